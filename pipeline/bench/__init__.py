@@ -1,0 +1,64 @@
+"""Benchmarks behind ``meshphase bench``: measured, never asserted.
+
+- :mod:`.io`          read throughput per format as a ratio to a raw .npy read, peak memory
+- :mod:`.models`      Monte Carlo error against run time (plain vs Sobol sampling)
+- :mod:`.processing`  onset timing error vs the Cramer-Rao bound, detection throughput
+
+:func:`run_bench` runs one or all of them into one output folder.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+from ..log import logger
+
+__all__ = ["run_bench"]
+
+KINDS = ("io", "models", "processing")
+
+
+def run_bench(what: str, out_dir, *, minutes: float = 60.0, quick: bool = False) -> dict:
+    """Run the ``what`` benchmark ("io", "models", "processing" or "all") into ``out_dir``.
+
+    Parameters
+    ----------
+    what : str
+    out_dir : path
+        Created if missing; each benchmark writes its JSON + Markdown (+ figure) there.
+    minutes : float
+        Length of the io benchmark's generated recording [min].
+    quick : bool
+        Small sizes for a smoke run.
+
+    Returns
+    -------
+    dict
+        ``{"files": {name: path}, "results": {kind: result dict}, "wall_s": {kind: s}}``
+    """
+    if what not in KINDS + ("all",):
+        raise ValueError(f"what must be one of {KINDS + ('all',)}, got {what!r}")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    kinds = KINDS if what == "all" else (what,)
+    results, wall = {}, {}
+    for kind in kinds:
+        t = time.perf_counter()
+        logger.info("bench %s -> %s", kind, out)
+        if kind == "io":
+            from .io import run_io_bench
+            results[kind] = run_io_bench(out, minutes=(min(minutes, 0.5) if quick else minutes))
+        elif kind == "models":
+            from .models import run_models_bench
+            results[kind] = run_models_bench(out, quick=quick)
+        else:
+            from .processing import run_processing_bench
+            results[kind] = run_processing_bench(out, quick=quick)
+        wall[kind] = time.perf_counter() - t
+    files = {p.name: str(p) for p in sorted(out.iterdir()) if p.is_file()}
+    summary = {"kinds": list(kinds), "wall_s": wall, "files": list(files)}
+    (out / "bench_summary.json").write_text(json.dumps(summary, indent=2))
+    files["bench_summary.json"] = str(out / "bench_summary.json")
+    return {"files": files, "results": results, "wall_s": wall}

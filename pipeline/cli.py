@@ -1,0 +1,212 @@
+"""The ``meshphase`` command.
+
+Subcommands import what they need lazily, so ``meshphase info`` never pays for Dask or
+matplotlib. Every subcommand returns an exit code: 0 success, 1 a processing failure, 2 bad
+input (the error message names the file / parameter).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import warnings
+from pathlib import Path
+
+from . import __version__
+from .log import logger
+
+__all__ = ["main", "build_parser"]
+
+
+def _progress(total: int | None, desc: str, enabled: bool):
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit="S", unit_scale=True, disable=not enabled,
+                leave=False, file=sys.stderr)
+
+
+# ---------------------------------------------------------------------------- info
+def _fmt_seconds(s: float) -> str:
+    if s >= 3600:
+        return f"{s / 3600:.3f} h"
+    if s >= 60:
+        return f"{s / 60:.3f} min"
+    return f"{s:.6g} s"
+
+
+def cmd_info(args) -> int:
+    from .io import read_info, iter_blocks, detect_format
+    from .quality import channel_quality
+
+    path = Path(args.file)
+    fmt = detect_format(path)
+    info = read_info(path, format=fmt)
+    out = {
+        "file": str(path), "format": fmt, "fs_hz": info.fs, "n_samples": info.n_samples,
+        "duration_s": info.duration, "t0_s": info.t0, "start_datetime": info.start_datetime,
+        "channels": [c.to_dict() for c in info.channels], "meta": info.meta,
+        "history": info.history,
+    }
+    if not args.no_quality:
+        # quality summary streamed in blocks: memory stays flat on long files
+        totals = {c.name: {"n_nonfinite": 0, "nonfinite_runs": 0, "clipped_runs": 0,
+                           "min": float("inf"), "max": float("-inf")} for c in info.channels}
+        block_s = max(1.0, 2**22 / info.fs)
+        with warnings.catch_warnings():
+            from .errors import DataQualityWarning
+            warnings.simplefilter("ignore", DataQualityWarning)  # counted below instead
+            with _progress(info.n_samples, "quality", not args.quiet) as bar:
+                for block in iter_blocks(path, block_s, format=fmt):
+                    for i, c in enumerate(block.channels):
+                        q = channel_quality(block.data[:, i])
+                        t = totals[c.name]
+                        t["n_nonfinite"] += q["n_nonfinite"]
+                        t["nonfinite_runs"] += len(q["nonfinite_runs"])
+                        t["clipped_runs"] += q["n_clipped_runs"]
+                        if q["n_samples"] > q["n_nonfinite"]:
+                            t["min"] = min(t["min"], q["min"])
+                            t["max"] = max(t["max"], q["max"])
+                    bar.update(block.n_samples)
+        out["quality"] = totals
+    if args.json:
+        print(json.dumps(out, indent=2, default=str))
+        return 0
+    print(f"file      {path}")
+    print(f"format    {fmt}")
+    print(f"fs        {info.fs:g} Hz")
+    print(f"samples   {info.n_samples} ({_fmt_seconds(info.duration)})")
+    print(f"start     t0 = {info.t0:g} s" + (f", {info.start_datetime}" if info.start_datetime else ""))
+    print(f"channels  {len(info.channels)}")
+    header = f"  {'name':<16} {'kind':<10} {'units':<8} {'gain':>10} {'tooth':>6} {'face [mm]':>10}"
+    if "quality" in out:
+        header += f" {'NaN':>8} {'NaN runs':>9} {'clipped':>8} {'min':>12} {'max':>12}"
+    print(header)
+    for c in info.channels:
+        face = "" if c.face_position is None else f"{c.face_position * 1e3:.3f}"
+        line = (f"  {c.name:<16} {c.kind:<10} {c.units:<8} {c.gain:>10.4g} "
+                f"{'' if c.tooth is None else c.tooth:>6} {face:>10}")
+        if "quality" in out:
+            q = out["quality"][c.name]
+            line += (f" {q['n_nonfinite']:>8} {q['nonfinite_runs']:>9} {q['clipped_runs']:>8} "
+                     f"{q['min']:>12.5g} {q['max']:>12.5g}")
+        print(line)
+    if info.history:
+        print(f"history   {len(info.history)} step(s): " + ", ".join(str(h.get('step', h)) for h in info.history))
+    return 0
+
+
+# ---------------------------------------------------------------------------- convert
+def cmd_convert(args) -> int:
+    from .io import detect_format, get_format, iter_blocks, read_info, write
+    from .recording import Recording
+    import numpy as np
+
+    src, dst = Path(args.input), Path(args.output)
+    fmt = detect_format(src)
+    info = read_info(src, format=fmt)
+    # read in blocks with a progress bar into one preallocated buffer, then write atomically
+    data = None
+    with _progress(info.n_samples, f"read {fmt}", not args.quiet) as bar:
+        i = 0
+        for block in iter_blocks(src, max(1.0, 2**22 / info.fs), format=fmt):
+            if data is None:
+                data = np.empty((info.n_samples, block.n_channels), dtype=block.data.dtype)
+            data[i:i + block.n_samples] = block.data
+            i += block.n_samples
+            bar.update(block.n_samples)
+    if data is None:
+        data = np.empty((0, len(info.channels)))
+    rec = Recording(data, info.fs, info.channels, info.t0, info.start_datetime, info.meta,
+                    info.history)
+    rec = rec.with_history("convert", source=str(src), source_format=fmt)
+    options = {}
+    if args.compression:
+        options["compression"] = args.compression
+    out = write(rec, dst, format=args.format, overwrite=args.overwrite, **options)
+    logger.info("wrote %s", out)
+    if not args.quiet:
+        print(f"{src} ({fmt}) -> {out} ({rec.n_samples} samples x {rec.n_channels} channels)")
+    return 0
+
+
+# ---------------------------------------------------------------------------- synth
+def cmd_synth(args) -> int:
+    from synthetic import cli_synth
+
+    path, truth = cli_synth(args.scenario, args.output, minutes=args.minutes, seed=args.seed,
+                            format=args.format, overwrite=args.overwrite, progress=not args.quiet)
+    print(f"wrote {path}\ntruth {truth}")
+    return 0
+
+
+# ---------------------------------------------------------------------------- bench
+def cmd_bench(args) -> int:
+    from .bench import run_bench
+
+    out = Path(args.out)
+    res = run_bench(args.what, out, minutes=args.minutes, quick=args.quick)
+    for name, path in res.get("files", {}).items():
+        print(f"{name:<24} {path}")
+    return 0
+
+
+# ---------------------------------------------------------------------------- parser
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="meshphase",
+        description="Planetary gear rig strain recordings -> measured mesh phasing vs models.")
+    p.add_argument("--version", action="version", version=f"meshphase {__version__}")
+    p.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv debug)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    s = sub.add_parser("info", help="channels, kinds, fs, duration, start and a quality summary of a recording")
+    s.add_argument("file")
+    s.add_argument("--json", action="store_true", help="machine-readable output")
+    s.add_argument("--no-quality", action="store_true", help="header only (do not scan the samples)")
+    s.set_defaults(func=cmd_info)
+
+    s = sub.add_parser("convert", help="convert a recording between formats (hdf5, mcap, csv; tdms read)")
+    s.add_argument("input")
+    s.add_argument("output")
+    s.add_argument("--format", choices=["hdf5", "mcap", "csv"], help="output format (default: from the suffix)")
+    s.add_argument("--compression", help="hdf5: gzip|lzf; mcap: lz4|zstd (default none)")
+    s.add_argument("--overwrite", action="store_true", help="replace an existing output file")
+    s.set_defaults(func=cmd_convert)
+
+    s = sub.add_parser("synth", help="write a synthetic recording of a named scenario plus its truth sidecar")
+    s.add_argument("scenario", help="scenario name (see `meshphase synth --list`)")
+    s.add_argument("output")
+    s.add_argument("--minutes", type=float, help="duration [min] (default: the scenario's)")
+    s.add_argument("--seed", type=int, help="random seed (recorded in the truth sidecar)")
+    s.add_argument("--format", choices=["hdf5", "mcap", "csv", "tdms"])
+    s.add_argument("--overwrite", action="store_true")
+    s.set_defaults(func=cmd_synth)
+
+    s = sub.add_parser("bench", help="benchmarks: io, models, processing or all (tables + figures)")
+    s.add_argument("what", nargs="?", default="all", choices=["io", "models", "processing", "all"])
+    s.add_argument("--out", default="bench-results", help="output folder (default ./bench-results)")
+    s.add_argument("--minutes", type=float, default=60.0, help="io: recording length [min] (default 60)")
+    s.add_argument("--quick", action="store_true", help="small sizes, for a smoke run")
+    s.set_defaults(func=cmd_bench)
+    return p
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    level = logging.WARNING - 10 * min(args.verbose, 2)
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    logger.setLevel(level)
+    logging.captureWarnings(False)
+    try:
+        return int(args.func(args) or 0)
+    except (ValueError, TypeError, FileNotFoundError, FileExistsError, KeyError) as exc:
+        print(f"meshphase {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

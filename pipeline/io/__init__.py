@@ -1,0 +1,156 @@
+"""Readers and writers: one module per format behind a small registry.
+
+``read(path, channels=None, start=None, stop=None)`` and ``write(recording, path,
+format=None)``. The format is recognised by content (magic bytes), the suffix only breaks
+ties for text formats; an unknown format raises ValueError listing the supported ones.
+
+Formats: ``hdf5`` (native archive), ``mcap``, ``csv``, ``tdms`` (NI, read only).
+"""
+
+from __future__ import annotations
+
+import importlib
+from pathlib import Path
+from typing import Iterator
+
+from ..recording import Recording
+from ..validate import as_nonnegative, as_positive
+from .base import RecordingFileError, RecordingInfo, atomic_path
+
+__all__ = ["read", "write", "read_info", "iter_blocks", "detect_format", "FORMATS",
+           "RecordingFileError", "RecordingInfo", "get_format"]
+
+#: Supported formats, in sniffing order (binary formats with magic bytes first, CSV last).
+FORMATS = ("hdf5", "mcap", "tdms", "csv")
+_SNIFF_BYTES = 4096
+
+
+def get_format(name: str):
+    """The module implementing format ``name``."""
+    if name not in FORMATS:
+        raise ValueError(f"unknown format {name!r}; supported formats: {', '.join(FORMATS)}")
+    return importlib.import_module(f"{__name__}.{name}")
+
+
+def detect_format(path) -> str:
+    """Name of the format of the file at ``path``, from its first bytes.
+
+    The file position of an open file object is never touched: the path is opened anew.
+    Raises FileNotFoundError when missing and ValueError (listing the supported formats)
+    when no format recognises the content.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such file")
+    if path.is_dir():
+        raise ValueError(f"{path}: is a directory, not a recording file")
+    with open(path, "rb") as fh:
+        head = fh.read(_SNIFF_BYTES)
+    if not head:
+        raise RecordingFileError(path, "file is empty (0 bytes)")
+    for name in FORMATS:
+        if get_format(name).sniff(head):
+            return name
+    raise ValueError(f"{path}: unknown format (first bytes {head[:8]!r}); supported formats: "
+                     f"{', '.join(FORMATS)}")
+
+
+def _format_for_write(path: Path, format: str | None) -> str:
+    if format is not None:
+        mod = get_format(format)
+        if not getattr(mod, "CAN_WRITE", False):
+            raise ValueError(f"format {format!r} is read-only here; writable formats: "
+                             f"{', '.join(f for f in FORMATS if get_format(f).CAN_WRITE)}")
+        return format
+    suffix = path.suffix.lower()
+    for name in FORMATS:
+        mod = get_format(name)
+        if suffix in mod.SUFFIXES and getattr(mod, "CAN_WRITE", False):
+            return name
+    raise ValueError(f"{path}: cannot tell the format from suffix {suffix!r}; pass format= one of "
+                     f"{', '.join(f for f in FORMATS if get_format(f).CAN_WRITE)}")
+
+
+def read_info(path, format: str | None = None) -> RecordingInfo:
+    """Header of a recording file (channels, fs, n_samples, t0, metadata) without samples."""
+    name = format or detect_format(path)
+    return get_format(name).read_info(Path(path))
+
+
+def read(path, channels=None, start: float | None = None, stop: float | None = None, *,
+         format: str | None = None) -> Recording:
+    """Read a recording file, or a time window / channel subset of it.
+
+    Parameters
+    ----------
+    path : str or Path
+    channels : str or sequence of str, optional
+        Channel names to read (all when None), in the order given.
+    start, stop : float, optional
+        Half-open time window [start, stop) [s] on the recording's own time axis
+        (``t0 + i / fs``); ValueError when it lies outside the recording.
+    format : str, optional
+        Skip detection and use this format.
+
+    Returns
+    -------
+    Recording
+    """
+    path = Path(path)
+    name = format or detect_format(path)
+    mod = get_format(name)
+    info = mod.read_info(path)
+    names = info.check_channels(channels)
+    i0, i1 = (0, info.n_samples) if start is None and stop is None else info.window(start, stop)
+    return mod.read(path, names, i0, i1)
+
+
+def iter_blocks(path, block: float, overlap: float = 0.0, channels=None, *,
+                format: str | None = None) -> Iterator[Recording]:
+    """Stream a recording file in blocks of ``block`` seconds plus ``overlap`` seconds.
+
+    Memory stays flat: only one block (plus overlap) is held at a time. Block k covers
+    samples [k n, (k + 1) n + n_overlap), the same as :meth:`Recording.blocks` gives in memory.
+    """
+    path = Path(path)
+    name = format or detect_format(path)
+    mod = get_format(name)
+    info = mod.read_info(path)
+    names = info.check_channels(channels)
+    n_block = max(1, int(round(as_positive(block, "block") * info.fs)))
+    n_ovl = int(round(as_nonnegative(overlap, "overlap") * info.fs))
+    if hasattr(mod, "iter_blocks"):
+        yield from mod.iter_blocks(path, n_block, n_ovl, names)
+        return
+    for i0 in range(0, info.n_samples, n_block):
+        yield mod.read(path, names, i0, min(info.n_samples, i0 + n_block + n_ovl))
+
+
+def write(recording: Recording, path, format: str | None = None, *, overwrite: bool = False,
+          **options) -> Path:
+    """Write ``recording`` to ``path`` atomically (temporary file, then rename).
+
+    Parameters
+    ----------
+    recording : Recording
+    path : str or Path
+    format : str, optional
+        One of the writable formats; from the suffix when None.
+    overwrite : bool
+        Replace an existing file (default False: FileExistsError).
+    **options
+        Format options (e.g. ``compression="gzip"`` for HDF5, ``block=5120`` for MCAP).
+
+    Returns
+    -------
+    Path
+        The written path.
+    """
+    if not isinstance(recording, Recording):
+        raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
+    path = Path(path)
+    name = _format_for_write(path, format)
+    mod = get_format(name)
+    with atomic_path(path, overwrite=overwrite) as tmp:
+        mod.write(recording, tmp, **options)
+    return path

@@ -1,0 +1,114 @@
+"""Shared argument validation used at every public entry point.
+
+Each helper raises ``ValueError`` for a bad value and ``TypeError`` for a bad type, with a
+message naming the parameter and echoing the value, and returns the normalised value.
+"""
+
+from __future__ import annotations
+
+import numbers
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "as_float",
+    "as_positive",
+    "as_nonnegative",
+    "as_int",
+    "as_positive_int",
+    "as_finite_array",
+    "as_choice",
+]
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def as_float(value: Any, name: str, *, finite: bool = True) -> float:
+    """Return ``value`` as a Python float; reject non-numbers and (by default) NaN/inf."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Real, np.number)):
+        raise TypeError(f"{name} must be a real number, got {type(value).__name__} {_short(value)}")
+    out = float(value)
+    if finite and not np.isfinite(out):
+        raise ValueError(f"{name} must be finite, got {out!r}")
+    return out
+
+
+def as_positive(value: Any, name: str) -> float:
+    """Return ``value`` as a finite float > 0."""
+    out = as_float(value, name)
+    if not out > 0.0:
+        raise ValueError(f"{name} must be > 0, got {out!r}")
+    return out
+
+
+def as_nonnegative(value: Any, name: str) -> float:
+    """Return ``value`` as a finite float >= 0."""
+    out = as_float(value, name)
+    if out < 0.0:
+        raise ValueError(f"{name} must be >= 0, got {out!r}")
+    return out
+
+
+def as_int(value: Any, name: str) -> int:
+    """Return ``value`` as a Python int; floats with a fractional part are rejected."""
+    if isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be an integer, got bool {value!r}")
+    if isinstance(value, (numbers.Integral, np.integer)):
+        return int(value)
+    if isinstance(value, (numbers.Real, np.floating)) and float(value).is_integer():
+        return int(value)
+    if isinstance(value, (numbers.Real, np.floating)):
+        raise ValueError(f"{name} must be a whole number, got {value!r}")
+    raise TypeError(f"{name} must be an integer, got {type(value).__name__} {_short(value)}")
+
+
+def as_positive_int(value: Any, name: str) -> int:
+    """Return ``value`` as an int >= 1."""
+    out = as_int(value, name)
+    if out < 1:
+        raise ValueError(f"{name} must be a positive integer, got {out!r}")
+    return out
+
+
+def as_finite_array(value: Any, name: str, *, ndim: int | None = None, dtype=np.float64,
+                    allow_empty: bool = True) -> np.ndarray:
+    """Return ``value`` as a float array with only finite entries.
+
+    Parameters
+    ----------
+    value : array_like
+        Input values.
+    name : str
+        Parameter name used in error messages.
+    ndim : int, optional
+        Required number of dimensions.
+    dtype : numpy dtype
+        Output dtype (float64 by default).
+    allow_empty : bool
+        Whether a zero-size array is accepted.
+    """
+    try:
+        arr = np.asarray(value, dtype=dtype)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name} must be numeric array_like, got {_short(value)}") from exc
+    if ndim is not None and arr.ndim != ndim:
+        raise ValueError(f"{name} must be {ndim}-D, got shape {arr.shape}")
+    if not allow_empty and arr.size == 0:
+        raise ValueError(f"{name} must not be empty")
+    if arr.size and not np.all(np.isfinite(arr)):
+        bad = int(np.count_nonzero(~np.isfinite(arr)))
+        raise ValueError(f"{name} must be finite, got {bad} non-finite value(s)")
+    return arr
+
+
+def as_choice(value: Any, name: str, choices) -> str:
+    """Return ``value`` if it is one of ``choices`` (strings), else raise ValueError."""
+    if not isinstance(value, str):
+        raise TypeError(f"{name} must be a string, one of {sorted(choices)}, got {_short(value)}")
+    if value not in choices:
+        raise ValueError(f"{name} must be one of {sorted(choices)}, got {value!r}")
+    return value
