@@ -1,0 +1,209 @@
+"""Measured phasing from onset times (pipeline.phasing), on pass trains with known truth.
+
+The truth here is spec section 1 (ideal phasing, gamma_sn = frac(+-Z_s psi_n / 2 pi),
+gamma_rn = frac(-+Z_r psi_n / 2 pi)) evaluated by hand, so a sign slip in the measured
+formula shows up as a mismatch on one gear or one direction.
+"""
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import given, strategies as st
+
+from pipeline.errors import ProcessingWarning
+from pipeline.phasing import (PassTable, assign_planets_by_pattern, assign_planets_by_tacho,
+                              measured_phasing, pass_order, planet_fractions, revolution_numbers)
+
+TWO_PI = 2 * math.pi
+
+
+def ideal(z_s, z_r, psi, direction):
+    s = 1 if direction == "cw" else -1
+    return (s * z_s * psi / TWO_PI) % 1.0, (-s * z_r * psi / TWO_PI) % 1.0
+
+
+def pass_train(psi, order, n_rev, angle_of_time=None, period=1.0):
+    """Times at which a gauge meets each planet; angle_of_time maps relative angle [rev] ->
+    time (identity scaled by `period` for constant speed)."""
+    frac = planet_fractions(psi, order)
+    rev = (np.arange(n_rev)[:, None] + frac[None, :]).ravel()
+    lab = np.tile(np.arange(psi.size), n_rev)
+    o = np.argsort(rev, kind="stable")
+    rev, lab = rev[o], lab[o]
+    t = rev * period if angle_of_time is None else angle_of_time(rev)
+    return t, lab
+
+
+def circ_err(a, b):
+    return np.abs((np.asarray(a) - np.asarray(b) + 0.5) % 1.0 - 0.5)
+
+
+@pytest.mark.parametrize("direction", ["cw", "ccw"])
+@pytest.mark.parametrize("gauge", ["sun", "ring"])
+def test_measured_equals_section1_both_gears_both_directions(direction, gauge):
+    z_s, z_r, n = 25, 87, 4
+    psi = TWO_PI * np.arange(n) / n
+    order = pass_order(direction, gauge)
+    t, lab = pass_train(psi, order, 12, period=0.37)
+    planet, info = assign_planets_by_pattern(t, psi, order)
+    np.testing.assert_array_equal(planet, lab)
+    z = z_s if gauge == "sun" else z_r
+    tab = measured_phasing(t, planet, z, n, gauge=gauge)
+    g_s, g_r = ideal(z_s, z_r, psi, direction)
+    want = (g_s if gauge == "sun" else g_r)[tab.planet - 1]
+    assert circ_err(tab.gamma, want).max() < 1e-9
+    assert set(tab.planet) == {2, 3, 4}
+
+
+@given(st.integers(12, 60), st.integers(3, 6), st.sampled_from(["cw", "ccw"]),
+       st.sampled_from(["sun", "ring"]), st.integers(0, 10_000))
+def test_property_assemblable_layouts_measure_ideal(z_s, n, direction, gauge, seed):
+    # assemblable unequal layout: psi_n = 2 pi p_n / (Z_s + Z_r) with distinct p_n
+    rng = np.random.default_rng(seed)
+    z_r = z_s + 2 * rng.integers(8, 40)
+    zt = z_s + z_r
+    if zt < 4 * n:
+        return
+    p = np.sort(rng.choice(np.arange(1, zt), size=n - 1, replace=False))
+    psi = TWO_PI * np.concatenate([[0], p]) / zt
+    order = pass_order(direction, gauge)
+    t, lab = pass_train(psi, order, 6, period=2.0)
+    z = z_s if gauge == "sun" else z_r
+    tab = measured_phasing(t, lab, z, n, gauge=gauge)
+    g_s, g_r = ideal(z_s, z_r, psi, direction)
+    assert circ_err(tab.gamma, (g_s if gauge == "sun" else g_r)[tab.planet - 1]).max() < 1e-7
+    # the assemblability invariant seen on the measured side: sun and ring phasing agree
+    assert circ_err(g_s, g_r).max() < 1e-9
+
+
+def test_speed_ramp_is_followed_not_nominal_speed():
+    # relative angle theta(t) = w0 t + a t^2 / 2 : speed up 40 % over the record
+    z_s, n = 25, 4
+    psi = TWO_PI * np.arange(n) / n
+    w0, a = 1.0, 0.02  # [rev/s], [rev/s^2]
+    inv = lambda rev: (-w0 + np.sqrt(w0 ** 2 + 2 * a * rev)) / a
+    t, lab = pass_train(psi, 1, 20, angle_of_time=inv)
+    tab = measured_phasing(t, lab, z_s, n, gauge="sun")
+    want = ideal(z_s, 87, psi, "cw")[0][tab.planet - 1]
+    # pchip through the planet-1 knots follows a quadratic angle to ~1e-4 of a revolution
+    # inside; Z_s amplifies it 25x: 5e-3 mesh cycles bound at the ends, far below nominal
+    # speed's error (0.3 mesh cycles at the end of the ramp)
+    assert circ_err(tab.gamma, want).max() < 5e-3
+    nominal = (z_s * (t - np.floor(t)) ) % 1.0  # what assuming the start speed gives
+    assert circ_err(nominal[lab > 0][-5:], want[-5:]).max() > 0.05
+
+
+def test_missing_pulse_is_skipped_and_reference_gap_bridged():
+    z_s, n = 25, 4
+    psi = TWO_PI * np.arange(n) / n
+    t, lab = pass_train(psi, 1, 15)
+    drop = [9, 20, 21]  # a planet-2 pulse and a planet-1 + planet-2 pair (a gap)
+    keep = np.setdiff1d(np.arange(t.size), drop)
+    t, lab = t[keep], lab[keep]
+    planet, info = assign_planets_by_pattern(t, psi, 1)
+    np.testing.assert_array_equal(planet, lab)
+    tab = measured_phasing(t, planet, z_s, n)
+    assert circ_err(tab.gamma, ideal(z_s, 87, psi, "cw")[0][tab.planet - 1]).max() < 1e-9
+    assert any("bridged" in s for s in tab.notes)
+
+
+def test_unequal_spacing_fixes_planet_one_from_the_pattern():
+    z_s, z_r = 25, 87
+    psi = TWO_PI * np.array([0, 27, 55, 84]) / 112  # assemblable, unequal
+    t, lab = pass_train(psi, 1, 8)
+    t, lab = t[2:], lab[2:]  # start mid-revolution: first onset is planet 3
+    planet, info = assign_planets_by_pattern(t, psi, 1)
+    assert info["shift_decided_by"] == "pattern" and not info["ambiguous"]
+    np.testing.assert_array_equal(planet, lab)
+
+
+def test_symmetric_layout_shift_from_amplitudes():
+    psi = TWO_PI * np.arange(4) / 4
+    t, lab = pass_train(psi, 1, 8)
+    t, lab = t[1:], lab[1:]  # first onset is planet 2
+    load = np.array([1.2, 0.9, 1.0, 0.9])
+    amp = load[lab]
+    planet, info = assign_planets_by_pattern(t, psi, 1, amplitudes=amp, reference_amplitudes=load)
+    assert info["shift_decided_by"] == "amplitude"
+    np.testing.assert_array_equal(planet, lab)
+    # without amplitudes the shift is ambiguous and says so
+    _, info2 = assign_planets_by_pattern(t, psi, 1)
+    assert info2["ambiguous"]
+
+
+def test_tacho_assignment_ring_gauge():
+    psi = TWO_PI * np.arange(3) / 3
+    w_c = 0.5  # carrier [rev/s], ring fixed -> ring turns -w_c relative to the carrier
+    gauge_angle = 0.3  # [rad]
+    tacho = np.arange(0, 12) / w_c
+    # planet n passes the gauge when theta_c + psi_n = gauge_angle (mod 2 pi)
+    rev = ((gauge_angle - psi) / TWO_PI) % 1.0
+    tt = ((np.arange(11)[:, None] + rev[None, :]) / w_c).ravel()
+    lab = np.tile(np.arange(3), 11)
+    o = np.argsort(tt)
+    planet = assign_planets_by_tacho(tt[o], tacho, psi, gauge_angle, 1)
+    np.testing.assert_array_equal(planet, lab[o])
+    tab = measured_phasing(tt[o], planet, 87, 3, gauge="ring", reference_times=tacho)
+    want = ideal(25, 87, psi, "cw")[1][tab.planet - 1]
+    assert circ_err(tab.gamma, want).max() < 1e-9
+
+
+def test_uncertainty_propagation():
+    z_s, n = 25, 4
+    psi = TWO_PI * np.arange(n) / n
+    t, lab = pass_train(psi, 1, 10, period=2.0)
+    tab = measured_phasing(t, lab, z_s, n, sigma_t=1e-3)
+    # sigma_gamma = Z |w| / (2 pi) * sqrt(sigma_n^2 + sigma_ref^2), sigma_ref = sigma (knots)
+    want = z_s * (1 / 2.0) * math.sqrt(2) * 1e-3
+    np.testing.assert_allclose(tab.uncertainty, want, rtol=1e-6)
+    np.testing.assert_allclose(tab.mesh_period, 2.0 / z_s, rtol=1e-9)
+
+
+def test_revolution_numbers_bridge_missing():
+    t = np.array([0, 1, 2, 4, 5, 8.02])
+    np.testing.assert_array_equal(revolution_numbers(t), [0, 1, 2, 4, 5, 8])
+    assert revolution_numbers([]).size == 0
+    with pytest.raises(ValueError, match="strictly increasing"):
+        revolution_numbers([0, 1, 1])
+
+
+def test_empty_inputs_give_empty_tables():
+    tab = measured_phasing([], np.array([], dtype=int), 25, 4)
+    assert isinstance(tab, PassTable) and len(tab) == 0
+    planet, info = assign_planets_by_pattern([], np.arange(4.0), 1)
+    assert planet.size == 0
+    assert assign_planets_by_tacho([], [0, 1], np.arange(3.0), 0.0, 1).size == 0
+    assert list(tab.to_dataframe().columns) == ["gauge", "time_s", "planet", "revolution", "gamma",
+                                                "uncertainty", "mesh_period_s"]
+
+
+def test_no_planet1_passes_warns_and_returns_empty():
+    with pytest.warns(ProcessingWarning, match="fewer than two reference passes"):
+        tab = measured_phasing([0.1, 0.2, 0.3], np.array([1, 2, 3]), 25, 4)
+    assert len(tab) == 0
+
+
+@pytest.mark.parametrize("kwargs, exc, match", [
+    (dict(times=[0.0, 1.0], planets=np.array([0]), z_gear=25, n_planets=4), ValueError, "shape"),
+    (dict(times=[0.0, np.nan], planets=np.array([0, 1]), z_gear=25, n_planets=4), ValueError, "finite"),
+    (dict(times=[0.0, 1.0], planets=np.array([0, 1]), z_gear=-3, n_planets=4), ValueError, "z_gear"),
+    (dict(times=[0.0, 1.0], planets=np.array([0, 7]), z_gear=25, n_planets=4), ValueError, "planets"),
+    (dict(times=[1.0, 0.0], planets=np.array([0, 1]), z_gear=25, n_planets=4), ValueError, "sorted"),
+    (dict(times=[0.0, 1.0], planets=np.array([0.0, 1.0]), z_gear=25, n_planets=4), TypeError, "integers"),
+])
+def test_bad_inputs(kwargs, exc, match):
+    with pytest.raises(exc, match=match):
+        measured_phasing(**kwargs)
+
+
+def test_bad_pass_order_args():
+    with pytest.raises(ValueError, match="gauge"):
+        pass_order("cw", "planet")
+    with pytest.raises(ValueError, match="direction"):
+        pass_order("up", "sun")
+    with pytest.raises(ValueError, match="order"):
+        planet_fractions([0.0, 1.0], 0)
+    with pytest.raises(ValueError, match="tacho"):
+        assign_planets_by_tacho([0.5], [0.0], np.arange(3.0), 0.0, 1)
