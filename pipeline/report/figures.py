@@ -1,0 +1,227 @@
+"""Figures of the validation report (matplotlib, Agg backend, no display needed).
+
+Every function takes plain arrays / tables and returns a matplotlib Figure; the caller embeds
+it (:meth:`pipeline.report.html.Section.figure`) or saves it. Units on every axis.
+"""
+
+from __future__ import annotations
+
+import math
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+__all__ = [
+    "signal_with_onsets",
+    "phasing_over_time",
+    "residual_histograms",
+    "load_sharing_bars",
+    "bearing_moments_bars",
+    "stage_times",
+    "error_vs_runtime",
+    "quality_overview",
+]
+
+_COLORS = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+
+
+def _c(i: int) -> str:
+    return _COLORS[i % len(_COLORS)]
+
+
+def signal_with_onsets(t, x, onset_times, planets=None, *, title="", units="µε", scale=1e6,
+                       max_points: int = 20000):
+    """A stretch of one gauge's signal with its detected onsets marked, coloured by planet.
+
+    Parameters
+    ----------
+    t, x : array_like
+        Sample times [s] and samples [strain m/m] (scaled by ``scale`` for display).
+    onset_times : array_like
+        Onset times [s].
+    planets : array_like of int, optional
+        1-based planet number per onset (0 or -1: unassigned).
+    """
+    t = np.asarray(t)
+    x = np.asarray(x) * scale
+    step = max(1, t.size // max_points)
+    fig, ax = plt.subplots(figsize=(10, 3.2))
+    ax.plot(t[::step], x[::step], lw=0.6, color="0.3")
+    on = np.asarray(onset_times)
+    pl = np.zeros(on.size, int) if planets is None else np.asarray(planets)
+    lo, hi = np.nanmin(x) if x.size else 0, np.nanmax(x) if x.size else 1
+    for p in np.unique(pl):
+        m = pl == p
+        label = f"planet {p}" if p > 0 else "unassigned"
+        ax.vlines(on[m], lo, hi, colors=_c(int(p) - 1) if p > 0 else "k", lw=0.8, alpha=0.8,
+                  label=label, linestyles="-" if p > 0 else ":")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel(f"strain [{units}]")
+    ax.set_title(title)
+    if on.size:
+        ax.legend(loc="upper right", fontsize=8, ncol=min(6, len(np.unique(pl))))
+    fig.tight_layout()
+    return fig
+
+
+def phasing_over_time(tables: dict, *, predicted: dict | None = None, bands: dict | None = None,
+                      ideal: dict | None = None, title: str = ""):
+    """Measured vs predicted phasing over time, one panel per gauge, one colour per planet.
+
+    Parameters
+    ----------
+    tables : dict gauge -> DataFrame
+        Measured passes with columns time_s, planet, gamma, uncertainty.
+    predicted : dict gauge -> dict planet -> (t [s], gamma [-])
+        Model curves (e.g. shaft-hole-error model with identified errors).
+    bands : dict gauge -> dict planet -> (lo, hi)
+        Monte Carlo 3-sigma band of gamma [-] per planet (constant over time).
+    ideal : dict gauge -> dict planet -> gamma
+        Ideal phasing (spec section 1) [-].
+    """
+    gauges = [g for g in ("sun", "ring") if g in tables]
+    fig, axes = plt.subplots(len(gauges) or 1, 1, figsize=(10, 3.2 * max(1, len(gauges))),
+                             squeeze=False)
+    for ax, g in zip(axes[:, 0], gauges):
+        df = tables[g]
+        for p in sorted(df["planet"].unique()):
+            d = df[df["planet"] == p]
+            col = _c(int(p) - 1)
+            ref = ideal[g][p] if ideal and g in ideal and p in ideal[g] else None
+            if ref is not None:
+                # unwrap around the ideal value so 0.99 and 0.01 sit together
+                y = ref + ((d["gamma"].to_numpy() - ref + 0.5) % 1.0 - 0.5)
+                ax.axhline(ref, color=col, lw=0.8, ls=":")
+            else:
+                y = d["gamma"].to_numpy()
+            ax.errorbar(d["time_s"], y, yerr=d["uncertainty"].fillna(0).to_numpy(), fmt="o", ms=2.5,
+                        color=col, lw=0.6, label=f"planet {p}")
+            if bands and g in bands and p in bands[g]:
+                lo, hi = bands[g][p]
+                ax.axhspan(lo, hi, color=col, alpha=0.12)
+            if predicted and g in predicted and p in predicted[g]:
+                tt, gg = predicted[g][p]
+                gg = np.asarray(gg)
+                if ref is not None:
+                    gg = ref + ((gg - ref + 0.5) % 1.0 - 0.5)
+                ax.plot(tt, gg, color=col, lw=1.2)
+        ax.set_ylabel(f"gamma_{g[0]}n [mesh cycles]")
+        ax.set_title(f"{g} gauge" + (f" — {title}" if title else ""), fontsize=10)
+        ax.legend(fontsize=8, ncol=6, loc="upper right")
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.tight_layout()
+    return fig
+
+
+def residual_histograms(residuals: dict, *, title: str = "residual measured - model"):
+    """Histograms of phasing residuals [mesh cycles] per gauge (dict gauge -> array)."""
+    n = max(1, len(residuals))
+    fig, axes = plt.subplots(1, n, figsize=(5 * n, 3), squeeze=False)
+    for ax, (g, r) in zip(axes[0], residuals.items()):
+        r = np.asarray(r, dtype=float)
+        r = r[np.isfinite(r)]
+        if r.size:
+            ax.hist(r, bins=min(60, max(10, int(math.sqrt(r.size)))), color=_c(0), alpha=0.8)
+            ax.axvline(0, color="k", lw=0.8)
+            ax.set_title(f"{g}: RMS {np.sqrt(np.mean(r ** 2)):.2e}, n={r.size}", fontsize=10)
+        else:
+            ax.set_title(f"{g}: no residuals", fontsize=10)
+        ax.set_xlabel("residual [mesh cycles]")
+    axes[0, 0].set_ylabel("passes")
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def load_sharing_bars(ls_measured, ls_true=None, ls_unc=None):
+    """Load-sharing factor per planet [-] (1 = equal), measured vs true/model."""
+    ls = np.asarray(ls_measured, dtype=float)
+    x = np.arange(1, ls.size + 1)
+    fig, ax = plt.subplots(figsize=(5.5, 3))
+    w = 0.38 if ls_true is not None else 0.6
+    ax.bar(x - (w / 2 if ls_true is not None else 0), ls, width=w, color=_c(0), label="measured",
+           yerr=None if ls_unc is None else np.asarray(ls_unc), capsize=3)
+    if ls_true is not None:
+        ax.bar(x + w / 2, np.asarray(ls_true, dtype=float), width=w, color=_c(1), label="truth/model")
+    ax.axhline(1.0, color="k", lw=0.8, ls=":")
+    ax.set_xticks(x)
+    ax.set_xlabel("planet")
+    ax.set_ylabel("load sharing factor [-]")
+    lo = min(0.8, float(np.nanmin(ls)) - 0.05) if ls.size else 0.8
+    ax.set_ylim(lo, max(1.2, float(np.nanmax(ls)) + 0.05) if ls.size else 1.2)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def bearing_moments_bars(labels, series: dict, *, ylabel="moment [N·m]", title=""):
+    """Grouped bars: one group per label (e.g. M_LOA sun / ring), one bar per series."""
+    x = np.arange(len(labels))
+    k = max(1, len(series))
+    w = 0.8 / k
+    fig, ax = plt.subplots(figsize=(max(5, 1.4 * len(labels) + 2), 3.2))
+    for i, (name, vals) in enumerate(series.items()):
+        ax.bar(x - 0.4 + w * (i + 0.5), np.asarray(vals, dtype=float), width=w, label=name, color=_c(i))
+    ax.axhline(0, color="k", lw=0.8)
+    ax.set_xticks(x)
+    ax.set_xticklabels(labels, fontsize=8)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def stage_times(names, seconds, errors=None):
+    """Horizontal bars of each stage's wall time [s], annotated with its error estimate."""
+    s = np.asarray(seconds, dtype=float)
+    fig, ax = plt.subplots(figsize=(7, 0.45 * len(names) + 1.2))
+    y = np.arange(len(names))
+    ax.barh(y, s, color=_c(0))
+    ax.set_yticks(y)
+    ax.set_yticklabels(names, fontsize=8)
+    ax.invert_yaxis()
+    ax.set_xlabel("wall time [s]")
+    if errors is not None:
+        for yi, si, e in zip(y, s, errors):
+            if e:
+                ax.text(si, yi, f"  {e}", va="center", fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def error_vs_runtime(curves: dict, *, xlabel="wall time [s]", ylabel="error", title=""):
+    """Log-log error against run time, one curve per method (dict name -> (time, error))."""
+    fig, ax = plt.subplots(figsize=(5.5, 3.6))
+    for i, (name, (tm, err)) in enumerate(curves.items()):
+        tm, err = np.asarray(tm, float), np.asarray(err, float)
+        ok = (tm > 0) & (err > 0)
+        ax.loglog(tm[ok], err[ok], "o-", color=_c(i), label=name, ms=4)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def quality_overview(rows):
+    """Per channel bar chart of non-finite samples and clipped runs (rows: dicts from a
+    quality report with keys channel, n_nonfinite, n_clipped_runs)."""
+    names = [r["channel"] for r in rows]
+    nf = [r.get("n_nonfinite", 0) for r in rows]
+    cl = [r.get("n_clipped_runs", 0) for r in rows]
+    fig, ax = plt.subplots(figsize=(max(5, 0.9 * len(names) + 2), 2.8))
+    x = np.arange(len(names))
+    ax.bar(x - 0.2, nf, width=0.4, label="NaN/gap samples", color=_c(3))
+    ax.bar(x + 0.2, cl, width=0.4, label="clipped runs", color=_c(1))
+    ax.set_xticks(x)
+    ax.set_xticklabels(names, fontsize=8, rotation=20)
+    ax.set_ylabel("count")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
