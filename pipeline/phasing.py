@@ -79,6 +79,12 @@ class PassTable:
         (NaN when no timing uncertainty was given).
     mesh_period : ndarray, shape (n,)
         Local mesh period T_j at the pass [s] (from the pulse train, not nominal speed).
+    ref_time : ndarray, shape (n,)
+        Time of the planet-1 pass that the phasing is taken against [s] (NaN when that pass
+        is missing and the revolution was bridged).
+    angle : ndarray, shape (n,)
+        Relative angle turned by the gauged member since the first reference pass, at the
+        pass [rad] (the pulse-train "encoder"; lets models run on the actual angle).
     """
 
     gauge: str
@@ -88,7 +94,16 @@ class PassTable:
     gamma: np.ndarray
     uncertainty: np.ndarray
     mesh_period: np.ndarray
+    ref_time: np.ndarray = None
+    angle: np.ndarray = None
     notes: list = field(default_factory=list)
+
+    def __post_init__(self):
+        n = np.asarray(self.time).size
+        if self.ref_time is None:
+            self.ref_time = np.full(n, np.nan)
+        if self.angle is None:
+            self.angle = np.full(n, np.nan)
 
     def __len__(self) -> int:
         return int(self.time.size)
@@ -97,7 +112,7 @@ class PassTable:
     def empty(cls, gauge: str, notes=None) -> "PassTable":
         z = np.empty(0)
         return cls(gauge, z, np.empty(0, int), np.empty(0, int), z.copy(), z.copy(), z.copy(),
-                   list(notes or []))
+                   z.copy(), z.copy(), list(notes or []))
 
     def to_dataframe(self):
         """pandas DataFrame with columns time_s, planet, revolution, gamma, uncertainty,
@@ -108,13 +123,15 @@ class PassTable:
             "gauge": self.gauge, "time_s": self.time, "planet": self.planet,
             "revolution": self.revolution, "gamma": self.gamma,
             "uncertainty": self.uncertainty, "mesh_period_s": self.mesh_period,
+            "ref_time_s": self.ref_time, "angle_rad": self.angle,
         })
 
     def for_planet(self, n: int) -> "PassTable":
         """Rows of planet ``n`` (1-based)."""
         m = self.planet == n
         return PassTable(self.gauge, self.time[m], self.planet[m], self.revolution[m],
-                         self.gamma[m], self.uncertainty[m], self.mesh_period[m], list(self.notes))
+                         self.gamma[m], self.uncertainty[m], self.mesh_period[m],
+                         self.ref_time[m], self.angle[m], list(self.notes))
 
     def summary(self) -> dict:
         """Per planet: count, circular mean of gamma, circular std, max - min of the deviation
@@ -453,6 +470,8 @@ def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str 
     if use_ref:
         # lag of planet 1 per revolution, subtracted from every planet of that revolution
         m1 = inside & (lab == 0)
+        t1 = np.full(int(k[-1]) + 1, np.nan)
+        t1[rev[m1]] = t[m1]
         lag1 = np.full(int(k[-1]) + 1, np.nan)
         lag1[rev[m1]] = lag[m1]
         sig1 = np.full(int(k[-1]) + 1, np.nan)
@@ -461,6 +480,8 @@ def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str 
         sig_ref = sig1[rev]
     else:
         rel = lag
+        t1 = np.full(int(k[-1]) + 1, np.nan)
+        t1[k] = knots_t
         # planet 1 knots bracket the pass: both of their errors move Theta(t_n)
         kpos = np.clip(np.searchsorted(knots_t, t, side="right") - 1, 0, knots_t.size - 2)
         sig_ref = np.hypot(knot_sig[kpos], knot_sig[kpos + 1]) / math.sqrt(2.0)
@@ -474,4 +495,6 @@ def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str 
     om = omega[keep]
     mesh_period = TWO_PI / (z * om)
     unc = z * om / TWO_PI * np.hypot(sig[keep], sig_ref[keep])
-    return PassTable(gauge, t[keep], lab[keep] + 1, rev[keep], gamma, unc, mesh_period, notes)
+    rk = rev[keep]
+    return PassTable(gauge, t[keep], lab[keep] + 1, rk, gamma, unc, mesh_period,
+                     t1[np.clip(rk, 0, t1.size - 1)], th[keep], notes)

@@ -107,6 +107,10 @@ def test_missing_pulse_is_skipped_and_reference_gap_bridged():
     tab = measured_phasing(t, planet, z_s, n)
     assert circ_err(tab.gamma, ideal(z_s, 87, psi, "cw")[0][tab.planet - 1]).max() < 1e-9
     assert any("bridged" in s for s in tab.notes)
+    # the planet-1 pass each row is measured against: its own revolution's, NaN where missing
+    ok = np.isfinite(tab.ref_time)
+    assert np.all(tab.ref_time[ok] <= tab.time[ok]) and np.all(tab.time[ok] - tab.ref_time[ok] < 1.0)
+    assert np.count_nonzero(~ok) >= 1
 
 
 def test_unequal_spacing_fixes_planet_one_from_the_pattern():
@@ -176,7 +180,8 @@ def test_empty_inputs_give_empty_tables():
     assert planet.size == 0
     assert assign_planets_by_tacho([], [0, 1], np.arange(3.0), 0.0, 1).size == 0
     assert list(tab.to_dataframe().columns) == ["gauge", "time_s", "planet", "revolution", "gamma",
-                                                "uncertainty", "mesh_period_s"]
+                                                "uncertainty", "mesh_period_s", "ref_time_s",
+                                                "angle_rad"]
 
 
 def test_no_planet1_passes_warns_and_returns_empty():
