@@ -1,0 +1,279 @@
+"""Error against run time of the tolerance Monte Carlo (``meshphase bench models``).
+
+Seed 000 case 3 (Table 1 gearset, Table 2 case 3 bands, angles as given) is run with
+increasing sample counts, with plain pseudo-random and with scrambled Sobol sampling. Each
+run's statistics (mean, mean + 3 std and the 99.865 % quantile, i.e. the upper 3-sigma
+bounds, of Dev_sn, Dev_rn, Ave_sn, Ave_rn) are held
+against a converged reference (a large Sobol run) and the wall time is measured. Errors are
+RMS over ``n_repeats`` independent runs, in units of the reference standard deviation of the
+statistic, worst planet. Results: ``models_bench.json``, ``models_bench.md`` and a log-log
+figure ``models_bench.png``. Measured, never asserted.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..log import logger
+from ..models import _kernels
+from ..models.tolerance import (STATISTICS, monte_carlo, observation_window, table2_case,
+                                WINDOW_KINDS)
+from ..validate import as_choice, as_positive_int
+
+__all__ = ["run_models_bench", "METRICS", "TABLE_COLUMNS"]
+
+#: Summaries whose error is measured: "mean"; "m3s" the moment 3-sigma bound mean + 3 std;
+#: "q3s" the quantile 3-sigma bound (upper bound3, the 99.865 % quantile).
+KINDS = ("mean", "m3s", "q3s")
+#: (statistic, summary) pairs whose error is measured.
+METRICS = tuple((s, k) for s in ("dev_s", "dev_r", "ave_s", "ave_r") for k in KINDS)
+TABLE_COLUMNS = (("sampler", "n_samples", "repeats", "wall_time_s")
+                 + tuple(f"err_{k}_{s}" for s, k in METRICS)
+                 + ("err_moments", "err_quantile", "err_max"))
+
+
+def _metric_values(res, stat, kind):
+    st = res.stat(stat)
+    if kind == "mean":
+        return st.mean
+    if kind == "m3s":
+        return st.mean_pm_3std[1]
+    return st.bound3[1]
+
+
+def _metric_se(res, stat, kind):
+    st = res.stat(stat)
+    if kind == "mean":
+        return st.se_mean
+    if kind == "m3s":
+        return np.sqrt(st.se_mean ** 2 + 9.0 * st.se_std ** 2)   # (ignores their correlation)
+    return st.se_bound3[1]
+
+
+def _sobol_count(n, replicates):
+    """Smallest replicates * 2**m >= n (Sobol balance)."""
+    per = max(1, math.ceil(n / replicates))
+    return replicates * (1 << (per - 1).bit_length())
+
+
+def _interp_crossover(ns, errs, target):
+    """Smallest n (log-log interpolation) where the error curve first drops to ``target``."""
+    ns = np.asarray(ns, float)
+    errs = np.asarray(errs, float)
+    order = np.argsort(ns)
+    ns, errs = ns[order], errs[order]
+    for i in range(ns.size):
+        if errs[i] <= target:
+            if i == 0:
+                return float(ns[0])
+            x0, x1 = math.log(ns[i - 1]), math.log(ns[i])
+            y0, y1 = math.log(errs[i - 1]), math.log(errs[i])
+            if y1 == y0:
+                return float(ns[i])
+            x = x0 + (math.log(target) - y0) * (x1 - x0) / (y1 - y0)
+            return float(math.exp(min(max(x, x0), x1)))
+    return float("nan")
+
+
+def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 100000),
+                     samplers=("random", "sobol"), reference_samples: int = 2 ** 21,
+                     rng=0, quick: bool = False, n_repeats: int = 5, replicates: int = 8,
+                     window: str = "slowest-offset", case3_samples: int = 100000,
+                     figure: bool = True) -> dict:
+    """Monte Carlo error against wall time for both samplers; writes table, JSON and figure.
+
+    Parameters
+    ----------
+    out_dir : path-like
+        Output folder (created if missing).
+    sample_counts : sequence of int
+        Sample counts [-]. Sobol counts are rounded up to ``replicates * 2**m`` (balance);
+        the table shows the count actually run.
+    samplers : sequence of {"random", "sobol"}
+        Samplers to compare.
+    reference_samples : int
+        Samples of the converged Sobol reference [-] (rounded like the Sobol counts).
+    rng : int
+        Base seed; run ``j`` of a configuration uses an independent child stream.
+    quick : bool
+        Tiny sizes for a smoke run (counts 64 and 256, reference 4096, 2 repeats, no
+        separate case-3 timing).
+    n_repeats : int
+        Independent runs per configuration (errors are RMS over them) [-].
+    replicates : int
+        Replicates per Monte Carlo run (standard errors; Sobol randomisation) [-].
+    window : str
+        Observation window kind (:func:`pipeline.models.tolerance.observation_window`).
+    case3_samples : int
+        Sample count of the separately timed seed case 3 run (plain random) [-].
+    figure : bool
+        Write the log-log figure (needs matplotlib).
+
+    Returns
+    -------
+    dict
+        ``{"rows": [...], "reference": {...}, "crossover": {...}, "case3": {...},
+        "meta": {...}, "files": {...}}``.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    samplers = tuple(as_choice(s, "samplers", ("random", "sobol")) for s in samplers)
+    window = as_choice(window, "window", WINDOW_KINDS)
+    if quick:
+        sample_counts, reference_samples, n_repeats = (64, 256), 4096, 2
+    counts = sorted({as_positive_int(n, "sample_counts") for n in sample_counts})
+    n_repeats = as_positive_int(n_repeats, "n_repeats")
+    replicates = as_positive_int(replicates, "replicates")
+    ref_n = _sobol_count(as_positive_int(reference_samples, "reference_samples"), replicates)
+    seeds = np.random.SeedSequence(rng)
+
+    g, sp, tol = table2_case(3)
+    win = observation_window(sp, window)
+    engine = _kernels.resolve_engine("auto")
+
+    t = time.perf_counter()
+    monte_carlo(g, sp, tol, win, 16, rng=0, replicates=2)       # JIT compile / cache load
+    warmup = time.perf_counter() - t
+
+    ref_seed, run_seeds, case_seed = seeds.spawn(3)
+    t = time.perf_counter()
+    ref = monte_carlo(g, sp, tol, win, ref_n, sampler="sobol", rng=np.random.default_rng(ref_seed),
+                      replicates=replicates)
+    ref_time = time.perf_counter() - t
+    scale = {s: ref.stat(s).std for s in STATISTICS}
+    active = [(s, k) for s, k in METRICS if np.max(scale[s][1:]) > 1e-12]
+    reference = {"n_samples": ref_n, "sampler": "sobol", "wall_time_s": ref_time,
+                 "values": {f"{k}_{s}": _metric_values(ref, s, k).tolist() for s, k in METRICS},
+                 "std": {s: scale[s].tolist() for s in STATISTICS},
+                 "stderr": {f"{k}_{s}": (_metric_se(ref, s, k) / np.where(
+                     scale[s] > 0, scale[s], np.inf)).tolist() for s, k in METRICS},
+                 "skipped_metrics": [f"{k}_{s}" for s, k in METRICS if (s, k) not in active]}
+
+    rows = []
+    config_seeds = iter(run_seeds.spawn(len(samplers) * len(counts)))
+    for sampler in samplers:
+        for n0 in counts:
+            n = _sobol_count(n0, replicates) if sampler == "sobol" else n0
+            sq = next(config_seeds)
+            errs = {m: [] for m in METRICS}
+            times = []
+            for child in sq.spawn(n_repeats):
+                res = monte_carlo(g, sp, tol, win, n, sampler=sampler,
+                                  rng=np.random.default_rng(child), replicates=replicates)
+                times.append(res.wall_time)
+                for s, k in METRICS:
+                    if (s, k) not in active:
+                        continue
+                    d = (_metric_values(res, s, k) - _metric_values(ref, s, k))[1:]
+                    errs[(s, k)].append(float(np.max(np.abs(d) / scale[s][1:])))
+            row = {"sampler": sampler, "n_samples": n, "repeats": n_repeats,
+                   "wall_time_s": float(np.median(times))}
+            for s, k in METRICS:
+                e = errs[(s, k)]
+                row[f"err_{k}_{s}"] = float(np.sqrt(np.mean(np.square(e)))) if e else float("nan")
+            for col, kinds in (("err_moments", ("mean", "m3s")), ("err_quantile", ("q3s",)),
+                               ("err_max", KINDS)):
+                vals = [row[f"err_{k}_{s}"] for s, k in active if k in kinds]
+                row[col] = float(np.max(vals)) if vals else float("nan")
+            rows.append(row)
+            logger.info("bench models: %s n=%d  %.3f s  err_max=%.3g", sampler, n,
+                        row["wall_time_s"], row["err_max"])
+
+    crossover = _crossover(rows, samplers, active)
+
+    case3 = {}
+    if not quick:
+        t = time.perf_counter()
+        res = monte_carlo(g, sp, tol, win, case3_samples, sampler="random",
+                          rng=np.random.default_rng(case_seed), replicates=replicates)
+        case3 = {"n_samples": case3_samples, "sampler": "random", "wall_time_s":
+                 time.perf_counter() - t, "window": win.to_dict(), "n_times": res.n_times,
+                 "dev_s_bound3_hi": res.dev_s.bound3[1].tolist(),
+                 "dev_r_bound3_hi": res.dev_r.bound3[1].tolist(),
+                 "ave_r_bound3": res.ave_r.bound3.tolist()}
+
+    meta = {"case": "seed000 Table 2 case 3 (angles given)", "window": win.to_dict(),
+            "n_times": ref.n_times, "engine": engine, "replicates": replicates,
+            "jit_warmup_s": warmup, "cpu_count": os.cpu_count(),
+            "python": platform.python_version(),
+            "numpy": np.__version__, "quick": quick,
+            "error_unit": "RMS over repeats of |estimate - reference| / reference std, "
+                          "worst planet (2..N)"}
+    result = {"rows": rows, "reference": reference, "crossover": crossover, "case3": case3,
+              "meta": meta, "files": {}}
+
+    jpath = out / "models_bench.json"
+    mpath = out / "models_bench.md"
+    jpath.write_text(json.dumps(result, indent=2, default=float))
+    mpath.write_text(_markdown(result))
+    result["files"] = {"json": str(jpath), "markdown": str(mpath)}
+    if figure:
+        from ..report.bench_figures_models import save_models_bench_figure
+        fpath = out / "models_bench.png"
+        save_models_bench_figure(result, fpath)
+        result["files"]["figure"] = str(fpath)
+    jpath.write_text(json.dumps(result, indent=2, default=float))
+    return result
+
+
+def _crossover(rows, samplers, active):
+    """Sobol sample count that matches plain random's error at its largest count."""
+    if not ("random" in samplers and "sobol" in samplers):
+        return {}
+    rnd = [r for r in rows if r["sampler"] == "random"]
+    sob = [r for r in rows if r["sampler"] == "sobol"]
+    top = max(rnd, key=lambda r: r["n_samples"])
+    out = {"random_n": top["n_samples"], "metrics": {}}
+    for key in ["err_max", "err_moments", "err_quantile"] + [f"err_{k}_{s}" for s, k in active]:
+        target = top[key]
+        n_match = _interp_crossover([r["n_samples"] for r in sob], [r[key] for r in sob], target)
+        out["metrics"][key] = {"random_error": target, "sobol_n_match": n_match,
+                               "ratio": (top["n_samples"] / n_match if n_match == n_match
+                                         else float("nan"))}
+    return out
+
+
+def _fmt(v):
+    if isinstance(v, float):
+        if v != v:
+            return "-"
+        return f"{v:.3g}"
+    return str(v)
+
+
+def _markdown(result):
+    lines = ["# Monte Carlo error against run time (seed 000 case 3)", ""]
+    m = result["meta"]
+    w = m["window"]
+    lines.append(f"Window: {w['name']} [{w['t0']:g}, {w['t0'] + w['duration']:g}] s, "
+                 f"{m['n_times']} time samples; engine {m['engine']}; {m['replicates']} "
+                 f"replicates per run; {m['cpu_count']} cores. Error unit: {m['error_unit']}.")
+    ref = result["reference"]
+    lines.append(f"Reference: Sobol, {ref['n_samples']} samples, {ref['wall_time_s']:.2f} s. "
+                 f"Skipped (zero spread): {', '.join(ref['skipped_metrics']) or 'none'}.")
+    lines.append("")
+    lines.append("| " + " | ".join(TABLE_COLUMNS) + " |")
+    lines.append("|" + "|".join("---" for _ in TABLE_COLUMNS) + "|")
+    for r in result["rows"]:
+        lines.append("| " + " | ".join(_fmt(r[c]) for c in TABLE_COLUMNS) + " |")
+    cx = result.get("crossover") or {}
+    if cx:
+        lines += ["", f"Sobol samples matching plain random's error at n = {cx['random_n']}:", ""]
+        lines.append("| metric | random error | sobol n | ratio |")
+        lines.append("|---|---|---|---|")
+        for k, v in cx["metrics"].items():
+            lines.append(f"| {k} | {_fmt(v['random_error'])} | {_fmt(v['sobol_n_match'])} | "
+                         f"{_fmt(v['ratio'])} |")
+    c3 = result.get("case3") or {}
+    if c3:
+        lines += ["", f"Case 3, {c3['n_samples']} plain random samples: "
+                      f"{c3['wall_time_s']:.2f} s wall (JIT warm-up {m['jit_warmup_s']:.2f} s "
+                      "measured separately)."]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,266 @@
+"""Inner loops of the shaft-hole-error phasing model (numpy path and optional numba path).
+
+Private module. Both paths evaluate the same arithmetic, in the same order, on the same
+precomputed inputs, so they agree to a few units in the last place (the tests hold them to
+1e-12); only the summation order of the time mean differs.
+
+Inputs (all float64):
+
+- ``cs, ss`` / ``cr, sr`` / ``cp, sp`` : cos and sin of the reduced offset rotation angles
+  w_sc t, w_rc t, w_pc t on the time grid, shape (n_t,) [-]. They come from
+  :func:`pipeline.models.mesh_phasing.rotation_cos_sin`, which reduces w t modulo 2 pi
+  exactly, so no large argument ever reaches a trig function here.
+- ``cpsi, spsi`` : cos and sin of the nominal planet angles psi_n, shape (N,) [-].
+- ``R`` : carrier radius [m].
+- per realisation i: ``es, cks, sks`` sun radial error [m] and cos/sin of its angle, shape (S,);
+  ``er, ckr, skr`` the ring's; ``ep, ckp, skp`` the planets', shape (S, N).
+
+Geometry (carrier frame, counter-clockwise positive; see mesh_phasing for the derivation):
+in the frame of planet n (radial unit vector u_n towards the ideal planet centre, tangential
+unit vector t_n = u_n rotated +90 deg) the vector from the actual sun centre to the actual
+planet centre is
+
+    v_s = (R - e_p cos th - e_s cos(a_s - psi_n),  -e_p sin th - e_s sin(a_s - psi_n))
+
+with th = w_pc t + kappa_p and a_s = w_sc t + kappa_s (ring: e_r, a_r = w_rc t + kappa_r), and
+the angular deviation of the mesh line from the nominal planet angle is delta = atan2(v_t, v_u).
+The angles enter only through angle addition of precomputed cos/sin, which is what makes the
+inner loop cheap. The numba kernel loops over time innermost with a branch-free atan (Cephes)
+so that loop vectorises: measured ~0.27 G (realisation x time x planet) evaluations/s, both
+meshes, on the 2-core machine (seed case 3, 1e5 x 223 x 4 in ~0.33 s), against ~0.045 with
+libm atan2 and ~0.01 for the chunked numpy path.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..log import logger
+
+__all__ = ["HAVE_NUMBA", "deltas_numpy", "stats_numpy", "stats_numba", "resolve_engine",
+           "atan_cephes"]
+
+try:  # numba is optional (extras "fast" and "test")
+    import numba as _numba
+
+    HAVE_NUMBA = True
+except Exception as _exc:  # pragma: no cover - exercised only without numba
+    _numba = None
+    HAVE_NUMBA = False
+    _NUMBA_ERROR = repr(_exc)
+
+ENGINES = ("auto", "numba", "numpy")
+_LOGGED_FALLBACK = False
+
+
+def resolve_engine(engine: str) -> str:
+    """Return ``"numba"`` or ``"numpy"`` for a requested engine.
+
+    ``"auto"`` picks numba when it imports and logs (once, at INFO) when it falls back to the
+    numpy path. Asking for ``"numba"`` explicitly without numba is a ValueError.
+    """
+    global _LOGGED_FALLBACK
+    if not isinstance(engine, str):
+        raise TypeError(f"engine must be a string, one of {list(ENGINES)}, got {engine!r}")
+    if engine not in ENGINES:
+        raise ValueError(f"engine must be one of {list(ENGINES)}, got {engine!r}")
+    if engine == "numpy":
+        return "numpy"
+    if HAVE_NUMBA:
+        return "numba"
+    if engine == "numba":
+        raise ValueError(f"engine='numba' requested but numba is not importable ({_NUMBA_ERROR})")
+    if not _LOGGED_FALLBACK:
+        logger.info("numba is not importable (%s): the phasing statistics use the numpy path "
+                    "(same numbers, ~10x slower)", _NUMBA_ERROR)
+        _LOGGED_FALLBACK = True
+    return "numpy"
+
+
+def deltas_numpy(cs, ss, cr, sr, cp, sp, cpsi, spsi, R, es, cks, sks, er, ckr, skr, ep, ckp, skp):
+    """Angular deviations delta_s, delta_r [rad] of the mesh lines, shape (S, n_t, N).
+
+    ``es ... skr`` have shape (S,), ``ep, ckp, skp`` shape (S, N); the time arrays (n_t,).
+    """
+    c_t = cs[None, :, None]
+    s_t = ss[None, :, None]
+    # sun offset direction a_s = w_sc t + kappa_s (angle addition), shape (S, n_t, 1)
+    ca_s = c_t * cks[:, None, None] - s_t * sks[:, None, None]
+    sa_s = s_t * cks[:, None, None] + c_t * sks[:, None, None]
+    c_t = cr[None, :, None]
+    s_t = sr[None, :, None]
+    ca_r = c_t * ckr[:, None, None] - s_t * skr[:, None, None]
+    sa_r = s_t * ckr[:, None, None] + c_t * skr[:, None, None]
+    # planet offset angle th = w_pc t + kappa_p, shape (S, n_t, N)
+    c_t = cp[None, :, None]
+    s_t = sp[None, :, None]
+    ct = c_t * ckp[:, None, :] - s_t * skp[:, None, :]
+    st = s_t * ckp[:, None, :] + c_t * skp[:, None, :]
+    epb = ep[:, None, :]
+    px = R - epb * ct
+    py = -(epb * st)
+    del ct, st
+    cps = cpsi[None, None, :]
+    sps = spsi[None, None, :]
+    crel = ca_s * cps + sa_s * sps
+    srel = sa_s * cps - ca_s * sps
+    esb = es[:, None, None]
+    d_s = np.arctan2(py - esb * srel, px - esb * crel)
+    crel = ca_r * cps + sa_r * sps
+    srel = sa_r * cps - ca_r * sps
+    erb = er[:, None, None]
+    d_r = np.arctan2(py - erb * srel, px - erb * crel)
+    return d_s, d_r
+
+
+def stats_numpy(cs, ss, cr, sr, cp, sp, cpsi, spsi, R, es, cks, sks, er, ckr, skr, ep, ckp, skp,
+                g_s, g_r, out_ave_s, out_dev_s, out_ave_r, out_dev_r, chunk_elems=1 << 20):
+    """Ave and Dev of the phasing deviation per realisation (numpy path), written in place.
+
+    g_s, g_r are the factors that turn an angle difference into mesh cycles
+    (+-Z_s / 2 pi, -+Z_r / 2 pi). Output arrays have shape (S, N). Realisations are processed
+    in chunks of about ``chunk_elems`` (S_chunk x n_t x N) elements to bound memory.
+    """
+    n_s = es.shape[0]
+    n_t = cs.shape[0]
+    n_p = cpsi.shape[0]
+    step = max(1, int(chunk_elems) // max(1, n_t * n_p))
+    for a in range(0, n_s, step):
+        b = min(n_s, a + step)
+        d_s, d_r = deltas_numpy(cs, ss, cr, sr, cp, sp, cpsi, spsi, R, es[a:b], cks[a:b],
+                                sks[a:b], er[a:b], ckr[a:b], skr[a:b], ep[a:b], ckp[a:b], skp[a:b])
+        for d, g, ave, dev in ((d_s, g_s, out_ave_s, out_dev_s), (d_r, g_r, out_ave_r, out_dev_r)):
+            v = g * (d - d[:, :, :1])
+            ave[a:b] = v.mean(axis=1)
+            dev[a:b] = v.max(axis=1) - v.min(axis=1)
+
+
+# Cephes atan (S. L. Moshier), rational approximation on |x| <= 0.66 with two argument
+# reductions, written branch-free (selects) so that the time loop vectorises: <= 1 ulp
+# against libm on 1e7 random arguments over 1e-5 .. 1e4 (measured); libm's atan2 is not
+# vectorised and made the kernel 6x slower.
+_T3P8 = 2.41421356237309504880      # tan(3 pi / 8)
+_MOREBITS = 6.123233995736765886130e-17
+_PIO2 = np.pi / 2
+_PIO4 = np.pi / 4
+_P = (-8.750608600031904122785e-1, -1.615753718733365076637e1, -7.500855792314704667340e1,
+      -1.228866684490136173410e2, -6.485021904942025371773e1)
+_Q = (2.485846490142306297962e1, 1.650270098316988542046e2, 4.328810604912902668951e2,
+      4.853903996359136964868e2, 1.945506571482613964425e2)
+
+
+def atan_cephes(x):
+    """Scalar atan(x) [rad] with the branch-free Cephes algorithm (reference for the kernel)."""
+    a = abs(x)
+    big = a > _T3P8
+    mid = a > 0.66
+    n1 = 0.0 if big else 1.0
+    n0 = 1.0 if mid else 0.0
+    d1 = 1.0 if mid else 0.0
+    d0 = 0.0 if big else 1.0
+    # big: -1/a, mid: (a - 1)/(a + 1), small: a / 1 (exact), with a single division
+    xr = (a * n1 - n0) / (a * d1 + d0)
+    y0 = _PIO2 if big else (_PIO4 if mid else 0.0)
+    mb = _MOREBITS if big else (0.5 * _MOREBITS if mid else 0.0)
+    z = xr * xr
+    p = (((_P[0] * z + _P[1]) * z + _P[2]) * z + _P[3]) * z + _P[4]
+    q = ((((z + _Q[0]) * z + _Q[1]) * z + _Q[2]) * z + _Q[3]) * z + _Q[4]
+    r = xr * (z * p / q) + xr
+    r = y0 + (r + mb)
+    return math.copysign(r, x)
+
+
+if HAVE_NUMBA:
+    _atan = _numba.njit(inline="always", cache=True)(atan_cephes)
+
+    @_numba.njit(parallel=True, cache=True, fastmath=False, nogil=True)
+    def _stats_numba_kernel(cs, ss, cr, sr, cp, sp, cpsi, spsi, R, es, cks, sks, er, ckr, skr,
+                            ep, ckp, skp, g_s, g_r, out_ave_s, out_dev_s, out_ave_r,
+                            out_dev_r):  # pragma: no cover - compiled
+        n_s = es.shape[0]
+        n_t = cs.shape[0]
+        n_p = cpsi.shape[0]
+        for i in _numba.prange(n_s):
+            cas = np.empty(n_t)
+            sas = np.empty(n_t)
+            car = np.empty(n_t)
+            sar = np.empty(n_t)
+            d1s = np.empty(n_t)
+            d1r = np.empty(n_t)
+            vs = np.empty(n_t)
+            vr = np.empty(n_t)
+            a1 = cks[i]
+            b1 = sks[i]
+            a2 = ckr[i]
+            b2 = skr[i]
+            for k in range(n_t):
+                cas[k] = cs[k] * a1 - ss[k] * b1
+                sas[k] = ss[k] * a1 + cs[k] * b1
+                car[k] = cr[k] * a2 - sr[k] * b2
+                sar[k] = sr[k] * a2 + cr[k] * b2
+            esi = es[i]
+            eri = er[i]
+            for n in range(n_p):
+                c_k = ckp[i, n]
+                s_k = skp[i, n]
+                e = ep[i, n]
+                cps = cpsi[n]
+                sps = spsi[n]
+                for k in range(n_t):
+                    ct = cp[k] * c_k - sp[k] * s_k
+                    st = sp[k] * c_k + cp[k] * s_k
+                    px = R - e * ct
+                    py = -(e * st)
+                    crel = cas[k] * cps + sas[k] * sps
+                    srel = sas[k] * cps - cas[k] * sps
+                    # x > 0 (e_s + e_p < R_c), so atan2(y, x) = atan(y / x)
+                    d_s = _atan((py - esi * srel) / (px - esi * crel))
+                    crel = car[k] * cps + sar[k] * sps
+                    srel = sar[k] * cps - car[k] * sps
+                    d_r = _atan((py - eri * srel) / (px - eri * crel))
+                    if n == 0:
+                        d1s[k] = d_s
+                        d1r[k] = d_r
+                    vs[k] = g_s * (d_s - d1s[k])
+                    vr[k] = g_r * (d_r - d1r[k])
+                sm = 0.0
+                mn = np.inf
+                mx = -np.inf
+                for k in range(n_t):
+                    v = vs[k]
+                    sm += v
+                    mn = min(mn, v)
+                    mx = max(mx, v)
+                out_ave_s[i, n] = sm / n_t
+                out_dev_s[i, n] = mx - mn
+                sm = 0.0
+                mn = np.inf
+                mx = -np.inf
+                for k in range(n_t):
+                    v = vr[k]
+                    sm += v
+                    mn = min(mn, v)
+                    mx = max(mx, v)
+                out_ave_r[i, n] = sm / n_t
+                out_dev_r[i, n] = mx - mn
+
+
+def stats_numba(cs, ss, cr, sr, cp, sp, cpsi, spsi, R, es, cks, sks, er, ckr, skr, ep, ckp, skp,
+                g_s, g_r, out_ave_s, out_dev_s, out_ave_r, out_dev_r):
+    """Same as :func:`stats_numpy`, compiled with numba (parallel over realisations)."""
+    if not HAVE_NUMBA:  # pragma: no cover
+        raise ValueError("numba is not importable")
+    if es.shape[0] == 0 or cs.shape[0] == 0:
+        return
+    # one compiled signature only: C-contiguous, writable float64 (read-only broadcast views
+    # would otherwise compile a second specialisation)
+    def req(a):
+        return np.require(a, dtype=np.float64, requirements=("C", "W"))
+
+    args = [req(a) for a in (cs, ss, cr, sr, cp, sp, cpsi, spsi)]
+    per = [req(a) for a in (es, cks, sks, er, ckr, skr)]
+    pl = [req(a) for a in (ep, ckp, skp)]
+    _stats_numba_kernel(*args, float(R), *per, *pl, float(g_s), float(g_r),
+                        out_ave_s, out_dev_s, out_ave_r, out_dev_r)
