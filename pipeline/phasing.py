@@ -50,6 +50,7 @@ __all__ = [
     "pass_order",
     "planet_fractions",
     "revolution_numbers",
+    "RevolutionEncoder",
     "assign_planets_by_pattern",
     "assign_planets_by_tacho",
     "measured_phasing",
@@ -84,7 +85,10 @@ class PassTable:
         is missing and the revolution was bridged).
     angle : ndarray, shape (n,)
         Relative angle turned by the gauged member since the first reference pass, at the
-        pass [rad] (the pulse-train "encoder"; lets models run on the actual angle).
+        pass [rad] (the pulse-train "encoder"; lets models run on the actual angle). The
+        planet-1 pass of revolution k sits at angle 2 pi k.
+    origin : float
+        Time of the first reference pass, where ``angle`` is 0 [s].
     """
 
     gauge: str
@@ -97,6 +101,7 @@ class PassTable:
     ref_time: np.ndarray = None
     angle: np.ndarray = None
     notes: list = field(default_factory=list)
+    origin: float = float("nan")
 
     def __post_init__(self):
         n = np.asarray(self.time).size
@@ -131,7 +136,15 @@ class PassTable:
         m = self.planet == n
         return PassTable(self.gauge, self.time[m], self.planet[m], self.revolution[m],
                          self.gamma[m], self.uncertainty[m], self.mesh_period[m],
-                         self.ref_time[m], self.angle[m], list(self.notes))
+                         self.ref_time[m], self.angle[m], list(self.notes), self.origin)
+
+    def mean_speed(self) -> float:
+        """Mean relative speed of the gauged member from the encoder angle, |w_jc| [rad/s]
+        (least-squares slope of angle against time; NaN with fewer than two passes)."""
+        ok = np.isfinite(self.angle)
+        if np.count_nonzero(ok) < 2 or np.ptp(self.time[ok]) == 0:
+            return float("nan")
+        return float(abs(np.polyfit(self.time[ok], self.angle[ok], 1)[0]))
 
     def summary(self) -> dict:
         """Per planet: count, circular mean of gamma, circular std, max - min of the deviation
@@ -391,6 +404,99 @@ def _walk(gaps: np.ndarray, fs: np.ndarray, q0: int, tol: float):
     return pos % n, ok, total
 
 
+class RevolutionEncoder:
+    """Relative angle of a gauged member from once-per-revolution reference times.
+
+    The reference passes (planet 1, or a tacho) mark whole relative revolutions k: knots
+    (t_k, 2 pi k). Their times are not exactly one revolution apart when the reference planet
+    has its own shaft hole error (its pass moves back and forth by its angular deviation), so
+    the angle is not interpolated through the knots: around every revolution a quadratic
+    theta(t) = 2 pi k + c1 (t - t_k) + c2 (t - t_k)^2 is fitted by least squares to the
+    2 h + 1 nearest knots. That is exact for constant speed and a linear speed ramp, follows
+    ripple slower than ~2 h revolutions and averages the reference planet's jitter.
+
+    Within revolution k the lag since its reference pass is c1 x + c2 x^2, x = t - t_k, so at
+    constant speed lag_n = w (t_n - t_1) exactly (spec section 3: gamma = frac(dt / T)).
+
+    Parameters
+    ----------
+    knot_times : ndarray, shape (m,)
+        Reference times [s], strictly increasing, m >= 2.
+    k : ndarray of int, shape (m,)
+        Their revolution numbers (:func:`revolution_numbers`), gaps allowed.
+    half_window : int
+        h, knots on each side used in each local fit [-].
+    """
+
+    def __init__(self, knot_times, k, half_window: int = 5):
+        kt = np.asarray(knot_times, dtype=float)
+        k = np.asarray(k, dtype=int)
+        self.k0 = int(k[0])
+        full_k = np.arange(k[0], k[-1] + 1)
+        # revolutions whose reference pass is missing get an interpolated knot time
+        self.full_t = np.interp(full_k, k, kt)
+        self._known = np.zeros(full_k.size, bool)
+        self._known[k - k[0]] = True
+        self.t_first = float(self.full_t[0])
+        self.t_last = float(self.full_t[-1])
+        m = kt.size
+        w = min(2 * half_window + 1, m)
+        deg = 2 if w >= 4 else 1
+        # window of measured knots around each revolution (shifted inward at the ends)
+        centre = np.searchsorted(kt, self.full_t)
+        lo = np.clip(centre - w // 2, 0, m - w)
+        idx = lo[:, None] + np.arange(w)[None, :]
+        x = kt[idx] - self.full_t[:, None]                      # (R, w)
+        y = TWO_PI * (k[idx] - full_k[:, None])                 # (R, w)
+        A = np.stack([x ** p for p in range(deg + 1)], axis=-1)  # (R, w, deg+1)
+        # scale x for conditioning: per-window period estimate
+        P0 = (kt[-1] - kt[0]) / max(1, k[-1] - k[0])
+        As = A / (P0 ** np.arange(deg + 1))
+        AtA = np.einsum("rwi,rwj->rij", As, As)
+        Aty = np.einsum("rwi,rw->ri", As, y)
+        c = np.linalg.solve(AtA, Aty[..., None])[..., 0] / (P0 ** np.arange(deg + 1))
+        c = np.concatenate([c, np.zeros((c.shape[0], 3 - c.shape[1]))], axis=1)
+        self.c1 = c[:, 1]
+        self.c2 = c[:, 2]
+        self.c0 = c[:, 0]
+
+    def lag(self, t):
+        """Revolution k, angle turned since that revolution's reference pass [rad] and the
+        local angular speed [rad/s] at times ``t`` (inside [t_first, t_last))."""
+        t = np.asarray(t, dtype=float)
+        j = np.clip(np.searchsorted(self.full_t, t, side="right") - 1, 0, self.full_t.size - 2)
+        x = t - self.full_t[j]
+        # the fit need not pass through its own knot: measure from the fitted angle there
+        lag = self.c1[j] * x + self.c2[j] * x * x
+        return j + self.k0, lag, np.abs(self.c1[j] + 2.0 * self.c2[j] * x)
+
+    def rates(self, t):
+        """Local angular speed [rad/s] and acceleration [rad/s^2] of the fit at times ``t``."""
+        t = np.asarray(t, dtype=float)
+        j = np.clip(np.searchsorted(self.full_t, t, side="right") - 1, 0, self.full_t.size - 1)
+        x = t - self.full_t[j]
+        return self.c1[j] + 2.0 * self.c2[j] * x, 2.0 * self.c2[j]
+
+    def average_with(self, others) -> None:
+        """Replace the local speed/acceleration by the mean over this and other encoders of the
+        same member (e.g. every planet's passes), evaluated at this encoder's knots.
+
+        Each planet's passes jitter with that planet's own shaft hole error; the speed is
+        common to all of them, so averaging N estimates shrinks the jitter's share."""
+        sp, ac = [self.c1], [2.0 * self.c2]
+        for o in others:
+            inside = (self.full_t >= o.t_first) & (self.full_t <= o.t_last)
+            v, a = o.rates(self.full_t)
+            sp.append(np.where(inside, v, np.nan))
+            ac.append(np.where(inside, a, np.nan))
+        self.c1 = np.nanmean(np.stack(sp), axis=0)
+        self.c2 = 0.5 * np.nanmean(np.stack(ac), axis=0)
+
+    def knot_time_or_nan(self) -> np.ndarray:
+        """Reference time per revolution (NaN where the pass was missing)."""
+        return np.where(self._known, self.full_t, np.nan)
+
+
 def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str = "sun",
                      sigma_t=None, reference_times=None) -> PassTable:
     """Phasing gamma_jn per pass from labelled onset times (equation (1) of the module notes).
@@ -460,13 +566,19 @@ def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str 
     k = revolution_numbers(knots_t)
     if k[-1] != knots_t.size - 1:
         notes.append(f"{int(k[-1] - knots_t.size + 1)} missing reference pass(es) bridged")
-    theta = PchipInterpolator(knots_t, TWO_PI * k, extrapolate=False)
-    dtheta = theta.derivative()
-    inside = (t >= knots_t[0]) & (t < knots_t[-1])
-    th = theta(np.where(inside, t, knots_t[0]))
-    rev = np.floor(th / TWO_PI + 1e-12).astype(int)
-    lag = th - TWO_PI * rev  # [0, 2 pi)
-    omega = np.abs(dtheta(np.where(inside, t, knots_t[0])))
+    enc = RevolutionEncoder(knots_t, k)
+    if not use_ref:
+        # every planet's own passes are a once-per-revolution encoder of the same member
+        others = []
+        for q in range(1, n):
+            tq = t[lab == q]
+            if tq.size >= 4 and np.all(np.diff(tq) > 0):
+                others.append(RevolutionEncoder(tq, revolution_numbers(tq)))
+        enc.average_with(others)
+    inside = (t >= enc.t_first) & (t < enc.t_last)
+    tt = np.where(inside, t, enc.t_first)
+    rev, lag, omega = enc.lag(tt)
+    th = TWO_PI * rev + lag
     if use_ref:
         # lag of planet 1 per revolution, subtracted from every planet of that revolution
         m1 = inside & (lab == 0)
@@ -480,11 +592,10 @@ def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str 
         sig_ref = sig1[rev]
     else:
         rel = lag
-        t1 = np.full(int(k[-1]) + 1, np.nan)
-        t1[k] = knots_t
-        # planet 1 knots bracket the pass: both of their errors move Theta(t_n)
-        kpos = np.clip(np.searchsorted(knots_t, t, side="right") - 1, 0, knots_t.size - 2)
-        sig_ref = np.hypot(knot_sig[kpos], knot_sig[kpos + 1]) / math.sqrt(2.0)
+        t1 = enc.knot_time_or_nan()
+        # the planet-1 pass of the revolution carries its own timing error
+        kpos = np.clip(np.searchsorted(knots_t, t, side="right") - 1, 0, knots_t.size - 1)
+        sig_ref = knot_sig[kpos]
     keep = inside & (lab > 0) & np.isfinite(rel)
     n_out = int(np.count_nonzero((lab > 0) & ~inside))
     if n_out:
@@ -497,4 +608,4 @@ def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str 
     unc = z * om / TWO_PI * np.hypot(sig[keep], sig_ref[keep])
     rk = rev[keep]
     return PassTable(gauge, t[keep], lab[keep] + 1, rk, gamma, unc, mesh_period,
-                     t1[np.clip(rk, 0, t1.size - 1)], th[keep], notes)
+                     t1[np.clip(rk, 0, t1.size - 1)], th[keep], notes, enc.t_first)

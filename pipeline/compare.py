@@ -1,0 +1,453 @@
+"""Measured phasing against the models: predictions at the measured passes, residuals, Monte
+Carlo band coverage, identification of the shaft hole errors, bearing moments.
+
+What a gauge measures
+---------------------
+A gauged sun tooth meets planet n when its direction about the actual sun centre equals the
+line of centres psi_es,n (synthetic.kinematics gives the same condition), so between the
+planet-1 pass (angle time tau_1) and the planet-n pass (tau_n) the tooth turns
+
+    lag_n = psi_es,n(tau_n) - psi_es,1(tau_1)        (mod 2 pi, in the gear's sense)
+
+and the measured phasing is gamma_n = frac(o Z lag_n / 2 pi) with o = +-1 the gauge's
+sense of rotation (:func:`pipeline.phasing.pass_order`). The model therefore has to be
+evaluated at the two engagement instants, not at one common time as in seed 000's
+gamma(t): :func:`predict_pass_phasing` does that, on the pulse-train encoder angle of each
+pass (so speed drift does not accumulate into the offset angles).
+
+One consequence is physical and worth knowing: a gear's own shaft hole offset turns with
+the gauged tooth, so a gauge on that gear meets every planet with the offset in the same
+place, and its phasing is blind to it (exactly, in the absence of planet errors). The sun
+gauge cannot see e_sun, the ring gauge cannot see e_ring; planet offsets are seen by both.
+:func:`identify_errors` reports such parameters as not identifiable from the data at hand
+instead of returning a number.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .errors import ProcessingWarning
+from .models.gearset import Gearset, Speeds
+from .models.mesh_phasing import ShaftHoleErrors, ideal_phasing, mesh_angle_deviations
+from .phasing import PassTable, pass_order
+from .validate import as_positive
+
+__all__ = [
+    "relative_speeds",
+    "predict_pass_phasing",
+    "wrap",
+    "residual_stats",
+    "band_coverage",
+    "Identification",
+    "identify_errors",
+    "PARAMETER_NAMES",
+]
+
+TWO_PI = 2.0 * math.pi
+
+
+def wrap(x):
+    """Wrap mesh-cycle differences into [-0.5, 0.5) [-]."""
+    x = np.asarray(x, dtype=float)
+    return x - np.floor(x + 0.5)
+
+
+def relative_speeds(gearset: Gearset, gauge: str, w_gauge: float) -> Speeds:
+    """Speeds relative to the carrier implied by one gauge's measured relative speed.
+
+    The model needs only speeds relative to the carrier, and those are tied by the tooth
+    counts whatever the input/output arrangement (Willis): w_pc = -(Z_s / Z_p) w_sc,
+    w_rc = -(Z_s / Z_r) w_sc. Returned with carrier = 0.
+
+    Parameters
+    ----------
+    gearset : Gearset
+        Needs z_planet > 0 for the planet offsets to turn (0: planet offsets frozen, warned).
+    gauge : {"sun", "ring"}
+    w_gauge : float
+        Magnitude of the gauged member's speed relative to the carrier [rad/s].
+    """
+    w = as_positive(w_gauge, "w_gauge")
+    o = pass_order(gearset.direction, gauge)
+    w_sc = o * w if gauge == "sun" else -o * w * gearset.z_ring / gearset.z_sun
+    if gearset.z_planet > 0:
+        w_pc = -w_sc * gearset.z_sun / gearset.z_planet
+    else:
+        warnings.warn("gearset.z_planet is 0: planet offsets are modelled as not turning",
+                      ProcessingWarning, stacklevel=2)
+        w_pc = 0.0
+    w_rc = -w_sc * gearset.z_sun / gearset.z_ring
+    return Speeds(sun=w_sc, carrier=0.0, planet=w_pc, ring=w_rc)
+
+
+def _angle_times(table: PassTable, w: float) -> tuple[np.ndarray, np.ndarray]:
+    """Angle time of each pass and of its planet-1 reference pass [s] from the encoder."""
+    if np.all(np.isfinite(table.angle)) and math.isfinite(table.origin):
+        tau_n = table.origin + table.angle / w
+        tau_1 = table.origin + TWO_PI * table.revolution / w
+    else:
+        tau_n = table.time
+        tau_1 = np.where(np.isfinite(table.ref_time), table.ref_time, np.nan)
+    return tau_n, tau_1
+
+
+def predict_pass_phasing(table: PassTable, gearset: Gearset, errors: ShaftHoleErrors | None,
+                         *, speeds: Speeds | None = None) -> np.ndarray:
+    """Model phasing at each measured pass of ``table`` [-], in [0, 1).
+
+    Parameters
+    ----------
+    table : PassTable
+        Measured passes (sun or ring gauge) with their encoder angles.
+    gearset : Gearset
+    errors : ShaftHoleErrors or None
+        One realisation; None gives the ideal phasing.
+    speeds : Speeds, optional
+        Relative speeds; default from the table's own mean speed (:func:`relative_speeds`).
+
+    Returns
+    -------
+    gamma : ndarray, shape (n_passes,)
+        frac(o Z (psi_n(tau_n) - psi_1(tau_1)) / 2 pi); NaN where the reference pass is
+        unknown.
+    """
+    if not isinstance(table, PassTable):
+        raise TypeError(f"table must be a PassTable, got {type(table).__name__}")
+    n = len(table)
+    if n == 0:
+        return np.empty(0)
+    gauge = table.gauge
+    z = gearset.z_sun if gauge == "sun" else gearset.z_ring
+    o = pass_order(gearset.direction, gauge)
+    w = table.mean_speed()
+    if not math.isfinite(w) or w <= 0:
+        raise ValueError(f"{gauge} table: cannot measure the gauge speed from {n} pass(es)")
+    sp = speeds or relative_speeds(gearset, gauge, w)
+    w_gauge = abs(sp.w_sc if gauge == "sun" else sp.w_rc)
+    tau_n, tau_1 = _angle_times(table, w_gauge)
+    psi = gearset.angles
+    idx = table.planet - 1
+    out = np.full(n, np.nan)
+    ok = np.isfinite(tau_1) & np.isfinite(tau_n)
+    if not np.any(ok):
+        return out
+    which = 0 if gauge == "sun" else 1
+    if errors is None or errors.is_zero:
+        d_n = np.zeros(np.count_nonzero(ok))
+        d_1 = d_n
+    else:
+        # deviations of each pass's own planet at its own time, and of planet 1 at tau_1
+        dn = mesh_angle_deviations(tau_n[ok], gearset, sp, errors)[which]
+        d1 = mesh_angle_deviations(tau_1[ok], gearset, sp, errors)[which]
+        rows = np.arange(dn.shape[-2])
+        d_n = dn[..., rows, idx[ok]]
+        d_1 = d1[..., rows, 0]
+    lag = (psi[idx[ok]] - psi[0]) + (d_n - d_1)
+    out[ok] = (o * z * lag / TWO_PI) % 1.0
+    return out
+
+
+def residual_stats(measured, predicted, planets=None) -> dict:
+    """Residual statistics of measured - predicted phasing [mesh cycles].
+
+    Returns
+    -------
+    dict
+        ``n``, ``mean``, ``rms``, ``max_abs``, ``std`` overall and ``per_planet`` (same keys).
+    """
+    m = np.asarray(measured, dtype=float)
+    p = np.asarray(predicted, dtype=float)
+    if m.shape != p.shape:
+        raise ValueError(f"measured {m.shape} and predicted {p.shape} must have the same shape")
+    r = wrap(m - p)
+    ok = np.isfinite(r)
+
+    def stats(x):
+        if x.size == 0:
+            return {"n": 0, "mean": float("nan"), "rms": float("nan"), "max_abs": float("nan"),
+                    "std": float("nan")}
+        return {"n": int(x.size), "mean": float(x.mean()), "rms": float(np.sqrt(np.mean(x ** 2))),
+                "max_abs": float(np.max(np.abs(x))), "std": float(x.std())}
+
+    out = stats(r[ok])
+    if planets is not None:
+        pl = np.asarray(planets)
+        out["per_planet"] = {int(n): stats(r[ok & (pl == n)]) for n in np.unique(pl)}
+    return out
+
+
+def band_coverage(measured, planets, ideal, band_lo, band_hi) -> dict:
+    """Which passes fall outside a phasing band around the ideal value.
+
+    Parameters
+    ----------
+    measured : array_like, shape (m,)
+        Measured gamma [-].
+    planets : array_like of int, shape (m,)
+        1-based planet per pass.
+    ideal : array_like, shape (N,)
+        Ideal gamma per planet [-].
+    band_lo, band_hi : array_like, shape (N,)
+        Band of the deviation from ideal per planet [-] (e.g. Monte Carlo 3-sigma bounds of
+        the smallest and largest deviation over the window).
+
+    Returns
+    -------
+    dict
+        ``inside_fraction``, ``outside_index`` (row indices), ``per_planet`` fractions.
+    """
+    m = np.asarray(measured, dtype=float)
+    pl = np.asarray(planets, dtype=int)
+    if m.shape != pl.shape:
+        raise ValueError(f"measured {m.shape} and planets {pl.shape} must have the same shape")
+    ideal = np.asarray(ideal, dtype=float)
+    lo = np.asarray(band_lo, dtype=float)
+    hi = np.asarray(band_hi, dtype=float)
+    if m.size == 0:
+        return {"inside_fraction": float("nan"), "outside_index": [], "per_planet": {}}
+    if pl.min() < 1 or pl.max() > ideal.size:
+        raise ValueError(f"planets must lie in [1, {ideal.size}], got [{pl.min()}, {pl.max()}]")
+    dev = wrap(m - ideal[pl - 1])
+    inside = (dev >= lo[pl - 1]) & (dev <= hi[pl - 1])
+    return {"inside_fraction": float(inside.mean()),
+            "outside_index": np.flatnonzero(~inside).tolist(),
+            "per_planet": {int(n): float(inside[pl == n].mean()) for n in np.unique(pl)}}
+
+
+#: parameter order of the identification: Cartesian offset components [m]
+def PARAMETER_NAMES(n_planets: int) -> list[str]:
+    """Names of the identification parameters (Cartesian offsets [m])."""
+    names = ["sun_x", "sun_y", "ring_x", "ring_y"]
+    for i in range(1, n_planets + 1):
+        names += [f"planet{i}_x", f"planet{i}_y"]
+    return names
+
+
+def _errors_from_vector(p: np.ndarray, n: int) -> ShaftHoleErrors:
+    xs, ys, xr, yr = p[:4]
+    xp, yp = p[4::2], p[5::2]
+    return ShaftHoleErrors(e_sun=math.hypot(xs, ys), kappa_sun=math.atan2(ys, xs),
+                           e_ring=math.hypot(xr, yr), kappa_ring=math.atan2(yr, xr),
+                           e_planet=np.hypot(xp, yp), kappa_planet=np.arctan2(yp, xp))
+
+
+def _vector_from_errors(err: ShaftHoleErrors, n: int) -> np.ndarray:
+    ep = np.broadcast_to(np.asarray(err.e_planet, float), (n,))
+    kp = np.broadcast_to(np.asarray(err.kappa_planet, float), (n,))
+    v = [float(err.e_sun) * math.cos(float(err.kappa_sun)), float(err.e_sun) * math.sin(float(err.kappa_sun)),
+         float(err.e_ring) * math.cos(float(err.kappa_ring)), float(err.e_ring) * math.sin(float(err.kappa_ring))]
+    for e, k in zip(ep, kp):
+        v += [e * math.cos(k), e * math.sin(k)]
+    return np.asarray(v)
+
+
+@dataclass
+class Identification:
+    """Shaft hole errors identified from measured phasing by least squares.
+
+    Attributes
+    ----------
+    errors : ShaftHoleErrors
+        The fitted errors used for the model curves: identifiable parameters at their
+        estimates, unidentifiable combinations at minimum norm (not an estimate of them).
+    table : list of dict
+        Per gear: ``gear``, ``e`` [m], ``e_std`` [m], ``e_ci95`` [m, m], ``kappa`` [rad],
+        ``kappa_std`` [rad], ``identifiable`` (bool), ``note``.
+    parameters : dict
+        Cartesian parameters: name -> (estimate [m], std [m], identifiable).
+    singular_values : ndarray
+        Of the weighted Jacobian (identifiability: near-zero ones are combinations the data
+        cannot see).
+    rms_before, rms_after : float
+        Residual RMS against the ideal and against the fitted model [mesh cycles].
+    sigma : float
+        Residual standard deviation after the fit [mesh cycles] (scales the covariance).
+    n_passes, n_parameters : int
+    cost_evaluations : int
+    wall_time : float [s]
+    identifiable : bool
+        All requested parameters identifiable.
+    projector : ndarray, shape (P, P)
+        Orthogonal projector onto the identifiable subspace of the Cartesian parameters
+        (:data:`PARAMETER_NAMES` order); see :meth:`subspace_error`.
+    notes : list of str
+    """
+
+    errors: ShaftHoleErrors
+    table: list
+    parameters: dict
+    singular_values: np.ndarray
+    rms_before: float
+    rms_after: float
+    sigma: float
+    n_passes: int
+    n_parameters: int
+    cost_evaluations: int
+    wall_time: float
+    identifiable: bool
+    notes: list = field(default_factory=list)
+    projector: np.ndarray | None = None
+    free: np.ndarray | None = None
+
+    def subspace_error(self, true_errors: ShaftHoleErrors) -> float:
+        """Distance [m] between the estimate and ``true_errors`` inside the identifiable
+        subspace (what the data can tell apart); the check for synthetic truth."""
+        if self.projector is None:
+            return float("nan")
+        n_pl = (self.free.size - 4) // 2
+        d = (_vector_from_errors(self.errors, n_pl) - _vector_from_errors(true_errors, n_pl))[self.free]
+        return float(np.linalg.norm(self.projector @ d))
+
+
+def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet"),
+                    rcond: float = 1e-2, max_nfev: int = 200) -> Identification:
+    """Identify shaft hole errors (e, kappa per gear) from measured phasing time series.
+
+    Weighted nonlinear least squares (scipy.optimize.least_squares, trust region) of the
+    wrapped residuals gamma_measured - :func:`predict_pass_phasing`, over Cartesian offset
+    components (x, y) = e (cos kappa, sin kappa) so that e = 0 is a regular point. The
+    weighted Jacobian's SVD decides identifiability: a parameter whose direction lies (to
+    99 %) outside the span of the singular vectors with s > rcond * s_max is reported as
+    not identifiable and held at 0 (e.g. a gear's own offset seen only by a gauge on that
+    gear). Confidence intervals: covariance sigma^2 (J^T J)^+ on the identifiable subspace,
+    e and kappa by the delta method; 95 % intervals are +-1.96 std.
+
+    Parameters
+    ----------
+    tables : PassTable or sequence of PassTable
+        Measured passes of the sun and/or ring gauge.
+    gearset : Gearset
+    gears : tuple of {"sun", "ring", "planet"}
+        Which offsets to fit.
+    rcond : float
+        Relative singular value threshold for identifiability [-].
+    max_nfev : int
+        Limit of model evaluations.
+
+    Returns
+    -------
+    Identification
+    """
+    t_start = time.perf_counter()
+    if isinstance(tables, PassTable):
+        tables = [tables]
+    tables = [t for t in tables if isinstance(t, PassTable) and len(t) > 0]
+    n_pl = gearset.n_planets
+    names = PARAMETER_NAMES(n_pl)
+    bad = set(gears) - {"sun", "ring", "planet"}
+    if bad:
+        raise ValueError(f"gears must be among 'sun', 'ring', 'planet', got {sorted(bad)}")
+    free = np.array([(n.split("_")[0].rstrip("0123456789") in gears) for n in names])
+    zero = ShaftHoleErrors()
+    if not tables:
+        warnings.warn("identify_errors: no measured passes; nothing identified",
+                      ProcessingWarning, stacklevel=2)
+        return Identification(zero, [], {}, np.empty(0), float("nan"), float("nan"),
+                              float("nan"), 0, int(free.sum()), 0, 0.0, False,
+                              ["no measured passes"])
+    speeds = {id(t): relative_speeds(gearset, t.gauge, t.mean_speed()) for t in tables}
+    meas = np.concatenate([t.gamma for t in tables])
+    unc = np.concatenate([t.uncertainty for t in tables])
+    ideal = np.concatenate([predict_pass_phasing(t, gearset, None, speeds=speeds[id(t)]) for t in tables])
+    r0 = wrap(meas - ideal)
+    ok = np.isfinite(r0)
+    rms_before = float(np.sqrt(np.mean(r0[ok] ** 2))) if ok.any() else float("nan")
+    # weights: given per-pass uncertainties, else the scatter of the residual about its mean
+    floor = max(1e-6, 0.1 * float(np.nanmedian(unc))) if np.any(np.isfinite(unc)) else 1e-6
+    w = 1.0 / np.where(np.isfinite(unc) & (unc > 0), np.maximum(unc, floor), np.nan)
+    if not np.any(np.isfinite(w)):
+        w = np.ones_like(meas)
+    w = np.where(np.isfinite(w), w, np.nanmedian(w))
+    scale = 1e-4 * gearset.carrier_radius  # parameter scale ~ a typical offset [m]
+    n_eval = [0]
+
+    def model(p_free):
+        p = np.zeros(len(names))
+        p[free] = p_free * scale
+        err = _errors_from_vector(p, n_pl)
+        n_eval[0] += 1
+        return np.concatenate([predict_pass_phasing(t, gearset, err, speeds=speeds[id(t)])
+                               for t in tables])
+
+    def resid(p_free):
+        r = wrap(meas - model(p_free)) * w
+        return np.where(ok, r, 0.0)
+
+    x0 = np.zeros(int(free.sum()))
+    # offsets are small against the carrier radius: bound each component to 5 % of R_c so the
+    # flat (unidentifiable) directions cannot wander to geometrically impossible layouts
+    bound = 0.05 * gearset.carrier_radius / scale
+    sol = least_squares(resid, x0, method="trf", x_scale=1.0, diff_step=1e-6, max_nfev=max_nfev,
+                        bounds=(-bound, bound))
+    J = sol.jac
+    U, s, Vt = np.linalg.svd(J, full_matrices=False)
+    keep = s > rcond * (s[0] if s.size and s[0] > 0 else 1.0)
+    resolution = np.sum(Vt[keep] ** 2, axis=0)
+    ident = resolution > 0.95
+    dof = max(1, int(ok.sum()) - int(keep.sum()))
+    chi2 = float(np.sum(sol.fun ** 2))
+    s2 = chi2 / dof  # reduced chi-square: rescales the given uncertainties to the scatter
+    Vk = Vt[keep].T
+    cov_free = s2 * (Vk / s[keep] ** 2) @ Vk.T * scale ** 2
+    p_hat = np.zeros(len(names))
+    # the fitted model keeps the whole solution (started at 0, the trust-region steps stay in
+    # the range of J^T, i.e. unidentifiable combinations sit at minimum norm); only the
+    # identifiable parameters are reported as estimates
+    est = sol.x * scale
+    p_hat[free] = est
+    cov = np.zeros((len(names), len(names)))
+    fi = np.flatnonzero(free)
+    cov[np.ix_(fi, fi)] = cov_free
+    err_hat = _errors_from_vector(p_hat, n_pl)
+    r1 = wrap(meas - model(est / scale))
+    rms_after = float(np.sqrt(np.mean(r1[ok] ** 2))) if ok.any() else float("nan")
+    sigma_res = float(np.std(r1[ok])) if ok.any() else float("nan")
+    ident_full = np.zeros(len(names), bool)
+    ident_full[fi] = ident
+    params = {nm: (float(p_hat[i]), float(math.sqrt(max(cov[i, i], 0.0))), bool(ident_full[i]))
+              for i, nm in enumerate(names) if free[i]}
+    rows = []
+    notes = []
+    gear_list = [("sun", 0), ("ring", 2)] + [(f"planet{i + 1}", 4 + 2 * i) for i in range(n_pl)]
+    for gear, i in gear_list:
+        if not free[i]:
+            continue
+        x, y = p_hat[i], p_hat[i + 1]
+        C = cov[i:i + 2, i:i + 2]
+        e = math.hypot(x, y)
+        idf = bool(ident_full[i] and ident_full[i + 1])
+        if idf and e > 0:
+            g = np.array([x, y]) / e
+            e_std = float(math.sqrt(max(g @ C @ g, 0.0)))
+            gk = np.array([-y, x]) / e ** 2
+            k_std = float(math.sqrt(max(gk @ C @ gk, 0.0)))
+        else:
+            e_std = k_std = float("nan")
+        note = ""
+        if not idf:
+            note = "not identifiable from these data"
+            watched = {t.gauge for t in tables}
+            if gear in watched:
+                note += f" (a {gear} gauge turns with the {gear} offset and cannot see it)"
+            notes.append(f"{gear}: {note}")
+        elif e_std > e:
+            note = "offset smaller than its uncertainty; angle undefined"
+        rows.append({"gear": gear, "e": e if idf else float("nan"), "e_std": e_std,
+                     "e_ci95": [e - 1.96 * e_std, e + 1.96 * e_std] if idf else [float("nan")] * 2,
+                     "kappa": math.atan2(y, x) if idf and e > 0 else float("nan"),
+                     "kappa_std": k_std, "identifiable": idf, "note": note})
+    if not sol.success:
+        notes.append(f"least squares stopped: {sol.message}")
+    return Identification(
+        errors=err_hat, table=rows, parameters=params, singular_values=s,
+        rms_before=rms_before, rms_after=rms_after, sigma=sigma_res, n_passes=int(ok.sum()),
+        n_parameters=int(free.sum()), cost_evaluations=n_eval[0],
+        wall_time=time.perf_counter() - t_start,
+        identifiable=bool(np.all(ident)), notes=notes, projector=Vk @ Vk.T, free=free)
