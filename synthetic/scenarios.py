@@ -1,0 +1,315 @@
+"""Registry of named synthetic scenarios (tests parametrize over :data:`SCENARIOS`).
+
+Each entry is a :class:`Scenario` whose ``config()`` builds a fresh
+:class:`~synthetic.config.SynthConfig`. ``get_scenario(name)`` returns the config;
+``list_scenarios()`` the names.
+
+Gearsets
+--------
+``table1``
+    Seed 000 Table 1 as :func:`pipeline.models.tolerance.table2_case` gives it: Z_s 25,
+    Z_r 87, Z_p 29, four equally spaced planets, R_c 112.5 mm, fixed ring, w_s 448,
+    w_c 100 rad/s (w_s / w_c = 4.48 = 1 + Z_r / Z_s), clockwise planets. Mesh frequency
+    Z_s w_sc / 2 pi = 1385 Hz, so it is sampled at 51.2 kHz (the NI 9234 maximum), 37 samples
+    per mesh period. Face width 40 mm (not in the seed; assumed).
+``seed_rig``
+    The seed's rig runs the sun at 18.19 r/min and the carrier at 1.06 r/min, a ratio of
+    17.16. With a fixed ring that needs 1 + Z_r / Z_s = 17.16, which no simple stage with four
+    planets can reach: the planets' tip circles must clear each other,
+    (Z_s + Z_p) sin(pi / 4) > Z_p + 2, and with Z_r = Z_s + 2 Z_p that caps the fixed-ring
+    ratio 2 + 2 Z_p / Z_s below 6.83. So the rig must run as a differential, the ring driven
+    too (a reaction motor or a back-to-back loop), and the sun and carrier speeds fix the
+    ring speed by Willis: w_r = w_c - (Z_s / Z_r)(w_s - w_c) = -3.862 r/min (counter-rotating).
+    Tooth counts: the seed's own Table 1 gearset (the experiment validates that model), with
+    the planet count made consistent with the centre distances: Z_s 25, Z_r 87,
+    Z_p = (87 - 25) / 2 = 31 (Table 1's 29 cannot mesh with both at one centre distance),
+    four equally spaced planets (assemblable: (25 + 87) / 4 = 28), R_c 112.5 mm (module 4 mm
+    with a +0.5 mm centre-distance shift), face width 40 mm. Mesh frequency 7.14 Hz
+    (T_m = 0.140 s = 717 samples at 5120 Hz); the sun gauge meets a planet every 0.88 s,
+    the ring gauge every 3.05 s (relative ring revolution 12.2 s).
+
+Gauges: sun tooth 0 (150 µε nominal, contact ratio 1.6), ring tooth 0 (100 µε, contact ratio
+1.8: internal meshes have more overlap), a carrier tacho; the face-width scenarios add gauges
+across one sun and one ring tooth.
+
+Scenarios
+---------
+``table1_high_speed`` (and ``_ccw``, every speed reversed), ``table2_case1/2/3`` (seed 000
+Table 2 errors; case 3 draws one realisation from the tolerance bands with the seed),
+``seed_rig`` (case 1 errors, clean), ``noisy``, ``adc16_clipped``, ``speed_ripple``,
+``speed_ramp``, ``gaps``, ``facewidth_offcentre``, ``facewidth_partial``, ``facewidth_tilt``,
+``rig_realistic``, ``one_hour`` (generate it with :func:`synthetic.generate_blocks`). Each
+entry's ``description`` says what it holds; :func:`describe_scenarios` lists them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+from pipeline.models.gearset import Gearset, Speeds, rpm_to_rad_s
+from pipeline.models.tolerance import table2_case
+
+from .config import Artefacts, GaugeConfig, SynthConfig, TachoConfig, TiltSource
+from .kinematics import SpeedProfile
+
+__all__ = ["Scenario", "SCENARIOS", "get_scenario", "list_scenarios", "describe_scenarios",
+           "register", "table1_gearset", "seed_rig_gearset", "seed_rig_speeds"]
+
+FACE_WIDTH = 40e-3
+SEED_RIG_SUN_RPM = 18.19
+SEED_RIG_CARRIER_RPM = 1.06
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A named scenario.
+
+    Attributes
+    ----------
+    name : str
+    description : str
+    build : callable() -> SynthConfig
+    tags : tuple of str
+        e.g. "fast" (cheap at its default duration), "long", "noise", "facewidth", "errors".
+    """
+
+    name: str
+    description: str
+    build: Callable[[], SynthConfig]
+    tags: tuple = field(default_factory=tuple)
+
+    def config(self, **changes) -> SynthConfig:
+        """A fresh config (with fields replaced, e.g. ``duration=2.0``)."""
+        cfg = self.build()
+        return cfg.with_(**changes) if changes else cfg
+
+
+#: name -> Scenario
+SCENARIOS: dict[str, Scenario] = {}
+
+
+def register(scenario: Scenario) -> Scenario:
+    """Add a scenario to the registry (ValueError if the name is taken)."""
+    if not isinstance(scenario, Scenario):
+        raise TypeError(f"scenario must be a Scenario, got {type(scenario).__name__}")
+    if scenario.name in SCENARIOS:
+        raise ValueError(f"scenario {scenario.name!r} is already registered")
+    SCENARIOS[scenario.name] = scenario
+    return scenario
+
+
+def list_scenarios() -> list[str]:
+    """Names of the registered scenarios, sorted."""
+    return sorted(SCENARIOS)
+
+
+def describe_scenarios() -> list[dict]:
+    """One row per scenario: ``name``, ``description``, ``tags``, ``fs`` [Hz], ``duration`` [s],
+    ``channels`` (for ``meshphase synth --list``)."""
+    rows = []
+    for name in list_scenarios():
+        sc = SCENARIOS[name]
+        cfg = sc.config()
+        rows.append({"name": name, "description": sc.description, "tags": list(sc.tags),
+                     "fs": cfg.fs, "duration": cfg.duration,
+                     "channels": [g.name for g in cfg.gauges] + ([cfg.tacho.name] if cfg.tacho else [])})
+    return rows
+
+
+def get_scenario(name: str, **changes) -> SynthConfig:
+    """Config of scenario ``name`` (ValueError listing the known names)."""
+    if not isinstance(name, str):
+        raise TypeError(f"scenario name must be a string, got {type(name).__name__}")
+    if name not in SCENARIOS:
+        raise ValueError(f"unknown scenario {name!r}; known: {', '.join(list_scenarios())}")
+    return SCENARIOS[name].config(**changes)
+
+
+# ----------------------------------------------------------------------------- building blocks
+
+def table1_gearset() -> tuple[Gearset, Speeds]:
+    """Seed 000 Table 1 gearset (face width 40 mm added) and its speeds [rad/s]."""
+    g, sp, _ = table2_case(1)
+    g = Gearset(g.z_sun, g.z_ring, g.z_planet, g.planet_angles, g.carrier_radius,
+                direction=g.direction, name="seed000-table1", face_width=FACE_WIDTH)
+    return g, sp
+
+
+def seed_rig_gearset() -> Gearset:
+    """The seed 000 rig as modelled here (see the module docstring for why)."""
+    return Gearset.equally_spaced(25, 87, 31, 4, 112.5e-3, direction="cw",
+                                  name="seed000-rig (differential, ring driven)",
+                                  face_width=FACE_WIDTH)
+
+
+def seed_rig_speeds(gearset: Gearset | None = None) -> Speeds:
+    """Sun 18.19 r/min, carrier 1.06 r/min, ring by Willis (-3.862 r/min) [rad/s]."""
+    g = seed_rig_gearset() if gearset is None else gearset
+    return Speeds.kinematic(g, rpm_to_rad_s(SEED_RIG_SUN_RPM), rpm_to_rad_s(SEED_RIG_CARRIER_RPM))
+
+
+def _gauges(*, facewidth: bool = False) -> tuple:
+    out = [GaugeConfig("sun", "sun", tooth=0, amplitude=150e-6, contact_ratio=1.6),
+           GaugeConfig("ring", "ring", tooth=0, amplitude=100e-6, contact_ratio=1.8)]
+    if facewidth:
+        b = FACE_WIDTH
+        for i, z in enumerate((-0.4 * b, 0.0, 0.4 * b)):
+            out.append(GaugeConfig(f"sun_fw{i + 1}", "sun", tooth=5, face_position=z,
+                                   amplitude=150e-6, contact_ratio=1.6))
+        for i, z in enumerate((-0.4 * b, -0.2 * b, 0.0, 0.2 * b, 0.4 * b)):
+            out.append(GaugeConfig(f"ring_fw{i + 1}", "ring", tooth=10, face_position=z,
+                                   amplitude=100e-6, contact_ratio=1.8))
+    return tuple(out)
+
+
+def _table1(name, description, *, errors=None, duration=0.5, **kw) -> SynthConfig:
+    g, sp = table1_gearset()
+    return SynthConfig(name=name, description=description, gearset=g, speeds=sp, fs=51200.0,
+                       duration=duration, gauges=_gauges(), errors=errors, tacho=TachoConfig(),
+                       **kw)
+
+
+def _seed_rig(name, description, *, duration=60.0, errors="case1", gauges=None, **kw) -> SynthConfig:
+    g = seed_rig_gearset()
+    if errors == "case1":
+        errors = table2_case(1)[2]
+    return SynthConfig(name=name, description=description, gearset=g, speeds=seed_rig_speeds(g),
+                       fs=5120.0, duration=duration, gauges=gauges or _gauges(), errors=errors,
+                       tacho=TachoConfig(), **kw)
+
+
+#: artefacts of a good real rig: 24-bit DAQ, 30 dB SNR with some 1/f, slight drift and hum
+_REALISTIC = Artefacts(snr_db=30.0, pink_fraction=0.3, pink_fmin=0.05, drift_amplitude=8e-6,
+                       drift_time_constant=900.0, hum_amplitude=2e-6, hum_frequency=50.0,
+                       adc_bits=24, adc_range=2e-3)
+
+
+# ----------------------------------------------------------------------------- the registry
+
+register(Scenario(
+    "table1_high_speed",
+    "Seed 000 Table 1 gearset at its Table 1 speeds (w_s 448, w_c 100 rad/s, fixed ring), no "
+    "errors, 51.2 kHz, sun + ring gauges + carrier tacho; clean.",
+    lambda: _table1("table1_high_speed", "Seed 000 Table 1 gearset at high speed, ideal"),
+    ("fast",)))
+
+register(Scenario(
+    "table1_high_speed_ccw",
+    "As table1_high_speed with every speed reversed (counter-clockwise planets): pass order "
+    "and phasing signs flip.",
+    lambda: (lambda g, sp: SynthConfig(
+        name="table1_high_speed_ccw", description="Table 1 gearset, reversed rotation",
+        gearset=Gearset(g.z_sun, g.z_ring, g.z_planet, g.planet_angles, g.carrier_radius,
+                        direction="ccw", name=g.name, face_width=g.face_width),
+        speeds=Speeds(-sp.sun, -sp.carrier, -sp.planet, -sp.ring), fs=51200.0, duration=0.5,
+        gauges=_gauges(), tacho=TachoConfig()))(*table1_gearset()),
+    ("fast",)))
+
+for _case in (1, 2, 3):
+    register(Scenario(
+        f"table2_case{_case}",
+        f"Seed 000 Table 1 gearset at high speed with Table 2 case {_case} shaft hole errors"
+        + (" (normal tolerance bands: one realisation drawn with the seed)" if _case == 3 else "")
+        + ", 51.2 kHz, sun + ring gauges + tacho; clean.",
+        (lambda c: lambda: _table1(f"table2_case{c}", f"Table 1 gearset, Table 2 case {c} errors",
+                                   errors=table2_case(c)[2]))(_case),
+        ("fast", "errors")))
+
+register(Scenario(
+    "seed_rig",
+    "The seed's rig: 5120 Hz, sun 18.19 r/min, carrier 1.06 r/min (ring driven at -3.862 r/min, "
+    "Z 25/87/31, 4 planets), Table 2 case 1 errors, sun + ring gauges + tacho, 60 s; clean.",
+    lambda: _seed_rig("seed_rig", "Seed 000 rig speeds, case 1 errors"),
+    ("fast", "errors")))
+
+register(Scenario(
+    "noisy",
+    "seed_rig at 20 dB SNR (40 % of the noise power 1/f from 0.05 Hz), thermal drift 20 µε "
+    "(T 600 s), 50 Hz hum 5 µε, 24-bit ADC over +-2000 µε, 2 % random gauge gain errors.",
+    lambda: _seed_rig("noisy", "seed rig with noise, drift, hum, 24-bit ADC, gain errors",
+                      artefacts=Artefacts(snr_db=20.0, pink_fraction=0.4, pink_fmin=0.05,
+                                          drift_amplitude=20e-6, drift_time_constant=600.0,
+                                          hum_amplitude=5e-6, hum_frequency=50.0, adc_bits=24,
+                                          adc_range=2e-3, gain_error_std=0.02)),
+    ("fast", "noise")))
+
+register(Scenario(
+    "adc16_clipped",
+    "seed_rig through a 16-bit ADC whose +-140 µε range clips the sun pulses, 60 Hz hum, "
+    "35 dB SNR.",
+    lambda: _seed_rig("adc16_clipped", "seed rig, 16-bit ADC clipping the sun gauge",
+                      artefacts=Artefacts(snr_db=35.0, hum_amplitude=3e-6, hum_frequency=60.0,
+                                          adc_bits=16, adc_range=140e-6)),
+    ("fast", "noise")))
+
+register(Scenario(
+    "speed_ripple",
+    "seed_rig with a slow speed ripple (5 % at 0.1 Hz plus 2 % at 0.37 Hz): engagement times "
+    "follow the actual rotation angles.",
+    lambda: _seed_rig("speed_ripple", "seed rig with speed ripple",
+                      speed=SpeedProfile(ripple=((0.05, 0.1, 0.0), (0.02, 0.37, 1.0)))),
+    ("fast", "speed")))
+
+register(Scenario(
+    "speed_ramp",
+    "seed_rig with the drive speeding up 20 % over 60 s (ramp 0.33 %/s) plus 1 % ripple at "
+    "0.2 Hz.",
+    lambda: _seed_rig("speed_ramp", "seed rig with a speed ramp",
+                      speed=SpeedProfile(ramp_rate=0.2 / 60.0, ripple=((0.01, 0.2, 0.0),))),
+    ("fast", "speed")))
+
+register(Scenario(
+    "gaps",
+    "seed_rig with acquisition gaps (one per 20 s on average, mean 0.2 s) and single dropped "
+    "samples (0.5 per s), NaN in every channel, 30 dB SNR.",
+    lambda: _seed_rig("gaps", "seed rig with gaps and dropped samples",
+                      artefacts=Artefacts(snr_db=30.0, gap_rate=0.05, gap_length=0.2,
+                                          dropout_rate=0.5)),
+    ("fast", "gaps")))
+
+register(Scenario(
+    "facewidth_offcentre",
+    "seed_rig with 3 face-width gauges across sun tooth 5 and 5 across ring tooth 10 "
+    "(b = 40 mm), load centroids off centre: Z_S = -2 mm, Z_R = +3, +2.5, +3.5, +3 mm per "
+    "planet (linear load), unequal load sharing 1.08/0.95/1.02/0.95.",
+    lambda: _seed_rig("facewidth_offcentre", "face-width gauges, off-centre load",
+                      gauges=_gauges(facewidth=True), centroid_sun=-2e-3,
+                      centroid_ring=(3e-3, 2.5e-3, 3.5e-3, 3e-3),
+                      load_sharing=(1.08, 0.95, 1.02, 0.95)),
+    ("fast", "facewidth")))
+
+register(Scenario(
+    "facewidth_partial",
+    "As facewidth_offcentre with the ring load run off the face (Z_R = 9 mm > b/6): partial "
+    "contact, triangular load, the gauges at the unloaded end read nothing.",
+    lambda: _seed_rig("facewidth_partial", "face-width gauges, partial contact",
+                      gauges=_gauges(facewidth=True), centroid_sun=-2e-3, centroid_ring=9e-3),
+    ("fast", "facewidth")))
+
+register(Scenario(
+    "facewidth_tilt",
+    "Face-width gauges with the load centroids from the coupled bearing tilt solve (seed 001 "
+    "Case 1 planet geometry, k_t = 8.8e4 N·m/rad, 1378.7 N·m, the gearset's 40 mm face): "
+    "Z_S < 0 < Z_R, equal on every planet.",
+    lambda: _seed_rig("facewidth_tilt", "face-width gauges, centroids from the tilt solve",
+                      gauges=_gauges(facewidth=True), tilt=TiltSource("1", k_tilt=8.8e4)),
+    ("fast", "facewidth")))
+
+register(Scenario(
+    "rig_realistic",
+    "seed_rig with everything a good rig records: 30 dB SNR (30 % 1/f), drift, hum, 24-bit "
+    "ADC, 1 % gain errors, 3 % speed ripple.",
+    lambda: _seed_rig("rig_realistic", "seed rig, realistic acquisition",
+                      artefacts=Artefacts(**{**_REALISTIC.to_dict(), "hum_harmonics": (1.0, 0.0, 0.25),
+                                             "gain_error_std": 0.01}),
+                      speed=SpeedProfile(ripple=((0.03, 0.05, 0.0),))),
+    ("fast", "noise", "speed")))
+
+register(Scenario(
+    "one_hour",
+    "One hour of the seed rig with realistic acquisition (30 dB SNR, 1/f, drift, hum, 24-bit): "
+    "18.4 MSamples per channel, for benchmarks; generate it with generate_blocks (flat memory).",
+    lambda: _seed_rig("one_hour", "one hour of the seed rig, realistic acquisition",
+                      duration=3600.0, artefacts=_REALISTIC),
+    ("long", "noise", "bench")))
