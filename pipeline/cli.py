@@ -133,7 +133,16 @@ def cmd_convert(args) -> int:
 
 # ---------------------------------------------------------------------------- synth
 def cmd_synth(args) -> int:
-    from synthetic import cli_synth
+    from synthetic import cli_synth, describe_scenarios
+
+    if args.list or not args.scenario or not args.output:
+        rows = describe_scenarios()
+        for r in rows:
+            print(f"{r['name']:<24} {r['fs']:>8g} Hz {r['duration']:>7g} s  {r['description']}")
+        if not args.list:
+            print("\nusage: meshphase synth SCENARIO OUT [--minutes M] [--seed N]", file=sys.stderr)
+            return 2
+        return 0
 
     path, truth = cli_synth(args.scenario, args.output, minutes=args.minutes, seed=args.seed,
                             format=args.format, overwrite=args.overwrite, progress=not args.quiet)
@@ -177,8 +186,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_convert)
 
     s = sub.add_parser("synth", help="write a synthetic recording of a named scenario plus its truth sidecar")
-    s.add_argument("scenario", help="scenario name (see `meshphase synth --list`)")
-    s.add_argument("output")
+    s.add_argument("scenario", nargs="?", help="scenario name (see `meshphase synth --list`)")
+    s.add_argument("output", nargs="?", help="output file: .h5, .mcap, .csv or .tdms")
+    s.add_argument("--list", action="store_true", help="list the scenarios and exit")
     s.add_argument("--minutes", type=float, help="duration [min] (default: the scenario's)")
     s.add_argument("--seed", type=int, help="random seed (recorded in the truth sidecar)")
     s.add_argument("--format", choices=["hdf5", "mcap", "csv", "tdms"])

@@ -51,6 +51,7 @@ __all__ = [
     "planet_fractions",
     "revolution_numbers",
     "RevolutionEncoder",
+    "ScaledEncoder",
     "assign_planets_by_pattern",
     "assign_planets_by_tacho",
     "measured_phasing",
@@ -102,6 +103,7 @@ class PassTable:
     angle: np.ndarray = None
     notes: list = field(default_factory=list)
     origin: float = float("nan")
+    encoder: object = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
         n = np.asarray(self.time).size
@@ -405,18 +407,21 @@ def _walk(gaps: np.ndarray, fs: np.ndarray, q0: int, tol: float):
 
 
 class RevolutionEncoder:
-    """Relative angle of a gauged member from once-per-revolution reference times.
+    """Relative angle of a gauged member from once-per-revolution pass trains.
 
     The reference passes (planet 1, or a tacho) mark whole relative revolutions k: knots
     (t_k, 2 pi k). Their times are not exactly one revolution apart when the reference planet
-    has its own shaft hole error (its pass moves back and forth by its angular deviation), so
-    the angle is not interpolated through the knots: around every revolution a quadratic
-    theta(t) = 2 pi k + c1 (t - t_k) + c2 (t - t_k)^2 is fitted by least squares to the
-    2 h + 1 nearest knots. That is exact for constant speed and a linear speed ramp, follows
-    ripple slower than ~2 h revolutions and averages the reference planet's jitter.
+    has its own shaft hole error (each pass moves by that planet's angular deviation, ~e/R_c),
+    so the angle is not forced through the knots: a smooth Theta(t) is fitted to them by least
+    squares, a cubic spline with interior knots every ``span`` revolutions (a quadratic when
+    the record is shorter). The other planets' pass trains, each at its own unknown constant
+    angle offset, join the fit (offsets estimated, then one refit), so N times more passes
+    average the jitter. Exact for constant speed and a linear ramp; follows ripple slower than
+    ~2 ``span`` revolutions.
 
-    Within revolution k the lag since its reference pass is c1 x + c2 x^2, x = t - t_k, so at
-    constant speed lag_n = w (t_n - t_1) exactly (spec section 3: gamma = frac(dt / T)).
+    The phasing of a pass at t_n is then taken from Theta(t_n) - Theta(t_1k) with t_1k the
+    measured reference pass of its revolution, so at constant speed lag_n = w (t_n - t_1k)
+    exactly (spec section 3: gamma = frac(dt / T)).
 
     Parameters
     ----------
@@ -424,81 +429,135 @@ class RevolutionEncoder:
         Reference times [s], strictly increasing, m >= 2.
     k : ndarray of int, shape (m,)
         Their revolution numbers (:func:`revolution_numbers`), gaps allowed.
-    half_window : int
-        h, knots on each side used in each local fit [-].
+    extra_trains : list of ndarray, optional
+        Pass times of other planets (each strictly increasing, once per revolution).
+    span : float
+        Spline knot spacing [revolutions].
     """
 
-    def __init__(self, knot_times, k, half_window: int = 5):
+    def __init__(self, knot_times, k, extra_trains=None, span: float = 8.0):
         kt = np.asarray(knot_times, dtype=float)
         k = np.asarray(k, dtype=int)
         self.k0 = int(k[0])
         full_k = np.arange(k[0], k[-1] + 1)
-        # revolutions whose reference pass is missing get an interpolated knot time
+        # revolutions whose reference pass is missing get an interpolated reference time
         self.full_t = np.interp(full_k, k, kt)
         self._known = np.zeros(full_k.size, bool)
         self._known[k - k[0]] = True
         self.t_first = float(self.full_t[0])
         self.t_last = float(self.full_t[-1])
-        m = kt.size
-        w = min(2 * half_window + 1, m)
-        deg = 2 if w >= 4 else 1
-        # window of measured knots around each revolution (shifted inward at the ends)
-        centre = np.searchsorted(kt, self.full_t)
-        lo = np.clip(centre - w // 2, 0, m - w)
-        idx = lo[:, None] + np.arange(w)[None, :]
-        x = kt[idx] - self.full_t[:, None]                      # (R, w)
-        y = TWO_PI * (k[idx] - full_k[:, None])                 # (R, w)
-        A = np.stack([x ** p for p in range(deg + 1)], axis=-1)  # (R, w, deg+1)
-        # scale x for conditioning: per-window period estimate
-        P0 = (kt[-1] - kt[0]) / max(1, k[-1] - k[0])
-        As = A / (P0 ** np.arange(deg + 1))
-        AtA = np.einsum("rwi,rwj->rij", As, As)
-        Aty = np.einsum("rwi,rw->ri", As, y)
-        c = np.linalg.solve(AtA, Aty[..., None])[..., 0] / (P0 ** np.arange(deg + 1))
-        c = np.concatenate([c, np.zeros((c.shape[0], 3 - c.shape[1]))], axis=1)
-        self.c1 = c[:, 1]
-        self.c2 = c[:, 2]
-        self.c0 = c[:, 0]
+        self.span = float(span)
+        tt = [kt]
+        yy = [TWO_PI * (k - k[0])]
+        self._fit(np.concatenate(tt), np.concatenate(yy))
+        if extra_trains:
+            for tq in extra_trains:
+                tq = np.asarray(tq, dtype=float)
+                inside = (tq >= self.t_first) & (tq <= self.t_last)
+                if np.count_nonzero(inside) < 2:
+                    continue
+                tq = tq[inside]
+                kq = revolution_numbers(tq)
+                # offset of this train: angle of its passes relative to whole revolutions
+                off = self._eval(tq) - TWO_PI * kq
+                phi = float(np.median(off))
+                tt.append(tq)
+                yy.append(TWO_PI * kq + phi)
+            self._fit(np.concatenate(tt), np.concatenate(yy))
+
+    def _fit(self, t, y):
+        from scipy.interpolate import LSQUnivariateSpline
+
+        o = np.argsort(t, kind="stable")
+        t, y = t[o], y[o]
+        self._t0 = float(t[0])
+        P = (self.t_last - self.t_first) / max(1, self.full_t.size - 1)
+        n_int = int((self.t_last - self.t_first) / (self.span * P)) - 1 if P > 0 else -1
+        self._spline = None
+        if n_int >= 1 and t.size > n_int + 8:
+            interior = np.linspace(t[0], t[-1], n_int + 2)[1:-1]
+            try:
+                self._spline = LSQUnivariateSpline(t, y, interior, k=3)
+                return
+            except ValueError:  # Schoenberg-Whitney conditions not met: fall back
+                self._spline = None
+        deg = 2 if t.size >= 4 else 1
+        self._poly = np.polyfit(t - self._t0, y, deg)
+
+    def _eval(self, t, nu: int = 0):
+        t = np.asarray(t, dtype=float)
+        if self._spline is not None:
+            return self._spline(t, nu=nu)
+        p = np.polyder(self._poly, nu) if nu else self._poly
+        return np.polyval(p, t - self._t0)
+
+    def angle(self, t):
+        """Smooth relative angle Theta(t) [rad] (0 near the first reference pass)."""
+        return self._eval(t)
+
+    def rates(self, t):
+        """Local angular speed [rad/s] and acceleration [rad/s^2] at times ``t``."""
+        return self._eval(t, 1), self._eval(t, 2)
 
     def lag(self, t):
         """Revolution k, angle turned since that revolution's reference pass [rad] and the
         local angular speed [rad/s] at times ``t`` (inside [t_first, t_last))."""
         t = np.asarray(t, dtype=float)
         j = np.clip(np.searchsorted(self.full_t, t, side="right") - 1, 0, self.full_t.size - 2)
-        x = t - self.full_t[j]
-        # the fit need not pass through its own knot: measure from the fitted angle there
-        lag = self.c1[j] * x + self.c2[j] * x * x
-        return j + self.k0, lag, np.abs(self.c1[j] + 2.0 * self.c2[j] * x)
-
-    def rates(self, t):
-        """Local angular speed [rad/s] and acceleration [rad/s^2] of the fit at times ``t``."""
-        t = np.asarray(t, dtype=float)
-        j = np.clip(np.searchsorted(self.full_t, t, side="right") - 1, 0, self.full_t.size - 1)
-        x = t - self.full_t[j]
-        return self.c1[j] + 2.0 * self.c2[j] * x, 2.0 * self.c2[j]
-
-    def average_with(self, others) -> None:
-        """Replace the local speed/acceleration by the mean over this and other encoders of the
-        same member (e.g. every planet's passes), evaluated at this encoder's knots.
-
-        Each planet's passes jitter with that planet's own shaft hole error; the speed is
-        common to all of them, so averaging N estimates shrinks the jitter's share."""
-        sp, ac = [self.c1], [2.0 * self.c2]
-        for o in others:
-            inside = (self.full_t >= o.t_first) & (self.full_t <= o.t_last)
-            v, a = o.rates(self.full_t)
-            sp.append(np.where(inside, v, np.nan))
-            ac.append(np.where(inside, a, np.nan))
-        self.c1 = np.nanmean(np.stack(sp), axis=0)
-        self.c2 = 0.5 * np.nanmean(np.stack(ac), axis=0)
+        lag = self._eval(t) - self._eval(self.full_t[j])
+        return j + self.k0, lag, np.abs(self._eval(t, 1))
 
     def knot_time_or_nan(self) -> np.ndarray:
         """Reference time per revolution (NaN where the pass was missing)."""
         return np.where(self._known, self.full_t, np.nan)
 
 
+class ScaledEncoder:
+    """An encoder of one member driven by another member's encoder through a fixed ratio.
+
+    The relative speeds of sun, planets and ring are tied by the tooth counts
+    (w_rc = -(Z_s / Z_r) w_sc), so the sun gauge's dense, finely timed pass train measures the
+    ring's relative angle too: angle_ring = ratio * angle_sun. The ring gauge's own planet-1
+    passes still fix which revolution a pass belongs to and the reference instant t_1.
+
+    Parameters
+    ----------
+    knot_times, k : ndarray
+        This member's reference passes and revolution numbers.
+    source : RevolutionEncoder
+        The driving encoder (must cover the span of interest).
+    ratio : float
+        |relative speed of this member| / |relative speed of the source member| [-].
+    """
+
+    def __init__(self, knot_times, k, source: "RevolutionEncoder", ratio: float):
+        kt = np.asarray(knot_times, dtype=float)
+        k = np.asarray(k, dtype=int)
+        self.k0 = int(k[0])
+        full_k = np.arange(k[0], k[-1] + 1)
+        self.full_t = np.interp(full_k, k, kt)
+        self._known = np.zeros(full_k.size, bool)
+        self._known[k - k[0]] = True
+        self.source = source
+        self.ratio = float(ratio)
+        self.t_first = max(float(self.full_t[0]), source.t_first)
+        self.t_last = min(float(self.full_t[-1]), source.t_last)
+
+    def lag(self, t):
+        t = np.asarray(t, dtype=float)
+        j = np.clip(np.searchsorted(self.full_t, t, side="right") - 1, 0, self.full_t.size - 2)
+        t_k = self.full_t[j]
+        lag = self.ratio * (self.source.angle(t) - self.source.angle(t_k))
+        speed = self.ratio * self.source.rates(t)[0]
+        return j + self.k0, lag, np.abs(speed)
+
+    def knot_time_or_nan(self) -> np.ndarray:
+        return np.where(self._known, self.full_t, np.nan)
+
+
 def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str = "sun",
-                     sigma_t=None, reference_times=None) -> PassTable:
+                     sigma_t=None, reference_times=None, encoder=None,
+                     encoder_ratio: float = 1.0) -> PassTable:
     """Phasing gamma_jn per pass from labelled onset times (equation (1) of the module notes).
 
     Parameters
@@ -520,6 +579,14 @@ def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str 
         planet-1 passes (e.g. a carrier tacho for a ring gauge). Phasing is still taken
         relative to planet 1: gamma_n = frac(Z (lag_n - lag_1) / 2 pi), lag_1 from the same
         revolution.
+
+    encoder : RevolutionEncoder, optional
+        Encoder of another member (e.g. ``sun_table.encoder`` for a ring gauge) that drives
+        this member's angle through ``encoder_ratio`` (:class:`ScaledEncoder`): a denser,
+        finer speed measurement than this gauge's own once-per-revolution passes.
+    encoder_ratio : float
+        |w of this member| / |w of the encoder's member| relative to the carrier [-]
+        (Z_s / Z_r for a ring gauge driven by the sun encoder).
 
     Returns
     -------
@@ -566,15 +633,16 @@ def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str 
     k = revolution_numbers(knots_t)
     if k[-1] != knots_t.size - 1:
         notes.append(f"{int(k[-1] - knots_t.size + 1)} missing reference pass(es) bridged")
-    enc = RevolutionEncoder(knots_t, k)
-    if not use_ref:
+    if encoder is not None and not use_ref:
+        enc = ScaledEncoder(knots_t, k, encoder, encoder_ratio)
+        if not enc.t_last > enc.t_first:
+            msg = f"{gauge} gauge: the driving encoder does not overlap this gauge's passes"
+            warnings.warn(msg, ProcessingWarning, stacklevel=2)
+            return PassTable.empty(gauge, [msg])
+    else:
         # every planet's own passes are a once-per-revolution encoder of the same member
-        others = []
-        for q in range(1, n):
-            tq = t[lab == q]
-            if tq.size >= 4 and np.all(np.diff(tq) > 0):
-                others.append(RevolutionEncoder(tq, revolution_numbers(tq)))
-        enc.average_with(others)
+        others = [] if use_ref else [t[lab == q] for q in range(1, n)]
+        enc = RevolutionEncoder(knots_t, k, extra_trains=[x for x in others if x.size >= 2])
     inside = (t >= enc.t_first) & (t < enc.t_last)
     tt = np.where(inside, t, enc.t_first)
     rev, lag, omega = enc.lag(tt)
@@ -607,5 +675,7 @@ def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str 
     mesh_period = TWO_PI / (z * om)
     unc = z * om / TWO_PI * np.hypot(sig[keep], sig_ref[keep])
     rk = rev[keep]
-    return PassTable(gauge, t[keep], lab[keep] + 1, rk, gamma, unc, mesh_period,
-                     t1[np.clip(rk, 0, t1.size - 1)], th[keep], notes, enc.t_first)
+    out = PassTable(gauge, t[keep], lab[keep] + 1, rk, gamma, unc, mesh_period,
+                    t1[np.clip(rk - enc.k0, 0, t1.size - 1)], th[keep], notes, enc.t_first)
+    out.encoder = enc
+    return out
