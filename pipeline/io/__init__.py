@@ -65,20 +65,25 @@ def _format_for_write(path: Path, format: str | None) -> str:
     suffix = path.suffix.lower()
     for name in FORMATS:
         mod = get_format(name)
-        if suffix in mod.SUFFIXES and getattr(mod, "CAN_WRITE", False):
+        if suffix in mod.SUFFIXES:
+            if not getattr(mod, "CAN_WRITE", False):
+                raise ValueError(f"{path}: format {name!r} is read-only here; writable formats: "
+                                 f"{', '.join(f for f in FORMATS if get_format(f).CAN_WRITE)}")
             return name
     raise ValueError(f"{path}: cannot tell the format from suffix {suffix!r}; pass format= one of "
                      f"{', '.join(f for f in FORMATS if get_format(f).CAN_WRITE)}")
 
 
-def read_info(path, format: str | None = None) -> RecordingInfo:
-    """Header of a recording file (channels, fs, n_samples, t0, metadata) without samples."""
+def read_info(path, format: str | None = None, **options) -> RecordingInfo:
+    """Header of a recording file (channels, fs, n_samples, t0, metadata) without samples.
+
+    ``options`` go to the format module (e.g. ``fs=`` and ``raw=`` for TDMS)."""
     name = format or detect_format(path)
-    return get_format(name).read_info(Path(path))
+    return get_format(name).read_info(Path(path), **options)
 
 
 def read(path, channels=None, start: float | None = None, stop: float | None = None, *,
-         format: str | None = None) -> Recording:
+         format: str | None = None, **options) -> Recording:
     """Read a recording file, or a time window / channel subset of it.
 
     Parameters
@@ -91,6 +96,9 @@ def read(path, channels=None, start: float | None = None, stop: float | None = N
         (``t0 + i / fs``); ValueError when it lies outside the recording.
     format : str, optional
         Skip detection and use this format.
+    **options
+        Format options (TDMS: ``fs=`` when the file has no ``wf_increment``, ``raw=True`` to
+        keep unscaled values); a format without options raises TypeError.
 
     Returns
     -------
@@ -99,14 +107,14 @@ def read(path, channels=None, start: float | None = None, stop: float | None = N
     path = Path(path)
     name = format or detect_format(path)
     mod = get_format(name)
-    info = mod.read_info(path)
+    info = mod.read_info(path, **options)
     names = info.check_channels(channels)
     i0, i1 = (0, info.n_samples) if start is None and stop is None else info.window(start, stop)
-    return mod.read(path, names, i0, i1)
+    return mod.read(path, names, i0, i1, **options)
 
 
 def iter_blocks(path, block: float, overlap: float = 0.0, channels=None, *,
-                format: str | None = None) -> Iterator[Recording]:
+                format: str | None = None, **options) -> Iterator[Recording]:
     """Stream a recording file in blocks of ``block`` seconds plus ``overlap`` seconds.
 
     Memory stays flat: only one block (plus overlap) is held at a time. Block k covers
@@ -115,15 +123,15 @@ def iter_blocks(path, block: float, overlap: float = 0.0, channels=None, *,
     path = Path(path)
     name = format or detect_format(path)
     mod = get_format(name)
-    info = mod.read_info(path)
+    info = mod.read_info(path, **options)
     names = info.check_channels(channels)
     n_block = max(1, int(round(as_positive(block, "block") * info.fs)))
     n_ovl = int(round(as_nonnegative(overlap, "overlap") * info.fs))
     if hasattr(mod, "iter_blocks"):
-        yield from mod.iter_blocks(path, n_block, n_ovl, names)
+        yield from mod.iter_blocks(path, n_block, n_ovl, names, **options)
         return
     for i0 in range(0, info.n_samples, n_block):
-        yield mod.read(path, names, i0, min(info.n_samples, i0 + n_block + n_ovl))
+        yield mod.read(path, names, i0, min(info.n_samples, i0 + n_block + n_ovl), **options)
 
 
 def write(recording: Recording, path, format: str | None = None, *, overwrite: bool = False,

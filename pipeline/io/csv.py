@@ -1,0 +1,633 @@
+"""CSV: a time column plus one column per channel (pandas C engine).
+
+File layout (full description in ``data_schemas/csv_header.md``)::
+
+    # meshphase {"format": "meshphase-csv", "format_version": 1, "fs": 5120.0, "t0": 0.0, ...}
+    time [s],sun_1 [m/m],ring_1 [m/m]
+    0.0,1.234e-05,-2.5e-06
+    0.0001953125,1.3e-05,NaN
+
+* Line 1 (our own files only): ``# meshphase `` and one line of JSON holding what the columns
+  cannot: format version, fs [Hz], t0 [s], n_samples, dtype, start_datetime, the full channel
+  specs, meta and history. Other lines starting with ``#`` before the header are ignored.
+* Header: ``time [s]`` then ``<name> [<units>]`` per channel (csv-quoted when needed).
+* Rows: time = t0 + i / fs, then the samples. float64 is written with the shortest repr that
+  round-trips, float32 with ``%.9g`` (bit-exact through float64 parsing); NaN as ``NaN``, +-inf as
+  ``inf``/``-inf``. Our own files round-trip bit-exactly (NaN payloads excepted).
+
+A plain CSV without the preamble (e.g. from a spreadsheet) reads too: kinds default to
+``"other"``, units come from the ``[...]`` of each header field (empty, with a FormatWarning,
+when missing), t0 is the first time value and fs is inferred from the first and last time and
+the row count (the shortest decimal fs that fits the time span to 1 % of a sample). The time
+column may be headed ``time``, ``t`` or ``time_s`` with units ``s``, ``ms`` or ``us``.
+
+Every row read is checked against the uniform grid t0 + i / fs: a time that does not increase
+raises RecordingFileError "non-monotonic time at line L"; a step between rows more than
+2 x :data:`TIME_TOLERANCE` sample intervals from 1 / fs, or a time more than
+:data:`TIME_TOLERANCE` sample intervals off the grid, raises "non-uniform time at line L".
+Our own files must also end with a newline and hold exactly n_samples rows (else "truncated").
+"""
+
+from __future__ import annotations
+
+import codecs
+import csv as _csv
+import io
+import json
+import math
+import re
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from ..errors import FormatWarning
+from ..recording import ChannelSpec, Recording
+from ..validate import as_int, as_positive_int
+from .base import RecordingFileError, RecordingInfo
+from .hdf5 import check_start_datetime, dumps_json, spec_from_dict, warn_nonfinite
+
+__all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "FORMAT_VERSION", "TIME_TOLERANCE", "sniff", "read_info",
+           "read", "write", "iter_blocks"]
+
+NAME = "csv"
+SUFFIXES = (".csv",)
+CAN_WRITE = True
+#: Version of the preamble written by :func:`write`.
+FORMAT_VERSION = 1
+#: Largest allowed distance of a time value from the uniform grid t0 + i / fs, in sample
+#: intervals [-]. 0.1 accepts times rounded to 1 us at 51.2 kHz and still catches any dropped,
+#: repeated or shifted sample.
+TIME_TOLERANCE = 0.1
+
+_TAG = "# meshphase "
+_TIME_NAMES = ("time", "t", "time_s")
+_TIME_UNITS = {"s": 1.0, "": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6}
+_FIELD_RE = re.compile(r"^(?P<name>.*?)\s*\[(?P<units>[^\[\]]*)\]\s*$", re.S)
+_PREAMBLE_KEYS = {"format", "format_version", "fs", "t0", "n_samples", "dtype", "start_datetime",
+                  "channels", "meta", "history"}
+
+
+# ---------------------------------------------------------------------------- sniff
+def sniff(head: bytes) -> bool:
+    """True when ``head`` is text whose first non-comment, non-blank line holds a comma."""
+    if not head or b"\x00" in head:
+        return False
+    if head.startswith(codecs.BOM_UTF8):
+        head = head[len(codecs.BOM_UTF8):]
+    if head.startswith(_TAG.encode() + b"{"):
+        return True
+    try:
+        text = codecs.getincrementaldecoder("utf-8")().decode(head, final=False)
+    except UnicodeDecodeError:
+        text = head.decode("latin-1")
+    if any(ord(c) < 32 and c not in "\t\r\n" for c in text):
+        return False
+    for line in text.splitlines():
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        return "," in s
+    return False
+
+
+# ---------------------------------------------------------------------------- header
+@dataclass
+class _Head:
+    n_head: int                      # lines before the first data row (preamble, comments, header)
+    preamble: dict | None
+    fields: list[str]                # header fields (time first)
+    names: list[str]
+    units: list[str]
+    time_scale: float
+    encoding: str
+    ends_with_newline: bool
+    size: int
+    specs: list[ChannelSpec] = field(default_factory=list)
+
+
+def _split_field(text: str) -> tuple[str, str | None]:
+    m = _FIELD_RE.match(text)
+    if m is None:
+        return text.strip(), None
+    return m.group("name").strip(), m.group("units").strip()
+
+
+def _header_field(name: str, units: str) -> str:
+    return f"{name} [{units}]"
+
+
+def _read_head(path) -> _Head:
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such file")
+    size = path.stat().st_size
+    if size == 0:
+        raise RecordingFileError(path, "file is empty (0 bytes)")
+    preamble = None
+    n_head = 0
+    with open(path, "rb") as fh:
+        while True:
+            raw = fh.readline()
+            if not raw:
+                raise RecordingFileError(path, "no header line (only comments or blank lines)")
+            n_head += 1
+            if n_head == 1 and raw.startswith(codecs.BOM_UTF8):
+                raw = raw[len(codecs.BOM_UTF8):]
+            try:
+                line = raw.decode("utf-8")
+                encoding = "utf-8"
+            except UnicodeDecodeError:
+                line = raw.decode("latin-1")
+                encoding = "latin-1"
+            line = line.rstrip("\r\n")
+            if line.startswith(_TAG) and preamble is None and n_head == 1:
+                try:
+                    preamble = json.loads(line[len(_TAG):])
+                except json.JSONDecodeError as exc:
+                    raise RecordingFileError(path, f"line 1: meshphase preamble is not valid JSON ({exc})") from exc
+                if not isinstance(preamble, dict):
+                    raise RecordingFileError(path, "line 1: meshphase preamble must be a JSON object")
+                continue
+            if line.startswith("#") or not line.strip():
+                continue
+            header = line
+            break
+        fh.seek(max(0, size - 1))
+        ends_with_newline = fh.read(1) == b"\n"
+    if encoding != "utf-8":
+        warnings.warn(FormatWarning(f"{path}: header is not UTF-8; decoded as latin-1"), stacklevel=3)
+    fields = next(_csv.reader([header]))
+    if len(fields) < 2 and not (preamble is not None and preamble.get("channels") == []):
+        raise RecordingFileError(path, f"line {n_head}: header {header[:80]!r} has no channel columns "
+                                       f"(expected 'time [s],<name> [<units>],...')")
+    tname, tunits = _split_field(fields[0])
+    if tname.lower() not in _TIME_NAMES or (tunits or "") not in _TIME_UNITS:
+        raise RecordingFileError(path, f"line {n_head}: first column must be the time, headed 'time [s]' "
+                                       f"(units s, ms or us), got {fields[0]!r}")
+    names, units = [], []
+    for f in fields[1:]:
+        nm, un = _split_field(f)
+        names.append(nm)
+        units.append(un)
+    return _Head(n_head=n_head, preamble=preamble, fields=fields, names=names, units=units,
+                 time_scale=_TIME_UNITS[tunits or ""], encoding=encoding,
+                 ends_with_newline=ends_with_newline, size=size)
+
+
+def _duplicates(names) -> list[str]:
+    seen, dup = set(), set()
+    for n in names:
+        (dup if n in seen else seen).add(n)
+    return sorted(dup)
+
+
+def _check_preamble(path, head: _Head) -> RecordingInfo:
+    p = head.preamble
+    if p.get("format") != "meshphase-csv":
+        raise RecordingFileError(path, f"line 1: preamble format must be 'meshphase-csv', got {p.get('format')!r}")
+    version = p.get("format_version")
+    if not isinstance(version, int) or isinstance(version, bool) or version < 1:
+        raise RecordingFileError(path, f"line 1: preamble format_version must be a positive integer, got {version!r}")
+    if version > FORMAT_VERSION:
+        raise RecordingFileError(path, f"written with CSV preamble version {version}; this reader knows "
+                                       f"versions up to {FORMAT_VERSION}")
+    unknown = sorted(set(p) - _PREAMBLE_KEYS)
+    if unknown:
+        warnings.warn(FormatWarning(f"{path}: ignored unknown preamble key(s) {unknown}"), stacklevel=3)
+    fs = p.get("fs")
+    if isinstance(fs, bool) or not isinstance(fs, (int, float)) or not (math.isfinite(fs) and fs > 0):
+        raise RecordingFileError(path, f"missing or non-positive sample rate (preamble fs = {fs!r})")
+    t0 = p.get("t0", 0.0)
+    if isinstance(t0, bool) or not isinstance(t0, (int, float)) or not math.isfinite(t0):
+        raise RecordingFileError(path, f"line 1: preamble t0 must be a finite number, got {t0!r}")
+    n = p.get("n_samples")
+    if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+        raise RecordingFileError(path, f"line 1: preamble n_samples must be a non-negative integer, got {n!r}")
+    dtype = p.get("dtype", "float64")
+    if dtype not in ("float32", "float64"):
+        raise RecordingFileError(path, f"line 1: preamble dtype must be 'float32' or 'float64', got {dtype!r}")
+    chans = p.get("channels")
+    if not isinstance(chans, list) or not all(isinstance(c, dict) for c in chans):
+        raise RecordingFileError(path, "line 1: preamble channels must be a list of channel specs")
+    dup = _duplicates([c.get("name") for c in chans])
+    if dup:
+        raise RecordingFileError(path, f"duplicate channel name(s) {dup} in the preamble")
+    specs = [spec_from_dict(c, path, f"line 1: preamble channels[{i}]") for i, c in enumerate(chans)]
+    meta = p.get("meta", {})
+    if not isinstance(meta, dict):
+        raise RecordingFileError(path, f"line 1: preamble meta must be a JSON object, got {type(meta).__name__}")
+    history = p.get("history", [])
+    if not isinstance(history, list):
+        raise RecordingFileError(path, f"line 1: preamble history must be a JSON array, got {type(history).__name__}")
+    start = check_start_datetime(p.get("start_datetime"), path)
+    expected = [_header_field(s.name, s.units) for s in specs]
+    if head.fields[1:] != expected:
+        raise RecordingFileError(path, f"line {head.n_head}: header columns {head.fields[1:]} do not match the "
+                                       f"preamble's channels {expected}")
+    if head.time_scale != 1.0:
+        raise RecordingFileError(path, f"line {head.n_head}: time column must be in seconds in a meshphase CSV")
+    if not head.ends_with_newline:
+        raise RecordingFileError(path, "truncated: the file does not end with a newline (last row cut short?)")
+    head.specs = specs
+    return RecordingInfo(path=str(path), format=NAME, fs=float(fs), n_samples=n, channels=specs, t0=float(t0),
+                         start_datetime=start, meta=meta, history=history,
+                         extra={"format_version": version, "dtype": dtype, "preamble": True,
+                                "header_lines": head.n_head, "encoding": head.encoding})
+
+
+def _plain_info(path, head: _Head) -> RecordingInfo:
+    """Header of a CSV without preamble: count rows, read first and last time, infer fs."""
+    dup = _duplicates(head.names)
+    if dup:
+        raise RecordingFileError(path, f"line {head.n_head}: duplicate channel name(s) {dup} in the header")
+    empty = [i + 2 for i, n in enumerate(head.names) if not n]
+    if empty:
+        raise RecordingFileError(path, f"line {head.n_head}: header column(s) {empty} have no name")
+    no_units = [n for n, u in zip(head.names, head.units) if u is None]
+    if no_units:
+        warnings.warn(FormatWarning(f"{path}: header column(s) {no_units} carry no '[units]'; units left empty"),
+                      stacklevel=3)
+    specs = []
+    for n, u in zip(head.names, head.units):
+        try:
+            specs.append(ChannelSpec(name=n, kind="other", units=u or ""))
+        except (ValueError, TypeError) as exc:
+            raise RecordingFileError(path, f"line {head.n_head}: bad channel column {n!r}: {exc}") from exc
+    head.specs = specs
+    n_lines, first, last = _scan_rows(path, head)
+    n = n_lines
+    if n < 2:
+        raise RecordingFileError(path, f"missing or non-positive sample rate: cannot infer it from {n} data row(s) "
+                                       f"(need at least 2)")
+    t_first = _parse_time(path, first, head.n_head + 1) * head.time_scale
+    t_last = _parse_time(path, last, head.n_head + n) * head.time_scale
+    span = t_last - t_first
+    if not span > 0:
+        raise RecordingFileError(path, f"missing or non-positive sample rate: time runs from {t_first!r} s to "
+                                       f"{t_last!r} s over {n} rows (non-monotonic time)")
+    fs = _nice_fs((n - 1) / span, n, span)
+    return RecordingInfo(path=str(path), format=NAME, fs=fs, n_samples=n, channels=specs, t0=float(t_first),
+                         extra={"format_version": None, "dtype": "float64", "preamble": False,
+                                "header_lines": head.n_head, "encoding": head.encoding})
+
+
+def _nice_fs(fs_est: float, n: int, span: float) -> float:
+    """The shortest decimal (<= 12 digits) sample rate whose grid spans ``span`` [s] over ``n``
+    rows to within 1 % of a sample interval; ``fs_est`` to 12 digits otherwise."""
+    for digits in range(1, 13):
+        cand = float(f"{fs_est:.{digits}g}")
+        if cand > 0 and abs((n - 1) / cand - span) * cand <= 0.01:
+            return cand
+    return float(f"{fs_est:.12g}")
+
+
+def _parse_time(path, line: bytes, lineno: int) -> float:
+    text = line.decode("latin-1").strip()
+    first = text.split(",", 1)[0].strip().strip('"')
+    try:
+        v = float(first)
+    except ValueError as exc:
+        raise RecordingFileError(path, f"line {lineno}: time {first!r} is not a number") from exc
+    if not math.isfinite(v):
+        raise RecordingFileError(path, f"line {lineno}: time {first!r} is not finite")
+    return v
+
+
+def _scan_rows(path, head: _Head) -> tuple[int, bytes, bytes]:
+    """Number of data rows (trailing blank lines excluded), first and last data line."""
+    buf = bytearray(1 << 22)
+    newlines = 0
+    with open(path, "rb", buffering=0) as fh:
+        while True:
+            k = fh.readinto(buf)
+            if not k:
+                break
+            newlines += buf.count(b"\n", 0, k)
+        # last non-blank line
+        tail_len = min(head.size, 1 << 16)
+        fh.seek(head.size - tail_len)
+        tail = fh.read(tail_len)
+    lines_total = newlines + (0 if head.ends_with_newline else 1)
+    tail_lines = tail.split(b"\n")
+    if head.ends_with_newline:
+        tail_lines = tail_lines[:-1]
+    trailing_blank = 0
+    while tail_lines and not tail_lines[-1].strip():
+        tail_lines.pop()
+        trailing_blank += 1
+    n = lines_total - head.n_head - trailing_blank
+    if n <= 0:
+        return 0, b"", b""
+    last = tail_lines[-1] if tail_lines else b""
+    with open(path, "rb") as fh:
+        for _ in range(head.n_head):
+            fh.readline()
+        first = fh.readline()
+    return n, first, last
+
+
+def read_info(path) -> RecordingInfo:
+    """Header of a CSV recording.
+
+    Our own files: preamble and header line only. Plain CSVs: also counts the rows and reads
+    the first and last time value to infer fs (no samples are parsed).
+    """
+    head = _read_head(path)
+    if head.preamble is not None:
+        return _check_preamble(path, head)
+    return _plain_info(path, head)
+
+
+# ---------------------------------------------------------------------------- reading
+def _parse(path, head: _Head, cols: list[int], dtype, skip: int, nrows: int | None, **kw):
+    """pandas C engine on rows skip... (nrows of them, or to the end when None).
+
+    Options are kept to the minimum (no usecols unless a subset is asked for, one dtype when
+    the file has one) because each costs parse time.
+    """
+    import pandas as pd
+
+    ncols = len(head.fields)
+    opts = {}
+    if len(cols) != ncols - 1:
+        opts["usecols"] = [0] + [c + 1 for c in cols]
+    opts["dtype"] = np.float64 if dtype == np.float64 else {0: np.float64, **{c + 1: dtype for c in cols}}
+    if nrows is not None:
+        opts["nrows"] = nrows
+    if head.encoding != "utf-8":
+        # only when needed: an explicit encoding routes pandas through a slower decoding reader
+        # (UTF-8 is its default; measured 1.6x slower parse with encoding="utf-8" given)
+        opts["encoding"] = head.encoding
+    try:
+        return pd.read_csv(path, sep=",", header=None, names=list(range(ncols)), skiprows=skip, engine="c",
+                           skip_blank_lines=False, **opts, **kw)
+    except pd.errors.EmptyDataError:
+        return None
+    except pd.errors.ParserError as exc:
+        raise RecordingFileError(path, f"malformed rows: {exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise RecordingFileError(path, f"not UTF-8 text ({exc})") from exc
+    except ValueError as exc:
+        raise RecordingFileError(path, f"non-numeric value in the data rows: {exc}{_locate_bad(path, skip, nrows)}") \
+            from exc
+
+
+def _locate_bad(path, skip: int, nrows: int) -> str:
+    """Line number of the first unparseable value (slow path, only after an error)."""
+    import pandas as pd
+
+    try:
+        df = pd.read_csv(path, header=None, skiprows=skip, nrows=nrows, dtype=str, keep_default_na=False,
+                         skip_blank_lines=False)
+    except (ValueError, pd.errors.ParserError):
+        return ""
+    for col in df.columns:
+        s = df[col]
+        num = pd.to_numeric(s.where(~s.isin(["NaN", "nan", ""]), "nan"), errors="coerce")
+        bad = num.isna() & ~s.isin(["NaN", "nan", ""])
+        if bad.any():
+            i = int(np.flatnonzero(bad.to_numpy())[0])
+            return f" (first at line {skip + i + 1}, column {int(col) + 1}: {s.iloc[i]!r})"
+    return ""
+
+
+def _frame_arrays(df, dtype) -> tuple[np.ndarray, np.ndarray]:
+    t = np.asarray(df[0].to_numpy(dtype=np.float64))
+    data = df.iloc[:, 1:].to_numpy(dtype=dtype)
+    if not data.flags.writeable:
+        # pandas (copy-on-write) hands out a read-only view of its block; the DataFrame is dropped
+        # right after, so the block becomes ours alone.
+        data.flags.writeable = True
+    return t, data
+
+
+def _check_time(path, head: _Head, info: RecordingInfo, t: np.ndarray, row0: int) -> None:
+    """Raise RecordingFileError naming the line when ``t`` (rows row0...) leaves the grid."""
+    if t.size == 0:
+        return
+    if head.time_scale != 1.0:
+        t = t * head.time_scale
+    bad = ~np.isfinite(t)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise RecordingFileError(path, f"missing or non-finite time at line {head.n_head + row0 + k + 1}")
+    tol = TIME_TOLERANCE / info.fs
+    if t.size > 1:
+        d = np.diff(t)
+        if not (d > 0).all():
+            k = int(np.flatnonzero(~(d > 0))[0]) + 1
+            raise RecordingFileError(path, f"non-monotonic time at line {head.n_head + row0 + k + 1} (data row "
+                                           f"{row0 + k}): t = {float(t[k])!r} s after {float(t[k - 1])!r} s")
+        # a step far from 1/fs (dropped, repeated or shifted sample) is reported where it happens
+        d -= 1.0 / info.fs
+        np.abs(d, out=d)
+        if not (d <= 2 * tol).all():
+            k = int(np.flatnonzero(~(d <= 2 * tol))[0]) + 1
+            raise RecordingFileError(path, f"non-uniform time at line {head.n_head + row0 + k + 1} (data row "
+                                           f"{row0 + k}): step {float(t[k] - t[k - 1])!r} s from the previous row, "
+                                           f"expected 1/fs = {1.0 / info.fs!r} s (fs = {info.fs!r} Hz, tolerance "
+                                           f"{2 * TIME_TOLERANCE} sample)")
+    expected = np.arange(row0, row0 + t.size, dtype=np.float64)
+    expected /= info.fs
+    expected += info.t0
+    expected -= t
+    np.abs(expected, out=expected)
+    if not (expected <= tol).all():
+        k = int(np.flatnonzero(~(expected <= tol))[0])
+        want = info.t0 + (row0 + k) / info.fs
+        raise RecordingFileError(path, f"non-uniform time at line {head.n_head + row0 + k + 1} (data row {row0 + k}): "
+                                       f"t = {float(t[k])!r} s, expected {want!r} s on the uniform grid "
+                                       f"t0 + i/fs (fs = {info.fs!r} Hz, tolerance {TIME_TOLERANCE} sample)")
+
+
+def _setup(path, channels):
+    head = _read_head(path)
+    info = _check_preamble(path, head) if head.preamble is not None else _plain_info(path, head)
+    names = info.check_channels(channels) if info.names else []
+    index = {n: i for i, n in enumerate(info.names)}
+    wanted = [index[n] for n in names]
+    cols = sorted(wanted)
+    perm = [cols.index(w) for w in wanted]
+    dtype = np.dtype(info.extra["dtype"])
+    return head, info, names, cols, perm, dtype
+
+
+def _recording(info: RecordingInfo, data, names, i0: int) -> Recording:
+    by_name = {c.name: c for c in info.channels}
+    return Recording(data, info.fs, [by_name[n] for n in names], t0=info.t0 + i0 / info.fs,
+                     start_datetime=info.start_datetime, meta=info.meta, history=info.history)
+
+
+def read(path, channels=None, i0: int = 0, i1: int | None = None) -> Recording:
+    """Rows ``i0 <= i < i1`` of the named channels (all when None) of a CSV recording.
+
+    The time column is checked against the uniform grid t0 + i / fs for every row read.
+
+    Returns
+    -------
+    Recording
+        float32 when the preamble says so, else float64; Fortran-ordered (channel-major).
+    """
+    head, info, names, cols, perm, dtype = _setup(path, channels)
+    n = info.n_samples
+    i0 = as_int(i0, "i0")
+    i1 = n if i1 is None else as_int(i1, "i1")
+    if not 0 <= i0 <= i1 <= n:
+        raise ValueError(f"{path}: sample range [{i0}, {i1}) outside the recording's [0, {n})")
+    m = i1 - i0
+    if m == 0:
+        data = np.empty((0, len(cols)), dtype=dtype)
+        return _recording(info, data[:, perm], names, i0)
+    own = head.preamble is not None
+    # a read up to the last row parses to the end of the file (cheaper than nrows, and a
+    # surplus row shows that the file and its preamble disagree)
+    df = _parse(path, head, cols, dtype, head.n_head + i0, None if i1 == n else m)
+    got = 0 if df is None else len(df)
+    if got < m:
+        raise RecordingFileError(path, f"truncated: expected {m} data rows from row {i0}, found {got}"
+                                       + (f" (preamble n_samples = {n})" if own else ""))
+    if got > m:
+        if own:
+            raise RecordingFileError(path, f"more data rows than the preamble's n_samples = {n}")
+        df = df.iloc[:m]  # trailing blank lines of a plain CSV
+    t, data = _frame_arrays(df, dtype)
+    del df
+    _check_time(path, head, info, t, i0)
+    if perm != sorted(perm):
+        data = np.asfortranarray(data[:, perm])
+    warn_nonfinite(path, data, names, i0)
+    return _recording(info, data, names, i0)
+
+
+def iter_blocks(path, n_block: int, n_overlap: int, channels=None) -> Iterator[Recording]:
+    """Blocks of ``n_block`` rows plus ``n_overlap`` following rows, parsed in one pass.
+
+    Block k covers rows [k n_block, (k + 1) n_block + n_overlap), clipped to the recording;
+    each row is parsed once (pandas ``chunksize``), so the cost is one read of the file.
+    """
+    import pandas as pd
+
+    n_block = as_positive_int(n_block, "n_block")
+    n_overlap = as_int(n_overlap, "n_overlap")
+    if n_overlap < 0:
+        raise ValueError(f"n_overlap must be >= 0, got {n_overlap}")
+    head, info, names, cols, perm, dtype = _setup(path, channels)
+    n = info.n_samples
+    if n == 0:
+        return
+    own = head.preamble is not None
+    reader = _parse(path, head, cols, dtype, head.n_head, None if own else n, chunksize=n_block)
+    if reader is None:
+        raise RecordingFileError(path, f"truncated: expected {n} data rows, found 0")
+    pending: list[np.ndarray] = []      # row arrays not yet fully emitted, in order
+    pending_rows = 0
+    start = 0                            # file row index of pending[0][0]
+    parsed = 0
+    with reader:
+        chunks = iter(reader)
+        exhausted = False
+        while start < n:
+            while not exhausted and pending_rows < min(n - start, n_block + n_overlap):
+                try:
+                    df = next(chunks)
+                except StopIteration:
+                    exhausted = True
+                    break
+                except pd.errors.ParserError as exc:
+                    raise RecordingFileError(path, f"malformed rows: {exc}") from exc
+                except ValueError as exc:
+                    raise RecordingFileError(path, f"non-numeric value in the data rows: {exc}") from exc
+                t, data = _frame_arrays(df, dtype)
+                del df
+                if parsed + len(t) > n:
+                    raise RecordingFileError(path, f"more data rows than the preamble's n_samples = {n}")
+                _check_time(path, head, info, t, parsed)
+                parsed += len(t)
+                pending.append(data)
+                pending_rows += len(data)
+            if pending_rows < min(n - start, n_block + n_overlap):
+                raise RecordingFileError(path, f"truncated: expected {n} data rows, found {parsed}"
+                                               + (f" (preamble n_samples = {n})" if own else ""))
+            want = min(n - start, n_block + n_overlap)
+            block = np.concatenate(pending, axis=0)[:want] if len(pending) > 1 else pending[0][:want]
+            block = np.asfortranarray(block[:, perm])
+            warn_nonfinite(path, block, names, start)
+            yield _recording(info, block, names, start)
+            # drop the rows before the next block start
+            drop = min(n_block, pending_rows)
+            while drop and pending:
+                if len(pending[0]) <= drop:
+                    drop -= len(pending[0])
+                    pending_rows -= len(pending[0])
+                    pending.pop(0)
+                else:
+                    pending[0] = pending[0][drop:]
+                    pending_rows -= drop
+                    drop = 0
+            start += n_block
+        if own:
+            try:
+                next(chunks)
+            except StopIteration:
+                pass
+            else:
+                raise RecordingFileError(path, f"more data rows than the preamble's n_samples = {n}")
+
+
+# ---------------------------------------------------------------------------- writing
+def _format_block(times: np.ndarray, data: np.ndarray) -> str:
+    import pandas as pd
+
+    if data.dtype == np.float32:
+        # %.9g: 9 significant digits identify every float32, and parsing them as float64 then
+        # rounding to float32 never meets a tie (the digits sit far from the midpoints)
+        df = pd.DataFrame(data, copy=False)
+        df.insert(0, "t", times.astype(str))
+        return df.to_csv(header=False, index=False, float_format="%.9g", na_rep="NaN", lineterminator="\n")
+    df = pd.DataFrame(np.column_stack([times, data]), copy=False)
+    # float64: pandas' default formatting is the shortest repr that round-trips
+    return df.to_csv(header=False, index=False, na_rep="NaN", lineterminator="\n")
+
+
+def write(recording: Recording, path, *, chunk_rows: int = 65536) -> None:
+    """Write ``recording`` as a meshphase CSV (preamble, header, rows) to ``path``.
+
+    Parameters
+    ----------
+    recording : Recording
+    path : str or Path
+    chunk_rows : int
+        Rows formatted per step [-] (memory stays bounded for long recordings).
+    """
+    if not isinstance(recording, Recording):
+        raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
+    chunk_rows = as_positive_int(chunk_rows, "chunk_rows")
+    for spec in recording.channels:
+        if any(c in spec.name + spec.units for c in "\r\n"):
+            raise ValueError(f"channel {spec.name!r}: a line break in a channel name or units cannot go in a "
+                             f"CSV header")
+    span = max(abs(recording.t0), abs(recording.t_end))
+    if np.spacing(span) > 0.01 / recording.fs:
+        raise ValueError(f"t0 = {recording.t0!r} s is too large for a CSV time column at fs = {recording.fs!r} Hz: "
+                         f"float64 times near {span:.6g} s are {np.spacing(span):.3g} s apart, more than 1 % of a "
+                         f"sample; shift t0 (e.g. keep the wall-clock time in start_datetime)")
+    preamble = {"format": "meshphase-csv", "format_version": FORMAT_VERSION, "fs": recording.fs,
+                "t0": recording.t0, "n_samples": recording.n_samples, "dtype": str(recording.data.dtype),
+                "start_datetime": recording.start_datetime,
+                "channels": [c.to_dict() for c in recording.channels],
+                "meta": recording.meta, "history": recording.history}
+    text = dumps_json(preamble, "recording metadata (CSV preamble)")
+    header = io.StringIO()
+    _csv.writer(header, lineterminator="\n").writerow(
+        ["time [s]"] + [_header_field(c.name, c.units) for c in recording.channels])
+    n = recording.n_samples
+    with open(path, "w", encoding="utf-8", newline="") as fh:
+        fh.write(_TAG + text + "\n")
+        fh.write(header.getvalue())
+        for i0 in range(0, n, chunk_rows):
+            i1 = min(n, i0 + chunk_rows)
+            times = recording.t0 + np.arange(i0, i1, dtype=np.float64) / recording.fs
+            fh.write(_format_block(times, recording.data[i0:i1]))

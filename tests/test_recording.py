@@ -1,0 +1,310 @@
+"""Recording, ChannelSpec and the quality array functions."""
+
+from __future__ import annotations
+
+import datetime as dt
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pipeline.quality import channel_quality, clipped_runs, find_runs, nonfinite_runs
+from pipeline.recording import CHANNEL_KINDS, ChannelSpec, Recording, sample_index
+
+
+def _rec(n=100, n_ch=3, fs=100.0, t0=0.0, dtype=np.float64, **kw):
+    data = np.arange(n * n_ch, dtype=dtype).reshape(n, n_ch)
+    specs = [ChannelSpec("sun_1", "sun"), ChannelSpec("ring_1", "ring"), ChannelSpec("tacho", "tacho", "V")][:n_ch]
+    specs += [ChannelSpec(f"x{j}") for j in range(n_ch - len(specs))]
+    return Recording(data, fs, specs, t0=t0, **kw)
+
+
+# ---------------------------------------------------------------------------- ChannelSpec
+def test_channel_spec_defaults_and_gear_from_kind():
+    s = ChannelSpec("a")
+    assert (s.kind, s.units, s.gain, s.gear, s.tooth, s.face_position, s.description) == \
+        ("other", "m/m", 1.0, None, None, None, "")
+    assert ChannelSpec("s", "sun").gear == "sun" and ChannelSpec("r", "ring").gear == "ring"
+    assert ChannelSpec("f", "facewidth").gear is None
+    assert ChannelSpec("t", "ring", gear="planet").gear == "planet"
+    assert set(CHANNEL_KINDS) == {"sun", "ring", "facewidth", "tacho", "other"}
+
+
+def test_channel_spec_normalises_numbers():
+    s = ChannelSpec("a", gain=2, tooth=np.int64(4), face_position=np.float32(0.5))
+    assert type(s.gain) is float and s.tooth == 4 and type(s.tooth) is int and type(s.face_position) is float
+
+
+@pytest.mark.parametrize("kw, exc, match", [
+    ({"name": ""}, ValueError, "non-empty"),
+    ({"name": "   "}, ValueError, "non-empty"),
+    ({"name": 3}, ValueError, "non-empty"),
+    ({"name": "a", "kind": "planet"}, ValueError, "kind must be one of"),
+    ({"name": "a", "units": 1}, TypeError, "units must be a string"),
+    ({"name": "a", "gain": 0.0}, ValueError, "gain must be non-zero"),
+    ({"name": "a", "gain": float("nan")}, ValueError, "gain must be finite"),
+    ({"name": "a", "gain": "1"}, TypeError, "gain must be a real number"),
+    ({"name": "a", "tooth": -1}, ValueError, "tooth must be a non-negative integer"),
+    ({"name": "a", "tooth": 1.5}, ValueError, "tooth must be a non-negative integer"),
+    ({"name": "a", "tooth": True}, ValueError, "tooth must be a non-negative integer"),
+    ({"name": "a", "face_position": "left"}, TypeError, "face_position must be a real number"),
+])
+def test_channel_spec_bad_input(kw, exc, match):
+    with pytest.raises(exc, match=match):
+        ChannelSpec(**kw)
+
+
+def test_channel_spec_dict_round_trip_and_unknown_keys():
+    s = ChannelSpec("fw", "facewidth", "m/m", 0.5, "planet", 3, -0.01, "left")
+    assert ChannelSpec.from_dict(s.to_dict()) == s
+    with pytest.raises(ValueError, match=r"unknown key\(s\) \['colour'\]"):
+        ChannelSpec.from_dict({"name": "a", "colour": "red"})
+    with pytest.raises(TypeError):
+        ChannelSpec.from_dict({})           # name missing
+
+
+# ---------------------------------------------------------------------------- construction
+def test_construction_normalises_data_and_channels():
+    r = Recording(np.arange(5), 10.0, ["a"])
+    assert r.data.shape == (5, 1) and r.data.dtype == np.float64
+    f32 = np.zeros((4, 2), np.float32)
+    r = Recording(f32, 10.0, [ChannelSpec("a"), {"name": "b", "kind": "ring"}])
+    assert r.data is f32 and r.data.dtype == np.float32
+    assert r.channels[1].kind == "ring" and isinstance(r.channels, tuple)
+    assert Recording(f32, 10.0, ["a", "b"], copy=True).data is not f32
+    r = Recording(np.zeros((2, 1)), 1.0, ["a"], start_datetime=dt.datetime(2024, 1, 2, tzinfo=dt.timezone.utc))
+    assert r.start_datetime == "2024-01-02T00:00:00+00:00"
+
+
+@pytest.mark.parametrize("args, kw, exc, match", [
+    ((np.zeros((3, 2, 2)), 10.0, ["a", "b"]), {}, ValueError, "must be 2-D"),
+    ((np.array(["a", "b"]), 10.0, ["a"]), {}, TypeError, "must be numeric"),
+    ((np.zeros((3, 2)), 0.0, ["a", "b"]), {}, ValueError, "fs must be > 0"),
+    ((np.zeros((3, 2)), -1.0, ["a", "b"]), {}, ValueError, "fs must be > 0"),
+    ((np.zeros((3, 2)), float("inf"), ["a", "b"]), {}, ValueError, "fs must be finite"),
+    ((np.zeros((3, 2)), "fast", ["a", "b"]), {}, TypeError, "fs must be a real number"),
+    ((np.zeros((3, 2)), True, ["a", "b"]), {}, TypeError, "fs must be a real number"),
+    ((np.zeros((3, 2)), 10.0, ["a"]), {}, ValueError, r"2 channel column\(s\) but 1 channel spec"),
+    ((np.zeros((3, 2)), 10.0, ["a", "a"]), {}, ValueError, r"duplicate channel name\(s\) \['a'\]"),
+    ((np.zeros((3, 2)), 10.0, ["a", 5]), {}, TypeError, "channels must be ChannelSpec, dict or str"),
+    ((np.zeros((3, 1)), 10.0, ["a"]), {"t0": float("nan")}, ValueError, "t0 must be finite"),
+    ((np.zeros((3, 1)), 10.0, ["a"]), {"start_datetime": 12}, TypeError, "start_datetime must be"),
+])
+def test_construction_bad_input(args, kw, exc, match):
+    with pytest.raises(exc, match=match):
+        Recording(*args, **kw)
+
+
+def test_empty_recording():
+    r = Recording(np.empty((0, 2)), 50.0, ["a", "b"])
+    assert (r.n_samples, r.n_channels, r.duration, len(r)) == (0, 2, 0.0, 0)
+    assert r.times().shape == (0,) and list(r.blocks(1.0)) == []
+    assert r.slice_time(0.0, 1.0).n_samples == 0
+    assert r.to_dataframe().shape == (0, 2)
+    assert r.quality()[0]["n_samples"] == 0
+    z = Recording(np.empty((5, 0)), 50.0, [])
+    assert z.n_channels == 0 and z.names == [] and z.n_samples == 5
+
+
+# ---------------------------------------------------------------------------- properties, equality
+def test_basic_properties_and_times():
+    r = _rec(n=200, fs=50.0, t0=-1.0)
+    assert (r.n_samples, r.n_channels, r.duration, r.dt, r.t_end) == (200, 3, 4.0, 0.02, 3.0)
+    assert r.names == ["sun_1", "ring_1", "tacho"]
+    np.testing.assert_array_equal(r.times(), -1.0 + np.arange(200) / 50.0)
+    assert "200 samples x 3 channels at 50 Hz" in repr(r)
+
+
+def test_equality_is_exact_and_nan_aware():
+    a = _rec()
+    a.data[3, 1] = np.nan
+    b = a.copy()
+    assert a == b and a is not b and a.data is not b.data
+    b.data[0, 0] += 1e-12
+    assert a != b
+    assert a != _rec(dtype=np.float32)                 # dtype matters
+    assert a != Recording(a.data, a.fs, a.channels, meta={"x": 1})
+    assert a != Recording(a.data, a.fs, a.channels, t0=1.0)
+    assert a != Recording(a.data, a.fs, a.channels, history=[{"step": "s"}])
+    assert (a == 5) is False
+
+
+def test_copy_is_deep():
+    a = Recording(np.zeros((3, 1)), 1.0, ["a"], meta={"g": {"z": 1}}, history=[{"step": "x"}])
+    b = a.copy()
+    b.meta["g"]["z"] = 2
+    b.history[0]["step"] = "y"
+    b.data[0, 0] = 9
+    assert a.meta["g"]["z"] == 1 and a.history[0]["step"] == "x" and a.data[0, 0] == 0
+
+
+# ---------------------------------------------------------------------------- channels
+def test_channel_access_and_selection():
+    r = _rec()
+    assert r.index("ring_1") == 1 and r.spec("tacho").units == "V"
+    np.testing.assert_array_equal(r.channel("tacho"), r.data[:, 2])
+    assert [c.name for c in r.by_kind("sun")] == ["sun_1"] and r.by_kind("facewidth") == []
+    s = r.select(["tacho", 0])
+    assert s.names == ["tacho", "sun_1"]
+    np.testing.assert_array_equal(s.data, r.data[:, [2, 0]])
+    assert r.select(-1).names == ["tacho"] and r.select("ring_1").names == ["ring_1"]
+    assert r.select(None) is r
+    assert r.select([0, 1, 2]).data is r.data
+
+
+@pytest.mark.parametrize("call, exc, match", [
+    (lambda r: r.index("nope"), ValueError, r"no channel named 'nope'; channels are \['sun_1'"),
+    (lambda r: r.by_kind("gear"), ValueError, "kind must be one of"),
+    (lambda r: r.select(["sun_1", "sun_1"]), ValueError, "repeats a channel"),
+    (lambda r: r.select([]), ValueError, "selection is empty"),
+    (lambda r: r.select([3]), ValueError, "out of range"),
+    (lambda r: r.select([True]), TypeError, "names or indices"),
+    (lambda r: r.select([1.0]), TypeError, "names or indices"),
+])
+def test_channel_access_bad_input(call, exc, match):
+    with pytest.raises(exc, match=match):
+        call(_rec())
+
+
+# ---------------------------------------------------------------------------- time
+def test_slice_time_is_half_open_and_a_view():
+    r = _rec(n=100, fs=10.0, t0=1.0)
+    s = r.slice_time(2.0, 3.0)
+    np.testing.assert_array_equal(s.times(), 2.0 + np.arange(10) / 10.0)
+    assert s.t0 == 2.0 and np.shares_memory(s.data, r.data)
+    assert r.slice_time(2.0, 2.05).n_samples == 1
+    assert r.slice_time(0.0, 1.05).n_samples == 1          # clipped at the start
+    assert r.slice_time(10.5, 100.0).n_samples == 5        # clipped at the end
+    assert r.slice_time().n_samples == 100
+
+
+@pytest.mark.parametrize("start, stop, match", [(11.0, 12.0, "outside the recording"),
+                                                (-5.0, 1.0, "outside the recording"),
+                                                (3.0, 2.0, "before start")])
+def test_window_outside_the_recording(start, stop, match):
+    with pytest.raises(ValueError, match=match):
+        _rec(n=100, fs=10.0, t0=1.0).slice_time(start, stop)
+
+
+def test_sample_index_rounding():
+    fs, t0 = 5120.0, 0.3
+    for i in [0, 1, 7, 5119, 123456]:
+        assert sample_index(t0 + i / fs, t0, fs, 10**6) == i
+    assert sample_index(t0 + 0.5 / fs, t0, fs, 100) == 1
+    assert sample_index(-10.0, t0, fs, 100) == 0 and sample_index(10.0, t0, fs, 100) == 100
+
+
+@settings(max_examples=100, deadline=None)
+@given(n=st.integers(1, 500), fs=st.floats(0.5, 1e5), t0=st.floats(-1e3, 1e3),
+       a=st.floats(0, 1), b=st.floats(0, 1))
+def test_slice_time_selects_exactly_the_half_open_window(n, fs, t0, a, b):
+    r = Recording(np.zeros((n, 1)), fs, ["x"], t0=t0)
+    start = t0 + min(a, b) * r.duration * 0.999
+    stop = t0 + max(a, b) * r.duration
+    if stop <= start:
+        return
+    i0, i1 = r.sample_range(start, stop)
+    t = r.times()
+    inside = np.flatnonzero((t >= start - 1e-6 / fs) & (t < stop - 1e-6 / fs))
+    assert (i0, i1) == ((inside[0], inside[-1] + 1) if inside.size else (i0, i0))
+
+
+def test_blocks_with_overlap():
+    r = _rec(n=105, fs=10.0)
+    blocks = list(r.blocks(2.0, 0.5))
+    assert [b.n_samples for b in blocks] == [25, 25, 25, 25, 25, 5]
+    assert [b.t0 for b in blocks] == [0.0, 2.0, 4.0, 6.0, 8.0, 10.0]
+    np.testing.assert_array_equal(blocks[1].data, r.data[20:45])
+    assert all(np.shares_memory(b.data, r.data) for b in blocks)
+    np.testing.assert_array_equal(np.concatenate([b.data[:20] for b in blocks]), r.data)
+
+
+@settings(max_examples=100, deadline=None)
+@given(n=st.integers(0, 300), block=st.integers(1, 120), overlap=st.integers(0, 150))
+def test_blocks_cover_every_sample_once_plus_overlap(n, block, overlap):
+    r = Recording(np.arange(n, dtype=float), 100.0, ["x"])
+    blocks = list(r.blocks(block / 100.0, overlap / 100.0))
+    assert len(blocks) == -(-n // block)
+    for k, b in enumerate(blocks):
+        np.testing.assert_array_equal(b.data[:, 0], np.arange(k * block, min(n, (k + 1) * block + overlap)))
+
+
+@pytest.mark.parametrize("block, overlap, match", [(0.0, 0.0, "block must be > 0"), (-1.0, 0.0, "block must be > 0"),
+                                                   (1.0, -0.1, "overlap must be >= 0"),
+                                                   ("1", 0.0, "block must be a real number")])
+def test_blocks_bad_input(block, overlap, match):
+    with pytest.raises((ValueError, TypeError), match=match):
+        list(_rec().blocks(block, overlap))
+
+
+# ---------------------------------------------------------------------------- conversions
+def test_to_dataframe():
+    r = _rec(n=5, fs=4.0, t0=1.0)
+    df = r.to_dataframe()
+    assert list(df.columns) == r.names and df.index.name == "time_s"
+    np.testing.assert_array_equal(df.index.to_numpy(), r.times())
+    np.testing.assert_array_equal(df.to_numpy(), r.data)
+    assert df.attrs["fs"] == 4.0 and df.attrs["units"]["tacho"] == "V"
+    assert r.to_dataframe(time_index=False).index.tolist() == [0, 1, 2, 3, 4]
+
+
+def test_header_history_and_replace_data():
+    r = _rec(n=4, meta={"rig": "B2"})
+    h = r.header()
+    assert h["fs"] == r.fs and h["n_samples"] == 4 and h["channels"][0]["name"] == "sun_1" and h["meta"] == {"rig": "B2"}
+    r2 = r.with_history("filter", band=np.array([1.0, 2.0]), order=np.int64(4))
+    assert r.history == [] and r2.history[0]["step"] == "filter"
+    assert r2.history[0]["band"] == [1.0, 2.0] and type(r2.history[0]["order"]) is int
+    r3 = r.replace_data(np.ones((4, 3)), step="ones")
+    assert r3.data.sum() == 12 and r3.history[-1]["step"] == "ones" and r3.channels == r.channels
+    with pytest.raises(ValueError, match="shape"):
+        r.replace_data(np.ones((3, 3)))
+
+
+# ---------------------------------------------------------------------------- quality
+def test_find_runs_and_nonfinite_runs():
+    np.testing.assert_array_equal(find_runs([0, 1, 1, 0, 1]), [[1, 3], [4, 5]])
+    assert find_runs([]).shape == (0, 2) and find_runs([False, False]).shape == (0, 2)
+    np.testing.assert_array_equal(find_runs([True, True]), [[0, 2]])
+    np.testing.assert_array_equal(nonfinite_runs([1, np.nan, np.inf, 2, -np.inf]), [[1, 3], [4, 5]])
+    assert nonfinite_runs(np.array([])).shape == (0, 2)
+    with pytest.raises(ValueError, match="1-D"):
+        find_runs(np.zeros((2, 2), bool))
+    with pytest.raises(ValueError, match="1-D"):
+        nonfinite_runs(np.zeros((2, 2)))
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.booleans(), max_size=200))
+def test_find_runs_reconstructs_the_mask(mask):
+    runs = find_runs(mask)
+    out = np.zeros(len(mask), bool)
+    for a, b in runs:
+        assert b > a
+        out[a:b] = True
+    np.testing.assert_array_equal(out, np.asarray(mask, bool))
+    assert np.all(runs[1:, 0] > runs[:-1, 1]) if len(runs) > 1 else True
+
+
+def test_clipped_runs():
+    x = np.array([0.0, 1.0, 5.0, 5.0, 5.0, 2.0, -3.0, -3.0, 0.0, 5.0, 5.0])
+    np.testing.assert_array_equal(clipped_runs(x), [[2, 5]])
+    np.testing.assert_array_equal(clipped_runs(x, min_run=2), [[2, 5], [6, 8], [9, 11]])
+    assert clipped_runs(np.ones(10)).shape == (0, 2)                 # constant: nothing to clip
+    assert clipped_runs(np.full(5, np.nan)).shape == (0, 2)
+    assert clipped_runs(np.array([])).shape == (0, 2)
+    with pytest.raises(ValueError, match="min_run"):
+        clipped_runs(x, min_run=1)
+
+
+def test_channel_quality_summary():
+    x = np.array([1.0, np.nan, np.nan, 3.0, np.inf, -1.0])
+    q = channel_quality(x)
+    assert (q["n_samples"], q["n_nonfinite"], q["longest_nonfinite_run"]) == (6, 3, 2)
+    assert q["nonfinite_runs"] == [[1, 3], [4, 5]] and (q["min"], q["max"]) == (-1.0, 3.0)
+    assert q["rms"] == pytest.approx(np.sqrt((1 + 9 + 1) / 3))
+    e = channel_quality(np.array([]))
+    assert e["n_samples"] == 0 and np.isnan(e["rms"]) and e["nonfinite_runs"] == []
+    r = Recording(np.column_stack([x, np.zeros(6)]), 1.0, ["a", "b"])
+    assert [q["channel"] for q in r.quality()] == ["a", "b"] and r.quality()[1]["n_nonfinite"] == 0
