@@ -161,6 +161,94 @@ def cmd_bench(args) -> int:
     return 0
 
 
+# ---------------------------------------------------------------------------- run / process / demo
+def _stage_progress(enabled: bool):
+    if not enabled:
+        return None
+    from tqdm import tqdm
+
+    bar = {"b": None}
+
+    def cb(name, i, n):
+        if bar["b"] is None:
+            bar["b"] = tqdm(total=n, desc="stages", leave=False, file=sys.stderr)
+        bar["b"].set_postfix_str(name)
+        bar["b"].n = i
+        bar["b"].refresh()
+        if name == "done":
+            bar["b"].close()
+    return cb
+
+
+def _print_run(ctx, files) -> None:
+    from .stages import summary_dict
+
+    s = summary_dict(ctx)
+    print(f"scene     {ctx.scene.name}")
+    print(f"stages    {', '.join(ctx.ran)}" + (f"  (failed: {', '.join(ctx.failed)})" if ctx.failed else ""))
+    for gear, t in s.get("phasing", {}).items():
+        print(f"{gear} phasing ({t['n_passes']} passes)   planet  mean gamma   std      range")
+        for n, v in t["per_planet"].items():
+            print(f"                        {n:>6}  {v['mean']:.5f}    {v['std']:.2e} {v['range']:.2e}"
+                  if v.get("mean") is not None else f"                        {n:>6}  –")
+    for row in s.get("load_sharing", []) or []:
+        ls, se = row["load_sharing"], row["std_error"]
+        print(f"load sharing planet {row['planet']}: " + ("–" if ls is None else f"{ls:.4f}")
+              + ("" if se is None else f" ± {se:.4f}"))
+    for gear, c in s.get("compare", {}).items():
+        vm = c.get("vs_model") or c.get("vs_ideal")
+        rms = vm.get("rms") if vm else None
+        extra = (f", vs truth {c['vs_truth']['rms']:.2e} (labels as truth: "
+                 f"{c['vs_truth']['label_match']:.0%})") if c.get("vs_truth") else ""
+        print(f"{gear}: RMS residual vs model " + ("–" if rms is None else f"{rms:.2e}") + f" cycles{extra}")
+    for stage, t in ctx.timings.items():
+        print(f"  {stage:<16} {t:8.3f} s  {ctx.error_estimates.get(stage, '')}")
+    for m in ctx.messages[:10]:
+        print(f"warning: {m}")
+    for name, p in files.items():
+        print(f"{name:<18} {p}")
+
+
+def cmd_run(args) -> int:
+    from .scene import load_scene
+    from .stages import new_output_dir, run_scene, write_outputs
+
+    scene = load_scene(args.scene)
+    base = Path(args.out) if args.out else (scene.output or Path(args.scene).with_suffix("").with_name(
+        Path(args.scene).stem + "-out"))
+    out = new_output_dir(base, overwrite=args.overwrite)
+    ctx = run_scene(scene, progress=_stage_progress(not args.quiet))
+    files = write_outputs(ctx, out, report=not args.no_report)
+    _print_run(ctx, files)
+    return 1 if ctx.failed and not ctx.ran else 0
+
+
+def cmd_process(args) -> int:
+    from .stages import process_recording
+
+    ctx, files = process_recording(args.file, args.gearset, out_dir=args.out, overwrite=args.overwrite)
+    _print_run(ctx, files)
+    return 1 if ctx.failed and not ctx.ran else 0
+
+
+def cmd_demo(args) -> int:
+    import time
+
+    from .scene import load_scene
+    from .stages import new_output_dir, run_scene, write_outputs
+    from .demo import DEMO_SCENE, demo_scene_path
+
+    t = time.perf_counter()
+    out = new_output_dir(Path(args.out), overwrite=args.overwrite)
+    scene_path = demo_scene_path(out)
+    scene = load_scene(scene_path)
+    ctx = run_scene(scene, progress=_stage_progress(not args.quiet))
+    files = write_outputs(ctx, out)
+    _print_run(ctx, files)
+    print(f"demo finished in {time.perf_counter() - t:.1f} s; open {files['report']}")
+    return 0
+
+
 # ---------------------------------------------------------------------------- parser
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
@@ -194,6 +282,25 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--format", choices=["hdf5", "mcap", "csv", "tdms"])
     s.add_argument("--overwrite", action="store_true")
     s.set_defaults(func=cmd_synth)
+
+    s = sub.add_parser("demo", help="generate the seed rig recording, run the full scene on it, write the report")
+    s.add_argument("--out", default="meshphase-demo", help="output folder (default ./meshphase-demo; never overwritten: -2, -3, ...)")
+    s.add_argument("--overwrite", action="store_true", help="reuse the output folder")
+    s.set_defaults(func=cmd_demo)
+
+    s = sub.add_parser("run", help="run a scene (TOML) and write results, figures and the HTML report")
+    s.add_argument("scene")
+    s.add_argument("--out", help="output folder (default: the scene's `output`, else SCENE-out)")
+    s.add_argument("--overwrite", action="store_true", help="reuse the output folder")
+    s.add_argument("--no-report", action="store_true", help="results only, no HTML/figures")
+    s.set_defaults(func=cmd_run)
+
+    s = sub.add_parser("process", help="process one recording: phasing, load sharing, comparison")
+    s.add_argument("file")
+    s.add_argument("--gearset", required=True, help="gearset TOML (scene format: [gearset], [[channels]], ...)")
+    s.add_argument("--out", help="output folder (default FILE-meshphase next to the input, never overwritten)")
+    s.add_argument("--overwrite", action="store_true")
+    s.set_defaults(func=cmd_process)
 
     s = sub.add_parser("bench", help="benchmarks: io, models, processing or all (tables + figures)")
     s.add_argument("what", nargs="?", default="all", choices=["io", "models", "processing", "all"])

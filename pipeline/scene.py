@@ -188,7 +188,7 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
     def err(keys, problem):
         return SceneError(label, ".".join(keys), problem, _line_of(text, keys))
 
-    results = list(raw["results"])
+    results = list(raw.get("results", []))
     gearset = None
     if "gearset" in raw:
         g = raw["gearset"]
@@ -287,7 +287,7 @@ def _check_consistency(scene: Scene, text: str, label) -> None:
     stages = plan(scene, check=False)
     needs_gearset = set(stages) & {"onsets", "phasing", "load_sharing", "ideal", "tolerance",
                                    "identify", "compare"}
-    if needs_gearset and scene.gearset is None:
+    if needs_gearset and scene.gearset is None and not scene.input.get("synthetic"):
         raise SceneError(label, "gearset", f"results {scene.results} need a [gearset] table",
                          _line_of(text, ["results"]))
     if set(stages) & _NEEDS_RECORDING and not scene.has_recording_input:

@@ -1,0 +1,722 @@
+"""The stages a scene runs, and the run itself: scene -> results -> files.
+
+Each stage is a function ``stage(ctx)`` that reads what earlier stages left in
+``ctx.results`` and adds its own; :func:`run_scene` runs exactly the stages that
+:func:`pipeline.scene.plan` asks for, times each one and records an error estimate where one
+exists ("error against run time"). Files are written by :func:`write_outputs`; the HTML
+report by :mod:`pipeline.report.validation` (the only place that plots).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from .errors import MeshphaseWarning, ProcessingWarning
+from .log import logger
+from .recording import ChannelSpec, Recording
+from .scene import Scene, plan
+
+__all__ = ["RunContext", "run_scene", "STAGE_FUNCTIONS", "write_outputs", "process_recording",
+           "new_output_dir"]
+
+
+@dataclass
+class RunContext:
+    """Everything a run produces.
+
+    Attributes
+    ----------
+    scene : Scene
+    results : dict
+        Stage outputs by stage name.
+    ran : list of str
+        Stages that ran, in order.
+    timings : dict
+        Wall time per stage [s].
+    error_estimates : dict
+        Per stage, a short text with its error estimate (what "error against run time" lists).
+    messages : list of str
+        Warnings raised during the run (category: message).
+    failed : dict
+        Stage -> error message for stages that raised (the run goes on with what it has).
+    """
+
+    scene: Scene
+    results: dict = field(default_factory=dict)
+    ran: list = field(default_factory=list)
+    timings: dict = field(default_factory=dict)
+    error_estimates: dict = field(default_factory=dict)
+    messages: list = field(default_factory=list)
+    failed: dict = field(default_factory=dict)
+    progress: Callable | None = None
+
+
+# ----------------------------------------------------------------------------- helpers
+def _gearset(ctx: RunContext):
+    g = ctx.scene.gearset
+    if g is None and "load" in ctx.results:
+        from .models.gearset import Gearset
+
+        meta = ctx.results["load"]["recording"].meta.get("gearset")
+        if meta:
+            g = Gearset.from_dict(meta)
+    return g
+
+
+def _apply_channel_overrides(rec: Recording, overrides: list[dict]) -> Recording:
+    if not overrides:
+        return rec
+    specs = list(rec.channels)
+    for o in overrides:
+        name = o["name"]
+        i = rec.index(name)  # ValueError names the channels present
+        d = specs[i].to_dict()
+        d.update({k: v for k, v in o.items() if k != "name"})
+        if "kind" in o and "gear" not in o and o["kind"] in ("sun", "ring"):
+            d["gear"] = o["kind"]
+        specs[i] = ChannelSpec.from_dict(d)
+    data = rec.data
+    gains = [o for o in overrides if "gain" in o]
+    if gains:
+        data = data.copy()
+        for o in gains:
+            data[:, rec.index(o["name"])] *= o["gain"]
+    out = Recording(data, rec.fs, specs, rec.t0, rec.start_datetime, rec.meta, rec.history)
+    return out.with_history("channel_overrides", channels=[o["name"] for o in overrides])
+
+
+def _mesh_freq(ctx: RunContext, gear: str) -> float | None:
+    sp = ctx.scene.speeds
+    g = _gearset(ctx)
+    if sp is None or g is None:
+        meta = ctx.results.get("load", {}).get("recording")
+        if meta is not None and "speeds_nominal" in meta.meta and g is not None:
+            from .models.gearset import Speeds
+
+            sp = Speeds(**meta.meta["speeds_nominal"])
+        else:
+            return None
+    w = sp.w_sc if gear == "sun" else sp.w_rc
+    z = g.z_sun if gear == "sun" else g.z_ring
+    return abs(w) * z / (2 * math.pi) if w else None
+
+
+# ----------------------------------------------------------------------------- stages
+def stage_load(ctx: RunContext) -> None:
+    inp = ctx.scene.input
+    truth = None
+    if inp.get("recording"):
+        from . import io
+
+        rec = io.read(inp["recording"], start=inp.get("start"), stop=inp.get("stop"))
+        source = str(inp["recording"])
+    else:
+        from synthetic import generate
+
+        minutes = inp.get("minutes")
+        rec, truth = generate(inp["synthetic"], duration=None if minutes is None else 60.0 * minutes,
+                              seed=inp.get("seed", 0))
+        source = f"synthetic:{inp['synthetic']}"
+    rec = _apply_channel_overrides(rec, ctx.scene.channels)
+    true_errors = None
+    if truth is not None and truth.errors is not None:
+        from synthetic.config import errors_from_dict
+
+        true_errors = errors_from_dict(truth.errors) if isinstance(truth.errors, dict) else truth.errors
+    ctx.results["load"] = {"recording": rec, "truth": truth, "source": source,
+                           "true_errors": true_errors, "quality": rec.quality()}
+    ctx.error_estimates["load"] = f"{rec.n_samples * rec.n_channels / 1e6:.2f} MSamples read"
+
+
+def stage_condition(ctx: RunContext) -> None:
+    from .condition import condition_recording
+
+    rec = ctx.results["load"]["recording"]
+    fm = [f for f in (_mesh_freq(ctx, "sun"), _mesh_freq(ctx, "ring")) if f]
+    cond = condition_recording(rec, mesh_freq=max(fm) if fm else None)
+    ctx.results["condition"] = {"recording": cond.recording, "quality": cond.quality}
+    snr = {k: getattr(q, "snr_db", None) for k, q in cond.quality.items()}
+    ctx.error_estimates["condition"] = "SNR " + ", ".join(
+        f"{k} {v:.1f} dB" for k, v in snr.items() if isinstance(v, (int, float)) and math.isfinite(v))
+
+
+def stage_onsets(ctx: RunContext) -> None:
+    from .onsets import detect_onsets_recording
+
+    cond = ctx.results["condition"]
+    rec = cond["recording"]
+    out = {}
+    for c in rec.channels:
+        if c.kind not in ("sun", "ring", "facewidth"):
+            continue
+        gear = c.gear or c.kind
+        fm = _mesh_freq(ctx, gear) if gear in ("sun", "ring") else None
+        kw = {"mesh_freq": fm} if fm else {}
+        out[c.name] = detect_onsets_recording(rec, c.name, quality=cond["quality"].get(c.name), **kw)
+    tacho = [c.name for c in rec.channels if c.kind == "tacho"]
+    tacho_times = None
+    if tacho:
+        x = ctx.results["load"]["recording"].channel(tacho[0])
+        fin = np.isfinite(x)
+        if fin.any():
+            lo, hi = np.nanmin(x), np.nanmax(x)
+            if hi > lo:
+                b = x > 0.5 * (lo + hi)
+                rise = np.flatnonzero(b[1:] & ~b[:-1]) + 1
+                tacho_times = rec.t0 + rise / rec.fs
+    ctx.results["onsets"] = {"by_channel": out, "tacho_times": tacho_times}
+    n = sum(len(o) for o in out.values())
+    jit = []
+    for o in out.values():
+        if len(o) and np.isfinite(o.corr).any():
+            jit.append(float(np.median(o.corr)))
+    ctx.error_estimates["onsets"] = (f"{n} onsets; median template correlation "
+                                     f"{np.median(jit):.4f}" if jit else f"{n} onsets")
+
+
+def _main_gauge(rec: Recording, gear: str) -> str | None:
+    c = [s.name for s in rec.channels if s.kind == gear]
+    return c[0] if c else None
+
+
+def stage_phasing(ctx: RunContext) -> None:
+    from .phasing import assign_planets_by_pattern, measured_phasing, pass_order
+
+    g = _gearset(ctx)
+    rec = ctx.results["condition"]["recording"]
+    ons = ctx.results["onsets"]["by_channel"]
+    tables, labels, info = {}, {}, {}
+    ring_load = None
+    # ring first: its amplitudes are the planet loads that can tell the sun labels apart
+    for gear in ("ring", "sun"):
+        ch = _main_gauge(rec, gear)
+        if ch is None or ch not in ons:
+            continue
+        on = ons[ch]
+        ok = on.good
+        times, amp = on.times[ok], on.amplitude[ok]
+        order = pass_order(g.direction, gear)
+        ref = ring_load if gear == "sun" else None
+        pl, inf = assign_planets_by_pattern(times, g.angles, order, amplitudes=np.abs(amp),
+                                            reference_amplitudes=ref)
+        if gear == "ring" and times.size:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", ProcessingWarning)
+                from .loads import load_sharing_from_amplitudes
+
+                ring_load = load_sharing_from_amplitudes(np.abs(amp), np.where(pl >= 0, pl + 1, 0),
+                                                         g.n_planets).mean_amplitude
+            if not np.all(np.isfinite(ring_load)):
+                ring_load = None
+        z = g.z_sun if gear == "sun" else g.z_ring
+        # onset timing uncertainty: from the template correlation (CRB-like scaling is in
+        # the onsets stage; here the pass-to-pass scatter of the phasing is reported too)
+        sig = None
+        labels[gear] = (ch, times, pl, amp)
+        info[gear] = inf
+        if gear == "sun":
+            tables["sun"] = measured_phasing(times, pl, z, g.n_planets, gauge="sun", sigma_t=sig)
+    if "ring" in labels:
+        ch, times, pl, amp = labels["ring"]
+        kw = {}
+        if "sun" in tables and tables["sun"].encoder is not None:
+            kw = {"encoder": tables["sun"].encoder, "encoder_ratio": g.z_sun / g.z_ring}
+        tables["ring"] = measured_phasing(times, pl, g.z_ring, g.n_planets, gauge="ring", **kw)
+    for gear, inf in info.items():
+        if inf.get("ambiguous"):
+            warnings.warn(f"{gear} gauge: which pulse is planet 1 cannot be told from the pattern "
+                          f"(symmetric layout{'' if gear == 'ring' else ', loads too equal'}); "
+                          "labels start at the first pulse", ProcessingWarning, stacklevel=2)
+    ctx.results["phasing"] = {"tables": tables, "labels": labels, "assignment": info}
+    est = []
+    for gear, t in tables.items():
+        s = t.summary()
+        if s:
+            est.append(f"{gear}: pass-to-pass std {np.mean([v['std'] for v in s.values()]):.2e} cycles")
+    ctx.error_estimates["phasing"] = "; ".join(est)
+
+
+def stage_load_sharing(ctx: RunContext) -> None:
+    from .loads import load_sharing_from_amplitudes
+    from .phasing import assign_planets_by_pattern, pass_order
+
+    g = _gearset(ctx)
+    labels = ctx.results.get("phasing", {}).get("labels", {})
+    if "ring" in labels:
+        ch, times, pl, amp = labels["ring"]
+    else:
+        rec = ctx.results["condition"]["recording"]
+        ch = _main_gauge(rec, "ring")
+        if ch is None:
+            ctx.results["load_sharing"] = None
+            ctx.error_estimates["load_sharing"] = "no ring gauge: skipped"
+            return
+        on = ctx.results["onsets"]["by_channel"][ch]
+        times, amp = on.times[on.good], on.amplitude[on.good]
+        pl, _ = assign_planets_by_pattern(times, g.angles, pass_order(g.direction, "ring"))
+    res = load_sharing_from_amplitudes(np.abs(amp), np.where(pl >= 0, pl + 1, 0), g.n_planets)
+    ctx.results["load_sharing"] = res
+    se = res.std_error[np.isfinite(res.std_error)]
+    ctx.error_estimates["load_sharing"] = (f"max std error {se.max():.2e}" if se.size else
+                                           "no standard error (fewer than two passes per planet)")
+
+
+def stage_centroids(ctx: RunContext) -> None:
+    from .loads import facewidth_centroid
+
+    rec = ctx.results["condition"]["recording"]
+    g = _gearset(ctx)
+    ons = ctx.results["onsets"]["by_channel"]
+    fw = [c for c in rec.channels if c.kind == "facewidth"]
+    if not fw:
+        ctx.results["centroids"] = {}
+        ctx.error_estimates["centroids"] = "no face-width gauges: nothing to do"
+        return
+    b = g.face_width if g is not None and g.face_width else None
+    out = {}
+    for gear in sorted({c.gear or "sun" for c in fw}):
+        chans = [c for c in fw if (c.gear or "sun") == gear and c.face_position is not None]
+        if len(chans) < 2 or b is None:
+            out[gear] = None
+            continue
+        ref = ons[chans[0].name]
+        # readings per pass: each gauge's amplitude at the pulse nearest the first gauge's
+        rows = []
+        for t0 in ref.times[ref.good]:
+            row = []
+            for c in chans:
+                o = ons[c.name]
+                if len(o) == 0:
+                    row.append(np.nan)
+                    continue
+                j = int(np.argmin(np.abs(o.times - t0)))
+                width = float(np.nanmedian(ref.width)) if len(ref) else 0.0
+                row.append(abs(o.amplitude[j]) if abs(o.times[j] - t0) < max(width, 1 / rec.fs) else 0.0)
+            rows.append(row)
+        readings = np.asarray(rows, dtype=float).reshape(-1, len(chans))
+        pos = np.array([c.face_position for c in chans])
+        out[gear] = facewidth_centroid(readings[np.all(np.isfinite(readings), axis=1)], pos, b)
+    ctx.results["centroids"] = out
+    ctx.error_estimates["centroids"] = "; ".join(
+        f"{k}: Z = {v.centroid * 1e3:.3f} ± {v.std_error * 1e3:.3f} mm" for k, v in out.items() if v)
+
+
+def stage_ideal(ctx: RunContext) -> None:
+    from .models.mesh_phasing import assembly_check, classify_phasing, ideal_phasing
+
+    g = _gearset(ctx)
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        cls = classify_phasing(g)
+    gs, gr = ideal_phasing(g)
+    ctx.results["ideal"] = {"gamma_s": gs, "gamma_r": gr, "classification": cls,
+                            "assembly": assembly_check(g)}
+    ctx.error_estimates["ideal"] = "exact (closed form)"
+
+
+def _tolerances(ctx: RunContext):
+    from .models.tolerance import ToleranceBand, Tolerances
+
+    t = ctx.scene.tolerances
+    kw = {}
+    for gear in ("sun", "ring", "planet"):
+        kw[f"e_{gear}"] = ToleranceBand(mean=t[f"mean_e_{gear}"], band=t[f"e_{gear}"])
+        k = t[f"kappa_{gear}"]
+        kw[f"kappa_{gear}"] = (ToleranceBand.full_circle() if k == "uniform" else
+                               ToleranceBand(mean=k, band=0.0))
+    return Tolerances(**kw)
+
+
+def stage_tolerance(ctx: RunContext) -> None:
+    from .models.tolerance import monte_carlo, observation_window
+
+    g = _gearset(ctx)
+    t = ctx.scene.tolerances
+    sp = ctx.scene.speeds
+    window = observation_window(sp) if t.get("window") is None else (0.0, float(t["window"]))
+    res = monte_carlo(g, sp, _tolerances(ctx), window, t["samples"], sampler=t["sampler"],
+                      rng=t.get("seed", 0))
+    ctx.results["tolerance"] = res
+    se = float(np.max(res.dev_s.se_bound3)) if res.dev_s.se_bound3.size else float("nan")
+    ctx.error_estimates["tolerance"] = (f"{res.n_samples} {res.sampler} samples; std error of the "
+                                        f"3-sigma Dev_sn bound {se:.1e} cycles")
+
+
+def stage_identify(ctx: RunContext) -> None:
+    from .compare import identify_errors
+
+    g = _gearset(ctx)
+    tables = [t for t in ctx.results["phasing"]["tables"].values() if len(t)]
+    ident = identify_errors(tables, g)
+    ctx.results["identify"] = ident
+    ctx.error_estimates["identify"] = (f"residual RMS {ident.rms_before:.2e} -> {ident.rms_after:.2e} "
+                                       f"cycles over {ident.n_passes} passes")
+
+
+def stage_compare(ctx: RunContext) -> None:
+    from .compare import band_coverage, predict_pass_phasing, residual_stats
+
+    g = _gearset(ctx)
+    tables = ctx.results["phasing"]["tables"]
+    ident = ctx.results.get("identify")
+    mc = ctx.results.get("tolerance")
+    out = {}
+    for gear, tab in sorted(tables.items(), key=lambda kv: kv[0] != "sun"):
+        if not len(tab):
+            continue
+        ideal = predict_pass_phasing(tab, g, None)
+        model = predict_pass_phasing(tab, g, ident.errors) if ident is not None else None
+        row = {"ideal": ideal, "model": model,
+               "vs_ideal": residual_stats(tab.gamma, ideal, tab.planet),
+               "vs_model": residual_stats(tab.gamma, model, tab.planet) if model is not None else None}
+        if mc is not None:
+            ave = mc.ave_s if gear == "sun" else mc.ave_r
+            dev = mc.dev_s if gear == "sun" else mc.dev_r
+            lo = ave.bound3[0] - dev.bound3[1] / 2
+            hi = ave.bound3[1] + dev.bound3[1] / 2
+            ideal_pl = ctx.results["ideal"]["gamma_s" if gear == "sun" else "gamma_r"]
+            row["band"] = {"lo": lo, "hi": hi}
+            row["coverage"] = band_coverage(tab.gamma, tab.planet, ideal_pl, lo, hi)
+        out[gear] = row
+    truth = ctx.results.get("load", {}).get("truth")
+    if truth is not None:
+        for gear in ("sun", "ring"):
+            if gear in out:
+                out[gear]["vs_truth"] = _truth_residual(ctx, tables[gear], truth, gear)
+    ctx.results["compare"] = out
+    parts = []
+    for gear, r in out.items():
+        s = r["vs_model"] or r["vs_ideal"]
+        parts.append(f"{gear}: RMS vs model {s['rms']:.2e}")
+        if "vs_truth" in r and r["vs_truth"]:
+            parts.append(f"{gear}: RMS vs truth {r['vs_truth']['rms']:.2e}")
+    ctx.error_estimates["compare"] = "; ".join(parts)
+
+
+def _truth_residual(ctx, tab, truth, gear) -> dict | None:
+    """Measured gamma against the synthetic truth.
+
+    Which pulse is planet 1 is not observable for a symmetric layout without an absolute
+    reference, so two numbers are reported: ``label_match`` (fraction of passes whose planet
+    label equals the truth's) and the phasing error with the onsets labelled as the truth
+    labels them (the measurement error of the phasing itself, same encoder chain).
+    """
+    from .compare import wrap
+    from .phasing import measured_phasing
+
+    g = _gearset(ctx)
+    labels = ctx.results["phasing"]["labels"]
+    if gear not in labels or not isinstance(truth.events, dict):
+        return None
+    ch, times, pl, amp = labels[gear]
+    if ch not in truth.events or not len(tab):
+        return None
+    ev = truth.events[ch]
+    et = np.asarray(ev.time)
+    if et.size == 0 or times.size == 0:
+        return None
+    # onset feature vs truth instant: a constant offset (fraction of a mesh period)
+    j = np.clip(np.searchsorted(et, times), 1, et.size - 1)
+    near = np.where(np.abs(et[j - 1] - times) < np.abs(et[j] - times), j - 1, j)
+    off = float(np.median(times - et[near]))
+    j = np.clip(np.searchsorted(et, times - off), 1, et.size - 1)
+    near = np.where(np.abs(et[j - 1] - (times - off)) < np.abs(et[j] - (times - off)), j - 1, j)
+    true_lab = np.asarray(ev.planet)[near] - 1
+    match = float(np.mean(true_lab[pl >= 0] == pl[pl >= 0])) if np.any(pl >= 0) else float("nan")
+    z = g.z_sun if gear == "sun" else g.z_ring
+    kw = {}
+    sun_t = ctx.results.get("_truth_sun_table")
+    if gear == "ring" and sun_t is not None and sun_t.encoder is not None:
+        kw = {"encoder": sun_t.encoder, "encoder_ratio": g.z_sun / g.z_ring}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ProcessingWarning)
+        t2 = measured_phasing(times, true_lab, z, g.n_planets, gauge=gear, **kw)
+    if gear == "sun":
+        ctx.results["_truth_sun_table"] = t2
+    pt = truth.gamma_table(ch)
+    if len(t2) == 0 or len(pt.time) == 0:
+        return None
+    k = np.clip(np.searchsorted(pt.time, t2.time - off), 1, len(pt.time) - 1)
+    k = np.where(np.abs(pt.time[k - 1] - (t2.time - off)) < np.abs(pt.time[k] - (t2.time - off)), k - 1, k)
+    err = wrap(t2.gamma - pt.gamma[k])
+    return {"n": int(err.size), "rms": float(np.sqrt(np.mean(err ** 2))),
+            "max_abs": float(np.max(np.abs(err))), "label_match": match,
+            "onset_offset_s": off}
+
+
+def stage_bearing_moments(ctx: RunContext) -> None:
+    from .models import bearing
+
+    b = ctx.scene.bearing
+    case = bearing.seed_case(b["case"])
+    geom = case.geometry
+    torque = b["input_torque"] if b.get("input_torque") is not None else case.input_torque
+    out = {"case": case, "torque": torque}
+    if isinstance(geom, bearing.SinglePinion):
+        out["concentrated"] = bearing.single_pinion_moments(geom, torque)
+        out["with_offsets"] = bearing.single_pinion_moments(geom, torque, b["z_s"], b["z_r"])
+        cen = ctx.results.get("centroids") or {}
+        if cen.get("sun") is not None and cen.get("ring") is not None:
+            z_s, z_r = cen["sun"].centroid, cen["ring"].centroid
+            mx, my = bearing.moments_from_offsets(geom, torque, z_s, z_r)
+            out["measured"] = bearing.single_pinion_moments(geom, torque, z_s, z_r)
+    else:
+        out["concentrated"] = bearing.double_pinion_moments(geom, torque)
+    ctx.results["bearing_moments"] = out
+    ctx.error_estimates["bearing_moments"] = "closed form (seed 001 tables reproduced to print precision)"
+
+
+def stage_tilt(ctx: RunContext) -> None:
+    from .models import bearing
+    from .models.tilt import solve_tilt
+
+    b = ctx.scene.bearing
+    case = bearing.seed_case(b["case"])
+    torque = b["input_torque"] if b.get("input_torque") is not None else case.input_torque
+    sols = []
+    for k in b["k_tilt"]:
+        sols.append((k, solve_tilt(case.geometry, torque, k, c_g=b["c_g"])))
+    ctx.results["tilt"] = {"case": case, "torque": torque, "solutions": sols}
+    res = max(float(np.max(s.residual)) for _, s in sols)
+    its = max(int(np.max(s.iterations)) for _, s in sols)
+    ctx.error_estimates["tilt"] = f"max residual {res:.1e} m, <= {its} iterations"
+
+
+STAGE_FUNCTIONS: dict[str, Callable[[RunContext], None]] = {
+    "load": stage_load, "condition": stage_condition, "onsets": stage_onsets,
+    "phasing": stage_phasing, "load_sharing": stage_load_sharing, "centroids": stage_centroids,
+    "ideal": stage_ideal, "tolerance": stage_tolerance, "identify": stage_identify,
+    "compare": stage_compare, "bearing_moments": stage_bearing_moments, "tilt": stage_tilt,
+}
+
+
+def run_scene(scene: Scene, *, progress: Callable[[str, int, int], None] | None = None) -> RunContext:
+    """Run the stages the scene's results need, in dependency order.
+
+    A stage that raises is recorded in ``ctx.failed`` and the stages that depend on it are
+    skipped (with the reason); the others still run, so a run always returns what it could
+    compute. Warnings are collected into ``ctx.messages`` (and still issued).
+    """
+    from .scene import STAGES
+
+    ctx = RunContext(scene)
+    stages = plan(scene)
+    for i, name in enumerate(stages):
+        blocked = [d for d in STAGES[name] if d in ctx.failed or (d not in ctx.ran)]
+        if blocked:
+            ctx.failed[name] = f"skipped: needs {', '.join(blocked)}"
+            continue
+        if name == "centroids" and "load" in ctx.results and not any(
+                c.kind == "facewidth" for c in ctx.results["load"]["recording"].channels):
+            # only what the scene needs: no face-width gauges, no centroid work
+            ctx.failed[name] = "skipped: the recording has no face-width gauges"
+            continue
+        if progress:
+            progress(name, i, len(stages))
+        t = time.perf_counter()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", MeshphaseWarning)
+            try:
+                STAGE_FUNCTIONS[name](ctx)
+                ctx.ran.append(name)
+            except (ValueError, TypeError, FileNotFoundError, KeyError, OSError) as exc:
+                ctx.failed[name] = f"{type(exc).__name__}: {exc}"
+                logger.warning("stage %s failed: %s", name, exc)
+        ctx.timings[name] = time.perf_counter() - t
+        for w in caught:
+            msg = f"{name}: {w.category.__name__}: {w.message}"
+            if msg not in ctx.messages:
+                ctx.messages.append(msg)
+            if not issubclass(w.category, MeshphaseWarning):
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    if progress:
+        progress("done", len(stages), len(stages))
+    return ctx
+
+
+def new_output_dir(base: Path, *, overwrite: bool = False) -> Path:
+    """``base`` if it does not exist (or ``overwrite``), else ``base-2``, ``base-3``, ...:
+    a run never overwrites an earlier one unless asked."""
+    base = Path(base)
+    if overwrite or not base.exists():
+        base.mkdir(parents=True, exist_ok=True)
+        return base
+    i = 2
+    while Path(f"{base}-{i}").exists():
+        i += 1
+    out = Path(f"{base}-{i}")
+    out.mkdir(parents=True)
+    return out
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, np.ndarray):
+        return _jsonable(v.tolist())
+    if isinstance(v, (np.floating, float)):
+        f = float(v)
+        return f if math.isfinite(f) else None
+    if isinstance(v, (np.integer,)):
+        return int(v)
+    if isinstance(v, (np.bool_,)):
+        return bool(v)
+    if isinstance(v, Path):
+        return str(v)
+    return v
+
+
+def summary_dict(ctx: RunContext) -> dict:
+    """The machine-readable summary of a run (JSON-friendly)."""
+    r = ctx.results
+    s: dict = {"scene": ctx.scene.name, "results_requested": ctx.scene.results,
+               "stages_ran": ctx.ran, "stages_failed": ctx.failed,
+               "timings_s": ctx.timings, "error_estimates": ctx.error_estimates,
+               "messages": ctx.messages}
+    g = _gearset(ctx)
+    if g is not None:
+        s["gearset"] = g.to_dict()
+    if "load" in r:
+        rec = r["load"]["recording"]
+        s["recording"] = {"source": r["load"]["source"], "fs_hz": rec.fs, "n_samples": rec.n_samples,
+                          "duration_s": rec.duration, "channels": [c.to_dict() for c in rec.channels]}
+    if "onsets" in r:
+        s["onsets"] = {k: o.summary() for k, o in r["onsets"]["by_channel"].items()}
+    if "ideal" in r:
+        s["ideal"] = {"gamma_s": r["ideal"]["gamma_s"], "gamma_r": r["ideal"]["gamma_r"],
+                      "classification": r["ideal"]["classification"]}
+    if "phasing" in r:
+        s["phasing"] = {k: {"n_passes": len(t), "per_planet": t.summary(), "notes": t.notes,
+                            "assignment": r["phasing"]["assignment"].get(k)}
+                        for k, t in r["phasing"]["tables"].items()}
+    if r.get("load_sharing") is not None:
+        s["load_sharing"] = r["load_sharing"].to_rows()
+    if r.get("centroids"):
+        s["centroids_m"] = {k: (None if v is None else vars(v)) for k, v in r["centroids"].items()}
+    if "tolerance" in r:
+        s["tolerance"] = r["tolerance"].to_dict()
+    if "identify" in r:
+        i = r["identify"]
+        s["identify"] = {"table": i.table, "rms_before": i.rms_before, "rms_after": i.rms_after,
+                         "n_passes": i.n_passes, "identifiable": i.identifiable, "notes": i.notes,
+                         "singular_values": i.singular_values}
+    if "compare" in r:
+        s["compare"] = {k: {kk: vv for kk, vv in v.items() if kk not in ("ideal", "model")}
+                        for k, v in r["compare"].items()}
+    if "bearing_moments" in r:
+        b = r["bearing_moments"]
+        s["bearing_moments"] = {"case": b["case"].name, "input_torque_Nm": b["torque"],
+                                "concentrated": _moments_dict(b["concentrated"]),
+                                **({"measured": _moments_dict(b["measured"])} if "measured" in b else {})}
+    if "tilt" in r:
+        s["tilt"] = [{"k_tilt_Nm_per_rad": k, "z_m": sol.z, "converged": sol.converged,
+                      "iterations": sol.iterations, "residual_m": sol.residual,
+                      "contact_fraction": sol.contact_fraction, "moments": _moments_dict(sol.moments)}
+                     for k, sol in r["tilt"]["solutions"]]
+    return _jsonable(s)
+
+
+def _moments_dict(m) -> dict:
+    out = {}
+    for k, v in vars(m).items():
+        if isinstance(v, (np.ndarray, float, int, np.floating)):
+            out[k] = v
+    return out
+
+
+def write_outputs(ctx: RunContext, out_dir: Path, *, report: bool = True) -> dict:
+    """Write summary.json, CSV tables, arrays.h5 and (optionally) report.html into ``out_dir``.
+
+    Returns a dict name -> path of what was written.
+    """
+    import h5py
+    import pandas as pd
+
+    out_dir = Path(out_dir)
+    files = {}
+    summ = summary_dict(ctx)
+    p = out_dir / "summary.json"
+    p.write_text(json.dumps(summ, indent=2))
+    files["summary"] = p
+    r = ctx.results
+    if "phasing" in r:
+        for gear, t in r["phasing"]["tables"].items():
+            df = t.to_dataframe()
+            if "compare" in r and gear in r["compare"]:
+                df["gamma_ideal"] = r["compare"][gear]["ideal"]
+                if r["compare"][gear]["model"] is not None:
+                    df["gamma_model"] = r["compare"][gear]["model"]
+            p = out_dir / f"passes_{gear}.csv"
+            df.to_csv(p, index=False)
+            files[f"passes_{gear}"] = p
+    if r.get("load_sharing") is not None:
+        p = out_dir / "load_sharing.csv"
+        pd.DataFrame(r["load_sharing"].to_rows()).to_csv(p, index=False)
+        files["load_sharing"] = p
+    if "identify" in r:
+        p = out_dir / "identified_errors.csv"
+        pd.DataFrame(r["identify"].table).to_csv(p, index=False)
+        files["identified_errors"] = p
+    if "tilt" in r:
+        p = out_dir / "tilt.csv"
+        pd.DataFrame([{"k_tilt_Nm_per_rad": k, "z_s_m": float(np.ravel(s.z)[0]),
+                       "z_r_m": float(np.ravel(s.z)[-1]), "converged": bool(np.all(s.converged)),
+                       "iterations": int(np.max(s.iterations)), "residual_m": float(np.max(s.residual))}
+                      for k, s in r["tilt"]["solutions"]]).to_csv(p, index=False)
+        files["tilt"] = p
+    p = out_dir / "stages.csv"
+    pd.DataFrame([{"stage": s, "wall_time_s": ctx.timings.get(s, float("nan")),
+                   "error_estimate": ctx.error_estimates.get(s, ""),
+                   "status": "ran" if s in ctx.ran else ctx.failed.get(s, "")}
+                  for s in list(ctx.timings)]).to_csv(p, index=False)
+    files["stages"] = p
+    # arrays: onsets per channel, Monte Carlo samples
+    arrays = out_dir / "arrays.h5"
+    with h5py.File(arrays, "w") as f:
+        if "onsets" in r:
+            grp = f.create_group("onsets")
+            for ch, o in r["onsets"]["by_channel"].items():
+                gch = grp.create_group(ch)
+                for a in ("times", "corr", "amplitude", "width", "flags"):
+                    gch.create_dataset(a, data=getattr(o, a))
+        if "tolerance" in r and r["tolerance"].samples is not None:
+            grp = f.create_group("monte_carlo")
+            for k, v in r["tolerance"].samples.items():
+                grp.create_dataset(k, data=v)
+    files["arrays"] = arrays
+    if report:
+        from .report.validation import build_report
+
+        p = build_report(ctx, out_dir)
+        files["report"] = p
+    return files
+
+
+def process_recording(path, gearset_scene_path, *, out_dir=None, overwrite=False) -> tuple:
+    """``meshphase process FILE --gearset GEARSET.toml``: the recording-processing results
+    (phasing, load sharing, centroids, comparison with the ideal and identified model).
+
+    Returns (RunContext, files).
+    """
+    from .scene import load_scene
+
+    scene = load_scene(gearset_scene_path)
+    scene.input = {"recording": Path(path).resolve()}
+    wanted = ["phasing", "load_sharing", "compare"]
+    scene.results = [r for r in dict.fromkeys(list(scene.results) + wanted)
+                     if r not in ("tolerance",) or scene.tolerances is not None]
+    ctx = run_scene(scene)
+    base = Path(out_dir) if out_dir else Path(path).with_name(Path(path).stem + "-meshphase")
+    out = new_output_dir(base, overwrite=overwrite)
+    files = write_outputs(ctx, out, report=False)
+    return ctx, files
