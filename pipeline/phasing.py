@@ -412,12 +412,12 @@ class RevolutionEncoder:
     The reference passes (planet 1, or a tacho) mark whole relative revolutions k: knots
     (t_k, 2 pi k). Their times are not exactly one revolution apart when the reference planet
     has its own shaft hole error (each pass moves by that planet's angular deviation, ~e/R_c),
-    so the angle is not forced through the knots: a smooth Theta(t) is fitted to them by least
-    squares, a cubic spline with interior knots every ``span`` revolutions (a quadratic when
-    the record is shorter). The other planets' pass trains, each at its own unknown constant
-    angle offset, join the fit (offsets estimated, then one refit), so N times more passes
-    average the jitter. Exact for constant speed and a linear ramp; follows ripple slower than
-    ~2 ``span`` revolutions.
+    so the angle is not forced through the knots: a smooth Theta(t) is fitted to them, a cubic
+    smoothing spline (scipy make_smoothing_spline) whose smoothing is chosen by generalised
+    cross-validation (a quadratic for fewer than 8 passes). The other planets' pass trains,
+    each at its own unknown constant angle offset, join the fit (offsets estimated, then one
+    refit), so N times more passes average the jitter. Exact for constant speed and a linear
+    ramp; follows speed ripple down to a few relative revolutions per period.
 
     The phasing of a pass at t_n is then taken from Theta(t_n) - Theta(t_1k) with t_1k the
     measured reference pass of its revolution, so at constant speed lag_n = w (t_n - t_1k)
@@ -431,11 +431,16 @@ class RevolutionEncoder:
         Their revolution numbers (:func:`revolution_numbers`), gaps allowed.
     extra_trains : list of ndarray, optional
         Pass times of other planets (each strictly increasing, once per revolution).
-    span : float
-        Spline knot spacing [revolutions].
+    lam : float, optional
+        Smoothing parameter of the spline in units of revolutions (None: GCV).
+    harmonic : float, optional
+        Rotation of a planet's shaft hole offset per radian of the gauged member's relative
+        angle, w_pc / w_jc [-] (-Z_s / Z_p for a sun gauge, Z_r / Z_p for a ring gauge): each
+        train gets a cos/sin term at that rate so planet eccentricity is not read as speed.
     """
 
-    def __init__(self, knot_times, k, extra_trains=None, span: float = 8.0):
+    def __init__(self, knot_times, k, extra_trains=None, lam: float | None = None,
+                 harmonic: float | None = None, knot_spacing: float = 1.0):
         kt = np.asarray(knot_times, dtype=float)
         k = np.asarray(k, dtype=int)
         self.k0 = int(k[0])
@@ -446,48 +451,90 @@ class RevolutionEncoder:
         self._known[k - k[0]] = True
         self.t_first = float(self.full_t[0])
         self.t_last = float(self.full_t[-1])
-        self.span = float(span)
-        tt = [kt]
-        yy = [TWO_PI * (k - k[0])]
-        self._fit(np.concatenate(tt), np.concatenate(yy))
-        if extra_trains:
-            for tq in extra_trains:
-                tq = np.asarray(tq, dtype=float)
-                inside = (tq >= self.t_first) & (tq <= self.t_last)
-                if np.count_nonzero(inside) < 2:
-                    continue
-                tq = tq[inside]
-                kq = revolution_numbers(tq)
-                # offset of this train: angle of its passes relative to whole revolutions
-                off = self._eval(tq) - TWO_PI * kq
-                phi = float(np.median(off))
-                tt.append(tq)
-                yy.append(TWO_PI * kq + phi)
-            self._fit(np.concatenate(tt), np.concatenate(yy))
+        self.lam = lam
+        self.knot_spacing = float(knot_spacing)
+        self.residual_rms = float("nan")
+        # every train (planet 1 first, then the others): times, revolution numbers, planet
+        trains = [(kt, k - k[0])]
+        for tq in (extra_trains or []):
+            tq = np.asarray(tq, dtype=float)
+            inside = (tq >= self.t_first) & (tq <= self.t_last)
+            if np.count_nonzero(inside) >= 2:
+                trains.append((tq[inside], revolution_numbers(tq[inside])))
+        self.harmonic = harmonic
+        tt = np.concatenate([x[0] for x in trains])
+        base = np.concatenate([TWO_PI * x[1] for x in trains])
+        which = np.concatenate([np.full(x[0].size, i) for i, x in enumerate(trains)])
+        self._fit_joint(tt, base, which, len(trains))
 
-    def _fit(self, t, y):
-        from scipy.interpolate import LSQUnivariateSpline
+    def _fit_joint(self, t, y, which, n_trains):
+        """One penalised least-squares solve (P-spline, Eilers & Marx 1996) of
+
+            y_i = S(t_i) + c_q + a_q cos(h S(t_i)) + b_q sin(h S(t_i))   (train q of pass i)
+
+        S a cubic B-spline (knots one revolution apart, third-difference penalty so that a
+        steady ramp is free), c_q the constant angle offset of each train (0 for planet 1:
+        its passes fix the origin) and the harmonic at the planet-offset rotation ratio h,
+        which is how a planet's own shaft hole error moves its passes; it turns with the
+        planet, so it cannot be mistaken for a change of speed. The harmonic's argument uses
+        the previous iterate of S (two Gauss-Newton-like rounds; S is known to ~1e-3 rad after
+        the first).
+        """
+        from scipy import sparse
+        from scipy.interpolate import BSpline
+        from scipy.sparse.linalg import spsolve
 
         o = np.argsort(t, kind="stable")
-        t, y = t[o], y[o]
+        t, y, which = t[o], y[o], which[o]
         self._t0 = float(t[0])
-        P = (self.t_last - self.t_first) / max(1, self.full_t.size - 1)
-        n_int = int((self.t_last - self.t_first) / (self.span * P)) - 1 if P > 0 else -1
-        self._spline = None
-        if n_int >= 1 and t.size > n_int + 8:
-            interior = np.linspace(t[0], t[-1], n_int + 2)[1:-1]
-            try:
-                self._spline = LSQUnivariateSpline(t, y, interior, k=3)
-                return
-            except ValueError:  # Schoenberg-Whitney conditions not met: fall back
-                self._spline = None
-        deg = 2 if t.size >= 4 else 1
-        self._poly = np.polyfit(t - self._t0, y, deg)
+        span = float(t[-1] - t[0])
+        n_rev = max(1.0, (y.max() - y.min()) / TWO_PI)
+        P = span / n_rev if span > 0 else 1.0
+        self._P = P
+        x = (t - self._t0) / P                           # [revolutions]
+        n_int = max(1, int(math.ceil(x[-1] / self.knot_spacing)))
+        if t.size < 4 * (n_int + 3) // 3 + 3 * n_trains or t.size < 8:
+            n_int = 1
+        edges = np.linspace(0.0, x[-1] if x[-1] > 0 else 1.0, n_int + 1)
+        hk = edges[1] - edges[0]
+        # equally spaced knots running past both ends (not clamped): then polynomials up to
+        # degree 2 have zero third differences of their coefficients, i.e. no penalty
+        kk = np.concatenate([edges[0] - hk * np.arange(3, 0, -1), edges, edges[-1] + hk * np.arange(1, 4)])
+        B = BSpline.design_matrix(np.clip(x, edges[0], edges[-1]), kk, 3).tocsc()
+        nb = B.shape[1]
+        D = sparse.diags([-1.0, 3.0, -3.0, 1.0], [0, 1, 2, 3], shape=(max(0, nb - 3), nb))
+        lam = self.lam if self.lam is not None else 1e-2
+        P_pen = lam * (D.T @ D)
+        s_prev = y.copy()
+        for _ in range(2 if self.harmonic else 1):
+            cols = [B]
+            for q in range(1, n_trains):
+                cols.append(sparse.csc_matrix((which == q).astype(float)[:, None]))
+            if self.harmonic:
+                for q in range(n_trains):
+                    m = (which == q).astype(float)
+                    if np.count_nonzero(m) >= 6:
+                        cols.append(sparse.csc_matrix((m * np.cos(self.harmonic * s_prev))[:, None]))
+                        cols.append(sparse.csc_matrix((m * np.sin(self.harmonic * s_prev))[:, None]))
+            A = sparse.hstack(cols, format="csc")
+            pen = sparse.block_diag([P_pen, sparse.csc_matrix((A.shape[1] - nb, A.shape[1] - nb))],
+                                    format="csc")
+            # normal equations are banded + a few dense columns: a sparse direct solve stays
+            # linear in the number of revolutions (6600 revolutions solve in well under 1 s)
+            M = (A.T @ A + pen).tocsc()
+            sol = spsolve(M, A.T @ y)
+            if not np.all(np.isfinite(sol)):
+                sol = np.linalg.lstsq(M.toarray(), A.T @ y, rcond=None)[0]
+            self._spline = BSpline(kk, sol[:nb], 3, extrapolate=True)
+            s_prev = self._spline(x)
+        self._lin = np.zeros(1)
+        self.residual_rms = float(np.sqrt(np.mean((A @ sol - y) ** 2)))
 
     def _eval(self, t, nu: int = 0):
         t = np.asarray(t, dtype=float)
         if self._spline is not None:
-            return self._spline(t, nu=nu)
+            x = (t - self._t0) / self._P
+            return self._spline(x, nu) / self._P ** nu
         p = np.polyder(self._poly, nu) if nu else self._poly
         return np.polyval(p, t - self._t0)
 
@@ -557,7 +604,7 @@ class ScaledEncoder:
 
 def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str = "sun",
                      sigma_t=None, reference_times=None, encoder=None,
-                     encoder_ratio: float = 1.0) -> PassTable:
+                     encoder_ratio: float = 1.0, planet_ratio: float | None = None) -> PassTable:
     """Phasing gamma_jn per pass from labelled onset times (equation (1) of the module notes).
 
     Parameters
@@ -587,6 +634,11 @@ def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str 
     encoder_ratio : float
         |w of this member| / |w of the encoder's member| relative to the carrier [-]
         (Z_s / Z_r for a ring gauge driven by the sun encoder).
+    planet_ratio : float, optional
+        w_pc / w_jc, the planets' rotation per radian of this member's relative angle [-]
+        (Z_s / Z_p for a sun gauge, Z_r / Z_p for a ring gauge; the sign does not matter):
+        lets the speed encoder tell planet eccentricity from speed change
+        (:class:`RevolutionEncoder`). None: not modelled.
 
     Returns
     -------
@@ -642,7 +694,8 @@ def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str 
     else:
         # every planet's own passes are a once-per-revolution encoder of the same member
         others = [] if use_ref else [t[lab == q] for q in range(1, n)]
-        enc = RevolutionEncoder(knots_t, k, extra_trains=[x for x in others if x.size >= 2])
+        enc = RevolutionEncoder(knots_t, k, extra_trains=[x for x in others if x.size >= 2],
+                                harmonic=planet_ratio)
     inside = (t >= enc.t_first) & (t < enc.t_last)
     tt = np.where(inside, t, enc.t_first)
     rev, lag, omega = enc.lag(tt)

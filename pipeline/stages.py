@@ -187,6 +187,13 @@ def _main_gauge(rec: Recording, gear: str) -> str | None:
     return c[0] if c else None
 
 
+def _planet_ratio(g, gear: str) -> float | None:
+    """|w_pc / w_jc|: planet turns per turn of the gauged member relative to the carrier."""
+    if not g.z_planet:
+        return None
+    return (g.z_sun if gear == "sun" else g.z_ring) / g.z_planet
+
+
 def stage_phasing(ctx: RunContext) -> None:
     from .phasing import assign_planets_by_pattern, measured_phasing, pass_order
 
@@ -223,10 +230,11 @@ def stage_phasing(ctx: RunContext) -> None:
         labels[gear] = (ch, times, pl, amp)
         info[gear] = inf
         if gear == "sun":
-            tables["sun"] = measured_phasing(times, pl, z, g.n_planets, gauge="sun", sigma_t=sig)
+            tables["sun"] = measured_phasing(times, pl, z, g.n_planets, gauge="sun", sigma_t=sig,
+                                             planet_ratio=_planet_ratio(g, "sun"))
     if "ring" in labels:
         ch, times, pl, amp = labels["ring"]
-        kw = {}
+        kw = {"planet_ratio": _planet_ratio(g, "ring")}
         if "sun" in tables and tables["sun"].encoder is not None:
             kw = {"encoder": tables["sun"].encoder, "encoder_ratio": g.z_sun / g.z_ring}
         tables["ring"] = measured_phasing(times, pl, g.z_ring, g.n_planets, gauge="ring", **kw)
@@ -432,7 +440,7 @@ def _truth_residual(ctx, tab, truth, gear) -> dict | None:
     true_lab = np.asarray(ev.planet)[near] - 1
     match = float(np.mean(true_lab[pl >= 0] == pl[pl >= 0])) if np.any(pl >= 0) else float("nan")
     z = g.z_sun if gear == "sun" else g.z_ring
-    kw = {}
+    kw = {"planet_ratio": _planet_ratio(g, gear)}
     sun_t = ctx.results.get("_truth_sun_table")
     if gear == "ring" and sun_t is not None and sun_t.encoder is not None:
         kw = {"encoder": sun_t.encoder, "encoder_ratio": g.z_sun / g.z_ring}
@@ -503,10 +511,14 @@ def run_scene(scene: Scene, *, progress: Callable[[str, int, int], None] | None 
 
     A stage that raises is recorded in ``ctx.failed`` and the stages that depend on it are
     skipped (with the reason); the others still run, so a run always returns what it could
-    compute. Warnings are collected into ``ctx.messages`` (and still issued).
+    compute. Our warnings (:class:`~pipeline.errors.MeshphaseWarning` and subclasses) are
+    collected into ``ctx.messages`` as "stage: Category: message" and not issued again (the
+    CLI prints them, the report lists them); other warnings are collected and re-issued.
     """
     from .scene import STAGES
 
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a Scene (pipeline.scene.load_scene), got {type(scene).__name__}")
     ctx = RunContext(scene)
     stages = plan(scene)
     for i, name in enumerate(stages):
@@ -642,7 +654,11 @@ def write_outputs(ctx: RunContext, out_dir: Path, *, report: bool = True) -> dic
     import h5py
     import pandas as pd
 
+    if not isinstance(ctx, RunContext):
+        raise TypeError(f"ctx must be a RunContext (from run_scene), got {type(ctx).__name__}")
     out_dir = Path(out_dir)
+    if not out_dir.is_dir():
+        raise FileNotFoundError(f"{out_dir}: output folder does not exist (see new_output_dir)")
     files = {}
     summ = summary_dict(ctx)
     p = out_dir / "summary.json"
@@ -678,7 +694,8 @@ def write_outputs(ctx: RunContext, out_dir: Path, *, report: bool = True) -> dic
     pd.DataFrame([{"stage": s, "wall_time_s": ctx.timings.get(s, float("nan")),
                    "error_estimate": ctx.error_estimates.get(s, ""),
                    "status": "ran" if s in ctx.ran else ctx.failed.get(s, "")}
-                  for s in list(ctx.timings)]).to_csv(p, index=False)
+                  for s in list(ctx.timings) + [k for k in ctx.failed if k not in ctx.timings]],
+                 columns=["stage", "wall_time_s", "error_estimate", "status"]).to_csv(p, index=False)
     files["stages"] = p
     # arrays: onsets per channel, Monte Carlo samples
     arrays = out_dir / "arrays.h5"
@@ -710,6 +727,8 @@ def process_recording(path, gearset_scene_path, *, out_dir=None, overwrite=False
     """
     from .scene import load_scene
 
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"{path}: no such recording file")
     scene = load_scene(gearset_scene_path)
     scene.input = {"recording": Path(path).resolve()}
     wanted = ["phasing", "load_sharing", "compare"]

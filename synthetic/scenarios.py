@@ -36,7 +36,8 @@ Scenarios
 ---------
 ``table1_high_speed`` (and ``_ccw``, every speed reversed), ``table2_case1/2/3`` (seed 000
 Table 2 errors; case 3 draws one realisation from the tolerance bands with the seed),
-``seed_rig`` (case 1 errors, clean), ``noisy``, ``adc16_clipped``, ``speed_ripple``,
+``seed_rig`` (case 1 errors, clean), ``noisy``, ``adc16_clipped``, ``speed_ripple``
+(``speed_ripple_fast`` as a stress case),
 ``speed_ramp``, ``gaps``, ``facewidth_offcentre``, ``facewidth_partial``, ``facewidth_tilt``,
 ``rig_realistic``, ``one_hour`` (generate it with :func:`synthetic.generate_blocks`). Each
 entry's ``description`` says what it holds; :func:`describe_scenarios` lists them.
@@ -245,18 +246,27 @@ register(Scenario(
 
 register(Scenario(
     "speed_ripple",
-    "seed_rig with a slow speed ripple (5 % at 0.1 Hz plus 2 % at 0.37 Hz): engagement times "
-    "follow the actual rotation angles.",
+    "seed_rig with a slow speed ripple (4 % at 0.01 Hz plus 1.5 % at 0.025 Hz, slow against "
+    "the 3.5 s relative sun revolution): engagement times follow the actual rotation angles.",
     lambda: _seed_rig("speed_ripple", "seed rig with speed ripple",
-                      speed=SpeedProfile(ripple=((0.05, 0.1, 0.0), (0.02, 0.37, 1.0)))),
+                      speed=SpeedProfile(ripple=((0.04, 0.01, 0.0), (0.015, 0.025, 1.0)))),
     ("fast", "speed")))
+
+register(Scenario(
+    "speed_ripple_fast",
+    "Stress case: seed_rig with a fast speed ripple (5 % at 0.1 Hz plus 2 % at 0.37 Hz, "
+    "comparable with the 3.5 s relative sun revolution), faster than four passes per "
+    "revolution can resolve; processing must say so rather than report clean phasing.",
+    lambda: _seed_rig("speed_ripple_fast", "seed rig with fast speed ripple",
+                      speed=SpeedProfile(ripple=((0.05, 0.1, 0.0), (0.02, 0.37, 1.0)))),
+    ("fast", "speed", "stress")))
 
 register(Scenario(
     "speed_ramp",
     "seed_rig with the drive speeding up 20 % over 60 s (ramp 0.33 %/s) plus 1 % ripple at "
-    "0.2 Hz.",
+    "0.02 Hz.",
     lambda: _seed_rig("speed_ramp", "seed rig with a speed ramp",
-                      speed=SpeedProfile(ramp_rate=0.2 / 60.0, ripple=((0.01, 0.2, 0.0),))),
+                      speed=SpeedProfile(ramp_rate=0.2 / 60.0, ripple=((0.01, 0.02, 0.0),))),
     ("fast", "speed")))
 
 register(Scenario(
@@ -299,11 +309,11 @@ register(Scenario(
 register(Scenario(
     "rig_realistic",
     "seed_rig with everything a good rig records: 30 dB SNR (30 % 1/f), drift, hum, 24-bit "
-    "ADC, 1 % gain errors, 3 % speed ripple.",
+    "ADC, 1 % gain errors, 3 % slow speed ripple (0.01 Hz).",
     lambda: _seed_rig("rig_realistic", "seed rig, realistic acquisition",
                       artefacts=Artefacts(**{**_REALISTIC.to_dict(), "hum_harmonics": (1.0, 0.0, 0.25),
                                              "gain_error_std": 0.01}),
-                      speed=SpeedProfile(ripple=((0.03, 0.05, 0.0),))),
+                      speed=SpeedProfile(ripple=((0.03, 0.01, 0.0),))),
     ("fast", "noise", "speed")))
 
 register(Scenario(
