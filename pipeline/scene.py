@@ -110,32 +110,78 @@ class Scene:
         return bool(self.input.get("recording") or self.input.get("synthetic"))
 
 
-def _line_of(text: str, keys: list[str]) -> int | None:
-    """Best-effort line number of a dotted key path in TOML text (1-based)."""
-    if not text:
+_HEADER = re.compile(r"^\s*(\[\[?)\s*([A-Za-z0-9_.\-]+)\s*\]\]?\s*(#.*)?$")
+_KEYLINE = re.compile(r"^\s*([A-Za-z0-9_\-]+)\s*=")
+
+
+def _line_of(text: str, keys: list) -> int | None:
+    """Best-effort line number (1-based) of a key path in TOML text.
+
+    ``keys`` is a path as jsonschema gives it (strings and array indices, indices also as digit
+    strings): ``["gearset", "z_sun"]``, ``["channels", 1, "tooth"]`` (the second ``[[channels]]``
+    table), ``["results", 1]`` (the ``results`` line), ``["foo"]`` (a ``foo = `` line or a
+    ``[foo]`` header). Falls back to the table header when the key itself is not written.
+    """
+    if not text or not keys:
         return None
+    keys = [int(k) if isinstance(k, str) and k.isdigit() else k for k in keys]
     lines = text.splitlines()
-    table_idx = None
-    # find the table header of all but the last key
-    head = [k for k in keys if not isinstance(k, int)]
-    if len(head) >= 2:
-        pat = re.compile(r"^\s*\[\[?\s*" + re.escape(head[0]) + r"\s*\]\]?\s*(#.*)?$")
-        for i, ln in enumerate(lines):
-            if pat.match(ln):
-                table_idx = i
-                break
-    key = head[-1] if head else None
-    if key is None:
+    # sections: (table name, array-of-tables index, header line or None, first body line, end)
+    sections, counts = [], {}
+    cur = ["", None, None, 0]
+    for i, ln in enumerate(lines):
+        m = _HEADER.match(ln)
+        if m:
+            sections.append((*cur, i))
+            name = m.group(2)
+            idx = None
+            if m.group(1) == "[[":
+                idx = counts.get(name, 0)
+                counts[name] = idx + 1
+            cur = [name, idx, i + 1, i + 1]
+    sections.append((*cur, len(lines)))
+
+    def find_key(sec, key):
+        for i in range(sec[3], sec[4]):
+            m = _KEYLINE.match(lines[i])
+            if m and m.group(1) == key:
+                return i + 1
         return None
-    kpat = re.compile(r"^\s*" + re.escape(str(key)) + r"\s*=")
-    start = table_idx + 1 if table_idx is not None else 0
-    for i in range(start, len(lines)):
-        if i > start and table_idx is not None and re.match(r"^\s*\[", lines[i]) and \
-                not re.match(r"^\s*\[\[\s*" + re.escape(head[0]), lines[i]):
-            break
-        if kpat.match(lines[i]):
-            return i + 1
-    return (table_idx + 1) if table_idx is not None else None
+
+    head, rest = keys[0], keys[1:]
+    if not isinstance(head, str):
+        return None
+    ln = find_key(sections[0], head)      # a top-level key (arrays: the key's line)
+    if ln is not None:
+        return ln
+    tabs = [s for s in sections[1:] if s[0] == head]
+    if not tabs:
+        return None
+    tab = tabs[0]
+    if rest and isinstance(rest[0], int):
+        tab = next((s for s in tabs if s[1] == rest[0]), tab)
+        rest = rest[1:]
+    sub = next((k for k in rest if isinstance(k, str)), None)
+    if sub is not None:
+        ln = find_key(tab, sub)
+        if ln is not None:
+            return ln
+    return tab[2]
+
+
+#: seed 001 bearing cases (:func:`pipeline.models.bearing.seed_case`) and the spellings accepted
+_BEARING_CASES = {"1": "1", "2a": "2-A", "2b": "2-B"}
+
+
+def _bearing_case(name) -> str | None:
+    """Canonical seed 001 case name ("1", "2-A", "2-B") of ``name``, or None if unknown.
+
+    Accepts the seed's labels and the usual spellings: "1", "case1", "Case 1", "2-B", "2B",
+    "case2B", "case 2-B".
+    """
+    key = re.sub(r"[\s_\-]", "", str(name).lower())
+    key = key[4:] if key.startswith("case") else key
+    return _BEARING_CASES.get(key)
 
 
 def load_scene(path) -> Scene:
@@ -162,13 +208,16 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         m = re.search(r"line (\d+)", str(exc))
-        raise SceneError(label, "", f"TOML syntax error: {exc}", int(m.group(1)) if m else None) from None
+        line = int(m.group(1)) if m else None
+        if line is None and "end of document" in str(exc):
+            line = max(1, len(text.splitlines()))
+        raise SceneError(label, "", f"TOML syntax error: {exc}", line) from None
     from data_schemas import load_schema
 
     import jsonschema
 
     validator = jsonschema.Draft202012Validator(load_schema("scene"))
-    errors = sorted(validator.iter_errors(raw), key=lambda e: list(e.absolute_path))
+    errors = sorted(validator.iter_errors(raw), key=lambda e: [str(k) for k in e.absolute_path])
     if errors:
         e = errors[0]
         keys = [k for k in e.absolute_path]
@@ -182,7 +231,7 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
                 allowed = sorted(e.schema.get("properties", {}))
                 msg = f"unknown key {extra[0]!r}; allowed here: {', '.join(allowed)}"
         more = f" (and {len(errors) - 1} more problem(s))" if len(errors) > 1 else ""
-        raise SceneError(label, key, msg + more, _line_of(text, [str(k) for k in keys]))
+        raise SceneError(label, key, msg + more, _line_of(text, keys))
     base = Path(path).resolve().parent if path is not None else Path.cwd()
 
     def err(keys, problem):
@@ -221,7 +270,9 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
                 speeds = Speeds(w_s, w_c, conv.get("planet", 0.0), conv.get("ring", 0.0))
             else:
                 speeds = Speeds.kinematic(gearset, w_s, w_c)
-                if "ring" in conv and abs(speeds.ring - conv["ring"]) > 1e-6 * max(1.0, abs(w_s)):
+                # nominal speeds are typed rounded (the seed's ring: -3.862 r/min): 0.1 % slack
+                scale = max(abs(w_s), abs(w_c), abs(speeds.ring))
+                if "ring" in conv and abs(speeds.ring - conv["ring"]) > 1e-3 * scale:
                     raise err(["speeds", "ring_rpm" if "ring_rpm" in s else "ring_rad_s"],
                               f"ring speed {conv['ring']:.6g} rad/s is not consistent with sun/carrier "
                               f"and the tooth counts (kinematics give {speeds.ring:.6g} rad/s)")
@@ -264,7 +315,11 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
     bearing = None
     if "bearing" in raw:
         b = raw["bearing"]
-        bearing = {"case": b.get("case", "case1"), "input_torque": b.get("input_torque_Nm"),
+        case = _bearing_case(b.get("case", "1"))
+        if case is None:
+            raise err(["bearing", "case"], f"unknown case {b['case']!r}; known: seed 001 cases "
+                      f"{', '.join(sorted(set(_BEARING_CASES.values())))} (also written case1, case2B)")
+        bearing = {"case": case, "input_torque": b.get("input_torque_Nm"),
                    "z_s": b.get("z_s_mm", 0.0) * 1e-3, "z_r": b.get("z_r_mm", 0.0) * 1e-3,
                    "c_g": b.get("c_g_N_per_mm_um", 20.0) * 1e9}
         k = b.get("k_tilt_Nm_per_rad")
@@ -282,8 +337,12 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
     return scene
 
 
-def _check_consistency(scene: Scene, text: str, label) -> None:
-    """Results against what the scene provides: each missing piece names its key."""
+def _check_consistency(scene: Scene, text: str, label, *, check_files: bool = True) -> None:
+    """Results against what the scene provides: each missing piece names its key.
+
+    ``check_files``: also require the recording file to exist when a stage will read it (at
+    load time; :func:`plan` skips it, so a run reports a file gone since as a failed stage).
+    """
     stages = plan(scene, check=False)
     needs_gearset = set(stages) & {"onsets", "phasing", "load_sharing", "ideal", "tolerance",
                                    "identify", "compare"}
@@ -293,6 +352,11 @@ def _check_consistency(scene: Scene, text: str, label) -> None:
     if set(stages) & _NEEDS_RECORDING and not scene.has_recording_input:
         raise SceneError(label, "input", f"results {scene.results} need an [input] recording or "
                          "synthetic scenario", _line_of(text, ["results"]))
+    rec = scene.input.get("recording")
+    if check_files and set(stages) & _NEEDS_RECORDING and rec and not Path(rec).is_file():
+        # checked only when a stage will read it: a bearing scene never opens its recording
+        raise SceneError(label, "input.recording", f"no such recording file: {rec}",
+                         _line_of(text, ["input", "recording"]))
     if "tolerance" in stages and scene.tolerances is None:
         raise SceneError(label, "tolerances", "result 'tolerance' needs a [tolerances] table",
                          _line_of(text, ["results"]))
@@ -319,9 +383,13 @@ def plan(scene: Scene, *, check: bool = True) -> list[str]:
     for r in scene.results:
         want.extend(RESULTS[r])
     if "compare" in want:
-        want.append("identify")
-        if scene.tolerances is not None:
-            want.append("tolerance")
+        # compare reads identify (the fitted model) and tolerance (the band) when present, so
+        # they must run before it: move them ahead of compare, never after
+        mc = scene.tolerances is not None or "tolerance" in want
+        extra = ["identify"] + (["tolerance"] if mc else [])
+        want = [s for s in want if s not in extra]
+        i = want.index("compare")
+        want[i:i] = extra
     order: list[str] = []
 
     def visit(s: str):
@@ -333,5 +401,5 @@ def plan(scene: Scene, *, check: bool = True) -> list[str]:
     for s in want:
         visit(s)
     if check:
-        _check_consistency(scene, "", scene.path or "<scene>")
+        _check_consistency(scene, "", scene.path or "<scene>", check_files=False)
     return order

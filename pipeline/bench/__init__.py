@@ -61,4 +61,38 @@ def run_bench(what: str, out_dir, *, minutes: float = 60.0, quick: bool = False)
     summary = {"kinds": list(kinds), "wall_s": wall, "files": list(files)}
     (out / "bench_summary.json").write_text(json.dumps(summary, indent=2))
     files["bench_summary.json"] = str(out / "bench_summary.json")
+    report = combined_report(out, kinds, wall)
+    files[report.name] = str(report)
+    md = out / "bench_report.md"
+    files[md.name] = str(md)
     return {"files": files, "results": results, "wall_s": wall}
+
+
+def combined_report(out: Path, kinds, wall: dict) -> Path:
+    """One table-and-figure set of every benchmark in ``out``: ``bench_report.md`` (the
+    benchmarks' Markdown tables, in order) and ``bench_report.html`` (the same tables plus
+    every figure, self-contained)."""
+    from ..report.html import Report
+
+    titles = {"io": "Read throughput and memory (ratios to a raw .npy read)",
+              "models": "Monte Carlo: error against run time",
+              "processing": "Onsets: timing error against the Cramer-Rao bound, throughput"}
+    parts = ["# meshphase benchmarks", ""]
+    rep = Report("meshphase benchmarks", "measured on this machine; numbers, not assertions")
+    for kind in kinds:
+        sec = rep.section(titles[kind])
+        sec.text(f"wall time of the benchmark: {wall.get(kind, float('nan')):.1f} s")
+        for mdf in sorted(out.glob(f"{kind}_*.md")):
+            text = mdf.read_text()
+            parts += [f"## {titles[kind]}", "", text, ""]
+            sec.html(f"<pre>{_escape(text)}</pre>")
+        for png in sorted(out.glob(f"{kind}_*.png")):
+            sec.figure(png.read_bytes(), caption=png.stem)
+    (out / "bench_report.md").write_text("\n".join(parts))
+    return rep.write(out / "bench_report.html")
+
+
+def _escape(text: str) -> str:
+    import html
+
+    return html.escape(text)

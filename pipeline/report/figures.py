@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 
 import matplotlib
+import matplotlib.ticker
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -62,7 +63,8 @@ def signal_with_onsets(t, x, onset_times, planets=None, *, title="", units="µε
     ax.set_ylabel(f"strain [{units}]")
     ax.set_title(title)
     if on.size:
-        ax.legend(loc="upper right", fontsize=8, ncol=min(6, len(np.unique(pl))))
+        # outside the axes: the onset marks span the full height and a legend inside hides them
+        ax.legend(loc="upper left", bbox_to_anchor=(1.005, 1.0), fontsize=8, borderaxespad=0.0)
     fig.tight_layout()
     return fig
 
@@ -110,27 +112,34 @@ def phasing_over_time(tables: dict, *, predicted: dict | None = None, bands: dic
                 ax.plot(tt, gg, color=col, lw=1.2)
         ax.set_ylabel(f"gamma_{g[0]}n [mesh cycles]")
         ax.set_title(f"{g} gauge" + (f" — {title}" if title else ""), fontsize=10)
-        ax.legend(fontsize=8, ncol=6, loc="upper right")
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.005, 1.0), borderaxespad=0.0)
     axes[-1, 0].set_xlabel("time [s]")
     fig.tight_layout()
     return fig
 
 
-def residual_histograms(residuals: dict, *, title: str = "residual measured - model"):
+def residual_histograms(residuals: dict, *, title: str = "residuals: measured - predicted"):
     """Histograms of phasing residuals [mesh cycles] per gauge (dict gauge -> array)."""
     n = max(1, len(residuals))
-    fig, axes = plt.subplots(1, n, figsize=(5 * n, 3), squeeze=False)
-    for ax, (g, r) in zip(axes[0], residuals.items()):
+    # at most two panels per row: four side by side shrink to unreadable text in the report
+    ncol = min(n, 2)
+    nrow = math.ceil(n / ncol)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(5 * ncol, 2.8 * nrow + 0.4), squeeze=False)
+    for ax in axes.ravel()[n:]:
+        ax.set_visible(False)
+    for ax, (g, r) in zip(axes.ravel(), residuals.items()):
         r = np.asarray(r, dtype=float)
         r = r[np.isfinite(r)]
         if r.size:
             ax.hist(r, bins=min(60, max(10, int(math.sqrt(r.size)))), color=_c(0), alpha=0.8)
             ax.axvline(0, color="k", lw=0.8)
             ax.set_title(f"{g}: RMS {np.sqrt(np.mean(r ** 2)):.2e}, n={r.size}", fontsize=10)
+            ax.yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))  # counts
         else:
             ax.set_title(f"{g}: no residuals", fontsize=10)
         ax.set_xlabel("residual [mesh cycles]")
-    axes[0, 0].set_ylabel("passes")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("passes")
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     return fig
@@ -178,7 +187,8 @@ def bearing_moments_bars(labels, series: dict, *, ylabel="moment [N·m]", title=
 def stage_times(names, seconds, errors=None):
     """Horizontal bars of each stage's wall time [s], annotated with its error estimate."""
     s = np.asarray(seconds, dtype=float)
-    fig, ax = plt.subplots(figsize=(7, 0.45 * len(names) + 1.2))
+    h = 0.4 * len(names) + 1.0
+    fig, ax = plt.subplots(figsize=(4.5, h))
     y = np.arange(len(names))
     ax.barh(y, s, color=_c(0))
     ax.set_yticks(y)
@@ -186,10 +196,15 @@ def stage_times(names, seconds, errors=None):
     ax.invert_yaxis()
     ax.set_xlabel("wall time [s]")
     if errors is not None:
-        for yi, si, e in zip(y, s, errors):
+        # one aligned column right of the axes (text at the bar ends crosses the frame); the
+        # axes keep their size (no tight_layout, which would shrink them to fit the text) and
+        # the saved figure grows to the text (figure_to_png saves with bbox_inches="tight")
+        for yi, e in zip(y, errors):
             if e:
-                ax.text(si, yi, f"  {e}", va="center", fontsize=7)
-    fig.tight_layout()
+                ax.text(1.03, yi, e, va="center", fontsize=7, transform=ax.get_yaxis_transform())
+        fig.subplots_adjust(left=0.3, right=0.95, bottom=0.7 / h, top=1 - 0.2 / h)
+    else:
+        fig.tight_layout()
     return fig
 
 
@@ -222,6 +237,7 @@ def quality_overview(rows):
     ax.set_xticks(x)
     ax.set_xticklabels(names, fontsize=8, rotation=20)
     ax.set_ylabel("count")
+    ax.set_ylim(0, max([1, *nf, *cl]) * 1.1)   # counts: never a negative axis
     ax.legend(fontsize=8)
     fig.tight_layout()
     return fig

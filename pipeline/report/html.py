@@ -108,8 +108,9 @@ class Section:
         out.append("<tr>" + "".join(f"<th class='{'l' if i == 0 else ''}'>{escape(c)}</th>"
                                     for i, c in enumerate(columns)) + "</tr>")
         for r in rows[:max_rows]:
+            # first column and text cells left-aligned, numbers right-aligned
             out.append("<tr>" + "".join(
-                f"<td class='{'l' if i == 0 else ''}'>{_fmt(r.get(c, ''))}</td>"
+                f"<td class='{'l' if i == 0 or isinstance(r.get(c, ''), str) else ''}'>{_fmt(r.get(c, ''))}</td>"
                 for i, c in enumerate(columns)) + "</tr>")
         out.append("</table>")
         if len(rows) > max_rows:

@@ -28,6 +28,15 @@ def _f(x, unit="", scale=1.0, fmt="{:.4g}"):
     return "–" if not math.isfinite(v) else fmt.format(v) + (f" {unit}" if unit else "")
 
 
+#: the double-pinion meshes in seed 001 Table 11 order
+_DP_MESHES = ("sun-SP", "SP-RP", "RP-SP", "RP-ring")
+
+
+def _columns(rows) -> list:
+    """Union of the rows' keys in first-seen order (rows may carry different columns)."""
+    return list(dict.fromkeys(k for row in rows for k in row))
+
+
 def build_report(ctx, out_dir) -> Path:
     """Write ``report.html`` (and the PNG figures beside it) for a finished run."""
     out_dir = Path(out_dir)
@@ -62,23 +71,33 @@ def build_report(ctx, out_dir) -> Path:
         s.text(f"{rec.n_channels} channels at {rec.fs:g} Hz, {rec.duration:.1f} s "
                f"({rec.n_samples} samples per channel).")
         q = r["load"]["quality"]
+        # a tacho is a pulse train that sits at its two levels by design: "clipped" runs there
+        # are its pulses, not converter saturation, so they are neither counted nor plotted
+        pulse = {c.name for c in rec.channels if c.kind == "tacho"}
         s.table([{"channel": x["channel"], "kind": rec.spec(x["channel"]).kind,
+                  "units": rec.spec(x["channel"]).units,
                   "NaN/gap samples": x["n_nonfinite"], "NaN runs": len(x["nonfinite_runs"]),
-                  "clipped runs": x["n_clipped_runs"], "min": x["min"], "max": x["max"]} for x in q])
+                  "clipped runs": "n/a (pulse train)" if x["channel"] in pulse else x["n_clipped_runs"],
+                  "min": x["min"], "max": x["max"]} for x in q])
         if "condition" in r:
             cq = r["condition"]["quality"]
             rows = []
             for name, qq in cq.items():
                 d = {"channel": name}
-                for a in ("snr_db", "settle"):
+                for a, col in (("snr_db", "SNR [dB]"), ("settle", "gap guard [s]")):
                     if hasattr(qq, a):
-                        d[a] = getattr(qq, a)
+                        d[col] = getattr(qq, a)
                 hum = getattr(qq, "hum", None)
                 d["hum"] = (", ".join(f"{f:g}" for f in hum.freqs) + " Hz") if hum is not None and getattr(hum, "present", False) else "none"
                 rows.append(d)
             s.heading("After conditioning (SNR from the conditioned signal)")
             s.table(rows)
-        add_fig(s, figures.quality_overview(q), "quality", "Non-finite samples and clipped runs per channel.")
+        qf = [dict(x, n_clipped_runs=0) if x["channel"] in pulse else x for x in q]
+        if any(x["n_nonfinite"] or x["n_clipped_runs"] for x in qf):
+            add_fig(s, figures.quality_overview(qf), "quality",
+                    "Non-finite samples and clipped runs per channel (tacho pulse trains: no clipping count).")
+        else:  # an all-zero bar chart says nothing a sentence does not
+            s.text("No non-finite samples and no clipped runs in any gauge channel.", cls="note ok")
 
     if "onsets" in r:
         s = rep.section("Engagement onsets")
@@ -224,56 +243,105 @@ def build_report(ctx, out_dir) -> Path:
         s = rep.section(f"Bearing moments — seed 001 case {b['case'].name}")
         s.text(f"Input torque {b['torque']:.1f} N·m. {b['case'].source}")
         m = b["concentrated"]
+        from ..models.tilt import TABLE11_THEORY, table10_cases, table11_cases
+
         if hasattr(m, "m_loa_sun"):
-            rows = [{"load": "concentrated (Z = 0)", "Mx [N·m]": m.mx, "My [N·m]": m.my,
+            rows = [{"load": "model, concentrated (Z = 0)", "Mx [N·m]": m.mx, "My [N·m]": m.my,
                      "M_LOA sun [N·m]": m.m_loa_sun, "M_LOA ring [N·m]": m.m_loa_ring}]
             if "measured" in b:
                 mm = b["measured"]
-                rows.append({"load": "measured centroids", "Mx [N·m]": mm.mx, "My [N·m]": mm.my,
+                rows.append({"load": "model, measured centroids", "Mx [N·m]": mm.mx, "My [N·m]": mm.my,
                              "M_LOA sun [N·m]": mm.m_loa_sun, "M_LOA ring [N·m]": mm.m_loa_ring})
+            if b["case"].name == "1":
+                for g in table10_cases():
+                    stiff = "" if g.c_g_scale == 1.0 else f", gears {g.c_g_scale:g}x stiffer"
+                    rows.append({"load": f"seed 001 Table 10 GSAM {g.name} (k_t {g.k_tilt:.2g} N·m/rad{stiff})",
+                                 "Mx [N·m]": g.mx, "My [N·m]": g.my, "M_LOA sun [N·m]": g.m_loa_sun,
+                                 "M_LOA ring [N·m]": g.m_loa_ring})
             s.table([{k: (float(np.ravel(v)[0]) if not isinstance(v, str) else v) for k, v in row.items()}
-                     for row in rows])
+                     for row in rows],
+                    caption="The model's moments side by side with GSAM (seed 001 Table 10)"
+                    if b["case"].name == "1" else None)
         else:
-            s.table([{"mesh": k, "M_LOA [N·m]": float(np.ravel(getattr(m, k))[0])}
-                     for k in ("m_sp_sun", "m_sp_rp", "m_rp_sp", "m_rp_ring") if hasattr(m, k)])
+            loa = [float(v) for v in np.ravel(m.loa)]
+            rows = []
+            for n, name in enumerate(_DP_MESHES):
+                row = {"mesh": name, "model M_LOA [N·m]": loa[n]}
+                if b["case"].name == "2-B":
+                    row["seed 001 Table 11 theor. [N·m]"] = TABLE11_THEORY[n]
+                    for g in table11_cases():
+                        row[f"GSAM {g.name} (k_t {g.k_tilt:.2g}) [N·m]"] = g.loa[n]
+                rows.append(row)
+            s.table(rows, caption="Concentrated-load LOA moments side by side with seed 001 Table 11 "
+                                  "(theory row and GSAM)" if b["case"].name == "2-B" else None)
 
     if "tilt" in r:
-        from ..models.tilt import table10_cases
+        from ..models.tilt import table10_cases, table11_cases
 
         t = r["tilt"]
         s = rep.section("Coupled bearing tilt / load distribution")
         rows = []
         gsam = {round(c.k_tilt): c for c in table10_cases() if c.c_g_scale == 1.0}
+        gsam2 = {round(c.k_tilt): c for c in table11_cases()}
+        single = t["case"].name == "1"
         for k, sol in t["solutions"]:
             z = np.ravel(sol.z)
             mom = sol.moments
             row = {"k_tilt [N·m/rad]": k, "Z_S [mm]": z[0] * 1e3, "Z_R [mm]": z[-1] * 1e3,
                    "contact": float(np.min(sol.contact_fraction)),
-                   "iterations": int(np.max(sol.iterations)), "residual [m]": float(np.max(sol.residual)),
-                   "method": str(np.ravel(sol.method)[0])}
+                   "iterations": f"{int(np.max(sol.iterations))} ({np.ravel(sol.method)[0]})",
+                   "residual [m]": float(np.max(sol.residual))}
             if hasattr(mom, "my"):
                 row["My [N·m]"] = float(np.ravel(mom.my)[0])
-                row["M_LOA sun"] = float(np.ravel(mom.m_loa_sun)[0])
-                row["M_LOA ring"] = float(np.ravel(mom.m_loa_ring)[0])
-            g = gsam.get(round(k))
-            if g is not None and t["case"].name in ("1", "Case 1", "case 1") or (g is not None and hasattr(mom, "my")):
-                row.update({"GSAM case": g.name, "GSAM Z_S [mm]": g.z_s * 1e3, "GSAM Z_R [mm]": g.z_r * 1e3,
-                            "GSAM My [N·m]": g.my})
+                row["M_LOA sun [N·m]"] = float(np.ravel(mom.m_loa_sun)[0])
+                row["M_LOA ring [N·m]"] = float(np.ravel(mom.m_loa_ring)[0])
+                g = gsam.get(round(k)) if single else None
+                if g is not None:
+                    row.update({"GSAM case": g.name, "GSAM Z_S [mm]": g.z_s * 1e3,
+                                "GSAM Z_R [mm]": g.z_r * 1e3, "GSAM My [N·m]": g.my})
+            elif hasattr(mom, "m_sp_sun"):
+                loa = np.ravel(mom.loa)
+                for name, v in zip(_DP_MESHES, loa):
+                    row[f"M_LOA {name} [N·m]"] = float(v)
+                g = gsam2.get(round(k)) if t["case"].name == "2-B" else None
+                if g is not None:
+                    row["GSAM case"] = g.name
+                    for name, v in zip(_DP_MESHES, g.loa):
+                        row[f"GSAM {name}"] = v
             rows.append(row)
-        s.table(rows, caption="Reduced model (c_g per scene) side by side with seed 001 Table 10 (GSAM) "
-                              "where the stiffness matches")
-        if rows and "My [N·m]" in rows[0] and any("GSAM My [N·m]" in x for x in rows):
+        has_gsam = any("GSAM case" in x for x in rows)
+        table_no = "10" if single else "11"
+        s.table(rows, columns=_columns(rows),
+                caption="Reduced model (c_g per scene)" + (
+                    f" side by side with seed 001 Table {table_no} (GSAM) where the stiffness matches"
+                    if has_gsam else "; seed 001 has no GSAM result at these stiffnesses"))
+        if rows and "My [N·m]" in rows[0] and has_gsam:
             labels = [f"{x.get('GSAM case', '')} k={x['k_tilt [N·m/rad]']:.2g}" for x in rows]
             add_fig(s, figures.bearing_moments_bars(
                 labels, {"model My": [x["My [N·m]"] for x in rows],
                          "GSAM My": [x.get("GSAM My [N·m]", float("nan")) for x in rows]},
                 title="My on the pinion: the self-correcting drop with flexibility"),
                 "tilt_my", "Pinion moment My, reduced model vs GSAM.")
+        elif rows and has_gsam:
+            labels = list(_DP_MESHES)
+            series = {}
+            for x in rows:
+                if "GSAM case" in x:
+                    series[f"model k={x['k_tilt [N·m/rad]']:.2g}"] = [x[f"M_LOA {n} [N·m]"] for n in labels]
+                    series[f"GSAM {x['GSAM case']}"] = [x[f"GSAM {n}"] for n in labels]
+            add_fig(s, figures.bearing_moments_bars(labels, series, title="LOA moments, double pinion"),
+                    "tilt_loa", "LOA moments per mesh, reduced model vs GSAM (seed 001 Table 11).")
 
     s = rep.section("Error against run time")
     names = list(ctx.timings)
-    s.table([{"stage": n, "wall time [s]": ctx.timings[n], "error estimate": ctx.error_estimates.get(n, ""),
-              "status": "ran" if n in ctx.ran else ctx.failed.get(n, "")} for n in names])
+    # stages that were skipped never started: listed too (no wall time), so every planned
+    # stage appears with what became of it
+    listed = names + [n for n in ctx.failed if n not in ctx.timings]
+    s.table([{"stage": n, "wall time [s]": ctx.timings.get(n, float("nan")),
+              "error estimate": ctx.error_estimates.get(n, ""),
+              "status": "ran" if n in ctx.ran else ctx.failed.get(n, "")} for n in listed])
+    if names:
+        s.text(f"Total wall time of the stages: {sum(ctx.timings.values()):.3g} s.")
     if "tolerance" in r:
         mc = r["tolerance"]
         s.text(f"Monte Carlo window: {mc.window} ({mc.n_times} time samples), {mc.n_samples} "
