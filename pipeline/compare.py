@@ -37,7 +37,7 @@ from .errors import ProcessingWarning
 from .models.gearset import Gearset, Speeds
 from .models.mesh_phasing import ShaftHoleErrors, ideal_phasing, mesh_angle_deviations
 from .phasing import PassTable, pass_order
-from .validate import as_positive
+from .validate import as_positive, as_positive_int
 
 __all__ = [
     "relative_speeds",
@@ -87,15 +87,100 @@ def relative_speeds(gearset: Gearset, gauge: str, w_gauge: float) -> Speeds:
     return Speeds(sun=w_sc, carrier=0.0, planet=w_pc, ring=w_rc)
 
 
+def _angle_zero_time(table: PassTable) -> float:
+    """Time [s] at which the table's encoder angle is 0: its first reference pass.
+
+    ``table.origin`` is documented as that instant, but a ring table driven by the sun's
+    encoder (:class:`pipeline.phasing.ScaledEncoder`) reports the start of the overlap of the
+    two encoders there, which is later than its first reference pass whenever the sun's
+    first planet-1 pass comes after the ring's; the angles still count from the ring's first
+    reference pass. Both encoders keep their reference times in ``full_t``, so take the
+    instant from there when the table carries its encoder.
+    """
+    full_t = getattr(table.encoder, "full_t", None)
+    if full_t is not None and np.size(full_t) and math.isfinite(float(full_t[0])):
+        return float(full_t[0])
+    return float(table.origin)
+
+
+def _angle_to_origin(table: PassTable, w: float, t0: float) -> float:
+    """Angle [rad] the gauged member turned from t = 0 to ``t0``, where the encoder angle is 0.
+
+    The offsets' phases kappa are fixed at t = 0 and turn with the members' actual rotation,
+    so the model's time variable must be (angle since t = 0) / w. The encoder counts angle
+    from its first reference pass on; the part before it (less than one relative revolution
+    when the record starts with the planet-1 pass) has to be extrapolated. When the table
+    carries its encoder, the encoder's own smooth angle is extrapolated (for a ring table
+    driven by the sun's encoder, the sun's angle times the ratio). Otherwise the passes of
+    the first two relative revolutions give it: a least-squares polynomial of the angle
+    against time constrained through the reference pass (t0, 0) (quadratic with four or more
+    passes, so a ramp is followed; linear otherwise), evaluated at t = 0. Falls back to
+    ``w * t0`` without usable passes.
+
+    Using the record's mean speed for the whole of it (w_mean * t0) shifts every offset
+    phase by (w_mean - w_0) t0: under a speed ramp of 5e-3 /s over 30 s that moved the
+    model phasing by ~5e-3 mesh cycles (Table 1 gearset at 5 % speed, e = 0.2 mm).
+    """
+    if t0 == 0.0:
+        return 0.0
+    enc = table.encoder
+    ends = np.array([0.0, t0])
+    if callable(getattr(enc, "angle", None)):
+        a = np.asarray(enc.angle(ends), dtype=float)
+        if np.all(np.isfinite(a)):
+            return float(a[1] - a[0])
+    src = getattr(enc, "source", None)
+    if callable(getattr(src, "angle", None)) and math.isfinite(getattr(enc, "ratio", float("nan"))):
+        a = np.asarray(src.angle(ends), dtype=float)
+        if np.all(np.isfinite(a)):
+            return float(enc.ratio * (a[1] - a[0]))
+    ok = np.isfinite(table.time) & np.isfinite(table.angle)
+    if np.count_nonzero(ok) == 0:
+        return w * t0
+    rev = table.revolution[ok]
+    near = rev <= rev.min() + 1
+    dt = table.time[ok][near] - t0
+    a = table.angle[ok][near]
+    good = dt != 0
+    dt, a = dt[good], a[good]
+    if dt.size == 0:
+        return w * t0
+    # the angle is 0 at t0 by definition: fit a(t) = c1 (t - t0) [+ c2 (t - t0)^2] through it
+    cols = [dt, dt * dt] if dt.size >= 4 else [dt]
+    coef = np.linalg.lstsq(np.stack(cols, axis=1), a, rcond=None)[0]
+    return float(sum(c * (t0 ** (i + 1)) * (-1) ** i for i, c in enumerate(coef)))
+
+
 def _angle_times(table: PassTable, w: float) -> tuple[np.ndarray, np.ndarray]:
-    """Angle time of each pass and of its planet-1 reference pass [s] from the encoder."""
+    """Angle time of each pass and of its planet-1 reference pass [s] from the encoder.
+
+    Angle time here is (angle of the gauged member since t = 0) / w, w the speed the model
+    turns the offsets at, so that every offset sits at its actual phase at each pass whatever
+    the speed did in between (see :func:`_angle_to_origin`).
+    """
     if np.all(np.isfinite(table.angle)) and math.isfinite(table.origin):
-        tau_n = table.origin + table.angle / w
-        tau_1 = table.origin + TWO_PI * table.revolution / w
+        a0 = _angle_to_origin(table, w, _angle_zero_time(table))
+        tau_n = (a0 + table.angle) / w
+        tau_1 = (a0 + TWO_PI * table.revolution) / w
     else:
         tau_n = table.time
         tau_1 = np.where(np.isfinite(table.ref_time), table.ref_time, np.nan)
     return tau_n, tau_1
+
+
+def _table_speeds(table: PassTable, gearset: Gearset) -> Speeds:
+    """Relative speeds from a table's encoder (mean slope), else from its mesh periods."""
+    z = gearset.z_sun if table.gauge == "sun" else gearset.z_ring
+    w = table.mean_speed()
+    if not math.isfinite(w):
+        # no encoder angles: the local speed the mesh periods carry
+        per = np.asarray(table.mesh_period, dtype=float)
+        per = per[np.isfinite(per) & (per > 0)]
+        w = TWO_PI / (z * float(np.median(per))) if per.size else float("nan")
+    if not math.isfinite(w) or w <= 0:
+        raise ValueError(f"{table.gauge} table: cannot measure the gauge speed from "
+                         f"{len(table)} pass(es)")
+    return relative_speeds(gearset, table.gauge, w)
 
 
 def predict_pass_phasing(table: PassTable, gearset: Gearset, errors: ShaftHoleErrors | None,
@@ -117,20 +202,51 @@ def predict_pass_phasing(table: PassTable, gearset: Gearset, errors: ShaftHoleEr
     gamma : ndarray, shape (n_passes,)
         frac(o Z (psi_n(tau_n) - psi_1(tau_1)) / 2 pi); NaN where the reference pass is
         unknown.
+
+    Raises
+    ------
+    TypeError
+        ``table``, ``gearset``, ``errors`` or ``speeds`` of the wrong type.
+    ValueError
+        A gauge other than sun/ring, errors with sample dimensions, planet numbers the
+        gearset does not have, no measurable gauge speed.
+
+    Notes
+    -----
+    The offsets turn with the members' actual rotation from their phases kappa at t = 0, so
+    the model runs on angle time tau = (angle of the gauged member since t = 0) / w: the
+    encoder angle of the pass plus the angle turned before the encoder's origin
+    (:func:`_angle_to_origin`). Without encoder angles the wall-clock times of the pass and
+    of its reference pass are used (exact at constant speed only). Accuracy against exact
+    engagements (tests/processing/test_compare.py): <= 1e-5 cycles with the true angles,
+    the residual being second order in e / R_c.
     """
     if not isinstance(table, PassTable):
         raise TypeError(f"table must be a PassTable, got {type(table).__name__}")
+    if not isinstance(gearset, Gearset):
+        raise TypeError(f"gearset must be a Gearset, got {type(gearset).__name__}")
+    if errors is not None and not isinstance(errors, ShaftHoleErrors):
+        raise TypeError(f"errors must be a ShaftHoleErrors or None, got {type(errors).__name__}")
+    if speeds is not None and not isinstance(speeds, Speeds):
+        raise TypeError(f"speeds must be a Speeds or None, got {type(speeds).__name__}")
     n = len(table)
     if n == 0:
         return np.empty(0)
     gauge = table.gauge
+    o = pass_order(gearset.direction, gauge)  # ValueError for a gauge other than sun/ring
     z = gearset.z_sun if gauge == "sun" else gearset.z_ring
-    o = pass_order(gearset.direction, gauge)
-    w = table.mean_speed()
-    if not math.isfinite(w) or w <= 0:
-        raise ValueError(f"{gauge} table: cannot measure the gauge speed from {n} pass(es)")
-    sp = speeds or relative_speeds(gearset, gauge, w)
+    if errors is not None and errors.sample_shape(gearset.n_planets) != ():
+        raise ValueError("errors must be one realisation (no sample dimensions), got sample "
+                         f"shape {errors.sample_shape(gearset.n_planets)}")
+    planet = np.asarray(table.planet)
+    if planet.min() < 1 or planet.max() > gearset.n_planets:
+        raise ValueError(f"table.planet must lie in [1, {gearset.n_planets}] (the gearset's "
+                         f"planets), got [{planet.min()}, {planet.max()}]")
+    sp = _table_speeds(table, gearset) if speeds is None else speeds
     w_gauge = abs(sp.w_sc if gauge == "sun" else sp.w_rc)
+    if not w_gauge > 0:
+        raise ValueError(f"speeds: the {gauge} must turn relative to the carrier, got "
+                         f"{'w_sc' if gauge == 'sun' else 'w_rc'} = 0")
     tau_n, tau_1 = _angle_times(table, w_gauge)
     psi = gearset.angles
     idx = table.planet - 1
@@ -150,7 +266,8 @@ def predict_pass_phasing(table: PassTable, gearset: Gearset, errors: ShaftHoleEr
         d_n = dn[..., rows, idx[ok]]
         d_1 = d1[..., rows, 0]
     lag = (psi[idx[ok]] - psi[0]) + (d_n - d_1)
-    out[ok] = (o * z * lag / TWO_PI) % 1.0
+    g = (o * z * lag / TWO_PI) % 1.0
+    out[ok] = np.where(g >= 1.0, 0.0, g)  # x % 1.0 rounds to 1.0 for x = -tiny
     return out
 
 
@@ -179,6 +296,8 @@ def residual_stats(measured, predicted, planets=None) -> dict:
     out = stats(r[ok])
     if planets is not None:
         pl = np.asarray(planets)
+        if pl.shape != m.shape:
+            raise ValueError(f"planets {pl.shape} must have the shape of measured {m.shape}")
         out["per_planet"] = {int(n): stats(r[ok & (pl == n)]) for n in np.unique(pl)}
     return out
 
@@ -210,15 +329,24 @@ def band_coverage(measured, planets, ideal, band_lo, band_hi) -> dict:
     ideal = np.asarray(ideal, dtype=float)
     lo = np.asarray(band_lo, dtype=float)
     hi = np.asarray(band_hi, dtype=float)
+    if ideal.ndim != 1 or lo.shape != ideal.shape or hi.shape != ideal.shape:
+        raise ValueError(f"ideal {ideal.shape}, band_lo {lo.shape} and band_hi {hi.shape} must be "
+                         "1-D with one value per planet")
     if m.size == 0:
         return {"inside_fraction": float("nan"), "outside_index": [], "per_planet": {}}
     if pl.min() < 1 or pl.max() > ideal.size:
         raise ValueError(f"planets must lie in [1, {ideal.size}], got [{pl.min()}, {pl.max()}]")
+    # passes without a measured value are neither inside nor outside: left out of the counts
+    fin = np.isfinite(m)
     dev = wrap(m - ideal[pl - 1])
     inside = (dev >= lo[pl - 1]) & (dev <= hi[pl - 1])
-    return {"inside_fraction": float(inside.mean()),
-            "outside_index": np.flatnonzero(~inside).tolist(),
-            "per_planet": {int(n): float(inside[pl == n].mean()) for n in np.unique(pl)}}
+
+    def frac(mask):
+        return float(inside[mask].mean()) if np.any(mask) else float("nan")
+
+    return {"inside_fraction": frac(fin),
+            "outside_index": np.flatnonzero(fin & ~inside).tolist(),
+            "per_planet": {int(n): frac(fin & (pl == n)) for n in np.unique(pl)}}
 
 
 #: parameter order of the identification: Cartesian offset components [m]
@@ -338,12 +466,24 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
     t_start = time.perf_counter()
     if isinstance(tables, PassTable):
         tables = [tables]
-    tables = [t for t in tables if isinstance(t, PassTable) and len(t) > 0]
+    tables = list(tables)
+    for t in tables:
+        if not isinstance(t, PassTable):
+            raise TypeError(f"tables must hold PassTable objects, got {type(t).__name__}")
+    tables = [t for t in tables if len(t) > 0]
+    if not isinstance(gearset, Gearset):
+        raise TypeError(f"gearset must be a Gearset, got {type(gearset).__name__}")
     n_pl = gearset.n_planets
     names = PARAMETER_NAMES(n_pl)
+    if isinstance(gears, str):
+        gears = (gears,)
+    gears = tuple(gears)
     bad = set(gears) - {"sun", "ring", "planet"}
-    if bad:
-        raise ValueError(f"gears must be among 'sun', 'ring', 'planet', got {sorted(bad)}")
+    if bad or not gears:
+        raise ValueError("gears must be a non-empty selection of 'sun', 'ring', 'planet', got "
+                         f"{gears!r}")
+    rcond = as_positive(rcond, "rcond")
+    max_nfev = as_positive_int(max_nfev, "max_nfev")
     free = np.array([(n.split("_")[0].rstrip("0123456789") in gears) for n in names])
     zero = ShaftHoleErrors()
     if not tables:
@@ -352,7 +492,7 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
         return Identification(zero, [], {}, np.empty(0), float("nan"), float("nan"),
                               float("nan"), 0, int(free.sum()), 0, 0.0, False,
                               ["no measured passes"])
-    speeds = {id(t): relative_speeds(gearset, t.gauge, t.mean_speed()) for t in tables}
+    speeds = {id(t): _table_speeds(t, gearset) for t in tables}
     meas = np.concatenate([t.gamma for t in tables])
     unc = np.concatenate([t.uncertainty for t in tables])
     ideal = np.concatenate([predict_pass_phasing(t, gearset, None, speeds=speeds[id(t)]) for t in tables])

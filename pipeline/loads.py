@@ -15,7 +15,10 @@ from scipy.optimize import least_squares
 
 from .errors import ProcessingWarning
 from .models.load_sharing import load_sharing
-from .validate import as_finite_array, as_positive, as_positive_int
+from .validate import as_finite_array, as_float, as_positive, as_positive_int
+
+#: relative slack on |s| b / 2 <= 1 (full contact) for rounding of fitted slopes [-]
+_FULL_CONTACT_TOL = 1e-12
 
 __all__ = ["LoadSharingResult", "load_sharing_from_amplitudes", "CentroidResult",
            "facewidth_centroid", "centroid_of_shape"]
@@ -63,7 +66,16 @@ def load_sharing_from_amplitudes(amplitudes, planets, n_planets: int) -> LoadSha
     Returns
     -------
     LoadSharingResult
-        NaN factors (with a ProcessingWarning) for planets that have no pulse.
+        NaN factors (with a ProcessingWarning) for planets that have no pulse; NaN standard
+        errors when a planet seen has a single pulse (no scatter to estimate).
+
+    Raises
+    ------
+    ValueError
+        Shape mismatch, planet numbers above ``n_planets``, negative amplitudes of assigned
+        pulses, a planet whose mean amplitude is 0.
+    TypeError
+        Non-integer planet numbers.
 
     Notes
     -----
@@ -74,9 +86,16 @@ def load_sharing_from_amplitudes(amplitudes, planets, n_planets: int) -> LoadSha
     p = np.asarray(planets)
     if p.shape != a.shape:
         raise ValueError(f"planets {p.shape} must match amplitudes {a.shape}")
+    if p.size and not np.issubdtype(p.dtype, np.integer):
+        raise TypeError(f"planets must be integers (1-based planet numbers), got dtype {p.dtype}")
     n = as_positive_int(n_planets, "n_planets")
     if p.size and (p.max() > n):
         raise ValueError(f"planets must be <= n_planets = {n}, got {p.max()}")
+    assigned = p > 0
+    if np.any(a[assigned] < 0):
+        raise ValueError("pulse amplitudes must be >= 0 (peak strain magnitudes), got "
+                         f"{int(np.count_nonzero(a[assigned] < 0))} negative value(s), min "
+                         f"{float(a[assigned].min())!r}")
     mean = np.full(n, np.nan)
     sem = np.full(n, np.nan)
     cnt = np.zeros(n, dtype=int)
@@ -94,7 +113,8 @@ def load_sharing_from_amplitudes(amplitudes, planets, n_planets: int) -> LoadSha
     if not np.any(cnt):
         return LoadSharingResult(np.full(n, np.nan), np.full(n, np.nan), cnt, mean)
     if np.any(mean[cnt > 0] <= 0):
-        raise ValueError("pulse amplitudes must be positive (tensile peak strain) to share load")
+        raise ValueError("every planet's mean pulse amplitude must be > 0 (peak strain) to share "
+                         f"load, got {mean.tolist()}")
     seen = cnt > 0
     ls = np.full(n, np.nan)
     # normalised over the planets seen: their factors sum to their count
@@ -105,7 +125,9 @@ def load_sharing_from_amplitudes(amplitudes, planets, n_planets: int) -> LoadSha
         # d LS_i / d m_j = k (delta_ij / S - m_i / S^2), k = number seen
         g = -seen.sum() * mean[i] / total ** 2 * np.ones(seen.sum())
         g[np.flatnonzero(np.flatnonzero(seen) == i)[0]] += seen.sum() / total
-        s = np.nan_to_num(sem[seen])
+        # a planet seen once has no scatter to estimate: the factors' std error is unknown
+        # (NaN), not zero, since every factor depends on every planet's mean
+        s = sem[seen]
         se[i] = float(np.sqrt(np.sum((g * s) ** 2)))
     return LoadSharingResult(ls, se, cnt, mean)
 
@@ -114,9 +136,11 @@ def centroid_of_shape(slope_ratio: float, face_width: float) -> tuple[float, flo
     """Centroid [m] and contact fraction [-] of the load shape w(z) ~ max(0, 1 - s z) on
     z in [-b/2, b/2] (spec section 5's shape, s = theta / delta [1/m])."""
     b = as_positive(face_width, "face_width")
-    s = float(slope_ratio)
-    if abs(s) * b / 2 <= 1.0:
-        # full contact: linear w = 1 - s z, centroid = -s b^2 / 12
+    s = as_float(slope_ratio, "slope_ratio")
+    if abs(s) * b / 2 <= 1.0 + _FULL_CONTACT_TOL:
+        # full contact: linear w = 1 - s z, centroid = -s b^2 / 12 (continuous with the
+        # triangle below at |s| b / 2 = 1, so rounding across the boundary does not matter
+        # for the centroid; the tolerance keeps the label and fraction from flickering)
         return -s * b * b / 12.0, 1.0
     # partial: contact from the loaded edge to z0 = 1 / s (triangle)
     edge = -b / 2 if s > 0 else b / 2
@@ -169,6 +193,14 @@ def facewidth_centroid(readings, positions, face_width: float, gains=None) -> Ce
     Returns
     -------
     CentroidResult
+        All NaN (shape "none") for zero rows, shape (0, G). Rows with a non-finite reading
+        are left out with a ProcessingWarning.
+
+    Raises
+    ------
+    ValueError
+        Fewer than two gauges, coinciding positions, positions off the face, readings not
+        one column per gauge, zero gains, no finite row, a non-positive mean load.
 
     Notes
     -----
@@ -198,9 +230,14 @@ def facewidth_centroid(readings, positions, face_width: float, gains=None) -> Ce
         r = r / g
     if r.shape[0] == 0:
         return CentroidResult(float("nan"), float("nan"), float("nan"), "none", float("nan"))
-    r = r[np.all(np.isfinite(r), axis=1)]
-    if r.shape[0] == 0:
+    finite = np.all(np.isfinite(r), axis=1)
+    if not np.any(finite):
         raise ValueError("every face-width reading row has a non-finite value")
+    if not np.all(finite):
+        warnings.warn(f"facewidth_centroid: {int(np.count_nonzero(~finite))} of {r.shape[0]} "
+                      "reading row(s) with a non-finite value left out", ProcessingWarning,
+                      stacklevel=2)
+        r = r[finite]
 
     def one(y):
         c, a = np.polyfit(z, y, 1)
@@ -208,14 +245,15 @@ def facewidth_centroid(readings, positions, face_width: float, gains=None) -> Ce
             raise ValueError("face-width readings do not describe a positive load (mean <= 0)")
         s = -c / a
         resid = y - (a + c * z)
-        if abs(s) * b / 2 <= 1.0 or z.size < 3:
+        if abs(s) * b / 2 <= 1.0 + _FULL_CONTACT_TOL or z.size < 3:
             zc, frac = centroid_of_shape(s, b)
             return zc, frac, "linear" if frac == 1.0 else "partial", float(np.sqrt(np.mean(resid ** 2)))
         # partial contact: fit A max(0, 1 - s z)
         fun = lambda p: p[0] * np.maximum(0.0, 1.0 - p[1] * z) - y
         sol = least_squares(fun, [a, s])
         zc, frac = centroid_of_shape(sol.x[1], b)
-        return zc, frac, "partial", float(np.sqrt(np.mean(sol.fun ** 2)))
+        return (zc, frac, "linear" if frac == 1.0 else "partial",
+                float(np.sqrt(np.mean(sol.fun ** 2))))
 
     zc, frac, shape, rms = one(r.mean(axis=0))
     if r.shape[0] > 1:

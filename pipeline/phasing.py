@@ -138,7 +138,8 @@ class PassTable:
         m = self.planet == n
         return PassTable(self.gauge, self.time[m], self.planet[m], self.revolution[m],
                          self.gamma[m], self.uncertainty[m], self.mesh_period[m],
-                         self.ref_time[m], self.angle[m], list(self.notes), self.origin)
+                         self.ref_time[m], self.angle[m], list(self.notes), self.origin,
+                         self.encoder)
 
     def mean_speed(self) -> float:
         """Mean relative speed of the gauged member from the encoder angle, |w_jc| [rad/s]
@@ -432,15 +433,18 @@ class RevolutionEncoder:
     extra_trains : list of ndarray, optional
         Pass times of other planets (each strictly increasing, once per revolution).
     lam : float, optional
-        Smoothing parameter of the spline in units of revolutions (None: GCV).
+        Weight of the third-difference roughness penalty (default 1e-2 with ``harmonic``,
+        1.0 without).
     harmonic : float, optional
         Rotation of a planet's shaft hole offset per radian of the gauged member's relative
         angle, w_pc / w_jc [-] (-Z_s / Z_p for a sun gauge, Z_r / Z_p for a ring gauge): each
         train gets a cos/sin term at that rate so planet eccentricity is not read as speed.
+    knot_spacing : float, optional
+        Spline knot spacing [revolutions] (default 1 with ``harmonic``, 4 without).
     """
 
     def __init__(self, knot_times, k, extra_trains=None, lam: float | None = None,
-                 harmonic: float | None = None, knot_spacing: float = 1.0):
+                 harmonic: float | None = None, knot_spacing: float | None = None):
         kt = np.asarray(knot_times, dtype=float)
         k = np.asarray(k, dtype=int)
         self.k0 = int(k[0])
@@ -451,6 +455,13 @@ class RevolutionEncoder:
         self._known[k - k[0]] = True
         self.t_first = float(self.full_t[0])
         self.t_last = float(self.full_t[-1])
+        # with the eccentricity harmonic modelled the spline may be supple (a knot per
+        # revolution); without it, it must be stiff enough not to follow the planets' jitter
+        # (which repeats every few revolutions): knots four revolutions apart, more penalty
+        if knot_spacing is None:
+            knot_spacing = 1.0 if harmonic else 4.0
+        if lam is None:
+            lam = 1e-2 if harmonic else 1.0
         self.lam = lam
         self.knot_spacing = float(knot_spacing)
         self.residual_rms = float("nan")
@@ -503,7 +514,7 @@ class RevolutionEncoder:
         B = BSpline.design_matrix(np.clip(x, edges[0], edges[-1]), kk, 3).tocsc()
         nb = B.shape[1]
         D = sparse.diags([-1.0, 3.0, -3.0, 1.0], [0, 1, 2, 3], shape=(max(0, nb - 3), nb))
-        lam = self.lam if self.lam is not None else 1e-2
+        lam = self.lam
         P_pen = lam * (D.T @ D)
         s_prev = y.copy()
         for _ in range(2 if self.harmonic else 1):
@@ -729,6 +740,6 @@ def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str 
     unc = z * om / TWO_PI * np.hypot(sig[keep], sig_ref[keep])
     rk = rev[keep]
     out = PassTable(gauge, t[keep], lab[keep] + 1, rk, gamma, unc, mesh_period,
-                    t1[np.clip(rk - enc.k0, 0, t1.size - 1)], th[keep], notes, enc.t_first)
+                    t1[np.clip(rk - enc.k0, 0, t1.size - 1)], th[keep], notes, float(enc.full_t[0]))
     out.encoder = enc
     return out
