@@ -1,0 +1,1094 @@
+"""Signal conditioning of tooth-root strain channels, and the per-channel quality report.
+
+Array functions at the bottom (numpy in, numpy out, sample rate ``fs`` in [Hz]) and thin
+:class:`~pipeline.recording.Recording` wrappers that convert, apply per channel and append
+one entry to the recording's history.
+
+Steps
+-----
+``filter_signal``
+    Zero-phase Butterworth band-, high- or low-pass (:func:`scipy.signal.sosfiltfilt`).
+``remove_drift``
+    Slow (thermal) drift removal: a robust moving-median baseline computed on block medians
+    (default), a Savitzky-Golay baseline on block medians, or a zero-phase high-pass.
+``notch_hum``
+    Mains hum (50/60 Hz and harmonics) notches (:func:`scipy.signal.iirnotch`, zero-phase),
+    applied only to the lines :func:`detect_hum` finds above the local noise floor.
+``assess_quality``
+    Gaps (non-finite runs), NaN runs, clipped runs and an SNR estimate, as a
+    :class:`ChannelQuality` that the onset stage respects (pulses overlapping a gap or a
+    clipped run are flagged, no onset is placed inside a gap).
+
+Defaults relative to the mesh frequency
+---------------------------------------
+With the mesh frequency ``f_m`` [Hz] known (``mesh_freq``), a tooth-root pulse lasts about
+the contact ratio (1.4-1.8) times the mesh period and carries its energy below ~3 ``f_m``;
+consecutive pulses of one gauge are several mesh periods apart. The defaults are
+
+- high-pass corner ``f_m / 20``: a time constant of ~20 mesh periods, an order of magnitude
+  longer than a pulse, so the pulse shape is kept and only slow drift is removed;
+- low-pass corner ``4 f_m`` when that is below ``0.45 fs``; otherwise no low-pass (pulses a
+  few samples wide, mesh frequency near Nyquist: keep the whole band);
+- drift-removal window 20 mesh periods (> 10 pulse lengths, so the moving median follows the
+  baseline, not the pulses).
+
+Without ``f_m``: high-pass corner 0.05 Hz, no low-pass, drift window 10 s.
+
+NaN handling
+------------
+Filtering never smears NaN: interior non-finite runs of at most ``fill_max`` samples are
+bridged by linear interpolation for the filter, longer runs split the signal into segments
+filtered independently, and every sample that was non-finite on input is NaN on output
+(mask back). Segments too short for the filter's edge padding come out NaN, with a
+:class:`~pipeline.errors.DataQualityWarning`.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+from scipy import ndimage, signal
+
+from .errors import DataQualityWarning, ProcessingWarning
+from .log import logger
+from .quality import clipped_runs as _clipped_runs
+from .quality import find_runs
+from .recording import Recording
+from .validate import as_choice, as_float, as_nonnegative, as_positive, as_positive_int
+
+__all__ = [
+    "ChannelQuality", "HumReport", "Conditioned",
+    "default_band", "design_filter", "filter_signal", "remove_drift", "drift_baseline",
+    "detect_hum", "notch_hum", "assess_quality", "estimate_noise", "estimate_snr",
+    "filter_recording", "remove_drift_recording", "notch_hum_recording",
+    "assess_quality_recording", "condition_recording", "merge_runs",
+    "DEFAULT_HIGHPASS_HZ", "DEFAULT_DRIFT_WINDOW_S",
+]
+
+#: High-pass corner used when the mesh frequency is unknown [Hz].
+DEFAULT_HIGHPASS_HZ = 0.05
+#: Drift-removal window used when the mesh frequency is unknown [s].
+DEFAULT_DRIFT_WINDOW_S = 10.0
+#: High-pass corner as a fraction of the mesh frequency [-].
+HIGHPASS_FRACTION = 1.0 / 20.0
+#: Low-pass corner as a multiple of the mesh frequency [-].
+LOWPASS_MULTIPLE = 4.0
+#: Highest corner frequency allowed, as a fraction of fs [-].
+MAX_CORNER_FRACTION = 0.45
+#: Drift-removal window in mesh periods [-].
+DRIFT_WINDOW_MESH_PERIODS = 20.0
+
+_MAD_TO_SIGMA = 1.482602218505602  # 1 / Phi^-1(3/4): MAD of a Gaussian -> sigma
+_SUBSAMPLE = 1 << 20                 # at most this many samples enter a median / quantile
+
+
+# ====================================================================== small helpers
+def _as_signal(x, name: str = "x") -> np.ndarray:
+    """1-D float64 view/copy of ``x``; NaN/inf allowed (they are data-quality findings)."""
+    arr = np.asarray(x)
+    if arr.dtype.kind not in "fiub":
+        raise TypeError(f"{name} must be a numeric array, got dtype {arr.dtype}")
+    if arr.ndim != 1:
+        raise ValueError(f"{name} must be 1-D (one channel), got shape {arr.shape}")
+    return arr.astype(np.float64, copy=False)
+
+
+def _subsample(x: np.ndarray, n_max: int = _SUBSAMPLE) -> np.ndarray:
+    """Every k-th sample so that at most ``n_max`` remain (deterministic)."""
+    step = max(1, -(-x.size // n_max))
+    return x[::step]
+
+
+def _check_freq(value, name: str, fs: float) -> float:
+    f = as_positive(value, name)
+    if f >= 0.5 * fs:
+        raise ValueError(f"{name} must be below Nyquist fs/2 = {0.5 * fs!r} Hz, got {f!r}")
+    return f
+
+
+def _apply_finite(x: np.ndarray, func: Callable[[np.ndarray], np.ndarray], *, min_len: int,
+                  fill_max: int, what: str) -> np.ndarray:
+    """Apply ``func`` to the finite parts of ``x`` without smearing NaN.
+
+    Interior non-finite runs of at most ``fill_max`` samples are bridged by linear
+    interpolation; longer runs split ``x`` into segments processed independently; segments
+    shorter than ``min_len`` become NaN (DataQualityWarning). Every sample non-finite on
+    input is NaN on output.
+    """
+    n = x.size
+    if n == 0:
+        return np.empty(0, dtype=np.float64)
+    if math.isfinite(float(np.sum(x))):
+        if n < min_len:
+            warnings.warn(f"{what}: signal of {n} sample(s) is shorter than the {min_len} the "
+                          "filter needs; returned as NaN", DataQualityWarning, stacklevel=3)
+            return np.full(n, np.nan)
+        return func(x)
+    bad = ~np.isfinite(x)
+    runs = find_runs(bad)
+    lengths = runs[:, 1] - runs[:, 0]
+    interior = (runs[:, 0] > 0) & (runs[:, 1] < n)
+    short = interior & (lengths <= fill_max)
+    xf = x.copy()
+    if short.any():
+        marks = np.zeros(n + 1, dtype=np.int64)
+        np.add.at(marks, runs[short, 0], 1)
+        np.add.at(marks, runs[short, 1], -1)
+        fill_idx = np.flatnonzero(np.cumsum(marks[:n]) > 0)
+        good = np.flatnonzero(~bad)
+        xf[fill_idx] = np.interp(fill_idx, good, x[good])
+    split = runs[~short]
+    # segments = complement of the long runs
+    edges = np.concatenate([[0], split.ravel(), [n]]).reshape(-1, 2)
+    out = np.full(n, np.nan)
+    n_short = 0
+    for a, b in edges:
+        if b <= a:
+            continue
+        if b - a < min_len:
+            n_short += 1
+            continue
+        out[a:b] = func(xf[a:b])
+    if n_short:
+        warnings.warn(f"{what}: {n_short} finite segment(s) between gaps are shorter than the "
+                      f"{min_len} samples the filter needs; they are set to NaN",
+                      DataQualityWarning, stacklevel=3)
+    out[bad] = np.nan
+    return out
+
+
+# ====================================================================== filtering
+def default_band(fs: float, mesh_freq: float | None = None) -> tuple[float | None, float | None]:
+    """Default (high-pass corner, low-pass corner) [Hz] for a strain channel.
+
+    Parameters
+    ----------
+    fs : float
+        Sample rate [Hz].
+    mesh_freq : float, optional
+        Mesh frequency f_m of the gauged gear [Hz].
+
+    Returns
+    -------
+    (low, high) : tuple
+        ``low = f_m / 20`` (``DEFAULT_HIGHPASS_HZ`` without ``f_m``); ``high = 4 f_m`` when
+        below ``0.45 fs``, else None (no low-pass). See the module docstring for the reasons.
+    """
+    fs = as_positive(fs, "fs")
+    if mesh_freq is None:
+        return (min(DEFAULT_HIGHPASS_HZ, 0.25 * fs), None)
+    fm = as_positive(mesh_freq, "mesh_freq")
+    low = HIGHPASS_FRACTION * fm
+    if low >= MAX_CORNER_FRACTION * fs:
+        raise ValueError(f"mesh_freq {fm!r} Hz is too high for fs {fs!r} Hz: the default "
+                         f"high-pass corner f_m/20 = {low!r} Hz exceeds 0.45 fs")
+    high = LOWPASS_MULTIPLE * fm
+    return (low, high if high < MAX_CORNER_FRACTION * fs else None)
+
+
+def design_filter(fs: float, *, kind: str = "bandpass", low: float | None = None,
+                  high: float | None = None, order: int = 4) -> np.ndarray:
+    """Butterworth second-order sections for :func:`filter_signal`.
+
+    Parameters
+    ----------
+    fs : float
+        Sample rate [Hz].
+    kind : {"bandpass", "highpass", "lowpass"}
+    low : float, optional
+        High-pass corner [Hz] (bandpass, highpass).
+    high : float, optional
+        Low-pass corner [Hz] (bandpass, lowpass).
+    order : int
+        Butterworth order of the one-way filter (zero-phase filtering doubles it).
+
+    Returns
+    -------
+    sos : ndarray, shape (n_sections, 6)
+    """
+    fs = as_positive(fs, "fs")
+    kind = as_choice(kind, "kind", ("bandpass", "highpass", "lowpass"))
+    order = as_positive_int(order, "order")
+    if order > 12:
+        raise ValueError(f"order must be <= 12, got {order!r}")
+    if kind in ("bandpass", "highpass"):
+        if low is None:
+            raise ValueError(f"kind={kind!r} needs the high-pass corner low [Hz], got None")
+        low = _check_freq(low, "low", fs)
+    if kind in ("bandpass", "lowpass"):
+        if high is None:
+            raise ValueError(f"kind={kind!r} needs the low-pass corner high [Hz], got None")
+        high = _check_freq(high, "high", fs)
+    if kind == "bandpass":
+        if not low < high:
+            raise ValueError(f"low ({low!r} Hz) must be below high ({high!r} Hz)")
+        return signal.butter(order, [low, high], btype="bandpass", fs=fs, output="sos")
+    if kind == "highpass":
+        return signal.butter(order, low, btype="highpass", fs=fs, output="sos")
+    return signal.butter(order, high, btype="lowpass", fs=fs, output="sos")
+
+
+def _resolve_band(fs, kind, low, high, mesh_freq):
+    d_low, d_high = default_band(fs, mesh_freq)
+    if kind == "bandpass":
+        low = d_low if low is None else low
+        high = d_high if high is None else high
+        if high is None:
+            logger.info("bandpass: no low-pass corner (mesh frequency unknown or near Nyquist); "
+                        "high-pass only at %.4g Hz", low)
+            return "highpass", low, None
+        return kind, low, high
+    if kind == "highpass":
+        return kind, (d_low if low is None else low), None
+    if high is None:
+        if d_high is None:
+            raise ValueError("kind='lowpass' needs high [Hz] or a mesh_freq whose default corner "
+                             f"4 f_m lies below 0.45 fs; got high=None, mesh_freq={mesh_freq!r}")
+        high = d_high
+    return kind, None, high
+
+
+def _settle_time(low: float | None, high: float | None) -> float:
+    """Heuristic settling time [s] of a zero-phase filter: 2 / (lowest corner)."""
+    corners = [f for f in (low, high) if f is not None]
+    return 2.0 / min(corners) if corners else 0.0
+
+
+def filter_signal(x, fs: float, *, kind: str = "bandpass", low: float | None = None,
+                  high: float | None = None, order: int = 4, mesh_freq: float | None = None,
+                  fill_max: int = 8) -> np.ndarray:
+    """Zero-phase Butterworth filtering that leaves gaps as NaN.
+
+    Parameters
+    ----------
+    x : array_like, shape (n,)
+        Samples of one channel [any unit]; NaN/inf mark gaps.
+    fs : float
+        Sample rate [Hz].
+    kind : {"bandpass", "highpass", "lowpass"}
+        Filter type. "bandpass" without a usable low-pass corner degrades to a high-pass
+        (logged).
+    low, high : float, optional
+        High-pass and low-pass corners [Hz]; default from :func:`default_band`.
+    order : int
+        One-way Butterworth order (the zero-phase result has twice the attenuation slope).
+    mesh_freq : float, optional
+        Mesh frequency of the gauged gear [Hz], for the defaults.
+    fill_max : int
+        Interior gaps up to this many samples are bridged for the filter (and NaN again on
+        output); longer gaps split the signal.
+
+    Returns
+    -------
+    y : ndarray of float64, shape (n,)
+
+    Notes
+    -----
+    :func:`scipy.signal.sosfiltfilt` runs the filter forwards and backwards: no phase shift
+    (the pulse timing is untouched) and squared magnitude response.
+    """
+    x = _as_signal(x)
+    fs = as_positive(fs, "fs")
+    fill_max = int(as_nonnegative(fill_max, "fill_max"))
+    kind = as_choice(kind, "kind", ("bandpass", "highpass", "lowpass"))
+    kind, low, high = _resolve_band(fs, kind, low, high, mesh_freq)
+    sos = design_filter(fs, kind=kind, low=low, high=high, order=order)
+    padlen = 3 * (2 * len(sos) + 1)
+    return _apply_finite(x, lambda s: signal.sosfiltfilt(sos, s, padlen=padlen),
+                         min_len=padlen + 1, fill_max=fill_max, what=f"filter_signal({kind})")
+
+
+# ====================================================================== drift
+def _block_medians(x: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
+    """Medians of consecutive blocks of ``b`` samples (at most 33 evenly strided samples of
+    each enter its median; NaN ignored) and the block centre indices."""
+    n = x.size
+    nb = -(-n // b)
+    pad = nb * b - n
+    xp = np.concatenate([x, np.full(pad, np.nan)]) if pad else x
+    step = max(1, b // 33)
+    rows = xp.reshape(nb, b)[:, ::step]
+    med = np.median(rows, axis=1)
+    bad = np.isnan(med)
+    if bad.any():
+        fin = np.isfinite(rows[bad]).any(axis=1)
+        sub = np.full(int(bad.sum()), np.nan)
+        if fin.any():
+            sub[fin] = np.nanmedian(rows[bad][fin], axis=1)
+        med[bad] = sub
+    starts = np.arange(nb) * b
+    stops = np.minimum(starts + b, n)
+    n_used = -(-(stops - starts) // step)             # strided samples inside each block
+    return med, starts + 0.5 * step * (n_used - 1)
+
+
+def drift_baseline(x, fs: float, *, method: str = "median", window: float | None = None,
+                   mesh_freq: float | None = None) -> np.ndarray:
+    """Slow baseline of a pulse train (what :func:`remove_drift` subtracts).
+
+    Parameters
+    ----------
+    x : array_like, shape (n,)
+        Samples [any unit]; NaN/inf ignored.
+    fs : float
+        Sample rate [Hz].
+    method : {"median", "savgol"}
+        "median": moving median (``window`` long) of block medians, one block being 1/16
+        of the window; robust to the pulses (tensile lobes above, compressive lobes below
+        the baseline) as long as they cover less than about half of each block.
+        "savgol": Savitzky-Golay (quadratic) smoothing of the same block medians; smoother,
+        less robust to outliers.
+    window : float, optional
+        Baseline window [s]; default 20 mesh periods, or ``DEFAULT_DRIFT_WINDOW_S`` without
+        ``mesh_freq``.
+    mesh_freq : float, optional
+        Mesh frequency [Hz].
+
+    Returns
+    -------
+    baseline : ndarray of float64, shape (n,)
+        Linearly interpolated between block centres (constant beyond the first and last);
+        NaN everywhere when no sample is finite.
+    """
+    x = _as_signal(x)
+    fs = as_positive(fs, "fs")
+    method = as_choice(method, "method", ("median", "savgol"))
+    window = _drift_window(window, mesh_freq)
+    n = x.size
+    if n == 0:
+        return np.empty(0)
+    b = max(1, int(round(window * fs / 16.0)))
+    means, centres = _block_medians(np.where(np.isfinite(x), x, np.nan), b)
+    ok = np.isfinite(means)
+    if not ok.any():
+        return np.full(n, np.nan)
+    if not ok.all():
+        means = np.interp(centres, centres[ok], means[ok])
+    k = 17  # blocks per window (odd)
+    if method == "median":
+        base = ndimage.median_filter(means, size=min(k, means.size) | 1, mode="nearest")
+    else:
+        if means.size >= k:
+            base = signal.savgol_filter(means, k, 2, mode="interp")
+        else:
+            base = np.full(means.size, np.mean(means))
+    if base.size == 1:
+        return np.full(n, base[0])
+    return np.interp(np.arange(n, dtype=np.float64), centres, base)
+
+
+def _drift_window(window, mesh_freq) -> float:
+    if window is not None:
+        return as_positive(window, "window")
+    if mesh_freq is not None:
+        return DRIFT_WINDOW_MESH_PERIODS / as_positive(mesh_freq, "mesh_freq")
+    return DEFAULT_DRIFT_WINDOW_S
+
+
+def remove_drift(x, fs: float, *, method: str = "median", window: float | None = None,
+                 mesh_freq: float | None = None, order: int = 2, fill_max: int = 8) -> np.ndarray:
+    """Remove slow (thermal) drift from a strain channel.
+
+    Parameters
+    ----------
+    x : array_like, shape (n,)
+        Samples [any unit]; NaN/inf stay NaN.
+    fs : float
+        Sample rate [Hz].
+    method : {"median", "savgol", "highpass"}
+        "median" (default) and "savgol" subtract :func:`drift_baseline`; "highpass" is a
+        zero-phase Butterworth high-pass of corner ``1 / window`` and order ``order``.
+    window : float, optional
+        Baseline window [s] (see :func:`drift_baseline`).
+    mesh_freq : float, optional
+        Mesh frequency [Hz] for the default window.
+    order : int
+        High-pass order (method "highpass" only).
+    fill_max : int
+        Gap bridging of the high-pass (see :func:`filter_signal`).
+
+    Returns
+    -------
+    y : ndarray of float64, shape (n,)
+
+    Notes
+    -----
+    The block-median + moving-median baseline costs a fraction of a pass over the data
+    (each block median uses at most 33 strided samples), is robust to the sparse tooth pulses and follows a linear
+    trend exactly; it is the default because a high-pass corner low enough to keep long
+    pulses intact (0.05 Hz at the seed rig's ring gauge) needs very long filter settling.
+    """
+    x = _as_signal(x)
+    fs = as_positive(fs, "fs")
+    method = as_choice(method, "method", ("median", "savgol", "highpass"))
+    w = _drift_window(window, mesh_freq)
+    if method == "highpass":
+        return filter_signal(x, fs, kind="highpass", low=min(1.0 / w, 0.25 * fs), order=order,
+                             fill_max=fill_max)
+    base = drift_baseline(x, fs, method=method, window=w)
+    return x - base
+
+
+# ====================================================================== mains hum
+@dataclass(frozen=True)
+class HumReport:
+    """Result of :func:`detect_hum`.
+
+    Attributes
+    ----------
+    mains : float or None
+        Detected mains family fundamental [Hz] (50 or 60), None when no hum was found.
+    freqs : ndarray
+        Hum lines found above the threshold [Hz] (empty when none).
+    candidates : ndarray
+        Lines examined [Hz] (harmonics of the examined families below 0.45 fs).
+    excess_db : ndarray
+        Line power over the local noise floor for each candidate [dB] (NaN when excluded).
+    threshold_db : float
+        Detection threshold [dB].
+    checked : bool
+        False when the data were too short (< 2 s of finite samples) to resolve the lines.
+    """
+
+    mains: float | None
+    freqs: np.ndarray
+    candidates: np.ndarray
+    excess_db: np.ndarray
+    threshold_db: float
+    checked: bool = True
+
+    @property
+    def present(self) -> bool:
+        """True when at least one hum line was found."""
+        return bool(self.freqs.size)
+
+    def to_dict(self) -> dict:
+        """JSON-friendly dict."""
+        return {"mains": self.mains, "freqs": self.freqs.tolist(),
+                "candidates": self.candidates.tolist(),
+                "excess_db": [None if not np.isfinite(v) else float(v) for v in self.excess_db],
+                "threshold_db": self.threshold_db, "checked": self.checked}
+
+
+def _fill_nonfinite(x: np.ndarray) -> np.ndarray:
+    bad = ~np.isfinite(x)
+    if not bad.any():
+        return x
+    good = np.flatnonzero(~bad)
+    if good.size == 0:
+        return np.zeros_like(x)
+    out = x.copy()
+    idx = np.flatnonzero(bad)
+    out[idx] = np.interp(idx, good, x[good])
+    return out
+
+
+def detect_hum(x, fs: float, *, mains: str | float = "auto", n_harmonics: int = 5,
+               threshold_db: float = 10.0, max_seconds: float = 120.0,
+               exclude: Sequence[float] = ()) -> HumReport:
+    """Find mains hum lines (50/60 Hz and harmonics) standing above the noise floor.
+
+    Parameters
+    ----------
+    x : array_like, shape (n,)
+        Samples [any unit]; non-finite samples are bridged by interpolation for the
+        spectrum.
+    fs : float
+        Sample rate [Hz].
+    mains : {"auto", 50, 60}
+        Mains family to look for; "auto" examines both and keeps the stronger.
+    n_harmonics : int
+        Harmonics examined (1 = fundamental only), capped at 0.45 fs.
+    threshold_db : float
+        A line is hum when its Welch PSD peak (within +-0.5 Hz) exceeds the median PSD of
+        its neighbourhood (1.5-6 Hz away) by this much [dB].
+    max_seconds : float
+        Only the first ``max_seconds`` of ``x`` are analysed [s] (hum is stationary; this
+        bounds the cost on long recordings).
+    exclude : sequence of float
+        Frequencies [Hz] not to treat as hum (e.g. known mesh harmonics); candidates within
+        1 Hz of one are skipped.
+
+    Returns
+    -------
+    HumReport
+
+    Notes
+    -----
+    Welch PSD with segments of about 4 s (0.25 Hz resolution) and linear detrending. A mesh
+    harmonic that happens to sit on a mains line is indistinguishable from hum by this test:
+    pass it in ``exclude``.
+    """
+    x = _as_signal(x)
+    fs = as_positive(fs, "fs")
+    if isinstance(mains, str):
+        as_choice(mains, "mains", ("auto",))
+        families = (50.0, 60.0)
+    else:
+        m = as_float(mains, "mains")
+        if m not in (50.0, 60.0):
+            raise ValueError(f"mains must be 'auto', 50 or 60 [Hz], got {mains!r}")
+        families = (m,)
+    n_harmonics = as_positive_int(n_harmonics, "n_harmonics")
+    threshold_db = as_float(threshold_db, "threshold_db")
+    max_seconds = as_positive(max_seconds, "max_seconds")
+    excl = np.asarray([as_float(f, "exclude") for f in exclude], dtype=np.float64)
+
+    cands = {f0: np.array([k * f0 for k in range(1, n_harmonics + 1)
+                           if k * f0 < MAX_CORNER_FRACTION * fs]) for f0 in families}
+    all_c = np.unique(np.concatenate(list(cands.values()))) if cands else np.empty(0)
+    n_use = min(x.size, int(max_seconds * fs))
+    xs = x[:n_use]
+    n_finite = int(np.count_nonzero(np.isfinite(xs)))
+    if n_finite < 2.0 * fs or all_c.size == 0:
+        return HumReport(None, np.empty(0), all_c, np.full(all_c.size, np.nan), threshold_db,
+                         checked=False)
+    xs = _fill_nonfinite(xs)
+    nper = int(min(xs.size, 2 ** math.ceil(math.log2(4.0 * fs))))
+    f, p = signal.welch(xs, fs, nperseg=nper, detrend="linear")
+    df = f[1] - f[0]
+
+    def excess(fc: float) -> float:
+        if excl.size and np.min(np.abs(excl - fc)) < 1.0:
+            return float("nan")
+        near = np.abs(f - fc) <= max(0.5, 0.51 * df)
+        ring = (np.abs(f - fc) >= max(1.5, 2 * df)) & (np.abs(f - fc) <= max(6.0, 8 * df))
+        if not near.any() or ring.sum() < 3:
+            return float("nan")
+        floor = np.median(p[ring])
+        peak = np.max(p[near])
+        if floor <= 0:
+            return float("inf") if peak > 0 else float("nan")
+        return float(10.0 * np.log10(peak / floor))
+
+    ex = {fc: excess(fc) for fc in all_c}
+    best, best_key = None, None
+    for f0, c in cands.items():
+        e = np.array([ex[fc] for fc in c])
+        present = np.nan_to_num(e, nan=-np.inf) >= threshold_db
+        if not present.any():
+            continue
+        key = (bool(present[0]), int(present.sum()), float(np.nansum(np.where(present, e, 0.0))))
+        if best_key is None or key > best_key:
+            best, best_key = f0, key
+    freqs = np.empty(0)
+    if best is not None:
+        c = cands[best]
+        e = np.array([ex[fc] for fc in c])
+        freqs = c[np.nan_to_num(e, nan=-np.inf) >= threshold_db]
+    return HumReport(best, freqs, all_c, np.array([ex[fc] for fc in all_c]), threshold_db)
+
+
+def notch_hum(x, fs: float, *, freqs: Sequence[float] | None = None, mains: str | float = "auto",
+              q: float = 30.0, threshold_db: float = 10.0, exclude: Sequence[float] = (),
+              fill_max: int = 8) -> np.ndarray:
+    """Zero-phase notches at mains hum lines.
+
+    Parameters
+    ----------
+    x : array_like, shape (n,)
+        Samples [any unit]; NaN/inf stay NaN.
+    fs : float
+        Sample rate [Hz].
+    freqs : sequence of float, optional
+        Lines to notch [Hz]; default: those :func:`detect_hum` finds (nothing is filtered
+        when no hum is present; an empty sequence also filters nothing).
+    mains, threshold_db, exclude
+        Passed to :func:`detect_hum` when ``freqs`` is None.
+    q : float
+        Quality factor of each notch, f / bandwidth(-3 dB) [-].
+    fill_max : int
+        Gap bridging (see :func:`filter_signal`).
+
+    Returns
+    -------
+    y : ndarray of float64, shape (n,)
+
+    Notes
+    -----
+    Each line is a :func:`scipy.signal.iirnotch` biquad; all are cascaded as second-order
+    sections and applied forwards and backwards (:func:`scipy.signal.sosfiltfilt`).
+    """
+    x = _as_signal(x)
+    fs = as_positive(fs, "fs")
+    q = as_positive(q, "q")
+    if freqs is None:
+        rep = detect_hum(x, fs, mains=mains, threshold_db=threshold_db, exclude=exclude)
+        if not rep.checked and x.size:
+            warnings.warn(f"notch_hum: only {x.size / fs:.3g} s of data, too short to detect mains "
+                          "hum; no notch applied (pass freqs to force one)", ProcessingWarning,
+                          stacklevel=2)
+        fl = rep.freqs
+    else:
+        fl = np.asarray([_check_freq(f, "freqs", fs) for f in freqs], dtype=np.float64)
+    if fl.size == 0 or x.size == 0:
+        return x.copy()
+    sos = np.concatenate([signal.tf2sos(*signal.iirnotch(f, q, fs=fs)) for f in fl])
+    padlen = 3 * (2 * len(sos) + 1)
+    fill_max = int(as_nonnegative(fill_max, "fill_max"))
+    return _apply_finite(x, lambda s: signal.sosfiltfilt(sos, s, padlen=padlen),
+                         min_len=padlen + 1, fill_max=fill_max, what="notch_hum")
+
+
+# ====================================================================== quality
+def estimate_noise(x) -> float:
+    """Robust white-noise standard deviation of ``x`` [units of x].
+
+    ``1.4826 * MAD(diff(x)) / sqrt(2)``: the first difference removes the slow pulse and
+    drift content, the MAD ignores the sparse large differences at pulse edges. It
+    overestimates the noise when pulses are only a few samples wide (their edges then fill a
+    large share of the differences). NaN when fewer than 2 finite neighbours exist.
+    """
+    x = _as_signal(x)
+    d = np.diff(x)
+    d = d[np.isfinite(d)]
+    if d.size == 0:
+        return float("nan")
+    d = _subsample(d)
+    return float(_MAD_TO_SIGMA * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0))
+
+
+def estimate_snr(x, *, quantile: float = 0.999) -> tuple[float, float, float]:
+    """Peak-power SNR estimate of a pulse train.
+
+    SNR = 10 log10(A^2 / sigma^2) [dB], the definition of the onset accuracy tests (peak
+    pulse power over noise variance): ``sigma`` from :func:`estimate_noise`, ``A`` the
+    median pulse peak above the median level. The peaks are the maxima of the runs above
+    half the ``quantile`` level of ``x - median(x)``, taken on a copy smoothed over a
+    quarter of the median run length (so that the noise on top of a peak does not bias
+    it upwards); the median over runs is insensitive to the planets' different loads.
+    Uses the first 2**20 samples; needs drift-free data (condition first).
+
+    Returns
+    -------
+    (snr_db, signal_peak, noise_rms) : tuple of float
+        [dB], [units of x], [units of x]; NaN when not computable.
+    """
+    x = _as_signal(x)
+    q = as_float(quantile, "quantile")
+    if not 0.5 < q < 1.0:
+        raise ValueError(f"quantile must be in (0.5, 1), got {q!r}")
+    sigma = estimate_noise(x)
+    xs = x[:_SUBSAMPLE]
+    xs = xs[np.isfinite(xs)]
+    if xs.size < 2 or not np.isfinite(sigma):
+        return float("nan"), float("nan"), sigma
+    z = xs - np.median(xs)
+    top = float(np.quantile(z, q))
+    a = top
+    runs = find_runs(z > 0.5 * top) if top > 0 else np.empty((0, 2), dtype=np.int64)
+    if len(runs):
+        # noise chops a pulse's run at its edges: merge runs closer than half a typical
+        # pulse run, then drop the slivers
+        typ = float(np.quantile(runs[:, 1] - runs[:, 0], 0.9))
+        new = np.ones(len(runs), dtype=bool)
+        new[1:] = (runs[1:, 0] - runs[:-1, 1]) > 0.5 * typ
+        runs = np.stack([runs[new, 0], np.maximum.reduceat(runs[:, 1], np.flatnonzero(new))], 1)
+        runs = runs[(runs[:, 1] - runs[:, 0]) >= max(1.0, 0.25 * typ)]
+    if len(runs):
+        m = max(1, int(np.median(runs[:, 1] - runs[:, 0])) // 4)
+        zs = ndimage.uniform_filter1d(z, m, mode="nearest") if m > 1 else z
+        a = float(np.median(_run_max(zs, runs)))
+    if sigma == 0.0:
+        return (float("inf") if a > 0 else float("nan")), a, sigma
+    if a <= 0:
+        return float("nan"), a, sigma
+    return float(20.0 * np.log10(a / sigma)), a, sigma
+
+
+def _run_max(z: np.ndarray, runs: np.ndarray) -> np.ndarray:
+    """Maximum of ``z`` over each ``[start, stop)`` run (runs sorted, disjoint)."""
+    edges = runs.ravel()
+    if edges[-1] == z.size:
+        edges = edges[:-1]
+    return np.maximum.reduceat(z, edges)[::2]
+
+
+@dataclass
+class ChannelQuality:
+    """Data-quality report of one channel (what later stages must respect).
+
+    Runs are ``[start, stop)`` sample indices relative to the first sample of the assessed
+    data; sample ``i`` is at ``t0 + i / fs`` [s].
+
+    Attributes
+    ----------
+    name : str
+        Channel name.
+    fs : float
+        Sample rate [Hz].
+    t0 : float
+        Time of sample 0 [s].
+    n_samples : int
+    gap_runs : ndarray of int64, shape (k, 2)
+        Gaps: runs of non-finite samples (NaN, +-inf; missing samples are stored as NaN by
+        the readers and the streaming stages).
+    nan_runs : ndarray of int64, shape (k, 2)
+        Runs of NaN only.
+    clipped_runs : ndarray of int64, shape (k, 2)
+        Runs of >= ``clip_min_run`` samples held at the channel's extreme value (converter
+        saturation), found on the raw data.
+    snr_db : float
+        Peak-power SNR estimate [dB] (:func:`estimate_snr`), NaN when unknown.
+    signal_peak : float
+        Pulse peak amplitude estimate [units].
+    noise_rms : float
+        Noise standard deviation estimate [units].
+    settle : float
+        Guard time around gaps within which filter transients may distort the data [s]
+        (set by :func:`condition_recording`; the onset stage flags pulses that close).
+    hum : HumReport or None
+        Mains hum found (None when not examined).
+    """
+
+    name: str
+    fs: float
+    t0: float
+    n_samples: int
+    gap_runs: np.ndarray
+    nan_runs: np.ndarray
+    clipped_runs: np.ndarray
+    snr_db: float = float("nan")
+    signal_peak: float = float("nan")
+    noise_rms: float = float("nan")
+    settle: float = 0.0
+    hum: HumReport | None = None
+
+    @property
+    def n_gap_samples(self) -> int:
+        """Samples inside gaps [-]."""
+        return int((self.gap_runs[:, 1] - self.gap_runs[:, 0]).sum())
+
+    @property
+    def n_clipped_samples(self) -> int:
+        """Samples inside clipped runs [-]."""
+        return int((self.clipped_runs[:, 1] - self.clipped_runs[:, 0]).sum())
+
+    @property
+    def ok(self) -> bool:
+        """True when there are no gaps and no clipped runs."""
+        return not (len(self.gap_runs) or len(self.clipped_runs))
+
+    def bad_runs(self) -> np.ndarray:
+        """Gaps and clipped runs merged into sorted, non-overlapping ``[start, stop)`` rows."""
+        return merge_runs(np.concatenate([self.gap_runs, self.clipped_runs]))
+
+    def runs_time(self, which: str = "gap") -> np.ndarray:
+        """Runs of one kind ("gap", "nan", "clipped", "bad") as ``[t_start, t_stop)`` [s]."""
+        which = as_choice(which, "which", ("gap", "nan", "clipped", "bad"))
+        runs = {"gap": self.gap_runs, "nan": self.nan_runs, "clipped": self.clipped_runs}.get(which)
+        if runs is None:
+            runs = self.bad_runs()
+        return self.t0 + runs.astype(np.float64) / self.fs
+
+    def summary(self) -> str:
+        """One line for logs and warnings."""
+        return (f"channel {self.name!r}: {len(self.gap_runs)} gap run(s) ({self.n_gap_samples} "
+                f"samples), {len(self.clipped_runs)} clipped run(s) ({self.n_clipped_samples} "
+                f"samples), SNR {self.snr_db:.1f} dB")
+
+    def to_dict(self) -> dict:
+        """JSON-friendly dict (runs as lists; non-finite floats as None)."""
+        def fl(v):
+            return None if v is None or not np.isfinite(v) else float(v)
+        return {"name": self.name, "fs": self.fs, "t0": self.t0, "n_samples": self.n_samples,
+                "gap_runs": self.gap_runs.tolist(), "nan_runs": self.nan_runs.tolist(),
+                "clipped_runs": self.clipped_runs.tolist(), "snr_db": fl(self.snr_db),
+                "signal_peak": fl(self.signal_peak), "noise_rms": fl(self.noise_rms),
+                "settle": self.settle, "hum": None if self.hum is None else self.hum.to_dict()}
+
+
+def merge_runs(runs) -> np.ndarray:
+    """Sort ``[start, stop)`` rows and merge overlapping or touching ones."""
+    r = np.asarray(runs, dtype=np.int64).reshape(-1, 2)
+    if len(r) == 0:
+        return np.empty((0, 2), dtype=np.int64)
+    r = r[np.argsort(r[:, 0], kind="stable")]
+    ends = np.maximum.accumulate(r[:, 1])
+    new = np.ones(len(r), dtype=bool)
+    new[1:] = r[1:, 0] > ends[:-1]
+    starts = r[new, 0]
+    stops = np.maximum.reduceat(r[:, 1], np.flatnonzero(new))
+    return np.stack([starts, stops], axis=1)
+
+
+def assess_quality(x, fs: float, *, t0: float = 0.0, name: str = "", clip_min_run: int = 3,
+                   clip_rtol: float = 0.0, snr: bool = True, warn: bool = True,
+                   snr_warn_db: float = 6.0) -> ChannelQuality:
+    """Quality report of one channel: gaps, NaN runs, clipped runs, SNR.
+
+    Parameters
+    ----------
+    x : array_like, shape (n,)
+        Samples [any unit]; assess clipping on raw (unfiltered) data.
+    fs : float
+        Sample rate [Hz].
+    t0 : float
+        Time of the first sample [s].
+    name : str
+        Channel name for messages.
+    clip_min_run, clip_rtol
+        See :func:`pipeline.quality.clipped_runs`.
+    snr : bool
+        Estimate the SNR (:func:`estimate_snr`); meaningful on drift-free data.
+    warn : bool
+        Issue a :class:`~pipeline.errors.DataQualityWarning` when gaps or clipped runs are
+        found, or the SNR is below ``snr_warn_db``.
+    snr_warn_db : float
+        SNR below which to warn [dB].
+
+    Returns
+    -------
+    ChannelQuality
+    """
+    x = _as_signal(x)
+    fs = as_positive(fs, "fs")
+    t0 = as_float(t0, "t0")
+    if not isinstance(name, str):
+        raise TypeError(f"name must be a string, got {name!r}")
+    clip_min_run = as_positive_int(clip_min_run, "clip_min_run")
+    if clip_min_run < 2:
+        raise ValueError(f"clip_min_run must be >= 2, got {clip_min_run!r}")
+    clip_rtol = as_nonnegative(clip_rtol, "clip_rtol")
+    if x.size == 0:
+        e = np.empty((0, 2), dtype=np.int64)
+        return ChannelQuality(name, fs, t0, 0, e, e.copy(), e.copy())
+    if math.isfinite(float(np.sum(x))):
+        gaps = np.empty((0, 2), dtype=np.int64)
+        nans = gaps.copy()
+    else:
+        gaps = find_runs(~np.isfinite(x))
+        nans = find_runs(np.isnan(x))
+    clipped = _clipped_runs(x, min_run=clip_min_run, rtol=clip_rtol)
+    rep = ChannelQuality(name, fs, t0, int(x.size), gaps, nans, clipped)
+    if snr:
+        rep.snr_db, rep.signal_peak, rep.noise_rms = estimate_snr(x)
+    if warn:
+        _warn_quality(rep, snr_warn_db)
+    return rep
+
+
+def _warn_quality(rep: ChannelQuality, snr_warn_db: float) -> None:
+    problems = []
+    if len(rep.gap_runs):
+        problems.append(f"{len(rep.gap_runs)} gap run(s) of non-finite samples "
+                        f"({rep.n_gap_samples} samples)")
+    if len(rep.clipped_runs):
+        problems.append(f"{len(rep.clipped_runs)} clipped run(s) ({rep.n_clipped_samples} samples)")
+    if np.isfinite(rep.snr_db) and rep.snr_db < snr_warn_db:
+        problems.append(f"low SNR {rep.snr_db:.1f} dB (< {snr_warn_db:g} dB)")
+    if problems:
+        warnings.warn(f"channel {rep.name!r}: " + "; ".join(problems), DataQualityWarning,
+                      stacklevel=3)
+
+
+# ====================================================================== Recording level
+def _default_channels(rec: Recording, channels) -> list[int]:
+    if channels is None:
+        return [i for i, c in enumerate(rec.channels) if c.kind != "tacho"]
+    if isinstance(channels, str):
+        channels = [channels]
+    return [rec.index(c) for c in channels]
+
+
+def _check_rec(rec) -> None:
+    if not isinstance(rec, Recording):
+        raise TypeError(f"rec must be a Recording, got {type(rec).__name__}")
+
+
+def _map_channels(rec: Recording, channels, func) -> tuple[Recording, list[str]]:
+    _check_rec(rec)
+    idx = _default_channels(rec, channels)
+    out = rec.data.copy()
+    for i in idx:
+        out[:, i] = func(rec.data[:, i])
+    return rec.replace_data(out), [rec.channels[i].name for i in idx]
+
+
+def filter_recording(rec: Recording, *, channels: Sequence[str] | str | None = None,
+                     kind: str = "bandpass", low: float | None = None, high: float | None = None,
+                     order: int = 4, mesh_freq: float | None = None) -> Recording:
+    """:func:`filter_signal` on channels of a recording (default: every non-tacho channel).
+
+    Returns a new Recording (same specs) with one ``"condition.filter"`` history entry
+    naming the corners actually used [Hz].
+    """
+    _check_rec(rec)
+    kind = as_choice(kind, "kind", ("bandpass", "highpass", "lowpass"))
+    kind, low, high = _resolve_band(rec.fs, kind, low, high, mesh_freq)
+    out, names = _map_channels(rec, channels, lambda c: filter_signal(
+        c, rec.fs, kind=kind, low=low, high=high, order=order))
+    return out.with_history("condition.filter", kind=kind, low_hz=low, high_hz=high,
+                            order=order, zero_phase=True, mesh_freq_hz=mesh_freq, channels=names)
+
+
+def remove_drift_recording(rec: Recording, *, channels: Sequence[str] | str | None = None,
+                           method: str = "median", window: float | None = None,
+                           mesh_freq: float | None = None) -> Recording:
+    """:func:`remove_drift` on channels of a recording (default: every non-tacho channel).
+
+    Returns a new Recording with one ``"condition.remove_drift"`` history entry.
+    """
+    _check_rec(rec)
+    method = as_choice(method, "method", ("median", "savgol", "highpass"))
+    w = _drift_window(window, mesh_freq)
+    out, names = _map_channels(rec, channels, lambda c: remove_drift(c, rec.fs, method=method,
+                                                                     window=w))
+    return out.with_history("condition.remove_drift", method=method, window_s=w, channels=names)
+
+
+def _notch_rec(rec: Recording, channels, freqs, mains, q, exclude):
+    _check_rec(rec)
+    q = as_positive(q, "q")
+    idx = _default_channels(rec, channels)
+    data = rec.data.copy()
+    reports: dict[str, HumReport | None] = {}
+    for i in idx:
+        name = rec.channels[i].name
+        if freqs is None:
+            rep = detect_hum(rec.data[:, i], rec.fs, mains=mains, exclude=exclude)
+            fl = rep.freqs
+        else:
+            rep = None
+            fl = np.asarray([_check_freq(f, "freqs", rec.fs) for f in freqs], dtype=np.float64)
+        data[:, i] = notch_hum(rec.data[:, i], rec.fs, freqs=fl, q=q)
+        reports[name] = rep
+    lines = {nm: ([float(f) for f in r.freqs] if r is not None else [float(f) for f in freqs])
+             for nm, r in reports.items()}
+    out = rec.replace_data(data).with_history("condition.notch_hum", q=q, lines_hz=lines)
+    return out, reports
+
+
+def notch_hum_recording(rec: Recording, *, channels: Sequence[str] | str | None = None,
+                        freqs: Sequence[float] | None = None, mains: str | float = "auto",
+                        q: float = 30.0, exclude: Sequence[float] = ()) -> Recording:
+    """:func:`notch_hum` on channels of a recording (default: every non-tacho channel).
+
+    Hum is detected per channel when ``freqs`` is None; the history entry
+    ``"condition.notch_hum"`` lists the lines notched on each channel [Hz].
+    """
+    return _notch_rec(rec, channels, freqs, mains, q, exclude)[0]
+
+
+def assess_quality_recording(rec: Recording, *, channels: Sequence[str] | str | None = None,
+                             warn: bool = True, **kwargs) -> dict[str, ChannelQuality]:
+    """:func:`assess_quality` per channel (default: every non-tacho channel), keyed by name."""
+    if not isinstance(rec, Recording):
+        raise TypeError(f"rec must be a Recording, got {type(rec).__name__}")
+    return {rec.channels[i].name: assess_quality(rec.data[:, i], rec.fs, t0=rec.t0,
+                                                 name=rec.channels[i].name, warn=warn, **kwargs)
+            for i in _default_channels(rec, channels)}
+
+
+@dataclass
+class Conditioned:
+    """Result of :func:`condition_recording`.
+
+    Attributes
+    ----------
+    recording : Recording
+        The conditioned recording (history extended by one entry per step).
+    quality : dict of str -> ChannelQuality
+        Per conditioned channel: gaps and clipping from the raw data, SNR after hum and
+        drift removal (before any low-pass, which would hide the white noise), hum found,
+        filter settling time.
+    """
+
+    recording: Recording
+    quality: dict = field(default_factory=dict)
+
+
+def condition_recording(rec: Recording, *, channels: Sequence[str] | str | None = None,
+                        mesh_freq: float | None = None, hum: bool = True,
+                        drift: str | None = "median", drift_window: float | None = None,
+                        lowpass: float | str | None = "auto", highpass: float | None = None,
+                        order: int = 4, warn: bool = True) -> Conditioned:
+    """The default conditioning chain: quality -> hum notch -> drift removal -> band limit.
+
+    Parameters
+    ----------
+    rec : Recording
+    channels : names, optional
+        Channels to condition (default: every non-tacho channel); the others pass unchanged.
+    mesh_freq : float, optional
+        Mesh frequency of the gauged gears [Hz] (defaults of the filters, see the module
+        docstring). Sun and ring gauges mesh at different frequencies (ring ~ Z_r w_c vs
+        sun ~ Z_s |w_s - w_c|): condition each gear's channels with its own ``mesh_freq``
+        (``channels=``) for the best drift window and low-pass.
+    hum : bool
+        Detect mains hum per channel and notch the lines found.
+    drift : {"median", "savgol", "highpass"} or None
+        Drift removal method (None: none).
+    drift_window : float, optional
+        Drift window [s].
+    lowpass : float, "auto" or None
+        Low-pass corner [Hz]; "auto": ``4 f_m`` when ``mesh_freq`` is given and below
+        0.45 fs, else none.
+    highpass : float, optional
+        Additional zero-phase high-pass corner [Hz] (None: none; the drift removal
+        usually suffices).
+    order : int
+        Butterworth order of the band-limiting filters.
+    warn : bool
+        Warn (DataQualityWarning) about gaps, clipping and low SNR.
+
+    Returns
+    -------
+    Conditioned
+    """
+    if not isinstance(rec, Recording):
+        raise TypeError(f"rec must be a Recording, got {type(rec).__name__}")
+    if drift is not None:
+        as_choice(drift, "drift", ("median", "savgol", "highpass"))
+    quality = assess_quality_recording(rec, channels=channels, warn=False, snr=False)
+    names = list(quality)
+    if not names:
+        return Conditioned(rec.with_history("condition", channels=[]), quality)
+    out = rec
+    settle = 0.0
+    if hum:
+        out, reports = _notch_rec(out, names, None, "auto", 30.0, ())
+        for nm, r in reports.items():
+            quality[nm].hum = r
+            if r is not None and r.present:
+                # a notch of quality q rings for ~q / (pi f) seconds
+                settle = max(settle, 2.0 * 30.0 / (math.pi * float(np.min(r.freqs))))
+    if drift is not None:
+        out = remove_drift_recording(out, channels=names, method=drift, window=drift_window,
+                                     mesh_freq=mesh_freq)
+        if drift == "highpass":
+            settle = max(settle, 2.0 * _drift_window(drift_window, mesh_freq))
+    # SNR on the drift-free, not yet band-limited data: its noise is still the white
+    # per-sample noise the peak-power SNR is defined with (a low-pass would hide it)
+    for nm in names:
+        q = quality[nm]
+        q.snr_db, q.signal_peak, q.noise_rms = estimate_snr(out.channel(nm))
+    low = None if highpass is None else _check_freq(highpass, "highpass", rec.fs)
+    if isinstance(lowpass, str):
+        as_choice(lowpass, "lowpass", ("auto",))
+        high = default_band(rec.fs, mesh_freq)[1] if mesh_freq is not None else None
+    elif lowpass is None:
+        high = None
+    else:
+        high = _check_freq(lowpass, "lowpass", rec.fs)
+    if low is not None or high is not None:
+        kind = "bandpass" if (low is not None and high is not None) else (
+            "highpass" if low is not None else "lowpass")
+        out = filter_recording(out, channels=names, kind=kind, low=low, high=high, order=order)
+        settle = max(settle, _settle_time(low, high))
+    for nm in names:
+        q = quality[nm]
+        q.settle = settle
+        if warn:
+            _warn_quality(q, 6.0)
+    out = out.with_history("condition.quality", settle_s=settle,
+                           quality={nm: {"gap_runs": len(quality[nm].gap_runs),
+                                         "clipped_runs": len(quality[nm].clipped_runs),
+                                         "snr_db": (None if not np.isfinite(quality[nm].snr_db)
+                                                    else round(quality[nm].snr_db, 2))}
+                                    for nm in names})
+    return Conditioned(out, quality)
