@@ -1,0 +1,94 @@
+"""The io benchmark runs end to end on a tiny recording and reports what it promises.
+
+Only the shape of the report is asserted (files, columns, positive numbers): timings are
+measured, never asserted.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+
+import numpy as np
+import pytest
+
+from pipeline.bench.io import COLUMNS, IO_FORMATS, TARGETS, run_io_bench, strain_recording
+
+
+def _present():
+    return [f for f in IO_FORMATS if importlib.util.find_spec(f"pipeline.io.{f}") is not None]
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    out = tmp_path_factory.mktemp("io_bench")
+    res = run_io_bench(out, minutes=0.05, n_channels=3, block_budget_mb=0.2, repeats=1,
+                       progress=False, rng=7)
+    return out, res
+
+
+def test_tiny_run_writes_json_and_markdown(tiny):
+    out, res = tiny
+    js = json.loads((out / "io_bench.json").read_text())
+    md = (out / "io_bench.md").read_text()
+    assert js["config"]["n_samples"] == round(0.05 * 60 * 5120)
+    assert js["config"]["n_channels"] == 3
+    assert js["raw"]["prealloc_msps"] > 0 and js["raw"]["np_load_msps"] > 0
+    rows = js["rows"]
+    assert rows and all(set(r) == set(COLUMNS) for r in rows)
+    present = _present()
+    assert sorted({r["format"] for r in rows}) == sorted(present)
+    assert sorted(s["format"] for s in js["skipped"]) == sorted(set(IO_FORMATS) - set(present))
+    if "mcap" in present:
+        assert sorted(r["variant"] for r in rows if r["format"] == "mcap") == ["lz4", "none", "zstd"]
+    if "tdms" in present:
+        assert len([r for r in rows if r["format"] == "tdms"]) == 2  # large and small segments
+    for r in rows:
+        for key in ("file_mb", "write_s", "read_s", "read_msps", "ratio_to_raw", "one_channel_msps",
+                    "window_msps", "stream_peak_mb_1x", "stream_peak_mb_4x"):
+            assert isinstance(r[key], float) and np.isfinite(r[key]) and r[key] > 0, (r["format"], key)
+        assert r["exact"] is True  # every format returns the samples that were written
+        assert r["target_ratio"] == TARGETS.get(r["format"])
+        assert isinstance(r["meets_target"], bool)
+        if r["format"] == "csv":
+            assert r["pandas_c_msps"] > 0 and r["csv_over_pandas"] > 0
+        else:
+            assert r["pandas_c_msps"] is None and r["csv_over_pandas"] is None
+    # the markdown table has a header, a rule and one line per row
+    table = [ln for ln in md.splitlines() if ln.startswith("|")]
+    assert len(table) == 2 + len(rows)
+    assert "read MS/s" in table[0] and "x raw" in table[0] and "stream peak 4x MB" in table[0]
+    assert res["files"]["json"].endswith("io_bench.json")
+    # the written test files are cleaned up
+    assert not [p for p in out.iterdir() if p.is_dir()]
+
+
+def test_strain_recording_shape_and_randomness():
+    a = strain_recording(1000, 3, 5120.0, rng=1)
+    b = strain_recording(1000, 3, 5120.0, rng=1)
+    c = strain_recording(1000, 3, 5120.0, rng=2)
+    assert a.data.shape == (1000, 3) and a.data.dtype == np.float64
+    assert np.array_equal(a.data, b.data) and not np.array_equal(a.data, c.data)
+    assert 5e-5 < a.data.max() < 2e-4  # pulse peaks ~1e-4 m/m
+    assert strain_recording(0, 2).data.shape == (0, 2)  # empty input
+
+
+@pytest.mark.parametrize("kwargs, exc", [
+    ({"formats": ()}, ValueError), ({"formats": ("xls",)}, ValueError),
+    ({"formats": ("mcap", "mcap")}, ValueError), ({"minutes": 0.0}, ValueError),
+    ({"minutes": "long"}, TypeError), ({"n_channels": 0}, ValueError),
+    ({"block_budget_mb": -1.0}, ValueError), ({"repeats": 0}, ValueError),
+    ({"minutes": 1e-6}, ValueError)])
+def test_bad_arguments(tmp_path, kwargs, exc):
+    with pytest.raises(exc):
+        run_io_bench(tmp_path, progress=False, **kwargs)
+    assert not (tmp_path / "io_bench.json").exists()
+
+
+def test_strain_recording_bad_input():
+    with pytest.raises(ValueError):
+        strain_recording(-1, 2)
+    with pytest.raises(TypeError):
+        strain_recording(10.5, 2)
+    with pytest.raises(ValueError):
+        strain_recording(10, 0)

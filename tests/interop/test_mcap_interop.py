@@ -1,0 +1,137 @@
+"""MCAP files written by meshphase read back with the independent TypeScript reader.
+
+``read_mcap.mjs`` uses ``@mcap/core`` (McapIndexedReader, from the npm registry) and decodes
+the payload itself from the layout documented in ``data_schemas/mcap.md``; nothing is shared
+with the Python code. Set up once with ``(cd tests/interop && npm ci --no-audit --no-fund)``.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+import pipeline.io as pio
+from pipeline.io import mcap as m
+from pipeline.recording import ChannelSpec, Recording
+
+pytestmark = pytest.mark.interop
+
+HERE = Path(__file__).resolve().parent
+SCRIPT = HERE / "read_mcap.mjs"
+
+
+def _skip_reason() -> str | None:
+    if shutil.which("node") is None:
+        return "node is not on PATH (the interop test needs Node.js >= 18)"
+    if not (HERE / "node_modules" / "@mcap" / "core").is_dir():
+        return ("tests/interop/node_modules is missing: run "
+                "`(cd tests/interop && npm ci --no-audit --no-fund)` first")
+    return None
+
+
+@pytest.fixture(scope="module")
+def node():
+    reason = _skip_reason()
+    if reason:
+        pytest.skip(reason)
+    return shutil.which("node")
+
+
+def _node_read(node, path, *args) -> dict:
+    res = subprocess.run([node, str(SCRIPT), str(path), *map(str, args)], cwd=HERE,
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, f"read_mcap.mjs failed:\n{res.stderr}"
+    return json.loads(res.stdout)
+
+
+def _recording(dtype, t0) -> Recording:
+    rng = np.random.default_rng(2024)
+    n = 23_456
+    data = (rng.standard_normal((n, 3)) * 1e-5).astype(dtype)
+    data[10, 0] = np.nan
+    data[20, 1] = -np.inf
+    data[30, 2] = -0.0
+    specs = [ChannelSpec("sun_1", kind="sun", tooth=4, description="sun root"),
+             ChannelSpec("ring_1", kind="ring", units="V", gain=0.25, face_position=-0.005),
+             ChannelSpec("tacho", kind="tacho", units="V")]
+    return Recording(data, 5120.0, specs, t0=t0, start_datetime="2025-01-01T00:00:00+00:00",
+                     meta={"rig": "A", "z": [21, 33, 87]}, history=[{"step": "acquire"}])
+
+
+def _bits(a):
+    a = np.ascontiguousarray(a)
+    return a.view(np.uint32 if a.dtype == np.float32 else np.uint64)
+
+
+@pytest.mark.parametrize("compression", ["none", "lz4", "zstd"])
+@pytest.mark.parametrize("dtype, t0", [(np.float64, 0.0), (np.float32, 12.5), (np.float64, -3.0)])
+def test_typescript_reader_sees_same_samples_times_and_metadata(node, tmp_path, compression, dtype, t0):
+    rec = _recording(dtype, t0)
+    block = 2000
+    p = pio.write(rec, tmp_path / "r.mcap", block=block, compression=compression, chunk_size=50_000)
+    out = _node_read(node, p)
+
+    origin = m._origin_ns(t0)
+    assert origin == (12_500_000_000 if t0 == 12.5 else 0)
+    starts = list(range(0, rec.n_samples, block))
+    want_times = [str(m.log_time_ns(a, rec.fs, origin)) for a in starts]
+
+    # schema, channels and metadata records as documented
+    assert [(s["name"], s["encoding"]) for s in out["schemas"]] == [(m.SCHEMA_NAME, m.SCHEMA_ENCODING)]
+    assert out["schemas"][0]["data"] == m.LAYOUT
+    chans = {c["topic"]: c for c in out["channels"]}
+    assert list(chans) == rec.names
+    for i, spec in enumerate(rec.channels):
+        c = chans[spec.name]
+        assert c["messageEncoding"] == m.MESSAGE_ENCODING
+        assert c["metadata"] == m._channel_metadata(spec, i, rec.fs, rec.data.dtype.name)
+    (md,) = [x for x in out["metadata"] if x["name"] == m.RECORDING_METADATA]
+    assert md["metadata"] == m._recording_metadata(rec, block, compression, origin)
+    assert float(md["metadata"]["fs"]) == rec.fs and float(md["metadata"]["t0"]) == rec.t0
+    assert out["statistics"]["messageCount"] == str(len(starts) * rec.n_channels)
+
+    # samples: bit-exact, in order, at the documented log times
+    for j, name in enumerate(rec.names):
+        t = out["topics"][name]
+        assert t["dtype"] == rec.data.dtype.name
+        assert t["contiguous"] and t["nSamples"] == rec.n_samples
+        assert t["firstSamples"] == [str(a) for a in starts]
+        assert t["logTimes"] == want_times
+        got = np.frombuffer(base64.b64decode(t["base64"]), rec.data.dtype.newbyteorder("<"))
+        np.testing.assert_array_equal(_bits(got.astype(rec.data.dtype)), _bits(rec.data[:, j]))
+        assert t["nNaN"] == int(np.isnan(rec.data[:, j]).sum())
+        head = [float(x) if not isinstance(x, str) else float(x.replace("Infinity", "inf"))
+                for x in t["head"]]
+        np.testing.assert_array_equal(np.array(head, dtype=rec.data.dtype), rec.data[:8, j])
+
+    # and our own reader agrees with itself on the same file
+    assert pio.read(p) == rec
+
+
+def test_time_window_end_is_inclusive_in_typescript_half_open_in_python(node, tmp_path):
+    rec = _recording(np.float64, 0.0)
+    block = 2000
+    p = pio.write(rec, tmp_path / "w.mcap", block=block)
+    t_start = m.log_time_ns(1 * block, rec.fs, 0)
+    t_end = m.log_time_ns(3 * block, rec.fs, 0)  # exactly the log time of block 3
+
+    out = _node_read(node, p, "--start", t_start, "--end", t_end)
+    ts = sorted({int(x["firstSample"]) for x in out["window"]["messages"] if x["topic"] == "sun_1"})
+    assert ts == [2000, 4000, 6000]  # @mcap/core: [startTime, endTime], end included
+
+    with open(p, "rb") as fh:
+        py = sorted(m._HEADER.unpack_from(x.data)[0] for _, _, x in make_reader(fh).iter_messages(
+            topics=["sun_1"], starting_at=t_start, ending_before=t_end))
+    assert py == [2000, 4000]  # mcap (Python): [start, end), end excluded
+
+    # meshphase's window read asks for what it needs whatever the convention
+    i0, i1 = 2500, 6001
+    got = pio.read(p, start=rec.t0 + i0 / rec.fs, stop=rec.t0 + i1 / rec.fs)
+    assert got == rec.slice_samples(i0, i1)
