@@ -804,7 +804,12 @@ class ChannelQuality:
 
 def merge_runs(runs) -> np.ndarray:
     """Sort ``[start, stop)`` rows and merge overlapping or touching ones."""
-    r = np.asarray(runs, dtype=np.int64).reshape(-1, 2)
+    r = np.asarray(runs)
+    if r.size and r.dtype.kind not in "iuf":
+        raise TypeError(f"runs must be integer [start, stop) rows, got dtype {r.dtype}")
+    if r.size and (r.ndim != 2 or r.shape[1] != 2):
+        raise ValueError(f"runs must have shape (k, 2), got {r.shape}")
+    r = r.astype(np.int64).reshape(-1, 2)
     if len(r) == 0:
         return np.empty((0, 2), dtype=np.int64)
     r = r[np.argsort(r[:, 0], kind="stable")]

@@ -359,3 +359,19 @@ def test_condition_recording_options_and_bad_input(train):
     only_tacho = rec.select(["tach"])
     out = condition_recording(only_tacho)
     assert out.quality == {} and np.array_equal(out.recording.data, only_tacho.data)
+
+
+def test_remaining_empty_and_bad_inputs():
+    assert drift_baseline(np.zeros(0), FS).shape == (0,)
+    assert math.isnan(estimate_snr(np.zeros(0))[0])
+    with pytest.raises(ValueError, match="1-D"):
+        estimate_noise(np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="shape"):
+        merge_runs([1, 2, 3])
+    with pytest.raises(TypeError, match="runs"):
+        merge_runs([["a", "b"]])
+    with pytest.raises(ValueError, match="fs"):
+        drift_baseline(np.zeros(10), 0.0)
+    for fn in (remove_drift_recording, notch_hum_recording, assess_quality_recording):
+        with pytest.raises(TypeError, match="Recording"):
+            fn(np.zeros((10, 1)))
