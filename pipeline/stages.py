@@ -140,10 +140,22 @@ def stage_condition(ctx: RunContext) -> None:
     from .condition import condition_recording
 
     rec = ctx.results["load"]["recording"]
-    fm = [f for f in (_mesh_freq(ctx, "sun"), _mesh_freq(ctx, "ring")) if f]
-    cond = condition_recording(rec, mesh_freq=max(fm) if fm else None)
-    ctx.results["condition"] = {"recording": cond.recording, "quality": cond.quality}
-    snr = {k: getattr(q, "snr_db", None) for k, q in cond.quality.items()}
+    # each gear's gauges with their own mesh frequency (drift window, low-pass corner)
+    groups: dict = {}
+    for c in rec.channels:
+        if c.kind == "tacho":
+            continue
+        gear = c.gear if c.gear in ("sun", "ring") else (c.kind if c.kind in ("sun", "ring") else None)
+        groups.setdefault(gear, []).append(c.name)
+    quality = {}
+    out = rec
+    for gear, names in groups.items():
+        fm = _mesh_freq(ctx, gear) if gear else None
+        cond = condition_recording(out, channels=names, mesh_freq=fm)
+        out = cond.recording
+        quality.update(cond.quality)
+    ctx.results["condition"] = {"recording": out, "quality": quality}
+    snr = {k: getattr(q, "snr_db", None) for k, q in quality.items()}
     ctx.error_estimates["condition"] = "SNR " + ", ".join(
         f"{k} {v:.1f} dB" for k, v in snr.items() if isinstance(v, (int, float)) and math.isfinite(v))
 
