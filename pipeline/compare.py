@@ -104,9 +104,12 @@ def _angle_zero_time(table: PassTable) -> float:
 
 
 def _angle_to_origin(table: PassTable, w: float, t0: float) -> float:
-    """Angle [rad] the gauged member turned from t = 0 to ``t0``, where the encoder angle is 0.
+    """Angle [rad] the gauged member turned from the time origin to ``t0``, where the encoder
+    angle is 0. The time origin is ``table.time_origin`` (the recording's first sample when
+    set by the pipeline, else t = 0), so a recording starting at t0 = 1e6 s needs no
+    extrapolation over 1e6 s and the identified kappa are the offsets' phases at its start.
 
-    The offsets' phases kappa are fixed at t = 0 and turn with the members' actual rotation,
+    The offsets' phases kappa are fixed at the time origin and turn with the members' actual rotation,
     so the model's time variable must be (angle since t = 0) / w. The encoder counts angle
     from its first reference pass on; the part before it (less than one relative revolution
     when the record starts with the planet-1 pass) has to be extrapolated. When the table
@@ -121,10 +124,11 @@ def _angle_to_origin(table: PassTable, w: float, t0: float) -> float:
     phase by (w_mean - w_0) t0: under a speed ramp of 5e-3 /s over 30 s that moved the
     model phasing by ~5e-3 mesh cycles (Table 1 gearset at 5 % speed, e = 0.2 mm).
     """
-    if t0 == 0.0:
+    origin = float(getattr(table, "time_origin", 0.0) or 0.0)
+    if t0 == origin:
         return 0.0
     enc = table.encoder
-    ends = np.array([0.0, t0])
+    ends = np.array([origin, t0])
     if callable(getattr(enc, "angle", None)):
         a = np.asarray(enc.angle(ends), dtype=float)
         if np.all(np.isfinite(a)):
@@ -135,8 +139,9 @@ def _angle_to_origin(table: PassTable, w: float, t0: float) -> float:
         if np.all(np.isfinite(a)):
             return float(enc.ratio * (a[1] - a[0]))
     ok = np.isfinite(table.time) & np.isfinite(table.angle)
+    span = t0 - origin
     if np.count_nonzero(ok) == 0:
-        return w * t0
+        return w * span
     rev = table.revolution[ok]
     near = rev <= rev.min() + 1
     dt = table.time[ok][near] - t0
@@ -144,11 +149,11 @@ def _angle_to_origin(table: PassTable, w: float, t0: float) -> float:
     good = dt != 0
     dt, a = dt[good], a[good]
     if dt.size == 0:
-        return w * t0
+        return w * span
     # the angle is 0 at t0 by definition: fit a(t) = c1 (t - t0) [+ c2 (t - t0)^2] through it
     cols = [dt, dt * dt] if dt.size >= 4 else [dt]
     coef = np.linalg.lstsq(np.stack(cols, axis=1), a, rcond=None)[0]
-    return float(sum(c * (t0 ** (i + 1)) * (-1) ** i for i, c in enumerate(coef)))
+    return float(sum(c * (span ** (i + 1)) * (-1) ** i for i, c in enumerate(coef)))
 
 
 def _angle_times(table: PassTable, w: float) -> tuple[np.ndarray, np.ndarray]:

@@ -90,6 +90,9 @@ class PassTable:
         planet-1 pass of revolution k sits at angle 2 pi k.
     origin : float
         Time of the first reference pass, where ``angle`` is 0 [s].
+    time_origin : float
+        Time at which model offset phases (kappa) are referred [s]; the pipeline sets the
+        recording's first-sample time (default 0).
     """
 
     gauge: str
@@ -104,6 +107,7 @@ class PassTable:
     notes: list = field(default_factory=list)
     origin: float = float("nan")
     encoder: object = field(default=None, repr=False, compare=False)
+    time_origin: float = 0.0
 
     def __post_init__(self):
         n = np.asarray(self.time).size
@@ -139,7 +143,7 @@ class PassTable:
         return PassTable(self.gauge, self.time[m], self.planet[m], self.revolution[m],
                          self.gamma[m], self.uncertainty[m], self.mesh_period[m],
                          self.ref_time[m], self.angle[m], list(self.notes), self.origin,
-                         self.encoder)
+                         self.encoder, self.time_origin)
 
     def mean_speed(self) -> float:
         """Mean relative speed of the gauged member from the encoder angle, |w_jc| [rad/s]
@@ -342,10 +346,21 @@ def assign_planets_by_pattern(times, planet_angles, order: int, *, first: int = 
         # too few onsets to estimate a period: label consecutively from `first`
         info["ambiguous"] = True
         return seq[(q_first + np.arange(t.size)) % n], info
-    # relative revolution period: median of N-step intervals (robust to a missing pulse)
-    period = float(np.median(t[n:] - t[:-n]))
+    # relative revolution period: median of N-step intervals (robust to a missing pulse),
+    # taken locally (a running median over ~2 revolutions) so speed ramps are followed
+    spans = t[n:] - t[:-n]
+    period = float(np.median(spans))
     info["period"] = period
-    gaps = np.diff(t) / period
+    w = min(spans.size, 2 * n + 1)
+    if spans.size >= w >= 3:
+        pad = np.pad(spans, (w // 2, w - 1 - w // 2), mode="edge")
+        local = np.median(np.lib.stride_tricks.sliding_window_view(pad, w), axis=1)
+        centre = 0.5 * (t[n:] + t[:-n])
+        mid = 0.5 * (t[1:] + t[:-1])
+        gap_period = np.interp(mid, centre, local)
+    else:
+        gap_period = np.full(t.size - 1, period)
+    gaps = np.diff(t) / gap_period
     symmetric = bool(np.allclose(step, step[0], atol=1e-9))
     starts = [q_first] if symmetric else list(range(n))
     walks = {q0: _walk(gaps, fs, q0, tol * spacing) for q0 in starts}

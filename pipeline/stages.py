@@ -165,6 +165,14 @@ def stage_onsets(ctx: RunContext) -> None:
 
     cond = ctx.results["condition"]
     rec = cond["recording"]
+    for gear in ("sun", "ring"):
+        fm = _mesh_freq(ctx, gear)
+        if fm and fm >= 0.45 * rec.fs:
+            from .errors import DataQualityWarning
+
+            warnings.warn(f"{gear} gauge: mesh frequency {fm:.4g} Hz is at or beyond 0.45 fs "
+                          f"({0.45 * rec.fs:.4g} Hz): pulses are aliased and onset times are not "
+                          "reliable", DataQualityWarning, stacklevel=2)
     out = {}
     for c in rec.channels:
         if c.kind not in ("sun", "ring", "facewidth"):
@@ -250,7 +258,13 @@ def stage_phasing(ctx: RunContext) -> None:
         if "sun" in tables and tables["sun"].encoder is not None:
             kw = {"encoder": tables["sun"].encoder, "encoder_ratio": g.z_sun / g.z_ring}
         tables["ring"] = measured_phasing(times, pl, g.z_ring, g.n_planets, gauge="ring", **kw)
+    for t in tables.values():
+        t.time_origin = float(rec.t0)
     for gear, inf in info.items():
+        if inf.get("n_unassigned"):
+            warnings.warn(f"{gear} gauge: {inf['n_unassigned']} pulse(s) fit no planet in the pass "
+                          "pattern (missing pulses, speed change or spurious detections); they "
+                          "are left out", ProcessingWarning, stacklevel=2)
         if inf.get("ambiguous"):
             warnings.warn(f"{gear} gauge: which pulse is planet 1 cannot be told from the pattern "
                           f"(symmetric layout{'' if gear == 'ring' else ', loads too equal'}); "
