@@ -207,6 +207,26 @@ def _main_gauge(rec: Recording, gear: str) -> str | None:
     return c[0] if c else None
 
 
+def _onset_sigma(on, noise_rms: float) -> np.ndarray:
+    """Per-onset timing uncertainty [s]: the Cramer-Rao bound for the learnt template at the
+    fitted amplitude in white noise of the conditioned channel's RMS, sigma / sqrt(sum (ds/dt)^2)
+    (Kay 1993, eq. 3.14); the onset tests hold the detector within ~1.1x of it. NaN when the
+    noise level is unknown."""
+    out = np.full(len(on), np.nan)
+    if not len(on) or not (isinstance(noise_rms, float) and math.isfinite(noise_rms)) or noise_rms <= 0:
+        return out
+    info = []
+    for tp in on.templates:
+        d = np.gradient(np.asarray(tp.samples, dtype=float)) * tp.rate   # [1/s], peak 1
+        info.append(tp.decimation * float(np.sum(d * d)))                 # per original sample
+    info = np.asarray(info)
+    ok = (on.template_id >= 0) & (on.template_id < info.size)
+    s2 = np.where(ok, info[np.clip(on.template_id, 0, max(0, info.size - 1))], np.nan) if info.size else np.full(len(on), np.nan)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = noise_rms / (np.abs(on.amplitude) * np.sqrt(s2))
+    return np.where(np.isfinite(out), out, np.nan)
+
+
 def _planet_ratio(g, gear: str) -> float | None:
     """|w_pc / w_jc|: planet turns per turn of the gauged member relative to the carrier."""
     if not g.z_planet:
@@ -244,20 +264,20 @@ def stage_phasing(ctx: RunContext) -> None:
             if not np.all(np.isfinite(ring_load)):
                 ring_load = None
         z = g.z_sun if gear == "sun" else g.z_ring
-        # onset timing uncertainty: from the template correlation (CRB-like scaling is in
-        # the onsets stage; here the pass-to-pass scatter of the phasing is reported too)
-        sig = None
-        labels[gear] = (ch, times, pl, amp)
+        q = ctx.results["condition"]["quality"].get(ch)
+        sig = _onset_sigma(on, getattr(q, "noise_rms", float("nan")))[ok]
+        labels[gear] = (ch, times, pl, amp, sig)
         info[gear] = inf
         if gear == "sun":
             tables["sun"] = measured_phasing(times, pl, z, g.n_planets, gauge="sun", sigma_t=sig,
                                              planet_ratio=_planet_ratio(g, "sun"))
     if "ring" in labels:
-        ch, times, pl, amp = labels["ring"]
+        ch, times, pl, amp, sig = labels["ring"]
         kw = {"planet_ratio": _planet_ratio(g, "ring")}
         if "sun" in tables and tables["sun"].encoder is not None:
             kw = {"encoder": tables["sun"].encoder, "encoder_ratio": g.z_sun / g.z_ring}
-        tables["ring"] = measured_phasing(times, pl, g.z_ring, g.n_planets, gauge="ring", **kw)
+        tables["ring"] = measured_phasing(times, pl, g.z_ring, g.n_planets, gauge="ring",
+                                          sigma_t=sig, **kw)
     for t in tables.values():
         t.time_origin = float(rec.t0)
     for gear, inf in info.items():
@@ -285,7 +305,7 @@ def stage_load_sharing(ctx: RunContext) -> None:
     g = _gearset(ctx)
     labels = ctx.results.get("phasing", {}).get("labels", {})
     if "ring" in labels:
-        ch, times, pl, amp = labels["ring"]
+        ch, times, pl, amp, _ = labels["ring"]
     else:
         rec = ctx.results["condition"]["recording"]
         ch = _main_gauge(rec, "ring")
@@ -411,6 +431,14 @@ def stage_compare(ctx: RunContext) -> None:
         row = {"ideal": ideal, "model": model,
                "vs_ideal": residual_stats(tab.gamma, ideal, tab.planet),
                "vs_model": residual_stats(tab.gamma, model, tab.planet) if model is not None else None}
+        if row["vs_model"] is not None and math.isfinite(row["vs_model"]["rms"]):
+            # per-pass uncertainty: the onset-timing bound propagated by measured_phasing is a
+            # lower bound (white noise); coloured noise and the speed encoder add to it, which
+            # the scatter of the passes about the fitted model shows: report the larger
+            scatter = row["vs_model"]["rms"]
+            tab.uncertainty = np.fmax(tab.uncertainty, scatter)
+            tab.notes.append(f"uncertainty = max(onset-timing bound, {scatter:.2e} residual "
+                             "RMS about the fitted model)")
         if mc is not None:
             ave = mc.ave_s if gear == "sun" else mc.ave_r
             dev = mc.dev_s if gear == "sun" else mc.dev_r
@@ -450,7 +478,7 @@ def _truth_residual(ctx, tab, truth, gear) -> dict | None:
     labels = ctx.results["phasing"]["labels"]
     if gear not in labels or not isinstance(truth.events, dict):
         return None
-    ch, times, pl, amp = labels[gear]
+    ch, times, pl, amp, _ = labels[gear]
     if ch not in truth.events or not len(tab):
         return None
     ev = truth.events[ch]

@@ -127,7 +127,7 @@ def build_report(ctx, out_dir) -> Path:
             m = (o.times >= tt[0]) & (o.times <= tt[-1]) if tt.size else np.zeros(len(o), bool)
             pl = None
             if gear in labels:
-                _, times, lab, _ = labels[gear]
+                _, times, lab, _, _ = labels[gear]
                 mm = (times >= tt[0]) & (times <= tt[-1]) if tt.size else np.zeros(times.size, bool)
                 add_fig(s, figures.signal_with_onsets(tt, x, times[mm], lab[mm] + 1,
                                                       title=f"{ch} ({gear} gauge), conditioned"),
