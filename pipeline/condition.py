@@ -58,7 +58,7 @@ from .log import logger
 from .quality import clipped_runs as _clipped_runs
 from .quality import find_runs
 from .recording import Recording
-from .validate import as_choice, as_float, as_nonnegative, as_positive, as_positive_int
+from .validate import as_signal, as_choice, as_float, as_nonnegative, as_positive, as_positive_int
 
 __all__ = [
     "ChannelQuality", "HumReport", "Conditioned",
@@ -89,12 +89,7 @@ _SUBSAMPLE = 1 << 20                 # at most this many samples enter a median 
 # ====================================================================== small helpers
 def _as_signal(x, name: str = "x") -> np.ndarray:
     """1-D float64 view/copy of ``x``; NaN/inf allowed (they are data-quality findings)."""
-    arr = np.asarray(x)
-    if arr.dtype.kind not in "fiub":
-        raise TypeError(f"{name} must be a numeric array, got dtype {arr.dtype}")
-    if arr.ndim != 1:
-        raise ValueError(f"{name} must be 1-D (one channel), got shape {arr.shape}")
-    return arr.astype(np.float64, copy=False)
+    return as_signal(x, name, float64=True)
 
 
 def _subsample(x: np.ndarray, n_max: int = _SUBSAMPLE) -> np.ndarray:

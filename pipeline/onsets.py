@@ -68,7 +68,7 @@ from .errors import DataQualityWarning, ProcessingWarning
 from .log import logger
 from .quality import find_runs
 from .recording import Recording
-from .validate import as_choice, as_float, as_nonnegative, as_positive, as_positive_int
+from .validate import as_signal, as_choice, as_float, as_nonnegative, as_positive, as_positive_int
 
 __all__ = [
     "Onsets", "Template", "CoarsePeaks", "detect_onsets", "detect_onsets_recording",
@@ -814,13 +814,7 @@ def _fill_nan(seg: np.ndarray) -> np.ndarray:
     return out
 
 
-def _as_signal(x, name: str = "x") -> np.ndarray:
-    arr = np.asarray(x)
-    if arr.dtype.kind not in "fiub":
-        raise TypeError(f"{name} must be a numeric array, got dtype {arr.dtype}")
-    if arr.ndim != 1:
-        raise ValueError(f"{name} must be 1-D (one channel), got shape {arr.shape}")
-    return arr
+_as_signal = as_signal
 
 
 # ====================================================================== options

@@ -19,6 +19,7 @@ __all__ = [
     "as_positive_int",
     "as_finite_array",
     "as_choice",
+    "as_signal",
 ]
 
 
@@ -112,3 +113,14 @@ def as_choice(value: Any, name: str, choices) -> str:
     if value not in choices:
         raise ValueError(f"{name} must be one of {sorted(choices)}, got {value!r}")
     return value
+
+
+def as_signal(value: Any, name: str = "x", *, float64: bool = False) -> np.ndarray:
+    """One channel of samples as a 1-D numeric array; NaN/inf allowed (they are data-quality
+    findings, not errors). ``float64`` converts (no copy when already float64)."""
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "fiub":
+        raise TypeError(f"{name} must be a numeric array, got dtype {arr.dtype}")
+    if arr.ndim != 1:
+        raise ValueError(f"{name} must be 1-D (one channel), got shape {arr.shape}")
+    return arr.astype(np.float64, copy=False) if float64 else arr
