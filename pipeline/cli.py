@@ -249,6 +249,24 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def cmd_campaign(args) -> int:
+    from .campaign import cli_campaign
+
+    res = cli_campaign(args.scene, args.inputs, scheduler=args.scheduler, workers=args.workers,
+                       out=args.out, overwrite=args.overwrite, progress=not args.quiet,
+                       recording_reports=args.recording_reports)
+    c = res["counts"]
+    print(f"campaign  {res['scene']}: {c['ok']} ok, {c['partial']} partial, {c['failed']} failed "
+          f"in {res['timing_s'].get('total', float('nan')):.1f} s "
+          f"({res['cluster']['n_workers']} worker(s), scheduler {res['cluster']['scheduler']})")
+    for r in res["recordings"]:
+        if r.get("status") == "failed":
+            print(f"failed    {r['recording']}: {r.get('error', '')}")
+    for name, p in res["files"].items():
+        print(f"{name:<22} {p}")
+    return 0 if c["ok"] + c["partial"] > 0 or not res["recordings"] else 1
+
+
 # ---------------------------------------------------------------------------- parser
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
@@ -301,6 +319,16 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", help="output folder (default FILE-meshphase next to the input, never overwritten)")
     s.add_argument("--overwrite", action="store_true")
     s.set_defaults(func=cmd_process)
+
+    s = sub.add_parser("campaign", help="process many recordings with one scene as a Dask job")
+    s.add_argument("scene", help="scene TOML (gearset, tolerances, results); each recording replaces [input]")
+    s.add_argument("inputs", nargs="+", metavar="DIR_OR_FILE", help="recording files or folders of them")
+    s.add_argument("--scheduler", help="address of an existing Dask scheduler (default: a LocalCluster)")
+    s.add_argument("--workers", type=int, help="LocalCluster worker processes (default: one per core)")
+    s.add_argument("--out", help="output folder (default SCENE-campaign; never overwritten: -2, -3, ...)")
+    s.add_argument("--overwrite", action="store_true")
+    s.add_argument("--recording-reports", action="store_true", help="an HTML report per recording too")
+    s.set_defaults(func=cmd_campaign)
 
     s = sub.add_parser("bench", help="benchmarks: io, models, processing or all (tables + figures)")
     s.add_argument("what", nargs="?", default="all", choices=["io", "models", "processing", "all"])

@@ -1,0 +1,830 @@
+"""Campaigns: one scene, many recordings, one Dask job (``meshphase campaign``).
+
+The scene supplies the gearset, channel map, tolerances and the results wanted; each
+recording file replaces the scene's ``[input]``. Every recording is one Dask task that gets
+*file paths* (scene, recording, output folder), never open handles or arrays, loads the
+scene in the worker, runs :func:`pipeline.stages.run_scene` and writes its own results into
+``OUT/<recording name>/``. The task returns a small JSON-friendly dict; a recording that
+fails (unreadable file, a stage raising, even the worker process dying) is reported as
+failed and the others finish. The client then writes ``campaign.json``, ``campaign.csv`` and
+``campaign_report.html`` (:mod:`pipeline.report.campaign_report`) across all recordings.
+
+Results that need no recording are computed once, on the client, not once per recording:
+the tolerance Monte Carlo (its 3-sigma phasing band is passed to the tasks, which then
+compute the band coverage of their own passes exactly as :func:`pipeline.stages.stage_compare`
+does), the tilt solve and the (unmeasured) bearing moments. They go to ``OUT/scene/``.
+
+Cluster: a :class:`distributed.LocalCluster` with one single-threaded worker *process* per
+core by default (processes, because the stages are numpy/Python code that holds the GIL for
+long stretches, and because ``warnings.catch_warnings`` inside :func:`run_scene` is not
+thread-safe); ``scheduler="tcp://host:8786"`` uses an existing cluster instead, whose
+workers must have meshphase installed and see the same paths (a shared file system).
+
+Per-recording HTML reports are off by default (``recording_reports=False``): building one
+with its figures took about twice as long as processing a 1-min seed rig recording on the
+reference machine (2.8 s vs 1.3 s), and the combined report is the product of a campaign;
+``meshphase process`` / ``meshphase run`` give the full single-recording report.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import logging
+import math
+import os
+import socket
+import sys
+import tempfile
+import time
+import traceback
+import uuid
+import warnings
+from pathlib import Path
+from typing import Any, Callable, Iterable
+
+from .log import logger
+from .validate import as_positive, as_positive_int
+
+__all__ = ["run_recording", "run_campaign", "cli_campaign", "collect_recordings",
+           "recording_names", "split_results", "campaign_rows", "measure_speedup",
+           "SCENE_DIR_NAME"]
+
+#: sub-folder of the campaign output that holds the scene-level results
+SCENE_DIR_NAME = "scene"
+_SKIP_SUFFIXES = (".truth.json", ".tdms_index")
+
+
+# ---------------------------------------------------------------------------- inputs
+def _recording_suffixes() -> tuple[str, ...]:
+    from .io import FORMATS, get_format
+
+    return tuple(s for f in FORMATS for s in get_format(f).SUFFIXES)
+
+
+def collect_recordings(inputs: Iterable) -> tuple[list[Path], list[dict]]:
+    """The recording files named by ``inputs`` (files or folders), in a stable order.
+
+    A folder contributes every file directly inside it (not recursively) that is a recording
+    by content (:func:`pipeline.io.detect_format`) or carries a recording suffix (.h5, .mcap,
+    .csv, .tdms, ...: a corrupt recording is kept so that the campaign reports it failed);
+    truth sidecars (``*.truth.json``), TDMS index files, hidden files and anything else are
+    skipped. A file named explicitly is always taken. Duplicates are dropped.
+
+    Parameters
+    ----------
+    inputs : iterable of str or Path
+
+    Returns
+    -------
+    files : list of Path
+        Resolved paths, folders' contents sorted by name.
+    skipped : list of dict
+        ``{"path", "reason"}`` for each folder entry that was left out.
+
+    Raises
+    ------
+    TypeError
+        ``inputs`` is a string (one path: wrap it in a list) or holds a non-path.
+    FileNotFoundError
+        A named file or folder does not exist.
+    """
+    from .io import detect_format
+
+    if isinstance(inputs, (str, bytes, os.PathLike)):
+        raise TypeError(f"inputs must be a list of paths, got a single path {inputs!r}")
+    suffixes = _recording_suffixes()
+    files: list[Path] = []
+    skipped: list[dict] = []
+    for item in inputs:
+        if not isinstance(item, (str, os.PathLike)):
+            raise TypeError(f"inputs must hold paths (str or Path), got {type(item).__name__} {item!r}")
+        p = Path(item)
+        if not p.exists():
+            raise FileNotFoundError(f"{p}: no such recording file or folder")
+        if p.is_file():
+            files.append(p.resolve())
+            continue
+        for q in sorted(p.iterdir()):
+            name = q.name.lower()
+            if not q.is_file():
+                reason = "not a file"
+            elif q.name.startswith("."):
+                reason = "hidden file"
+            elif name.endswith(_SKIP_SUFFIXES):
+                reason = "truth sidecar" if name.endswith(".truth.json") else "TDMS index"
+            else:
+                try:
+                    detect_format(q)
+                    reason = None
+                except ValueError as exc:  # RecordingFileError is a ValueError
+                    reason = None if q.suffix.lower() in suffixes else f"not a recording: {exc}"
+            if reason is None:
+                files.append(q.resolve())
+            else:
+                skipped.append({"path": str(q), "reason": reason})
+    unique = list(dict.fromkeys(files))
+    return unique, skipped
+
+
+def recording_names(paths: Iterable) -> list[str]:
+    """Unique output-folder names for ``paths``: the file stem, then ``stem_suffix`` where
+    stems collide, then ``-2``, ``-3`` ... (never ``scene``, which holds the scene results).
+
+    Parameters
+    ----------
+    paths : iterable of str or Path
+
+    Returns
+    -------
+    list of str
+        One name per path, in order, all distinct.
+    """
+    paths = [Path(p) for p in paths]
+    stems = [p.stem or p.name for p in paths]
+    count: dict[str, int] = {}
+    for s in stems:
+        count[s] = count.get(s, 0) + 1
+    names = []
+    used = {SCENE_DIR_NAME}
+    for p, s in zip(paths, stems):
+        base = s if count[s] == 1 and s != SCENE_DIR_NAME else f"{s}_{p.suffix.lstrip('.') or 'file'}"
+        name, i = base, 2
+        while name in used:
+            name, i = f"{base}-{i}", i + 1
+        used.add(name)
+        names.append(name)
+    return names
+
+
+# ---------------------------------------------------------------------------- scene split
+def split_results(scene) -> tuple[list[str], list[str], bool]:
+    """Which of the scene's results run once on the client and which per recording.
+
+    Parameters
+    ----------
+    scene : pipeline.scene.Scene
+
+    Returns
+    -------
+    client : list of str
+        Results that need no recording (``tolerance`` - also when only pulled in by
+        ``compare`` for its band coverage -, ``tilt``, and ``bearing_moments`` unless
+        measured centroids are wanted too).
+    worker : list of str
+        The per-recording results.
+    mc_on_client : bool
+        True when the tolerance Monte Carlo runs on the client and the tasks get its band.
+        It stays in the tasks only when the scene has no ``[gearset]`` (each recording then
+        brings its own from its metadata).
+    """
+    results = list(scene.results)
+    mc_wanted = "tolerance" in results or ("compare" in results and scene.tolerances is not None)
+    mc_on_client = mc_wanted and scene.gearset is not None
+    client, worker = [], []
+    for r in results:
+        if r == "tolerance":
+            (client if mc_on_client else worker).append(r)
+        elif r == "tilt" or (r == "bearing_moments" and "centroids" not in results):
+            client.append(r)
+        else:
+            worker.append(r)
+    if mc_on_client and "tolerance" not in client:
+        client.append("tolerance")
+    return client, worker, mc_on_client
+
+
+def _worker_scene(scene, recording: Path, mc_on_client: bool):
+    """A copy of ``scene`` reading ``recording``, with the per-recording results only."""
+    _, worker, _ = split_results(scene)
+    s = copy.copy(scene)
+    s.input = {"recording": Path(recording)}
+    s.results = worker
+    if mc_on_client:
+        s.tolerances = None  # the band comes from the client's Monte Carlo
+    return s
+
+
+def _client_scene(scene):
+    client, _, _ = split_results(scene)
+    s = copy.copy(scene)
+    s.input = {}
+    s.results = client
+    return s
+
+
+def _bands(mc) -> dict:
+    """The phasing band around the ideal per gauge, as :func:`stages.stage_compare` builds it."""
+    out = {}
+    for gear, ave, dev in (("sun", mc.ave_s, mc.dev_s), ("ring", mc.ave_r, mc.dev_r)):
+        lo = ave.bound3[0] - dev.bound3[1] / 2
+        hi = ave.bound3[1] + dev.bound3[1] / 2
+        out[gear] = {"lo": [float(v) for v in lo], "hi": [float(v) for v in hi]}
+    return out
+
+
+def _apply_bands(ctx, bands: dict) -> None:
+    """Band coverage of each gauge's passes, given the client's Monte Carlo band."""
+    import numpy as np
+
+    from .compare import band_coverage
+
+    comp = ctx.results.get("compare") or {}
+    tables = ctx.results.get("phasing", {}).get("tables", {})
+    ideal = ctx.results.get("ideal") or {}
+    for gear, row in comp.items():
+        if gear not in bands or gear not in tables or not ideal:
+            continue
+        tab = tables[gear]
+        lo, hi = np.asarray(bands[gear]["lo"]), np.asarray(bands[gear]["hi"])
+        try:
+            row["band"] = {"lo": lo, "hi": hi}
+            row["coverage"] = band_coverage(tab.gamma, tab.planet,
+                                            ideal["gamma_s" if gear == "sun" else "gamma_r"], lo, hi)
+        except ValueError as exc:
+            ctx.messages.append(f"compare: band coverage of the {gear} gauge: {exc}")
+
+
+# ---------------------------------------------------------------------------- the task
+def _warm_up() -> int:
+    """Import the processing stack in a worker (so task wall times measure processing)."""
+    import pipeline.compare  # noqa: F401
+    import pipeline.condition  # noqa: F401
+    import pipeline.io  # noqa: F401
+    import pipeline.loads  # noqa: F401
+    import pipeline.models.mesh_phasing  # noqa: F401
+    import pipeline.onsets  # noqa: F401
+    import pipeline.phasing  # noqa: F401
+    import pipeline.stages  # noqa: F401
+    from pipeline.io import FORMATS, get_format
+
+    for name in FORMATS:  # the readers import h5py, mcap, pandas, npTDMS
+        get_format(name)
+    return os.getpid()
+
+
+def _compact(summary: dict) -> dict:
+    """The per-recording numbers the combined report needs, from :func:`summary_dict`."""
+    out: dict = {}
+    rec = summary.get("recording")
+    if rec:
+        out["recording_info"] = {"fs_hz": rec.get("fs_hz"), "n_samples": rec.get("n_samples"),
+                                 "duration_s": rec.get("duration_s"),
+                                 "n_channels": len(rec.get("channels") or [])}
+    if "ideal" in summary:
+        out["ideal"] = {"gamma_s": summary["ideal"]["gamma_s"], "gamma_r": summary["ideal"]["gamma_r"]}
+    if "phasing" in summary:
+        out["phasing"] = {g: {"n_passes": v["n_passes"], "per_planet": v["per_planet"]}
+                          for g, v in summary["phasing"].items()}
+    if summary.get("load_sharing") is not None:
+        out["load_sharing"] = summary["load_sharing"]
+    if "compare" in summary:
+        comp = {}
+        for g, c in summary["compare"].items():
+            comp[g] = {"rms_vs_ideal": (c.get("vs_ideal") or {}).get("rms"),
+                       "rms_vs_model": (c.get("vs_model") or {}).get("rms"),
+                       "coverage": (c.get("coverage") or {}).get("inside_fraction"),
+                       "rms_vs_truth": (c.get("vs_truth") or {}).get("rms")}
+        out["compare"] = comp
+    if "identify" in summary:
+        i = summary["identify"]
+        out["identify"] = {k: i.get(k) for k in ("rms_before", "rms_after", "n_passes", "identifiable")}
+    if summary.get("centroids_m"):
+        out["centroids_m"] = summary["centroids_m"]
+    if "bearing_moments" in summary:
+        out["bearing_moments"] = summary["bearing_moments"]
+    return out
+
+
+def run_recording(scene_path: str, recording_path: str, out_dir: str, *, bands: dict | None = None,
+                  recording_report: bool = False) -> dict:
+    """Process one recording of a campaign (the Dask task; also callable directly).
+
+    Loads the scene, replaces its ``[input]`` by the recording, keeps the per-recording
+    results (:func:`split_results`), runs them, writes ``summary.json``, the pass CSVs,
+    ``stages.csv`` and ``arrays.h5`` (plus ``report.html`` when ``recording_report``) into
+    ``out_dir`` and returns a small JSON-friendly dict. It never raises for a bad recording:
+    any exception becomes ``status = "failed"`` with its message.
+
+    Parameters
+    ----------
+    scene_path, recording_path, out_dir : str
+        Paths as seen by the worker (created: ``out_dir``).
+    bands : dict, optional
+        ``{gauge: {"lo": [...], "hi": [...]}}``, the tolerance band of the deviation from the
+        ideal phasing per planet [mesh cycles] from the client's Monte Carlo; the band
+        coverage of the passes is computed with it.
+    recording_report : bool
+        Also build this recording's HTML report (slower; see the module notes).
+
+    Returns
+    -------
+    dict
+        ``recording``, ``name``, ``out_dir``, ``status`` ("ok", "partial": some stage failed,
+        "failed": nothing usable), ``error`` (None or the message), ``format``,
+        ``wall_time_s`` and ``cpu_time_s`` (this process's CPU time) [s], ``worker``,
+        ``timings_s``, ``stages_ran``, ``stages_failed``,
+        ``messages``, ``files`` and the compact results (``phasing``, ``load_sharing``,
+        ``compare``, ``identify``, ``ideal``, ``recording_info`` ... when computed).
+    """
+    t0, c0 = time.perf_counter(), time.process_time()
+    rec_path = Path(recording_path)
+    out: dict = {"recording": str(recording_path), "name": Path(out_dir).name, "out_dir": str(out_dir),
+                 "status": "failed", "error": None, "format": None, "wall_time_s": float("nan"),
+                 "worker": f"{socket.gethostname()}:{os.getpid()}", "timings_s": {},
+                 "stages_ran": [], "stages_failed": {}, "messages": [], "files": {}}
+    try:
+        from .io import detect_format
+        from .scene import load_scene
+        from .stages import run_scene, summary_dict, write_outputs
+
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                out["format"] = detect_format(rec_path)
+            except (ValueError, OSError) as exc:
+                out["error"] = f"{type(exc).__name__}: {exc}"
+            scene = load_scene(scene_path)
+            _, _, mc_on_client = split_results(scene)
+            scene = _worker_scene(scene, rec_path, mc_on_client and bands is not None)
+            ctx = run_scene(scene)
+            if bands:
+                _apply_bands(ctx, bands)
+            d = Path(out_dir)
+            d.mkdir(parents=True, exist_ok=True)
+            files = write_outputs(ctx, d, report=recording_report)
+        out["files"] = {k: str(v) for k, v in files.items()}
+        summ = summary_dict(ctx)
+        out.update(_compact(summ))
+        out["timings_s"] = summ["timings_s"]
+        out["stages_ran"] = list(ctx.ran)
+        out["stages_failed"] = dict(ctx.failed)
+        msgs = list(ctx.messages)
+        for w in caught:
+            m = f"{w.category.__name__}: {w.message}"
+            if not any(m in x for x in msgs):
+                msgs.append(m)
+        out["messages"] = msgs
+        # "skipped: ..." entries follow from another stage's error (or are benign, e.g. no
+        # face-width gauges); the errors themselves decide the status
+        errors = {k: v for k, v in ctx.failed.items() if not str(v).startswith("skipped:")}
+        if "load" in ctx.failed:
+            out["status"], out["error"] = "failed", f"load: {ctx.failed['load']}"
+        elif errors:
+            out["status"] = "partial"
+            out["error"] = "; ".join(f"{k}: {v}" for k, v in errors.items())
+        else:
+            out["status"], out["error"] = "ok", None
+    except Exception as exc:  # noqa: BLE001 - the task must report, never kill the campaign
+        out["status"] = "failed"
+        out["error"] = f"{type(exc).__name__}: {exc}"
+        out["traceback"] = traceback.format_exc(limit=8)
+        logger.warning("campaign: %s failed: %s", recording_path, out["error"])
+    out["wall_time_s"] = time.perf_counter() - t0
+    out["cpu_time_s"] = time.process_time() - c0
+    return out
+
+
+def _failed_record(path: Path, name: str, out_dir: Path, error: str) -> dict:
+    return {"recording": str(path), "name": name, "out_dir": str(out_dir), "status": "failed",
+            "error": error, "format": None, "wall_time_s": float("nan"), "worker": None,
+            "timings_s": {}, "stages_ran": [], "stages_failed": {}, "messages": [], "files": {}}
+
+
+# ---------------------------------------------------------------------------- tables
+def campaign_rows(records: list[dict]) -> list[dict]:
+    """One flat row per recording (the columns of ``campaign.csv``).
+
+    Columns: name, recording, format, status, error, duration_s, wall_time_s, worker,
+    passes_<gauge>, rms_vs_ideal_<gauge>, rms_vs_model_<gauge>, coverage_<gauge>,
+    gamma_mean_<gauge>_p<k>, gamma_std_<gauge>_p<k> [mesh cycles], load_sharing_p<k>,
+    load_sharing_se_p<k> [-], identify_rms_after, n_messages, out_dir.
+
+    Parameters
+    ----------
+    records : list of dict
+        What :func:`run_recording` returns.
+
+    Returns
+    -------
+    list of dict
+    """
+    if not isinstance(records, (list, tuple)):
+        raise TypeError(f"records must be a list of dicts, got {type(records).__name__}")
+    rows = []
+    for r in records:
+        if not isinstance(r, dict):
+            raise TypeError(f"records must hold dicts, got {type(r).__name__} {r!r}")
+        info = r.get("recording_info") or {}
+        row = {"name": r.get("name"), "recording": r.get("recording"), "format": r.get("format"),
+               "status": r.get("status"), "error": r.get("error") or "",
+               "duration_s": info.get("duration_s"), "wall_time_s": r.get("wall_time_s"),
+               "worker": r.get("worker")}
+        for gear in ("sun", "ring"):
+            ph = (r.get("phasing") or {}).get(gear)
+            row[f"passes_{gear}"] = None if ph is None else ph.get("n_passes")
+            c = (r.get("compare") or {}).get(gear) or {}
+            row[f"rms_vs_ideal_{gear}"] = c.get("rms_vs_ideal")
+            row[f"rms_vs_model_{gear}"] = c.get("rms_vs_model")
+            row[f"coverage_{gear}"] = c.get("coverage")
+            for k, v in sorted(((ph or {}).get("per_planet") or {}).items(), key=lambda kv: int(kv[0])):
+                row[f"gamma_mean_{gear}_p{k}"] = v.get("mean")
+                row[f"gamma_std_{gear}_p{k}"] = v.get("std")
+        for ls in r.get("load_sharing") or []:
+            row[f"load_sharing_p{ls['planet']}"] = ls.get("load_sharing")
+            row[f"load_sharing_se_p{ls['planet']}"] = ls.get("std_error")
+        row["identify_rms_after"] = (r.get("identify") or {}).get("rms_after")
+        row["n_messages"] = len(r.get("messages") or [])
+        row["out_dir"] = r.get("out_dir")
+        rows.append(row)
+    # one column set and order for every row: fixed columns, then per planet, then the tail
+    tail = ["identify_rms_after", "n_messages", "out_dir"]
+    keys = list(dict.fromkeys(k for row in rows for k in row))
+    fixed = [k for k in keys if not k.startswith(("gamma_", "load_sharing_")) and k not in tail]
+
+    def planet_key(k):
+        kind, _, p = k.rpartition("_p")
+        return (k.startswith("load_sharing"), kind.split("_")[-1] if k.startswith("gamma") else "",
+                int(p), kind)
+
+    per_planet = sorted((k for k in keys if k.startswith(("gamma_", "load_sharing_"))), key=planet_key)
+    order = fixed + per_planet + tail
+    return [{k: row.get(k) for k in order} for row in rows]
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, Path):
+        return str(v)
+    return v
+
+
+# ---------------------------------------------------------------------------- the campaign
+def _cores() -> int:
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = None,
+                 workers: int | None = None, overwrite: bool = False, progress: bool = True,
+                 recording_reports: bool = False,
+                 task: Callable[..., dict] | None = None) -> dict:
+    """Process many recordings with one scene as one Dask job.
+
+    Parameters
+    ----------
+    scene_path : str or Path
+        Scene TOML; its ``[input]`` is replaced by each recording.
+    inputs : list of str or Path
+        Recording files and/or folders (:func:`collect_recordings`).
+    out_dir : str or Path, optional
+        Campaign output folder (default ``<scene stem>-campaign`` next to the scene). An
+        existing folder is never overwritten unless ``overwrite``: ``-2``, ``-3`` ... instead.
+    scheduler : str, optional
+        Address of an existing Dask scheduler (``tcp://host:8786``); its workers need
+        meshphase and the same paths. Default: a LocalCluster on this machine.
+    workers : int, optional
+        LocalCluster worker processes (one thread each); default one per core.
+    overwrite : bool
+        Reuse ``out_dir`` if it exists.
+    progress : bool
+        A tqdm progress bar (recordings done) on stderr.
+    recording_reports : bool
+        Also write each recording's HTML report (default False: see the module notes).
+    task : callable, optional
+        The per-recording function, ``task(scene_path, recording_path, out_dir, **kw) ->
+        dict`` (default :func:`run_recording`); must be importable by the workers.
+
+    Returns
+    -------
+    dict
+        ``scene``, ``scene_path``, ``out_dir``, ``cluster`` (``scheduler``, ``n_workers``,
+        ``local``), ``timing_s`` (``total``, ``scene_level``, ``cluster_start``,
+        ``processing``, ``report``), ``counts`` (ok / partial / failed), ``skipped_inputs``,
+        ``scene_level`` (summary of the client-side results or None), ``recordings`` (one
+        dict per recording, in input order) and ``files`` (campaign.json, campaign.csv,
+        campaign_report.html).
+
+    Raises
+    ------
+    FileNotFoundError
+        The scene, or a named recording / folder, does not exist.
+    ValueError
+        No recording found, a bad scene, bad ``workers``, or an unreachable scheduler.
+    TypeError
+        Arguments of the wrong type.
+    """
+    t_all = time.perf_counter()
+    from .scene import load_scene, plan
+    from .stages import new_output_dir, run_scene, summary_dict, write_outputs
+
+    if scheduler is not None and not isinstance(scheduler, str):
+        raise TypeError(f"scheduler must be an address string like 'tcp://host:8786', got "
+                        f"{type(scheduler).__name__} {scheduler!r}")
+    if workers is not None:
+        workers = as_positive_int(workers, "workers")
+        if scheduler is not None:
+            raise ValueError(f"workers={workers} applies to the local cluster only; the cluster at "
+                             f"{scheduler!r} has its own workers")
+    task = run_recording if task is None else task
+    if not callable(task):
+        raise TypeError(f"task must be callable, got {type(task).__name__}")
+    scene_path = Path(scene_path).resolve()
+    scene = load_scene(scene_path)  # FileNotFoundError / SceneError (a ValueError) up front
+    if not isinstance(inputs, (str, bytes, os.PathLike)):
+        inputs = list(inputs)  # read twice below: a generator would be empty the second time
+    files, skipped = collect_recordings(inputs)
+    if not files:
+        left = [Path(s["path"]).name for s in skipped]
+        raise ValueError(f"no recording files found in inputs {[str(i) for i in inputs]!r}"
+                         + (f" (left out: {', '.join(left[:8])}{', ...' if len(left) > 8 else ''})"
+                            if left else ""))
+    client_results, worker_results, mc_on_client = split_results(scene)
+    if not worker_results:
+        raise ValueError(f"scene {scene_path.name}: results {scene.results} need no recording; "
+                         "a campaign needs per-recording results (phasing, load_sharing, compare, "
+                         "identify, centroids); use `meshphase run` for this scene")
+    plan(_worker_scene(scene, files[0], mc_on_client))  # the worker scene validates here, once
+    names = recording_names(files)
+    base = Path(out_dir) if out_dir is not None else scene_path.with_name(scene_path.stem + "-campaign")
+    out = new_output_dir(base, overwrite=overwrite).resolve()
+    timing: dict[str, float] = {}
+
+    # --- scene-level results, once, on the client
+    t = time.perf_counter()
+    scene_level = None
+    bands = None
+    if client_results:
+        sctx = run_scene(_client_scene(scene))
+        sdir = out / SCENE_DIR_NAME
+        sdir.mkdir(exist_ok=True)
+        write_outputs(sctx, sdir, report=False)
+        scene_level = summary_dict(sctx)
+        if mc_on_client and "tolerance" in sctx.results:
+            bands = _bands(sctx.results["tolerance"])
+            scene_level["bands"] = bands
+        elif mc_on_client:
+            logger.warning("campaign: the tolerance Monte Carlo failed (%s); no band coverage",
+                           sctx.failed.get("tolerance"))
+    timing["scene_level"] = time.perf_counter() - t
+
+    # --- the Dask job
+    import dask
+    from distributed import Client, LocalCluster, as_completed
+    from tqdm import tqdm
+
+    records: dict[int, dict] = {}
+    cluster = None
+    t = time.perf_counter()
+    # distributed logs cluster life (start, connections, close) at INFO; show it only when
+    # our own logger is verbose (meshphase -v)
+    dlog = logging.getLogger("distributed")
+    old_level = dlog.level
+    if not logger.isEnabledFor(logging.INFO):
+        dlog.setLevel(logging.WARNING)
+    try:
+        if scheduler is None:
+            n = workers or _cores()
+            # worker-saturation 1.0: a worker holds only the task it runs (inputs are paths,
+            # prefetching buys nothing); when a worker dies, only that task is suspect, not
+            # one queued behind it
+            with dask.config.set({"distributed.scheduler.worker-saturation": 1.0}):
+                # ":0": the scheduler's HTTP server (always started) on a free port, so
+                # that campaigns side by side never fight over 8787
+                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                       dashboard_address=":0")
+            client = Client(cluster)
+        else:
+            try:
+                client = Client(scheduler)
+            except OSError as exc:
+                raise ValueError(f"scheduler {scheduler!r}: cannot connect: {exc}") from None
+        with client:
+            try:
+                pids = client.run(_warm_up)
+            except ImportError as exc:
+                raise ValueError(f"the workers of {client.scheduler.address} cannot import "
+                                 f"meshphase ({exc}); install it where the workers run") from None
+            n_workers = len(pids)
+            if not n_workers:
+                logger.warning("campaign: the cluster at %s has no workers yet; the tasks wait "
+                               "for workers to join", client.scheduler.address)
+            address = client.scheduler.address
+            timing["cluster_start"] = time.perf_counter() - t
+            t = time.perf_counter()
+            kw = {"bands": bands, "recording_report": recording_reports}
+            token = uuid.uuid4().hex[:10]  # task keys unique on a shared scheduler
+            # one map call = one graph: the tasks form one group, which the scheduler queues
+            # (root-ish tasks) when there are more than twice as many as worker threads
+            futs = client.map(task, [str(scene_path)] * len(files), [str(p) for p in files],
+                              [str(out / n) for n in names],
+                              key=[f"meshphase-{token}-{i}-{n}" for i, n in enumerate(names)],
+                              pure=False, **kw)
+            futures = {f: i for i, f in enumerate(futs)}
+            n_failed = 0
+            with tqdm(total=len(futures), desc="recordings", unit="rec", disable=not progress,
+                      file=sys.stderr, leave=False) as bar:
+                for f in as_completed(list(futures)):
+                    i = futures[f]
+                    if f.status == "finished":
+                        rec = f.result()
+                    else:  # a worker died, the task was cancelled, or the task itself raised
+                        exc = f.exception() if f.status == "error" else None
+                        err = (f"{type(exc).__name__}: {exc}" if exc is not None else
+                               f"dask future {f.status}")
+                        rec = _failed_record(files[i], names[i], out / names[i], f"task lost: {err}")
+                        logger.warning("campaign: %s: %s", files[i], rec["error"])
+                    if not isinstance(rec, dict):
+                        rec = _failed_record(files[i], names[i], out / names[i],
+                                             f"task returned {type(rec).__name__}, not a dict")
+                    records[i] = rec
+                    n_failed += rec.get("status") == "failed"
+                    bar.set_postfix_str(f"failed {n_failed}")
+                    bar.update(1)
+                    f.release()
+            timing["processing"] = time.perf_counter() - t
+    finally:
+        if cluster is not None:
+            cluster.close()
+        dlog.setLevel(old_level)
+    recs = [records[i] for i in range(len(files))]
+
+    # --- combined outputs
+    t = time.perf_counter()
+    counts = {s: sum(r.get("status") == s for r in recs) for s in ("ok", "partial", "failed")}
+    result = {"scene": scene.name, "scene_path": str(scene_path), "out_dir": str(out),
+              "inputs": [str(i) for i in inputs], "skipped_inputs": skipped,
+              "cluster": {"scheduler": address, "n_workers": n_workers, "local": scheduler is None},
+              "results_client": client_results, "results_per_recording": worker_results,
+              "counts": counts, "timing_s": timing, "scene_level": scene_level, "recordings": recs}
+    import pandas as pd
+
+    csv_path = out / "campaign.csv"
+    pd.DataFrame(campaign_rows(recs)).to_csv(csv_path, index=False)
+    from .report.campaign_report import build_campaign_report
+
+    report_path = build_campaign_report(result, out)
+    timing["report"] = time.perf_counter() - t
+    timing["total"] = time.perf_counter() - t_all
+    json_path = out / "campaign.json"
+    result["files"] = {"campaign.json": str(json_path), "campaign.csv": str(csv_path),
+                       "campaign_report.html": str(report_path)}
+    json_path.write_text(json.dumps(_jsonable(result), indent=2))
+    logger.info("campaign %s: %d ok, %d partial, %d failed in %.1f s -> %s", scene.name,
+                counts["ok"], counts["partial"], counts["failed"], timing["total"], out)
+    return result
+
+
+def cli_campaign(scene_path, inputs: list[str], *, scheduler: str | None = None,
+                 workers: int | None = None, out=None, overwrite: bool = False,
+                 progress: bool = True, recording_reports: bool = False) -> dict:
+    """``meshphase campaign SCENE DIR...``: :func:`run_campaign` with the CLI's arguments.
+
+    Parameters
+    ----------
+    scene_path : str
+    inputs : list of str
+        Recording files and/or folders.
+    scheduler : str, optional
+        Dask scheduler address (``--scheduler``); default a LocalCluster.
+    workers : int, optional
+        LocalCluster worker processes (``--workers``); default one per core.
+    out : str, optional
+        Output folder (``--out``); default ``<scene stem>-campaign`` next to the scene.
+    overwrite : bool
+    progress : bool
+    recording_reports : bool
+        ``--recording-reports``: an HTML report per recording too.
+
+    Returns
+    -------
+    dict
+        As :func:`run_campaign`.
+    """
+    return run_campaign(scene_path, list(inputs), out, scheduler=scheduler, workers=workers,
+                        overwrite=overwrite, progress=progress, recording_reports=recording_reports)
+
+
+# ---------------------------------------------------------------------------- speed-up
+def _finite_sum(values) -> float:
+    return float(sum(v for v in values if isinstance(v, (int, float)) and math.isfinite(v)))
+
+
+def measure_speedup(n_recordings: int = 8, minutes: float = 2.0, workers=(1, 2), *,
+                    repeats: int = 1, scenario: str = "noisy", scene_path=None, work_dir=None,
+                    seed: int = 0, progress: bool = False) -> dict:
+    """Time the same campaign with different numbers of local worker processes.
+
+    ``n_recordings`` synthetic recordings of ``scenario`` (HDF5, seeds ``seed`` ...) are
+    generated once, then the campaign runs once per entry of ``workers`` on a fresh
+    LocalCluster (one single-threaded process per worker), each into its own folder; with
+    ``repeats`` > 1 the worker counts are interleaved (1, 2, 1, 2, ...) and the speed-ups
+    use the shortest time per worker count (other work on the machine only ever adds time).
+
+    Parameters
+    ----------
+    n_recordings : int
+        Recordings in the campaign.
+    minutes : float
+        Length of each recording [min].
+    workers : sequence of int
+        Worker counts to time; the first is the reference of the speed-ups.
+    repeats : int
+        Timed runs per worker count.
+    scenario : str
+        Synthetic scenario (:data:`synthetic.SCENARIOS`).
+    scene_path : str or Path, optional
+        Scene to run (default: the demo scene, :data:`pipeline.demo.DEMO_SCENE`).
+    work_dir : str or Path, optional
+        Where recordings and outputs go (default: a temporary folder, removed afterwards).
+    seed : int
+        Seed of the first recording.
+    progress : bool
+
+    Returns
+    -------
+    dict
+        ``n_recordings``, ``minutes``, ``cores``, ``runs`` (per worker count: ``workers``,
+        ``wall_s`` total incl. cluster start, ``cluster_start_s``, ``processing_s``
+        (first submit to last result), ``scene_level_s``, ``report_s``, ``task_sum_s`` and
+        ``task_cpu_sum_s`` (sums of the tasks' own wall and CPU times: their ratio shows
+        contention for the cores), ``n_ok``, ``n_failed``), ``loadavg`` (the machine's load
+        before the first run: other work on the cores distorts the numbers), and
+        ``speedup`` / ``processing_speedup`` per worker count relative to the first.
+    """
+    n_recordings = as_positive_int(n_recordings, "n_recordings")
+    minutes = as_positive(minutes, "minutes")
+    repeats = as_positive_int(repeats, "repeats")
+    if isinstance(workers, (int, str)) or not hasattr(workers, "__iter__"):
+        raise TypeError(f"workers must be a sequence of ints, got {workers!r}")
+    workers = [as_positive_int(w, "workers") for w in workers]
+    if not workers:
+        raise ValueError("workers must name at least one worker count, got an empty sequence")
+    from synthetic import cli_synth
+    from synthetic.scenarios import SCENARIOS
+
+    if scenario not in SCENARIOS:
+        raise ValueError(f"scenario must be one of {sorted(SCENARIOS)}, got {scenario!r}")
+    tmp = None
+    if work_dir is None:
+        tmp = tempfile.TemporaryDirectory(prefix="meshphase-speedup-")
+        work = Path(tmp.name)
+    else:
+        work = Path(work_dir)
+        work.mkdir(parents=True, exist_ok=True)
+    try:
+        rec_dir = work / "recordings"
+        rec_dir.mkdir(exist_ok=True)
+        for k in range(n_recordings):
+            p = rec_dir / f"{scenario}_{k:03d}.h5"
+            if not p.exists():
+                cli_synth(scenario, p, minutes=minutes, seed=seed + k, progress=False)
+        if scene_path is None:
+            from .demo import DEMO_SCENE
+
+            scene_path = work / "speedup_scene.toml"
+            scene_path.write_text(DEMO_SCENE, encoding="utf-8")
+        # warm the client up (imports, numba compilation of the Monte Carlo kernel) so that
+        # the first timed run does not pay for what the later ones get for free
+        import distributed  # noqa: F401
+
+        from .report import campaign_report  # noqa: F401
+        from .scene import load_scene
+        from .stages import run_scene
+
+        warm = _client_scene(load_scene(scene_path))
+        if warm.results:
+            run_scene(warm)
+        runs = []
+        load0 = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
+        for rep, w in ((rep, w) for rep in range(repeats) for w in workers):
+            res = run_campaign(scene_path, [rec_dir], work / f"campaign-{w}w", workers=w,
+                               progress=progress)
+            tm = res["timing_s"]
+            runs.append({"workers": w, "repeat": rep, "wall_s": tm["total"],
+                         "cluster_start_s": tm["cluster_start"],
+                         "processing_s": tm["processing"], "scene_level_s": tm["scene_level"],
+                         "report_s": tm["report"],
+                         "task_sum_s": _finite_sum(r.get("wall_time_s") for r in res["recordings"]),
+                         "task_cpu_sum_s": _finite_sum(r.get("cpu_time_s") for r in res["recordings"]),
+                         "n_ok": res["counts"]["ok"], "n_failed": res["counts"]["failed"]})
+            logger.info("speed-up: %d worker(s): %.1f s total, %.1f s processing", w,
+                        tm["total"], tm["processing"])
+        best = {w: min(r["wall_s"] for r in runs if r["workers"] == w) for w in workers}
+        best_p = {w: min(r["processing_s"] for r in runs if r["workers"] == w) for w in workers}
+        ref = workers[0]
+        return {"n_recordings": n_recordings, "minutes": minutes, "scenario": scenario,
+                "repeats": repeats, "cores": _cores(), "loadavg": list(load0), "runs": runs,
+                "best_wall_s": best, "best_processing_s": best_p,
+                "speedup": {w: best[ref] / best[w] for w in workers},
+                "processing_speedup": {w: best_p[ref] / best_p[w] for w in workers}}
+    finally:
+        if tmp is not None:
+            tmp.cleanup()

@@ -1,0 +1,401 @@
+"""`meshphase campaign`: many recordings, one scene, one Dask job.
+
+The recordings are generated in code (20 s of the seed rig, a few MB each) in three formats,
+plus a truncated HDF5 file that must be reported as failed while the others finish. The Dask
+runs use real worker processes (LocalCluster, processes=True): one run lets the campaign
+start its own cluster (the default path), the others share one module-scoped cluster through
+its scheduler address (the ``--scheduler`` path). Numbers compared between recordings are
+regression values of our own pipeline, not paper values.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pipeline import campaign as cp
+from pipeline.report import campaign_report as crep
+from pipeline.scene import load_scene
+
+SCENE = """\
+name = "campaign test scene"
+results = ["ideal_phasing", "phasing", "load_sharing", "compare", "tolerance"]
+
+[gearset]
+name = "seed 000 rig"
+z_sun = 25
+z_ring = 87
+z_planet = 31
+n_planets = 4
+carrier_radius_mm = 112.5
+face_width_mm = 40
+direction = "cw"
+
+[speeds]
+sun_rpm = 18.19
+carrier_rpm = 1.06
+
+[input]
+synthetic = "seed_rig"
+minutes = 0.1
+
+[tolerances]
+e_sun_mm = 0.2
+e_ring_mm = 0.5
+e_planet_mm = 0.2
+samples = 512
+sampler = "sobol"
+"""
+
+GOOD = ("rig_a.h5", "rig_b.csv", "rig_c.mcap")
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    """Scene + a folder with 3 good recordings (hdf5, csv, mcap; truth sidecars beside
+    them) and one truncated HDF5 file."""
+    from synthetic import cli_synth
+
+    root = tmp_path_factory.mktemp("campaign")
+    scene = root / "scene.toml"
+    scene.write_text(SCENE)
+    rec = root / "recordings"
+    rec.mkdir()
+    for k, name in enumerate(GOOD):
+        cli_synth("seed_rig", rec / name, minutes=20 / 60, seed=10 + k, progress=False)
+    raw = (rec / "rig_a.h5").read_bytes()
+    (rec / "broken.h5").write_bytes(raw[: len(raw) // 3])  # HDF5 magic intact, body cut off
+    return {"root": root, "scene": scene, "recordings": rec}
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """One LocalCluster (2 single-threaded worker processes) shared through its address.
+
+    ``allowed-failures = 0``: a task whose worker dies is not retried on another worker (the
+    default retries 3 times, each costing a worker restart), so the worker-death test is
+    quick; ``worker-saturation = 1.0`` (as the campaign's own cluster): no task waits queued on
+    the dying worker, where it would count as a failure too. ``dashboard_address=":0"``: the
+    scheduler's HTTP server always starts; on a free port it never warns "Port 8787 is already
+    in use" (a UserWarning, an error here) when another cluster runs on this machine.
+    """
+    import dask
+    from distributed import LocalCluster
+
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0,
+                          "distributed.scheduler.worker-saturation": 1.0}):
+        cl = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0")
+    yield cl
+    cl.close()
+
+
+# ---------------------------------------------------------------------------- the task
+def test_run_recording_good_and_corrupt_in_process(data, tmp_path):
+    """The task itself, no Dask: results for a good file, a failure (with the reader's
+    message) for a truncated one, JSON-friendly either way, band coverage from given bands."""
+    bands = {"sun": {"lo": [-0.05] * 4, "hi": [0.05] * 4}, "ring": {"lo": [-0.05] * 4, "hi": [0.05] * 4}}
+    good = cp.run_recording(str(data["scene"]), str(data["recordings"] / "rig_a.h5"),
+                            str(tmp_path / "a"), bands=bands)
+    assert good["status"] == "ok", good["error"]
+    assert good["format"] == "hdf5"
+    assert good["phasing"]["sun"]["n_passes"] > 0
+    assert good["compare"]["sun"]["coverage"] == pytest.approx(1.0)  # +-0.05 cycles holds all passes
+    assert "tolerance" not in good["stages_ran"]  # the Monte Carlo is the client's job
+    assert (tmp_path / "a" / "summary.json").is_file() and not (tmp_path / "a" / "report.html").exists()
+    json.dumps(good, allow_nan=True)
+    bad = cp.run_recording(str(data["scene"]), str(data["recordings"] / "broken.h5"), str(tmp_path / "b"))
+    assert bad["status"] == "failed"
+    assert "broken.h5" in bad["error"] and "HDF5" in bad["error"]
+    json.dumps(bad, allow_nan=True)
+    missing = cp.run_recording(str(data["scene"]), str(tmp_path / "nope.h5"), str(tmp_path / "c"))
+    assert missing["status"] == "failed" and "nope.h5" in missing["error"]
+    noscene = cp.run_recording(str(tmp_path / "no_scene.toml"), str(data["recordings"] / "rig_a.h5"),
+                               str(tmp_path / "d"))
+    assert noscene["status"] == "failed" and "FileNotFoundError" in noscene["error"]
+
+
+# ---------------------------------------------------------------------------- Dask runs
+def test_campaign_default_local_cluster(data, tmp_path, capsys):
+    """The default path: the campaign starts a 2-process LocalCluster, every good recording
+    has results, the truncated one is failed with its message, the combined outputs name all."""
+    out = tmp_path / "camp"
+    res = cp.cli_campaign(str(data["scene"]), [str(data["recordings"])], workers=2, out=str(out),
+                          progress=True)
+    assert "recordings" in capsys.readouterr().err  # the tqdm bar went to stderr
+    by = {Path(r["recording"]).name: r for r in res["recordings"]}
+    assert set(by) == set(GOOD) | {"broken.h5"}  # sidecars (*.truth.json) were skipped
+    assert {Path(s["path"]).name for s in res["skipped_inputs"]} == {g + ".truth.json" for g in GOOD}
+    for name in GOOD:
+        r = by[name]
+        assert r["status"] == "ok", r["error"]
+        assert r["phasing"]["sun"]["per_planet"], name
+        assert r["compare"]["sun"]["coverage"] is not None  # band from the client's Monte Carlo
+        assert (out / r["name"] / "summary.json").is_file()
+    assert {by[n]["format"] for n in GOOD} == {"hdf5", "csv", "mcap"}
+    # the same signal in three formats (different seeds): regression check that they agree
+    # to well within the pass-to-pass scatter of 1e-2 cycles
+    means = [by[n]["phasing"]["sun"]["per_planet"]["3"]["mean"] for n in GOOD]
+    assert np.ptp(means) < 1e-2
+    assert by["broken.h5"]["status"] == "failed"
+    assert "broken.h5" in by["broken.h5"]["error"] and "truncated" in by["broken.h5"]["error"]
+    assert res["counts"] == {"ok": 3, "partial": 0, "failed": 1}
+    assert res["cluster"]["local"] and res["cluster"]["n_workers"] == 2
+    assert len({r["worker"] for r in res["recordings"]}) == 2  # both processes did work
+    assert res["results_client"] == ["tolerance"]
+    assert (out / "scene" / "summary.json").is_file()
+    saved = json.loads((out / "campaign.json").read_text())
+    assert [r["name"] for r in saved["recordings"]] == [r["name"] for r in res["recordings"]]
+    csv = (out / "campaign.csv").read_text().splitlines()
+    assert len(csv) == 5 and csv[0].startswith("name,recording,format,status,error")
+    html = (out / "campaign_report.html").read_text()
+    for r in res["recordings"]:
+        assert r["name"] in html
+    assert "truncated" in html and "Phasing per planet" in html
+
+
+def _die_on_rig_b(scene_path, recording_path, out_dir, **kw):
+    """A task whose worker process dies on one recording (as a segfault or the OOM killer would)."""
+    if Path(recording_path).name == "rig_b.csv":
+        os._exit(3)
+    return cp.run_recording(scene_path, recording_path, out_dir, **kw)
+
+
+def test_campaign_on_existing_scheduler_dying_worker_and_no_overwrite(data, cluster, tmp_path):
+    """``--scheduler ADDRESS``: an existing cluster is used and left running.
+
+    A worker process dying under one recording fails that recording only. Five tasks on 2
+    worker threads are more than twice the threads, so the scheduler queues them and a worker
+    holds only the task it runs (fewer are assigned eagerly, and a task waiting on the dying
+    worker would count as killed too; with the default allowed-failures = 3 it would be
+    retried instead, at the cost of worker restarts). A second run into the same folder goes
+    to ``-2`` and leaves the first untouched.
+    """
+    import cloudpickle
+
+    files = [data["recordings"] / n for n in GOOD]
+    for k, src in enumerate(files[::2]):  # two more recordings: copies under other names
+        dst = tmp_path / f"copy_{k}{src.suffix}"
+        dst.write_bytes(src.read_bytes())
+        files.append(dst)
+    out = tmp_path / "camp"
+    # the workers cannot import this test module: ship the task function by value
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])
+    try:
+        r1 = cp.run_campaign(data["scene"], files, out, scheduler=cluster.scheduler_address,
+                             progress=False, task=_die_on_rig_b)
+    finally:
+        cloudpickle.unregister_pickle_by_value(sys.modules[__name__])
+    by = {Path(r["recording"]).name: r for r in r1["recordings"]}
+    assert by["rig_b.csv"]["status"] == "failed"
+    assert "KilledWorker" in by["rig_b.csv"]["error"]
+    assert all(by[f.name]["status"] == "ok" for f in files if f.name != "rig_b.csv"), \
+        {k: v["error"] for k, v in by.items()}
+    assert "rig_b" in (out / "campaign_report.html").read_text()
+    assert not r1["cluster"]["local"] and r1["cluster"]["scheduler"] == cluster.scheduler_address
+    first = (out / "campaign.json").read_bytes()
+    r2 = cp.run_campaign(data["scene"], [files[0], data["recordings"] / "broken.h5"], out,
+                         scheduler=cluster.scheduler_address, progress=False)
+    assert Path(r1["out_dir"]) == out.resolve()
+    assert Path(r2["out_dir"]) == Path(f"{out}-2").resolve()
+    assert (out / "campaign.json").read_bytes() == first
+    assert r2["counts"] == {"ok": 1, "partial": 0, "failed": 1}
+    assert cluster.status.name == "running"  # not ours to close
+
+
+# ---------------------------------------------------------------------------- inputs, errors
+def test_collect_recordings_rules(tmp_path):
+    d = tmp_path / "in"
+    d.mkdir()
+    (d / "odd_name.dat").write_bytes(b"\x89HDF\r\n\x1a\n" + b"\0" * 64)  # HDF5 by content
+    (d / "garbage.csv").write_bytes(b"\x00\x01\x02 not text")  # corrupt, kept by suffix
+    (d / "notes.txt").write_text("hello")
+    (d / "x.h5.truth.json").write_text("{}")
+    (d / ".hidden.h5").write_bytes(b"\x89HDF\r\n\x1a\n")
+    (d / "sub").mkdir()
+    extra = tmp_path / "explicit.xyz"
+    extra.write_text("not a recording, but named explicitly")
+    files, skipped = cp.collect_recordings([d, extra, d / "garbage.csv"])
+    assert [f.name for f in files] == ["garbage.csv", "odd_name.dat", "explicit.xyz"]  # no duplicate
+    reasons = {Path(s["path"]).name: s["reason"] for s in skipped}
+    assert reasons[".hidden.h5"] == "hidden file" and reasons["x.h5.truth.json"] == "truth sidecar"
+    assert reasons["sub"] == "not a file" and reasons["notes.txt"].startswith("not a recording")
+    assert cp.collect_recordings([]) == ([], [])
+    with pytest.raises(TypeError, match="single path"):
+        cp.collect_recordings(str(d))
+    with pytest.raises(TypeError, match="inputs must hold paths"):
+        cp.collect_recordings([3])
+    with pytest.raises(FileNotFoundError, match="missing"):
+        cp.collect_recordings([tmp_path / "missing"])
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.lists(st.tuples(st.sampled_from(["a", "b", "scene", "rig"]),
+                          st.sampled_from([".h5", ".csv", ".mcap", ""]),
+                          st.sampled_from(["x", "y"])), max_size=12))
+def test_recording_names_unique(items):
+    paths = [Path("/d") / folder / (stem + suf) for stem, suf, folder in items]
+    names = cp.recording_names(paths)
+    assert len(names) == len(paths)
+    assert len(set(names)) == len(names) and "scene" not in names
+    for n, p in zip(names, paths):
+        assert n.startswith(p.stem)
+
+
+def test_recording_names_empty_and_bad():
+    assert cp.recording_names([]) == []
+    assert cp.recording_names(["/x/a.h5", "/y/a.csv", "/z/b.h5"]) == ["a_h5", "a_csv", "b"]
+    with pytest.raises(TypeError):
+        cp.recording_names([3.5])
+
+
+def test_split_results(data, tmp_path):
+    scene = load_scene(data["scene"])
+    client, worker, mc = cp.split_results(scene)
+    assert client == ["tolerance"] and "tolerance" not in worker and "compare" in worker and mc
+    # compare alone still pulls the Monte Carlo (for band coverage): run once, on the client
+    p = tmp_path / "s.toml"
+    p.write_text(SCENE.replace('"compare", "tolerance"]', '"compare"]'))
+    client, worker, mc = cp.split_results(load_scene(p))
+    assert client == ["tolerance"] and mc
+    # without tolerances nothing runs on the client
+    p.write_text(SCENE.replace('"compare", "tolerance"]', '"compare"]').split("[tolerances]")[0])
+    client, worker, mc = cp.split_results(load_scene(p))
+    assert client == [] and not mc and worker == ["ideal_phasing", "phasing", "load_sharing", "compare"]
+
+
+def test_campaign_bad_and_empty_inputs_fail_before_any_cluster(data, tmp_path):
+    scene, rec = data["scene"], [data["recordings"] / "rig_a.h5"]
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(ValueError, match="no recording files"):
+        cp.run_campaign(scene, [], tmp_path / "o")
+    with pytest.raises(ValueError, match="no recording files"):
+        cp.run_campaign(scene, [empty], tmp_path / "o")
+    with pytest.raises(ValueError, match="workers"):
+        cp.run_campaign(scene, rec, tmp_path / "o", workers=0)
+    with pytest.raises(TypeError, match="workers"):
+        cp.run_campaign(scene, rec, tmp_path / "o", workers="2")
+    with pytest.raises(ValueError, match="local cluster only"):
+        cp.run_campaign(scene, rec, tmp_path / "o", workers=2, scheduler="tcp://127.0.0.1:1")
+    with pytest.raises(TypeError, match="scheduler"):
+        cp.run_campaign(scene, rec, tmp_path / "o", scheduler=8786)
+    with pytest.raises(TypeError, match="task"):
+        cp.run_campaign(scene, rec, tmp_path / "o", task="run_recording")
+    with pytest.raises(FileNotFoundError, match="no_scene"):
+        cp.run_campaign(tmp_path / "no_scene.toml", rec, tmp_path / "o")
+    with pytest.raises(FileNotFoundError, match="gone.h5"):
+        cp.run_campaign(scene, [tmp_path / "gone.h5"], tmp_path / "o")
+    only_mc = tmp_path / "mc.toml"
+    only_mc.write_text(SCENE.replace('["ideal_phasing", "phasing", "load_sharing", "compare", "tolerance"]',
+                                     '["tolerance"]'))
+    with pytest.raises(ValueError, match="need no recording"):
+        cp.run_campaign(only_mc, rec, tmp_path / "o")
+    assert not (tmp_path / "o").exists()  # nothing was created by a refused campaign
+
+
+def test_campaign_rows_empty_bad_and_columns():
+    assert cp.campaign_rows([]) == []
+    with pytest.raises(TypeError):
+        cp.campaign_rows({"name": "x"})
+    with pytest.raises(TypeError):
+        cp.campaign_rows(["x"])
+    rows = cp.campaign_rows([
+        {"name": "a", "status": "failed", "error": "boom"},
+        {"name": "b", "status": "ok", "phasing": {"sun": {"n_passes": 3, "per_planet": {
+            "2": {"n": 3, "mean": 0.25, "std": 0.01}}}},
+         "load_sharing": [{"planet": 1, "load_sharing": 1.01, "std_error": 0.002}]}])
+    assert list(rows[0]) == list(rows[1])  # one column set for the CSV
+    assert rows[1]["gamma_mean_sun_p2"] == 0.25 and rows[0]["gamma_mean_sun_p2"] is None
+    assert rows[1]["load_sharing_p1"] == 1.01 and rows[0]["error"] == "boom"
+
+
+def test_measure_speedup_bad_input():
+    with pytest.raises(ValueError, match="n_recordings"):
+        cp.measure_speedup(n_recordings=0)
+    with pytest.raises(ValueError, match="minutes"):
+        cp.measure_speedup(minutes=-1)
+    with pytest.raises(ValueError, match="workers"):
+        cp.measure_speedup(workers=())
+    with pytest.raises(TypeError, match="workers"):
+        cp.measure_speedup(workers=2)
+    with pytest.raises(ValueError, match="repeats"):
+        cp.measure_speedup(repeats=0)
+    with pytest.raises(ValueError, match="scenario"):
+        cp.measure_speedup(scenario="no_such_scenario")
+
+
+@pytest.mark.bench
+def test_measure_speedup_smoke(tmp_path):
+    res = cp.measure_speedup(n_recordings=2, minutes=0.25, workers=(1, 2), work_dir=tmp_path)
+    assert [r["workers"] for r in res["runs"]] == [1, 2]
+    assert res["best_wall_s"][1] == res["runs"][0]["wall_s"]
+    assert all(r["n_ok"] == 2 for r in res["runs"])
+    assert res["speedup"][1] == pytest.approx(1.0) and res["speedup"][2] > 0
+
+
+# ---------------------------------------------------------------------------- report
+def test_campaign_report_empty_and_bad(tmp_path):
+    p = crep.build_campaign_report({"scene": "s", "recordings": []}, tmp_path)
+    assert "No recordings" in p.read_text()
+    with pytest.raises(TypeError, match="campaign"):
+        crep.build_campaign_report([], tmp_path)
+    with pytest.raises(TypeError, match="recordings"):
+        crep.build_campaign_report({"recordings": ["x"]}, tmp_path)
+    with pytest.raises(FileNotFoundError):
+        crep.build_campaign_report({"recordings": []}, tmp_path / "missing")
+
+
+def test_campaign_report_from_records(tmp_path):
+    recs = [{"name": "r<1>", "recording": "/x/r1.h5", "out_dir": str(tmp_path / "r1"), "status": "ok",
+             "format": "hdf5", "wall_time_s": 1.5, "worker": "w:1", "files": {"summary": "s"},
+             "ideal": {"gamma_s": [0, 0.25], "gamma_r": [0, 0.5]},
+             "phasing": {"sun": {"n_passes": 4, "per_planet": {"2": {"n": 2, "mean": 0.26, "std": 0.01}}}},
+             "load_sharing": [{"planet": 1, "load_sharing": 1.02, "std_error": 0.01},
+                              {"planet": 2, "load_sharing": 0.98, "std_error": 0.01}],
+             "compare": {"sun": {"rms_vs_ideal": 0.01, "rms_vs_model": 0.005, "coverage": 0.9}},
+             "messages": ["phasing: ProcessingWarning: ambiguous"]},
+            {"name": "r2", "recording": "/x/r2.h5", "out_dir": "o", "status": "failed",
+             "error": "load: RecordingFileError: truncated", "wall_time_s": float("nan")}]
+    html = crep.build_campaign_report({"scene": "s", "recordings": recs, "timing_s": {"processing": 2.0}},
+                                      tmp_path).read_text()
+    assert "r&lt;1&gt;" in html and "truncated" in html and "90.0%" in html
+    assert "1.0200 ± 1.0e-02" in html and "ProcessingWarning" in html
+    assert sorted(q.name for q in (tmp_path / "figures").iterdir()) == [
+        "load_sharing_across_recordings.png", "phasing_across_recordings.png", "residual_rms.png",
+        "wall_times.png"]
+
+
+@pytest.mark.parametrize("fn, args", [
+    (crep.phasing_across_recordings, ([], {})),
+    (crep.load_sharing_across_recordings, ([], [])),
+    (crep.residual_rms_across_recordings, ([], {})),
+    (crep.wall_times_across_recordings, ([], [])),
+])
+def test_figures_empty(fn, args):
+    fig = fn(*args)
+    assert "no " in " ".join(t.get_text() for ax in fig.axes for t in ax.texts)
+    plt.close(fig)
+
+
+@pytest.mark.parametrize("fn, args, exc", [
+    (crep.phasing_across_recordings, (["a", "b"], {"sun": {"2": ([0.25], [0.01])}}), ValueError),
+    (crep.phasing_across_recordings, ("ab", {}), TypeError),
+    (crep.load_sharing_across_recordings, (["a"], [[1.0], [1.0]]), ValueError),
+    (crep.load_sharing_across_recordings, (["a"], [[1.0, 1.0]], [[0.1]]), ValueError),
+    (crep.residual_rms_across_recordings, (["a"], [0.1]), TypeError),
+    (crep.residual_rms_across_recordings, (["a"], {"sun": [0.1, 0.2]}), ValueError),
+    (crep.wall_times_across_recordings, (["a"], [1.0, 2.0]), ValueError),
+    (crep.wall_times_across_recordings, (["a"], [1.0], ["ok", "ok"]), ValueError),
+])
+def test_figures_bad_input(fn, args, exc):
+    with pytest.raises(exc):
+        fn(*args)
+    plt.close("all")
