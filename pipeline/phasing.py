@@ -347,19 +347,33 @@ def assign_planets_by_pattern(times, planet_angles, order: int, *, first: int = 
         info["ambiguous"] = True
         return seq[(q_first + np.arange(t.size)) % n], info
     # relative revolution period: median of N-step intervals (robust to a missing pulse),
-    # taken locally (a running median over ~2 revolutions) so speed ramps are followed
-    spans = t[n:] - t[:-n]
-    period = float(np.median(spans))
+    # taken locally (a running median over ~2 revolutions) so speed ramps are followed. If a
+    # planet is missing altogether, N - 1 (or fewer) pulses make a revolution: the candidate
+    # step counts are tried and the one whose gaps fit the planet pattern best is kept.
+    mid = 0.5 * (t[1:] + t[:-1])
+
+    def gap_periods(k):
+        spans = t[k:] - t[:-k]
+        w = min(spans.size, 2 * k + 1)
+        if spans.size >= w >= 3:
+            pad = np.pad(spans, (w // 2, w - 1 - w // 2), mode="edge")
+            local = np.median(np.lib.stride_tricks.sliding_window_view(pad, w), axis=1)
+            return np.interp(mid, 0.5 * (t[k:] + t[:-k]), local), float(np.median(spans))
+        return np.full(t.size - 1, float(np.median(spans))), float(np.median(spans))
+
+    best = None
+    for k in range(n, max(1, n - 2), -1):
+        if t.size < k + 2:
+            continue
+        gp, per = gap_periods(k)
+        probe = _walk(np.diff(t) / gp, fs, q_first, tol * spacing)
+        score = (np.count_nonzero(~probe[1]), probe[2])
+        if best is None or score < best[0]:
+            best = (score, gp, per)
+        if score[0] == 0:
+            break
+    gap_period, period = best[1], best[2]
     info["period"] = period
-    w = min(spans.size, 2 * n + 1)
-    if spans.size >= w >= 3:
-        pad = np.pad(spans, (w // 2, w - 1 - w // 2), mode="edge")
-        local = np.median(np.lib.stride_tricks.sliding_window_view(pad, w), axis=1)
-        centre = 0.5 * (t[n:] + t[:-n])
-        mid = 0.5 * (t[1:] + t[:-1])
-        gap_period = np.interp(mid, centre, local)
-    else:
-        gap_period = np.full(t.size - 1, period)
     gaps = np.diff(t) / gap_period
     symmetric = bool(np.allclose(step, step[0], atol=1e-9))
     starts = [q_first] if symmetric else list(range(n))

@@ -250,6 +250,10 @@ def stage_phasing(ctx: RunContext) -> None:
         on = ons[ch]
         ok = on.good
         times, amp = on.times[ok], on.amplitude[ok]
+        if times.size == 0:
+            warnings.warn(f"{gear} gauge ({ch}): no usable pulse ({len(on)} onset(s), all flagged "
+                          "or none found): dead gauge, wrong channel or no load; no phasing from it",
+                          ProcessingWarning, stacklevel=2)
         order = pass_order(g.direction, gear)
         ref = ring_load if gear == "sun" else None
         pl, inf = assign_planets_by_pattern(times, g.angles, order, amplitudes=np.abs(amp),
