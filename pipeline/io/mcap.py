@@ -21,12 +21,12 @@ Layout (full description, with the reasons, in ``data_schemas/mcap.md``):
 Reads take the summary section (chunk index, channels, schema, metadata) from
 ``mcap.reader.make_reader`` and pick the chunks of the wanted channels whose log-time range
 meets the wanted samples. The library's own message iteration costs ~15 us and three copies
-per message, so the chunks are read here: an uncompressed chunk of full messages (what
-:func:`write` produces) goes with scatter reads straight from the file into one
-preallocated Fortran-order output array (one copy, headers checked afterwards); other
-chunks are read whole, decompressed and their messages copied out. Every wanted sample
-must arrive exactly once. Anything the file does not hold as promised (truncated, another
-writer's MCAP, metadata missing or inconsistent, samples missing) raises
+per message (measured ~0.1 GS/s), so the chunks are read here: each is read whole into one
+reused buffer, decompressed if needed, and its messages are copied once into one
+preallocated Fortran-order output array (a chunk of full messages of one channel, as
+:func:`write` makes them, in a single strided copy). Every wanted sample must arrive
+exactly once. Anything the file does not hold as promised (truncated, another writer's
+MCAP, metadata missing or inconsistent, samples missing) raises
 :class:`~pipeline.io.base.RecordingFileError` naming the file and the problem.
 """
 
@@ -38,7 +38,6 @@ import json
 import math
 import os
 import struct
-import sys
 import zlib
 from collections import OrderedDict, deque
 from dataclasses import dataclass
@@ -592,84 +591,6 @@ def _uniform_chunk(recs: memoryview, lay: _Layout, col: dict, i0: int, i1: int):
     return col[cid], first, samples
 
 
-class _ScatterMismatch(Exception):
-    """A chunk read by :func:`_scatter_chunk` did not hold what its index predicted."""
-
-
-_CHUNK_PREFIX = 9 + _CHUNK_HEAD.size + 8  # record header, chunk header (no compression), length
-_IOV_MAX = 1024
-
-
-def _predict_chunk(ci, lay: _Layout, col: dict, i0: int, i1: int):
-    """(column, channel id, first sample, messages) when the chunk index alone says this
-    chunk is an uncompressed run of full-size messages of one wanted channel entirely
-    inside [i0, i1) (what :func:`write` produces); else None."""
-    if ci.compression or ci.compressed_size != ci.uncompressed_size:
-        return None
-    ids = list(ci.message_index_offsets)
-    if len(ids) != 1 or ids[0] not in col:
-        return None
-    rec_size = 9 + _MSG_HEAD.size + HEADER_SIZE + lay.block * lay.dtype.itemsize
-    usize = int(ci.uncompressed_size)
-    k = usize // rec_size
-    if k < 1 or usize % rec_size or ci.chunk_length != _CHUNK_PREFIX + usize:
-        return None
-    fs, origin, block = lay.info.fs, lay.origin_ns, lay.block
-    guess = int(round((ci.message_start_time - origin) * fs / 1e9 / block))
-    for j in (guess, guess - 1, guess + 1):
-        first = j * block
-        if j >= 0 and _log_time(first, fs, origin) == ci.message_start_time:
-            break
-    else:
-        return None
-    last = first + (k - 1) * block
-    if (_log_time(last, fs, origin) != ci.message_end_time or first < i0
-            or last + block > min(i1, lay.info.n_samples)):
-        return None
-    return col[ids[0]], ids[0], first, k
-
-
-def _scatter_chunk(fh, ci, pred, lay: _Layout, out: np.ndarray, i0: int) -> None:
-    """Read a predicted chunk with scatter reads: every message's samples go straight from
-    the file into their place in ``out`` (one copy, like HDF5's read_direct); the headers
-    land in a small buffer and are checked afterwards (_ScatterMismatch if they disagree)."""
-    c, cid, first, k = pred
-    block = lay.block
-    prefix = bytearray(_CHUNK_PREFIX)
-    heads = bytearray(k * (9 + _MSG_HEAD.size + HEADER_SIZE))
-    hv = memoryview(heads)
-    column = out[:, c]
-    bufs = [prefix]
-    hs = 9 + _MSG_HEAD.size + HEADER_SIZE
-    for i in range(k):
-        a = first - i0 + i * block
-        bufs.append(hv[i * hs:(i + 1) * hs])
-        bufs.append(memoryview(column[a:a + block]))
-    offset = ci.chunk_start_offset
-    total = 0
-    fd = fh.fileno()
-    for g in range(0, len(bufs), _IOV_MAX):
-        part = bufs[g:g + _IOV_MAX]
-        want = sum(memoryview(b).nbytes for b in part)
-        got = os.preadv(fd, part, offset + total)
-        if got != want:
-            raise RecordingFileError(fh.name, f"chunk at byte {ci.chunk_start_offset}: only "
-                                              f"{total + got} of {ci.chunk_length} bytes present")
-        total += got
-    op, length = _REC.unpack_from(prefix, 0)
-    _, _, usize, _, clen = _CHUNK_HEAD.unpack_from(prefix, 9)
-    (rlen,) = _U64.unpack_from(prefix, 9 + _CHUNK_HEAD.size)
-    if op != _OP_CHUNK or 9 + length != ci.chunk_length or clen != 0 or rlen != usize \
-            or usize != ci.uncompressed_size:
-        raise _ScatterMismatch()
-    h = np.frombuffer(heads, dtype=_RECORD_VIEW)
-    if not (np.all(h["op"] == _OP_MESSAGE) and np.all(h["length"] == hs - 9 + block * lay.dtype.itemsize)
-            and np.all(h["channel"] == cid) and np.all(h["n"] == block) and np.all(h["nch"] == 1)
-            and np.all(h["code"] == lay.code) and np.all(h["version"] == FORMAT_VERSION)
-            and np.array_equal(h["first"], first + block * np.arange(k, dtype=np.uint64))):
-        raise _ScatterMismatch()
-
-
 def _check_tiling(path: Path, name: str, spans: list, i0: int, i1: int) -> None:
     """Samples [i0, i1) of one channel must be covered exactly once by ``spans``."""
     if i1 <= i0:
@@ -726,7 +647,7 @@ def _select_chunks(lay: _Layout, ids, start_ns: int, end_ns: int) -> list:
 
 
 def read(path, channels=None, i0: int = 0, i1: int | None = None, *,
-         validate_crcs: bool = False, _scatter: bool = True) -> Recording:
+         validate_crcs: bool = False) -> Recording:
     """Samples ``i0 <= i < i1`` of the named channels of an MCAP recording.
 
     Parameters
@@ -749,13 +670,11 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *,
     -----
     The chunk index of the summary section (parsed by ``mcap.reader.make_reader``) selects
     the chunks of the wanted channels whose log-time range meets the inclusive range
-    ``[log_time(i0 - block + 1), log_time(i1 - 1)]``. An uncompressed chunk that the index
-    shows to be a run of full messages of one channel inside the window (what :func:`write`
-    produces) is read with scatter reads (``os.preadv``): each message's samples go from the
-    file straight into their place in the output, one copy as with HDF5's ``read_direct``;
-    its headers are checked afterwards, and if they disagree with the index the whole read
-    is done again the general way. Other chunks are read whole (and decompressed), their
-    message records parsed here, and each message's samples copied into the output.
+    ``[log_time(i0 - block + 1), log_time(i1 - 1)]``. Each chunk is read whole into one
+    reused buffer (and decompressed); a chunk of full messages of one channel (what
+    :func:`write` produces) is copied into the output in one strided copy, any other chunk
+    message by message. (Scatter reads straight from the file into the output, saving that
+    buffer, measured no faster here: first-touch page faults of the output dominate.)
     """
     with _open(path) as (path, fh, lay):
         info = lay.info
@@ -773,21 +692,8 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *,
             itemsize = lay.dtype.itemsize
             dtype = lay.dtype
             chunks = _ChunkReader(fh, path, validate_crcs=validate_crcs)
-            scatter = (_scatter and not validate_crcs and sys.byteorder == "little"
-                       and hasattr(os, "preadv"))
-            redo = False
             with _lib_errors(path, "reading chunks"):
                 for ci in _select_chunks(lay, col, start_ns, end_ns):
-                    pred = _predict_chunk(ci, lay, col, i0, i1) if scatter else None
-                    if pred is not None:
-                        try:
-                            _scatter_chunk(fh, ci, pred, lay, out, i0)
-                        except _ScatterMismatch:
-                            redo = True  # not what the index promised: read it all again,
-                            break  # message by message (the scatter may have landed anywhere)
-                        c, _, first, k = pred
-                        spans[c].append((first, first + k * lay.block))
-                        continue
                     recs = chunks.records(ci)
                     fast = _uniform_chunk(recs, lay, col, i0, i1)
                     if fast is not None:  # whole chunk in one strided copy
@@ -806,9 +712,6 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *,
                         out[a - i0:b - i0, c] = np.frombuffer(
                             recs, dtype, b - a, off + HEADER_SIZE + (a - first) * itemsize)
                         spans[c].append((a, b))
-            if redo:
-                out = None
-                return read(path, names, i0, i1, validate_crcs=validate_crcs, _scatter=False)
             for c, name in enumerate(names):
                 _check_tiling(path, name, spans[c], i0, i1)
         return _recording(lay, out, names, i0)
