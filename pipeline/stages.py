@@ -227,6 +227,48 @@ def _onset_sigma(on, noise_rms: float) -> np.ndarray:
     return np.where(np.isfinite(out), out, np.nan)
 
 
+def _tacho_shift(ctx, g, times, pl, inf):
+    """Fix which ring pulse is planet 1 from a carrier once-per-revolution tacho.
+
+    With a fixed ring the gauged ring tooth sits still, so the same planet passes it first
+    after every tacho pulse; the scene (or the synthetic rig convention) says that planet is
+    planet 1 (the tacho key set a quarter planet spacing ahead of planet 1's pass). The
+    pattern labels are shifted cyclically by the majority vote of the first pulses after
+    each tacho pulse. A driven ring (differential) gives no such fixed relation: unchanged.
+    """
+    tacho = ctx.results["onsets"].get("tacho_times")
+    sp = ctx.scene.speeds
+    if sp is None:
+        meta = ctx.results["load"]["recording"].meta.get("speeds_nominal")
+        if meta:
+            from .models.gearset import Speeds
+
+            sp = Speeds(**meta)
+    if tacho is None or len(tacho) < 2 or sp is None or abs(sp.ring) > 1e-9 * max(1.0, abs(sp.carrier)):
+        return pl, inf
+    ok = pl >= 0
+    t_ok, p_ok = times[ok], pl[ok]
+    j = np.searchsorted(t_ok, np.asarray(tacho))
+    j = j[j < t_ok.size]
+    if j.size == 0:
+        return pl, inf
+    votes = np.bincount(p_ok[j], minlength=g.n_planets)
+    first = int(np.argmax(votes))
+    if votes[first] < 0.8 * j.size:
+        return pl, inf
+    n = g.n_planets
+    # relabel cyclically in pass order so that `first` becomes planet 1 (index 0)
+    from .phasing import pass_order, planet_fractions
+
+    seq = np.argsort(planet_fractions(g.angles, pass_order(g.direction, "ring")), kind="stable")
+    pos = np.empty(n, int)
+    pos[seq] = np.arange(n)
+    shift = pos[first]
+    new = np.where(pl >= 0, seq[(pos[np.clip(pl, 0, n - 1)] - shift) % n], -1)
+    inf = dict(inf, shift_decided_by="tacho", ambiguous=False)
+    return new, inf
+
+
 def _planet_ratio(g, gear: str) -> float | None:
     """|w_pc / w_jc|: planet turns per turn of the gauged member relative to the carrier."""
     if not g.z_planet:
@@ -258,14 +300,21 @@ def stage_phasing(ctx: RunContext) -> None:
         ref = ring_load if gear == "sun" else None
         pl, inf = assign_planets_by_pattern(times, g.angles, order, amplitudes=np.abs(amp),
                                             reference_amplitudes=ref)
+        if gear == "ring" and inf.get("ambiguous"):
+            pl, inf = _tacho_shift(ctx, g, times, pl, inf)
         if gear == "ring" and times.size:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", ProcessingWarning)
                 from .loads import load_sharing_from_amplitudes
 
-                ring_load = load_sharing_from_amplitudes(np.abs(amp), np.where(pl >= 0, pl + 1, 0),
-                                                         g.n_planets).mean_amplitude
-            if not np.all(np.isfinite(ring_load)):
+                ls = load_sharing_from_amplitudes(np.abs(amp), np.where(pl >= 0, pl + 1, 0),
+                                                  g.n_planets)
+            ring_load = ls.mean_amplitude
+            # the loads can only name the sun's planets if they differ beyond their own
+            # scatter; equal sharing would let noise pick a labelling and call it decided
+            spread = np.nanmax(np.abs(ls.factors - 1.0)) if np.any(np.isfinite(ls.factors)) else 0.0
+            noise = np.nanmax(ls.std_error) if np.any(np.isfinite(ls.std_error)) else np.inf
+            if not np.all(np.isfinite(ring_load)) or not spread > 5.0 * noise:
                 ring_load = None
         z = g.z_sun if gear == "sun" else g.z_ring
         q = ctx.results["condition"]["quality"].get(ch)
