@@ -82,8 +82,9 @@ seed_rig 30 s, SNR 40, 20, 10, 6, 3,   every stage runs, no NaN. Sun error 3e-4,
                                        slow: test_snr_sweep_more_seeds]
 table1_high_speed, fs = f_m / 0.3,     phasing finite, error sun 1.1e-3, 2.9e-3, 2.0e-2 and ring
 0.4, 0.45 (f_m = 1385 Hz; 51.2 kHz     3.5e-4, 4.7e-3, 4.8e-2 (7e-5 at 51.2 kHz), growing
-for reference)                         towards Nyquist and always <= 3 x scatter: the scatter
-                                       shows the degradation; no warning
+for reference)                         towards Nyquist; at 0.3 within 3 x scatter, from 0.35 fs
+                                       on a DataQualityWarning names the gauge (bias the
+                                       scatter does not show)
                                        [test_mesh_frequency_near_nyquist]
 f_m = fs / 2 and f_m = fs (aliased)    phasing biased (sun 0.171 for 0.25 with a 1e-4
                                        scatter), announced by a DataQualityWarning "mesh
@@ -591,8 +592,13 @@ def test_mesh_frequency_near_nyquist(frac, sun_bound, ring_bound):
     assert _unwarned_problems(run) == []
     assert run.error("sun") <= sun_bound and run.error("ring") <= ring_bound
     for gear in ("sun", "ring"):
-        # the scatter shows the degradation: the error stays within 3x of it
-        assert run.error(gear) <= 3 * run.scatter(gear) + 1e-3
+        if frac >= 0.35:
+            # fewer than 3 samples per mesh period: the onsets carry a bias the scatter does
+            # not show, so the run must say so (DataQualityWarning naming the gauge)
+            assert any("mesh frequency" in m for m in run.messages(gear))
+        else:
+            # the scatter shows the degradation: the error stays within 3x of it
+            assert run.error(gear) <= 3 * run.scatter(gear) + 1e-3
         assert len(run.tables[gear]) >= 60 if gear == "sun" else len(run.tables[gear]) >= 18
 
 
