@@ -318,6 +318,18 @@ def _noise_level(y: np.ndarray, w: float) -> tuple[float, float, float]:
         pieces = [y[a:a + piece] for a in starts]
     h = int(math.ceil(1.5 * w)) + 1
     rest = []
+    # a gap filled with one constant (see _fill_nan) carries no noise: leave constant runs
+    # out of the pieces, else a gap at the start or end collapses the MAD (and the threshold)
+    def _live(p):
+        if p.size < 3:
+            return p
+        flat = np.concatenate([[False], np.diff(p) == 0])
+        flat[:-1] |= flat[1:]
+        return p if not flat.any() else p[~flat]
+    pieces = [q for q in (_live(p) for p in pieces) if q.size >= 16]
+    if not pieces:
+        live = _live(y)
+        pieces = [live if live.size >= 3 else y]
     for p in pieces:                                  # <= 4 pieces
         med = float(np.median(p))
         sig = float(_MAD_TO_SIGMA * np.median(np.abs(p - med)))

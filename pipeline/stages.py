@@ -209,6 +209,28 @@ def _main_gauge(rec: Recording, gear: str) -> str | None:
     return c[0] if c else None
 
 
+def _usable(on, x, fs: float, t0: float) -> np.ndarray:
+    """Onsets to measure phasing with: the clean ones, plus those flagged only for a gap that
+    conditioning bridged (a few dropped samples, see condition.filter_signal's ``fill_max``):
+    the conditioned signal is finite over the whole pulse, so the timing is not affected."""
+    from .onsets import FLAG_GAP
+
+    ok = on.good.copy()
+    gap_only = on.flags == np.uint8(FLAG_GAP)
+    if not np.any(gap_only):
+        return ok
+    bad = ~np.isfinite(np.asarray(x))
+    if not bad.any():
+        return ok | gap_only
+    cum = np.concatenate([[0], np.cumsum(bad)])
+    half = np.maximum(2, np.ceil(np.nan_to_num(on.width, nan=0.0) * fs)).astype(np.int64)
+    i = np.rint((on.times - t0) * fs).astype(np.int64)
+    a = np.clip(i - 2 * half, 0, x.size)
+    b = np.clip(i + 2 * half, 0, x.size)
+    clean = (cum[b] - cum[a]) == 0
+    return ok | (gap_only & clean)
+
+
 def _onset_sigma(on, noise_rms: float) -> np.ndarray:
     """Per-onset timing uncertainty [s]: the Cramer-Rao bound for the learnt template at the
     fitted amplitude in white noise of the conditioned channel's RMS, sigma / sqrt(sum (ds/dt)^2)
@@ -292,7 +314,7 @@ def stage_phasing(ctx: RunContext) -> None:
         if ch is None or ch not in ons:
             continue
         on = ons[ch]
-        ok = on.good
+        ok = _usable(on, rec.channel(ch), rec.fs, rec.t0)
         times, amp = on.times[ok], on.amplitude[ok]
         if times.size == 0:
             warnings.warn(f"{gear} gauge ({ch}): no usable pulse ({len(on)} onset(s), all flagged "
