@@ -418,7 +418,10 @@ def stage_centroids(ctx: RunContext) -> None:
         if len(chans) < 2 or b is None:
             out[gear] = None
             continue
-        ref = ons[chans[0].name]
+        # time the passes on the gauge that sees the most load: with partial contact the
+        # gauges at the unloaded end of the face read nothing
+        ref = max((ons[c.name] for c in chans), key=lambda o: (int(o.good.sum()),
+                  float(np.nanmedian(np.abs(o.amplitude))) if len(o) else 0.0))
         # readings per pass: each gauge's amplitude at the pulse nearest the first gauge's
         rows = []
         for t0 in ref.times[ref.good]:
@@ -426,7 +429,7 @@ def stage_centroids(ctx: RunContext) -> None:
             for c in chans:
                 o = ons[c.name]
                 if len(o) == 0:
-                    row.append(np.nan)
+                    row.append(0.0)  # no pulse at all on this gauge: unloaded end of the face
                     continue
                 j = int(np.argmin(np.abs(o.times - t0)))
                 width = float(np.nanmedian(ref.width)) if len(ref) else 0.0
@@ -434,7 +437,11 @@ def stage_centroids(ctx: RunContext) -> None:
             rows.append(row)
         readings = np.asarray(rows, dtype=float).reshape(-1, len(chans))
         pos = np.array([c.face_position for c in chans])
-        out[gear] = facewidth_centroid(readings[np.all(np.isfinite(readings), axis=1)], pos, b)
+        readings = readings[np.all(np.isfinite(readings), axis=1)]
+        if readings.shape[0] == 0:
+            warnings.warn(f"{gear} face-width gauges: no pass seen on any of them; no centroid",
+                          ProcessingWarning, stacklevel=2)
+        out[gear] = facewidth_centroid(readings, pos, b)
     ctx.results["centroids"] = out
     ctx.error_estimates["centroids"] = "; ".join(
         f"{k}: Z = {v.centroid * 1e3:.3f} ± {v.std_error * 1e3:.3f} mm" for k, v in out.items() if v)
