@@ -209,6 +209,17 @@ def _main_gauge(rec: Recording, gear: str) -> str | None:
     return c[0] if c else None
 
 
+def _peak_times(on) -> np.ndarray:
+    """Onset times moved to their template's tensile peak [s] (per onset's template)."""
+    if not len(on) or not on.templates:
+        return on.times
+    shift = np.array([tp.ref_after_peak for tp in on.templates], dtype=float)
+    tid = np.clip(on.template_id, 0, shift.size - 1)
+    out = on.times - np.where(on.template_id >= 0, shift[tid], 0.0)
+    # keep the order strictly increasing (templates may differ between blocks)
+    return out if np.all(np.diff(out) > 0) else on.times
+
+
 def _usable(on, x, fs: float, t0: float) -> np.ndarray:
     """Onsets to measure phasing with: the clean ones, plus those flagged only for a gap that
     conditioning bridged (a few dropped samples, see condition.filter_signal's ``fill_max``):
@@ -315,7 +326,10 @@ def stage_phasing(ctx: RunContext) -> None:
             continue
         on = ons[ch]
         ok = _usable(on, rec.channel(ch), rec.fs, rec.t0)
-        times, amp = on.times[ok], on.amplitude[ok]
+        # pass times at the tensile peak of each pulse (the middle of the tooth's contact),
+        # not at the onset feature on its leading edge: the phasing is the same (a common
+        # shift), but the model turns the offsets to the instant of engagement
+        times, amp = _peak_times(on)[ok], on.amplitude[ok]
         if times.size == 0:
             warnings.warn(f"{gear} gauge ({ch}): no usable pulse ({len(on)} onset(s), all flagged "
                           "or none found): dead gauge, wrong channel or no load; no phasing from it",
@@ -355,8 +369,18 @@ def stage_phasing(ctx: RunContext) -> None:
             kw = {"encoder": tables["sun"].encoder, "encoder_ratio": g.z_sun / g.z_ring}
         tables["ring"] = measured_phasing(times, pl, g.z_ring, g.n_planets, gauge="ring",
                                           sigma_t=sig, **kw)
-    for t in tables.values():
+    for gear, t in tables.items():
         t.time_origin = float(rec.t0)
+        enc = t.encoder
+        src = getattr(enc, "source", enc)
+        res = getattr(src, "residual_rms", float("nan"))
+        z = g.z_sun if gear == "sun" else g.z_ring
+        ratio = getattr(enc, "ratio", 1.0)
+        if isinstance(res, float) and math.isfinite(res) and z * ratio * res / (2 * math.pi) > 0.01:
+            warnings.warn(f"{gear} gauge: the pass train does not follow one smooth speed (encoder "
+                          f"misfit {res:.2e} rad = {z * ratio * res / (2 * math.pi):.2e} mesh cycles): "
+                          "speed varies faster than the passes resolve, or pulses are mislabelled; "
+                          "phasing not reliable", ProcessingWarning, stacklevel=2)
     for gear, inf in info.items():
         if inf.get("n_unassigned"):
             warnings.warn(f"{gear} gauge: {inf['n_unassigned']} pulse(s) fit no planet in the pass "

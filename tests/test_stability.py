@@ -96,9 +96,9 @@ ripple), +2 %/s (x1.6 in 30 s),        asserted), no warning. At -1 %/s the ring
                                        [test_speed_ramps]
 +4 %/s, -2 %/s                         finite phasing or warned problems (the pattern walk uses
                                        a local period) [test_steep_speed_ramps_warn]
-+5 %/s                                 BUG (xfail): the onsets drop sun pulses on the
-                                       conditioned signal and the phasing goes wrong with no
-                                       warning [test_steep_speed_ramps_warn]
++5 %/s                                 the onsets drop sun pulses; the encoder misfit warning
+                                       ("does not follow one smooth speed") names the gauge
+                                       [test_steep_speed_ramps_warn]
 t0 = 1e6 s (time axis offset)          onsets, passes, phasing as with t0 = 0: onset times
                                        shifted by 1e6 s to 1 ulp (1.2e-10 s), gamma equal to
                                        4 ulp of the time axis (3.3e-9 cycles), compare's
@@ -628,12 +628,7 @@ def test_speed_ramps(rate):
     assert run.error("sun") <= 5e-3 and run.error("ring") <= 3e-2
 
 
-_STEEP_XFAIL = pytest.mark.xfail(strict=True, reason="known defect: at +5 %/s the onsets still "
-                                  "drop sun pulses and the phasing goes wrong without a warning "
-                                  "(+4 %/s and -2 %/s were fixed by the local-period pattern walk)")
-
-
-@pytest.mark.parametrize("rate", [0.04, pytest.param(0.05, marks=_STEEP_XFAIL), -0.02],
+@pytest.mark.parametrize("rate", [0.04, 0.05, -0.02],
                          ids=["+4%/s", "+5%/s", "-2%/s"])
 def test_steep_speed_ramps_warn(rate):
     run = _ramp_run(rate)
