@@ -18,6 +18,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 import pytest
+from seed_rig_toml import SEED_RIG_GEARSET
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -29,20 +30,7 @@ SCENE = """\
 name = "campaign test scene"
 results = ["ideal_phasing", "phasing", "load_sharing", "compare", "tolerance"]
 
-[gearset]
-name = "seed 000 rig"
-z_sun = 25
-z_ring = 87
-z_planet = 31
-n_planets = 4
-carrier_radius_mm = 112.5
-face_width_mm = 40
-direction = "cw"
-
-[speeds]
-sun_rpm = 18.19
-carrier_rpm = 1.06
-
+""" + SEED_RIG_GEARSET + """
 [input]
 synthetic = "seed_rig"
 minutes = 0.1

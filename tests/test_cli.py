@@ -20,6 +20,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from seed_rig_toml import SEED_RIG_GEARSET
 
 import pipeline.io
 from pipeline.cli import main
@@ -27,20 +28,7 @@ from pipeline.recording import ChannelSpec, Recording
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
-GEARSET_TOML = """\
-name = "seed rig gearset"
-[gearset]
-z_sun = 25
-z_ring = 87
-z_planet = 31
-n_planets = 4
-carrier_radius_mm = 112.5
-face_width_mm = 40
-direction = "cw"
-[speeds]
-sun_rpm = 18.19
-carrier_rpm = 1.06
-"""
+GEARSET_TOML = 'name = "seed rig gearset"\n' + SEED_RIG_GEARSET
 
 
 def _sections(html: str) -> dict:

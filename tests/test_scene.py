@@ -8,6 +8,7 @@ import re
 from pathlib import Path
 
 import pytest
+from seed_rig_toml import SEED_RIG_GEARSET
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -16,21 +17,7 @@ from pipeline.scene import RESULTS, STAGES, Scene, SceneError, load_scene, parse
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
-GEARSET = """\
-[gearset]
-name = "seed 000 rig"
-z_sun = 25
-z_ring = 87
-z_planet = 31
-n_planets = 4
-carrier_radius_mm = 112.5
-face_width_mm = 40
-direction = "cw"
-
-[speeds]
-sun_rpm = 18.19
-carrier_rpm = 1.06
-"""
+GEARSET = SEED_RIG_GEARSET
 
 TOLERANCES = """\
 [tolerances]
