@@ -1,0 +1,4 @@
+"""Independent reference rig for meshphase (imports neither ``pipeline`` nor ``synthetic``).
+
+See :mod:`independent.rig` (``tests/independent/rig.py``).
+"""
