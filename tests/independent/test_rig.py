@@ -377,7 +377,7 @@ def test_sidecar_round_trip(tmp_path):
     assert doc["speeds"]["carrier_rpm_scene"] == 4.06
 
 
-def test_pipeline_style_info_fields(tmp_path):
+def test_no_tacho_file_layout(tmp_path):
     """What an NI reader needs: one wf_increment, one start time, a length per channel."""
     path = tmp_path / "b.tdms"
     R.make_rig_tdms(path, minutes=1 / 60, tacho=False)
@@ -524,3 +524,27 @@ def test_rig_and_writer_bad_and_empty_inputs(tmp_path):
         R.RigTruth.from_json(b"{}")
     with pytest.raises(TypeError, match="mapping"):
         R.RigConfig.from_dict([])
+
+
+def test_small_api_bad_inputs():
+    g = GEARSETS["4eq_25_87_29"]
+    k = R.nominal_kinematics(g, sun_rpm=18.19)
+    with pytest.raises(ValueError, match="member"):
+        k.coef("shaft")
+    with pytest.raises(ValueError, match="mesh_rate"):
+        R.Kinematics(g, "ring", 0.0)
+    with pytest.raises(TypeError, match="ripple term"):
+        R.RippleTerm.coerce(0.01)
+    assert R.RippleTerm.coerce({"amplitude": 0.01}).member == "carrier"
+    assert R.HoleErrors.coerce(None) == R.HoleErrors()
+    rig = R.Rig(small_config(minutes=1 / 60, ring_gauge=False))
+    t, p = rig.engagements("sun")
+    assert t.size == p.size
+    with pytest.raises(ValueError, match="gear"):
+        rig.engagements("ring")  # not recorded
+    with pytest.raises(ValueError, match="adc_bits"):
+        rig.lsb("SG_sun_T3")
+    rq = R.Rig(small_config(minutes=1 / 60, adc_bits=16))
+    with pytest.raises(ValueError, match="no channel"):
+        rq.lsb("SG_planet")
+    assert rq.lsb("SG_sun_T3") == 2 * 2e-3 / 2 ** 16
