@@ -84,8 +84,9 @@ with 1 / local speed.
 *Tacho.* A carrier once-per-revolution TTL channel (0 / 5 V): high while
 ``s (theta_c - theta_edge) mod 2 pi < key_width`` (``s`` the carrier's sense of rotation), so
 its rising edge is where the absolute carrier angle equals ``theta_edge`` (mod 2 pi) in
-either sense. Geometry, in the ground frame of ``t = 0``: at a rising edge planet 1 sits at
-ground angle ``theta_edge``; the ring gauge sits at ground angle ``a_r0``; so measured from
+either sense. Geometry, in the ground frame of ``t = 0``: with the pick-up at ground angle 0,
+the key sits on the carrier at ``-theta_edge`` relative to planet 1 (reported as
+``key_carrier_angle``); at a rising edge planet 1 sits at ground angle ``theta_edge``; the ring gauge sits at ground angle ``a_r0``; so measured from
 planet 1's position at the tacho mark (meshphase's ``gauge_angle`` convention) the ring gauge
 is at ``a_r0 - theta_edge`` (reported as ``ring_gauge_angle_from_tacho``).
 
@@ -1359,10 +1360,14 @@ class Rig:
             tacho = {
                 "channel": "Tacho OPR", "rising_edges": self.tacho_edges.tolist(),
                 "edge_carrier_angle": c.tacho_edge_angle, "key_width": c.tacho_key_width,
+                "key_carrier_angle": float(np.mod(-c.tacho_edge_angle, TWO_PI)),
+                "pickup_ground_angle": 0.0,
                 "ring_gauge_ground_angle": c.ring_gauge_angle,
                 "ring_gauge_angle_from_tacho": float(np.mod(c.ring_gauge_angle - c.tacho_edge_angle, TWO_PI)),
                 "sun_tooth_carrier_angle0": c.sun_tooth_angle0,
-                "geometry": "rising edge when the absolute carrier angle equals edge_carrier_angle (mod 2 pi); "
+                "geometry": "rising edge when the absolute carrier angle equals edge_carrier_angle (mod 2 pi), "
+                            "i.e. when the key (at key_carrier_angle ccw from planet 1 on the carrier) passes "
+                            "the pick-up at ground angle 0; "
                             "then planet 1 is at ground angle edge_carrier_angle; the ring gauge tooth is at "
                             "ground angle ring_gauge_ground_angle, i.e. ring_gauge_angle_from_tacho ccw from "
                             "planet 1's position at the tacho mark. Carrier and ground frames coincide at t=0.",

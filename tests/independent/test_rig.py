@@ -298,6 +298,9 @@ def test_tacho_edges(sun_rpm):
     truth = rig.truth()
     assert truth.tacho["ring_gauge_angle_from_tacho"] == pytest.approx(
         (cfg.ring_gauge_angle - cfg.tacho_edge_angle) % TWO_PI)
+    # the key passes the pick-up (ground angle 0) at each edge
+    key_ground = rig.motion.angle("carrier", te) + truth.tacho["key_carrier_angle"]
+    assert np.abs(R._wrap(key_ground)).max() < 1e-10
 
 
 # ----------------------------------------------------------------------------- TDMS + sidecar
