@@ -40,6 +40,7 @@ from .phasing import PassTable, pass_order
 from .validate import as_positive, as_positive_int
 
 __all__ = [
+    "truth_comparison",
     "relative_speeds",
     "predict_pass_phasing",
     "wrap",
@@ -596,3 +597,79 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
         n_parameters=int(free.sum()), cost_evaluations=n_eval[0],
         wall_time=time.perf_counter() - t_start,
         identifiable=bool(np.all(ident)), notes=notes, projector=Vk @ Vk.T, free=free)
+
+
+def truth_comparison(table: PassTable, truth, channel: str, *, times=None, planets=None) -> dict | None:
+    """Measured phasing of ``table`` against a synthetic recording's truth, pass by pass.
+
+    Each measured row compares two pulses (the planet-n pass and its planet-1 reference);
+    both are matched to the truth's engagements of ``channel`` (after removing the median
+    offset of the timed pulse feature from the engagement instant) and the true phasing of
+    exactly that pair is the mesh angle the gear turned between them,
+    ``Z |w| (tau_n - tau_1) / 2 pi`` with tau the truth's angle time (``synthetic.truth``).
+    So the error is the measurement's own, whatever the planet labels.
+
+    Parameters
+    ----------
+    table : PassTable
+    truth : synthetic.truth.GroundTruth
+        Anything with ``events[channel]`` (``time``, ``tau``, ``planet``) and ``config``
+        (``gearset``, ``speeds``).
+    channel : str
+        The gauge channel the table was measured on.
+    times, planets : array_like, optional
+        Every labelled pulse of the channel [s] and its 0-based planet (-1 unassigned): gives
+        ``label_match``, the share of labels equal to the truth's.
+
+    Returns
+    -------
+    dict or None
+        ``n``, ``rms``, ``max_abs`` [cycles]; ``z_rms`` (RMS of error / uncertainty) and
+        ``coverage95`` (share within 1.96 sigma); ``floor_rms`` (RMS timing floor [cycles]);
+        ``label_match``; ``onset_offset_s``; ``errors`` (per row [cycles]). None when the
+        truth has no engagements for the channel or the table is empty.
+    """
+    if not isinstance(table, PassTable):
+        raise TypeError(f"table must be a PassTable, got {type(table).__name__}")
+    events = getattr(truth, "events", None)
+    if not isinstance(events, dict) or channel not in events or not len(table):
+        return None
+    ev = events[channel]
+    et = np.asarray(ev.time, dtype=float)
+    if et.size < 2:
+        return None
+
+    def nearest(x):
+        j = np.clip(np.searchsorted(et, x), 1, et.size - 1)
+        return np.where(np.abs(et[j - 1] - x) < np.abs(et[j] - x), j - 1, j)
+
+    ref_times = table.time if times is None else np.asarray(times, dtype=float)
+    off = float(np.median(ref_times - et[nearest(ref_times)]))
+    match = float("nan")
+    if times is not None and planets is not None:
+        pl = np.asarray(planets)
+        true_lab = np.asarray(ev.planet)[nearest(ref_times - off)] - 1
+        ok = pl >= 0
+        match = float(np.mean(true_lab[ok] == pl[ok])) if np.any(ok) else float("nan")
+    g = truth.config["gearset"]
+    sp = Speeds(**truth.config["speeds"])
+    z = g["z_sun"] if table.gauge == "sun" else g["z_ring"]
+    w = abs(sp.w_sc if table.gauge == "sun" else sp.w_rc)
+    tau = np.asarray(ev.tau, dtype=float)
+    i_n = nearest(table.time - off)
+    i_1 = nearest(table.ref_time - off)
+    true = np.mod(z * w * (tau[i_n] - tau[i_1]) / TWO_PI, 1.0)
+    err = wrap(table.gamma - true)
+    sig = np.asarray(table.uncertainty, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        zs = err / sig
+    fin = np.isfinite(zs)
+    floor = np.asarray(table.timing_floor, dtype=float)
+    ff = floor[np.isfinite(floor)]
+    return {"n": int(err.size), "rms": float(np.sqrt(np.mean(err ** 2))),
+            "max_abs": float(np.max(np.abs(err))), "label_match": match,
+            "onset_offset_s": off,
+            "z_rms": float(np.sqrt(np.mean(zs[fin] ** 2))) if fin.any() else float("nan"),
+            "coverage95": float(np.mean(np.abs(zs[fin]) <= 1.96)) if fin.any() else float("nan"),
+            "floor_rms": float(np.sqrt(np.mean(ff ** 2))) if ff.size else float("nan"),
+            "errors": err}

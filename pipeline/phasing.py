@@ -24,13 +24,18 @@ section 3 writes the ring case as frac(-(t_n - t_1) / T_r); that holds when t_n 
 counted backwards from planet n to planet 1; we follow the geometry (and the tests check
 the measured value against section 1 on both gears and both directions).
 
-Speed drift. The rig's speed is never assumed: the relative angle of the gauged member is
-rebuilt from the pulse train itself. Every pass of planet 1 marks one more relative
-revolution, so the knots (t_1k, 2 pi k) define the angle Theta(t) of the gauged member;
-a shape-preserving cubic (scipy PchipInterpolator) through them gives Theta between knots
-and lag_n = Theta(t_n) - 2 pi k. This is exact for constant speed and for a linear ramp to
-second order, and follows slow ripple. A carrier once-per-revolution tacho gives the same
-knots for a ring gauge (the ring turns once per carrier revolution relative to the carrier).
+Speed. The rig's speed is never assumed. Z_j lag_n / 2 pi is the mesh angle turned between
+the two passes, and the mesh angle A(t) of the whole gear train is fitted to every pass train
+and the tacho at once (:mod:`pipeline.angles`: smooth drift plus ripple locked to the shaft
+angles, per-planet offsets and planet-spin terms told apart by how they sample the shafts),
+so gamma_n = frac(A(t_n) - A(t_1)) (:func:`phasing_from_model`). Each pass carries the
+one-sigma uncertainty of its two onsets' timing and of the model.
+
+Labels. Which pulse is which planet comes from the pass pattern
+(:func:`assign_planets_by_pattern`: the fractions of a revolution between consecutive
+planets); which one is planet 1 from unequal spacing, from a carrier tacho for a gauge on
+the held member (:func:`assign_planets_by_tacho`, geometry in ``data_schemas/scene.md``), or
+from the planets' loads; otherwise the labels are relative to the first pulse.
 """
 
 from __future__ import annotations
@@ -42,6 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
+from .angles import AngleModel, PassTrain, revolution_numbers
 from .errors import ProcessingWarning
 from .validate import as_finite_array, as_positive_int
 
@@ -50,11 +56,15 @@ __all__ = [
     "pass_order",
     "planet_fractions",
     "revolution_numbers",
-    "RevolutionEncoder",
-    "ScaledEncoder",
+    "GaugeEncoder",
     "assign_planets_by_pattern",
     "assign_planets_by_tacho",
+    "phasing_from_model",
     "measured_phasing",
+    "GaugePasses",
+    "GaugeLabels",
+    "PhasingResult",
+    "measure_phasing",
 ]
 
 TWO_PI = 2.0 * math.pi
@@ -77,8 +87,8 @@ class PassTable:
     gamma : ndarray, shape (n,)
         Measured phasing gamma_jn [-] in [0, 1) (fraction of one mesh cycle).
     uncertainty : ndarray, shape (n,)
-        One-sigma uncertainty of gamma [-] propagated from the onset timing uncertainty
-        (NaN when no timing uncertainty was given).
+        One-sigma uncertainty of gamma [-]: the two onsets' timing (bound times the train's
+        fitted variance factor) and the angle model's covariance, combined.
     mesh_period : ndarray, shape (n,)
         Local mesh period T_j at the pass [s] (from the pulse train, not nominal speed).
     ref_time : ndarray, shape (n,)
@@ -93,6 +103,11 @@ class PassTable:
     time_origin : float
         Time at which model offset phases (kappa) are referred [s]; the pipeline sets the
         recording's first-sample time (default 0).
+    timing_floor : ndarray, shape (n,)
+        The part of ``uncertainty`` the two onsets' timing bounds alone set [-]:
+        A'(t_n) sigma_n and A'(t_1) sigma_1 combined (NaN without timing bounds).
+    model_sigma : ndarray, shape (n,)
+        The angle model's own one-sigma uncertainty of A(t_n) - A(t_1) [-].
     """
 
     gauge: str
@@ -108,13 +123,14 @@ class PassTable:
     origin: float = float("nan")
     encoder: object = field(default=None, repr=False, compare=False)
     time_origin: float = 0.0
+    timing_floor: np.ndarray = None
+    model_sigma: np.ndarray = None
 
     def __post_init__(self):
         n = np.asarray(self.time).size
-        if self.ref_time is None:
-            self.ref_time = np.full(n, np.nan)
-        if self.angle is None:
-            self.angle = np.full(n, np.nan)
+        for name in ("ref_time", "angle", "timing_floor", "model_sigma"):
+            if getattr(self, name) is None:
+                setattr(self, name, np.full(n, np.nan))
 
     def __len__(self) -> int:
         return int(self.time.size)
@@ -126,8 +142,8 @@ class PassTable:
                    z.copy(), z.copy(), list(notes or []))
 
     def to_dataframe(self):
-        """pandas DataFrame with columns time_s, planet, revolution, gamma, uncertainty,
-        mesh_period_s, gauge."""
+        """pandas DataFrame: gauge, time_s, planet, revolution, gamma, uncertainty,
+        mesh_period_s, ref_time_s, angle_rad, timing_floor, model_sigma."""
         import pandas as pd
 
         return pd.DataFrame({
@@ -135,6 +151,7 @@ class PassTable:
             "revolution": self.revolution, "gamma": self.gamma,
             "uncertainty": self.uncertainty, "mesh_period_s": self.mesh_period,
             "ref_time_s": self.ref_time, "angle_rad": self.angle,
+            "timing_floor": self.timing_floor, "model_sigma": self.model_sigma,
         })
 
     def for_planet(self, n: int) -> "PassTable":
@@ -143,7 +160,8 @@ class PassTable:
         return PassTable(self.gauge, self.time[m], self.planet[m], self.revolution[m],
                          self.gamma[m], self.uncertainty[m], self.mesh_period[m],
                          self.ref_time[m], self.angle[m], list(self.notes), self.origin,
-                         self.encoder, self.time_origin)
+                         self.encoder, self.time_origin, self.timing_floor[m],
+                         self.model_sigma[m])
 
     def mean_speed(self) -> float:
         """Mean relative speed of the gauged member from the encoder angle, |w_jc| [rad/s]
@@ -195,46 +213,6 @@ def planet_fractions(planet_angles, order: int) -> np.ndarray:
     if order not in (1, -1):
         raise ValueError(f"order must be +1 or -1, got {order!r}")
     return ((order * (psi - psi[0])) / TWO_PI) % 1.0
-
-
-def revolution_numbers(ref_times, *, tol: float = 0.5) -> np.ndarray:
-    """Revolution count k of each once-per-revolution reference time, allowing for missed ones.
-
-    A reference pulse missing (gap, dropout) shows as an interval about twice the local period;
-    k then steps by the rounded ratio, so the angle knots stay right.
-
-    Parameters
-    ----------
-    ref_times : array_like, shape (m,)
-        Sorted reference times [s] (planet-1 passes or tacho pulses).
-    tol : float
-        Largest accepted distance of an interval ratio from an integer [-].
-
-    Returns
-    -------
-    k : ndarray of int, shape (m,)
-        k[0] = 0, non-decreasing steps of >= 1.
-    """
-    t = as_finite_array(ref_times, "ref_times", ndim=1)
-    if t.size == 0:
-        return np.empty(0, dtype=int)
-    if t.size == 1:
-        return np.zeros(1, dtype=int)
-    d = np.diff(t)
-    if np.any(d <= 0):
-        raise ValueError("ref_times must be strictly increasing")
-    # local period: running median of the intervals (robust to single missed pulses)
-    # local period: running median of the intervals over 15 (robust to a few missed pulses,
-    # follows slow speed change); short trains use their global median
-    w = 15
-    if d.size < w:
-        local = np.full(d.size, np.median(d))
-    else:
-        pad = np.pad(d, (w // 2, w - 1 - w // 2), mode="reflect")
-        local = np.median(np.lib.stride_tricks.sliding_window_view(pad, w), axis=1)
-    ratio = d / local
-    steps = np.maximum(1, np.rint(ratio)).astype(int)
-    return np.concatenate([[0], np.cumsum(steps)])
 
 
 def assign_planets_by_tacho(times, tacho_times, planet_angles, gauge_angle: float, order: int,
@@ -323,12 +301,15 @@ def assign_planets_by_pattern(times, planet_angles, order: int, *, first: int = 
         0-based planet index per onset, -1 where unassigned.
     info : dict
         ``shift_decided_by`` ("pattern", "amplitude", "given"), ``ambiguous`` (bool),
-        ``n_unassigned``, ``period`` (median relative revolution [s]).
+        ``n_unassigned``, ``period`` (median relative revolution [s]), ``position``
+        (int array: cumulative pass-order position of each onset, revolution
+        ``position // N`` and place ``position % N``; meaningful where planet >= 0).
     """
     t = as_finite_array(times, "times", ndim=1)
     frac = planet_fractions(planet_angles, order)
     n = frac.size
-    info = {"shift_decided_by": "given", "ambiguous": False, "n_unassigned": 0, "period": float("nan")}
+    info = {"shift_decided_by": "given", "ambiguous": False, "n_unassigned": 0, "period": float("nan"),
+            "position": np.empty(0, dtype=np.int64)}
     if t.size == 0:
         return np.empty(0, dtype=int), info
     if np.any(np.diff(t) <= 0):
@@ -340,11 +321,13 @@ def assign_planets_by_pattern(times, planet_angles, order: int, *, first: int = 
     spacing = float(step.min())
     if n == 1:
         info["period"] = float(np.median(np.diff(t))) if t.size > 1 else float("nan")
+        info["position"] = np.arange(t.size, dtype=np.int64)
         return np.zeros(t.size, dtype=int), info
     q_first = int(np.flatnonzero(seq == first)[0])
     if t.size < n + 1:
         # too few onsets to estimate a period: label consecutively from `first`
         info["ambiguous"] = True
+        info["position"] = q_first + np.arange(t.size, dtype=np.int64)
         return seq[(q_first + np.arange(t.size)) % n], info
     # relative revolution period: median of N-step intervals (robust to a missing pulse),
     # taken locally (a running median over ~2 revolutions) so speed ramps are followed. If a
@@ -396,12 +379,13 @@ def assign_planets_by_pattern(times, planet_angles, order: int, *, first: int = 
                 best = int(np.argmax(scores))
                 info["shift_decided_by"] = "amplitude"
                 info["ambiguous"] = bool(scores[best] - np.sort(scores)[-2] < 0.2)
-                pos = (pos + best - q0) % n
+                pos = pos + (best - q0) % n
     else:
         q0 = min(starts, key=lambda q: (np.count_nonzero(~walks[q][1]), walks[q][2]))
         pos, ok, _ = walks[q0]
         info["shift_decided_by"] = "pattern"
-    planet = np.where(ok, seq[pos], -1)
+    planet = np.where(ok, seq[pos % n], -1)
+    info["position"] = pos
     info["n_unassigned"] = int(np.count_nonzero(~ok))
     return planet, info
 
@@ -433,219 +417,242 @@ def _walk(gaps: np.ndarray, fs: np.ndarray, q0: int, tol: float):
             adv = max(1, adv)
         p += adv
         pos[i] = p
-    return pos % n, ok, total
+    return pos, ok, total
 
 
-class RevolutionEncoder:
-    """Relative angle of a gauged member from once-per-revolution pass trains.
+class GaugeEncoder:
+    """The relative angle of one gauged gear, read off the recording's :class:`AngleModel`.
 
-    The reference passes (planet 1, or a tacho) mark whole relative revolutions k: knots
-    (t_k, 2 pi k). Their times are not exactly one revolution apart when the reference planet
-    has its own shaft hole error (each pass moves by that planet's angular deviation, ~e/R_c),
-    so the angle is not forced through the knots: a smooth Theta(t) is fitted to them, a cubic
-    smoothing spline (scipy make_smoothing_spline) whose smoothing is chosen by generalised
-    cross-validation (a quadratic for fewer than 8 passes). The other planets' pass trains,
-    each at its own unknown constant angle offset, join the fit (offsets estimated, then one
-    refit), so N times more passes average the jitter. Exact for constant speed and a linear
-    ramp; follows speed ripple down to a few relative revolutions per period.
+    ``angle(t) = 2 pi (A(t) - A(origin)) / Z`` [rad]: the angle the gauged gear has turned
+    relative to the carrier since its first reference (planet-1) pass, in its own sense of
+    rotation. :mod:`pipeline.compare` runs the models on it.
 
-    The phasing of a pass at t_n is then taken from Theta(t_n) - Theta(t_1k) with t_1k the
-    measured reference pass of its revolution, so at constant speed lag_n = w (t_n - t_1k)
-    exactly (spec section 3: gamma = frac(dt / T)).
-
-    Parameters
+    Attributes
     ----------
-    knot_times : ndarray, shape (m,)
-        Reference times [s], strictly increasing, m >= 2.
-    k : ndarray of int, shape (m,)
-        Their revolution numbers (:func:`revolution_numbers`), gaps allowed.
-    extra_trains : list of ndarray, optional
-        Pass times of other planets (each strictly increasing, once per revolution).
-    lam : float, optional
-        Weight of the third-difference roughness penalty (default 1e-2 with ``harmonic``,
-        1.0 without).
-    harmonic : float, optional
-        Rotation of a planet's shaft hole offset per radian of the gauged member's relative
-        angle, w_pc / w_jc [-] (-Z_s / Z_p for a sun gauge, Z_r / Z_p for a ring gauge): each
-        train gets a cos/sin term at that rate so planet eccentricity is not read as speed.
-    knot_spacing : float, optional
-        Spline knot spacing [revolutions] (default 1 with ``harmonic``, 4 without).
+    model : AngleModel
+    z : int
+        Tooth count of the gauged gear [-].
+    full_t : ndarray
+        Planet-1 pass time of each revolution from the first one with a reference pass [s]
+        (NaN where that pass is missing).
+    k0 : int
+        Revolution number of ``full_t[0]``.
     """
 
-    def __init__(self, knot_times, k, extra_trains=None, lam: float | None = None,
-                 harmonic: float | None = None, knot_spacing: float | None = None):
-        kt = np.asarray(knot_times, dtype=float)
-        k = np.asarray(k, dtype=int)
-        self.k0 = int(k[0])
-        full_k = np.arange(k[0], k[-1] + 1)
-        # revolutions whose reference pass is missing get an interpolated reference time
-        self.full_t = np.interp(full_k, k, kt)
-        self._known = np.zeros(full_k.size, bool)
-        self._known[k - k[0]] = True
-        self.t_first = float(self.full_t[0])
-        self.t_last = float(self.full_t[-1])
-        # with the eccentricity harmonic modelled the spline may be supple (a knot per
-        # revolution); without it, it must be stiff enough not to follow the planets' jitter
-        # (which repeats every few revolutions): knots four revolutions apart, more penalty
-        if knot_spacing is None:
-            knot_spacing = 1.0 if harmonic else 4.0
-        if lam is None:
-            lam = 1e-2 if harmonic else 1.0
-        self.lam = lam
-        self.knot_spacing = float(knot_spacing)
-        self.residual_rms = float("nan")
-        # every train (planet 1 first, then the others): times, revolution numbers, planet
-        trains = [(kt, k - k[0])]
-        for tq in (extra_trains or []):
-            tq = np.asarray(tq, dtype=float)
-            inside = (tq >= self.t_first) & (tq <= self.t_last)
-            if np.count_nonzero(inside) >= 2:
-                trains.append((tq[inside], revolution_numbers(tq[inside])))
-        self.harmonic = harmonic
-        tt = np.concatenate([x[0] for x in trains])
-        base = np.concatenate([TWO_PI * x[1] for x in trains])
-        which = np.concatenate([np.full(x[0].size, i) for i, x in enumerate(trains)])
-        self._fit_joint(tt, base, which, len(trains))
+    def __init__(self, model: AngleModel, z: int, full_t: np.ndarray, k0: int):
+        self.model = model
+        self.z = int(z)
+        self.full_t = np.asarray(full_t, dtype=float)
+        self.k0 = int(k0)
+        self._a0 = float(model.mesh_angle(self.full_t[:1])[0])
+        self.t_first, self.t_last = (float(x) for x in model.t_span)
 
-    def _fit_joint(self, t, y, which, n_trains):
-        """One penalised least-squares solve (P-spline, Eilers & Marx 1996) of
-
-            y_i = S(t_i) + c_q + a_q cos(h S(t_i)) + b_q sin(h S(t_i))   (train q of pass i)
-
-        S a cubic B-spline (knots one revolution apart, third-difference penalty so that a
-        steady ramp is free), c_q the constant angle offset of each train (0 for planet 1:
-        its passes fix the origin) and the harmonic at the planet-offset rotation ratio h,
-        which is how a planet's own shaft hole error moves its passes; it turns with the
-        planet, so it cannot be mistaken for a change of speed. The harmonic's argument uses
-        the previous iterate of S (two Gauss-Newton-like rounds; S is known to ~1e-3 rad after
-        the first).
-        """
-        from scipy import sparse
-        from scipy.interpolate import BSpline
-        from scipy.sparse.linalg import spsolve
-
-        o = np.argsort(t, kind="stable")
-        t, y, which = t[o], y[o], which[o]
-        self._t0 = float(t[0])
-        span = float(t[-1] - t[0])
-        n_rev = max(1.0, (y.max() - y.min()) / TWO_PI)
-        P = span / n_rev if span > 0 else 1.0
-        self._P = P
-        x = (t - self._t0) / P                           # [revolutions]
-        n_int = max(1, int(math.ceil(x[-1] / self.knot_spacing)))
-        if t.size < 4 * (n_int + 3) // 3 + 3 * n_trains or t.size < 8:
-            n_int = 1
-        edges = np.linspace(0.0, x[-1] if x[-1] > 0 else 1.0, n_int + 1)
-        hk = edges[1] - edges[0]
-        # equally spaced knots running past both ends (not clamped): then polynomials up to
-        # degree 2 have zero third differences of their coefficients, i.e. no penalty
-        kk = np.concatenate([edges[0] - hk * np.arange(3, 0, -1), edges, edges[-1] + hk * np.arange(1, 4)])
-        B = BSpline.design_matrix(np.clip(x, edges[0], edges[-1]), kk, 3).tocsc()
-        nb = B.shape[1]
-        D = sparse.diags([-1.0, 3.0, -3.0, 1.0], [0, 1, 2, 3], shape=(max(0, nb - 3), nb))
-        lam = self.lam
-        P_pen = lam * (D.T @ D)
-        s_prev = y.copy()
-        for _ in range(2 if self.harmonic else 1):
-            cols = [B]
-            for q in range(1, n_trains):
-                cols.append(sparse.csc_matrix((which == q).astype(float)[:, None]))
-            if self.harmonic:
-                for q in range(n_trains):
-                    m = (which == q).astype(float)
-                    if np.count_nonzero(m) >= 6:
-                        cols.append(sparse.csc_matrix((m * np.cos(self.harmonic * s_prev))[:, None]))
-                        cols.append(sparse.csc_matrix((m * np.sin(self.harmonic * s_prev))[:, None]))
-            A = sparse.hstack(cols, format="csc")
-            pen = sparse.block_diag([P_pen, sparse.csc_matrix((A.shape[1] - nb, A.shape[1] - nb))],
-                                    format="csc")
-            # normal equations are banded + a few dense columns: a sparse direct solve stays
-            # linear in the number of revolutions (6600 revolutions solve in well under 1 s)
-            M = (A.T @ A + pen).tocsc()
-            sol = spsolve(M, A.T @ y)
-            if not np.all(np.isfinite(sol)):
-                sol = np.linalg.lstsq(M.toarray(), A.T @ y, rcond=None)[0]
-            self._spline = BSpline(kk, sol[:nb], 3, extrapolate=True)
-            s_prev = self._spline(x)
-        self._lin = np.zeros(1)
-        self.residual_rms = float(np.sqrt(np.mean((A @ sol - y) ** 2)))
-
-    def _eval(self, t, nu: int = 0):
-        t = np.asarray(t, dtype=float)
-        if self._spline is not None:
-            x = (t - self._t0) / self._P
-            return self._spline(x, nu) / self._P ** nu
-        p = np.polyder(self._poly, nu) if nu else self._poly
-        return np.polyval(p, t - self._t0)
-
-    def angle(self, t):
-        """Smooth relative angle Theta(t) [rad] (0 near the first reference pass)."""
-        return self._eval(t)
+    def angle(self, t) -> np.ndarray:
+        """Relative angle of the gauged gear since its first reference pass [rad]."""
+        return TWO_PI * (self.model.mesh_angle(t) - self._a0) / self.z
 
     def rates(self, t):
-        """Local angular speed [rad/s] and acceleration [rad/s^2] at times ``t``."""
-        return self._eval(t, 1), self._eval(t, 2)
-
-    def lag(self, t):
-        """Revolution k, angle turned since that revolution's reference pass [rad] and the
-        local angular speed [rad/s] at times ``t`` (inside [t_first, t_last))."""
-        t = np.asarray(t, dtype=float)
-        j = np.clip(np.searchsorted(self.full_t, t, side="right") - 1, 0, self.full_t.size - 2)
-        lag = self._eval(t) - self._eval(self.full_t[j])
-        return j + self.k0, lag, np.abs(self._eval(t, 1))
+        """Relative angular speed [rad/s] and (not modelled separately) 0 acceleration."""
+        w = TWO_PI * self.model.mesh_rate(t) / self.z
+        return w, np.zeros_like(w)
 
     def knot_time_or_nan(self) -> np.ndarray:
-        """Reference time per revolution (NaN where the pass was missing)."""
-        return np.where(self._known, self.full_t, np.nan)
+        return self.full_t.copy()
 
 
-class ScaledEncoder:
-    """An encoder of one member driven by another member's encoder through a fixed ratio.
+def assign_planets_by_tacho(times, tacho_times, planet_angles, gauge_angle: float, order: int,
+                            *, key_angle: float = 0.0, tol: float = 0.25) -> np.ndarray:
+    """Planet index of each pass of a gauge on the HELD member from a carrier tacho.
 
-    The relative speeds of sun, planets and ring are tied by the tooth counts
-    (w_rc = -(Z_s / Z_r) w_sc), so the sun gauge's dense, finely timed pass train measures the
-    ring's relative angle too: angle_ring = ratio * angle_sun. The ring gauge's own planet-1
-    passes still fix which revolution a pass belongs to and the reference instant t_1.
+    Geometry (``data_schemas/scene.md`` has the figure): ground angles are counted
+    counter-clockwise from the tacho probe; planet n sits at carrier-frame angle psi_n
+    (planet 1 at 0); the tacho key sits at carrier-frame angle ``key_angle`` and the edge
+    fires when the key passes the probe, i.e. when the carrier angle theta_c = -key_angle
+    (mod 2 pi). A gauge on the held member at ground angle ``gauge_angle`` meets planet n when
+    theta_c + psi_n = gauge_angle (mod 2 pi). theta_c(t) between edges comes from the edges
+    (shape-preserving cubic through them); speed ripple of several percent moves it by far
+    less than a planet spacing.
 
     Parameters
     ----------
-    knot_times, k : ndarray
-        This member's reference passes and revolution numbers.
-    source : RevolutionEncoder
-        The driving encoder (must cover the span of interest).
-    ratio : float
-        |relative speed of this member| / |relative speed of the source member| [-].
+    times : array_like, shape (m,)
+        Pass times [s].
+    tacho_times : array_like, shape (r,)
+        Tacho edge times [s] (>= 2).
+    planet_angles : array_like, shape (N,)
+        psi_n [rad].
+    gauge_angle : float
+        Ground angle of the gauged tooth of the held member [rad].
+    order : {+1, -1}
+        Sense of the carrier's rotation (+1: counter-clockwise).
+    key_angle : float
+        Carrier-frame angle of the tacho key relative to planet 1 [rad].
+    tol : float
+        Largest accepted angular mismatch as a fraction of the smallest planet spacing [-];
+        passes further off are labelled -1 (unassigned).
+
+    Returns
+    -------
+    planet : ndarray of int, shape (m,)
+        0-based planet index, -1 when unassigned (outside the tacho span or no planet near).
     """
+    t = as_finite_array(times, "times", ndim=1)
+    tach = as_finite_array(tacho_times, "tacho_times", ndim=1)
+    psi = as_finite_array(planet_angles, "planet_angles", ndim=1, allow_empty=False)
+    if order not in (1, -1):
+        raise ValueError(f"order must be +1 or -1, got {order!r}")
+    out = np.full(t.size, -1, dtype=int)
+    if t.size == 0:
+        return out
+    if tach.size < 2:
+        raise ValueError(f"assign_planets_by_tacho needs >= 2 tacho pulses, got {tach.size}")
+    k = revolution_numbers(tach)
+    theta = PchipInterpolator(tach, -float(key_angle) + TWO_PI * k * order, extrapolate=False)(t)
+    ok = np.isfinite(theta)
+    # ground angle of planet n: theta_c + psi_n; match against the gauge angle
+    d = (gauge_angle - theta[ok, None] - psi[None, :] + math.pi) % TWO_PI - math.pi
+    best = np.argmin(np.abs(d), axis=1)
+    spacing = np.min(np.diff(np.sort(np.concatenate([psi % TWO_PI, [psi[0] % TWO_PI + TWO_PI]]))))
+    good = np.abs(d[np.arange(best.size), best]) <= tol * spacing
+    idx = np.flatnonzero(ok)
+    out[idx[good]] = best[good]
+    return out
 
-    def __init__(self, knot_times, k, source: "RevolutionEncoder", ratio: float):
-        kt = np.asarray(knot_times, dtype=float)
-        k = np.asarray(k, dtype=int)
-        self.k0 = int(k[0])
-        full_k = np.arange(k[0], k[-1] + 1)
-        self.full_t = np.interp(full_k, k, kt)
-        self._known = np.zeros(full_k.size, bool)
-        self._known[k - k[0]] = True
-        self.source = source
-        self.ratio = float(ratio)
-        self.t_first = max(float(self.full_t[0]), source.t_first)
-        self.t_last = min(float(self.full_t[-1]), source.t_last)
 
-    def lag(self, t):
-        t = np.asarray(t, dtype=float)
-        j = np.clip(np.searchsorted(self.full_t, t, side="right") - 1, 0, self.full_t.size - 2)
-        t_k = self.full_t[j]
-        lag = self.ratio * (self.source.angle(t) - self.source.angle(t_k))
-        speed = self.ratio * self.source.rates(t)[0]
-        return j + self.k0, lag, np.abs(speed)
+def _gap_between(t_a: np.ndarray, t_b: np.ndarray, gaps) -> np.ndarray:
+    """True where a gap interval [g0, g1) lies (partly) between t_a and t_b."""
+    out = np.zeros(t_a.size, bool)
+    if gaps is None:
+        return out
+    g = np.asarray(gaps, dtype=float).reshape(-1, 2)
+    if g.size == 0 or t_a.size == 0:
+        return out
+    lo = np.minimum(t_a, t_b)
+    hi = np.maximum(t_a, t_b)
+    g = g[np.argsort(g[:, 0])]
+    # any gap starting before hi whose end is after lo
+    j = np.searchsorted(g[:, 0], hi, side="left")
+    end_max = np.maximum.accumulate(g[:, 1])
+    has = j > 0
+    out[has] = end_max[j[has] - 1] > lo[has]
+    return out
 
-    def knot_time_or_nan(self) -> np.ndarray:
-        return np.where(self._known, self.full_t, np.nan)
+
+def phasing_from_model(model: AngleModel, train: PassTrain, z_gear: int, n_planets: int, *,
+                       gauge: str, gaps=None) -> PassTable:
+    """Measured phasing per pass of one gauge train from the recording's angle model.
+
+    gamma = frac(A(t_n) - A(t_1)) with t_1 the planet-1 pass opening the same revolution of
+    the same gauge (module notes; A in mesh cycles). Each row's ``uncertainty`` is the
+    one-sigma combination of the two onsets' timing (their bound times the train's variance
+    factor, which is >= 1) and the angle model's own uncertainty of A(t_n) - A(t_1);
+    ``timing_floor`` is the part the two timing bounds alone set.
+
+    Parameters
+    ----------
+    model : AngleModel
+        From :func:`pipeline.angles.fit_angle_model` (``train`` among its trains).
+    train : PassTrain
+        The gauge's passes (:func:`pipeline.angles.gauge_train`).
+    z_gear : int
+        Tooth count of the gauged gear [-].
+    n_planets : int
+        N [-].
+    gauge : {"sun", "ring"}
+        Label carried into the table.
+    gaps : array_like, shape (k, 2), optional
+        Gap intervals [s] of the recording: a pass whose planet-1 reference lies across a gap
+        longer than the train's median interval between passes (less data than anywhere
+        else in the record) is dropped, never bridged silently; the count goes into the
+        notes. Shorter gaps (dropped samples) take no more angle on trust than the ordinary
+        interval between two passes does.
+
+    Returns
+    -------
+    PassTable
+    """
+    if not isinstance(model, AngleModel):
+        raise TypeError(f"model must be an AngleModel, got {type(model).__name__}")
+    if not isinstance(train, PassTrain):
+        raise TypeError(f"train must be a PassTrain, got {type(train).__name__}")
+    z = as_positive_int(z_gear, "z_gear")
+    n = as_positive_int(n_planets, "n_planets")
+    notes: list[str] = []
+    if len(train) == 0:
+        return PassTable.empty(gauge, ["no passes"])
+    try:
+        out_mask = model.outlier_mask(train.name)
+        scale = model.scale_of(train.name)
+    except KeyError:
+        out_mask = np.zeros(len(train), bool)
+        scale = 1.0
+    t, pl, pos, sig = train.times, train.planet, train.position, train.sigma
+    good = ~out_mask
+    rev = np.floor_divide(pos, n)
+    r0 = int(rev[good].min())
+    nrev = int(rev[good].max()) - r0 + 1
+    ref_t = np.full(nrev, np.nan)
+    ref_s = np.full(nrev, np.nan)
+    one = good & (pl == 0)
+    ref_t[rev[one] - r0] = t[one]
+    ref_s[rev[one] - r0] = sig[one]
+    if np.count_nonzero(np.isfinite(ref_t)) == 0:
+        msg = f"{gauge} gauge: no planet-1 pass; phasing relative to planet 1 cannot be measured"
+        warnings.warn(msg, ProcessingWarning, stacklevel=2)
+        return PassTable.empty(gauge, [msg])
+    first = int(np.flatnonzero(np.isfinite(ref_t))[0])
+    ref_t, ref_s = ref_t[first:], ref_s[first:]
+    r0 += first
+    rows = np.flatnonzero(good & (pl > 0) & (rev >= r0))
+    ri = rev[rows] - r0
+    t1 = ref_t[ri]
+    s1 = ref_s[ri]
+    missing = ~np.isfinite(t1)
+    across = np.zeros(rows.size, bool)
+    if gaps is not None and t.size > 1:
+        g = np.asarray(gaps, dtype=float).reshape(-1, 2)
+        g = g[(g[:, 1] - g[:, 0]) >= float(np.median(np.diff(t)))]
+        across[~missing] = _gap_between(t[rows][~missing], t1[~missing], g)
+    if np.any(missing):
+        notes.append(f"{int(missing.sum())} pass(es) without the planet-1 pass of their "
+                     "revolution dropped")
+    if np.any(across):
+        notes.append(f"{int(across.sum())} pass(es) whose planet-1 reference lies across a gap "
+                     "dropped")
+    if np.any(out_mask):
+        notes.append(f"{int(out_mask.sum())} pass(es) far off the angle model left out")
+    keep = ~missing & ~across
+    rows, t1, s1, ri = rows[keep], t1[keep], s1[keep], ri[keep]
+    tn = t[rows]
+    an = model.mesh_angle(tn)
+    a1 = model.mesh_angle(t1)
+    fn = model.mesh_rate(tn)
+    f1 = model.mesh_rate(t1)
+    gamma = np.mod(an - a1, 1.0)
+    gamma = np.where(gamma >= 1.0, 0.0, gamma)
+    floor = np.hypot(fn * sig[rows], f1 * s1) if train.sigma_given else np.full(rows.size, np.nan)
+    timing = scale * np.hypot(fn * sig[rows], f1 * s1)
+    model_sd = model.difference_std(tn, t1) if rows.size else np.empty(0)
+    unc = np.hypot(timing, model_sd)
+    a_ref = float(model.mesh_angle(ref_t[:1])[0])
+    enc = GaugeEncoder(model, z, ref_t, r0)
+    tab = PassTable(gauge, tn, pl[rows].astype(int) + 1, ri, gamma, unc, 1.0 / fn, t1,
+                    TWO_PI * (an - a_ref) / z, notes, float(ref_t[0]))
+    tab.encoder = enc
+    tab.timing_floor = floor
+    tab.model_sigma = model_sd
+    return tab
 
 
 def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str = "sun",
-                     sigma_t=None, reference_times=None, encoder=None,
-                     encoder_ratio: float = 1.0, planet_ratio: float | None = None) -> PassTable:
-    """Phasing gamma_jn per pass from labelled onset times (equation (1) of the module notes).
+                     sigma_t=None, reference_times=None, z_planet: int = 0,
+                     positions=None, planet_angles=None, direction: str | None = None) -> PassTable:
+    """Phasing per pass of ONE gauge's labelled onsets, with an angle model fitted to them.
+
+    The convenience path for a single pass train (the pipeline fits every gauge and the tacho
+    together: :func:`pipeline.angles.fit_angle_model`, :func:`phasing_from_model`). The
+    gauged member's angle comes from the train itself (every planet's passes, each at its own
+    offset, plus planet-spin terms when ``z_planet`` is given), never from nominal speed.
 
     Parameters
     ----------
@@ -658,34 +665,28 @@ def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str 
     n_planets : int
         Number of planets N [-].
     gauge : {"sun", "ring"}
-        Label carried into the table.
+        Which gear carries the gauge.
     sigma_t : float or array_like, optional
-        One-sigma onset timing uncertainty [s], scalar or per onset.
+        One-sigma onset timing uncertainty [s] (the timing bound), scalar or per onset.
     reference_times : array_like, optional
-        Once-per-relative-revolution reference times [s] to use as angle knots instead of the
-        planet-1 passes (e.g. a carrier tacho for a ring gauge). Phasing is still taken
-        relative to planet 1: gamma_n = frac(Z (lag_n - lag_1) / 2 pi), lag_1 from the same
-        revolution.
-
-    encoder : RevolutionEncoder, optional
-        Encoder of another member (e.g. ``sun_table.encoder`` for a ring gauge) that drives
-        this member's angle through ``encoder_ratio`` (:class:`ScaledEncoder`): a denser,
-        finer speed measurement than this gauge's own once-per-revolution passes.
-    encoder_ratio : float
-        |w of this member| / |w of the encoder's member| relative to the carrier [-]
-        (Z_s / Z_r for a ring gauge driven by the sun encoder).
-    planet_ratio : float, optional
-        w_pc / w_jc, the planets' rotation per radian of this member's relative angle [-]
-        (Z_s / Z_p for a sun gauge, Z_r / Z_p for a ring gauge; the sign does not matter):
-        lets the speed encoder tell planet eccentricity from speed change
-        (:class:`RevolutionEncoder`). None: not modelled.
+        Once-per-relative-revolution reference times of this gauge's member [s] (a carrier
+        tacho for a gauge on a held ring): an extra angle train, Z_gear mesh cycles apart.
+    z_planet : int
+        Planet tooth count [-] (0: no planet-spin terms).
+    positions : array_like of int, optional
+        Pass-order positions (:func:`assign_planets_by_pattern` ``info["position"]``);
+        default: counted from the labels (consecutive onsets of one revolution).
+    planet_angles : array_like, optional
+        psi_n [rad] (default equally spaced) and ``direction`` ("cw"/"ccw") fix the pass
+        order; ``direction`` None: the order the labels follow in time.
 
     Returns
     -------
     PassTable
-        Rows for planets 2..N (planet 1 is the reference, gamma = 0 by definition), each with
-        the revolution it belongs to, the local mesh period and the propagated uncertainty.
+        Rows for planets 2..N (planet 1 is the reference, gamma = 0 by definition).
     """
+    from .angles import Kinematics, fit_angle_model, gauge_train, tacho_train
+
     t = as_finite_array(times, "times", ndim=1)
     lab = np.asarray(planets)
     if lab.shape != t.shape:
@@ -700,75 +701,347 @@ def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str 
         raise ValueError(f"planets must lie in [-1, {n - 1}], got range [{lab.min()}, {lab.max()}]")
     if t.size and np.any(np.diff(t) < 0):
         raise ValueError("times must be sorted in increasing order")
-    if sigma_t is None:
-        sig = np.full(t.size, np.nan)
-    else:
+    if sigma_t is not None:
         sig = np.broadcast_to(np.asarray(sigma_t, dtype=float), t.shape).astype(float)
         if np.any(sig < 0):
             raise ValueError("sigma_t must be >= 0")
+    else:
+        sig = None
     if t.size == 0:
         return PassTable.empty(gauge, ["no onsets"])
-    notes = []
-    use_ref = reference_times is not None
-    if use_ref:
-        knots_t = as_finite_array(reference_times, "reference_times", ndim=1)
-        knot_sig = np.zeros(knots_t.size)
-    else:
-        first = lab == 0
-        knots_t = t[first]
-        knot_sig = sig[first]
-    if knots_t.size < 2:
-        msg = (f"{gauge} gauge: fewer than two reference passes ({knots_t.size}); no relative "
-               "revolution can be measured")
+    ok = lab >= 0
+    if np.count_nonzero(lab[ok] == 0) < 2:
+        msg = (f"{gauge} gauge: fewer than two reference passes ({np.count_nonzero(lab == 0)}); "
+               "no relative revolution can be measured")
         warnings.warn(msg, ProcessingWarning, stacklevel=2)
         return PassTable.empty(gauge, [msg])
-    k = revolution_numbers(knots_t)
-    if k[-1] != knots_t.size - 1:
-        notes.append(f"{int(k[-1] - knots_t.size + 1)} missing reference pass(es) bridged")
-    if encoder is not None and not use_ref:
-        enc = ScaledEncoder(knots_t, k, encoder, encoder_ratio)
-        if not enc.t_last > enc.t_first:
-            msg = f"{gauge} gauge: the driving encoder does not overlap this gauge's passes"
-            warnings.warn(msg, ProcessingWarning, stacklevel=2)
-            return PassTable.empty(gauge, [msg])
+    if positions is not None:
+        if planet_angles is None:
+            raise ValueError("positions need planet_angles (and direction) to fix the pass order")
+        psi = as_finite_array(planet_angles, "planet_angles", ndim=1, allow_empty=False)
+        frac = planet_fractions(psi, pass_order(direction or "cw", gauge))
+        pos = np.asarray(positions)[ok]
     else:
-        # every planet's own passes are a once-per-revolution encoder of the same member
-        others = [] if use_ref else [t[lab == q] for q in range(1, n)]
-        enc = RevolutionEncoder(knots_t, k, extra_trains=[x for x in others if x.size >= 2],
-                                harmonic=planet_ratio)
-    inside = (t >= enc.t_first) & (t < enc.t_last)
-    tt = np.where(inside, t, enc.t_first)
-    rev, lag, omega = enc.lag(tt)
-    th = TWO_PI * rev + lag
-    if use_ref:
-        # lag of planet 1 per revolution, subtracted from every planet of that revolution
-        m1 = inside & (lab == 0)
-        t1 = np.full(int(k[-1]) + 1, np.nan)
-        t1[rev[m1]] = t[m1]
-        lag1 = np.full(int(k[-1]) + 1, np.nan)
-        lag1[rev[m1]] = lag[m1]
-        sig1 = np.full(int(k[-1]) + 1, np.nan)
-        sig1[rev[m1]] = sig[m1]
-        rel = lag - lag1[rev]
-        sig_ref = sig1[rev]
-    else:
-        rel = lag
-        t1 = enc.knot_time_or_nan()
-        # the planet-1 pass of the revolution carries its own timing error
-        kpos = np.clip(np.searchsorted(knots_t, t, side="right") - 1, 0, knots_t.size - 1)
-        sig_ref = knot_sig[kpos]
-    keep = inside & (lab > 0) & np.isfinite(rel)
-    n_out = int(np.count_nonzero((lab > 0) & ~inside))
-    if n_out:
-        notes.append(f"{n_out} pass(es) outside the reference span dropped")
-    rel = rel[keep]
-    gamma = (z * rel / TWO_PI) % 1.0
-    gamma = np.where(gamma >= 1.0, 0.0, gamma)
-    om = omega[keep]
-    mesh_period = TWO_PI / (z * om)
-    unc = z * om / TWO_PI * np.hypot(sig[keep], sig_ref[keep])
-    rk = rev[keep]
-    out = PassTable(gauge, t[keep], lab[keep] + 1, rk, gamma, unc, mesh_period,
-                    t1[np.clip(rk - enc.k0, 0, t1.size - 1)], th[keep], notes, float(enc.full_t[0]))
-    out.encoder = enc
-    return out
+        frac, pos = _positions_from_labels(t[ok], lab[ok], n)
+    tr = gauge_train(gauge, gauge, t[ok], lab[ok].astype(int), pos.astype(np.int64), frac, z,
+                     sigma=None if sig is None else sig[ok])
+    trains = [tr]
+    if reference_times is not None:
+        ref = as_finite_array(reference_times, "reference_times", ndim=1)
+        if ref.size >= 2:
+            trains.append(tacho_train(ref, float(z)))
+    # a lone train knows no shaft ratios but the planet spin (a turn of its own member
+    # relative to the carrier is no ripple rate: at the passes it equals the offsets)
+    zp = int(z_planet or 0)
+    kin = Kinematics(z, z, zp, None, {"planet": float(zp)} if zp > 0 else {}, None)
+    model = fit_angle_model(trains, kin, n)
+    tab = phasing_from_model(model, tr, z, n, gauge=gauge)
+    tab.notes = list(model.notes) + tab.notes
+    return tab
+
+
+def _positions_from_labels(t: np.ndarray, lab: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Fractions of a revolution per planet and pass-order positions of labelled passes.
+
+    The planet-1 passes count relative revolutions (:func:`revolution_numbers` bridges a
+    missing one); every pass gets the revolution count interpolated at its time, whose
+    integer part is its revolution and whose fractional part, averaged per planet, is that
+    planet's place in the revolution. No planet angles are needed: the angle model's
+    per-planet offsets absorb any constant error of the fractions.
+    """
+    one = lab == 0
+    t1 = t[one]
+    k1 = revolution_numbers(t1).astype(float)
+    slope0 = (k1[1] - k1[0]) / (t1[1] - t1[0])
+    slope1 = (k1[-1] - k1[-2]) / (t1[-1] - t1[-2])
+    r = np.interp(t, t1, k1)
+    r = np.where(t < t1[0], k1[0] + (t - t1[0]) * slope0, r)
+    r = np.where(t > t1[-1], k1[-1] + (t - t1[-1]) * slope1, r)
+    r = np.where(one, np.rint(r), r)
+    k = np.floor(r + 1e-9)
+    frac = np.zeros(n)
+    for q in range(1, n):
+        m = lab == q
+        if np.any(m):
+            frac[q] = float(np.median(r[m] - k[m]))
+        else:
+            frac[q] = q / n
+    seq = np.argsort(frac, kind="stable")
+    place = np.empty(n, dtype=np.int64)
+    place[seq] = np.arange(n)
+    pos = k.astype(np.int64) * n + place[lab]
+    return frac, pos
+
+
+# ----------------------------------------------------------------------------- the whole recording
+@dataclass(frozen=True)
+class GaugePasses:
+    """The usable pulses of one gauge channel, as the phasing needs them.
+
+    Attributes
+    ----------
+    name : str
+        Channel name.
+    gear : {"sun", "ring"}
+        Gear carrying the gauge.
+    times : ndarray
+        Pass times [s], strictly increasing (a fixed feature of each pulse).
+    amplitude : ndarray
+        Pulse amplitudes [channel units] (planet loads).
+    sigma : ndarray or None
+        Timing bound of each pass [s].
+    main : bool
+        The gauge whose passes make the gear's phasing table (others only inform the angle).
+    """
+
+    name: str
+    gear: str
+    times: np.ndarray
+    amplitude: np.ndarray
+    sigma: np.ndarray | None = None
+    main: bool = True
+
+
+@dataclass
+class GaugeLabels:
+    """Planet labels of one gauge's pulses.
+
+    Attributes
+    ----------
+    channel : str
+    times, amplitude, sigma : ndarray
+        As in :class:`GaugePasses`.
+    planet : ndarray of int
+        0-based planet per pulse, -1 unassigned.
+    position : ndarray of int
+        Pass-order position per pulse (revolution ``position // N``).
+    decided_by : str
+        What named planet 1: "tacho", "pattern" (unequal spacing), "amplitude" (planet
+        loads) or "first pulse" (relative labels).
+    n_unassigned : int
+    """
+
+    channel: str
+    times: np.ndarray
+    amplitude: np.ndarray
+    sigma: np.ndarray | None
+    planet: np.ndarray
+    position: np.ndarray
+    decided_by: str
+    n_unassigned: int = 0
+
+    def as_tuple(self):
+        """(channel, times, planet, amplitude, sigma): the pre-typed hand-off."""
+        return (self.channel, self.times, self.planet, self.amplitude, self.sigma)
+
+
+@dataclass
+class PhasingResult:
+    """Measured phasing of a recording.
+
+    Attributes
+    ----------
+    tables : dict of str to PassTable
+        Per gear ("sun", "ring"): passes of its main gauge.
+    labels : dict of str to GaugeLabels
+        Per gear: labels of its main gauge.
+    model : AngleModel or None
+        The angle model of the whole recording.
+    fixed : {"ring", "sun", None}
+        The held member used; ``fixed_reason`` says how it was decided.
+    reliability : dict of str to dict
+        Per gear: ``reliable`` (bool), ``reasons`` (list of str), ``error_estimate`` (RMS of
+        the per-pass uncertainty [-]) and ``floor`` (RMS of the timing floor [-]).
+    labels_relative : list of str
+        Gears whose planet 1 is only the first pulse seen (no absolute reference).
+    notes : list of str
+    """
+
+    tables: dict
+    labels: dict
+    model: AngleModel | None
+    fixed: str | None
+    fixed_reason: str
+    reliability: dict
+    labels_relative: list
+    notes: list = field(default_factory=list)
+
+
+def _ring_loads(lab: GaugeLabels, n: int):
+    """Mean |amplitude| per planet and whether their spread exceeds 5x its standard error
+    (only then can the loads tell the sun's planets apart)."""
+    a = np.abs(lab.amplitude)
+    mean = np.full(n, np.nan)
+    se = np.full(n, np.nan)
+    for q in range(n):
+        x = a[lab.planet == q]
+        if x.size >= 2:
+            mean[q] = x.mean()
+            se[q] = x.std(ddof=1) / math.sqrt(x.size)
+    if not np.all(np.isfinite(mean)):
+        return None
+    ls = n * mean / mean.sum()
+    spread = float(np.max(np.abs(ls - 1.0)))
+    noise = float(np.max(n * se / mean.sum()))
+    return mean if spread > 5.0 * noise else None
+
+
+def _shift_labels(planet, position, seq, shift):
+    """Relabel cyclically in pass order by ``shift`` places (planet 1 moves)."""
+    n = seq.size
+    pos = position + shift
+    return np.where(planet >= 0, seq[np.mod(pos, n)], -1), pos
+
+
+def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
+                    tacho_times=None, key_angle: float | None = None, mounts=None,
+                    speeds=None, gaps=None, carrier_sense: int | None = None) -> PhasingResult:
+    """Label every gauge's pulses, fit one angle model to all of them and the tacho, and
+    measure the phasing of each gear's main gauge.
+
+    Parameters
+    ----------
+    passes : sequence of GaugePasses
+        Every sun, ring and face-width gauge with its usable pulses.
+    gearset : Gearset
+    fixed : {"ring", "sun", None}
+        Held member (:func:`pipeline.angles.held_member`); ``fixed_reason`` says why.
+    tacho_times : array_like, optional
+        Carrier tacho edges [s]: an angle train when a member is held, and planet 1 of the
+        held member's gauge when ``key_angle`` and that gauge's ``mounts`` entry are known.
+    key_angle : float, optional
+        Carrier-frame angle of the tacho key from planet 1 [rad].
+    mounts : dict of str to float, optional
+        Ground angle of each gauge on the held member [rad], from the tacho probe.
+    speeds : Speeds, optional
+        Nominal speeds (shaft ratios of a differential; the carrier's sense).
+    gaps : array_like, shape (k, 2), optional
+        Gap intervals [s]: a pass whose reference lies across one is dropped.
+    carrier_sense : {+1, -1}, optional
+        Sense of the carrier's rotation (default from the direction and the held member).
+
+    Returns
+    -------
+    PhasingResult
+    """
+    from .angles import fit_angle_model, gauge_train, kinematics, tacho_train
+
+    n = gearset.n_planets
+    psi = gearset.angles
+    notes: list[str] = []
+    passes = [p for p in passes if isinstance(p, GaugePasses)]
+    labels: dict = {}
+    all_labels: dict = {}
+    relative: list = []
+    mounts = dict(mounts or {})
+    tach = None if tacho_times is None else np.asarray(tacho_times, dtype=float)
+    if carrier_sense is None:
+        # clockwise planets: the sun turns counter-clockwise relative to the carrier; with
+        # the ring held the carrier turns with the sun (ccw), with the sun held against it
+        cw = gearset.direction == "cw"
+        carrier_sense = (1 if cw else -1) * (1 if fixed != "sun" else -1)
+    ring_load = None
+    # ring first: its loads may name the sun's planets
+    for p in sorted(passes, key=lambda p: (p.gear != "ring", not p.main)):
+        order = pass_order(gearset.direction, p.gear)
+        frac = planet_fractions(psi, order)
+        seq = np.argsort(frac, kind="stable")
+        ref = ring_load if (p.gear == "sun" and p.main) else None
+        pl, inf = assign_planets_by_pattern(p.times, psi, order, amplitudes=np.abs(p.amplitude),
+                                            reference_amplitudes=ref)
+        pos = inf["position"]
+        decided = {"pattern": "pattern", "amplitude": "amplitude"}.get(inf["shift_decided_by"],
+                                                                         "first pulse")
+        if inf.get("ambiguous"):
+            decided = "first pulse"
+        held_gauge = p.gear == fixed and p.name in mounts and key_angle is not None
+        if held_gauge and tach is not None and tach.size >= 2 and np.any(pl >= 0):
+            tl = assign_planets_by_tacho(p.times, tach, psi, mounts[p.name], carrier_sense,
+                                         key_angle=key_angle)
+            both = (tl >= 0) & (pl >= 0)
+            if np.any(both):
+                place = np.empty(n, dtype=np.int64)
+                place[seq] = np.arange(n)
+                votes = np.bincount(np.mod(place[tl[both]] - place[pl[both]], n), minlength=n)
+                best = int(np.argmax(votes))
+                if votes[best] >= 0.8 * both.sum():
+                    pl, pos = _shift_labels(pl, pos, seq, best)
+                    decided = "tacho"
+                else:
+                    notes.append(f"{p.name}: the tacho and the pass pattern disagree on planet 1 "
+                                 f"({votes[best]} of {int(both.sum())} passes agree); labels "
+                                 "left relative")
+        lab = GaugeLabels(p.name, p.times, p.amplitude, p.sigma, pl, pos, decided,
+                          int(inf.get("n_unassigned", 0)))
+        all_labels[p.name] = (lab, frac, p)
+        if p.main and p.gear not in labels:
+            labels[p.gear] = lab
+            if decided == "first pulse":
+                relative.append(p.gear)
+            if p.gear == "ring" and np.any(pl >= 0):
+                ring_load = _ring_loads(lab, n)
+    # one angle model from every train (and the tacho when a member is held)
+    kin = kinematics(gearset.z_sun, gearset.z_ring, gearset.z_planet, fixed=fixed, speeds=speeds)
+    trains, train_of = [], {}
+    for name, (lab, frac, p) in all_labels.items():
+        ok = lab.planet >= 0
+        if np.count_nonzero(ok) < 2:
+            continue
+        z = gearset.z_sun if p.gear == "sun" else gearset.z_ring
+        sig = None if p.sigma is None else np.asarray(p.sigma)[ok]
+        tr = gauge_train(name, p.gear, p.times[ok], lab.planet[ok].astype(int),
+                         lab.position[ok].astype(np.int64), frac, z, sigma=sig,
+                         order=pass_order(gearset.direction, p.gear))
+        trains.append(tr)
+        train_of[name] = tr
+    if fixed is not None and tach is not None and tach.size >= 2 and kin.tacho_cycles:
+        trains.append(tacho_train(tach, kin.tacho_cycles))
+    elif tach is not None and tach.size >= 2 and fixed is None:
+        notes.append("differential rig: the carrier tacho does not fix the mesh angle (no held "
+                     "member); it is not used")
+    model = None
+    tables: dict = {}
+    reliability: dict = {}
+    if any(tr.kind in ("sun", "ring") and len(tr) >= 2 for tr in trains):
+        model = fit_angle_model(trains, kin, n)
+        notes.extend(model.notes)
+        for gear, lab in labels.items():
+            tr = train_of.get(lab.channel)
+            if tr is None:
+                continue
+            z = gearset.z_sun if gear == "sun" else gearset.z_ring
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", ProcessingWarning)
+                tab = phasing_from_model(model, tr, z, n, gauge=gear, gaps=gaps)
+            tables[gear] = tab
+            reliability[gear] = _reliability(model, tr, tab)
+    return PhasingResult(tables, labels, model, fixed, fixed_reason, reliability, relative, notes)
+
+
+#: the "not reliable" rule: the per-pass error the model's own diagnostics predict, against
+#: the timing floor; a train's residual autocorrelation above this means systematic misfit
+UNRELIABLE_RATIO = 3.0
+UNRELIABLE_LAG1 = 0.6
+
+
+def _reliability(model: AngleModel, train: PassTrain, tab: PassTable) -> dict:
+    """Whether a gear's phasing can be trusted, from the model's own residual diagnostics."""
+    reasons = []
+    fit = model.train(train.name)
+    est = float(np.sqrt(np.mean(tab.uncertainty ** 2))) if len(tab) else float("nan")
+    floor = float(np.sqrt(np.mean(tab.timing_floor ** 2))) if len(tab) else float("nan")
+    if math.isfinite(floor) and floor > 0 and est > UNRELIABLE_RATIO * floor:
+        reasons.append(f"the passes scatter {fit.scale:.1f}x beyond their timing bound: "
+                       f"estimated error {est:.2e} cycles is {est / floor:.1f}x the floor {floor:.2e}")
+    if math.isfinite(fit.lag1) and fit.lag1 > UNRELIABLE_LAG1 and fit.n >= 20:
+        reasons.append(f"residuals follow each other (lag-1 correlation {fit.lag1:.2f}): the "
+                       "speed varies in a way the angle model does not follow")
+    if not model.converged:
+        reasons.append("the angle model did not converge")
+    if fit.n and fit.n_outliers > 0.1 * (fit.n + fit.n_outliers):
+        reasons.append(f"{fit.n_outliers} of {fit.n + fit.n_outliers} passes far off the model "
+                       "(mislabelled or spurious pulses)")
+    if len(tab) == 0:
+        reasons.append("no pass could be measured")
+    return {"reliable": not reasons, "reasons": reasons, "error_estimate": est, "floor": floor,
+            "scale": fit.scale, "lag1": fit.lag1}

@@ -90,6 +90,16 @@ class Scene:
     output : Path or None
     raw : dict
         The parsed TOML as written.
+    speeds_resolution : dict or None
+        Uncertainty of the typed sun and carrier speeds [rad/s] (half a unit in the last
+        typed digit): what "zero" means for a Willis ring speed.
+    fixed : {"ring", "sun", "none"} or None
+        The held member as the scene states it (None: decided from speeds and tacho).
+    tacho : dict
+        ``key_angle`` [rad] (carrier-frame angle of the key from planet 1), ``channel``.
+    mounts : dict of str to float
+        Ground angle of each gauge on a held member [rad], from its channel's
+        ``mount_angle_deg``.
     """
 
     path: Path | None
@@ -104,6 +114,10 @@ class Scene:
     bearing: dict | None = None
     output: Path | None = None
     raw: dict = field(default_factory=dict)
+    speeds_resolution: dict | None = None
+    fixed: str | None = None
+    tacho: dict = field(default_factory=dict)
+    mounts: dict = field(default_factory=dict)
 
     @property
     def has_recording_input(self) -> bool:
@@ -254,16 +268,22 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
         except (ValueError, TypeError) as exc:
             raise err(["gearset", "z_ring"] if "z_ring" in str(exc) else ["gearset"], str(exc)) from None
     speeds = None
+    resolution = None
     if "speeds" in raw and gearset is not None:
+        from .angles import typed_resolution
+
         s = raw["speeds"]
         conv = {}
+        resolution = {}
         for m in ("sun", "carrier", "ring", "planet"):
             if f"{m}_rpm" in s and f"{m}_rad_s" in s:
                 raise err(["speeds", f"{m}_rad_s"], f"give {m}_rpm or {m}_rad_s, not both")
             if f"{m}_rpm" in s:
                 conv[m] = rpm_to_rad_s(s[f"{m}_rpm"])
+                resolution[m] = abs(rpm_to_rad_s(typed_resolution(s[f"{m}_rpm"])))
             elif f"{m}_rad_s" in s:
                 conv[m] = float(s[f"{m}_rad_s"])
+                resolution[m] = typed_resolution(s[f"{m}_rad_s"])
         if "sun" in conv and "carrier" in conv:
             w_s, w_c = conv["sun"], conv["carrier"]
             if "planet" in conv or gearset.z_planet == 0:
@@ -276,14 +296,24 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
                     raise err(["speeds", "ring_rpm" if "ring_rpm" in s else "ring_rad_s"],
                               f"ring speed {conv['ring']:.6g} rad/s is not consistent with sun/carrier "
                               f"and the tooth counts (kinematics give {speeds.ring:.6g} rad/s)")
-        elif s:
+        elif any(k != "fixed" for k in s):
             raise err(["speeds"], "give both the sun and the carrier speed")
+    fixed = raw.get("speeds", {}).get("fixed")
     channels = []
+    mounts = {}
     for i, c in enumerate(raw.get("channels", [])):
-        d = {k: v for k, v in c.items() if k != "face_position_mm"}
+        d = {k: v for k, v in c.items() if k not in ("face_position_mm", "mount_angle_deg")}
         if "face_position_mm" in c:
             d["face_position"] = c["face_position_mm"] * 1e-3
+        if "mount_angle_deg" in c:
+            mounts[c["name"]] = math.radians(c["mount_angle_deg"])
         channels.append(d)
+    tacho = {}
+    if "tacho" in raw:
+        if "key_angle_deg" in raw["tacho"]:
+            tacho["key_angle"] = math.radians(raw["tacho"]["key_angle_deg"])
+        if "channel" in raw["tacho"]:
+            tacho["channel"] = raw["tacho"]["channel"]
     inp = dict(raw.get("input", {}))
     if "recording" in inp and "synthetic" in inp:
         raise err(["input", "synthetic"], "give either recording or synthetic, not both")
@@ -332,7 +362,8 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
         name=raw.get("name", Path(path).stem if path is not None else "scene"),
         results=results, gearset=gearset, speeds=speeds, channels=channels, input=inp,
         processing=dict(raw.get("processing", {})), tolerances=tol, bearing=bearing,
-        output=(base / raw["output"]) if "output" in raw else None, raw=raw)
+        output=(base / raw["output"]) if "output" in raw else None, raw=raw,
+        speeds_resolution=resolution or None, fixed=fixed, tacho=tacho, mounts=mounts)
     _check_consistency(scene, text, label)
     return scene
 

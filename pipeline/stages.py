@@ -191,9 +191,13 @@ def stage_onsets(ctx: RunContext) -> None:
         if fin.any():
             lo, hi = np.nanmin(x), np.nanmax(x)
             if hi > lo:
-                b = x > 0.5 * (lo + hi)
+                half = 0.5 * (lo + hi)
+                b = x > half
                 rise = np.flatnonzero(b[1:] & ~b[:-1]) + 1
-                tacho_times = rec.t0 + rise / rec.fs
+                # the crossing of the half level, linearly between the two samples around it
+                x0, x1 = x[rise - 1], x[rise]
+                frac = np.where(x1 > x0, (half - x0) / np.where(x1 > x0, x1 - x0, 1.0), 0.0)
+                tacho_times = rec.t0 + (rise - 1 + np.clip(frac, 0.0, 1.0)) / rec.fs
     ctx.results["onsets"] = {"by_channel": out, "tacho_times": tacho_times}
     n = sum(len(o) for o in out.values())
     jit = []
@@ -242,6 +246,10 @@ def _usable(on, x, fs: float, t0: float) -> np.ndarray:
     return ok | (gap_only & clean)
 
 
+#: finest onset timing claimed on noise-free data [samples]
+ONSET_RESOLUTION = 0.05
+
+
 def _onset_sigma(on, noise_rms: float) -> np.ndarray:
     """Per-onset timing uncertainty [s]: the Cramer-Rao bound for the learnt template at the
     fitted amplitude in white noise of the conditioned channel's RMS, sigma / sqrt(sum (ds/dt)^2)
@@ -259,19 +267,16 @@ def _onset_sigma(on, noise_rms: float) -> np.ndarray:
     s2 = np.where(ok, info[np.clip(on.template_id, 0, max(0, info.size - 1))], np.nan) if info.size else np.full(len(on), np.nan)
     with np.errstate(divide="ignore", invalid="ignore"):
         out = noise_rms / (np.abs(on.amplitude) * np.sqrt(s2))
+    # the detector's own resolution on noise-free data: its sub-sample interpolation leaves a
+    # bias of up to ~0.03 sample that repeats with the pulse's position on the sample grid
+    # (seed rig, noise-free: 6.6 us sun / 4.1 us ring RMS at 5120 Hz); the bound never
+    # claims better than ONSET_RESOLUTION
+    out = np.fmax(out, ONSET_RESOLUTION / on.fs)
     return np.where(np.isfinite(out), out, np.nan)
 
 
-def _tacho_shift(ctx, g, times, pl, inf):
-    """Fix which ring pulse is planet 1 from a carrier once-per-revolution tacho.
-
-    With a fixed ring the gauged ring tooth sits still, so the same planet passes it first
-    after every tacho pulse; the scene (or the synthetic rig convention) says that planet is
-    planet 1 (the tacho key set a quarter planet spacing ahead of planet 1's pass). The
-    pattern labels are shifted cyclically by the majority vote of the first pulses after
-    each tacho pulse. A driven ring (differential) gives no such fixed relation: unchanged.
-    """
-    tacho = ctx.results["onsets"].get("tacho_times")
+def _nominal_speeds(ctx: RunContext):
+    """The scene's nominal speeds, else the recording's (synthetic files carry them)."""
     sp = ctx.scene.speeds
     if sp is None:
         meta = ctx.results["load"]["recording"].meta.get("speeds_nominal")
@@ -279,123 +284,130 @@ def _tacho_shift(ctx, g, times, pl, inf):
             from .models.gearset import Speeds
 
             sp = Speeds(**meta)
-    if tacho is None or len(tacho) < 2 or sp is None or abs(sp.ring) > 1e-9 * max(1.0, abs(sp.carrier)):
-        return pl, inf
-    ok = pl >= 0
-    t_ok, p_ok = times[ok], pl[ok]
-    j = np.searchsorted(t_ok, np.asarray(tacho))
-    j = j[j < t_ok.size]
-    if j.size == 0:
-        return pl, inf
-    votes = np.bincount(p_ok[j], minlength=g.n_planets)
-    first = int(np.argmax(votes))
-    if votes[first] < 0.8 * j.size:
-        return pl, inf
-    n = g.n_planets
-    # relabel cyclically in pass order so that `first` becomes planet 1 (index 0)
-    from .phasing import pass_order, planet_fractions
-
-    seq = np.argsort(planet_fractions(g.angles, pass_order(g.direction, "ring")), kind="stable")
-    pos = np.empty(n, int)
-    pos[seq] = np.arange(n)
-    shift = pos[first]
-    new = np.where(pl >= 0, seq[(pos[np.clip(pl, 0, n - 1)] - shift) % n], -1)
-    inf = dict(inf, shift_decided_by="tacho", ambiguous=False)
-    return new, inf
+    return sp
 
 
-def _planet_ratio(g, gear: str) -> float | None:
-    """|w_pc / w_jc|: planet turns per turn of the gauged member relative to the carrier."""
-    if not g.z_planet:
-        return None
-    return (g.z_sun if gear == "sun" else g.z_ring) / g.z_planet
+def _tacho_geometry(ctx: RunContext) -> tuple:
+    """(key angle [rad] or None, mounts {channel: ground angle [rad]}): the scene's keys, else
+    the recording's metadata, else (synthetic input) the generator's configuration."""
+    key = ctx.scene.tacho.get("key_angle")
+    mounts = dict(ctx.scene.mounts)
+    meta = ctx.results["load"]["recording"].meta
+    if key is None and meta.get("tacho_key_angle") is not None:
+        key = float(meta["tacho_key_angle"])
+    for k, v in (meta.get("mount_angles") or {}).items():
+        mounts.setdefault(k, float(v))
+    truth = ctx.results["load"].get("truth")
+    if truth is not None and (key is None or not mounts):
+        from synthetic.config import SynthConfig
+
+        cfg = SynthConfig.from_dict(truth.config)
+        if cfg.tacho is not None and key is None:
+            # the generator's key reaches the probe at carrier angle cfg.tacho_angle():
+            # the edge fires at theta_c = -key_angle
+            key = -cfg.tacho_angle()
+        for gcfg in cfg.gauges:
+            # a held member's gauge sits still: its direction at t = 0 is its ground angle
+            mounts.setdefault(gcfg.name, cfg.tooth_angle(gcfg))
+    return key, mounts
+
+
+def _gap_intervals(quality: dict) -> np.ndarray:
+    """Gap intervals [s] of the conditioned gauge channels (NaN runs and dropouts)."""
+    out = []
+    for q in quality.values():
+        for attr in ("gap_runs", "dropout_runs"):
+            runs = getattr(q, attr, None)
+            if runs is not None and np.size(runs):
+                r = np.asarray(runs, dtype=float).reshape(-1, 2)
+                out.append(q.t0 + r / q.fs)
+    return np.concatenate(out) if out else np.empty((0, 2))
 
 
 def stage_phasing(ctx: RunContext) -> None:
-    from .phasing import assign_planets_by_pattern, measured_phasing, pass_order
+    from .angles import held_member, revolution_numbers
+    from .phasing import GaugePasses, PassTable, measure_phasing
 
     g = _gearset(ctx)
     rec = ctx.results["condition"]["recording"]
+    quality = ctx.results["condition"]["quality"]
     ons = ctx.results["onsets"]["by_channel"]
-    tables, labels, info = {}, {}, {}
-    ring_load = None
-    # ring first: its amplitudes are the planet loads that can tell the sun labels apart
-    for gear in ("ring", "sun"):
-        ch = _main_gauge(rec, gear)
-        if ch is None or ch not in ons:
+    passes = []
+    mains = {}
+    for c in rec.channels:
+        if c.kind not in ("sun", "ring", "facewidth") or c.name not in ons:
             continue
-        on = ons[ch]
-        ok = _usable(on, rec.channel(ch), rec.fs, rec.t0)
-        # pass times at the tensile peak of each pulse (the middle of the tooth's contact),
-        # not at the onset feature on its leading edge: the phasing is the same (a common
-        # shift), but the model turns the offsets to the instant of engagement
+        gear = c.gear if c.gear in ("sun", "ring") else (c.kind if c.kind in ("sun", "ring") else "sun")
+        on = ons[c.name]
+        ok = _usable(on, rec.channel(c.name), rec.fs, rec.t0)
+        # pass times at the tensile peak of each pulse (the middle of the tooth's contact):
+        # a fixed angle of the gauged gear after the engagement, which the gauge's constant
+        # in the angle model absorbs
         times, amp = _peak_times(on)[ok], on.amplitude[ok]
-        if times.size == 0:
-            warnings.warn(f"{gear} gauge ({ch}): no usable pulse ({len(on)} onset(s), all flagged "
-                          "or none found): dead gauge, wrong channel or no load; no phasing from it",
-                          ProcessingWarning, stacklevel=2)
-        order = pass_order(g.direction, gear)
-        ref = ring_load if gear == "sun" else None
-        pl, inf = assign_planets_by_pattern(times, g.angles, order, amplitudes=np.abs(amp),
-                                            reference_amplitudes=ref)
-        if gear == "ring" and inf.get("ambiguous"):
-            pl, inf = _tacho_shift(ctx, g, times, pl, inf)
-        if gear == "ring" and times.size:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", ProcessingWarning)
-                from .loads import load_sharing_from_amplitudes
-
-                ls = load_sharing_from_amplitudes(np.abs(amp), np.where(pl >= 0, pl + 1, 0),
-                                                  g.n_planets)
-            ring_load = ls.mean_amplitude
-            # the loads can only name the sun's planets if they differ beyond their own
-            # scatter; equal sharing would let noise pick a labelling and call it decided
-            spread = np.nanmax(np.abs(ls.factors - 1.0)) if np.any(np.isfinite(ls.factors)) else 0.0
-            noise = np.nanmax(ls.std_error) if np.any(np.isfinite(ls.std_error)) else np.inf
-            if not np.all(np.isfinite(ring_load)) or not spread > 5.0 * noise:
-                ring_load = None
-        z = g.z_sun if gear == "sun" else g.z_ring
-        q = ctx.results["condition"]["quality"].get(ch)
-        sig = _onset_sigma(on, getattr(q, "noise_rms", float("nan")))[ok]
-        labels[gear] = (ch, times, pl, amp, sig)
-        info[gear] = inf
-        if gear == "sun":
-            tables["sun"] = measured_phasing(times, pl, z, g.n_planets, gauge="sun", sigma_t=sig,
-                                             planet_ratio=_planet_ratio(g, "sun"))
-    if "ring" in labels:
-        ch, times, pl, amp, sig = labels["ring"]
-        kw = {"planet_ratio": _planet_ratio(g, "ring")}
-        if "sun" in tables and tables["sun"].encoder is not None:
-            kw = {"encoder": tables["sun"].encoder, "encoder_ratio": g.z_sun / g.z_ring}
-        tables["ring"] = measured_phasing(times, pl, g.z_ring, g.n_planets, gauge="ring",
-                                          sigma_t=sig, **kw)
-    for gear, t in tables.items():
+        sig = _onset_sigma(on, getattr(quality.get(c.name), "noise_rms", float("nan")))[ok]
+        main = c.kind in ("sun", "ring") and gear not in mains
+        if main:
+            mains[gear] = c.name
+            if times.size == 0:
+                warnings.warn(f"{gear} gauge ({c.name}): no usable pulse ({len(on)} onset(s), all "
+                              "flagged or none found): dead gauge, wrong channel or no load; no "
+                              "phasing from it", ProcessingWarning, stacklevel=2)
+        if times.size:
+            passes.append(GaugePasses(c.name, gear, times, amp,
+                                      sig if np.any(np.isfinite(sig)) else None, main))
+    tacho = ctx.results["onsets"].get("tacho_times")
+    sp = _nominal_speeds(ctx)
+    # which member is held: the scene's word, else the typed speeds within their precision,
+    # checked against the tacho's carrier rate
+    mesh_rate = carrier_rate = None
+    if tacho is not None and len(tacho) >= 2 and passes:
+        k = revolution_numbers(tacho)
+        carrier_rate = float(k[-1]) / float(tacho[-1] - tacho[0])
+        p0 = max(passes, key=lambda p: p.times.size)
+        if p0.times.size >= 2:
+            z = g.z_sun if p0.gear == "sun" else g.z_ring
+            # passes per second / N planets = relative revolutions per second
+            mesh_rate = z * (p0.times.size - 1) / float(p0.times[-1] - p0.times[0]) / g.n_planets
+    stated = ctx.scene.fixed
+    if stated is not None:
+        fixed, why = (None if stated == "none" else stated), "stated in the scene ([speeds] fixed)"
+    else:
+        fixed, why = held_member(g.z_sun, g.z_ring, sp,
+                                 resolution=ctx.scene.speeds_resolution if ctx.scene.speeds else None,
+                                 mesh_rate=mesh_rate, carrier_rate=carrier_rate)
+    key, mounts = _tacho_geometry(ctx)
+    res = measure_phasing(passes, g, fixed=fixed, fixed_reason=why, tacho_times=tacho,
+                          key_angle=key, mounts=mounts, speeds=sp, gaps=_gap_intervals(quality))
+    for gear in mains:
+        # a main gauge without a measurable pass gives an empty table, not a missing one
+        res.tables.setdefault(gear, PassTable.empty(gear, ["no usable pass"]))
+    for t in res.tables.values():
         t.time_origin = float(rec.t0)
-        enc = t.encoder
-        src = getattr(enc, "source", enc)
-        res = getattr(src, "residual_rms", float("nan"))
-        z = g.z_sun if gear == "sun" else g.z_ring
-        ratio = getattr(enc, "ratio", 1.0)
-        if isinstance(res, float) and math.isfinite(res) and z * ratio * res / (2 * math.pi) > 0.01:
-            warnings.warn(f"{gear} gauge: the pass train does not follow one smooth speed (encoder "
-                          f"misfit {res:.2e} rad = {z * ratio * res / (2 * math.pi):.2e} mesh cycles): "
-                          "speed varies faster than the passes resolve, or pulses are mislabelled; "
-                          "phasing not reliable", ProcessingWarning, stacklevel=2)
-    for gear, inf in info.items():
-        if inf.get("n_unassigned"):
-            warnings.warn(f"{gear} gauge: {inf['n_unassigned']} pulse(s) fit no planet in the pass "
+    for gear, lab in res.labels.items():
+        if lab.n_unassigned:
+            warnings.warn(f"{gear} gauge: {lab.n_unassigned} pulse(s) fit no planet in the pass "
                           "pattern (missing pulses, speed change or spurious detections); they "
                           "are left out", ProcessingWarning, stacklevel=2)
-        if inf.get("ambiguous"):
-            warnings.warn(f"{gear} gauge: which pulse is planet 1 cannot be told from the pattern "
-                          f"(symmetric layout{'' if gear == 'ring' else ', loads too equal'}); "
-                          "labels start at the first pulse", ProcessingWarning, stacklevel=2)
-    ctx.results["phasing"] = {"tables": tables, "labels": labels, "assignment": info}
+    for gear, rel in res.reliability.items():
+        if not rel["reliable"]:
+            warnings.warn(f"{gear} gauge: phasing not reliable: " + "; ".join(rel["reasons"]),
+                          ProcessingWarning, stacklevel=2)
+    ctx.results["phasing"] = {
+        "tables": res.tables, "labels": {k: v.as_tuple() for k, v in res.labels.items()},
+        "assignment": {k: {"shift_decided_by": v.decided_by, "n_unassigned": v.n_unassigned,
+                           "ambiguous": v.decided_by == "first pulse"}
+                       for k, v in res.labels.items()},
+        "model": res.model, "reliability": res.reliability, "fixed": res.fixed,
+        "fixed_reason": res.fixed_reason, "labels_relative": res.labels_relative,
+        "notes": res.notes, "result": res}
     est = []
-    for gear, t in tables.items():
-        s = t.summary()
-        if s:
-            est.append(f"{gear}: pass-to-pass std {np.mean([v['std'] for v in s.values()]):.2e} cycles")
+    for gear, t in res.tables.items():
+        rel = res.reliability.get(gear, {})
+        if len(t):
+            est.append(f"{gear}: per-pass sigma {rel.get('error_estimate', float('nan')):.2e} "
+                       f"cycles (timing floor {rel.get('floor', float('nan')):.2e})")
+    if res.model is not None:
+        est.append(f"angle model: {res.model.terms}, rank {res.model.rank}/{res.model.n_parameters}")
     ctx.error_estimates["phasing"] = "; ".join(est)
 
 
@@ -539,14 +551,6 @@ def stage_compare(ctx: RunContext) -> None:
         row = {"ideal": ideal, "model": model,
                "vs_ideal": residual_stats(tab.gamma, ideal, tab.planet),
                "vs_model": residual_stats(tab.gamma, model, tab.planet) if model is not None else None}
-        if row["vs_model"] is not None and math.isfinite(row["vs_model"]["rms"]):
-            # per-pass uncertainty: the onset-timing bound propagated by measured_phasing is a
-            # lower bound (white noise); coloured noise and the speed encoder add to it, which
-            # the scatter of the passes about the fitted model shows: report the larger
-            scatter = row["vs_model"]["rms"]
-            tab.uncertainty = np.fmax(tab.uncertainty, scatter)
-            tab.notes.append(f"uncertainty = max(onset-timing bound, {scatter:.2e} residual "
-                             "RMS about the fitted model)")
         if mc is not None:
             ave = mc.ave_s if gear == "sun" else mc.ave_r
             dev = mc.dev_s if gear == "sun" else mc.dev_r
@@ -572,54 +576,15 @@ def stage_compare(ctx: RunContext) -> None:
 
 
 def _truth_residual(ctx, tab, truth, gear) -> dict | None:
-    """Measured gamma against the synthetic truth.
+    """Measured gamma against the synthetic truth, pass by pass
+    (:func:`pipeline.compare.truth_comparison`)."""
+    from .compare import truth_comparison
 
-    Which pulse is planet 1 is not observable for a symmetric layout without an absolute
-    reference, so two numbers are reported: ``label_match`` (fraction of passes whose planet
-    label equals the truth's) and the phasing error with the onsets labelled as the truth
-    labels them (the measurement error of the phasing itself, same encoder chain).
-    """
-    from .compare import wrap
-    from .phasing import measured_phasing
-
-    g = _gearset(ctx)
     labels = ctx.results["phasing"]["labels"]
-    if gear not in labels or not isinstance(truth.events, dict):
+    if gear not in labels:
         return None
     ch, times, pl, amp, _ = labels[gear]
-    if ch not in truth.events or not len(tab):
-        return None
-    ev = truth.events[ch]
-    et = np.asarray(ev.time)
-    if et.size == 0 or times.size == 0:
-        return None
-    # onset feature vs truth instant: a constant offset (fraction of a mesh period)
-    j = np.clip(np.searchsorted(et, times), 1, et.size - 1)
-    near = np.where(np.abs(et[j - 1] - times) < np.abs(et[j] - times), j - 1, j)
-    off = float(np.median(times - et[near]))
-    j = np.clip(np.searchsorted(et, times - off), 1, et.size - 1)
-    near = np.where(np.abs(et[j - 1] - (times - off)) < np.abs(et[j] - (times - off)), j - 1, j)
-    true_lab = np.asarray(ev.planet)[near] - 1
-    match = float(np.mean(true_lab[pl >= 0] == pl[pl >= 0])) if np.any(pl >= 0) else float("nan")
-    z = g.z_sun if gear == "sun" else g.z_ring
-    kw = {"planet_ratio": _planet_ratio(g, gear)}
-    sun_t = ctx.results.get("_truth_sun_table")
-    if gear == "ring" and sun_t is not None and sun_t.encoder is not None:
-        kw = {"encoder": sun_t.encoder, "encoder_ratio": g.z_sun / g.z_ring}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ProcessingWarning)
-        t2 = measured_phasing(times, true_lab, z, g.n_planets, gauge=gear, **kw)
-    if gear == "sun":
-        ctx.results["_truth_sun_table"] = t2
-    pt = truth.gamma_table(ch)
-    if len(t2) == 0 or len(pt.time) == 0:
-        return None
-    k = np.clip(np.searchsorted(pt.time, t2.time - off), 1, len(pt.time) - 1)
-    k = np.where(np.abs(pt.time[k - 1] - (t2.time - off)) < np.abs(pt.time[k] - (t2.time - off)), k - 1, k)
-    err = wrap(t2.gamma - pt.gamma[k])
-    return {"n": int(err.size), "rms": float(np.sqrt(np.mean(err ** 2))),
-            "max_abs": float(np.max(np.abs(err))), "label_match": match,
-            "onset_offset_s": off}
+    return truth_comparison(tab, truth, ch, times=times, planets=pl)
 
 
 def stage_bearing_moments(ctx: RunContext) -> None:
@@ -770,9 +735,19 @@ def summary_dict(ctx: RunContext) -> dict:
         s["ideal"] = {"gamma_s": r["ideal"]["gamma_s"], "gamma_r": r["ideal"]["gamma_r"],
                       "classification": r["ideal"]["classification"]}
     if "phasing" in r:
+        ph = r["phasing"]
         s["phasing"] = {k: {"n_passes": len(t), "per_planet": t.summary(), "notes": t.notes,
-                            "assignment": r["phasing"]["assignment"].get(k)}
-                        for k, t in r["phasing"]["tables"].items()}
+                            "assignment": ph["assignment"].get(k),
+                            "reliability": ph.get("reliability", {}).get(k)}
+                        for k, t in ph["tables"].items()}
+        rel = ph.get("labels_relative") or []
+        s["phasing_labels"] = (
+            f"planet labels of the {' and '.join(rel)} gauge(s) are relative: planet 1 is the "
+            "first pulse seen (no tacho geometry, unequal spacing or unequal loads named it)"
+            if rel else "planet labels absolute")
+        s["held_member"] = {"fixed": ph.get("fixed"), "reason": ph.get("fixed_reason")}
+        if ph.get("model") is not None:
+            s["angle_model"] = ph["model"].summary()
     if r.get("load_sharing") is not None:
         s["load_sharing"] = r["load_sharing"].to_rows()
     if r.get("centroids"):

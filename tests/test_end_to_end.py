@@ -83,10 +83,9 @@ import numpy as np
 import pytest
 
 import pipeline.io
-from pipeline.compare import PARAMETER_NAMES, _vector_from_errors, wrap
+from pipeline.compare import PARAMETER_NAMES, _vector_from_errors, truth_comparison, wrap
 from pipeline.errors import ProcessingWarning
 from pipeline.models.mesh_phasing import ShaftHoleErrors
-from pipeline.phasing import measured_phasing
 from pipeline.scene import load_scene, parse_scene
 from pipeline.stages import RunContext, _gearset, run_scene, summary_dict
 from synthetic import SCENARIOS, generate, list_scenarios
@@ -537,25 +536,14 @@ def run_file(tmp_path: Path, rec, *, z_sun: int = 25, z_ring: int = 87) -> RunCo
     return run_scene(load_scene(tmp_path / "scene.toml"))
 
 
-def truth_phasing_error(ctx: RunContext, truth, gear: str, g) -> dict:
-    """Phasing error against the truth for a run without it (a file): the onsets the run
-    labelled, relabelled as the truth labels them, through the same encoder chain (ring driven
-    by the sun's encoder when the sun has passes), compared pass by pass."""
-    times, _, tl, off = truth_labels(ctx, truth, gear)
-    z = g.z_sun if gear == "sun" else g.z_ring
-    kw = {"planet_ratio": z / g.z_planet}
-    if gear == "ring" and len(ctx.results["phasing"]["tables"].get("sun", ())):
-        sun = truth_phasing_error(ctx, truth, "sun", g)["table"]
-        if sun.encoder is not None:
-            kw = {"encoder": sun.encoder, "encoder_ratio": g.z_sun / g.z_ring}
-    with warnings.catch_warnings():
-        # the rebuild's own notes (bridged passes...) are not what is tested here
-        warnings.simplefilter("ignore", ProcessingWarning)
-        tab = measured_phasing(times, tl, z, g.n_planets, gauge=gear, **kw)
-    pt = truth.gamma_table(ctx.results["phasing"]["labels"][gear][0])
-    err = wrap(tab.gamma - pt.gamma[_nearest(pt.time, tab.time - off)])
-    return {"table": tab, "n": int(err.size), "rms": float(np.sqrt(np.mean(err ** 2))),
-            "max_abs": float(np.max(np.abs(err)))}
+def truth_phasing_error(ctx: RunContext, truth, gear: str, g=None) -> dict:
+    """Phasing error against the truth for a run without it (a file): every measured pass
+    against the true mesh angle turned between its two pulses
+    (:func:`pipeline.compare.truth_comparison`)."""
+    ch, times, pl, _, _ = ctx.results["phasing"]["labels"][gear]
+    out = truth_comparison(ctx.results["phasing"]["tables"][gear], truth, ch, times=times, planets=pl)
+    out["table"] = ctx.results["phasing"]["tables"][gear]
+    return out
 
 
 def _json_has_no_nan(ctx: RunContext) -> None:

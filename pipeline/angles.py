@@ -1,0 +1,1275 @@
+"""One kinematic angle model for a whole recording (the "angles" step of DESIGN.md's flow).
+
+Array code: pass trains (onset times with their planet labels and pass-order positions) in,
+a fitted :class:`AngleModel` out. No Recording, no files.
+
+The mesh angle
+--------------
+Every mesh of a simple planetary gearset runs at the same mesh frequency, whatever member is
+held: Z_s |w_sc| = Z_r |w_rc| = Z_p |w_pc| (Willis). So one angle describes the whole gear
+train: the *mesh angle* ``A(t)`` [mesh cycles], the number of mesh cycles since an origin,
+increasing with time in either sense of rotation. A gauge on sun tooth j meets planet n when
+the sun, relative to the carrier, has turned to the planet's direction, i.e. at
+
+    A = Z_s (k + f_n) + c + d_n + h_n          (sun gauge, relative revolution k)        (1)
+
+with ``f_n`` the planet's fraction of a revolution in the gauge's pass order
+(:func:`pipeline.phasing.planet_fractions`), ``c`` a constant of the gauge (which tooth, which
+pulse feature is timed), ``d_n`` planet n's phasing deviation from the ideal (the quantity of
+interest) and ``h_n`` its time-varying part (a planet's own shaft hole offset turns with the
+planet and moves its passes: terms periodic in the planet's spin, Z_p mesh cycles per turn).
+A ring gauge obeys (1) with Z_r; a carrier once-per-revolution tacho, when a member is held,
+fires at A = P_c k + c_T with P_c = Z_r (ring held) or Z_s (sun held) mesh cycles per carrier
+revolution. Measured phasing is then the mesh angle turned between two passes,
+gamma_n = frac(A(t_n) - A(t_1)) (spec section 3; at constant speed frac((t_n - t_1) / T)).
+
+The model
+---------
+The rig's speed is never assumed; ``A(t)`` is estimated from every pass train at once::
+
+    A(t) = S(t) + sum_rho sum_m (a + a' x) cos(2 pi m S / P_rho) + (b + b' x) sin(...)       (2)
+
+``S`` a cubic B-spline in time (slow drift, ramps), the sums the speed ripple locked to the
+shaft angles present (carrier, sun, ring, planet spin: P_rho mesh cycles per turn of that
+shaft, from the tooth counts; drive and eccentricity ripple follow the shaft angle, so the
+terms are periodic in angle, and a periodic-in-angle speed gives exactly such a series in the
+smooth angle S), optionally with amplitudes changing linearly in the scaled time x in [-1, 1]
+(a relative ripple under a ramp). The per-train constants, per-planet offsets d and planet
+terms h of (1) are separate parameters: a speed change moves every pass of every gauge
+together, an offset moves only one planet's passes of one gauge, and the two are told apart
+by their different sampling of the shaft angles. A term that the data cannot tell apart
+from others (a column in the span of earlier columns, e.g. the planet-spin term at a ring
+gauge when Z_r / Z_p is an integer: the planet shows the same tooth at every ring pass) is
+dropped with a note; the effective rank is reported.
+
+Estimation: weighted Gauss-Newton on (2) (the ripple arguments depend on S), each step a
+least-squares solve of the column-scaled weighted Jacobian by QR (never the normal
+equations). Weights 1 / (sigma_t A'(t)) from each onset's timing bound, with one variance
+factor per train estimated from its residuals (leverage-corrected; never below 1 when the
+timing bound was given). The model order (spline intervals, ripple harmonics per shaft,
+amplitude modulation, planet-term harmonics) is chosen from the data by greedy forward
+selection on the Bayesian information criterion; a pass whose residual is far outside its
+train's scatter (a mislabelled pulse) is left out, with a count. Nothing depends on rounding:
+selection needs a BIC gain of at least 2 and the residual variance in the criterion has a
+floor (the timing bound: residuals inside it are no evidence for another term), so the same
+onsets moved by 1e-9 s give the same model.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import linalg
+from scipy.interpolate import BSpline
+
+from .errors import ProcessingWarning
+from .validate import as_finite_array
+
+__all__ = ["PassTrain", "Kinematics", "AngleModel", "gauge_train", "tacho_train",
+           "kinematics", "fit_angle_model", "revolution_numbers", "held_member",
+           "typed_resolution"]
+
+TWO_PI = 2.0 * math.pi
+#: spline interval counts tried, in order
+KNOT_LADDER = (1, 2, 3, 4, 6, 8, 11, 16, 22, 32, 45, 64)
+#: columns whose share outside the span of earlier columns is below this are dropped [-]
+RANK_TOL = 1e-7
+#: BIC gain needed to accept a term [-] ("positive evidence", Kass & Raftery 1995)
+BIC_GAIN = 2.0
+#: floor of the mean squared weighted residual in the criterion [-] when no timing bound was
+#: given (noise-free data); with bounds the floor is 1
+CHI2_FLOOR = 1e-8
+
+
+# ----------------------------------------------------------------------------- inputs
+@dataclass(frozen=True)
+class PassTrain:
+    """One train of angle observations: a gauge's passes or the tacho's edges.
+
+    Attributes
+    ----------
+    name : str
+        Channel name (or "tacho").
+    kind : {"sun", "ring", "tacho"}
+    times : ndarray, shape (m,)
+        Observation times [s], strictly increasing.
+    sigma : ndarray, shape (m,)
+        One-sigma timing uncertainty of each observation [s] (> 0).
+    target : ndarray, shape (m,)
+        Mesh angle of each observation up to the train's constant and the planet terms
+        [mesh cycles]: Z (k + f_n) for a gauge, P_c k for a tacho.
+    planet : ndarray of int, shape (m,)
+        0-based planet of each gauge pass; -1 for a tacho.
+    position : ndarray of int, shape (m,)
+        Pass-order position counted from the train's first pass (gauges; revolution
+        k = position // N, planet 1 opens each revolution).
+    sigma_given : bool
+        True when ``sigma`` is a timing bound (the train's variance factor is then >= 1).
+    z : int
+        Tooth count of the gauged gear (0 for a tacho) [-].
+    order : {+1, -1}
+        Sense in which the gauge meets the planets (:func:`pipeline.phasing.pass_order`):
+        a planet's carrier-frame angle shift d psi moves its passes by
+        ``order * z * d psi / 2 pi`` mesh cycles.
+    """
+
+    name: str
+    kind: str
+    times: np.ndarray
+    sigma: np.ndarray
+    target: np.ndarray
+    planet: np.ndarray
+    position: np.ndarray
+    sigma_given: bool = True
+    z: int = 0
+    order: int = 1
+
+    def __len__(self) -> int:
+        return int(self.times.size)
+
+
+def _check_times(times, name: str) -> np.ndarray:
+    t = as_finite_array(times, name, ndim=1)
+    if t.size > 1 and np.any(np.diff(t) <= 0):
+        raise ValueError(f"{name} must be strictly increasing")
+    return t
+
+
+def _sigma(sigma, n: int, default: float) -> tuple[np.ndarray, bool]:
+    if sigma is None:
+        return np.full(n, default), False
+    s = np.broadcast_to(np.asarray(sigma, dtype=float), (n,)).astype(float)
+    bad = ~np.isfinite(s) | (s <= 0)
+    if np.all(bad) and n:
+        return np.full(n, default), False
+    if np.any(bad):
+        s[bad] = np.median(s[~bad])
+    return s, True
+
+
+def gauge_train(name: str, gear: str, times, planet, position, fractions, z_gear: int, *,
+                sigma=None, order: int = 1) -> PassTrain:
+    """A gauge's pass train for :func:`fit_angle_model`.
+
+    Parameters
+    ----------
+    name : str
+        Channel name.
+    gear : {"sun", "ring"}
+        Gear carrying the gauge.
+    times : array_like, shape (m,)
+        Pass times [s], strictly increasing.
+    planet : array_like of int, shape (m,)
+        0-based planet per pass (>= 0: pass unassigned pulses separately, not here).
+    position : array_like of int, shape (m,)
+        Pass-order position of each pass (:func:`pipeline.phasing.assign_planets_by_pattern`
+        ``info["position"]``): consecutive planets differ by 1, a revolution by N.
+    fractions : array_like, shape (N,)
+        Fraction of a revolution from planet 1 to planet n in pass order [-]
+        (:func:`pipeline.phasing.planet_fractions`).
+    z_gear : int
+        Tooth count of the gauged gear [-].
+    sigma : float or array_like, optional
+        Timing uncertainty per pass [s] (the onset timing bound). None: unknown (the
+        train's scatter sets it).
+    order : {+1, -1}
+        The gauge's pass order (:func:`pipeline.phasing.pass_order`), which sets the sign
+        with which a planet's own angle shift moves its passes.
+    """
+    if order not in (1, -1):
+        raise ValueError(f"order must be +1 or -1, got {order!r}")
+    if gear not in ("sun", "ring"):
+        raise ValueError(f"gear must be 'sun' or 'ring', got {gear!r}")
+    t = _check_times(times, "times")
+    pl = np.asarray(planet)
+    pos = np.asarray(position)
+    if pl.shape != t.shape or pos.shape != t.shape:
+        raise ValueError(f"planet {pl.shape} and position {pos.shape} must have the shape of "
+                         f"times {t.shape}")
+    if t.size and (not np.issubdtype(pl.dtype, np.integer) or not np.issubdtype(pos.dtype, np.integer)):
+        raise TypeError("planet and position must be integer arrays")
+    f = as_finite_array(fractions, "fractions", ndim=1, allow_empty=False)
+    n = f.size
+    if t.size and (pl.min() < 0 or pl.max() >= n):
+        raise ValueError(f"planet must lie in [0, {n - 1}], got [{pl.min()}, {pl.max()}]")
+    z = int(z_gear)
+    if z <= 0:
+        raise ValueError(f"z_gear must be a positive integer, got {z_gear!r}")
+    seq = np.argsort(f, kind="stable")
+    fs = f[seq]
+    if t.size and np.any(seq[pos % n] != pl):
+        raise ValueError("position and planet disagree: position % N must be the planet's place "
+                         "in pass order")
+    target = z * (np.floor_divide(pos, n) + fs[pos % n])
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    s, given = _sigma(sigma, t.size, 1e-3 * dt)
+    return PassTrain(name, gear, t, s, target.astype(float), pl.astype(int), pos.astype(int), given,
+                     z, int(order))
+
+
+def revolution_numbers(ref_times, *, tol: float = 0.5) -> np.ndarray:
+    """Revolution count k of each once-per-revolution reference time, allowing for missed ones.
+
+    A reference pulse missing (gap, dropout) shows as an interval about twice the local period;
+    k then steps by the rounded ratio, so the angle knots stay right.
+
+    Parameters
+    ----------
+    ref_times : array_like, shape (m,)
+        Sorted reference times [s] (planet-1 passes or tacho pulses).
+    tol : float
+        Largest accepted distance of an interval ratio from an integer [-].
+
+    Returns
+    -------
+    k : ndarray of int, shape (m,)
+        k[0] = 0, non-decreasing steps of >= 1.
+    """
+    t = as_finite_array(ref_times, "ref_times", ndim=1)
+    if t.size == 0:
+        return np.empty(0, dtype=int)
+    if t.size == 1:
+        return np.zeros(1, dtype=int)
+    d = np.diff(t)
+    if np.any(d <= 0):
+        raise ValueError("ref_times must be strictly increasing")
+    # local period: running median of the intervals (robust to single missed pulses)
+    # local period: running median of the intervals over 15 (robust to a few missed pulses,
+    # follows slow speed change); short trains use their global median
+    w = 15
+    if d.size < w:
+        local = np.full(d.size, np.median(d))
+    else:
+        pad = np.pad(d, (w // 2, w - 1 - w // 2), mode="reflect")
+        local = np.median(np.lib.stride_tricks.sliding_window_view(pad, w), axis=1)
+    ratio = d / local
+    steps = np.maximum(1, np.rint(ratio)).astype(int)
+    return np.concatenate([[0], np.cumsum(steps)])
+
+
+def tacho_train(times, cycles_per_rev: float, *, sigma=None, name: str = "tacho") -> PassTrain:
+    """The carrier tacho's rising edges as an angle train (A = P_c k + c_T).
+
+    Parameters
+    ----------
+    times : array_like, shape (m,)
+        Edge times [s], strictly increasing.
+    cycles_per_rev : float
+        Mesh cycles per carrier revolution P_c [-] (Z_r with the ring held, Z_s with the sun
+        held; :attr:`Kinematics.tacho_cycles`).
+    sigma : float or array_like, optional
+        Edge timing uncertainty [s]; None: the train's scatter sets it.
+    """
+    t = _check_times(times, "times")
+    p = float(cycles_per_rev)
+    if not (math.isfinite(p) and p > 0):
+        raise ValueError(f"cycles_per_rev must be a positive number, got {cycles_per_rev!r}")
+    k = revolution_numbers(t) if t.size else np.empty(0, int)
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    s, given = _sigma(sigma, t.size, 1e-4 * dt)
+    return PassTrain(name, "tacho", t, s, p * k.astype(float), np.full(t.size, -1),
+                     k.astype(int), given)
+
+
+@dataclass(frozen=True)
+class Kinematics:
+    """What the tooth counts say about the shafts, in mesh cycles.
+
+    Attributes
+    ----------
+    z_sun, z_ring, z_planet : int
+        Tooth counts (z_planet 0 when unknown: no planet-spin terms).
+    fixed : {"ring", "sun", None}
+        The held member (None: a differential, both driven).
+    periods : dict of str to float
+        Mesh cycles per turn of each shaft whose speed ripple can be modelled [-]
+        ("carrier", "sun", "ring": absolute turns; "planet": spin relative to the carrier).
+    tacho_cycles : float or None
+        Mesh cycles per carrier revolution when a member is held (the tacho then measures the
+        mesh angle); None for a differential.
+    """
+
+    z_sun: int
+    z_ring: int
+    z_planet: int
+    fixed: str | None
+    periods: dict
+    tacho_cycles: float | None
+
+    @property
+    def planet_period(self) -> float | None:
+        """Mesh cycles per planet spin relative to the carrier, Z_p [-] (None if unknown)."""
+        return float(self.z_planet) if self.z_planet > 0 else None
+
+
+def kinematics(z_sun: int, z_ring: int, z_planet: int = 0, *, fixed: str | None = "ring",
+               speeds=None) -> Kinematics:
+    """Shaft periods in mesh cycles from the tooth counts and the held member.
+
+    Parameters
+    ----------
+    z_sun, z_ring, z_planet : int
+        Tooth counts [-] (z_planet 0: unknown).
+    fixed : {"ring", "sun", None}
+        Held member; None for a differential (then ``speeds`` give the shaft ratios).
+    speeds : pipeline.models.gearset.Speeds, optional
+        Nominal speeds [rad/s]; used only for a differential (ratios of shaft speeds to the
+        mesh frequency). Without them a differential gets no shaft-ripple terms.
+
+    Notes
+    -----
+    Ring held: a carrier turn is Z_r mesh cycles, a sun turn Z_s Z_r / (Z_s + Z_r); sun held:
+    a carrier turn is Z_s, a ring turn Z_s Z_r / (Z_s + Z_r). A planet turns once relative to
+    the carrier every Z_p mesh cycles in every arrangement.
+    """
+    zs, zr, zp = int(z_sun), int(z_ring), int(z_planet or 0)
+    if zs <= 0 or zr <= 0 or zp < 0:
+        raise ValueError(f"tooth counts must be positive, got z_sun={z_sun!r}, z_ring={z_ring!r}, "
+                         f"z_planet={z_planet!r}")
+    if fixed not in ("ring", "sun", None):
+        raise ValueError(f"fixed must be 'ring', 'sun' or None, got {fixed!r}")
+    periods: dict = {}
+    tacho = None
+    if fixed == "ring":
+        periods = {"carrier": float(zr), "sun": zs * zr / (zs + zr)}
+        tacho = float(zr)
+    elif fixed == "sun":
+        periods = {"carrier": float(zs), "ring": zs * zr / (zs + zr)}
+        tacho = float(zs)
+    elif speeds is not None:
+        w_sc = abs(speeds.sun - speeds.carrier)
+        if w_sc > 0:
+            for name in ("carrier", "sun", "ring"):
+                w = abs(getattr(speeds, name))
+                if w > 1e-9 * w_sc:
+                    periods[name] = zs * w_sc / w
+    if zp > 0:
+        periods["planet"] = float(zp)
+    return Kinematics(zs, zr, zp, fixed, periods, tacho)
+
+
+# ----------------------------------------------------------------------------- the model
+@dataclass
+class _Spec:
+    knots: int = 1
+    harm: dict = field(default_factory=dict)      # rate -> highest harmonic
+    mod: dict = field(default_factory=dict)       # rate -> amplitude modulation on/off
+    sig: int = 0                                  # planet-term harmonics
+
+    def copy(self) -> "_Spec":
+        return _Spec(self.knots, dict(self.harm), dict(self.mod), self.sig)
+
+    def describe(self) -> str:
+        parts = [f"spline {self.knots} interval(s)"]
+        for r, h in self.harm.items():
+            if h:
+                parts.append(f"{r} ripple x{h}" + (" (modulated)" if self.mod.get(r) else ""))
+        if self.sig:
+            parts.append(f"planet terms x{self.sig}")
+        return ", ".join(parts)
+
+
+def _basis(x: np.ndarray, K: int, nu: int = 0) -> np.ndarray:
+    """Uniform cubic B-spline basis on [-1, 1] with K intervals (knots continued past both
+    ends, so polynomials up to degree 3 are in the span), value or derivative ``nu``."""
+    h = 2.0 / K
+    kk = -1.0 + h * np.arange(-3, K + 4)
+    nb = K + 3
+    spl = BSpline(kk, np.eye(nb), 3, extrapolate=True)
+    return spl(x, nu) if x.size else np.zeros((0, nb))
+
+
+class _Design:
+    """Observations of all trains, stacked, and the column layout of one model spec."""
+
+    def __init__(self, trains: list[PassTrain], kin: Kinematics, n_planets: int):
+        self.trains = trains
+        self.kin = kin
+        self.N = n_planets
+        self.t = np.concatenate([tr.times for tr in trains])
+        self.y = np.concatenate([tr.target for tr in trains])
+        self.sig = np.concatenate([tr.sigma for tr in trains])
+        self.q = np.concatenate([np.full(len(tr), i) for i, tr in enumerate(trains)])
+        self.pl = np.concatenate([tr.planet for tr in trains])
+        # mesh cycles per radian of a planet's carrier-frame angle shift, per row (0: tacho)
+        self.ps = np.concatenate([np.full(len(tr), tr.order * tr.z / TWO_PI if tr.kind != "tacho" else 0.0)
+                                  for tr in trains])
+        self.t_lo, self.t_hi = float(self.t.min()), float(self.t.max())
+        self.t_mid = 0.5 * (self.t_lo + self.t_hi)
+        self.half = max(0.5 * (self.t_hi - self.t_lo), 1e-12)
+        self.x = (self.t - self.t_mid) / self.half
+        self.active = np.ones(self.t.size, bool)      # False: left out as an outlier
+        # reference planet of each gauge train: planet 1 when present, else the lowest
+        self.ref = []
+        for tr in trains:
+            if tr.kind == "tacho" or not len(tr):
+                self.ref.append(-1)
+            else:
+                present = np.unique(tr.planet)
+                self.ref.append(0 if 0 in present else int(present[0]))
+
+    def x_of(self, t: np.ndarray) -> np.ndarray:
+        return (np.asarray(t, dtype=float) - self.t_mid) / self.half
+
+    def layout(self, spec: _Spec) -> dict:
+        """Parameter blocks of ``spec``: name -> slice, column names, priorities, and the
+        (train, planet) -> column tables of the offsets and planet terms."""
+        names, prio = [], []
+        blocks = {}
+        i = 0
+
+        def add(key, cols, p):
+            nonlocal i
+            blocks[key] = slice(i, i + len(cols))
+            names.extend(cols)
+            prio.extend([p] * len(cols))
+            i += len(cols)
+
+        add("spline", [f"spline[{j}]" for j in range(spec.knots + 3)], 0)
+        for r in self.kin.periods:
+            h = spec.harm.get(r, 0)
+            if h:
+                # a common ripple at the planet spin is what identical planet terms on every
+                # planet would look like: where the data cannot tell them apart, the planet
+                # terms (always present, from the planets' own shaft hole offsets) are kept
+                pr = 6 if r == "planet" else 3
+                add(f"rip:{r}", [f"{r} ripple {c}{m}" for m in range(1, h + 1) for c in ("cos", "sin")], pr)
+                if spec.mod.get(r):
+                    add(f"mod:{r}", [f"{r} ripple x*{c}{m}" for m in range(1, h + 1) for c in ("cos", "sin")], pr + 1)
+        add("const", [f"{tr.name}: constant" for q, tr in enumerate(self.trains) if q > 0], 1)
+        T = len(self.trains)
+        off_table = np.full((T, self.N), -1, dtype=np.int64)
+        offs = []
+        for q, tr in enumerate(self.trains):
+            if tr.kind == "tacho":
+                continue
+            for n in np.unique(tr.planet):
+                if n != self.ref[q]:
+                    off_table[q, n] = len(offs)
+                    offs.append(f"{tr.name}: planet {n + 1} offset")
+        add("off", offs, 2)
+        # planet terms: one set per planet, shared by every gauge (a planet's own shaft hole
+        # offset turns the line of centres of its sun and its ring mesh alike, to first order
+        # in e / R_c: d psi_n(t) [rad]), each gauge seeing it scaled by order * Z / 2 pi
+        sig_index = np.full(self.N, -1, dtype=np.int64)
+        sigs = []
+        if spec.sig and self.kin.planet_period:
+            for n in np.unique(self.pl[self.pl >= 0]):
+                sig_index[n] = len(sigs)
+                sigs += [f"planet {n + 1} spin term {c}{m}"
+                         for m in range(1, spec.sig + 1) for c in ("cos", "sin")]
+        add("sig", sigs, 5)
+        pl = np.maximum(self.pl, 0)
+        return {"blocks": blocks, "names": names, "priority": np.asarray(prio), "p": i,
+                "off_table": off_table, "sig_index": sig_index,
+                "oi": np.where(self.pl >= 0, off_table[self.q, pl], -1),
+                "si": np.where((self.pl >= 0) & (self.ps != 0), sig_index[pl], -1)}
+
+    # ------------------------------------------------------------------ evaluation
+    def _ripple(self, theta, lay, spec, A, x):
+        """R(A, x), dR/dA, dR/dx at mesh angles A and scaled times x; and the columns
+        dR/dtheta (one array per ripple block, in layout order)."""
+        R = np.zeros(A.size)
+        RA = np.zeros(A.size)
+        Rx = np.zeros(A.size)
+        cols = []
+        for r, P in self.kin.periods.items():
+            h = spec.harm.get(r, 0)
+            if not h:
+                continue
+            m = np.arange(1, h + 1)
+            ph = TWO_PI * np.mod(np.outer(A, m / P), 1.0)             # (n, h), reduced
+            c, sn = np.cos(ph), np.sin(ph)
+            trig = np.empty((A.size, 2 * h))
+            trig[:, 0::2], trig[:, 1::2] = c, sn
+            dtrig = np.empty_like(trig)                               # d trig / dA
+            dtrig[:, 0::2] = -sn * (TWO_PI * m / P)
+            dtrig[:, 1::2] = c * (TWO_PI * m / P)
+            a = theta[lay["blocks"][f"rip:{r}"]]
+            R += trig @ a
+            RA += dtrig @ a
+            cols.append(trig)
+            if spec.mod.get(r):
+                am = theta[lay["blocks"][f"mod:{r}"]]
+                R += x * (trig @ am)
+                RA += x * (dtrig @ am)
+                Rx += trig @ am
+                cols.append(trig * x[:, None])
+        return R, RA, Rx, cols
+
+    def _common(self, theta, lay, spec, x, A_fixed=None):
+        """Solve A = S(t) + R(A, x) (Newton from A = S) at scaled times x.
+
+        Returns A, dA/dt, the columns dA/dtheta restricted to spline and ripple blocks (as a
+        dense (n, p) array with zeros elsewhere) and dR/dA. With ``A_fixed`` the columns are
+        evaluated at those angles instead of the solved ones."""
+        B = _basis(x, spec.knots)
+        dB = _basis(x, spec.knots, 1) / self.half
+        beta = theta[lay["blocks"]["spline"]]
+        S = B @ beta
+        dS = dB @ beta
+        A = S.copy() if A_fixed is None else np.asarray(A_fixed, dtype=float)
+        if A_fixed is None and any(spec.harm.get(r, 0) for r in self.kin.periods):
+            scale = max(1.0, float(np.max(np.abs(S))) if S.size else 1.0)
+            for _ in range(30):
+                R, RA, _, _ = self._ripple(theta, lay, spec, A, x)
+                F = A - S - R
+                A = A - F / (1.0 - RA)
+                if not F.size or float(np.max(np.abs(F))) <= 4 * np.finfo(float).eps * scale:
+                    break
+        R, RA, Rx, cols = self._ripple(theta, lay, spec, A, x)
+        den = 1.0 - RA if A_fixed is None else np.ones(A.size)
+        G = np.zeros((x.size, lay["p"]))
+        G[:, lay["blocks"]["spline"]] = B / den[:, None]
+        c = 0
+        for key, sl in lay["blocks"].items():
+            if key.startswith("rip:") or key.startswith("mod:"):
+                G[:, sl] = cols[c] / den[:, None]
+                c += 1
+        rate = (dS + Rx / self.half) / den
+        return A, rate, G, RA
+
+    def evaluate(self, theta, lay, spec, rows=None, *, jac=True, nominal=False):
+        """Model value f, Jacobian J (rows x p), and the observation's angle rate [cycles/s].
+
+        ``nominal``: the first-order (structural) design instead: columns evaluated at the
+        angles the observations put A at (target minus the train's constant, offset and
+        planet term), without the slope factors (1 + h') / (1 - R'). Those angles are exactly
+        periodic where the geometry makes them so (a planet meeting a ring gauge at the same
+        spin angle every time), so structural dependence between columns is exact, not
+        blurred by residuals or by second-order coupling of ripple and planet terms (which no
+        real record resolves); used to judge identifiability.
+        """
+        idx = np.arange(self.t.size) if rows is None else rows
+        x = self.x[idx]
+        A, rate, G, _ = self._common(theta, lay, spec, x)
+        if nominal:
+            f0, _, _ = self.evaluate(theta, lay, spec, idx, jac=False)
+            A_nom = A + (self.y[idx] - f0)
+            A, rate, G, _ = self._common(theta, lay, spec, x, A_fixed=A_nom)
+        q = self.q[idx]
+        n = idx.size
+        f = A.copy()
+        cb = lay["blocks"]["const"]
+        ob = lay["blocks"]["off"]
+        th_c = theta[cb]
+        th_o = theta[ob]
+        has_c = q > 0
+        if th_c.size:
+            f += np.where(has_c, th_c[np.maximum(q - 1, 0)], 0.0)
+        oi = lay["oi"][idx]
+        if th_o.size:
+            f += np.where(oi >= 0, th_o[np.maximum(oi, 0)], 0.0)
+        # planet terms, periodic in the planet's spin: functions of the mesh angle A
+        sb = lay["blocks"]["sig"]
+        hA = np.zeros(n)
+        sig_cols = None
+        if sb.stop > sb.start:
+            P = self.kin.planet_period
+            m = np.arange(1, spec.sig + 1)
+            ph = TWO_PI * np.mod(np.outer(A, m / P), 1.0)
+            trig = np.empty((n, 2 * spec.sig))
+            trig[:, 0::2], trig[:, 1::2] = np.cos(ph), np.sin(ph)
+            dtrig = np.empty_like(trig)
+            dtrig[:, 0::2] = -np.sin(ph) * (TWO_PI * m / P)
+            dtrig[:, 1::2] = np.cos(ph) * (TWO_PI * m / P)
+            si = lay["si"][idx]
+            ps = self.ps[idx]
+            th_s = theta[sb]
+            w = 2 * spec.sig
+            ok = si >= 0
+            if np.any(ok):
+                gather = th_s[si[ok, None] + np.arange(w)[None, :]]
+                f[ok] += ps[ok] * np.sum(gather * trig[ok], axis=1)
+                hA[ok] = ps[ok] * np.sum(gather * dtrig[ok], axis=1)
+            sig_cols = (si, trig * ps[:, None])
+        if nominal:
+            hA = np.zeros(n)
+        obs_rate = rate * (1.0 + hA)
+        if not jac:
+            return f, None, obs_rate
+        J = G * (1.0 + hA)[:, None]
+        if cb.stop > cb.start:
+            J[np.flatnonzero(has_c), cb.start + q[has_c] - 1] = 1.0
+        if ob.stop > ob.start:
+            k = np.flatnonzero(oi >= 0)
+            J[k, ob.start + oi[k]] = 1.0
+        if sig_cols is not None:
+            si, trig = sig_cols
+            k = np.flatnonzero(si >= 0)
+            w = trig.shape[1]
+            J[k[:, None], sb.start + si[k][:, None] + np.arange(w)[None, :]] = trig[k]
+        return f, J, obs_rate
+
+    def a_part(self, theta, lay, spec, t):
+        """A(t), dA/dt and dA/dtheta (the common angle only, no train terms) at times t."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        A, rate, G, _ = self._common(theta, lay, spec, self.x_of(t))
+        return A, rate, G
+
+
+def _rank_keep(d: "_Design", theta, lay, spec, rows) -> np.ndarray:
+    """Identifiable columns: the Jacobian at the nominal angles, weighted by the timing bounds
+    alone (a train's variance factor must not decide what is identifiable)."""
+    _, J, rate = d.evaluate(theta, lay, spec, rows, nominal=True)
+    w = 1.0 / (d.sig[rows] * _fix_rate(rate))
+    return _independent_columns(J * w[:, None], lay["priority"])
+
+
+def _fix_rate(rate: np.ndarray) -> np.ndarray:
+    """Angle rates with non-finite or non-positive entries (a model not yet fitted) replaced
+    by the median of the good ones (1 when there is none) [cycles/s]."""
+    ok = np.isfinite(rate) & (rate > 0)
+    if np.all(ok):
+        return rate
+    return np.where(ok, rate, float(np.median(rate[ok])) if np.any(ok) else 1.0)
+
+
+def _independent_columns(Jw: np.ndarray, priority: np.ndarray, tol: float = RANK_TOL) -> np.ndarray:
+    """Columns kept, in priority order (then left to right): a column whose part outside the
+    span of the columns kept before it is below ``tol`` of its norm is dropped.
+
+    Householder QR without pivoting on the unit-norm columns in priority order gives, in
+    |R_jj|, each column's distance to the span of the ones before it. The first column
+    below ``tol`` is dropped and the QR repeated (a dependent column would otherwise steer
+    the later reflections), until none is."""
+    p = Jw.shape[1]
+    order = np.lexsort((np.arange(p), priority))
+    norms = np.linalg.norm(Jw, axis=0)
+    cand = [j for j in order if norms[j] > 0]
+    while cand:
+        A = Jw[:, cand] / norms[cand]
+        R = linalg.qr(A, mode="r", check_finite=False)[0]
+        d = np.abs(np.diag(R))
+        small = np.flatnonzero(d < tol)
+        if small.size == 0:
+            break
+        # clear-cut dependence (far below tol) is dropped at once; a borderline column one
+        # at a time, since a dependent column steers the later reflections
+        clear = small[d[small] < 1e-3 * tol]
+        drop = clear if clear.size else small[:1]
+        for i in sorted(drop.tolist(), reverse=True):
+            del cand[int(i)]
+    keep = np.zeros(p, bool)
+    keep[cand] = True
+    return keep
+
+
+@dataclass
+class _Fit:
+    spec: _Spec
+    lay: dict
+    theta: np.ndarray
+    keep: np.ndarray
+    chi2: float
+    n: int
+    rank: int
+    iterations: int
+    converged: bool
+    resid: np.ndarray = None        # [mesh cycles], all rows (outliers too)
+    rate: np.ndarray = None         # [cycles/s]
+    cov: np.ndarray = None          # kept-parameter covariance (scaled)
+    lev: np.ndarray = None          # leverages of the active rows
+
+    floor: float = CHI2_FLOOR
+
+    def bic(self) -> float:
+        """n ln(max(chi2 / n, floor)) + rank ln n. With timing bounds given the floor is 1:
+        residuals already inside the bounds are no evidence for another term."""
+        n = max(self.n, 1)
+        return n * math.log(max(self.chi2 / n, self.floor)) + self.rank * math.log(n)
+
+
+def _solve(d: _Design, spec: _Spec, theta0: np.ndarray | None, scale: np.ndarray, *,
+           max_iter: int = 12, tol: float = 1e-10, full: bool = False,
+           recheck: bool = True) -> _Fit:
+    """Weighted Gauss-Newton for one spec; ``scale`` is the per-train variance factor."""
+    lay = d.layout(spec)
+    p = lay["p"]
+    theta = np.zeros(p) if theta0 is None else theta0.copy()
+    rows = np.flatnonzero(d.active)
+    keep = None
+    conv = False
+    it = 0
+    it = 0
+    rechecked = not recheck
+    while it < max_iter:
+        it += 1
+        f, J, rate = d.evaluate(theta, lay, spec, rows)
+        rate = _fix_rate(rate)
+        w = 1.0 / (d.sig[rows] * rate * scale[d.q[rows]])
+        r = d.y[rows] - f
+        Jw = J * w[:, None]
+        if keep is None:
+            keep = _rank_keep(d, theta, lay, spec, rows)
+            if not np.all(keep):
+                # unidentifiable parameters sit at zero (minimum norm), not at stale values
+                theta[~keep] = 0.0
+                continue
+        A = Jw[:, keep]
+        cn = np.linalg.norm(A, axis=0)
+        cn[cn == 0] = 1.0
+        step, *_ = linalg.lstsq(A / cn, r * w, lapack_driver="gelsy", check_finite=False)
+        step = step / cn
+        theta[keep] += step
+        change = float(np.max(np.abs(J[:, keep] @ step))) if step.size else 0.0
+        if change <= max(tol, 64 * np.finfo(float).eps * float(np.max(np.abs(d.y)))):
+            if rechecked:
+                conv = True
+                break
+            # identifiability is judged where the columns are evaluated: check it again at
+            # the converged point (a start far off can make dependent columns look apart)
+            rechecked = True
+            k2 = _rank_keep(d, theta, lay, spec, rows)
+            if np.array_equal(k2, keep):
+                conv = True
+                break
+            keep = k2
+            theta[~keep] = 0.0
+    if full and not rechecked:
+        # the iteration limit came first: the identifiability check at the end still decides
+        k2 = _rank_keep(d, theta, lay, spec, rows)
+        if not np.array_equal(k2, keep):
+            keep = k2
+            theta[~keep] = 0.0
+            return _solve(d, spec, theta, scale, max_iter=max_iter, tol=tol, full=full,
+                          recheck=False) if max_iter > 1 else _solve(d, spec, theta, scale,
+                                                                       max_iter=2, full=full)
+    f, J, rate = d.evaluate(theta, lay, spec, np.arange(d.t.size), jac=full)
+    resid = d.y - f
+    rate = _fix_rate(rate)
+    w_all = 1.0 / (d.sig * rate * scale[d.q])
+    chi2 = float(np.sum((resid[rows] * w_all[rows]) ** 2))
+    fit = _Fit(spec, lay, theta, keep, chi2, rows.size, int(keep.sum()), it, conv, resid, rate)
+    fit.floor = 1.0 if all(tr.sigma_given for tr in d.trains) else CHI2_FLOOR
+    if full:
+        A = (J[rows] * w_all[rows, None])[:, keep]
+        cn = np.linalg.norm(A, axis=0)
+        cn[cn == 0] = 1.0
+        Q, R = linalg.qr(A / cn, mode="economic", check_finite=False)
+        dR = np.abs(np.diag(R))
+        if dR.size and dR.min() > RANK_TOL * dR.max():
+            Rinv = linalg.solve_triangular(R, np.eye(R.shape[0]), check_finite=False)
+        else:
+            # a column that became dependent at the converged point: its variance is
+            # unbounded, which the pseudo-inverse reports as the smallest-norm split
+            Rinv = np.linalg.pinv(R, rcond=RANK_TOL)
+        C = (Rinv @ Rinv.T) / np.outer(cn, cn)
+        fit.cov = C
+        lev = np.zeros(d.t.size)
+        lev[rows] = np.sum(Q * Q, axis=1)
+        fit.lev = lev
+    return fit
+
+
+# ----------------------------------------------------------------------------- results
+@dataclass
+class TrainFit:
+    """Fit diagnostics of one train.
+
+    Attributes
+    ----------
+    name, kind : str
+    n, n_outliers : int
+        Observations used and left out (residual beyond 6 times the train's scatter).
+    scale : float
+        Variance factor: residual scatter / timing bound [-] (leverage-corrected).
+    rms : float
+        Residual RMS [mesh cycles].
+    lag1 : float
+        Lag-1 autocorrelation of the normalised residuals per planet, averaged [-] (near 0
+        for a model that follows the speed; near 1 for systematic misfit).
+    """
+
+    name: str
+    kind: str
+    n: int
+    n_outliers: int
+    scale: float
+    rms: float
+    lag1: float
+
+
+@dataclass
+class AngleModel:
+    """The fitted mesh angle of a recording (module notes) and its diagnostics.
+
+    Use :meth:`mesh_angle` / :meth:`mesh_rate` for A(t) and dA/dt, :meth:`difference_std`
+    for the model's own uncertainty of A(t_a) - A(t_b), :meth:`train` for a train's
+    diagnostics, ``offsets`` for the per-planet phasing deviations the fit estimated.
+
+    Attributes
+    ----------
+    t_span : tuple of float
+        First and last observation time [s] (the model is fitted there; outside it is
+        extrapolated).
+    terms : str
+        The selected model order, in words.
+    rank, n_parameters : int
+        Effective rank and columns of the final design.
+    dropped : list of str
+        Columns the data could not tell apart from earlier ones.
+    trains : list of TrainFit
+    residual_rms : float
+        Weighted-average residual RMS over all trains [mesh cycles].
+    selection : list of tuple
+        (step, terms, BIC) of the forward selection.
+    notes : list of str
+    wall_time : float [s]
+    """
+
+    t_span: tuple
+    terms: str
+    rank: int
+    n_parameters: int
+    dropped: list
+    trains: list
+    residual_rms: float
+    selection: list
+    notes: list
+    wall_time: float
+    iterations: int
+    converged: bool
+    offsets: dict = field(default_factory=dict)
+    _design: _Design = field(default=None, repr=False)
+    _fit: _Fit = field(default=None, repr=False)
+
+    def mesh_angle(self, t) -> np.ndarray:
+        """Mesh angle A(t) [mesh cycles] at times ``t`` [s]."""
+        return self._design.a_part(self._fit.theta, self._fit.lay, self._fit.spec, t)[0]
+
+    def mesh_rate(self, t) -> np.ndarray:
+        """Mesh frequency dA/dt [cycles/s] at times ``t`` [s]."""
+        return self._design.a_part(self._fit.theta, self._fit.lay, self._fit.spec, t)[1]
+
+    def difference_std(self, t_a, t_b) -> np.ndarray:
+        """Standard deviation of A(t_a) - A(t_b) from the fit's covariance [mesh cycles]."""
+        f = self._fit
+        ga = self._design.a_part(f.theta, f.lay, f.spec, t_a)[2][:, f.keep]
+        gb = self._design.a_part(f.theta, f.lay, f.spec, t_b)[2][:, f.keep]
+        g = ga - gb
+        return np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", g, f.cov, g), 0.0))
+
+    def train(self, name: str) -> TrainFit:
+        """Diagnostics of the train called ``name`` (KeyError naming the trains)."""
+        for tr in self.trains:
+            if tr.name == name:
+                return tr
+        raise KeyError(f"no train {name!r}; trains: {[t.name for t in self.trains]}")
+
+    def scale_of(self, name: str) -> float:
+        """Variance factor of train ``name`` [-] (1 when unknown)."""
+        try:
+            return float(self.train(name).scale)
+        except KeyError:
+            return 1.0
+
+    def residuals(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """(times [s], residuals [mesh cycles]) of train ``name``'s observations."""
+        d = self._design
+        for q, tr in enumerate(d.trains):
+            if tr.name == name:
+                m = d.q == q
+                return d.t[m], self._fit.resid[m]
+        raise KeyError(f"no train {name!r}")
+
+    def outlier_mask(self, name: str) -> np.ndarray:
+        """True for the observations of train ``name`` left out as outliers."""
+        d = self._design
+        for q, tr in enumerate(d.trains):
+            if tr.name == name:
+                return ~d.active[d.q == q]
+        raise KeyError(f"no train {name!r}")
+
+    def summary(self) -> dict:
+        """JSON-friendly diagnostics."""
+        return {"terms": self.terms, "rank": self.rank, "n_parameters": self.n_parameters,
+                "dropped": list(self.dropped), "residual_rms_cycles": self.residual_rms,
+                "iterations": self.iterations, "converged": self.converged,
+                "t_span_s": list(self.t_span), "wall_time_s": self.wall_time,
+                "trains": [vars(t) for t in self.trains], "notes": list(self.notes),
+                "selection": [{"step": s, "terms": m, "bic": b} for s, m, b in self.selection]}
+
+
+def _dropped_notes(d: _Design, lay: dict, keep: np.ndarray) -> tuple[list, list]:
+    names = [nm for nm, k in zip(lay["names"], keep) if not k]
+    notes = []
+    if not names:
+        return names, notes
+    kin = d.kin
+    spin = [nm for nm in names if "spin term" in nm]
+    rest = [nm for nm in names if "spin term" not in nm]
+    if spin:
+        why = []
+        for tr in d.trains:
+            if tr.kind in ("sun", "ring") and kin.z_planet:
+                z = kin.z_sun if tr.kind == "sun" else kin.z_ring
+                if z % kin.z_planet == 0:
+                    why.append(f"{tr.name}: Z/Z_p = {z}/{kin.z_planet} = {z // kin.z_planet} is an "
+                               "integer, the planet shows the same tooth at every pass")
+        notes.append(f"{len(spin)} planet spin term(s) not identifiable and dropped"
+                     + (f": {'; '.join(why)}" if why else ""))
+    if rest:
+        notes.append(f"not identifiable and dropped: {', '.join(rest)}")
+    return names, notes
+
+
+def _min_step(tr: PassTrain) -> float:
+    """Smallest mesh-angle step between consecutive planets of a gauge train [mesh cycles]
+    (Z times the smallest planet spacing in revolutions)."""
+    steps = np.diff(tr.target)[np.diff(tr.position) == 1]
+    return float(np.min(steps)) if steps.size else float("inf")
+
+
+def _lag1(resid: np.ndarray, pl: np.ndarray) -> float:
+    vals = []
+    for n in np.unique(pl):
+        r = resid[pl == n]
+        if r.size >= 6 and np.std(r) > 0:
+            r = r - r.mean()
+            vals.append(float(np.sum(r[1:] * r[:-1]) / np.sum(r * r)))
+    return float(np.mean(vals)) if vals else float("nan")
+
+
+def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: int = 4,
+                    max_planet_harmonics: int = 2, outlier_k: float = 6.0,
+                    max_knots: int | None = None) -> AngleModel:
+    """Fit the mesh angle A(t) to every pass train and tacho at once (module notes).
+
+    Parameters
+    ----------
+    trains : sequence of PassTrain
+        Gauge trains (:func:`gauge_train`) and at most one tacho (:func:`tacho_train`);
+        trains with fewer than 2 observations are ignored.
+    kin : Kinematics
+        Shaft periods and the held member (:func:`kinematics`).
+    n_planets : int
+        Number of planets N [-].
+    max_harmonics : int
+        Highest harmonic of each shaft ripple tried [-].
+    max_planet_harmonics : int
+        Highest harmonic of the planet spin terms tried [-].
+    outlier_k : float
+        Observations whose residual exceeds this many times the train's robust scatter are
+        left out [-].
+    max_knots : int, optional
+        Cap on the spline intervals (default: knots at least two relative revolutions of the
+        densest gauge train apart, at most 64 intervals).
+
+    Returns
+    -------
+    AngleModel
+
+    Raises
+    ------
+    TypeError
+        Trains that are not PassTrain, kin not Kinematics.
+    ValueError
+        No gauge train with at least 2 passes; n_planets < 1.
+    """
+    t_start = time.perf_counter()
+    if not isinstance(kin, Kinematics):
+        raise TypeError(f"kin must be a Kinematics (pipeline.angles.kinematics), got {type(kin).__name__}")
+    trains = list(trains)
+    for tr in trains:
+        if not isinstance(tr, PassTrain):
+            raise TypeError(f"trains must hold PassTrain objects, got {type(tr).__name__}")
+    N = int(n_planets)
+    if N < 1:
+        raise ValueError(f"n_planets must be >= 1, got {n_planets!r}")
+    use = [tr for tr in trains if len(tr) >= 2]
+    gauges = [tr for tr in use if tr.kind in ("sun", "ring")]
+    if not gauges:
+        raise ValueError("fit_angle_model needs at least one gauge train with 2 or more passes")
+    names = [tr.name for tr in use]
+    if len(set(names)) != len(names):
+        raise ValueError(f"train names must be unique, got {names}")
+    # the gauge with most passes first: its constant is the spline's
+    use = sorted(gauges, key=lambda tr: -len(tr)) + [tr for tr in use if tr.kind == "tacho"]
+    notes: list[str] = []
+    d = _Design(use, kin, N)
+    span = d.t_hi - d.t_lo
+    # densest gauge train's relative revolution [s]: knots at least two of them apart
+    rev = min(float(np.ptp(tr.times)) / max(1.0, (tr.target[-1] - tr.target[0]) /
+                                             (kin.z_sun if tr.kind == "sun" else kin.z_ring))
+              for tr in gauges)
+    kmax = int(max(1, min(64, math.floor(span / (2.0 * rev)) if rev > 0 else 1)))
+    if max_knots is not None:
+        kmax = max(1, min(kmax, int(max_knots)))
+    n_obs = d.t.size
+    ladder = [k for k in KNOT_LADDER if k <= kmax]
+    rates = list(kin.periods)
+    # a shaft must turn at least once over the record for its ripple to be told from drift
+    mean_rate = (d.y.max() - d.y.min()) / span if span > 0 else 0.0
+    turns = {r: mean_rate * span / P for r, P in kin.periods.items()}
+    rates = [r for r in rates if turns[r] >= 1.0]
+    skipped = [r for r in kin.periods if r not in rates]
+    if skipped:
+        notes.append(f"no ripple terms for {', '.join(skipped)}: fewer than one turn in the record")
+    ones = np.ones(len(use))
+    spec = _Spec(knots=ladder[0], harm={r: 0 for r in rates}, mod={r: False for r in rates})
+    # 1. base fit and gross outliers (mislabelled pulses are whole planet spacings off)
+    fit = _solve(d, spec, None, ones)
+    for _ in range(3):
+        out = np.zeros(n_obs, bool)
+        for q in range(len(use)):
+            m = (d.q == q) & d.active
+            r = fit.resid[m]
+            if r.size < 4:
+                continue
+            med = np.median(r)
+            mad = 1.4826 * np.median(np.abs(r - med))
+            lim = max(outlier_k * mad, 1e-9)
+            if use[q].kind == "tacho":
+                continue
+            # mislabels are whole planet spacings off; never call less than 0.3 of the
+            # smallest spacing an outlier here (unmodelled ripple can reach ~0.5 cycles)
+            step_min = _min_step(use[q])
+            if math.isfinite(step_min):
+                lim = max(lim, 0.3 * step_min)
+            idx = np.flatnonzero(m)
+            out[idx[np.abs(r - med) > lim]] = True
+        if not out.any():
+            break
+        d.active &= ~out
+        fit = _solve(d, spec, None, ones)
+    # 2. forward selection on BIC (weights from the timing bounds alone)
+    selection = [(0, spec.describe(), fit.bic())]
+    step = 0
+    while True:
+        step += 1
+        cands = []
+        # every finer spline is a candidate: a drift the next step cannot follow may still
+        # be followed by a finer one (greedy steps of one would stop short)
+        for k in (k for k in ladder if k > spec.knots):
+            s2 = spec.copy()
+            s2.knots = k
+            cands.append(s2)
+        for r in rates:
+            # a common ripple at the planet spin looks, on one gear's gauges, exactly like the
+            # same planet term on every planet: it is tried only next to planet terms of that
+            # harmonic (and dropped where the data cannot tell the two apart), because every
+            # planet's own shaft hole offset is certain to be there and a common planet-rate
+            # speed ripple is not
+            if r == "planet" and spec.harm[r] >= spec.sig:
+                continue
+            if spec.harm[r] < max_harmonics:
+                s2 = spec.copy()
+                s2.harm[r] += 1
+                cands.append(s2)
+            if spec.harm[r] >= 1 and not spec.mod[r]:
+                s2 = spec.copy()
+                s2.mod[r] = True
+                cands.append(s2)
+        if kin.planet_period and spec.sig < max_planet_harmonics:
+            s2 = spec.copy()
+            s2.sig += 1
+            cands.append(s2)
+        best = None
+        for c in cands:
+            lay = d.layout(c)
+            if lay["p"] >= 0.5 * np.count_nonzero(d.active):
+                continue
+            th0 = _extend(fit, c, d)
+            f2 = _solve(d, c, th0, ones, max_iter=4, recheck=False)
+            if best is None or f2.bic() < best.bic():
+                best = f2
+        if best is None or best.bic() > fit.bic() - BIC_GAIN:
+            break
+        fit = _solve(d, best.spec, best.theta, ones)
+        spec = best.spec
+        selection.append((step, spec.describe(), fit.bic()))
+    # 3. variance factors per train, outliers against the final model, final fit
+    scale = ones.copy()
+    for _ in range(4):
+        fit = _solve(d, spec, fit.theta, scale, full=True)
+        new = scale.copy()
+        w = 1.0 / (d.sig * fit.rate)
+        for q, tr in enumerate(use):
+            m = (d.q == q) & d.active
+            if not np.any(m):
+                continue
+            dof = max(1.0, np.count_nonzero(m) - float(np.sum(fit.lev[m])))
+            s = math.sqrt(float(np.sum((fit.resid[m] * w[m]) ** 2)) / dof)
+            # a given timing bound is a bound; an unknown one (default sigma) may be far off,
+            # but never trusted below 1e-6 of the default (sub-nanosecond timing)
+            new[q] = max(s, 1.0) if tr.sigma_given else max(s, 1e-6)
+        out = np.zeros(n_obs, bool)
+        for q in range(len(use)):
+            m = (d.q == q) & d.active
+            lim = outlier_k * new[q] / w[m]
+            idx = np.flatnonzero(m)
+            out[idx[np.abs(fit.resid[m]) > lim]] = True
+        if not out.any() and np.allclose(new, scale, rtol=1e-3):
+            scale = new
+            break
+        d.active &= ~out
+        scale = new
+    fit = _solve(d, spec, fit.theta, scale, full=True)
+    dropped, dnotes = _dropped_notes(d, fit.lay, fit.keep)
+    notes.extend(dnotes)
+    tfits = []
+    w = 1.0 / (d.sig * fit.rate)
+    for q, tr in enumerate(use):
+        m = d.q == q
+        act = m & d.active
+        r = fit.resid[act]
+        tfits.append(TrainFit(tr.name, tr.kind, int(np.count_nonzero(act)),
+                              int(np.count_nonzero(m & ~d.active)), float(scale[q]),
+                              float(np.sqrt(np.mean(r ** 2))) if r.size else float("nan"),
+                              _lag1(fit.resid[act] * w[act], d.pl[act])))
+        if tfits[-1].n_outliers:
+            notes.append(f"{tr.name}: {tfits[-1].n_outliers} observation(s) far off the model "
+                         "(mislabelled or spurious pulses) left out")
+    act = d.active
+    wall = time.perf_counter() - t_start
+    # per-planet offsets with their standard deviation [mesh cycles]
+    offsets = {}
+    ob = fit.lay["blocks"]["off"]
+    kept_idx = np.cumsum(fit.keep) - 1
+    for q, n in zip(*np.nonzero(fit.lay["off_table"] >= 0)):
+        col = ob.start + int(fit.lay["off_table"][q, n])
+        n = int(n)
+        std = float(math.sqrt(max(fit.cov[kept_idx[col], kept_idx[col]], 0.0))) if fit.keep[col] else float("nan")
+        offsets.setdefault(use[q].name, {})[n] = (float(fit.theta[col]), std)
+    if not fit.converged:
+        warnings.warn(f"angle model: Gauss-Newton did not converge in {fit.iterations} iterations "
+                      "(speed ripple too strong for its series?)", ProcessingWarning, stacklevel=2)
+    return AngleModel(
+        t_span=(d.t_lo, d.t_hi), terms=spec.describe(), rank=fit.rank,
+        n_parameters=fit.lay["p"], dropped=dropped, trains=tfits,
+        residual_rms=float(np.sqrt(np.mean(fit.resid[act] ** 2))) if act.any() else float("nan"),
+        selection=selection, notes=notes, wall_time=wall, iterations=fit.iterations,
+        converged=fit.converged, offsets=offsets, _design=d, _fit=fit)
+
+
+def _extend(fit: _Fit, spec: _Spec, d: _Design) -> np.ndarray:
+    """Parameters of ``fit`` mapped onto the layout of ``spec`` (new terms start at 0; a
+    finer spline starts from the old one's least-squares projection)."""
+    new = d.layout(spec)
+    th = np.zeros(new["p"])
+    old = fit.lay
+    for key, sl in old["blocks"].items():
+        if key == "spline":
+            continue
+        if key in new["blocks"]:
+            ns = new["blocks"][key]
+            k = min(sl.stop - sl.start, ns.stop - ns.start)
+            if key.startswith("rip:") or key.startswith("mod:"):
+                # harmonic pairs keep their place
+                th[ns.start:ns.start + k] = fit.theta[sl.start:sl.start + k]
+            elif key == "sig":
+                # per (train, planet) groups of 2 * sig columns
+                w_old = 2 * fit.spec.sig
+                w_new = 2 * spec.sig
+                if w_old and w_new:
+                    g = (sl.stop - sl.start) // w_old
+                    for i in range(g):
+                        th[ns.start + i * w_new: ns.start + i * w_new + w_old] = \
+                            fit.theta[sl.start + i * w_old: sl.start + (i + 1) * w_old]
+            else:
+                th[ns] = fit.theta[sl]
+    sb = new["blocks"]["spline"]
+    if spec.knots == fit.spec.knots:
+        th[sb] = fit.theta[old["blocks"]["spline"]]
+    else:
+        xs = np.linspace(-1.0, 1.0, 8 * (spec.knots + 3))
+        s_old = _basis(xs, fit.spec.knots) @ fit.theta[old["blocks"]["spline"]]
+        th[sb] = linalg.lstsq(_basis(xs, spec.knots), s_old, check_finite=False)[0]
+    return th
+
+
+def typed_resolution(value: float) -> float:
+    """Half a unit in the last digit of a number as a person typed it [same unit].
+
+    ``4.06`` -> 0.005, ``18.19`` -> 0.005, ``100.0`` -> 0.05, ``4`` -> 0.5, ``1e-3`` -> 5e-4: the
+    uncertainty a typed nominal value carries (Python keeps the shortest repr that round
+    trips, which is the typed text for typed numbers)."""
+    if isinstance(value, bool):
+        raise TypeError(f"value must be a number, got {value!r}")
+    if isinstance(value, (int, np.integer)):
+        return 0.5
+    v = float(value)
+    if not math.isfinite(v):
+        raise ValueError(f"value must be finite, got {value!r}")
+    text = repr(abs(v)).lower()
+    mant, _, exp = text.partition("e")
+    decimals = len(mant.split(".")[1]) if "." in mant else 0
+    if "." in mant and mant.split(".")[1] == "0":
+        decimals = 1 if not exp else 0
+    e = int(exp) if exp else 0
+    return 0.5 * 10.0 ** (e - decimals)
+
+
+def held_member(z_sun: int, z_ring: int, speeds=None, *, resolution=None,
+                mesh_rate: float | None = None, carrier_rate: float | None = None,
+                rel_tol: float = 1e-3) -> tuple[str | None, str]:
+    """Which member is held (its speed is zero within what is known about it).
+
+    Parameters
+    ----------
+    z_sun, z_ring : int
+        Tooth counts [-].
+    speeds : Speeds, optional
+        Nominal speeds [rad/s] (ring from Willis when the user typed sun and carrier).
+    resolution : dict, optional
+        Uncertainty of the typed sun and carrier speeds {"sun": [rad/s], "carrier": [rad/s]}
+        (:func:`typed_resolution` of what was typed, converted); the ring's uncertainty
+        follows by Willis. None: the speeds are exact (then |w| <= 1e-9 of the largest speed
+        counts as zero).
+    mesh_rate, carrier_rate : float, optional
+        Measured mesh frequency [cycles/s] and carrier revolutions per second [1/s] (from the
+        pass trains and a carrier tacho): a held ring gives mesh/carrier = Z_r, a held sun
+        Z_s, within ``rel_tol``. When given they decide, and a contradiction with the speeds
+        is reported in the reason.
+
+    Returns
+    -------
+    fixed : {"ring", "sun", None}
+    reason : str
+        How it was decided, for the summary.
+
+    Notes
+    -----
+    No speed is ever compared with an exact zero: a user types the carrier of a held-ring
+    rig as 4.06 r/min, which with sun 18.19 r/min gives a Willis ring speed of -3.4e-4 r/min,
+    far inside the +-7.9e-3 r/min the two typed values leave open.
+    """
+    from_speeds = None
+    why = ""
+    if speeds is not None:
+        zs, zr = float(z_sun), float(z_ring)
+        if resolution is None:
+            scale = max(abs(speeds.sun), abs(speeds.carrier), abs(speeds.ring), 1e-300)
+            d_ring = d_sun = 1e-9 * scale
+        else:
+            ds = float(resolution.get("sun", 0.0))
+            dc = float(resolution.get("carrier", 0.0))
+            d_ring = (1.0 + zs / zr) * dc + (zs / zr) * ds
+            d_sun = ds
+        if abs(speeds.ring) <= d_ring:
+            from_speeds = "ring"
+            why = f"ring speed {speeds.ring:.3g} rad/s is zero within +-{d_ring:.2g} rad/s"
+        elif abs(speeds.sun) <= d_sun:
+            from_speeds = "sun"
+            why = f"sun speed {speeds.sun:.3g} rad/s is zero within +-{d_sun:.2g} rad/s"
+        else:
+            why = "no member's speed is zero: a differential (both driven)"
+    if mesh_rate is not None and carrier_rate is not None and carrier_rate > 0 and mesh_rate > 0:
+        ratio = mesh_rate / carrier_rate
+        data = None
+        for name, z in (("ring", z_ring), ("sun", z_sun)):
+            if abs(ratio / z - 1.0) <= rel_tol:
+                data = name
+        dwhy = (f"measured mesh/carrier frequency ratio {ratio:.5g} "
+                + (f"= Z_{'r' if data == 'ring' else 's'}" if data else
+                   f"matches neither Z_r = {z_ring} nor Z_s = {z_sun}"))
+        if speeds is not None and data != from_speeds:
+            return data, (f"{dwhy}; the nominal speeds said "
+                          f"{from_speeds or 'a differential'} ({why}): the data decide")
+        return data, dwhy + (f"; {why}" if why else "")
+    return from_speeds, why or "no speeds: treated as a differential"
