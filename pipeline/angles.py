@@ -71,7 +71,7 @@ from .validate import as_finite_array
 
 __all__ = ["PassTrain", "Kinematics", "AngleModel", "gauge_train", "tacho_train",
            "kinematics", "fit_angle_model", "revolution_numbers", "held_member",
-           "typed_resolution"]
+           "typed_resolution", "relabel_train", "label_shift_costs"]
 
 TWO_PI = 2.0 * math.pi
 #: spline interval counts tried, in order
@@ -463,9 +463,21 @@ class _Design:
                 sigs += [f"planet {n + 1} spin term {c}{m}"
                          for m in range(1, spec.sig + 1) for c in ("cos", "sin")]
         add("sig", sigs, 5)
+        # the gauges time their passes at features that sit a (small, gauge-specific) angle
+        # off the engagement; the planet terms turn with the planet, so each gauge after the
+        # first carries that angle as a phase lag of the planet terms [mesh cycles]
+        lag_index = np.full(T, -1, dtype=np.int64)
+        lags = []
+        if sigs:
+            gauges = [q for q, tr in enumerate(self.trains) if tr.kind != "tacho"]
+            for q in gauges[1:]:
+                lag_index[q] = len(lags)
+                lags.append(f"{self.trains[q].name}: planet-term lag")
+        add("lag", lags, 5)
         pl = np.maximum(self.pl, 0)
         return {"blocks": blocks, "names": names, "priority": np.asarray(prio), "p": i,
-                "off_table": off_table, "sig_index": sig_index,
+                "off_table": off_table, "sig_index": sig_index, "lag_index": lag_index,
+                "li": lag_index[self.q],
                 "oi": np.where(self.pl >= 0, off_table[self.q, pl], -1),
                 "si": np.where((self.pl >= 0) & (self.ps != 0), sig_index[pl], -1)}
 
@@ -568,10 +580,17 @@ class _Design:
         sb = lay["blocks"]["sig"]
         hA = np.zeros(n)
         sig_cols = None
+        hA_lag = np.zeros(n)
+        lb = lay["blocks"]["lag"]
+        li = lay["li"][idx]
+        lag = np.zeros(n)
+        if lb.stop > lb.start:
+            has = li >= 0
+            lag[has] = theta[lb][li[has]]
         if sb.stop > sb.start:
             P = self.kin.planet_period
             m = np.arange(1, spec.sig + 1)
-            ph = TWO_PI * np.mod(np.outer(A, m / P), 1.0)
+            ph = TWO_PI * np.mod(np.outer(A - lag, m / P), 1.0)
             trig = np.empty((n, 2 * spec.sig))
             trig[:, 0::2], trig[:, 1::2] = np.cos(ph), np.sin(ph)
             dtrig = np.empty_like(trig)
@@ -587,6 +606,7 @@ class _Design:
                 f[ok] += ps[ok] * np.sum(gather * trig[ok], axis=1)
                 hA[ok] = ps[ok] * np.sum(gather * dtrig[ok], axis=1)
             sig_cols = (si, trig * ps[:, None])
+        hA_lag = hA.copy()
         if nominal:
             hA = np.zeros(n)
         obs_rate = rate * (1.0 + hA)
@@ -603,6 +623,9 @@ class _Design:
             k = np.flatnonzero(si >= 0)
             w = trig.shape[1]
             J[k[:, None], sb.start + si[k][:, None] + np.arange(w)[None, :]] = trig[k]
+        if lb.stop > lb.start:
+            k = np.flatnonzero((li >= 0) & (lay["si"][idx] >= 0))
+            J[k, lb.start + li[k]] = -hA_lag[k]
         return f, J, obs_rate
 
     def a_part(self, theta, lay, spec, t):
@@ -1172,7 +1195,7 @@ def _extend(fit: _Fit, spec: _Spec, d: _Design) -> np.ndarray:
                         th[ns.start + i * w_new: ns.start + i * w_new + w_old] = \
                             fit.theta[sl.start + i * w_old: sl.start + (i + 1) * w_old]
             else:
-                th[ns] = fit.theta[sl]
+                th[ns.start:ns.start + k] = fit.theta[sl.start:sl.start + k]
     sb = new["blocks"]["spline"]
     if spec.knots == fit.spec.knots:
         th[sb] = fit.theta[old["blocks"]["spline"]]
@@ -1273,3 +1296,53 @@ def held_member(z_sun: int, z_ring: int, speeds=None, *, resolution=None,
                           f"{from_speeds or 'a differential'} ({why}): the data decide")
         return data, dwhy + (f"; {why}" if why else "")
     return from_speeds, why or "no speeds: treated as a differential"
+
+
+def relabel_train(train: PassTrain, shift: int, fractions, n_planets: int) -> PassTrain:
+    """The same passes with planet 1 moved ``shift`` places along the pass order (every
+    label and position with it): the N cyclic relabellings of a symmetric layout."""
+    f = as_finite_array(fractions, "fractions", ndim=1, allow_empty=False)
+    n = int(n_planets)
+    seq = np.argsort(f, kind="stable")
+    pos = train.position + int(shift)
+    pl = seq[np.mod(pos, n)]
+    target = train.z * (np.floor_divide(pos, n) + np.sort(f)[np.mod(pos, n)])
+    return PassTrain(train.name, train.kind, train.times, train.sigma, target.astype(float),
+                     pl.astype(int), pos.astype(int), train.sigma_given, train.z, train.order)
+
+
+def label_shift_costs(reference, train: PassTrain, fractions, kin: Kinematics,
+                      n_planets: int) -> np.ndarray:
+    """Misfit of each cyclic relabelling of ``train`` against ``reference`` trains whose
+    labels are taken as they are.
+
+    A planet's own shaft hole offset moves its passes on every gauge alike (the planet terms
+    of the model are shared by the gauges), so when the planets' offsets differ, only the
+    relabelling that names the same physical planet alike on both gauges fits. Each shift is
+    fitted with a fixed small model (cubic spline, first ripple harmonic of every shaft that
+    turns, first planet term) and scored by its weighted chi-square.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        chi-square per pass-order shift 0..N-1 [-] (inf where the fit failed).
+    """
+    refs = [r for r in reference if len(r) >= 2]
+    n = int(n_planets)
+    out = np.full(n, np.inf)
+    if not refs or len(train) < 2 or not kin.planet_period:
+        return out
+    for s in range(n):
+        trs = refs + [relabel_train(train, s, fractions, n)]
+        d = _Design(trs, kin, n)
+        span = d.t_hi - d.t_lo
+        mean_rate = (d.y.max() - d.y.min()) / span if span > 0 else 0.0
+        harm = {r: (1 if mean_rate * span / P >= 1.0 else 0) for r, P in kin.periods.items()}
+        harm["planet"] = 0
+        spec = _Spec(knots=1, harm=harm, mod={r: False for r in kin.periods}, sig=1)
+        base = _solve(d, _Spec(knots=1, harm={r: 0 for r in kin.periods},
+                               mod={r: False for r in kin.periods}), None, np.ones(len(trs)))
+        fit = _solve(d, spec, _extend(base, spec, d), np.ones(len(trs)))
+        if np.isfinite(fit.chi2):
+            out[s] = fit.chi2
+    return out

@@ -994,6 +994,13 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
                          order=pass_order(gearset.direction, p.gear))
         trains.append(tr)
         train_of[name] = tr
+    # the planet terms are shared by every gauge, so every gauge must name the same physical
+    # planet alike: align the relatively labelled gauges to the absolute ones (or to the
+    # largest), by the planets' own offsets where they differ enough to tell
+    symmetric = bool(np.allclose(np.diff(np.sort(planet_fractions(psi, 1))), 1.0 / n, atol=1e-9))
+    if symmetric and n > 1 and kin.planet_period and len(train_of) > 1:
+        trains, train_of = _align_labels(trains, train_of, all_labels, labels, kin, n, notes)
+        relative = [gear for gear, lab in labels.items() if lab.decided_by == "first pulse"]
     if fixed is not None and tach is not None and tach.size >= 2 and kin.tacho_cycles:
         trains.append(tacho_train(tach, kin.tacho_cycles))
     elif tach is not None and tach.size >= 2 and fixed is None:
@@ -1016,6 +1023,52 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
             tables[gear] = tab
             reliability[gear] = _reliability(model, tr, tab)
     return PhasingResult(tables, labels, model, fixed, fixed_reason, reliability, relative, notes)
+
+
+def _align_labels(trains, train_of, all_labels, labels, kin, n, notes):
+    """Relabel relatively labelled gauge trains cyclically so that their planet numbers name
+    the same planets as the reference trains' (see :func:`pipeline.angles.label_shift_costs`).
+    A shift is taken only when its misfit stands clearly apart (the next best is worse by more
+    than 25 times the fit's variance per observation); otherwise the planets' offsets look
+    alike, nothing is changed and a note says so."""
+    from .angles import label_shift_costs, relabel_train
+
+    absolute = [nm for nm in train_of if all_labels[nm][0].decided_by in ("tacho", "pattern")]
+    rel = [nm for nm in train_of if nm not in absolute]
+    if not rel:
+        return trains, train_of
+    refs = absolute or [max(rel, key=lambda nm: len(train_of[nm]))]
+    ref_kind = "absolute" if absolute else "relative"
+    todo = [nm for nm in rel if nm not in refs]
+    for nm in sorted(todo, key=lambda nm: -len(train_of[nm])):
+        lab, frac, p = all_labels[nm]
+        tr = train_of[nm]
+        costs = label_shift_costs([train_of[r] for r in refs], tr, frac, kin, n)
+        if not np.all(np.isfinite(costs)):
+            continue
+        order = np.argsort(costs)
+        best, second = float(costs[order[0]]), float(costs[order[1]])
+        n_obs = sum(len(train_of[r]) for r in refs) + len(tr)
+        var = max(best / max(n_obs, 1), 1e-300)
+        if second - best <= 25.0 * var:
+            notes.append(f"{nm}: the planets' own offsets look too alike to tell which of its "
+                         f"pulses is which planet from the {', '.join(refs)} gauge(s)")
+            refs.append(nm)
+            continue
+        shift = int(order[0])
+        if shift:
+            new = relabel_train(tr, shift, frac, n)
+            train_of[nm] = new
+            trains = [new if t.name == nm else t for t in trains]
+            seq = np.argsort(frac, kind="stable")
+            pl, pos = _shift_labels(lab.planet, lab.position, seq, shift)
+            lab.planet, lab.position = pl, pos
+        if ref_kind == "absolute":
+            lab.decided_by = f"planet offsets (as {', '.join(refs)})"
+        notes.append(f"{nm}: planet labels aligned with the {', '.join(refs)} gauge(s) by the "
+                     f"planets' own offsets (shift {shift}, misfit {best:.3g} vs {second:.3g} next)")
+        refs.append(nm)
+    return trains, train_of
 
 
 #: the "not reliable" rule: the per-pass error the model's own diagnostics predict, against

@@ -213,11 +213,36 @@ def _main_gauge(rec: Recording, gear: str) -> str | None:
     return c[0] if c else None
 
 
-def _peak_times(on) -> np.ndarray:
-    """Onset times moved to their template's tensile peak [s] (per onset's template)."""
+def _lobe_middle(tp) -> float:
+    """Position of the middle of a template's tensile lobe, halfway between its half-maximum
+    crossings [template samples] (linear interpolation between samples)."""
+    h = np.asarray(tp.samples, dtype=float)
+    i = int(np.clip(round(tp.peak), 0, h.size - 1))
+    top = h[i]
+    if not (top > 0):
+        return float(tp.peak)
+    half = 0.5 * top
+    left = i
+    while left > 0 and h[left - 1] > half:
+        left -= 1
+    right = i
+    while right < h.size - 1 and h[right + 1] > half:
+        right += 1
+    xl = float(left) if left == 0 else (left - 1) + (half - h[left - 1]) / (h[left] - h[left - 1])
+    xr = float(right) if right == h.size - 1 else right + (h[right] - half) / (h[right] - h[right + 1])
+    return 0.5 * (xl + xr)
+
+
+def _pass_times(on) -> np.ndarray:
+    """Onset times moved to the middle of their template's tensile lobe [s].
+
+    The engagement instant is the middle of the tooth's contact, and the tensile lobe spans
+    the contact; timing every gauge at the same physical instant matters because a planet's
+    own offset turns while the lobe passes (the model of the angle shares the planets' terms
+    between gauges, and the error models are evaluated at the pass instants)."""
     if not len(on) or not on.templates:
         return on.times
-    shift = np.array([tp.ref_after_peak for tp in on.templates], dtype=float)
+    shift = np.array([(tp.ref - _lobe_middle(tp)) / tp.rate for tp in on.templates], dtype=float)
     tid = np.clip(on.template_id, 0, shift.size - 1)
     out = on.times - np.where(on.template_id >= 0, shift[tid], 0.0)
     # keep the order strictly increasing (templates may differ between blocks)
@@ -340,10 +365,9 @@ def stage_phasing(ctx: RunContext) -> None:
         gear = c.gear if c.gear in ("sun", "ring") else (c.kind if c.kind in ("sun", "ring") else "sun")
         on = ons[c.name]
         ok = _usable(on, rec.channel(c.name), rec.fs, rec.t0)
-        # pass times at the tensile peak of each pulse (the middle of the tooth's contact):
-        # a fixed angle of the gauged gear after the engagement, which the gauge's constant
-        # in the angle model absorbs
-        times, amp = _peak_times(on)[ok], on.amplitude[ok]
+        # pass times at the middle of each pulse's tensile lobe: the middle of the tooth's
+        # contact, i.e. the engagement instant, on every gauge alike
+        times, amp = _pass_times(on)[ok], on.amplitude[ok]
         sig = _onset_sigma(on, getattr(quality.get(c.name), "noise_rms", float("nan")))[ok]
         main = c.kind in ("sun", "ring") and gear not in mains
         if main:
