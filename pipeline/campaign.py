@@ -618,8 +618,8 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
         Arguments of the wrong type.
     """
     t_all = time.perf_counter()
+    from .exits import OutputDir
     from .scene import load_scene, plan
-    from .stages import new_output_dir, run_scene, summary_dict, write_outputs
 
     if scheduler is not None and not isinstance(scheduler, str):
         raise TypeError(f"scheduler must be an address string like 'tcp://host:8786', got "
@@ -650,7 +650,20 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
     plan(_worker_scene(scene, files[0], mc_on_client))  # the worker scene validates here, once
     names = recording_names(files)
     base = Path(out_dir) if out_dir is not None else scene_path.with_name(scene_path.stem + "-campaign")
-    out = new_output_dir(base, overwrite=overwrite).resolve()
+    # the folder is reserved now and removed again if the campaign raises or is interrupted
+    # (Ctrl-C): no half campaign left behind (pipeline.exits.OutputDir)
+    with OutputDir(base, overwrite=overwrite) as guard:
+        return _campaign_body(scene, scene_path, inputs, files, skipped, names, guard.path.resolve(),
+                              client_results, worker_results, mc_on_client, scheduler, workers,
+                              progress, recording_reports, task, t_all)
+
+
+def _campaign_body(scene, scene_path, inputs, files, skipped, names, out, client_results,
+                   worker_results, mc_on_client, scheduler, workers, progress, recording_reports,
+                   task, t_all) -> dict:
+    """The campaign after its output folder is reserved (see :func:`run_campaign`)."""
+    from .stages import run_scene, summary_dict, write_outputs
+
     timing: dict[str, float] = {}
 
     # --- scene-level results, once, on the client

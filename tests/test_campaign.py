@@ -256,6 +256,22 @@ def test_run_recording_unreliable_phasing_is_not_ok(data, tmp_path, monkeypatch)
     assert cp.campaign_rows([r])[0]["status"] == "unreliable"
 
 
+def test_campaign_interrupted_exits_130_and_leaves_no_folder(data, tmp_path, monkeypatch, capsys):
+    """Ctrl-C during a campaign: exit 130, the campaign folder it had reserved is removed."""
+    from pipeline.cli import main
+
+    def ctrl_c(scene, scene_path, inputs, files, skipped, names, out, *rest):
+        (out / "campaign.csv").write_text("half written")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cp, "_campaign_body", ctrl_c)
+    out = tmp_path / "camp"
+    assert main(["-q", "campaign", str(data["scene"]), str(data["recordings"] / "rig_a.h5"),
+                 "--out", str(out)]) == 130
+    assert capsys.readouterr().err.strip() == "meshphase campaign: interrupted"
+    assert not out.exists()
+
+
 def test_campaign_exit_code_table_empty_and_bad():
     assert cp.campaign_exit_code({"recordings": []}) == 0
     assert cp.campaign_exit_code({"recordings": [{"status": "ok"}, {"status": "ok"}]}) == 0
