@@ -490,6 +490,10 @@ def main(argv=None) -> int:
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     logger.setLevel(level)
     logging.captureWarnings(False)
+    # warnings on one line each ("meshphase info: FormatWarning: ..."), not file:line + source
+    old_format = warnings.formatwarning
+    warnings.formatwarning = lambda message, category, *_a, **_k: (
+        f"meshphase {args.command}: {category.__name__}: {_one_line(message)}\n")
     try:
         rc = int(args.func(args) or 0)
         sys.stdout.flush()                 # a closed pipe shows here, not at interpreter exit
@@ -509,6 +513,8 @@ def main(argv=None) -> int:
         except OSError:
             pass
         return EXIT_ERROR
+    finally:
+        warnings.formatwarning = old_format
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -191,7 +191,7 @@ def test_output_folder_under_a_regular_file_exits_1(rig, tmp_path, capsys):
 
 
 @pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() == 0,
-                    reason="root ignores permission bits (covered by the ENOTDIR test above)")
+                    reason="root ignores permission bits (covered by the ENOTDIR and injected EACCES tests)")
 def test_permission_denied_output_folder_exits_1(rig, tmp_path, capsys):
     locked = tmp_path / "locked"
     locked.mkdir()
@@ -203,6 +203,20 @@ def test_permission_denied_output_folder_exits_1(rig, tmp_path, capsys):
         locked.chmod(0o700)
     err = capsys.readouterr().err
     assert "Permission denied" in err and "check the permissions" in err
+
+
+def test_permission_denied_output_folder_injected_exits_1(rig, tmp_path, monkeypatch, capsys):
+    """The EACCES path as root too: the folder cannot be created (as mkdir raises it)."""
+    def denied(base, *, overwrite=False):
+        raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(base))
+
+    monkeypatch.setattr(pipeline.stages, "new_output_dir", denied)
+    out = tmp_path / "locked" / "out"
+    assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
+                 "--out", str(out)]) == EXIT_ERROR
+    err = _err_lines(capsys)
+    assert err == [f"meshphase process: error: {out}: Permission denied (check the permissions of "
+                   "the file or folder)"]
 
 
 def test_output_name_too_long_exits_1(rig, tmp_path, capsys):
