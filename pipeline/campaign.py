@@ -33,6 +33,7 @@ import json
 import logging
 import math
 import os
+import re
 import socket
 import sys
 import tempfile
@@ -44,15 +45,70 @@ from pathlib import Path
 from typing import Any, Callable, Iterable
 
 from .log import logger
-from .validate import as_positive, as_positive_int
+from .validate import as_positive, as_positive_int, as_regular_file
 
 __all__ = ["run_recording", "run_campaign", "cli_campaign", "collect_recordings",
            "recording_names", "split_results", "campaign_rows", "measure_speedup",
-           "SCENE_DIR_NAME"]
+           "phasing_reliability", "campaign_exit_code", "SCENE_DIR_NAME", "STATUSES"]
 
 #: sub-folder of the campaign output that holds the scene-level results
 SCENE_DIR_NAME = "scene"
 _SKIP_SUFFIXES = (".truth.json", ".tdms_index")
+#: a recording's status in a campaign, best first (pipeline.exits.run_status)
+STATUSES = ("ok", "unreliable", "partial", "failed")
+
+
+# ---------------------------------------------------------------------------- reliability
+_NOT_RELIABLE = re.compile(r"ProcessingWarning: (?:(?P<gauge>[A-Za-z0-9_]+) gauge\b)?.*not reliable")
+
+
+def phasing_reliability(ctx) -> dict:
+    """Whether each gauge's measured phasing is reliable, and why not.
+
+    The one place that decides it (campaign status, ``process`` / ``run`` status line,
+    summary.json): ``ctx.results["phasing"]["reliability"]`` when the phasing stage provides
+    it (``{gauge: {"reliable": bool, "reasons": [str, ...]}}``); otherwise the
+    ProcessingWarning messages of the run (``ctx.messages``) that say "not reliable",
+    attributed to the gauge they name ("sun gauge: ...") or, when they name none, to every
+    gauge with a phasing table (to ``"phasing"`` if there is none).
+
+    Parameters
+    ----------
+    ctx : pipeline.stages.RunContext
+
+    Returns
+    -------
+    dict
+        gauge -> ``{"reliable": bool, "reasons": list of str}``; empty when no phasing ran
+        and nothing was flagged.
+
+    Raises
+    ------
+    TypeError
+        ``ctx`` has no ``results`` dict or ``messages`` list (not a run context).
+    """
+    results, messages = getattr(ctx, "results", None), getattr(ctx, "messages", None)
+    if not isinstance(results, dict) or not isinstance(messages, (list, tuple)):
+        raise TypeError(f"ctx must be a RunContext (pipeline.stages.run_scene), got {type(ctx).__name__}")
+    phasing = results.get("phasing") if isinstance(results.get("phasing"), dict) else {}
+    given = phasing.get("reliability")
+    if isinstance(given, dict):
+        return {str(g): {"reliable": bool(v.get("reliable", True)),
+                         "reasons": [str(r) for r in v.get("reasons") or []]}
+                for g, v in given.items()}
+    out = {str(g): {"reliable": True, "reasons": []} for g in phasing.get("tables") or {}}
+    for m in messages:
+        hit = _NOT_RELIABLE.search(str(m))
+        if hit is None:
+            continue
+        reason = str(m).split("ProcessingWarning: ", 1)[1]
+        gauges = [hit.group("gauge")] if hit.group("gauge") else (list(out) or ["phasing"])
+        for g in gauges:
+            entry = out.setdefault(g, {"reliable": True, "reasons": []})
+            entry["reliable"] = False
+            if reason not in entry["reasons"]:
+                entry["reasons"].append(reason)
+    return out
 
 
 # ---------------------------------------------------------------------------- inputs
@@ -88,6 +144,8 @@ def collect_recordings(inputs: Iterable) -> tuple[list[Path], list[dict]]:
         ``inputs`` is a string (one path: wrap it in a list) or holds a non-path.
     FileNotFoundError
         A named file or folder does not exist.
+    ValueError
+        A named input is a FIFO, a device or a socket (not a regular file, not a folder).
     """
     from .io import detect_format
 
@@ -102,8 +160,9 @@ def collect_recordings(inputs: Iterable) -> tuple[list[Path], list[dict]]:
         p = Path(item)
         if not p.exists():
             raise FileNotFoundError(f"{p}: no such recording file or folder")
-        if p.is_file():
-            files.append(p.resolve())
+        if not p.is_dir():
+            # a named FIFO or device is refused here, before a worker could block on it
+            files.append(as_regular_file(p, "a campaign input").resolve())
             continue
         for q in sorted(p.iterdir()):
             name = q.name.lower()
@@ -320,8 +379,10 @@ def run_recording(scene_path: str, recording_path: str, out_dir: str, *, bands: 
     Returns
     -------
     dict
-        ``recording``, ``name``, ``out_dir``, ``status`` ("ok", "partial": some stage failed,
-        "failed": nothing usable), ``error`` (None or the message), ``format``,
+        ``recording``, ``name``, ``out_dir``, ``status`` ("ok"; "unreliable": all computed,
+        phasing flagged unreliable; "partial": a result not computed; "failed": nothing
+        usable; :func:`pipeline.exits.run_status`), ``error`` (None or the cause(s)),
+        ``missing_results`` and ``unreliable`` (as run_status gives them), ``format``,
         ``wall_time_s`` and ``cpu_time_s`` (this process's CPU time) [s], ``worker``,
         ``timings_s``, ``stages_ran``, ``stages_failed``,
         ``messages``, ``files`` and the compact results (``phasing``, ``load_sharing``,
@@ -334,6 +395,7 @@ def run_recording(scene_path: str, recording_path: str, out_dir: str, *, bands: 
                  "worker": f"{socket.gethostname()}:{os.getpid()}", "timings_s": {},
                  "stages_ran": [], "stages_failed": {}, "messages": [], "files": {}}
     try:
+        from .exits import run_status
         from .io import detect_format
         from .scene import load_scene
         from .stages import run_scene, summary_dict, write_outputs
@@ -365,16 +427,20 @@ def run_recording(scene_path: str, recording_path: str, out_dir: str, *, bands: 
             if not any(m in x for x in msgs):
                 msgs.append(m)
         out["messages"] = msgs
-        # "skipped: ..." entries follow from another stage's error (or are benign, e.g. no
-        # face-width gauges); the errors themselves decide the status
-        errors = {k: v for k, v in ctx.failed.items() if not str(v).startswith("skipped:")}
-        if "load" in ctx.failed:
-            out["status"], out["error"] = "failed", f"load: {ctx.failed['load']}"
-        elif errors:
-            out["status"] = "partial"
-            out["error"] = "; ".join(f"{k}: {v}" for k, v in errors.items())
+        # the same status as `meshphase process` / `run` (summary.json "status")
+        st = run_status(ctx)
+        out["status"] = st["status"]
+        out["missing_results"] = st["missing_results"]
+        out["unreliable"] = st["unreliable"]
+        if st["status"] == "failed":
+            out["error"] = st["error"]
+        elif st["status"] == "partial":
+            out["error"] = "; ".join(f"{m['result']}: {m['cause']}" for m in st["missing_results"])
+        elif st["status"] == "unreliable":
+            out["error"] = "; ".join(f"{g} gauge phasing: {'; '.join(r)}"
+                                     for g, r in st["unreliable"].items())
         else:
-            out["status"], out["error"] = "ok", None
+            out["error"] = None
     except Exception as exc:  # noqa: BLE001 - the task must report, never kill the campaign
         out["status"] = "failed"
         out["error"] = f"{type(exc).__name__}: {exc}"
@@ -464,6 +530,35 @@ def _jsonable(v: Any) -> Any:
     return v
 
 
+def campaign_exit_code(campaign: dict) -> int:
+    """The exit code of ``meshphase campaign`` (table in :mod:`pipeline.exits`).
+
+    0 when every recording is "ok" (and the scene-level results, if any, too); 1 when every
+    recording failed (nothing usable); 3 otherwise: any recording failed, partial or
+    unreliable, or a scene-level result (Monte Carlo, tilt, ...) missing.
+
+    Parameters
+    ----------
+    campaign : dict
+        :func:`run_campaign`'s result (``recordings``, optionally ``scene_status``).
+
+    Returns
+    -------
+    int
+    """
+    from .exits import EXIT_ERROR, EXIT_OK, EXIT_PARTIAL
+
+    if not isinstance(campaign, dict) or not isinstance(campaign.get("recordings"), list):
+        raise TypeError(f"campaign must be run_campaign's dict with a 'recordings' list, got "
+                        f"{type(campaign).__name__}")
+    statuses = [r.get("status", "failed") if isinstance(r, dict) else "failed"
+                for r in campaign["recordings"]]
+    if statuses and all(s == "failed" for s in statuses):
+        return EXIT_ERROR
+    scene_ok = (campaign.get("scene_status") or {}).get("status", "ok") == "ok"
+    return EXIT_OK if scene_ok and all(s == "ok" for s in statuses) else EXIT_PARTIAL
+
+
 # ---------------------------------------------------------------------------- the campaign
 def _cores() -> int:
     try:
@@ -507,10 +602,11 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
     dict
         ``scene``, ``scene_path``, ``out_dir``, ``cluster`` (``scheduler``, ``n_workers``,
         ``local``), ``timing_s`` (``total``, ``scene_level``, ``cluster_start``,
-        ``processing``, ``report``), ``counts`` (ok / partial / failed), ``skipped_inputs``,
-        ``scene_level`` (summary of the client-side results or None), ``recordings`` (one
-        dict per recording, in input order) and ``files`` (campaign.json, campaign.csv,
-        campaign_report.html).
+        ``processing``, ``report``), ``counts`` (ok / unreliable / partial / failed),
+        ``skipped_inputs``, ``scene_level`` (summary of the client-side results or None),
+        ``scene_status`` (their :func:`pipeline.exits.run_status`, or None), ``recordings``
+        (one dict per recording, in input order), ``exit_code`` (:func:`campaign_exit_code`)
+        and ``files`` (campaign.json, campaign.csv, campaign_report.html).
 
     Raises
     ------
@@ -522,8 +618,8 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
         Arguments of the wrong type.
     """
     t_all = time.perf_counter()
+    from .exits import OutputDir
     from .scene import load_scene, plan
-    from .stages import new_output_dir, run_scene, summary_dict, write_outputs
 
     if scheduler is not None and not isinstance(scheduler, str):
         raise TypeError(f"scheduler must be an address string like 'tcp://host:8786', got "
@@ -554,15 +650,32 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
     plan(_worker_scene(scene, files[0], mc_on_client))  # the worker scene validates here, once
     names = recording_names(files)
     base = Path(out_dir) if out_dir is not None else scene_path.with_name(scene_path.stem + "-campaign")
-    out = new_output_dir(base, overwrite=overwrite).resolve()
+    # the folder is reserved now and removed again if the campaign raises or is interrupted
+    # (Ctrl-C): no half campaign left behind (pipeline.exits.OutputDir)
+    with OutputDir(base, overwrite=overwrite) as guard:
+        return _campaign_body(scene, scene_path, inputs, files, skipped, names, guard.path.resolve(),
+                              client_results, worker_results, mc_on_client, scheduler, workers,
+                              progress, recording_reports, task, t_all)
+
+
+def _campaign_body(scene, scene_path, inputs, files, skipped, names, out, client_results,
+                   worker_results, mc_on_client, scheduler, workers, progress, recording_reports,
+                   task, t_all) -> dict:
+    """The campaign after its output folder is reserved (see :func:`run_campaign`)."""
+    from .stages import run_scene, summary_dict, write_outputs
+
     timing: dict[str, float] = {}
 
     # --- scene-level results, once, on the client
     t = time.perf_counter()
     scene_level = None
+    scene_status = None
     bands = None
     if client_results:
+        from .exits import run_status
+
         sctx = run_scene(_client_scene(scene))
+        scene_status = {k: v for k, v in run_status(sctx).items() if k != "exit_code"}
         sdir = out / SCENE_DIR_NAME
         sdir.mkdir(exist_ok=True)
         write_outputs(sctx, sdir, report=False)
@@ -658,12 +771,14 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
 
     # --- combined outputs
     t = time.perf_counter()
-    counts = {s: sum(r.get("status") == s for r in recs) for s in ("ok", "partial", "failed")}
+    counts = {s: sum(r.get("status") == s for r in recs) for s in STATUSES}
     result = {"scene": scene.name, "scene_path": str(scene_path), "out_dir": str(out),
               "inputs": [str(i) for i in inputs], "skipped_inputs": skipped,
               "cluster": {"scheduler": address, "n_workers": n_workers, "local": scheduler is None},
               "results_client": client_results, "results_per_recording": worker_results,
-              "counts": counts, "timing_s": timing, "scene_level": scene_level, "recordings": recs}
+              "counts": counts, "timing_s": timing, "scene_level": scene_level,
+              "scene_status": scene_status, "recordings": recs}
+    result["exit_code"] = campaign_exit_code(result)
     import pandas as pd
 
     csv_path = out / "campaign.csv"
@@ -677,8 +792,9 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
     result["files"] = {"campaign.json": str(json_path), "campaign.csv": str(csv_path),
                        "campaign_report.html": str(report_path)}
     json_path.write_text(json.dumps(_jsonable(result), indent=2))
-    logger.info("campaign %s: %d ok, %d partial, %d failed in %.1f s -> %s", scene.name,
-                counts["ok"], counts["partial"], counts["failed"], timing["total"], out)
+    logger.info("campaign %s: %d ok, %d unreliable, %d partial, %d failed in %.1f s -> %s",
+                scene.name, counts["ok"], counts["unreliable"], counts["partial"], counts["failed"],
+                timing["total"], out)
     return result
 
 

@@ -1,23 +1,46 @@
 """The ``meshphase`` command.
 
 Subcommands import what they need lazily, so ``meshphase info`` never pays for Dask or
-matplotlib. Every subcommand returns an exit code: 0 success, 1 a processing failure, 2 bad
-input (the error message names the file / parameter).
+matplotlib.
+
+Exit status (every subcommand; README.md "Exit status"; constants in :mod:`pipeline.exits`):
+
+====  ==========================================================================================
+0     ok: every requested result computed
+1     input or scene error, nothing usable: unreadable / corrupt file, a channel the scene
+      names that the file lacks, no gauge channel, a bad scene, a FIFO / device / folder
+      where a file is expected, an OS error (permission, no space left, name too long, ...),
+      out of memory; a campaign in which every recording failed
+2     usage error (argparse)
+3     partial result: outputs written, but a requested result could not be computed (its
+      stage failed or was skipped for a failed stage it needs; summary.json ``"status":
+      "partial"`` and ``missing_results`` with each cause), or phasing flagged unreliable
+      (``"status": "unreliable"``); a campaign with any recording failed, partial or unreliable
+130   interrupted (Ctrl-C); the interrupted run's output folder is removed
+141   standard output closed by the reader (``| head``): no message
+====  ==========================================================================================
+
+Errors are one line per cause on stderr, ``meshphase COMMAND: error: ...``, never a
+traceback; ``--debug`` (or ``MESHPHASE_DEBUG=1``) re-raises them with the traceback and logs
+the traceback of each failed stage.
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import logging
+import os
 import sys
 import warnings
 from pathlib import Path
 
 from . import __version__
+from .exits import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_PIPE
 from .log import logger
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "describe_error"]
 
 
 def _progress(total: int | None, desc: str, enabled: bool):
@@ -37,12 +60,15 @@ def _fmt_seconds(s: float) -> str:
 
 
 def cmd_info(args) -> int:
+    from .exits import recording_read_errors
     from .io import read_info, iter_blocks, detect_format
     from .quality import channel_quality
+    from .validate import as_regular_file
 
-    path = Path(args.file)
-    fmt = detect_format(path)
-    info = read_info(path, format=fmt)
+    path = as_regular_file(args.file, "the recording")  # a FIFO would block detect_format
+    with recording_read_errors(path):
+        fmt = detect_format(path)
+        info = read_info(path, format=fmt)
     out = {
         "file": str(path), "format": fmt, "fs_hz": info.fs, "n_samples": info.n_samples,
         "duration_s": info.duration, "t0_s": info.t0, "start_datetime": info.start_datetime,
@@ -57,7 +83,8 @@ def cmd_info(args) -> int:
         with warnings.catch_warnings():
             from .errors import DataQualityWarning
             warnings.simplefilter("ignore", DataQualityWarning)  # counted below instead
-            with _progress(info.n_samples, "quality", not args.quiet) as bar:
+            with _progress(info.n_samples, "quality", not args.quiet) as bar, \
+                    recording_read_errors(path):
                 for block in iter_blocks(path, block_s, format=fmt):
                     for i, c in enumerate(block.channels):
                         q = channel_quality(block.data[:, i])
@@ -99,16 +126,19 @@ def cmd_info(args) -> int:
 
 # ---------------------------------------------------------------------------- convert
 def cmd_convert(args) -> int:
-    from .io import detect_format, get_format, iter_blocks, read_info, write
+    from .exits import recording_read_errors
+    from .io import detect_format, iter_blocks, read_info, write
     from .recording import Recording
+    from .validate import as_regular_file
     import numpy as np
 
-    src, dst = Path(args.input), Path(args.output)
-    fmt = detect_format(src)
-    info = read_info(src, format=fmt)
+    src, dst = as_regular_file(args.input, "the input recording"), Path(args.output)
+    with recording_read_errors(src):
+        fmt = detect_format(src)
+        info = read_info(src, format=fmt)
     # read in blocks with a progress bar into one preallocated buffer, then write atomically
     data = None
-    with _progress(info.n_samples, f"read {fmt}", not args.quiet) as bar:
+    with _progress(info.n_samples, f"read {fmt}", not args.quiet) as bar, recording_read_errors(src):
         i = 0
         for block in iter_blocks(src, max(1.0, 2**22 / info.fs), format=fmt):
             if data is None:
@@ -186,6 +216,10 @@ def _print_run(ctx, files) -> None:
     s = summary_dict(ctx)
     print(f"scene     {ctx.scene.name}")
     print(f"stages    {', '.join(ctx.ran)}" + (f"  (failed: {', '.join(ctx.failed)})" if ctx.failed else ""))
+    if ctx.channels_unused:
+        kinds = {c["name"]: c["kind"] for c in (s.get("recording") or {}).get("channels", [])}
+        print("unused    " + ", ".join(f"{n} ({kinds.get(n, '?')})" for n in ctx.channels_unused)
+              + ": channel(s) read but used by no stage")
     for gear, t in s.get("phasing", {}).items():
         print(f"{gear} phasing ({t['n_passes']} passes)   planet  mean gamma   std      range")
         for n, v in t["per_planet"].items():
@@ -209,62 +243,108 @@ def _print_run(ctx, files) -> None:
         print(f"{name:<18} {p}")
 
 
+def _finish_run(args, ctx, files) -> int:
+    """Print a run, its status line, one stderr line per cause; return the exit code."""
+    from .exits import run_status, status_line
+
+    st = run_status(ctx)
+    if st["status"] == "failed":
+        # nothing usable and nothing written: the cause is the whole story
+        print(f"meshphase {args.command}: error: {_one_line(st['error'])}", file=sys.stderr)
+        return st["exit_code"]
+    _print_run(ctx, files)
+    print(f"status    {status_line(st)}")
+    for m in st["missing_results"]:
+        print(f"meshphase {args.command}: partial: {m['result']} not computed: "
+              f"{_one_line(m['cause'])}", file=sys.stderr)
+    for gauge, reasons in st["unreliable"].items():
+        print(f"meshphase {args.command}: unreliable: {gauge} gauge phasing: "
+              f"{_one_line('; '.join(reasons) or 'flagged unreliable')}", file=sys.stderr)
+    return st["exit_code"]
+
+
+def _run_and_write(args, scene, base, *, report: bool = True):
+    """Reserve the output folder, run the scene, write the outputs unless nothing is usable.
+
+    ``scene`` is a Scene or a function of the reserved folder returning one (the demo writes
+    its scene file there first). The folder is removed again when the run fails or is
+    interrupted (:class:`pipeline.exits.OutputDir`)."""
+    from .exits import OutputDir, run_status
+    from .stages import run_scene, write_outputs
+
+    with OutputDir(base, overwrite=args.overwrite) as out:
+        if callable(scene):
+            scene = scene(out.path)
+        ctx = run_scene(scene, progress=_stage_progress(not args.quiet))
+        if run_status(ctx)["status"] == "failed":
+            out.discard()
+            return ctx, {}
+        return ctx, write_outputs(ctx, out.path, report=report)
+
+
 def cmd_run(args) -> int:
     from .scene import load_scene
-    from .stages import new_output_dir, run_scene, write_outputs
+    from .validate import as_regular_file
 
-    scene = load_scene(args.scene)
+    scene = load_scene(as_regular_file(args.scene, "the scene"))
     base = Path(args.out) if args.out else (scene.output or Path(args.scene).with_suffix("").with_name(
         Path(args.scene).stem + "-out"))
-    out = new_output_dir(base, overwrite=args.overwrite)
-    ctx = run_scene(scene, progress=_stage_progress(not args.quiet))
-    files = write_outputs(ctx, out, report=not args.no_report)
-    _print_run(ctx, files)
-    return 1 if ctx.failed and not ctx.ran else 0
+    ctx, files = _run_and_write(args, scene, base, report=not args.no_report)
+    return _finish_run(args, ctx, files)
 
 
 def cmd_process(args) -> int:
     from .stages import process_recording
+    from .validate import as_regular_file
 
-    ctx, files = process_recording(args.file, args.gearset, out_dir=args.out, overwrite=args.overwrite)
-    _print_run(ctx, files)
-    return 1 if ctx.failed and not ctx.ran else 0
+    as_regular_file(args.gearset, "the gearset scene (--gearset)")
+    ctx, files = process_recording(args.file, args.gearset, out_dir=args.out, overwrite=args.overwrite,
+                                   progress=_stage_progress(not args.quiet))
+    return _finish_run(args, ctx, files)
 
 
 def cmd_demo(args) -> int:
     import time
 
+    from .demo import demo_scene_path
     from .scene import load_scene
-    from .stages import new_output_dir, run_scene, write_outputs
-    from .demo import DEMO_SCENE, demo_scene_path
 
     t = time.perf_counter()
-    out = new_output_dir(Path(args.out), overwrite=args.overwrite)
-    scene_path = demo_scene_path(out)
-    scene = load_scene(scene_path)
-    ctx = run_scene(scene, progress=_stage_progress(not args.quiet))
-    files = write_outputs(ctx, out)
-    _print_run(ctx, files)
-    print(f"demo finished in {time.perf_counter() - t:.1f} s; open {files['report']}")
-    return 0
+    # the scene file goes into the output folder first: `meshphase run` on it reproduces the run
+    ctx, files = _run_and_write(args, lambda out: load_scene(demo_scene_path(out)), Path(args.out))
+    rc = _finish_run(args, ctx, files)
+    if files:
+        print(f"demo finished in {time.perf_counter() - t:.1f} s; open {files['report']}")
+    return rc
 
 
 def cmd_campaign(args) -> int:
     from .campaign import cli_campaign
+    from .exits import status_line
+    from .validate import as_regular_file
 
+    as_regular_file(args.scene, "the scene")
     res = cli_campaign(args.scene, args.inputs, scheduler=args.scheduler, workers=args.workers,
                        out=args.out, overwrite=args.overwrite, progress=not args.quiet,
                        recording_reports=args.recording_reports)
     c = res["counts"]
-    print(f"campaign  {res['scene']}: {c['ok']} ok, {c['partial']} partial, {c['failed']} failed "
-          f"in {res['timing_s'].get('total', float('nan')):.1f} s "
+    print(f"campaign  {res['scene']}: {c['ok']} ok, {c['unreliable']} unreliable, {c['partial']} partial, "
+          f"{c['failed']} failed in {res['timing_s'].get('total', float('nan')):.1f} s "
           f"({res['cluster']['n_workers']} worker(s), scheduler {res['cluster']['scheduler']})")
     for r in res["recordings"]:
-        if r.get("status") == "failed":
-            print(f"failed    {r['recording']}: {r.get('error', '')}")
+        if r.get("status") != "ok":
+            line = status_line({"status": r.get("status"), "error": r.get("error"),
+                                "missing_results": r.get("missing_results") or [],
+                                "unreliable": r.get("unreliable") or {}})
+            print(f"{r.get('status', 'failed'):<11}{r.get('name')}")
+            print(f"meshphase campaign: {r.get('recording')}: {_one_line(line)}", file=sys.stderr)
+    scene_status = res.get("scene_status") or {}
+    if scene_status.get("status", "ok") != "ok":
+        print(f"scene     {status_line(scene_status)}")
+        print(f"meshphase campaign: scene-level results {status_line(scene_status)}", file=sys.stderr)
     for name, p in res["files"].items():
         print(f"{name:<22} {p}")
-    return 0 if c["ok"] + c["partial"] > 0 or not res["recordings"] else 1
+    return res["exit_code"]
 
 
 # ---------------------------------------------------------------------------- parser
@@ -275,6 +355,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"meshphase {__version__}")
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv debug)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--debug", action="store_true",
+                   help="developers: re-raise errors with their traceback (also MESHPHASE_DEBUG=1)")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     s = sub.add_parser("info", help="channels, kinds, fs, duration, start and a quality summary of a recording")
@@ -339,18 +421,100 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _one_line(text) -> str:
+    """``text`` on one line (messages of nested errors can hold newlines)."""
+    return " ".join(str(text).split())
+
+
+_OS_HINTS = {
+    errno.EACCES: "check the permissions of the file or folder",
+    errno.EPERM: "check the permissions of the file or folder",
+    errno.ENOSPC: "free some space or write the outputs elsewhere (--out)",
+    errno.EDQUOT: "disk quota exceeded: free some space or write elsewhere (--out)",
+    errno.ENAMETOOLONG: "a file or folder name is longer than the file system allows, usually 255 bytes",
+    errno.ELOOP: "a symbolic-link loop in the path",
+    errno.ENOTDIR: "a part of the path is a file, not a folder",
+    errno.EISDIR: "a folder where a file is expected",
+    errno.EROFS: "the file system is read-only",
+}
+
+
+def describe_error(exc: BaseException) -> str:
+    """One line for an exception that ends a command (no traceback, no class name where the
+    message says it all).
+
+    Parameters
+    ----------
+    exc : BaseException
+
+    Returns
+    -------
+    str
+    """
+    if isinstance(exc, MemoryError):
+        return ("out of memory" + (f" ({exc})" if str(exc) else "") + "; process a shorter time "
+                "window ([input] start_s / stop_s) or on a machine with more memory")
+    if isinstance(exc, OSError) and exc.errno is not None:
+        names = " -> ".join(str(f) for f in (exc.filename, exc.filename2) if f is not None)
+        text = exc.strerror or str(exc)
+        hint = _OS_HINTS.get(exc.errno)
+        return _one_line((f"{names}: " if names else "") + text + (f" ({hint})" if hint else ""))
+    if isinstance(exc, KeyError):
+        return _one_line(f"missing key {exc.args[0]!r}" if exc.args else "KeyError")
+    if isinstance(exc, (ValueError, TypeError, OSError)):
+        return _one_line(exc)  # ours name the file / parameter; h5py's OSErrors say HDF5
+    return _one_line(f"{type(exc).__name__}: {exc} (unexpected; `meshphase --debug ...` shows "
+                     "the traceback)")
+
+
+def _stdout_closed() -> int:
+    """The reader of our stdout went away (``| head``): send the rest to devnull and exit
+    quietly (the Python docs' recipe, signal module, "Note on SIGPIPE")."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):  # stdout replaced in-process (tests)
+        pass
+    return EXIT_PIPE
+
+
 def main(argv=None) -> int:
+    """Run the command line; returns the exit code (the table in the module docstring).
+
+    The one error boundary of the command: every error becomes one line on stderr and an
+    exit code; ``--debug`` / ``MESHPHASE_DEBUG=1`` re-raises instead."""
     parser = build_parser()
-    args = parser.parse_args(argv)
-    level = logging.WARNING - 10 * min(args.verbose, 2)
+    args = parser.parse_args(argv)        # usage errors: argparse prints them, exits 2
+    debug = bool(args.debug) or os.environ.get("MESHPHASE_DEBUG", "").strip() not in ("", "0")
+    level = logging.DEBUG if debug else logging.WARNING - 10 * min(args.verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     logger.setLevel(level)
     logging.captureWarnings(False)
+    # warnings on one line each ("meshphase info: FormatWarning: ..."), not file:line + source
+    old_format = warnings.formatwarning
+    warnings.formatwarning = lambda message, category, *_a, **_k: (
+        f"meshphase {args.command}: {category.__name__}: {_one_line(message)}\n")
     try:
-        return int(args.func(args) or 0)
-    except (ValueError, TypeError, FileNotFoundError, FileExistsError, KeyError) as exc:
-        print(f"meshphase {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        rc = int(args.func(args) or 0)
+        sys.stdout.flush()                 # a closed pipe shows here, not at interpreter exit
+        return rc
+    except BrokenPipeError:
+        return _stdout_closed()
+    except KeyboardInterrupt:
+        if debug:
+            raise
+        print(f"meshphase {args.command}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except Exception as exc:  # noqa: BLE001 - the boundary: one line, never a traceback
+        if debug:
+            raise
+        try:
+            print(f"meshphase {args.command}: error: {describe_error(exc)}", file=sys.stderr)
+        except OSError:
+            pass
+        return EXIT_ERROR
+    finally:
+        warnings.formatwarning = old_format
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -386,7 +386,9 @@ def _check_consistency(scene: Scene, text: str, label, *, check_files: bool = Tr
     rec = scene.input.get("recording")
     if check_files and set(stages) & _NEEDS_RECORDING and rec and not Path(rec).is_file():
         # checked only when a stage will read it: a bearing scene never opens its recording
-        raise SceneError(label, "input.recording", f"no such recording file: {rec}",
+        what = ("not a regular file (a folder, FIFO or device)" if Path(rec).exists()
+                else "no such recording file")
+        raise SceneError(label, "input.recording", f"{what}: {rec}",
                          _line_of(text, ["input", "recording"]))
     if "tolerance" in stages and scene.tolerances is None:
         raise SceneError(label, "tolerances", "result 'tolerance' needs a [tolerances] table",

@@ -47,6 +47,8 @@ class RunContext:
         Warnings raised during the run (category: message).
     failed : dict
         Stage -> error message for stages that raised (the run goes on with what it has).
+    channels_unused : list of str
+        Channels of the recording that no planned stage reads (set by the load stage).
     """
 
     scene: Scene
@@ -57,6 +59,7 @@ class RunContext:
     messages: list = field(default_factory=list)
     failed: dict = field(default_factory=dict)
     progress: Callable | None = None
+    channels_unused: list = field(default_factory=list)
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -71,13 +74,31 @@ def _gearset(ctx: RunContext):
     return g
 
 
-def _apply_channel_overrides(rec: Recording, overrides: list[dict]) -> Recording:
+def _channels_present(rec: Recording) -> str:
+    """``name (kind), ...`` of every channel of ``rec``, for error messages."""
+    return ", ".join(f"{c.name} ({c.kind})" for c in rec.channels) or "none"
+
+
+def _apply_channel_overrides(rec: Recording, overrides: list[dict], source: str | None = None) -> Recording:
     if not overrides:
         return rec
+    missing = [o["name"] for o in overrides if o["name"] not in rec.names]
+    if missing:
+        import difflib
+
+        def near(m):  # a name present inside the one asked for ("sun" in "sun_gauge"), or alike
+            inside = [n for n in rec.names if n.lower() in m.lower() or m.lower() in n.lower()]
+            return (inside or difflib.get_close_matches(m, rec.names, n=1))[:1]
+
+        hints = [f"{m!r} -> {close[0]!r}?" for m in missing if (close := near(m))]
+        raise ValueError(f"{source or 'the recording'}: the scene's [[channels]] name "
+                         f"{', '.join(repr(m) for m in missing)} is not in the file; channels "
+                         f"present: {_channels_present(rec)}"
+                         + (f" (did you mean {', '.join(hints)})" if hints else ""))
     specs = list(rec.channels)
     for o in overrides:
         name = o["name"]
-        i = rec.index(name)  # ValueError names the channels present
+        i = rec.index(name)
         d = specs[i].to_dict()
         d.update({k: v for k, v in o.items() if k != "name"})
         if "kind" in o and "gear" not in o and o["kind"] in ("sun", "ring"):
@@ -110,13 +131,45 @@ def _mesh_freq(ctx: RunContext, gear: str) -> float | None:
 
 
 # ----------------------------------------------------------------------------- stages
+#: channel kinds the onset detector times (the gauges)
+_GAUGE_KINDS = ("sun", "ring", "facewidth")
+
+
+def _check_gauges(ctx: RunContext, rec: Recording, source: str) -> list[str]:
+    """Refuse a recording without any gauge when the scene wants measured results; return
+    the channels that no planned stage reads."""
+    from .scene import plan
+
+    stages = plan(ctx.scene, check=False)
+    measured = [r for r in ctx.scene.results if r in ("phasing", "load_sharing", "centroids",
+                                                      "compare", "identify")]
+    if "onsets" in stages and not any(c.kind in _GAUGE_KINDS for c in rec.channels):
+        first = rec.channels[0].name if rec.channels else "CHANNEL"
+        raise ValueError(f"{source}: no gauge channel (kind sun, ring or facewidth) for the "
+                         f"results {', '.join(measured) or 'wanted'}; channels present: "
+                         f"{_channels_present(rec)}; say which channel is which gauge in the "
+                         f'scene, e.g. [[channels]] name = "{first}", kind = "sun"')
+    used = set()
+    if "onsets" in stages:
+        used |= {c.name for c in rec.channels if c.kind in _GAUGE_KINDS}
+    tacho = [c.name for c in rec.channels if c.kind == "tacho"]
+    if "phasing" in stages and tacho:
+        used.add(tacho[0])  # the ring pulse that is planet 1, from the first tacho only
+    return [c.name for c in rec.channels if c.name not in used]
+
+
 def stage_load(ctx: RunContext) -> None:
     inp = ctx.scene.input
     truth = None
     if inp.get("recording"):
         from . import io
+        from .exits import recording_read_errors
+        from .validate import as_regular_file
 
-        rec = io.read(inp["recording"], start=inp.get("start"), stop=inp.get("stop"))
+        # stat only: a FIFO or device is refused before opening it could block
+        path = as_regular_file(inp["recording"], "the recording")
+        with recording_read_errors(path):
+            rec = io.read(path, start=inp.get("start"), stop=inp.get("stop"))
         source = str(inp["recording"])
     else:
         from synthetic import generate
@@ -125,7 +178,8 @@ def stage_load(ctx: RunContext) -> None:
         rec, truth = generate(inp["synthetic"], duration=None if minutes is None else 60.0 * minutes,
                               seed=inp.get("seed", 0))
         source = f"synthetic:{inp['synthetic']}"
-    rec = _apply_channel_overrides(rec, ctx.scene.channels)
+    rec = _apply_channel_overrides(rec, ctx.scene.channels, source)
+    ctx.channels_unused = _check_gauges(ctx, rec, source)
     true_errors = None
     if truth is not None and truth.errors is not None:
         from synthetic.config import errors_from_dict
@@ -692,7 +746,10 @@ def run_scene(scene: Scene, *, progress: Callable[[str, int, int], None] | None 
                 ctx.ran.append(name)
             except (ValueError, TypeError, FileNotFoundError, KeyError, OSError) as exc:
                 ctx.failed[name] = f"{type(exc).__name__}: {exc}"
-                logger.warning("stage %s failed: %s", name, exc)
+                # the caller reports ctx.failed (the CLI: one line per cause); the traceback
+                # is for developers (meshphase --debug)
+                logger.info("stage %s failed: %s", name, exc)
+                logger.debug("stage %s traceback", name, exc_info=True)
         ctx.timings[name] = time.perf_counter() - t
         for w in caught:
             msg = f"{name}: {w.category.__name__}: {w.message}"
@@ -741,11 +798,18 @@ def _jsonable(v: Any) -> Any:
 
 def summary_dict(ctx: RunContext) -> dict:
     """The machine-readable summary of a run (JSON-friendly)."""
+    from .campaign import phasing_reliability
+    from .exits import run_status
+
     r = ctx.results
-    s: dict = {"scene": ctx.scene.name, "results_requested": ctx.scene.results,
+    st = run_status(ctx)
+    s: dict = {"scene": ctx.scene.name, "status": st["status"],
+               "missing_results": st["missing_results"],
+               "phasing_reliability": phasing_reliability(ctx),
+               "results_requested": ctx.scene.results,
                "stages_ran": ctx.ran, "stages_failed": ctx.failed,
                "timings_s": ctx.timings, "error_estimates": ctx.error_estimates,
-               "messages": ctx.messages}
+               "messages": ctx.messages, "channels_unused": ctx.channels_unused}
     g = _gearset(ctx)
     if g is not None:
         s["gearset"] = g.to_dict()
@@ -880,23 +944,33 @@ def write_outputs(ctx: RunContext, out_dir: Path, *, report: bool = True) -> dic
     return files
 
 
-def process_recording(path, gearset_scene_path, *, out_dir=None, overwrite=False) -> tuple:
+def process_recording(path, gearset_scene_path, *, out_dir=None, overwrite=False,
+                      progress: Callable[[str, int, int], None] | None = None) -> tuple:
     """``meshphase process FILE --gearset GEARSET.toml``: the recording-processing results
     (phasing, load sharing, centroids, comparison with the ideal and identified model).
 
+    The output folder is reserved before the run (an unwritable location fails at once) and
+    removed again when the run raises or is interrupted; when the recording cannot be loaded
+    (nothing usable) nothing is written and ``files`` is empty: see
+    :func:`pipeline.exits.run_status` for the status of the run.
+
     Returns (RunContext, files).
     """
+    from .exits import OutputDir, run_status
     from .scene import load_scene
+    from .validate import as_regular_file
 
-    if not Path(path).is_file():
-        raise FileNotFoundError(f"{path}: no such recording file")
+    path = as_regular_file(path, "the recording")  # stat only: a FIFO never blocks here
     scene = load_scene(gearset_scene_path)
     scene.input = {"recording": Path(path).resolve()}
     wanted = ["phasing", "load_sharing", "compare"]
     scene.results = [r for r in dict.fromkeys(list(scene.results) + wanted)
                      if r not in ("tolerance",) or scene.tolerances is not None]
-    ctx = run_scene(scene)
     base = Path(out_dir) if out_dir else Path(path).with_name(Path(path).stem + "-meshphase")
-    out = new_output_dir(base, overwrite=overwrite)
-    files = write_outputs(ctx, out, report=False)
+    with OutputDir(base, overwrite=overwrite) as out:
+        ctx = run_scene(scene, progress=progress)
+        if run_status(ctx)["status"] == "failed":
+            out.discard()
+            return ctx, {}
+        files = write_outputs(ctx, out.path, report=False)
     return ctx, files

@@ -7,6 +7,9 @@ message naming the parameter and echoing the value, and returns the normalised v
 from __future__ import annotations
 
 import numbers
+import os
+import stat
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -20,6 +23,7 @@ __all__ = [
     "as_finite_array",
     "as_choice",
     "as_signal",
+    "as_regular_file",
 ]
 
 
@@ -124,3 +128,46 @@ def as_signal(value: Any, name: str = "x", *, float64: bool = False) -> np.ndarr
     if arr.ndim != 1:
         raise ValueError(f"{name} must be 1-D (one channel), got shape {arr.shape}")
     return arr.astype(np.float64, copy=False) if float64 else arr
+
+
+_FILE_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
+               (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+               (stat.S_ISSOCK, "a socket"))
+
+
+def as_regular_file(value: Any, name: str) -> Path:
+    """Return ``value`` as a Path to an existing regular file, without opening it.
+
+    Checked with ``os.stat`` only, so a FIFO, a device or a socket is refused before anything
+    could block reading it; symbolic links are followed (a link to a regular file is fine).
+
+    Raises
+    ------
+    TypeError
+        ``value`` is not a str or os.PathLike.
+    FileNotFoundError
+        Nothing exists at the path (or a dangling link).
+    IsADirectoryError
+        The path is a directory.
+    ValueError
+        The path is empty, or a FIFO, a device or a socket (the message says which).
+    OSError
+        ``os.stat`` failed otherwise (permission on a parent folder, a symbolic-link loop,
+        a name too long, a parent that is a file ...); its errno and file name are kept.
+    """
+    if not isinstance(value, (str, os.PathLike)):
+        raise TypeError(f"{name} must be a path (str or Path), got {type(value).__name__} {_short(value)}")
+    if not os.fspath(value):
+        raise ValueError(f"{name} must be a file path, got an empty path {value!r}")
+    path = Path(value)
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: no such file ({name})") from None
+    if stat.S_ISREG(st.st_mode):
+        return path
+    kind = next((k for test, k in _FILE_KINDS if test(st.st_mode)), "not a regular file")
+    if kind == "a directory":
+        raise IsADirectoryError(f"{path}: is a directory; {name} must be a file")
+    raise ValueError(f"{path}: is {kind}, not a regular file; {name} must be a file "
+                     "(refused before opening it: reading a pipe or device could block)")

@@ -134,7 +134,7 @@ def test_campaign_default_local_cluster(data, tmp_path, capsys):
     assert np.ptp(means) < 1e-2
     assert by["broken.h5"]["status"] == "failed"
     assert "broken.h5" in by["broken.h5"]["error"] and "truncated" in by["broken.h5"]["error"]
-    assert res["counts"] == {"ok": 3, "partial": 0, "failed": 1}
+    assert res["counts"] == {"ok": 3, "unreliable": 0, "partial": 0, "failed": 1}
     assert res["cluster"]["local"] and res["cluster"]["n_workers"] == 2
     assert len({r["worker"] for r in res["recordings"]}) == 2  # both processes did work
     assert res["results_client"] == ["tolerance"]
@@ -194,8 +194,97 @@ def test_campaign_on_existing_scheduler_dying_worker_and_no_overwrite(data, clus
     assert Path(r1["out_dir"]) == out.resolve()
     assert Path(r2["out_dir"]) == Path(f"{out}-2").resolve()
     assert (out / "campaign.json").read_bytes() == first
-    assert r2["counts"] == {"ok": 1, "partial": 0, "failed": 1}
+    assert r2["counts"] == {"ok": 1, "unreliable": 0, "partial": 0, "failed": 1}
     assert cluster.status.name == "running"  # not ours to close
+
+
+def _phasing_only_scene(folder: Path) -> Path:
+    """The test scene asking for phasing only, no Monte Carlo (quick; statuses are the point)."""
+    scene = folder / "phasing_only.toml"
+    scene.write_text(SCENE.replace('["ideal_phasing", "phasing", "load_sharing", "compare", "tolerance"]',
+                                   '["phasing"]').split("[tolerances]")[0])
+    return scene
+
+
+def test_campaign_cli_exit_codes(data, cluster, tmp_path, capsys):
+    """`meshphase campaign`: any recording failed -> exit 3 (the table lists all, the failed one
+    with its cause on stderr); every recording failed -> exit 1 (nothing usable)."""
+    from pipeline.cli import main
+
+    rec = data["recordings"]
+    out = tmp_path / "camp"
+    scene = _phasing_only_scene(tmp_path)
+    rc = main(["-q", "campaign", str(scene), str(rec / "rig_a.h5"), str(rec / "broken.h5"),
+               "--scheduler", cluster.scheduler_address, "--out", str(out)])
+    cap = capsys.readouterr()
+    assert rc == 3
+    assert "1 ok, 0 unreliable, 0 partial, 1 failed" in cap.out
+    assert "failed     broken" in cap.out
+    err = cap.err.strip().splitlines()
+    assert len(err) == 1 and "broken.h5: failed: cannot load the recording" in err[0]
+    assert "truncated" in err[0]
+    rows = (out / "campaign.csv").read_text().splitlines()
+    assert len(rows) == 3 and {r.split(",")[0] for r in rows[1:]} == {"rig_a", "broken"}
+    assert json.loads((out / "campaign.json").read_text())["exit_code"] == 3
+    rc = main(["-q", "campaign", str(scene), str(rec / "broken.h5"),
+               "--scheduler", cluster.scheduler_address, "--out", str(tmp_path / "all_bad")])
+    assert rc == 1 and "0 ok, 0 unreliable, 0 partial, 1 failed" in capsys.readouterr().out
+
+
+def test_run_recording_unreliable_phasing_is_not_ok(data, tmp_path, monkeypatch):
+    """A recording whose phasing the run flags unreliable is "unreliable" (exit 3), not "ok"."""
+    import warnings
+
+    from pipeline.errors import ProcessingWarning
+    from pipeline.stages import STAGE_FUNCTIONS
+
+    original = STAGE_FUNCTIONS["phasing"]
+
+    def flagged(ctx):
+        original(ctx)
+        warnings.warn("sun gauge: encoder misfit 3e-2 mesh cycles; phasing not reliable",
+                      ProcessingWarning, stacklevel=2)
+
+    monkeypatch.setitem(STAGE_FUNCTIONS, "phasing", flagged)
+    r = cp.run_recording(str(_phasing_only_scene(tmp_path)), str(data["recordings"] / "rig_a.h5"),
+                         str(tmp_path / "a"))
+    assert r["status"] == "unreliable"
+    assert r["unreliable"] == {"sun": ["sun gauge: encoder misfit 3e-2 mesh cycles; phasing not reliable"]}
+    assert "sun gauge phasing" in r["error"] and r["missing_results"] == []
+    assert json.loads((tmp_path / "a" / "summary.json").read_text())["status"] == "unreliable"
+    assert cp.campaign_exit_code({"recordings": [r]}) == 3
+    assert cp.campaign_rows([r])[0]["status"] == "unreliable"
+
+
+def test_campaign_interrupted_exits_130_and_leaves_no_folder(data, tmp_path, monkeypatch, capsys):
+    """Ctrl-C during a campaign: exit 130, the campaign folder it had reserved is removed."""
+    from pipeline.cli import main
+
+    def ctrl_c(scene, scene_path, inputs, files, skipped, names, out, *rest):
+        (out / "campaign.csv").write_text("half written")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cp, "_campaign_body", ctrl_c)
+    out = tmp_path / "camp"
+    assert main(["-q", "campaign", str(data["scene"]), str(data["recordings"] / "rig_a.h5"),
+                 "--out", str(out)]) == 130
+    assert capsys.readouterr().err.strip() == "meshphase campaign: interrupted"
+    assert not out.exists()
+
+
+def test_campaign_exit_code_table_empty_and_bad():
+    assert cp.campaign_exit_code({"recordings": []}) == 0
+    assert cp.campaign_exit_code({"recordings": [{"status": "ok"}, {"status": "ok"}]}) == 0
+    assert cp.campaign_exit_code({"recordings": [{"status": "ok"}, {"status": "partial"}]}) == 3
+    assert cp.campaign_exit_code({"recordings": [{"status": "ok"}, {"status": "failed"}]}) == 3
+    assert cp.campaign_exit_code({"recordings": [{"status": "failed"}, {"status": "failed"}]}) == 1
+    # a scene-level result (the Monte Carlo) missing makes the campaign partial too
+    assert cp.campaign_exit_code({"recordings": [{"status": "ok"}],
+                                  "scene_status": {"status": "partial"}}) == 3
+    with pytest.raises(TypeError, match="recordings"):
+        cp.campaign_exit_code([])
+    with pytest.raises(TypeError, match="recordings"):
+        cp.campaign_exit_code({"recordings": "x"})
 
 
 # ---------------------------------------------------------------------------- inputs, errors

@@ -1,5 +1,6 @@
 """The ``meshphase`` command: run / process / demo write results without overwriting earlier
-ones, the report carries its sections, bad input exits 2 naming the file; info, convert and
+ones, the report carries its sections, bad input exits 1 naming the file (exit table in
+pipeline/exits.py; more in test_exit_status.py); info, convert and
 synth on small generated files (issue 6, item 3).
 
 Most tests call :func:`pipeline.cli.main` in-process (no interpreter start-up); one runs the
@@ -60,34 +61,34 @@ def _assert_png_not_blank(png: bytes) -> None:
 
 
 # --------------------------------------------------------------------------- bad input
-def test_run_bad_scene_exits_2_naming_file_key_and_line(tmp_path, capsys):
+def test_run_bad_scene_exits_1_naming_file_key_and_line(tmp_path, capsys):
     p = tmp_path / "bad.toml"
     p.write_text('results = ["bearing_moments"]\n[bearing]\ncase = "1"\ntorque = 5\n', encoding="utf-8")
-    assert main(["-q", "run", str(p)]) == 2
+    assert main(["-q", "run", str(p)]) == 1
     err = capsys.readouterr().err
     assert str(p) in err and "line 4" in err and "bearing.torque" in err
     assert not (tmp_path / "bad-out").exists()     # nothing written for a scene that failed
 
 
-def test_run_missing_scene_exits_2(tmp_path, capsys):
+def test_run_missing_scene_exits_1(tmp_path, capsys):
     p = tmp_path / "missing.toml"
-    assert main(["-q", "run", str(p)]) == 2
+    assert main(["-q", "run", str(p)]) == 1
     assert str(p) in capsys.readouterr().err
 
 
-def test_run_scene_with_missing_recording_exits_2(tmp_path, capsys):
+def test_run_scene_with_missing_recording_exits_1(tmp_path, capsys):
     p = tmp_path / "rec.toml"
     p.write_text('results = ["phasing"]\n' + GEARSET_TOML.split("name =", 1)[1].split("\n", 1)[1]
                  + '[input]\nrecording = "no_such.h5"\n', encoding="utf-8")
-    assert main(["-q", "run", str(p)]) == 2
+    assert main(["-q", "run", str(p)]) == 1
     err = capsys.readouterr().err
     assert "no_such.h5" in err and "input.recording" in err
 
 
-def test_process_missing_recording_exits_2(tmp_path, capsys):
+def test_process_missing_recording_exits_1(tmp_path, capsys):
     gs = tmp_path / "gs.toml"
     gs.write_text(GEARSET_TOML, encoding="utf-8")
-    assert main(["-q", "process", str(tmp_path / "none.h5"), "--gearset", str(gs)]) == 2
+    assert main(["-q", "process", str(tmp_path / "none.h5"), "--gearset", str(gs)]) == 1
     assert "none.h5" in capsys.readouterr().err
 
 
@@ -96,8 +97,9 @@ def test_exit_code_of_the_real_command(tmp_path):
     p.write_text('results = ["phasing"\n', encoding="utf-8")
     r = subprocess.run([sys.executable, "-m", "pipeline.cli", "-q", "run", str(p)],
                        capture_output=True, text=True, timeout=120)
-    assert r.returncode == 2
+    assert r.returncode == 1                     # a bad scene: input error (2 is usage only)
     assert str(p) in r.stderr and "TOML syntax error" in r.stderr
+    assert "Traceback" not in r.stderr
 
 
 # --------------------------------------------------------------------------- run
@@ -247,11 +249,11 @@ def test_info_text_and_json(tmp_path, capsys):
 
 
 def test_info_missing_and_unknown_files(tmp_path, capsys):
-    assert main(["-q", "info", str(tmp_path / "nope.h5")]) == 2
+    assert main(["-q", "info", str(tmp_path / "nope.h5")]) == 1
     assert "nope.h5" in capsys.readouterr().err
     junk = tmp_path / "junk.bin"
     junk.write_bytes(b"\x00\x01 not a recording")
-    assert main(["-q", "info", str(junk)]) == 2
+    assert main(["-q", "info", str(junk)]) == 1
     assert "junk.bin" in capsys.readouterr().err
 
 
@@ -272,8 +274,8 @@ def test_convert_round_trip_is_bit_exact(tmp_path, capsys):
     assert [c.name for c in out.channels] == ["sun", "ring", "tacho"]
     assert [c.kind for c in out.channels] == ["sun", "ring", "tacho"]
     assert any(h.get("step") == "convert" for h in out.history)
-    # the output exists now: converting onto it again is refused (exit 2), unless asked
-    assert main(["-q", "convert", str(csv), str(back)]) == 2
+    # the output exists now: converting onto it again is refused (exit 1), unless asked
+    assert main(["-q", "convert", str(csv), str(back)]) == 1
     assert "c.h5" in capsys.readouterr().err
     assert main(["-q", "convert", str(csv), str(back), "--overwrite"]) == 0
 

@@ -26,7 +26,7 @@ __all__ = ["build_campaign_report", "phasing_across_recordings", "load_sharing_a
            "residual_rms_across_recordings", "wall_times_across_recordings"]
 
 _COLORS = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-_STATUS_COLOR = {"ok": "#1b6b2f", "partial": "#c77800", "failed": "#a4161a"}
+_STATUS_COLOR = {"ok": "#1b6b2f", "unreliable": "#7a5195", "partial": "#c77800", "failed": "#a4161a"}
 
 
 def _c(i: int) -> str:
@@ -219,7 +219,7 @@ def wall_times_across_recordings(names, seconds, statuses=None):
     ax.set_yticks(y)
     ax.set_yticklabels(names, fontsize=8)
     ax.invert_yaxis()
-    ax.set_xlabel("task wall time [s] (green ok, orange partial, red failed)")
+    ax.set_xlabel("task wall time [s] (green ok, purple unreliable, orange partial, red failed)")
     fig.tight_layout()
     return fig
 
@@ -301,12 +301,13 @@ def build_campaign_report(campaign: dict, out_dir, *, filename: str = "campaign_
     fig_dir = out_dir / "figures"
     names = [str(r.get("name", f"#{i + 1}")) for i, r in enumerate(recs)]
     counts = campaign.get("counts") or {s: sum(r.get("status") == s for r in recs)
-                                        for s in ("ok", "partial", "failed")}
+                                        for s in ("ok", "unreliable", "partial", "failed")}
     timing = campaign.get("timing_s") or {}
     cluster = campaign.get("cluster") or {}
     rep = Report(f"meshphase campaign — {campaign.get('scene', '')}",
-                 f"{len(recs)} recording(s) · {counts.get('ok', 0)} ok, {counts.get('partial', 0)} partial, "
-                 f"{counts.get('failed', 0)} failed")
+                 f"{len(recs)} recording(s) · {counts.get('ok', 0)} ok, "
+                 + (f"{counts['unreliable']} unreliable, " if counts.get("unreliable") else "")
+                 + f"{counts.get('partial', 0)} partial, {counts.get('failed', 0)} failed")
 
     def add_fig(section, fig, name, caption):
         png = figure_to_png(fig)
@@ -350,7 +351,7 @@ def build_campaign_report(campaign: dict, out_dir, *, filename: str = "campaign_
         add_fig(s, wall_times_across_recordings(names, [_num(r.get("wall_time_s")) for r in recs],
                                                 [r.get("status", "failed") for r in recs]),
                 "wall_times", "Task wall time per recording")
-        bad = [r for r in recs if r.get("status") in ("failed", "partial")]
+        bad = [r for r in recs if r.get("status") in ("failed", "partial", "unreliable")]
         if bad:
             s = rep.section("Failures")
             s.table([{"recording": r.get("name"), "status": r.get("status"), "error": r.get("error") or "",

@@ -1,0 +1,514 @@
+"""Exit status is the truth: one exit-code table (pipeline/exits.py, README "Exit status") for
+every subcommand, one line per cause on stderr, never a traceback.
+
+The CLI runs in-process through :func:`pipeline.cli.main` (a few cases as a subprocess, to see
+the real exit code and that no "Traceback" reaches stderr). Recordings are 5 s of the seed rig
+(the exit codes do not depend on how many passes the run measures; 5 s keeps each run under a
+second).
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import h5py
+import pytest
+from seed_rig_toml import SEED_RIG_GEARSET
+
+import pipeline.io
+import pipeline.stages
+from pipeline import cli
+from pipeline.campaign import phasing_reliability
+from pipeline.cli import describe_error, main
+from pipeline.errors import ProcessingWarning
+from pipeline.exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK, EXIT_PARTIAL, EXIT_PIPE,
+                            OutputDir, run_status, status_line)
+from pipeline.recording import ChannelSpec, Recording
+from pipeline.stages import STAGE_FUNCTIONS, RunContext
+from pipeline.validate import as_regular_file
+
+GEARSET_TOML = 'name = "seed rig gearset"\n' + SEED_RIG_GEARSET
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def rig(tmp_path_factory):
+    """5 s of the seed rig as HDF5 (channels sun, ring, tacho), its gearset file, and a copy of
+    the recording truncated to a third (HDF5 magic intact, body cut off)."""
+    from synthetic import generate
+
+    d = tmp_path_factory.mktemp("exit_rig")
+    rec, _ = generate("seed_rig", duration=5.0, seed=0)
+    path = Path(pipeline.io.write(rec, d / "rig.h5"))
+    gs = d / "gearset.toml"
+    gs.write_text(GEARSET_TOML, encoding="utf-8")
+    raw = path.read_bytes()
+    cut = d / "cut.h5"
+    cut.write_bytes(raw[: len(raw) // 3])
+    return {"dir": d, "rec": rec, "path": path, "gearset": gs, "cut": cut}
+
+
+def _run_cli(*args, env=None, timeout=120, **kw):
+    """``python -m pipeline.cli ARGS`` as a subprocess (the real exit code and stderr)."""
+    return subprocess.run([sys.executable, "-m", "pipeline.cli", "-q", *map(str, args)],
+                          capture_output=True, text=True, timeout=timeout, cwd=REPO, env=env, **kw)
+
+
+def _entries(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.iterdir())
+
+
+def _err_lines(capsys) -> list[str]:
+    return [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+
+
+# --------------------------------------------------------------------------- 1: input errors
+def test_truncated_recording_exits_1_and_writes_nothing(rig, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["-q", "process", str(rig["cut"]), "--gearset", str(rig["gearset"]),
+                 "--out", str(out)]) == EXIT_ERROR
+    err = _err_lines(capsys)
+    assert len(err) == 1                                   # one cause, one line
+    assert "cut.h5" in err[0] and "truncated" in err[0] and "cannot load the recording" in err[0]
+    assert not out.exists()                                # nothing usable, nothing written
+
+
+def test_truncated_recording_real_command_has_no_traceback(rig, tmp_path):
+    r = _run_cli("process", rig["cut"], "--gearset", rig["gearset"], "--out", tmp_path / "o")
+    assert r.returncode == EXIT_ERROR
+    assert "Traceback" not in r.stderr and "cut.h5" in r.stderr and "truncated" in r.stderr
+    assert not (tmp_path / "o").exists()
+
+
+def test_channel_typo_in_scene_lists_the_channels_present(rig, tmp_path, capsys):
+    gs = tmp_path / "typo.toml"
+    gs.write_text(GEARSET_TOML + '\n[[channels]]\nname = "sun_gauge"\nkind = "sun"\n', encoding="utf-8")
+    assert main(["-q", "process", str(rig["path"]), "--gearset", str(gs),
+                 "--out", str(tmp_path / "o")]) == EXIT_ERROR
+    err = _err_lines(capsys)
+    assert len(err) == 1
+    assert "'sun_gauge'" in err[0] and "is not in the file" in err[0]
+    assert "channels present: sun (sun), ring (ring), tacho (tacho)" in err[0]
+    assert "did you mean 'sun_gauge' -> 'sun'" in err[0]
+    assert not (tmp_path / "o").exists()
+
+
+def test_run_scene_with_channel_typo_exits_1(rig, tmp_path, capsys):
+    scene = tmp_path / "typo.toml"
+    scene.write_text('results = ["ideal_phasing", "phasing"]\n' + SEED_RIG_GEARSET
+                     + f'[input]\nrecording = "{rig["path"]}"\n'
+                     + '[[channels]]\nname = "ring_gauge"\nkind = "ring"\n', encoding="utf-8")
+    # `ideal` needs no recording and runs: still exit 1, the recording was not read
+    assert main(["-q", "run", str(scene), "--no-report"]) == EXIT_ERROR
+    err = capsys.readouterr().err
+    assert "'ring_gauge'" in err and "sun (sun), ring (ring), tacho (tacho)" in err
+    assert not (tmp_path / "typo-out").exists()
+
+
+def test_recording_without_gauge_channels_exits_1_naming_kinds(rig, tmp_path, capsys):
+    rec = rig["rec"]
+    specs = [ChannelSpec("ch_a", kind="other"), ChannelSpec("ch_b", kind="other"),
+             ChannelSpec("tacho", kind="tacho", units="V")]
+    path = pipeline.io.write(Recording(rec.data, rec.fs, specs), tmp_path / "nogauge.h5")
+    assert main(["-q", "process", str(path), "--gearset", str(rig["gearset"]),
+                 "--out", str(tmp_path / "o")]) == EXIT_ERROR
+    err = _err_lines(capsys)
+    assert len(err) == 1
+    assert "no gauge channel (kind sun, ring or facewidth)" in err[0]
+    assert "channels present: ch_a (other), ch_b (other), tacho (tacho)" in err[0]
+    assert '[[channels]] name = "ch_a", kind = "sun"' in err[0]       # the mapping to add
+    assert not (tmp_path / "o").exists()
+
+
+def test_plain_csv_without_strain_channels_exits_1(tmp_path, capsys):
+    p = tmp_path / "plain.csv"
+    p.write_text("time,a,b\n" + "".join(f"{i / 5120!r},{i % 7}.5,{i % 3}.25\n" for i in range(2048)),
+                 encoding="utf-8")
+    gs = tmp_path / "gs.toml"
+    gs.write_text(GEARSET_TOML, encoding="utf-8")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")       # the reader's FormatWarning: no [units] in the header
+        rc = main(["-q", "process", str(p), "--gearset", str(gs), "--out", str(tmp_path / "o")])
+    assert rc == EXIT_ERROR
+    err = capsys.readouterr().err
+    assert "no gauge channel" in err and "a (other), b (other)" in err and "[[channels]]" in err
+    assert "no measured passes" not in err and not (tmp_path / "o").exists()
+
+
+def test_hdf5_soft_link_loop_exits_1_naming_the_file(rig, tmp_path, capsys):
+    p = tmp_path / "loop.h5"
+    p.write_bytes(rig["path"].read_bytes())
+    with h5py.File(p, "a") as f:                          # h5py raises RuntimeError on it
+        del f["channels/sun"]
+        f["channels/sun"] = h5py.SoftLink("/channels/sun2")
+        f["channels/sun2"] = h5py.SoftLink("/channels/sun")
+    assert main(["-q", "info", str(p)]) == EXIT_ERROR
+    err = _err_lines(capsys)
+    assert len(err) == 1 and "loop.h5" in err[0] and "too many links" in err[0]
+
+
+def test_directory_as_input_exits_1(rig, tmp_path, capsys):
+    d = tmp_path / "a_folder.h5"
+    d.mkdir()
+    assert main(["-q", "info", str(d)]) == EXIT_ERROR
+    assert "a_folder.h5: is a directory" in capsys.readouterr().err
+    assert main(["-q", "process", str(d), "--gearset", str(rig["gearset"])]) == EXIT_ERROR
+    assert "is a directory" in capsys.readouterr().err
+    assert main(["-q", "process", str(rig["path"]), "--gearset", str(d)]) == EXIT_ERROR
+    assert "is a directory; the gearset scene (--gearset) must be a file" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no os.mkfifo on this platform")
+def test_fifo_as_input_is_refused_without_opening_it(rig, tmp_path, capsys):
+    fifo = tmp_path / "pipe.h5"
+    os.mkfifo(fifo)
+    # in-process: refused by stat before anything opens it (opening would block: no writer)
+    for argv in (["info", str(fifo)], ["convert", str(fifo), str(tmp_path / "x.h5")],
+                 ["process", str(fifo), "--gearset", str(rig["gearset"])], ["run", str(fifo)]):
+        assert main(["-q", *argv]) == EXIT_ERROR, argv
+        err = _err_lines(capsys)
+        assert len(err) == 1 and "is a FIFO (named pipe), not a regular file" in err[0], argv
+    # the real command: a hang would hit the timeout (subprocess.TimeoutExpired fails the test)
+    r = _run_cli("info", fifo, timeout=60)
+    assert r.returncode == EXIT_ERROR and "FIFO" in r.stderr and "Traceback" not in r.stderr
+
+
+# --------------------------------------------------------------------------- 1: OS errors
+def test_output_folder_under_a_regular_file_exits_1(rig, tmp_path, capsys):
+    blocker = tmp_path / "not_a_folder"
+    blocker.write_text("x")
+    assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
+                 "--out", str(blocker / "out")]) == EXIT_ERROR
+    err = _err_lines(capsys)
+    assert len(err) == 1
+    assert "not_a_folder/out: Not a directory" in err[0] and "a part of the path is a file" in err[0]
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() == 0,
+                    reason="root ignores permission bits (covered by the ENOTDIR and injected EACCES tests)")
+def test_permission_denied_output_folder_exits_1(rig, tmp_path, capsys):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o500)
+    try:
+        assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
+                     "--out", str(locked / "out")]) == EXIT_ERROR
+    finally:
+        locked.chmod(0o700)
+    err = capsys.readouterr().err
+    assert "Permission denied" in err and "check the permissions" in err
+
+
+def test_permission_denied_output_folder_injected_exits_1(rig, tmp_path, monkeypatch, capsys):
+    """The EACCES path as root too: the folder cannot be created (as mkdir raises it)."""
+    def denied(base, *, overwrite=False):
+        raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(base))
+
+    monkeypatch.setattr(pipeline.stages, "new_output_dir", denied)
+    out = tmp_path / "locked" / "out"
+    assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
+                 "--out", str(out)]) == EXIT_ERROR
+    err = _err_lines(capsys)
+    assert err == [f"meshphase process: error: {out}: Permission denied (check the permissions of "
+                   "the file or folder)"]
+
+
+def test_output_name_too_long_exits_1(rig, tmp_path, capsys):
+    long = tmp_path / ("x" * 300)                     # one name > 255 bytes: ENAMETOOLONG
+    assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
+                 "--out", str(long)]) == EXIT_ERROR
+    err = _err_lines(capsys)
+    assert len(err) == 1 and "File name too long" in err[0]
+    assert main(["-q", "convert", str(rig["path"]), str(tmp_path / ("y" * 300 + ".h5"))]) == EXIT_ERROR
+    assert "File name too long" in capsys.readouterr().err
+    assert _entries(tmp_path) == []
+
+
+def test_no_space_left_while_writing_exits_1_and_cleans_up(rig, tmp_path, monkeypatch, capsys):
+    def full(ctx, out_dir, **kw):
+        (Path(out_dir) / "summary.json").write_text("{")     # half written when the disk fills
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(Path(out_dir) / "arrays.h5"))
+
+    monkeypatch.setattr(pipeline.stages, "write_outputs", full)
+    out = tmp_path / "o"
+    assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
+                 "--out", str(out)]) == EXIT_ERROR
+    err = _err_lines(capsys)
+    assert len(err) == 1 and "arrays.h5: No space left on device" in err[0]
+    assert not out.exists()                                # no half-written results left
+
+
+def test_memory_error_exits_1_with_one_line(rig, tmp_path, monkeypatch, capsys):
+    def oom(ctx):
+        raise MemoryError()
+
+    monkeypatch.setitem(STAGE_FUNCTIONS, "condition", oom)
+    assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
+                 "--out", str(tmp_path / "o")]) == EXIT_ERROR
+    err = _err_lines(capsys)
+    assert len(err) == 1 and err[0].startswith("meshphase process: error: out of memory")
+    assert not (tmp_path / "o").exists()
+
+
+# --------------------------------------------------------------------------- 3: partial
+def test_failed_stage_is_partial_exit_3_with_causes(rig, tmp_path, monkeypatch, capsys):
+    def boom(ctx):
+        raise ValueError("onset detector exploded")
+
+    monkeypatch.setitem(STAGE_FUNCTIONS, "onsets", boom)
+    out = tmp_path / "o"
+    assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
+                 "--out", str(out)]) == EXIT_PARTIAL
+    cap = capsys.readouterr()
+    assert "status    partial: not computed: phasing, load_sharing, identify, compare" in cap.out
+    err = cap.err.splitlines()
+    assert len(err) == 4                                    # one line per missing result
+    assert all("onsets failed (ValueError: onset detector exploded)" in ln for ln in err)
+    summ = json.loads((out / "summary.json").read_text())  # outputs are still written
+    assert summ["status"] == "partial"
+    missing = {m["result"]: m for m in summ["missing_results"]}
+    assert set(missing) == {"phasing", "load_sharing", "identify", "compare"}
+    assert missing["phasing"]["stage"] == "phasing"
+    assert missing["phasing"]["cause"] == "skipped: onsets failed (ValueError: onset detector exploded)"
+    assert "ideal" in summ["stages_ran"]
+
+
+def test_failed_result_stage_itself_is_partial(rig, tmp_path, monkeypatch, capsys):
+    def boom(ctx):
+        raise KeyError("planet_count")
+
+    monkeypatch.setitem(STAGE_FUNCTIONS, "load_sharing", boom)
+    out = tmp_path / "o"
+    assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
+                 "--out", str(out)]) == EXIT_PARTIAL
+    err = _err_lines(capsys)
+    assert err == ["meshphase process: partial: load_sharing not computed: KeyError: 'planet_count'"]
+    summ = json.loads((out / "summary.json").read_text())
+    assert summ["status"] == "partial"
+    assert summ["missing_results"] == [{"result": "load_sharing", "stage": "load_sharing",
+                                        "cause": "KeyError: 'planet_count'"}]
+
+
+def test_unreliable_phasing_exits_3_with_status_line(rig, tmp_path, monkeypatch, capsys):
+    original = STAGE_FUNCTIONS["phasing"]
+
+    def flagged(ctx):
+        original(ctx)
+        warnings.warn("sun gauge: the pass train does not follow one smooth speed; phasing not "
+                      "reliable", ProcessingWarning, stacklevel=2)
+
+    monkeypatch.setitem(STAGE_FUNCTIONS, "phasing", flagged)
+    out = tmp_path / "o"
+    assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
+                 "--out", str(out)]) == EXIT_PARTIAL
+    cap = capsys.readouterr()
+    assert "status    unreliable: phasing of the sun gauge" in cap.out
+    assert cap.err.strip() == ("meshphase process: unreliable: sun gauge phasing: sun gauge: the pass "
+                               "train does not follow one smooth speed; phasing not reliable")
+    summ = json.loads((out / "summary.json").read_text())
+    assert summ["status"] == "unreliable" and summ["missing_results"] == []
+    assert summ["phasing_reliability"]["sun"]["reliable"] is False
+    assert summ["phasing_reliability"]["ring"] == {"reliable": True, "reasons": []}
+
+
+def test_clean_run_exits_0_and_lists_unused_channels(rig, tmp_path, capsys):
+    rec = rig["rec"]
+    extra = Recording(rec.data[:, [0, 1, 2, 2]], rec.fs,
+                      list(rec.channels) + [ChannelSpec("oil_temp", kind="other", units="V")])
+    path = pipeline.io.write(extra, tmp_path / "extra.h5")
+    out = tmp_path / "o"
+    assert main(["-q", "process", str(path), "--gearset", str(rig["gearset"]),
+                 "--out", str(out)]) == EXIT_OK
+    cap = capsys.readouterr()
+    assert "unused    oil_temp (other): channel(s) read but used by no stage" in cap.out
+    assert "status    ok" in cap.out and cap.err == ""
+    summ = json.loads((out / "summary.json").read_text())
+    assert summ["status"] == "ok" and summ["channels_unused"] == ["oil_temp"]
+    assert summ["missing_results"] == []
+
+
+# --------------------------------------------------------------------------- 130: interrupted
+def test_keyboard_interrupt_in_a_stage_exits_130_and_leaves_nothing(rig, tmp_path, monkeypatch, capsys):
+    def ctrl_c(ctx):
+        raise KeyboardInterrupt
+
+    monkeypatch.setitem(STAGE_FUNCTIONS, "phasing", ctrl_c)
+    before = _entries(rig["dir"])
+    assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"])]) == EXIT_INTERRUPTED
+    assert _err_lines(capsys) == ["meshphase process: interrupted"]
+    assert _entries(rig["dir"]) == before                  # the reserved rig-meshphase is gone
+
+
+def test_keyboard_interrupt_while_writing_removes_only_this_runs_files(rig, tmp_path, monkeypatch, capsys):
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "earlier.txt").write_text("from an earlier run")
+    real = pipeline.stages.write_outputs
+
+    def interrupted(ctx, out_dir, **kw):
+        real(ctx, out_dir, **kw)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pipeline.stages, "write_outputs", interrupted)
+    assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
+                 "--out", str(out), "--overwrite"]) == EXIT_INTERRUPTED
+    assert _entries(out) == ["earlier.txt"]               # reused folder: ours removed, not theirs
+    assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
+                 "--out", str(tmp_path / "fresh")]) == EXIT_INTERRUPTED
+    assert not (tmp_path / "fresh").exists()
+    assert capsys.readouterr().err.count("interrupted") == 2
+
+
+def test_keyboard_interrupt_in_run_scene_exits_130(tmp_path, monkeypatch, capsys):
+    scene = REPO / "examples" / "bearing_moments.toml"
+
+    def ctrl_c(ctx):
+        raise KeyboardInterrupt
+
+    monkeypatch.setitem(STAGE_FUNCTIONS, "tilt", ctrl_c)
+    out = tmp_path / "bm"
+    assert main(["-q", "run", str(scene), "--out", str(out), "--no-report"]) == EXIT_INTERRUPTED
+    assert "interrupted" in capsys.readouterr().err and not out.exists()
+
+
+# --------------------------------------------------------------------------- 141: closed pipe
+def test_info_json_into_a_closed_pipe_exits_quietly(rig):
+    # the reader closes its end before meshphase writes (imports alone take longer): EPIPE for sure
+    p = subprocess.Popen([sys.executable, "-m", "pipeline.cli", "-q", "info", "--json",
+                          "--no-quality", str(rig["path"])], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, cwd=REPO)
+    p.stdout.close()
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == EXIT_PIPE
+    assert err.decode() == ""                              # no BrokenPipeError, no message
+
+
+def test_info_json_piped_to_head_has_no_traceback(rig):
+    cmd = (f"{sys.executable} -m pipeline.cli -q info --json {rig['path']} | head -c 10; "
+           "echo \" rc=${PIPESTATUS[0]}\"")
+    r = subprocess.run(["bash", "-c", cmd], capture_output=True, text=True, timeout=120, cwd=REPO)
+    # the JSON may fit the pipe buffer before head exits (0) or not (141): both are quiet
+    assert r.stdout.startswith("{") and r.stdout.rstrip().endswith(("rc=0", f"rc={EXIT_PIPE}"))
+    assert "Traceback" not in r.stderr and "BrokenPipeError" not in r.stderr and r.stderr == ""
+
+
+# --------------------------------------------------------------------------- --debug
+def test_debug_reraises_with_the_traceback(rig, tmp_path, monkeypatch):
+    with pytest.raises(IsADirectoryError, match="is a directory"):
+        main(["-q", "--debug", "info", str(tmp_path)])
+    monkeypatch.setenv("MESHPHASE_DEBUG", "1")
+    with pytest.raises(IsADirectoryError):
+        main(["-q", "info", str(tmp_path)])
+    monkeypatch.setenv("MESHPHASE_DEBUG", "0")
+    assert main(["-q", "info", str(tmp_path)]) == EXIT_ERROR
+
+
+def test_usage_error_is_2():
+    with pytest.raises(SystemExit) as e:
+        main(["process"])
+    assert e.value.code == 2
+
+
+# --------------------------------------------------------------------------- helpers
+def _ctx(failed=None, ran=None, messages=None, results=None):
+    from pipeline.scene import parse_scene
+
+    scene = parse_scene('results = ["tilt"]\n[bearing]\ncase = "1"\nk_tilt_Nm_per_rad = 1e6\n')
+    ctx = RunContext(scene)
+    ctx.failed, ctx.ran = dict(failed or {}), list(ran or [])
+    ctx.messages, ctx.results = list(messages or []), dict(results or {})
+    return ctx
+
+
+def test_run_status_table():
+    ok = run_status(_ctx(ran=["tilt"]))
+    assert ok == {"status": "ok", "exit_code": 0, "error": None, "missing_results": [], "unreliable": {}}
+    assert status_line(ok) == "ok"
+    # a benign skip (no face-width gauges) is not a missing result
+    benign = run_status(_ctx(ran=["load"], failed={"centroids": "skipped: the recording has no "
+                                                                 "face-width gauges"}))
+    assert benign["status"] == "ok"
+    chain = run_status(_ctx(ran=["load", "ideal"], failed={
+        "condition": "ValueError: bad", "onsets": "skipped: needs condition",
+        "phasing": "skipped: needs onsets", "compare": "skipped: needs phasing"}))
+    assert chain["status"] == "partial" and chain["exit_code"] == 3
+    assert [m["result"] for m in chain["missing_results"]] == ["phasing", "compare"]
+    assert chain["missing_results"][1]["cause"] == "skipped: condition failed (ValueError: bad)"
+    assert status_line(chain) == "partial: not computed: phasing, compare"
+    load = run_status(_ctx(ran=["ideal"], failed={"load": "RecordingFileError: x.h5: truncated"}))
+    assert load["status"] == "failed" and load["exit_code"] == 1
+    assert load["error"] == "cannot load the recording: x.h5: truncated"
+    none = run_status(_ctx(failed={"tilt": "ValueError: k"}))
+    assert none["status"] == "failed" and none["exit_code"] == 1 and status_line(none) == "failed: tilt: ValueError: k"
+
+
+def test_run_status_and_status_line_bad_input():
+    with pytest.raises(TypeError, match="RunContext"):
+        run_status({"failed": {}})
+    with pytest.raises(TypeError, match="run_status"):
+        status_line("ok")
+    with pytest.raises(TypeError, match="run_status"):
+        status_line({})
+
+
+def test_phasing_reliability_prefers_the_stage_key_and_falls_back_to_messages():
+    assert phasing_reliability(_ctx()) == {}                         # nothing ran: nothing flagged
+    msg = "phasing: ProcessingWarning: ring gauge: encoder misfit; phasing not reliable"
+    ctx = _ctx(messages=[msg, "onsets: DataQualityWarning: sun gauge: aliased, not reliable"],
+               results={"phasing": {"tables": {"sun": [], "ring": []}}})
+    assert phasing_reliability(ctx) == {
+        "sun": {"reliable": True, "reasons": []},                    # DataQualityWarning: not ours
+        "ring": {"reliable": False, "reasons": ["ring gauge: encoder misfit; phasing not reliable"]}}
+    anon = _ctx(messages=["compare: ProcessingWarning: residuals not reliable"],
+                results={"phasing": {"tables": {"sun": []}}})
+    assert phasing_reliability(anon)["sun"]["reliable"] is False
+    given = {"sun": {"reliable": False, "reasons": ["from the stage"]}}
+    ctx.results["phasing"]["reliability"] = given                    # the rewritten stage's key wins
+    assert phasing_reliability(ctx) == given
+    with pytest.raises(TypeError, match="RunContext"):
+        phasing_reliability(object())
+
+
+def test_describe_error_one_line_per_kind():
+    assert describe_error(OSError(errno.ENOSPC, "No space left on device", "/x/a.h5")) == (
+        "/x/a.h5: No space left on device (free some space or write the outputs elsewhere (--out))")
+    assert describe_error(ValueError("x.h5: bad\nheader")) == "x.h5: bad header"
+    assert describe_error(KeyError("fs")) == "missing key 'fs'"
+    assert describe_error(MemoryError()).startswith("out of memory; ")
+    assert "unexpected" in describe_error(RuntimeError("boom")) and "--debug" in describe_error(RuntimeError())
+    assert describe_error(OSError("Can't read data")) == "Can't read data"   # h5py: no errno
+
+
+def test_output_dir_bad_input_and_discard(tmp_path):
+    with pytest.raises(TypeError, match="base"):
+        OutputDir(3)
+    with OutputDir(tmp_path / "a") as out:
+        (out.path / "f").write_text("x")
+        out.discard()
+    assert not (tmp_path / "a").exists()
+    with pytest.raises(RuntimeError):
+        with OutputDir(tmp_path / "b") as out:
+            raise RuntimeError("stage bug")
+    assert not (tmp_path / "b").exists()
+
+
+def test_as_regular_file_empty_and_bad_input(tmp_path):
+    f = tmp_path / "f.h5"
+    f.write_bytes(b"x")
+    assert as_regular_file(str(f), "the recording") == f
+    with pytest.raises(FileNotFoundError, match="nope.h5"):
+        as_regular_file(tmp_path / "nope.h5", "the recording")
+    with pytest.raises(ValueError, match="empty path"):
+        as_regular_file("", "the recording")
+    with pytest.raises(IsADirectoryError, match="is a directory"):
+        as_regular_file(tmp_path, "the recording")
+    with pytest.raises(TypeError, match="the recording must be a path"):
+        as_regular_file(3, "the recording")
+    with pytest.raises(NotADirectoryError):
+        as_regular_file(f / "sub", "the recording")
