@@ -344,11 +344,35 @@ def assign_planets_by_pattern(times, planet_angles, order: int, *, first: int = 
             return np.interp(mid, 0.5 * (t[k:] + t[:-k]), local), float(np.median(spans))
         return np.full(t.size - 1, float(np.median(spans))), float(np.median(spans))
 
+    def step_periods():
+        """Equal spacing, sparse trains (pulses lost to dropouts): every gap between
+        consecutive pulses is a whole number of planet steps, so the step is the local median
+        of gap / round(gap / step), started from the short gaps (single steps) and refined
+        twice; the period is N steps."""
+        g = np.diff(t)
+        s = float(np.quantile(g, 0.2))
+        if not s > 0:
+            return None
+        loc = np.full(g.size, s)
+        for _ in range(3):
+            m = np.maximum(1.0, np.rint(g / loc))
+            est = g / m
+            w = min(est.size, 4 * n + 1)
+            if w >= 3:
+                pad = np.pad(est, (w // 2, w - 1 - w // 2), mode="edge")
+                loc = np.median(np.lib.stride_tricks.sliding_window_view(pad, w), axis=1)
+            else:
+                loc = np.full(g.size, float(np.median(est)))
+        return n * loc, float(n * np.median(loc))
+
     best = None
-    for k in range(n, max(1, n - 2), -1):
-        if t.size < k + 2:
+    cands = [k for k in range(n, max(1, n - 2), -1) if t.size >= k + 2]
+    symmetric_steps = bool(np.allclose(step, step[0], atol=1e-9))
+    for k in cands + (["steps"] if symmetric_steps and t.size >= 3 else []):
+        got = step_periods() if k == "steps" else gap_periods(k)
+        if got is None:
             continue
-        gp, per = gap_periods(k)
+        gp, per = got
         probe = _walk(np.diff(t) / gp, fs, q_first, tol * spacing)
         score = (np.count_nonzero(~probe[1]), probe[2])
         if best is None or score < best[0]:

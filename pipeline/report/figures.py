@@ -24,6 +24,7 @@ __all__ = [
     "stage_times",
     "error_vs_runtime",
     "quality_overview",
+    "tacho_geometry",
 ]
 
 _COLORS = plt.rcParams["axes.prop_cycle"].by_key()["color"]
@@ -239,5 +240,66 @@ def quality_overview(rows):
     ax.set_ylabel("count")
     ax.set_ylim(0, max([1, *nf, *cl]) * 1.1)   # counts: never a negative axis
     ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def tacho_geometry(planet_angles, key_angle: float, mounts: dict | None = None, *,
+                   carrier_angle: float = math.radians(30.0), title: str = ""):
+    """The geometry that names planet 1 from a carrier tacho (``data_schemas/scene.md``).
+
+    Ground frame, counter-clockwise positive, angle 0 at the tacho probe. Planet n sits at
+    carrier-frame angle psi_n (planet 1 at 0), the key at carrier-frame angle ``key_angle``;
+    the carrier is drawn turned by ``carrier_angle``. Each gauge on the held ring is drawn at
+    its ground angle (``mounts``: name -> [rad]).
+
+    Parameters
+    ----------
+    planet_angles : array_like
+        psi_n [rad].
+    key_angle : float
+        Carrier-frame angle of the tacho key from planet 1 [rad].
+    mounts : dict of str to float, optional
+        Ground angles of gauges on the held member [rad].
+    carrier_angle : float
+        Carrier angle theta_c at which to draw [rad].
+    """
+    psi = np.asarray(planet_angles, dtype=float)
+    fig, ax = plt.subplots(figsize=(6.4, 6.0))
+    ax.set_aspect("equal")
+    ax.axis("off")
+    th = np.linspace(0, 2 * math.pi, 361)
+    ax.plot(1.55 * np.cos(th), 1.55 * np.sin(th), color="0.6", lw=8, alpha=0.5)
+    ax.text(-2.0, -1.95, "held ring (ground frame)", color="0.4", fontsize=8)
+    ax.plot(np.cos(th), np.sin(th), color=_c(2), lw=1.2, ls="--")
+    ax.add_patch(plt.Circle((0, 0), 0.33, fc="0.93", ec="0.2"))
+    ax.text(0, 0, "sun", ha="center", va="center")
+    for i, p in enumerate(psi):
+        a = carrier_angle + p
+        ax.add_patch(plt.Circle((math.cos(a), math.sin(a)), 0.45, fc="#fdf2d0" if i == 0 else "white",
+                                ec="0.2", lw=1.5 if i == 0 else 1.0))
+        ax.text(math.cos(a), math.sin(a), f"planet {i + 1}\nψ={math.degrees(p):.0f}°", ha="center",
+                va="center", fontsize=8, fontweight="bold" if i == 0 else "normal")
+    # the probe at ground angle 0, the key on the carrier
+    ax.plot([0, 1.85], [0, 0], color="0.3", ls=":", lw=1)
+    ax.add_patch(plt.Rectangle((1.72, -0.07), 0.2, 0.14, color="#c33"))
+    ax.text(1.72, -0.2, "tacho probe\n(ground 0°)", color="#c33", fontsize=8, va="top")
+    ka = carrier_angle + key_angle
+    ax.plot([0, 1.08 * math.cos(ka)], [0, 1.08 * math.sin(ka)], color="#c33", lw=1)
+    ax.plot(1.08 * math.cos(ka), 1.08 * math.sin(ka), "s", color="#c33", ms=8)
+    ax.text(1.2 * math.cos(ka), 1.2 * math.sin(ka), f"tacho key\nkey_angle_deg = {math.degrees(key_angle):.1f}",
+            color="#c33", fontsize=8, ha="center", va="center")
+    arc = np.linspace(0, carrier_angle, 40)
+    ax.plot(0.62 * np.cos(arc), 0.62 * np.sin(arc), color=_c(2), lw=1.5)
+    ax.text(0.7 * math.cos(carrier_angle / 2), 0.7 * math.sin(carrier_angle / 2), "θc", color=_c(2))
+    for name, mu in (mounts or {}).items():
+        ax.plot(1.55 * math.cos(mu), 1.55 * math.sin(mu), "D", color=_c(0), ms=9)
+        ax.text(1.75 * math.cos(mu), 1.75 * math.sin(mu),
+                f"{name}\nmount_angle_deg = {math.degrees(mu):.1f}", color=_c(0), fontsize=8,
+                ha="center", va="center")
+    ax.set_xlim(-2.1, 2.3)
+    ax.set_ylim(-2.1, 2.1)
+    ax.set_title(title or "tacho edge: the key passes the probe, θc = -key_angle\nplanet n meets "
+                 "a gauge on the held ring when θc + ψn = mount_angle (mod 360°)", fontsize=9)
     fig.tight_layout()
     return fig

@@ -1,0 +1,320 @@
+"""The angle model of a whole recording (pipeline.angles), on pass trains with known truth.
+
+Truth here is the synthetic kinematics' exact engagement instants (synthetic.kinematics:
+the geometric condition solved in angle time to ~1e-15 relative) and their true phasing,
+Z |w| (tau_n - tau_1) / 2 pi per pass. The passes are fed in exactly (no onset detector), so
+what is left is the angle model's own error; the tolerances below say what limits it.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from pipeline.angles import (AngleModel, Kinematics, PassTrain, fit_angle_model, gauge_train,
+                             held_member, kinematics, label_shift_costs, relabel_train,
+                             revolution_numbers, tacho_train, typed_resolution)
+from pipeline.models.gearset import Gearset, Speeds, rpm_to_rad_s
+from pipeline.models.tolerance import table2_case
+from pipeline.phasing import (assign_planets_by_pattern, pass_order, phasing_from_model,
+                              planet_fractions)
+from synthetic.kinematics import SpeedProfile, engagement_events, event_times_for_angles
+
+TWO_PI = 2 * math.pi
+
+
+def rig(direction="cw", n=4, zr=87, zp=29):
+    """Seed 000 Table 1 teeth on the seed's rig speeds with the ring held."""
+    g = Gearset.equally_spaced(25, zr, zp, n, 0.1125, direction=direction)
+    ws = rpm_to_rad_s(18.19)
+    wc = ws / (1 + zr / 25)
+    if direction == "ccw":
+        ws, wc = -ws, -wc
+    sp = Speeds.kinematic(g, ws, wc)
+    return g, Speeds(sp.sun, sp.carrier, sp.planet, 0.0)
+
+
+def trains_from_truth(g, sp, profile, duration, *, errors=None, sigma=None, jitter=0.0, seed=0,
+                      tacho=True):
+    rng = np.random.default_rng(seed)
+    out, events = [], {}
+    for gear, z, tooth in (("sun", g.z_sun, 0.3), ("ring", g.z_ring, 0.2)):
+        ev = engagement_events(g, sp, gear, tooth, 0.0, duration, errors=errors, profile=profile)
+        o = np.argsort(ev.time)
+        order = pass_order(g.direction, gear)
+        frac = planet_fractions(g.angles, order)
+        lab, info = assign_planets_by_pattern(ev.time[o], g.angles, order,
+                                              first=int(ev.planet[o][0] - 1))
+        t = ev.time[o] + (rng.normal(0.0, jitter, o.size) if jitter else 0.0)
+        out.append(gauge_train(gear, gear, t, lab, info["position"], frac, z, sigma=sigma,
+                               order=order))
+        events[gear] = (ev.tau[o], abs(sp.w_sc if gear == "sun" else sp.w_rc), z)
+    if tacho:
+        tt, _ = event_times_for_angles(sp.carrier, 0.1, 0.0, duration, profile=profile)
+        out.append(tacho_train(tt, g.z_ring, sigma=sigma))
+    return out, events
+
+
+def per_pass_error(model, train, events, n):
+    tab = phasing_from_model(model, train, train.z, n, gauge=train.kind)
+    tau, w, z = events[train.name]
+    i_n = np.searchsorted(train.times, tab.time)
+    i_1 = np.searchsorted(train.times, tab.ref_time)
+    true = np.mod(z * w * (tau[i_n] - tau[i_1]) / TWO_PI, 1.0)
+    return (tab.gamma - true + 0.5) % 1.0 - 0.5, tab
+
+
+@pytest.mark.parametrize("direction", ["cw", "ccw"])
+@pytest.mark.parametrize("ripple", [("carrier", 0.01), ("carrier", 0.03), ("sun", 0.01)])
+def test_exact_passes_under_shaft_rate_ripple(direction, ripple):
+    # Table 2 case 1 shaft hole errors, 1-3 % speed ripple at a shaft rate, exact engagement
+    # instants: the per-pass phasing follows the true mesh angle. Bound 5e-4 cycles: the
+    # ripple here is periodic in time at the shaft's nominal rate and the model's terms in
+    # angle, which differ at second order in the ripple (3 % -> ~1.7e-4 measured); ten times
+    # below the 2e-3 target, and 0.3 cycles is what ignoring the ripple costs at 3 %.
+    g, sp = rig(direction)
+    f = abs(getattr(sp, ripple[0])) / TWO_PI
+    prof = SpeedProfile(ripple=((ripple[1], f, 0.4),))
+    trains, ev = trains_from_truth(g, sp, prof, 120.0, errors=table2_case(1)[2])
+    model = fit_angle_model(trains, kinematics(25, 87, 29, fixed="ring"), 4)
+    assert model.converged
+    assert f"{ripple[0]} ripple" in model.terms
+    for tr in trains[:2]:
+        err, tab = per_pass_error(model, tr, ev, 4)
+        assert len(tab) >= 20  # 2 min: ~8 carrier turns x 3 ring passes, ~28 x 3 sun
+        assert np.sqrt(np.mean(err ** 2)) < 5e-4, (tr.name, model.terms)
+
+
+def test_steady_error_free_passes_are_exact_to_rounding():
+    # uniform trains and no errors: the mesh angle is linear; 1e-9 cycles is rounding of
+    # angles of ~700 cycles (1e-16 relative times the fit's conditioning), far from any
+    # formula slip (>= 1e-3)
+    g, sp = rig()
+    trains, ev = trains_from_truth(g, sp, SpeedProfile(), 120.0)
+    model = fit_angle_model(trains, kinematics(25, 87, 29, fixed="ring"), 4)
+    for tr in trains[:2]:
+        err, _ = per_pass_error(model, tr, ev, 4)
+        assert np.max(np.abs(err)) < 1e-9
+
+
+def test_integer_ring_to_planet_ratio_is_detected_not_solved_by_rounding():
+    # Z_r / Z_p = 87 / 29 = 3: a planet shows the ring gauge the same tooth at every pass, so a
+    # planet term cannot be told from its offset at the ring; the lag of the ring's planet
+    # terms goes with it. The fit drops what is unidentifiable, says why, and stays exact.
+    g, sp = rig()
+    trains, ev = trains_from_truth(g, sp, SpeedProfile(), 120.0, errors=table2_case(1)[2])
+    model = fit_angle_model(trains, kinematics(25, 87, 29, fixed="ring"), 4)
+    assert "planet terms" in model.terms
+    assert model.rank <= model.n_parameters
+    assert any("ring: planet-term lag" in d for d in model.dropped)
+    for tr in trains[:2]:
+        err, _ = per_pass_error(model, tr, ev, 4)
+        assert np.max(np.abs(err)) < 1e-6
+
+
+def test_nothing_depends_on_rounding():
+    # the same onsets moved by 1e-9 s (what TDMS vs CSV timestamps differ by) give the same
+    # model order and phasing to 1e-7 cycles (the move itself is ~6e-9 cycles at 5.9 Hz)
+    g, sp = rig()
+    prof = SpeedProfile(ripple=((0.01, abs(sp.carrier) / TWO_PI, 0.4),))
+    sig = 2e-4
+    trains, ev = trains_from_truth(g, sp, prof, 120.0, errors=table2_case(1)[2], sigma=sig,
+                                   jitter=sig, seed=3)
+    kin = kinematics(25, 87, 29, fixed="ring")
+    a = fit_angle_model(trains, kin, 4)
+    rng = np.random.default_rng(7)
+    moved = [PassTrain(tr.name, tr.kind, tr.times + rng.uniform(-1e-9, 1e-9, len(tr)), tr.sigma,
+                       tr.target, tr.planet, tr.position, tr.sigma_given, tr.z, tr.order)
+             for tr in trains]
+    b = fit_angle_model(moved, kin, 4)
+    assert a.terms == b.terms
+    for ta, tb in zip(trains[:2], moved[:2]):
+        ga = phasing_from_model(a, ta, ta.z, 4, gauge=ta.kind)
+        gb = phasing_from_model(b, tb, tb.z, 4, gauge=tb.kind)
+        d = (ga.gamma - gb.gamma + 0.5) % 1.0 - 0.5
+        assert np.max(np.abs(d)) < 1e-7
+
+
+def test_noisy_passes_have_calibrated_uncertainty():
+    # timing noise at its stated bound: error / sigma has unit RMS within what 100-odd passes
+    # allow (0.7-1.5, the issue's calibration band), and the 95 % interval holds ~95 %
+    g, sp = rig()
+    prof = SpeedProfile(ripple=((0.01, abs(sp.carrier) / TWO_PI, 0.4),))
+    zs, cover = [], []
+    for seed in range(4):
+        sig = 3e-4
+        trains, ev = trains_from_truth(g, sp, prof, 120.0, errors=table2_case(1)[2], sigma=sig,
+                                       jitter=sig, seed=seed)
+        model = fit_angle_model(trains, kinematics(25, 87, 29, fixed="ring"), 4)
+        for tr in trains[:2]:
+            err, tab = per_pass_error(model, tr, ev, 4)
+            zs.append(err / tab.uncertainty)
+    z = np.concatenate(zs)
+    assert 0.7 <= np.sqrt(np.mean(z ** 2)) <= 1.5
+    assert 0.90 <= np.mean(np.abs(z) <= 1.96) <= 0.98
+
+
+@settings(max_examples=6, deadline=None)
+@given(st.floats(0.0, 0.03), st.floats(0.0, 2 * math.pi), st.floats(-0.1, 0.1))
+def test_property_ripple_and_ramp_followed(amplitude, phase, ramp):
+    # any 0-3 % carrier-rate ripple with a +-10 % ramp over the record, exact passes: within
+    # 2e-3 cycles (the ripple is time-locked here while the model is angle-locked, so a ramp
+    # detunes them; the spline follows the rest)
+    g, sp = rig()
+    dur = 120.0
+    prof = SpeedProfile(ramp_rate=ramp / dur,
+                        ripple=((amplitude, abs(sp.carrier) / TWO_PI, phase),) if amplitude else ())
+    trains, ev = trains_from_truth(g, sp, prof, dur)
+    model = fit_angle_model(trains, kinematics(25, 87, 29, fixed="ring"), 4)
+    for tr in trains[:2]:
+        err, _ = per_pass_error(model, tr, ev, 4)
+        assert np.sqrt(np.mean(err ** 2)) < 2e-3, (model.terms, tr.name)
+
+
+def test_five_planets_and_no_tacho():
+    g, sp = rig(n=5, zr=85, zp=30)
+    prof = SpeedProfile(ripple=((0.01, abs(sp.carrier) / TWO_PI, 0.4),))
+    trains, ev = trains_from_truth(g, sp, prof, 120.0, tacho=False)
+    model = fit_angle_model(trains, kinematics(25, 85, 30, fixed="ring"), 5)
+    for tr in trains:
+        err, _ = per_pass_error(model, tr, ev, 5)
+        assert np.sqrt(np.mean(err ** 2)) < 1e-4
+
+
+def test_mislabelled_pass_is_left_out():
+    g, sp = rig()
+    trains, ev = trains_from_truth(g, sp, SpeedProfile(), 120.0, errors=table2_case(1)[2])
+    sun = trains[0]
+    bad = sun.planet.copy()
+    i = 41
+    pos = sun.position.copy()
+    # move one pulse a whole planet along (its neighbour's label)
+    pos[i] += 1
+    bad[i] = np.argsort(planet_fractions(g.angles, 1), kind="stable")[pos[i] % 4]
+    frac = planet_fractions(g.angles, 1)
+    spoilt = gauge_train("sun", "sun", sun.times, bad, pos, frac, 25, order=1)
+    model = fit_angle_model([spoilt] + trains[1:], kinematics(25, 87, 29, fixed="ring"), 4)
+    assert model.train("sun").n_outliers == 1
+    assert model.outlier_mask("sun")[i]
+    assert any("left out" in n for n in model.notes)
+
+
+def test_label_shift_costs_find_the_planets_by_their_own_offsets():
+    # unequal planet errors (Table 2 case 3 drawn) tell the planets apart when the ring gauge
+    # sees them turn (Z_r / Z_p = 87 / 31 not an integer): a ring train relabelled by one
+    # place is recognised and the misfit of the right shift stands out
+    from synthetic.generate import draw_errors
+
+    g, sp = rig(zp=31)
+    err = draw_errors(table2_case(3)[2], 4, 5)
+    trains, _ = trains_from_truth(g, sp, SpeedProfile(), 120.0, errors=err, sigma=2e-5)
+    ring = trains[1]
+    frac = planet_fractions(g.angles, pass_order("cw", "ring"))
+    shifted = relabel_train(ring, 1, frac, 4)
+    assert not np.array_equal(shifted.planet, ring.planet)
+    kin = kinematics(25, 87, 31, fixed="ring")
+    costs = label_shift_costs([trains[0]], shifted, frac, kin, 4)
+    best = int(np.argmin(costs))
+    assert best == 3  # three more places round (four in all) restores the truth
+    assert np.sort(costs)[1] > 25 * costs[best]
+    # Z_r / Z_p = 87 / 29 = 3: the ring gauge cannot see a planet turn, every shift fits alike
+    g, sp = rig(zp=29)
+    trains, _ = trains_from_truth(g, sp, SpeedProfile(), 120.0, errors=err, sigma=2e-5)
+    costs = label_shift_costs([trains[0]], relabel_train(trains[1], 1, frac, 4), frac,
+                              kinematics(25, 87, 29, fixed="ring"), 4)
+    assert np.ptp(costs) <= 1e-6 * np.max(costs)
+
+
+# ----------------------------------------------------------------------------- held member
+def test_typed_speeds_hold_the_ring_within_their_precision():
+    g = Gearset.equally_spaced(25, 87, 29, 4, 0.1125)
+    sp = Speeds.kinematic(g, rpm_to_rad_s(18.19), rpm_to_rad_s(4.06))
+    assert sp.ring != 0.0  # -3.4e-4 r/min: never compared with an exact zero
+    res = {"sun": rpm_to_rad_s(typed_resolution(18.19)), "carrier": rpm_to_rad_s(typed_resolution(4.06))}
+    fixed, why = held_member(25, 87, sp, resolution=res)
+    assert fixed == "ring" and "within" in why
+    # exact speeds (synthetic): the same speeds are a differential
+    assert held_member(25, 87, sp)[0] is None
+
+
+def test_seed_rig_is_a_differential_and_the_tacho_decides():
+    g = Gearset.equally_spaced(25, 87, 31, 4, 0.1125)
+    sp = Speeds.kinematic(g, rpm_to_rad_s(18.19), rpm_to_rad_s(1.06))
+    assert held_member(25, 87, sp)[0] is None
+    # the data contradict the typed speeds: the data decide, and say so
+    fixed, why = held_member(25, 87, sp, mesh_rate=87 * 0.05, carrier_rate=0.05)
+    assert fixed == "ring" and "the data decide" in why
+    assert held_member(25, 87, None, mesh_rate=25 * 0.2, carrier_rate=0.2)[0] == "sun"
+
+
+@pytest.mark.parametrize("value, want", [(4.06, 0.005), (18.19, 0.005), (100.0, 0.05), (4, 0.5),
+                                         (1e-3, 5e-4), (3.862, 5e-4), (-4.06, 0.005)])
+def test_typed_resolution(value, want):
+    assert typed_resolution(value) == pytest.approx(want)
+
+
+def test_typed_resolution_bad_input():
+    with pytest.raises(ValueError, match="finite"):
+        typed_resolution(float("nan"))
+    with pytest.raises(TypeError, match="number"):
+        typed_resolution(True)
+
+
+def test_kinematics_periods():
+    k = kinematics(25, 87, 29, fixed="ring")
+    assert k.periods == {"carrier": 87.0, "sun": pytest.approx(25 * 87 / 112), "planet": 29.0}
+    assert k.tacho_cycles == 87.0
+    k = kinematics(25, 87, 0, fixed="sun")
+    assert k.periods == {"carrier": 25.0, "ring": pytest.approx(25 * 87 / 112)}
+    assert kinematics(25, 87, 31, fixed=None).periods == {"planet": 31.0}
+    with pytest.raises(ValueError, match="fixed"):
+        kinematics(25, 87, 29, fixed="carrier")
+    with pytest.raises(ValueError, match="tooth counts"):
+        kinematics(0, 87)
+
+
+# ----------------------------------------------------------------------------- bad inputs
+def test_empty_and_bad_trains():
+    frac = planet_fractions(np.arange(4) * TWO_PI / 4, 1)
+    empty = gauge_train("sun", "sun", [], np.empty(0, int), np.empty(0, int), frac, 25)
+    assert len(empty) == 0
+    assert len(tacho_train([], 87.0)) == 0
+    with pytest.raises(ValueError, match="at least one gauge train"):
+        fit_angle_model([empty], kinematics(25, 87, 29), 4)
+    with pytest.raises(TypeError, match="PassTrain"):
+        fit_angle_model([object()], kinematics(25, 87, 29), 4)
+    with pytest.raises(TypeError, match="Kinematics"):
+        fit_angle_model([], {"periods": {}}, 4)
+    with pytest.raises(ValueError, match="strictly increasing"):
+        gauge_train("sun", "sun", [1.0, 0.5], np.array([0, 1]), np.array([0, 1]), frac, 25)
+    with pytest.raises(ValueError, match="disagree"):
+        gauge_train("sun", "sun", [0.0, 0.5], np.array([0, 2]), np.array([0, 1]), frac, 25)
+    with pytest.raises(ValueError, match="gear"):
+        gauge_train("x", "planet", [0.0], np.array([0]), np.array([0]), frac, 25)
+    with pytest.raises(ValueError, match="order"):
+        gauge_train("sun", "sun", [0.0], np.array([0]), np.array([0]), frac, 25, order=0)
+    with pytest.raises(TypeError, match="integer"):
+        gauge_train("sun", "sun", [0.0], np.array([0.0]), np.array([0]), frac, 25)
+    with pytest.raises(ValueError, match="cycles_per_rev"):
+        tacho_train([0.0, 1.0], -1.0)
+    with pytest.raises(ValueError, match="n_planets"):
+        fit_angle_model([], kinematics(25, 87, 29), 0)
+
+
+def test_revolution_numbers_moved_here_still_bridge():
+    assert revolution_numbers([0, 1, 2, 4, 5]).tolist() == [0, 1, 2, 4, 5]
+
+
+def test_model_diagnostics_are_json_friendly():
+    import json
+
+    g, sp = rig()
+    trains, _ = trains_from_truth(g, sp, SpeedProfile(), 60.0)
+    m = fit_angle_model(trains, kinematics(25, 87, 29, fixed="ring"), 4)
+    assert isinstance(m, AngleModel)
+    s = json.loads(json.dumps(m.summary()))
+    assert s["rank"] == m.rank and s["trains"][0]["name"] == "sun"
+    with pytest.raises(KeyError, match="trains"):
+        m.train("nope")
+    assert isinstance(kinematics(25, 87), Kinematics)
