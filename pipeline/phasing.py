@@ -65,6 +65,7 @@ __all__ = [
     "GaugeLabels",
     "PhasingResult",
     "measure_phasing",
+    "relabel_gauge",
 ]
 
 TWO_PI = 2.0 * math.pi
@@ -879,6 +880,12 @@ class PhasingResult:
     labels_relative : list of str
         Gears whose planet 1 is only the first pulse seen (no absolute reference).
     notes : list of str
+    trains : dict of str to PassTrain
+        The angle trains by channel (what :func:`relabel_gauge` recomputes from).
+    fractions : dict of str to ndarray
+        Each channel's planet fractions in pass order [-].
+    gaps : ndarray or None
+        Gap intervals used [s].
     """
 
     tables: dict
@@ -889,6 +896,33 @@ class PhasingResult:
     reliability: dict
     labels_relative: list
     notes: list = field(default_factory=list)
+    trains: dict = field(default_factory=dict)
+    fractions: dict = field(default_factory=dict)
+    gaps: np.ndarray | None = None
+
+
+def relabel_gauge(result: PhasingResult, gear: str, shift: int, gearset) -> tuple:
+    """(PassTable, GaugeLabels) of ``gear``'s main gauge with planet 1 moved ``shift`` places
+    along its pass order, recomputed from the same angle model (a cyclic relabelling of a
+    symmetric layout: what :func:`pipeline.stages.stage_identify` tries when a gauge's labels
+    are only relative)."""
+    from .angles import relabel_train
+
+    lab = result.labels[gear]
+    tr = result.trains[lab.channel]
+    frac = result.fractions[lab.channel]
+    n = gearset.n_planets
+    new_tr = relabel_train(tr, shift, frac, n)
+    z = gearset.z_sun if gear == "sun" else gearset.z_ring
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ProcessingWarning)
+        tab = phasing_from_model(result.model, new_tr, z, n, gauge=gear, gaps=result.gaps)
+    tab.time_origin = result.tables[gear].time_origin if gear in result.tables else 0.0
+    seq = np.argsort(frac, kind="stable")
+    pl, pos = _shift_labels(lab.planet, lab.position, seq, shift)
+    new_lab = GaugeLabels(lab.channel, lab.times, lab.amplitude, lab.sigma, pl, pos,
+                          lab.decided_by, lab.n_unassigned)
+    return tab, new_lab
 
 
 def _ring_loads(lab: GaugeLabels, n: int):
@@ -1046,7 +1080,9 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
                 tab = phasing_from_model(model, tr, z, n, gauge=gear, gaps=gaps)
             tables[gear] = tab
             reliability[gear] = _reliability(model, tr, tab)
-    return PhasingResult(tables, labels, model, fixed, fixed_reason, reliability, relative, notes)
+    return PhasingResult(tables, labels, model, fixed, fixed_reason, reliability, relative, notes,
+                         dict(train_of), {nm: v[1] for nm, v in all_labels.items()},
+                         None if gaps is None else np.asarray(gaps, dtype=float))
 
 
 def _align_labels(trains, train_of, all_labels, labels, kin, n, notes):

@@ -325,32 +325,37 @@ def _usable(on, x, fs: float, t0: float) -> np.ndarray:
     return ok | (gap_only & clean)
 
 
-#: finest onset timing claimed on noise-free data [samples]
-ONSET_RESOLUTION = 0.05
+#: finest onset timing claimed on noise-free data, as a fraction of the pulse's FWHM [-]
+ONSET_RESOLUTION = 1e-4
 
 
 def _onset_sigma(on, noise_rms: float) -> np.ndarray:
     """Per-onset timing uncertainty [s]: the Cramer-Rao bound for the learnt template at the
     fitted amplitude in white noise of the conditioned channel's RMS, sigma / sqrt(sum (ds/dt)^2)
-    (Kay 1993, eq. 3.14); the onset tests hold the detector within ~1.1x of it. NaN when the
-    noise level is unknown."""
+    (Kay 1993, eq. 3.14); the onset tests hold the detector within ~1.1x of it.
+
+    It never claims better than the detector resolves a noise-free pulse: its sub-sample
+    interpolation leaves an error that repeats with the pulse's position on the sample grid,
+    ~1e-4 of the pulse's FWHM (noise-free seed rig at 5120 Hz, FWHM 650 samples: 6.6 us sun,
+    4.1 us ring RMS; Table 1 at 51.2 kHz, FWHM 34 samples: 0.004 sample), so
+    ``ONSET_RESOLUTION`` times the template's FWHM is a floor. NaN without a template."""
     out = np.full(len(on), np.nan)
-    if not len(on) or not (isinstance(noise_rms, float) and math.isfinite(noise_rms)) or noise_rms <= 0:
+    if not len(on) or not on.templates:
         return out
+    tid = np.clip(on.template_id, 0, len(on.templates) - 1)
+    has = on.template_id >= 0
+    floor = np.array([ONSET_RESOLUTION * tp.fwhm for tp in on.templates])[tid]
+    floor = np.where(has, floor, np.nan)
+    if not (isinstance(noise_rms, float) and math.isfinite(noise_rms)) or noise_rms <= 0:
+        return floor
     info = []
     for tp in on.templates:
         d = np.gradient(np.asarray(tp.samples, dtype=float)) * tp.rate   # [1/s], peak 1
         info.append(tp.decimation * float(np.sum(d * d)))                 # per original sample
-    info = np.asarray(info)
-    ok = (on.template_id >= 0) & (on.template_id < info.size)
-    s2 = np.where(ok, info[np.clip(on.template_id, 0, max(0, info.size - 1))], np.nan) if info.size else np.full(len(on), np.nan)
+    s2 = np.where(has, np.asarray(info)[tid], np.nan)
     with np.errstate(divide="ignore", invalid="ignore"):
         out = noise_rms / (np.abs(on.amplitude) * np.sqrt(s2))
-    # the detector's own resolution on noise-free data: its sub-sample interpolation leaves a
-    # bias of up to ~0.03 sample that repeats with the pulse's position on the sample grid
-    # (seed rig, noise-free: 6.6 us sun / 4.1 us ring RMS at 5120 Hz); the bound never
-    # claims better than ONSET_RESOLUTION
-    out = np.fmax(out, ONSET_RESOLUTION / on.fs)
+    out = np.fmax(out, floor)
     return np.where(np.isfinite(out), out, np.nan)
 
 
@@ -604,10 +609,38 @@ def stage_tolerance(ctx: RunContext) -> None:
 
 def stage_identify(ctx: RunContext) -> None:
     from .compare import identify_errors
+    from .phasing import relabel_gauge
 
     g = _gearset(ctx)
-    tables = [t for t in ctx.results["phasing"]["tables"].values() if len(t)]
-    ident = identify_errors(tables, g)
+    ph = ctx.results["phasing"]
+    tables = {k: t for k, t in ph["tables"].items() if len(t)}
+    ident = identify_errors(list(tables.values()), g)
+    res = ph.get("result")
+    # a gauge whose planet numbering is only relative is tried in every cyclic relabelling:
+    # the error model ties the gauges' numberings together (a planet's offset moves its mean
+    # phasing on both), and a relabelling is kept only where it halves the joint residual
+    relative = [gear for gear in ph.get("labels_relative", []) if gear in tables]
+    if res is not None and res.model is not None and len(tables) > 1 and relative:
+        for gear in relative[:1]:
+            best = (ident.rms_after, 0, ident, None, None)
+            for shift in range(1, g.n_planets):
+                tab, lab = relabel_gauge(res, gear, shift, g)
+                if not len(tab):
+                    continue
+                cand = identify_errors([tab if k == gear else t for k, t in tables.items()], g)
+                if cand.rms_after < best[0]:
+                    best = (cand.rms_after, shift, cand, tab, lab)
+            if best[1] and best[0] <= 0.5 * ident.rms_after:
+                _, shift, ident, tab, lab = best
+                lab.decided_by = "identification"
+                res.tables[gear], res.labels[gear] = tab, lab
+                ph["tables"][gear] = tab
+                ph["labels"][gear] = lab.as_tuple()
+                ph["assignment"][gear] = {"shift_decided_by": "identification",
+                                          "n_unassigned": lab.n_unassigned, "ambiguous": False}
+                ph["labels_relative"] = [x for x in ph["labels_relative"] if x != gear]
+                ident.notes.append(f"{gear} gauge relabelled by {shift} place(s): the error model "
+                                   "fits both gauges only with the planets numbered alike")
     ctx.results["identify"] = ident
     ctx.error_estimates["identify"] = (f"residual RMS {ident.rms_before:.2e} -> {ident.rms_after:.2e} "
                                        f"cycles over {ident.n_passes} passes")
