@@ -70,7 +70,7 @@ from scipy import ndimage, signal
 from .errors import DataQualityWarning, ProcessingWarning
 from .log import logger
 from .quality import clipped_runs as _clipped_runs
-from .quality import CLIP_MIN_RUN, DROPOUT_MIN_RUN, FALSE_ALARM, find_runs, flat_runs
+from .quality import DROPOUT_MIN_RUN, FALSE_ALARM, find_runs, flat_runs, outside_runs
 from .recording import Recording
 from .validate import as_signal, as_choice, as_float, as_nonnegative, as_positive, as_positive_int
 
@@ -741,8 +741,9 @@ class ChannelQuality:
         Runs of NaN only.
     clipped_runs : ndarray of int64, shape (k, 2)
         Clipped samples, found on the raw data: runs of >= ``clip_min_run`` samples held at
-        the channel's extreme value (converter saturation) and clipped plateaus at any level
-        (:func:`pipeline.quality.flat_runs`), merged.
+        the channel's extreme value (converter saturation; not when the run is a dropout
+        that happens to sit at the extreme, e.g. zeros on a positive channel) and clipped
+        plateaus at any level (:func:`pipeline.quality.flat_runs`), merged.
     snr_db : float
         Peak-power SNR estimate [dB] (:func:`estimate_snr`), NaN when unknown.
     signal_peak : float
@@ -991,6 +992,7 @@ def assess_quality(x, fs: float, *, t0: float = 0.0, name: str = "", clip_min_ru
     if detect_flat:
         fr = flat_runs(x, false_alarm=false_alarm, min_run=dropout_min_run,
                        clip_min_run=clip_min_run)
+        clipped = outside_runs(clipped, fr.dropout_runs)   # a dropout at the rail is no clip
         if len(fr.clipped_runs):
             clipped = merge_runs(np.concatenate([clipped, fr.clipped_runs]))
         extra = dict(dropout_runs=fr.dropout_runs, dropout_min_run=fr.min_run,

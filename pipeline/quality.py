@@ -48,7 +48,9 @@ tells them apart; every step is a vectorised pass over the samples (``np.diff``,
      noise a step of more than 5 sigma has probability ~1e-6);
    - ``v`` is not exactly 0.0 (the fill value of dropping DAQs).
 
-   A dropout therefore sits at 0, or at an arbitrary mid-signal value that the signal
+   A run at the channel's extreme finite value (its rail) that is not 0.0 is a clip whatever
+   the tests above say (converter saturation, the rule of :func:`clipped_runs`; a DAQ error
+   code written at full scale reads the same). A dropout therefore sits at 0, or at an arbitrary mid-signal value that the signal
    passes through (a held sample on a pulse flank: the signal is above it on one side), or
    on the baseline, or ends with a jump (a hold that outlasts the pulse it started on: the
    signal is back at the baseline when the DAQ recovers). The one ambiguous case, a sample
@@ -84,7 +86,7 @@ import numpy as np
 
 __all__ = ["find_runs", "nonfinite_runs", "clipped_runs", "channel_quality", "equal_runs",
            "quantisation_step", "chance_min_run", "FlatRuns", "flat_runs", "dropout_runs",
-           "plateau_runs", "FALSE_ALARM", "DROPOUT_MIN_RUN", "CLIP_MIN_RUN"]
+           "plateau_runs", "outside_runs", "FALSE_ALARM", "DROPOUT_MIN_RUN", "CLIP_MIN_RUN"]
 
 #: Expected number of chance runs over a channel below which a run is significant [-].
 FALSE_ALARM = 1e-3
@@ -394,7 +396,8 @@ class FlatRuns:
     p_equal : float
         Upper estimate of the probability that a run of equal samples continues [-].
     quant_step : float
-        Quantisation step used [units]; 0.0 for continuous data or when not examined.
+        Quantisation step found [units]; 0.0 for continuous data or when not examined (it
+        is, when at least 30 runs of 3 or more equal samples exist, or any candidate run).
     smooth : bool or None
         The channel has no sample-level noise (None: not examined, no candidate run).
     """
@@ -449,7 +452,7 @@ def flat_runs(x, *, false_alarm: float = FALSE_ALARM, min_run: int = DROPOUT_MIN
     thr_drop, thr_clip = max(min_run, chance), max(clip_min_run, chance)
     cand = lengths >= min(thr_drop, thr_clip)
     if not cand.any():
-        return FlatRuns(empty, empty.copy(), thr_drop, thr_clip, p)
+        return FlatRuns(empty, empty.copy(), thr_drop, thr_clip, p, q or 0.0)
     runs, lengths = runs[cand], lengths[cand]
     a, b = runs[:, 0], runs[:, 1]
     v = x[a]
@@ -507,7 +510,9 @@ def flat_runs(x, *, false_alarm: float = FALSE_ALARM, min_run: int = DROPOUT_MIN
         steep &= np.isnan(m) | ((inner > _STEEP_STEPS * q) & (inner > 0.0))
     away = sgn * (cv - med) > 3.0 * sigma + q
     cjump = _jumps(x, ca, cb, cv, q, sigma)
-    cclip = (sgn != 0) & steep & away & ~cjump & (cv != 0.0) & (longest >= thr_clip)
+    fin_x = x[np.isfinite(x)]
+    rail = (cv == fin_x.max()) | (cv == fin_x.min())
+    cclip = (((sgn != 0) & steep & away & ~cjump) | rail) & (cv != 0.0) & (longest >= thr_clip)
     clip = cclip[cid]
 
     # ---- dropouts: everything else significant, except a noise-free channel's rest level
@@ -552,6 +557,28 @@ def _merge_sorted(r: np.ndarray) -> np.ndarray:
                     axis=1).astype(np.int64)
 
 
+def _as_runs(runs, name: str) -> np.ndarray:
+    r = np.asarray(runs)
+    if r.size == 0:
+        return np.empty((0, 2), dtype=np.int64)
+    if r.dtype.kind not in "iu":
+        raise TypeError(f"{name} must be integer [start, stop) rows, got dtype {r.dtype}")
+    if r.ndim != 2 or r.shape[1] != 2:
+        raise ValueError(f"{name} must have shape (k, 2), got {r.shape}")
+    return r.astype(np.int64)
+
+
+def outside_runs(runs, cover) -> np.ndarray:
+    """The rows of ``runs`` not contained in one row of ``cover`` (both ``[start, stop)``;
+    ``cover`` sorted and disjoint), e.g. rail runs that are really dropouts at the rail."""
+    r, c = _as_runs(runs, "runs"), _as_runs(cover, "cover")
+    if len(r) == 0 or len(c) == 0:
+        return r
+    j = np.searchsorted(c[:, 0], r[:, 0], side="right") - 1
+    inside = (j >= 0) & (r[:, 1] <= c[np.maximum(j, 0), 1])
+    return r[~inside]
+
+
 def dropout_runs(x, **kwargs) -> np.ndarray:
     """Dropout runs of one channel, ``[start, stop)`` rows (:func:`flat_runs`)."""
     return flat_runs(x, **kwargs).dropout_runs
@@ -580,8 +607,9 @@ def channel_quality(x, *, kind: str | None = None) -> dict:
     dict
         ``n_samples``, ``n_nonfinite``, ``nonfinite_runs`` (list of [start, stop)),
         ``longest_nonfinite_run``, ``n_clipped_runs``, ``clipped_runs`` (runs at the
-        channel's extreme values and, for analogue channels, clipped plateaus at any level
-        from :func:`flat_runs`, merged), ``n_dropout_runs``, ``dropout_runs``,
+        channel's extreme values that are not dropouts and, for analogue channels, clipped
+        plateaus at any level from :func:`flat_runs`, merged), ``n_dropout_runs``,
+        ``dropout_runs``,
         ``n_dropout_samples``, ``longest_dropout_run``, ``dropout_min_run`` (threshold used
         [samples]; None when not examined), ``min``, ``max``, ``rms`` (of finite samples; NaN
         when none is finite).
@@ -596,6 +624,7 @@ def channel_quality(x, *, kind: str | None = None) -> dict:
     else:
         fr = flat_runs(x)
         dr, thr = fr.dropout_runs, fr.min_run
+        cl = outside_runs(cl, dr)             # a dropout at the channel's min/max is no clip
         if len(fr.clipped_runs):
             cl = _merge_sorted(np.concatenate([cl, fr.clipped_runs]))
     finite = x[np.isfinite(x)]
