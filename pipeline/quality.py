@@ -68,8 +68,10 @@ tells them apart; every step is a vectorised pass over the samples (``np.diff``,
    over the samples within ``q`` of its level that follow each other with gaps of at most
    ``clip(L // 4, clip_min_run, 16)`` samples (searching up to 512 samples beyond each end);
    overlapping extents form one cluster, classified once (the tests above, on the cluster's
-   extent, at the level of its longest run). A clipped cluster is reported whole; a dropout
-   is reported as its exact run of equal samples.
+   extent, at the level of its longest run); runs at other levels (a dropout inside a
+   clipped pulse) stay apart, and an end that borders another flat run gives no evidence
+   for the jump and steepness tests. A clipped cluster is reported whole; a dropout is
+   reported as its exact run of equal samples.
 
 Flagged sample ranges: a dropout writing zeros is flagged exactly; a held-value dropout
 starts one sample early (the last good sample equals its held copies and is
@@ -346,20 +348,27 @@ def _side(x: np.ndarray, edge: np.ndarray, width: int, direction: int) -> np.nda
 
 
 def _jumps(x: np.ndarray, a: np.ndarray, b: np.ndarray, v: np.ndarray, q: float,
-           sigma: float) -> np.ndarray:
+           sigma: float, flat: np.ndarray) -> np.ndarray:
     """Whether the flat runs ``[a, b)`` at level ``v`` are entered or left by a jump: a step
     from the sample beyond an end to ``v`` above ``_JUMP_FACTOR`` times the larger of the
     median absolute difference of the 8 samples beyond that end and the channel's noise
     ``sigma``, plus ``2 q`` (a clip is reached and left at the pulse's own pace; a dropout
-    falls to zero or ends where the signal went)."""
+    falls to zero or ends where the signal went). A neighbour inside another of the sorted,
+    disjoint ``flat`` runs (a dropout next to a plateau) is no evidence either way."""
     jump = np.zeros(a.size, dtype=bool)
     for edge, direction in ((a - 1, -1), (b, +1)):
         sd = _side(x, edge, 9, direction)
         scale = np.nan_to_num(_row_nanmedian(np.abs(np.diff(sd, axis=1))), nan=0.0)
         scale = np.maximum(scale, sigma)
         with np.errstate(invalid="ignore"):
-            jump |= np.abs(sd[:, 0] - v) > _JUMP_FACTOR * scale + 2.0 * q
+            jump |= ~_in_runs(edge, flat) & (np.abs(sd[:, 0] - v) > _JUMP_FACTOR * scale + 2.0 * q)
     return jump
+
+
+def _in_runs(i: np.ndarray, runs: np.ndarray) -> np.ndarray:
+    """Whether each index ``i`` lies inside one of the sorted, disjoint ``[start, stop)`` runs."""
+    j = np.searchsorted(runs[:, 0], i, side="right") - 1
+    return (j >= 0) & (i < runs[np.maximum(j, 0), 1])
 
 
 def _row_nanmedian(a: np.ndarray) -> np.ndarray:
@@ -461,16 +470,20 @@ def flat_runs(x, *, false_alarm: float = FALSE_ALARM, min_run: int = DROPOUT_MIN
         med, sigma = _robust_level(x)
 
     # ---- each candidate extended over the samples at its level (a clip's fragments);
-    # overlapping extents form one cluster, classified once at its longest run's level
+    # overlapping extents at one level (values within q) form a cluster, classified once
     k = runs.shape[0]
     ext = runs.copy()
     level = (v != 0.0) & (np.abs(v - med) > 3.0 * sigma + q)      # could be a clip level
     if level.any():
         ext[level] = _extend(x, runs[level], v[level], q, clip_min_run)
-    order = np.argsort(ext[:, 0], kind="stable")
-    ends = np.maximum.accumulate(ext[order, 1])
+    vs = np.argsort(v, kind="stable")
+    grp = np.empty(k, dtype=np.int64)
+    grp[vs] = np.cumsum(np.concatenate([[0], np.diff(v[vs]) > q]))
+    off = grp * (x.size + 1)                             # groups never overlap each other
+    order = np.lexsort((ext[:, 0], grp))
+    ends = np.maximum.accumulate(ext[order, 1] + off[order])
     new = np.ones(k, dtype=bool)
-    new[1:] = ext[order[1:], 0] > ends[:-1]
+    new[1:] = ext[order[1:], 0] + off[order[1:]] > ends[:-1]
     cid = np.empty(k, dtype=np.int64)
     cid[order] = np.cumsum(new) - 1
     nc = int(new.sum())
@@ -504,12 +517,12 @@ def flat_runs(x, *, false_alarm: float = FALSE_ALARM, min_run: int = DROPOUT_MIN
     jj = np.arange(int(dd.max()))[None, :]
     far = (jj >= (dd // 2 - 1)[:, None]) & (jj < dd[:, None])
     steep = np.ones(nc, dtype=bool)
-    for sd in (left, right):
+    for sd, edge in ((left, ca - 1), (right, cb)):
         m = _row_nanmean(np.where(far, sd[:, :far.shape[1]], np.nan))
         inner = sgn * (cv - m)
-        steep &= np.isnan(m) | ((inner > _STEEP_STEPS * q) & (inner > 0.0))
+        steep &= np.isnan(m) | _in_runs(edge, runs) | ((inner > _STEEP_STEPS * q) & (inner > 0.0))
     away = sgn * (cv - med) > 3.0 * sigma + q
-    cjump = _jumps(x, ca, cb, cv, q, sigma)
+    cjump = _jumps(x, ca, cb, cv, q, sigma, runs)
     fin_x = x[np.isfinite(x)]
     rail = (cv == fin_x.max()) | (cv == fin_x.min())
     cclip = (((sgn != 0) & steep & away & ~cjump) | rail) & (cv != 0.0) & (longest >= thr_clip)
@@ -521,7 +534,7 @@ def flat_runs(x, *, false_alarm: float = FALSE_ALARM, min_run: int = DROPOUT_MIN
     if drop.any():
         smooth = _is_smooth(x)
         if smooth:
-            drop &= _jumps(x, a, b, v, q, sigma) | ~has_any[cid]
+            drop &= _jumps(x, a, b, v, q, sigma, runs) | ~has_any[cid]
     clipped = np.stack([ca[cclip], cb[cclip]], axis=1).astype(np.int64)
     return FlatRuns(runs[drop], clipped, thr_drop, thr_clip, p, q, smooth)
 

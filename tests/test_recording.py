@@ -474,6 +474,15 @@ def test_flat_runs_tell_a_clip_from_a_dropout():
     fr = flat_runs(-x)
     assert fr.clipped_runs.tolist() == [[first, last + 1]]
     assert fr.dropout_runs.tolist() == [[2150, 2250], [3549, 3650]]
+    # a dropout inside a clipped plateau stays a dropout, the plateau on either side a clip
+    # (a step into another flat run is no jump; runs at other levels do not join a cluster)
+    y = x.copy()
+    y[5000:5400] = np.minimum(y[5000:5400], 0.9)
+    c5 = 5000 + np.flatnonzero(y[5000:5400] == 0.9)[[0, -1]]
+    y[5190:5210] = 0.0
+    fr = flat_runs(y)
+    assert fr.dropout_runs.tolist() == [[2150, 2250], [3549, 3650], [5190, 5210]]
+    assert fr.clipped_runs.tolist() == [[first, last + 1], [c5[0], 5190], [5210, c5[1] + 1]]
 
 
 def test_channel_quality_lists_dropouts_and_skips_a_tacho():
