@@ -16,9 +16,10 @@ tells them apart; every step is a vectorised pass over the samples (``np.diff``,
    that a run of equal samples continues (for independent repeats this is the probability
    that two consecutive samples are equal), a run of ``L`` samples has probability
    ``~p^(L-1)`` per position, and the expected number of chance runs that long in ``N``
-   finite samples is ``N p^(L-1)``. Runs for which this is below ``false_alarm`` (default
-   1e-3) are *significant*: ``L >= 1 + ceil(log(false_alarm / N) / log p)``, never below
-   the floors ``min_run`` (dropouts, default 4) and ``clip_min_run`` (plateaus, default 3).
+   finite samples is ``N p^(L-1)``. Runs at least as long as the smallest ``L`` with
+   ``N p^(L-1) < false_alarm`` (default 1e-3; :func:`chance_min_run`) are *significant*,
+   never shorter than the floors ``min_run`` (dropouts, default 4) and ``clip_min_run``
+   (plateaus, default 3).
    ``p`` is estimated from the run-length survival counts ``S(k)`` (number of runs of at
    least ``k`` samples) as the largest continuation ratio ``S(k+1) / S(k)``, k = 1..3, each
    an upper 97.5 % Poisson bound (``(c + 2 sqrt(c) + 3) / S(k)``, c = S(k+1)). The ratios
@@ -30,8 +31,9 @@ tells them apart; every step is a vectorised pass over the samples (``np.diff``,
    part of the run-length tail), cannot be dragged up by the faults themselves (each fault
    is one run among ~N, whatever its length), and is ~0 for float64 or 24-bit noisy data
    (threshold = the floor: such data never repeat a value by chance).
-3. **Clipped plateau or dropout.** A significant run at level ``v`` is a *clipped plateau*
-   when all of these hold, else a *dropout*:
+3. **Clipped plateau or dropout.** A significant run at level ``v`` (with the fragments of
+   its plateau, step 5; ``L`` below is the extent of the whole cluster) is a *clipped
+   plateau* when all of these hold, else a *dropout*:
 
    - it bounds the signal around it: every finite sample within ``clip(2 L, 8, 128)``
      samples on either side lies on one side of ``v`` (below for a top clip, above for a
@@ -50,10 +52,11 @@ tells them apart; every step is a vectorised pass over the samples (``np.diff``,
 
    A run at the channel's extreme finite value (its rail) that is not 0.0 is a clip whatever
    the tests above say (converter saturation, the rule of :func:`clipped_runs`; a DAQ error
-   code written at full scale reads the same). A dropout therefore sits at 0, or at an arbitrary mid-signal value that the signal
-   passes through (a held sample on a pulse flank: the signal is above it on one side), or
-   on the baseline, or ends with a jump (a hold that outlasts the pulse it started on: the
-   signal is back at the baseline when the DAQ recovers). The one ambiguous case, a sample
+   code written at full scale reads the same). A dropout therefore sits at 0, or at an
+   arbitrary mid-signal value that the signal passes through (a held sample on a pulse
+   flank: the signal is above it on one side), or on the baseline, or ends with a jump (a
+   hold that outlasts the pulse it started on: the signal is back at the baseline when the
+   DAQ recovers). The one ambiguous case, a sample
    held briefly at a pulse's own maximum (no jump when it ends), is reported as clipped;
    either flag takes the pulse out of the clean set.
 4. **Noise-free channels.** In a channel without sample-level noise (synthetic, noise-free
@@ -64,19 +67,31 @@ tells them apart; every step is a vectorised pass over the samples (``np.diff``,
    inside a pulse, or the signal having moved on during a hold). A dropout at exactly the
    rest level of a noise-free channel is undetectable, and harmless.
 5. **Clip extent.** Noise makes the signal dip below a clip level near the plateau's ends,
-   splitting the clipped samples into fragments. Every significant run is first extended
-   over the samples within ``q`` of its level that follow each other with gaps of at most
-   ``clip(L // 4, clip_min_run, 16)`` samples (searching up to 512 samples beyond each end);
-   overlapping extents form one cluster, classified once (the tests above, on the cluster's
-   extent, at the level of its longest run); runs at other levels (a dropout inside a
-   clipped pulse) stay apart, and an end that borders another flat run gives no evidence
-   for the jump and steepness tests. A clipped cluster is reported whole; a dropout is
-   reported as its exact run of equal samples.
+   splitting the clipped samples into fragments. Every significant run whose level could
+   be a clip (not 0.0, away from the baseline) is first extended over the samples within
+   ``q`` of its level that follow each other with gaps of at most
+   ``clip(L // 4, clip_min_run, 128)`` samples (searching up to 512 samples beyond each
+   end); overlapping extents at one level (values within ``q``) form a cluster, classified
+   once (the tests above, on the cluster's extent, at the level of its longest run). Runs
+   at other levels (a dropout inside a clipped pulse) stay apart, and an end that borders
+   another flat run gives no evidence for the jump and steepness tests. A clipped cluster
+   is reported whole, from its first to its last sample at the level (the dips between are
+   inside); a dropout is reported as its exact run of equal samples.
 
 Flagged sample ranges: a dropout writing zeros is flagged exactly; a held-value dropout
 starts one sample early (the last good sample equals its held copies and is
 indistinguishable from them), and in a quantised channel it also takes in the following
 samples that happen to equal the held value (probability ``p`` each).
+
+Limits: a dropout shorter than the threshold is not seen (with 1 LSB of noise on a 16-bit
+channel the threshold is ~21 samples: below that, chance repeats are as likely); neither is
+one at the rest level of a noise-free channel, nor a channel that is constant throughout
+(one run: no statistics to call it improbable). A clip followed by more than one step of
+noise (added downstream of the saturating stage) is not flat and is not found. At 20 dB
+SNR a few isolated samples that the noise lifted over the clip level, far out on the
+flanks, stay outside the reported extent. Pulse trains (a tacho) are flat by design: do
+not pass them. Cost on clean float data: one comparison pass and ``np.flatnonzero``, a few
+ms per million samples; the candidate runs add work in proportion to their number.
 """
 
 from __future__ import annotations
@@ -603,6 +618,13 @@ def plateau_runs(x, **kwargs) -> np.ndarray:
     return flat_runs(x, **kwargs).clipped_runs
 
 
+def _pulse_train(x: np.ndarray) -> bool:
+    """True when the finite samples take at most 8 distinct values (4096 strided ones)."""
+    xs = x[:: max(1, x.size // 4096)]
+    xs = xs[np.isfinite(xs)]
+    return xs.size > 0 and np.unique(xs).size <= 8
+
+
 def channel_quality(x, *, kind: str | None = None) -> dict:
     """Summary of one channel: counts and runs of non-finite, dropout and clipped samples, range.
 
@@ -613,7 +635,9 @@ def channel_quality(x, *, kind: str | None = None) -> dict:
     kind : str, optional
         Channel kind (:class:`pipeline.recording.ChannelSpec`). A "tacho" is a pulse train,
         flat by design: its dropout and plateau analysis is skipped (the rail runs at its
-        two levels are still listed as clipped, as before).
+        two levels are still listed as clipped, as before). Without a kind, a channel whose
+        finite samples take at most 8 distinct values (among 4096 evenly strided ones) is
+        taken for a pulse train; an analogue channel shows hundreds.
 
     Returns
     -------
@@ -632,7 +656,7 @@ def channel_quality(x, *, kind: str | None = None) -> dict:
         raise TypeError(f"kind must be a string or None, got {type(kind).__name__} {kind!r}")
     nf = nonfinite_runs(x)
     cl = clipped_runs(x)
-    if kind == "tacho" or x.size == 0:
+    if kind == "tacho" or x.size == 0 or (kind is None and _pulse_train(x)):
         dr, thr = np.empty((0, 2), dtype=np.int64), None
     else:
         fr = flat_runs(x)

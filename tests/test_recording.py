@@ -496,6 +496,8 @@ def test_channel_quality_lists_dropouts_and_skips_a_tacho():
     assert channel_quality(tacho, kind="tacho")["n_dropout_runs"] == 0
     assert channel_quality(tacho, kind="tacho")["dropout_min_run"] is None
     assert channel_quality(tacho, kind="tacho")["clipped_runs"] == clipped_runs(tacho).tolist()
+    assert channel_quality(tacho) == channel_quality(tacho, kind="tacho")   # recognised as such
+    assert channel_quality(x, kind="sun") == q
     e = channel_quality(np.array([]))
     assert e["dropout_runs"] == [] and e["n_dropout_runs"] == 0 and e["longest_dropout_run"] == 0
     with pytest.raises(TypeError, match="kind"):
