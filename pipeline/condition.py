@@ -15,9 +15,23 @@ Steps
     Mains hum (50/60 Hz and harmonics) notches (:func:`scipy.signal.iirnotch`, zero-phase),
     applied only to the lines :func:`detect_hum` finds above the local noise floor.
 ``assess_quality``
-    Gaps (non-finite runs), NaN runs, clipped runs and an SNR estimate, as a
-    :class:`ChannelQuality` that the onset stage respects (pulses overlapping a gap or a
-    clipped run are flagged, no onset is placed inside a gap).
+    Gaps (non-finite runs), NaN runs, DAQ dropout runs (exact zeros or a held value),
+    clipped runs (at the rails, or plateaus at any level) and an SNR estimate, as a
+    :class:`ChannelQuality` that the onset stage respects (pulses overlapping a gap, a
+    dropout or a clipped run are flagged, no onset is placed inside a gap or a dropout).
+    :func:`gap_intervals` lists a channel's gaps and dropouts in seconds.
+
+Dropouts and clipped plateaus
+-----------------------------
+A DAQ that drops samples may write exact zeros or hold its last sample instead of NaN; an
+ADC or amplifier stage may saturate below the nominal full scale, or on one polarity only.
+:func:`pipeline.quality.flat_runs` finds both on the raw data, with a run-length threshold
+from the channel's own statistics (a quantised quiet channel repeats values by chance) and
+tells them apart by where the flat run sits: a clip bounds a pulse extreme and is entered
+steeply, a dropout sits at 0 or at a value the signal passes through (see that module's
+docstring for the rule). :func:`condition_recording` sets dropout samples to NaN before
+filtering (``dropouts="nan"``): the filters then neither ring on the dropout's steps nor
+treat fake samples as data, and every later stage sees an ordinary gap.
 
 Defaults relative to the mesh frequency
 ---------------------------------------
@@ -56,7 +70,7 @@ from scipy import ndimage, signal
 from .errors import DataQualityWarning, ProcessingWarning
 from .log import logger
 from .quality import clipped_runs as _clipped_runs
-from .quality import find_runs
+from .quality import DROPOUT_MIN_RUN, FALSE_ALARM, find_runs, flat_runs, outside_runs
 from .recording import Recording
 from .validate import as_signal, as_choice, as_float, as_nonnegative, as_positive, as_positive_int
 
@@ -65,7 +79,7 @@ __all__ = [
     "default_band", "design_filter", "filter_signal", "remove_drift", "drift_baseline",
     "detect_hum", "notch_hum", "assess_quality", "estimate_noise", "estimate_snr",
     "filter_recording", "remove_drift_recording", "notch_hum_recording",
-    "assess_quality_recording", "condition_recording", "merge_runs",
+    "assess_quality_recording", "condition_recording", "merge_runs", "gap_intervals",
     "DEFAULT_HIGHPASS_HZ", "DEFAULT_DRIFT_WINDOW_S",
 ]
 
@@ -721,12 +735,15 @@ class ChannelQuality:
     n_samples : int
     gap_runs : ndarray of int64, shape (k, 2)
         Gaps: runs of non-finite samples (NaN, +-inf; missing samples are stored as NaN by
-        the readers and the streaming stages).
+        the readers and the streaming stages). Dropouts are listed apart
+        (``dropout_runs``); :meth:`all_gap_runs` merges both.
     nan_runs : ndarray of int64, shape (k, 2)
         Runs of NaN only.
     clipped_runs : ndarray of int64, shape (k, 2)
-        Runs of >= ``clip_min_run`` samples held at the channel's extreme value (converter
-        saturation), found on the raw data.
+        Clipped samples, found on the raw data: runs of >= ``clip_min_run`` samples held at
+        the channel's extreme value (converter saturation; not when the run is a dropout
+        that happens to sit at the extreme, e.g. zeros on a positive channel) and clipped
+        plateaus at any level (:func:`pipeline.quality.flat_runs`), merged.
     snr_db : float
         Peak-power SNR estimate [dB] (:func:`estimate_snr`), NaN when unknown.
     signal_peak : float
@@ -738,6 +755,17 @@ class ChannelQuality:
         (set by :func:`condition_recording`; the onset stage flags pulses that close).
     hum : HumReport or None
         Mains hum found (None when not examined).
+    dropout_runs : ndarray of int64, shape (k, 2)
+        DAQ dropouts found on the raw data: runs of exact zeros or of one held value longer
+        than chance allows (:func:`pipeline.quality.flat_runs`); gaps for every later stage.
+    dropout_min_run : int or None
+        Shortest run of equal samples counted as a dropout on this channel [samples] (None:
+        not examined).
+    p_equal : float
+        Estimated probability that a run of equal samples continues, by chance [-] (NaN:
+        not examined).
+    quant_step : float
+        Quantisation step found [units]; 0.0 for continuous data or when not examined.
     """
 
     name: str
@@ -752,6 +780,10 @@ class ChannelQuality:
     noise_rms: float = float("nan")
     settle: float = 0.0
     hum: HumReport | None = None
+    dropout_runs: np.ndarray = field(default_factory=lambda: np.empty((0, 2), dtype=np.int64))
+    dropout_min_run: int | None = None
+    p_equal: float = float("nan")
+    quant_step: float = 0.0
 
     @property
     def n_gap_samples(self) -> int:
@@ -764,25 +796,44 @@ class ChannelQuality:
         return int((self.clipped_runs[:, 1] - self.clipped_runs[:, 0]).sum())
 
     @property
+    def n_dropout_samples(self) -> int:
+        """Samples inside dropout runs [-]."""
+        return int((self.dropout_runs[:, 1] - self.dropout_runs[:, 0]).sum())
+
+    @property
     def ok(self) -> bool:
-        """True when there are no gaps and no clipped runs."""
-        return not (len(self.gap_runs) or len(self.clipped_runs))
+        """True when there are no gaps, no dropouts and no clipped runs."""
+        return not (len(self.gap_runs) or len(self.clipped_runs) or len(self.dropout_runs))
+
+    def all_gap_runs(self) -> np.ndarray:
+        """Gaps and dropouts merged into sorted, non-overlapping ``[start, stop)`` rows: the
+        samples that are NaN in the conditioned channel (``dropouts="nan"``)."""
+        return merge_runs(np.concatenate([self.gap_runs, self.dropout_runs]))
 
     def bad_runs(self) -> np.ndarray:
-        """Gaps and clipped runs merged into sorted, non-overlapping ``[start, stop)`` rows."""
-        return merge_runs(np.concatenate([self.gap_runs, self.clipped_runs]))
+        """Gaps, dropouts and clipped runs merged into sorted, non-overlapping
+        ``[start, stop)`` rows."""
+        return merge_runs(np.concatenate([self.gap_runs, self.dropout_runs, self.clipped_runs]))
 
     def runs_time(self, which: str = "gap") -> np.ndarray:
-        """Runs of one kind ("gap", "nan", "clipped", "bad") as ``[t_start, t_stop)`` [s]."""
-        which = as_choice(which, "which", ("gap", "nan", "clipped", "bad"))
-        runs = {"gap": self.gap_runs, "nan": self.nan_runs, "clipped": self.clipped_runs}.get(which)
+        """Runs of one kind as ``[t_start, t_stop)`` [s]: "gap" (non-finite), "nan",
+        "dropout", "clipped", "bad" (all of them) or "all_gaps" (gaps and dropouts, as
+        :func:`gap_intervals`)."""
+        which = as_choice(which, "which", ("gap", "nan", "dropout", "clipped", "bad", "all_gaps"))
+        runs = {"gap": self.gap_runs, "nan": self.nan_runs, "dropout": self.dropout_runs,
+                "clipped": self.clipped_runs}.get(which)
         if runs is None:
-            runs = self.bad_runs()
+            runs = self.bad_runs() if which == "bad" else self.all_gap_runs()
         return self.t0 + runs.astype(np.float64) / self.fs
+
+    def gap_intervals(self) -> np.ndarray:
+        """Gaps and dropouts as ``[t_start, t_stop)`` rows [s] (see :func:`gap_intervals`)."""
+        return gap_intervals(self)
 
     def summary(self) -> str:
         """One line for logs and warnings."""
         return (f"channel {self.name!r}: {len(self.gap_runs)} gap run(s) ({self.n_gap_samples} "
+                f"samples), {len(self.dropout_runs)} dropout run(s) ({self.n_dropout_samples} "
                 f"samples), {len(self.clipped_runs)} clipped run(s) ({self.n_clipped_samples} "
                 f"samples), SNR {self.snr_db:.1f} dB")
 
@@ -794,7 +845,9 @@ class ChannelQuality:
                 "gap_runs": self.gap_runs.tolist(), "nan_runs": self.nan_runs.tolist(),
                 "clipped_runs": self.clipped_runs.tolist(), "snr_db": fl(self.snr_db),
                 "signal_peak": fl(self.signal_peak), "noise_rms": fl(self.noise_rms),
-                "settle": self.settle, "hum": None if self.hum is None else self.hum.to_dict()}
+                "settle": self.settle, "hum": None if self.hum is None else self.hum.to_dict(),
+                "dropout_runs": self.dropout_runs.tolist(), "dropout_min_run": self.dropout_min_run,
+                "p_equal": fl(self.p_equal), "quant_step": float(self.quant_step)}
 
 
 def merge_runs(runs) -> np.ndarray:
@@ -816,10 +869,63 @@ def merge_runs(runs) -> np.ndarray:
     return np.stack([starts, stops], axis=1)
 
 
+def gap_intervals(quality_or_mask, fs: float | None = None, t0: float | None = None) -> np.ndarray:
+    """Gap intervals of a channel in seconds: non-finite gaps and dropout runs together.
+
+    Parameters
+    ----------
+    quality_or_mask : ChannelQuality, or array_like of shape (n,)
+        A channel's quality report (its ``gap_runs`` and ``dropout_runs``); or a boolean
+        mask, True for every sample lost; or the samples of a conditioned channel (float),
+        whose non-finite samples are the gaps (dropouts are NaN there after
+        :func:`condition_recording`).
+    fs : float, optional
+        Sample rate [Hz]; required for a mask or samples, taken from a report (and checked
+        against it when given).
+    t0 : float, optional
+        Time of sample 0 [s]; default 0 for a mask or samples, the report's own ``t0`` for a
+        report (checked against it when given).
+
+    Returns
+    -------
+    ndarray of float64, shape (k, 2)
+        ``[t_start, t_stop)`` per gap, sorted, disjoint, merged when touching:
+        ``t_start = t0 + i_start / fs`` is the time of the first lost sample, ``t_stop =
+        t0 + i_stop / fs`` that of the first good sample after it (the end of the
+        recording for a trailing gap). A reference time ``t`` lies in a gap when
+        ``t_start <= t < t_stop``; shape (0, 2) when there is none.
+    """
+    if isinstance(quality_or_mask, ChannelQuality):
+        q = quality_or_mask
+        if fs is not None and as_positive(fs, "fs") != q.fs:
+            raise ValueError(f"fs {fs!r} Hz contradicts the quality report's {q.fs!r} Hz")
+        if t0 is not None and as_float(t0, "t0") != q.t0:
+            raise ValueError(f"t0 {t0!r} s contradicts the quality report's {q.t0!r} s")
+        runs, fs, t0 = q.all_gap_runs(), q.fs, q.t0
+    else:
+        if isinstance(quality_or_mask, (str, bytes, dict)) or quality_or_mask is None:
+            raise TypeError("quality_or_mask must be a ChannelQuality, a boolean mask or the "
+                            f"samples of a channel, got {type(quality_or_mask).__name__}")
+        arr = np.asarray(quality_or_mask)
+        if arr.dtype.kind not in "bf":
+            raise TypeError(f"quality_or_mask must be a ChannelQuality, a boolean mask or float "
+                            f"samples, got an array of dtype {arr.dtype}")
+        if arr.ndim != 1:
+            raise ValueError(f"quality_or_mask must be 1-D (one channel), got shape {arr.shape}")
+        if fs is None:
+            raise ValueError("fs [Hz] is required with a mask or samples, got None")
+        fs = as_positive(fs, "fs")
+        t0 = 0.0 if t0 is None else as_float(t0, "t0")
+        runs = find_runs(arr if arr.dtype.kind == "b" else ~np.isfinite(arr))
+    return t0 + runs.astype(np.float64) / fs
+
+
 def assess_quality(x, fs: float, *, t0: float = 0.0, name: str = "", clip_min_run: int = 3,
                    clip_rtol: float = 0.0, snr: bool = True, warn: bool = True,
-                   snr_warn_db: float = 6.0) -> ChannelQuality:
-    """Quality report of one channel: gaps, NaN runs, clipped runs, SNR.
+                   snr_warn_db: float = 6.0, detect_flat: bool = True,
+                   dropout_min_run: int = DROPOUT_MIN_RUN,
+                   false_alarm: float = FALSE_ALARM) -> ChannelQuality:
+    """Quality report of one channel: gaps, NaN runs, dropouts, clipped runs, SNR.
 
     Parameters
     ----------
@@ -832,14 +938,24 @@ def assess_quality(x, fs: float, *, t0: float = 0.0, name: str = "", clip_min_ru
     name : str
         Channel name for messages.
     clip_min_run, clip_rtol
-        See :func:`pipeline.quality.clipped_runs`.
+        See :func:`pipeline.quality.clipped_runs`; ``clip_min_run`` is also the shortest
+        clipped plateau at other levels [samples].
     snr : bool
         Estimate the SNR (:func:`estimate_snr`); meaningful on drift-free data.
     warn : bool
-        Issue a :class:`~pipeline.errors.DataQualityWarning` when gaps or clipped runs are
-        found, or the SNR is below ``snr_warn_db``.
+        Issue a :class:`~pipeline.errors.DataQualityWarning` when gaps, dropouts or clipped
+        runs are found, or the SNR is below ``snr_warn_db``.
     snr_warn_db : float
         SNR below which to warn [dB].
+    detect_flat : bool
+        Look for dropout runs and clipped plateaus at any level
+        (:func:`pipeline.quality.flat_runs`); False: non-finite gaps and rail clipping only.
+        Meant for analogue (strain) channels, not pulse trains.
+    dropout_min_run : int
+        Floor of the dropout run-length threshold [samples], >= 2 (the threshold itself
+        comes from the channel's statistics).
+    false_alarm : float
+        Expected number of chance runs over the channel at the threshold [-], in (0, 1).
 
     Returns
     -------
@@ -854,6 +970,14 @@ def assess_quality(x, fs: float, *, t0: float = 0.0, name: str = "", clip_min_ru
     if clip_min_run < 2:
         raise ValueError(f"clip_min_run must be >= 2, got {clip_min_run!r}")
     clip_rtol = as_nonnegative(clip_rtol, "clip_rtol")
+    if not isinstance(detect_flat, (bool, np.bool_)):
+        raise TypeError(f"detect_flat must be a bool, got {type(detect_flat).__name__} {detect_flat!r}")
+    dropout_min_run = as_positive_int(dropout_min_run, "dropout_min_run")
+    if dropout_min_run < 2:
+        raise ValueError(f"dropout_min_run must be >= 2, got {dropout_min_run!r}")
+    false_alarm = as_positive(false_alarm, "false_alarm")
+    if not false_alarm < 1.0:
+        raise ValueError(f"false_alarm must be in (0, 1), got {false_alarm!r}")
     if x.size == 0:
         e = np.empty((0, 2), dtype=np.int64)
         return ChannelQuality(name, fs, t0, 0, e, e.copy(), e.copy())
@@ -864,7 +988,16 @@ def assess_quality(x, fs: float, *, t0: float = 0.0, name: str = "", clip_min_ru
         gaps = find_runs(~np.isfinite(x))
         nans = find_runs(np.isnan(x))
     clipped = _clipped_runs(x, min_run=clip_min_run, rtol=clip_rtol)
-    rep = ChannelQuality(name, fs, t0, int(x.size), gaps, nans, clipped)
+    extra = {}
+    if detect_flat:
+        fr = flat_runs(x, false_alarm=false_alarm, min_run=dropout_min_run,
+                       clip_min_run=clip_min_run)
+        clipped = outside_runs(clipped, fr.dropout_runs)   # a dropout at the rail is no clip
+        if len(fr.clipped_runs):
+            clipped = merge_runs(np.concatenate([clipped, fr.clipped_runs]))
+        extra = dict(dropout_runs=fr.dropout_runs, dropout_min_run=fr.min_run,
+                     p_equal=fr.p_equal, quant_step=fr.quant_step)
+    rep = ChannelQuality(name, fs, t0, int(x.size), gaps, nans, clipped, **extra)
     if snr:
         rep.snr_db, rep.signal_peak, rep.noise_rms = estimate_snr(x)
     if warn:
@@ -877,6 +1010,9 @@ def _warn_quality(rep: ChannelQuality, snr_warn_db: float) -> None:
     if len(rep.gap_runs):
         problems.append(f"{len(rep.gap_runs)} gap run(s) of non-finite samples "
                         f"({rep.n_gap_samples} samples)")
+    if len(rep.dropout_runs):
+        problems.append(f"{len(rep.dropout_runs)} dropout run(s) of zeros or a held value "
+                        f"({rep.n_dropout_samples} samples, treated as gaps)")
     if len(rep.clipped_runs):
         problems.append(f"{len(rep.clipped_runs)} clipped run(s) ({rep.n_clipped_samples} samples)")
     if np.isfinite(rep.snr_db) and rep.snr_db < snr_warn_db:
@@ -993,9 +1129,9 @@ class Conditioned:
     recording : Recording
         The conditioned recording (history extended by one entry per step).
     quality : dict of str -> ChannelQuality
-        Per conditioned channel: gaps and clipping from the raw data, SNR after hum and
-        drift removal (before any low-pass, which would hide the white noise), hum found,
-        filter settling time.
+        Per conditioned channel: gaps, dropouts and clipping from the raw data, SNR after
+        hum and drift removal (before any low-pass, which would hide the white noise), hum
+        found, filter settling time.
     """
 
     recording: Recording
@@ -1006,8 +1142,9 @@ def condition_recording(rec: Recording, *, channels: Sequence[str] | str | None 
                         mesh_freq: float | None = None, hum: bool = True,
                         drift: str | None = "median", drift_window: float | None = None,
                         lowpass: float | str | None = "auto", highpass: float | None = None,
-                        order: int = 4, warn: bool = True) -> Conditioned:
-    """The default conditioning chain: quality -> hum notch -> drift removal -> band limit.
+                        order: int = 4, warn: bool = True, dropouts: str = "nan") -> Conditioned:
+    """The default conditioning chain: quality -> (dropouts to NaN) -> hum notch -> drift
+    removal -> band limit.
 
     Parameters
     ----------
@@ -1034,7 +1171,12 @@ def condition_recording(rec: Recording, *, channels: Sequence[str] | str | None 
     order : int
         Butterworth order of the band-limiting filters.
     warn : bool
-        Warn (DataQualityWarning) about gaps, clipping and low SNR.
+        Warn (DataQualityWarning) about gaps, dropouts, clipping and low SNR.
+    dropouts : {"nan", "keep"}
+        "nan": the dropout runs found on the raw data become NaN before any filtering (one
+        ``"condition.mask_dropouts"`` history entry when there are any), so that they are
+        gaps for every later stage; "keep": leave the samples (the report still lists them;
+        pass ``quality=`` to :func:`pipeline.onsets.detect_onsets_recording`).
 
     Returns
     -------
@@ -1044,11 +1186,22 @@ def condition_recording(rec: Recording, *, channels: Sequence[str] | str | None 
         raise TypeError(f"rec must be a Recording, got {type(rec).__name__}")
     if drift is not None:
         as_choice(drift, "drift", ("median", "savgol", "highpass"))
+    dropouts = as_choice(dropouts, "dropouts", ("nan", "keep"))
     quality = assess_quality_recording(rec, channels=channels, warn=False, snr=False)
     names = list(quality)
     if not names:
         return Conditioned(rec.with_history("condition", channels=[]), quality)
     out = rec
+    masked = {nm: quality[nm].n_dropout_samples for nm in names if len(quality[nm].dropout_runs)}
+    if dropouts == "nan" and masked:
+        data = rec.data.copy()
+        for nm in masked:
+            runs = quality[nm].dropout_runs
+            marks = np.zeros(rec.n_samples + 1, dtype=np.int64)
+            np.add.at(marks, runs[:, 0], 1)
+            np.add.at(marks, runs[:, 1], -1)
+            data[np.cumsum(marks[:-1]) > 0, rec.index(nm)] = np.nan
+        out = rec.replace_data(data).with_history("condition.mask_dropouts", samples=masked)
     settle = 0.0
     if hum:
         out, reports = _notch_rec(out, names, None, "auto", 30.0, ())
@@ -1087,6 +1240,7 @@ def condition_recording(rec: Recording, *, channels: Sequence[str] | str | None 
             _warn_quality(q, 6.0)
     out = out.with_history("condition.quality", settle_s=settle,
                            quality={nm: {"gap_runs": len(quality[nm].gap_runs),
+                                         "dropout_runs": len(quality[nm].dropout_runs),
                                          "clipped_runs": len(quality[nm].clipped_runs),
                                          "snr_db": (None if not np.isfinite(quality[nm].snr_db)
                                                     else round(quality[nm].snr_db, 2))}

@@ -48,7 +48,8 @@ bit-identical onsets (:func:`detect_onsets_stream`).
 
 Quality per onset: normalised correlation with the template, amplitude (signed, in data
 units: the fitted tensile peak above baseline), width (FWHM measured on the pulse) and a
-bit mask of flags (``FLAG_*``). No onset is ever placed inside a gap (NaN samples) or
+bit mask of flags (``FLAG_*``). No onset is ever placed inside a gap (NaN samples, or the
+sample ranges passed as ``gap_runs``, e.g. DAQ dropouts that read zeros or a held value) or
 outside the data; pulses whose window touches a gap or a flagged run are kept but flagged.
 """
 
@@ -76,9 +77,11 @@ __all__ = [
     "FLAG_GAP", "FLAG_CLIPPED", "FLAG_LOW_CORR", "FLAG_EDGE", "FLAG_TEMPLATE", "FLAG_NAMES",
 ]
 
-#: The pulse window overlaps (or lies within ``gap_guard`` of) a gap of non-finite samples.
+#: The pulse window overlaps (or lies within ``gap_guard`` of) a gap: non-finite samples or
+#: a ``gap_runs`` range (a DAQ dropout from the quality report).
 FLAG_GAP = 1
-#: The pulse window overlaps a flagged run (clipping, from the quality report).
+#: The pulse window overlaps a flagged run (clipping at a rail or a plateau at any level,
+#: from the quality report).
 FLAG_CLIPPED = 2
 #: Normalised correlation with the template below ``min_corr``.
 FLAG_LOW_CORR = 4
@@ -852,13 +855,14 @@ class _Options:
     flag_runs: np.ndarray          # absolute samples, merged
     gap_guard: int                 # samples
     channel: str | None
+    gap_runs: np.ndarray           # absolute samples, merged: finite samples that are gaps
 
 
 def _options(fs, *, t0=0.0, width=None, mesh_freq=None, min_spacing=None, template=None,
              relearn="block", polarity=None, reference="rise", level=0.5, k_sigma=5.0,
              min_corr=0.5, block=None, decimation=None, max_template_pulses=256,
              min_template_pulses=8, n_align=2, flag_runs=None, gap_guard=0.0,
-             channel=None) -> _Options:
+             channel=None, gap_runs=None) -> _Options:
     fs = as_positive(fs, "fs")
     t0 = as_float(t0, "t0")
     w = None if width is None else as_positive(width, "width") * fs
@@ -895,19 +899,24 @@ def _options(fs, *, t0=0.0, width=None, mesh_freq=None, min_spacing=None, templa
     mtp = as_positive_int(max_template_pulses, "max_template_pulses")
     mnp = as_positive_int(min_template_pulses, "min_template_pulses")
     n_align = as_positive_int(n_align, "n_align")
-    if flag_runs is None:
-        fr = np.empty((0, 2), dtype=np.int64)
-    else:
-        fr = np.asarray(flag_runs)
-        if fr.dtype.kind not in "iu" or fr.ndim != 2 or fr.shape[1] != 2:
-            raise ValueError(f"flag_runs must be an integer array of [start, stop) rows, got "
-                             f"dtype {fr.dtype}, shape {fr.shape}")
-        fr = _merge(fr)
+    fr = _check_runs(flag_runs, "flag_runs")
+    gr = _check_runs(gap_runs, "gap_runs")
     guard = int(math.ceil(as_nonnegative(gap_guard, "gap_guard") * fs))
     if channel is not None and not isinstance(channel, str):
         raise TypeError(f"channel must be a string, got {channel!r}")
     return _Options(fs, t0, w, mw, sp, template, relearn, polarity, reference, level, k_sigma,
-                    min_corr, blk, dec, mtp, mnp, n_align, fr, guard, channel)
+                    min_corr, blk, dec, mtp, mnp, n_align, fr, guard, channel, gr)
+
+
+def _check_runs(runs, name: str) -> np.ndarray:
+    """``[start, stop)`` integer rows, merged; (0, 2) for None."""
+    if runs is None:
+        return np.empty((0, 2), dtype=np.int64)
+    r = np.asarray(runs)
+    if r.dtype.kind not in "iu" or r.ndim != 2 or r.shape[1] != 2:
+        raise ValueError(f"{name} must be an integer array of [start, stop) rows, got "
+                         f"dtype {r.dtype}, shape {r.shape}")
+    return _merge(r)
 
 
 # ====================================================================== the engine
@@ -984,7 +993,19 @@ class _Engine:
                 continue
             parts.append(a[max(lo, s) - s:min(hi, e) - s])
         seg = parts[0] if len(parts) == 1 else np.concatenate(parts)
-        return seg.astype(np.float64, copy=False)
+        seg = seg.astype(np.float64, copy=False)
+        gr = self.o.gap_runs
+        if len(gr):
+            # finite samples that are gaps (dropouts) read as NaN, like any other gap
+            i = np.searchsorted(gr[:, 1], lo, side="right")
+            j = np.searchsorted(gr[:, 0], hi, side="left")
+            if j > i:
+                r = np.clip(gr[i:j] - lo, 0, seg.size)
+                marks = np.zeros(seg.size + 1, dtype=np.int64)
+                np.add.at(marks, r[:, 0], 1)
+                np.add.at(marks, r[:, 1], -1)
+                seg = np.where(np.cumsum(marks[:-1]) > 0, np.nan, seg)
+        return seg
 
     def _trim(self) -> None:
         keep_from = self.k * self.B - self.B
@@ -1187,7 +1208,7 @@ def detect_onsets(x, fs: float, *, t0: float = 0.0, width: float | None = None,
                   k_sigma: float = 5.0, min_corr: float = 0.5, block: float | None = None,
                   decimation: int | None = None, max_template_pulses: int = 256,
                   min_template_pulses: int = 8, n_align: int = 2, flag_runs=None,
-                  gap_guard: float = 0.0, channel: str | None = None) -> Onsets:
+                  gap_guard: float = 0.0, channel: str | None = None, gap_runs=None) -> Onsets:
     """Engagement onsets of the pulses in one conditioned strain channel.
 
     Parameters
@@ -1240,6 +1261,11 @@ def detect_onsets(x, fs: float, *, t0: float = 0.0, width: float | None = None,
         ``ChannelQuality.settle``).
     channel : str, optional
         Channel name carried into the result and messages.
+    gap_runs : array_like of int, shape (k, 2), optional
+        ``[start, stop)`` sample ranges (relative to the first sample) that are gaps although
+        their samples are finite (e.g. ``ChannelQuality.dropout_runs``: a DAQ writing zeros
+        or holding its last value). Treated exactly as NaN samples: no onset inside, left
+        out of template learning, touching pulses flagged ``FLAG_GAP``.
 
     Returns
     -------
@@ -1261,7 +1287,7 @@ def detect_onsets(x, fs: float, *, t0: float = 0.0, width: float | None = None,
                    level=level, k_sigma=k_sigma, min_corr=min_corr, block=block,
                    decimation=decimation, max_template_pulses=max_template_pulses,
                    min_template_pulses=min_template_pulses, n_align=n_align,
-                   flag_runs=flag_runs, gap_guard=gap_guard, channel=channel)
+                   flag_runs=flag_runs, gap_guard=gap_guard, channel=channel, gap_runs=gap_runs)
     eng = _Engine(opt)
     eng.feed(arr)
     return eng.finish()
@@ -1278,7 +1304,9 @@ def detect_onsets_recording(rec: Recording, channel: str, *, quality=None, **kwa
         Channel name.
     quality : ChannelQuality, optional
         The channel's report from :mod:`pipeline.condition`: its clipped runs are flagged
-        (``FLAG_CLIPPED``) and its ``settle`` time is used as ``gap_guard``.
+        (``FLAG_CLIPPED``), its dropout runs are gaps (``gap_runs``; already NaN in a
+        recording conditioned with ``dropouts="nan"``) and its ``settle`` time is used as
+        ``gap_guard``.
     **kwargs
         Passed to :func:`detect_onsets` (not ``fs``, ``t0``, ``channel``).
 
@@ -1304,11 +1332,13 @@ def detect_onsets_recording(rec: Recording, channel: str, *, quality=None, **kwa
                              f"not describe this recording ({rec.n_samples} samples at {rec.fs} Hz)")
         kwargs.setdefault("flag_runs", quality.clipped_runs)
         kwargs.setdefault("gap_guard", quality.settle)
+        if len(quality.dropout_runs):
+            kwargs.setdefault("gap_runs", quality.dropout_runs)
     return detect_onsets(x, rec.fs, t0=rec.t0, channel=channel, **kwargs)
 
 
 def detect_onsets_stream(blocks: Iterable[Recording], channel: str, *, flag_times=None,
-                         **kwargs) -> Onsets:
+                         gap_times=None, **kwargs) -> Onsets:
     """:func:`detect_onsets` over a stream of recording blocks, in bounded memory.
 
     Parameters
@@ -1322,8 +1352,12 @@ def detect_onsets_stream(blocks: Iterable[Recording], channel: str, *, flag_time
         Channel name.
     flag_times : array_like, shape (k, 2), optional
         ``[t_start, t_stop)`` time ranges [s] to flag ``FLAG_CLIPPED``.
+    gap_times : array_like, shape (k, 2), optional
+        ``[t_start, t_stop)`` time ranges [s] that are gaps although finite (dropouts, e.g.
+        ``ChannelQuality.runs_time("dropout")``); see ``gap_runs`` of :func:`detect_onsets`.
     **kwargs
-        Passed to :func:`detect_onsets` (not ``fs``, ``t0``, ``channel``, ``flag_runs``).
+        Passed to :func:`detect_onsets` (not ``fs``, ``t0``, ``channel``, ``flag_runs``,
+        ``gap_runs``).
 
     Returns
     -------
@@ -1340,7 +1374,7 @@ def detect_onsets_stream(blocks: Iterable[Recording], channel: str, *, flag_time
                         "(use detect_onsets_recording)")
     if not isinstance(channel, str):
         raise TypeError(f"channel must be a channel name (str), got {channel!r}")
-    for bad in ("fs", "t0", "channel", "flag_runs"):
+    for bad in ("fs", "t0", "channel", "flag_runs", "gap_runs"):
         if bad in kwargs:
             raise TypeError(f"detect_onsets_stream takes {bad} from the blocks, not as an argument")
     eng = None
@@ -1352,13 +1386,10 @@ def detect_onsets_stream(blocks: Iterable[Recording], channel: str, *, flag_time
         col = blk.channel(channel)
         if eng is None:
             fs, t0 = blk.fs, blk.t0
-            fr = None
-            if flag_times is not None:
-                ft = np.asarray(flag_times, dtype=np.float64).reshape(-1, 2)
-                if ft.size and not np.all(np.isfinite(ft)):
-                    raise ValueError("flag_times must be finite")
-                fr = np.ceil((ft - t0) * fs - 1e-6).astype(np.int64)
-            eng = _Engine(_options(fs, t0=t0, channel=channel, flag_runs=fr, **kwargs))
+            fr = _time_runs(flag_times, "flag_times", fs, t0)
+            gr = _time_runs(gap_times, "gap_times", fs, t0)
+            eng = _Engine(_options(fs, t0=t0, channel=channel, flag_runs=fr, gap_runs=gr,
+                                   **kwargs))
         elif blk.fs != fs:
             raise ValueError(f"block at t0={blk.t0!r} s has fs={blk.fs!r} Hz, the stream started at {fs!r} Hz")
         pos = (blk.t0 - t0) * fs
@@ -1380,6 +1411,16 @@ def detect_onsets_stream(blocks: Iterable[Recording], channel: str, *, flag_time
         warnings.warn(f"channel {channel!r}: {missing} sample(s) missing between stream blocks; "
                       "treated as a gap", DataQualityWarning, stacklevel=2)
     return eng.finish()
+
+
+def _time_runs(times, name: str, fs: float, t0: float) -> np.ndarray | None:
+    """``[t_start, t_stop)`` rows [s] as sample runs ``[ceil((t-t0) fs), ...)`` (None: None)."""
+    if times is None:
+        return None
+    ft = np.asarray(times, dtype=np.float64).reshape(-1, 2)
+    if ft.size and not np.all(np.isfinite(ft)):
+        raise ValueError(f"{name} must be finite")
+    return np.ceil((ft - t0) * fs - 1e-6).astype(np.int64)
 
 
 def coarse_peaks(x, fs: float, *, width: float, min_spacing: float | None = None,

@@ -373,13 +373,15 @@ class Recording:
 
     # ------------------------------------------------------------------ quality
     def quality(self) -> list[dict]:
-        """Per-channel quality summary: NaN/inf runs, longest run, min/max, clipped runs.
+        """Per-channel quality summary: NaN/inf runs, longest run, min/max, clipped runs,
+        dropout runs.
 
-        Uses :func:`pipeline.quality.channel_quality` on each channel.
+        Uses :func:`pipeline.quality.channel_quality` on each channel (with its kind: a tacho's
+        flat levels are not analysed as dropouts or clipped plateaus).
         """
         from .quality import channel_quality
 
-        return [dict(channel=c.name, **channel_quality(self.data[:, i]))
+        return [dict(channel=c.name, **channel_quality(self.data[:, i], kind=c.kind))
                 for i, c in enumerate(self.channels)]
 
 

@@ -9,7 +9,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.quality import channel_quality, clipped_runs, find_runs, nonfinite_runs
+from pipeline.quality import (FlatRuns, chance_min_run, channel_quality, clipped_runs,
+                              dropout_runs, equal_runs, find_runs, flat_runs, nonfinite_runs,
+                              outside_runs, plateau_runs, quantisation_step)
 from pipeline.recording import CHANNEL_KINDS, ChannelSpec, Recording, sample_index
 
 
@@ -308,3 +310,211 @@ def test_channel_quality_summary():
     assert e["n_samples"] == 0 and np.isnan(e["rms"]) and e["nonfinite_runs"] == []
     r = Recording(np.column_stack([x, np.zeros(6)]), 1.0, ["a", "b"])
     assert [q["channel"] for q in r.quality()] == ["a", "b"] and r.quality()[1]["n_nonfinite"] == 0
+
+
+# ---------------------------------------------------------------------------- flat runs
+def _planted(seed, spec, gap_range=(20, 60)):
+    """White float64 noise (never repeats a value) with planted runs of exactly equal
+    samples: ``spec`` = [(length, kind)], kind "zero" (DAQ writes 0.0), "hold" (the sample
+    before the run is held) or "value" (an arbitrary value). Returns (x, [start, stop) rows)."""
+    rng = np.random.default_rng(seed)
+    total = sum(L for L, _ in spec) + (len(spec) + 1) * gap_range[1] + 1
+    x = 5.0 + rng.standard_normal(total)
+    pos, runs = 0, []
+    for L, kind in spec:
+        pos += int(rng.integers(*gap_range))
+        v = {"zero": 0.0, "hold": x[pos], "value": float(rng.normal(5.0, 3.0))}[kind]
+        x[pos:pos + L] = v                       # "hold": x[pos] is the held sample itself
+        runs.append([pos, pos + L])
+        pos += L
+    return x[:pos + gap_range[0]], runs
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1),
+       spec=st.lists(st.tuples(st.integers(2, 40), st.sampled_from(["zero", "hold", "value"])),
+                     max_size=8),
+       floor=st.integers(2, 6))
+def test_flat_runs_find_exactly_the_planted_runs_above_the_threshold(seed, spec, floor):
+    x, planted = _planted(seed, spec)
+    fr = flat_runs(x, min_run=floor, clip_min_run=floor)
+    assert fr.min_run == fr.clip_min_run >= floor
+    found = sorted(fr.dropout_runs.tolist() + fr.clipped_runs.tolist())
+    assert found == [r for r in planted if r[1] - r[0] >= fr.min_run]
+    # the threshold is the chance model's: noise never repeats, so p only counts the
+    # planted runs themselves (upper Poisson bound over the runs of the array)
+    n_runs = x.size - sum(r[1] - r[0] - 1 for r in planted)
+    c = len(planted)
+    p = (c + 2 * np.sqrt(c) + 3) / n_runs
+    assert fr.p_equal == pytest.approx(p)
+    assert fr.min_run == max(floor, chance_min_run(min(p, 1.0), x.size))
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1),
+       spec=st.lists(st.tuples(st.integers(2, 40), st.sampled_from(["zero", "hold", "value"])),
+                     max_size=8),
+       min_run=st.integers(2, 10))
+def test_equal_runs_are_the_planted_runs(seed, spec, min_run):
+    x, planted = _planted(seed, spec, gap_range=(1, 30))
+    assert equal_runs(x, min_run=min_run).tolist() == [r for r in planted if r[1] - r[0] >= min_run]
+
+
+def test_chance_min_run_is_the_smallest_improbable_length():
+    # smallest L with n p^(L-1) < false_alarm: 1000 * 0.5**20 = 9.5e-4 < 1e-3 <= 1000 * 0.5**19
+    assert chance_min_run(0.5, 1000, 1e-3) == 21
+    for p, n in ((0.1, 3_000_000), (0.8, 307_200), (1e-4, 10**7)):
+        L = chance_min_run(p, n)
+        assert n * p ** (L - 1) < 1e-3 <= n * p ** (L - 2) or L == 2
+    assert chance_min_run(0.0, 10**9) == 2
+    assert chance_min_run(1e-9, 100) == 2                 # n p < false_alarm: even pairs are rare
+    assert chance_min_run(1.0, 500) == 501                # every run is as likely as any
+    assert chance_min_run(0.5, 0) == 2                    # empty channel
+    with pytest.raises(ValueError, match="p"):
+        chance_min_run(1.5, 100)
+    with pytest.raises(TypeError, match="p"):
+        chance_min_run("0.5", 100)
+    with pytest.raises(ValueError, match="n"):
+        chance_min_run(0.5, -1)
+    with pytest.raises(TypeError, match="n"):
+        chance_min_run(0.5, 10.5)
+    with pytest.raises(ValueError, match="false_alarm"):
+        chance_min_run(0.5, 100, 0.0)
+    with pytest.raises(ValueError, match="false_alarm"):
+        chance_min_run(0.5, 100, 1.0)
+
+
+def test_quantisation_step():
+    rng = np.random.default_rng(3)
+    lsb = 2.0 * 140e-6 / 2**16                            # 16-bit over +-140 um/m
+    x = np.rint(rng.normal(0.0, 20 * lsb, 50_000) / lsb) * lsb
+    assert quantisation_step(x) == pytest.approx(lsb, rel=1e-9)
+    assert quantisation_step(np.rint(rng.normal(0, 20, 5000)).astype(np.int16)) == 1.0
+    assert quantisation_step(rng.normal(size=5000)) == 0.0           # continuous
+    assert quantisation_step(np.array([])) == 0.0
+    assert quantisation_step(np.full(100, np.nan)) == 0.0
+    assert quantisation_step(np.ones(100)) == 0.0                     # no step to see
+    with pytest.raises(ValueError, match="1-D"):
+        quantisation_step(np.zeros((3, 3)))
+    with pytest.raises(TypeError, match="numeric"):
+        quantisation_step(np.array(["a", "b"]))
+
+
+def test_equal_runs_small_cases_and_bad_input():
+    x = np.array([1.0, 2, 2, 2, 3, np.nan, np.nan, 4, 4, np.inf, np.inf, np.inf, 5])
+    assert equal_runs(x).tolist() == [[1, 4], [7, 9]]       # NaN and inf never form runs
+    assert equal_runs(x, min_run=3).tolist() == [[1, 4]]
+    assert equal_runs(np.array([])).shape == (0, 2)
+    assert equal_runs(np.array([7.0])).shape == (0, 2)
+    with pytest.raises(ValueError, match="min_run"):
+        equal_runs(x, min_run=1)
+    with pytest.raises(TypeError, match="min_run"):
+        equal_runs(x, min_run=2.5)
+    with pytest.raises(ValueError, match="1-D"):
+        equal_runs(np.zeros((2, 2)))
+    with pytest.raises(TypeError, match="numeric"):
+        equal_runs(["a", "b"])
+
+
+def test_flat_runs_empty_degenerate_and_bad_input():
+    for x in (np.array([]), np.array([1.0]), np.full(50, np.nan)):
+        fr = flat_runs(x)
+        assert isinstance(fr, FlatRuns)
+        assert fr.dropout_runs.shape == fr.clipped_runs.shape == (0, 2)
+        assert dropout_runs(x).shape == plateau_runs(x).shape == (0, 2)
+    # a constant channel has one run and no statistics to call it improbable: p = 1
+    fr = flat_runs(np.zeros(10_000))
+    assert fr.dropout_runs.shape == (0, 2) and fr.p_equal == 1.0
+    spec = [(30, "zero"), (25, "hold"), (3, "value")]
+    x, planted = _planted(1, spec)
+    assert dropout_runs(x).tolist() == planted[:2]
+    # ~200 samples holding 3 runs: p ~ 0.06 and a 3-sample run is no evidence (threshold 6)
+    assert flat_runs(x, min_run=3).min_run == 6 and dropout_runs(x, min_run=3).tolist() == planted[:2]
+    # ~150000 samples: n p^2 < 1e-3, a 3-sample run of exactly equal floats is a fault (the
+    # arbitrary value, a few sigma above the noise and no jump away, reads as a clipped spike)
+    x, planted = _planted(1, spec, gap_range=(40_000, 60_000))
+    fr = flat_runs(x, min_run=3)
+    assert fr.min_run == 3 and fr.dropout_runs.tolist()[:2] == planted[:2]
+    assert sorted(fr.dropout_runs.tolist() + fr.clipped_runs.tolist()) == planted
+    with pytest.raises(ValueError, match="false_alarm"):
+        flat_runs(x, false_alarm=0.0)
+    with pytest.raises(TypeError, match="false_alarm"):
+        flat_runs(x, false_alarm="1e-3")
+    with pytest.raises(ValueError, match="min_run"):
+        flat_runs(x, min_run=1)
+    with pytest.raises(ValueError, match="clip_min_run"):
+        plateau_runs(x, clip_min_run=0)
+    with pytest.raises(TypeError, match="min_run"):
+        dropout_runs(x, min_run=None)
+    with pytest.raises(ValueError, match="1-D"):
+        flat_runs(np.zeros((4, 4)))
+    with pytest.raises(TypeError, match="numeric"):
+        flat_runs(np.array(["x"] * 10))
+
+
+def test_flat_runs_tell_a_clip_from_a_dropout():
+    # sin^2 pulses in white noise (20 dB), one clipped at 60 % of its peak (a one-polarity
+    # gain-stage clip), one with its top zeroed, one whose rising flank is held
+    rng = np.random.default_rng(4)
+    n, w = 6000, 400
+    t = np.arange(w)
+    pulse = np.sin(np.pi * t / w) ** 2
+    x = 0.1 * rng.standard_normal(n) + 0.3
+    for s in (500, 2000, 3500, 5000):
+        x[s:s + w] += pulse
+    clip = x[500:900] > 0.9
+    x[500:900] = np.minimum(x[500:900], 0.9)
+    x[2150:2250] = 0.0
+    x[3550:3650] = x[3549]
+    fr = flat_runs(x)
+    first, last = 500 + np.flatnonzero(clip)[[0, -1]]
+    assert fr.clipped_runs.tolist() == [[first, last + 1]]
+    assert fr.dropout_runs.tolist() == [[2150, 2250], [3549, 3650]]    # held: from its source
+    # the other polarity: the same, mirrored
+    fr = flat_runs(-x)
+    assert fr.clipped_runs.tolist() == [[first, last + 1]]
+    assert fr.dropout_runs.tolist() == [[2150, 2250], [3549, 3650]]
+    # a dropout inside a clipped plateau stays a dropout, the plateau on either side a clip
+    # (a step into another flat run is no jump; runs at other levels do not join a cluster)
+    y = x.copy()
+    y[5000:5400] = np.minimum(y[5000:5400], 0.9)
+    c5 = 5000 + np.flatnonzero(y[5000:5400] == 0.9)[[0, -1]]
+    y[5190:5210] = 0.0
+    fr = flat_runs(y)
+    assert fr.dropout_runs.tolist() == [[2150, 2250], [3549, 3650], [5190, 5210]]
+    assert fr.clipped_runs.tolist() == [[first, last + 1], [c5[0], 5190], [5210, c5[1] + 1]]
+
+
+def test_channel_quality_lists_dropouts_and_skips_a_tacho():
+    x, planted = _planted(2, [(40, "zero"), (60, "hold")])
+    q = channel_quality(x)
+    assert q["dropout_runs"] == planted and q["n_dropout_runs"] == 2
+    assert q["n_dropout_samples"] == 100 and q["longest_dropout_run"] == 60
+    assert q["dropout_min_run"] >= 4 and q["n_clipped_runs"] == 0
+    # a tacho sits on two levels by design: its flat runs are not dropouts
+    tacho = np.where(np.arange(20_000) % 5000 < 100, 5.0, 0.0)
+    assert channel_quality(tacho, kind="tacho")["n_dropout_runs"] == 0
+    assert channel_quality(tacho, kind="tacho")["dropout_min_run"] is None
+    assert channel_quality(tacho, kind="tacho")["clipped_runs"] == clipped_runs(tacho).tolist()
+    assert channel_quality(tacho) == channel_quality(tacho, kind="tacho")   # recognised as such
+    assert channel_quality(x, kind="sun") == q
+    e = channel_quality(np.array([]))
+    assert e["dropout_runs"] == [] and e["n_dropout_runs"] == 0 and e["longest_dropout_run"] == 0
+    with pytest.raises(TypeError, match="kind"):
+        channel_quality(x, kind=3)
+    r = Recording(np.column_stack([x, tacho[:x.size]]), 1000.0,
+                  [ChannelSpec("g", kind="sun"), ChannelSpec("t", kind="tacho", units="V")])
+    rq = r.quality()
+    assert rq[0]["dropout_runs"] == planted and rq[1]["dropout_runs"] == []
+
+
+def test_outside_runs():
+    runs = np.array([[0, 5], [10, 20], [30, 33]])
+    assert outside_runs(runs, [[0, 6], [29, 40]]).tolist() == [[10, 20]]
+    assert outside_runs(runs, [[11, 20]]).tolist() == runs.tolist()     # not contained
+    assert outside_runs(runs, np.empty((0, 2), np.int64)).tolist() == runs.tolist()
+    assert outside_runs([], [[0, 5]]).shape == (0, 2)
+    with pytest.raises(ValueError, match="runs"):
+        outside_runs(np.array([1, 2, 3]), [[0, 1]])
+    with pytest.raises(TypeError, match="cover"):
+        outside_runs(runs, [[0.5, 2.0]])

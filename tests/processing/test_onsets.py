@@ -221,6 +221,72 @@ def test_recording_wrapper_respects_quality_report(make_train):
         detect_onsets_recording(rec, "r1", fs=FS)
 
 
+def test_gap_runs_act_exactly_like_nan(make_train):
+    # a DAQ dropout that wrote zeros (or held a value) over [10000, 12000): passed as
+    # gap_runs it must give the onsets of the same samples set to NaN, flags included
+    x, _, _ = make_train(n_pulses=100, snr_db=20.0, rng=1)
+    for fill in (0.0, x[9999]):
+        y = x.copy()
+        y[10000:12000] = fill
+        nan = x.copy()
+        nan[10000:12000] = np.nan
+        ref = detect_onsets(nan, FS, gap_guard=100 / FS)
+        on = detect_onsets(y, FS, gap_guard=100 / FS, gap_runs=np.array([[10000, 12000]]))
+        np.testing.assert_array_equal(on.index, ref.index)
+        np.testing.assert_array_equal(on.flags, ref.flags)
+        assert not np.any((on.index >= 10000) & (on.index < 12000))
+        assert on.has_flag(FLAG_GAP).sum() >= 1
+    # left in as data, the zeros are no gap: nothing flagged
+    y = x.copy()
+    y[10000:12000] = 0.0
+    assert not np.any(detect_onsets(y, FS).has_flag(FLAG_GAP))
+    # empty and out-of-range runs change nothing
+    ref = detect_onsets(x, FS)
+    for gr in (np.empty((0, 2), dtype=np.int64), np.array([[x.size + 10, x.size + 20]])):
+        np.testing.assert_array_equal(detect_onsets(x, FS, gap_runs=gr).index, ref.index)
+
+
+def test_recording_wrapper_takes_dropouts_from_the_report(make_train):
+    x, _, _ = make_train(n_pulses=60, snr_db=20.0, rng=1)
+    o = int(detect_onsets(x, FS).index[24])            # a pulse (32 samples FWHM) ...
+    a, b = o + 40, o + 200                              # ... whose tail the logger held
+    y = x.copy()
+    y[a:b] = y[a - 1]
+    rec = Recording(y, FS, [ChannelSpec("r1", kind="ring")])
+    q = assess_quality(y, FS, name="r1", warn=False)
+    assert q.dropout_runs.tolist() == [[a - 1, b]]
+    on = detect_onsets_recording(rec, "r1", quality=q)
+    assert not np.any((on.index >= a - 1) & (on.index < b))
+    g = on.has_flag(FLAG_GAP)
+    assert g[np.argmin(np.abs(on.index - o))]           # the pulse whose tail was held
+    assert np.all((on.index[g] > a - 300) & (on.index[g] < b + 300))
+    # explicit gap_runs win over the report's
+    on2 = detect_onsets_recording(rec, "r1", quality=q, gap_runs=np.empty((0, 2), dtype=np.int64))
+    assert not np.any(on2.has_flag(FLAG_GAP))
+
+
+def test_stream_gap_times_match_whole_array(make_train):
+    x, _, _ = make_train(n_pulses=80, snr_db=20.0, rng=2)
+    y = x.copy()
+    y[8000:9000] = 0.0
+    rec = Recording(y, FS, ["g"], t0=3.0)
+    ref = detect_onsets(y, FS, t0=3.0, gap_runs=np.array([[8000, 9000]]))
+    on = detect_onsets_stream(rec.blocks(2500 / FS), "g",
+                              gap_times=[[3.0 + 8000 / FS, 3.0 + 9000 / FS]])
+    np.testing.assert_array_equal(on.index, ref.index)
+    np.testing.assert_array_equal(on.flags, ref.flags)
+    assert np.any(on.has_flag(FLAG_GAP))
+    with pytest.raises(ValueError, match="gap_times"):
+        detect_onsets_stream(rec.blocks(2500 / FS), "g", gap_times=[[np.nan, 1.0]])
+    with pytest.raises(TypeError, match="gap_runs"):
+        detect_onsets_stream(rec.blocks(2500 / FS), "g", gap_runs=[[0, 1]])
+    with pytest.raises(ValueError, match="gap_runs"):
+        detect_onsets(y, FS, gap_runs=np.array([1, 2, 3]))
+    with pytest.raises(ValueError, match="gap_runs"):
+        detect_onsets(y, FS, gap_runs=np.array([[1.5, 2.5]]))
+    assert len(detect_onsets(np.zeros(0), FS, gap_runs=np.array([[0, 5]]))) == 0
+
+
 def test_low_correlation_pulse_is_flagged(make_train):
     x, _, shape = make_train(n_pulses=60, snr_db=30.0, rng=1)
     y = x.copy()
