@@ -144,9 +144,16 @@ def _read_head(path) -> _Head:
     n_head = 0
     with open(path, "rb") as fh:
         while True:
+            at = fh.tell()
             raw = fh.readline()
             if not raw:
+                if preamble is not None:
+                    raise CorruptFileError(path, f"byte {size} (end of file)", "truncated: the file ends after "
+                                                                               "the preamble, before the header line")
                 raise RecordingFileError(path, "no header line (only comments or blank lines)")
+            if not raw.endswith(b"\n"):
+                raise CorruptFileError(path, f"line {n_head + 1} (byte {at})",
+                                       "truncated: the file ends inside the preamble or header line (no newline)")
             n_head += 1
             if n_head == 1 and raw.startswith(codecs.BOM_UTF8):
                 raw = raw[len(codecs.BOM_UTF8):]

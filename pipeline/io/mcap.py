@@ -320,6 +320,9 @@ def _check_ends(fh, path: Path) -> None:
     size = fh.tell()
     fh.seek(0)
     head = fh.read(8)
+    if len(head) < 8 and MAGIC.startswith(head):
+        raise CorruptFileError(path, f"byte {size} (end of file)", f"truncated MCAP file: only {size} bytes, "
+                                                                  f"part of the opening magic")
     if head != MAGIC:
         raise RecordingFileError(path, f"not an MCAP file: it does not start with the MCAP magic "
                                        f"{MAGIC!r} (first bytes {head!r})")
