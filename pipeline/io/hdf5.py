@@ -46,9 +46,11 @@ from __future__ import annotations
 
 import copy
 import datetime as _dt
+import errno
 import json
 import math
 import os
+import re
 import uuid
 import warnings
 from collections import OrderedDict
@@ -601,42 +603,92 @@ def write(recording: Recording, path, *, compression: str | None = None, compres
     n = recording.n_samples
     # rdcc_nbytes=0: chunks go straight to the file, so a failing write (ENOSPC) leaves no
     # dirty chunk cache that HDF5 would flush again on close (which crashed the process)
-    with h5py.File(path, "w", track_order=False, libver=LIBVER, rdcc_nbytes=0) as f:
-        f.attrs["meshphase_format"] = "recording"
-        f.attrs["format_version"] = np.int64(FORMAT_VERSION)
-        f.attrs["fs"] = np.float64(recording.fs)
-        f.attrs["t0"] = np.float64(recording.t0)
-        f.attrs["n_samples"] = np.int64(n)
-        f.attrs["dtype"] = str(recording.data.dtype)
-        if recording.start_datetime is not None:
-            f.attrs["start_datetime"] = recording.start_datetime
-        f.attrs["channel_order"] = np.array(recording.names, dtype=h5py.string_dtype())
-        f.attrs["meta"] = meta
-        f.attrs["history"] = history
-        f.attrs["created_by"] = f"meshphase {_version_string()}"
-        f.attrs["file_id"] = str(uuid.uuid4())
-        group = f.create_group(_GROUP)
-        kw = {}
-        if n:
-            kw["chunks"] = (min(n, chunk_samples),)
-            if compression is not None:
-                kw.update(compression=compression, compression_opts=compression_opts)
-            if shuffle:
-                kw["shuffle"] = True
-            if fletcher32:
-                kw["fletcher32"] = True
-        for j, spec in enumerate(recording.channels):
-            ds = group.create_dataset(dataset_name(spec.name), data=np.ascontiguousarray(recording.data[:, j]),
-                                      **kw)
-            for key, value in spec.to_dict().items():
-                if value is None:
-                    continue
-                if isinstance(value, float):
-                    value = np.float64(value)
-                elif isinstance(value, int):
-                    value = np.int64(value)
-                ds.attrs[key] = value
+    f = h5py.File(path, "w", track_order=False, libver=LIBVER, rdcc_nbytes=0)
+    try:
+        _write_open(f, recording, meta, history, chunk_samples, compression, compression_opts, shuffle,
+                    fletcher32)
+    except BaseException as exc:
+        _close_after_failure(f, path)
+        err = _as_oserror(exc, path) if isinstance(exc, (OSError, RuntimeError)) else exc
+        if err is exc:
+            raise
+        raise err from exc
+    try:
+        f.close()
+    except (OSError, RuntimeError) as exc:  # the final flush failed (disk full)
+        _close_after_failure(f, path)
+        err = _as_oserror(exc, path)
+        if err is exc:
+            raise
+        raise err from exc
     logger.debug("wrote %s: %d x %d samples, compression=%s", path, n, recording.n_channels, compression)
+
+
+def _write_open(f, recording: Recording, meta: str, history: str, chunk_samples: int, compression,
+                compression_opts, shuffle: bool, fletcher32: bool) -> None:
+    """Fill the new, open HDF5 file ``f`` (see :func:`write`)."""
+    import h5py
+
+    n = recording.n_samples
+    f.attrs["meshphase_format"] = "recording"
+    f.attrs["format_version"] = np.int64(FORMAT_VERSION)
+    f.attrs["fs"] = np.float64(recording.fs)
+    f.attrs["t0"] = np.float64(recording.t0)
+    f.attrs["n_samples"] = np.int64(n)
+    f.attrs["dtype"] = str(recording.data.dtype)
+    if recording.start_datetime is not None:
+        f.attrs["start_datetime"] = recording.start_datetime
+    f.attrs["channel_order"] = np.array(recording.names, dtype=h5py.string_dtype())
+    f.attrs["meta"] = meta
+    f.attrs["history"] = history
+    f.attrs["created_by"] = f"meshphase {_version_string()}"
+    f.attrs["file_id"] = str(uuid.uuid4())
+    group = f.create_group(_GROUP)
+    kw = {}
+    if n:
+        kw["chunks"] = (min(n, chunk_samples),)
+        if compression is not None:
+            kw.update(compression=compression, compression_opts=compression_opts)
+        if shuffle:
+            kw["shuffle"] = True
+        if fletcher32:
+            kw["fletcher32"] = True
+    for j, spec in enumerate(recording.channels):
+        ds = group.create_dataset(dataset_name(spec.name), data=np.ascontiguousarray(recording.data[:, j]),
+                                  **kw)
+        for key, value in spec.to_dict().items():
+            if value is None:
+                continue
+            if isinstance(value, float):
+                value = np.float64(value)
+            elif isinstance(value, int):
+                value = np.int64(value)
+            ds.attrs[key] = value
+
+
+_ERRNO_RE = re.compile(r"errno = (\d+)")
+
+
+def _as_oserror(exc: BaseException, path) -> OSError:
+    """An OSError for an HDF5 write failure (h5py raises RuntimeError from some flushes)."""
+    if isinstance(exc, OSError) and exc.errno is not None:
+        return exc
+    m = _ERRNO_RE.search(str(exc))
+    code = int(m.group(1)) if m else errno.EIO
+    return OSError(code, f"{os.strerror(code)}: writing HDF5 file {path} failed ({str(exc).splitlines()[0]})",
+                   str(path))
+
+
+def _close_after_failure(f, path) -> None:
+    """Close an h5py file whose write failed; HDF5 may fail to flush while closing (ENOSPC),
+    so try twice and then leave it (the caller removes the file)."""
+    for _ in range(2):
+        try:
+            if f.id.valid:
+                f.close()
+            return
+        except Exception as exc:  # HDF5 raises OSError/RuntimeError while flushing to a full disk
+            logger.debug("closing %s after a failed write: %s", path, exc)
 
 
 def _version_string() -> str:

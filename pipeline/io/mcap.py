@@ -595,15 +595,13 @@ def _open(path, verify: bool = True):
         with _LOCK:
             lay = _LAYOUTS.get(key)
             checked = key in _VERIFIED
-        data_end = None
-        if verify and not checked:
+        if verify and not checked:  # before anything parses the file's records
             _check_ends(fh, path)
-            _, data_end = _check_summary_crc(fh, path)  # before anything parses the summary
-        if lay is None:
-            _, lay = _read_layout(fh, path, verify)
-        if verify and not checked:
+            _, data_end = _check_summary_crc(fh, path)
             # the summary starts right after the DataEnd record: the walk stops there
             _check_data_crc(fh, path, data_end)
+        if lay is None:
+            _, lay = _read_layout(fh, path, verify)
         with _LOCK:
             _LAYOUTS[key] = lay
             _LAYOUTS.move_to_end(key)
