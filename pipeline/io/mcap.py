@@ -217,6 +217,11 @@ def _origin_ns(t0: float) -> int:
 # ---------------------------------------------------------------------------------- CRC32
 _CRC_POLY = 0xEDB88320  # CRC-32 (ISO-HDLC, zlib), reflected
 
+try:  # ISA-L's CRC-32 (same polynomial as zlib, SIMD): ~3x zlib's speed where installed
+    from isal.isal_zlib import crc32 as _crc32
+except ImportError:  # the default: zlib (releases the GIL for large buffers, as does isal)
+    _crc32 = zlib.crc32
+
 
 def _crc_mulmod(a: int, b: int) -> int:
     """a * b modulo the CRC-32 polynomial (reflected bit order, as zlib's multmodp)."""
@@ -365,8 +370,8 @@ def _check_summary_crc(fh, path: Path) -> tuple[int, int]:
                                                             f"byte {offset_start}, footer at byte {pos})")
     if crc:
         fh.seek(start)
-        got = zlib.crc32(fh.read(pos - start))
-        got = zlib.crc32(_FOOTER.pack(op, length, summary_start, offset_start, 0)[:-4], got)
+        got = _crc32(fh.read(pos - start))
+        got = _crc32(_FOOTER.pack(op, length, summary_start, offset_start, 0)[:-4], got)
         if got != crc:
             raise CorruptFileError(path, f"bytes [{start}, {pos + 25}) (summary section and footer)",
                                    f"summary CRC32 is {got:#010x}, the footer records {crc:#010x}: the "
@@ -384,7 +389,7 @@ def _check_data_crc(fh, path: Path, data_end_limit: int) -> bool:
     is read. Other records (and compressed chunks) are read and CRC'd. Returns True when a
     CRC was checked, False when the file stores none.
     """
-    crc = zlib.crc32(MAGIC)
+    crc = _crc32(MAGIC)
     pos = 8
     fh.seek(pos)
     head_size = 9 + _CHUNK_HEAD.size
@@ -408,7 +413,7 @@ def _check_data_crc(fh, path: Path, data_end_limit: int) -> bool:
                                        f"{stored:#010x}: a record outside the chunks' records (header, "
                                        f"metadata, chunk headers, message indexes) is damaged")
             return bool(stored)
-        crc = zlib.crc32(head, crc)
+        crc = _crc32(head, crc)
         done = 9
         if op == _OP_CHUNK and length >= _CHUNK_HEAD.size + 4 + 8:
             fixed = fh.read(_CHUNK_HEAD.size)
@@ -417,22 +422,22 @@ def _check_data_crc(fh, path: Path, data_end_limit: int) -> bool:
                 rest = fh.read(clen + 8)
                 (rlen,) = _U64.unpack_from(rest, clen)
                 if ccrc and clen == 0 and head_size + clen + 8 + rlen == 9 + length and usize == rlen:
-                    crc = zlib.crc32(rest, zlib.crc32(fixed, crc))
+                    crc = _crc32(rest, _crc32(fixed, crc))
                     crc = crc32_combine(crc, ccrc, rlen)
                     pos = end
                     fh.seek(pos)
                     continue
-                crc = zlib.crc32(rest, zlib.crc32(fixed, crc))
+                crc = _crc32(rest, _crc32(fixed, crc))
                 done = head_size + clen + 8
             else:
-                crc = zlib.crc32(fixed, crc)
+                crc = _crc32(fixed, crc)
                 done = head_size
         left = 9 + length - done
         while left > 0:
             piece = fh.read(min(left, _IO_BLOCK))
             if not piece:
                 raise CorruptFileError(path, f"byte {pos}", "record runs past the end of the file")
-            crc = zlib.crc32(piece, crc)
+            crc = _crc32(piece, crc)
             left -= len(piece)
         pos = end
 
@@ -732,7 +737,7 @@ class _ChunkReader:
         """Check (or start checking) the CRC of ``data``, which lives in buffer ``turn``
         (-1: in its own object)."""
         if len(data) < _CRC_ASYNC_MIN:
-            got = zlib.crc32(data)
+            got = _crc32(data)
             if got != want:
                 raise self._crc_error(ci, got, want, len(data))
             return
@@ -741,7 +746,7 @@ class _ChunkReader:
 
             self.pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="meshphase-crc")
         self.finish()  # one CRC in flight at a time
-        self.pending = (self.pool.submit(zlib.crc32, data), ci, want, len(data))
+        self.pending = (self.pool.submit(_crc32, data), ci, want, len(data))
         self._pending_turn = turn
 
     def records(self, ci) -> memoryview:

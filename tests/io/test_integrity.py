@@ -306,21 +306,21 @@ def test_hdf5_fletcher32_composes_with_chunking_and_compression(tmp_path, option
 
 
 # ---------------------------------------------------------------------------------- truncation
-def _files(tmp_path, build_recording):
+def _files(tmp_path, build_recording, write_tdms):
     rec = build_recording(3000, 3)
     out = {}
     for fmt, suffix in [("hdf5", "h5"), ("mcap", "mcap"), ("csv", "csv")]:
         out[fmt] = pio.write(rec, tmp_path / f"full.{suffix}")
-    from synthetic.tdms_export import write_tdms
-
-    blocks = [rec.slice_samples(i, min(3000, i + 700)) for i in range(0, 3000, 700)]
-    out["tdms"] = write_tdms(blocks, tmp_path / "full.tdms", n_samples=3000)
+    # as synthetic.tdms_export writes them: wf_samples = the total, meshphase_kind set
+    props = {"wf_increment": 1.0 / rec.fs, "wf_start_offset": 0.0, "wf_samples": 3000, "meshphase_kind": "sun"}
+    out["tdms"] = write_tdms(tmp_path / "full.tdms", [("meshphase", name, rec.data[:, j], dict(props))
+                                                      for j, name in enumerate(rec.names)], segments=4)
     return out
 
 
 @pytest.fixture(scope="module")
-def originals(tmp_path_factory, make_recording):
-    return _files(tmp_path_factory.mktemp("orig"), make_recording)
+def originals(tmp_path_factory, make_recording, tdms_tools):
+    return _files(tmp_path_factory.mktemp("orig"), make_recording, tdms_tools[0])
 
 
 def _cuts(size, n):
@@ -359,7 +359,7 @@ def test_tdms_cut_at_a_segment_boundary_is_caught_by_wf_samples(originals, tmp_p
     q = tmp_path / "seg.tdms"
     q.write_bytes(blob[:last])
     with pytest.raises(CorruptFileError, match=r"seg\.tdms: channel '\w+', end of file at byte \d+: truncated: "
-                                               r"2800 samples, wf_samples says 3000"):
+                                               r"2250 samples, wf_samples says 3000"):
         pio.read(q)
 
 
