@@ -72,16 +72,24 @@ def test_hdf5_fletcher32_cost(rec, tmp_path):
         k[0] += 1
         return pio.write(rec, tmp_path / f"w{k[0]}.h5", fletcher32=fletcher32)
 
+    def write_raw(fletcher32):  # the format writer alone: no temporary file, no fsync
+        k[0] += 1
+        return hdf5.write(rec, tmp_path / f"raw{k[0]}.h5", fletcher32=fletcher32)
+
     w_off = _best(lambda: write(False))
     w_on = _best(lambda: write(True))
+    raw_off = _best(lambda: write_raw(False))
+    raw_on = _best(lambda: write_raw(True))
     p_off = pio.write(rec, tmp_path / "off.h5", fletcher32=False)
     p_on = pio.write(rec, tmp_path / "on.h5", fletcher32=True)
     r_off = _best(lambda: hdf5.read(p_off))
     r_on = _best(lambda: hdf5.read(p_on))
     r_skip = _best(lambda: hdf5.read(p_on, verify=False))
     print()
-    _row("HDF5 write, no fletcher32", *w_off)
-    _row("HDF5 write, fletcher32", *w_on, base=w_off[0])
+    _row("HDF5 write (registry: fsync), no fletcher32", *w_off)
+    _row("HDF5 write (registry: fsync), fletcher32", *w_on, base=w_off[0])
+    _row("HDF5 write (no fsync), no fletcher32", *raw_off)
+    _row("HDF5 write (no fsync), fletcher32", *raw_on, base=raw_off[0])
     _row("HDF5 read, no fletcher32", *r_off)
     _row("HDF5 read, fletcher32 checked", *r_on, base=r_off[0])
     _row("HDF5 read, fletcher32 file, verify=False", *r_skip, base=r_off[0])
