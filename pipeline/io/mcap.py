@@ -442,12 +442,18 @@ def _check_data_crc(fh, path: Path, data_end_limit: int) -> bool:
         pos = end
 
 
-def _read_layout(fh, path: Path, verify: bool = True) -> tuple[object, _Layout]:
-    """Open an MCAP stream, check it is one of ours and parse the header records."""
-    _check_ends(fh, path)
+def _summary(fh, path: Path, verify: bool):
+    """(reader, summary) from ``mcap.reader.make_reader`` (summary None when absent)."""
     with _lib_errors(path, "reading the summary section"):
         reader = make_reader(fh, validate_crcs=verify)
-        summary = reader.get_summary()
+        return reader, reader.get_summary()
+
+
+def _read_layout(fh, path: Path, verify: bool = True, opened=None) -> tuple[object, _Layout]:
+    """Open an MCAP stream, check it is one of ours and parse the header records.
+    ``opened``: (reader, summary) already made by :func:`_summary`."""
+    _check_ends(fh, path)
+    reader, summary = opened if opened is not None else _summary(fh, path, verify)
     if summary is None:
         raise RecordingFileError(path, "MCAP file has no summary section (no index); meshphase "
                                        "needs the chunk index to read blocks and time windows")
@@ -600,13 +606,18 @@ def _open(path, verify: bool = True):
         with _LOCK:
             lay = _LAYOUTS.get(key)
             checked = key in _VERIFIED
-        if verify and not checked:  # before anything parses the file's records
+        opened = None
+        if verify and not checked:  # before anything parses the data section's records
             _check_ends(fh, path)
             _, data_end = _check_summary_crc(fh, path)
-            # the summary starts right after the DataEnd record: the walk stops there
-            _check_data_crc(fh, path, data_end)
+            opened = _summary(fh, path, verify)  # the summary passed its CRC
+            summary = opened[1]
+            if summary is not None and any(sc.name == SCHEMA_NAME for sc in summary.schemas.values()):
+                # one of ours (else _read_layout says what it is, without walking a foreign
+                # file); the summary starts right after the DataEnd record: the walk stops there
+                _check_data_crc(fh, path, data_end)
         if lay is None:
-            _, lay = _read_layout(fh, path, verify)
+            _, lay = _read_layout(fh, path, verify, opened)
         with _LOCK:
             _LAYOUTS[key] = lay
             _LAYOUTS.move_to_end(key)
