@@ -39,6 +39,7 @@ from pathlib import Path
 
 from ..log import logger
 from ..recording import ChannelSpec, sample_index
+from ..validate import as_float, as_nonnegative
 
 __all__ = ["RecordingFileError", "CorruptFileError", "RecordingInfo", "atomic_path",
            "clean_stale_partials", "TEMP_PREFIX", "TEMP_SUFFIX", "STALE_AGE"]
@@ -212,7 +213,8 @@ def clean_stale_partials(directory, *, max_age: float = STALE_AGE, now: float | 
         The files removed.
     """
     directory = Path(directory)
-    now = time.time() if now is None else float(now)
+    max_age = as_nonnegative(max_age, "max_age")
+    now = time.time() if now is None else as_float(now, "now")
     host = _host_tag()
     removed = []
     try:

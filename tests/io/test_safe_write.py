@@ -195,6 +195,16 @@ def test_stale_partials_are_cleaned_and_others_kept(tmp_path):
     assert clean_stale_partials(tmp_path / "missing") == []
 
 
+def test_clean_stale_partials_empty_and_bad_input(tmp_path):
+    assert clean_stale_partials(tmp_path) == []
+    (tmp_path / _temp_name(os.getppid())).write_bytes(b"")
+    assert clean_stale_partials(tmp_path, max_age=0.0, now=time.time() + 1.0) != []  # everything is old
+    with pytest.raises(ValueError, match="max_age must be >= 0"):
+        clean_stale_partials(tmp_path, max_age=-1.0)
+    with pytest.raises(TypeError, match="now"):
+        clean_stale_partials(tmp_path, now="today")
+
+
 _KILLED_WRITER = textwrap.dedent("""
     import sys, time
     from pipeline.io.base import atomic_path
