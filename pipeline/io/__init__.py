@@ -5,6 +5,16 @@ format=None)``. The format is recognised by content (magic bytes), the suffix on
 ties for text formats; an unknown format raises ValueError listing the supported ones.
 
 Formats: ``hdf5`` (native archive), ``mcap``, ``csv``, ``tdms`` (NI, read only).
+
+Integrity: every read checks what the format lets it check (``data_schemas/*.md`` say what,
+per format): MCAP chunk, data-section and summary CRC32s, HDF5 fletcher32 checksums of the
+sample chunks, CSV and TDMS structure (truncation, malformed final row, field counts). A
+damaged file raises :class:`CorruptFileError` (a :class:`RecordingFileError`, so a
+ValueError) naming the file, the position and the problem. ``verify=False`` (a format
+option of :func:`read`, :func:`read_info` and :func:`iter_blocks`) skips the checksum
+checks (MCAP, HDF5); structural checks always run.
+
+Writes are atomic and safe: see :func:`~pipeline.io.base.atomic_path`.
 """
 
 from __future__ import annotations
@@ -15,10 +25,11 @@ from typing import Iterator
 
 from ..recording import Recording
 from ..validate import as_nonnegative, as_positive
-from .base import RecordingFileError, RecordingInfo, atomic_path
+from .base import CorruptFileError, RecordingFileError, RecordingInfo, atomic_path, clean_stale_partials
 
 __all__ = ["read", "write", "read_info", "iter_blocks", "detect_format", "FORMATS",
-           "RecordingFileError", "RecordingInfo", "get_format"]
+           "RecordingFileError", "CorruptFileError", "RecordingInfo", "get_format", "atomic_path",
+           "clean_stale_partials"]
 
 #: Supported formats, in sniffing order (binary formats with magic bytes first, CSV last).
 FORMATS = ("hdf5", "mcap", "tdms", "csv")
@@ -77,7 +88,8 @@ def _format_for_write(path: Path, format: str | None) -> str:
 def read_info(path, format: str | None = None, **options) -> RecordingInfo:
     """Header of a recording file (channels, fs, n_samples, t0, metadata) without samples.
 
-    ``options`` go to the format module (e.g. ``fs=`` and ``raw=`` for TDMS)."""
+    ``options`` go to the format module (e.g. ``fs=`` and ``raw=`` for TDMS, ``verify=False``
+    to skip checksum checks)."""
     name = format or detect_format(path)
     return get_format(name).read_info(Path(path), **options)
 
@@ -97,8 +109,18 @@ def read(path, channels=None, start: float | None = None, stop: float | None = N
     format : str, optional
         Skip detection and use this format.
     **options
-        Format options (TDMS: ``fs=`` when the file has no ``wf_increment``, ``raw=True`` to
-        keep unscaled values); a format without options raises TypeError.
+        Format options: every format takes ``verify`` (default True: check the stored
+        checksums, MCAP CRC32 and HDF5 fletcher32; False skips them, structural checks
+        still run); TDMS also ``fs=`` when the file has no ``wf_increment`` and ``raw=True``
+        to keep unscaled values. An unknown option raises TypeError.
+
+    Raises
+    ------
+    CorruptFileError
+        The file is damaged (checksum mismatch, truncated, malformed row); the message
+        names the file, the position and the problem.
+    RecordingFileError
+        The file is not a recording of the detected format, or is inconsistent.
 
     Returns
     -------
@@ -153,12 +175,37 @@ def write(recording: Recording, path, format: str | None = None, *, overwrite: b
     -------
     Path
         The written path.
+
+    Raises
+    ------
+    FileExistsError
+        ``path`` exists (also when another writer published it while this one wrote) and
+        not ``overwrite``.
+    OSError
+        From the filesystem, e.g. ENOSPC (disk full): raised before writing when the free
+        space is clearly too small, else when the write fails; nothing is left behind.
+
+    Notes
+    -----
+    The file is written to a temporary ``.mp-*.partial`` file in the same directory
+    (created with O_EXCL), fsync'ed and then published (see
+    :func:`~pipeline.io.base.atomic_path`); a reader never sees a partial file under
+    ``path``.
     """
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
     path = Path(path)
     name = _format_for_write(path, format)
     mod = get_format(name)
-    with atomic_path(path, overwrite=overwrite) as tmp:
+    with atomic_path(path, overwrite=overwrite, size_hint=_size_hint(recording, name, options)) as tmp:
         mod.write(recording, tmp, **options)
     return path
+
+
+def _size_hint(recording: Recording, name: str, options: dict) -> int | None:
+    """A lower bound of the written file's size [B] (None when compressed: unknown)."""
+    if options.get("compression") not in (None, "none"):
+        return None
+    if name == "csv":  # at least one digit and one separator per value
+        return 2 * recording.n_samples * (recording.n_channels + 1)
+    return int(recording.data.nbytes)

@@ -1,32 +1,48 @@
-"""What every format module shares: the header type, the file error, atomic writes.
+"""What every format module shares: the header type, the file errors, atomic writes.
 
 A format module (``hdf5``, ``mcap``, ``csv``, ``tdms``) provides
 
 ``NAME`` (str), ``SUFFIXES`` (tuple of lower-case suffixes), ``CAN_WRITE`` (bool),
 ``sniff(head: bytes) -> bool``
     True when the first bytes of a file are this format (content, not suffix).
-``read_info(path) -> RecordingInfo``
+``read_info(path, *, verify=True) -> RecordingInfo``
     Header only: no samples are read.
-``read(path, channels=None, i0=0, i1=None) -> Recording``
+``read(path, channels=None, i0=0, i1=None, *, verify=True) -> Recording``
     Samples ``i0 <= i < i1`` of the named channels (all when None); indices already checked
-    by the registry.
+    by the registry. ``verify`` switches the checksum checks of formats that store checksums
+    (MCAP CRCs, HDF5 fletcher32); structural checks (truncation, field counts) always run.
 ``write(recording, path, **options) -> None`` (when ``CAN_WRITE``)
-    Writes straight to ``path``; the registry wraps it in a temporary file and a rename.
-``iter_blocks(path, n_block, n_overlap, channels) -> Iterator[Recording]`` (optional)
-    A faster streaming path than repeated ``read`` calls.
+    Writes to ``path``, an empty file the registry created for it (see :func:`atomic_path`).
+``iter_blocks(path, n_block, n_overlap, channels, *, verify=True) -> Iterator[Recording]``
+    (optional) A faster streaming path than repeated ``read`` calls.
+
+Errors: :class:`RecordingFileError` (a ValueError) for a file that is not what it claims to
+be; its subclass :class:`CorruptFileError` for a file whose bytes are damaged (checksum
+mismatch, truncation, a malformed row), with the position of the damage.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
+import hashlib
 import os
-import tempfile
+import re
+import secrets
+import signal
+import socket
+import stat
+import threading
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..log import logger
 from ..recording import ChannelSpec, sample_index
+from ..validate import as_float, as_nonnegative
 
-__all__ = ["RecordingInfo", "RecordingFileError", "atomic_path"]
+__all__ = ["RecordingFileError", "CorruptFileError", "RecordingInfo", "atomic_path",
+           "clean_stale_partials", "TEMP_PREFIX", "TEMP_SUFFIX", "STALE_AGE"]
 
 
 class RecordingFileError(ValueError):
@@ -37,6 +53,29 @@ class RecordingFileError(ValueError):
         self.path = str(path)
         self.problem = problem
         super().__init__(f"{path}: {problem}")
+
+
+class CorruptFileError(RecordingFileError):
+    """The bytes of a recording file are damaged: a checksum does not match (MCAP CRC32, HDF5
+    fletcher32), the file is cut short, or a row is malformed.
+
+    The message is ``"<path>: <position>: <problem>"``; the parts are kept as attributes.
+
+    Attributes
+    ----------
+    path : str
+    position : str
+        Where the damage is, in the format's own terms: ``"byte 1234"``,
+        ``"chunk 3 at byte 1234"``, ``"line 17 (byte 4096)"``, ``"dataset /channels/x,
+        samples [0, 131072)"``.
+    problem : str
+        What is wrong.
+    """
+
+    def __init__(self, path, position: str, problem: str):
+        self.position = str(position)
+        super().__init__(path, f"{position}: {problem}")
+        self.problem = problem
 
 
 @dataclass
@@ -112,27 +151,278 @@ class RecordingInfo:
         return channels
 
 
-@contextlib.contextmanager
-def atomic_path(path, *, overwrite: bool = False):
-    """Yield a temporary path next to ``path``; on success rename it onto ``path``.
 
-    Nothing is left at ``path`` if the body raises (the temporary file is removed), so a
-    crash never leaves a half-written recording under the target name. An existing ``path``
-    raises FileExistsError unless ``overwrite``.
+# ---------------------------------------------------------------------------- atomic writes
+#: Temporary files are named ``.mp-<host>-<pid>-<8 hex>.partial`` (at most 33 characters,
+#: so any legal output name works): ``host`` is 4 hex digits of a hash of the host name and
+#: ``pid`` the writing process, so a later write can tell a dead writer's leftover.
+TEMP_PREFIX = ".mp-"
+TEMP_SUFFIX = ".partial"
+#: A ``.partial`` file not modified for this long [s] is stale whoever wrote it (a writer
+#: on another host, a reused PID, a writer of an older meshphase).
+STALE_AGE = 3600.0
+_TEMP_RE = re.compile(r"^\.mp-(?P<host>[0-9a-f]{4})-(?P<pid>[0-9]{1,10})-[0-9a-f]{8}\.partial$")
+# temporary names of meshphase <= 0.1 (tempfile.mkstemp(prefix=".<name>.", suffix=".partial"))
+_LEGACY_RE = re.compile(r"^\..+\.[a-z0-9_]{8}\.partial$")
+# link() is refused by filesystems without hard links (FAT, some FUSE/SMB mounts)
+_NO_LINK = {errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.EMLINK, errno.ENOSYS, errno.EACCES}
+# fsync of a directory is refused by some filesystems; the data are already synced then
+_NO_DIR_FSYNC = {errno.EINVAL, errno.EBADF, errno.EACCES, errno.EPERM, errno.EISDIR, errno.ENOTSUP}
+#: Signals that would end the process without unwinding; while a temporary file is open in
+#: the main thread they raise SystemExit(128 + signum) instead, so the file is removed.
+_GUARDED_SIGNALS = tuple(getattr(signal, n) for n in ("SIGTERM", "SIGHUP") if hasattr(signal, n))
+
+
+def _host_tag() -> str:
+    return hashlib.blake2s(socket.gethostname().encode("utf-8", "replace"), digest_size=2).hexdigest()
+
+
+def _pid_alive(pid: int) -> bool:
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError, OSError):
+        return True  # exists under another user (or cannot tell): keep its file
+    return True
+
+
+def clean_stale_partials(directory, *, max_age: float = STALE_AGE, now: float | None = None) -> list[Path]:
+    """Remove temporary files of writers that died (SIGKILL, power loss) from ``directory``.
+
+    A ``.mp-<host>-<pid>-<hex>.partial`` file is stale when it was made on this host by a
+    process that no longer runs, or when it was not modified for ``max_age`` seconds (a
+    writer on another host, a reused PID). Files of older meshphase versions
+    (``.<name>.<8 chars>.partial``) are removed by age only. Anything else is never touched.
+    Called by :func:`atomic_path` on every write, so a killed writer's leftover is removed
+    by the next write to the same directory.
+
+    Parameters
+    ----------
+    directory : str or Path
+    max_age : float
+        Age [s] after which any matching file is stale (default :data:`STALE_AGE`).
+    now : float, optional
+        Current time [s since the epoch] (default ``time.time()``).
+
+    Returns
+    -------
+    list of Path
+        The files removed.
+    """
+    directory = Path(directory)
+    max_age = as_nonnegative(max_age, "max_age")
+    now = time.time() if now is None else as_float(now, "now")
+    host = _host_tag()
+    removed = []
+    try:
+        entries = list(os.scandir(directory))
+    except OSError:
+        return removed
+    for entry in entries:
+        name = entry.name
+        if not name.endswith(TEMP_SUFFIX) or not name.startswith("."):
+            continue
+        m = _TEMP_RE.match(name)
+        if m is None and not _LEGACY_RE.match(name):
+            continue
+        try:
+            st = entry.stat(follow_symlinks=False)
+        except OSError:
+            continue
+        if not stat.S_ISREG(st.st_mode):
+            continue
+        old = now - st.st_mtime > max_age
+        dead = (m is not None and m["host"] == host and int(m["pid"]) != os.getpid()
+                and not _pid_alive(int(m["pid"])))
+        if not (old or dead):
+            continue
+        try:
+            os.unlink(entry.path)
+        except OSError as exc:
+            logger.debug("could not remove stale temporary file %s: %s", entry.path, exc)
+            continue
+        logger.info("removed stale temporary file %s (%s)", entry.path,
+                    "writer process gone" if dead else f"not modified for {now - st.st_mtime:.0f} s")
+        removed.append(Path(entry.path))
+    return removed
+
+
+def _create_temp(directory: Path) -> tuple[Path, int]:
+    """Create a new empty temporary file with O_EXCL in ``directory``; (path, fd)."""
+    host = _host_tag()
+    flags = os.O_CREAT | os.O_EXCL | os.O_WRONLY | getattr(os, "O_CLOEXEC", 0)
+    for _ in range(100):
+        tmp = directory / f"{TEMP_PREFIX}{host}-{os.getpid()}-{secrets.token_hex(4)}{TEMP_SUFFIX}"
+        try:
+            return tmp, os.open(tmp, flags, 0o666)
+        except FileExistsError:
+            continue
+    raise FileExistsError(errno.EEXIST, f"{directory}: no free temporary file name after 100 tries")
+
+
+def _fsync_dir(directory: Path) -> None:
+    try:
+        fd = os.open(directory, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    except OSError as exc:
+        if exc.errno in _NO_DIR_FSYNC:
+            return
+        raise
+    try:
+        os.fsync(fd)
+    except OSError as exc:
+        if exc.errno not in _NO_DIR_FSYNC:
+            raise
+    finally:
+        os.close(fd)
+
+
+def _check_space(path: Path, size_hint: int | None) -> None:
+    if not size_hint:
+        return
+    try:
+        st = os.statvfs(path.parent)
+    except (OSError, AttributeError):
+        return
+    free = st.f_bavail * st.f_frsize
+    if free < size_hint:
+        raise OSError(errno.ENOSPC, f"{path}: not enough free space: the file needs about "
+                                    f"{size_hint} bytes, {free} bytes are free on {path.parent}")
+
+
+def _publish(tmp: Path, path: Path, overwrite: bool) -> None:
+    """Move the finished temporary file onto ``path``: atomically, and refusing an existing
+    ``path`` unless ``overwrite`` (a hard link cannot replace, unlike rename)."""
+    if overwrite:
+        os.replace(tmp, path)
+        return
+    try:
+        os.link(tmp, path)
+    except FileExistsError:
+        raise FileExistsError(errno.EEXIST, f"{path}: exists (written by another writer while this one "
+                                            f"ran?); nothing replaced; pass overwrite=True to replace it",
+                              str(path)) from None
+    except OSError as exc:
+        if exc.errno not in _NO_LINK:
+            raise
+        # no hard links on this filesystem: check, then rename (a race with another writer
+        # finishing in between is possible here, and only here)
+        if os.path.lexists(path):
+            raise FileExistsError(errno.EEXIST, f"{path}: exists; pass overwrite=True to replace it",
+                                  str(path)) from None
+        os.rename(tmp, path)
+        return
+    os.unlink(tmp)
+
+
+class _SignalGuard:
+    """While active in the main thread, SIGTERM/SIGHUP raise SystemExit(128 + signum) where
+    they would have killed the process, so ``finally`` blocks run and temporary files go.
+    Only signals still at their default action are taken over; handlers are restored."""
+
+    def __init__(self):
+        self.saved = {}
+
+    def __enter__(self):
+        if threading.current_thread() is not threading.main_thread():
+            return self
+        for sig in _GUARDED_SIGNALS:
+            try:
+                if signal.getsignal(sig) is signal.SIG_DFL:
+                    signal.signal(sig, self._raise)
+                    self.saved[sig] = signal.SIG_DFL
+            except (ValueError, OSError):  # not allowed here
+                continue
+        return self
+
+    @staticmethod
+    def _raise(signum, frame):
+        raise SystemExit(128 + signum)
+
+    def __exit__(self, *exc):
+        for sig, handler in self.saved.items():
+            with contextlib.suppress(ValueError, OSError):
+                signal.signal(sig, handler)
+        self.saved.clear()
+        return False
+
+
+@contextlib.contextmanager
+def atomic_path(path, *, overwrite: bool = False, size_hint: int | None = None):
+    """Yield a new empty temporary file next to ``path``; on success publish it as ``path``.
+
+    1. Stale temporary files of dead writers in the target directory are removed
+       (:func:`clean_stale_partials`).
+    2. The temporary file ``.mp-<host>-<pid>-<8 hex>.partial`` is created with
+       ``O_CREAT | O_EXCL`` in the target directory (short name: any legal output name
+       works) and yielded as a Path; the caller's writer opens it by name and writes.
+    3. When the body returns: the file is fsync'ed, checked to be still the file created in
+       2, and published: ``overwrite=False`` hard-links it to ``path``, which fails with
+       FileExistsError when ``path`` exists by then (two writers to one output: exactly one
+       wins, the other's data are dropped); ``overwrite=True`` renames it over ``path``
+       (atomic). Then the directory is fsync'ed.
+
+    On every failure (an exception, KeyboardInterrupt, SIGTERM or SIGHUP in the main thread,
+    which raise SystemExit(143) / SystemExit(129) here) the temporary file is removed and
+    ``path`` is untouched. After SIGKILL or a power loss the temporary file stays until the
+    next write to the same directory removes it.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file.
+    overwrite : bool
+        Replace an existing ``path`` (default False: FileExistsError, checked before writing
+        and again, atomically, when publishing).
+    size_hint : int, optional
+        Expected file size [B]; OSError(ENOSPC) before anything is written when the
+        filesystem has less free space.
+
+    Raises
+    ------
+    FileExistsError
+        ``path`` exists and not ``overwrite``.
+    FileNotFoundError
+        The directory of ``path`` does not exist.
+    IsADirectoryError
+        ``path`` is a directory.
+    OSError
+        From the filesystem (ENOSPC: disk full), with nothing left behind.
     """
     path = Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path}: exists; pass overwrite=True to replace it")
-    if not path.parent.exists():
-        raise FileNotFoundError(f"{path}: directory {path.parent} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent)
-    os.close(fd)
-    os.unlink(tmp)  # writers (h5py, TdmsWriter) want to create the file themselves
-    tmp = Path(tmp)
-    try:
-        yield tmp
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
-        raise
+    if path.is_dir():
+        raise IsADirectoryError(errno.EISDIR, f"{path}: is a directory", str(path))
+    if os.path.lexists(path) and not overwrite:
+        raise FileExistsError(errno.EEXIST, f"{path}: exists; pass overwrite=True to replace it", str(path))
+    directory = path.parent
+    if not directory.is_dir():
+        raise FileNotFoundError(errno.ENOENT, f"{path}: directory {directory} does not exist", str(directory))
+    clean_stale_partials(directory)
+    _check_space(path, size_hint)
+    with _SignalGuard():
+        tmp, fd = _create_temp(directory)
+        try:
+            created = os.fstat(fd)
+            yield tmp
+            os.fsync(fd)
+            try:
+                now = os.lstat(tmp)
+            except FileNotFoundError:
+                now = None
+            if now is None or (now.st_dev, now.st_ino) != (created.st_dev, created.st_ino) \
+                    or not stat.S_ISREG(now.st_mode):
+                raise OSError(errno.ESTALE, f"{tmp}: the temporary file was removed or replaced during "
+                                            f"the write; {path} not written")
+            os.close(fd)
+            fd = -1
+            _publish(tmp, path, overwrite)
+            tmp = None
+            _fsync_dir(directory)
+        finally:
+            if fd >= 0:
+                os.close(fd)
+            if tmp is not None:
+                with contextlib.suppress(FileNotFoundError):
+                    os.unlink(tmp)

@@ -25,7 +25,18 @@ Every row read is checked against the uniform grid t0 + i / fs: a time that does
 raises RecordingFileError "non-monotonic time at line L"; a step between rows more than
 2 x :data:`TIME_TOLERANCE` sample intervals from 1 / fs, or a time more than
 :data:`TIME_TOLERANCE` sample intervals off the grid, raises "non-uniform time at line L".
-Our own files must also end with a newline and hold exactly n_samples rows (else "truncated").
+
+Structure (every file, once per file identity, one vectorised pass over the bytes; raises
+:class:`~pipeline.io.base.CorruptFileError` with the line number and byte offset):
+
+* the file ends with a newline: a last line without one was cut short (a number cut
+  mid-token, "-7.85" of "-7.85e-11", is recognisable only this way, or by a missing field);
+* every data line holds exactly as many commas as the header has fields minus one (lines
+  end with "\n" or "\r\n"; data fields are never quoted);
+* blank lines only at the end (plain CSVs), none in our own files;
+* our own files hold exactly the preamble's n_samples rows (fewer: "truncated").
+
+A plain CSV cut exactly after a newline is a shorter valid file: nothing can tell.
 """
 
 from __future__ import annotations
@@ -35,8 +46,10 @@ import csv as _csv
 import io
 import json
 import math
+import os
 import re
 import warnings
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
@@ -46,7 +59,7 @@ import numpy as np
 from ..errors import FormatWarning
 from ..recording import ChannelSpec, Recording
 from ..validate import as_int, as_positive_int
-from .base import RecordingFileError, RecordingInfo
+from .base import CorruptFileError, RecordingFileError, RecordingInfo
 from .hdf5 import check_start_datetime, dumps_json, spec_from_dict, warn_nonfinite
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "FORMAT_VERSION", "TIME_TOLERANCE", "sniff", "read_info",
@@ -105,6 +118,7 @@ class _Head:
     encoding: str
     ends_with_newline: bool
     size: int
+    data_offset: int = 0             # byte offset of the first data row
     specs: list[ChannelSpec] = field(default_factory=list)
 
 
@@ -130,9 +144,16 @@ def _read_head(path) -> _Head:
     n_head = 0
     with open(path, "rb") as fh:
         while True:
+            at = fh.tell()
             raw = fh.readline()
             if not raw:
+                if preamble is not None:
+                    raise CorruptFileError(path, f"byte {size} (end of file)", "truncated: the file ends after "
+                                                                               "the preamble, before the header line")
                 raise RecordingFileError(path, "no header line (only comments or blank lines)")
+            if not raw.endswith(b"\n"):
+                raise CorruptFileError(path, f"line {n_head + 1} (byte {at})",
+                                       "truncated: the file ends inside the preamble or header line (no newline)")
             n_head += 1
             if n_head == 1 and raw.startswith(codecs.BOM_UTF8):
                 raw = raw[len(codecs.BOM_UTF8):]
@@ -155,6 +176,7 @@ def _read_head(path) -> _Head:
                 continue
             header = line
             break
+        data_offset = fh.tell()
         fh.seek(max(0, size - 1))
         ends_with_newline = fh.read(1) == b"\n"
     if encoding != "utf-8":
@@ -174,7 +196,7 @@ def _read_head(path) -> _Head:
         units.append(un)
     return _Head(n_head=n_head, preamble=preamble, fields=fields, names=names, units=units,
                  time_scale=_TIME_UNITS[tunits or ""], encoding=encoding,
-                 ends_with_newline=ends_with_newline, size=size)
+                 ends_with_newline=ends_with_newline, size=size, data_offset=data_offset)
 
 
 def _duplicates(names) -> list[str]:
@@ -230,7 +252,8 @@ def _check_preamble(path, head: _Head) -> RecordingInfo:
     if head.time_scale != 1.0:
         raise RecordingFileError(path, f"line {head.n_head}: time column must be in seconds in a meshphase CSV")
     if not head.ends_with_newline:
-        raise RecordingFileError(path, "truncated: the file does not end with a newline (last row cut short?)")
+        raise CorruptFileError(path, f"byte {head.size} (end of file)",
+                               "truncated: the file does not end with a newline (last row cut short)")
     head.specs = specs
     return RecordingInfo(path=str(path), format=NAME, fs=float(fs), n_samples=n, channels=specs, t0=float(t0),
                          start_datetime=start, meta=meta, history=history,
@@ -257,8 +280,7 @@ def _plain_info(path, head: _Head) -> RecordingInfo:
         except (ValueError, TypeError) as exc:
             raise RecordingFileError(path, f"line {head.n_head}: bad channel column {n!r}: {exc}") from exc
     head.specs = specs
-    n_lines, first, last = _scan_rows(path, head)
-    n = n_lines
+    n, first, last = _scan(path, head)
     if n < 2:
         raise RecordingFileError(path, f"missing or non-positive sample rate: cannot infer it from {n} data row(s) "
                                        f"(need at least 2)")
@@ -296,45 +318,135 @@ def _parse_time(path, line: bytes, lineno: int) -> float:
     return v
 
 
-def _scan_rows(path, head: _Head) -> tuple[int, bytes, bytes]:
-    """Number of data rows (trailing blank lines excluded), first and last data line."""
-    buf = bytearray(1 << 22)
-    newlines = 0
+_SCAN_BLOCK = 1 << 22  # bytes per step of the structure scan
+# structure scans of the last few files: identity -> (n rows, first row, last row)
+_SCANS: "OrderedDict[tuple, tuple[int, bytes, bytes]]" = OrderedDict()
+_SCANS_MAX = 16
+
+
+def _scan(path, head: _Head) -> tuple[int, bytes, bytes]:
+    """Check the structure of the data lines (see the module notes); return the number of
+    data rows (trailing blank lines excluded), the first and the last data row. Cached by
+    file identity (device, inode, size, mtime)."""
+    st = os.stat(path)
+    key = (os.path.realpath(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, head.data_offset,
+           len(head.fields))
+    hit = _SCANS.get(key)
+    if hit is not None:
+        _SCANS.move_to_end(key)
+        return hit
+    out = _scan_structure(path, head)
+    _SCANS[key] = out
+    while len(_SCANS) > _SCANS_MAX:
+        _SCANS.popitem(last=False)
+    return out
+
+
+def _scan_structure(path, head: _Head) -> tuple[int, bytes, bytes]:
+    expected = len(head.fields) - 1   # commas per data line
+    own = head.preamble is not None
+    buf = bytearray(_SCAN_BLOCK)
+    pos = head.data_offset            # file offset of buf[0]
+    line = head.n_head + 1            # file line number of the next line to end
+    line_start = pos                  # its byte offset
+    carry = 0                         # commas seen so far in that line
+    prev_byte = -1                    # last byte of the previous block
+    blank_from = None                 # (line, offset) of the first blank line of a trailing run
+    n_rows = 0
+    last_span = None                  # (start, end) of the last non-blank line
+
+    def bad_line(ln, off, problem):
+        return CorruptFileError(path, f"line {ln} (byte {off})", problem)
+
     with open(path, "rb", buffering=0) as fh:
+        fh.seek(pos)
         while True:
             k = fh.readinto(buf)
             if not k:
                 break
-            newlines += buf.count(b"\n", 0, k)
-        # last non-blank line
-        tail_len = min(head.size, 1 << 16)
-        fh.seek(head.size - tail_len)
-        tail = fh.read(tail_len)
-    lines_total = newlines + (0 if head.ends_with_newline else 1)
-    tail_lines = tail.split(b"\n")
-    if head.ends_with_newline:
-        tail_lines = tail_lines[:-1]
-    trailing_blank = 0
-    while tail_lines and not tail_lines[-1].strip():
-        tail_lines.pop()
-        trailing_blank += 1
-    n = lines_total - head.n_head - trailing_blank
-    if n <= 0:
-        return 0, b"", b""
-    last = tail_lines[-1] if tail_lines else b""
-    with open(path, "rb") as fh:
-        for _ in range(head.n_head):
-            fh.readline()
-        first = fh.readline()
-    return n, first, last
+            a = np.frombuffer(buf, np.uint8, k)
+            nl = np.flatnonzero(a == 10)
+            if not nl.size:
+                carry += int(np.count_nonzero(a == 44))
+                prev_byte = int(a[-1])
+                pos += k
+                continue
+            cm = np.flatnonzero(a == 44)
+            before = np.searchsorted(cm, nl)
+            counts = np.diff(before, prepend=0)
+            counts[0] += carry
+            carry = int(cm.size - before[-1])
+            starts = np.empty_like(nl)
+            starts[0] = line_start - pos
+            starts[1:] = nl[:-1] + 1
+            lengths = nl - starts
+            # byte before each newline ('\r' of a CRLF blank line), from the previous block if needed
+            cr = np.where(nl > 0, a[np.maximum(nl - 1, 0)], prev_byte) == 13
+            blank = (counts == 0) & ((lengths == 0) | ((lengths == 1) & cr))
+            rows = ~blank
+            if blank_from is not None and rows.any():  # a blank run of earlier blocks, then a row
+                ln, off = blank_from
+                raise bad_line(ln, off, "blank line inside the data rows")
+            wrong = (counts != expected) & rows
+            problems = []  # (index in block, message): the first one in the file is reported
+            if wrong.any():
+                i = int(np.argmax(wrong))
+                problems.append((i, f"{int(counts[i]) + 1} field(s), the header has {expected + 1}: "
+                                    f"malformed row"))
+            if blank.any():
+                i = int(np.argmax(blank))
+                if own:
+                    problems.append((i, "blank line in a meshphase CSV (none are written)"))
+                elif rows[i:].any():
+                    problems.append((i, "blank line inside the data rows"))
+            if problems:
+                i, problem = min(problems)
+                raise bad_line(line + i, pos + int(starts[i]), problem)
+            n_rows += int(rows.sum())
+            if rows.any():
+                j = int(np.flatnonzero(rows)[-1])
+                last_span = (pos + int(starts[j]), pos + int(nl[j]))
+            if blank[-1]:
+                if blank_from is None:
+                    run = np.flatnonzero(~blank)
+                    i = int(run[-1]) + 1 if run.size else 0
+                    blank_from = (line + i, pos + int(starts[i]))
+            else:
+                blank_from = None
+            line += nl.size
+            line_start = pos + int(nl[-1]) + 1
+            prev_byte = int(a[-1])
+            pos += k
+        size = pos
+        if line_start < size:
+            fh.seek(max(line_start, size - 40))
+            tail = fh.read(40)
+            raise bad_line(line, line_start, f"truncated: the last line does not end with a newline: the file was "
+                                             f"cut mid-row (it ends with {tail.decode('latin-1')!r}; if the file is "
+                                             f"complete, add a final newline)")
+        first = last = b""
+        if n_rows:
+            fh.seek(head.data_offset)
+            first = fh.readline()
+            fh.seek(last_span[0])
+            last = fh.read(last_span[1] - last_span[0])
+    return n_rows, first, last
 
 
-def read_info(path) -> RecordingInfo:
+def _check_verify(verify) -> None:
+    if not isinstance(verify, (bool, np.bool_)):
+        raise TypeError(f"verify must be a bool, got {verify!r}")
+
+
+def read_info(path, *, verify: bool = True) -> RecordingInfo:
     """Header of a CSV recording.
 
-    Our own files: preamble and header line only. Plain CSVs: also counts the rows and reads
-    the first and last time value to infer fs (no samples are parsed).
+    Our own files: preamble and header line only (and the final newline). Plain CSVs: also
+    the structure scan (see the module notes), which counts the rows, and the first and last
+    time value to infer fs (no samples are parsed). ``verify`` is accepted for the
+    registry's uniform options: CSV stores no checksum, the structure is always checked.
     """
+    _check_verify(verify)
     head = _read_head(path)
     if head.preamble is not None:
         return _check_preamble(path, head)
@@ -445,7 +557,17 @@ def _check_time(path, head: _Head, info: RecordingInfo, t: np.ndarray, row0: int
 
 def _setup(path, channels):
     head = _read_head(path)
-    info = _check_preamble(path, head) if head.preamble is not None else _plain_info(path, head)
+    if head.preamble is not None:
+        info = _check_preamble(path, head)
+        rows, _, _ = _scan(path, head)
+        if rows < info.n_samples:
+            raise CorruptFileError(path, f"byte {head.size} (end of file)",
+                                   f"truncated: {rows} data rows, the preamble says n_samples = {info.n_samples}")
+        if rows > info.n_samples:
+            raise RecordingFileError(path, f"more data rows than the preamble's n_samples = {info.n_samples} "
+                                           f"({rows} rows)")
+    else:
+        info = _plain_info(path, head)
     names = info.check_channels(channels) if info.names else []
     index = {n: i for i, n in enumerate(info.names)}
     wanted = [index[n] for n in names]
@@ -461,16 +583,26 @@ def _recording(info: RecordingInfo, data, names, i0: int) -> Recording:
                      start_datetime=info.start_datetime, meta=info.meta, history=info.history)
 
 
-def read(path, channels=None, i0: int = 0, i1: int | None = None) -> Recording:
+def read(path, channels=None, i0: int = 0, i1: int | None = None, *, verify: bool = True) -> Recording:
     """Rows ``i0 <= i < i1`` of the named channels (all when None) of a CSV recording.
 
-    The time column is checked against the uniform grid t0 + i / fs for every row read.
+    The structure of the whole file is checked once (final newline, field count of every
+    line, row count of our own files; see the module notes), and the time column against
+    the uniform grid t0 + i / fs for every row read. ``verify`` as in :func:`read_info`.
+
+    Raises
+    ------
+    CorruptFileError
+        Truncated file or malformed row (line number and byte offset named).
+    RecordingFileError
+        Bad header or preamble, non-numeric values, time off the grid.
 
     Returns
     -------
     Recording
         float32 when the preamble says so, else float64; Fortran-ordered (channel-major).
     """
+    _check_verify(verify)
     head, info, names, cols, perm, dtype = _setup(path, channels)
     n = info.n_samples
     i0 = as_int(i0, "i0")
@@ -502,8 +634,11 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None) -> Recording:
     return _recording(info, data, names, i0)
 
 
-def iter_blocks(path, n_block: int, n_overlap: int, channels=None) -> Iterator[Recording]:
+def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *,
+                verify: bool = True) -> Iterator[Recording]:
     """Blocks of ``n_block`` rows plus ``n_overlap`` following rows, parsed in one pass.
+
+    The structure is checked first, as in :func:`read`.
 
     Block k covers rows [k n_block, (k + 1) n_block + n_overlap), clipped to the recording;
     each row is parsed once (pandas ``chunksize``), so the cost is one read of the file.
@@ -514,6 +649,7 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None) -> Iterator[R
     n_overlap = as_int(n_overlap, "n_overlap")
     if n_overlap < 0:
         raise ValueError(f"n_overlap must be >= 0, got {n_overlap}")
+    _check_verify(verify)
     head, info, names, cols, perm, dtype = _setup(path, channels)
     n = info.n_samples
     if n == 0:

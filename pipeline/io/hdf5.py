@@ -10,7 +10,8 @@ Layout (version 1; full description in ``data_schemas/hdf5_layout.md``, schema i
                                    created_by, file_id (random UUID of this write)
     /channels/<name>        one 1-D dataset per channel (channel-major), float32 or float64
                             as in the Recording, chunked (default 131072 samples = 1 MiB of
-                            float64), optional gzip/lzf compression; attrs: the ChannelSpec
+                            float64), fletcher32 checksum per chunk (default on), optional
+                            gzip/lzf compression; attrs: the ChannelSpec
                             fields (name, kind, units, gain, gear, tooth, face_position,
                             description), None fields left out
 
@@ -24,7 +25,18 @@ every ChannelSpec field, ``meta``, ``history``, ``t0``, ``fs`` and ``start_datet
 
 Format options of :func:`write`: ``compression`` (None | "gzip" | "lzf", default None),
 ``compression_opts`` (gzip level 0-9, default 4), ``shuffle`` (default True when compressed),
-``chunk_samples`` (samples per chunk, default 131072).
+``chunk_samples`` (samples per chunk, default 131072), ``fletcher32`` (default True).
+
+Integrity: files are written in the HDF5 1.10 file format (``libver=("v110", "v110")``:
+superblock, object headers, attributes and the chunk index carry checksums that HDF5 checks
+when it reads them) with a fletcher32 checksum on every sample chunk, which HDF5 checks on
+every read of that chunk. A mismatch raises :class:`~pipeline.io.base.CorruptFileError`
+naming the file, the dataset, the sample range of the chunk and its byte offset.
+``read(..., verify=False)`` reads chunks stored with fletcher32 as the only filter without
+checking the checksum (to salvage the undamaged samples of a damaged file); chunks with
+compression are always checked (h5py exposes no switch to skip it). Files are written with
+no chunk cache (``rdcc_nbytes=0``), so a failed write (ENOSPC) leaves no dirty chunk for
+HDF5 to flush while closing: the write raises a clean OSError.
 
 The helpers :func:`warn_nonfinite`, :func:`dumps_json` and :func:`loads_json` are shared with
 the CSV and TDMS modules.
@@ -34,9 +46,11 @@ from __future__ import annotations
 
 import copy
 import datetime as _dt
+import errno
 import json
 import math
 import os
+import re
 import uuid
 import warnings
 from collections import OrderedDict
@@ -50,7 +64,7 @@ from ..log import logger
 from ..quality import nonfinite_runs
 from ..recording import ChannelSpec, Recording
 from ..validate import as_choice, as_int, as_positive_int
-from .base import RecordingFileError, RecordingInfo
+from .base import CorruptFileError, RecordingFileError, RecordingInfo
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "FORMAT_VERSION", "DEFAULT_CHUNK_SAMPLES", "sniff",
            "read_info", "read", "write", "iter_blocks"]
@@ -62,6 +76,10 @@ CAN_WRITE = True
 FORMAT_VERSION = 1
 #: Samples per chunk (131072 float64 samples = 1 MiB, the HDF5 default chunk-cache size).
 DEFAULT_CHUNK_SAMPLES = 131072
+
+#: HDF5 file-format versions written (lowest, highest): 1.10, the first with checksums on
+#: every metadata object that a recording uses (readable by HDF5 >= 1.10).
+LIBVER = ("v110", "v110")
 
 _MAGIC = b"\x89HDF\r\n\x1a\n"
 _USERBLOCK_OFFSETS = (0, 512, 1024, 2048)
@@ -230,8 +248,30 @@ def _open(path):
         return h5py.File(path, "r", rdcc_nbytes=0)
     except OSError as exc:
         size = path.stat().st_size
-        raise RecordingFileError(path, f"cannot open as HDF5 ({size} bytes): truncated or corrupt file "
-                                       f"({exc})") from exc
+        raise CorruptFileError(path, f"file of {size} bytes", f"cannot open as HDF5: truncated or corrupt "
+                                                              f"file ({exc})") from exc
+
+
+# what h5py raises for damaged metadata (checksum, bad address) read after opening
+_H5_ERRORS = (OSError, KeyError, RuntimeError, ValueError, TypeError)
+
+
+class _MetaErrors:
+    """Turn h5py errors while reading metadata (attributes, groups) into CorruptFileError."""
+
+    def __init__(self, path):
+        self.path = path
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, typ, exc, tb):
+        if exc is None or isinstance(exc, RecordingFileError) or not isinstance(exc, _H5_ERRORS):
+            return False
+        if isinstance(exc, (ValueError, TypeError)) and "checksum" not in str(exc):
+            return False
+        raise CorruptFileError(self.path, "HDF5 metadata (header, attributes or index)",
+                               f"cannot be read: {type(exc).__name__}: {exc}") from exc
 
 
 _HEADER_CACHE: "OrderedDict[tuple, tuple]" = OrderedDict()
@@ -255,6 +295,11 @@ def _header(f, path) -> tuple[dict, list, list]:
     Parsed headers are cached (see :func:`_cache_key`): the registry reads the header for
     ``read_info`` and again for ``read``, and each HDF5 attribute costs ~40 us to read.
     """
+    with _MetaErrors(path):
+        return _header_checked(f, path)
+
+
+def _header_checked(f, path) -> tuple[dict, list, list]:
     key = _cache_key(f, path)
     hit = _HEADER_CACHE.get(key) if key is not None else None
     if hit is None:
@@ -338,29 +383,81 @@ def _parse_header(f, path) -> tuple[dict, tuple, tuple]:
     return attrs, tuple(specs), tuple(keys)
 
 
-def read_info(path) -> RecordingInfo:
+def read_info(path, *, verify: bool = True) -> RecordingInfo:
     """Header of an HDF5 recording (root and channel attributes; no samples are read).
+
+    ``verify`` is accepted for the registry's uniform options; the metadata checksums of
+    the HDF5 format are always checked by HDF5.
 
     Raises
     ------
+    CorruptFileError
+        Truncated file, damaged metadata (checksum mismatch).
     RecordingFileError
-        Truncated/corrupt file, not a meshphase recording, header not matching
+        Not a meshphase recording, header not matching
         ``hdf5_layout.schema.json``, missing or non-positive sample rate, channels of unequal
         length, duplicate channel names.
     """
-    with _open(path) as f:
+    _check_verify(verify)
+    with _open(path) as f, _MetaErrors(path):
         attrs, specs, dsets = _header(f, path)
         extra = {"format_version": attrs["format_version"],
                  "dtype": attrs["dtype"],
                  "chunks": dsets[0].chunks if dsets else None,
                  "compression": dsets[0].compression if dsets else None,
+                 "fletcher32": bool(dsets[0].fletcher32) if dsets else None,
                  "created_by": attrs.get("created_by"), "file_id": attrs.get("file_id")}
     return RecordingInfo(path=str(path), format=NAME, fs=float(attrs["fs"]), n_samples=int(attrs["n_samples"]),
                          channels=specs, t0=float(attrs["t0"]), start_datetime=attrs["start_datetime"],
                          meta=attrs["meta"], history=attrs["history"], extra=extra)
 
 
-def _read_open(f, path, attrs, specs, dsets, names, i0, i1) -> Recording:
+def _check_verify(verify) -> bool:
+    if not isinstance(verify, (bool, np.bool_)):
+        raise TypeError(f"verify must be a bool, got {verify!r}")
+    return bool(verify)
+
+
+def _unverified_ok(ds) -> bool:
+    """True when the chunks of ``ds`` can be read raw with the checksum skipped: fletcher32
+    is its only filter."""
+    return bool(ds.chunks and ds.fletcher32 and ds.compression is None and not ds.shuffle
+                and not ds.scaleoffset)
+
+
+def _read_raw_chunks(ds, out: np.ndarray, i0: int, i1: int) -> None:
+    """Samples [i0, i1) of a fletcher32-only dataset into ``out``, checksums not checked."""
+    c = ds.chunks[0]
+    dtype = ds.dtype
+    for c0 in range((i0 // c) * c, i1, c):
+        _, raw = ds.id.read_direct_chunk((c0,))
+        a, b = max(i0, c0), min(i1, c0 + c)
+        out[a - i0:b - i0] = np.frombuffer(raw, dtype, b - a, (a - c0) * dtype.itemsize)
+
+
+def _locate_bad_chunk(f, path, ds, name: str, i0: int, i1: int, exc: BaseException):
+    """CorruptFileError for the first chunk of [i0, i1) of ``ds`` that fails to read."""
+    problem = (f"fletcher32 checksum mismatch: the stored samples are damaged ({exc})"
+               if ds.fletcher32 else f"cannot read the samples: {exc}")
+    where = f"dataset {ds.name} (channel {name!r})"
+    if ds.chunks:
+        c = ds.chunks[0]
+        tmp = np.empty(c, dtype=ds.dtype)
+        for c0 in range((i0 // c) * c, i1, c):
+            c1 = min(c0 + c, ds.shape[0])
+            try:
+                ds.read_direct(tmp[:c1 - c0], np.s_[c0:c1])
+            except OSError:
+                try:
+                    off = ds.id.get_chunk_info_by_coord((c0,)).byte_offset
+                    at = f" at byte {off}" if off is not None else ""
+                except (OSError, RuntimeError, ValueError):
+                    at = ""
+                return CorruptFileError(path, f"{where}, samples [{c0}, {c1}) (chunk {c0 // c}{at})", problem)
+    return CorruptFileError(path, f"{where}, samples [{i0}, {i1})", problem)
+
+
+def _read_open(f, path, attrs, specs, dsets, names, i0, i1, verify: bool = True) -> Recording:
     by_name = {s.name: (s, d) for s, d in zip(specs, dsets)}
     sel = [by_name[nm] for nm in names]
     dtype = np.dtype(attrs["dtype"])
@@ -368,8 +465,14 @@ def _read_open(f, path, attrs, specs, dsets, names, i0, i1) -> Recording:
     buf = np.empty((len(sel), n), dtype=dtype)  # channel-major; data = buf.T (Fortran order)
     if n:
         source = np.s_[i0:i1]
-        for j, (_, ds) in enumerate(sel):
-            ds.read_direct(buf[j], source)
+        for j, (spec, ds) in enumerate(sel):
+            try:
+                if not verify and _unverified_ok(ds):
+                    _read_raw_chunks(ds, buf[j], i0, i1)
+                else:
+                    ds.read_direct(buf[j], source)
+            except (OSError, RuntimeError) as exc:
+                raise _locate_bad_chunk(f, path, ds, spec.name, i0, i1, exc) from exc
     data = buf.T
     warn_nonfinite(path, data, names, i0)
     fs = float(attrs["fs"])
@@ -392,7 +495,7 @@ def _names(path, specs, channels) -> list[str]:
     return info.check_channels(channels)
 
 
-def read(path, channels=None, i0: int = 0, i1: int | None = None) -> Recording:
+def read(path, channels=None, i0: int = 0, i1: int | None = None, *, verify: bool = True) -> Recording:
     """Samples ``i0 <= i < i1`` of the named channels (all when None) of an HDF5 recording.
 
     Parameters
@@ -402,25 +505,38 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None) -> Recording:
         Channel names, in the order wanted.
     i0, i1 : int
         Sample range [i0, i1) (default: all).
+    verify : bool
+        Check the fletcher32 checksum of every chunk read (default True). False reads the
+        chunks of fletcher32-only datasets raw, unchecked (compressed ones stay checked).
 
     Returns
     -------
     Recording
         Data are a Fortran-ordered (channel-major) samples x channels array of the file's
         dtype; ``t0`` is shifted to the first sample read.
+
+    Raises
+    ------
+    CorruptFileError
+        A chunk's checksum does not match (dataset, sample range and byte offset named),
+        the file is truncated, or its metadata are damaged.
     """
+    verify = _check_verify(verify)
     with _open(path) as f:
         attrs, specs, dsets = _header(f, path)
         names = _names(path, specs, channels)
         i0, i1 = _check_range(path, int(attrs["n_samples"]), i0, i1)
-        return _read_open(f, path, attrs, specs, dsets, names, i0, i1)
+        return _read_open(f, path, attrs, specs, dsets, names, i0, i1, verify)
 
 
-def iter_blocks(path, n_block: int, n_overlap: int, channels=None) -> Iterator[Recording]:
+def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *,
+                verify: bool = True) -> Iterator[Recording]:
     """Blocks of ``n_block`` samples plus ``n_overlap`` following samples, file kept open.
 
     Block k covers samples [k n_block, (k + 1) n_block + n_overlap), clipped to the recording.
+    ``verify`` as in :func:`read`.
     """
+    verify = _check_verify(verify)
     n_block = as_positive_int(n_block, "n_block")
     n_overlap = as_int(n_overlap, "n_overlap")
     if n_overlap < 0:
@@ -430,12 +546,13 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None) -> Iterator[R
         names = _names(path, specs, channels)
         n = int(attrs["n_samples"])
         for i0 in range(0, n, n_block):
-            yield _read_open(f, path, attrs, specs, dsets, names, i0, min(n, i0 + n_block + n_overlap))
+            yield _read_open(f, path, attrs, specs, dsets, names, i0, min(n, i0 + n_block + n_overlap), verify)
 
 
 # ---------------------------------------------------------------------------- writing
 def write(recording: Recording, path, *, compression: str | None = None, compression_opts: int | None = None,
-          shuffle: bool | None = None, chunk_samples: int = DEFAULT_CHUNK_SAMPLES) -> None:
+          shuffle: bool | None = None, chunk_samples: int = DEFAULT_CHUNK_SAMPLES,
+          fletcher32: bool = True) -> None:
     """Write ``recording`` to a new HDF5 file at ``path`` (the registry makes it atomic).
 
     Parameters
@@ -451,6 +568,14 @@ def write(recording: Recording, path, *, compression: str | None = None, compres
         Byte-shuffle filter; default True when compressed, False otherwise.
     chunk_samples : int
         Samples per chunk [-] (default 131072).
+    fletcher32 : bool
+        Store a fletcher32 checksum with every chunk (default True; 4 bytes per chunk,
+        checked by HDF5 on every read).
+
+    Raises
+    ------
+    OSError
+        From the filesystem (e.g. ENOSPC); the HDF5 file is closed before it propagates.
     """
     import h5py
 
@@ -471,43 +596,99 @@ def write(recording: Recording, path, *, compression: str | None = None, compres
     elif not isinstance(shuffle, (bool, np.bool_)):
         raise TypeError(f"shuffle must be a bool, got {shuffle!r}")
     chunk_samples = as_positive_int(chunk_samples, "chunk_samples")
+    if not isinstance(fletcher32, (bool, np.bool_)):
+        raise TypeError(f"fletcher32 must be a bool, got {fletcher32!r}")
     meta = dumps_json(recording.meta, "recording meta")
     history = dumps_json(recording.history, "recording history")
     n = recording.n_samples
-    with h5py.File(path, "w", track_order=False) as f:
-        f.attrs["meshphase_format"] = "recording"
-        f.attrs["format_version"] = np.int64(FORMAT_VERSION)
-        f.attrs["fs"] = np.float64(recording.fs)
-        f.attrs["t0"] = np.float64(recording.t0)
-        f.attrs["n_samples"] = np.int64(n)
-        f.attrs["dtype"] = str(recording.data.dtype)
-        if recording.start_datetime is not None:
-            f.attrs["start_datetime"] = recording.start_datetime
-        f.attrs["channel_order"] = np.array(recording.names, dtype=h5py.string_dtype())
-        f.attrs["meta"] = meta
-        f.attrs["history"] = history
-        f.attrs["created_by"] = f"meshphase {_version_string()}"
-        f.attrs["file_id"] = str(uuid.uuid4())
-        group = f.create_group(_GROUP)
-        kw = {}
-        if n:
-            kw["chunks"] = (min(n, chunk_samples),)
-            if compression is not None:
-                kw.update(compression=compression, compression_opts=compression_opts)
-            if shuffle:
-                kw["shuffle"] = True
-        for j, spec in enumerate(recording.channels):
-            ds = group.create_dataset(dataset_name(spec.name), data=np.ascontiguousarray(recording.data[:, j]),
-                                      **kw)
-            for key, value in spec.to_dict().items():
-                if value is None:
-                    continue
-                if isinstance(value, float):
-                    value = np.float64(value)
-                elif isinstance(value, int):
-                    value = np.int64(value)
-                ds.attrs[key] = value
+    # rdcc_nbytes=0: chunks go straight to the file, so a failing write (ENOSPC) leaves no
+    # dirty chunk cache that HDF5 would flush again on close (which crashed the process)
+    f = h5py.File(path, "w", track_order=False, libver=LIBVER, rdcc_nbytes=0)
+    try:
+        _write_open(f, recording, meta, history, chunk_samples, compression, compression_opts, shuffle,
+                    fletcher32)
+    except BaseException as exc:
+        _close_after_failure(f, path)
+        err = _as_oserror(exc, path) if isinstance(exc, (OSError, RuntimeError)) else exc
+        if err is exc:
+            raise
+        raise err from exc
+    try:
+        f.close()
+    except (OSError, RuntimeError) as exc:  # the final flush failed (disk full)
+        _close_after_failure(f, path)
+        err = _as_oserror(exc, path)
+        if err is exc:
+            raise
+        raise err from exc
     logger.debug("wrote %s: %d x %d samples, compression=%s", path, n, recording.n_channels, compression)
+
+
+def _write_open(f, recording: Recording, meta: str, history: str, chunk_samples: int, compression,
+                compression_opts, shuffle: bool, fletcher32: bool) -> None:
+    """Fill the new, open HDF5 file ``f`` (see :func:`write`)."""
+    import h5py
+
+    n = recording.n_samples
+    f.attrs["meshphase_format"] = "recording"
+    f.attrs["format_version"] = np.int64(FORMAT_VERSION)
+    f.attrs["fs"] = np.float64(recording.fs)
+    f.attrs["t0"] = np.float64(recording.t0)
+    f.attrs["n_samples"] = np.int64(n)
+    f.attrs["dtype"] = str(recording.data.dtype)
+    if recording.start_datetime is not None:
+        f.attrs["start_datetime"] = recording.start_datetime
+    f.attrs["channel_order"] = np.array(recording.names, dtype=h5py.string_dtype())
+    f.attrs["meta"] = meta
+    f.attrs["history"] = history
+    f.attrs["created_by"] = f"meshphase {_version_string()}"
+    f.attrs["file_id"] = str(uuid.uuid4())
+    group = f.create_group(_GROUP)
+    kw = {}
+    if n:
+        kw["chunks"] = (min(n, chunk_samples),)
+        if compression is not None:
+            kw.update(compression=compression, compression_opts=compression_opts)
+        if shuffle:
+            kw["shuffle"] = True
+        if fletcher32:
+            kw["fletcher32"] = True
+    for j, spec in enumerate(recording.channels):
+        ds = group.create_dataset(dataset_name(spec.name), data=np.ascontiguousarray(recording.data[:, j]),
+                                  **kw)
+        for key, value in spec.to_dict().items():
+            if value is None:
+                continue
+            if isinstance(value, float):
+                value = np.float64(value)
+            elif isinstance(value, int):
+                value = np.int64(value)
+            ds.attrs[key] = value
+
+
+_ERRNO_RE = re.compile(r"errno = (\d+)")
+
+
+def _as_oserror(exc: BaseException, path) -> OSError:
+    """An OSError for an HDF5 write failure (h5py raises RuntimeError from some flushes)."""
+    if isinstance(exc, OSError) and exc.errno is not None:
+        return exc
+    m = _ERRNO_RE.search(str(exc))
+    code = int(m.group(1)) if m else errno.EIO
+    return OSError(code, f"{os.strerror(code)}: writing HDF5 file {path} failed ({str(exc).splitlines()[0]})",
+                   str(path))
+
+
+def _close_after_failure(f, path) -> None:
+    """Close an h5py file whose write failed; HDF5 may fail to flush while closing (ENOSPC),
+    so try twice and then leave it (the caller removes the file)."""
+    for _ in range(2):
+        try:
+            if f.id.valid:
+                f.close()
+            return
+        except Exception as exc:  # HDF5 raises OSError/RuntimeError while flushing to a full disk
+            logger.debug("closing %s after a failed write: %s", path, exc)
 
 
 def _version_string() -> str:

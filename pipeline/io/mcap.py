@@ -28,6 +28,17 @@ preallocated Fortran-order output array (a chunk of full messages of one channel
 exactly once. Anything the file does not hold as promised (truncated, another writer's
 MCAP, metadata missing or inconsistent, samples missing) raises
 :class:`~pipeline.io.base.RecordingFileError` naming the file and the problem.
+
+Integrity (``verify=True``, the default of :func:`read`, :func:`read_info` and
+:func:`iter_blocks`; ``data_schemas/mcap.md`` has the details): once per file (cached by
+file identity) the footer's summary CRC and the DataEnd record's data-section CRC are
+checked, and every chunk read has its CRC32 (over the uncompressed records) checked, in a
+worker thread while the samples are copied. Together they cover every byte of the file but
+the leading magic. The data-section CRC is checked without reading the uncompressed chunks'
+records: their stored CRC is combined in (``crc32_combine``), and each record byte is checked
+by its chunk's CRC when that chunk is read. A mismatch raises
+:class:`~pipeline.io.base.CorruptFileError` naming the file, the chunk (number and byte
+offset) or byte range, and the CRCs.
 """
 
 from __future__ import annotations
@@ -35,6 +46,7 @@ from __future__ import annotations
 import contextlib
 import copy
 import json
+import threading
 import math
 import os
 import struct
@@ -53,11 +65,11 @@ from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, IndexType, Writer
 
 from ..recording import ChannelSpec, Recording
 from ..validate import as_choice, as_int, as_positive, as_positive_int
-from .base import RecordingFileError, RecordingInfo
+from .base import CorruptFileError, RecordingFileError, RecordingInfo
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "MAGIC", "SCHEMA_NAME", "MESSAGE_ENCODING",
            "RECORDING_METADATA", "COMPRESSIONS", "DEFAULT_BLOCK", "sniff", "read_info", "read",
-           "write", "iter_blocks", "log_time_ns"]
+           "write", "iter_blocks", "log_time_ns", "crc32_combine"]
 
 NAME = "mcap"
 SUFFIXES = (".mcap",)
@@ -202,6 +214,77 @@ def _origin_ns(t0: float) -> int:
     return 0
 
 
+# ---------------------------------------------------------------------------------- CRC32
+_CRC_POLY = 0xEDB88320  # CRC-32 (ISO-HDLC, zlib), reflected
+
+try:  # ISA-L's CRC-32 (same polynomial as zlib, SIMD): ~3x zlib's speed where installed
+    from isal.isal_zlib import crc32 as _crc32
+except ImportError:  # the default: zlib (releases the GIL for large buffers, as does isal)
+    _crc32 = zlib.crc32
+
+
+def _crc_mulmod(a: int, b: int) -> int:
+    """a * b modulo the CRC-32 polynomial (reflected bit order, as zlib's multmodp)."""
+    m = 1 << 31
+    p = 0
+    while m:
+        if a & m:
+            p ^= b
+            if not a & (m - 1):
+                break
+        m >>= 1
+        b = (b >> 1) ^ _CRC_POLY if b & 1 else b >> 1
+    return p
+
+
+def _x2n_table() -> list[int]:
+    t = [0] * 32
+    p = 1 << 30  # x^1
+    for k in range(32):
+        t[k] = p
+        p = _crc_mulmod(p, p)
+    return t
+
+
+_X2N = _x2n_table()  # x^(2^k) mod P
+
+
+@lru_cache(maxsize=1024)
+def _x8n(n: int) -> int:
+    """x^(8 n) mod P: the factor that shifts a CRC over n zero bytes."""
+    p = 1 << 31  # x^0
+    k = 3
+    while n:
+        if n & 1:
+            p = _crc_mulmod(_X2N[k & 31], p)
+        n >>= 1
+        k += 1
+    return p
+
+
+def crc32_combine(crc1: int, crc2: int, len2: int) -> int:
+    """CRC-32 of ``A + B`` from ``crc1 = crc32(A)``, ``crc2 = crc32(B)`` and ``len(B)``.
+
+    The algorithm of zlib's ``crc32_combine`` (not exposed by Python's zlib): shift
+    ``crc1`` over ``len2`` bytes by multiplying with x^(8 len2) modulo the polynomial.
+
+    Parameters
+    ----------
+    crc1, crc2 : int
+        CRC-32 values (as ``zlib.crc32`` returns).
+    len2 : int
+        Length of the second block [B], >= 0.
+
+    Returns
+    -------
+    int
+    """
+    len2 = as_int(len2, "len2")
+    if len2 < 0:
+        raise ValueError(f"len2 must be >= 0, got {len2}")
+    return _crc_mulmod(_x8n(len2), crc1 & 0xFFFFFFFF) ^ (crc2 & 0xFFFFFFFF)
+
+
 # ---------------------------------------------------------------------------------- sniff
 def sniff(head: bytes) -> bool:
     """True when ``head`` (the first bytes of a file) starts with the MCAP magic."""
@@ -242,29 +325,135 @@ def _check_ends(fh, path: Path) -> None:
     size = fh.tell()
     fh.seek(0)
     head = fh.read(8)
+    if len(head) < 8 and MAGIC.startswith(head):
+        raise CorruptFileError(path, f"byte {size} (end of file)", f"truncated MCAP file: only {size} bytes, "
+                                                                  f"part of the opening magic")
     if head != MAGIC:
         raise RecordingFileError(path, f"not an MCAP file: it does not start with the MCAP magic "
                                        f"{MAGIC!r} (first bytes {head!r})")
     # magic + header record + ... + footer record (1 + 8 + 20 bytes) + magic
     if size < 8 + 9 + 29 + 8:
-        raise RecordingFileError(path, f"truncated MCAP file: only {size} bytes, too short for a "
-                                       f"header, a footer and the closing magic")
+        raise CorruptFileError(path, f"byte {size} (end of file)",
+                               f"truncated MCAP file: only {size} bytes, too short for a header, "
+                               f"a footer and the closing magic")
     fh.seek(size - 8)
     tail = fh.read(8)
     fh.seek(0)
     if tail != MAGIC:
-        raise RecordingFileError(path, f"truncated MCAP file ({size} bytes): it does not end with "
-                                       f"the closing MCAP magic, so the footer and summary "
-                                       f"(the index) are missing; the write was probably "
-                                       f"interrupted")
+        raise CorruptFileError(path, f"byte {size} (end of file)",
+                               f"truncated MCAP file ({size} bytes): it does not end with the "
+                               f"closing MCAP magic, so the footer and summary (the index) are "
+                               f"missing; the write was probably interrupted")
 
 
-def _read_layout(fh, path: Path) -> tuple[object, _Layout]:
-    """Open an MCAP stream, check it is one of ours and parse the header records."""
-    _check_ends(fh, path)
+_FOOTER = struct.Struct("<BQQQI")  # opcode, length (20), summary_start, summary_offset_start, crc
+_OP_FOOTER = 0x02
+_OP_DATA_END = 0x0F
+_IO_BLOCK = 1 << 22  # bytes CRC'd per read while walking the data section
+
+
+def _check_summary_crc(fh, path: Path) -> tuple[int, int]:
+    """Check the footer record and the summary CRC (when not 0) before anything parses the
+    summary. Returns (footer offset, summary_start)."""
+    fh.seek(0, 2)
+    size = fh.tell()
+    pos = size - 8 - _FOOTER.size
+    fh.seek(pos)
+    op, length, summary_start, offset_start, crc = _FOOTER.unpack(fh.read(_FOOTER.size))
+    if op != _OP_FOOTER or length != 20:
+        raise CorruptFileError(path, f"byte {pos} (footer)", f"no footer record before the closing magic "
+                                                            f"(opcode {op:#04x}, length {length})")
+    start = summary_start or pos
+    if not 8 <= start <= pos or (offset_start and not start <= offset_start <= pos):
+        raise CorruptFileError(path, f"byte {pos} (footer)", f"footer points outside the file (summary "
+                                                            f"at byte {summary_start}, summary offsets at "
+                                                            f"byte {offset_start}, footer at byte {pos})")
+    if crc:
+        fh.seek(start)
+        got = _crc32(fh.read(pos - start))
+        got = _crc32(_FOOTER.pack(op, length, summary_start, offset_start, 0)[:-4], got)
+        if got != crc:
+            raise CorruptFileError(path, f"bytes [{start}, {pos + 25}) (summary section and footer)",
+                                   f"summary CRC32 is {got:#010x}, the footer records {crc:#010x}: the "
+                                   f"index, channel or schema records are damaged")
+    fh.seek(0)
+    return pos, start
+
+
+def _check_data_crc(fh, path: Path, data_end_limit: int) -> bool:
+    """Walk the records of the data section and check the DataEnd record's CRC (when not 0).
+
+    The CRC covers bytes [0, start of DataEnd). Uncompressed chunks with a stored CRC are
+    not read: their record prefix is CRC'd and the stored CRC of their records combined in
+    (:func:`crc32_combine`); a damaged record byte is caught by that chunk's own CRC when it
+    is read. Other records (and compressed chunks) are read and CRC'd. Returns True when a
+    CRC was checked, False when the file stores none.
+    """
+    crc = _crc32(MAGIC)
+    pos = 8
+    fh.seek(pos)
+    head_size = 9 + _CHUNK_HEAD.size
+    while True:
+        if pos + 9 > data_end_limit:
+            raise CorruptFileError(path, f"byte {pos}", f"the data section ends without a DataEnd record "
+                                                        f"(records run into the summary at byte {data_end_limit})")
+        head = fh.read(9)
+        op, length = _REC.unpack(head)
+        end = pos + 9 + length
+        if end > data_end_limit:
+            raise CorruptFileError(path, f"byte {pos}", f"record (opcode {op:#04x}) of {length} bytes runs past "
+                                                        f"the data section (ends at byte {data_end_limit})")
+        if op == _OP_DATA_END:
+            if length < 4:
+                raise CorruptFileError(path, f"byte {pos}", f"DataEnd record of {length} bytes is too short")
+            (stored,) = struct.unpack("<I", fh.read(4))
+            if stored and stored != crc:
+                raise CorruptFileError(path, f"bytes [0, {pos}) (data section)",
+                                       f"data-section CRC32 is {crc:#010x}, the DataEnd record says "
+                                       f"{stored:#010x}: a record outside the chunks' records (header, "
+                                       f"metadata, chunk headers, message indexes) is damaged")
+            return bool(stored)
+        crc = _crc32(head, crc)
+        done = 9
+        if op == _OP_CHUNK and length >= _CHUNK_HEAD.size + 4 + 8:
+            fixed = fh.read(_CHUNK_HEAD.size)
+            _, _, usize, ccrc, clen = _CHUNK_HEAD.unpack(fixed)
+            if head_size + clen + 8 <= 9 + length:
+                rest = fh.read(clen + 8)
+                (rlen,) = _U64.unpack_from(rest, clen)
+                if ccrc and clen == 0 and head_size + clen + 8 + rlen == 9 + length and usize == rlen:
+                    crc = _crc32(rest, _crc32(fixed, crc))
+                    crc = crc32_combine(crc, ccrc, rlen)
+                    pos = end
+                    fh.seek(pos)
+                    continue
+                crc = _crc32(rest, _crc32(fixed, crc))
+                done = head_size + clen + 8
+            else:
+                crc = _crc32(fixed, crc)
+                done = head_size
+        left = 9 + length - done
+        while left > 0:
+            piece = fh.read(min(left, _IO_BLOCK))
+            if not piece:
+                raise CorruptFileError(path, f"byte {pos}", "record runs past the end of the file")
+            crc = _crc32(piece, crc)
+            left -= len(piece)
+        pos = end
+
+
+def _summary(fh, path: Path, verify: bool):
+    """(reader, summary) from ``mcap.reader.make_reader`` (summary None when absent)."""
     with _lib_errors(path, "reading the summary section"):
-        reader = make_reader(fh)
-        summary = reader.get_summary()
+        reader = make_reader(fh, validate_crcs=verify)
+        return reader, reader.get_summary()
+
+
+def _read_layout(fh, path: Path, verify: bool = True, opened=None) -> tuple[object, _Layout]:
+    """Open an MCAP stream, check it is one of ours and parse the header records.
+    ``opened``: (reader, summary) already made by :func:`_summary`."""
+    _check_ends(fh, path)
+    reader, summary = opened if opened is not None else _summary(fh, path, verify)
     if summary is None:
         raise RecordingFileError(path, "MCAP file has no summary section (no index); meshphase "
                                        "needs the chunk index to read blocks and time windows")
@@ -394,33 +583,62 @@ def _read_layout(fh, path: Path) -> tuple[object, _Layout]:
 # is cached; samples are always read from the file.
 _LAYOUTS: OrderedDict = OrderedDict()
 _LAYOUTS_MAX = 8
+# identities of files whose summary and data-section CRCs passed (same key as _LAYOUTS)
+_VERIFIED: OrderedDict = OrderedDict()
+_LOCK = threading.Lock()
+
+
+def _check_verify(verify) -> bool:
+    if not isinstance(verify, (bool, np.bool_)):
+        raise TypeError(f"verify must be a bool, got {verify!r}")
+    return bool(verify)
 
 
 @contextlib.contextmanager
-def _open(path):
+def _open(path, verify: bool = True):
     path = Path(path)
+    verify = _check_verify(verify)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file")
     with open(path, "rb") as fh:
         st = os.fstat(fh.fileno())
         key = (str(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
-        lay = _LAYOUTS.get(key)
+        with _LOCK:
+            lay = _LAYOUTS.get(key)
+            checked = key in _VERIFIED
+        opened = None
+        if verify and not checked:  # before anything parses the data section's records
+            _check_ends(fh, path)
+            _, data_end = _check_summary_crc(fh, path)
+            opened = _summary(fh, path, verify)  # the summary passed its CRC
+            summary = opened[1]
+            if summary is not None and any(sc.name == SCHEMA_NAME for sc in summary.schemas.values()):
+                # one of ours (else _read_layout says what it is, without walking a foreign
+                # file); the summary starts right after the DataEnd record: the walk stops there
+                _check_data_crc(fh, path, data_end)
         if lay is None:
-            _, lay = _read_layout(fh, path)
+            _, lay = _read_layout(fh, path, verify, opened)
+        with _LOCK:
             _LAYOUTS[key] = lay
+            _LAYOUTS.move_to_end(key)
             while len(_LAYOUTS) > _LAYOUTS_MAX:
                 _LAYOUTS.popitem(last=False)
-        else:
-            _LAYOUTS.move_to_end(key)
+            if verify:
+                _VERIFIED[key] = True
+                _VERIFIED.move_to_end(key)
+                while len(_VERIFIED) > _LAYOUTS_MAX:
+                    _VERIFIED.popitem(last=False)
         yield path, fh, lay
 
 
-def read_info(path) -> RecordingInfo:
+def read_info(path, *, verify: bool = True) -> RecordingInfo:
     """Header of an MCAP recording (channels, fs, n_samples, t0, metadata); no samples read.
 
     Parameters
     ----------
     path : str or Path
+    verify : bool
+        Check the summary and data-section CRCs (default True; once per file identity).
 
     Returns
     -------
@@ -428,7 +646,7 @@ def read_info(path) -> RecordingInfo:
         ``extra`` holds ``block`` [samples per message], ``dtype``, ``compression``,
         ``n_chunks``, ``n_messages`` and ``log_time_origin_ns`` [ns].
     """
-    with _open(path) as (_, _, lay):
+    with _open(path, verify) as (_, _, lay):
         return copy.deepcopy(lay.info)
 
 
@@ -447,23 +665,100 @@ _RECORD_VIEW = np.dtype({
     "itemsize": 47})
 
 
+_CRC_ASYNC_MIN = 1 << 16  # chunks at least this large [B] get their CRC in the worker thread
+
+
 class _ChunkReader:
     """Reads the uncompressed records of one chunk given its ChunkIndex (summary section).
 
-    The file bytes go into one buffer reused for every chunk: the returned view is valid
-    only until the next call (callers copy the samples out at once).
+    The file bytes go into two buffers used in turn: the returned view is valid until the
+    next call but one (callers copy the samples out at once). With ``verify``, the CRC32 of
+    each chunk's uncompressed records is computed in a worker thread (zlib releases the GIL)
+    while the caller copies the samples and reads the next chunk; :meth:`finish` waits for
+    it. Use as a context manager: on leaving, the last CRC is checked, and a CRC mismatch
+    takes precedence over an error raised while parsing the damaged chunk.
     """
 
-    def __init__(self, fh, path: Path, *, validate_crcs: bool = False):
+    def __init__(self, fh, path: Path, lay: _Layout | None = None, *, verify: bool = True):
         self.fh = fh
         self.file_size = os.fstat(fh.fileno()).st_size
         self.path = path
-        self.validate_crcs = validate_crcs
-        self.buf = bytearray(0)
+        self.lay = lay
+        self.verify = verify
+        self.bufs = [bytearray(0), bytearray(0)]
+        self.turn = 0
+        self.pending = None  # (future, chunk index, stored crc, n bytes)
+        self._pending_turn = -1  # buffer the pending CRC reads (-1: none of ours)
+        self.pool = None
         self._zstd = None
+        self._numbers = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, typ, exc, tb):
+        try:
+            if exc is None:
+                self.finish()
+            else:
+                try:
+                    self.finish()
+                except CorruptFileError as crc_error:
+                    if isinstance(exc, (RecordingFileError,) + _LIB_ERRORS):
+                        raise crc_error from exc
+        finally:
+            if self.pool is not None:
+                self.pool.shutdown(wait=True)
+                self.pool = None
+        return False
+
+    def _where(self, ci) -> str:
+        if self.lay is not None:
+            if self._numbers is None:
+                self._numbers = {c.chunk_start_offset: k for k, c in enumerate(self.lay.summary.chunk_indexes)}
+            k = self._numbers.get(ci.chunk_start_offset)
+            if k is not None:
+                return f"chunk {k} at byte {ci.chunk_start_offset}"
+        return f"chunk at byte {ci.chunk_start_offset}"
 
     def _bad(self, ci, problem: str):
-        return RecordingFileError(self.path, f"chunk at byte {ci.chunk_start_offset}: {problem}")
+        return CorruptFileError(self.path, self._where(ci), problem)
+
+    def _crc_error(self, ci, got: int, want: int, nbytes: int):
+        names = []
+        if self.lay is not None:
+            by_id = {v: k for k, v in self.lay.channel_ids.items()}
+            names = [by_id[i] for i in (ci.message_index_offsets or {}) if i in by_id]
+        return self._bad(ci, f"CRC32 of its {nbytes} uncompressed record bytes is {got:#010x}, the chunk "
+                             f"records {want:#010x}: the chunk is damaged (channel(s) {names}, log time "
+                             f"[{ci.message_start_time}, {ci.message_end_time}] ns)")
+
+    def finish(self) -> None:
+        """Wait for the pending CRC and raise CorruptFileError when it does not match."""
+        if self.pending is None:
+            return
+        fut, ci, want, nbytes = self.pending
+        self.pending = None
+        self._pending_turn = -1
+        got = fut.result()
+        if got != want:
+            raise self._crc_error(ci, got, want, nbytes)
+
+    def _check_crc(self, ci, data, want: int, turn: int) -> None:
+        """Check (or start checking) the CRC of ``data``, which lives in buffer ``turn``
+        (-1: in its own object)."""
+        if len(data) < _CRC_ASYNC_MIN:
+            got = _crc32(data)
+            if got != want:
+                raise self._crc_error(ci, got, want, len(data))
+            return
+        if self.pool is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self.pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="meshphase-crc")
+        self.finish()  # one CRC in flight at a time
+        self.pending = (self.pool.submit(_crc32, data), ci, want, len(data))
+        self._pending_turn = turn
 
     def records(self, ci) -> memoryview:
         size = int(ci.chunk_length)
@@ -471,9 +766,12 @@ class _ChunkReader:
             raise self._bad(ci, f"the chunk index says {size} bytes, past the end of the "
                                 f"{self.file_size}-byte file")
         self.fh.seek(ci.chunk_start_offset)
-        if len(self.buf) < size:
-            self.buf = bytearray(size)
-        mv = memoryview(self.buf)[:size]
+        if self.pending is not None and self._pending_turn == self.turn:
+            self.finish()  # the pending CRC still reads this buffer
+        buf = self.bufs[self.turn]
+        if len(buf) < size:
+            buf = self.bufs[self.turn] = bytearray(size)
+        mv = memoryview(buf)[:size]
         got = self.fh.readinto(mv)
         if got != size:
             raise self._bad(ci, f"only {got} of {size} bytes present (file truncated)")
@@ -496,24 +794,31 @@ class _ChunkReader:
         data = mv[pos:pos + rlen]
         if usize > _MAX_RECORD:
             raise self._bad(ci, f"claims {usize} bytes uncompressed, more than {_MAX_RECORD}")
-        if comp == "":
-            pass
-        elif comp == "lz4":
-            import lz4.frame
+        try:
+            if comp == "":
+                pass
+            elif comp == "lz4":
+                import lz4.frame
 
-            data = memoryview(lz4.frame.decompress(data))
-        elif comp == "zstd":
-            if self._zstd is None:
-                import zstandard
+                data = memoryview(lz4.frame.decompress(data))
+            elif comp == "zstd":
+                if self._zstd is None:
+                    import zstandard
 
-                self._zstd = zstandard.ZstdDecompressor()
-            data = memoryview(self._zstd.decompress(data, max_output_size=usize))
-        else:
-            raise self._bad(ci, f"unsupported compression {comp!r} (supported: none, lz4, zstd)")
+                    self._zstd = zstandard.ZstdDecompressor()
+                data = memoryview(self._zstd.decompress(data, max_output_size=usize))
+            else:
+                raise self._bad(ci, f"unsupported compression {comp!r} (supported: none, lz4, zstd)")
+        except RecordingFileError:
+            raise
+        except _LIB_ERRORS as exc:
+            raise self._bad(ci, f"{comp} data do not decompress ({type(exc).__name__}: {exc}): the chunk "
+                                f"is damaged") from exc
         if len(data) != usize:
             raise self._bad(ci, f"decompressed to {len(data)} bytes, the chunk says {usize}")
-        if self.validate_crcs and crc and zlib.crc32(data) != crc:
-            raise self._bad(ci, "CRC of the uncompressed records does not match (corrupted)")
+        if self.verify and crc:
+            self._check_crc(ci, data, crc, self.turn if comp == "" else -1)
+        self.turn ^= 1
         return data
 
 
@@ -647,7 +952,7 @@ def _select_chunks(lay: _Layout, ids, start_ns: int, end_ns: int) -> list:
 
 
 def read(path, channels=None, i0: int = 0, i1: int | None = None, *,
-         validate_crcs: bool = False) -> Recording:
+         verify: bool = True) -> Recording:
     """Samples ``i0 <= i < i1`` of the named channels of an MCAP recording.
 
     Parameters
@@ -657,8 +962,10 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *,
         Channel names (all when None), in the order wanted.
     i0, i1 : int
         Sample range [i0, i1) [-]; ``i1=None`` reads to the end.
-    validate_crcs : bool
-        Check the CRC of every chunk read (default False: costs about as much as the read).
+    verify : bool
+        Check the CRCs (default True): summary and data-section CRC once per file, and the
+        CRC of every chunk read (computed in a worker thread while the samples are copied).
+        False skips them (a damaged chunk then reads as whatever its bytes say).
 
     Returns
     -------
@@ -675,8 +982,15 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *,
     :func:`write` produces) is copied into the output in one strided copy, any other chunk
     message by message. (Scatter reads straight from the file into the output, saving that
     buffer, measured no faster here: first-touch page faults of the output dominate.)
+
+    Raises
+    ------
+    CorruptFileError
+        A CRC does not match or the file is truncated (the chunk or byte range is named).
+    RecordingFileError
+        The file is not a meshphase MCAP recording or does not hold what its index says.
     """
-    with _open(path) as (path, fh, lay):
+    with _open(path, verify) as (path, fh, lay):
         info = lay.info
         names = _names(info, channels)
         n_total = info.n_samples
@@ -691,8 +1005,8 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *,
             start_ns, end_ns = _window_ns(lay, i0, i1)
             itemsize = lay.dtype.itemsize
             dtype = lay.dtype
-            chunks = _ChunkReader(fh, path, validate_crcs=validate_crcs)
-            with _lib_errors(path, "reading chunks"):
+            with _lib_errors(path, "reading chunks"), \
+                    _ChunkReader(fh, path, lay, verify=verify) as chunks:
                 for ci in _select_chunks(lay, col, start_ns, end_ns):
                     recs = chunks.records(ci)
                     fast = _uniform_chunk(recs, lay, col, i0, i1)
@@ -717,7 +1031,8 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *,
         return _recording(lay, out, names, i0)
 
 
-def iter_blocks(path, n_block: int, n_overlap: int, channels=None) -> Iterator[Recording]:
+def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *,
+                verify: bool = True) -> Iterator[Recording]:
     """Stream an MCAP recording in blocks of ``n_block`` samples plus ``n_overlap``.
 
     One pass over the chunks in log-time order; each message's samples are copied at once
@@ -737,6 +1052,9 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None) -> Iterator[R
         Extra samples of the following block appended to each block [-], >= 0.
     channels : sequence of str, optional
         Channel names (all when None).
+    verify : bool
+        Check the CRCs as :func:`read` does (default True); every chunk feeding a block has
+        passed its CRC before the block is handed out.
 
     Yields
     ------
@@ -746,7 +1064,7 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None) -> Iterator[R
     if isinstance(n_overlap, bool) or not isinstance(n_overlap, (int, np.integer)) or n_overlap < 0:
         raise ValueError(f"n_overlap must be a non-negative integer, got {n_overlap!r}")
     n_overlap = int(n_overlap)
-    with _open(path) as (path, fh, lay):
+    with _open(path, verify) as (path, fh, lay):
         info = lay.info
         names = _names(info, channels)
         n_total = info.n_samples
@@ -790,8 +1108,8 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None) -> Iterator[R
             return out
 
         cur = start_block(0)
-        chunks = _ChunkReader(fh, path)  # samples are copied out at once
-        with _lib_errors(path, "streaming chunks"):
+        with _lib_errors(path, "streaming chunks"), \
+                _ChunkReader(fh, path, lay, verify=verify) as chunks:  # samples are copied out at once
             for ci in _select_chunks(lay, col, 0, _MAX_LOG_TIME):
                 recs = chunks.records(ci)
                 for cid, off, size, _ in _payloads(recs, col, path):
@@ -814,6 +1132,7 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None) -> Iterator[R
                     done[c] = first + n
                 low = min(done)
                 while k_next < n_blocks and low >= span(k_next)[1]:
+                    chunks.finish()  # the chunks feeding this block passed their CRC
                     out, cur = cur, None
                     yield _recording(lay, out, names, span(k_next)[0])
                     del out
@@ -925,7 +1244,7 @@ def write(recording: Recording, path, *, block: int = DEFAULT_BLOCK, compression
         # (one channel per chunk, one group of blocks per chunk).
         w = Writer(fh, chunk_size=1 << 62, compression=comp, index_types=IndexType.ALL,
                    use_chunking=True, use_statistics=True, use_summary_offsets=True,
-                   enable_crcs=True)
+                   enable_crcs=True, enable_data_crcs=True)
         w.start(profile=PROFILE, library=f"meshphase-mcap/{FORMAT_VERSION}; {LIBRARY_IDENTIFIER}")
         sid = w.register_schema(SCHEMA_NAME, SCHEMA_ENCODING, layout)
         cids = [w.register_channel(s.name, MESSAGE_ENCODING, sid, md)

@@ -24,9 +24,15 @@ Mapping (full description in ``data_schemas/tdms_mapping.md``):
   meta["tdms"] with the file, group and channel properties (JSON-friendly); history: the file
   property ``meshphase_history`` (JSON array text) when present, then the read_tdms entry.
 
-Channels of unequal length, truncated files (segment lead-in or data cut short, or a
-segment never finished), files npTDMS cannot parse and a stale ``.tdms_index`` raise
-RecordingFileError naming the file and the problem.
+Channels of unequal length, files npTDMS cannot parse and a stale ``.tdms_index`` raise
+RecordingFileError naming the file and the problem. Truncated or damaged structure raises
+its subclass CorruptFileError with the segment and byte offset: every segment lead-in is
+followed from byte 0 to the end of the file (a lead-in cut short, a segment whose
+next-segment offset runs past the end of the file or was never written, a lead-in without
+the ``TDSm`` tag, a raw-data offset beyond its segment), a segment holding a partial chunk
+of data, and, in files written by meshphase (channel property ``meshphase_kind``), fewer
+samples than ``wf_samples`` says (a cut exactly at a segment boundary). TDMS stores no
+checksums: a flipped byte in the raw data cannot be detected.
 
 Reading: metadata through ``TdmsFile.open``; the samples of plain segments (contiguous,
 little-endian, non-DAQmx) are read with ``readinto`` straight into the preallocated output
@@ -56,7 +62,7 @@ import numpy as np
 from ..errors import FormatWarning
 from ..recording import CHANNEL_KINDS, Recording
 from ..validate import as_int, as_positive, as_positive_int
-from .base import RecordingFileError, RecordingInfo
+from .base import CorruptFileError, RecordingFileError, RecordingInfo
 from .hdf5 import spec_from_dict, warn_nonfinite
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "sniff", "read_info", "read", "iter_blocks", "kind_from_name"]
@@ -114,26 +120,26 @@ def _walk_segments(path) -> tuple[int, bytes]:
     with open(path, "rb") as fh:
         while pos < size:
             if size - pos < _LEAD_IN:
-                raise RecordingFileError(path, f"truncated: segment {n} at byte {pos} has an incomplete lead-in "
-                                               f"({size - pos} of {_LEAD_IN} bytes)")
+                raise CorruptFileError(path, f"segment {n} at byte {pos}", f"truncated: incomplete lead-in "
+                                                                           f"({size - pos} of {_LEAD_IN} bytes)")
             fh.seek(pos)
             lead = fh.read(_LEAD_IN)
             if lead[:4] != b"TDSm":
-                raise RecordingFileError(path, f"corrupt: segment {n} at byte {pos} does not start with b'TDSm' "
-                                               f"(found {lead[:4]!r})")
+                raise CorruptFileError(path, f"segment {n} at byte {pos}", f"corrupt: the lead-in does not start "
+                                                                           f"with b'TDSm' (found {lead[:4]!r})")
             toc = struct.unpack("<I", lead[4:8])[0]
             endian = ">" if toc & _TOC_BIG_ENDIAN else "<"
             _version, next_off, raw_off = struct.unpack(endian + "IQQ", lead[8:28])
             if next_off == _INCOMPLETE:
-                raise RecordingFileError(path, f"truncated: segment {n} at byte {pos} was never finished "
-                                               f"(next-segment offset unset; the writer stopped mid-segment)")
+                raise CorruptFileError(path, f"segment {n} at byte {pos}", "truncated: the segment was never "
+                                       "finished (next-segment offset unset; the writer stopped mid-segment)")
             if raw_off > next_off:
-                raise RecordingFileError(path, f"corrupt: segment {n} at byte {pos}: raw-data offset {raw_off} "
-                                               f"beyond the segment length {next_off}")
+                raise CorruptFileError(path, f"segment {n} at byte {pos}", f"corrupt: raw-data offset {raw_off} "
+                                                                           f"beyond the segment length {next_off}")
             nxt = pos + _LEAD_IN + next_off
             if nxt > size:
-                raise RecordingFileError(path, f"truncated: segment {n} at byte {pos} needs {nxt} bytes, the file "
-                                               f"has {size}")
+                raise CorruptFileError(path, f"segment {n} at byte {pos}", f"truncated: the segment needs {nxt} "
+                                                                           f"bytes, the file has {size}")
             digest.update(lead)
             if raw_off:
                 digest.update(fh.read(raw_off))
@@ -235,6 +241,11 @@ def _has_scale_props(props) -> bool:
     return any(k.startswith("NI_Scale[") and k.endswith("_Scale_Type") for k in props)
 
 
+def _check_verify(verify) -> None:
+    if not isinstance(verify, (bool, np.bool_)):
+        raise TypeError(f"verify must be a bool, got {verify!r}")
+
+
 def _open(path):
     from nptdms import TdmsFile
 
@@ -279,6 +290,14 @@ def _plan(tdms, path, n_segments: int, fs_opt, raw: bool) -> _Plan:
         raise RecordingFileError(path, f"duplicate channel name(s) {dup}")
 
     lengths = {n: len(ch) for n, (_, ch) in zip(names, usable)}
+    for n, (_, ch) in zip(names, usable):
+        # meshphase writes the total sample count as wf_samples (NI writers use it for other
+        # counts, so only our own files are held to it)
+        want = ch.properties.get("wf_samples")
+        if "meshphase_kind" in ch.properties and isinstance(want, (int, np.integer)) and lengths[n] < want:
+            raise CorruptFileError(path, f"channel {n!r}, end of file at byte {os.path.getsize(path)}",
+                                   f"truncated: {lengths[n]} samples, wf_samples says {int(want)} (the file was "
+                                   f"cut at a segment boundary)")
     if len(set(lengths.values())) > 1:
         raise RecordingFileError(path, f"channels of unequal length: {lengths}")
     n_samples = next(iter(lengths.values()))
@@ -389,8 +408,8 @@ def _build_extents(tdms, path, chans: dict, raw: bool) -> bool:
     try:
         for seg in segs:
             if seg.segment_incomplete or seg.final_chunk_lengths_override is not None:
-                raise RecordingFileError(path, f"truncated or corrupt: the segment at byte {seg.position} holds a "
-                                               f"partial chunk of data")
+                raise CorruptFileError(path, f"segment at byte {seg.position}", "truncated or corrupt: the segment "
+                                                                                "holds a partial chunk of data")
             toc = seg.toc_mask
             if not toc & _TOC_RAW:
                 continue
@@ -472,8 +491,8 @@ def _read_fast(fh, plan: _Plan, names, i0, i1, buf, path):
             target = t[:cnt]
         got = fh.readinto(memoryview(target).cast("B"))
         if got != target.nbytes:
-            raise RecordingFileError(path, f"truncated: {got} of {target.nbytes} bytes of channel {names[j]!r} at "
-                                           f"byte {off}")
+            raise CorruptFileError(path, f"byte {off}", f"truncated: {got} of {target.nbytes} bytes of channel "
+                                                        f"{names[j]!r}")
         if not direct:
             if c.scaling is not None:
                 dest[:] = c.scaling.scale(RawChannelDataChunk.channel_data(target))
@@ -495,7 +514,8 @@ def _read_general(plan: _Plan, names, i0, i1, buf, path):
                 raise RecordingFileError(path, f"channel {name!r} has {len(arr)} DAQmx raw scalers; read it scaled")
             arr = next(iter(arr.values()))
         if len(arr) != n:
-            raise RecordingFileError(path, f"truncated: channel {name!r} gave {len(arr)} of {n} samples")
+            raise CorruptFileError(path, f"channel {name!r}, samples [{i0}, {i1})",
+                                   f"truncated: npTDMS gave {len(arr)} of {n} samples")
         buf[j] = arr
 
 
@@ -538,7 +558,7 @@ def _prepare(path, fs, raw):
     return path, tdms, plan
 
 
-def read_info(path, *, fs: float | None = None, raw: bool = False) -> RecordingInfo:
+def read_info(path, *, fs: float | None = None, raw: bool = False, verify: bool = True) -> RecordingInfo:
     """Header of a TDMS file (segment structure and properties; no samples are read).
 
     Parameters
@@ -548,7 +568,11 @@ def read_info(path, *, fs: float | None = None, raw: bool = False) -> RecordingI
         Sample rate [Hz] to use when the file has no (or a wrong) ``wf_increment``.
     raw : bool
         Describe the raw (unscaled) values instead of the NI-scaled ones.
+    verify : bool
+        Accepted for the registry's uniform options: TDMS stores no checksum; the segment
+        structure is always checked.
     """
+    _check_verify(verify)
     path, tdms, plan = _prepare(path, fs, raw)
     if tdms is not None:
         tdms.close()
@@ -564,7 +588,7 @@ def _recording(plan: _Plan, data, names, i0) -> Recording:
 
 
 def read(path, channels=None, i0: int = 0, i1: int | None = None, *, fs: float | None = None,
-         raw: bool = False) -> Recording:
+         raw: bool = False, verify: bool = True) -> Recording:
     """Samples ``i0 <= i < i1`` of the named channels (all when None) of a TDMS file.
 
     Parameters
@@ -577,12 +601,20 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *, fs: float |
         Sample rate [Hz] when the file lacks ``wf_increment``.
     raw : bool
         Return the stored (unscaled) values instead of NI-scaled physical values.
+    verify : bool
+        As in :func:`read_info`.
 
     Returns
     -------
     Recording
         float64 (float32 when every channel is unscaled float32), Fortran-ordered.
+
+    Raises
+    ------
+    CorruptFileError
+        Truncated or damaged segment structure (segment and byte offset named).
     """
+    _check_verify(verify)
     path, tdms, plan = _prepare(path, fs, raw)
     with contextlib.ExitStack() as stack:
         if tdms is not None:
@@ -600,11 +632,12 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *, fs: float |
 
 
 def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *, fs: float | None = None,
-                raw: bool = False) -> Iterator[Recording]:
+                raw: bool = False, verify: bool = True) -> Iterator[Recording]:
     """Blocks of ``n_block`` samples plus ``n_overlap`` following samples; file opened once.
 
     Block k covers samples [k n_block, (k + 1) n_block + n_overlap), clipped to the recording.
     """
+    _check_verify(verify)
     n_block = as_positive_int(n_block, "n_block")
     n_overlap = as_int(n_overlap, "n_overlap")
     if n_overlap < 0:

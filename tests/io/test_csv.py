@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 import pipeline.io as pio
 from pipeline.errors import DataQualityWarning, FormatWarning
 from pipeline.io import csv as mcsv
-from pipeline.io.base import RecordingFileError
+from pipeline.io.base import CorruptFileError, RecordingFileError
 from pipeline.recording import ChannelSpec, Recording
 
 
@@ -133,7 +133,7 @@ def test_read_info_is_header_only_for_our_files(tmp_path, recording, monkeypatch
     import pandas as pd
 
     monkeypatch.setattr(pd, "read_csv", lambda *a, **k: pytest.fail("rows parsed"))
-    monkeypatch.setattr(mcsv, "_scan_rows", lambda *a, **k: pytest.fail("rows counted"))
+    monkeypatch.setattr(mcsv, "_scan", lambda *a, **k: pytest.fail("rows counted"))
     info = mcsv.read_info(path)
     assert (info.fs, info.n_samples, info.t0, info.format) == (recording.fs, recording.n_samples, 0.0, "csv")
     assert info.channels == list(recording.channels) and info.extra["preamble"] is True
@@ -230,7 +230,7 @@ def test_non_monotonic_time_names_the_line(tmp_path):
 
 def test_blank_line_inside_the_data_is_reported(tmp_path):
     path = _plain(tmp_path / "bl.csv", "time [s],a [V]\n0,1\n0.1,2\n\n0.2,3\n0.3,4\n")
-    with pytest.raises(RecordingFileError, match=r"missing or non-finite time at line 4"):
+    with pytest.raises(CorruptFileError, match=r"bl\.csv: line 4 \(byte 25\): blank line inside the data rows"):
         mcsv.read(path)
 
 
@@ -258,7 +258,7 @@ def test_truncated_own_file(tmp_path, recording, cut):
         path.write_text("\n".join(lines[:1000]) + "\n", encoding="utf-8")
     else:
         path.write_text(text[: len(text) // 2], encoding="utf-8")
-    with pytest.raises(RecordingFileError, match=r"t\.csv: truncated"):
+    with pytest.raises(CorruptFileError, match=r"t\.csv: byte \d+ \(end of file\): truncated"):
         pio.read(path)
 
 
@@ -371,7 +371,7 @@ def test_non_numeric_value_names_the_line(tmp_path):
 
 def test_row_with_too_many_fields(tmp_path):
     path = _plain(tmp_path / "rag.csv", "time [s],a [V]\n0,1\n1,2,3\n2,4\n")
-    with pytest.raises(RecordingFileError, match="malformed rows"):
+    with pytest.raises(CorruptFileError, match=r"line 3 \(byte 19\): 3 field\(s\), the header has 2: malformed row"):
         mcsv.read(path)
 
 

@@ -15,7 +15,7 @@ import pipeline.io as pio
 from data_schemas import validate
 from pipeline.errors import DataQualityWarning, FormatWarning
 from pipeline.io import hdf5
-from pipeline.io.base import RecordingFileError
+from pipeline.io.base import CorruptFileError, RecordingFileError
 from pipeline.recording import ChannelSpec, Recording
 
 
@@ -271,7 +271,7 @@ def test_truncated_file_raises(tmp_path, recording, fraction):
     path = _write(recording, tmp_path / "t.h5")
     blob = path.read_bytes()
     path.write_bytes(blob[: int(len(blob) * fraction)])
-    with pytest.raises(RecordingFileError, match=r"t\.h5: cannot open as HDF5 .*truncated or corrupt"):
+    with pytest.raises(CorruptFileError, match=r"t\.h5: file of \d+ bytes: cannot open as HDF5: truncated or corrupt"):
         hdf5.read_info(path)
     with pytest.raises(RecordingFileError, match="truncated or corrupt"):
         pio.read(path)

@@ -18,7 +18,7 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
 import pipeline.io as pio
-from pipeline.io import RecordingFileError
+from pipeline.io import CorruptFileError, RecordingFileError
 from pipeline.io import mcap as m
 from pipeline.recording import ChannelSpec, Recording
 
@@ -258,11 +258,14 @@ def test_one_channel_read_touches_only_its_chunks(tmp_path):
     rec = _recording(20_000)
     p = _write(rec, tmp_path / "r.mcap", block=1000, chunk_size=20_000)
     off, _ = _chunk_of(p, "ring_2", which=1)
-    _corrupt_chunk(p, off)  # break a chunk of another channel
-    np.testing.assert_array_equal(_bits(pio.read(p, channels=["sun_1"]).data[:, 0]),
+    _corrupt_chunk(p, off)  # break a chunk of another channel (its opcode byte)
+    # verify=False: the file-level data-section CRC would catch the damage at open
+    np.testing.assert_array_equal(_bits(pio.read(p, channels=["sun_1"], verify=False).data[:, 0]),
                                   _bits(rec.data[:, 0]))
-    with pytest.raises(RecordingFileError, match="chunk at byte"):
-        pio.read(p)
+    with pytest.raises(CorruptFileError, match=r"chunk \d+ at byte"):
+        pio.read(p, verify=False)
+    with pytest.raises(CorruptFileError, match="data-section CRC32"):
+        pio.read(p, channels=["sun_1"])
 
 
 def test_window_read_uses_the_chunk_index(tmp_path):
@@ -270,9 +273,9 @@ def test_window_read_uses_the_chunk_index(tmp_path):
     p = _write(rec, tmp_path / "r.mcap", block=1000, chunk_size=40_100)  # 5 blocks = 1 s per chunk
     off, _ = _chunk_of(p, "sun_1", which=8)  # samples 40000..44999, t in [8, 9) s
     _corrupt_chunk(p, off)
-    assert pio.read(p, start=1.0, stop=3.5) == rec.slice_time(1.0, 3.5)
+    assert pio.read(p, start=1.0, stop=3.5, verify=False) == rec.slice_time(1.0, 3.5)
     with pytest.raises(RecordingFileError, match=str(p.name)):
-        pio.read(p, start=7.5, stop=8.5)
+        pio.read(p, start=7.5, stop=8.5, verify=False)
 
 
 # ---------------------------------------------------------------------------------- streaming
@@ -445,9 +448,9 @@ def test_crc_validation_catches_flipped_sample(tmp_path):
         b = fh.read(1)
         fh.seek(off + length - 3)
         fh.write(bytes([b[0] ^ 0xFF]))
-    with pytest.raises(RecordingFileError, match="CRC"):
-        m.read(p, validate_crcs=True)
-    assert not np.array_equal(_bits(m.read(p).data), _bits(rec.data))  # default: no CRC check
+    with pytest.raises(CorruptFileError, match="CRC"):
+        m.read(p)  # checked by default
+    assert not np.array_equal(_bits(m.read(p, verify=False).data), _bits(rec.data))  # switched off
 
 
 def test_foreign_mcap_file_raises_clear_error(tmp_path):

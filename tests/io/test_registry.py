@@ -148,7 +148,9 @@ def test_failed_write_leaves_nothing_half_written(tmp_path, recording, make_reco
 def test_atomic_path_contract(tmp_path):
     target = tmp_path / "t.bin"
     with atomic_path(target) as tmp:
-        assert tmp.parent == tmp_path and tmp != target and not tmp.exists()
+        # created empty with O_EXCL (the name is reserved), short name next to the target
+        assert tmp.parent == tmp_path and tmp != target and tmp.read_bytes() == b""
+        assert tmp.name.startswith(".mp-") and tmp.name.endswith(".partial") and len(tmp.name) <= 33
         tmp.write_bytes(b"ok")
         assert not target.exists()
     assert target.read_bytes() == b"ok"

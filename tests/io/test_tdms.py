@@ -11,7 +11,7 @@ import pytest
 import pipeline.io as pio
 from pipeline.errors import DataQualityWarning, FormatWarning
 from pipeline.io import tdms
-from pipeline.io.base import RecordingFileError
+from pipeline.io.base import CorruptFileError, RecordingFileError
 
 FS = 5120.0
 
@@ -271,9 +271,9 @@ def test_truncated_file(rig_tdms, fraction):
     blob = path.read_bytes()
     cut = int(len(blob) * fraction)
     path.write_bytes(blob[:cut])
-    with pytest.raises(RecordingFileError, match=r"rig\.tdms: truncated: segment \d+ at byte \d+"):
+    with pytest.raises(CorruptFileError, match=r"rig\.tdms: segment \d+ at byte \d+: truncated"):
         tdms.read_info(path)
-    with pytest.raises(RecordingFileError, match="truncated"):
+    with pytest.raises(CorruptFileError, match="truncated"):
         pio.read(path)
 
 
@@ -284,14 +284,14 @@ def test_segment_never_finished(rig_tdms):
     last = blob.rfind(b"TDSm")
     blob[last + 12:last + 20] = struct.pack("<Q", 0xFFFFFFFFFFFFFFFF)
     path.write_bytes(bytes(blob))
-    with pytest.raises(RecordingFileError, match="was never finished"):
+    with pytest.raises(CorruptFileError, match="was never finished"):
         tdms.read(path)
 
 
 def test_garbage_after_the_last_segment(rig_tdms):
     path, _ = rig_tdms
     path.write_bytes(path.read_bytes() + b"\0" * 40)
-    with pytest.raises(RecordingFileError, match=r"does not start with b'TDSm'"):
+    with pytest.raises(CorruptFileError, match=r"does not start with b'TDSm'"):
         tdms.read(path)
 
 
