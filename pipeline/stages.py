@@ -175,7 +175,9 @@ def stage_load(ctx: RunContext) -> None:
         from synthetic import generate
 
         minutes = inp.get("minutes")
-        rec, truth = generate(inp["synthetic"], duration=None if minutes is None else 60.0 * minutes,
+        # a config built in code (benchmarks, tests) wins over the registered scenario's
+        rec, truth = generate(inp.get("config") or inp["synthetic"],
+                              duration=None if minutes is None else 60.0 * minutes,
                               seed=inp.get("seed", 0))
         source = f"synthetic:{inp['synthetic']}"
     rec = _apply_channel_overrides(rec, ctx.scene.channels, source)

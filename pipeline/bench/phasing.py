@@ -1,0 +1,179 @@
+"""Measured phasing against synthetic truth on a real rig's conditions: error against run time.
+
+The accuracy matrix of the measured-phasing issue: the seed 000 Table 1 gearset on the seed's
+rig (Z 25/87/29, four planets, held ring, sun 18.19 r/min, 5120 Hz, 0.2 mm shaft hole errors,
+white noise, hum, drift; scenarios ``rig_*`` of :mod:`synthetic.scenarios`) under 1 % and 3 %
+speed ripple at the carrier rate, 1 % at the sun rate, +-10 % ramps, both senses, three
+unequally spaced planets, five planets, with and without the carrier tacho, at 20 and 10 dB,
+over 2 and 10 minutes.
+
+Per case and gauge: the per-pass RMS phasing error against the truth [mesh cycles] (every
+measured pass against the true mesh angle turned between its two pulses,
+:func:`pipeline.compare.truth_comparison`), the floor the two onsets' timing bounds set (RMS
+of the per-pass timing floor), their ratio, the target ``max(2e-3, 1.3 x floor)``, the
+calibration of the per-pass uncertainty (RMS of error / sigma, share inside 1.96 sigma), the
+planet-label match, whether the run flagged the phasing unreliable, the angle model chosen,
+and the wall time of the processing (load to compare, not the generation). Measured, never
+asserted here (tests/test_phasing_accuracy.py asserts).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+import warnings
+
+import numpy as np
+
+from ..log import logger
+
+__all__ = ["PhasingCase", "matrix_cases", "run_case", "phasing_rows", "markdown_table",
+           "PHASING_COLUMNS", "TARGET_ABS", "TARGET_FLOOR_RATIO"]
+
+#: accuracy target: per-pass RMS <= max(TARGET_ABS, TARGET_FLOOR_RATIO x floor) [mesh cycles]
+TARGET_ABS = 2e-3
+TARGET_FLOOR_RATIO = 1.3
+
+PHASING_COLUMNS = ("case", "gauge", "n", "rms", "floor", "ratio", "target", "ok", "z_rms",
+                   "coverage95", "label_match", "reliable", "model", "process_s")
+
+
+@dataclasses.dataclass(frozen=True)
+class PhasingCase:
+    """One cell of the matrix.
+
+    Attributes
+    ----------
+    scenario : str
+        A ``rig_*`` scenario of :mod:`synthetic.scenarios`.
+    tacho : bool
+        Keep the carrier tacho channel.
+    snr_db : float
+        White-noise SNR [dB] (20 log10 peak / noise RMS).
+    minutes : float
+        Record length [min]; a ramp keeps its total speed change over the record.
+    """
+
+    scenario: str
+    tacho: bool = True
+    snr_db: float = 20.0
+    minutes: float = 2.0
+
+    @property
+    def name(self) -> str:
+        return (f"{self.scenario}{'' if self.tacho else ' no-tacho'} {self.snr_db:g}dB "
+                f"{self.minutes:g}min")
+
+
+_BASE = ("rig_steady", "rig_ripple1", "rig_ripple3", "rig_ripple_sun", "rig_ramp_up",
+         "rig_ramp_down", "rig_ccw", "rig_3planets", "rig_5planets")
+
+
+def matrix_cases(quick: bool = False) -> list[PhasingCase]:
+    """The matrix: every condition at 20 dB over 2 min with the tacho; without it for the
+    ripple, ramp and planet-layout cases; at 10 dB; over 10 min. ``quick``: three cells."""
+    if quick:
+        return [PhasingCase("rig_ripple1", minutes=1.0), PhasingCase("rig_ripple3", minutes=1.0),
+                PhasingCase("rig_ripple1", tacho=False, minutes=1.0)]
+    cases = [PhasingCase(s) for s in _BASE]
+    cases += [PhasingCase(s, tacho=False) for s in ("rig_ripple1", "rig_ripple3", "rig_ramp_up",
+                                                     "rig_ccw", "rig_3planets", "rig_5planets")]
+    cases += [PhasingCase(s, snr_db=10.0) for s in ("rig_ripple1", "rig_ripple3", "rig_5planets")]
+    cases += [PhasingCase(s, minutes=10.0) for s in ("rig_ripple1", "rig_ripple3", "rig_ramp_up")]
+    cases += [PhasingCase("rig_ripple1", tacho=False, snr_db=10.0, minutes=10.0)]
+    return cases
+
+
+def case_config(case: PhasingCase):
+    """The scenario's :class:`synthetic.config.SynthConfig` changed as the case says."""
+    from synthetic.kinematics import SpeedProfile
+    from synthetic.scenarios import get_scenario
+
+    cfg = get_scenario(case.scenario)
+    dur = 60.0 * case.minutes
+    changes = {"duration": dur, "artefacts": dataclasses.replace(cfg.artefacts, snr_db=case.snr_db)}
+    if not case.tacho:
+        changes["tacho"] = None
+    if cfg.speed.ramp_rate:
+        # the same total speed change over the record, whatever its length
+        sp = cfg.speed
+        changes["speed"] = dataclasses.replace(sp, ramp_rate=sp.ramp_rate * cfg.duration / dur)
+    return cfg.with_(**changes)
+
+
+def run_case(case: PhasingCase, *, seed: int = 0, results=("phasing", "compare")) -> dict:
+    """Generate the case, run the scene stages on it, compare with the truth.
+
+    Returns
+    -------
+    dict
+        ``case``, ``ctx`` (the RunContext), ``process_s`` (wall time of the stages [s]),
+        ``gauges``: {gear: row dict with the :data:`PHASING_COLUMNS` values}.
+    """
+    from ..compare import truth_comparison
+    from ..scene import Scene
+    from ..stages import run_scene
+
+    cfg = case_config(case)
+    scene = Scene(path=None, name=case.name, results=list(results),
+                  input={"synthetic": case.scenario, "minutes": case.minutes, "seed": seed,
+                         "config": cfg})
+    t = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ctx = run_scene(scene)
+    wall = time.perf_counter() - t
+    rows = {}
+    ph = ctx.results.get("phasing")
+    truth = ctx.results.get("load", {}).get("truth")
+    if ph is not None and truth is not None:
+        model = ph.get("model")
+        for gear, tab in ph["tables"].items():
+            ch, times, pl, _, _ = ph["labels"][gear]
+            tc = truth_comparison(tab, truth, ch, times=times, planets=pl) if len(tab) else None
+            if tc is None:
+                continue
+            floor = tc["floor_rms"]
+            target = max(TARGET_ABS, TARGET_FLOOR_RATIO * floor) if math.isfinite(floor) else TARGET_ABS
+            rows[gear] = {"case": case.name, "gauge": gear, "n": tc["n"], "rms": tc["rms"],
+                          "floor": floor, "ratio": tc["rms"] / floor if floor > 0 else float("nan"),
+                          "target": target, "ok": bool(tc["rms"] <= target),
+                          "z_rms": tc["z_rms"], "coverage95": tc["coverage95"],
+                          "label_match": tc["label_match"],
+                          "reliable": bool(ph["reliability"].get(gear, {}).get("reliable", False)),
+                          "model": model.terms if model is not None else "",
+                          "process_s": wall, "errors": tc["errors"],
+                          "sigma": np.asarray(tab.uncertainty)}
+    return {"case": case, "ctx": ctx, "process_s": wall, "gauges": rows}
+
+
+def phasing_rows(cases, *, seed: int = 0) -> list[dict]:
+    """Table rows (one per case and gauge, :data:`PHASING_COLUMNS`) of :func:`run_case`."""
+    out = []
+    for case in cases:
+        res = run_case(case, seed=seed)
+        for gear in ("sun", "ring"):
+            r = res["gauges"].get(gear)
+            if r is not None:
+                out.append({k: r[k] for k in PHASING_COLUMNS})
+        logger.info("phasing bench: %s done in %.1f s", case.name, res["process_s"])
+    return out
+
+
+def _fmt(v) -> str:
+    if isinstance(v, bool):
+        return "yes" if v else "NO"
+    if isinstance(v, float):
+        return "-" if not math.isfinite(v) else (f"{v:.2e}" if abs(v) < 0.01 or abs(v) >= 1e3 else f"{v:.3g}")
+    return str(v)
+
+
+def markdown_table(rows) -> str:
+    """The rows as a Markdown table, with the pooled calibration underneath."""
+    head = ("case", "gauge", "n", "rms", "floor", "ratio", "target", "ok", "z_rms",
+            "coverage95", "label_match", "reliable", "process_s", "model")
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        lines.append("| " + " | ".join(_fmt(r[k]) for k in head) + " |")
+    return "\n".join(lines) + "\n"
