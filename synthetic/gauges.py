@@ -342,25 +342,29 @@ def render_pulses(out, i0: int, positions, periods, amplitudes, table: PulseTabl
 # ----------------------------------------------------------------------------- pulses in angle
 
 #: Polynomial degrees tried by :func:`angle_pulse_map`, lowest first.
-_DEGREES = (1, 2, 3, 4, 5, 6, 8, 10, 12, 14, 16)
+_DEGREES = tuple(range(1, 17))
 
 
 @dataclass(frozen=True, eq=False)
 class AnglePulses:
     """Where each pulse's samples lie and how to find their pulse variable.
 
-    Sample ``first[e] + k`` (``0 <= k < width``) of event ``e`` reads the pulse table at the
-    table coordinate ``x = sum_j coef[e, j] y^(degree - j)`` (Horner order, highest power
+    Sample ``first[e] + k`` (``0 <= k < count[e]``) of event ``e`` reads the pulse table at
+    the table coordinate ``x = sum_j coef[e, j] y^(degree - j)`` (Horner order, highest power
     first) with ``y = 2 k / (width - 1) - 1``; ``x = (u + half) * scale`` with ``u`` the
-    angle since the engagement in mesh periods (module docstring).
+    angle since the engagement in mesh periods (module docstring). The polynomial holds on
+    the whole window ``0 <= k < width``; beyond ``count[e]`` the pulse is zero.
 
     Attributes
     ----------
     first : ndarray of int64, shape (m,)
         Absolute index of the first sample inside each event's support [-] (sorted as the
         events).
+    count : ndarray of int64, shape (m,)
+        Samples inside each event's support [-].
     width : int
-        Samples evaluated per event [-] (the longest support plus one).
+        Length of the common window the polynomials are fitted on [samples] (the longest
+        support plus one).
     coef : ndarray, shape (m, degree + 1)
         Polynomial coefficients of the table coordinate in ``y`` [table points].
     degree : int
@@ -371,6 +375,7 @@ class AnglePulses:
     """
 
     first: np.ndarray
+    count: np.ndarray
     width: int
     coef: np.ndarray
     degree: int
@@ -455,13 +460,14 @@ def angle_pulse_map(tau_e, mesh_angle: float, tau_of, time_of, fs: float, table:
     if not callable(tau_of) or not callable(time_of):
         raise TypeError("tau_of and time_of must be callables (e.g. SpeedClock.tau, .time_of)")
     if tau_e.size == 0:
-        return AnglePulses(np.empty(0, np.int64), 0, np.empty((0, 2)), 1, 0.0)
+        return AnglePulses(np.empty(0, np.int64), np.empty(0, np.int64), 0, np.empty((0, 2)), 1, 0.0)
     half, scale = table.half, table.scale
     t_lo = np.asarray(time_of(tau_e - half * T), dtype=np.float64)
     t_hi = np.asarray(time_of(tau_e + half * T), dtype=np.float64)
     first = np.floor(t_lo * fs).astype(np.int64) + 1
     last = np.ceil(t_hi * fs).astype(np.int64) - 1
-    width = max(2, int(np.max(last - first)) + 2)
+    count = np.maximum(last - first + 1, 0)
+    width = max(2, int(np.max(count)) + 1)
     span = 0.5 * (width - 1)                         # k = (y + 1) * span
     floor = 64.0 * np.finfo(float).eps * (float(np.max(np.abs(tau_e))) + half * T) / T
     fb = first.astype(np.float64)
@@ -480,7 +486,7 @@ def angle_pulse_map(tau_e, mesh_angle: float, tau_of, time_of, fs: float, table:
         err = float(np.max(np.abs(_horner(coef, check) - exact(check)))) / scale
         worst = err
         if err <= tol + floor:
-            return AnglePulses(first, width, np.ascontiguousarray(coef), d, err)
+            return AnglePulses(first, count, width, np.ascontiguousarray(coef), d, err)
     raise ValueError(f"the speed changes too fast within one pulse: no polynomial of degree <= "
                      f"{max_degree} follows the pulse variable to {tol!r} mesh periods (best "
                      f"{worst!r}); lower the ripple frequency or raise max_degree")
@@ -508,9 +514,10 @@ def render_angle_pulses(out, i0: int, pulses: AnglePulses, amplitudes, table: Pu
 
     Notes
     -----
-    The value of sample ``first[e] + k`` depends on the event and k only (``y`` is the same
-    array for every block), and events add in their order, so the result is the same bit for
-    bit however the recording is cut into blocks.
+    The value of sample ``first[e] + k`` depends on the event and k only (``y[k]`` is the same
+    number in every call), and events add in their order, so the result is the same bit for
+    bit however the recording is cut into blocks. Only ``max(count) + 1`` samples per event
+    of the events in the buffer are evaluated.
     """
     n = out.shape[0]
     if not isinstance(pulses, AnglePulses):
@@ -522,14 +529,15 @@ def render_angle_pulses(out, i0: int, pulses: AnglePulses, amplitudes, table: Pu
     if amp.shape != first.shape:
         raise ValueError(f"amplitudes must have one value per event ({first.size}), got shape "
                          f"{amp.shape}")
-    m = pulses.width
-    keep = (first < i0 + n) & (first + m > i0)
+    count = pulses.count
+    keep = (first < i0 + n) & (first + count > i0)
     coef = pulses.coef
     if not np.all(keep):
-        first, coef, amp = first[keep], coef[keep], amp[keep]
+        first, count, coef, amp = first[keep], count[keep], coef[keep], amp[keep]
     if first.size == 0:
         return
-    y = np.arange(m, dtype=np.float64) * (2.0 / (m - 1)) - 1.0
+    m = min(pulses.width, int(count.max()) + 1)
+    y = np.arange(m, dtype=np.float64) * (2.0 / (pulses.width - 1)) - 1.0
     kj = np.arange(m, dtype=np.int64)
     step = max(1, max_elems // m)
     for a in range(0, first.size, step):

@@ -355,8 +355,8 @@ class _Plan:
                         lo = int(np.searchsorted(ap.first, j0 - ap.width, side="right"))
                         hi = int(np.searchsorted(ap.first, j1, side="left"))
                         if hi > lo:
-                            sub = AnglePulses(ap.first[lo:hi], ap.width, ap.coef[lo:hi],
-                                              ap.degree, ap.fit_error)
+                            sub = AnglePulses(ap.first[lo:hi], ap.count[lo:hi], ap.width,
+                                              ap.coef[lo:hi], ap.degree, ap.fit_error)
                             render_angle_pulses(work, j0, sub, ch.amp[lo:hi], ch.table)
                 elif ch.pos.size:
                     lo = int(np.searchsorted(ch.pos, j0 - ch.reach, side="left"))

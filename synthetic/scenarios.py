@@ -102,7 +102,8 @@ class Scenario:
     description : str
     build : callable() -> SynthConfig
     tags : tuple of str
-        e.g. "fast" (cheap at its default duration), "long", "noise", "facewidth", "errors".
+        e.g. "fast" (cheap at its default duration), "long", "noise", "facewidth", "errors",
+        "speed" (speed variation), "rig" (the accuracy-matrix family).
     """
 
     name: str

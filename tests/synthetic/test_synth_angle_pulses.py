@@ -74,8 +74,8 @@ def test_angle_renderer_matches_direct_evaluation():
     # the samples inside each support are exactly those the map names
     for e, te in enumerate(tau_e):
         inside = np.flatnonzero(np.abs((tau - te) / T) < tab.half)
-        assert inside[0] == ap.first[e]
-        assert inside[-1] < ap.first[e] + ap.width
+        assert inside[0] == ap.first[e] and inside.size == ap.count[e]
+        assert inside[-1] == ap.first[e] + ap.count[e] - 1 < ap.first[e] + ap.width
 
 
 def test_angle_map_is_linear_at_constant_speed():
