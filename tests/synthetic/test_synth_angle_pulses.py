@@ -284,3 +284,14 @@ def test_rig_without_tacho_and_other_snr(name):
     assert len(t2.passes["sun"]) > 0
     n = cfg.gearset.n_planets
     assert set(np.unique(t2.events["ring"].planet)) <= set(range(1, n + 1))
+
+
+def test_cli_lists_the_rig_family(capsys):
+    import re
+
+    from pipeline.cli import main
+
+    assert main(["synth", "--list"]) == 0
+    out = capsys.readouterr().out
+    for name in RIG_SCENARIOS:
+        assert re.search(rf"^{name}\s+5120 Hz\s+120 s", out, re.M), name
