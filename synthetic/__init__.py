@@ -1,7 +1,9 @@
 """Synthetic rig recordings generated from the models, with their ground truth.
 
-- :mod:`.kinematics`  speed profile (ripple, ramp) and exact engagement times
-- :mod:`.gauges`      tooth-root strain pulse shape, face-width load weighting, rendering
+- :mod:`.kinematics`  speed profile (ramp, ripple in Hz, ripple locked to a shaft angle),
+                      the speed clock tau(t), exact engagement times
+- :mod:`.gauges`      tooth-root strain pulse shape (a function of the gauged gear's angle),
+                      face-width load weighting, rendering
 - :mod:`.artefacts`   noise (white, 1/f), drift, hum, ADC, clipping, gaps, gain errors
 - :mod:`.config`      the typed scenario description (:class:`SynthConfig`)
 - :mod:`.scenarios`   the registry of named scenarios (:data:`SCENARIOS`)
@@ -13,12 +15,13 @@
 
 from .config import Artefacts, GaugeConfig, SynthConfig, TachoConfig, TiltSource
 from .generate import SyntheticStream, generate, generate_blocks
-from .kinematics import SpeedProfile
+from .kinematics import ShaftRipple, SpeedClock, SpeedProfile
 from .scenarios import SCENARIOS, Scenario, describe_scenarios, get_scenario, list_scenarios
 from .truth import GroundTruth, truth_path_for
 from .cli import cli_synth
 
 __all__ = ["generate", "generate_blocks", "SyntheticStream", "SynthConfig", "GaugeConfig",
-           "TachoConfig", "TiltSource", "Artefacts", "SpeedProfile", "SCENARIOS", "Scenario",
+           "TachoConfig", "TiltSource", "Artefacts", "SpeedProfile", "ShaftRipple", "SpeedClock",
+           "SCENARIOS", "Scenario",
            "get_scenario", "list_scenarios", "describe_scenarios", "GroundTruth",
            "truth_path_for", "cli_synth"]

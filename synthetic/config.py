@@ -383,7 +383,8 @@ class SynthConfig:
     tilt : TiltSource, optional
         Take Z_S, Z_R from the coupled tilt solve instead (then leave the centroids at 0).
     speed : SpeedProfile
-        Speed fluctuation (ramp and ripple).
+        Speed fluctuation: ramp, ripple at fixed frequencies and ripple locked to a member's
+        rotation angle (:class:`synthetic.kinematics.ShaftRipple`).
     artefacts : Artefacts
         Noise, drift, hum, ADC, clipping, gaps, gain error.
     tacho : TachoConfig, optional

@@ -7,13 +7,20 @@ renderer that scatters one pulse per engagement event into a sample buffer.
 
 Pulse shape
 -----------
-Time is measured from the engagement instant ``t_e`` in local mesh periods,
-``u = (t - t_e) / T_m`` with ``T_m = 2 pi / (Z |w_rel|)`` the local mesh period [s] at
-``t_e`` (``Z`` the tooth count of the gauged gear, ``w_rel`` its speed relative to the
-carrier, scaled by the instantaneous speed factor). The engagement instant is the instant
-the gauged tooth's centre line crosses the line of centres of the actual gear centre and the
-actual planet centre, i.e. the middle of the tooth's contact with that planet (see
-:mod:`synthetic.kinematics`).
+A tooth-root pulse is a function of the gauged gear's rotation angle relative to the carrier,
+not of time: the tooth bends while a planet rolls across it, over a fixed angle. The pulse
+variable is the angle turned since the engagement, in mesh periods::
+
+    u = Z |w_rel| (tau(t) - tau_e) / (2 pi)
+
+(``Z`` the tooth count of the gauged gear, ``w_rel`` its nominal speed relative to the
+carrier [rad/s], ``tau`` the angle time of :mod:`synthetic.kinematics`, ``tau_e`` that of the
+engagement). So the pulse stretches and shrinks with the local speed, also within one pulse:
+a pulse lasts ``2 * half`` mesh periods of angle, ``2 * half * T_m`` [s] at a steady local
+mesh period ``T_m = 2 pi / (Z |w_rel| s)``. At constant speed this is ``u = (t - t_e) / T_m``.
+The engagement instant is the instant the gauged tooth's centre line crosses the line of
+centres of the actual gear centre and the actual planet centre, i.e. the middle of the
+tooth's contact with that planet (see :mod:`synthetic.kinematics`).
 
 The tooth carries load while ``|u| < eps / 2`` (``eps`` the contact ratio): a single-contact
 plateau of half-width ``a = eps/2 - r`` and, at each end, a double-contact zone of width
@@ -35,7 +42,17 @@ the strain reads::
     p(u) = g(u) - side_lobe * (g(u - 1) + g(u + 1)),      normalised to max p = 1
 
 a tensile peak while the tooth carries load, with a compressive lobe before and after it.
-The pulse support is ``|u| < 1 + eps / 2`` [mesh periods].
+The pulse support is ``|u| < 1 + eps / 2`` [mesh periods of angle].
+
+Rendering
+---------
+:func:`render_pulses` scatters pulses whose variable is linear in time (constant speed).
+:func:`angle_pulse_map` gives, per engagement, the first sample of its support and a
+polynomial in the sample offset that reproduces the table coordinate ``u(t_i)`` to a
+verified tolerance (1e-9 mesh periods by default: the degree is raised until the fit matches
+the exact ``tau(t)`` at interleaved check points); :func:`render_angle_pulses` scatters
+them. Both evaluate only the samples near each event, and a sample gets the same value bit
+for bit however the recording is cut into blocks.
 
 Face-width weighting (spec section 7)
 -------------------------------------
@@ -53,13 +70,15 @@ from __future__ import annotations
 
 import functools
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from pipeline.validate import as_finite_array, as_float, as_nonnegative, as_positive
 
 __all__ = ["pulse_shape", "pulse_support", "pulse_peak_offset", "face_load_factor",
-           "PulseTable", "render_pulses", "render_box"]
+           "PulseTable", "render_pulses", "render_box", "AnglePulses", "angle_pulse_map",
+           "render_angle_pulses"]
 
 _MIN_RAMP = 0.15
 _TABLE_POINTS = 1 << 15
@@ -123,7 +142,8 @@ def pulse_shape(u, contact_ratio: float = 1.6, side_lobe: float = 0.3, skew: flo
     Parameters
     ----------
     u : array_like
-        Time from the engagement instant in local mesh periods [-].
+        Angle turned since the engagement, in mesh periods [-] (at constant speed: time from
+        the engagement instant in mesh periods).
     contact_ratio : float
         Contact ratio eps [-]: the tooth carries load for ``eps`` mesh periods.
     side_lobe : float
@@ -146,10 +166,12 @@ def pulse_shape(u, contact_ratio: float = 1.6, side_lobe: float = 0.3, skew: flo
 
 
 def pulse_peak_offset(contact_ratio: float = 1.6, side_lobe: float = 0.3, skew: float = 0.0) -> float:
-    """Time of the pulse maximum after the engagement instant [mesh periods].
+    """Position of the pulse maximum after the engagement [mesh periods of angle].
 
-    A detector that reports the pulse peak sees the truth engagement time shifted by this
-    constant (times the local mesh period).
+    A detector that reports the pulse peak sees the truth engagement shifted by this constant
+    angle: ``peak_offset * 2 pi / Z`` [rad] of the gauged gear relative to the carrier, i.e.
+    ``tau_e + peak_offset * T`` in angle time (``T = 2 pi / (Z |w_rel|)``), about
+    ``peak_offset`` local mesh periods in time.
     """
     return _peak_offset(*_check_shape(contact_ratio, side_lobe, skew))
 
@@ -310,6 +332,222 @@ def render_pulses(out, i0: int, positions, periods, amplitudes, table: PulseTabl
         val *= amp[a:b, None]
         j = (first[a:b] - i0)[:, None] + kj[None, :]
         fa = first[a:b]
+        if fa.min() >= i0 and fa.max() + m <= i0 + n:
+            np.add.at(out, j.ravel(), val.ravel())
+        else:
+            ok = (j >= 0) & (j < n)
+            np.add.at(out, j[ok], val[ok])
+
+
+# ----------------------------------------------------------------------------- pulses in angle
+
+#: Polynomial degrees tried by :func:`angle_pulse_map`, lowest first.
+_DEGREES = tuple(range(1, 17))
+
+
+@dataclass(frozen=True, eq=False)
+class AnglePulses:
+    """Where each pulse's samples lie and how to find their pulse variable.
+
+    Sample ``first[e] + k`` (``0 <= k < count[e]``) of event ``e`` reads the pulse table at
+    the table coordinate ``x = sum_j coef[e, j] y^(degree - j)`` (Horner order, highest power
+    first) with ``y = 2 k / (width - 1) - 1``; ``x = (u + half) * scale`` with ``u`` the
+    angle since the engagement in mesh periods (module docstring). The polynomial holds on
+    the whole window ``0 <= k < width``; beyond ``count[e]`` the pulse is zero.
+
+    Attributes
+    ----------
+    first : ndarray of int64, shape (m,)
+        Absolute index of the first sample inside each event's support [-] (sorted as the
+        events).
+    count : ndarray of int64, shape (m,)
+        Samples inside each event's support [-].
+    width : int
+        Length of the common window the polynomials are fitted on [samples] (the longest
+        support plus one).
+    coef : ndarray, shape (m, degree + 1)
+        Polynomial coefficients of the table coordinate in ``y`` [table points].
+    degree : int
+        Polynomial degree [-].
+    fit_error : float
+        Largest deviation of the polynomial from the exact pulse variable at the check
+        points [mesh periods].
+    """
+
+    first: np.ndarray
+    count: np.ndarray
+    width: int
+    coef: np.ndarray
+    degree: int
+    fit_error: float
+
+    def __len__(self) -> int:
+        return int(self.first.size)
+
+
+@functools.lru_cache(maxsize=32)
+def _fit_matrices(d: int):
+    nodes = np.cos(np.pi * (np.arange(d + 1) + 0.5) / (d + 1))     # Chebyshev, first kind
+    check = np.cos(np.pi * np.arange(d + 2) / (d + 1))              # interleaved, with +-1
+    vander = np.polynomial.chebyshev.chebvander(nodes, d)
+    to_mono = np.zeros((d + 1, d + 1))
+    for k in range(d + 1):
+        e = np.zeros(d + 1)
+        e[k] = 1.0
+        p = np.polynomial.chebyshev.cheb2poly(e)
+        to_mono[: p.size, k] = p
+    # node values -> monomial coefficients, highest power first
+    fit = (to_mono @ np.linalg.inv(vander))[::-1]
+    for a in (nodes, check, fit):
+        a.flags.writeable = False
+    return nodes, check, fit
+
+
+def _horner(coef, y):
+    x = coef[:, 0:1] * y[None, :]
+    x += coef[:, 1:2]
+    for j in range(2, coef.shape[1]):
+        x *= y[None, :]
+        x += coef[:, j:j + 1]
+    return x
+
+
+def angle_pulse_map(tau_e, mesh_angle: float, tau_of, time_of, fs: float, table: PulseTable, *,
+                    tol: float = 1e-9, max_degree: int = 16) -> AnglePulses:
+    """Sample windows and pulse-variable polynomials of pulses that last a fixed angle.
+
+    Parameters
+    ----------
+    tau_e : array_like, shape (m,)
+        Angle times of the engagements [s], sorted.
+    mesh_angle : float
+        One mesh period of angle in angle time, ``2 pi / (Z |w_rel|)`` [s].
+    tau_of : callable
+        ``tau_of(t)``: angle time [s] at times t [s] from the first sample (vectorised).
+    time_of : callable
+        ``time_of(tau)``: its inverse [s].
+    fs : float
+        Sample rate [Hz]; sample i sits at t = i / fs.
+    table : PulseTable
+        Pulse shape (its ``half`` and ``scale``).
+    tol : float
+        Largest allowed deviation of the polynomial from the exact pulse variable
+        [mesh periods] (plus the rounding floor of ``tau_of(t) - tau_e``, 64 ulp of tau).
+    max_degree : int
+        Highest polynomial degree tried; ValueError beyond.
+
+    Returns
+    -------
+    AnglePulses
+        Empty (width 0) when there is no event.
+
+    Notes
+    -----
+    Per event, the support ``|u| < half`` is mapped to times with ``time_of`` (so its samples
+    are exactly those inside the angle support); the table coordinate is interpolated at
+    Chebyshev points of the sample window and checked against ``tau_of`` at the interleaved
+    points and the window ends; the lowest degree that meets ``tol`` on every event is used.
+    The speed changes slowly against one pulse (a ripple period spans many mesh periods), so
+    degrees of 2-8 are typical, and 1 at constant speed.
+    """
+    if not isinstance(table, PulseTable):
+        raise TypeError(f"table must be a PulseTable, got {type(table).__name__}")
+    tau_e = as_finite_array(tau_e, "tau_e", ndim=1)
+    T = as_positive(mesh_angle, "mesh_angle")
+    fs = as_positive(fs, "fs")
+    tol = as_positive(tol, "tol")
+    max_degree = int(max_degree)
+    if not callable(tau_of) or not callable(time_of):
+        raise TypeError("tau_of and time_of must be callables (e.g. SpeedClock.tau, .time_of)")
+    if tau_e.size == 0:
+        return AnglePulses(np.empty(0, np.int64), np.empty(0, np.int64), 0, np.empty((0, 2)), 1, 0.0)
+    half, scale = table.half, table.scale
+    t_lo = np.asarray(time_of(tau_e - half * T), dtype=np.float64)
+    t_hi = np.asarray(time_of(tau_e + half * T), dtype=np.float64)
+    first = np.floor(t_lo * fs).astype(np.int64) + 1
+    last = np.ceil(t_hi * fs).astype(np.int64) - 1
+    count = np.maximum(last - first + 1, 0)
+    width = max(2, int(np.max(count)) + 1)
+    span = 0.5 * (width - 1)                         # k = (y + 1) * span
+    floor = 64.0 * np.finfo(float).eps * (float(np.max(np.abs(tau_e))) + half * T) / T
+    fb = first.astype(np.float64)
+
+    def exact(y):
+        t = (fb[:, None] + (y[None, :] + 1.0) * span) / fs
+        tau = np.asarray(tau_of(t.ravel()), dtype=np.float64).reshape(t.shape)
+        return ((tau - tau_e[:, None]) / T + half) * scale
+
+    worst = math.inf
+    for d in _DEGREES:
+        if d > max_degree:
+            break
+        nodes, check, fit = _fit_matrices(d)
+        coef = exact(nodes) @ fit.T
+        err = float(np.max(np.abs(_horner(coef, check) - exact(check)))) / scale
+        worst = err
+        if err <= tol + floor:
+            return AnglePulses(first, count, width, np.ascontiguousarray(coef), d, err)
+    raise ValueError(f"the speed changes too fast within one pulse: no polynomial of degree <= "
+                     f"{max_degree} follows the pulse variable to {tol!r} mesh periods (best "
+                     f"{worst!r}); lower the ripple frequency or raise max_degree")
+
+
+def render_angle_pulses(out, i0: int, pulses: AnglePulses, amplitudes, table: PulseTable, *,
+                        max_elems: int = 1 << 15) -> None:
+    """Add the pulses of :func:`angle_pulse_map` into ``out`` (in place).
+
+    Parameters
+    ----------
+    out : ndarray, shape (n,)
+        Buffer holding absolute samples ``i0 <= i < i0 + n``.
+    i0 : int
+        Absolute index of ``out[0]`` [-].
+    pulses : AnglePulses
+        Windows and polynomials (a subset of events may be given by slicing its arrays into
+        a new AnglePulses).
+    amplitudes : array_like, shape (m,)
+        Peak strains [m/m].
+    table : PulseTable
+        The table the map was made for.
+    max_elems : int
+        Bound on the temporary (events x width) work arrays.
+
+    Notes
+    -----
+    The value of sample ``first[e] + k`` depends on the event and k only (``y[k]`` is the same
+    number in every call), and events add in their order, so the result is the same bit for
+    bit however the recording is cut into blocks. Only ``max(count) + 1`` samples per event
+    of the events in the buffer are evaluated.
+    """
+    n = out.shape[0]
+    if not isinstance(pulses, AnglePulses):
+        raise TypeError(f"pulses must be an AnglePulses, got {type(pulses).__name__}")
+    first = pulses.first
+    if n == 0 or first.size == 0:
+        return
+    amp = np.asarray(amplitudes, dtype=np.float64)
+    if amp.shape != first.shape:
+        raise ValueError(f"amplitudes must have one value per event ({first.size}), got shape "
+                         f"{amp.shape}")
+    count = pulses.count
+    keep = (first < i0 + n) & (first + count > i0)
+    coef = pulses.coef
+    if not np.all(keep):
+        first, count, coef, amp = first[keep], count[keep], coef[keep], amp[keep]
+    if first.size == 0:
+        return
+    m = min(pulses.width, int(count.max()) + 1)
+    y = np.arange(m, dtype=np.float64) * (2.0 / (pulses.width - 1)) - 1.0
+    kj = np.arange(m, dtype=np.int64)
+    step = max(1, max_elems // m)
+    for a in range(0, first.size, step):
+        b = min(first.size, a + step)
+        x = _horner(coef[a:b], y)
+        np.maximum(x, 0.0, out=x)
+        val = table.lookup(x)
+        val *= amp[a:b, None]
+        fa = first[a:b]
+        j = (fa - i0)[:, None] + kj[None, :]
         if fa.min() >= i0 and fa.max() + m <= i0 + n:
             np.add.at(out, j.ravel(), val.ravel())
         else:

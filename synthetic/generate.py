@@ -17,6 +17,13 @@ How a block is made
    samples, not events x samples); then only the artefacts the scenario asks for are added,
    in the order of :mod:`synthetic.artefacts`.
 
+One :class:`~synthetic.kinematics.SpeedClock` (the speed profile bound to the nominal speeds)
+gives the engagements, the tacho edges, the pulses and the truth, so they share one angle
+time ``tau``. Pulses last a fixed angle of the gauged gear (:mod:`synthetic.gauges`): at
+constant speed they are rendered linear in time, otherwise through
+:func:`~synthetic.gauges.angle_pulse_map` (a per-event polynomial in the sample offset that
+follows ``tau(t)`` to 1e-9 mesh periods).
+
 Channels appear in the order of ``config.gauges``, the tacho last. Samples are in physical
 units (strain [m/m], tacho [V]) with ``ChannelSpec.gain = 1``.
 """
@@ -37,14 +44,15 @@ from pipeline.validate import as_int, as_positive
 
 from . import artefacts as art
 from .config import SynthConfig, errors_to_dict
-from .gauges import PulseTable, face_load_factor, pulse_peak_offset, render_box, render_pulses
+from .gauges import (AnglePulses, PulseTable, angle_pulse_map, face_load_factor, pulse_peak_offset, render_angle_pulses,
+                     render_box, render_pulses)
 from .kinematics import EngagementEvents, engagement_events, event_times_for_angles, gauge_rates
 from .truth import EventTable, GroundTruth, PassTruth
 
 __all__ = ["generate", "generate_blocks", "SyntheticStream", "resolve_seed", "resolve_config",
            "draw_errors", "GENERATOR_VERSION"]
 
-GENERATOR_VERSION = "1"
+GENERATOR_VERSION = "2"
 TWO_PI = 2.0 * math.pi
 _SNAP = 1e-9
 _DEFAULT_BLOCK_SAMPLES = 1 << 20
@@ -127,7 +135,7 @@ def _frac(x):
 
 class _Channel:
     __slots__ = ("spec", "gauge", "pos", "per", "amp", "table", "gain", "sigma", "hum_phases",
-                 "reach")
+                 "reach", "angle")
 
 
 class _Plan:
@@ -143,6 +151,8 @@ class _Plan:
         dur = self.n_samples / self.fs
         cfg.speed.check(dur)
         g, sp = cfg.gearset, cfg.speeds
+        #: the speed profile bound to the nominal speeds: one angle time for everything
+        self.clock = clock = cfg.speed.clock(sp)
         n_p = g.n_planets
         a = cfg.artefacts
         self.dtype = np.dtype(cfg.dtype)
@@ -169,7 +179,7 @@ class _Plan:
         gain_rand = setup.standard_normal(len(cfg.gauges)) * a.gain_error_std
         hum_rng = art.stream_rng(seed, "setup", 1)
         n_harm = len(a.hum_harmonics)
-        s_min = 1.0 + min(0.0, cfg.speed.ramp_rate * dur) - sum(c[0] for c in cfg.speed.ripple)
+        s_min = cfg.speed.bounds(dur)[0]
         self.channels: list[_Channel] = []
         events_truth, passes_truth, pulse_info = {}, {}, {}
         gain_errors, noise_rms, hum_phases = {}, {}, {}
@@ -186,7 +196,7 @@ class _Plan:
             t_mesh_max = TWO_PI / (z * abs(w) * s_min)
             margin = ch.table.half * t_mesh_max + 2.0 / self.fs
             ev = engagement_events(g, sp, gauge.gear, cfg.tooth_angle(gauge), -margin,
-                                   dur + margin, errors=errors, profile=cfg.speed)
+                                   dur + margin, errors=errors, profile=clock)
             # amplitudes: nominal x load sharing x face load factor
             fac = np.ones(n_p)
             if gauge.face_position is not None:
@@ -207,6 +217,14 @@ class _Plan:
             ch.per = ev.mesh_period * self.fs
             ch.amp = amp * ch.gain
             ch.reach = ch.table.half * float(ch.per.max()) + 1.0 if ch.per.size else 0.0
+            t_angle = TWO_PI / (z * abs(w))                 # one mesh period of angle [s]
+            ch.angle = None
+            map_info = {"degree": 1, "fit_error": 0.0}
+            if not clock.is_constant:
+                # the pulse lasts a fixed angle: follow tau(t) within every pulse
+                ch.angle = angle_pulse_map(ev.tau, t_angle, clock.tau, clock.time_of, self.fs,
+                                           ch.table)
+                map_info = {"degree": ch.angle.degree, "fit_error": ch.angle.fit_error}
             ch.sigma = gauge.amplitude / 10.0 ** (a.snr_db / 20.0) if a.snr_db is not None else 0.0
             ch.hum_phases = hum_rng.uniform(0.0, TWO_PI, n_harm)
             self.channels.append(ch)
@@ -220,7 +238,8 @@ class _Plan:
             pulse_info[gauge.name] = {
                 "contact_ratio": gauge.contact_ratio, "side_lobe": gauge.side_lobe,
                 "skew": gauge.skew, "support": ch.table.half,
-                "peak_offset": pulse_peak_offset(gauge.contact_ratio, gauge.side_lobe, gauge.skew)}
+                "peak_offset": pulse_peak_offset(gauge.contact_ratio, gauge.side_lobe, gauge.skew),
+                "domain": "angle", "nominal_mesh_period": t_angle, "angle_map": map_info}
             gain_errors[gauge.name] = ge
             noise_rms[gauge.name] = ch.sigma
             hum_phases[gauge.name] = ch.hum_phases.tolist() if a.hum_amplitude else []
@@ -231,7 +250,7 @@ class _Plan:
             tc = cfg.tacho
             t_rev = TWO_PI / (abs(sp.carrier) * s_min)
             st, sp_ = event_times_for_angles(sp.carrier, cfg.tacho_angle(), -tc.width * t_rev - 2.0 / self.fs,
-                                             dur, width=tc.width, profile=cfg.speed)
+                                             dur, width=tc.width, profile=clock)
             self.tacho = (st * self.fs, sp_ * self.fs, tc.level)
             self.tacho_spec = ChannelSpec(tc.name, kind="tacho", units="V", gain=1.0, gear="carrier",
                                           description="synthetic carrier once-per-revolution tacho")
@@ -251,7 +270,7 @@ class _Plan:
         }
         self.history = [{"step": "synthetic.generate", "scenario": cfg.name, "seed": seed,
                          "generator": GENERATOR_VERSION}]
-        s_grid = cfg.speed.factor(np.linspace(0.0, dur, 1001))
+        s_grid = clock.factor(np.linspace(0.0, dur, 1001))
         self.truth = GroundTruth(
             scenario=cfg.name, seed=seed, fs=self.fs, t0=cfg.t0, n_samples=self.n_samples,
             config=cfg.to_dict(), errors=errors_to_dict(errors) if isinstance(errors, ShaftHoleErrors) else None,
@@ -262,6 +281,7 @@ class _Plan:
             noise_rms=noise_rms, hum_phases=hum_phases, gaps=self.gaps, pulse=pulse_info,
             extra={"generator": GENERATOR_VERSION,
                    "speed_factor_range": [float(s_grid.min()), float(s_grid.max())],
+                   "speed_clock_panels": clock.n_panels,
                    "tacho_angle": cfg.tacho_angle() if cfg.tacho else None,
                    "tilt_solution": tilt_info,
                    "tooth_angles": {x.name: cfg.tooth_angle(x) for x in cfg.gauges},
@@ -329,7 +349,16 @@ class _Plan:
                 work = buf[c, s:e] if f64 else scratch[:e - s]
                 if not f64:
                     work.fill(0.0)
-                if ch.pos.size:
+                if ch.angle is not None:
+                    ap = ch.angle
+                    if len(ap):
+                        lo = int(np.searchsorted(ap.first, j0 - ap.width, side="right"))
+                        hi = int(np.searchsorted(ap.first, j1, side="left"))
+                        if hi > lo:
+                            sub = AnglePulses(ap.first[lo:hi], ap.count[lo:hi], ap.width,
+                                              ap.coef[lo:hi], ap.degree, ap.fit_error)
+                            render_angle_pulses(work, j0, sub, ch.amp[lo:hi], ch.table)
+                elif ch.pos.size:
                     lo = int(np.searchsorted(ch.pos, j0 - ch.reach, side="left"))
                     hi = int(np.searchsorted(ch.pos, j1 + ch.reach, side="right"))
                     if hi > lo:

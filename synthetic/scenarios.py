@@ -28,9 +28,24 @@ Gearsets
     (T_m = 0.140 s = 717 samples at 5120 Hz); the sun gauge meets a planet every 0.88 s,
     the ring gauge every 3.05 s (relative ring revolution 12.2 s).
 
+``rig`` (the accuracy-matrix family, ``rig_*`` below)
+    The seed's Table 1 gearset on a rig as an independent tester ran it: Z_s 25, Z_r 87,
+    Z_p 29 (as in Table 1: 29 rather than (87 - 25) / 2 = 31 needs a centre-distance /
+    profile shift, which the kinematics do not see), four planets at 90 deg, R_c 112.5 mm,
+    face width 40 mm, FIXED ring (w_r = 0 exactly), sun 18.19 r/min, carrier
+    18.19 / (1 + 87/25) = 4.0603 r/min (Willis), clockwise planets, 5120 Hz. Mesh frequency
+    Z_s w_sc / 2 pi = Z_r w_c / 2 pi = 5.89 Hz (T_m = 0.170 s = 869 samples); the sun gauge
+    meets a planet every 1.06 s (relative sun revolution 4.25 s), the ring gauge every 3.69 s
+    (one carrier revolution 14.8 s). Table 2 case 1 shaft hole errors (0.2 mm), 20 dB SNR of
+    white noise (no 1/f), 50 Hz hum 2 µε, thermal drift 8 µε (T 900 s), 24-bit ADC over
+    +-2000 µε, sun + ring gauges and a carrier tacho, 2 min. ``rig_5planets`` uses
+    Z 25/85/30 with five equally spaced planets (assemblable: 110 / 5 = 22; tip circles clear:
+    55 sin 36 deg = 32.3 > 32), carrier 18.19 / (1 + 85/25) r/min.
+
 Gauges: sun tooth 0 (150 µε nominal, contact ratio 1.6), ring tooth 0 (100 µε, contact ratio
 1.8: internal meshes have more overlap), a carrier tacho; the face-width scenarios add gauges
-across one sun and one ring tooth.
+across one sun and one ring tooth. Every scenario's tacho can be removed with
+``get_scenario(name).with_(tacho=None)`` and its artefacts replaced with ``artefacts=...``.
 
 Scenarios
 ---------
@@ -39,12 +54,26 @@ Table 2 errors; case 3 draws one realisation from the tolerance bands with the s
 ``seed_rig`` (case 1 errors, clean), ``noisy``, ``adc16_clipped``, ``speed_ripple``
 (``speed_ripple_fast`` as a stress case),
 ``speed_ramp``, ``gaps``, ``facewidth_offcentre``, ``facewidth_partial``, ``facewidth_tilt``,
-``rig_realistic``, ``one_hour`` (generate it with :func:`synthetic.generate_blocks`). Each
-entry's ``description`` says what it holds; :func:`describe_scenarios` lists them.
+``rig_realistic``, ``one_hour`` (generate it with :func:`synthetic.generate_blocks`).
+
+The ``rig`` family changes one factor each from ``rig_steady`` (no speed variation):
+``rig_ripple1`` / ``rig_ripple3`` (1 % / 3 % speed ripple once per carrier revolution, locked
+to the carrier angle), ``rig_ripple_sun`` (1 % once per absolute sun revolution),
+``rig_ripple_planet`` (1 % once per planet revolution relative to the carrier: generator
+only, it may not be measurable), ``rig_ramp_up`` / ``rig_ramp_down`` (1 % carrier ripple plus
++10 % / -10 % speed over the 2 min, the ramp in time), ``rig_ccw`` (1 % carrier ripple, every
+speed reversed, counter-clockwise planets), ``rig_3planets`` (three unequally spaced
+assemblable planets at p_n = 0, 36, 75 of 2 pi / 112, i.e. 0, 115.7, 241.1 deg: mixed
+phasing; 1 % carrier ripple), ``rig_5planets`` (Z 25/85/30, five equally spaced planets,
+1 % carrier ripple). Shaft-locked ripple follows the member's angle
+(:class:`synthetic.kinematics.ShaftRipple`), so it stays locked to the shaft through a ramp.
+
+Each entry's ``description`` says what it holds; :func:`describe_scenarios` lists them.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -52,10 +81,11 @@ from pipeline.models.gearset import Gearset, Speeds, rpm_to_rad_s
 from pipeline.models.tolerance import table2_case
 
 from .config import Artefacts, GaugeConfig, SynthConfig, TachoConfig, TiltSource
-from .kinematics import SpeedProfile
+from .kinematics import ShaftRipple, SpeedProfile
 
 __all__ = ["Scenario", "SCENARIOS", "get_scenario", "list_scenarios", "describe_scenarios",
-           "register", "table1_gearset", "seed_rig_gearset", "seed_rig_speeds"]
+           "register", "table1_gearset", "seed_rig_gearset", "seed_rig_speeds", "rig_gearset",
+           "rig_speeds", "RIG_SCENARIOS"]
 
 FACE_WIDTH = 40e-3
 SEED_RIG_SUN_RPM = 18.19
@@ -72,7 +102,8 @@ class Scenario:
     description : str
     build : callable() -> SynthConfig
     tags : tuple of str
-        e.g. "fast" (cheap at its default duration), "long", "noise", "facewidth", "errors".
+        e.g. "fast" (cheap at its default duration), "long", "noise", "facewidth", "errors",
+        "speed" (speed variation), "rig" (the accuracy-matrix family).
     """
 
     name: str
@@ -150,6 +181,27 @@ def seed_rig_speeds(gearset: Gearset | None = None) -> Speeds:
     return Speeds.kinematic(g, rpm_to_rad_s(SEED_RIG_SUN_RPM), rpm_to_rad_s(SEED_RIG_CARRIER_RPM))
 
 
+def rig_gearset(z_sun: int = 25, z_ring: int = 87, z_planet: int = 29, planet_angles=None, *,
+                direction: str = "cw", name: str = "seed000-table1-rig") -> Gearset:
+    """The ``rig`` family's gearset: seed 000 Table 1 (Z 25/87/29, R_c 112.5 mm, face width
+    40 mm); ``planet_angles`` [rad] default four at 90 deg."""
+    if planet_angles is None:
+        planet_angles = tuple(i * math.pi / 2.0 for i in range(4))
+    return Gearset(z_sun, z_ring, z_planet, tuple(planet_angles), 112.5e-3, direction=direction,
+                   name=name, face_width=FACE_WIDTH)
+
+
+def rig_speeds(gearset: Gearset, sun_rpm: float = SEED_RIG_SUN_RPM, *, reverse: bool = False) -> Speeds:
+    """Fixed-ring speeds [rad/s]: sun ``sun_rpm`` [r/min], carrier sun / (1 + Z_r / Z_s), ring
+    exactly 0, planet by Willis (``w_p - w_c = -(Z_s / Z_p)(w_s - w_c)``); ``reverse`` turns
+    every speed round."""
+    sun = rpm_to_rad_s(sun_rpm)
+    carrier = sun / (1.0 + gearset.z_ring / gearset.z_sun)
+    planet = carrier - gearset.z_sun / gearset.z_planet * (sun - carrier)
+    sgn = -1.0 if reverse else 1.0
+    return Speeds(sun=sgn * sun, carrier=sgn * carrier, planet=sgn * planet, ring=0.0)
+
+
 def _gauges(*, facewidth: bool = False) -> tuple:
     out = [GaugeConfig("sun", "sun", tooth=0, amplitude=150e-6, contact_ratio=1.6),
            GaugeConfig("ring", "ring", tooth=0, amplitude=100e-6, contact_ratio=1.8)]
@@ -178,6 +230,22 @@ def _seed_rig(name, description, *, duration=60.0, errors="case1", gauges=None, 
     return SynthConfig(name=name, description=description, gearset=g, speeds=seed_rig_speeds(g),
                        fs=5120.0, duration=duration, gauges=gauges or _gauges(), errors=errors,
                        tacho=TachoConfig(), **kw)
+
+
+#: acquisition of the rig family: 20 dB white noise, 50 Hz hum, slow drift, 24-bit ADC
+_RIG_ACQ = Artefacts(snr_db=20.0, pink_fraction=0.0, drift_amplitude=8e-6, drift_time_constant=900.0,
+                     hum_amplitude=2e-6, hum_frequency=50.0, adc_bits=24, adc_range=2e-3)
+#: the rig family's default duration [s]
+RIG_DURATION = 120.0
+
+
+def _rig(name, description, *, speed=None, reverse=False, gearset=None) -> SynthConfig:
+    g = rig_gearset(direction="ccw" if reverse else "cw") if gearset is None else gearset
+    return SynthConfig(name=name, description=description, gearset=g,
+                       speeds=rig_speeds(g, reverse=reverse), fs=5120.0, duration=RIG_DURATION,
+                       gauges=_gauges(), errors=table2_case(1)[2],
+                       speed=SpeedProfile() if speed is None else speed, artefacts=_RIG_ACQ,
+                       tacho=TachoConfig())
 
 
 #: artefacts of a good real rig: 24-bit DAQ, 30 dB SNR with some 1/f, slight drift and hum
@@ -323,3 +391,61 @@ register(Scenario(
     lambda: _seed_rig("one_hour", "one hour of the seed rig, realistic acquisition",
                       duration=3600.0, artefacts=_REALISTIC),
     ("long", "noise", "bench")))
+
+
+# ----------------------------------------------------------------------------- the rig family
+
+def _ripple(member, amplitude=0.01, ramp=0.0):
+    return SpeedProfile.shaft_ripple(member, amplitude, 1, 0.0, ramp_rate=ramp / RIG_DURATION)
+
+
+#: p_n of the three-planet layout: psi_n = 2 pi p_n / (Z_s + Z_r)
+RIG_3PLANETS_P = (0, 36, 75)
+
+_RIG_COMMON = ("seed 000 Table 1 gearset (Z 25/87/29, 4 planets at 90 deg) on a fixed-ring rig, "
+               "sun 18.19 r/min, carrier 4.0603 r/min, 5120 Hz, Table 2 case 1 errors, 20 dB "
+               "white noise, 50 Hz hum, drift, 24-bit ADC, sun + ring gauges + tacho, 2 min")
+
+_RIG = {
+    "rig_steady": ("No speed variation: the reference of the rig family; " + _RIG_COMMON + ".",
+                   lambda n, d: _rig(n, d), ("rig",)),
+    "rig_ripple1": ("rig_steady with 1 % speed ripple once per carrier revolution (locked to "
+                    "the carrier angle).", lambda n, d: _rig(n, d, speed=_ripple("carrier")),
+                    ("rig", "speed")),
+    "rig_ripple3": ("rig_steady with 3 % speed ripple once per carrier revolution.",
+                    lambda n, d: _rig(n, d, speed=_ripple("carrier", 0.03)), ("rig", "speed")),
+    "rig_ripple_sun": ("rig_steady with 1 % speed ripple once per absolute sun revolution "
+                       "(3.3 s at 18.19 r/min).", lambda n, d: _rig(n, d, speed=_ripple("sun")),
+                       ("rig", "speed")),
+    "rig_ripple_planet": ("rig_steady with 1 % speed ripple once per planet revolution "
+                          "relative to the carrier (4.9 s); generator only, may not be "
+                          "measurable.", lambda n, d: _rig(n, d, speed=_ripple("planet")),
+                          ("rig", "speed")),
+    "rig_ramp_up": ("rig_ripple1 plus a +10 % speed change over the 2 min (ramp in time, the "
+                    "ripple stays locked to the carrier angle).",
+                    lambda n, d: _rig(n, d, speed=_ripple("carrier", ramp=0.10)), ("rig", "speed")),
+    "rig_ramp_down": ("rig_ripple1 plus a -10 % speed change over the 2 min.",
+                      lambda n, d: _rig(n, d, speed=_ripple("carrier", ramp=-0.10)),
+                      ("rig", "speed")),
+    "rig_ccw": ("rig_ripple1 with every speed reversed (counter-clockwise planets, direction "
+                "'ccw'): pass order and phasing signs flip, the ripple follows the reversed "
+                "carrier angle.", lambda n, d: _rig(n, d, speed=_ripple("carrier"), reverse=True),
+                ("rig", "speed")),
+    "rig_3planets": ("rig_ripple1 with three unequally spaced planets that can be assembled "
+                     "(psi_n = 2 pi p_n / 112, p_n = 0, 36, 75: 0, 115.7, 241.1 deg; mixed "
+                     "phasing).",
+                     lambda n, d: _rig(n, d, speed=_ripple("carrier"), gearset=rig_gearset(
+                         planet_angles=tuple(2.0 * math.pi * p / 112 for p in RIG_3PLANETS_P),
+                         name="seed000-table1-rig, 3 unequal planets")), ("rig", "speed")),
+    "rig_5planets": ("rig_ripple1 on a Z 25/85/30 gearset with five equally spaced planets "
+                     "(carrier 18.19 / 4.4 r/min).",
+                     lambda n, d: _rig(n, d, speed=_ripple("carrier"), gearset=rig_gearset(
+                         25, 85, 30, tuple(2.0 * math.pi * i / 5 for i in range(5)),
+                         name="rig 25/85/30, 5 planets")), ("rig", "speed")),
+}
+
+#: names of the rig family (the accuracy matrix), in a sensible reading order
+RIG_SCENARIOS = tuple(_RIG)
+
+for _name, (_desc, _build, _tags) in _RIG.items():
+    register(Scenario(_name, _desc, (lambda n, d, b: lambda: b(n, d))(_name, _desc, _build), _tags))

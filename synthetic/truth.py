@@ -7,11 +7,21 @@ Definitions
 Engagement time
     The instant the gauged tooth's centre line crosses the line of centres from the gauged
     gear's actual pitch centre to the actual centre of the planet, i.e. the middle of the
-    tooth's contact with that planet (:mod:`synthetic.kinematics`). The strain pulse's tensile
-    lobe spans ``contact_ratio`` mesh periods centred on it and its maximum lies
-    ``pulse[name]["peak_offset"]`` mesh periods after it (:mod:`synthetic.gauges`). A detector
-    reporting another feature of the pulse sees a constant offset in mesh periods, which is
-    expected. Times are on the recording's time axis (``t0 + i / fs``) [s].
+    tooth's contact with that planet (:mod:`synthetic.kinematics`). Times are on the
+    recording's time axis (``t0 + i / fs``) [s]; ``tau`` is the engagement's angle time.
+Pulse position (angle, not time)
+    A pulse is a function of the gauged gear's rotation angle relative to the carrier
+    (:mod:`synthetic.gauges`): the tensile lobe spans ``contact_ratio`` mesh periods *of angle*
+    centred on the engagement, its maximum lies ``pulse[name]["peak_offset"]`` mesh periods of
+    angle after it, and the support is ``pulse[name]["support"]`` mesh periods of angle either
+    side. One mesh period of angle is ``2 pi / Z`` of relative rotation, i.e. angle time
+    ``pulse[name]["nominal_mesh_period"]`` = ``2 pi / (Z |w_rel|)`` [s]; in time it lasts the
+    local mesh period (``events[name].mesh_period`` at the engagement), and it stretches with
+    the speed within the pulse. A feature ``x`` mesh periods of angle after the engagement
+    therefore sits at ``t(tau_e + x * nominal_mesh_period)``, which
+    :meth:`GroundTruth.event_angle_times` evaluates exactly (``~ t_e + x * mesh_period`` to
+    first order). A detector reporting another feature of the pulse sees a constant offset in
+    mesh periods of angle, which is expected.
 Planet numbers
     1-based, planet 1 = ``gearset.planet_angles[0]`` (as in the papers and
     :class:`pipeline.phasing.PassTable`).
@@ -55,9 +65,10 @@ TRUTH_FORMAT = "meshphase-synthetic-truth/1"
 ENGAGEMENT_DEFINITION = (
     "engagement time = instant the gauged tooth's centre line crosses the line of centres "
     "(actual gear pitch centre -> actual planet centre), i.e. the middle of the tooth's contact "
-    "with that planet; the tensile lobe of the pulse spans contact_ratio mesh periods centred "
-    "on it and its peak lies pulse[channel].peak_offset mesh periods after it; times on the "
-    "recording axis t0 + i/fs [s]; planets 1-based")
+    "with that planet; the pulse is a function of the gauged gear's angle: its tensile lobe "
+    "spans contact_ratio mesh periods of angle centred on it and its peak lies "
+    "pulse[channel].peak_offset mesh periods of angle after it; times on the recording axis "
+    "t0 + i/fs [s]; planets 1-based")
 
 
 def truth_path_for(recording_path) -> Path:
@@ -206,8 +217,11 @@ class GroundTruth:
     gaps : ndarray of int, shape (k, 2)
         ``[start, stop)`` sample ranges lost (NaN in every channel).
     pulse : dict of str to dict
-        Per gauge: ``contact_ratio``, ``side_lobe``, ``skew``, ``peak_offset`` and
-        ``support`` (half-width) in mesh periods.
+        Per gauge: ``contact_ratio``, ``side_lobe``, ``skew``; ``peak_offset`` and ``support``
+        (half-width) in mesh periods of the gauged gear's angle relative to the carrier;
+        ``domain`` ("angle"); ``nominal_mesh_period``: one mesh period of angle in angle time,
+        ``2 pi / (Z |w_rel|)`` [s]; ``angle_map``: degree and fit error [mesh periods] of the
+        renderer's per-pulse polynomial (degree 1, error 0 at constant speed).
     engagement_definition : str
         :data:`ENGAGEMENT_DEFINITION`.
     extra : dict
@@ -305,6 +319,36 @@ class GroundTruth:
         with open(path, encoding="utf-8") as fh:
             d = json.load(fh)
         return cls.from_dict(d)
+
+    def speed_clock(self):
+        """The recording's :class:`~synthetic.kinematics.SpeedClock` (speed profile bound to the
+        nominal speeds, both from ``config``): ``tau(t)`` and ``t(tau)`` with t from the first
+        sample [s]."""
+        from .config import SynthConfig
+
+        cfg = SynthConfig.from_dict(self.config)
+        return cfg.speed.clock(cfg.speeds)
+
+    def event_angle_times(self, channel: str, offset) -> np.ndarray:
+        """Times [s] (recording axis) at which the gauged gear has turned ``offset`` mesh
+        periods of angle past each engagement of ``channel``.
+
+        ``offset = pulse[channel]["peak_offset"]`` gives the pulse maxima, ``+-support`` the
+        ends of the pulse support, 0 the engagement times themselves.
+
+        Parameters
+        ----------
+        channel : str
+            Gauge channel name.
+        offset : float or array_like
+            Angle after the engagement [mesh periods]; broadcast against the events.
+        """
+        if channel not in self.events:
+            raise ValueError(f"no gauge channel {channel!r} in the truth; channels: {sorted(self.events)}")
+        ev = self.events[channel]
+        tau = np.asarray(ev.tau, dtype=float) + np.asarray(offset, dtype=float) * float(
+            self.pulse[channel]["nominal_mesh_period"])
+        return self.t0 + self.speed_clock().time_of(tau)
 
     def gamma_table(self, channel: str) -> PassTruth:
         """True phasing per pass of ``channel`` (ValueError naming the channels if unknown)."""

@@ -31,7 +31,9 @@ def _rate(name, duration, block=None, repeat=3):
 @pytest.mark.bench
 @pytest.mark.parametrize("name, duration", [("seed_rig", 600.0), ("table1_high_speed", 60.0),
                                             ("noisy", 600.0), ("rig_realistic", 600.0),
-                                            ("facewidth_offcentre", 300.0)])
+                                            ("facewidth_offcentre", 300.0),
+                                            # pulses rendered in angle (shaft-locked ripple)
+                                            ("rig_ripple1", 600.0), ("rig_ripple_sun", 600.0)])
 def test_generation_rate(name, duration):
     _rate(name, duration / 10, repeat=1)   # warm caches
     s, gs, dt = _rate(name, duration)
