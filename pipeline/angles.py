@@ -558,24 +558,28 @@ class _Design:
         """
         idx = np.arange(self.t.size) if rows is None else rows
         x = self.x[idx]
-        A, rate, G, _ = self._common(theta, lay, spec, x)
-        if nominal:
-            f0, _, _ = self.evaluate(theta, lay, spec, idx, jac=False)
-            A_nom = A + (self.y[idx] - f0)
-            A, rate, G, _ = self._common(theta, lay, spec, x, A_fixed=A_nom)
         q = self.q[idx]
         n = idx.size
-        f = A.copy()
         cb = lay["blocks"]["const"]
         ob = lay["blocks"]["off"]
         th_c = theta[cb]
         th_o = theta[ob]
         has_c = q > 0
-        if th_c.size:
-            f += np.where(has_c, th_c[np.maximum(q - 1, 0)], 0.0)
         oi = lay["oi"][idx]
+        train_terms = np.zeros(n)
+        if th_c.size:
+            train_terms += np.where(has_c, th_c[np.maximum(q - 1, 0)], 0.0)
         if th_o.size:
-            f += np.where(oi >= 0, th_o[np.maximum(oi, 0)], 0.0)
+            train_terms += np.where(oi >= 0, th_o[np.maximum(oi, 0)], 0.0)
+        if nominal:
+            # the angle the observation names: its target less its train's constant and
+            # offset, exactly periodic wherever the geometry is (the planet terms, a few
+            # 1e-3 cycles, and the residuals are left out on purpose)
+            A, rate, G, _ = self._common(theta, lay, spec, x,
+                                         A_fixed=self.y[idx] - train_terms)
+        else:
+            A, rate, G, _ = self._common(theta, lay, spec, x)
+        f = A + train_terms
         # planet terms, periodic in the planet's spin: functions of the mesh angle A
         sb = lay["blocks"]["sig"]
         hA = np.zeros(n)

@@ -335,8 +335,26 @@ def _block_medians(x: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
     return med, starts + 0.5 * step * (n_used - 1)
 
 
+def _block_means(x: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
+    """Means of consecutive blocks of ``b`` samples (NaN ignored; NaN for an all-NaN block)
+    and the block centre indices."""
+    n = x.size
+    nb = -(-n // b)
+    pad = nb * b - n
+    xp = np.concatenate([x, np.full(pad, np.nan)]) if pad else x
+    rows = xp.reshape(nb, b)
+    fin = np.isfinite(rows)
+    cnt = fin.sum(axis=1)
+    tot = np.where(fin, rows, 0.0).sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(cnt > 0, tot / np.maximum(cnt, 1), np.nan)
+    starts = np.arange(nb) * b
+    stops = np.minimum(starts + b, n)
+    return mean, 0.5 * (starts + stops - 1)
+
+
 def drift_baseline(x, fs: float, *, method: str = "median", window: float | None = None,
-                   mesh_freq: float | None = None) -> np.ndarray:
+                   mesh_freq: float | None = None, pulse_period: float | None = None) -> np.ndarray:
     """Slow baseline of a pulse train (what :func:`remove_drift` subtracts).
 
     Parameters
@@ -356,6 +374,15 @@ def drift_baseline(x, fs: float, *, method: str = "median", window: float | None
         ``mesh_freq``.
     mesh_freq : float, optional
         Mesh frequency [Hz].
+    pulse_period : float, optional
+        Period of the pulse train [s]: the time between passes of consecutive planets (one
+        relative revolution / N for equally spaced planets). Given, the blocks are whole
+        periods and each enters with its MEAN: every block then holds the same pulses, which
+        add a constant instead of a wobble. Needed when the pulses cover more than about
+        half of the time (five planets on a sun gauge: tensile lobe and side lobes span 3.6
+        of every 5 mesh periods), where block medians follow the pulses and the baseline
+        they leave shifts each pulse's timing (1.1e-3 mesh cycles RMS noise-free, against
+        4e-4 without drift removal).
 
     Returns
     -------
@@ -370,8 +397,12 @@ def drift_baseline(x, fs: float, *, method: str = "median", window: float | None
     n = x.size
     if n == 0:
         return np.empty(0)
-    b = max(1, int(round(window * fs / 16.0)))
-    means, centres = _block_medians(np.where(np.isfinite(x), x, np.nan), b)
+    if pulse_period is not None:
+        b = max(1, int(round(as_positive(pulse_period, "pulse_period") * fs)))
+        means, centres = _block_means(np.where(np.isfinite(x), x, np.nan), b)
+    else:
+        b = max(1, int(round(window * fs / 16.0)))
+        means, centres = _block_medians(np.where(np.isfinite(x), x, np.nan), b)
     ok = np.isfinite(means)
     if not ok.any():
         return np.full(n, np.nan)
@@ -399,7 +430,8 @@ def _drift_window(window, mesh_freq) -> float:
 
 
 def remove_drift(x, fs: float, *, method: str = "median", window: float | None = None,
-                 mesh_freq: float | None = None, order: int = 2, fill_max: int = 8) -> np.ndarray:
+                 mesh_freq: float | None = None, order: int = 2, fill_max: int = 8,
+                 pulse_period: float | None = None) -> np.ndarray:
     """Remove slow (thermal) drift from a strain channel.
 
     Parameters
@@ -419,6 +451,8 @@ def remove_drift(x, fs: float, *, method: str = "median", window: float | None =
         High-pass order (method "highpass" only).
     fill_max : int
         Gap bridging of the high-pass (see :func:`filter_signal`).
+    pulse_period : float, optional
+        Period of the pulse train [s] (see :func:`drift_baseline`).
 
     Returns
     -------
@@ -438,7 +472,7 @@ def remove_drift(x, fs: float, *, method: str = "median", window: float | None =
     if method == "highpass":
         return filter_signal(x, fs, kind="highpass", low=min(1.0 / w, 0.25 * fs), order=order,
                              fill_max=fill_max)
-    base = drift_baseline(x, fs, method=method, window=w)
+    base = drift_baseline(x, fs, method=method, window=w, pulse_period=pulse_period)
     return x - base
 
 
@@ -1064,7 +1098,8 @@ def filter_recording(rec: Recording, *, channels: Sequence[str] | str | None = N
 
 def remove_drift_recording(rec: Recording, *, channels: Sequence[str] | str | None = None,
                            method: str = "median", window: float | None = None,
-                           mesh_freq: float | None = None) -> Recording:
+                           mesh_freq: float | None = None,
+                           pulse_period: float | None = None) -> Recording:
     """:func:`remove_drift` on channels of a recording (default: every non-tacho channel).
 
     Returns a new Recording with one ``"condition.remove_drift"`` history entry.
@@ -1073,8 +1108,10 @@ def remove_drift_recording(rec: Recording, *, channels: Sequence[str] | str | No
     method = as_choice(method, "method", ("median", "savgol", "highpass"))
     w = _drift_window(window, mesh_freq)
     out, names = _map_channels(rec, channels, lambda c: remove_drift(c, rec.fs, method=method,
-                                                                     window=w))
-    return out.with_history("condition.remove_drift", method=method, window_s=w, channels=names)
+                                                                     window=w,
+                                                                     pulse_period=pulse_period))
+    return out.with_history("condition.remove_drift", method=method, window_s=w, channels=names,
+                            pulse_period_s=pulse_period)
 
 
 def _notch_rec(rec: Recording, channels, freqs, mains, q, exclude):
@@ -1142,7 +1179,8 @@ def condition_recording(rec: Recording, *, channels: Sequence[str] | str | None 
                         mesh_freq: float | None = None, hum: bool = True,
                         drift: str | None = "median", drift_window: float | None = None,
                         lowpass: float | str | None = "auto", highpass: float | None = None,
-                        order: int = 4, warn: bool = True, dropouts: str = "nan") -> Conditioned:
+                        order: int = 4, warn: bool = True, dropouts: str = "nan",
+                        pulse_period: float | None = None) -> Conditioned:
     """The default conditioning chain: quality -> (dropouts to NaN) -> hum notch -> drift
     removal -> band limit.
 
@@ -1177,6 +1215,9 @@ def condition_recording(rec: Recording, *, channels: Sequence[str] | str | None 
         ``"condition.mask_dropouts"`` history entry when there are any), so that they are
         gaps for every later stage; "keep": leave the samples (the report still lists them;
         pass ``quality=`` to :func:`pipeline.onsets.detect_onsets_recording`).
+    pulse_period : float, optional
+        Period of the channels' pulse train [s] (time between consecutive planets' passes):
+        the drift baseline then averages whole periods (:func:`drift_baseline`).
 
     Returns
     -------
@@ -1212,6 +1253,7 @@ def condition_recording(rec: Recording, *, channels: Sequence[str] | str | None 
                 settle = max(settle, 2.0 * 30.0 / (math.pi * float(np.min(r.freqs))))
     if drift is not None:
         out = remove_drift_recording(out, channels=names, method=drift, window=drift_window,
+                                     pulse_period=pulse_period,
                                      mesh_freq=mesh_freq)
         if drift == "highpass":
             settle = max(settle, 2.0 * _drift_window(drift_window, mesh_freq))

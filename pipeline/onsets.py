@@ -646,9 +646,16 @@ def _gather(y: np.ndarray, start: np.ndarray, length: int) -> tuple[np.ndarray, 
 
 def _learn_dec(yd: np.ndarray, peaks: np.ndarray, *, fs: float, d: int, w_d: float,
                reference: str, level: float, polarity: int, max_pulses: int, n_align: int,
-               min_corr: float) -> Template | None:
-    """Learn a template from decimated data ``yd`` around coarse maxima ``peaks``."""
+               min_corr: float, max_half: int | None = None) -> Template | None:
+    """Learn a template from decimated data ``yd`` around coarse maxima ``peaks``.
+
+    The template spans +-3 FWHM, but never more than half the usual distance between
+    pulses (``max_half`` [decimated samples]): a template reaching into the neighbouring
+    pulses (planets a few mesh periods apart) learns their tails and times every pulse
+    worse (five planets, sun gauge: 1.6x the Cramer-Rao bound before the cap, 1.2x after)."""
     h_half = max(4, int(math.ceil(_HALF_LENGTH * w_d)))
+    if max_half is not None:
+        h_half = max(4, min(h_half, int(max_half)))
     k = int(math.ceil(0.5 * w_d)) + 2
     L = 2 * h_half + 1
     start = peaks - h_half - k
@@ -1071,10 +1078,12 @@ class _Engine:
             b = lo + (peaks + h_half + kk + 1) * d
             clean = peaks[~_runs_overlap(a - o.gap_guard, b + o.gap_guard, bad_runs)]
         new = None
+        # half the usual distance between pulses bounds the template (see _learn_dec)
+        cap = int(0.5 * np.quantile(np.diff(peaks), 0.25)) if peaks.size >= 4 else None
         if clean.size >= 3:
             new = _learn_dec(yd, clean, fs=o.fs, d=d, w_d=w_d, reference=o.reference,
                              level=o.level, polarity=self.pol, max_pulses=o.max_template_pulses,
-                             n_align=o.n_align, min_corr=o.min_corr)
+                             n_align=o.n_align, min_corr=o.min_corr, max_half=cap)
         if new is not None and new.n_pulses >= o.min_template_pulses:
             return new, False
         if tpl is not None:
@@ -1085,7 +1094,7 @@ class _Engine:
             every = _learn_dec(yd, peaks, fs=o.fs, d=d, w_d=w_d, reference=o.reference,
                                level=o.level, polarity=self.pol,
                                max_pulses=o.max_template_pulses, n_align=o.n_align,
-                               min_corr=o.min_corr) if peaks.size >= 3 else None
+                               min_corr=o.min_corr, max_half=cap) if peaks.size >= 3 else None
             if every is not None and (new is None or every.n_pulses > new.n_pulses):
                 new = every
         if new is not None and new.n_pulses >= 3:

@@ -205,9 +205,18 @@ def stage_condition(ctx: RunContext) -> None:
         groups.setdefault(gear, []).append(c.name)
     quality = {}
     out = rec
+    g = _gearset(ctx)
     for gear, names in groups.items():
         fm = _mesh_freq(ctx, gear) if gear else None
-        cond = condition_recording(out, channels=names, mesh_freq=fm)
+        # the pulse train's period: consecutive planets' passes, Z / N mesh periods apart
+        # for equally spaced planets (a relative revolution otherwise)
+        period = None
+        if fm and g is not None:
+            z = g.z_sun if gear == "sun" else g.z_ring
+            steps = np.diff(np.sort(np.mod(g.angles, 2 * math.pi)))
+            equal = steps.size == 0 or np.allclose(steps, 2 * math.pi / g.n_planets, atol=1e-9)
+            period = z / fm / (g.n_planets if equal else 1)
+        cond = condition_recording(out, channels=names, mesh_freq=fm, pulse_period=period)
         out = cond.recording
         quality.update(cond.quality)
     ctx.results["condition"] = {"recording": out, "quality": quality}
@@ -269,36 +278,32 @@ def _main_gauge(rec: Recording, gear: str) -> str | None:
     return c[0] if c else None
 
 
-def _lobe_middle(tp) -> float:
-    """Position of the middle of a template's tensile lobe, halfway between its half-maximum
-    crossings [template samples] (linear interpolation between samples)."""
+def _timing_centre(tp) -> float:
+    """The point of a template the matched filter follows when the pulse stretches
+    [template samples]: the centroid of its squared slope, sum(u h'(u)^2) / sum(h'(u)^2).
+
+    A tooth-root pulse lasts a fixed angle, so at another speed it is the template stretched
+    in time by s about the engagement; the correlation peak then moves by (s - 1) times that
+    centroid's distance from the engagement (d lag / d s = int u h'^2 / int h'^2, implicit
+    differentiation of the correlation maximum). The onset the detector reports is that
+    centroid plus a template-fixed (time-fixed) offset, so only the centroid sits at a fixed
+    angle of the gauged gear under speed ripple."""
     h = np.asarray(tp.samples, dtype=float)
-    i = int(np.clip(round(tp.peak), 0, h.size - 1))
-    top = h[i]
-    if not (top > 0):
+    d = np.gradient(h)
+    e = d * d
+    tot = float(e.sum())
+    if not tot > 0:
         return float(tp.peak)
-    half = 0.5 * top
-    left = i
-    while left > 0 and h[left - 1] > half:
-        left -= 1
-    right = i
-    while right < h.size - 1 and h[right + 1] > half:
-        right += 1
-    xl = float(left) if left == 0 else (left - 1) + (half - h[left - 1]) / (h[left] - h[left - 1])
-    xr = float(right) if right == h.size - 1 else right + (h[right] - half) / (h[right] - h[right + 1])
-    return 0.5 * (xl + xr)
+    return float(np.sum(np.arange(h.size) * e) / tot)
 
 
 def _pass_times(on) -> np.ndarray:
-    """Onset times moved to the middle of their template's tensile lobe [s].
-
-    The engagement instant is the middle of the tooth's contact, and the tensile lobe spans
-    the contact; timing every gauge at the same physical instant matters because a planet's
-    own offset turns while the lobe passes (the model of the angle shares the planets' terms
-    between gauges, and the error models are evaluated at the pass instants)."""
+    """Onset times moved to their template's timing centre [s] (:func:`_timing_centre`): a
+    fixed angle of the gauged gear whatever the local speed, near the middle of the tooth's
+    contact, i.e. the engagement instant, on every gauge alike."""
     if not len(on) or not on.templates:
         return on.times
-    shift = np.array([(tp.ref - _lobe_middle(tp)) / tp.rate for tp in on.templates], dtype=float)
+    shift = np.array([(tp.ref - _timing_centre(tp)) / tp.rate for tp in on.templates], dtype=float)
     tid = np.clip(on.template_id, 0, shift.size - 1)
     out = on.times - np.where(on.template_id >= 0, shift[tid], 0.0)
     # keep the order strictly increasing (templates may differ between blocks)
@@ -426,8 +431,8 @@ def stage_phasing(ctx: RunContext) -> None:
         gear = c.gear if c.gear in ("sun", "ring") else (c.kind if c.kind in ("sun", "ring") else "sun")
         on = ons[c.name]
         ok = _usable(on, rec.channel(c.name), rec.fs, rec.t0)
-        # pass times at the middle of each pulse's tensile lobe: the middle of the tooth's
-        # contact, i.e. the engagement instant, on every gauge alike
+        # pass times at each pulse's timing centre: a fixed angle of the gauged gear near the
+        # middle of the tooth's contact, on every gauge alike
         times, amp = _pass_times(on)[ok], on.amplitude[ok]
         sig = _onset_sigma(on, getattr(quality.get(c.name), "noise_rms", float("nan")))[ok]
         main = c.kind in ("sun", "ring") and gear not in mains

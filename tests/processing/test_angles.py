@@ -51,7 +51,7 @@ def trains_from_truth(g, sp, profile, duration, *, errors=None, sigma=None, jitt
                                order=order))
         events[gear] = (ev.tau[o], abs(sp.w_sc if gear == "sun" else sp.w_rc), z)
     if tacho:
-        tt, _ = event_times_for_angles(sp.carrier, 0.1, 0.0, duration, profile=profile)
+        tt, _ = event_times_for_angles(sp.carrier, 0.1, 0.0, duration, profile=profile, speeds=sp)
         out.append(tacho_train(tt, g.z_ring, sigma=sigma))
     return out, events
 
@@ -158,13 +158,15 @@ def test_noisy_passes_have_calibrated_uncertainty():
 @settings(max_examples=6, deadline=None)
 @given(st.floats(0.0, 0.03), st.floats(0.0, 2 * math.pi), st.floats(-0.1, 0.1))
 def test_property_ripple_and_ramp_followed(amplitude, phase, ramp):
-    # any 0-3 % carrier-rate ripple with a +-10 % ramp over the record, exact passes: within
-    # 2e-3 cycles (the ripple is time-locked here while the model is angle-locked, so a ramp
-    # detunes them; the spline follows the rest)
+    # any 0-3 % ripple locked to the carrier's angle (drive ripple follows the shaft) with a
+    # +-10 % ramp over the record, exact passes: within 2e-3 cycles (the ramp makes a
+    # relative ripple's amplitude in angle drift by up to 10 %: the modulated terms take it)
+    from synthetic.kinematics import ShaftRipple
+
     g, sp = rig()
     dur = 120.0
-    prof = SpeedProfile(ramp_rate=ramp / dur,
-                        ripple=((amplitude, abs(sp.carrier) / TWO_PI, phase),) if amplitude else ())
+    shaft = (ShaftRipple("carrier", amplitude, 1, phase),) if amplitude else ()
+    prof = SpeedProfile(ramp_rate=ramp / dur, shaft=shaft)
     trains, ev = trains_from_truth(g, sp, prof, dur)
     model = fit_angle_model(trains, kinematics(25, 87, 29, fixed="ring"), 4)
     for tr in trains[:2]:
