@@ -71,7 +71,8 @@ from .validate import as_finite_array
 
 __all__ = ["PassTrain", "Kinematics", "AngleModel", "gauge_train", "tacho_train",
            "kinematics", "fit_angle_model", "revolution_numbers", "held_member",
-           "typed_resolution", "relabel_train", "label_shift_costs"]
+           "typed_resolution", "relabel_train", "label_shift_costs",
+           "mesh_cycles_per_carrier_turn"]
 
 TWO_PI = 2.0 * math.pi
 #: spline interval counts tried, in order
@@ -1122,7 +1123,8 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
         best = None
         for c in cands:
             lay = d.layout(c)
-            if lay["p"] >= 0.5 * np.count_nonzero(d.active):
+            n_act = np.count_nonzero(d.active)
+            if lay["p"] > n_act - max(4, 0.2 * n_act):
                 continue
             th0 = _extend(fit, c, d)
             f2 = _solve(d, c, th0, ones, max_iter=4, recheck=False)
@@ -1312,6 +1314,8 @@ def held_member(z_sun: int, z_ring: int, speeds=None, *, resolution=None,
             why = "no member's speed is zero: a differential (both driven)"
     if mesh_rate is not None and carrier_rate is not None and carrier_rate > 0 and mesh_rate > 0:
         ratio = mesh_rate / carrier_rate
+        if not math.isfinite(ratio):
+            return from_speeds, why or "no speeds: treated as a differential"
         data = None
         for name, z in (("ring", z_ring), ("sun", z_sun)):
             if abs(ratio / z - 1.0) <= rel_tol:
@@ -1374,3 +1378,30 @@ def label_shift_costs(reference, train: PassTrain, fractions, kin: Kinematics,
         if np.isfinite(fit.chi2):
             out[s] = fit.chi2
     return out
+
+
+def mesh_cycles_per_carrier_turn(train: PassTrain, tacho_times) -> float:
+    """Measured mesh cycles per carrier revolution between the first and last tacho edge.
+
+    The gauge train's mesh angle (its targets, piecewise linear between passes) is read at
+    the first and the last edge inside its span; the edges count whole carrier turns
+    (:func:`revolution_numbers`). Both counts cover the same interval, so a ramp or ripple
+    cancels; the error is the linear interpolation between two passes at each end (a
+    fraction of the speed variation within one pass interval). A held ring gives Z_r, a held
+    sun Z_s (:func:`held_member`). NaN when fewer than two edges fall inside the train.
+    """
+    if not isinstance(train, PassTrain):
+        raise TypeError(f"train must be a PassTrain, got {type(train).__name__}")
+    t = _check_times(tacho_times, "tacho_times")
+    if len(train) < 2 or t.size < 2:
+        return float("nan")
+    k = revolution_numbers(t)
+    inside = (t >= train.times[0]) & (t <= train.times[-1])
+    if np.count_nonzero(inside) < 2:
+        return float("nan")
+    ta, tb = t[inside][0], t[inside][-1]
+    ka, kb = k[inside][0], k[inside][-1]
+    if kb == ka:
+        return float("nan")
+    a = np.interp([ta, tb], train.times, train.target)
+    return float((a[1] - a[0]) / (kb - ka))

@@ -416,7 +416,7 @@ def _gap_intervals(quality: dict) -> np.ndarray:
 
 
 def stage_phasing(ctx: RunContext) -> None:
-    from .angles import held_member, revolution_numbers
+    from .angles import held_member
     from .phasing import GaugePasses, PassTable, measure_phasing
 
     g = _gearset(ctx)
@@ -448,26 +448,17 @@ def stage_phasing(ctx: RunContext) -> None:
     tacho = ctx.results["onsets"].get("tacho_times")
     sp = _nominal_speeds(ctx)
     # which member is held: the scene's word, else the typed speeds within their precision,
-    # checked against the tacho's carrier rate
-    mesh_rate = carrier_rate = None
-    if tacho is not None and len(tacho) >= 2 and passes:
-        k = revolution_numbers(tacho)
-        carrier_rate = float(k[-1]) / float(tacho[-1] - tacho[0])
-        p0 = max(passes, key=lambda p: p.times.size)
-        if p0.times.size >= 2:
-            z = g.z_sun if p0.gear == "sun" else g.z_ring
-            # passes per second / N planets = relative revolutions per second
-            mesh_rate = z * (p0.times.size - 1) / float(p0.times[-1] - p0.times[0]) / g.n_planets
+    # and the tacho's count of mesh cycles per carrier turn when there is a tacho
+    res_typed = ctx.scene.speeds_resolution if ctx.scene.speeds is not None else None
     stated = ctx.scene.fixed
     if stated is not None:
         fixed, why = (None if stated == "none" else stated), "stated in the scene ([speeds] fixed)"
     else:
-        fixed, why = held_member(g.z_sun, g.z_ring, sp,
-                                 resolution=ctx.scene.speeds_resolution if ctx.scene.speeds else None,
-                                 mesh_rate=mesh_rate, carrier_rate=carrier_rate)
+        fixed, why = held_member(g.z_sun, g.z_ring, sp, resolution=res_typed)
     key, mounts = _tacho_geometry(ctx)
     res = measure_phasing(passes, g, fixed=fixed, fixed_reason=why, tacho_times=tacho,
-                          key_angle=key, mounts=mounts, speeds=sp, gaps=_gap_intervals(quality))
+                          key_angle=key, mounts=mounts, speeds=sp, gaps=_gap_intervals(quality),
+                          check_held=stated is None, speeds_resolution=res_typed)
     for gear in mains:
         # a main gauge without a measurable pass gives an empty table, not a missing one
         res.tables.setdefault(gear, PassTable.empty(gear, ["no usable pass"]))

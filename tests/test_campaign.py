@@ -242,8 +242,9 @@ def test_run_recording_unreliable_phasing_is_not_ok(data, tmp_path, monkeypatch)
 
     def flagged(ctx):
         original(ctx)
-        warnings.warn("sun gauge: encoder misfit 3e-2 mesh cycles; phasing not reliable",
-                      ProcessingWarning, stacklevel=2)
+        reason = "sun gauge: encoder misfit 3e-2 mesh cycles; phasing not reliable"
+        ctx.results["phasing"]["reliability"]["sun"] = {"reliable": False, "reasons": [reason]}
+        warnings.warn(reason, ProcessingWarning, stacklevel=2)
 
     monkeypatch.setitem(STAGE_FUNCTIONS, "phasing", flagged)
     r = cp.run_recording(str(_phasing_only_scene(tmp_path)), str(data["recordings"] / "rig_a.h5"),

@@ -307,4 +307,4 @@ def test_demo_runs_quickly_and_writes_the_report(tmp_path, capsys):
     # the scene written next to the outputs reproduces the run with `meshphase run`
     from pipeline.scene import load_scene
 
-    assert load_scene(d / "demo_scene.toml").input["synthetic"] == "noisy"
+    assert load_scene(d / "demo_scene.toml").input["synthetic"] == "rig_ripple1"

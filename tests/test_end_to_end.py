@@ -235,7 +235,10 @@ def _messages(ctx: RunContext, *words: str) -> list[str]:
 
 # ============================================================================ the registry
 def test_every_registry_scenario_has_an_expectation():
-    assert set(EXPECT) == set(list_scenarios()) == set(SCENARIOS)
+    # the "rig" family (seed 000 Table 1 teeth on the seed's rig, held ring) has its own
+    # accuracy matrix in tests/test_phasing_accuracy.py
+    rig = {n for n, sc in SCENARIOS.items() if "rig" in sc.tags}
+    assert rig and set(EXPECT) == set(list_scenarios()) - rig == set(SCENARIOS) - rig
 
 
 def test_truth_helpers_agree_with_the_runs_own_truth_comparison():

@@ -60,9 +60,10 @@ def test_rig_run_ran_the_planned_stages_in_order(rig_run):
     assert set(ctx.timings) == set(ctx.ran)
     assert all(t >= 0 for t in ctx.timings.values())
     assert all(ctx.error_estimates.get(s) for s in ctx.ran)
-    # the symmetric 4-planet layout: which ring pulse is planet 1 cannot be observed
-    assert any(m.startswith("phasing: ProcessingWarning:") and "planet 1 cannot be told" in m
-               for m in ctx.messages)
+    # the symmetric 4-planet layout of a differential rig (no held member: the tacho cannot
+    # name planet 1): the labels are relative, said once in the summary, not warned each run
+    assert set(ctx.results["phasing"]["labels_relative"]) >= {"ring"}
+    assert not any("planet 1" in m for m in ctx.messages)
 
 
 def test_rig_compare_uses_the_identified_model_and_the_band(rig_run):
