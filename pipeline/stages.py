@@ -208,14 +208,11 @@ def stage_condition(ctx: RunContext) -> None:
     g = _gearset(ctx)
     for gear, names in groups.items():
         fm = _mesh_freq(ctx, gear) if gear else None
-        # the pulse train's period: consecutive planets' passes, Z / N mesh periods apart
-        # for equally spaced planets (a relative revolution otherwise)
+        # the pulse train's period: one relative revolution of the gauged gear (Z mesh
+        # periods), in which every planet passes once
         period = None
         if fm and g is not None:
-            z = g.z_sun if gear == "sun" else g.z_ring
-            steps = np.diff(np.sort(np.mod(g.angles, 2 * math.pi)))
-            equal = steps.size == 0 or np.allclose(steps, 2 * math.pi / g.n_planets, atol=1e-9)
-            period = z / fm / (g.n_planets if equal else 1)
+            period = (g.z_sun if gear == "sun" else g.z_ring) / fm
         cond = condition_recording(out, channels=names, mesh_freq=fm, pulse_period=period)
         out = cond.recording
         quality.update(cond.quality)
