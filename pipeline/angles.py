@@ -988,7 +988,7 @@ def _lag1(resid: np.ndarray, pl: np.ndarray) -> float:
 
 def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: int = 4,
                     max_planet_harmonics: int = 2, outlier_k: float = 6.0,
-                    max_knots: int | None = None) -> AngleModel:
+                    max_knots: int | None = None, planet_ripple: bool = False) -> AngleModel:
     """Fit the mesh angle A(t) to every pass train and tacho at once (module notes).
 
     Parameters
@@ -1010,6 +1010,13 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
     max_knots : int, optional
         Cap on the spline intervals (default: knots at least two relative revolutions of the
         densest gauge train apart, at most 64 intervals).
+    planet_ripple : bool
+        Also try a common speed ripple at the planet spin rate. Off by default: on one
+        gear's gauges it is the same as an equal term on every planet (each planet's own
+        offset is certain to be there, a common planet-rate speed ripple is not), and only
+        the two gears together over a long record tell them apart; tried on shorter records
+        it takes up what the planets' own terms should (a 30-s seed-rig ramp: 4.7e-3 mesh
+        cycles of error with it, 1e-4 without).
 
     Returns
     -------
@@ -1057,8 +1064,8 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
     # a shaft must turn at least once over the record for its ripple to be told from drift
     mean_rate = (d.y.max() - d.y.min()) / span if span > 0 else 0.0
     turns = {r: mean_rate * span / P for r, P in kin.periods.items()}
-    rates = [r for r in rates if turns[r] >= 1.0]
-    skipped = [r for r in kin.periods if r not in rates]
+    rates = [r for r in rates if turns[r] >= 1.0 and (planet_ripple or r != "planet")]
+    skipped = [r for r in kin.periods if r not in rates and (planet_ripple or r != "planet")]
     if skipped:
         notes.append(f"no ripple terms for {', '.join(skipped)}: fewer than one turn in the record")
     ones = np.ones(len(use))
@@ -1136,7 +1143,9 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
         fit = full if full.bic() <= best.bic() + 1e-9 * abs(best.bic()) else best
         spec = best.spec
         selection.append((step, spec.describe(), fit.bic()))
-    # 3. variance factors per train, outliers against the final model, final fit
+    # 3. variance factors per train, outliers against the final model, final fit (each round
+    # judges every observation afresh: one left out early by a poorer model may come back)
+    base_active = d.active.copy()
     scale = ones.copy()
     for _ in range(4):
         fit = _solve(d, spec, fit.theta, scale, full=True)
@@ -1153,14 +1162,15 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
             new[q] = max(s, 1.0) if tr.sigma_given else max(s, 1e-6)
         out = np.zeros(n_obs, bool)
         for q in range(len(use)):
-            m = (d.q == q) & d.active
+            m = (d.q == q) & base_active
             lim = outlier_k * new[q] / w[m]
             idx = np.flatnonzero(m)
             out[idx[np.abs(fit.resid[m]) > lim]] = True
-        if not out.any() and np.allclose(new, scale, rtol=1e-3):
+        active = base_active & ~out
+        if np.array_equal(active, d.active) and np.allclose(new, scale, rtol=1e-3):
             scale = new
             break
-        d.active &= ~out
+        d.active = active
         scale = new
     fit = _solve(d, spec, fit.theta, scale, full=True)
     dropped, dnotes = _dropped_notes(d, fit.lay, fit.keep)

@@ -398,9 +398,14 @@ def drift_baseline(x, fs: float, *, method: str = "median", window: float | None
     n = x.size
     if n == 0:
         return np.empty(0)
-    if pulse_period is not None:
-        b = max(1, int(round(as_positive(pulse_period, "pulse_period") * fs)))
+    b_p = None if pulse_period is None else max(1, int(round(as_positive(pulse_period, "pulse_period") * fs)))
+    if b_p is not None and n >= 2 * b_p:
+        # whole periods only: a partial block at the end holds some planets' pulses and not
+        # the others', which is exactly the wobble whole periods avoid
+        b = b_p
         means, centres = _block_means(np.where(np.isfinite(x), x, np.nan), b)
+        if n % b:
+            means, centres = means[:-1], centres[:-1]
     else:
         b = max(1, int(round(window * fs / 16.0)))
         means, centres = _block_medians(np.where(np.isfinite(x), x, np.nan), b)

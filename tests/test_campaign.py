@@ -58,7 +58,7 @@ def data(tmp_path_factory):
     rec = root / "recordings"
     rec.mkdir()
     for k, name in enumerate(GOOD):
-        cli_synth("seed_rig", rec / name, minutes=20 / 60, seed=10 + k, progress=False)
+        cli_synth("seed_rig", rec / name, minutes=40 / 60, seed=10 + k, progress=False)
     raw = (rec / "rig_a.h5").read_bytes()
     (rec / "broken.h5").write_bytes(raw[: len(raw) // 3])  # HDF5 magic intact, body cut off
     return {"root": root, "scene": scene, "recordings": rec}
