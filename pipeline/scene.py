@@ -709,7 +709,7 @@ def _source_checks(scene: Scene, fs: float | None, meta_gearset: dict | None, so
                    text: str, label) -> None:
     """The scene against what its recording holds: planet count, filters against Nyquist."""
     raw_g = scene.raw.get("gearset", {})
-    if scene.gearset is not None and meta_gearset:
+    if scene.gearset is not None and isinstance(meta_gearset, dict):
         n_rec = len(meta_gearset.get("planet_angles") or ())
         if n_rec and n_rec != scene.gearset.n_planets:
             key = ["gearset", "n_planets" if "n_planets" in raw_g else "planet_angles_deg"]
@@ -762,6 +762,8 @@ def check_recording(scene: Scene, info=None) -> None:
         info = io.read_info(rec_path)
     text, label = scene.text, scene.path or "<scene>"
     source = str(rec_path)
+    if not (math.isfinite(info.fs) and info.fs > 0):
+        return  # a header without a sample rate: the load stage says what is wrong
     _source_checks(scene, info.fs, info.meta.get("gearset"), source, text, label)
     start, stop = scene.input.get("start"), scene.input.get("stop")
     t0, t_end = info.t0, info.t0 + info.duration
@@ -791,8 +793,8 @@ def check_recording(scene: Scene, info=None) -> None:
     try:
         mapped = _apply_channel_overrides(empty, scene.channels, source)
     except ValueError as exc:
-        i = next((i for i, c in enumerate(scene.channels) if c["name"] not in info.names), 0)
-        key = ["channels", i, "name"]
+        i = next((i for i, c in enumerate(scene.channels) if c["name"] not in info.names), None)
+        key = ["channels"] if i is None else ["channels", i, "name"]
         raise SceneError(label, ".".join(map(str, key)), str(exc), _line_of(text, key)) from None
     try:
         _check_gauges(RunContext(scene), mapped, source)

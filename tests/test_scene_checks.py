@@ -53,13 +53,19 @@ def _names(e: SceneError, key: str, text: str, fragment: str, path=FILE) -> None
 
 
 @pytest.fixture(scope="module")
-def rig_file(tmp_path_factory):
-    """2 s of the seed rig (4 planets, 5120 Hz; channels sun, ring, tacho) as HDF5."""
+def rig_files(tmp_path_factory):
+    """2 s of the seed rig (4 planets, 5120 Hz; channels sun, ring, tacho) in every writable
+    format (each carries the generator's gearset in its metadata)."""
     from synthetic import generate
 
     d = tmp_path_factory.mktemp("scene_checks")
     rec, _ = generate("seed_rig", duration=2.0, seed=0)
-    return Path(pipeline.io.write(rec, d / "rig.h5"))
+    return {ext: Path(pipeline.io.write(rec, d / f"rig.{ext}")) for ext in ("h5", "mcap", "csv")}
+
+
+@pytest.fixture(scope="module")
+def rig_file(rig_files):
+    return rig_files["h5"]
 
 
 def _with_file(rec_path: Path, body: str, tmp_path: Path) -> tuple[Path, str]:
@@ -70,13 +76,14 @@ def _with_file(rec_path: Path, body: str, tmp_path: Path) -> tuple[Path, str]:
 
 
 # =========================================================================== fault campaign
-def test_five_planets_against_a_four_planet_recording(rig_file, tmp_path):
-    p, text = _with_file(rig_file, 'results = ["phasing"]\n' + G5, tmp_path)
+@pytest.mark.parametrize("ext", ["h5", "mcap", "csv"])
+def test_five_planets_against_a_four_planet_recording(rig_files, tmp_path, ext):
+    p, text = _with_file(rig_files[ext], 'results = ["phasing"]\n' + G5, tmp_path)
     with pytest.raises(SceneError) as info:
         load_scene(p)
     e = info.value
     _names(e, "gearset.n_planets", text, "n_planets", path=p)
-    assert "5 planets" in str(e) and "made with 4" in str(e) and str(rig_file) in str(e)
+    assert "5 planets" in str(e) and "made with 4" in str(e) and str(rig_files[ext]) in str(e)
 
 
 def test_five_planets_against_a_four_planet_synthetic_scenario():
