@@ -397,6 +397,8 @@ AMBIGUOUS = "planet 1 cannot be told"       # generic symmetric-layout notice, a
 def _scene_text(cfg) -> str:
     g, sp = cfg.gearset, cfg.speeds
     fw = f"face_width_mm = {g.face_width * 1e3!r}\n" if g.face_width else ""
+    # seed 000 Table 1 (Z 25/87/29) is not coaxial: the scene must declare the profile shift
+    fw += "profile_shift = true\n" if g.z_ring != g.z_sun + 2 * g.z_planet else ""
     return (f'name = "stability {cfg.name}"\nresults = ["phasing", "compare"]\n'
             f"[gearset]\nz_sun = {g.z_sun}\nz_ring = {g.z_ring}\nz_planet = {g.z_planet}\n"
             f"n_planets = {g.n_planets}\ncarrier_radius_mm = {g.carrier_radius * 1e3!r}\n{fw}"
