@@ -28,6 +28,7 @@ n_planets = 4
 carrier_radius_mm = 112.5
 face_width_mm = 40
 direction = "cw"
+profile_shift = true   # 25 + 2 x 29 = 83, not 87: the seed's gearset needs shifted profiles
 
 [speeds]          # nominal, as typed [r/min]: the ring is held (Willis gives -3.4e-4 r/min,
 sun_rpm = 18.19   # zero within what two values typed to 0.01 r/min can tell)

@@ -46,6 +46,7 @@ z_planet = {g.z_planet}
 planet_angles_deg = [{ang}]
 carrier_radius_mm = {g.carrier_radius * 1e3}
 direction = "{sp.get("planet_rotation", "cw")}"
+profile_shift = {"true" if g.z_ring != g.z_sun + 2 * g.z_planet else "false"}
 [speeds]
 sun_rpm = {sp["sun_rpm"]}
 carrier_rpm = {sp["carrier_rpm_scene"]}
