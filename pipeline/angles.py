@@ -657,6 +657,34 @@ def _fix_rate(rate: np.ndarray) -> np.ndarray:
     return np.where(ok, rate, float(np.median(rate[ok])) if np.any(ok) else 1.0)
 
 
+#: mesh-angle rates within one fit stay within this factor of their median [-]: a model
+#: beyond it has left the implicit angle equation's domain (a step to dR/dA near 1)
+RATE_SPREAD = 100.0
+
+
+def _plausible_rate(rate: np.ndarray) -> bool:
+    """Whether every mesh-angle rate is finite, positive and within ``RATE_SPREAD`` of the
+    median (a recording that speeds up 100-fold is split by operating point, not fitted)."""
+    rate = np.asarray(rate, dtype=np.float64)
+    if rate.size == 0:
+        return True
+    if not (np.all(np.isfinite(rate)) and np.all(rate > 0)):
+        return False
+    med = float(np.median(rate))
+    return bool(np.all(rate <= RATE_SPREAD * med) and np.all(rate >= med / RATE_SPREAD))
+
+
+def _column_norms(A: np.ndarray) -> np.ndarray:
+    """Euclidean norm of each column, without overflow when entries are huge (a near-exact
+    observation, such as a synthetic tacho, carries weights where squares pass 1e308)."""
+    A = np.asarray(A, dtype=np.float64)
+    if A.size == 0:
+        return np.zeros(A.shape[1] if A.ndim == 2 else 0)
+    amax = np.max(np.abs(A), axis=0)
+    safe = np.where(amax > 0, amax, 1.0)
+    return np.where(amax > 0, amax * np.linalg.norm(A / safe, axis=0), 0.0)
+
+
 def _independent_columns(Jw: np.ndarray, priority: np.ndarray, tol: float = RANK_TOL) -> np.ndarray:
     """Columns kept, in priority order (then left to right): a column whose part outside the
     span of the columns kept before it is below ``tol`` of its norm is dropped.
@@ -667,7 +695,7 @@ def _independent_columns(Jw: np.ndarray, priority: np.ndarray, tol: float = RANK
     the later reflections), until none is."""
     p = Jw.shape[1]
     order = np.lexsort((np.arange(p), priority))
-    norms = np.linalg.norm(Jw, axis=0)
+    norms = _column_norms(Jw)
     cand = [j for j in order if norms[j] > 0]
     while cand:
         A = Jw[:, cand] / norms[cand]
@@ -739,7 +767,13 @@ def _solve(d: _Design, spec: _Spec, theta0: np.ndarray | None, scale: np.ndarray
         f_, J_, rate_ = d.evaluate(theta_, lay, spec, rows)
         w_ = 1.0 / (d.sig[rows] * _fix_rate(rate_) * scale[d.q[rows]])
         r_ = d.y[rows] - f_
-        return f_, J_, w_, r_, float(np.sum((r_ * w_) ** 2))
+        # a trial step can throw the implicit angle equation near its singular point (rates
+        # past 1e190): such a point is no candidate, never a floating-point overflow
+        with np.errstate(over="ignore", invalid="ignore"):
+            chi_ = float(np.sum((r_ * w_) ** 2))
+        if not (math.isfinite(chi_) and _plausible_rate(rate_)):
+            chi_ = math.inf
+        return f_, J_, w_, r_, chi_
 
     f, J, w, r, chi = weighted(theta)
     while it < budget:
@@ -751,8 +785,8 @@ def _solve(d: _Design, spec: _Spec, theta0: np.ndarray | None, scale: np.ndarray
                 theta[~keep] = 0.0
                 f, J, w, r, chi = weighted(theta)
         A = (J * w[:, None])[:, keep]
-        cn = np.linalg.norm(A, axis=0)
-        cn[cn == 0] = 1.0
+        cn = _column_norms(A)
+        cn[~(cn > 0)] = 1.0
         step, *_ = linalg.lstsq(A / cn, r * w, lapack_driver="gelsy", check_finite=False)
         step = step / cn
         # Gauss-Newton with step halving: never accept a step that raises the misfit
@@ -799,20 +833,20 @@ def _solve(d: _Design, spec: _Spec, theta0: np.ndarray | None, scale: np.ndarray
     fit.floor = 1.0 if all(tr.sigma_given for tr in d.trains) else CHI2_FLOOR
     if full:
         A = (J[rows] * w_all[rows, None])[:, keep]
-        cn = np.linalg.norm(A, axis=0)
-        cn[cn == 0] = 1.0
-        Q, R = linalg.qr(A / cn, mode="economic", check_finite=False)
-        dR = np.abs(np.diag(R))
-        if dR.size and dR.min() > RANK_TOL * dR.max():
-            Rinv = linalg.solve_triangular(R, np.eye(R.shape[0]), check_finite=False)
-        else:
-            # a column that became dependent at the converged point: its variance is
-            # unbounded, which the pseudo-inverse reports as the smallest-norm split
-            Rinv = np.linalg.pinv(R, rcond=RANK_TOL)
-        C = (Rinv @ Rinv.T) / np.outer(cn, cn)
+        cn = _column_norms(A)
+        cn[~(cn > 0)] = 1.0
+        # covariance from the SVD of the (column-scaled) weighted design: R's diagonal from
+        # an unpivoted QR can sit above any tolerance while R^-1 still overflows (110 passes
+        # at 51.2 kHz: entries past 1e154); the singular values say it. A direction that
+        # became dependent at the converged point has unbounded variance, which the
+        # truncated pseudo-inverse reports as the smallest-norm split
+        U, sv, Vt = linalg.svd(A / cn, full_matrices=False, check_finite=False)
+        use = sv > RANK_TOL * (sv[0] if sv.size else 0.0)
+        Vs = Vt[use].T / sv[use]
+        C = (Vs @ Vs.T) / np.outer(cn, cn)
         fit.cov = C
         lev = np.zeros(d.t.size)
-        lev[rows] = np.sum(Q * Q, axis=1)
+        lev[rows] = np.sum(U[:, use] ** 2, axis=1)
         fit.lev = lev
     return fit
 
@@ -1158,8 +1192,10 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
             dof = max(1.0, np.count_nonzero(m) - float(np.sum(fit.lev[m])))
             s = math.sqrt(float(np.sum((fit.resid[m] * w[m]) ** 2)) / dof)
             # a given timing bound is a bound; an unknown one (default sigma) may be far off,
-            # but never trusted below 1e-6 of the default (sub-nanosecond timing)
-            new[q] = max(s, 1.0) if tr.sigma_given else max(s, 1e-6)
+            # but never trusted below 1e-3 of the default (1e-7 of a tacho interval: a
+            # synthetic tacho is exact to 1e-13, and weights that far apart make every
+            # Gauss-Newton step stiff enough to leave the model's domain)
+            new[q] = max(s, 1.0) if tr.sigma_given else max(s, 1e-3)
         out = np.zeros(n_obs, bool)
         for q in range(len(use)):
             m = (d.q == q) & base_active

@@ -716,9 +716,20 @@ def _coarse_dec(yd: np.ndarray, w_d: float, spacing_d: float, k_sigma: float):
     if cand.size == 0:
         e = np.empty(0, dtype=np.int64)
         return e, np.empty(0), thr - med, sig, med
+    # samples above the threshold closer than the minimum spacing form one run (a broad pulse
+    # dipping below the threshold, or its side lobes, gives one maximum). A run much longer
+    # than a pulse is a dense train whose quiet stretches are shorter than that spacing (sun
+    # gauge at 2.5 samples per mesh period: every pulse after the first 0.2 s was lost): it
+    # is split where the samples above the threshold break; maxima closer than the spacing
+    # are resolved below
     gap = max(1, int(math.ceil(spacing_d)))
+    step = np.diff(cand)
     new = np.ones(cand.size, dtype=bool)
-    new[1:] = np.diff(cand) > gap
+    new[1:] = step > gap
+    first = np.flatnonzero(new)
+    last = np.append(first[1:] - 1, cand.size - 1)
+    long_run = (cand[last] - cand[first] > 3.0 * spacing_d)[np.cumsum(new) - 1]
+    new[1:] |= long_run[1:] & (step > 1)
     starts = np.flatnonzero(new)
     vals = ys[cand]
     cmax = np.maximum.reduceat(vals, starts)
@@ -728,8 +739,7 @@ def _coarse_dec(yd: np.ndarray, w_d: float, spacing_d: float, k_sigma: float):
     first[1:] = cid[at[1:]] != cid[at[:-1]]
     peaks = cand[at[first]]
     heights = ys[peaks] - med
-    # runs merged within `gap` already keep maxima >= gap apart except across a run
-    # boundary; resolve the rare residual conflicts, strongest first (loop over peaks)
+    # maxima of runs closer than the spacing: keep the strongest (loop over peaks)
     if peaks.size > 1 and np.any(np.diff(peaks) < spacing_d):
         keep = np.ones(peaks.size, dtype=bool)
         for i in np.argsort(-heights, kind="stable"):

@@ -216,56 +216,6 @@ def planet_fractions(planet_angles, order: int) -> np.ndarray:
     return ((order * (psi - psi[0])) / TWO_PI) % 1.0
 
 
-def assign_planets_by_tacho(times, tacho_times, planet_angles, gauge_angle: float, order: int,
-                            *, tol: float = 0.25) -> np.ndarray:
-    """Planet index of each ring-gauge onset from a carrier once-per-revolution tacho.
-
-    The tacho fires when the carrier angle is 0 (planet 1 at ground angle psi_1). A ring gauge
-    at ground angle ``gauge_angle`` [rad] meets planet n when theta_c(t) + psi_n = gauge_angle
-    (mod 2 pi); theta_c(t) comes from the tacho knots (pchip, as in :func:`measured_phasing`).
-
-    Parameters
-    ----------
-    times : array_like, shape (m,)
-        Onset times [s].
-    tacho_times : array_like, shape (r,)
-        Tacho pulse times [s] (>= 2).
-    planet_angles : array_like, shape (N,)
-        psi_n [rad].
-    gauge_angle : float
-        Ground angle of the gauged ring tooth [rad], measured like psi_n from the tacho mark.
-    order : {+1, -1}
-        Sense of the carrier relative to the ring (+1: the carrier turns counter-clockwise).
-    tol : float
-        Largest accepted angular mismatch as a fraction of the smallest planet spacing [-];
-        onsets further off are labelled -1 (unassigned).
-
-    Returns
-    -------
-    planet : ndarray of int, shape (m,)
-        0-based planet index, -1 when unassigned (outside the tacho span or no planet near).
-    """
-    t = as_finite_array(times, "times", ndim=1)
-    tach = as_finite_array(tacho_times, "tacho_times", ndim=1)
-    psi = as_finite_array(planet_angles, "planet_angles", ndim=1, allow_empty=False)
-    out = np.full(t.size, -1, dtype=int)
-    if t.size == 0:
-        return out
-    if tach.size < 2:
-        raise ValueError(f"assign_planets_by_tacho needs >= 2 tacho pulses, got {tach.size}")
-    k = revolution_numbers(tach)
-    theta = PchipInterpolator(tach, TWO_PI * k * order, extrapolate=False)(t)
-    ok = np.isfinite(theta)
-    # ground angle of planet n: theta_c + psi_n; match against the gauge angle
-    d = (gauge_angle - theta[ok, None] - psi[None, :] + math.pi) % TWO_PI - math.pi
-    best = np.argmin(np.abs(d), axis=1)
-    spacing = np.min(np.diff(np.sort(np.concatenate([psi % TWO_PI, [psi[0] % TWO_PI + TWO_PI]]))))
-    good = np.abs(d[np.arange(best.size), best]) <= tol * spacing
-    idx = np.flatnonzero(ok)
-    out[idx[good]] = best[good]
-    return out
-
-
 def assign_planets_by_pattern(times, planet_angles, order: int, *, first: int = 0,
                               amplitudes=None, reference_amplitudes=None,
                               tol: float = 0.3) -> tuple[np.ndarray, dict]:
