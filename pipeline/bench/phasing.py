@@ -141,7 +141,10 @@ def run_case(case: PhasingCase, *, seed: int = 0, results=("phasing", "compare")
                           "floor": floor, "ratio": tc["rms"] / floor if floor > 0 else float("nan"),
                           "target": target, "ok": bool(tc["rms"] <= target),
                           "z_rms": tc["z_rms"], "coverage95": tc["coverage95"],
-                          "label_match": tc["label_match"],
+                          # a gauge whose planets cannot be named (declared relative in the
+                          # run's summary) has no label to match: said, not scored as 0
+                          "label_match": ("relative" if gear in (ph.get("labels_relative") or ())
+                                          else tc["label_match"]),
                           "reliable": bool(ph["reliability"].get(gear, {}).get("reliable", False)),
                           "model": model.terms if model is not None else "",
                           "process_s": wall, "errors": tc["errors"],
