@@ -4,21 +4,34 @@ The scene supplies the gearset, channel map, tolerances and the results wanted; 
 recording file replaces the scene's ``[input]``. Every recording is one Dask task that gets
 *file paths* (scene, recording, output folder), never open handles or arrays, loads the
 scene in the worker, runs :func:`pipeline.stages.run_scene` and writes its own results into
-``OUT/<recording name>/``. The task returns a small JSON-friendly dict; a recording that
-fails (unreadable file, a stage raising, even the worker process dying) is reported as
-failed and the others finish. The client then writes ``campaign.json``, ``campaign.csv`` and
-``campaign_report.html`` (:mod:`pipeline.report.campaign_report`) across all recordings.
+``OUT/recordings/<recording name>/`` (:func:`recording_names`; a name space of their own,
+so no recording can collide with the campaign's files), its completion marker
+(:data:`DONE_NAME`) last. The task returns a small JSON-friendly dict; a recording that
+fails (unreadable file, a stage raising, the worker process dying more often than Dask
+retries, a task running past its timeout) is reported as failed and the others finish. The
+client then writes ``campaign.json``, ``campaign.csv`` and ``campaign_report.html``
+(:mod:`pipeline.report.campaign_report`) across all recordings, each atomically; the whole
+folder is built beside ``OUT`` and swapped in when finished (:class:`pipeline.exits.OutputDir`).
+
+Faults: a task's timeout (:func:`default_task_timeout`, ``--task-timeout``) counts from the
+moment it starts on a worker (the worker tells the client through a Dask event); past it the
+task is failed and its worker killed (our LocalCluster: the Nanny starts a new one) or
+restarted (another cluster). Workers lost under a task are seen in the scheduler's
+"remove-worker" events; Dask retries the task and the campaign records each retry with its
+cause. ``--resume`` reuses the recordings whose marker matches their inputs
+(:func:`recording_key`) in ``OUT`` and in ``OUT.partial`` (what an unfinished campaign kept).
 
 Results that need no recording are computed once, on the client, not once per recording:
 the tolerance Monte Carlo (its 3-sigma phasing band is passed to the tasks, which then
 compute the band coverage of their own passes exactly as :func:`pipeline.stages.stage_compare`
 does), the tilt solve and the (unmeasured) bearing moments. They go to ``OUT/scene/``.
 
-Cluster: a :class:`distributed.LocalCluster` with one single-threaded worker *process* per
-core by default (processes, because the stages are numpy/Python code that holds the GIL for
-long stretches, and because ``warnings.catch_warnings`` inside :func:`run_scene` is not
-thread-safe); ``scheduler="tcp://host:8786"`` uses an existing cluster instead, whose
-workers must have meshphase installed and see the same paths (a shared file system).
+Cluster: a :class:`distributed.LocalCluster` (:func:`local_cluster`: on 127.0.0.1 only, no
+dashboard unless asked) with one single-threaded worker *process* per core by default
+(processes, because the stages are numpy/Python code that holds the GIL for long stretches,
+and because ``warnings.catch_warnings`` inside :func:`run_scene` is not thread-safe);
+``scheduler="tcp://host:8786"`` uses an existing cluster instead, whose workers must have
+meshphase installed and see the same paths (a shared file system).
 
 Per-recording HTML reports are off by default (``recording_reports=False``): building one
 with its figures took about twice as long as processing a 1-min seed rig recording on the
@@ -261,6 +274,8 @@ def recording_names(paths: Iterable) -> list[str]:
             trial = {i: _safe_name("_".join([stems[i]] + [part[i] for part in parts])) for i in members}
             if len({t.casefold() for t in trial.values()}) == len(members):
                 break
+        else:  # nothing tells them apart (one file named twice): the stem, then -2, -3
+            trial = {}
         cands = [trial.get(i, c) for i, c in enumerate(cands)]
     names: list[str] = []
     used: set[str] = set()
@@ -644,8 +659,11 @@ def _link_or_copy(src, dst) -> None:
 
 
 def _relocate(record: dict, old_dir, new_dir) -> dict:
-    """``record`` with its ``out_dir`` and ``files`` moved from ``old_dir`` to ``new_dir``."""
+    """``record`` with its ``out_dir`` and ``files`` moved to ``new_dir`` (from the record's
+    own ``out_dir``, else ``old_dir``: a marker holds the paths its task wrote, in the
+    staging folder of the campaign that made it)."""
     rec = dict(record)
+    old_dir = record.get("out_dir") or old_dir
 
     def move(p):
         try:
@@ -733,9 +751,12 @@ def local_cluster(n_workers: int, *, dashboard=None):
     host = address.rsplit(":", 1)[0].strip("[]")
     if on and host not in ("127.0.0.1", "localhost", "::1"):
         logger.warning("campaign: the Dask dashboard listens on %s without authentication", address)
+    # the workers' own distributed logs (a cancelled task, a restart) reach stderr only when
+    # our logger is verbose (meshphase -v): the campaign reports those events itself
+    quiet = logging.WARNING if logger.isEnabledFor(logging.INFO) else logging.ERROR
     with dask.config.set({"distributed.scheduler.worker-saturation": 1.0}):
         return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
-                            host="127.0.0.1", dashboard_address=address,
+                            host="127.0.0.1", dashboard_address=address, silence_logs=quiet,
                             scheduler_kwargs={"dashboard": on})
 
 
@@ -744,7 +765,8 @@ def campaign_rows(records: list[dict]) -> list[dict]:
     """One flat row per recording (the columns of ``campaign.csv``).
 
     Columns: name, recording, format, status, error, duration_s, wall_time_s, worker,
-    passes_<gauge>, rms_vs_ideal_<gauge>, rms_vs_model_<gauge>, coverage_<gauge>,
+    attempts (1 + the retries), retries (their causes, "; "-separated), resumed (taken from an
+    earlier run by ``--resume``), passes_<gauge>, rms_vs_ideal_<gauge>, rms_vs_model_<gauge>, coverage_<gauge>,
     gamma_mean_<gauge>_p<k>, gamma_std_<gauge>_p<k> [mesh cycles], load_sharing_p<k>,
     load_sharing_se_p<k> [-], identify_rms_after, n_messages, out_dir.
 
@@ -767,7 +789,8 @@ def campaign_rows(records: list[dict]) -> list[dict]:
         row = {"name": r.get("name"), "recording": r.get("recording"), "format": r.get("format"),
                "status": r.get("status"), "error": r.get("error") or "",
                "duration_s": info.get("duration_s"), "wall_time_s": r.get("wall_time_s"),
-               "worker": r.get("worker")}
+               "worker": r.get("worker"), "attempts": r.get("attempts", 1),
+               "retries": "; ".join(r.get("retries") or []), "resumed": bool(r.get("resumed"))}
         for gear in ("sun", "ring"):
             ph = (r.get("phasing") or {}).get(gear)
             row[f"passes_{gear}"] = None if ph is None else ph.get("n_passes")
@@ -1044,7 +1067,9 @@ def _campaign_body(scene, scene_path, inputs, files, skipped, names, out, opts) 
         except OSError:
             keys.append(None)  # gone since it was listed: the task reports it
     records: dict[int, dict] = {}
-    sources = [str(s) for s in opts["sources"] if Path(s).is_dir() and not Path(s).is_symlink()]
+    # (the folder reserved for this campaign is new and empty: no source)
+    sources = [str(s) for s in opts["sources"]
+               if not Path(s).is_symlink() and (Path(s) / RECORDINGS_DIR_NAME).is_dir()]
     if sources:
         done: dict[str, tuple[Path, dict]] = {}
         for src in sources:
@@ -1136,12 +1161,13 @@ def _run_tasks(files, names, rec_dirs, keys, limits, todo, records, bands, clust
     scheduler = opts["scheduler"]
     cluster = None
     t = time.perf_counter()
-    # distributed logs cluster life (start, connections, close) at INFO; show it only when
-    # our own logger is verbose (meshphase -v)
+    # distributed logs cluster life (start, connections, close) at INFO and worker restarts
+    # at WARNING; show them only when our own logger is verbose (meshphase -v): the campaign
+    # reports lost workers, retries and timeouts itself
     dlog = logging.getLogger("distributed")
     old_level = dlog.level
     if not logger.isEnabledFor(logging.INFO):
-        dlog.setLevel(logging.WARNING)
+        dlog.setLevel(logging.ERROR)
     try:
         if scheduler is None:
             cluster = local_cluster(opts["workers"] or _cores(), dashboard=opts["dashboard"])
@@ -1183,6 +1209,7 @@ def _collect(client, files, names, rec_dirs, keys, limits, todo, records, bands,
     index_of = {k: i for i, k in dkeys.items()}
     starts: dict[str, list[dict]] = {}
     lost: dict[str, list[dict]] = {}
+    restarted: set = set()  # workers this campaign restarted (after a timeout)
 
     # the handlers run on the client's event loop thread, before the loop below sees the
     # futures they concern (events and results come on one ordered stream)
@@ -1205,7 +1232,7 @@ def _collect(client, files, names, rec_dirs, keys, limits, todo, records, bands,
             # a worker that dies at once may not have sent the task's start: "held"
             cause = (f"worker {w} (pid {st[-1]['pid']}) was lost while running it" if ran
                      else f"worker {w} was lost while it held the task")
-            cause += (" (restarted by this campaign)" if msg.get("expected")
+            cause += (" (restarted after another task's timeout)" if w in restarted
                       else " (killed, crashed or out of memory)")
             lost.setdefault(k, []).append({"cause": cause, "worker": w, "running": ran})
 
@@ -1213,7 +1240,7 @@ def _collect(client, files, names, rec_dirs, keys, limits, todo, records, bands,
     client.subscribe_topic("all", on_cluster)
     try:
         _collect_loop(client, files, names, rec_dirs, keys, limits, todo, records, bands, opts,
-                      final_of, guard, dkeys, index_of, starts, lost)
+                      final_of, guard, dkeys, index_of, starts, lost, restarted)
     finally:
         # before the client closes: else the scheduler fails to send it the "remove-client"
         # event of topic "all" and logs that as CRITICAL
@@ -1223,7 +1250,7 @@ def _collect(client, files, names, rec_dirs, keys, limits, todo, records, bands,
 
 
 def _collect_loop(client, files, names, rec_dirs, keys, limits, todo, records, bands, opts,
-                  final_of, guard, dkeys, index_of, starts, lost) -> None:
+                  final_of, guard, dkeys, index_of, starts, lost, restarted) -> None:
     import functools
 
     from tqdm import tqdm
@@ -1298,24 +1325,47 @@ def _collect_loop(client, files, names, rec_dirs, keys, limits, todo, records, b
                 st = starts.get(dkeys[i])
                 if limits[i] is None or not st or now - st[-1]["t"] <= limits[i]:
                     continue
+                restarted.add(st[-1]["worker"])
                 finish(i, _timed_out(client, fut_of[i], files[i], names[i], rec_dirs[i], limits[i], st[-1]))
 
 
-def _timed_out(client, fut, path, name, rec_dir, limit, start) -> dict:
-    """Fail a task that ran past its timeout: cancel it, restart its worker (the only way to
-    stop a thread blocked in a read), drop what it half wrote."""
-    client.cancel([fut])
-    w = start["worker"]
+def _own_child(pid) -> bool:
+    """True when ``pid`` is a process this one started (a worker of our LocalCluster)."""
+    import psutil
+
     try:
-        res = client.restart_workers([w], timeout=120, raise_for_error=False)
-        state = res.get(w, "?") if isinstance(res, dict) else "?"
-    except Exception as exc:  # noqa: BLE001 - the campaign goes on either way
-        state = f"{type(exc).__name__}: {exc}"
-    how = "restarted" if state == "OK" else f"not restarted ({state}): it may stay busy"
+        return isinstance(pid, int) and any(c.pid == pid for c in psutil.Process().children(recursive=True))
+    except psutil.Error:
+        return False
+
+
+def _timed_out(client, fut, path, name, rec_dir, limit, start) -> dict:
+    """Fail a task that ran past its timeout: cancel it, end its worker (the only way to stop
+    a thread blocked in a read), drop what it half wrote.
+
+    A worker of our own LocalCluster is killed at once (SIGKILL; its Nanny starts a new one:
+    a graceful restart would wait for the blocked thread first); another cluster's worker is
+    restarted through the scheduler (which needs a Nanny there)."""
+    import signal
+
+    client.cancel([fut])
+    w, pid = start["worker"], start["pid"]
+    if _own_child(pid):
+        try:
+            os.kill(pid, getattr(signal, "SIGKILL", signal.SIGTERM))
+            how = "killed (its Nanny starts a new one)"
+        except OSError as exc:
+            how = f"not stopped ({exc}): it may stay busy"
+    else:
+        try:
+            res = client.restart_workers([w], timeout=120, raise_for_error=False)
+            state = res.get(w, "?") if isinstance(res, dict) else "?"
+        except Exception as exc:  # noqa: BLE001 - the campaign goes on either way
+            state = f"{type(exc).__name__}: {exc}"
+        how = "restarted" if state == "OK" else f"not restarted ({state}): it may stay busy"
     shutil.rmtree(rec_dir, ignore_errors=True)
     rec = _failed_record(path, name, rec_dir, f"timeout: no result {limit:.4g} s after the task started "
-                                              f"(--task-timeout); its worker {w} (pid {start['pid']}) "
-                                              f"was {how}")
+                                              f"(--task-timeout); its worker {w} (pid {pid}) was {how}")
     rec["timed_out"] = True
     rec["worker"] = w
     logger.warning("campaign: %s: %s", path, rec["error"])

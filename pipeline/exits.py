@@ -18,6 +18,8 @@ code  meaning
       is flagged unreliable (``"status": "unreliable"``); a campaign with any recording
       failed, partial or unreliable
 130   interrupted (Ctrl-C / SIGINT); the output folder of the interrupted run is removed
+      (with ``--overwrite`` the previous folder stays as it was; a campaign keeps its finished
+      recordings in ``OUT.partial`` for ``--resume``)
 141   standard output closed early by the reader (``meshphase info --json | head -1``): quiet,
       the status a process killed by SIGPIPE gets
 ====  ==========================================================================================

@@ -71,16 +71,18 @@ def cluster():
     ``allowed-failures = 0``: a task whose worker dies is not retried on another worker (the
     default retries 3 times, each costing a worker restart), so the worker-death test is
     quick; ``worker-saturation = 1.0`` (as the campaign's own cluster): no task waits queued on
-    the dying worker, where it would count as a failure too. ``dashboard_address=":0"``: the
-    scheduler's HTTP server always starts; on a free port it never warns "Port 8787 is already
-    in use" (a UserWarning, an error here) when another cluster runs on this machine.
+    the dying worker, where it would count as a failure too. ``dashboard_address=
+    "127.0.0.1:0"``: the scheduler's HTTP server always starts; on a free port it never warns
+    "Port 8787 is already in use" (a UserWarning, an error here) when another cluster runs on
+    this machine, and on loopback only (":0" would listen on all interfaces).
     """
     import dask
     from distributed import LocalCluster
 
     with dask.config.set({"distributed.scheduler.allowed-failures": 0,
                           "distributed.scheduler.worker-saturation": 1.0}):
-        cl = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0")
+        cl = LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                          dashboard_address="127.0.0.1:0")
     yield cl
     cl.close()
 
