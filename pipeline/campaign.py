@@ -682,6 +682,10 @@ def _campaign_task(task: Callable[..., dict], scene_path: str, recording_path: s
     timeout counts from here), run ``task``, and when its results are usable (status ok,
     unreliable or partial) write the completion marker :data:`DONE_NAME` last, atomically.
     Gets paths only, never open handles."""
+    for what, v in (("scene_path", scene_path), ("recording_path", recording_path), ("out_dir", out_dir)):
+        if not isinstance(v, str):
+            raise TypeError(f"{what} must be a path string (tasks get paths, never handles), got "
+                            f"{type(v).__name__}")
     if dask_key is not None:
         try:
             from distributed import get_worker
@@ -957,7 +961,7 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
         Arguments of the wrong type.
     """
     t_all = time.perf_counter()
-    from .exits import PARTIAL_SUFFIX, OutputDir
+    from .exits import PARTIAL_SUFFIX, OutputDir, remove_partial
     from .scene import load_scene, plan
     from .validate import as_nonnegative
 
@@ -1011,8 +1015,8 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
     with OutputDir(base, overwrite=overwrite or resume, staged=True) as guard:
         opts["guard"] = guard
         result = _campaign_body(scene, scene_path, inputs, files, skipped, names, guard.path.resolve(), opts)
-    if resume and Path(guard.final) == base and partial.is_dir() and not partial.is_symlink():
-        shutil.rmtree(partial, ignore_errors=True)  # its results are in the campaign now
+    if resume and Path(guard.final) == Path(os.path.abspath(base)):
+        remove_partial(base)  # its results are in the campaign now
     return result
 
 

@@ -403,13 +403,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("demo", help="generate the seed rig recording, run the full scene on it, write the report")
     s.add_argument("--out", default="meshphase-demo", help="output folder (default ./meshphase-demo; never overwritten: -2, -3, ...)")
-    s.add_argument("--overwrite", action="store_true", help="reuse the output folder")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the output folder (atomically, when the run finishes)")
     s.set_defaults(func=cmd_demo)
 
     s = sub.add_parser("run", help="run a scene (TOML) and write results, figures and the HTML report")
     s.add_argument("scene")
     s.add_argument("--out", help="output folder (default: the scene's `output`, else SCENE-out)")
-    s.add_argument("--overwrite", action="store_true", help="reuse the output folder")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the output folder (atomically, when the run finishes)")
     s.add_argument("--no-report", action="store_true", help="results only, no HTML/figures")
     s.set_defaults(func=cmd_run)
 
@@ -417,7 +419,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("file")
     s.add_argument("--gearset", required=True, help="gearset TOML (scene format: [gearset], [[channels]], ...)")
     s.add_argument("--out", help="output folder (default FILE-meshphase next to the input, never overwritten)")
-    s.add_argument("--overwrite", action="store_true")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the output folder (atomically, when the run finishes)")
     s.set_defaults(func=cmd_process)
 
     s = sub.add_parser("campaign", help="process many recordings with one scene as a Dask job")

@@ -53,7 +53,7 @@ from typing import Iterator
 __all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_USAGE", "EXIT_PARTIAL", "EXIT_INTERRUPTED",
            "EXIT_PIPE", "BENIGN_SKIPS", "RESULT_OF_STAGE", "run_status", "status_line",
            "OutputDir", "recording_read_errors", "foreign_entries", "recover_output_dirs",
-           "published_path", "MANIFEST_NAME", "PARTIAL_SUFFIX", "STALE_DIR_AGE"]
+           "published_path", "remove_partial", "MANIFEST_NAME", "PARTIAL_SUFFIX", "STALE_DIR_AGE"]
 
 EXIT_OK = 0
 EXIT_ERROR = 1
@@ -403,6 +403,34 @@ def _swap_in(stage: Path, dest: Path, token: str, *, reserved: bool = False, sna
     _fsync_path(parent, directory=True)
 
 
+def _keep_as_partial(stage: Path, dest: Path, token: str) -> None:
+    """Put the unfinished ``stage`` at ``dest`` (``<folder>.partial``), replacing an older one
+    only when that holds nothing but meshphase's files (it may be a folder of the user's)."""
+    if os.path.lexists(dest):
+        if os.path.islink(dest) or not os.path.isdir(dest):
+            raise FileExistsError(errno.EEXIST, "exists and is not a meshphase folder", str(dest))
+        foreign = foreign_entries(dest, limit=1)
+        if foreign:
+            raise FileExistsError(errno.EEXIST, f"holds {foreign[0]}, not written by meshphase", str(dest))
+    _write_json_atomic(stage / MANIFEST_NAME, {**(_read_manifest(stage) or {}), "state": "partial",
+                                               "target": dest.name[:-len(PARTIAL_SUFFIX)],
+                                               "files": _files_under(stage)})
+    _fsync_tree(stage)
+    _swap_in(stage, dest, token)
+
+
+def remove_partial(folder) -> bool:
+    """Remove ``<folder>.partial`` when it is meshphase's (its manifest says "partial" and it
+    holds nothing else); True when removed."""
+    partial = Path(os.path.abspath(folder) + PARTIAL_SUFFIX)
+    if os.path.islink(partial) or not partial.is_dir():
+        return False
+    if (_read_manifest(partial) or {}).get("state") != "partial" or foreign_entries(partial, limit=1):
+        return False
+    shutil.rmtree(partial, ignore_errors=True)
+    return not partial.exists()
+
+
 def recover_output_dirs(parent) -> list[str]:
     """Finish or undo what writers that died left next to their output folders in ``parent``.
 
@@ -484,10 +512,13 @@ def recover_output_dirs(parent) -> list[str]:
             target = (man or {}).get("target")
             if man and man.get("keep") and _plain_name(target):
                 dest = parent / (target + PARTIAL_SUFFIX)
-                m = _WORK_RE.match(e.name)
-                _write_json_atomic(p / MANIFEST_NAME, {**man, "state": "partial", "files": _files_under(p)})
-                _swap_in(p, dest, m["tok"])
-                done.append(f"{dest}: kept the partial results of a run that died")
+                try:
+                    _keep_as_partial(p, dest, _WORK_RE.match(e.name)["tok"])
+                    done.append(f"{dest}: kept the partial results of a run that died")
+                    continue
+                except FileExistsError as exc:
+                    logger.warning("%s: the partial results of a run that died are dropped: %s", p, exc)
+                shutil.rmtree(p, ignore_errors=True)
             else:
                 shutil.rmtree(p, ignore_errors=True)
                 done.append(f"{p}: removed the working folder of a run that died")
@@ -566,7 +597,8 @@ class OutputDir:
             raise ValueError(f"base must be a folder path, got an empty path {base!r}")
         if staged is not None and not isinstance(staged, bool):
             raise TypeError(f"staged must be None or a bool, got {type(staged).__name__} {staged!r}")
-        self.base = Path(base)
+        # absolute: the staging folder goes into the parent ("." and ".." have none of their own)
+        self.base = Path(os.path.abspath(base))
         self.overwrite = bool(overwrite)
         self.staged = staged
         self.path: Path | None = None
@@ -589,6 +621,13 @@ class OutputDir:
         if base.parent.is_dir():
             recover_output_dirs(base.parent)
         if self.overwrite and base.is_dir():
+            try:
+                cwd = os.getcwd()
+            except OSError:
+                cwd = None
+            if cwd is not None and (cwd == str(base) or cwd.startswith(str(base).rstrip(os.sep) + os.sep)):
+                raise ValueError(f"{base}: --overwrite cannot replace the current folder (or one it is "
+                                 "in); run from elsewhere or choose another output folder")
             foreign = foreign_entries(base)
             if foreign:
                 raise FileExistsError(
@@ -709,9 +748,7 @@ class OutputDir:
         if self._keep and self.is_staged and self.path.is_dir():
             dest = self.final.with_name(self.final.name + PARTIAL_SUFFIX)
             try:
-                _write_json_atomic(self.path / MANIFEST_NAME, self._manifest("partial"))
-                _fsync_tree(self.path)
-                _swap_in(self.path, dest, self._token)
+                _keep_as_partial(self.path, dest, self._token)
             except OSError as exc:
                 logger.warning("%s: could not keep the partial results (%s); removed", dest, exc)
             else:

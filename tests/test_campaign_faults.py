@@ -358,3 +358,16 @@ def test_recording_names_hostile_cases():
     assert len({n.casefold() for n in names}) == len(names)
     assert cp.recording_names(["/a/x.h5", "/b/x.h5"]) == ["x_a", "x_b"]
     assert cp.recording_names(["/a/x.h5", "/a/x.h5"]) == ["x", "x-2"]
+
+
+def test_task_takes_paths_only_and_writes_no_marker_for_a_failure(tmp_path):
+    with open(os.devnull) as handle, pytest.raises(TypeError, match="recording_path must be a path string"):
+        cp._campaign_task(_light_task, "s.toml", handle, str(tmp_path / "o"))
+    failed = {"status": "failed", "error": "boom"}
+    rec = cp._campaign_task(lambda *a, **k: dict(failed), "s.toml", "r.h5", str(tmp_path / "o"),
+                            None, {"recording": "r.h5"})
+    assert rec == failed and not (tmp_path / "o").exists()
+    ok = cp._campaign_task(lambda *a, **k: {"status": "ok", "messages": []}, "s.toml", "r.h5",
+                           str(tmp_path / "o"), None, {"recording": "r.h5"})
+    marker = json.loads((tmp_path / "o" / cp.DONE_NAME).read_text())
+    assert marker["key"] == {"recording": "r.h5"} and marker["record"] == ok

@@ -301,3 +301,34 @@ def test_mark_partial_keeps_an_unfinished_run(tmp_path):
             raise RuntimeError("boom")
     assert (out.partial_path / "done.json").read_text() == "2"
     assert sorted(os.listdir(tmp_path)) == ["out", "out" + PARTIAL_SUFFIX]
+
+
+def test_a_users_partial_folder_is_never_replaced(tmp_path, caplog):
+    base = _publish(tmp_path / "out", {"summary.json": "old"})
+    mine = tmp_path / ("out" + PARTIAL_SUFFIX)
+    mine.mkdir()
+    (mine / "notes.txt").write_text("the user's")
+    with pytest.raises(KeyboardInterrupt):
+        with OutputDir(base, overwrite=True) as out:
+            (out.path / "done.json").write_text("1")
+            out.mark_partial()
+            raise KeyboardInterrupt
+    assert out.partial_path is None and "could not keep the partial results" in caplog.text
+    assert _tree(mine) == {"notes.txt": b"the user's"}
+    assert sorted(os.listdir(tmp_path)) == ["out", "out" + PARTIAL_SUFFIX]
+    assert not ex.remove_partial(base) and mine.is_dir()  # not meshphase's: left alone
+
+
+def test_relative_paths_and_the_current_folder(tmp_path, monkeypatch):
+    base = _publish(tmp_path / "out", {"summary.json": "old"})
+    monkeypatch.chdir(tmp_path)
+    with OutputDir("out", overwrite=True) as out:  # relative: the staging folder is a sibling
+        assert out.final == base and out.path.parent == tmp_path
+        (out.path / "summary.json").write_text("new")
+    assert (base / "summary.json").read_text() == "new"
+    monkeypatch.chdir(base)
+    for path in (".", str(base)):
+        with pytest.raises(ValueError, match="cannot replace the current folder"):
+            with OutputDir(path, overwrite=True):
+                pass
+    assert (base / "summary.json").read_text() == "new" and sorted(os.listdir(tmp_path)) == ["out"]
