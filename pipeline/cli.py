@@ -272,14 +272,16 @@ def _run_and_write(args, scene, base, *, report: bool = True):
     from .exits import OutputDir, run_status
     from .stages import run_scene, write_outputs
 
-    with OutputDir(base, overwrite=args.overwrite) as out:
+    with OutputDir(base, overwrite=args.overwrite, staged=True) as out:
         if callable(scene):
             scene = scene(out.path)
         ctx = run_scene(scene, progress=_stage_progress(not args.quiet))
         if run_status(ctx)["status"] == "failed":
             out.discard()
             return ctx, {}
-        return ctx, write_outputs(ctx, out.path, report=report)
+        files = write_outputs(ctx, out.path, report=report)
+    # written into the staging folder; these are the paths now that it is published
+    return ctx, {k: out.published(v) for k, v in files.items()}
 
 
 def cmd_run(args) -> int:
@@ -298,9 +300,12 @@ def cmd_process(args) -> int:
     from .validate import as_regular_file
 
     as_regular_file(args.gearset, "the gearset scene (--gearset)")
+    from .exits import published_path
+
     ctx, files = process_recording(args.file, args.gearset, out_dir=args.out, overwrite=args.overwrite,
                                    progress=_stage_progress(not args.quiet))
-    return _finish_run(args, ctx, files)
+    # process_recording returns the paths it wrote (in the staging folder of OutputDir)
+    return _finish_run(args, ctx, {k: published_path(v) for k, v in files.items()})
 
 
 def cmd_demo(args) -> int:
@@ -326,11 +331,13 @@ def cmd_campaign(args) -> int:
     as_regular_file(args.scene, "the scene")
     res = cli_campaign(args.scene, args.inputs, scheduler=args.scheduler, workers=args.workers,
                        out=args.out, overwrite=args.overwrite, progress=not args.quiet,
-                       recording_reports=args.recording_reports)
+                       recording_reports=args.recording_reports, task_timeout=args.task_timeout,
+                       resume=args.resume, dashboard=args.dashboard)
     c = res["counts"]
     print(f"campaign  {res['scene']}: {c['ok']} ok, {c['unreliable']} unreliable, {c['partial']} partial, "
           f"{c['failed']} failed in {res['timing_s'].get('total', float('nan')):.1f} s "
-          f"({res['cluster']['n_workers']} worker(s), scheduler {res['cluster']['scheduler']})")
+          f"({res['cluster']['n_workers']} worker(s), scheduler {res['cluster']['scheduler']})"
+          + (f"; {res['resume']['n_resumed']} resumed" if res["resume"]["enabled"] else ""))
     for r in res["recordings"]:
         if r.get("status") != "ok":
             line = status_line({"status": r.get("status"), "error": r.get("error"),
@@ -348,6 +355,17 @@ def cmd_campaign(args) -> int:
 
 
 # ---------------------------------------------------------------------------- parser
+def _seconds(text: str) -> float:
+    """argparse type: a finite, non-negative number of seconds."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
+    if not (v >= 0 and v != float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a finite number of seconds >= 0, got {text!r}")
+    return v
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="meshphase",
@@ -385,13 +403,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("demo", help="generate the seed rig recording, run the full scene on it, write the report")
     s.add_argument("--out", default="meshphase-demo", help="output folder (default ./meshphase-demo; never overwritten: -2, -3, ...)")
-    s.add_argument("--overwrite", action="store_true", help="reuse the output folder")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the output folder (atomically, when the run finishes)")
     s.set_defaults(func=cmd_demo)
 
     s = sub.add_parser("run", help="run a scene (TOML) and write results, figures and the HTML report")
     s.add_argument("scene")
     s.add_argument("--out", help="output folder (default: the scene's `output`, else SCENE-out)")
-    s.add_argument("--overwrite", action="store_true", help="reuse the output folder")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the output folder (atomically, when the run finishes)")
     s.add_argument("--no-report", action="store_true", help="results only, no HTML/figures")
     s.set_defaults(func=cmd_run)
 
@@ -399,7 +419,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("file")
     s.add_argument("--gearset", required=True, help="gearset TOML (scene format: [gearset], [[channels]], ...)")
     s.add_argument("--out", help="output folder (default FILE-meshphase next to the input, never overwritten)")
-    s.add_argument("--overwrite", action="store_true")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the output folder (atomically, when the run finishes)")
     s.set_defaults(func=cmd_process)
 
     s = sub.add_parser("campaign", help="process many recordings with one scene as a Dask job")
@@ -408,7 +429,17 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--scheduler", help="address of an existing Dask scheduler (default: a LocalCluster)")
     s.add_argument("--workers", type=int, help="LocalCluster worker processes (default: one per core)")
     s.add_argument("--out", help="output folder (default SCENE-campaign; never overwritten: -2, -3, ...)")
-    s.add_argument("--overwrite", action="store_true")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the output folder (atomically, when the campaign finishes)")
+    s.add_argument("--resume", action="store_true",
+                   help="reuse the complete results in the output folder (and OUT.partial, kept by an "
+                        "unfinished run); redo changed or missing recordings")
+    s.add_argument("--task-timeout", type=_seconds, metavar="SECONDS",
+                   help="fail a recording whose task runs longer (its worker is restarted); "
+                        "0: no limit (default: 300 s + 10 s per MB of the recording)")
+    s.add_argument("--dashboard", nargs="?", const="127.0.0.1:0", metavar="ADDRESS",
+                   help="serve the Dask dashboard of the local cluster (default off; without ADDRESS "
+                        "on 127.0.0.1, a free port; it has no authentication)")
     s.add_argument("--recording-reports", action="store_true", help="an HTML report per recording too")
     s.set_defaults(func=cmd_campaign)
 
