@@ -256,9 +256,14 @@ class _Collect(logging.Filter):
         super().__init__()
         self.messages: list[str] = []
 
+    #: npTDMS messages this reader reports in its own words already
+    SAID = ("Unsupported scale type",)
+
     def filter(self, record):
         if record.levelno >= logging.WARNING:
             text = " ".join(record.getMessage().split())
+            if text.startswith(self.SAID):
+                return False
             self.messages.append(text if len(text) <= 200 else text[:197] + "...")
         return False
 
@@ -270,6 +275,8 @@ def _nptdms_logs_as_warnings(path):
     one multi-line record per segment: route its loggers' records into one FormatWarning per
     distinct message naming the file, issued when the read succeeds (when it fails, the
     error says what is wrong and the log lines would only repeat it)."""
+    import nptdms  # noqa: F401  (its modules create their loggers on import)
+
     grab = _Collect()
     loggers = [logging.getLogger(name) for name in list(sys.modules)
                if name == "nptdms" or name.startswith("nptdms.")]
@@ -288,8 +295,7 @@ def _open(path):
     from nptdms import TdmsFile
 
     try:
-        with _nptdms_logs_as_warnings(path):
-            return TdmsFile.open(str(path))
+        return TdmsFile.open(str(path))
     except Exception as exc:  # npTDMS raises ValueError, KeyError, EOFError, struct.error, Exception
         raise RecordingFileError(path, f"cannot parse as TDMS ({type(exc).__name__}: {exc})") from exc
 
@@ -582,12 +588,13 @@ def _prepare(path, fs, raw):
         if plan is not None:
             _PLAN_CACHE.move_to_end(key)
             return path, None, plan
-    tdms = _open(path)
-    try:
-        plan = _plan(tdms, path, n_segments, fs, bool(raw))
-    except BaseException:
-        tdms.close()
-        raise
+    with _nptdms_logs_as_warnings(path):     # shown only when the file passes the checks
+        tdms = _open(path)
+        try:
+            plan = _plan(tdms, path, n_segments, fs, bool(raw))
+        except BaseException:
+            tdms.close()
+            raise
     if plan.fast:
         tdms.close()
         tdms = None
