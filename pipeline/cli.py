@@ -22,7 +22,9 @@ Exit status (every subcommand; README.md "Exit status"; constants in :mod:`pipel
 
 Errors are one line per cause on stderr, ``meshphase COMMAND: error: ...``, never a
 traceback; ``--debug`` (or ``MESHPHASE_DEBUG=1``) re-raises them with the traceback and logs
-the traceback of each failed stage.
+the traceback of each failed stage. Warnings are one line each
+(``meshphase COMMAND: FormatWarning: ...``), each distinct line once. ``tests/faults``
+runs a corpus of faulty inputs and outputs through this boundary.
 """
 
 from __future__ import annotations

@@ -423,13 +423,18 @@ def atomic_path(path, *, overwrite: bool = False, size_hint: int | None = None):
     Raises
     ------
     FileExistsError
-        ``path`` exists and not ``overwrite``.
+        ``path`` exists and not ``overwrite``; or, with ``overwrite``, ``path`` is a FIFO,
+        device or socket (overwrite replaces regular files, and a symbolic link itself).
     FileNotFoundError
         The directory of ``path`` does not exist.
+    NotADirectoryError
+        The directory of ``path`` is a file (or a part of its path is).
     IsADirectoryError
         ``path`` is a directory.
     OSError
-        From the filesystem (ENOSPC: disk full), with nothing left behind.
+        ENAMETOOLONG (the name is longer than the file system allows), ELOOP, EACCES
+        (checked before anything is written); from the filesystem while writing (ENOSPC:
+        disk full), with nothing left behind. Every error carries ``path`` as its file name.
     """
     path = Path(path)
     directory = path.parent

@@ -236,6 +236,37 @@ def test_nptdms_log_lines_become_one_warning_line(originals, tmp_path):
                                 "mismatch, 4712 != 4713"]
 
 
+@pytest.mark.slow
+@pytest.mark.timeout(600, func_only=True)
+def test_campaign_over_faulty_recordings(originals, tmp_path):
+    """``campaign`` (the real command, one local worker) over a truncated HDF5, an MCAP with a
+    flipped CRC and a valid TDMS: exit 3 (some failed), one stderr line naming each failed
+    recording, no traceback, no stray log lines; over the two faulty ones only: exit 1."""
+    recs = tmp_path / "recs"
+    recs.mkdir()
+    blob = originals.blob("hdf5")
+    (recs / "cut.h5").write_bytes(blob[: len(blob) // 2])
+    mcap = bytearray(originals.blob("mcap"))
+    lo, hi = originals.regions["mcap"]["checksum"][0]
+    mcap[lo] ^= 0x5A
+    (recs / "crc.mcap").write_bytes(bytes(mcap))
+    scene = tmp_path / "campaign.toml"
+    scene.write_text(originals.gearset.read_text().replace('name = "seed rig gearset (fault corpus)"',
+                     'name = "campaign"\nresults = ["phasing"]')   # each recording replaces [input]
+                     + f'\n[input]\nrecording = "{originals.recordings["tdms"]}"\n', encoding="utf-8")
+    for files, want in (((recs / "cut.h5", recs / "crc.mcap", originals.recordings["tdms"]), 3),
+                        ((recs / "cut.h5", recs / "crc.mcap"), 1)):
+        out = tmp_path / f"camp{want}"
+        rc, _, err = _run_subprocess(["-q", "campaign", str(scene), *map(str, files), "--out", str(out),
+                                      "--workers", "1"], 400)
+        assert rc == want, err
+        assert "Traceback" not in err
+        lines = [ln for ln in err.splitlines() if ln.strip()]
+        assert all(ln.startswith("meshphase campaign: ") for ln in lines), lines
+        for bad in ("cut.h5", "crc.mcap"):
+            assert len([ln for ln in lines if bad in ln]) == 1, lines
+
+
 def test_corpus_shape():
     """Every category is there, names are unique, the default selection is bounded and every
     case accepts only documented, non-zero exit codes."""
