@@ -51,7 +51,6 @@ Nothing here imports pytest: the corpus can be listed and run by hand
 
 from __future__ import annotations
 
-import contextlib
 import errno
 import json
 import math
@@ -328,7 +327,7 @@ def mcap_regions(path) -> dict:
     blob = Path(path).read_bytes()
     with open(path, "rb") as fh:
         summary = make_reader(fh).get_summary()
-    data, crcs, heads = [], [], []
+    data, crcs = [], []
     for ci in summary.chunk_indexes:
         c0 = ci.chunk_start_offset
         (clen,) = struct.unpack_from("<I", blob, c0 + 9 + 28)
@@ -340,7 +339,6 @@ def mcap_regions(path) -> dict:
     crcs.append((summary_start - 4, summary_start))  # DataEnd's data_section_crc
     crcs.append((len(blob) - 8 - 4, len(blob) - 8))  # the footer's summary_crc
     first_chunk = min(ci.chunk_start_offset for ci in summary.chunk_indexes)
-    heads.append((0, first_chunk))
     return {"header": [(0, 8)], "data": data, "checksum": crcs,
             "metadata": _minus(_complement(data, len(blob)), crcs + [(0, 8)]),
             "meta_section": [(8, first_chunk), (summary_start, len(blob) - 8)]}
@@ -634,8 +632,36 @@ SPECIAL_KINDS = ("fifo", "directory", "devnull", "symlink-loop", "dangling-symli
                  "parent-is-file", "name-too-long", "missing", "proc-mem", "eacces")
 
 
+def _reading_raises(exc_type):
+    """Every read of a recording raises ``exc_type`` (out of memory, Ctrl-C while reading)."""
+    def patch(mp, values):
+        import pipeline.io as pio
+
+        def boom(*a, **k):
+            raise exc_type("Unable to allocate 7.32 GiB for an array" if exc_type is MemoryError else "")
+
+        def boom_iter(*a, **k):
+            boom()
+            yield  # pragma: no cover
+        for name in ("read", "read_info"):
+            mp.setattr(pio, name, boom)
+        mp.setattr(pio, "iter_blocks", boom_iter)
+    return patch
+
+
+def _valid_copy(ws):
+    p = ws.tmp / "rec.h5"
+    p.write_bytes(ws.orig.blob("hdf5"))
+    return {"input": str(p), "recording": str(p)}
+
+
 def special_cases() -> list[FaultCase]:
-    cases = []
+    cases = [
+        FaultCase("special/recording/out-of-memory", "special", _valid_copy, (INFO, PROCESS, CONVERT),
+                  names=(), contains=("out of memory",), patch=_reading_raises(MemoryError)),
+        FaultCase("special/recording/interrupted", "special", _valid_copy, (INFO, PROCESS, CONVERT),
+                  expect=frozenset({130}), names=(), patch=_reading_raises(KeyboardInterrupt)),
+    ]
     for kind in SPECIAL_KINDS:
         patch = _deny_reading("path") if kind == "eacces" else None
         cases.append(FaultCase(
