@@ -22,7 +22,9 @@ Exit status (every subcommand; README.md "Exit status"; constants in :mod:`pipel
 
 Errors are one line per cause on stderr, ``meshphase COMMAND: error: ...``, never a
 traceback; ``--debug`` (or ``MESHPHASE_DEBUG=1``) re-raises them with the traceback and logs
-the traceback of each failed stage.
+the traceback of each failed stage. Warnings are one line each
+(``meshphase COMMAND: FormatWarning: ...``), each distinct line once. ``tests/faults``
+runs a corpus of faulty inputs and outputs through this boundary.
 """
 
 from __future__ import annotations
@@ -289,6 +291,13 @@ def cmd_run(args) -> int:
     from .validate import as_regular_file
 
     scene = load_scene(as_regular_file(args.scene, "the scene"))
+    if not scene.results:
+        from .scene import SceneError
+
+        # an empty scene (or a gearset file) would "succeed" at computing nothing
+        raise SceneError(args.scene, "results", "no results requested, nothing to run; add e.g. "
+                         'results = ["ideal_phasing", "phasing"] (`meshphase process FILE --gearset '
+                         f"{args.scene}` takes a gearset file without results)")
     base = Path(args.out) if args.out else (scene.output or Path(args.scene).with_suffix("").with_name(
         Path(args.scene).stem + "-out"))
     ctx, files = _run_and_write(args, scene, base, report=not args.no_report)
@@ -498,6 +507,19 @@ def describe_error(exc: BaseException) -> str:
                      "the traceback)")
 
 
+def _once(show):
+    """``warnings.showwarning`` that shows each distinct warning line once per command."""
+    seen = set()
+
+    def showwarning(message, category, filename, lineno, file=None, line=None):
+        key = (category, _one_line(message))
+        if key in seen:
+            return
+        seen.add(key)
+        show(message, category, filename, lineno, file, line)
+    return showwarning
+
+
 def _stdout_closed() -> int:
     """The reader of our stdout went away (``| head``): send the rest to devnull and exit
     quietly (the Python docs' recipe, signal module, "Note on SIGPIPE")."""
@@ -521,10 +543,13 @@ def main(argv=None) -> int:
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     logger.setLevel(level)
     logging.captureWarnings(False)
-    # warnings on one line each ("meshphase info: FormatWarning: ..."), not file:line + source
-    old_format = warnings.formatwarning
+    # warnings on one line each ("meshphase info: FormatWarning: ..."), not file:line + source,
+    # and each line once (a warning repeats when a block reader meets it again, or when a
+    # filter change resets the registry that "default" uses to show it once)
+    old_format, old_show = warnings.formatwarning, warnings.showwarning
     warnings.formatwarning = lambda message, category, *_a, **_k: (
         f"meshphase {args.command}: {category.__name__}: {_one_line(message)}\n")
+    warnings.showwarning = _once(old_show)
     try:
         rc = int(args.func(args) or 0)
         sys.stdout.flush()                 # a closed pipe shows here, not at interpreter exit
@@ -545,7 +570,7 @@ def main(argv=None) -> int:
             pass
         return EXIT_ERROR
     finally:
-        warnings.formatwarning = old_format
+        warnings.formatwarning, warnings.showwarning = old_format, old_show
 
 
 if __name__ == "__main__":  # pragma: no cover

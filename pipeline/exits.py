@@ -74,7 +74,18 @@ RESULT_OF_STAGE = {"ideal": "ideal_phasing", "phasing": "phasing", "load_sharing
 
 _SKIP_PREFIX = "skipped: needs "
 #: exception class names that add nothing to a message that names the file and the problem
-_GENERIC = re.compile(r"^(ValueError|TypeError|KeyError|OSError|RecordingFileError): ")
+_GENERIC = re.compile(r"^(ValueError|TypeError|KeyError|OSError|RecordingFileError|CorruptFileError|"
+                      r"SceneError|PermissionError|FileNotFoundError|IsADirectoryError|"
+                      r"NotADirectoryError|TimeoutError|InterruptedError): ")
+#: ``str()`` of an OSError with a file name: "[Errno 13] Permission denied: '/x.h5'"
+_OS_TEXT = re.compile(r"^\[Errno \d+\] (?P<text>.*): (?P<q>['\"])(?P<file>.*)(?P=q)$")
+
+
+def _load_error(msg: str) -> str:
+    """A failed load stage's message without the exception class, the file name first."""
+    msg = _GENERIC.sub("", str(msg), count=1)
+    m = _OS_TEXT.match(msg)
+    return f"{m['file']}: {m['text']}" if m else msg
 
 
 def _root_causes(failed: dict, stage: str, seen: frozenset = frozenset()) -> list[tuple[str, str]]:
@@ -135,7 +146,7 @@ def run_status(ctx) -> dict:
     error = None
     if "load" in failed:
         status = "failed"
-        error = "cannot load the recording: " + _GENERIC.sub("", str(failed["load"]), count=1)
+        error = "cannot load the recording: " + _load_error(failed["load"])
     elif failed and not ctx.ran:
         status = "failed"
         error = "; ".join(f"{s}: {_cause(failed, s)}" for s in failed)
@@ -784,8 +795,9 @@ def recording_read_errors(path) -> Iterator[None]:
     h5py reports HDF5 failures as ``OSError`` without an errno ("Can't synchronously read
     data (filter returned failure during read)"), ``RuntimeError`` ("Special link traversal
     failed (too many links)": a soft-link loop) or ``KeyError`` ("Unable to open object");
-    none names the file. OS errors with an errno (permission, ...) pass through unchanged:
-    they carry the file name already.
+    none names the file. OS errors with an errno pass through: unchanged when they carry a
+    file name (permission, ...), with ``path`` as their file name when they do not (EIO
+    from ``read()``).
     """
     from .io import RecordingFileError
 
@@ -794,6 +806,9 @@ def recording_read_errors(path) -> Iterator[None]:
     except RecordingFileError:
         raise
     except OSError as exc:
+        if exc.errno is not None and exc.filename is None:
+            # read() errors (EIO from a failing disk or /proc/self/mem) carry no file name
+            raise type(exc)(exc.errno, exc.strerror, str(path)) from exc
         if exc.errno is not None or type(exc) is not OSError:  # ours name the file already
             raise
         raise RecordingFileError(path, f"read error, file corrupt? ({exc})") from exc
