@@ -309,12 +309,10 @@ def cmd_process(args) -> int:
     from .validate import as_regular_file
 
     as_regular_file(args.gearset, "the gearset scene (--gearset)")
-    from .exits import published_path
-
+    # process_recording returns the paths as published (the output folder's final name)
     ctx, files = process_recording(args.file, args.gearset, out_dir=args.out, overwrite=args.overwrite,
                                    progress=_stage_progress(not args.quiet))
-    # process_recording returns the paths it wrote (in the staging folder of OutputDir)
-    return _finish_run(args, ctx, {k: published_path(v) for k, v in files.items()})
+    return _finish_run(args, ctx, files)
 
 
 def cmd_demo(args) -> int:
