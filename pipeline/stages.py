@@ -995,10 +995,13 @@ def process_recording(path, gearset_scene_path, *, out_dir=None, overwrite=False
     scene.results = [r for r in dict.fromkeys(list(scene.results) + wanted)
                      if r not in ("tolerance",) or scene.tolerances is not None]
     base = Path(out_dir) if out_dir else Path(path).with_name(Path(path).stem + "-meshphase")
-    with OutputDir(base, overwrite=overwrite) as out:
+    # staged: the folder is built beside its final name and swapped in whole, so a killed
+    # run never leaves a half-written result folder under the name a reader expects
+    with OutputDir(base, overwrite=overwrite, staged=True) as out:
         ctx = run_scene(scene, progress=progress)
         if run_status(ctx)["status"] == "failed":
             out.discard()
             return ctx, {}
-        files = write_outputs(ctx, out.path, report=False)
+        written = write_outputs(ctx, out.path, report=False)
+        files = {k: out.published(v) for k, v in written.items()}
     return ctx, files

@@ -116,12 +116,16 @@ def test_run_never_overwrites_unless_asked(tmp_path, capsys):
     second = tmp_path / "bearing-out-2"
     assert second.is_dir()
     assert (first / "summary.json").read_text() == summary
+    html = (first / "report.html").read_text(encoding="utf-8")
+    names = {p.name for p in first.iterdir()}
+    assert {"summary.json", "tilt.csv", "stages.csv", "arrays.h5", "report.html", "figures"} <= names
     assert main(["-q", "run", str(scene), "--overwrite", "--no-report"]) == 0
     assert not (tmp_path / "bearing-out-3").exists()
     assert {"summary.json", "tilt.csv", "stages.csv", "arrays.h5"} <= {p.name for p in second.iterdir()}
+    # --overwrite replaced the folder: no report.html / figures of the earlier run beside the new summary
     names = {p.name for p in first.iterdir()}
-    assert {"summary.json", "tilt.csv", "stages.csv", "arrays.h5", "report.html", "figures"} <= names
-    html = (first / "report.html").read_text(encoding="utf-8")
+    assert {"summary.json", "tilt.csv", "stages.csv", "arrays.h5"} <= names
+    assert not names & {"report.html", "figures"}
     sec = _sections(html)
     bm = next(v for k, v in sec.items() if k.startswith("Bearing moments"))
     # the model's moments with seed 001 Table 10 (GSAM) side by side
