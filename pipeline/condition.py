@@ -69,8 +69,7 @@ from scipy import ndimage, signal
 
 from .errors import DataQualityWarning, ProcessingWarning
 from .log import logger
-from .quality import clipped_runs as _clipped_runs
-from .quality import DROPOUT_MIN_RUN, FALSE_ALARM, find_runs, flat_runs, outside_runs
+from .quality import (DROPOUT_MIN_RUN, FALSE_ALARM, ChannelScan, ScanResult, find_runs)
 from .recording import Recording
 from .validate import as_signal, as_choice, as_float, as_nonnegative, as_positive, as_positive_int
 
@@ -1015,28 +1014,33 @@ def assess_quality(x, fs: float, *, t0: float = 0.0, name: str = "", clip_min_ru
     if x.size == 0:
         e = np.empty((0, 2), dtype=np.int64)
         return ChannelQuality(name, fs, t0, 0, e, e.copy(), e.copy())
-    if math.isfinite(float(np.sum(x))):
-        gaps = np.empty((0, 2), dtype=np.int64)
-        nans = gaps.copy()
-    else:
-        gaps = find_runs(~np.isfinite(x))
-        nans = find_runs(np.isnan(x))
-    clipped = _clipped_runs(x, min_run=clip_min_run, rtol=clip_rtol)
-    extra = {}
-    if detect_flat:
-        fr = flat_runs(x, false_alarm=false_alarm, min_run=dropout_min_run,
+    scan = ChannelScan(x.size, flat=bool(detect_flat), rail_min_run=clip_min_run,
+                       rail_rtol=clip_rtol, false_alarm=false_alarm, min_run=dropout_min_run,
                        clip_min_run=clip_min_run)
-        clipped = outside_runs(clipped, fr.dropout_runs)   # a dropout at the rail is no clip
-        if len(fr.clipped_runs):
-            clipped = merge_runs(np.concatenate([clipped, fr.clipped_runs]))
-        extra = dict(dropout_runs=fr.dropout_runs, dropout_min_run=fr.min_run,
-                     p_equal=fr.p_equal, quant_step=fr.quant_step)
-    rep = ChannelQuality(name, fs, t0, int(x.size), gaps, nans, clipped, **extra)
+    scan.feed1(x)
+    scan.end1()
+    scan.feed2(x)
+    rep = quality_from_scan(scan.result(), name, fs, t0)
     if snr:
         rep.snr_db, rep.signal_peak, rep.noise_rms = estimate_snr(x)
     if warn:
         _warn_quality(rep, snr_warn_db)
     return rep
+
+
+def quality_from_scan(res: ScanResult, name: str, fs: float, t0: float) -> ChannelQuality:
+    """The :class:`ChannelQuality` (no SNR yet) of a channel scanned by
+    :class:`pipeline.quality.ChannelScan` (whole, or streamed in blocks: the same report)."""
+    if res.n == 0:
+        e = np.empty((0, 2), dtype=np.int64)
+        return ChannelQuality(name, fs, t0, 0, e, e.copy(), e.copy())
+    extra = {}
+    if res.flat is not None:
+        fr = res.flat
+        extra = dict(dropout_runs=fr.dropout_runs, dropout_min_run=fr.min_run,
+                     p_equal=fr.p_equal, quant_step=fr.quant_step)
+    return ChannelQuality(name, fs, t0, int(res.n), res.nonfinite_runs, res.nan_runs,
+                          res.clipped(), **extra)
 
 
 def _warn_quality(rep: ChannelQuality, snr_warn_db: float) -> None:
