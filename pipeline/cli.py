@@ -126,8 +126,10 @@ def cmd_info(args) -> int:
 
 # ---------------------------------------------------------------------------- convert
 def cmd_convert(args) -> int:
+    import dataclasses
+
     from .exits import recording_read_errors
-    from .io import detect_format, iter_blocks, read_info, write
+    from .io import detect_format, iter_blocks, read_info, write_blocks
     from .recording import Recording
     from .validate import as_regular_file
     import numpy as np
@@ -136,28 +138,37 @@ def cmd_convert(args) -> int:
     with recording_read_errors(src):
         fmt = detect_format(src)
         info = read_info(src, format=fmt)
-    # read in blocks with a progress bar into one preallocated buffer, then write atomically
-    data = None
-    with _progress(info.n_samples, f"read {fmt}", not args.quiet) as bar, recording_read_errors(src):
-        i = 0
-        for block in iter_blocks(src, max(1.0, 2**22 / info.fs), format=fmt):
-            if data is None:
-                data = np.empty((info.n_samples, block.n_channels), dtype=block.data.dtype)
-            data[i:i + block.n_samples] = block.data
-            i += block.n_samples
-            bar.update(block.n_samples)
-    if data is None:
-        data = np.empty((0, len(info.channels)))
-    rec = Recording(data, info.fs, info.channels, info.t0, info.start_datetime, info.meta,
-                    info.history)
-    rec = rec.with_history("convert", source=str(src), source_format=fmt)
+    # streamed: each block read is written at once (flat memory: one block plus the writer's
+    # chunk buffer), the output published atomically when complete
+    history = Recording(np.empty((0, len(info.channels))), info.fs, info.channels,
+                        history=info.history).with_history(
+        "convert", source=str(src), source_format=fmt).history
+    header = dataclasses.replace(info, history=history)
+    # 2**18 samples per channel per block: 16 MB of 8 float64 channels
+    blocks = iter_blocks(src, 2**18 / info.fs, format=fmt)
+    first = None
+    with recording_read_errors(src):
+        first = next(blocks, None)
+    dtype = first.data.dtype if first is not None else np.dtype(np.float64)
+
+    def data():
+        with _progress(info.n_samples, f"{fmt} -> {args.format or dst.suffix.lstrip('.')}",
+                       not args.quiet) as bar, recording_read_errors(src):
+            if first is not None:
+                yield first.data
+                bar.update(first.n_samples)
+            for block in blocks:
+                yield block.data
+                bar.update(block.n_samples)
+
     options = {}
     if args.compression:
         options["compression"] = args.compression
-    out = write(rec, dst, format=args.format, overwrite=args.overwrite, **options)
+    out = write_blocks(header, data(), dst, format=args.format, dtype=dtype,
+                       overwrite=args.overwrite, **options)
     logger.info("wrote %s", out)
     if not args.quiet:
-        print(f"{src} ({fmt}) -> {out} ({rec.n_samples} samples x {rec.n_channels} channels)")
+        print(f"{src} ({fmt}) -> {out} ({info.n_samples} samples x {len(info.channels)} channels)")
     return 0
 
 

@@ -752,25 +752,26 @@ class _EqualRuns:
         m = x.size
         if m == 0:
             return np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0)
-        if self.last is None:
-            xx, base = x, self.n
-        else:
-            xx, base = np.concatenate(([self.last], x)), self.n - 1
-        idx = _equal_pairs(xx)
+        pos = self.n
+        idx = _equal_pairs(x) + pos                       # pairs (i, i + 1) inside the piece
+        if self.last is not None and self.last == x[0] and np.isfinite(self.last):
+            idx = np.concatenate(([pos - 1], idx))        # the pair across the boundary
         self.n_pairs += idx.size
         runs = _runs_from_pairs(idx)
-        values = xx[runs[:, 0]]
-        starts, stops = runs[:, 0] + base, runs[:, 1] + base
+        starts, stops = runs[:, 0], runs[:, 1]
+        values = x[np.maximum(starts - pos, 0)]
+        if starts.size and starts[0] == pos - 1:
+            values[0] = self.last
         if self.open is not None:
             a0, v0 = self.open
-            if starts.size and starts[0] == self.n - 1:
+            if starts.size and starts[0] == pos - 1:
                 starts[0] = a0
             else:
                 starts = np.concatenate(([a0], starts))
-                stops = np.concatenate(([self.n], stops))
+                stops = np.concatenate(([pos], stops))
                 values = np.concatenate(([v0], values))
             self.open = None
-        end = self.n + m
+        end = pos + m
         if starts.size and stops[-1] == end:
             self.open = (int(starts[-1]), values[-1])
             starts, stops, values = starts[:-1], stops[:-1], values[:-1]
@@ -824,10 +825,12 @@ class _StridedPairs:
             # pairs (i, i + 1) with i + 1 in this piece: i in [pos - 1, pos + m - 1)
             lo = max(pos - 1, 0)
             first = lo + (-lo) % self.step
-            i = np.arange(first, min(pos + m - 1, self.n - 1), self.step)
+            i = np.arange(first, min(pos + m - 1, self.n - 1), self.step) - pos
             if i.size:
-                xx, off = (x, pos) if self.last is None else (np.concatenate(([self.last], x)), pos - 1)
-                d = xx[i + 1 - off] - xx[i - off]
+                left = x[np.maximum(i, 0)]
+                if i[0] < 0:
+                    left[0] = self.last
+                d = x[i + 1] - left
                 self.parts.append(d[np.isfinite(d)])
         self.last = x[-1]
         self.pos += m
@@ -947,16 +950,19 @@ class FlatScan:
         self.pos = 0
         self.closed = False
 
-    def add(self, x: np.ndarray) -> None:
-        """Feed the next piece of float64 samples."""
+    def add(self, x: np.ndarray, finite: np.ndarray | None = None) -> None:
+        """Feed the next piece of float64 samples (``finite``: its np.isfinite, if known)."""
         if self.closed:
             raise RuntimeError("FlatScan.add after stats(): the scan is closed")
         if x.size == 0:
             return
-        fin = np.isfinite(x)
+        fin = np.isfinite(x) if finite is None else finite
         nf = int(np.count_nonzero(fin))
         self.n_fin += nf
-        if nf:
+        if nf == x.size:
+            self.hi = max(self.hi, float(np.max(x)))
+            self.lo = min(self.lo, float(np.min(x)))
+        elif nf:
             self.hi = max(self.hi, float(np.max(x, where=fin, initial=-np.inf)))
             self.lo = min(self.lo, float(np.min(x, where=fin, initial=np.inf)))
         self._count(*self.runs.add(x))
@@ -1024,6 +1030,8 @@ class _Candidates:
         self.tail = np.empty(0)                  # the last <= w samples before the piece
         self.pos = 0
         self.open_left: tuple | None = None      # (start, left window) of the open run
+        self._x = None                           # the piece being fed, and the index of
+        self._e0 = 0                             # the tail's first sample
         self.found: list[tuple] = []             # (a, b, v, left window start, left, right)
         self.pending: list[list] = []            # right windows still filling: [row, need]
 
@@ -1037,33 +1045,46 @@ class _Candidates:
             row[5] = np.concatenate([row[5], take])
             p[1] = need - take.size
         self.pending = [p for p in self.pending if p[1] > 0]
-        ext = np.concatenate([self.tail, x])
-        e0 = pos - self.tail.size
+        self._x, self._e0 = x, pos - self.tail.size
         was_open = self.runs.open
         starts, stops, values = self.runs.add(x)
         for a, b, v in zip(starts.tolist(), stops.tolist(), values):
             if b - a >= self.min_len:
-                self._found(a, b, v, ext, e0)
+                self._found(a, b, v)
         op = self.runs.open
         if op is not None and (was_open is None or was_open[0] != op[0]):
             a = op[0]
             lo = max(a - self.w, 0)
-            self.open_left = (a, lo, ext[lo - e0:a - e0].copy())
+            self.open_left = (a, lo, self._slice(lo, a))
         elif op is None:
             self.open_left = None
         # w + 1: a run may start on the previous piece's last sample
-        self.tail = ext[-(self.w + 1):].copy() if ext.size > self.w + 1 else ext.copy()
+        k = self.w + 1
+        self.tail = x[-k:].copy() if m >= k else np.concatenate([self.tail, x])[-k:]
+        self._x = None
         self.pos = pos + m
 
-    def _found(self, a, b, v, ext, e0) -> None:
+    def _slice(self, lo: int, hi: int) -> np.ndarray:
+        """Samples [lo, hi) of the tail followed by the current piece (a copy)."""
+        e0, t, x = self._e0, self.tail, self._x
+        split = e0 + t.size                        # global index of the piece's first sample
+        if lo >= split:
+            return x[lo - split:hi - split].copy()
+        if hi <= split:
+            return t[lo - e0:hi - e0].copy()
+        return np.concatenate([t[lo - e0:], x[:hi - split]])
+
+    def _found(self, a, b, v) -> None:
         lo = max(a - self.w, 0)
-        left = ext[lo - e0:a - e0].copy() if lo >= e0 else None
-        if left is None:
+        if self._x is not None and lo >= self._e0:
+            left = self._slice(lo, a)
+        else:
             if self.open_left is None or self.open_left[0] != a:
                 raise RuntimeError(f"flat-run scan lost the left window of the run at {a}")
             _, lo, left = self.open_left
         hi = min(b + self.w, self.n)
-        right = ext[b - e0:hi - e0].copy()
+        right = self._slice(b, min(hi, self._e0 + self.tail.size + self._x.size)) \
+            if self._x is not None else np.empty(0)
         row = [a, b, v, lo, left, right]
         self.found.append(row)
         need = hi - b - right.size
@@ -1074,7 +1095,7 @@ class _Candidates:
         starts, stops, values = self.runs.finish()
         for a, b, v in zip(starts.tolist(), stops.tolist(), values):
             if b - a >= self.min_len:
-                self._found(a, b, v, np.empty(0), self.pos)
+                self._found(a, b, v)
 
     def result(self):
         """(runs, values, sample lookup) for :func:`classify_flat_runs`."""
@@ -1251,7 +1272,7 @@ class ChannelScan:
         bad = ~fin
         self.nonfinite.add(bad)
         self.nan.add(np.isnan(x) if bad.any() else bad)
-        self.fscan.add(x)
+        self.fscan.add(x, fin)
         if self.pulse is not None:
             first = (-self.pos1) % self.pulse_step
             self.pulse.append(x[first::self.pulse_step])
