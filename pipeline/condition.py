@@ -751,7 +751,8 @@ def estimate_noise(x) -> float:
     large share of the differences). NaN when fewer than 2 finite neighbours exist.
     """
     x = _as_signal(x)
-    d = np.diff(x)
+    with np.errstate(invalid="ignore"):                # inf - inf: dropped below
+        d = np.diff(x)
     return _noise_from_diffs(_subsample(d[np.isfinite(d)]))
 
 

@@ -328,7 +328,8 @@ def _strided_pairs(x: np.ndarray, n_max: int) -> np.ndarray:
     if x.size < 2:
         return np.empty(0)
     i = np.arange(0, x.size - 1, max(1, -(-(x.size - 1) // n_max)))
-    d = x[i + 1] - x[i]
+    with np.errstate(invalid="ignore"):                # inf - inf: dropped below
+        d = x[i + 1] - x[i]
     return d[np.isfinite(d)]
 
 
@@ -353,7 +354,8 @@ def _level_from(xs: np.ndarray, d: np.ndarray) -> tuple[float, float]:
 def _is_smooth(x: np.ndarray) -> bool:
     """True for a channel without sample-level noise (few sign changes of the non-zero
     first differences; white noise has 2/3)."""
-    d = np.diff(x[:_SUBSAMPLE])
+    with np.errstate(invalid="ignore"):                # inf - inf: dropped below
+        d = np.diff(x[:_SUBSAMPLE])
     d = d[np.isfinite(d) & (d != 0)]
     if d.size < 16:
         return True
@@ -830,7 +832,8 @@ class _StridedPairs:
                 left = x[np.maximum(i, 0)]
                 if i[0] < 0:
                     left[0] = self.last
-                d = x[i + 1] - left
+                with np.errstate(invalid="ignore"):    # inf - inf: dropped below
+                    d = x[i + 1] - left
                 self.parts.append(d[np.isfinite(d)])
         self.last = x[-1]
         self.pos += m
@@ -855,7 +858,8 @@ class _SmoothTest:
         if m and pos < self.limit:
             seg = x[:self.limit - pos]
             xx = seg if self.last is None else np.concatenate(([self.last], seg))
-            d = np.diff(xx)
+            with np.errstate(invalid="ignore"):        # inf - inf: dropped below
+                d = np.diff(xx)
             d = d[np.isfinite(d) & (d != 0)]
             if d.size:
                 s = np.signbit(d)

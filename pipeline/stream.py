@@ -548,7 +548,8 @@ class _TachoEdges:
         rise = np.flatnonzero(b[1:] & ~b[:-1]) + 1
         if rise.size:
             x0, x1 = xx[rise - 1], xx[rise]
-            frac = np.where(x1 > x0, (self.half - x0) / np.where(x1 > x0, x1 - x0, 1.0), 0.0)
+            with np.errstate(invalid="ignore", divide="ignore"):   # inf edges: frac unused
+                frac = np.where(x1 > x0, (self.half - x0) / np.where(x1 > x0, x1 - x0, 1.0), 0.0)
             self.parts.append(self.t0 + (rise + off - 1 + np.clip(frac, 0.0, 1.0)) / self.fs)
         self.last = x[-1:].copy()
         self.pos += x.size
@@ -915,11 +916,17 @@ class _Chain:
     limit, each stage streaming; ``push`` returns the newly final conditioned samples."""
 
     def __init__(self, n: int, *, dropouts: np.ndarray | None, notch: _ZeroPhase | None,
-                 drift, snr: "_SnrTap", band: _ZeroPhase | None):
+                 drift, snr: "_SnrTap", band: _ZeroPhase | None, dtype=np.float64):
         self.n = n
         self.dropouts = dropouts if dropouts is not None and len(dropouts) else None
         self.notch, self.drift, self.snr, self.band = notch, drift, snr, band
         self.pos = 0
+        # a float32 recording holds each conditioning step's result as float32 (as the
+        # whole-array path does, writing every step back into the recording's array)
+        self.round = np.dtype(dtype) == np.float32
+
+    def _rounded(self, x: np.ndarray) -> np.ndarray:
+        return x.astype(np.float32).astype(np.float64) if self.round and x.size else x
 
     def _mask(self, x: np.ndarray) -> np.ndarray:
         if self.dropouts is None:
@@ -936,12 +943,13 @@ class _Chain:
 
     def _through(self, x: np.ndarray, final: bool) -> np.ndarray:
         for st in (self.notch, self.drift):
-            if st is None:
+            if st is None or isinstance(st, _Identity):
                 continue
             x = st.push(x) if x.size else np.empty(0)
             if final:
                 tail = st.flush()
                 x = np.concatenate([x, tail]) if tail.size else x
+            x = self._rounded(x)
         if x.size:
             self.snr.add(x)
         if self.band is not None:
@@ -949,7 +957,7 @@ class _Chain:
             if final:
                 tail = self.band.flush()
                 y = np.concatenate([y, tail]) if tail.size else y
-            x = y
+            x = self._rounded(y)
         return x
 
     def push(self, x: np.ndarray) -> np.ndarray:
@@ -991,7 +999,8 @@ class _SnrTap:
         if x.size == 0:
             return
         xx = x if self.last is None else np.concatenate([self.last, x])
-        d = np.diff(xx)
+        with np.errstate(invalid="ignore"):            # inf - inf: dropped below
+            d = np.diff(xx)
         d = d[np.isfinite(d)]
         first = (-self.rank) % self.step
         self.parts.append(d[first::self.step].copy())
@@ -1118,6 +1127,7 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
                      drift_window: float | None = None, lowpass="auto",
                      highpass: float | None = None, order: int = 4, warn: bool = True,
                      block: int = BLOCK_SAMPLES, memory_budget: float = MEMORY_BUDGET,
+                     on_samples: Callable[[str, int, np.ndarray], None] | None = None,
                      progress: Callable[[str, int, int], None] | None = None) -> StreamResult:
     """Pass 3: condition the planned channels and detect onsets on the gauges, streamed.
 
@@ -1139,6 +1149,9 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
         Samples per channel read at a time.
     memory_budget : float
         Largest estimated memory [B] (:func:`stream_memory`); ValueError above it.
+    on_samples : callable(channel, first sample, samples), optional
+        Called with every piece of conditioned samples as it is final (e.g. to write the
+        conditioned recording out, block by block); the array is the callee's to keep.
     progress : callable(name, done, total), optional
 
     Returns
@@ -1225,7 +1238,8 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
             if st is not None:
                 est_overlap += st.L
         chains[p.name] = _Chain(n, dropouts=q.dropout_runs, notch=notch,
-                                drift=dr if dr is not None else _Identity(), snr=snr, band=band)
+                                drift=dr if dr is not None else _Identity(), snr=snr, band=band,
+                                dtype=h.dtype)
         taps[p.name] = snr
         gaps[p.name] = _RunTrack()
         excerpts[p.name] = np.empty(n_ex)
@@ -1260,6 +1274,8 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
             # a fresh float64 copy: the stages hold on to what they are given
             y = chains[p.name].push(np.array(data[:, idx[p.name]], dtype=np.float64))
             t_cond += time.perf_counter() - t
+            if on_samples is not None and y.size:
+                on_samples(p.name, done[p.name], y)
             _deliver(p, y, done, gaps, excerpts, n_ex)
             if p.name in onsets and y.size:
                 t = time.perf_counter()
