@@ -57,14 +57,13 @@ import numpy as np
 from scipy import ndimage, signal
 
 from .errors import DataQualityWarning
-from .log import logger
 from .recording import ChannelSpec, Recording
 from .validate import as_positive
 
 __all__ = ["StreamedRecording", "BlockSource", "FileSource", "MemorySource", "RawScan",
            "ChannelPlan", "StreamResult", "scan_source", "condition_stream", "filter_overlap",
-           "stream_memory", "MEMORY_BUDGET", "BLOCK_SAMPLES", "HUM_SECONDS",
-           "EXCERPT_SECONDS"]
+           "stream_memory", "MEMORY_BUDGET", "PROCESS_RSS_BUDGET", "BLOCK_SAMPLES",
+           "HUM_SECONDS", "EXCERPT_SECONDS"]
 
 #: Samples per channel read at a time [-] (one block of every channel is held).
 BLOCK_SAMPLES = 1 << 18
@@ -77,6 +76,11 @@ _EXCERPT_MAX = 1 << 19
 #: Default memory budget of the streaming stages [B]: the estimate of
 #: :func:`stream_memory` must stay below it.
 MEMORY_BUDGET = 2 * 1024 ** 3
+#: Peak resident memory of ``meshphase process`` on a recording of up to 8 channels at
+#: 5120 Hz, whatever its length [B]: what ``meshphase bench processing`` measures (~0.5 GB
+#: from 10 min to 3 h, Python and its libraries included) with a factor 2 of headroom;
+#: tests/processing/test_stream.py holds a 30-minute run to it (slow).
+PROCESS_RSS_BUDGET = 1024 ** 3
 #: Decay of the slowest filter pole over the overlap of two filter windows [-].
 _DECAY = 1e-15
 _FILL_MAX = 8          # gap bridging of the conditioning filters (filter_signal's default)
@@ -289,8 +293,7 @@ class FileSource(BlockSource):
             self.i0, self.i1 = 0, info.n_samples
         else:
             self.i0, self.i1 = info.window(start, stop)
-        dtype = np.dtype(info.extra.get("dtype") or info.meta.get("dtype") or "float64") \
-            if isinstance(info.extra, dict) else np.dtype("float64")
+        dtype = np.dtype(np.float64)            # until the first block says otherwise
         self.gains = list(gains or [])
         self.header = StreamedRecording(info.fs, self.i1 - self.i0,
                                         tuple(channels) if channels is not None else tuple(info.channels),
@@ -1160,7 +1163,7 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
     """
     import time
 
-    from .condition import (HumReport, _drift_window, _short_segments_message,
+    from .condition import (_drift_window, _short_segments_message,
                             _short_signal_message, _warn_quality, detect_hum,
                             finite_apply_gaps, quality_from_scan)
     from .onsets import OnsetStream

@@ -1,8 +1,11 @@
 """Benchmarks behind ``meshphase bench``: measured, never asserted.
 
-- :mod:`.io`          read throughput per format as a ratio to a raw .npy read, peak memory
+- :mod:`.io`          read throughput per format as a ratio to a raw .npy read, peak memory;
+                      peak RSS of ``meshphase convert`` from 10 min to 3 h of 8 channels
 - :mod:`.models`      Monte Carlo error against run time (plain vs Sobol sampling)
-- :mod:`.processing`  onset timing error vs the Cramer-Rao bound, detection throughput
+- :mod:`.processing`  onset timing error vs the Cramer-Rao bound, detection throughput; peak
+                      RSS and wall time of ``meshphase process`` from 2 min to 3 h of 8 channels
+- :mod:`.rss`         the child-process peak-memory measurement both use
 
 :func:`run_bench` runs one or all of them into one output folder.
 """
@@ -48,14 +51,16 @@ def run_bench(what: str, out_dir, *, minutes: float = 60.0, quick: bool = False)
         t = time.perf_counter()
         logger.info("bench %s -> %s", kind, out)
         if kind == "io":
-            from .io import run_io_bench
-            results[kind] = run_io_bench(out, minutes=(min(minutes, 0.5) if quick else minutes))
+            from .io import CONVERT_MINUTES, run_io_bench
+            results[kind] = run_io_bench(out, minutes=(min(minutes, 0.5) if quick else minutes),
+                                         convert_minutes=(0.5, 1.0) if quick else CONVERT_MINUTES)
         elif kind == "models":
             from .models import run_models_bench
             results[kind] = run_models_bench(out, quick=quick)
         else:
-            from .processing import run_processing_bench
-            results[kind] = run_processing_bench(out, quick=quick)
+            from .processing import PROCESS_MINUTES, run_processing_bench
+            results[kind] = run_processing_bench(
+                out, quick=quick, process_minutes=(0.5, 1.0) if quick else PROCESS_MINUTES)
         wall[kind] = time.perf_counter() - t
     files = {p.name: str(p) for p in sorted(out.iterdir()) if p.is_file()}
     summary = {"kinds": list(kinds), "wall_s": wall, "files": list(files)}

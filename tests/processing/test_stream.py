@@ -408,3 +408,35 @@ def test_write_blocks_bad_header_and_dtype(tmp_path):
         io.write_blocks(rec, [rec.data], tmp_path / "x.h5", dtype="int16")
     with pytest.raises(ValueError, match="read-only"):
         io.write_blocks(rec, [rec.data], tmp_path / "x.tdms")
+
+
+# ---------------------------------------------------------------- peak memory of process
+def test_run_child_measures_a_child_and_refuses_other_jobs():
+    from pipeline.bench.rss import run_child
+
+    r = run_child("sosfiltfilt_job", n=1 << 16, repeats=1)
+    assert r["returncode"] == 0 and r["samples_per_s"] > 0
+    assert r["peak_rss_mb"] > 10 and r["wall_s"] >= r["job_s"] > 0
+    with pytest.raises(ValueError, match="job"):
+        run_child("os_system")
+
+
+@pytest.mark.slow
+def test_process_peak_rss_on_a_30_minute_file_stays_under_the_budget(tmp_path):
+    # meshphase process on 30 min x 8 channels (float64 HDF5: 590 MB of samples): a child
+    # process, its peak RSS from os.wait4. Before streaming it peaked at ~5x the samples
+    # (~2.9 GB); the streaming stages hold a fixed budget (pipeline.stream.PROCESS_RSS_BUDGET)
+    from pipeline.bench.rss import BENCH_GEARSET, run_child
+    from pipeline.stream import PROCESS_RSS_BUDGET
+
+    path = tmp_path / "rec30.h5"
+    w = run_child("write_job", path=str(path), minutes=30.0)
+    assert w["n_samples"] == 30 * 60 * 5120 and w["n_channels"] == 8
+    gs = tmp_path / "gearset.toml"
+    gs.write_text(BENCH_GEARSET, encoding="utf-8")
+    r = run_child("process_job", path=str(path), gearset=str(gs), out_dir=str(tmp_path / "out"))
+    assert r["status"] in ("ok", "unreliable") and not r["failed"]
+    assert r["n_onsets"] > 5000
+    data_mb = path.stat().st_size / 2**20
+    assert r["peak_rss_mb"] * 2**20 < PROCESS_RSS_BUDGET
+    assert r["peak_rss_mb"] < data_mb            # less than the samples themselves
