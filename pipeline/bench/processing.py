@@ -65,7 +65,8 @@ THROUGHPUT_COLUMNS = ("stage", "scenario", "n_samples", "n_pulses", "runtime_s",
                       "wall_s")
 #: Columns of the ``meshphase process`` peak-memory table.
 PROCESS_COLUMNS = ("minutes", "n_channels", "n_samples", "data_mb", "status", "n_onsets",
-                   "wall_s", "peak_rss_mb", "rss_over_data", "memory_estimate_mb", "load_s",
+                   "wall_s", "peak_rss_mb", "streamed_peak_mb", "rss_over_data",
+                   "memory_estimate_mb", "load_s",
                    "condition_s", "onsets_s", "phasing_s", "other_s", "sosfiltfilt_s",
                    "wall_over_sosfiltfilt", "streamed_over_sosfiltfilt")
 #: Recording lengths of ``meshphase bench processing``'s process table [min].
@@ -413,7 +414,10 @@ def _markdown(res: dict) -> str:
                   "child process, BLAS on one thread; times in s. sosfiltfilt_s: one zero-phase "
                   "pass of the conditioning low-pass over the same samples (rate "
                   f"{res['meta'].get('sosfiltfilt_msps', float('nan')):.1f} MS/s here); streamed = "
-                  "load + condition + onsets (the three passes over the samples). Before "
+                  "load + condition + onsets (the three passes over the samples); "
+                  "streamed_peak_mb: the peak RSS (VmHWM) when they are done, peak_rss_mb: of "
+                  "the whole run (phasing and the later stages work on the passes, whose "
+                  "number grows with the length). Before "
                   "streaming, process peaked at ~5x the samples' size (10 min: 0.96 GB, 1 h: "
                   "5.1 GB, measured on this machine; 3 h would need ~15 GB).", ""]
         cols = PROCESS_COLUMNS
@@ -462,7 +466,9 @@ def process_rss_rows(work, minutes, *, seed: int = 1) -> tuple[list, list, float
         ref = n * N_CHANNELS / rate
         rows.append({"minutes": m, "n_channels": N_CHANNELS, "n_samples": n, "data_mb": data / 2**20,
                      "status": r["status"], "n_onsets": r["n_onsets"], "wall_s": r["wall_s"],
-                     "peak_rss_mb": r["peak_rss_mb"], "rss_over_data": r["peak_rss_mb"] / (data / 2**20),
+                     "peak_rss_mb": r["peak_rss_mb"],
+                     "streamed_peak_mb": (r.get("hwm_mb") or {}).get("onsets"),
+                     "rss_over_data": r["peak_rss_mb"] / (data / 2**20),
                      "memory_estimate_mb": r.get("memory_estimate_mb"),
                      "load_s": t.get("load"), "condition_s": t.get("condition"),
                      "onsets_s": r.get("onsets_s"), "phasing_s": t.get("phasing"),

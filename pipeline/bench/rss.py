@@ -189,18 +189,26 @@ def convert_job(src: str, dst: str) -> dict:
 
 def process_job(path: str, gearset: str, out_dir: str) -> dict:
     """``meshphase process PATH --gearset GEARSET --out OUT_DIR --overwrite``, in-process:
-    the stage timings and the run's status come back."""
+    the stage timings, the peak RSS reached by the end of each stage (VmHWM) and the run's
+    status come back."""
     import warnings
 
+    from .. import stages
     from ..exits import run_status
     from ..stages import process_recording
 
+    hwm = {}
+    for name, fn in list(stages.STAGE_FUNCTIONS.items()):   # this child process only
+        def wrapped(ctx, fn=fn, name=name):
+            fn(ctx)
+            hwm[name] = _vmhwm()
+        stages.STAGE_FUNCTIONS[name] = wrapped
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         ctx, files = process_recording(path, gearset, out_dir=out_dir, overwrite=True)
     ons = ctx.results.get("onsets", {}).get("by_channel", {})
     cond = ctx.results.get("condition", {})
-    return {"status": run_status(ctx)["status"], "timings": dict(ctx.timings),
+    return {"status": run_status(ctx)["status"], "timings": dict(ctx.timings), "hwm_mb": hwm,
             "failed": dict(ctx.failed), "n_onsets": int(sum(len(o) for o in ons.values())),
             "onsets_s": float(cond.get("timings", {}).get("onsets_s", float("nan"))),
             "memory_estimate_mb": (cond.get("memory", {}).get("total", 0) / 2**20) or None}
