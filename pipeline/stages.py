@@ -170,11 +170,18 @@ def _check_gauges(ctx: RunContext, rec: Recording, source: str) -> list[str]:
     return [c.name for c in rec.channels if c.name not in used]
 
 
+#: A synthetic recording up to this size [B] is generated whole, once; a longer one is
+#: generated block by block again for each pass over its samples (bounded memory).
+SYNTHETIC_WHOLE_BYTES = 256 * 2**20
+
+
 def stage_load(ctx: RunContext) -> None:
     """Open the recording and scan its raw samples (passes 1 and 2 of :mod:`pipeline.stream`):
     the quality of every channel, the tacho's edges, the hum windows. A file is never held
-    in memory: the later stages stream it again; a synthetic recording is generated whole."""
-    from .stream import FileSource, MemorySource, scan_source
+    in memory: the later stages stream it again. A synthetic recording up to
+    :data:`SYNTHETIC_WHOLE_BYTES` is generated whole, once; a longer one is generated again,
+    block by block, for every pass (the generator is deterministic)."""
+    from .stream import BLOCK_SAMPLES, FileSource, GeneratorSource, MemorySource
 
     inp = ctx.scene.input
     truth = None
@@ -198,16 +205,30 @@ def stage_load(ctx: RunContext) -> None:
                     "channel_overrides", channels=[o["name"] for o in overrides])
         rec = src.header
     else:
-        from synthetic import generate
+        from synthetic import generate_blocks
 
         minutes = inp.get("minutes")
         # a config built in code (benchmarks, tests) wins over the registered scenario's
-        rec, truth = generate(inp.get("config") or inp["synthetic"],
-                              duration=None if minutes is None else 60.0 * minutes,
-                              seed=inp.get("seed", 0))
+        stream = generate_blocks(inp.get("config") or inp["synthetic"],
+                                 duration=None if minutes is None else 60.0 * minutes,
+                                 seed=inp.get("seed", 0))
+        truth = stream.truth
         source = f"synthetic:{inp['synthetic']}"
-        rec = _apply_channel_overrides(rec, overrides, source)
-        src = MemorySource(rec)
+        size = stream.n_samples * len(stream.channels) * stream.dtype.itemsize
+        if size <= SYNTHETIC_WHOLE_BYTES:
+            # short: generated once, whole (in memory anyway)
+            rec = _apply_channel_overrides(stream.collect(), overrides, source)
+            src = MemorySource(rec)
+        else:
+            # long: generated again, block by block, for every pass over the samples
+            specs, gains = _channel_overrides(stream.names, stream.channels, overrides, source,
+                                              _channels_present(stream))
+            stream.block_samples = BLOCK_SAMPLES       # the blocks the file path reads
+            src = GeneratorSource(stream, channels=specs, gains=gains)
+            if overrides:
+                src.header = src.header.with_history(
+                    "channel_overrides", channels=[o["name"] for o in overrides])
+            rec = src.header
     ctx.channels_unused = _check_gauges(ctx, rec, source)
     true_errors = None
     if truth is not None and truth.errors is not None:

@@ -60,9 +60,10 @@ from .errors import DataQualityWarning
 from .recording import ChannelSpec, Recording
 from .validate import as_positive
 
-__all__ = ["StreamedRecording", "BlockSource", "FileSource", "MemorySource", "RawScan",
+__all__ = ["StreamedRecording", "BlockSource", "FileSource", "MemorySource", "GeneratorSource",
+           "RawScan",
            "ChannelPlan", "StreamResult", "scan_source", "condition_stream", "filter_overlap",
-           "stream_memory", "MEMORY_BUDGET", "PROCESS_RSS_BUDGET", "BLOCK_SAMPLES",
+           "stream_memory", "scan_memory", "MEMORY_BUDGET", "PROCESS_RSS_BUDGET", "BLOCK_SAMPLES",
            "HUM_SECONDS", "EXCERPT_SECONDS"]
 
 #: Samples per channel read at a time [-] (one block of every channel is held).
@@ -383,6 +384,39 @@ class FileSource(BlockSource):
             self._dtype_known = True
 
 
+class GeneratorSource(BlockSource):
+    """A synthetic recording generated block by block, again for every pass (the generator
+    is deterministic: :func:`synthetic.generate_blocks` gives the same samples each time).
+
+    Parameters
+    ----------
+    stream : synthetic.generate.SyntheticStream
+        (:func:`synthetic.generate_blocks`); its own block length is used.
+    channels : sequence of ChannelSpec, optional
+        Specs replacing the stream's (channel overrides).
+    gains : list of (int, float), optional
+        (column, factor) applied to the samples, in order.
+    """
+
+    def __init__(self, stream, channels=None, gains: list | None = None):
+        self.stream = stream
+        self.gains = list(gains or [])
+        self.header = StreamedRecording(stream.fs, stream.n_samples,
+                                        tuple(channels) if channels is not None else tuple(stream.channels),
+                                        stream.t0, stream.start_datetime, stream.meta,
+                                        stream.history, stream.dtype)
+
+    @property
+    def label(self) -> str:
+        return "synthetic recording"
+
+    def blocks(self, n_block: int):
+        pos = 0
+        for blk in self.stream:
+            yield pos, _apply_gains(blk.data, self.gains, copy=False)
+            pos += blk.n_samples
+
+
 def _rechunk(source: BlockSource, n_block: int) -> Iterator[tuple[int, np.ndarray]]:
     """The source's blocks, checked to be consecutive and to cover the recording."""
     pos = 0
@@ -493,6 +527,24 @@ def stream_memory(fs: float, n_samples: int, n_channels: int, n_conditioned: int
     return out
 
 
+def scan_memory(fs: float, n_samples: int, n_channels: int, n_conditioned: int, *,
+                itemsize: int = 8, block: int = BLOCK_SAMPLES,
+                hum_seconds: float = HUM_SECONDS) -> dict:
+    """Estimated peak memory of passes 1 and 2 (:func:`scan_source`) [B], by item.
+
+    Parameters as :func:`stream_memory`; ``hum_seconds`` [s]. Returns a dict with ``"total"``;
+    the buffers that grow with fs are capped at the recording's length.
+    """
+    n = max(int(n_samples), 0)
+    blk = min(int(block), n)
+    out = {"read block (all channels, stored + float64 copies)": blk * n_channels * (itemsize + 8),
+           "hum windows": 8 * min(int(hum_seconds * fs), n) * n_conditioned,
+           # strided subsamples of the flat-run statistics: 2**16 + 2**16 + 2**18 per channel
+           "quality subsamples": 8 * min(3 * 2**16 + 2**18, 2 * n) * n_channels}
+    out["total"] = int(sum(out.values()))
+    return out
+
+
 def _check_budget(est: dict, budget: float, fs: float, what: str) -> None:
     if est["total"] > budget:
         big = max((k for k in est if k != "total"), key=lambda k: est[k])
@@ -563,6 +615,7 @@ class _TachoEdges:
 
 def scan_source(source: BlockSource, *, conditioned: Sequence[str] = (), tacho: str | None = None,
                 block: int = BLOCK_SAMPLES, hum_seconds: float = HUM_SECONDS,
+                memory_budget: float = MEMORY_BUDGET,
                 progress: Callable[[str, int, int], None] | None = None) -> RawScan:
     """Passes 1 and 2: the quality of every channel, the tacho edges and the hum windows.
 
@@ -577,6 +630,8 @@ def scan_source(source: BlockSource, *, conditioned: Sequence[str] = (), tacho: 
         Samples per channel read at a time.
     hum_seconds : float
         Length of the hum window [s].
+    memory_budget : float
+        Largest estimated memory [B] (:func:`scan_memory`); ValueError above it.
     progress : callable(pass name, samples done, samples total), optional
 
     Returns
@@ -585,9 +640,18 @@ def scan_source(source: BlockSource, *, conditioned: Sequence[str] = (), tacho: 
     """
     from .quality import ChannelScan
 
+    if not isinstance(source, BlockSource):
+        raise TypeError(f"source must be a BlockSource (FileSource, MemorySource, "
+                        f"GeneratorSource), got {type(source).__name__}")
     h = source.header
     n = h.n_samples
     specs = h.channels
+    unknown = [c for c in list(conditioned) + ([tacho] if tacho else []) if c not in h.names]
+    if unknown:
+        raise ValueError(f"{source.label}: no channel(s) {unknown}; channels: {h.names}")
+    _check_budget(scan_memory(h.fs, n, h.n_channels, len(conditioned), itemsize=h.dtype.itemsize,
+                              block=block, hum_seconds=hum_seconds),
+                  memory_budget, h.fs, "quality scan")
     scans = {c.name: ChannelScan(n, flat=c.kind != "tacho") for c in specs}
     nblk = 0
     for a, data in _rechunk(source, block):
@@ -1168,9 +1232,20 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
                             finite_apply_gaps, quality_from_scan)
     from .onsets import OnsetStream
 
+    if not isinstance(source, BlockSource):
+        raise TypeError(f"source must be a BlockSource, got {type(source).__name__}")
+    if not isinstance(scan, RawScan):
+        raise TypeError(f"scan must be the RawScan of scan_source, got {type(scan).__name__}")
     h = source.header
     n, fs = h.n_samples, h.fs
     plans = list(plans)
+    for p in plans:
+        if not isinstance(p, ChannelPlan):
+            raise TypeError(f"plans must be ChannelPlan objects, got {type(p).__name__}")
+        if p.name not in scan.results:
+            raise ValueError(f"plan for channel {p.name!r}: not in the recording; channels: {h.names}")
+    if drift is not None and drift not in ("median", "savgol", "highpass"):
+        raise ValueError(f"drift must be 'median', 'savgol', 'highpass' or None, got {drift!r}")
     quality = {}
     for p in plans:
         quality[p.name] = quality_from_scan(scan.results[p.name], p.name, fs, h.t0)
@@ -1196,6 +1271,7 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
         q = quality[p.name]
         bad = q.all_gap_runs()                                 # masked input: gaps + dropouts
         notch = None
+        chain_l = 0
         if p.name in notch_sos:
             notch = _ZeroPhase(notch_sos[p.name], n, what="notch_hum", chunk=block)
             out, n_short, whole = finite_apply_gaps(bad, n, min_len=notch.min_len, fill_max=_FILL_MAX)
@@ -1219,7 +1295,7 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
                     notes.append(_short_segments_message("filter_signal(highpass)", n_short, dr.min_len))
                 bad = out
                 settle[p.group] = max(settle[p.group], 2.0 * w)
-                est_overlap = max(est_overlap, dr.L)
+                chain_l = dr.L
             else:
                 dr = _Drift(n, fs, method=drift, window=w, pulse_period=p.pulse_period)
                 est_drift = max(est_drift, dr.b)
@@ -1237,9 +1313,8 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
             from .condition import _settle_time
 
             settle[p.group] = max(settle[p.group], _settle_time(low, high))
-        for st in (notch, band):
-            if st is not None:
-                est_overlap += st.L
+        chain_l += sum(st.L for st in (notch, band) if st is not None)
+        est_overlap = max(est_overlap, chain_l)        # the longest chain's overlaps
         chains[p.name] = _Chain(n, dropouts=q.dropout_runs, notch=notch,
                                 drift=dr if dr is not None else _Identity(), snr=snr, band=band,
                                 dtype=h.dtype)

@@ -440,3 +440,78 @@ def test_process_peak_rss_on_a_30_minute_file_stays_under_the_budget(tmp_path):
     data_mb = path.stat().st_size / 2**20
     assert r["peak_rss_mb"] * 2**20 < PROCESS_RSS_BUDGET
     assert r["peak_rss_mb"] < data_mb            # less than the samples themselves
+
+
+def test_generator_source_equals_the_generated_recording():
+    # a long synthetic scene streams from the generator, generated again for every pass:
+    # the same samples as generated whole
+    from synthetic import generate_blocks
+
+    from pipeline.stream import GeneratorSource
+
+    rec, _ = generate("gaps", seed=4, duration=6.0)
+    gen = GeneratorSource(generate_blocks("gaps", seed=4, duration=6.0, block=1.3))
+    assert gen.header.n_samples == rec.n_samples and gen.header.names == rec.names
+    plans = [ChannelPlan("sun", mesh_freq=_mesh()["sun"][0], onsets=True)]
+    out = []
+    for src in (MemorySource(rec), gen):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DataQualityWarning)
+            scan = scan_source(src, conditioned=["sun"], tacho="tacho", block=5000)
+            out.append((scan, condition_stream(src, scan, plans, block=5000)))
+    (sa, ra), (sb, rb) = out
+    assert sa.quality == sb.quality
+    np.testing.assert_array_equal(sa.tacho_times, sb.tacho_times)
+    # other blocks (the generator's 1.3 s): other filter windows, equal to the tolerance
+    assert len(ra.onsets["sun"]) == len(rb.onsets["sun"]) > 3
+    assert np.max(np.abs(ra.onsets["sun"].times - rb.onsets["sun"].times)) * rec.fs < 1e-6
+
+
+def test_scan_and_condition_stream_bad_input():
+    rec, _ = generate("seed_rig", seed=1, duration=2.0)
+    src = MemorySource(rec)
+    with pytest.raises(TypeError, match="BlockSource"):
+        scan_source(rec)
+    with pytest.raises(ValueError, match="nope"):
+        scan_source(src, conditioned=["nope"])
+    with pytest.raises(ValueError, match="quality scan.*memory_budget"):
+        scan_source(src, conditioned=["sun"], memory_budget=1e4)
+    scan = scan_source(src, conditioned=["sun"])
+    with pytest.raises(TypeError, match="RawScan"):
+        condition_stream(src, {}, [])
+    with pytest.raises(ValueError, match="nope"):
+        condition_stream(src, scan, [ChannelPlan("nope")])
+    with pytest.raises(TypeError, match="ChannelPlan"):
+        condition_stream(src, scan, ["sun"])
+    with pytest.raises(ValueError, match="drift"):
+        condition_stream(src, scan, [ChannelPlan("sun")], drift="mean")
+    res = condition_stream(src, scan, [])              # nothing planned: nothing conditioned
+    assert res.quality == {} and res.onsets == {} and res.excerpt.n_channels == 0
+
+
+def test_long_synthetic_scene_streams_from_the_generator(monkeypatch):
+    # above SYNTHETIC_WHOLE_BYTES the load stage generates the recording again for every
+    # pass instead of holding it; with the same blocks the result is the same to rounding
+    # (the conditioning is block-wise either way: only where the samples come from differs)
+    from pipeline import stages
+    from pipeline.scene import parse_scene
+    from pipeline.stream import GeneratorSource
+
+    text = ('name = "gen"\nresults = ["phasing"]\n[input]\nsynthetic = "gaps"\nminutes = 0.1\n'
+            'seed = 3\n[[channels]]\nname = "sun"\ngain = 2.0\n')
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataQualityWarning)
+        warnings.simplefilter("ignore", ProcessingWarning)
+        whole = stages.run_scene(parse_scene(text))
+        monkeypatch.setattr(stages, "SYNTHETIC_WHOLE_BYTES", 0)
+        gen = stages.run_scene(parse_scene(text))
+    assert isinstance(gen.results["load"]["stream"], GeneratorSource)
+    assert isinstance(whole.results["load"]["stream"], MemorySource)
+    assert gen.results["load"]["recording"].history[-1]["step"] == "channel_overrides"
+    assert whole.results["load"]["quality"] == gen.results["load"]["quality"]
+    assert len(whole.results["condition"]["onsets"]["sun"]) > 3
+    for ch, on in whole.results["condition"]["onsets"].items():
+        other = gen.results["condition"]["onsets"][ch]
+        assert len(on) == len(other)
+        # same samples, same blocks: equal up to float rounding of the summation order
+        np.testing.assert_allclose(on.times, other.times, rtol=0, atol=1e-9 / 5120)
