@@ -71,7 +71,8 @@ from .validate import as_finite_array
 
 __all__ = ["PassTrain", "Kinematics", "AngleModel", "gauge_train", "tacho_train",
            "kinematics", "fit_angle_model", "revolution_numbers", "held_member",
-           "typed_resolution", "relabel_train", "label_shift_costs"]
+           "typed_resolution", "relabel_train", "label_shift_costs",
+           "mesh_cycles_per_carrier_turn"]
 
 TWO_PI = 2.0 * math.pi
 #: spline interval counts tried, in order
@@ -987,7 +988,7 @@ def _lag1(resid: np.ndarray, pl: np.ndarray) -> float:
 
 def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: int = 4,
                     max_planet_harmonics: int = 2, outlier_k: float = 6.0,
-                    max_knots: int | None = None) -> AngleModel:
+                    max_knots: int | None = None, planet_ripple: bool = False) -> AngleModel:
     """Fit the mesh angle A(t) to every pass train and tacho at once (module notes).
 
     Parameters
@@ -1009,6 +1010,13 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
     max_knots : int, optional
         Cap on the spline intervals (default: knots at least two relative revolutions of the
         densest gauge train apart, at most 64 intervals).
+    planet_ripple : bool
+        Also try a common speed ripple at the planet spin rate. Off by default: on one
+        gear's gauges it is the same as an equal term on every planet (each planet's own
+        offset is certain to be there, a common planet-rate speed ripple is not), and only
+        the two gears together over a long record tell them apart; tried on shorter records
+        it takes up what the planets' own terms should (a 30-s seed-rig ramp: 4.7e-3 mesh
+        cycles of error with it, 1e-4 without).
 
     Returns
     -------
@@ -1056,8 +1064,8 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
     # a shaft must turn at least once over the record for its ripple to be told from drift
     mean_rate = (d.y.max() - d.y.min()) / span if span > 0 else 0.0
     turns = {r: mean_rate * span / P for r, P in kin.periods.items()}
-    rates = [r for r in rates if turns[r] >= 1.0]
-    skipped = [r for r in kin.periods if r not in rates]
+    rates = [r for r in rates if turns[r] >= 1.0 and (planet_ripple or r != "planet")]
+    skipped = [r for r in kin.periods if r not in rates and (planet_ripple or r != "planet")]
     if skipped:
         notes.append(f"no ripple terms for {', '.join(skipped)}: fewer than one turn in the record")
     ones = np.ones(len(use))
@@ -1122,7 +1130,8 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
         best = None
         for c in cands:
             lay = d.layout(c)
-            if lay["p"] >= 0.5 * np.count_nonzero(d.active):
+            n_act = np.count_nonzero(d.active)
+            if lay["p"] > n_act - max(4, 0.2 * n_act):
                 continue
             th0 = _extend(fit, c, d)
             f2 = _solve(d, c, th0, ones, max_iter=4, recheck=False)
@@ -1134,7 +1143,9 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
         fit = full if full.bic() <= best.bic() + 1e-9 * abs(best.bic()) else best
         spec = best.spec
         selection.append((step, spec.describe(), fit.bic()))
-    # 3. variance factors per train, outliers against the final model, final fit
+    # 3. variance factors per train, outliers against the final model, final fit (each round
+    # judges every observation afresh: one left out early by a poorer model may come back)
+    base_active = d.active.copy()
     scale = ones.copy()
     for _ in range(4):
         fit = _solve(d, spec, fit.theta, scale, full=True)
@@ -1151,14 +1162,15 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
             new[q] = max(s, 1.0) if tr.sigma_given else max(s, 1e-6)
         out = np.zeros(n_obs, bool)
         for q in range(len(use)):
-            m = (d.q == q) & d.active
+            m = (d.q == q) & base_active
             lim = outlier_k * new[q] / w[m]
             idx = np.flatnonzero(m)
             out[idx[np.abs(fit.resid[m]) > lim]] = True
-        if not out.any() and np.allclose(new, scale, rtol=1e-3):
+        active = base_active & ~out
+        if np.array_equal(active, d.active) and np.allclose(new, scale, rtol=1e-3):
             scale = new
             break
-        d.active &= ~out
+        d.active = active
         scale = new
     fit = _solve(d, spec, fit.theta, scale, full=True)
     dropped, dnotes = _dropped_notes(d, fit.lay, fit.keep)
@@ -1312,6 +1324,8 @@ def held_member(z_sun: int, z_ring: int, speeds=None, *, resolution=None,
             why = "no member's speed is zero: a differential (both driven)"
     if mesh_rate is not None and carrier_rate is not None and carrier_rate > 0 and mesh_rate > 0:
         ratio = mesh_rate / carrier_rate
+        if not math.isfinite(ratio):
+            return from_speeds, why or "no speeds: treated as a differential"
         data = None
         for name, z in (("ring", z_ring), ("sun", z_sun)):
             if abs(ratio / z - 1.0) <= rel_tol:
@@ -1374,3 +1388,30 @@ def label_shift_costs(reference, train: PassTrain, fractions, kin: Kinematics,
         if np.isfinite(fit.chi2):
             out[s] = fit.chi2
     return out
+
+
+def mesh_cycles_per_carrier_turn(train: PassTrain, tacho_times) -> float:
+    """Measured mesh cycles per carrier revolution between the first and last tacho edge.
+
+    The gauge train's mesh angle (its targets, piecewise linear between passes) is read at
+    the first and the last edge inside its span; the edges count whole carrier turns
+    (:func:`revolution_numbers`). Both counts cover the same interval, so a ramp or ripple
+    cancels; the error is the linear interpolation between two passes at each end (a
+    fraction of the speed variation within one pass interval). A held ring gives Z_r, a held
+    sun Z_s (:func:`held_member`). NaN when fewer than two edges fall inside the train.
+    """
+    if not isinstance(train, PassTrain):
+        raise TypeError(f"train must be a PassTrain, got {type(train).__name__}")
+    t = _check_times(tacho_times, "tacho_times")
+    if len(train) < 2 or t.size < 2:
+        return float("nan")
+    k = revolution_numbers(t)
+    inside = (t >= train.times[0]) & (t <= train.times[-1])
+    if np.count_nonzero(inside) < 2:
+        return float("nan")
+    ta, tb = t[inside][0], t[inside][-1]
+    ka, kb = k[inside][0], k[inside][-1]
+    if kb == ka:
+        return float("nan")
+    a = np.interp([ta, tb], train.times, train.target)
+    return float((a[1] - a[0]) / (kb - ka))

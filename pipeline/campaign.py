@@ -4,21 +4,34 @@ The scene supplies the gearset, channel map, tolerances and the results wanted; 
 recording file replaces the scene's ``[input]``. Every recording is one Dask task that gets
 *file paths* (scene, recording, output folder), never open handles or arrays, loads the
 scene in the worker, runs :func:`pipeline.stages.run_scene` and writes its own results into
-``OUT/<recording name>/``. The task returns a small JSON-friendly dict; a recording that
-fails (unreadable file, a stage raising, even the worker process dying) is reported as
-failed and the others finish. The client then writes ``campaign.json``, ``campaign.csv`` and
-``campaign_report.html`` (:mod:`pipeline.report.campaign_report`) across all recordings.
+``OUT/recordings/<recording name>/`` (:func:`recording_names`; a name space of their own,
+so no recording can collide with the campaign's files), its completion marker
+(:data:`DONE_NAME`) last. The task returns a small JSON-friendly dict; a recording that
+fails (unreadable file, a stage raising, the worker process dying more often than Dask
+retries, a task running past its timeout) is reported as failed and the others finish. The
+client then writes ``campaign.json``, ``campaign.csv`` and ``campaign_report.html``
+(:mod:`pipeline.report.campaign_report`) across all recordings, each atomically; the whole
+folder is built beside ``OUT`` and swapped in when finished (:class:`pipeline.exits.OutputDir`).
+
+Faults: a task's timeout (:func:`default_task_timeout`, ``--task-timeout``) counts from the
+moment it starts on a worker (the worker tells the client through a Dask event); past it the
+task is failed and its worker killed (our LocalCluster: the Nanny starts a new one) or
+restarted (another cluster). Workers lost under a task are seen in the scheduler's
+"remove-worker" events; Dask retries the task and the campaign records each retry with its
+cause. ``--resume`` reuses the recordings whose marker matches their inputs
+(:func:`recording_key`) in ``OUT`` and in ``OUT.partial`` (what an unfinished campaign kept).
 
 Results that need no recording are computed once, on the client, not once per recording:
 the tolerance Monte Carlo (its 3-sigma phasing band is passed to the tasks, which then
 compute the band coverage of their own passes exactly as :func:`pipeline.stages.stage_compare`
 does), the tilt solve and the (unmeasured) bearing moments. They go to ``OUT/scene/``.
 
-Cluster: a :class:`distributed.LocalCluster` with one single-threaded worker *process* per
-core by default (processes, because the stages are numpy/Python code that holds the GIL for
-long stretches, and because ``warnings.catch_warnings`` inside :func:`run_scene` is not
-thread-safe); ``scheduler="tcp://host:8786"`` uses an existing cluster instead, whose
-workers must have meshphase installed and see the same paths (a shared file system).
+Cluster: a :class:`distributed.LocalCluster` (:func:`local_cluster`: on 127.0.0.1 only, no
+dashboard unless asked) with one single-threaded worker *process* per core by default
+(processes, because the stages are numpy/Python code that holds the GIL for long stretches,
+and because ``warnings.catch_warnings`` inside :func:`run_scene` is not thread-safe);
+``scheduler="tcp://host:8786"`` uses an existing cluster instead, whose workers must have
+meshphase installed and see the same paths (a shared file system).
 
 Per-recording HTML reports are off by default (``recording_reports=False``): building one
 with its figures took about twice as long as processing a 1-min seed rig recording on the
@@ -28,13 +41,18 @@ reference machine (2.8 s vs 1.3 s), and the combined report is the product of a 
 
 from __future__ import annotations
 
+import contextlib
 import copy
+import hashlib
 import json
 import logging
 import math
 import os
+import queue
 import re
+import shutil
 import socket
+import stat
 import sys
 import tempfile
 import time
@@ -49,10 +67,26 @@ from .validate import as_positive, as_positive_int, as_regular_file
 
 __all__ = ["run_recording", "run_campaign", "cli_campaign", "collect_recordings",
            "recording_names", "split_results", "campaign_rows", "measure_speedup",
-           "phasing_reliability", "campaign_exit_code", "SCENE_DIR_NAME", "STATUSES"]
+           "phasing_reliability", "campaign_exit_code", "default_task_timeout", "local_cluster",
+           "recording_key", "completed_recordings", "SCENE_DIR_NAME", "RECORDINGS_DIR_NAME",
+           "DONE_NAME", "STATUSES", "TIMEOUT_BASE_S", "TIMEOUT_RATE_BPS"]
 
 #: sub-folder of the campaign output that holds the scene-level results
 SCENE_DIR_NAME = "scene"
+#: sub-folder of the campaign output with one folder per recording, ``recordings/<name>/``:
+#: names derived from recording files live in their own name space, so they never collide
+#: with the campaign's own files and folders
+RECORDINGS_DIR_NAME = "recordings"
+#: a recording's completion marker, written last and atomically into its folder: the key of
+#: its inputs (recording path, size, mtime; scene hash; meshphase version; options) and its
+#: campaign record. ``--resume`` skips a recording whose marker's key matches.
+DONE_NAME = "done.json"
+#: default ``--task-timeout`` of a recording of ``size`` bytes: TIMEOUT_BASE_S +
+#: size / TIMEOUT_RATE_BPS seconds (see :func:`default_task_timeout`)
+TIMEOUT_BASE_S = 300.0
+TIMEOUT_RATE_BPS = 100e3
+# worker -> client event when a task starts (its key, worker, pid): start of its timeout
+_START_TOPIC = "meshphase-task-start"
 _SKIP_SUFFIXES = (".truth.json", ".tdms_index")
 #: a recording's status in a campaign, best first (pipeline.exits.run_status)
 STATUSES = ("ok", "unreliable", "partial", "failed")
@@ -186,9 +220,30 @@ def collect_recordings(inputs: Iterable) -> tuple[list[Path], list[dict]]:
     return unique, skipped
 
 
+_MAX_NAME_BYTES = 120
+
+
+def _safe_name(stem: str) -> str:
+    """A folder name from a file stem: no leading dot (hidden, and the working names of
+    :mod:`pipeline.exits` start with one), never empty, at most 120 bytes (longer: cut, plus
+    a hash of the whole, so room is left for the suffixes that tell names apart)."""
+    name = re.sub(r"^\.+", lambda m: "_" * len(m.group()), stem.replace("\0", "")) or "recording"
+    raw = name.encode("utf-8", "surrogateescape")
+    if len(raw) > _MAX_NAME_BYTES:
+        digest = hashlib.blake2s(raw, digest_size=4).hexdigest()
+        name = raw[:_MAX_NAME_BYTES - 9].decode("utf-8", "ignore") + "~" + digest
+    return name
+
+
 def recording_names(paths: Iterable) -> list[str]:
-    """Unique output-folder names for ``paths``: the file stem, then ``stem_suffix`` where
-    stems collide, then ``-2``, ``-3`` ... (never ``scene``, which holds the scene results).
+    """Unique folder names for ``paths`` (the folders ``recordings/<name>/`` of a campaign).
+
+    The file stem; where stems collide (case-insensitively: a campaign folder may live on a
+    case-insensitive file system), the least of ``stem_<suffix>`` (``a.h5``, ``a.csv``),
+    ``stem_<parent folder>`` (``a/x.h5``, ``b/x.h5`` -> ``x_a``, ``x_b``) or both that tells
+    them apart; then ``-2``, ``-3`` ... Leading dots become ``_``; names longer than 120 bytes
+    are cut and get a hash. The names live in their own folder, so no recording name can
+    collide with the campaign's own files (``campaign.json``, ``figures``, ``scene`` ...).
 
     Parameters
     ----------
@@ -197,21 +252,38 @@ def recording_names(paths: Iterable) -> list[str]:
     Returns
     -------
     list of str
-        One name per path, in order, all distinct.
+        One name per path, in order, all distinct (also case-insensitively).
+
+    Raises
+    ------
+    TypeError
+        An entry is not a path.
     """
     paths = [Path(p) for p in paths]
-    stems = [p.stem or p.name for p in paths]
-    count: dict[str, int] = {}
-    for s in stems:
-        count[s] = count.get(s, 0) + 1
-    names = []
-    used = {SCENE_DIR_NAME}
-    for p, s in zip(paths, stems):
-        base = s if count[s] == 1 and s != SCENE_DIR_NAME else f"{s}_{p.suffix.lstrip('.') or 'file'}"
-        name, i = base, 2
-        while name in used:
-            name, i = f"{base}-{i}", i + 1
-        used.add(name)
+    stems = [_safe_name(p.stem or p.name) for p in paths]
+    groups: dict[str, list[int]] = {}
+    for i, s in enumerate(stems):
+        groups.setdefault(s.casefold(), []).append(i)
+    cands = list(stems)
+    for members in groups.values():
+        if len(members) < 2:
+            continue
+        suffix = {i: paths[i].suffix.lstrip(".") or "file" for i in members}
+        parent = {i: paths[i].parent.name or "root" for i in members}
+        for parts in ((suffix,), (parent,), (suffix, parent)):
+            trial = {i: _safe_name("_".join([stems[i]] + [part[i] for part in parts])) for i in members}
+            if len({t.casefold() for t in trial.values()}) == len(members):
+                break
+        else:  # nothing tells them apart (one file named twice): the stem, then -2, -3
+            trial = {}
+        cands = [trial.get(i, c) for i, c in enumerate(cands)]
+    names: list[str] = []
+    used: set[str] = set()
+    for c in cands:
+        name, k = c, 2
+        while name.casefold() in used:
+            name, k = f"{c}-{k}", k + 1
+        used.add(name.casefold())
         names.append(name)
     return names
 
@@ -457,12 +529,248 @@ def _failed_record(path: Path, name: str, out_dir: Path, error: str) -> dict:
             "timings_s": {}, "stages_ran": [], "stages_failed": {}, "messages": [], "files": {}}
 
 
+# ---------------------------------------------------------------------------- fault handling
+def default_task_timeout(size_bytes) -> float:
+    """The default ``--task-timeout`` of a recording of ``size_bytes`` bytes [s].
+
+    ``TIMEOUT_BASE_S + size_bytes / TIMEOUT_RATE_BPS``: 300 s plus 10 s per MB. The campaign of
+    8 x 2-min noisy seed-rig recordings (HDF5, 15.7 MB each) took 3-6 s per task on a loaded
+    2-core machine (about 3-5 MB/s), so the rate of 0.1 MB/s leaves a margin of 30-50 for
+    slower machines, compressed files (more samples per byte) and contention, and the 300 s
+    the start-up of a cold worker (imports, numba compilation); a 3-h recording of 8 channels
+    (about 1.4 GB) gets about 4 h. It exists to end a task that hangs (a read blocked on a
+    dead network file system, a deadlock), not to bound slow ones: give ``--task-timeout``
+    for a tighter limit.
+
+    Parameters
+    ----------
+    size_bytes : int or float
+        File size [B].
+
+    Returns
+    -------
+    float
+        Timeout [s].
+    """
+    from .validate import as_nonnegative
+
+    return TIMEOUT_BASE_S + as_nonnegative(size_bytes, "size_bytes") / TIMEOUT_RATE_BPS
+
+
+def _sha256_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def recording_key(recording, scene_sha256: str, options: dict | None = None) -> dict:
+    """What a recording's results depend on (the key of its completion marker).
+
+    Parameters
+    ----------
+    recording : str or Path
+        The recording file (resolved here).
+    scene_sha256 : str
+        SHA-256 of the scene file's bytes.
+    options : dict, optional
+        Campaign options that change the results (``recording_report``).
+
+    Returns
+    -------
+    dict
+        ``recording`` (resolved path), ``size`` [B], ``mtime_ns``, ``scene_sha256``,
+        ``meshphase`` (version), ``options``. A recording whose file was rewritten (size or
+        mtime changed), or a changed scene, gives a different key.
+
+    Raises
+    ------
+    OSError
+        The file cannot be stat'ed.
+    """
+    from . import __version__
+
+    if not isinstance(recording, (str, os.PathLike)):
+        raise TypeError(f"recording must be a path, got {type(recording).__name__} {recording!r}")
+    path = Path(recording).resolve()
+    st = os.stat(path)
+    return {"recording": str(path), "size": int(st.st_size), "mtime_ns": int(st.st_mtime_ns),
+            "scene_sha256": str(scene_sha256), "meshphase": __version__,
+            "options": dict(sorted((options or {}).items()))}
+
+
+def _read_json(path: Path) -> dict | None:
+    try:
+        if not stat.S_ISREG(os.lstat(path).st_mode):
+            return None
+        with open(path, "rb") as fh:
+            d = json.loads(fh.read(16 * 2**20).decode("utf-8"))
+    except (OSError, ValueError):
+        return None
+    return d if isinstance(d, dict) else None
+
+
+def _write_atomic(path: Path, write: Callable[[Path], None]) -> None:
+    """``write(tmp)`` to a temporary file beside ``path``, fsync, rename (pipeline.io)."""
+    from .io import atomic_path
+
+    with atomic_path(path, overwrite=True) as tmp:
+        write(tmp)
+
+
+def _write_text_atomic(path: Path, text: str) -> None:
+    _write_atomic(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+
+
+def completed_recordings(folder) -> dict[str, tuple[Path, dict]]:
+    """The recordings whose results are complete in a campaign folder (its completion markers).
+
+    Parameters
+    ----------
+    folder : str or Path
+        A campaign output folder (or its ``.partial`` twin); missing: empty result.
+
+    Returns
+    -------
+    dict
+        Resolved recording path -> (the recording's results folder, its marker: ``key``
+        (:func:`recording_key`) and ``record`` (what the task returned)).
+    """
+    out: dict[str, tuple[Path, dict]] = {}
+    try:
+        entries = sorted(os.scandir(Path(folder) / RECORDINGS_DIR_NAME), key=lambda e: e.name)
+    except OSError:
+        return out
+    for e in entries:
+        if not e.is_dir(follow_symlinks=False):
+            continue
+        m = _read_json(Path(e.path) / DONE_NAME)
+        if m and isinstance(m.get("key"), dict) and isinstance(m.get("record"), dict):
+            out.setdefault(str(m["key"].get("recording")), (Path(e.path), m))
+    return out
+
+
+def _link_or_copy(src, dst) -> None:
+    try:
+        os.link(src, dst, follow_symlinks=False)
+    except OSError:  # no hard links here (FAT, some network file systems), or across devices
+        shutil.copy2(src, dst, follow_symlinks=False)
+
+
+def _relocate(record: dict, old_dir, new_dir) -> dict:
+    """``record`` with its ``out_dir`` and ``files`` moved to ``new_dir`` (from the record's
+    own ``out_dir``, else ``old_dir``: a marker holds the paths its task wrote, in the
+    staging folder of the campaign that made it)."""
+    rec = dict(record)
+    old_dir = record.get("out_dir") or old_dir
+
+    def move(p):
+        try:
+            return str(Path(new_dir) / Path(p).relative_to(old_dir))
+        except (ValueError, TypeError):
+            return p
+
+    rec["out_dir"] = str(new_dir)
+    rec["files"] = {k: move(v) for k, v in (record.get("files") or {}).items()}
+    return rec
+
+
+def _campaign_task(task: Callable[..., dict], scene_path: str, recording_path: str, out_dir: str,
+                   dask_key: str | None = None, done_key: dict | None = None, **kw) -> dict:
+    """What a campaign worker runs for one recording: tell the client the task started (its
+    timeout counts from here), run ``task``, and when its results are usable (status ok,
+    unreliable or partial) write the completion marker :data:`DONE_NAME` last, atomically.
+    Gets paths only, never open handles."""
+    for what, v in (("scene_path", scene_path), ("recording_path", recording_path), ("out_dir", out_dir)):
+        if not isinstance(v, str):
+            raise TypeError(f"{what} must be a path string (tasks get paths, never handles), got "
+                            f"{type(v).__name__}")
+    if dask_key is not None:
+        try:
+            from distributed import get_worker
+
+            w = get_worker()
+            w.log_event(_START_TOPIC, {"key": dask_key, "worker": w.address, "pid": os.getpid()})
+        except ValueError:  # not in a worker (called directly)
+            pass
+    rec = task(scene_path, recording_path, out_dir, **kw)
+    if done_key is not None and isinstance(rec, dict) and rec.get("status") in ("ok", "unreliable", "partial"):
+        d = Path(out_dir)
+        try:
+            d.mkdir(parents=True, exist_ok=True)
+            _write_text_atomic(d / DONE_NAME, json.dumps(_jsonable({"meshphase_done": 1, "key": done_key,
+                                                                    "record": rec}), indent=1))
+        except OSError as exc:
+            rec.setdefault("messages", []).append(f"campaign: completion marker not written ({exc}); "
+                                                  "--resume will redo this recording")
+    return rec
+
+
+def _dashboard_address(dashboard) -> str:
+    """``--dashboard`` value -> the HTTP address: loopback unless a host is named."""
+    text = "" if dashboard is True else str(dashboard).strip()
+    if not text:
+        return "127.0.0.1:0"
+    if text.isdigit():
+        return f"127.0.0.1:{text}"
+    if text.startswith(":"):  # ":8787" means all interfaces to distributed; here loopback
+        return "127.0.0.1" + text
+    return text
+
+
+def local_cluster(n_workers: int, *, dashboard=None):
+    """The campaign's own Dask cluster: ``n_workers`` single-threaded worker processes.
+
+    Everything listens on the loopback interface only: the scheduler and the workers
+    (``host="127.0.0.1"``) and the scheduler's HTTP server, which distributed always starts
+    (health and metrics routes) and which serves the dashboard - unauthenticated - when asked
+    (``dashboard``); it is off by default. ``worker-saturation = 1.0``: a worker holds only
+    the task it runs (inputs are paths, prefetching buys nothing), so when a worker dies or a
+    task hangs only that task is concerned.
+
+    Parameters
+    ----------
+    n_workers : int
+    dashboard : None, bool, int or str
+        None/False: no dashboard (the HTTP server on 127.0.0.1, a free port). True: the
+        dashboard on 127.0.0.1, a free port. A port (8787, ":8787"): on 127.0.0.1 at that
+        port. ``host:port``: there, as given (another interface only when named: it has no
+        authentication; a warning is logged).
+
+    Returns
+    -------
+    distributed.LocalCluster
+        Its ``dashboard_link`` is the dashboard's address.
+    """
+    import dask
+    from distributed import LocalCluster
+
+    n_workers = as_positive_int(n_workers, "n_workers")
+    if dashboard is not None and not isinstance(dashboard, (bool, int, str)):
+        raise TypeError(f"dashboard must be None, a bool, a port or 'host:port', got "
+                        f"{type(dashboard).__name__} {dashboard!r}")
+    on = dashboard is not None and dashboard is not False
+    address = _dashboard_address(dashboard) if on else "127.0.0.1:0"
+    host = address.rsplit(":", 1)[0].strip("[]")
+    if on and host not in ("127.0.0.1", "localhost", "::1"):
+        logger.warning("campaign: the Dask dashboard listens on %s without authentication", address)
+    # the workers' own distributed logs (a cancelled task, a restart) reach stderr only when
+    # our logger is verbose (meshphase -v): the campaign reports those events itself
+    quiet = logging.WARNING if logger.isEnabledFor(logging.INFO) else logging.ERROR
+    with dask.config.set({"distributed.scheduler.worker-saturation": 1.0}):
+        return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                            host="127.0.0.1", dashboard_address=address, silence_logs=quiet,
+                            scheduler_kwargs={"dashboard": on})
+
+
 # ---------------------------------------------------------------------------- tables
 def campaign_rows(records: list[dict]) -> list[dict]:
     """One flat row per recording (the columns of ``campaign.csv``).
 
     Columns: name, recording, format, status, error, duration_s, wall_time_s, worker,
-    passes_<gauge>, rms_vs_ideal_<gauge>, rms_vs_model_<gauge>, coverage_<gauge>,
+    attempts (1 + the retries), retries (their causes, "; "-separated), resumed (taken from an
+    earlier run by ``--resume``), passes_<gauge>, rms_vs_ideal_<gauge>, rms_vs_model_<gauge>, coverage_<gauge>,
     gamma_mean_<gauge>_p<k>, gamma_std_<gauge>_p<k> [mesh cycles], load_sharing_p<k>,
     load_sharing_se_p<k> [-], identify_rms_after, n_messages, out_dir.
 
@@ -485,7 +793,8 @@ def campaign_rows(records: list[dict]) -> list[dict]:
         row = {"name": r.get("name"), "recording": r.get("recording"), "format": r.get("format"),
                "status": r.get("status"), "error": r.get("error") or "",
                "duration_s": info.get("duration_s"), "wall_time_s": r.get("wall_time_s"),
-               "worker": r.get("worker")}
+               "worker": r.get("worker"), "attempts": r.get("attempts", 1),
+               "retries": "; ".join(r.get("retries") or []), "resumed": bool(r.get("resumed"))}
         for gear in ("sun", "ring"):
             ph = (r.get("phasing") or {}).get(gear)
             row[f"passes_{gear}"] = None if ph is None else ph.get("n_passes")
@@ -569,9 +878,24 @@ def _cores() -> int:
 
 def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = None,
                  workers: int | None = None, overwrite: bool = False, progress: bool = True,
-                 recording_reports: bool = False,
-                 task: Callable[..., dict] | None = None) -> dict:
+                 recording_reports: bool = False, task: Callable[..., dict] | None = None,
+                 task_timeout: float | None = None, resume: bool = False, dashboard=None) -> dict:
     """Process many recordings with one scene as one Dask job.
+
+    The output folder is written whole or not at all (:class:`pipeline.exits.OutputDir`: a
+    staging folder swapped in at the end). Each recording's results go to
+    ``recordings/<name>/`` (:func:`recording_names`) with a completion marker written last
+    (:data:`DONE_NAME`); ``resume`` reuses the results whose marker matches the recording
+    (path, size, mtime), the scene (its SHA-256), the meshphase version and the options, and
+    redoes the rest. If the campaign does not finish (an error, Ctrl-C, the process killed)
+    after some recordings were done, those are kept in ``<out_dir>.partial`` for ``resume``.
+
+    A task counts its time from the moment it starts on a worker; past its timeout it is
+    failed ("timeout: ...", the campaign goes on) and its worker restarted (which needs a
+    Nanny: a LocalCluster always has one). A task whose worker dies (killed, crashed, out of
+    memory) is retried by Dask on another worker (up to ``distributed.scheduler.allowed-
+    failures`` times, 3 by default; then failed with KilledWorker); every retry is recorded
+    with its cause (``attempts``, ``retries`` in campaign.json and campaign.csv).
 
     Parameters
     ----------
@@ -581,14 +905,17 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
         Recording files and/or folders (:func:`collect_recordings`).
     out_dir : str or Path, optional
         Campaign output folder (default ``<scene stem>-campaign`` next to the scene). An
-        existing folder is never overwritten unless ``overwrite``: ``-2``, ``-3`` ... instead.
+        existing folder is never overwritten unless ``overwrite`` or ``resume``: ``-2``,
+        ``-3`` ... instead.
     scheduler : str, optional
         Address of an existing Dask scheduler (``tcp://host:8786``); its workers need
-        meshphase and the same paths. Default: a LocalCluster on this machine.
+        meshphase and the same paths. Default: a LocalCluster on this machine
+        (:func:`local_cluster`, on 127.0.0.1 only).
     workers : int, optional
         LocalCluster worker processes (one thread each); default one per core.
     overwrite : bool
-        Reuse ``out_dir`` if it exists.
+        Replace ``out_dir`` if it exists (atomically; refused when it holds files meshphase
+        did not write or symbolic links: :class:`pipeline.exits.OutputDir`).
     progress : bool
         A tqdm progress bar (recordings done) on stderr.
     recording_reports : bool
@@ -596,30 +923,47 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
     task : callable, optional
         The per-recording function, ``task(scene_path, recording_path, out_dir, **kw) ->
         dict`` (default :func:`run_recording`); must be importable by the workers.
+    task_timeout : float, optional
+        Seconds a task may run [s]; None: :func:`default_task_timeout` of each recording's
+        size; 0: no timeout.
+    resume : bool
+        Reuse the complete results in ``out_dir`` and ``<out_dir>.partial`` (implies
+        replacing ``out_dir``, as ``overwrite``).
+    dashboard : None, bool, int or str
+        The local cluster's Dask dashboard (:func:`local_cluster`): off by default; True or
+        a port: on 127.0.0.1.
 
     Returns
     -------
     dict
         ``scene``, ``scene_path``, ``out_dir``, ``cluster`` (``scheduler``, ``n_workers``,
-        ``local``), ``timing_s`` (``total``, ``scene_level``, ``cluster_start``,
-        ``processing``, ``report``), ``counts`` (ok / unreliable / partial / failed),
-        ``skipped_inputs``, ``scene_level`` (summary of the client-side results or None),
-        ``scene_status`` (their :func:`pipeline.exits.run_status`, or None), ``recordings``
-        (one dict per recording, in input order), ``exit_code`` (:func:`campaign_exit_code`)
-        and ``files`` (campaign.json, campaign.csv, campaign_report.html).
+        ``local``, ``dashboard``), ``timing_s`` (``total``, ``scene_level``,
+        ``cluster_start``, ``processing``, ``report``), ``counts`` (ok / unreliable / partial
+        / failed), ``skipped_inputs``, ``scene_level`` (summary of the client-side results or
+        None), ``scene_status`` (their :func:`pipeline.exits.run_status`, or None),
+        ``task_timeout`` (``mode`` "size" / "fixed" / "off", ``seconds``), ``resume``
+        (``enabled``, ``n_resumed``, ``sources``), ``recordings`` (one dict per recording, in
+        input order, with ``attempts``, ``retries`` and ``resumed``), ``exit_code``
+        (:func:`campaign_exit_code`) and ``files`` (campaign.json, campaign.csv,
+        campaign_report.html).
 
     Raises
     ------
     FileNotFoundError
         The scene, or a named recording / folder, does not exist.
+    FileExistsError
+        ``out_dir`` is a symbolic link, or (``overwrite`` / ``resume``) holds what meshphase
+        did not write.
     ValueError
-        No recording found, a bad scene, bad ``workers``, or an unreachable scheduler.
+        No recording found, a bad scene, bad ``workers`` / ``task_timeout``, or an
+        unreachable scheduler.
     TypeError
         Arguments of the wrong type.
     """
     t_all = time.perf_counter()
-    from .exits import OutputDir
+    from .exits import PARTIAL_SUFFIX, OutputDir, remove_partial
     from .scene import load_scene, plan
+    from .validate import as_nonnegative
 
     if scheduler is not None and not isinstance(scheduler, str):
         raise TypeError(f"scheduler must be an address string like 'tcp://host:8786', got "
@@ -629,6 +973,15 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
         if scheduler is not None:
             raise ValueError(f"workers={workers} applies to the local cluster only; the cluster at "
                              f"{scheduler!r} has its own workers")
+    if dashboard is not None and dashboard is not False:
+        if not isinstance(dashboard, (bool, int, str)):
+            raise TypeError(f"dashboard must be None, a bool, a port or 'host:port', got "
+                            f"{type(dashboard).__name__} {dashboard!r}")
+        if scheduler is not None:
+            raise ValueError(f"dashboard={dashboard!r} applies to the local cluster only; the cluster "
+                             f"at {scheduler!r} has its own dashboard")
+    if task_timeout is not None:
+        task_timeout = as_nonnegative(task_timeout, "task_timeout")
     task = run_recording if task is None else task
     if not callable(task):
         raise TypeError(f"task must be callable, got {type(task).__name__}")
@@ -650,21 +1003,39 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
     plan(_worker_scene(scene, files[0], mc_on_client))  # the worker scene validates here, once
     names = recording_names(files)
     base = Path(out_dir) if out_dir is not None else scene_path.with_name(scene_path.stem + "-campaign")
-    # the folder is reserved now and removed again if the campaign raises or is interrupted
-    # (Ctrl-C): no half campaign left behind (pipeline.exits.OutputDir)
-    with OutputDir(base, overwrite=overwrite) as guard:
-        return _campaign_body(scene, scene_path, inputs, files, skipped, names, guard.path.resolve(),
-                              client_results, worker_results, mc_on_client, scheduler, workers,
-                              progress, recording_reports, task, t_all)
+    partial = base.with_name(base.name + PARTIAL_SUFFIX)
+    opts = {"scene_path": str(scene_path), "scene_path_sha256": _sha256_file(scene_path), "client_results": client_results,
+            "worker_results": worker_results, "mc_on_client": mc_on_client, "scheduler": scheduler,
+            "workers": workers, "progress": progress, "recording_reports": bool(recording_reports),
+            "task": task, "t_all": t_all, "task_timeout": task_timeout, "resume": bool(resume),
+            "sources": [base, partial] if resume else [], "dashboard": dashboard}
+    # the folder is reserved now; the campaign fills a staging folder beside it, swapped in
+    # when it finishes; if it raises or is interrupted (Ctrl-C) nothing is left but the
+    # recordings it had finished, in <out>.partial (pipeline.exits.OutputDir)
+    with OutputDir(base, overwrite=overwrite or resume, staged=True) as guard:
+        opts["guard"] = guard
+        result = _campaign_body(scene, scene_path, inputs, files, skipped, names, guard.path.resolve(), opts)
+    if resume and Path(guard.final) == Path(os.path.abspath(base)):
+        remove_partial(base)  # its results are in the campaign now
+    return result
 
 
-def _campaign_body(scene, scene_path, inputs, files, skipped, names, out, client_results,
-                   worker_results, mc_on_client, scheduler, workers, progress, recording_reports,
-                   task, t_all) -> dict:
-    """The campaign after its output folder is reserved (see :func:`run_campaign`)."""
+def _campaign_body(scene, scene_path, inputs, files, skipped, names, out, opts) -> dict:
+    """The campaign after its output folder is reserved (see :func:`run_campaign`); ``out``
+    is the staging folder, ``opts["guard"].final`` the folder it will be."""
     from .stages import run_scene, summary_dict, write_outputs
 
+    guard = opts["guard"]
+    final = Path(guard.final).resolve()
+    client_results, mc_on_client = opts["client_results"], opts["mc_on_client"]
+    scheduler = opts["scheduler"]
     timing: dict[str, float] = {}
+
+    def final_of(p) -> str:
+        try:
+            return str(final / Path(p).relative_to(out))
+        except ValueError:
+            return str(p)
 
     # --- scene-level results, once, on the client
     t = time.perf_counter()
@@ -688,32 +1059,126 @@ def _campaign_body(scene, scene_path, inputs, files, skipped, names, out, client
                            sctx.failed.get("tolerance"))
     timing["scene_level"] = time.perf_counter() - t
 
-    # --- the Dask job
-    import dask
-    from distributed import Client, LocalCluster, as_completed
-    from tqdm import tqdm
-
+    # --- keys, and the recordings a resumed campaign has done already
+    rec_root = out / RECORDINGS_DIR_NAME
+    rec_root.mkdir(exist_ok=True)
+    rec_dirs = [rec_root / n for n in names]
+    options = {"recording_report": opts["recording_reports"]}
+    keys: list[dict | None] = []
+    for f in files:
+        try:
+            keys.append(recording_key(f, opts["scene_path_sha256"], options))
+        except OSError:
+            keys.append(None)  # gone since it was listed: the task reports it
     records: dict[int, dict] = {}
+    # (the folder reserved for this campaign is new and empty: no source)
+    sources = [str(s) for s in opts["sources"]
+               if not Path(s).is_symlink() and (Path(s) / RECORDINGS_DIR_NAME).is_dir()]
+    if sources:
+        done: dict[str, tuple[Path, dict]] = {}
+        for src in sources:
+            for path, hit in completed_recordings(src).items():
+                done.setdefault(path, hit)
+        for i, key in enumerate(keys):
+            hit = done.get(key["recording"]) if key else None
+            if hit is None or hit[1].get("key") != key:
+                continue
+            try:
+                shutil.copytree(hit[0], rec_dirs[i], symlinks=True, copy_function=_link_or_copy)
+            except (OSError, shutil.Error) as exc:
+                logger.warning("campaign: %s: cannot reuse the results in %s (%s); redone", files[i],
+                               hit[0], exc)
+                shutil.rmtree(rec_dirs[i], ignore_errors=True)
+                continue
+            rec = _relocate(hit[1]["record"], hit[0], final_of(rec_dirs[i]))
+            rec.update(name=names[i], resumed=True)
+            records[i] = rec
+        if records:
+            guard.mark_partial()
+            logger.info("campaign: %d of %d recordings complete already (--resume)", len(records), len(files))
+
+    # --- per-task timeouts [s] (None: none)
+    tt = opts["task_timeout"]
+    limits = {}
+    for i, key in enumerate(keys):
+        limits[i] = (None if tt == 0 else tt if tt is not None
+                     else default_task_timeout(key["size"] if key else 0))
+
+    # --- the Dask job
+    todo = [i for i in range(len(files)) if i not in records]
+    cluster_info = {"scheduler": None, "n_workers": 0, "local": scheduler is None, "dashboard": None}
+    timing["cluster_start"] = 0.0
+    timing["processing"] = 0.0
+    if todo:
+        _run_tasks(files, names, rec_dirs, keys, limits, todo, records, bands, cluster_info, timing,
+                   opts, final_of)
+    recs = [records[i] for i in range(len(files))]
+    for r in recs:
+        r.setdefault("attempts", 1)
+        r.setdefault("retries", [])
+        r.setdefault("resumed", False)
+
+    # --- combined outputs, each written atomically
+    t = time.perf_counter()
+    counts = {s: sum(r.get("status") == s for r in recs) for s in STATUSES}
+    result = {"scene": scene.name, "scene_path": str(scene_path), "out_dir": str(final),
+              "inputs": [str(i) for i in inputs], "skipped_inputs": skipped,
+              "cluster": cluster_info, "results_client": client_results,
+              "results_per_recording": opts["worker_results"], "counts": counts, "timing_s": timing,
+              "scene_level": scene_level, "scene_status": scene_status,
+              "task_timeout": {"mode": "off" if tt == 0 else "size" if tt is None else "fixed",
+                               "seconds": tt if tt else None},
+              "resume": {"enabled": opts["resume"], "n_resumed": sum(bool(r.get("resumed")) for r in recs),
+                         "sources": sources},
+              "recordings": recs}
+    result["exit_code"] = campaign_exit_code(result)
+    import pandas as pd
+
+    csv_path = out / "campaign.csv"
+    rows = pd.DataFrame(campaign_rows(recs))
+    _write_atomic(csv_path, lambda tmp: rows.to_csv(tmp, index=False))
+    from .report.campaign_report import build_campaign_report
+
+    report_path = build_campaign_report(result, out)
+    timing["report"] = time.perf_counter() - t
+    timing["total"] = time.perf_counter() - opts["t_all"]
+    json_path = out / "campaign.json"
+    result["files"] = {"campaign.json": final_of(json_path), "campaign.csv": final_of(csv_path),
+                       "campaign_report.html": final_of(report_path)}
+    _write_text_atomic(json_path, json.dumps(_jsonable(result), indent=2))
+    logger.info("campaign %s: %d ok, %d unreliable, %d partial, %d failed in %.1f s -> %s",
+                scene.name, counts["ok"], counts["unreliable"], counts["partial"], counts["failed"],
+                timing["total"], final)
+    return result
+
+
+def _dask_key(token: str, i: int, name: str) -> str:
+    return f"meshphase-{token}-{i}-{re.sub(r'[^A-Za-z0-9_.-]', '_', name)[:40]}"
+
+
+def _run_tasks(files, names, rec_dirs, keys, limits, todo, records, bands, cluster_info, timing,
+               opts, final_of) -> None:
+    """Submit the recordings ``todo`` to the cluster and collect one record per recording into
+    ``records``: results, failures, timeouts (worker restarted) and retries (worker lost)."""
+    from distributed import Client
+
+    scheduler = opts["scheduler"]
     cluster = None
     t = time.perf_counter()
-    # distributed logs cluster life (start, connections, close) at INFO; show it only when
-    # our own logger is verbose (meshphase -v)
+    # distributed logs cluster life (start, connections, close) at INFO and worker restarts
+    # at WARNING; show them only when our own logger is verbose (meshphase -v): the campaign
+    # reports lost workers, retries and timeouts itself
     dlog = logging.getLogger("distributed")
     old_level = dlog.level
     if not logger.isEnabledFor(logging.INFO):
-        dlog.setLevel(logging.WARNING)
+        dlog.setLevel(logging.ERROR)
     try:
         if scheduler is None:
-            n = workers or _cores()
-            # worker-saturation 1.0: a worker holds only the task it runs (inputs are paths,
-            # prefetching buys nothing); when a worker dies, only that task is suspect, not
-            # one queued behind it
-            with dask.config.set({"distributed.scheduler.worker-saturation": 1.0}):
-                # ":0": the scheduler's HTTP server (always started) on a free port, so
-                # that campaigns side by side never fight over 8787
-                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                       dashboard_address=":0")
+            cluster = local_cluster(opts["workers"] or _cores(), dashboard=opts["dashboard"])
             client = Client(cluster)
+            if opts["dashboard"] not in (None, False):
+                cluster_info["dashboard"] = cluster.dashboard_link
+                logger.warning("campaign: Dask dashboard at %s", cluster.dashboard_link)
         else:
             try:
                 client = Client(scheduler)
@@ -725,82 +1190,196 @@ def _campaign_body(scene, scene_path, inputs, files, skipped, names, out, client
             except ImportError as exc:
                 raise ValueError(f"the workers of {client.scheduler.address} cannot import "
                                  f"meshphase ({exc}); install it where the workers run") from None
-            n_workers = len(pids)
-            if not n_workers:
+            cluster_info["n_workers"] = len(pids)
+            if not pids:
                 logger.warning("campaign: the cluster at %s has no workers yet; the tasks wait "
                                "for workers to join", client.scheduler.address)
-            address = client.scheduler.address
+            cluster_info["scheduler"] = client.scheduler.address
             timing["cluster_start"] = time.perf_counter() - t
             t = time.perf_counter()
-            kw = {"bands": bands, "recording_report": recording_reports}
-            token = uuid.uuid4().hex[:10]  # task keys unique on a shared scheduler
-            # one map call = one graph: the tasks form one group, which the scheduler queues
-            # (root-ish tasks) when there are more than twice as many as worker threads
-            futs = client.map(task, [str(scene_path)] * len(files), [str(p) for p in files],
-                              [str(out / n) for n in names],
-                              key=[f"meshphase-{token}-{i}-{n}" for i, n in enumerate(names)],
-                              pure=False, **kw)
-            futures = {f: i for i, f in enumerate(futs)}
-            n_failed = 0
-            with tqdm(total=len(futures), desc="recordings", unit="rec", disable=not progress,
-                      file=sys.stderr, leave=False) as bar:
-                for f in as_completed(list(futures)):
-                    i = futures[f]
-                    if f.status == "finished":
-                        rec = f.result()
-                    else:  # a worker died, the task was cancelled, or the task itself raised
-                        exc = f.exception() if f.status == "error" else None
-                        err = (f"{type(exc).__name__}: {exc}" if exc is not None else
-                               f"dask future {f.status}")
-                        rec = _failed_record(files[i], names[i], out / names[i], f"task lost: {err}")
-                        logger.warning("campaign: %s: %s", files[i], rec["error"])
-                    if not isinstance(rec, dict):
-                        rec = _failed_record(files[i], names[i], out / names[i],
-                                             f"task returned {type(rec).__name__}, not a dict")
-                    records[i] = rec
-                    n_failed += rec.get("status") == "failed"
-                    bar.set_postfix_str(f"failed {n_failed}")
-                    bar.update(1)
-                    f.release()
+            _collect(client, files, names, rec_dirs, keys, limits, todo, records, bands, opts,
+                     final_of)
             timing["processing"] = time.perf_counter() - t
     finally:
         if cluster is not None:
             cluster.close()
         dlog.setLevel(old_level)
-    recs = [records[i] for i in range(len(files))]
 
-    # --- combined outputs
-    t = time.perf_counter()
-    counts = {s: sum(r.get("status") == s for r in recs) for s in STATUSES}
-    result = {"scene": scene.name, "scene_path": str(scene_path), "out_dir": str(out),
-              "inputs": [str(i) for i in inputs], "skipped_inputs": skipped,
-              "cluster": {"scheduler": address, "n_workers": n_workers, "local": scheduler is None},
-              "results_client": client_results, "results_per_recording": worker_results,
-              "counts": counts, "timing_s": timing, "scene_level": scene_level,
-              "scene_status": scene_status, "recordings": recs}
-    result["exit_code"] = campaign_exit_code(result)
-    import pandas as pd
 
-    csv_path = out / "campaign.csv"
-    pd.DataFrame(campaign_rows(recs)).to_csv(csv_path, index=False)
-    from .report.campaign_report import build_campaign_report
+def _collect(client, files, names, rec_dirs, keys, limits, todo, records, bands, opts, final_of) -> None:
+    guard = opts["guard"]
+    token = uuid.uuid4().hex[:10]  # task keys unique on a shared scheduler
+    dkeys = {i: _dask_key(token, i, names[i]) for i in todo}
+    index_of = {k: i for i, k in dkeys.items()}
+    starts: dict[str, list[dict]] = {}
+    lost: dict[str, list[dict]] = {}
+    restarted: set = set()  # workers this campaign restarted (after a timeout)
 
-    report_path = build_campaign_report(result, out)
-    timing["report"] = time.perf_counter() - t
-    timing["total"] = time.perf_counter() - t_all
-    json_path = out / "campaign.json"
-    result["files"] = {"campaign.json": str(json_path), "campaign.csv": str(csv_path),
-                       "campaign_report.html": str(report_path)}
-    json_path.write_text(json.dumps(_jsonable(result), indent=2))
-    logger.info("campaign %s: %d ok, %d unreliable, %d partial, %d failed in %.1f s -> %s",
-                scene.name, counts["ok"], counts["unreliable"], counts["partial"], counts["failed"],
-                timing["total"], out)
-    return result
+    # the handlers run on the client's event loop thread, before the loop below sees the
+    # futures they concern (events and results come on one ordered stream)
+    def on_start(event):
+        msg = event[1] if isinstance(event, (tuple, list)) and len(event) == 2 else event
+        if isinstance(msg, dict) and msg.get("key") in index_of:
+            starts.setdefault(msg["key"], []).append({"t": time.monotonic(), "worker": msg.get("worker"),
+                                                      "pid": msg.get("pid")})
+
+    def on_cluster(event):
+        msg = event[1] if isinstance(event, (tuple, list)) and len(event) == 2 else event
+        if not isinstance(msg, dict) or msg.get("action") != "remove-worker":
+            return
+        w = msg.get("worker")
+        for k in msg.get("processing-tasks") or ():
+            if k not in index_of:
+                continue
+            st = starts.get(k) or []
+            ran = bool(st) and st[-1]["worker"] == w
+            # a worker that dies at once may not have sent the task's start: "held"
+            cause = (f"worker {w} (pid {st[-1]['pid']}) was lost while running it" if ran
+                     else f"worker {w} was lost while it held the task")
+            cause += (" (restarted after another task's timeout)" if w in restarted
+                      else " (killed, crashed or out of memory)")
+            lost.setdefault(k, []).append({"cause": cause, "worker": w, "running": ran})
+
+    client.subscribe_topic(_START_TOPIC, on_start)
+    client.subscribe_topic("all", on_cluster)
+    try:
+        _collect_loop(client, files, names, rec_dirs, keys, limits, todo, records, bands, opts,
+                      final_of, guard, dkeys, index_of, starts, lost, restarted)
+    finally:
+        # before the client closes: else the scheduler fails to send it the "remove-client"
+        # event of topic "all" and logs that as CRITICAL
+        for topic in (_START_TOPIC, "all"):
+            with contextlib.suppress(Exception):
+                client.unsubscribe_topic(topic)
+
+
+def _collect_loop(client, files, names, rec_dirs, keys, limits, todo, records, bands, opts,
+                  final_of, guard, dkeys, index_of, starts, lost, restarted) -> None:
+    import functools
+
+    from tqdm import tqdm
+
+    kw = {"bands": bands, "recording_report": opts["recording_reports"]}
+    fn = functools.partial(_campaign_task, opts["task"])
+    # one map call = one graph: the tasks form one group, which the scheduler queues
+    # (root-ish tasks) when there are more than twice as many as worker threads
+    futs = client.map(fn, [opts["scene_path"]] * len(todo), [str(files[i]) for i in todo],
+                      [str(rec_dirs[i]) for i in todo], [dkeys[i] for i in todo],
+                      [keys[i] for i in todo], key=[dkeys[i] for i in todo], pure=False, **kw)
+    fut_of = dict(zip(todo, futs))
+    done_q: queue.SimpleQueue = queue.SimpleQueue()
+    for f in futs:
+        f.add_done_callback(done_q.put)
+    pending = set(todo)
+    n_failed = 0
+
+    def finish(i: int, rec: dict) -> None:
+        nonlocal n_failed
+        k = dkeys[i]
+        if not isinstance(rec, dict):
+            rec = _failed_record(files[i], names[i], rec_dirs[i],
+                                 f"task returned {type(rec).__name__}, not a dict")
+        rec = _relocate(rec, rec_dirs[i], final_of(rec_dirs[i]))
+        retries = lost.get(k, [])
+        rec["retries"] = [r["cause"] for r in retries]
+        rec["attempts"] = 1 + len(retries)
+        rec["resumed"] = False
+        if retries:
+            logger.warning("campaign: %s: %s; retried (attempt %d)", files[i], retries[-1]["cause"],
+                           rec["attempts"])
+        records[i] = rec
+        pending.discard(i)
+        if rec.get("status") == "failed":
+            n_failed += 1
+        else:
+            guard.mark_partial()
+        bar.set_postfix_str(f"failed {n_failed}")
+        bar.update(1)
+
+    with tqdm(total=len(records) + len(todo), initial=len(records), desc="recordings", unit="rec",
+              disable=not opts["progress"], file=sys.stderr, leave=False) as bar:
+        next_check = 0.0
+        while pending:
+            try:
+                f = done_q.get(timeout=0.5)
+            except queue.Empty:
+                f = None
+            if f is not None:
+                i = index_of.get(f.key)
+                if i in pending:
+                    if f.status == "finished":
+                        try:
+                            rec = f.result()
+                        except Exception as exc:  # noqa: BLE001 - a result that cannot be fetched
+                            rec = _failed_record(files[i], names[i], rec_dirs[i],
+                                                 f"task lost: {type(exc).__name__}: {exc}")
+                    else:  # the worker died too often (KilledWorker), or the task raised
+                        exc = f.exception() if f.status == "error" else None
+                        err = (f"{type(exc).__name__}: {exc}" if exc is not None else f"dask future {f.status}")
+                        rec = _failed_record(files[i], names[i], rec_dirs[i], f"task lost: {err}")
+                        shutil.rmtree(rec_dirs[i], ignore_errors=True)  # whatever it half wrote
+                        logger.warning("campaign: %s: %s", files[i], rec["error"])
+                    finish(i, rec)
+                f.release()
+            now = time.monotonic()
+            if now < next_check:
+                continue
+            next_check = now + 0.5
+            for i in sorted(pending):
+                st = starts.get(dkeys[i])
+                if limits[i] is None or not st or now - st[-1]["t"] <= limits[i]:
+                    continue
+                restarted.add(st[-1]["worker"])
+                finish(i, _timed_out(client, fut_of[i], files[i], names[i], rec_dirs[i], limits[i], st[-1]))
+
+
+def _own_child(pid) -> bool:
+    """True when ``pid`` is a process this one started (a worker of our LocalCluster)."""
+    import psutil
+
+    try:
+        return isinstance(pid, int) and any(c.pid == pid for c in psutil.Process().children(recursive=True))
+    except psutil.Error:
+        return False
+
+
+def _timed_out(client, fut, path, name, rec_dir, limit, start) -> dict:
+    """Fail a task that ran past its timeout: cancel it, end its worker (the only way to stop
+    a thread blocked in a read), drop what it half wrote.
+
+    A worker of our own LocalCluster is killed at once (SIGKILL; its Nanny starts a new one:
+    a graceful restart would wait for the blocked thread first); another cluster's worker is
+    restarted through the scheduler (which needs a Nanny there)."""
+    import signal
+
+    client.cancel([fut])
+    w, pid = start["worker"], start["pid"]
+    if _own_child(pid):
+        try:
+            os.kill(pid, getattr(signal, "SIGKILL", signal.SIGTERM))
+            how = "killed (its Nanny starts a new one)"
+        except OSError as exc:
+            how = f"not stopped ({exc}): it may stay busy"
+    else:
+        try:
+            res = client.restart_workers([w], timeout=120, raise_for_error=False)
+            state = res.get(w, "?") if isinstance(res, dict) else "?"
+        except Exception as exc:  # noqa: BLE001 - the campaign goes on either way
+            state = f"{type(exc).__name__}: {exc}"
+        how = "restarted" if state == "OK" else f"not restarted ({state}): it may stay busy"
+    shutil.rmtree(rec_dir, ignore_errors=True)
+    rec = _failed_record(path, name, rec_dir, f"timeout: no result {limit:.4g} s after the task started "
+                                              f"(--task-timeout); its worker {w} (pid {pid}) was {how}")
+    rec["timed_out"] = True
+    rec["worker"] = w
+    logger.warning("campaign: %s: %s", path, rec["error"])
+    return rec
 
 
 def cli_campaign(scene_path, inputs: list[str], *, scheduler: str | None = None,
                  workers: int | None = None, out=None, overwrite: bool = False,
-                 progress: bool = True, recording_reports: bool = False) -> dict:
+                 progress: bool = True, recording_reports: bool = False,
+                 task_timeout: float | None = None, resume: bool = False, dashboard=None) -> dict:
     """``meshphase campaign SCENE DIR...``: :func:`run_campaign` with the CLI's arguments.
 
     Parameters
@@ -818,6 +1397,12 @@ def cli_campaign(scene_path, inputs: list[str], *, scheduler: str | None = None,
     progress : bool
     recording_reports : bool
         ``--recording-reports``: an HTML report per recording too.
+    task_timeout : float, optional
+        ``--task-timeout`` [s] (0: none; default from each recording's size).
+    resume : bool
+        ``--resume``: reuse complete results.
+    dashboard : None, bool or str
+        ``--dashboard [ADDRESS]``.
 
     Returns
     -------
@@ -825,7 +1410,8 @@ def cli_campaign(scene_path, inputs: list[str], *, scheduler: str | None = None,
         As :func:`run_campaign`.
     """
     return run_campaign(scene_path, list(inputs), out, scheduler=scheduler, workers=workers,
-                        overwrite=overwrite, progress=progress, recording_reports=recording_reports)
+                        overwrite=overwrite, progress=progress, recording_reports=recording_reports,
+                        task_timeout=task_timeout, resume=resume, dashboard=dashboard)
 
 
 # ---------------------------------------------------------------------------- speed-up

@@ -22,7 +22,9 @@ Exit status (every subcommand; README.md "Exit status"; constants in :mod:`pipel
 
 Errors are one line per cause on stderr, ``meshphase COMMAND: error: ...``, never a
 traceback; ``--debug`` (or ``MESHPHASE_DEBUG=1``) re-raises them with the traceback and logs
-the traceback of each failed stage.
+the traceback of each failed stage. Warnings are one line each
+(``meshphase COMMAND: FormatWarning: ...``), each distinct line once. ``tests/faults``
+runs a corpus of faulty inputs and outputs through this boundary.
 """
 
 from __future__ import annotations
@@ -283,14 +285,16 @@ def _run_and_write(args, scene, base, *, report: bool = True):
     from .exits import OutputDir, run_status
     from .stages import run_scene, write_outputs
 
-    with OutputDir(base, overwrite=args.overwrite) as out:
+    with OutputDir(base, overwrite=args.overwrite, staged=True) as out:
         if callable(scene):
             scene = scene(out.path)
         ctx = run_scene(scene, progress=_stage_progress(not args.quiet))
         if run_status(ctx)["status"] == "failed":
             out.discard()
             return ctx, {}
-        return ctx, write_outputs(ctx, out.path, report=report)
+        files = write_outputs(ctx, out.path, report=report)
+    # written into the staging folder; these are the paths now that it is published
+    return ctx, {k: out.published(v) for k, v in files.items()}
 
 
 def cmd_run(args) -> int:
@@ -298,6 +302,13 @@ def cmd_run(args) -> int:
     from .validate import as_regular_file
 
     scene = load_scene(as_regular_file(args.scene, "the scene"))
+    if not scene.results:
+        from .scene import SceneError
+
+        # an empty scene (or a gearset file) would "succeed" at computing nothing
+        raise SceneError(args.scene, "results", "no results requested, nothing to run; add e.g. "
+                         'results = ["ideal_phasing", "phasing"] (`meshphase process FILE --gearset '
+                         f"{args.scene}` takes a gearset file without results)")
     base = Path(args.out) if args.out else (scene.output or Path(args.scene).with_suffix("").with_name(
         Path(args.scene).stem + "-out"))
     ctx, files = _run_and_write(args, scene, base, report=not args.no_report)
@@ -309,6 +320,7 @@ def cmd_process(args) -> int:
     from .validate import as_regular_file
 
     as_regular_file(args.gearset, "the gearset scene (--gearset)")
+    # process_recording returns the paths as published (the output folder's final name)
     ctx, files = process_recording(args.file, args.gearset, out_dir=args.out, overwrite=args.overwrite,
                                    progress=_stage_progress(not args.quiet))
     return _finish_run(args, ctx, files)
@@ -337,11 +349,13 @@ def cmd_campaign(args) -> int:
     as_regular_file(args.scene, "the scene")
     res = cli_campaign(args.scene, args.inputs, scheduler=args.scheduler, workers=args.workers,
                        out=args.out, overwrite=args.overwrite, progress=not args.quiet,
-                       recording_reports=args.recording_reports)
+                       recording_reports=args.recording_reports, task_timeout=args.task_timeout,
+                       resume=args.resume, dashboard=args.dashboard)
     c = res["counts"]
     print(f"campaign  {res['scene']}: {c['ok']} ok, {c['unreliable']} unreliable, {c['partial']} partial, "
           f"{c['failed']} failed in {res['timing_s'].get('total', float('nan')):.1f} s "
-          f"({res['cluster']['n_workers']} worker(s), scheduler {res['cluster']['scheduler']})")
+          f"({res['cluster']['n_workers']} worker(s), scheduler {res['cluster']['scheduler']})"
+          + (f"; {res['resume']['n_resumed']} resumed" if res["resume"]["enabled"] else ""))
     for r in res["recordings"]:
         if r.get("status") != "ok":
             line = status_line({"status": r.get("status"), "error": r.get("error"),
@@ -359,6 +373,17 @@ def cmd_campaign(args) -> int:
 
 
 # ---------------------------------------------------------------------------- parser
+def _seconds(text: str) -> float:
+    """argparse type: a finite, non-negative number of seconds."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
+    if not (v >= 0 and v != float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a finite number of seconds >= 0, got {text!r}")
+    return v
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="meshphase",
@@ -396,13 +421,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("demo", help="generate the seed rig recording, run the full scene on it, write the report")
     s.add_argument("--out", default="meshphase-demo", help="output folder (default ./meshphase-demo; never overwritten: -2, -3, ...)")
-    s.add_argument("--overwrite", action="store_true", help="reuse the output folder")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the output folder (atomically, when the run finishes)")
     s.set_defaults(func=cmd_demo)
 
     s = sub.add_parser("run", help="run a scene (TOML) and write results, figures and the HTML report")
     s.add_argument("scene")
     s.add_argument("--out", help="output folder (default: the scene's `output`, else SCENE-out)")
-    s.add_argument("--overwrite", action="store_true", help="reuse the output folder")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the output folder (atomically, when the run finishes)")
     s.add_argument("--no-report", action="store_true", help="results only, no HTML/figures")
     s.set_defaults(func=cmd_run)
 
@@ -410,7 +437,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("file")
     s.add_argument("--gearset", required=True, help="gearset TOML (scene format: [gearset], [[channels]], ...)")
     s.add_argument("--out", help="output folder (default FILE-meshphase next to the input, never overwritten)")
-    s.add_argument("--overwrite", action="store_true")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the output folder (atomically, when the run finishes)")
     s.set_defaults(func=cmd_process)
 
     s = sub.add_parser("campaign", help="process many recordings with one scene as a Dask job")
@@ -419,7 +447,17 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--scheduler", help="address of an existing Dask scheduler (default: a LocalCluster)")
     s.add_argument("--workers", type=int, help="LocalCluster worker processes (default: one per core)")
     s.add_argument("--out", help="output folder (default SCENE-campaign; never overwritten: -2, -3, ...)")
-    s.add_argument("--overwrite", action="store_true")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the output folder (atomically, when the campaign finishes)")
+    s.add_argument("--resume", action="store_true",
+                   help="reuse the complete results in the output folder (and OUT.partial, kept by an "
+                        "unfinished run); redo changed or missing recordings")
+    s.add_argument("--task-timeout", type=_seconds, metavar="SECONDS",
+                   help="fail a recording whose task runs longer (its worker is restarted); "
+                        "0: no limit (default: 300 s + 10 s per MB of the recording)")
+    s.add_argument("--dashboard", nargs="?", const="127.0.0.1:0", metavar="ADDRESS",
+                   help="serve the Dask dashboard of the local cluster (default off; without ADDRESS "
+                        "on 127.0.0.1, a free port; it has no authentication)")
     s.add_argument("--recording-reports", action="store_true", help="an HTML report per recording too")
     s.set_defaults(func=cmd_campaign)
 
@@ -478,6 +516,19 @@ def describe_error(exc: BaseException) -> str:
                      "the traceback)")
 
 
+def _once(show):
+    """``warnings.showwarning`` that shows each distinct warning line once per command."""
+    seen = set()
+
+    def showwarning(message, category, filename, lineno, file=None, line=None):
+        key = (category, _one_line(message))
+        if key in seen:
+            return
+        seen.add(key)
+        show(message, category, filename, lineno, file, line)
+    return showwarning
+
+
 def _stdout_closed() -> int:
     """The reader of our stdout went away (``| head``): send the rest to devnull and exit
     quietly (the Python docs' recipe, signal module, "Note on SIGPIPE")."""
@@ -501,10 +552,13 @@ def main(argv=None) -> int:
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     logger.setLevel(level)
     logging.captureWarnings(False)
-    # warnings on one line each ("meshphase info: FormatWarning: ..."), not file:line + source
-    old_format = warnings.formatwarning
+    # warnings on one line each ("meshphase info: FormatWarning: ..."), not file:line + source,
+    # and each line once (a warning repeats when a block reader meets it again, or when a
+    # filter change resets the registry that "default" uses to show it once)
+    old_format, old_show = warnings.formatwarning, warnings.showwarning
     warnings.formatwarning = lambda message, category, *_a, **_k: (
         f"meshphase {args.command}: {category.__name__}: {_one_line(message)}\n")
+    warnings.showwarning = _once(old_show)
     try:
         rc = int(args.func(args) or 0)
         sys.stdout.flush()                 # a closed pipe shows here, not at interpreter exit
@@ -525,7 +579,7 @@ def main(argv=None) -> int:
             pass
         return EXIT_ERROR
     finally:
-        warnings.formatwarning = old_format
+        warnings.formatwarning, warnings.showwarning = old_format, old_show
 
 
 if __name__ == "__main__":  # pragma: no cover

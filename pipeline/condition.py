@@ -439,14 +439,15 @@ def drift_baseline(x, fs: float, *, method: str = "median", window: float | None
     mesh_freq : float, optional
         Mesh frequency [Hz].
     pulse_period : float, optional
-        Period of the pulse train [s]: the time between passes of consecutive planets (one
-        relative revolution / N for equally spaced planets). Given, the blocks are whole
-        periods and each enters with its MEAN: every block then holds the same pulses, which
-        add a constant instead of a wobble. Needed when the pulses cover more than about
-        half of the time (five planets on a sun gauge: tensile lobe and side lobes span 3.6
-        of every 5 mesh periods), where block medians follow the pulses and the baseline
-        they leave shifts each pulse's timing (1.1e-3 mesh cycles RMS noise-free, against
-        4e-4 without drift removal).
+        Period of the pulse train [s]: one relative revolution of the gauged gear, in which
+        every planet passes once. Given, the blocks are whole periods and each enters with
+        its MEAN: every block then holds the same pulses (each planet's, whatever their
+        loads), which add a constant instead of a wobble. Needed when the pulses cover more
+        than about half of the time (five planets on a sun gauge: tensile lobe and side
+        lobes span 3.6 of every 5 mesh periods), where block medians follow the pulses and
+        the baseline they leave shifts each pulse's timing (1.1e-3 mesh cycles RMS
+        noise-free, against 4e-4 without drift removal); blocks of one planet spacing would
+        still wobble with the planets' unequal loads (face-width amplitudes moved by 6 %).
 
     Returns
     -------
@@ -461,9 +462,14 @@ def drift_baseline(x, fs: float, *, method: str = "median", window: float | None
     n = x.size
     if n == 0:
         return np.empty(0)
-    if pulse_period is not None:
-        b = max(1, int(round(as_positive(pulse_period, "pulse_period") * fs)))
+    b_p = None if pulse_period is None else max(1, int(round(as_positive(pulse_period, "pulse_period") * fs)))
+    if b_p is not None and n >= 2 * b_p:
+        # whole periods only: a partial block at the end holds some planets' pulses and not
+        # the others', which is exactly the wobble whole periods avoid
+        b = b_p
         means, centres = _block_means(np.where(np.isfinite(x), x, np.nan), b)
+        if n % b:
+            means, centres = means[:-1], centres[:-1]
     else:
         b = max(1, int(round(window * fs / 16.0)))
         means, centres = _block_medians(np.where(np.isfinite(x), x, np.nan), b)
@@ -1316,7 +1322,7 @@ def condition_recording(rec: Recording, *, channels: Sequence[str] | str | None 
         gaps for every later stage; "keep": leave the samples (the report still lists them;
         pass ``quality=`` to :func:`pipeline.onsets.detect_onsets_recording`).
     pulse_period : float, optional
-        Period of the channels' pulse train [s] (time between consecutive planets' passes):
+        Period of the channels' pulse train [s] (one relative revolution of the gauged gear):
         the drift baseline then averages whole periods (:func:`drift_baseline`).
 
     Returns

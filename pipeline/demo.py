@@ -1,4 +1,5 @@
-"""The embedded demo scene: the seed 000 rig, synthetic, with every recording result.
+"""The embedded demo scene: seed 000 Table 1 teeth on the seed's rig with the ordinary 1 %
+drive ripple, synthetic, with every recording result.
 
 ``meshphase demo`` writes this scene next to its outputs (so the run is reproducible with
 ``meshphase run``) and runs it.
@@ -11,27 +12,30 @@ from pathlib import Path
 __all__ = ["DEMO_SCENE", "demo_scene_path"]
 
 DEMO_SCENE = """\
-# meshphase demo: the seed 000 rig (5120 Hz, sun 18.19 r/min, carrier 1.06 r/min), a synthetic
-# recording with noise, drift, hum and Table 2 case 1 shaft hole errors; every recording result.
-name = "meshphase demo: seed 000 rig"
+# meshphase demo: seed 000 Table 1 teeth on the seed's rig (5120 Hz, sun 18.19 r/min, ring held,
+# so the carrier turns at 18.19 x 25/112 = 4.06 r/min), the ordinary 1 % drive ripple at the
+# carrier rate, 20 dB white noise, 50 Hz hum, drift, Table 2 case 1 shaft hole errors and a
+# carrier tacho; a synthetic recording with known truth; every recording result.
+name = "meshphase demo: seed 000 gearset on the seed's rig, 1 % drive ripple"
 results = ["ideal_phasing", "phasing", "load_sharing", "compare", "identify", "tolerance"]
 
 [gearset]
-name = "seed 000 rig (Z 25/87/31, 4 planets, ring driven)"
+name = "seed 000 Table 1 (Z 25/87/29, 4 planets, ring held)"
 z_sun = 25
 z_ring = 87
-z_planet = 31
+z_planet = 29
 n_planets = 4
 carrier_radius_mm = 112.5
 face_width_mm = 40
 direction = "cw"
+profile_shift = true   # 25 + 2 x 29 = 83, not 87: the seed's gearset needs shifted profiles
 
-[speeds]          # nominal hint [r/min]; the ring is driven at -3.862 r/min (differential)
-sun_rpm = 18.19
-carrier_rpm = 1.06
+[speeds]          # nominal, as typed [r/min]: the ring is held (Willis gives -3.4e-4 r/min,
+sun_rpm = 18.19   # zero within what two values typed to 0.01 r/min can tell)
+carrier_rpm = 4.06
 
 [input]
-synthetic = "noisy"
+synthetic = "rig_ripple1"
 minutes = 2.0
 seed = 2026
 

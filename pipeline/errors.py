@@ -16,6 +16,7 @@ __all__ = [
     "ModelWarning",
     "ConvergenceWarning",
     "ProcessingWarning",
+    "SceneWarning",
 ]
 
 
@@ -41,3 +42,8 @@ class ConvergenceWarning(ModelWarning):
 
 class ProcessingWarning(MeshphaseWarning):
     """A processing stage produced a partial result (missing pass, unassigned pulse...)."""
+
+
+class SceneWarning(MeshphaseWarning):
+    """A scene value that is valid but worth a second look before the run (e.g. a Monte Carlo
+    that will take a long time); the message names the file, the key and the line."""

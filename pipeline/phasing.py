@@ -953,7 +953,8 @@ def _shift_labels(planet, position, seq, shift):
 
 def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
                     tacho_times=None, key_angle: float | None = None, mounts=None,
-                    speeds=None, gaps=None, carrier_sense: int | None = None) -> PhasingResult:
+                    speeds=None, gaps=None, carrier_sense: int | None = None,
+                    check_held: bool = False, speeds_resolution=None) -> PhasingResult:
     """Label every gauge's pulses, fit one angle model to all of them and the tacho, and
     measure the phasing of each gear's main gauge.
 
@@ -977,6 +978,11 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
         Gap intervals [s]: a pass whose reference lies across one is dropped.
     carrier_sense : {+1, -1}, optional
         Sense of the carrier's rotation (default from the direction and the held member).
+    check_held : bool
+        Decide the held member again from the data (mesh cycles per carrier turn measured
+        between tacho edges, :func:`pipeline.angles.mesh_cycles_per_carrier_turn`) together
+        with ``speeds`` and their typed ``speeds_resolution``
+        (:func:`pipeline.angles.held_member`); ``fixed`` is then only the starting guess.
 
     Returns
     -------
@@ -993,6 +999,26 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
     relative: list = []
     mounts = dict(mounts or {})
     tach = None if tacho_times is None else np.asarray(tacho_times, dtype=float)
+    # the held member from the data: mesh cycles per carrier turn, counted over one interval
+    # (the pass pattern's positions of the busiest gauge; which pulse is planet 1 does not
+    # matter for a count)
+    if check_held and tach is not None and tach.size >= 2 and passes:
+        from .angles import held_member, mesh_cycles_per_carrier_turn
+
+        p0 = max(passes, key=lambda p: p.times.size)
+        o0 = pass_order(gearset.direction, p0.gear)
+        pl0, inf0 = assign_planets_by_pattern(p0.times, psi, o0)
+        ok0 = pl0 >= 0
+        if np.count_nonzero(ok0) >= 2:
+            z0 = gearset.z_sun if p0.gear == "sun" else gearset.z_ring
+            tr0 = gauge_train(p0.name, p0.gear, p0.times[ok0], pl0[ok0].astype(int),
+                              inf0["position"][ok0].astype(np.int64),
+                              planet_fractions(psi, o0), z0)
+            ratio = mesh_cycles_per_carrier_turn(tr0, tach)
+            if math.isfinite(ratio):
+                fixed, fixed_reason = held_member(gearset.z_sun, gearset.z_ring, speeds,
+                                                  resolution=speeds_resolution,
+                                                  mesh_rate=ratio, carrier_rate=1.0)
     if carrier_sense is None:
         # clockwise planets: the sun turns counter-clockwise relative to the carrier; with
         # the ring held the carrier turns with the sun (ccw), with the sun held against it
@@ -1038,8 +1064,6 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
                 relative.append(p.gear)
             if p.gear == "ring" and np.any(pl >= 0):
                 ring_load = _ring_loads(lab, n)
-    # one angle model from every train (and the tacho when a member is held)
-    kin = kinematics(gearset.z_sun, gearset.z_ring, gearset.z_planet, fixed=fixed, speeds=speeds)
     trains, train_of = [], {}
     for name, (lab, frac, p) in all_labels.items():
         ok = lab.planet >= 0
@@ -1052,6 +1076,8 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
                          order=pass_order(gearset.direction, p.gear))
         trains.append(tr)
         train_of[name] = tr
+    # one angle model from every train (and the tacho when a member is held)
+    kin = kinematics(gearset.z_sun, gearset.z_ring, gearset.z_planet, fixed=fixed, speeds=speeds)
     # the planet terms are shared by every gauge, so every gauge must name the same physical
     # planet alike: align the relatively labelled gauges to the absolute ones (or to the
     # largest), by the planets' own offsets where they differ enough to tell

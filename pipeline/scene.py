@@ -3,7 +3,9 @@
 A scene names the gearset, the gauges, the inputs (a recording file or a synthetic
 scenario), the tolerances and the results wanted (``data_schemas/scene.schema.json``,
 documented in ``data_schemas/scene.md``). It is validated up front; errors name the key and
-the line of the scene file. :func:`plan` turns the requested results into the ordered list of
+the line of the scene file (what is checked: ``data_schemas/scene.md``, "What is checked before
+anything runs"; the gearset itself with :mod:`pipeline.models.assembly`, and the scene against
+the recording's header with :func:`check_recording`). :func:`plan` turns the requested results into the ordered list of
 stages that must run, and nothing else: a bearing-moment scene opens no recording, a scene
 without tolerances runs no Monte Carlo, a scene without face-width gauges does no centroid
 work. The stages themselves live in :mod:`pipeline.stages`.
@@ -12,15 +14,20 @@ work. The stages themselves live in :mod:`pipeline.stages`.
 from __future__ import annotations
 
 import math
+import os
 import re
 import tomllib
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from .models.gearset import Gearset, Speeds, rpm_to_rad_s
 
-__all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "plan", "STAGES", "RESULTS"]
+__all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "plan", "check_recording",
+           "STAGES", "RESULTS", "LIMITS"]
 
 #: stage -> the stages it needs (a DAG; flows one way, as in DESIGN.md)
 STAGES: dict[str, tuple[str, ...]] = {
@@ -100,6 +107,12 @@ class Scene:
     mounts : dict of str to float
         Ground angle of each gauge on a held member [rad], from its channel's
         ``mount_angle_deg``.
+    profile_shift : bool
+        ``[gearset] profile_shift``: the gears are profile shifted, so Z_r = Z_s + 2 Z_p need
+        not hold (coaxiality is then not checked).
+    text : str
+        The scene file's text (for the line numbers of errors found later, e.g. by
+        :func:`plan`); empty for a scene built in code.
     """
 
     path: Path | None
@@ -118,6 +131,8 @@ class Scene:
     fixed: str | None = None
     tacho: dict = field(default_factory=dict)
     mounts: dict = field(default_factory=dict)
+    profile_shift: bool = False
+    text: str = field(default="", repr=False, compare=False)
 
     @property
     def has_recording_input(self) -> bool:
@@ -198,6 +213,43 @@ def _bearing_case(name) -> str | None:
     return _BEARING_CASES.get(key)
 
 
+#: physical ranges of scene values (the checks of data_schemas/scene.md, "What is checked")
+LIMITS = {
+    # lengths typed in mm (carrier radius, face width): outside this a unit slip (metres,
+    # micrometres) is far likelier than a real rig's gear [mm]
+    "length_mm": (5.0, 5000.0),
+    # fastest member speed [r/min]: beyond any gear test rig (1e5 r/min = 10 472 rad/s)
+    "speed_rpm": 1e5,
+    # Monte Carlo realisations: above "samples_warn" a run-time warning, above "samples_max"
+    # refused; "mc_evals_max": realisations x time points x planets (about 40 min with numba
+    # at 0.45 G evals/s, 7 h on the numpy path at 0.04, DESIGN.md)
+    "samples_warn": 10**6,
+    "samples_max": 10**8,
+    "mc_evals_max": 1e12,
+    # mesh stiffness per unit face width [N/(mm·µm)] (ISO 6336: 20 by default, 10..25 usual)
+    "c_g": (0.5, 1000.0),
+    # a synthetic recording is generated whole in memory and processed with about this many
+    # float64 copies of its samples alive (measured peak RSS 7.6x the samples for 8 min of
+    # seed_rig through phasing + load sharing); refused above the machine's physical memory
+    "processing_copies": 8,
+}
+
+#: Monte Carlo kernel throughput for the run-time estimate [evaluations/s] (DESIGN.md)
+_MC_RATE = {"numba": 0.45e9, "numpy": 0.04e9}
+#: results that need the planet tooth count (planet speed w_pc = -(Z_s / Z_p) w_sc)
+_NEEDS_Z_PLANET = {"phasing": "the angle model's planet-spin terms",
+                   "identify": "the identified planet offsets",
+                   "tolerance": "the Monte Carlo's planet offsets"}
+
+_EMPTY_HELP = (
+    "a scene needs `results = [...]` (any of {results}) and the tables those results read: "
+    "[gearset] (z_sun, z_ring, z_planet, n_planets or planet_angles_deg, carrier_radius_mm) "
+    "for phasing, ideal_phasing, compare, identify, tolerance; [input] (recording = \"FILE\" "
+    "or synthetic = \"SCENARIO\") for measured results; [tolerances] for tolerance; [bearing] "
+    "for bearing_moments and tilt. data_schemas/scene.md lists every key; examples/ has one "
+    "scene of each kind")
+
+
 def load_scene(path) -> Scene:
     """Read and validate a scene TOML file.
 
@@ -215,8 +267,55 @@ def load_scene(path) -> Scene:
     return parse_scene(text, path)
 
 
+def _walk(obj, keys=()):
+    """(key path, value) of every leaf of a parsed TOML document."""
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            yield from _walk(v, keys + (k,))
+    elif isinstance(obj, list):
+        for i, v in enumerate(obj):
+            yield from _walk(v, keys + (i,))
+    else:
+        yield keys, obj
+
+
+def _mm_hint(value: float, lo: float, hi: float) -> str:
+    if value < lo:
+        return f"a value in metres? {value:g} m = {value * 1e3:g} mm"
+    return f"a value in micrometres? {value:g} µm = {value * 1e-3:g} mm"
+
+
+def _physical_memory() -> int | None:
+    """Physical memory of this machine [B], or None when the OS does not tell."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
 def parse_scene(text: str, path: Path | str | None = None) -> Scene:
-    """Validate scene TOML ``text`` (``path`` only labels errors and anchors relative paths)."""
+    """Validate scene TOML ``text`` (``path`` only labels errors and anchors relative paths).
+
+    Everything that can be told from the scene alone is checked here, before anything runs
+    (``data_schemas/scene.md``, "What is checked before anything runs"): the schema, finite
+    numbers, physical ranges (lengths in mm, speeds, Monte Carlo size, the synthetic
+    recording's memory), the gearset (coaxiality, assembly, planet tip clearance), the results
+    against what the scene provides, and, when the scene reads a recording file, the scene
+    against the file's header (:func:`check_recording`). Planet angles given in
+    ``planet_angles_deg`` are snapped to the nearest assemblable angles
+    psi_1 + 2 pi p_n / (Z_s + Z_r) when within the precision they were typed with.
+
+    Raises
+    ------
+    SceneError
+        Naming the file, the key and the line.
+
+    Warns
+    -----
+    SceneWarning
+        A Monte Carlo of more than ``LIMITS["samples_warn"]`` realisations (with its run-time
+        estimate).
+    """
     label = path if path is not None else "<scene>"
     try:
         raw = tomllib.loads(text)
@@ -226,6 +325,16 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
         if line is None and "end of document" in str(exc):
             line = max(1, len(text.splitlines()))
         raise SceneError(label, "", f"TOML syntax error: {exc}", line) from None
+
+    def err(keys, problem):
+        return SceneError(label, ".".join(str(k) for k in keys), problem, _line_of(text, list(keys)))
+
+    if not set(raw) - {"name", "description", "output"}:
+        raise SceneError(label, "results", "the scene is empty (nothing to run): "
+                         + _EMPTY_HELP.format(results=", ".join(RESULTS)), 1)
+    for keys, v in _walk(raw):
+        if isinstance(v, float) and not math.isfinite(v):
+            raise err(keys, f"{v} is not a finite number (TOML reads inf and nan as numbers)")
     from data_schemas import load_schema
 
     import jsonschema
@@ -244,17 +353,23 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
                 key = ".".join(str(k) for k in keys)
                 allowed = sorted(e.schema.get("properties", {}))
                 msg = f"unknown key {extra[0]!r}; allowed here: {', '.join(allowed)}"
+        elif e.validator in ("minimum", "maximum", "exclusiveMinimum") and "description" in e.schema:
+            msg += f" ({e.schema['description']})"   # what the key means says why the limit
         more = f" (and {len(errors) - 1} more problem(s))" if len(errors) > 1 else ""
         raise SceneError(label, key, msg + more, _line_of(text, keys))
     base = Path(path).resolve().parent if path is not None else Path.cwd()
 
-    def err(keys, problem):
-        return SceneError(label, ".".join(keys), problem, _line_of(text, keys))
-
     results = list(raw.get("results", []))
     gearset = None
+    profile_shift = False
     if "gearset" in raw:
         g = raw["gearset"]
+        profile_shift = bool(g.get("profile_shift", False))
+        lo, hi = LIMITS["length_mm"]
+        for k in ("carrier_radius_mm", "face_width_mm"):
+            if k in g and not lo <= g[k] <= hi:
+                raise err(["gearset", k], f"{g[k]:g} mm is outside {lo:g} .. {hi:g} mm, where "
+                          f"gear dimensions lie; {_mm_hint(g[k], lo, hi)}")
         if "planet_angles_deg" in g:
             angles = tuple(math.radians(a) for a in g["planet_angles_deg"])
         else:
@@ -267,6 +382,7 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
                               face_width=g["face_width_mm"] * 1e-3 if "face_width_mm" in g else None)
         except (ValueError, TypeError) as exc:
             raise err(["gearset", "z_ring"] if "z_ring" in str(exc) else ["gearset"], str(exc)) from None
+        gearset = _check_gearset(gearset, g, profile_shift, err)
     speeds = None
     resolution = None
     if "speeds" in raw and gearset is not None:
@@ -284,24 +400,45 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
             elif f"{m}_rad_s" in s:
                 conv[m] = float(s[f"{m}_rad_s"])
                 resolution[m] = typed_resolution(s[f"{m}_rad_s"])
+            if m in conv and abs(conv[m]) > rpm_to_rad_s(LIMITS["speed_rpm"]):
+                k = f"{m}_rpm" if f"{m}_rpm" in s else f"{m}_rad_s"
+                raise err(["speeds", k], f"{s[k]:g} {'r/min' if k.endswith('rpm') else 'rad/s'} is "
+                          f"faster than gear rigs run (limit {LIMITS['speed_rpm']:g} r/min = "
+                          f"{rpm_to_rad_s(LIMITS['speed_rpm']):.0f} rad/s); check the value and its unit")
         if "sun" in conv and "carrier" in conv:
             w_s, w_c = conv["sun"], conv["carrier"]
-            if "planet" in conv or gearset.z_planet == 0:
-                speeds = Speeds(w_s, w_c, conv.get("planet", 0.0), conv.get("ring", 0.0))
+            if w_s == w_c:
+                k = "sun_rpm" if "sun_rpm" in s else "sun_rad_s"
+                raise err(["speeds", k], f"the sun turns with the carrier (both {w_s:.6g} rad/s): "
+                          "the gearset turns as one block and no tooth meshes")
+            # Willis, no planet teeth needed: w_r - w_c = -(Z_s / Z_r)(w_s - w_c)
+            ring = w_c - gearset.z_sun / gearset.z_ring * (w_s - w_c)
+            if "planet" in conv:
+                speeds = Speeds(w_s, w_c, conv["planet"], conv.get("ring", ring))
+            elif gearset.z_planet == 0:
+                # the planet speed is unknown without Z_p (0 here); the results that need it
+                # require z_planet (_check_consistency)
+                speeds = Speeds(w_s, w_c, 0.0, conv.get("ring", ring))
             else:
                 speeds = Speeds.kinematic(gearset, w_s, w_c)
-                # nominal speeds are typed rounded (the seed's ring: -3.862 r/min): 0.1 % slack
-                scale = max(abs(w_s), abs(w_c), abs(speeds.ring))
-                if "ring" in conv and abs(speeds.ring - conv["ring"]) > 1e-3 * scale:
-                    raise err(["speeds", "ring_rpm" if "ring_rpm" in s else "ring_rad_s"],
-                              f"ring speed {conv['ring']:.6g} rad/s is not consistent with sun/carrier "
-                              f"and the tooth counts (kinematics give {speeds.ring:.6g} rad/s)")
+            # nominal speeds are typed rounded (the seed's ring: -3.862 r/min): 0.1 % slack
+            scale = max(abs(w_s), abs(w_c), abs(ring))
+            if "ring" in conv and abs(ring - conv["ring"]) > 1e-3 * scale:
+                raise err(["speeds", "ring_rpm" if "ring_rpm" in s else "ring_rad_s"],
+                          f"ring speed {conv['ring']:.6g} rad/s is not consistent with sun/carrier "
+                          f"and the tooth counts (kinematics give {ring:.6g} rad/s)")
         elif any(k != "fixed" for k in s):
             raise err(["speeds"], "give both the sun and the carrier speed")
     fixed = raw.get("speeds", {}).get("fixed")
     channels = []
     mounts = {}
+    seen = {}
     for i, c in enumerate(raw.get("channels", [])):
+        if c["name"] in seen:
+            raise err(["channels", i, "name"], f"channel {c['name']!r} is mapped twice (also "
+                      f"[[channels]] number {seen[c['name']] + 1}); map each channel once")
+        seen[c["name"]] = i
+        _check_channel(c, i, gearset, err)
         d = {k: v for k, v in c.items() if k not in ("face_position_mm", "mount_angle_deg")}
         if "face_position_mm" in c:
             d["face_position"] = c["face_position_mm"] * 1e-3
@@ -317,6 +454,17 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
     inp = dict(raw.get("input", {}))
     if "recording" in inp and "synthetic" in inp:
         raise err(["input", "synthetic"], "give either recording or synthetic, not both")
+    if "recording" in inp and "minutes" in inp:
+        raise err(["input", "minutes"], "minutes sets the length of a synthetic scenario; a "
+                  "recording file is read whole, or between start_s and stop_s")
+    if "synthetic" in inp:
+        for k in ("start_s", "stop_s"):
+            if k in inp:
+                raise err(["input", k], f"{k} selects a window of a recording file; a synthetic "
+                          "scenario is generated from t = 0 for `minutes`")
+    if "start_s" in inp and "stop_s" in inp and inp["stop_s"] <= inp["start_s"]:
+        raise err(["input", "stop_s"], f"stop_s = {inp['stop_s']:g} s is not after start_s = "
+                  f"{inp['start_s']:g} s: the window is empty")
     if "recording" in inp:
         inp["recording"] = (base / inp["recording"]).resolve()
     if "start_s" in inp:
@@ -329,9 +477,14 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
         if inp["synthetic"] not in SCENARIOS:
             raise err(["input", "synthetic"], f"unknown scenario {inp['synthetic']!r}; known: "
                       f"{', '.join(sorted(SCENARIOS))}")
+        _check_synthetic_size(inp, err)
     tol = None
     if "tolerances" in raw:
         t = raw["tolerances"]
+        if t.get("samples", 0) > LIMITS["samples_max"]:
+            raise err(["tolerances", "samples"], f"{t['samples']:g} Monte Carlo samples is more "
+                      f"than {LIMITS['samples_max']:.0e} (the statistics of Ave and Dev settle "
+                      "long before: their standard errors fall as 1/sqrt(samples)); use 1e4 .. 1e6")
         tol = {}
         for g in ("sun", "ring", "planet"):
             tol[f"e_{g}"] = t.get(f"e_{g}_mm", 0.0) * 1e-3
@@ -342,6 +495,16 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
         tol["sampler"] = t.get("sampler", "sobol")
         tol["window"] = t.get("window_s")
         tol["seed"] = t.get("seed", 0)
+        if gearset is not None:
+            for g in ("sun", "ring"):
+                reach = sum(tol[f"{p}e_{m}"] for p in ("", "mean_") for m in (g, "planet"))
+                if reach >= gearset.carrier_radius:
+                    k = f"e_{g}_mm" if f"e_{g}_mm" in t else f"mean_e_{g}_mm"
+                    raise err(["tolerances", k if k in t else "e_planet_mm"],
+                              f"the {g} and planet bands reach {reach * 1e3:g} mm (mean + 3-sigma "
+                              f"band, both gears), beyond the carrier radius "
+                              f"{gearset.carrier_radius * 1e3:g} mm: the offset model needs "
+                              "e_" + g + " + e_planet < R_c; are these values in µm?")
     bearing = None
     if "bearing" in raw:
         b = raw["bearing"]
@@ -349,6 +512,11 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
         if case is None:
             raise err(["bearing", "case"], f"unknown case {b['case']!r}; known: seed 001 cases "
                       f"{', '.join(sorted(set(_BEARING_CASES.values())))} (also written case1, case2B)")
+        lo, hi = LIMITS["c_g"]
+        if "c_g_N_per_mm_um" in b and not lo <= b["c_g_N_per_mm_um"] <= hi:
+            raise err(["bearing", "c_g_N_per_mm_um"], f"{b['c_g_N_per_mm_um']:g} N/(mm·µm) is outside "
+                      f"{lo:g} .. {hi:g} (ISO 6336: 20 by default); the key is in N/(mm·µm), "
+                      "not SI (20 N/(mm·µm) = 2e10 N/m^2)")
         bearing = {"case": case, "input_torque": b.get("input_torque_Nm"),
                    "z_s": b.get("z_s_mm", 0.0) * 1e-3, "z_r": b.get("z_r_mm", 0.0) * 1e-3,
                    "c_g": b.get("c_g_N_per_mm_um", 20.0) * 1e9}
@@ -363,9 +531,276 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
         results=results, gearset=gearset, speeds=speeds, channels=channels, input=inp,
         processing=dict(raw.get("processing", {})), tolerances=tol, bearing=bearing,
         output=(base / raw["output"]) if "output" in raw else None, raw=raw,
-        speeds_resolution=resolution or None, fixed=fixed, tacho=tacho, mounts=mounts)
+        speeds_resolution=resolution or None, fixed=fixed, tacho=tacho, mounts=mounts,
+        profile_shift=profile_shift, text=text)
     _check_consistency(scene, text, label)
+    stages = plan(scene, check=False)
+    if "tolerance" in stages:
+        _check_monte_carlo(scene, err)
+    rec = scene.input.get("recording")
+    if "load" in stages and rec and Path(rec).is_file():
+        from . import io
+
+        try:
+            info = io.read_info(rec)
+        except Exception:  # noqa: BLE001 - unreadable files are the load stage's to report
+            info = None
+        if info is not None:
+            check_recording(scene, info)
     return scene
+
+
+def _check_gearset(gearset: Gearset, g: dict, profile_shift: bool, err) -> Gearset:
+    """Coaxiality, assembly and planet tip clearance of the scene's gearset (``g``: the
+    ``[gearset]`` table as written); returns the gearset with typed planet angles snapped to
+    the assemblable ones."""
+    from .angles import typed_resolution
+    from .models.assembly import (CLEARANCE_ATOL, assemblable_planet_counts, coaxiality_error,
+                                  max_equal_planets, tip_clearance)
+    from .models.mesh_phasing import assembly_check
+
+    zs, zr, zp = gearset.z_sun, gearset.z_ring, gearset.z_planet
+    n = gearset.n_planets
+    where = "n_planets" if "n_planets" in g else "planet_angles_deg"
+    if zp > 0 and not profile_shift:
+        d = coaxiality_error(zs, zr, zp)
+        if d != 0:
+            coax = (f"the coaxial planet has (Z_r - Z_s)/2 = {(zr - zs) // 2} teeth" if (zr - zs) % 2 == 0
+                    else f"Z_r - Z_s = {zr - zs} is odd, so no standard planet is coaxial")
+            raise err(["gearset", "z_planet"],
+                      f"Z_r = {zr} but Z_s + 2 Z_p = {zs} + 2 x {zp} = {zs + 2 * zp}: with standard "
+                      f"gears the sun-planet and planet-ring centre distances differ by {abs(d) / 2:g} "
+                      f"module(s) ({coax}); if the gears are profile shifted (a centre-distance "
+                      "modification), say so with [gearset] profile_shift = true")
+    z_sum = zs + zr
+    counts = assemblable_planet_counts(zs, zr, zp or None, n_max=max(12, n))
+    if where == "n_planets":
+        if z_sum % n:
+            raise err(["gearset", "n_planets"],
+                      f"{n} equally spaced planets cannot be assembled: (Z_s + Z_r)/N = {z_sum}/{n} "
+                      f"= {z_sum / n:.4g} is not an integer (Parker & Lin 2004); planet counts that "
+                      f"can be{' (tip circles clear)' if zp else ''}: {', '.join(map(str, counts))}")
+    else:
+        typed = g["planet_angles_deg"]
+        chk = assembly_check(gearset, atol=0.0)
+        step = 360.0 / z_sum
+        res1 = typed_resolution(typed[0])
+        for i, a in enumerate(typed):
+            tol = min(typed_resolution(a) + res1, step / 4) if i else math.inf
+            err_deg = math.degrees(abs(chk.angle_error[i]))
+            if err_deg > tol:
+                p = int(chk.p[i])
+                near = sorted(((q, typed[0] + q * step) for q in (p, p + 1 if chk.angle_error[i] > 0 else p - 1)),
+                              key=lambda x: x[0])
+                raise err(["gearset", "planet_angles_deg"],
+                          f"planet {i + 1} at {a:g} deg cannot be assembled with Z_s + Z_r = {z_sum}: "
+                          f"planets sit at whole multiples p of 360/{z_sum} = {step:.6g} deg from planet 1 "
+                          f"(Parker & Lin 2004), and {a:g} deg is {err_deg:.3g} deg from the nearest "
+                          f"(tolerance {tol:.3g} deg: the precision typed, at most a quarter step); nearest: "
+                          + " or ".join(f"{v:.6g} deg (p = {q})" for q, v in near))
+        p = np.mod(chk.p, z_sum)
+        for i in range(1, n):
+            j = np.flatnonzero(p[:i] == p[i])
+            if j.size:
+                raise err(["gearset", "planet_angles_deg"],
+                          f"planets {j[0] + 1} and {i + 1} sit at the same place ({typed[j[0]]:g} and "
+                          f"{typed[i]:g} deg)")
+        gearset = Gearset(zs, zr, zp, tuple(float(x) for x in chk.nearest_angles), gearset.carrier_radius,
+                          direction=gearset.direction, name=gearset.name, face_width=gearset.face_width)
+    if zp > 0:
+        margin = tip_clearance(zs, zr, zp, gearset.angles)
+        if not margin > CLEARANCE_ATOL:
+            lhs = (f"(Z_s + Z_p) = {zs + zp}" if zr == zs + 2 * zp else
+                   f"(Z_s + Z_r)/2 = {z_sum / 2:g} (profile shifted: the mean centre distance)")
+            if where == "n_planets":
+                what = (f"{n} equally spaced planets collide: {lhs} x sin(pi/{n}) = "
+                        f"{margin + zp + 2:.4g} is not more than the tip diameter Z_p + 2 = {zp + 2} "
+                        f"(in modules); at most {max_equal_planets(zs, zr, zp)} fit, and these can "
+                        f"be assembled: {', '.join(map(str, counts))}")
+            else:
+                what = (f"neighbouring planets collide: {lhs} x sin(gap/2) at the smallest gap "
+                        f"between planets is {margin + zp + 2:.4g}, not more than the tip diameter "
+                        f"Z_p + 2 = {zp + 2} (in modules)")
+            raise err(["gearset", where], what)
+    return gearset
+
+
+def _check_channel(c: dict, i: int, gearset: Gearset | None, err) -> None:
+    """One ``[[channels]]`` table against the gearset: tooth numbers, face positions, gain."""
+    if "gain" in c and c["gain"] == 0:
+        raise err(["channels", i, "gain"], "gain 0 would erase the channel; leave the key out "
+                  "for gain 1")
+    if gearset is None:
+        return
+    gear = c.get("gear") or (c.get("kind") if c.get("kind") in ("sun", "ring") else None)
+    z = {"sun": gearset.z_sun, "ring": gearset.z_ring, "planet": gearset.z_planet or None}.get(gear)
+    if "tooth" in c and z and c["tooth"] >= z:
+        raise err(["channels", i, "tooth"], f"the {gear} has {z} teeth, numbered 0 .. {z - 1}; "
+                  f"tooth {c['tooth']} does not exist")
+    b = gearset.face_width
+    if "face_position_mm" in c and b is not None and abs(c["face_position_mm"]) > 0.5 * b * 1e3:
+        raise err(["channels", i, "face_position_mm"],
+                  f"{c['face_position_mm']:g} mm lies outside the face (face_width_mm = {b * 1e3:g}: "
+                  f"positions from the face centre run -{b * 5e2:g} .. +{b * 5e2:g} mm)")
+
+
+def _synthetic_config(inp: dict):
+    """The synthetic scenario's configuration (no samples generated), or None."""
+    if inp.get("config") is not None:
+        return inp["config"]
+    from synthetic.scenarios import SCENARIOS, get_scenario
+
+    return get_scenario(inp["synthetic"]) if inp.get("synthetic") in SCENARIOS else None
+
+
+def _check_synthetic_size(inp: dict, err) -> None:
+    """``[input] minutes`` of a synthetic scenario against this machine's memory: the
+    recording is generated whole and processed with ~LIMITS["processing_copies"] copies."""
+    cfg = _synthetic_config(inp)
+    mem = _physical_memory()
+    if cfg is None or mem is None:
+        return
+    duration = 60.0 * inp["minutes"] if "minutes" in inp else cfg.duration
+    n_ch = len(cfg.gauges) + (cfg.tacho is not None)
+    need = duration * cfg.fs * n_ch * 8.0 * LIMITS["processing_copies"]
+    if need > mem:
+        fit = mem / (cfg.fs * n_ch * 8.0 * LIMITS["processing_copies"]) / 60.0
+        raise err(["input", "minutes" if "minutes" in inp else "synthetic"],
+                  f"{duration / 60:g} min of {inp['synthetic']!r} ({cfg.fs:g} Hz x {n_ch} channels) "
+                  f"needs about {need / 2**30:.3g} GiB to generate and process (the samples are held "
+                  f"in memory, ~{LIMITS['processing_copies']} copies), more than this machine's "
+                  f"{mem / 2**30:.3g} GiB; at most about {fit:.3g} min fit (for long synthetic "
+                  "files: `meshphase synth`, which writes in blocks)")
+
+
+def _check_monte_carlo(scene: Scene, err) -> None:
+    """Size of the Monte Carlo (realisations x time points x planets) before it runs: refused
+    above ``LIMITS["mc_evals_max"]``, a SceneWarning with the run-time estimate above
+    ``LIMITS["samples_warn"]`` realisations."""
+    from .errors import SceneWarning
+    from .models.tolerance import default_n_times, observation_window
+
+    t, sp, g = scene.tolerances, scene.speeds, scene.gearset
+    if t is None or sp is None or g is None:
+        return
+    try:
+        window = observation_window(sp) if t.get("window") is None else (0.0, float(t["window"]))
+        n_times = default_n_times(sp, window)
+    except ValueError as exc:
+        raise err(["speeds"], f"the Monte Carlo cannot run with these speeds: {exc}") from None
+    evals = float(t["samples"]) * n_times * g.n_planets
+    key = ["tolerances", "window_s" if t.get("window") is not None else "samples"]
+    if evals > LIMITS["mc_evals_max"]:
+        raise err(key, f"the Monte Carlo would evaluate {evals:.3g} phasings ({t['samples']} samples "
+                  f"x {n_times} time points x {g.n_planets} planets), more than "
+                  f"{LIMITS['mc_evals_max']:.0e} (~{evals / _MC_RATE['numba'] / 3600:.3g} h with numba): "
+                  "fewer samples, or a window_s of about one revolution of the slowest offset "
+                  "(the default)")
+    if t["samples"] > LIMITS["samples_warn"]:
+        line = _line_of(scene.text, ["tolerances", "samples"])
+        where = f"{scene.path or '<scene>'}" + (f", line {line}" if line else "")
+        warnings.warn(f"{where}: [tolerances.samples] {t['samples']:g} Monte Carlo samples: "
+                      f"{evals:.3g} evaluations, about {evals / _MC_RATE['numba']:.3g} s with numba "
+                      f"or {evals / _MC_RATE['numpy']:.3g} s on the numpy path (the standard errors "
+                      "fall only as 1/sqrt(samples))", SceneWarning, stacklevel=3)
+
+
+def _source_checks(scene: Scene, fs: float | None, meta_gearset: dict | None, source: str,
+                   text: str, label) -> None:
+    """The scene against what its recording holds: planet count, filters against Nyquist."""
+    raw_g = scene.raw.get("gearset", {})
+    if scene.gearset is not None and isinstance(meta_gearset, dict):
+        n_rec = len(meta_gearset.get("planet_angles") or ())
+        if n_rec and n_rec != scene.gearset.n_planets:
+            key = ["gearset", "n_planets" if "n_planets" in raw_g else "planet_angles_deg"]
+            zs, zr, zp = (meta_gearset.get(k) for k in ("z_sun", "z_ring", "z_planet"))
+            raise SceneError(label, ".".join(key),
+                             f"the scene has {scene.gearset.n_planets} planets but {source} was "
+                             f"made with {n_rec} (its metadata gearset: Z {zs}/{zr}/{zp}, {n_rec} "
+                             "planets)", _line_of(text, key))
+    notch = scene.processing.get("notch_hz")
+    if fs and notch is not None and notch >= 0.5 * fs:
+        raise SceneError(label, "processing.notch_hz",
+                         f"notch_hz = {notch:g} Hz is at or above the Nyquist frequency "
+                         f"{0.5 * fs:g} Hz of {source} (fs {fs:g} Hz): no such frequency is in "
+                         "the samples", _line_of(text, ["processing", "notch_hz"]))
+
+
+def check_recording(scene: Scene, info=None) -> None:
+    """Check a scene against the recording file it reads, from the file's header only.
+
+    Run by :func:`parse_scene` when the scene's results read a recording file that exists and
+    whose header reads (a file that does not is the load stage's to report, with its
+    position). Checks: the planet count against the recording's metadata gearset (synthetic
+    files carry one); ``processing.notch_hz`` below the Nyquist frequency; the
+    ``start_s``/``stop_s`` window inside the recording; every ``[[channels]]`` name and the
+    ``[tacho] channel`` present, and a gauge channel when measured results are wanted (the
+    same rules and messages as the load stage, :func:`pipeline.stages._apply_channel_overrides`
+    and :func:`pipeline.stages._check_gauges`).
+
+    Parameters
+    ----------
+    scene : Scene
+        With ``input["recording"]`` set.
+    info : pipeline.io.RecordingInfo, optional
+        The recording's header; read with :func:`pipeline.io.read_info` when None.
+
+    Raises
+    ------
+    SceneError
+        Naming the scene file, the key and its line.
+    """
+    from . import io
+    from .recording import Recording
+
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a Scene (pipeline.scene.load_scene), got {type(scene).__name__}")
+    rec_path = scene.input.get("recording")
+    if not rec_path:
+        raise ValueError("scene.input has no recording to check against")
+    if info is None:
+        info = io.read_info(rec_path)
+    text, label = scene.text, scene.path or "<scene>"
+    source = str(rec_path)
+    if not (math.isfinite(info.fs) and info.fs > 0):
+        return  # a header without a sample rate: the load stage says what is wrong
+    _source_checks(scene, info.fs, info.meta.get("gearset"), source, text, label)
+    start, stop = scene.input.get("start"), scene.input.get("stop")
+    t0, t_end = info.t0, info.t0 + info.duration
+    span = f"{source} runs {t0:g} .. {t_end:g} s (fs {info.fs:g} Hz)"
+    if start is not None and not start < t_end:
+        raise SceneError(label, "input.start_s", f"start_s = {start:g} s is not before the end of "
+                         f"the recording: {span}", _line_of(text, ["input", "start_s"]))
+    if stop is not None and not stop > t0:
+        raise SceneError(label, "input.stop_s", f"stop_s = {stop:g} s is not after the start of "
+                         f"the recording: {span}", _line_of(text, ["input", "stop_s"]))
+    if start is not None or stop is not None:
+        try:
+            info.window(start, stop)
+        except ValueError as exc:
+            key = ["input", "start_s" if start is not None else "stop_s"]
+            raise SceneError(label, ".".join(key), f"{exc} (fs {info.fs:g} Hz)",
+                             _line_of(text, key)) from None
+    tacho = scene.tacho.get("channel")
+    if tacho is not None and tacho not in info.names:
+        raise SceneError(label, "tacho.channel", f"{source}: tacho channel {tacho!r} is not in the "
+                         f"file; channels present: {', '.join(info.names) or 'none'}",
+                         _line_of(text, ["tacho", "channel"]))
+    from .stages import RunContext, _apply_channel_overrides, _check_gauges
+
+    empty = Recording(np.empty((0, len(info.channels))), info.fs, info.channels, info.t0,
+                      meta=info.meta)
+    try:
+        mapped = _apply_channel_overrides(empty, scene.channels, source)
+    except ValueError as exc:
+        i = next((i for i, c in enumerate(scene.channels) if c["name"] not in info.names), None)
+        key = ["channels"] if i is None else ["channels", i, "name"]
+        raise SceneError(label, ".".join(map(str, key)), str(exc), _line_of(text, key)) from None
+    try:
+        _check_gauges(RunContext(scene), mapped, source)
+    except ValueError as exc:
+        key = ["input", "recording"]
+        raise SceneError(label, ".".join(key), str(exc), _line_of(text, key)) from None
 
 
 def _check_consistency(scene: Scene, text: str, label, *, check_files: bool = True) -> None:
@@ -380,6 +815,16 @@ def _check_consistency(scene: Scene, text: str, label, *, check_files: bool = Tr
     if needs_gearset and scene.gearset is None and not scene.input.get("synthetic"):
         raise SceneError(label, "gearset", f"results {scene.results} need a [gearset] table",
                          _line_of(text, ["results"]))
+    need_zp = [s for s in _NEEDS_Z_PLANET if s in stages]
+    if scene.gearset is not None and scene.gearset.z_planet == 0 and need_zp:
+        g = scene.gearset
+        hint = (f" (the coaxial value: (Z_r - Z_s)/2 = {(g.z_ring - g.z_sun) // 2})"
+                if (g.z_ring - g.z_sun) % 2 == 0 else "")
+        raise SceneError(label, "gearset.z_planet",
+                         f"results {scene.results} need z_planet{hint}: "
+                         + ", ".join(_NEEDS_Z_PLANET[s] for s in need_zp)
+                         + " turn at the planet speed w_pc = -(Z_s/Z_p) w_sc",
+                         _line_of(text, ["gearset", "z_planet"]))
     if set(stages) & _NEEDS_RECORDING and not scene.has_recording_input:
         raise SceneError(label, "input", f"results {scene.results} need an [input] recording or "
                          "synthetic scenario", _line_of(text, ["results"]))
@@ -390,6 +835,11 @@ def _check_consistency(scene: Scene, text: str, label, *, check_files: bool = Tr
                 else "no such recording file")
         raise SceneError(label, "input.recording", f"{what}: {rec}",
                          _line_of(text, ["input", "recording"]))
+    if set(stages) & _NEEDS_RECORDING and not rec and scene.input.get("synthetic"):
+        cfg = _synthetic_config(scene.input)
+        if cfg is not None:
+            _source_checks(scene, cfg.fs, cfg.gearset.to_dict(),
+                           f"the synthetic scenario {scene.input['synthetic']!r}", text, label)
     if "tolerance" in stages and scene.tolerances is None:
         raise SceneError(label, "tolerances", "result 'tolerance' needs a [tolerances] table",
                          _line_of(text, ["results"]))
@@ -434,5 +884,5 @@ def plan(scene: Scene, *, check: bool = True) -> list[str]:
     for s in want:
         visit(s)
     if check:
-        _check_consistency(scene, "", scene.path or "<scene>", check_files=False)
+        _check_consistency(scene, scene.text, scene.path or "<scene>", check_files=False)
     return order

@@ -287,14 +287,11 @@ def stage_condition(ctx: RunContext) -> None:
         # each gear's gauges with their own mesh frequency (drift window, low-pass corner)
         gear = c.gear if c.gear in ("sun", "ring") else (c.kind if c.kind in ("sun", "ring") else None)
         fm = _mesh_freq(ctx, gear) if gear else None
-        # the pulse train's period: consecutive planets' passes, Z / N mesh periods apart
-        # for equally spaced planets (a relative revolution otherwise)
+        # the pulse train's period: one relative revolution of the gauged gear (Z mesh
+        # periods), in which every planet passes once
         period = None
         if fm and g is not None:
-            z = g.z_sun if gear == "sun" else g.z_ring
-            steps = np.diff(np.sort(np.mod(g.angles, 2 * math.pi)))
-            equal = steps.size == 0 or np.allclose(steps, 2 * math.pi / g.n_planets, atol=1e-9)
-            period = z / fm / (g.n_planets if equal else 1)
+            period = (g.z_sun if gear == "sun" else g.z_ring) / fm
         onsets = c.kind in _GAUGE_KINDS
         kw = {}
         if onsets:
@@ -513,7 +510,7 @@ def _gap_intervals(quality: dict) -> np.ndarray:
 
 
 def stage_phasing(ctx: RunContext) -> None:
-    from .angles import held_member, revolution_numbers
+    from .angles import held_member
     from .phasing import GaugePasses, PassTable, measure_phasing
 
     g = _gearset(ctx)
@@ -548,26 +545,17 @@ def stage_phasing(ctx: RunContext) -> None:
     tacho = ctx.results["onsets"].get("tacho_times")
     sp = _nominal_speeds(ctx)
     # which member is held: the scene's word, else the typed speeds within their precision,
-    # checked against the tacho's carrier rate
-    mesh_rate = carrier_rate = None
-    if tacho is not None and len(tacho) >= 2 and passes:
-        k = revolution_numbers(tacho)
-        carrier_rate = float(k[-1]) / float(tacho[-1] - tacho[0])
-        p0 = max(passes, key=lambda p: p.times.size)
-        if p0.times.size >= 2:
-            z = g.z_sun if p0.gear == "sun" else g.z_ring
-            # passes per second / N planets = relative revolutions per second
-            mesh_rate = z * (p0.times.size - 1) / float(p0.times[-1] - p0.times[0]) / g.n_planets
+    # and the tacho's count of mesh cycles per carrier turn when there is a tacho
+    res_typed = ctx.scene.speeds_resolution if ctx.scene.speeds is not None else None
     stated = ctx.scene.fixed
     if stated is not None:
         fixed, why = (None if stated == "none" else stated), "stated in the scene ([speeds] fixed)"
     else:
-        fixed, why = held_member(g.z_sun, g.z_ring, sp,
-                                 resolution=ctx.scene.speeds_resolution if ctx.scene.speeds else None,
-                                 mesh_rate=mesh_rate, carrier_rate=carrier_rate)
+        fixed, why = held_member(g.z_sun, g.z_ring, sp, resolution=res_typed)
     key, mounts = _tacho_geometry(ctx)
     res = measure_phasing(passes, g, fixed=fixed, fixed_reason=why, tacho_times=tacho,
-                          key_angle=key, mounts=mounts, speeds=sp, gaps=_gap_intervals(quality))
+                          key_angle=key, mounts=mounts, speeds=sp, gaps=_gap_intervals(quality),
+                          check_held=stated is None, speeds_resolution=res_typed)
     for gear in mains:
         # a main gauge without a measurable pass gives an empty table, not a missing one
         res.tables.setdefault(gear, PassTable.empty(gear, ["no usable pass"]))
@@ -1107,10 +1095,13 @@ def process_recording(path, gearset_scene_path, *, out_dir=None, overwrite=False
     scene.results = [r for r in dict.fromkeys(list(scene.results) + wanted)
                      if r not in ("tolerance",) or scene.tolerances is not None]
     base = Path(out_dir) if out_dir else Path(path).with_name(Path(path).stem + "-meshphase")
-    with OutputDir(base, overwrite=overwrite) as out:
+    # staged: the folder is built beside its final name and swapped in whole, so a killed
+    # run never leaves a half-written result folder under the name a reader expects
+    with OutputDir(base, overwrite=overwrite, staged=True) as out:
         ctx = run_scene(scene, progress=progress)
         if run_status(ctx)["status"] == "failed":
             out.discard()
             return ctx, {}
-        files = write_outputs(ctx, out.path, report=False)
+        written = write_outputs(ctx, out.path, report=False)
+        files = {k: out.published(v) for k, v in written.items()}
     return ctx, files

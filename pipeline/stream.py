@@ -801,13 +801,17 @@ class _Drift:
     def __init__(self, n_total: int, fs: float, *, method: str, window: float,
                  pulse_period: float | None):
         self.n = int(n_total)
-        if pulse_period is not None:
-            self.b = max(1, int(round(as_positive(pulse_period, "pulse_period") * fs)))
+        b_p = None if pulse_period is None else max(
+            1, int(round(as_positive(pulse_period, "pulse_period") * fs)))
+        if b_p is not None and self.n >= 2 * b_p:
+            # as drift_baseline: means of whole periods only, a partial last block left out
+            self.b = b_p
             self.means = True
+            self.nb = self.n // self.b
         else:
             self.b = max(1, int(round(window * fs / 16.0)))
             self.means = False
-        self.nb = -(-self.n // self.b) if self.n else 0
+            self.nb = -(-self.n // self.b) if self.n else 0
         self.method = method
         if method == "median":
             self.h = (min(17, self.nb) | 1) // 2
@@ -832,15 +836,20 @@ class _Drift:
         self.pend = _Pending()
         self.nan_all = False
         self.n_in = 0
+        self.filled_final = False
 
     # -------------------------------------------------------------- block values
     def _values(self, final: bool) -> None:
         from .condition import _block_means, _block_medians
 
-        k = self.acc_n // self.b
-        if final and self.acc_n > k * self.b:
-            k += 1
+        k = min(self.acc_n // self.b, self.nb - self.j_next)
+        if final and self.acc_n > k * self.b and self.j_next + k < self.nb:
+            k += 1                              # the partial last block (medians only)
         if k == 0:
+            if final and self.j_next >= self.nb and not self.filled_final:
+                # the last whole block came before the end (a partial block left out)
+                self.filled_final = True
+                self._fill(np.empty(0), np.empty(0), True)
             return
         x = self.acc[0] if len(self.acc) == 1 else np.concatenate(self.acc)
         m = min(x.size, k * self.b)
@@ -851,7 +860,9 @@ class _Drift:
         self.acc = [rest] if rest.size else []
         self.acc_n = rest.size
         self.j_next += vals.size
-        self._fill(vals, cents, final and self.j_next >= self.nb)
+        last = final and self.j_next >= self.nb
+        self.filled_final = self.filled_final or last
+        self._fill(vals, cents, last)
 
     def _fill(self, vals: np.ndarray, cents: np.ndarray, final: bool) -> None:
         ok = np.isfinite(vals)

@@ -253,10 +253,13 @@ def test_scene_error_without_path_label():
         parse_scene("results = [\n")
 
 
-def test_empty_scene_plans_nothing():
-    scene = parse_scene("")
-    assert scene.results == [] and scene.gearset is None and scene.tolerances is None
+def test_scene_without_results_plans_nothing():
+    # a gearset file for `meshphase process` has no results: valid, plans nothing by itself
+    scene = parse_scene(GEARSET)
+    assert scene.results == [] and scene.tolerances is None
     assert plan(scene) == []
+    # an empty scene is an error (tests/test_scene_checks.py); built in code it plans nothing
+    assert plan(Scene(path=None, name="empty", results=[])) == []
 
 
 def test_bad_input_types():

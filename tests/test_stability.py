@@ -397,6 +397,8 @@ AMBIGUOUS = "planet 1 cannot be told"       # generic symmetric-layout notice, a
 def _scene_text(cfg) -> str:
     g, sp = cfg.gearset, cfg.speeds
     fw = f"face_width_mm = {g.face_width * 1e3!r}\n" if g.face_width else ""
+    # seed 000 Table 1 (Z 25/87/29) is not coaxial: the scene must declare the profile shift
+    fw += "profile_shift = true\n" if g.z_ring != g.z_sun + 2 * g.z_planet else ""
     return (f'name = "stability {cfg.name}"\nresults = ["phasing", "compare"]\n'
             f"[gearset]\nz_sun = {g.z_sun}\nz_ring = {g.z_ring}\nz_planet = {g.z_planet}\n"
             f"n_planets = {g.n_planets}\ncarrier_radius_mm = {g.carrier_radius * 1e3!r}\n{fw}"
@@ -623,9 +625,20 @@ def test_speed_ramps(rate):
     run = _ramp_run(rate)
     _check_finite(run)
     assert _unwarned_problems(run) == []
-    assert run.messages() == []
-    # measured: sun <= 2.3e-3, ring <= 1.5e-2 cycles
+    # measured: sun <= 4e-4, ring <= 8e-4 cycles (noise-free: the floor is ~1.3e-4)
     assert run.error("sun") <= 5e-3 and run.error("ring") <= 3e-2
+    # the only message allowed is the "not reliable" verdict, and only where it is true: a
+    # flagged gauge's error exceeds 3x its timing floor (a 30-s record's 10 ring passes
+    # under a 20 %/min ramp), an unflagged one's does not (x1.5 slack for the estimate)
+    rel = run.ctx.results["phasing"]["reliability"]
+    for m in run.messages():
+        assert "phasing not reliable" in m, m
+    for gear, r in rel.items():
+        floor = run.ctx.results["compare"][gear]["vs_truth"]["floor_rms"]
+        if r["reliable"]:
+            assert run.error(gear) <= 1.5 * 3 * floor, (gear, run.error(gear), floor)
+        else:
+            assert run.error(gear) > 3 * floor, (gear, run.error(gear), floor)
 
 
 @pytest.mark.parametrize("rate", [0.04, 0.05, -0.02],

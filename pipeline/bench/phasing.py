@@ -29,7 +29,8 @@ import numpy as np
 from ..log import logger
 
 __all__ = ["PhasingCase", "matrix_cases", "run_case", "phasing_rows", "markdown_table",
-           "PHASING_COLUMNS", "TARGET_ABS", "TARGET_FLOOR_RATIO"]
+           "pooled_calibration", "error_vs_runtime_figure", "PHASING_COLUMNS", "TARGET_ABS",
+           "TARGET_FLOOR_RATIO"]
 
 #: accuracy target: per-pass RMS <= max(TARGET_ABS, TARGET_FLOOR_RATIO x floor) [mesh cycles]
 TARGET_ABS = 2e-3
@@ -149,16 +150,47 @@ def run_case(case: PhasingCase, *, seed: int = 0, results=("phasing", "compare")
 
 
 def phasing_rows(cases, *, seed: int = 0) -> list[dict]:
-    """Table rows (one per case and gauge, :data:`PHASING_COLUMNS`) of :func:`run_case`."""
+    """Table rows (one per case and gauge, :data:`PHASING_COLUMNS`) of :func:`run_case`, each
+    with ``z`` (the per-pass error / sigma values, for the pooled calibration)."""
     out = []
     for case in cases:
         res = run_case(case, seed=seed)
         for gear in ("sun", "ring"):
             r = res["gauges"].get(gear)
             if r is not None:
-                out.append({k: r[k] for k in PHASING_COLUMNS})
+                row = {k: r[k] for k in PHASING_COLUMNS}
+                z = r["errors"] / r["sigma"]
+                row["z"] = z[np.isfinite(z)].tolist()
+                out.append(row)
         logger.info("phasing bench: %s done in %.1f s", case.name, res["process_s"])
     return out
+
+
+def pooled_calibration(rows) -> dict:
+    """RMS of error / sigma and the share inside 1.96 sigma over every pass of ``rows``."""
+    z = np.concatenate([np.asarray(r.get("z", []), dtype=float) for r in rows]) if rows else np.empty(0)
+    return {"n": int(z.size), "z_rms": float(np.sqrt(np.mean(z ** 2))) if z.size else float("nan"),
+            "coverage95": float(np.mean(np.abs(z) <= 1.96)) if z.size else float("nan"),
+            "n_ok": int(sum(bool(r["ok"]) for r in rows)), "n_rows": len(rows)}
+
+
+def error_vs_runtime_figure(rows, path) -> None:
+    """Scatter of error / target against processing time, one point per case and gauge
+    (matplotlib through pipeline.report.figures, the one plotting module)."""
+    from ..report.figures import error_vs_runtime
+
+    curves = {}
+    for r in rows:
+        key = r["gauge"]
+        xs, ys = curves.setdefault(key, ([], []))
+        xs.append(float(r["process_s"]))
+        ys.append(float(r["rms"] / r["target"]))
+    srt = {k: (np.asarray(x)[np.argsort(x)], np.asarray(y)[np.argsort(x)]) for k, (x, y) in curves.items()}
+    fig = error_vs_runtime(srt,
+                           xlabel="processing wall time [s]",
+                           ylabel="per-pass RMS error / target [-]",
+                           title="measured phasing: error against run time (target = 1)")
+    fig.savefig(path, dpi=90)
 
 
 def _fmt(v) -> str:

@@ -57,8 +57,14 @@ def detect_format(path) -> str:
         raise FileNotFoundError(f"{path}: no such file")
     if path.is_dir():
         raise ValueError(f"{path}: is a directory, not a recording file")
-    with open(path, "rb") as fh:
-        head = fh.read(_SNIFF_BYTES)
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(_SNIFF_BYTES)
+    except OSError as exc:
+        if exc.filename is not None or exc.errno is None:
+            raise
+        # read() errors (EIO, EINVAL: /proc/self/mem, a failing disk) carry no file name
+        raise type(exc)(exc.errno, exc.strerror, str(path)) from exc
     if not head:
         raise RecordingFileError(path, "file is empty (0 bytes)")
     for name in FORMATS:

@@ -349,6 +349,46 @@ class _SignalGuard:
         return False
 
 
+def _name_max(directory: Path) -> int:
+    try:
+        return int(os.pathconf(directory, "PC_NAME_MAX"))
+    except (OSError, ValueError, AttributeError):
+        return 255
+
+
+def _check_target(path: Path, directory: Path, overwrite: bool) -> None:
+    """Refuse an output ``path`` before anything is written: its folder must be a folder,
+    its name must fit, and an existing entry is replaced only when it is a regular file (or
+    a symbolic link: the link itself is replaced, never written through) and ``overwrite``.
+    The errors carry ``path`` as their file name; their text does not repeat it."""
+    try:
+        st_dir = os.stat(directory)
+    except FileNotFoundError:
+        raise FileNotFoundError(errno.ENOENT, f"folder {directory} does not exist", str(path)) from None
+    except OSError as exc:   # ENOTDIR (a part of the path is a file), ELOOP, EACCES, ENAMETOOLONG
+        raise type(exc)(exc.errno, exc.strerror, str(path)) from None
+    if not stat.S_ISDIR(st_dir.st_mode):
+        raise NotADirectoryError(errno.ENOTDIR, f"{directory} is a file, not a folder", str(path))
+    n, n_max = len(os.fsencode(path.name)), _name_max(directory)
+    if n > n_max:
+        raise OSError(errno.ENAMETOOLONG, f"{os.strerror(errno.ENAMETOOLONG)}: the name has {n} bytes, "
+                                          f"the file system allows {n_max}", str(path))
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        return
+    if stat.S_ISDIR(st.st_mode) or (stat.S_ISLNK(st.st_mode) and path.is_dir()):
+        raise IsADirectoryError(errno.EISDIR, "is a directory", str(path))
+    if not overwrite:
+        raise FileExistsError(errno.EEXIST, "exists; pass overwrite=True to replace it", str(path))
+    if not (stat.S_ISREG(st.st_mode) or stat.S_ISLNK(st.st_mode)):
+        kind = ("a FIFO (named pipe)" if stat.S_ISFIFO(st.st_mode) else
+                "a device" if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else
+                "a socket" if stat.S_ISSOCK(st.st_mode) else "not a regular file")
+        raise FileExistsError(errno.EEXIST, f"is {kind}; overwrite replaces regular files only, "
+                                            "nothing replaced", str(path))
+
+
 @contextlib.contextmanager
 def atomic_path(path, *, overwrite: bool = False, size_hint: int | None = None):
     """Yield a new empty temporary file next to ``path``; on success publish it as ``path``.
@@ -383,22 +423,22 @@ def atomic_path(path, *, overwrite: bool = False, size_hint: int | None = None):
     Raises
     ------
     FileExistsError
-        ``path`` exists and not ``overwrite``.
+        ``path`` exists and not ``overwrite``; or, with ``overwrite``, ``path`` is a FIFO,
+        device or socket (overwrite replaces regular files, and a symbolic link itself).
     FileNotFoundError
         The directory of ``path`` does not exist.
+    NotADirectoryError
+        The directory of ``path`` is a file (or a part of its path is).
     IsADirectoryError
         ``path`` is a directory.
     OSError
-        From the filesystem (ENOSPC: disk full), with nothing left behind.
+        ENAMETOOLONG (the name is longer than the file system allows), ELOOP, EACCES
+        (checked before anything is written); from the filesystem while writing (ENOSPC:
+        disk full), with nothing left behind. Every error carries ``path`` as its file name.
     """
     path = Path(path)
-    if path.is_dir():
-        raise IsADirectoryError(errno.EISDIR, f"{path}: is a directory", str(path))
-    if os.path.lexists(path) and not overwrite:
-        raise FileExistsError(errno.EEXIST, f"{path}: exists; pass overwrite=True to replace it", str(path))
     directory = path.parent
-    if not directory.is_dir():
-        raise FileNotFoundError(errno.ENOENT, f"{path}: directory {directory} does not exist", str(directory))
+    _check_target(path, directory, overwrite)
     clean_stale_partials(directory)
     _check_space(path, size_hint)
     with _SignalGuard():

@@ -47,8 +47,10 @@ import contextlib
 import copy
 import hashlib
 import json
+import logging
 import math
 import os
+import sys
 from collections import OrderedDict
 import re
 import struct
@@ -244,6 +246,49 @@ def _has_scale_props(props) -> bool:
 def _check_verify(verify) -> None:
     if not isinstance(verify, (bool, np.bool_)):
         raise TypeError(f"verify must be a bool, got {verify!r}")
+
+
+class _Collect(logging.Filter):
+    """Keeps npTDMS's log records instead of letting them through (a logger filter that
+    returns False stops the record before any handler and before propagation)."""
+
+    def __init__(self):
+        super().__init__()
+        self.messages: list[str] = []
+
+    #: npTDMS messages this reader reports in its own words already
+    SAID = ("Unsupported scale type",)
+
+    def filter(self, record):
+        if record.levelno >= logging.WARNING:
+            text = " ".join(record.getMessage().split())
+            if text.startswith(self.SAID):
+                return False
+            self.messages.append(text if len(text) <= 200 else text[:197] + "...")
+        return False
+
+
+@contextlib.contextmanager
+def _nptdms_logs_as_warnings(path):
+    """npTDMS logs what it finds odd ("Segment version mismatch", "Error decoding string",
+    "Data size ... is not a multiple of the chunk size") to stderr through its own handler,
+    one multi-line record per segment: route its loggers' records into one FormatWarning per
+    distinct message naming the file, issued when the read succeeds (when it fails, the
+    error says what is wrong and the log lines would only repeat it)."""
+    import nptdms  # noqa: F401  (its modules create their loggers on import)
+
+    grab = _Collect()
+    loggers = [logging.getLogger(name) for name in list(sys.modules)
+               if name == "nptdms" or name.startswith("nptdms.")]
+    for lg in loggers:
+        lg.addFilter(grab)
+    try:
+        yield
+    finally:
+        for lg in loggers:
+            lg.removeFilter(grab)
+    for msg in dict.fromkeys(grab.messages):
+        warnings.warn(FormatWarning(f"{path}: npTDMS: {msg}"), stacklevel=3)
 
 
 def _open(path):
@@ -505,7 +550,8 @@ def _read_general(plan: _Plan, names, i0, i1, buf, path):
     for j, name in enumerate(names):
         ch = plan.chans[name].ch
         try:
-            arr = ch.read_data(offset=i0, length=n, scaled=not plan.raw)
+            with _nptdms_logs_as_warnings(path):
+                arr = ch.read_data(offset=i0, length=n, scaled=not plan.raw)
         except Exception as exc:  # npTDMS raises plain Exception for some malformed data
             raise RecordingFileError(path, f"channel {name!r}: npTDMS cannot read the data "
                                            f"({type(exc).__name__}: {exc})") from exc
@@ -542,12 +588,13 @@ def _prepare(path, fs, raw):
         if plan is not None:
             _PLAN_CACHE.move_to_end(key)
             return path, None, plan
-    tdms = _open(path)
-    try:
-        plan = _plan(tdms, path, n_segments, fs, bool(raw))
-    except BaseException:
-        tdms.close()
-        raise
+    with _nptdms_logs_as_warnings(path):     # shown only when the file passes the checks
+        tdms = _open(path)
+        try:
+            plan = _plan(tdms, path, n_segments, fs, bool(raw))
+        except BaseException:
+            tdms.close()
+            raise
     if plan.fast:
         tdms.close()
         tdms = None

@@ -1,6 +1,7 @@
 """Prediction models (pure numpy/scipy, SI units, no files).
 
 - :mod:`.gearset`       Gearset geometry and Speeds
+- :mod:`.assembly`      can it be built: coaxiality, planet tip clearance (module-free)
 - :mod:`.mesh_phasing`  ideal and shaft-hole-error phasing (spec sections 1, 2)
 - :mod:`.tolerance`     Monte Carlo tolerance statistics (spec section 2)
 - :mod:`.bearing`       planet bearing moments, single and double pinion (spec section 4)

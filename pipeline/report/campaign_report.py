@@ -12,6 +12,7 @@ recordings are listed with their error message. Input: the dict that
 from __future__ import annotations
 
 import math
+import urllib.parse
 from pathlib import Path
 
 import matplotlib
@@ -20,6 +21,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from ..io import atomic_path  # noqa: E402
 from .html import Report, escape, figure_to_png  # noqa: E402
 
 __all__ = ["build_campaign_report", "phasing_across_recordings", "load_sharing_across_recordings",
@@ -241,10 +243,19 @@ def _ideal(recs) -> dict:
     return {}
 
 
-def _records_table(recs) -> str:
+def _link(path, base) -> str:
+    """A relative URL of ``path`` from the folder ``base`` (the page's folder)."""
+    try:
+        rel = Path(path).relative_to(base).as_posix()
+    except (ValueError, TypeError):
+        rel = Path(str(path)).name
+    return urllib.parse.quote(rel)
+
+
+def _records_table(recs, base=None) -> str:
     cols = ["recording", "format", "status", "duration [s]", "sun passes", "ring passes",
             "RMS vs ideal sun", "RMS vs ideal ring", "RMS vs model sun", "RMS vs model ring",
-            "band coverage sun", "band coverage ring", "wall time [s]", "worker", "results"]
+            "band coverage sun", "band coverage ring", "wall time [s]", "attempts", "worker", "results"]
     out = ["<table>", "<tr>" + "".join(f"<th class='{'l' if i == 0 else ''}'>{escape(c)}</th>"
                                        for i, c in enumerate(cols)) + "</tr>"]
     for r in recs:
@@ -253,8 +264,8 @@ def _records_table(recs) -> str:
         info = r.get("recording_info") or {}
         st = r.get("status", "failed")
         cls = {"ok": "ok", "failed": "bad"}.get(st, "")
-        link = (f"<a href='{escape(Path(r['out_dir']).name)}/summary.json'>summary.json</a>"
-                if r.get("files", {}).get("summary") else "–")
+        summary = (r.get("files") or {}).get("summary")
+        link = (f"<a href='{escape(_link(summary, base))}'>summary.json</a>" if summary else "–")
         cells = [f"<td class='l' title='{escape(r.get('recording', ''))}'>{escape(r.get('name', ''))}</td>",
                  f"<td>{escape(r.get('format') or '–')}</td>",
                  f"<td class='{cls}'>{escape(st)}</td>",
@@ -265,7 +276,8 @@ def _records_table(recs) -> str:
             for g in ("sun", "ring"):
                 v = (cp.get(g) or {}).get(key)
                 cells.append(f"<td>{_fmt(v, '{:.1%}' if key == 'coverage' else '{:.3g}')}</td>")
-        cells += [f"<td>{_fmt(r.get('wall_time_s'), '{:.2f}')}</td>",
+        attempts = _fmt(r.get("attempts", 1)) + (" (resumed)" if r.get("resumed") else "")
+        cells += [f"<td>{_fmt(r.get('wall_time_s'), '{:.2f}')}</td>", f"<td>{escape(attempts)}</td>",
                   f"<td>{escape(r.get('worker') or '–')}</td>", f"<td>{link}</td>"]
         out.append("<tr>" + "".join(cells) + "</tr>")
     out.append("</table>")
@@ -280,9 +292,11 @@ def build_campaign_report(campaign: dict, out_dir, *, filename: str = "campaign_
     campaign : dict
         As built by :func:`pipeline.campaign.run_campaign`: ``recordings`` (list of dicts
         from :func:`pipeline.campaign.run_recording`) and optionally ``scene``, ``counts``,
-        ``timing_s``, ``cluster``, ``scene_level``, ``skipped_inputs``.
+        ``timing_s``, ``cluster``, ``scene_level``, ``skipped_inputs`` and ``out_dir`` (the
+        folder the page will be read in: links to the recordings' results are relative to it;
+        default ``out_dir`` below).
     out_dir : str or Path
-        Existing folder; the page is written there.
+        Existing folder; the page (and its PNGs) are written there, each atomically.
     filename : str
 
     Returns
@@ -312,7 +326,8 @@ def build_campaign_report(campaign: dict, out_dir, *, filename: str = "campaign_
     def add_fig(section, fig, name, caption):
         png = figure_to_png(fig)
         fig_dir.mkdir(exist_ok=True)
-        (fig_dir / f"{name}.png").write_bytes(png)
+        with atomic_path(fig_dir / f"{name}.png", overwrite=True) as tmp:
+            tmp.write_bytes(png)
         section.figure(png, caption)
 
     # --- overview
@@ -344,7 +359,7 @@ def build_campaign_report(campaign: dict, out_dir, *, filename: str = "campaign_
     # --- per recording
     if recs:
         s = rep.section("Recordings")
-        s.html(_records_table(recs))
+        s.html(_records_table(recs, campaign.get("out_dir") or out_dir))
         s.text("RMS residuals are of the measured phasing [mesh cycles] against the ideal phasing "
                "and against the shaft-hole-error model identified from the recording itself; band "
                "coverage is the fraction of passes inside the tolerance Monte Carlo 3-sigma band.")
@@ -356,6 +371,13 @@ def build_campaign_report(campaign: dict, out_dir, *, filename: str = "campaign_
             s = rep.section("Failures")
             s.table([{"recording": r.get("name"), "status": r.get("status"), "error": r.get("error") or "",
                       "file": r.get("recording")} for r in bad])
+        retried = [r for r in recs if r.get("retries")]
+        if retried:
+            s = rep.section("Retries")
+            s.text("Tasks whose worker was lost (killed, crashed, out of memory, or restarted after "
+                   "another task's timeout) are given to another worker by Dask; each loss is listed.")
+            s.table([{"recording": r.get("name"), "attempts": r.get("attempts"), "status": r.get("status"),
+                      "cause": c} for r in retried for c in r["retries"]])
 
     # --- phasing
     ideal = _ideal(recs)
@@ -442,4 +464,7 @@ def build_campaign_report(campaign: dict, out_dir, *, filename: str = "campaign_
     if msg_rows:
         s = rep.section("Warnings per recording")
         s.table(msg_rows, max_rows=300)
-    return rep.write(out_dir / filename)
+    path = out_dir / filename
+    with atomic_path(path, overwrite=True) as tmp:  # never a half-written page
+        rep.write(tmp)
+    return path

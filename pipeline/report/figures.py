@@ -25,6 +25,7 @@ __all__ = [
     "error_vs_runtime",
     "quality_overview",
     "tacho_geometry",
+    "angle_model_residuals",
 ]
 
 _COLORS = plt.rcParams["axes.prop_cycle"].by_key()["color"]
@@ -301,5 +302,27 @@ def tacho_geometry(planet_angles, key_angle: float, mounts: dict | None = None, 
     ax.set_ylim(-2.1, 2.1)
     ax.set_title(title or "tacho edge: the key passes the probe, θc = -key_angle\nplanet n meets "
                  "a gauge on the held ring when θc + ψn = mount_angle (mod 360°)", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def angle_model_residuals(series: dict, *, title: str = ""):
+    """Residuals of the angle model per pass train against time.
+
+    Parameters
+    ----------
+    series : dict of str to (ndarray, ndarray)
+        Train name -> (times [s], residuals [mesh cycles]).
+    """
+    fig, ax = plt.subplots(figsize=(7.0, 3.2))
+    for i, (name, (t, r)) in enumerate(series.items()):
+        t, r = np.asarray(t, float), np.asarray(r, float)
+        ax.plot(t, r * 1e3, ".", ms=3, color=_c(i), label=name)
+    ax.axhline(0.0, color="0.5", lw=0.8)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("residual [1e-3 mesh cycles]")
+    ax.set_title(title or "angle model residuals", fontsize=10)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8, markerscale=3)
     fig.tight_layout()
     return fig

@@ -152,10 +152,41 @@ def build_report(ctx, out_dir) -> Path:
     if "phasing" in r and r["phasing"]["tables"]:
         s = rep.section("Measured phasing against the models")
         tabs = {g: t.to_dataframe() for g, t in r["phasing"]["tables"].items() if len(t)}
-        for g, inf in r["phasing"]["assignment"].items():
-            s.text(f"{g} gauge: planets assigned by {inf.get('shift_decided_by')} "
-                   f"({'ambiguous — labels start at the first pulse' if inf.get('ambiguous') else 'unambiguous'}), "
+        ph = r["phasing"]
+        model = ph.get("model")
+        if ph.get("fixed_reason"):
+            s.text(f"Held member: {ph.get('fixed') or 'none (a differential)'} — {ph['fixed_reason']}.")
+        if model is not None:
+            s.text(f"One angle model for the whole recording (mesh angle of every pass train"
+                   f"{' and the tacho' if any(t.kind == 'tacho' for t in model.trains) else ''}): "
+                   f"{model.terms}; rank {model.rank} of {model.n_parameters} columns; residual "
+                   f"RMS {model.residual_rms:.2e} mesh cycles; chosen by BIC from "
+                   f"{len(model.selection)} step(s).")
+            s.table([{"train": t.name, "observations": t.n, "left out": t.n_outliers,
+                      "scatter / timing bound": t.scale, "residual RMS [cycles]": t.rms,
+                      "lag-1 correlation": t.lag1} for t in model.trains],
+                    caption="Angle model per train (scatter / timing bound near 1: the passes "
+                            "scatter as their onsets' timing bound says)")
+            for n in model.notes:
+                s.text(n)
+            series = {}
+            for t in model.trains:
+                tt, rr = model.residuals(t.name)
+                series[t.name] = (tt, rr)
+            add_fig(s, figures.angle_model_residuals(series), "angle_residuals",
+                    "Angle model residuals per pass train [mesh cycles] against time: structure "
+                    "here (a drift, a periodic pattern) is speed variation the model does not "
+                    "follow.")
+        for g, inf in ph["assignment"].items():
+            s.text(f"{g} gauge: planet 1 named by {inf.get('shift_decided_by')}"
+                   f"{' (relative: planet 1 is the first pulse seen)' if inf.get('ambiguous') else ''}, "
                    f"{inf.get('n_unassigned', 0)} pulse(s) unassigned.")
+        for g, rel in (ph.get("reliability") or {}).items():
+            if rel.get("reliable"):
+                s.text(f"{g} gauge phasing: reliable — per-pass uncertainty {rel['error_estimate']:.2e} "
+                       f"cycles (RMS), timing floor {rel['floor']:.2e}.")
+            else:
+                s.warning(f"{g} gauge phasing NOT reliable: " + "; ".join(rel["reasons"]))
         ideal = None
         if "ideal" in r:
             ideal = {"sun": {n + 1: float(v) for n, v in enumerate(r["ideal"]["gamma_s"])},
@@ -194,8 +225,13 @@ def build_report(ctx, out_dir) -> Path:
                 res[f"{g} - ideal"] = wrap(r["phasing"]["tables"][g].gamma - c["ideal"])
                 if "coverage" in c:
                     row["inside MC 3σ band"] = c["coverage"]["inside_fraction"]
+                tab = r["phasing"]["tables"][g]
+                row["per-pass σ (RMS)"] = float(np.sqrt(np.mean(tab.uncertainty ** 2)))
+                row["timing floor (RMS)"] = float(np.sqrt(np.mean(tab.timing_floor ** 2)))
                 if c.get("vs_truth"):
                     row["RMS vs truth"] = c["vs_truth"]["rms"]
+                    row["error/σ RMS"] = c["vs_truth"]["z_rms"]
+                    row["inside 1.96σ"] = c["vs_truth"]["coverage95"]
                     row["labels = truth"] = c["vs_truth"]["label_match"]
                 rows.append(row)
             s.table(rows, caption="Residuals [mesh cycles]")

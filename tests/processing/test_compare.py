@@ -117,16 +117,28 @@ def exact_table(direction, gauge, err, profile="constant", tooth=None):
 @functools.lru_cache(maxsize=None)
 def measured(direction, err, gauge, profile="constant", tooth=0.3):
     """(events, table) as the pipeline builds them: gauge "sun" and "ring" from their own
-    pass trains (with the planet-eccentricity harmonic at Z_gear / Z_p, as stage_phasing
-    passes it), "ring_sun_encoder" from the ring's passes driven by the sun's encoder."""
+    pass trains alone (one angle model each, with the planet terms at Z_p = 29),
+    "ring_sun_encoder" the ring's passes from one angle model of both gauges' trains (the
+    ring held), as stage_phasing does."""
     if gauge == "ring_sun_encoder":
+        from pipeline.angles import fit_angle_model, gauge_train, kinematics
+        from pipeline.phasing import assign_planets_by_pattern, phasing_from_model, planet_fractions
+
+        g = gearset(direction)
+        trains = {}
+        for gear in ("sun", "ring"):
+            ev_g = events(direction, gear, err, profile, tooth)
+            order = pass_order(direction, gear)
+            lab, info = assign_planets_by_pattern(ev_g.time, g.angles, order,
+                                                  first=int(ev_g.planet[0] - 1))
+            trains[gear] = gauge_train(gear, gear, ev_g.time, lab, info["position"],
+                                       planet_fractions(g.angles, order), z_of(gear),
+                                       order=order)
+        model = fit_angle_model(list(trains.values()), kinematics(25, 87, 29, fixed="ring"), 4)
         ev = events(direction, "ring", err, profile, tooth)
-        sun = measured(direction, err, "sun", profile, tooth)[1]
-        return ev, measured_phasing(ev.time, ev.planet - 1, 87, 4, gauge="ring",
-                                    encoder=sun.encoder, encoder_ratio=25 / 87)
+        return ev, phasing_from_model(model, trains["ring"], 87, 4, gauge="ring")
     ev = events(direction, gauge, err, profile, tooth)
-    return ev, measured_phasing(ev.time, ev.planet - 1, z_of(gauge), 4, gauge=gauge,
-                                planet_ratio=z_of(gauge) / 29)
+    return ev, measured_phasing(ev.time, ev.planet - 1, z_of(gauge), 4, gauge=gauge, z_planet=29)
 
 
 def truth_of_rows(ev, table, direction):
