@@ -33,6 +33,7 @@ import argparse
 import errno
 import json
 import logging
+import math
 import os
 import sys
 import warnings
@@ -195,13 +196,31 @@ def cmd_synth(args) -> int:
 
 # ---------------------------------------------------------------------------- bench
 def cmd_bench(args) -> int:
-    from .bench import run_bench
+    from .bench import rss_summary, run_bench
 
     out = Path(args.out)
-    res = run_bench(args.what, out, minutes=args.minutes, quick=args.quick)
+    res = run_bench(args.what, out, minutes=args.minutes, quick=args.quick,
+                    rss_minutes=args.rss_minutes)
     for name, path in res.get("files", {}).items():
         print(f"{name:<24} {path}")
+    for line in rss_summary(res.get("results", {})):
+        print(line)
     return 0
+
+
+def _minutes_list(text: str) -> tuple:
+    """``--rss-minutes 10,60,180`` -> (10.0, 60.0, 180.0); "" or "none" -> ()."""
+    if text.strip().lower() in ("", "none"):
+        return ()
+    try:
+        vals = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected minutes separated by commas "
+                                         f"(e.g. 10,60,180), got {text!r}") from None
+    bad = [v for v in vals if not (v > 0 and math.isfinite(v))]
+    if bad:
+        raise argparse.ArgumentTypeError(f"minutes must be positive and finite, got {text!r}")
+    return vals
 
 
 # ---------------------------------------------------------------------------- run / process / demo
@@ -466,6 +485,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", default="bench-results", help="output folder (default ./bench-results)")
     s.add_argument("--minutes", type=float, default=60.0, help="io: recording length [min] (default 60)")
     s.add_argument("--quick", action="store_true", help="small sizes, for a smoke run")
+    s.add_argument("--rss-minutes", type=_minutes_list, default=None, metavar="M[,M...]",
+                   help="lengths [min] of the 8-channel recordings whose peak memory of convert "
+                        "and process is measured (default io: 10,60,180, a few minutes for the "
+                        "3 h one; processing: 2,10,60,180; --quick: 0.5,1; none: skip)")
     s.set_defaults(func=cmd_bench)
     return p
 

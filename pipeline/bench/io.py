@@ -26,7 +26,9 @@ Peak memory of ``meshphase convert`` (``convert_minutes``; ``meshphase bench io`
 5120 Hz, float64) is generated and written block by block to HDF5, converted to MCAP and back
 (each conversion a child process: peak RSS from ``os.wait4``, wall time); flat means the
 same peak RSS whatever the length. A length whose files do not fit on the disk (2.2 x the
-samples' size free) is skipped and listed.
+samples' size free) is skipped and listed. Peak memory of ``meshphase process`` on the same
+recordings (``process_minutes``, :func:`pipeline.bench.processing.process_rss_rows`) is
+measured alongside, so that one table shows both streamed commands flat in the length.
 """
 
 from __future__ import annotations
@@ -259,7 +261,7 @@ def _check_args(minutes, n_channels, fs, formats, block_budget_mb, repeats):
 def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: float = 5120.0,
                  formats=IO_FORMATS, block_budget_mb: float | None = None, rng=0,
                  progress: bool = True, repeats: int = 3, keep_files: bool = False,
-                 convert_minutes=()) -> dict:
+                 convert_minutes=(), process_minutes=()) -> dict:
     """Measure read throughput and streaming memory of every recording format.
 
     Parameters
@@ -292,12 +294,17 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
         Lengths [min] of the 8-channel recordings whose ``meshphase convert`` peak memory is
         measured (:func:`convert_rss_rows`; default none, ``meshphase bench io`` passes
         :data:`CONVERT_MINUTES`).
+    process_minutes : sequence of float
+        Lengths [min] of the 8-channel recordings whose ``meshphase process`` peak memory and
+        wall time are measured (:func:`pipeline.bench.processing.process_rss_rows`; default
+        none, ``meshphase bench io`` passes :data:`CONVERT_MINUTES`).
 
     Returns
     -------
     dict
-        ``{"config", "raw", "rows", "convert", "skipped", "warnings", "notes", "files"}``
-        (``convert``: rows with the keys :data:`CONVERT_COLUMNS`); ``rows`` is a
+        ``{"config", "raw", "rows", "convert", "process", "skipped", "warnings", "notes",
+        "files"}`` (``convert``: rows with the keys :data:`CONVERT_COLUMNS`; ``process``: rows
+        with the keys :data:`pipeline.bench.processing.PROCESS_COLUMNS`); ``rows`` is a
         list of dicts with the keys :data:`COLUMNS`, throughputs in MSamples/s, sizes in MB,
         times in s (None where a column does not apply).
     """
@@ -401,6 +408,13 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
                 bar.update(1)
         convert, conv_skipped = convert_rss_rows(work, convert_minutes)
         skipped += conv_skipped
+        process = []
+        if process_minutes:
+            from .processing import process_rss_rows
+
+            process, proc_skipped, _ = process_rss_rows(work / "process", process_minutes)
+            skipped += [{"format": f"process {s['minutes']:g} min", "reason": s["reason"]}
+                        for s in proc_skipped]
     finally:
         if bar:
             bar.close()
@@ -422,6 +436,7 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
         "raw": raw,
         "rows": rows,
         "convert": convert,
+        "process": process,
         "skipped": skipped,
         "warnings": caught,
         "notes": [
@@ -444,6 +459,11 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
             "rss_over_data its ratio to the samples' size; streamed block by block, so flat "
             "in the length. Before streaming (one buffer for the whole recording) convert "
             "peaked at ~1.2x the samples' size.",
+            "process table: `meshphase process` (the seed rig's gearset) of the same recording "
+            "in a child process; peak_rss_mb as above; streamed_peak_mb the peak (VmHWM) when "
+            "the three streamed passes (load, condition, onsets) are done; the later stages "
+            "work on the onsets, whose number grows with the length. Before streaming, process "
+            "peaked at ~5x the samples' size.",
             "Measured, never asserted.",
         ],
     }
@@ -550,6 +570,15 @@ def _markdown(res: dict) -> str:
             lines.append(f"| {r['minutes']:g} | {r['n_channels']} | {r['n_samples'] * r['n_channels'] / 1e6:.1f} "
                          f"| {r['data_mb']:.0f} | {r['source']} | {r['target']} | {r['wall_s']:.1f} "
                          f"| {r['msps']:.1f} | {r['peak_rss_mb']:.0f} | {r['rss_over_data']:.3f} |")
+        lines.append("")
+    if res.get("process"):
+        lines += ["## meshphase process: peak memory against recording length", "",
+                  "| minutes | channels | data MB | status | onsets | wall s | peak RSS MB | "
+                  "streamed peak MB | RSS / data |", "|" + "---|" * 9]
+        for r in res["process"]:
+            lines.append(f"| {r['minutes']:g} | {r['n_channels']} | {r['data_mb']:.0f} | {r['status']} "
+                         f"| {r['n_onsets']} | {r['wall_s']:.1f} | {r['peak_rss_mb']:.0f} "
+                         f"| {_fmt(r.get('streamed_peak_mb'))} | {r['rss_over_data']:.3f} |")
         lines.append("")
     if res["skipped"]:
         lines.append("Skipped: " + "; ".join(f"{s['format']} ({s['reason']})" for s in res["skipped"]))
