@@ -26,7 +26,8 @@ of the filter decays by 1e-15 over it (:func:`filter_overlap`): a transient star
 artificial window edge has decayed below ~1e-13 of the signal at the samples kept; at the
 recording's own ends and at gaps the window holds the true edge and the filter pads it as
 the whole-array filter does. The drift baseline is computed from the same block medians
-(means) as the whole array; its output for a sample waits until every block value that
+(means of whole pulse periods, the partial last period left out, when the recording holds
+at least two) as the whole array; its output for a sample waits until every block value that
 sample depends on is known (about 9 blocks ahead, further across a gap; stretches of all-NaN
 samples are held as their length only). So the conditioned signal equals the whole-array
 :func:`pipeline.condition.condition_recording` to ~1e-12 of its amplitude and the onset
@@ -40,9 +41,15 @@ overlaps (tens of thousands of samples), the drift look-ahead (~10 drift blocks)
 detector's two analysis blocks (2 x 2**20 samples), the SNR estimate's subsamples (2 x 2**20
 values), the hum window (``HUM_SECONDS`` x fs) and the excerpt, plus one read block of every
 channel; and in proportion to what is found (gap, dropout and clip runs, ~20 KB per
-candidate flat run, the onsets). :func:`stream_memory` estimates it before anything is read
-and refuses (ValueError naming the parameter) when it exceeds the budget (every buffer that
-grows with fs is capped at the recording's own length).
+candidate flat run, the onsets). :func:`scan_memory` (passes 1 and 2) and
+:func:`stream_memory` (pass 3) estimate it before the pass reads anything and refuse
+(ValueError naming fs, the largest item and ``memory_budget``) when it exceeds the budget;
+every buffer that grows with fs is capped at the recording's own length, so a high fs costs
+at most the recording's size.
+
+Sources: :class:`FileSource` (a file of any :mod:`pipeline.io` format, read block by block
+through its format module), :class:`MemorySource` (a Recording in memory) and
+:class:`GeneratorSource` (a synthetic recording generated again for every pass).
 """
 
 from __future__ import annotations
