@@ -24,7 +24,7 @@ reader module is missing is skipped with a logged message.
 Peak memory of ``meshphase convert`` (``convert_minutes``; ``meshphase bench io`` measures
 10 min, 1 h and 3 h): the 8-channel benchmark recording (:func:`pipeline.bench.rss.bench_config`,
 5120 Hz, float64) is generated and written block by block to HDF5, converted to MCAP and back
-(each conversion a child process: peak RSS from ``os.wait4``, wall time); flat means the
+(each conversion a child process: its peak RSS (VmHWM), wall time); flat means the
 same peak RSS whatever the length. A length whose files do not fit on the disk (2.2 x the
 samples' size free) is skipped and listed. Peak memory of ``meshphase process`` on the same
 recordings (``process_minutes``, :func:`pipeline.bench.processing.process_rss_rows`) is
@@ -455,7 +455,7 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
             "block budget over a recording of 1x and 4x the budget; flat = ratio near 1.",
             "convert table: `meshphase convert` of the 8-channel benchmark recording "
             "(pipeline.bench.rss.bench_config, float64, 5120 Hz) in a child process; peak_rss_mb "
-            "is its ru_maxrss (os.wait4: every page it touched, C libraries included), "
+            "is its VmHWM (every page its address space touched, C libraries included), "
             "rss_over_data its ratio to the samples' size; streamed block by block, so flat "
             "in the length. Before streaming (one buffer for the whole recording) convert "
             "peaked at ~1.2x the samples' size.",

@@ -31,7 +31,7 @@ constant offset between features, irrelevant to phasing) removed and reported se
 Peak memory and wall time of ``meshphase process`` (``process_minutes``; ``meshphase bench
 processing`` measures 2 min, 10 min, 1 h and 3 h): the 8-channel benchmark recording
 (:func:`pipeline.bench.rss.bench_config`, float64 HDF5 written block by block) processed with
-the seed rig's gearset in a child process (peak RSS from ``os.wait4``), with each stage's
+the seed rig's gearset in a child process (peak RSS: its VmHWM), with each stage's
 time, and the whole run and the streamed stages (load, condition, onsets: the three passes
 over the samples) as multiples of one :func:`scipy.signal.sosfiltfilt` pass over the same
 samples (the conditioning's 4th-order low-pass, rate measured in the same run).

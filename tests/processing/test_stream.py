@@ -436,10 +436,22 @@ def test_run_child_measures_a_child_and_refuses_other_jobs():
         run_child("os_system")
 
 
+def test_run_child_peak_is_the_childs_own_not_the_parents():
+    # the kernel carries a posix_spawn'ed child's parent's high-water mark into its
+    # ru_maxrss; the peak reported is the child's own VmHWM. 400 MB held here (touched)
+    # against a child that needs ~100 MB: the child's peak stays far below the 400 MB
+    from pipeline.bench.rss import run_child
+
+    held = np.ones(400 * 2**20 // 8)
+    r = run_child("sosfiltfilt_job", n=1 << 16, repeats=1)
+    assert r["ru_maxrss_mb"] >= 400 > r["peak_rss_mb"] == r["vmhwm_mb"] > 10
+    del held
+
+
 @pytest.mark.slow
 def test_process_peak_rss_on_a_30_minute_file_stays_under_the_budget(tmp_path):
     # meshphase process on 30 min x 8 channels (float64 HDF5: 590 MB of samples): a child
-    # process, its peak RSS from os.wait4. Before streaming it peaked at ~5x the samples
+    # process, its peak RSS (VmHWM). Before streaming it peaked at ~5x the samples
     # (~2.9 GB); the streaming stages hold a fixed budget (pipeline.stream.PROCESS_RSS_BUDGET)
     from pipeline.bench.rss import BENCH_GEARSET, run_child
     from pipeline.stream import PROCESS_RSS_BUDGET
