@@ -33,6 +33,7 @@ import argparse
 import errno
 import json
 import logging
+import math
 import os
 import sys
 import warnings
@@ -128,8 +129,10 @@ def cmd_info(args) -> int:
 
 # ---------------------------------------------------------------------------- convert
 def cmd_convert(args) -> int:
+    import dataclasses
+
     from .exits import recording_read_errors
-    from .io import detect_format, iter_blocks, read_info, write
+    from .io import detect_format, iter_blocks, read_info, write_blocks
     from .recording import Recording
     from .validate import as_regular_file
     import numpy as np
@@ -138,28 +141,37 @@ def cmd_convert(args) -> int:
     with recording_read_errors(src):
         fmt = detect_format(src)
         info = read_info(src, format=fmt)
-    # read in blocks with a progress bar into one preallocated buffer, then write atomically
-    data = None
-    with _progress(info.n_samples, f"read {fmt}", not args.quiet) as bar, recording_read_errors(src):
-        i = 0
-        for block in iter_blocks(src, max(1.0, 2**22 / info.fs), format=fmt):
-            if data is None:
-                data = np.empty((info.n_samples, block.n_channels), dtype=block.data.dtype)
-            data[i:i + block.n_samples] = block.data
-            i += block.n_samples
-            bar.update(block.n_samples)
-    if data is None:
-        data = np.empty((0, len(info.channels)))
-    rec = Recording(data, info.fs, info.channels, info.t0, info.start_datetime, info.meta,
-                    info.history)
-    rec = rec.with_history("convert", source=str(src), source_format=fmt)
+    # streamed: each block read is written at once (flat memory: one block plus the writer's
+    # chunk buffer), the output published atomically when complete
+    history = Recording(np.empty((0, len(info.channels))), info.fs, info.channels,
+                        history=info.history).with_history(
+        "convert", source=str(src), source_format=fmt).history
+    header = dataclasses.replace(info, history=history)
+    # 2**18 samples per channel per block: 16 MB of 8 float64 channels
+    blocks = iter_blocks(src, 2**18 / info.fs, format=fmt)
+    first = None
+    with recording_read_errors(src):
+        first = next(blocks, None)
+    dtype = first.data.dtype if first is not None else np.dtype(np.float64)
+
+    def data():
+        with _progress(info.n_samples, f"{fmt} -> {args.format or dst.suffix.lstrip('.')}",
+                       not args.quiet) as bar, recording_read_errors(src):
+            if first is not None:
+                yield first.data
+                bar.update(first.n_samples)
+            for block in blocks:
+                yield block.data
+                bar.update(block.n_samples)
+
     options = {}
     if args.compression:
         options["compression"] = args.compression
-    out = write(rec, dst, format=args.format, overwrite=args.overwrite, **options)
+    out = write_blocks(header, data(), dst, format=args.format, dtype=dtype,
+                       overwrite=args.overwrite, **options)
     logger.info("wrote %s", out)
     if not args.quiet:
-        print(f"{src} ({fmt}) -> {out} ({rec.n_samples} samples x {rec.n_channels} channels)")
+        print(f"{src} ({fmt}) -> {out} ({info.n_samples} samples x {len(info.channels)} channels)")
     return 0
 
 
@@ -184,13 +196,31 @@ def cmd_synth(args) -> int:
 
 # ---------------------------------------------------------------------------- bench
 def cmd_bench(args) -> int:
-    from .bench import run_bench
+    from .bench import rss_summary, run_bench
 
     out = Path(args.out)
-    res = run_bench(args.what, out, minutes=args.minutes, quick=args.quick)
+    res = run_bench(args.what, out, minutes=args.minutes, quick=args.quick,
+                    rss_minutes=args.rss_minutes)
     for name, path in res.get("files", {}).items():
         print(f"{name:<24} {path}")
+    for line in rss_summary(res.get("results", {})):
+        print(line)
     return 0
+
+
+def _minutes_list(text: str) -> tuple:
+    """``--rss-minutes 10,60,180`` -> (10.0, 60.0, 180.0); "" or "none" -> ()."""
+    if text.strip().lower() in ("", "none"):
+        return ()
+    try:
+        vals = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected minutes separated by commas "
+                                         f"(e.g. 10,60,180), got {text!r}") from None
+    bad = [v for v in vals if not (v > 0 and math.isfinite(v))]
+    if bad:
+        raise argparse.ArgumentTypeError(f"minutes must be positive and finite, got {text!r}")
+    return vals
 
 
 # ---------------------------------------------------------------------------- run / process / demo
@@ -455,6 +485,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", default="bench-results", help="output folder (default ./bench-results)")
     s.add_argument("--minutes", type=float, default=60.0, help="io: recording length [min] (default 60)")
     s.add_argument("--quick", action="store_true", help="small sizes, for a smoke run")
+    s.add_argument("--rss-minutes", type=_minutes_list, default=None, metavar="M[,M...]",
+                   help="lengths [min] of the 8-channel recordings whose peak memory of convert "
+                        "and process is measured (default io: 10,60,180, a few minutes for the "
+                        "3 h one; processing: 2,10,60,180; --quick: 0.5,1; none: skip)")
     s.set_defaults(func=cmd_bench)
     return p
 

@@ -69,8 +69,7 @@ from scipy import ndimage, signal
 
 from .errors import DataQualityWarning, ProcessingWarning
 from .log import logger
-from .quality import clipped_runs as _clipped_runs
-from .quality import DROPOUT_MIN_RUN, FALSE_ALARM, find_runs, flat_runs, outside_runs
+from .quality import (DROPOUT_MIN_RUN, FALSE_ALARM, ChannelScan, ScanResult, find_runs)
 from .recording import Recording
 from .validate import as_signal, as_choice, as_float, as_nonnegative, as_positive, as_positive_int
 
@@ -120,7 +119,7 @@ def _check_freq(value, name: str, fs: float) -> float:
 
 
 def _apply_finite(x: np.ndarray, func: Callable[[np.ndarray], np.ndarray], *, min_len: int,
-                  fill_max: int, what: str) -> np.ndarray:
+                  fill_max: int, what: str, warn: bool = True) -> np.ndarray:
     """Apply ``func`` to the finite parts of ``x`` without smearing NaN.
 
     Interior non-finite runs of at most ``fill_max`` samples are bridged by linear
@@ -133,8 +132,9 @@ def _apply_finite(x: np.ndarray, func: Callable[[np.ndarray], np.ndarray], *, mi
         return np.empty(0, dtype=np.float64)
     if math.isfinite(float(np.sum(x))):
         if n < min_len:
-            warnings.warn(f"{what}: signal of {n} sample(s) is shorter than the {min_len} the "
-                          "filter needs; returned as NaN", DataQualityWarning, stacklevel=3)
+            if warn:
+                warnings.warn(_short_signal_message(what, n, min_len), DataQualityWarning,
+                              stacklevel=3)
             return np.full(n, np.nan)
         return func(x)
     bad = ~np.isfinite(x)
@@ -162,12 +162,61 @@ def _apply_finite(x: np.ndarray, func: Callable[[np.ndarray], np.ndarray], *, mi
             n_short += 1
             continue
         out[a:b] = func(xf[a:b])
-    if n_short:
-        warnings.warn(f"{what}: {n_short} finite segment(s) between gaps are shorter than the "
-                      f"{min_len} samples the filter needs; they are set to NaN",
-                      DataQualityWarning, stacklevel=3)
+    if n_short and warn:
+        warnings.warn(_short_segments_message(what, n_short, min_len), DataQualityWarning,
+                      stacklevel=3)
     out[bad] = np.nan
     return out
+
+
+def _short_signal_message(what: str, n: int, min_len: int) -> str:
+    return (f"{what}: signal of {n} sample(s) is shorter than the {min_len} the filter needs; "
+            "returned as NaN")
+
+
+def _short_segments_message(what: str, n_short: int, min_len: int) -> str:
+    return (f"{what}: {n_short} finite segment(s) between gaps are shorter than the {min_len} "
+            "samples the filter needs; they are set to NaN")
+
+
+def finite_apply_gaps(bad_runs, n: int, *, min_len: int, fill_max: int) -> tuple[np.ndarray, int, bool]:
+    """The non-finite runs of the output of a gap-aware filter, from those of its input.
+
+    What :func:`filter_signal` and :func:`notch_hum` (``_apply_finite``) do to the gaps,
+    without the samples: interior runs of at most ``fill_max`` samples are bridged (and
+    non-finite again on output), longer runs split the signal, and finite segments shorter
+    than ``min_len`` become NaN.
+
+    Parameters
+    ----------
+    bad_runs : ndarray of int, shape (k, 2)
+        Sorted, disjoint ``[start, stop)`` runs of non-finite input samples.
+    n : int
+        Samples [-].
+    min_len, fill_max : int
+        As the filter uses them [samples].
+
+    Returns
+    -------
+    (runs, n_short, whole_short) : (ndarray, int, bool)
+        Non-finite output runs (merged); the number of finite segments set to NaN; True when
+        the input was finite throughout and shorter than ``min_len`` (the "signal shorter"
+        case, one NaN run over everything).
+    """
+    r = np.asarray(bad_runs, dtype=np.int64).reshape(-1, 2)
+    if n == 0:
+        return np.empty((0, 2), dtype=np.int64), 0, False
+    if len(r) == 0:
+        if n < min_len:
+            return np.array([[0, n]], dtype=np.int64), 0, True
+        return np.empty((0, 2), dtype=np.int64), 0, False
+    lengths = r[:, 1] - r[:, 0]
+    interior = (r[:, 0] > 0) & (r[:, 1] < n)
+    split = r[~(interior & (lengths <= fill_max))]
+    edges = np.concatenate([[0], split.ravel(), [n]]).reshape(-1, 2)
+    seg = edges[edges[:, 1] > edges[:, 0]]
+    short = seg[(seg[:, 1] - seg[:, 0]) < min_len]
+    return merge_runs(np.concatenate([r, short])), int(len(short)), False
 
 
 # ====================================================================== filtering
@@ -314,13 +363,21 @@ def filter_signal(x, fs: float, *, kind: str = "bandpass", low: float | None = N
 # ====================================================================== drift
 def _block_medians(x: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
     """Medians of consecutive blocks of ``b`` samples (at most 33 evenly strided samples of
-    each enter its median; NaN ignored) and the block centre indices."""
+    each enter its median; NaN ignored) and the block centre indices.
+
+    Only the strided samples are gathered (a partial last block is padded with NaN to the
+    length of the others): the work space is ~34 values per block whatever ``b`` is, so a
+    block longer than the data (a window of seconds at an absurd fs) costs nothing."""
     n = x.size
     nb = -(-n // b)
-    pad = nb * b - n
-    xp = np.concatenate([x, np.full(pad, np.nan)]) if pad else x
+    nf = n // b
     step = max(1, b // 33)
-    rows = xp.reshape(nb, b)[:, ::step]
+    rows = np.full((nb, -(-b // step)), np.nan)
+    if nf:
+        rows[:nf] = x[:nf * b].reshape(nf, b)[:, ::step]
+    if nb > nf:
+        part = x[nf * b::step]
+        rows[nf, :part.size] = part
     med = np.median(rows, axis=1)
     bad = np.isnan(med)
     if bad.any():
@@ -337,15 +394,22 @@ def _block_medians(x: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
 
 def _block_means(x: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
     """Means of consecutive blocks of ``b`` samples (NaN ignored; NaN for an all-NaN block)
-    and the block centre indices."""
+    and the block centre indices (no padding: the work space is the data's own size)."""
     n = x.size
     nb = -(-n // b)
-    pad = nb * b - n
-    xp = np.concatenate([x, np.full(pad, np.nan)]) if pad else x
-    rows = xp.reshape(nb, b)
-    fin = np.isfinite(rows)
-    cnt = fin.sum(axis=1)
-    tot = np.where(fin, rows, 0.0).sum(axis=1)
+    nf = n // b
+    cnt = np.zeros(nb, dtype=np.int64)
+    tot = np.zeros(nb)
+    if nf:
+        rows = x[:nf * b].reshape(nf, b)
+        fin = np.isfinite(rows)
+        cnt[:nf] = fin.sum(axis=1)
+        tot[:nf] = np.where(fin, rows, 0.0).sum(axis=1)
+    if nb > nf:
+        part = x[nf * b:]
+        fin = np.isfinite(part)
+        cnt[nf] = int(fin.sum())
+        tot[nf] = float(np.where(fin, part, 0.0).sum())
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = np.where(cnt > 0, tot / np.maximum(cnt, 1), np.nan)
     starts = np.arange(nb) * b
@@ -693,11 +757,15 @@ def estimate_noise(x) -> float:
     large share of the differences). NaN when fewer than 2 finite neighbours exist.
     """
     x = _as_signal(x)
-    d = np.diff(x)
-    d = d[np.isfinite(d)]
+    with np.errstate(invalid="ignore"):                # inf - inf: dropped below
+        d = np.diff(x)
+    return _noise_from_diffs(_subsample(d[np.isfinite(d)]))
+
+
+def _noise_from_diffs(d: np.ndarray) -> float:
+    """:func:`estimate_noise` from its (subsampled, finite) first differences."""
     if d.size == 0:
         return float("nan")
-    d = _subsample(d)
     return float(_MAD_TO_SIGMA * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0))
 
 
@@ -721,11 +789,19 @@ def estimate_snr(x, *, quantile: float = 0.999) -> tuple[float, float, float]:
     q = as_float(quantile, "quantile")
     if not 0.5 < q < 1.0:
         raise ValueError(f"quantile must be in (0.5, 1), got {q!r}")
-    sigma = estimate_noise(x)
-    xs = x[:_SUBSAMPLE]
+    return _snr_from(estimate_noise(x), x[:_SUBSAMPLE], q)
+
+
+def _snr_from(sigma: float, xs: np.ndarray, q: float) -> tuple[float, float, float]:
+    """:func:`estimate_snr` from the noise estimate and the first ``_SUBSAMPLE`` samples."""
     xs = xs[np.isfinite(xs)]
-    if xs.size < 2 or not np.isfinite(sigma):
-        return float("nan"), float("nan"), sigma
+    a = _snr_peak(xs, q) if xs.size >= 2 else None
+    return _snr_combine(sigma, a)
+
+
+def _snr_peak(xs: np.ndarray, q: float) -> float:
+    """The pulse peak amplitude ``A`` of :func:`estimate_snr` from the finite samples ``xs``
+    of the first ``_SUBSAMPLE`` samples (at least 2)."""
     z = xs - np.median(xs)
     top = float(np.quantile(z, q))
     a = top
@@ -742,6 +818,14 @@ def estimate_snr(x, *, quantile: float = 0.999) -> tuple[float, float, float]:
         m = max(1, int(np.median(runs[:, 1] - runs[:, 0])) // 4)
         zs = ndimage.uniform_filter1d(z, m, mode="nearest") if m > 1 else z
         a = float(np.median(_run_max(zs, runs)))
+    return a
+
+
+def _snr_combine(sigma: float, a: float | None) -> tuple[float, float, float]:
+    """(snr_db, signal_peak, noise_rms) of :func:`estimate_snr` from the noise ``sigma``
+    and the peak ``a`` (None: fewer than 2 finite samples in the first ``_SUBSAMPLE``)."""
+    if a is None or not np.isfinite(sigma):
+        return float("nan"), float("nan"), sigma
     if sigma == 0.0:
         return (float("inf") if a > 0 else float("nan")), a, sigma
     if a <= 0:
@@ -806,6 +890,11 @@ class ChannelQuality:
         not examined).
     quant_step : float
         Quantisation step found [units]; 0.0 for continuous data or when not examined.
+    conditioned_gap_runs : ndarray of int64, shape (k, 2), or None
+        Runs of non-finite samples of the conditioned channel: its gaps and dropouts plus
+        the stretches between gaps too short for the filters (set by
+        :func:`condition_recording` and the streaming stage; None when not conditioned).
+        What the phasing stage checks a pulse's window against.
     """
 
     name: str
@@ -824,6 +913,7 @@ class ChannelQuality:
     dropout_min_run: int | None = None
     p_equal: float = float("nan")
     quant_step: float = 0.0
+    conditioned_gap_runs: np.ndarray | None = None
 
     @property
     def n_gap_samples(self) -> int:
@@ -887,7 +977,9 @@ class ChannelQuality:
                 "signal_peak": fl(self.signal_peak), "noise_rms": fl(self.noise_rms),
                 "settle": self.settle, "hum": None if self.hum is None else self.hum.to_dict(),
                 "dropout_runs": self.dropout_runs.tolist(), "dropout_min_run": self.dropout_min_run,
-                "p_equal": fl(self.p_equal), "quant_step": float(self.quant_step)}
+                "p_equal": fl(self.p_equal), "quant_step": float(self.quant_step),
+                "conditioned_gap_runs": (None if self.conditioned_gap_runs is None
+                                         else self.conditioned_gap_runs.tolist())}
 
 
 def merge_runs(runs) -> np.ndarray:
@@ -1021,28 +1113,33 @@ def assess_quality(x, fs: float, *, t0: float = 0.0, name: str = "", clip_min_ru
     if x.size == 0:
         e = np.empty((0, 2), dtype=np.int64)
         return ChannelQuality(name, fs, t0, 0, e, e.copy(), e.copy())
-    if math.isfinite(float(np.sum(x))):
-        gaps = np.empty((0, 2), dtype=np.int64)
-        nans = gaps.copy()
-    else:
-        gaps = find_runs(~np.isfinite(x))
-        nans = find_runs(np.isnan(x))
-    clipped = _clipped_runs(x, min_run=clip_min_run, rtol=clip_rtol)
-    extra = {}
-    if detect_flat:
-        fr = flat_runs(x, false_alarm=false_alarm, min_run=dropout_min_run,
+    scan = ChannelScan(x.size, flat=bool(detect_flat), rail_min_run=clip_min_run,
+                       rail_rtol=clip_rtol, false_alarm=false_alarm, min_run=dropout_min_run,
                        clip_min_run=clip_min_run)
-        clipped = outside_runs(clipped, fr.dropout_runs)   # a dropout at the rail is no clip
-        if len(fr.clipped_runs):
-            clipped = merge_runs(np.concatenate([clipped, fr.clipped_runs]))
-        extra = dict(dropout_runs=fr.dropout_runs, dropout_min_run=fr.min_run,
-                     p_equal=fr.p_equal, quant_step=fr.quant_step)
-    rep = ChannelQuality(name, fs, t0, int(x.size), gaps, nans, clipped, **extra)
+    scan.feed1(x)
+    scan.end1()
+    scan.feed2(x)
+    rep = quality_from_scan(scan.result(), name, fs, t0)
     if snr:
         rep.snr_db, rep.signal_peak, rep.noise_rms = estimate_snr(x)
     if warn:
         _warn_quality(rep, snr_warn_db)
     return rep
+
+
+def quality_from_scan(res: ScanResult, name: str, fs: float, t0: float) -> ChannelQuality:
+    """The :class:`ChannelQuality` (no SNR yet) of a channel scanned by
+    :class:`pipeline.quality.ChannelScan` (whole, or streamed in blocks: the same report)."""
+    if res.n == 0:
+        e = np.empty((0, 2), dtype=np.int64)
+        return ChannelQuality(name, fs, t0, 0, e, e.copy(), e.copy())
+    extra = {}
+    if res.flat is not None:
+        fr = res.flat
+        extra = dict(dropout_runs=fr.dropout_runs, dropout_min_run=fr.min_run,
+                     p_equal=fr.p_equal, quant_step=fr.quant_step)
+    return ChannelQuality(name, fs, t0, int(res.n), res.nonfinite_runs, res.nan_runs,
+                          res.clipped(), **extra)
 
 
 def _warn_quality(rep: ChannelQuality, snr_warn_db: float) -> None:
@@ -1124,7 +1221,7 @@ def _notch_rec(rec: Recording, channels, freqs, mains, q, exclude):
     _check_rec(rec)
     q = as_positive(q, "q")
     idx = _default_channels(rec, channels)
-    data = rec.data.copy()
+    data = rec.data                     # copied once, when the first channel is notched
     reports: dict[str, HumReport | None] = {}
     for i in idx:
         name = rec.channels[i].name
@@ -1134,7 +1231,10 @@ def _notch_rec(rec: Recording, channels, freqs, mains, q, exclude):
         else:
             rep = None
             fl = np.asarray([_check_freq(f, "freqs", rec.fs) for f in freqs], dtype=np.float64)
-        data[:, i] = notch_hum(rec.data[:, i], rec.fs, freqs=fl, q=q)
+        if fl.size:
+            if data is rec.data:
+                data = rec.data.copy()
+            data[:, i] = notch_hum(rec.data[:, i], rec.fs, freqs=fl, q=q)
         reports[name] = rep
     lines = {nm: ([float(f) for f in r.freqs] if r is not None else [float(f) for f in freqs])
              for nm, r in reports.items()}
@@ -1284,6 +1384,7 @@ def condition_recording(rec: Recording, *, channels: Sequence[str] | str | None 
     for nm in names:
         q = quality[nm]
         q.settle = settle
+        q.conditioned_gap_runs = find_runs(~np.isfinite(out.channel(nm)))
         if warn:
             _warn_quality(q, 6.0)
     out = out.with_history("condition.quality", settle_s=settle,

@@ -73,7 +73,7 @@ from .validate import as_signal, as_choice, as_float, as_nonnegative, as_positiv
 
 __all__ = [
     "Onsets", "Template", "CoarsePeaks", "detect_onsets", "detect_onsets_recording",
-    "detect_onsets_stream", "learn_template", "coarse_peaks", "estimate_pulse_width",
+    "detect_onsets_stream", "OnsetStream", "learn_template", "coarse_peaks", "estimate_pulse_width",
     "FLAG_GAP", "FLAG_CLIPPED", "FLAG_LOW_CORR", "FLAG_EDGE", "FLAG_TEMPLATE", "FLAG_NAMES",
 ]
 
@@ -1025,7 +1025,10 @@ class _Engine:
         return seg
 
     def _trim(self) -> None:
-        keep_from = self.k * self.B - self.B
+        # the next block reads from k B - its margin, rounded down to the decimation grid
+        # (as _process computes it; the geometry does not change before it runs)
+        keep_from = max(0, self.k * self.B - min(self._geom()[3], self.B))
+        keep_from -= keep_from % self.d
         while self.chunks and self.chunks[0][0] + self.chunks[0][1].size <= keep_from:
             self.chunks.pop(0)
 
@@ -1354,6 +1357,48 @@ def detect_onsets_recording(rec: Recording, channel: str, *, quality=None, **kwa
         if len(quality.dropout_runs):
             kwargs.setdefault("gap_runs", quality.dropout_runs)
     return detect_onsets(x, rec.fs, t0=rec.t0, channel=channel, **kwargs)
+
+
+class OnsetStream:
+    """:func:`detect_onsets` on samples fed in consecutive chunks, in bounded memory.
+
+    Parameters
+    ----------
+    fs : float
+        Sample rate [Hz].
+    **kwargs
+        As :func:`detect_onsets` (``t0``, ``mesh_freq``, ``flag_runs``, ``gap_runs``,
+        ``gap_guard``, ``channel``...), runs in samples from the first sample fed.
+
+    Notes
+    -----
+    :meth:`feed` keeps references to the arrays it is given (no copy): do not change them
+    afterwards. The result of :meth:`finish` is identical to :func:`detect_onsets` on the
+    concatenated samples, however they are chunked; about two analysis blocks (2**20
+    samples each by default) are held at a time.
+    """
+
+    def __init__(self, fs: float, **kwargs):
+        self._eng = _Engine(_options(fs, **kwargs))
+        self._done = False
+
+    @property
+    def n_samples(self) -> int:
+        """Samples fed so far [-]."""
+        return self._eng.n
+
+    def feed(self, x) -> None:
+        """Feed the next chunk of samples (1-D, float32 or float64; NaN marks gaps)."""
+        if self._done:
+            raise RuntimeError("OnsetStream.feed after finish()")
+        self._eng.feed(_as_signal(x))
+
+    def finish(self) -> Onsets:
+        """The onsets of everything fed (call once)."""
+        if self._done:
+            raise RuntimeError("OnsetStream.finish called twice")
+        self._done = True
+        return self._eng.finish()
 
 
 def detect_onsets_stream(blocks: Iterable[Recording], channel: str, *, flag_times=None,

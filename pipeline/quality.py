@@ -103,7 +103,9 @@ import numpy as np
 
 __all__ = ["find_runs", "nonfinite_runs", "clipped_runs", "channel_quality", "equal_runs",
            "quantisation_step", "chance_min_run", "FlatRuns", "flat_runs", "dropout_runs",
-           "plateau_runs", "outside_runs", "FALSE_ALARM", "DROPOUT_MIN_RUN", "CLIP_MIN_RUN"]
+           "plateau_runs", "outside_runs", "FALSE_ALARM", "DROPOUT_MIN_RUN", "CLIP_MIN_RUN",
+           "FlatScan", "FlatStats", "classify_flat_runs", "ChannelScan", "ScanResult",
+           "FLAT_WINDOW"]
 
 #: Expected number of chance runs over a channel below which a run is significant [-].
 FALSE_ALARM = 1e-3
@@ -264,7 +266,12 @@ def quantisation_step(x) -> float:
     difference turned up, where the step does not matter) and 0.0 is returned.
     """
     x = _as_1d(x)
-    d = np.abs(_strided_pairs(x, 1 << 18))
+    return _quant_from_pairs(_strided_pairs(x, 1 << 18))
+
+
+def _quant_from_pairs(d: np.ndarray) -> float:
+    """:func:`quantisation_step` from its strided first differences (finite, in order)."""
+    d = np.abs(d)
     d = d[d > 0]
     if d.size < 16:
         return 0.0
@@ -297,18 +304,17 @@ def chance_min_run(p: float, n: int, false_alarm: float = FALSE_ALARM) -> int:
     return int(1 + math.floor(math.log(fa / n) / math.log(p)) + 1)
 
 
-def _continuation_prob(lengths: np.ndarray, bulk: np.ndarray, n_runs: int) -> float:
+def _continuation_prob(n_runs2: int, bulk_counts, n_runs: int) -> float:
     """Upper estimate of the probability that a run of equal samples continues (module doc).
 
-    ``lengths``: length of every run of >= 2 equal samples; ``bulk``: whether the run lies
-    in the bulk of the signal (used for the tail ratios); ``n_runs``: number of runs of
-    finite samples of any length (S(1))."""
+    ``n_runs2``: number of runs of >= 2 equal samples (S(2)); ``bulk_counts``: numbers of
+    those runs in the bulk of the signal that are at least 2, 3 and 4 samples long (used for
+    the tail ratios); ``n_runs``: number of runs of finite samples of any length (S(1))."""
     if n_runs <= 0:
         return 1.0
-    c = float(lengths.size)
+    c = float(n_runs2)
     p = (c + 2.0 * math.sqrt(c) + 3.0) / n_runs               # S(2) / S(1), all runs
-    lb = lengths[bulk]
-    s = [float(np.count_nonzero(lb >= k)) for k in (2, 3, 4)]
+    s = [float(v) for v in bulk_counts]
     for k in range(2):                                        # S(3) / S(2), S(4) / S(3)
         c = s[k + 1]
         if c < max(30.0, 1e-3 * n_runs):
@@ -322,7 +328,8 @@ def _strided_pairs(x: np.ndarray, n_max: int) -> np.ndarray:
     if x.size < 2:
         return np.empty(0)
     i = np.arange(0, x.size - 1, max(1, -(-(x.size - 1) // n_max)))
-    d = x[i + 1] - x[i]
+    with np.errstate(invalid="ignore"):                # inf - inf: dropped below
+        d = x[i + 1] - x[i]
     return d[np.isfinite(d)]
 
 
@@ -330,11 +337,14 @@ def _robust_level(x: np.ndarray) -> tuple[float, float]:
     """(median, per-sample noise sigma) of the finite samples, from up to 2**16 strided
     samples and sample pairs (sigma = 1.4826 MAD of the first difference / sqrt 2)."""
     xs = x[:: max(1, -(-x.size // _ROBUST_SAMPLES))]
-    xs = xs[np.isfinite(xs)]
+    return _level_from(xs[np.isfinite(xs)], _strided_pairs(x, _ROBUST_SAMPLES))
+
+
+def _level_from(xs: np.ndarray, d: np.ndarray) -> tuple[float, float]:
+    """:func:`_robust_level` from its strided finite samples and first differences."""
     if xs.size == 0:
         return 0.0, 0.0
     med = float(np.median(xs))
-    d = _strided_pairs(x, _ROBUST_SAMPLES)
     if d.size == 0:
         return med, 0.0
     sig = float(_MAD_TO_SIGMA * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0))
@@ -344,7 +354,8 @@ def _robust_level(x: np.ndarray) -> tuple[float, float]:
 def _is_smooth(x: np.ndarray) -> bool:
     """True for a channel without sample-level noise (few sign changes of the non-zero
     first differences; white noise has 2/3)."""
-    d = np.diff(x[:_SUBSAMPLE])
+    with np.errstate(invalid="ignore"):                # inf - inf: dropped below
+        d = np.diff(x[:_SUBSAMPLE])
     d = d[np.isfinite(d) & (d != 0)]
     if d.size < 16:
         return True
@@ -454,35 +465,54 @@ def flat_runs(x, *, false_alarm: float = FALSE_ALARM, min_run: int = DROPOUT_MIN
     Returns
     -------
     FlatRuns
+
+    Notes
+    -----
+    The channel-wide statistics (:class:`FlatScan`) and the classification of the few
+    candidate runs (:func:`classify_flat_runs`) are separate steps, so that a recording
+    streamed in blocks gets the same result (:class:`ChannelScan`).
     """
     x = _as_1d(x)
     fa = _check_false_alarm(false_alarm)
     min_run = _check_int(min_run, "min_run", 2)
     clip_min_run = _check_int(clip_min_run, "clip_min_run", 2)
+    scan = FlatScan(x.size)
+    scan.add(x)
+    st = scan.stats(false_alarm=fa, min_run=min_run, clip_min_run=clip_min_run)
+    cand = equal_runs(x, min_run=st.min_candidate)
+    return classify_flat_runs(x, cand, x[cand[:, 0]], st)
+
+
+def classify_flat_runs(x, runs: np.ndarray, values: np.ndarray, st: "FlatStats") -> FlatRuns:
+    """Classify the candidate flat runs of one channel as dropouts or clipped plateaus.
+
+    Parameters
+    ----------
+    x : ndarray or sample lookup
+        The channel's samples, or any object with ``size`` (the channel's length) and
+        integer-array indexing that returns the samples within ``WINDOW`` samples of every
+        candidate run and inside them (:class:`ChannelScan` keeps exactly those).
+    runs : ndarray of int64, shape (k, 2)
+        Every maximal run of equal finite samples at least ``st.min_candidate`` long, sorted.
+    values : ndarray, shape (k,)
+        The value of each run [units of x].
+    st : FlatStats
+        The channel-wide statistics (:meth:`FlatScan.stats`).
+
+    Returns
+    -------
+    FlatRuns
+    """
     empty = np.empty((0, 2), dtype=np.int64)
-    idx = _equal_pairs(x)
-    n_fin = int(np.count_nonzero(np.isfinite(x))) if x.size else 0
-    runs = _runs_from_pairs(idx)
+    thr_drop, thr_clip, p, clip_min_run = st.thr_drop, st.thr_clip, st.p, st.clip_min_run
+    if len(runs) == 0:
+        return FlatRuns(empty, empty.copy(), thr_drop, thr_clip, p,
+                        st.q if st.n_long >= _TAIL_RUNS else 0.0)
+    runs = np.asarray(runs, dtype=np.int64).reshape(-1, 2)
     lengths = runs[:, 1] - runs[:, 0]
-    if np.count_nonzero(lengths >= 3) >= 30:                 # enough for a tail ratio
-        q = quantisation_step(x)
-        med, sigma = _robust_level(x)
-        bulk = np.abs(x[runs[:, 0]] - med) <= 3.0 * sigma + q
-    else:
-        q = med = sigma = None
-        bulk = np.zeros(len(runs), dtype=bool)
-    p = _continuation_prob(lengths, bulk, n_fin - idx.size)
-    chance = chance_min_run(p, max(n_fin, 1), fa) if n_fin else 2
-    thr_drop, thr_clip = max(min_run, chance), max(clip_min_run, chance)
-    cand = lengths >= min(thr_drop, thr_clip)
-    if not cand.any():
-        return FlatRuns(empty, empty.copy(), thr_drop, thr_clip, p, q or 0.0)
-    runs, lengths = runs[cand], lengths[cand]
     a, b = runs[:, 0], runs[:, 1]
-    v = x[a]
-    if q is None:
-        q = quantisation_step(x)
-        med, sigma = _robust_level(x)
+    v = np.asarray(values, dtype=np.float64)
+    q, med, sigma = st.q, st.med, st.sigma
 
     # ---- each candidate extended over the samples at its level (a clip's fragments);
     # overlapping extents at one level (values within q) form a cluster, classified once
@@ -538,8 +568,7 @@ def flat_runs(x, *, false_alarm: float = FALSE_ALARM, min_run: int = DROPOUT_MIN
         steep &= np.isnan(m) | _in_runs(edge, runs) | ((inner > _STEEP_STEPS * q) & (inner > 0.0))
     away = sgn * (cv - med) > 3.0 * sigma + q
     cjump = _jumps(x, ca, cb, cv, q, sigma, runs)
-    fin_x = x[np.isfinite(x)]
-    rail = (cv == fin_x.max()) | (cv == fin_x.min())
+    rail = (cv == st.hi) | (cv == st.lo)
     cclip = (((sgn != 0) & steep & away & ~cjump) | rail) & (cv != 0.0) & (longest >= thr_clip)
     clip = cclip[cid]
 
@@ -547,7 +576,7 @@ def flat_runs(x, *, false_alarm: float = FALSE_ALARM, min_run: int = DROPOUT_MIN
     drop = ~clip & (lengths >= thr_drop)
     smooth = None
     if drop.any():
-        smooth = _is_smooth(x)
+        smooth = st.smooth
         if smooth:
             drop &= _jumps(x, a, b, v, q, sigma, runs) | ~has_any[cid]
     clipped = np.stack([ca[cclip], cb[cclip]], axis=1).astype(np.int64)
@@ -618,13 +647,6 @@ def plateau_runs(x, **kwargs) -> np.ndarray:
     return flat_runs(x, **kwargs).clipped_runs
 
 
-def _pulse_train(x: np.ndarray) -> bool:
-    """True when the finite samples take at most 8 distinct values (4096 strided ones)."""
-    xs = x[:: max(1, x.size // 4096)]
-    xs = xs[np.isfinite(xs)]
-    return xs.size > 0 and np.unique(xs).size <= 8
-
-
 def channel_quality(x, *, kind: str | None = None) -> dict:
     """Summary of one channel: counts and runs of non-finite, dropout and clipped samples, range.
 
@@ -654,31 +676,655 @@ def channel_quality(x, *, kind: str | None = None) -> dict:
     x = np.asarray(x)
     if kind is not None and not isinstance(kind, str):
         raise TypeError(f"kind must be a string or None, got {type(kind).__name__} {kind!r}")
-    nf = nonfinite_runs(x)
-    cl = clipped_runs(x)
-    if kind == "tacho" or x.size == 0 or (kind is None and _pulse_train(x)):
-        dr, thr = np.empty((0, 2), dtype=np.int64), None
-    else:
-        fr = flat_runs(x)
-        dr, thr = fr.dropout_runs, fr.min_run
-        cl = outside_runs(cl, dr)             # a dropout at the channel's min/max is no clip
-        if len(fr.clipped_runs):
-            cl = _merge_sorted(np.concatenate([cl, fr.clipped_runs]))
-    finite = x[np.isfinite(x)]
-    dl = dr[:, 1] - dr[:, 0]
-    return {
-        "n_samples": int(x.size),
-        "n_nonfinite": int((nf[:, 1] - nf[:, 0]).sum()),
-        "nonfinite_runs": nf.tolist(),
-        "longest_nonfinite_run": int((nf[:, 1] - nf[:, 0]).max()) if len(nf) else 0,
-        "n_clipped_runs": int(len(cl)),
-        "clipped_runs": cl.tolist(),
-        "n_dropout_runs": int(len(dr)),
-        "dropout_runs": dr.tolist(),
-        "n_dropout_samples": int(dl.sum()),
-        "longest_dropout_run": int(dl.max()) if dl.size else 0,
-        "dropout_min_run": thr,
-        "min": float(finite.min()) if finite.size else float("nan"),
-        "max": float(finite.max()) if finite.size else float("nan"),
-        "rms": float(np.sqrt(np.mean(np.square(finite, dtype=np.float64)))) if finite.size else float("nan"),
-    }
+    if x.ndim != 1:
+        raise ValueError(f"x must be 1-D, got shape {x.shape}")
+    x = _as_1d(x)
+    scan = ChannelScan(x.size, flat=None if kind is None else kind != "tacho")
+    scan.feed1(x)
+    scan.end1()
+    scan.feed2(x)
+    return scan.result().to_dict()
+
+
+# ====================================================================== streaming scans
+# A recording streamed in blocks gets the same quality report as the whole array: the
+# channel-wide statistics are accumulated over the blocks (pass 1), the few candidate flat
+# runs are collected with the samples around them (pass 2) and classified at the end.
+
+#: Runs of >= 3 equal samples needed before the bulk tail ratios are used (module doc).
+_TAIL_RUNS = 30
+#: Samples kept on either side of each candidate flat run for its classification
+#: [samples]: :func:`classify_flat_runs` reads at most _EXTEND_SPAN + 128 + 1 samples
+#: beyond a run's ends (extension, bounding window), and inside runs only their value.
+FLAT_WINDOW = _EXTEND_SPAN + 128 + 16
+
+_EMPTY_RUNS = np.empty((0, 2), dtype=np.int64)
+
+
+class _RunTracker:
+    """Runs of True of a boolean mask fed in consecutive pieces, merged across pieces."""
+
+    def __init__(self):
+        self.done: list[np.ndarray] = []
+        self.open: int | None = None      # start of a run that touches the last piece's end
+        self.n = 0
+
+    def add(self, mask: np.ndarray) -> None:
+        m = mask.size
+        if m == 0:
+            return
+        if not mask.any():
+            if self.open is not None:
+                self.done.append(np.array([[self.open, self.n]], dtype=np.int64))
+                self.open = None
+            self.n += m
+            return
+        r = find_runs(mask) + self.n
+        if self.open is not None:
+            if r[0, 0] == self.n:
+                r[0, 0] = self.open
+            else:
+                self.done.append(np.array([[self.open, self.n]], dtype=np.int64))
+            self.open = None
+        if r[-1, 1] == self.n + m:
+            self.open = int(r[-1, 0])
+            r = r[:-1]
+        if len(r):
+            self.done.append(r)
+        self.n += m
+
+    def runs(self) -> np.ndarray:
+        out = list(self.done)
+        if self.open is not None:
+            out.append(np.array([[self.open, self.n]], dtype=np.int64))
+        return np.concatenate(out).astype(np.int64) if out else _EMPTY_RUNS.copy()
+
+
+class _EqualRuns:
+    """Maximal runs of equal finite samples (>= 2) of a channel fed in consecutive pieces."""
+
+    def __init__(self):
+        self.n = 0
+        self.last = None                   # last sample of the previous piece
+        self.open: tuple | None = None     # (start, value) of a run touching that sample
+        self.n_pairs = 0
+
+    def add(self, x: np.ndarray):
+        """Feed the next piece; returns (starts, stops, values) of the runs it completed."""
+        m = x.size
+        if m == 0:
+            return np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0)
+        pos = self.n
+        idx = _equal_pairs(x) + pos                       # pairs (i, i + 1) inside the piece
+        if self.last is not None and self.last == x[0] and np.isfinite(self.last):
+            idx = np.concatenate(([pos - 1], idx))        # the pair across the boundary
+        self.n_pairs += idx.size
+        runs = _runs_from_pairs(idx)
+        starts, stops = runs[:, 0], runs[:, 1]
+        values = x[np.maximum(starts - pos, 0)]
+        if starts.size and starts[0] == pos - 1:
+            values[0] = self.last
+        if self.open is not None:
+            a0, v0 = self.open
+            if starts.size and starts[0] == pos - 1:
+                starts[0] = a0
+            else:
+                starts = np.concatenate(([a0], starts))
+                stops = np.concatenate(([pos], stops))
+                values = np.concatenate(([v0], values))
+            self.open = None
+        end = pos + m
+        if starts.size and stops[-1] == end:
+            self.open = (int(starts[-1]), values[-1])
+            starts, stops, values = starts[:-1], stops[:-1], values[:-1]
+        self.n = end
+        self.last = x[-1]
+        return starts, stops, values
+
+    def finish(self):
+        """(starts, stops, values) of the run still open at the end (if any)."""
+        if self.open is None:
+            return np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0)
+        a0, v0 = self.open
+        self.open = None
+        return np.array([a0], np.int64), np.array([self.n], np.int64), np.array([v0])
+
+
+class _Strided:
+    """``x[::step]`` (finite only) of a channel of ``n`` samples fed in pieces, with
+    ``step = max(1, ceil(n / n_max))`` as :func:`_robust_level` takes it."""
+
+    def __init__(self, n: int, n_max: int):
+        self.step = max(1, -(-n // n_max))
+        self.parts: list[np.ndarray] = []
+        self.pos = 0
+
+    def add(self, x: np.ndarray) -> None:
+        first = (-self.pos) % self.step
+        v = x[first::self.step]
+        self.parts.append(v[np.isfinite(v)])
+        self.pos += x.size
+
+    def values(self) -> np.ndarray:
+        return np.concatenate(self.parts) if self.parts else np.empty(0)
+
+
+class _StridedPairs:
+    """:func:`_strided_pairs` of a channel of ``n`` samples fed in pieces."""
+
+    def __init__(self, n: int, n_max: int):
+        self.n = n
+        self.step = max(1, -(-(n - 1) // n_max)) if n >= 2 else 1
+        self.parts: list[np.ndarray] = []
+        self.pos = 0
+        self.last = None
+
+    def add(self, x: np.ndarray) -> None:
+        m, pos = x.size, self.pos
+        if m == 0:
+            return
+        if self.n >= 2:
+            # pairs (i, i + 1) with i + 1 in this piece: i in [pos - 1, pos + m - 1)
+            lo = max(pos - 1, 0)
+            first = lo + (-lo) % self.step
+            i = np.arange(first, min(pos + m - 1, self.n - 1), self.step) - pos
+            if i.size:
+                left = x[np.maximum(i, 0)]
+                if i[0] < 0:
+                    left[0] = self.last
+                with np.errstate(invalid="ignore"):    # inf - inf: dropped below
+                    d = x[i + 1] - left
+                self.parts.append(d[np.isfinite(d)])
+        self.last = x[-1]
+        self.pos += m
+
+    def values(self) -> np.ndarray:
+        return np.concatenate(self.parts) if self.parts else np.empty(0)
+
+
+class _SmoothTest:
+    """:func:`_is_smooth` over the first ``min(n, 2**20)`` samples, fed in pieces."""
+
+    def __init__(self, n: int):
+        self.limit = min(n, _SUBSAMPLE)
+        self.pos = 0
+        self.last = None
+        self.kept = 0
+        self.changes = 0
+        self.sign = None
+
+    def add(self, x: np.ndarray) -> None:
+        m, pos = x.size, self.pos
+        if m and pos < self.limit:
+            seg = x[:self.limit - pos]
+            xx = seg if self.last is None else np.concatenate(([self.last], seg))
+            with np.errstate(invalid="ignore"):        # inf - inf: dropped below
+                d = np.diff(xx)
+            d = d[np.isfinite(d) & (d != 0)]
+            if d.size:
+                s = np.signbit(d)
+                self.changes += int(np.count_nonzero(s[1:] != s[:-1]))
+                if self.sign is not None:
+                    self.changes += int(s[0] != self.sign)
+                self.sign = bool(s[-1])
+                self.kept += d.size
+        if m:
+            self.last = x[-1]
+        self.pos += m
+
+    def result(self) -> bool:
+        if self.kept < 16:
+            return True
+        return bool(self.changes / (self.kept - 1) < _SMOOTH_SIGN_CHANGES)
+
+
+@dataclass(frozen=True, eq=False)
+class FlatStats:
+    """The channel-wide statistics behind :func:`flat_runs` (from :meth:`FlatScan.stats`).
+
+    Attributes
+    ----------
+    n, n_fin : int
+        Samples, finite samples [-].
+    n_long : int
+        Runs of at least 3 equal samples [-].
+    q, med, sigma : float
+        Quantisation step, median level and per-sample noise sigma [units].
+    hi, lo : float
+        Largest and smallest finite sample [units] (NaN when none is finite).
+    smooth : bool
+        The channel has no sample-level noise (:func:`_is_smooth`).
+    p : float
+        Continuation probability of a run of equal samples [-].
+    thr_drop, thr_clip : int
+        Dropout and plateau run-length thresholds [samples].
+    clip_min_run : int
+        Floor of the plateau threshold [samples].
+    """
+
+    n: int
+    n_fin: int
+    n_long: int
+    q: float
+    med: float
+    sigma: float
+    hi: float
+    lo: float
+    smooth: bool
+    p: float
+    thr_drop: int
+    thr_clip: int
+    clip_min_run: int
+
+    @property
+    def min_candidate(self) -> int:
+        """Shortest run classified at all [samples]."""
+        return min(self.thr_drop, self.thr_clip)
+
+
+class FlatScan:
+    """Accumulates the statistics of :func:`flat_runs` over a channel fed in pieces.
+
+    Parameters
+    ----------
+    n : int
+        Length of the whole channel [samples] (the strided subsamples depend on it).
+
+    Notes
+    -----
+    Memory is bounded by the subsamples (at most 2**16 + 2**16 + 2**18 values) and a
+    histogram of the values at which runs of equal samples occur (one row per distinct
+    value: a few thousand for quantised data, ~0 for noisy float data).
+    """
+
+    def __init__(self, n: int):
+        self.n = int(n)
+        self.runs = _EqualRuns()
+        self.n_fin = 0
+        self.n_runs2 = 0
+        self.n_long = 0
+        self.vals = np.empty(0)
+        self.cnt = np.zeros((0, 3), dtype=np.int64)   # per value: runs >= 2, >= 3, >= 4
+        self.hi = -np.inf
+        self.lo = np.inf
+        self.level = _Strided(self.n, _ROBUST_SAMPLES)
+        self.pairs16 = _StridedPairs(self.n, _ROBUST_SAMPLES)
+        self.pairs18 = _StridedPairs(self.n, 1 << 18)
+        self.smooth = _SmoothTest(self.n)
+        self.pos = 0
+        self.closed = False
+
+    def add(self, x: np.ndarray, finite: np.ndarray | None = None) -> None:
+        """Feed the next piece of float64 samples (``finite``: its np.isfinite, if known)."""
+        if self.closed:
+            raise RuntimeError("FlatScan.add after stats(): the scan is closed")
+        if x.size == 0:
+            return
+        fin = np.isfinite(x) if finite is None else finite
+        nf = int(np.count_nonzero(fin))
+        self.n_fin += nf
+        if nf == x.size:
+            self.hi = max(self.hi, float(np.max(x)))
+            self.lo = min(self.lo, float(np.min(x)))
+        elif nf:
+            self.hi = max(self.hi, float(np.max(x, where=fin, initial=-np.inf)))
+            self.lo = min(self.lo, float(np.min(x, where=fin, initial=np.inf)))
+        self._count(*self.runs.add(x))
+        self.level.add(x)
+        self.pairs16.add(x)
+        self.pairs18.add(x)
+        self.smooth.add(x)
+        self.pos += x.size
+
+    def _count(self, starts, stops, values) -> None:
+        if starts.size == 0:
+            return
+        L = stops - starts
+        self.n_runs2 += int(L.size)
+        self.n_long += int(np.count_nonzero(L >= 3))
+        u, inv = np.unique(values, return_inverse=True)
+        inv = inv.ravel()
+        c = np.stack([np.bincount(inv, minlength=u.size),
+                      np.bincount(inv, weights=(L >= 3), minlength=u.size),
+                      np.bincount(inv, weights=(L >= 4), minlength=u.size)], axis=1).astype(np.int64)
+        if self.vals.size:
+            allv = np.concatenate([self.vals, u])
+            u, inv = np.unique(allv, return_inverse=True)
+            cc = np.zeros((u.size, 3), dtype=np.int64)
+            np.add.at(cc, inv.ravel(), np.concatenate([self.cnt, c]))
+            c = cc
+        self.vals, self.cnt = u, c
+
+    def stats(self, *, false_alarm: float = FALSE_ALARM, min_run: int = DROPOUT_MIN_RUN,
+              clip_min_run: int = CLIP_MIN_RUN) -> FlatStats:
+        """The statistics and thresholds, once every sample has been fed."""
+        if not self.closed:
+            if self.pos != self.n:
+                raise ValueError(f"FlatScan fed {self.pos} samples, the channel has {self.n}")
+            self._count(*self.runs.finish())
+            self.closed = True
+        fa = _check_false_alarm(false_alarm)
+        min_run = _check_int(min_run, "min_run", 2)
+        clip_min_run = _check_int(clip_min_run, "clip_min_run", 2)
+        med, sigma = _level_from(self.level.values(), self.pairs16.values())
+        q = _quant_from_pairs(self.pairs18.values())
+        if self.n_long >= _TAIL_RUNS:
+            bulk = np.abs(self.vals - med) <= 3.0 * sigma + q
+            counts = self.cnt[bulk].sum(axis=0)
+        else:
+            counts = (0, 0, 0)
+        p = _continuation_prob(self.n_runs2, counts, self.n_fin - self.runs.n_pairs)
+        chance = chance_min_run(p, max(self.n_fin, 1), fa) if self.n_fin else 2
+        has = self.n_fin > 0
+        return FlatStats(self.n, self.n_fin, self.n_long, q, med, sigma,
+                         self.hi if has else float("nan"), self.lo if has else float("nan"),
+                         self.smooth.result(), p, max(min_run, chance),
+                         max(clip_min_run, chance), clip_min_run)
+
+
+class _Candidates:
+    """Maximal runs of equal finite samples at least ``min_len`` long, with the samples
+    within ``FLAT_WINDOW`` of their ends, from a channel fed in consecutive pieces."""
+
+    def __init__(self, n: int, min_len: int, window: int = FLAT_WINDOW):
+        self.n = n
+        self.min_len = int(min_len)
+        self.w = int(window)
+        self.runs = _EqualRuns()
+        self.tail = np.empty(0)                  # the last <= w samples before the piece
+        self.pos = 0
+        self.open_left: tuple | None = None      # (start, left window) of the open run
+        self._x = None                           # the piece being fed, and the index of
+        self._e0 = 0                             # the tail's first sample
+        self.found: list[tuple] = []             # (a, b, v, left window start, left, right)
+        self.pending: list[list] = []            # right windows still filling: [row, need]
+
+    def add(self, x: np.ndarray) -> None:
+        m, pos = x.size, self.pos
+        if m == 0:
+            return
+        for p in self.pending:                    # right windows of earlier candidates
+            row, need = p
+            take = x[:need]
+            row[5] = np.concatenate([row[5], take])
+            p[1] = need - take.size
+        self.pending = [p for p in self.pending if p[1] > 0]
+        self._x, self._e0 = x, pos - self.tail.size
+        was_open = self.runs.open
+        starts, stops, values = self.runs.add(x)
+        for a, b, v in zip(starts.tolist(), stops.tolist(), values):
+            if b - a >= self.min_len:
+                self._found(a, b, v)
+        op = self.runs.open
+        if op is not None and (was_open is None or was_open[0] != op[0]):
+            a = op[0]
+            lo = max(a - self.w, 0)
+            self.open_left = (a, lo, self._slice(lo, a))
+        elif op is None:
+            self.open_left = None
+        # w + 1: a run may start on the previous piece's last sample
+        k = self.w + 1
+        self.tail = x[-k:].copy() if m >= k else np.concatenate([self.tail, x])[-k:]
+        self._x = None
+        self.pos = pos + m
+
+    def _slice(self, lo: int, hi: int) -> np.ndarray:
+        """Samples [lo, hi) of the tail followed by the current piece (a copy)."""
+        e0, t, x = self._e0, self.tail, self._x
+        split = e0 + t.size                        # global index of the piece's first sample
+        if lo >= split:
+            return x[lo - split:hi - split].copy()
+        if hi <= split:
+            return t[lo - e0:hi - e0].copy()
+        return np.concatenate([t[lo - e0:], x[:hi - split]])
+
+    def _found(self, a, b, v) -> None:
+        lo = max(a - self.w, 0)
+        if self._x is not None and lo >= self._e0:
+            left = self._slice(lo, a)
+        else:
+            if self.open_left is None or self.open_left[0] != a:
+                raise RuntimeError(f"flat-run scan lost the left window of the run at {a}")
+            _, lo, left = self.open_left
+        hi = min(b + self.w, self.n)
+        right = self._slice(b, min(hi, self._e0 + self.tail.size + self._x.size)) \
+            if self._x is not None else np.empty(0)
+        row = [a, b, v, lo, left, right]
+        self.found.append(row)
+        need = hi - b - right.size
+        if need > 0:
+            self.pending.append([row, need])
+
+    def finish(self) -> None:
+        starts, stops, values = self.runs.finish()
+        for a, b, v in zip(starts.tolist(), stops.tolist(), values):
+            if b - a >= self.min_len:
+                self._found(a, b, v)
+
+    def result(self):
+        """(runs, values, sample lookup) for :func:`classify_flat_runs`."""
+        if not self.found:
+            return _EMPTY_RUNS.copy(), np.empty(0), None
+        runs = np.array([[r[0], r[1]] for r in self.found], dtype=np.int64)
+        values = np.array([r[2] for r in self.found], dtype=np.float64)
+        windows = []
+        for a, b, v, lo, left, right in self.found:
+            windows.append((lo, left))
+            windows.append((b, right))
+        return runs, values, _SampleWindows(self.n, windows, runs, values)
+
+
+class _SampleWindows:
+    """The samples of a channel near its candidate flat runs (and inside them: their value),
+    indexable like the array by integer arrays; reading anywhere else is an error."""
+
+    def __init__(self, n: int, windows: list, runs: np.ndarray, values: np.ndarray):
+        self.size = int(n)
+        ws = sorted(((int(a), w) for a, w in windows if w.size), key=lambda t: t[0])
+        starts, arrays = [], []
+        for a, w in ws:                            # merge overlapping windows (they agree)
+            if starts and a <= starts[-1] + arrays[-1].size:
+                s0, arr = starts[-1], arrays[-1]
+                end = max(s0 + arr.size, a + w.size)
+                merged = np.empty(end - s0)
+                merged[:arr.size] = arr
+                merged[a - s0:a - s0 + w.size] = w
+                arrays[-1] = merged
+            else:
+                starts.append(a)
+                arrays.append(w)
+        self.starts = np.array(starts, dtype=np.int64)
+        self.stops = np.array([s + a.size for s, a in zip(starts, arrays)], dtype=np.int64)
+        self.arrays = arrays
+        self.runs = runs
+        self.values = values
+
+    def __getitem__(self, idx):
+        idx = np.asarray(idx, dtype=np.int64)
+        out = np.full(idx.shape, np.nan)
+        done = np.zeros(idx.shape, dtype=bool)
+        if self.starts.size:
+            j = np.searchsorted(self.starts, idx, side="right") - 1
+            inw = (j >= 0) & (idx < self.stops[np.maximum(j, 0)])
+            for k in np.unique(j[inw]):
+                sel = inw & (j == k)
+                out[sel] = self.arrays[k][idx[sel] - self.starts[k]]
+            done |= inw
+        if len(self.runs):
+            r = np.searchsorted(self.runs[:, 0], idx, side="right") - 1
+            inr = ~done & (r >= 0) & (idx < self.runs[np.maximum(r, 0), 1])
+            out[inr] = self.values[r[inr]]
+            done |= inr
+        if not np.all(done):
+            raise RuntimeError("flat-run classification read samples the scan did not keep "
+                               f"(e.g. index {int(idx[~done].ravel()[0])})")
+        return out
+
+
+@dataclass(eq=False)
+class ScanResult:
+    """What :class:`ChannelScan` found on one channel (raw samples).
+
+    Attributes
+    ----------
+    n : int
+    nonfinite_runs, nan_runs : ndarray of int64, shape (k, 2)
+        ``[start, stop)`` runs of non-finite and of NaN samples.
+    rail_runs : ndarray of int64, shape (k, 2)
+        Runs at the channel's extreme finite value (:func:`clipped_runs`).
+    flat : FlatRuns or None
+        Dropouts and plateaus (None: not examined, e.g. a tacho).
+    n_finite : int
+    min, max, rms : float
+        Of the finite samples (NaN when none).
+    """
+
+    n: int
+    nonfinite_runs: np.ndarray
+    nan_runs: np.ndarray
+    rail_runs: np.ndarray
+    flat: FlatRuns | None
+    n_finite: int
+    min: float
+    max: float
+    rms: float
+
+    def clipped(self) -> np.ndarray:
+        """Rail runs that are not dropouts, merged with the clipped plateaus."""
+        cl = self.rail_runs
+        if self.flat is not None:
+            cl = outside_runs(cl, self.flat.dropout_runs)
+            if len(self.flat.clipped_runs):
+                cl = _merge_sorted(np.concatenate([cl, self.flat.clipped_runs]))
+        return cl
+
+    def to_dict(self) -> dict:
+        """The summary :func:`channel_quality` returns."""
+        nf = self.nonfinite_runs
+        cl = self.clipped()
+        dr = self.flat.dropout_runs if self.flat is not None else _EMPTY_RUNS.copy()
+        thr = self.flat.min_run if self.flat is not None else None
+        dl = dr[:, 1] - dr[:, 0]
+        return {
+            "n_samples": int(self.n),
+            "n_nonfinite": int((nf[:, 1] - nf[:, 0]).sum()),
+            "nonfinite_runs": nf.tolist(),
+            "longest_nonfinite_run": int((nf[:, 1] - nf[:, 0]).max()) if len(nf) else 0,
+            "n_clipped_runs": int(len(cl)),
+            "clipped_runs": cl.tolist(),
+            "n_dropout_runs": int(len(dr)),
+            "dropout_runs": dr.tolist(),
+            "n_dropout_samples": int(dl.sum()),
+            "longest_dropout_run": int(dl.max()) if dl.size else 0,
+            "dropout_min_run": thr,
+            "min": self.min, "max": self.max, "rms": self.rms,
+        }
+
+
+class ChannelScan:
+    """The quality of one channel from its raw samples fed in consecutive pieces, twice.
+
+    Pass 1 (:meth:`feed1`, then :meth:`end1`) accumulates the channel-wide statistics
+    (extremes, strided subsamples, run-length counts: :class:`FlatScan`), pass 2
+    (:meth:`feed2`) the runs at the rails and the candidate flat runs with the samples
+    around them; :meth:`result` classifies them. The result equals that of the whole array
+    (:func:`channel_quality`, :func:`pipeline.condition.assess_quality`) whatever the
+    pieces, in memory bounded by the subsamples plus ~2 * ``FLAT_WINDOW`` samples per
+    candidate flat run (the faults found) and the run lists themselves.
+
+    Parameters
+    ----------
+    n : int
+        Samples of the channel [-].
+    flat : bool or None
+        Look for dropouts and plateaus (:func:`flat_runs`); None: unless the channel is a
+        pulse train (at most 8 distinct values among 4096 strided samples).
+    rail_min_run : int
+        Shortest run at the rails reported [samples] (:func:`clipped_runs`).
+    rail_rtol : float
+        Tolerance of "at the rail" relative to the range [-] (:func:`clipped_runs`).
+    false_alarm, min_run, clip_min_run
+        As :func:`flat_runs`.
+    """
+
+    def __init__(self, n: int, *, flat: bool | None = True, rail_min_run: int = 3,
+                 rail_rtol: float = 0.0, false_alarm: float = FALSE_ALARM,
+                 min_run: int = DROPOUT_MIN_RUN, clip_min_run: int = CLIP_MIN_RUN):
+        self.n = _check_int(n, "n", 0)
+        self.flat = flat
+        self.rail_min_run = _check_int(rail_min_run, "rail_min_run", 2)
+        self.rail_rtol = float(rail_rtol)
+        self.fa = _check_false_alarm(false_alarm)
+        self.min_run = _check_int(min_run, "min_run", 2)
+        self.clip_min_run = _check_int(clip_min_run, "clip_min_run", 2)
+        self.nonfinite = _RunTracker()
+        self.nan = _RunTracker()
+        self.fscan = FlatScan(self.n)
+        self.pulse: list | None = [] if flat is None else None   # the pulse-train test
+        self.pulse_step = max(1, self.n // 4096)
+        self.sumsq = 0.0
+        self.pos1 = self.pos2 = 0
+        self.stats: FlatStats | None = None
+        self.rails = _RunTracker()
+        self.cand: _Candidates | None = None
+
+    def feed1(self, x: np.ndarray) -> None:
+        """Pass 1: the next piece of float64 samples."""
+        if self.stats is not None:
+            raise RuntimeError("ChannelScan.feed1 after end1()")
+        fin = np.isfinite(x)
+        bad = ~fin
+        self.nonfinite.add(bad)
+        self.nan.add(np.isnan(x) if bad.any() else bad)
+        self.fscan.add(x, fin)
+        if self.pulse is not None:
+            first = (-self.pos1) % self.pulse_step
+            self.pulse.append(x[first::self.pulse_step])
+        if x.size:
+            self.sumsq += float(np.sum(np.square(x[fin]))) if bad.any() else float(np.sum(np.square(x)))
+        self.pos1 += x.size
+
+    def end1(self) -> None:
+        """End of pass 1: the thresholds for pass 2."""
+        if self.pos1 != self.n:
+            raise ValueError(f"ChannelScan pass 1 fed {self.pos1} samples, the channel has {self.n}")
+        self.stats = self.fscan.stats(false_alarm=self.fa, min_run=self.min_run,
+                                      clip_min_run=self.clip_min_run)
+        if self.flat is None:
+            xs = np.concatenate(self.pulse) if self.pulse else np.empty(0)
+            xs = xs[np.isfinite(xs)]
+            self.flat = not (xs.size > 0 and np.unique(xs).size <= 8)
+            self.pulse = None
+        if self.n == 0:
+            self.flat = False
+        if self.flat:
+            self.cand = _Candidates(self.n, self.stats.min_candidate)
+
+    def feed2(self, x: np.ndarray) -> None:
+        """Pass 2: the same pieces again."""
+        if self.stats is None:
+            raise RuntimeError("ChannelScan.feed2 before end1()")
+        st = self.stats
+        if st.n_fin and st.hi != st.lo:
+            tol = self.rail_rtol * (st.hi - st.lo)
+            self.rails.add((x >= st.hi - tol) | (x <= st.lo + tol))
+        if self.cand is not None:
+            self.cand.add(x)
+        self.pos2 += x.size
+
+    def result(self) -> ScanResult:
+        """The quality found, once both passes are complete."""
+        if self.stats is None or self.pos2 != self.n:
+            raise ValueError(f"ChannelScan: pass 2 fed {self.pos2} of {self.n} samples")
+        st = self.stats
+        rails = self.rails.runs()
+        rails = rails[(rails[:, 1] - rails[:, 0]) >= self.rail_min_run]
+        fr = None
+        if self.cand is not None:
+            self.cand.finish()
+            runs, values, lookup = self.cand.result()
+            fr = classify_flat_runs(lookup, runs, values, st)
+        nf = st.n_fin
+        return ScanResult(self.n, self.nonfinite.runs(), self.nan.runs(), rails, fr, nf,
+                          st.lo if nf else float("nan"), st.hi if nf else float("nan"),
+                          math.sqrt(self.sumsq / nf) if nf else float("nan"))

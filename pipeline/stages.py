@@ -79,37 +79,49 @@ def _channels_present(rec: Recording) -> str:
     return ", ".join(f"{c.name} ({c.kind})" for c in rec.channels) or "none"
 
 
-def _apply_channel_overrides(rec: Recording, overrides: list[dict], source: str | None = None) -> Recording:
-    if not overrides:
-        return rec
-    missing = [o["name"] for o in overrides if o["name"] not in rec.names]
+def _channel_overrides(names: list[str], specs, overrides: list[dict], source: str | None,
+                       present: str) -> tuple[list, list]:
+    """The channel specs after the scene's ``[[channels]]`` overrides, and the gains they ask
+    for ([(column, gain)], applied in that order); ValueError naming the channels present for
+    an unknown name."""
+    missing = [o["name"] for o in overrides if o["name"] not in names]
     if missing:
         import difflib
 
         def near(m):  # a name present inside the one asked for ("sun" in "sun_gauge"), or alike
-            inside = [n for n in rec.names if n.lower() in m.lower() or m.lower() in n.lower()]
-            return (inside or difflib.get_close_matches(m, rec.names, n=1))[:1]
+            inside = [n for n in names if n.lower() in m.lower() or m.lower() in n.lower()]
+            return (inside or difflib.get_close_matches(m, names, n=1))[:1]
 
         hints = [f"{m!r} -> {close[0]!r}?" for m in missing if (close := near(m))]
         raise ValueError(f"{source or 'the recording'}: the scene's [[channels]] name "
                          f"{', '.join(repr(m) for m in missing)} is not in the file; channels "
-                         f"present: {_channels_present(rec)}"
+                         f"present: {present}"
                          + (f" (did you mean {', '.join(hints)})" if hints else ""))
-    specs = list(rec.channels)
+    specs = list(specs)
+    gains = []
     for o in overrides:
-        name = o["name"]
-        i = rec.index(name)
+        i = names.index(o["name"])
         d = specs[i].to_dict()
         d.update({k: v for k, v in o.items() if k != "name"})
         if "kind" in o and "gear" not in o and o["kind"] in ("sun", "ring"):
             d["gear"] = o["kind"]
         specs[i] = ChannelSpec.from_dict(d)
+        if "gain" in o:
+            gains.append((i, o["gain"]))
+    return specs, gains
+
+
+def _apply_channel_overrides(rec: Recording, overrides: list[dict], source: str | None = None) -> Recording:
+    if not overrides:
+        return rec
+    specs, gains = _channel_overrides(rec.names, rec.channels, overrides, source,
+                                      _channels_present(rec))
     data = rec.data
-    gains = [o for o in overrides if "gain" in o]
     if gains:
         data = data.copy()
-        for o in gains:
-            data[:, rec.index(o["name"])] *= o["gain"]
+        for o in overrides:
+            if "gain" in o:
+                data[:, rec.index(o["name"])] *= o["gain"]
     out = Recording(data, rec.fs, specs, rec.t0, rec.start_datetime, rec.meta, rec.history)
     return out.with_history("channel_overrides", channels=[o["name"] for o in overrides])
 
@@ -158,73 +170,150 @@ def _check_gauges(ctx: RunContext, rec: Recording, source: str) -> list[str]:
     return [c.name for c in rec.channels if c.name not in used]
 
 
+#: A synthetic recording up to this size [B] is generated whole, once; a longer one is
+#: generated block by block again for each pass over its samples (bounded memory).
+SYNTHETIC_WHOLE_BYTES = 256 * 2**20
+
+
 def stage_load(ctx: RunContext) -> None:
+    """Open the recording and scan its raw samples (passes 1 and 2 of :mod:`pipeline.stream`):
+    the quality of every channel, the tacho's edges, the hum windows. A file is never held
+    in memory: the later stages stream it again. A synthetic recording up to
+    :data:`SYNTHETIC_WHOLE_BYTES` is generated whole, once; a longer one is generated again,
+    block by block, for every pass (the generator is deterministic)."""
+    from .stream import BLOCK_SAMPLES, FileSource, GeneratorSource, MemorySource
+
     inp = ctx.scene.input
     truth = None
+    overrides = ctx.scene.channels
     if inp.get("recording"):
-        from . import io
         from .exits import recording_read_errors
         from .validate import as_regular_file
 
         # stat only: a FIFO or device is refused before opening it could block
         path = as_regular_file(inp["recording"], "the recording")
-        with recording_read_errors(path):
-            rec = io.read(path, start=inp.get("start"), stop=inp.get("stop"))
         source = str(inp["recording"])
+        with recording_read_errors(path):
+            src = FileSource(path, start=inp.get("start"), stop=inp.get("stop"))
+            h = src.header
+            if overrides:
+                specs, gains = _channel_overrides(h.names, h.channels, overrides, source,
+                                                  _channels_present(h))
+                src = FileSource(path, start=inp.get("start"), stop=inp.get("stop"),
+                                 channels=specs, gains=gains, format=src.fmt)
+                src.header = src.header.with_history(
+                    "channel_overrides", channels=[o["name"] for o in overrides])
+        rec = src.header
     else:
-        from synthetic import generate
+        from synthetic import generate_blocks
 
         minutes = inp.get("minutes")
         # a config built in code (benchmarks, tests) wins over the registered scenario's
-        rec, truth = generate(inp.get("config") or inp["synthetic"],
-                              duration=None if minutes is None else 60.0 * minutes,
-                              seed=inp.get("seed", 0))
+        stream = generate_blocks(inp.get("config") or inp["synthetic"],
+                                 duration=None if minutes is None else 60.0 * minutes,
+                                 seed=inp.get("seed", 0))
+        truth = stream.truth
         source = f"synthetic:{inp['synthetic']}"
-    rec = _apply_channel_overrides(rec, ctx.scene.channels, source)
+        size = stream.n_samples * len(stream.channels) * stream.dtype.itemsize
+        if size <= SYNTHETIC_WHOLE_BYTES:
+            # short: generated once, whole (in memory anyway)
+            rec = _apply_channel_overrides(stream.collect(), overrides, source)
+            src = MemorySource(rec)
+        else:
+            # long: generated again, block by block, for every pass over the samples
+            specs, gains = _channel_overrides(stream.names, stream.channels, overrides, source,
+                                              _channels_present(stream))
+            stream.block_samples = BLOCK_SAMPLES       # the blocks the file path reads
+            src = GeneratorSource(stream, channels=specs, gains=gains)
+            if overrides:
+                src.header = src.header.with_history(
+                    "channel_overrides", channels=[o["name"] for o in overrides])
+            rec = src.header
     ctx.channels_unused = _check_gauges(ctx, rec, source)
     true_errors = None
     if truth is not None and truth.errors is not None:
         from synthetic.config import errors_from_dict
 
         true_errors = errors_from_dict(truth.errors) if isinstance(truth.errors, dict) else truth.errors
+    scan = _scan(src)
+    if hasattr(src, "warn_nonfinite"):
+        src.warn_nonfinite(scan.results)
     ctx.results["load"] = {"recording": rec, "truth": truth, "source": source,
-                           "true_errors": true_errors, "quality": rec.quality()}
-    ctx.error_estimates["load"] = f"{rec.n_samples * rec.n_channels / 1e6:.2f} MSamples read"
+                           "true_errors": true_errors, "quality": scan.quality,
+                           "stream": src, "scan": scan}
+    h = src.header
+    ctx.error_estimates["load"] = (f"{h.n_samples * h.n_channels / 1e6:.2f} MSamples read "
+                                   f"(twice, {scan.n_blocks} block(s) each)")
+
+
+def _scan(src):
+    """Passes 1 and 2 over ``src``: every non-tacho channel may be conditioned, the first
+    tacho is timed."""
+    from .stream import scan_source
+
+    h = src.header
+    tacho = [c.name for c in h.channels if c.kind == "tacho"]
+    return scan_source(src, conditioned=[c.name for c in h.channels if c.kind != "tacho"],
+                       tacho=tacho[0] if tacho else None)
+
+
+def _load_stream(ctx: RunContext):
+    """(source, scan) of the loaded recording; a load stage that left only a Recording (a
+    test feeding one) is scanned here."""
+    from .stream import MemorySource
+
+    load = ctx.results["load"]
+    src, scan = load.get("stream"), load.get("scan")
+    if src is None:
+        src = MemorySource(load["recording"])
+        scan = _scan(src)
+        load["stream"], load["scan"] = src, scan
+    return src, scan
 
 
 def stage_condition(ctx: RunContext) -> None:
-    from .condition import condition_recording
+    """Condition every non-tacho channel and time the gauges' pulses, in one streamed pass
+    (pass 3 of :mod:`pipeline.stream`): the conditioned samples are not kept, only the
+    quality reports, the onsets (handed to the onsets stage) and a short excerpt."""
+    from .stream import ChannelPlan, condition_stream
 
-    rec = ctx.results["load"]["recording"]
-    # each gear's gauges with their own mesh frequency (drift window, low-pass corner)
-    groups: dict = {}
+    src, scan = _load_stream(ctx)
+    rec = src.header
+    g = _gearset(ctx)
+    plans = []
     for c in rec.channels:
         if c.kind == "tacho":
             continue
+        # each gear's gauges with their own mesh frequency (drift window, low-pass corner)
         gear = c.gear if c.gear in ("sun", "ring") else (c.kind if c.kind in ("sun", "ring") else None)
-        groups.setdefault(gear, []).append(c.name)
-    quality = {}
-    out = rec
-    g = _gearset(ctx)
-    for gear, names in groups.items():
         fm = _mesh_freq(ctx, gear) if gear else None
         # the pulse train's period: one relative revolution of the gauged gear (Z mesh
         # periods), in which every planet passes once
         period = None
         if fm and g is not None:
             period = (g.z_sun if gear == "sun" else g.z_ring) / fm
-        cond = condition_recording(out, channels=names, mesh_freq=fm, pulse_period=period)
-        out = cond.recording
-        quality.update(cond.quality)
-    ctx.results["condition"] = {"recording": out, "quality": quality}
-    snr = {k: getattr(q, "snr_db", None) for k, q in quality.items()}
-    ctx.error_estimates["condition"] = "SNR " + ", ".join(
-        f"{k} {v:.1f} dB" for k, v in snr.items() if isinstance(v, (int, float)) and math.isfinite(v))
+        onsets = c.kind in _GAUGE_KINDS
+        kw = {}
+        if onsets:
+            og = c.gear or c.kind
+            ofm = _mesh_freq(ctx, og) if og in ("sun", "ring") else None
+            kw = {"mesh_freq": ofm} if ofm else {}
+        plans.append(ChannelPlan(c.name, mesh_freq=fm, pulse_period=period, group=str(gear),
+                                 onsets=onsets, onset_kwargs=kw))
+    res = condition_stream(src, scan, plans)
+    ctx.results["condition"] = {"recording": res.recording, "quality": res.quality,
+                                "excerpt": res.excerpt, "onsets": res.onsets,
+                                "onset_warnings": res.warnings, "timings": res.timings,
+                                "memory": res.memory}
+    snr = {k: getattr(q, "snr_db", None) for k, q in res.quality.items()}
+    est = "SNR " + ", ".join(f"{k} {v:.1f} dB" for k, v in snr.items()
+                             if isinstance(v, (int, float)) and math.isfinite(v))
+    ctx.error_estimates["condition"] = (
+        est + f"; streamed in {res.n_blocks} block(s), onset detection "
+        f"{res.timings.get('onsets_s', 0.0):.2f} s of it")
 
 
 def stage_onsets(ctx: RunContext) -> None:
-    from .onsets import detect_onsets_recording
-
     cond = ctx.results["condition"]
     rec = cond["recording"]
     for gear in ("sun", "ring"):
@@ -237,29 +326,24 @@ def stage_onsets(ctx: RunContext) -> None:
                          "1e-3 mesh cycles")
             warnings.warn(f"{gear} gauge: mesh frequency {fm:.4g} Hz is {fm / rec.fs:.2f} fs: {what}",
                           DataQualityWarning, stacklevel=2)
-    out = {}
-    for c in rec.channels:
-        if c.kind not in ("sun", "ring", "facewidth"):
-            continue
-        gear = c.gear or c.kind
-        fm = _mesh_freq(ctx, gear) if gear in ("sun", "ring") else None
-        kw = {"mesh_freq": fm} if fm else {}
-        out[c.name] = detect_onsets_recording(rec, c.name, quality=cond["quality"].get(c.name), **kw)
-    tacho = [c.name for c in rec.channels if c.kind == "tacho"]
-    tacho_times = None
-    if tacho:
-        x = ctx.results["load"]["recording"].channel(tacho[0])
-        fin = np.isfinite(x)
-        if fin.any():
-            lo, hi = np.nanmin(x), np.nanmax(x)
-            if hi > lo:
-                half = 0.5 * (lo + hi)
-                b = x > half
-                rise = np.flatnonzero(b[1:] & ~b[:-1]) + 1
-                # the crossing of the half level, linearly between the two samples around it
-                x0, x1 = x[rise - 1], x[rise]
-                frac = np.where(x1 > x0, (half - x0) / np.where(x1 > x0, x1 - x0, 1.0), 0.0)
-                tacho_times = rec.t0 + (rise - 1 + np.clip(frac, 0.0, 1.0)) / rec.fs
+    # the detector ran in the condition stage's pass over the samples: its warnings are
+    # this stage's
+    for category, message in cond.get("onset_warnings", ()):
+        warnings.warn(message, category, stacklevel=2)
+    found = cond.get("onsets")
+    if found is None:                           # a condition stage that kept the samples
+        from .onsets import detect_onsets_recording
+
+        found = {}
+        for c in rec.channels:
+            if c.kind in _GAUGE_KINDS:
+                gear = c.gear or c.kind
+                fm = _mesh_freq(ctx, gear) if gear in ("sun", "ring") else None
+                found[c.name] = detect_onsets_recording(rec, c.name, quality=cond["quality"].get(c.name),
+                                                        **({"mesh_freq": fm} if fm else {}))
+    out = {c.name: found[c.name] for c in rec.channels if c.kind in _GAUGE_KINDS and c.name in found}
+    scan = ctx.results["load"].get("scan")
+    tacho_times = None if scan is None else scan.tacho_times
     ctx.results["onsets"] = {"by_channel": out, "tacho_times": tacho_times}
     n = sum(len(o) for o in out.values())
     jit = []
@@ -307,26 +391,39 @@ def _pass_times(on) -> np.ndarray:
     return out if np.all(np.diff(out) > 0) else on.times
 
 
-def _usable(on, x, fs: float, t0: float) -> np.ndarray:
+def _usable(on, gap_runs, fs: float, t0: float) -> np.ndarray:
     """Onsets to measure phasing with: the clean ones, plus those flagged only for a gap that
     conditioning bridged (a few dropped samples, see condition.filter_signal's ``fill_max``):
-    the conditioned signal is finite over the whole pulse, so the timing is not affected."""
+    the conditioned signal is finite over the whole pulse, so the timing is not affected.
+
+    ``gap_runs``: the ``[start, stop)`` sample runs where the conditioned channel is not
+    finite (``ChannelQuality.conditioned_gap_runs``; its gaps and dropouts when that is
+    unknown); a pulse is clean when no run meets ``[i - 2 h, i + 2 h)`` around its onset
+    sample ``i``, ``h`` its half width (at least 2 samples)."""
     from .onsets import FLAG_GAP
 
     ok = on.good.copy()
     gap_only = on.flags == np.uint8(FLAG_GAP)
     if not np.any(gap_only):
         return ok
-    bad = ~np.isfinite(np.asarray(x))
-    if not bad.any():
+    r = np.empty((0, 2), dtype=np.int64) if gap_runs is None else \
+        np.asarray(gap_runs, dtype=np.int64).reshape(-1, 2)
+    if not len(r):
         return ok | gap_only
-    cum = np.concatenate([[0], np.cumsum(bad)])
     half = np.maximum(2, np.ceil(np.nan_to_num(on.width, nan=0.0) * fs)).astype(np.int64)
     i = np.rint((on.times - t0) * fs).astype(np.int64)
-    a = np.clip(i - 2 * half, 0, x.size)
-    b = np.clip(i + 2 * half, 0, x.size)
-    clean = (cum[b] - cum[a]) == 0
-    return ok | (gap_only & clean)
+    a, b = i - 2 * half, i + 2 * half
+    j = np.searchsorted(r[:, 1], a, side="right")          # first run ending after a
+    hit = (j < len(r)) & (r[np.minimum(j, len(r) - 1), 0] < b) & (b > a)
+    return ok | (gap_only & ~hit)
+
+
+def _conditioned_gaps(q):
+    """The runs where a conditioned channel is not finite, from its quality report."""
+    if q is None:
+        return None
+    runs = getattr(q, "conditioned_gap_runs", None)
+    return q.all_gap_runs() if runs is None else runs
 
 
 #: finest onset timing claimed on noise-free data, as a fraction of the pulse's FWHM [-]
@@ -420,6 +517,9 @@ def stage_phasing(ctx: RunContext) -> None:
     rec = ctx.results["condition"]["recording"]
     quality = ctx.results["condition"]["quality"]
     ons = ctx.results["onsets"]["by_channel"]
+    # the conditioned samples are streamed, not kept: a pulse's window is checked against
+    # the runs where the conditioned channel is not finite (its quality report)
+    gaps = {name: _conditioned_gaps(q) for name, q in quality.items()}
     passes = []
     mains = {}
     for c in rec.channels:
@@ -427,7 +527,7 @@ def stage_phasing(ctx: RunContext) -> None:
             continue
         gear = c.gear if c.gear in ("sun", "ring") else (c.kind if c.kind in ("sun", "ring") else "sun")
         on = ons[c.name]
-        ok = _usable(on, rec.channel(c.name), rec.fs, rec.t0)
+        ok = _usable(on, gaps.get(c.name), rec.fs, rec.t0)
         # pass times at each pulse's timing centre: a fixed angle of the gauged gear near the
         # middle of the tooth's contact, on every gauge alike
         times, amp = _pass_times(on)[ok], on.amplitude[ok]

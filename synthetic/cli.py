@@ -2,9 +2,8 @@
 
 :func:`cli_synth` generates a named scenario and writes the recording in any of the four
 formats plus the ground-truth sidecar (``OUT.truth.json``). TDMS is written block by block
-(flat memory, :mod:`synthetic.tdms_export`); HDF5, MCAP and CSV go through
-``pipeline.io.write``, which takes a whole Recording, so those hold the recording in memory
-once (rendered straight into one array).
+(flat memory, :mod:`synthetic.tdms_export`); HDF5, MCAP and CSV through
+``pipeline.io.write_blocks``, block by block as well.
 """
 
 from __future__ import annotations
@@ -82,10 +81,11 @@ def cli_synth(scenario: str, out, minutes: float | None = None, seed: int | None
 
         write_tdms(iter(stream), out, n_samples=stream.n_samples, overwrite=overwrite)
     else:
-        from pipeline.io import write
+        from pipeline.io import write_blocks
 
-        rec = stream.collect()
-        write(rec, out, format=fmt, overwrite=overwrite)
+        # block by block too: flat memory whatever the duration
+        write_blocks(stream, (blk.data for blk in stream), out, format=fmt,
+                     dtype=stream.dtype, overwrite=overwrite)
     stream.truth.write(truth_path, overwrite=overwrite)
     logger.info("synth %s: wrote %s (%s, %d samples x %d channels) and %s", scenario, out, fmt,
                 stream.n_samples, len(stream.channels), truth_path)

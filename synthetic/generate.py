@@ -435,6 +435,8 @@ class SyntheticStream:
     channels : tuple of ChannelSpec
     block_samples : int
         Samples per block.
+    dtype : numpy dtype
+        Sample type of the blocks.
     """
 
     def __init__(self, plan: _Plan, block_samples: int, progress=None):
@@ -449,6 +451,7 @@ class SyntheticStream:
         self.history = plan.history
         self.t0 = plan.cfg.t0
         self.start_datetime = plan.cfg.start_datetime
+        self.dtype = plan.dtype
 
     def __len__(self) -> int:
         return -(-self.n_samples // self.block_samples)

@@ -20,6 +20,15 @@ Times are the best of ``repeats`` runs on files just written (page cache warm): 
 are measured and reported against the issue's targets (HDF5 >= 0.5 x raw, MCAP and TDMS >=
 0.3 x raw, CSV at least as fast as pandas' C engine alone), never asserted. A format whose
 reader module is missing is skipped with a logged message.
+
+Peak memory of ``meshphase convert`` (``convert_minutes``; ``meshphase bench io`` measures
+10 min, 1 h and 3 h): the 8-channel benchmark recording (:func:`pipeline.bench.rss.bench_config`,
+5120 Hz, float64) is generated and written block by block to HDF5, converted to MCAP and back
+(each conversion a child process: its peak RSS (VmHWM), wall time); flat means the
+same peak RSS whatever the length. A length whose files do not fit on the disk (2.2 x the
+samples' size free) is skipped and listed. Peak memory of ``meshphase process`` on the same
+recordings (``process_minutes``, :func:`pipeline.bench.processing.process_rss_rows`) is
+measured alongside, so that one table shows both streamed commands flat in the length.
 """
 
 from __future__ import annotations
@@ -44,7 +53,8 @@ from ..log import logger
 from ..recording import ChannelSpec, Recording
 from ..validate import as_positive, as_positive_int
 
-__all__ = ["run_io_bench", "strain_recording", "IO_FORMATS", "TARGETS", "COLUMNS"]
+__all__ = ["run_io_bench", "strain_recording", "convert_rss_rows", "IO_FORMATS", "TARGETS",
+           "COLUMNS", "CONVERT_COLUMNS", "CONVERT_MINUTES"]
 
 #: Formats the benchmark knows, in report order.
 IO_FORMATS = ("hdf5", "mcap", "csv", "tdms")
@@ -55,6 +65,11 @@ COLUMNS = ("format", "variant", "file_mb", "write_s", "read_s", "read_msps", "ra
            "target_ratio", "meets_target", "exact", "one_channel_msps", "window_msps",
            "pandas_c_msps", "csv_over_pandas", "stream_peak_mb_1x", "stream_peak_mb_4x",
            "stream_peak_ratio")
+#: Columns of the convert peak-memory table.
+CONVERT_COLUMNS = ("minutes", "n_channels", "n_samples", "data_mb", "source", "target",
+                   "wall_s", "msps", "peak_rss_mb", "rss_over_data")
+#: Recording lengths of ``meshphase bench io``'s convert table [min].
+CONVERT_MINUTES = (10.0, 60.0, 180.0)
 _MCAP_VARIANTS = ("none", "lz4", "zstd")
 _TDMS_LARGE_SEGMENT = 1 << 20  # samples per channel per segment (8 MiB of float64)
 _TDMS_SMALL_SEGMENT = 512
@@ -245,7 +260,8 @@ def _check_args(minutes, n_channels, fs, formats, block_budget_mb, repeats):
 
 def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: float = 5120.0,
                  formats=IO_FORMATS, block_budget_mb: float | None = None, rng=0,
-                 progress: bool = True, repeats: int = 3, keep_files: bool = False) -> dict:
+                 progress: bool = True, repeats: int = 3, keep_files: bool = False,
+                 convert_minutes=(), process_minutes=()) -> dict:
     """Measure read throughput and streaming memory of every recording format.
 
     Parameters
@@ -274,11 +290,21 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
         Each timed read is repeated this often; the best time is kept.
     keep_files : bool
         Keep the written files (default False: removed at the end).
+    convert_minutes : sequence of float
+        Lengths [min] of the 8-channel recordings whose ``meshphase convert`` peak memory is
+        measured (:func:`convert_rss_rows`; default none, ``meshphase bench io`` passes
+        :data:`CONVERT_MINUTES`).
+    process_minutes : sequence of float
+        Lengths [min] of the 8-channel recordings whose ``meshphase process`` peak memory and
+        wall time are measured (:func:`pipeline.bench.processing.process_rss_rows`; default
+        none, ``meshphase bench io`` passes :data:`CONVERT_MINUTES`).
 
     Returns
     -------
     dict
-        ``{"config", "raw", "rows", "skipped", "warnings", "notes", "files"}``; ``rows`` is a
+        ``{"config", "raw", "rows", "convert", "process", "skipped", "warnings", "notes",
+        "files"}`` (``convert``: rows with the keys :data:`CONVERT_COLUMNS`; ``process``: rows
+        with the keys :data:`pipeline.bench.processing.PROCESS_COLUMNS`); ``rows`` is a
         list of dicts with the keys :data:`COLUMNS`, throughputs in MSamples/s, sizes in MB,
         times in s (None where a column does not apply).
     """
@@ -380,6 +406,15 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
                         row["read_msps"], row["ratio_to_raw"])
             if bar:
                 bar.update(1)
+        convert, conv_skipped = convert_rss_rows(work, convert_minutes)
+        skipped += conv_skipped
+        process = []
+        if process_minutes:
+            from .processing import process_rss_rows
+
+            process, proc_skipped, _ = process_rss_rows(work / "process", process_minutes)
+            skipped += [{"format": f"process {s['minutes']:g} min", "reason": s["reason"]}
+                        for s in proc_skipped]
     finally:
         if bar:
             bar.close()
@@ -400,6 +435,8 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
         },
         "raw": raw,
         "rows": rows,
+        "convert": convert,
+        "process": process,
         "skipped": skipped,
         "warnings": caught,
         "notes": [
@@ -416,6 +453,17 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
             "stream_peak_mb_*: tracemalloc peak (Python + numpy allocations; HDF5/TDMS C "
             "internals not seen) while streaming pipeline.io.iter_blocks in blocks of the "
             "block budget over a recording of 1x and 4x the budget; flat = ratio near 1.",
+            "convert table: `meshphase convert` of the 8-channel benchmark recording "
+            "(pipeline.bench.rss.bench_config, float64, 5120 Hz) in a child process; peak_rss_mb "
+            "is its VmHWM (every page its address space touched, C libraries included), "
+            "rss_over_data its ratio to the samples' size; streamed block by block, so flat "
+            "in the length. Before streaming (one buffer for the whole recording) convert "
+            "peaked at ~1.2x the samples' size.",
+            "process table: `meshphase process` (the seed rig's gearset) of the same recording "
+            "in a child process; peak_rss_mb as above; streamed_peak_mb the peak (VmHWM) when "
+            "the three streamed passes (load, condition, onsets) are done; the later stages "
+            "work on the onsets, whose number grows with the length. Before streaming, process "
+            "peaked at ~5x the samples' size.",
             "Measured, never asserted.",
         ],
     }
@@ -425,6 +473,50 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
                                    encoding="utf-8")
     Path(files["md"]).write_text(_markdown(result), encoding="utf-8")
     return result
+
+
+def convert_rss_rows(work, minutes, *, seed: int = 1) -> tuple[list, list]:
+    """Peak memory and wall time of ``meshphase convert`` HDF5 -> MCAP -> HDF5 of the
+    8-channel benchmark recording of each length in ``minutes`` (written to ``work``,
+    removed again); a length whose files do not fit on the disk is skipped.
+
+    Returns
+    -------
+    (rows, skipped) : (list of dict, list of dict)
+        Rows with the keys :data:`CONVERT_COLUMNS`; skipped lengths with their reason.
+    """
+    from .rss import N_CHANNELS, free_bytes, run_child
+
+    work = Path(work)
+    rows, skipped = [], []
+    for m in minutes:
+        m = as_positive(m, "convert_minutes")
+        n = int(round(m * 60.0 * 5120.0))
+        data = n * N_CHANNELS * 8
+        need = int(2.2 * data) + (64 << 20)
+        if free_bytes(work) < need:
+            skipped.append({"format": f"convert {m:g} min",
+                            "reason": f"needs {need / 1e9:.1f} GB free on {work}, "
+                                      f"{free_bytes(work) / 1e9:.1f} GB are"})
+            logger.warning("io bench: convert %g min skipped: not enough disk space", m)
+            continue
+        h5, mc, back = work / f"conv_{m:g}.h5", work / f"conv_{m:g}.mcap", work / f"back_{m:g}.h5"
+        logger.info("io bench: writing the %g min x %d channel recording", m, N_CHANNELS)
+        run_child("write_job", path=str(h5), minutes=m, seed=seed)
+        for src, dst, a, b in ((h5, mc, "hdf5", "mcap"), (mc, back, "mcap", "hdf5")):
+            r = run_child("convert_job", src=str(src), dst=str(dst))
+            if r.get("rc") != 0:
+                raise RuntimeError(f"convert {src} -> {dst} exited {r.get('rc')}")
+            rows.append({"minutes": m, "n_channels": N_CHANNELS, "n_samples": n,
+                         "data_mb": data / 2**20, "source": a, "target": b,
+                         "wall_s": r["wall_s"], "msps": n * N_CHANNELS / r["wall_s"] / 1e6,
+                         "peak_rss_mb": r["peak_rss_mb"],
+                         "rss_over_data": r["peak_rss_mb"] / (data / 2**20)})
+            logger.info("io bench: convert %g min %s -> %s: %.1f s, peak RSS %.0f MB", m, a, b,
+                        r["wall_s"], r["peak_rss_mb"])
+        for p in (h5, mc, back):
+            p.unlink(missing_ok=True)
+    return rows, skipped
 
 
 def _json_default(obj):
@@ -470,6 +562,24 @@ def _markdown(res: dict) -> str:
     for row in res["rows"]:
         lines.append("| " + " | ".join(_fmt(row[k]) for k in keys) + " |")
     lines.append("")
+    if res.get("convert"):
+        lines += ["## meshphase convert: peak memory against recording length", "",
+                  "| minutes | channels | MSamples | data MB | from | to | wall s | MS/s | "
+                  "peak RSS MB | RSS / data |", "|" + "---|" * 10]
+        for r in res["convert"]:
+            lines.append(f"| {r['minutes']:g} | {r['n_channels']} | {r['n_samples'] * r['n_channels'] / 1e6:.1f} "
+                         f"| {r['data_mb']:.0f} | {r['source']} | {r['target']} | {r['wall_s']:.1f} "
+                         f"| {r['msps']:.1f} | {r['peak_rss_mb']:.0f} | {r['rss_over_data']:.3f} |")
+        lines.append("")
+    if res.get("process"):
+        lines += ["## meshphase process: peak memory against recording length", "",
+                  "| minutes | channels | data MB | status | onsets | wall s | peak RSS MB | "
+                  "streamed peak MB | RSS / data |", "|" + "---|" * 9]
+        for r in res["process"]:
+            lines.append(f"| {r['minutes']:g} | {r['n_channels']} | {r['data_mb']:.0f} | {r['status']} "
+                         f"| {r['n_onsets']} | {r['wall_s']:.1f} | {r['peak_rss_mb']:.0f} "
+                         f"| {_fmt(r.get('streamed_peak_mb'))} | {r['rss_over_data']:.3f} |")
+        lines.append("")
     if res["skipped"]:
         lines.append("Skipped: " + "; ".join(f"{s['format']} ({s['reason']})" for s in res["skipped"]))
         lines.append("")

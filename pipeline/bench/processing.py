@@ -27,6 +27,14 @@ Detector settings
 
 Errors are measured on the onset feature of each setting, with the mean offset (bias: a
 constant offset between features, irrelevant to phasing) removed and reported separately.
+
+Peak memory and wall time of ``meshphase process`` (``process_minutes``; ``meshphase bench
+processing`` measures 2 min, 10 min, 1 h and 3 h): the 8-channel benchmark recording
+(:func:`pipeline.bench.rss.bench_config`, float64 HDF5 written block by block) processed with
+the seed rig's gearset in a child process (peak RSS: its VmHWM), with each stage's
+time, and the whole run and the streamed stages (load, condition, onsets: the three passes
+over the samples) as multiples of one :func:`scipy.signal.sosfiltfilt` pass over the same
+samples (the conditioning's 4th-order low-pass, rate measured in the same run).
 """
 
 from __future__ import annotations
@@ -47,7 +55,8 @@ from ..log import logger
 from ..validate import as_float, as_nonnegative, as_positive
 
 __all__ = ["PulseShape", "pulse_train", "pulse_scenario", "match_onsets", "run_processing_bench",
-           "ACCURACY_COLUMNS", "THROUGHPUT_COLUMNS"]
+           "process_rss_rows", "ACCURACY_COLUMNS", "THROUGHPUT_COLUMNS", "PROCESS_COLUMNS",
+           "PROCESS_MINUTES"]
 
 #: Columns of the accuracy table (processing_bench.json "accuracy", and the Markdown).
 ACCURACY_COLUMNS = ("scenario", "setting", "snr_db", "fwhm_samples", "n_true", "n_matched",
@@ -56,6 +65,14 @@ ACCURACY_COLUMNS = ("scenario", "setting", "snr_db", "fwhm_samples", "n_true", "
 #: Columns of the throughput table.
 THROUGHPUT_COLUMNS = ("stage", "scenario", "n_samples", "n_pulses", "runtime_s", "msamples_per_s",
                       "wall_s")
+#: Columns of the ``meshphase process`` peak-memory table.
+PROCESS_COLUMNS = ("minutes", "n_channels", "n_samples", "data_mb", "status", "n_onsets",
+                   "wall_s", "peak_rss_mb", "streamed_peak_mb", "rss_over_data",
+                   "memory_estimate_mb", "load_s",
+                   "condition_s", "onsets_s", "phasing_s", "other_s", "sosfiltfilt_s",
+                   "wall_over_sosfiltfilt", "streamed_over_sosfiltfilt")
+#: Recording lengths of ``meshphase bench processing``'s process table [min].
+PROCESS_MINUTES = (2.0, 10.0, 60.0, 180.0)
 
 
 # ====================================================================== test pulses
@@ -393,6 +410,25 @@ def _markdown(res: dict) -> str:
     lines.append("|" + "---|" * len(cols))
     for r in res["throughput"]:
         lines.append("| " + " | ".join(_fmt(r[c]) for c in cols) + " |")
+    if res.get("process"):
+        lines += ["", "## meshphase process: peak memory and time against recording length", "",
+                  "8 channels (sun, ring, 5 face-width gauges, tacho) at 5120 Hz, float64 HDF5; "
+                  "child process, BLAS on one thread; times in s. sosfiltfilt_s: one zero-phase "
+                  "pass of the conditioning low-pass over the same samples (rate "
+                  f"{res['meta'].get('sosfiltfilt_msps', float('nan')):.1f} MS/s here); streamed = "
+                  "load + condition + onsets (the three passes over the samples); "
+                  "streamed_peak_mb: the peak RSS (VmHWM) when they are done, peak_rss_mb: of "
+                  "the whole run (phasing and the later stages work on the passes, whose "
+                  "number grows with the length). Before "
+                  "streaming, process peaked at ~5x the samples' size (10 min: 0.96 GB, 1 h: "
+                  "5.1 GB, measured on this machine; 3 h would need ~15 GB).", ""]
+        cols = PROCESS_COLUMNS
+        lines.append("| " + " | ".join(cols) + " |")
+        lines.append("|" + "---|" * len(cols))
+        for r in res["process"]:
+            lines.append("| " + " | ".join(_fmt(r.get(c)) for c in cols) + " |")
+        for sk in res.get("process_skipped", []):
+            lines.append(f"\nSkipped {sk['minutes']:g} min: {sk['reason']}")
     if res.get("phasing"):
         from .phasing import TARGET_ABS, TARGET_FLOOR_RATIO, markdown_table, pooled_calibration
 
@@ -410,10 +446,65 @@ def _markdown(res: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def process_rss_rows(work, minutes, *, seed: int = 1) -> tuple[list, list, float]:
+    """Peak memory, wall and stage times of ``meshphase process`` on the 8-channel benchmark
+    recording of each length in ``minutes`` (written to ``work``, removed again).
+
+    Returns
+    -------
+    (rows, skipped, rate) : (list of dict, list of dict, float)
+        Rows with the keys :data:`PROCESS_COLUMNS`; lengths skipped for want of disk space;
+        the sosfiltfilt rate [samples/s] the ratios use.
+    """
+    from .rss import BENCH_GEARSET, N_CHANNELS, free_bytes, run_child
+
+    work = Path(work)
+    work.mkdir(parents=True, exist_ok=True)
+    rate = run_child("sosfiltfilt_job")["samples_per_s"]
+    gearset = work / "gearset.toml"
+    gearset.write_text(BENCH_GEARSET, encoding="utf-8")
+    rows, skipped = [], []
+    for m in minutes:
+        m = as_positive(m, "process_minutes")
+        n = int(round(m * 60.0 * 5120.0))
+        data = n * N_CHANNELS * 8
+        if free_bytes(work) < int(1.1 * data) + (256 << 20):
+            skipped.append({"minutes": m, "reason": f"needs {1.1 * data / 1e9:.1f} GB free on {work}"})
+            logger.warning("processing bench: process %g min skipped: not enough disk space", m)
+            continue
+        path = work / f"process_{m:g}.h5"
+        logger.info("processing bench: writing the %g min x %d channel recording", m, N_CHANNELS)
+        run_child("write_job", path=str(path), minutes=m, seed=seed)
+        r = run_child("process_job", path=str(path), gearset=str(gearset),
+                      out_dir=str(work / f"process_{m:g}-out"))
+        t = r["timings"]
+        streamed = sum(t.get(k, 0.0) for k in ("load", "condition", "onsets"))
+        ref = n * N_CHANNELS / rate
+        rows.append({"minutes": m, "n_channels": N_CHANNELS, "n_samples": n, "data_mb": data / 2**20,
+                     "status": r["status"], "n_onsets": r["n_onsets"], "wall_s": r["wall_s"],
+                     "peak_rss_mb": r["peak_rss_mb"],
+                     "streamed_peak_mb": (r.get("hwm_mb") or {}).get("onsets"),
+                     "rss_over_data": r["peak_rss_mb"] / (data / 2**20),
+                     "memory_estimate_mb": r.get("memory_estimate_mb"),
+                     "load_s": t.get("load"), "condition_s": t.get("condition"),
+                     "onsets_s": r.get("onsets_s"), "phasing_s": t.get("phasing"),
+                     "other_s": sum(v for k, v in t.items()
+                                    if k not in ("load", "condition", "onsets", "phasing")),
+                     "sosfiltfilt_s": ref, "wall_over_sosfiltfilt": r["wall_s"] / ref,
+                     "streamed_over_sosfiltfilt": streamed / ref})
+        logger.info("processing bench: process %g min: %.1f s, peak RSS %.0f MB", m, r["wall_s"],
+                    r["peak_rss_mb"])
+        path.unlink(missing_ok=True)
+        import shutil
+
+        shutil.rmtree(work / f"process_{m:g}-out", ignore_errors=True)
+    return rows, skipped, rate
+
+
 _THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 
 
-def run_processing_bench(out_dir, *, quick: bool = False, rng=0) -> dict:
+def run_processing_bench(out_dir, *, quick: bool = False, rng=0, process_minutes=None) -> dict:
     """Run the processing benchmark into ``out_dir``.
 
     Parameters
@@ -424,12 +515,17 @@ def run_processing_bench(out_dir, *, quick: bool = False, rng=0) -> dict:
         Tiny sizes (a smoke run, seconds).
     rng : None, int or Generator
         Noise seed.
+    process_minutes : sequence of float, optional
+        Lengths [min] of the 8-channel recordings ``meshphase process`` runs on for the peak
+        memory table (:func:`process_rss_rows`); default :data:`PROCESS_MINUTES`, none when
+        ``quick``.
 
     Returns
     -------
     dict
-        ``{"accuracy": [row...], "throughput": [row...], "meta": {...}, "files": {...}}``;
-        row keys are :data:`ACCURACY_COLUMNS` and :data:`THROUGHPUT_COLUMNS`.
+        ``{"accuracy": [row...], "throughput": [row...], "process": [row...], "meta": {...},
+        "files": {...}}``; row keys are :data:`ACCURACY_COLUMNS`, :data:`THROUGHPUT_COLUMNS`
+        and :data:`PROCESS_COLUMNS`.
 
     Notes
     -----
@@ -443,12 +539,15 @@ def run_processing_bench(out_dir, *, quick: bool = False, rng=0) -> dict:
         rng = int(rng.integers(2 ** 32))
     elif rng is not None:
         rng = int(rng)
+    if process_minutes is None:
+        process_minutes = () if quick else PROCESS_MINUTES
+    process_minutes = tuple(float(as_positive(m, "process_minutes")) for m in process_minutes)
     if all(os.environ.get(v) == "1" for v in _THREAD_VARS):
-        res = _run(out, quick, rng)
+        res = _run(out, quick, rng, process_minutes)
     else:
         env = dict(os.environ, **{v: "1" for v in _THREAD_VARS})
         code = ("import sys; from pipeline.bench.processing import _run; "
-                f"_run(sys.argv[1], {bool(quick)!r}, {rng!r})")
+                f"_run(sys.argv[1], {bool(quick)!r}, {rng!r}, {process_minutes!r})")
         root = str(Path(__file__).resolve().parents[2])
         env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
         proc = subprocess.run([sys.executable, "-c", code, str(out)], env=env,
@@ -461,7 +560,7 @@ def run_processing_bench(out_dir, *, quick: bool = False, rng=0) -> dict:
     return res
 
 
-def _run(out_dir, quick: bool, rng) -> dict:
+def _run(out_dir, quick: bool, rng, process_minutes=()) -> dict:
     rng = np.random.default_rng(rng)
     out = Path(out_dir)
     fs, scen = _scenarios(quick)
@@ -478,13 +577,24 @@ def _run(out_dir, quick: bool, rng) -> dict:
             acc += _accuracy_rows(name, x, truth, fs, sc["shape"], snr, settings)
             logger.info("processing bench: %s at %g dB done", name, snr)
     thr = _throughput_rows(fs, scen, (1 << 17) if quick else (1 << 24), rng)
+    proc, proc_skipped, rate = [], [], float("nan")
+    if process_minutes:
+        import shutil
+        import tempfile
+
+        work = Path(tempfile.mkdtemp(prefix="process_bench_", dir=out))
+        try:
+            proc, proc_skipped, rate = process_rss_rows(work, process_minutes)
+        finally:
+            shutil.rmtree(work, ignore_errors=True)
     from .phasing import matrix_cases, phasing_rows
 
     phs = phasing_rows(matrix_cases(quick))
-    res = {"accuracy": acc, "throughput": thr, "phasing": phs,
+    res = {"accuracy": acc, "throughput": thr, "phasing": phs, "process": proc,
+           "process_skipped": proc_skipped,
            "meta": {"machine": f"{platform.machine()} {platform.processor() or ''} "
                                f"python {platform.python_version()}".strip(),
-                    "quick": quick, "fs": fs,
+                    "quick": quick, "fs": fs, "sosfiltfilt_msps": rate / 1e6,
                     "blas_threads": {v: os.environ.get(v) for v in _THREAD_VARS},
                     "snr_definition": "10 log10(A^2/sigma^2), A = tensile peak of a mean pulse"}}
     (out / "processing_bench.json").write_text(json.dumps(res, indent=2, default=float))

@@ -23,11 +23,13 @@ import importlib
 from pathlib import Path
 from typing import Iterator
 
+import numpy as np
+
 from ..recording import Recording
 from ..validate import as_nonnegative, as_positive
 from .base import CorruptFileError, RecordingFileError, RecordingInfo, atomic_path, clean_stale_partials
 
-__all__ = ["read", "write", "read_info", "iter_blocks", "detect_format", "FORMATS",
+__all__ = ["read", "write", "write_blocks", "read_info", "iter_blocks", "detect_format", "FORMATS",
            "RecordingFileError", "CorruptFileError", "RecordingInfo", "get_format", "atomic_path",
            "clean_stale_partials"]
 
@@ -208,10 +210,62 @@ def write(recording: Recording, path, format: str | None = None, *, overwrite: b
     return path
 
 
+def write_blocks(header, blocks, path, format: str | None = None, *, dtype="float64",
+                 overwrite: bool = False, **options) -> Path:
+    """Write a recording given as a header and consecutive blocks of samples, atomically.
+
+    The streaming form of :func:`write` (``meshphase convert``, ``meshphase synth``): memory
+    holds one block plus the writer's own buffer (one chunk per channel for HDF5, one chunk
+    group for MCAP, ``chunk_rows`` rows for CSV), whatever the length; the file is the same
+    as :func:`write` makes of the same samples.
+
+    Parameters
+    ----------
+    header : Recording, RecordingInfo or alike
+        ``fs``, ``t0``, ``n_samples``, ``channels``, ``start_datetime``, ``meta``,
+        ``history`` of the recording.
+    blocks : iterable of ndarray, shape (k, n_channels)
+        The samples, in order; together exactly ``header.n_samples`` rows (ValueError
+        otherwise, and nothing is written).
+    path : str or Path
+    format : str, optional
+        One of the writable formats; from the suffix when None.
+    dtype : {"float32", "float64"}
+        Sample type stored.
+    overwrite : bool
+        Replace an existing file (default False: FileExistsError).
+    **options
+        Format options, as :func:`write`.
+
+    Returns
+    -------
+    Path
+    """
+    path = Path(path)
+    name = _format_for_write(path, format)
+    mod = get_format(name)
+    for attr in ("fs", "t0", "n_samples", "channels", "meta", "history"):
+        if not hasattr(header, attr):
+            raise TypeError(f"header must have fs, t0, n_samples, channels, meta and history "
+                            f"(a Recording or RecordingInfo), got {type(header).__name__} without {attr}")
+    dtype = np.dtype(dtype)
+    if dtype not in (np.float32, np.float64):
+        raise TypeError(f"dtype must be float32 or float64, got {dtype}")
+    hint = _hint(int(header.n_samples), len(header.channels), dtype.itemsize, name, options)
+    with atomic_path(path, overwrite=overwrite, size_hint=hint) as tmp:
+        mod.write_blocks(header, blocks, tmp, dtype=dtype, **options)
+    return path
+
+
 def _size_hint(recording: Recording, name: str, options: dict) -> int | None:
     """A lower bound of the written file's size [B] (None when compressed: unknown)."""
+    return _hint(recording.n_samples, recording.n_channels, recording.data.dtype.itemsize,
+                 name, options)
+
+
+def _hint(n: int, nc: int, itemsize: int, name: str, options: dict) -> int | None:
     if options.get("compression") not in (None, "none"):
         return None
     if name == "csv":  # at least one digit and one separator per value
-        return 2 * recording.n_samples * (recording.n_channels + 1)
-    return int(recording.data.nbytes)
+        return 2 * n * (nc + 1)
+    return int(n * nc * itemsize)

@@ -63,7 +63,7 @@ from .base import CorruptFileError, RecordingFileError, RecordingInfo
 from .hdf5 import check_start_datetime, dumps_json, spec_from_dict, warn_nonfinite
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "FORMAT_VERSION", "TIME_TOLERANCE", "sniff", "read_info",
-           "read", "write", "iter_blocks"]
+           "read", "write", "write_blocks", "iter_blocks"]
 
 NAME = "csv"
 SUFFIXES = (".csv",)
@@ -740,30 +740,67 @@ def write(recording: Recording, path, *, chunk_rows: int = 65536) -> None:
     """
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
+    write_blocks(recording, [recording.data], path, dtype=recording.data.dtype,
+                 chunk_rows=chunk_rows)
+
+
+def write_blocks(header, blocks, path, *, dtype="float64", chunk_rows: int = 65536) -> None:
+    """Write a recording given as a header and consecutive blocks of samples (streaming).
+
+    Parameters
+    ----------
+    header : Recording, RecordingInfo or alike
+        ``fs``, ``t0``, ``n_samples``, ``channels``, ``start_datetime``, ``meta``,
+        ``history`` (samples, if any, not read).
+    blocks : iterable of ndarray, shape (k, n_channels)
+        The samples, in order; together exactly ``header.n_samples`` rows.
+    path : str or Path
+    dtype : {"float32", "float64"}
+        Sample type (named in the preamble, decides the number format).
+    chunk_rows : int
+        Rows formatted per step [-].
+    """
     chunk_rows = as_positive_int(chunk_rows, "chunk_rows")
-    for spec in recording.channels:
+    dtype = np.dtype(dtype)
+    if dtype not in (np.float32, np.float64):
+        raise TypeError(f"dtype must be float32 or float64, got {dtype}")
+    for spec in header.channels:
         if any(c in spec.name + spec.units for c in "\r\n"):
             raise ValueError(f"channel {spec.name!r}: a line break in a channel name or units cannot go in a "
                              f"CSV header")
-    span = max(abs(recording.t0), abs(recording.t_end))
-    if np.spacing(span) > 0.01 / recording.fs:
-        raise ValueError(f"t0 = {recording.t0!r} s is too large for a CSV time column at fs = {recording.fs!r} Hz: "
+    n = int(header.n_samples)
+    fs = float(header.fs)
+    t_end = header.t0 + n / fs
+    span = max(abs(header.t0), abs(t_end))
+    if np.spacing(span) > 0.01 / fs:
+        raise ValueError(f"t0 = {header.t0!r} s is too large for a CSV time column at fs = {fs!r} Hz: "
                          f"float64 times near {span:.6g} s are {np.spacing(span):.3g} s apart, more than 1 % of a "
                          f"sample; shift t0 (e.g. keep the wall-clock time in start_datetime)")
-    preamble = {"format": "meshphase-csv", "format_version": FORMAT_VERSION, "fs": recording.fs,
-                "t0": recording.t0, "n_samples": recording.n_samples, "dtype": str(recording.data.dtype),
-                "start_datetime": recording.start_datetime,
-                "channels": [c.to_dict() for c in recording.channels],
-                "meta": recording.meta, "history": recording.history}
+    preamble = {"format": "meshphase-csv", "format_version": FORMAT_VERSION, "fs": fs,
+                "t0": header.t0, "n_samples": n, "dtype": str(dtype),
+                "start_datetime": header.start_datetime,
+                "channels": [c.to_dict() for c in header.channels],
+                "meta": header.meta, "history": header.history}
     text = dumps_json(preamble, "recording metadata (CSV preamble)")
-    header = io.StringIO()
-    _csv.writer(header, lineterminator="\n").writerow(
-        ["time [s]"] + [_header_field(c.name, c.units) for c in recording.channels])
-    n = recording.n_samples
+    out = io.StringIO()
+    _csv.writer(out, lineterminator="\n").writerow(
+        ["time [s]"] + [_header_field(c.name, c.units) for c in header.channels])
+    nc = len(header.channels)
+    pos = 0
     with open(path, "w", encoding="utf-8", newline="") as fh:
         fh.write(_TAG + text + "\n")
-        fh.write(header.getvalue())
-        for i0 in range(0, n, chunk_rows):
-            i1 = min(n, i0 + chunk_rows)
-            times = recording.t0 + np.arange(i0, i1, dtype=np.float64) / recording.fs
-            fh.write(_format_block(times, recording.data[i0:i1]))
+        fh.write(out.getvalue())
+        for blk in blocks:
+            blk = np.asarray(blk)
+            if blk.ndim != 2 or blk.shape[1] != nc:
+                raise ValueError(f"blocks must be (samples, {nc}) arrays, got shape {blk.shape}")
+            if pos + blk.shape[0] > n:
+                raise ValueError(f"blocks hold more than the header's n_samples = {n}")
+            blk = blk.astype(dtype, copy=False)
+            for i0 in range(0, blk.shape[0], chunk_rows):
+                i1 = min(blk.shape[0], i0 + chunk_rows)
+                times = header.t0 + np.arange(pos + i0, pos + i1, dtype=np.float64) / fs
+                fh.write(_format_block(times, blk[i0:i1]))
+            pos += blk.shape[0]
+    if pos != n:
+        raise ValueError(f"blocks hold {pos} samples, the header says n_samples = {n}")

@@ -67,7 +67,7 @@ from ..validate import as_choice, as_int, as_positive_int
 from .base import CorruptFileError, RecordingFileError, RecordingInfo
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "FORMAT_VERSION", "DEFAULT_CHUNK_SAMPLES", "sniff",
-           "read_info", "read", "write", "iter_blocks"]
+           "read_info", "read", "write", "write_blocks", "iter_blocks"]
 
 NAME = "hdf5"
 SUFFIXES = (".h5", ".hdf5", ".hdf", ".he5")
@@ -577,10 +577,38 @@ def write(recording: Recording, path, *, compression: str | None = None, compres
     OSError
         From the filesystem (e.g. ENOSPC); the HDF5 file is closed before it propagates.
     """
-    import h5py
-
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
+    write_blocks(recording, [recording.data], path, dtype=recording.data.dtype,
+                 compression=compression, compression_opts=compression_opts, shuffle=shuffle,
+                 chunk_samples=chunk_samples, fletcher32=fletcher32)
+
+
+def write_blocks(header, blocks, path, *, dtype="float64", compression: str | None = None,
+                 compression_opts: int | None = None, shuffle: bool | None = None,
+                 chunk_samples: int = DEFAULT_CHUNK_SAMPLES, fletcher32: bool = True) -> None:
+    """Write a recording given as a header and consecutive blocks of samples (streaming).
+
+    Parameters
+    ----------
+    header : Recording, RecordingInfo or alike
+        ``fs``, ``t0``, ``n_samples``, ``channels``, ``start_datetime``, ``meta``,
+        ``history`` of the recording (its samples, if any, are not read).
+    blocks : iterable of ndarray, shape (k, n_channels)
+        The samples, in order; together exactly ``header.n_samples`` rows. Cast to ``dtype``.
+    path : str or Path
+    dtype : {"float32", "float64"}
+        Sample type stored.
+    compression, compression_opts, shuffle, chunk_samples, fletcher32
+        As :func:`write`.
+
+    Notes
+    -----
+    Samples are written chunk-aligned (one chunk of every channel is buffered), so memory
+    stays at one block plus one chunk per channel whatever the length.
+    """
+    import h5py
+
     if compression is not None:
         as_choice(compression, "compression", ("gzip", "lzf"))
     if compression_opts is not None:
@@ -598,15 +626,19 @@ def write(recording: Recording, path, *, compression: str | None = None, compres
     chunk_samples = as_positive_int(chunk_samples, "chunk_samples")
     if not isinstance(fletcher32, (bool, np.bool_)):
         raise TypeError(f"fletcher32 must be a bool, got {fletcher32!r}")
-    meta = dumps_json(recording.meta, "recording meta")
-    history = dumps_json(recording.history, "recording history")
-    n = recording.n_samples
+    dtype = np.dtype(dtype)
+    if dtype not in (np.float32, np.float64):
+        raise TypeError(f"dtype must be float32 or float64, got {dtype}")
+    meta = dumps_json(header.meta, "recording meta")
+    history = dumps_json(header.history, "recording history")
+    n = int(header.n_samples)
     # rdcc_nbytes=0: chunks go straight to the file, so a failing write (ENOSPC) leaves no
     # dirty chunk cache that HDF5 would flush again on close (which crashed the process)
     f = h5py.File(path, "w", track_order=False, libver=LIBVER, rdcc_nbytes=0)
     try:
-        _write_open(f, recording, meta, history, chunk_samples, compression, compression_opts, shuffle,
-                    fletcher32)
+        dsets = _write_open(f, header, dtype, meta, history, chunk_samples, compression,
+                            compression_opts, shuffle, fletcher32)
+        _write_samples(dsets, blocks, n, dtype, min(n, chunk_samples) if n else 1)
     except BaseException as exc:
         _close_after_failure(f, path)
         err = _as_oserror(exc, path) if isinstance(exc, (OSError, RuntimeError)) else exc
@@ -621,24 +653,26 @@ def write(recording: Recording, path, *, compression: str | None = None, compres
         if err is exc:
             raise
         raise err from exc
-    logger.debug("wrote %s: %d x %d samples, compression=%s", path, n, recording.n_channels, compression)
+    logger.debug("wrote %s: %d x %d samples, compression=%s", path, n, len(dsets), compression)
 
 
-def _write_open(f, recording: Recording, meta: str, history: str, chunk_samples: int, compression,
-                compression_opts, shuffle: bool, fletcher32: bool) -> None:
-    """Fill the new, open HDF5 file ``f`` (see :func:`write`)."""
+def _write_open(f, header, dtype, meta: str, history: str, chunk_samples: int, compression,
+                compression_opts, shuffle: bool, fletcher32: bool) -> list:
+    """Write the header of the new, open HDF5 file ``f`` and create one dataset per channel
+    (see :func:`write_blocks`); returns the datasets in column order."""
     import h5py
 
-    n = recording.n_samples
+    n = int(header.n_samples)
+    names = [c.name for c in header.channels]
     f.attrs["meshphase_format"] = "recording"
     f.attrs["format_version"] = np.int64(FORMAT_VERSION)
-    f.attrs["fs"] = np.float64(recording.fs)
-    f.attrs["t0"] = np.float64(recording.t0)
+    f.attrs["fs"] = np.float64(header.fs)
+    f.attrs["t0"] = np.float64(header.t0)
     f.attrs["n_samples"] = np.int64(n)
-    f.attrs["dtype"] = str(recording.data.dtype)
-    if recording.start_datetime is not None:
-        f.attrs["start_datetime"] = recording.start_datetime
-    f.attrs["channel_order"] = np.array(recording.names, dtype=h5py.string_dtype())
+    f.attrs["dtype"] = str(np.dtype(dtype))
+    if header.start_datetime is not None:
+        f.attrs["start_datetime"] = header.start_datetime
+    f.attrs["channel_order"] = np.array(names, dtype=h5py.string_dtype())
     f.attrs["meta"] = meta
     f.attrs["history"] = history
     f.attrs["created_by"] = f"meshphase {_version_string()}"
@@ -653,9 +687,9 @@ def _write_open(f, recording: Recording, meta: str, history: str, chunk_samples:
             kw["shuffle"] = True
         if fletcher32:
             kw["fletcher32"] = True
-    for j, spec in enumerate(recording.channels):
-        ds = group.create_dataset(dataset_name(spec.name), data=np.ascontiguousarray(recording.data[:, j]),
-                                  **kw)
+    dsets = []
+    for spec in header.channels:
+        ds = group.create_dataset(dataset_name(spec.name), shape=(n,), dtype=dtype, **kw)
         for key, value in spec.to_dict().items():
             if value is None:
                 continue
@@ -664,6 +698,48 @@ def _write_open(f, recording: Recording, meta: str, history: str, chunk_samples:
             elif isinstance(value, int):
                 value = np.int64(value)
             ds.attrs[key] = value
+        dsets.append(ds)
+    return dsets
+
+
+def _write_samples(dsets: list, blocks, n: int, dtype, cs: int) -> None:
+    """Write consecutive blocks into the datasets, chunk-aligned (``cs`` samples)."""
+    nc = len(dsets)
+    buf = np.empty((nc, cs), dtype=dtype)
+    fill = pos = 0
+
+    for blk in blocks:
+        blk = np.asarray(blk)
+        if blk.ndim != 2 or blk.shape[1] != nc:
+            raise ValueError(f"blocks must be (samples, {nc}) arrays, got shape {blk.shape}")
+        k = blk.shape[0]
+        if pos + fill + k > n:
+            raise ValueError(f"blocks hold more than the header's n_samples = {n}")
+        i = 0
+        while i < k:
+            if fill == 0 and k - i >= cs:
+                m = ((k - i) // cs) * cs
+                for j, ds in enumerate(dsets):
+                    ds.write_direct(np.ascontiguousarray(blk[i:i + m, j], dtype=dtype),
+                                    dest_sel=np.s_[pos:pos + m])
+                pos += m
+                i += m
+            else:
+                m = min(cs - fill, k - i)
+                buf[:, fill:fill + m] = blk[i:i + m].T
+                fill += m
+                i += m
+                if fill == cs:
+                    for j, ds in enumerate(dsets):
+                        ds.write_direct(buf[j], dest_sel=np.s_[pos:pos + cs])
+                    pos += cs
+                    fill = 0
+    if fill:
+        for j, ds in enumerate(dsets):
+            ds.write_direct(np.ascontiguousarray(buf[j, :fill]), dest_sel=np.s_[pos:pos + fill])
+        pos += fill
+    if pos != n:
+        raise ValueError(f"blocks hold {pos} samples, the header says n_samples = {n}")
 
 
 _ERRNO_RE = re.compile(r"errno = (\d+)")

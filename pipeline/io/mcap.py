@@ -69,7 +69,7 @@ from .base import CorruptFileError, RecordingFileError, RecordingInfo
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "MAGIC", "SCHEMA_NAME", "MESSAGE_ENCODING",
            "RECORDING_METADATA", "COMPRESSIONS", "DEFAULT_BLOCK", "sniff", "read_info", "read",
-           "write", "iter_blocks", "log_time_ns", "crc32_combine"]
+           "write", "write_blocks", "iter_blocks", "log_time_ns", "crc32_combine"]
 
 NAME = "mcap"
 SUFFIXES = (".mcap",)
@@ -1175,11 +1175,16 @@ def _channel_metadata(spec: ChannelSpec, index: int, fs: float, dtype_name: str)
     return md
 
 
-def _recording_metadata(rec: Recording, block: int, compression: str, origin: int) -> dict:
-    """The string map of the ``meshphase.recording`` Metadata record."""
+def _recording_metadata(rec, block: int, compression: str, origin: int,
+                        dtype_name: str | None = None) -> dict:
+    """The string map of the ``meshphase.recording`` Metadata record (``rec``: a Recording,
+    or a header with the same attributes and ``dtype_name``)."""
+    if dtype_name is None:
+        dtype_name = rec.data.dtype.name
+    names = [c.name for c in rec.channels]
     md = {"format_version": str(FORMAT_VERSION), "fs": repr(float(rec.fs)), "t0": repr(float(rec.t0)),
-          "n_samples": str(rec.n_samples), "n_channels": str(rec.n_channels),
-          "channels": json.dumps(rec.names), "dtype": rec.data.dtype.name, "block": str(block),
+          "n_samples": str(int(rec.n_samples)), "n_channels": str(len(names)),
+          "channels": json.dumps(names), "dtype": dtype_name, "block": str(block),
           "log_time_origin_ns": str(origin), "compression": compression,
           "meta": _dumps(rec.meta, "meta"), "history": _dumps(rec.history, "history")}
     if rec.start_datetime is not None:
@@ -1208,24 +1213,52 @@ def write(recording: Recording, path, *, block: int = DEFAULT_BLOCK, compression
     """
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
+    write_blocks(recording, [recording.data], path, dtype=recording.data.dtype, block=block,
+                 compression=compression, chunk_size=chunk_size)
+
+
+def write_blocks(header, blocks, path, *, dtype="float64", block: int = DEFAULT_BLOCK,
+                 compression: str = "none", chunk_size: int = DEFAULT_CHUNK_SIZE) -> None:
+    """Write a recording given as a header and consecutive blocks of samples (streaming).
+
+    Parameters
+    ----------
+    header : Recording, RecordingInfo or alike
+        ``fs``, ``t0``, ``n_samples``, ``channels``, ``start_datetime``, ``meta``,
+        ``history`` (samples, if any, not read).
+    blocks : iterable of ndarray, shape (k, n_channels)
+        The samples, in order; together exactly ``header.n_samples`` rows.
+    path : str or Path
+    dtype : {"float32", "float64"}
+    block, compression, chunk_size
+        As :func:`write`.
+
+    Notes
+    -----
+    The file is the one :func:`write` makes of the same samples: messages are grouped into
+    chunks as they come, so one chunk group (about n_channels x chunk_size bytes) is
+    buffered, whatever the length.
+    """
     block = as_positive_int(block, "block")
     if block > 2 ** 32 - 1:
         raise ValueError(f"block must be < 2**32 samples, got {block}")
     compression = as_choice(compression, "compression", COMPRESSIONS)
     chunk_size = as_positive_int(chunk_size, "chunk_size")
-    rec = recording
-    if rec.n_channels > 65000:
-        raise ValueError(f"MCAP holds at most 65000 channels here, the recording has {rec.n_channels}")
-    dtype_name = rec.data.dtype.name
+    rec = header
+    nch = len(rec.channels)
+    if nch > 65000:
+        raise ValueError(f"MCAP holds at most 65000 channels here, the recording has {nch}")
+    dtype_name = np.dtype(dtype).name
     if dtype_name not in _DTYPE_CODES:  # Recording guarantees float32/float64
-        raise TypeError(f"recording data must be float32 or float64, got {rec.data.dtype}")
+        raise TypeError(f"recording data must be float32 or float64, got {np.dtype(dtype)}")
     le = np.dtype(dtype_name).newbyteorder("<")
+    n = int(rec.n_samples)
     origin = _origin_ns(rec.t0)
-    if rec.n_samples and _log_time(rec.n_samples - 1, rec.fs, origin) > _MAX_LOG_TIME:
+    if n and _log_time(n - 1, rec.fs, origin) > _MAX_LOG_TIME:
         raise ValueError(f"recording too long for MCAP uint64 nanosecond log times: "
-                         f"{rec.n_samples} samples at fs={rec.fs!r} Hz from origin {origin} ns")
+                         f"{n} samples at fs={rec.fs!r} Hz from origin {origin} ns")
 
-    rec_md = _recording_metadata(rec, block, compression, origin)
+    rec_md = _recording_metadata(rec, block, compression, origin, dtype_name)
     ch_md = [_channel_metadata(s, i, rec.fs, dtype_name) for i, s in enumerate(rec.channels)]
     for kind, md in [("recording", rec_md)] + [("channel", m) for m in ch_md]:
         problem = _schema_problem(kind, md)
@@ -1236,9 +1269,9 @@ def write(recording: Recording, path, *, block: int = DEFAULT_BLOCK, compression
             "zstd": CompressionType.ZSTD}[compression]
     layout = json.dumps(LAYOUT, indent=1).encode("utf-8")
     code = _DTYPE_CODES[dtype_name]
-    n = rec.n_samples
     n_msgs = -(-n // block)
     per_chunk = max(1, chunk_size // (HEADER_SIZE + block * le.itemsize))
+    group_len = per_chunk * block
     with open(path, "wb") as fh:
         # chunk_size of the library writer is set out of reach: chunks are closed here
         # (one channel per chunk, one group of blocks per chunk).
@@ -1250,18 +1283,50 @@ def write(recording: Recording, path, *, block: int = DEFAULT_BLOCK, compression
         cids = [w.register_channel(s.name, MESSAGE_ENCODING, sid, md)
                 for s, md in zip(rec.channels, ch_md)]
         w.add_metadata(RECORDING_METADATA, rec_md)
-        times = [_log_time(k * block, rec.fs, origin) for k in range(n_msgs)]
-        for g0 in range(0, n_msgs, per_chunk):
-            g1 = min(n_msgs, g0 + per_chunk)
-            s0, s1 = g0 * block, min(n, g1 * block)
-            group = np.ascontiguousarray(rec.data[s0:s1].T, dtype=le)  # (channels, samples)
+
+        def put(group: np.ndarray, s0: int) -> None:
+            """Write the messages of samples [s0, s0 + group width): one chunk per channel."""
+            s1 = s0 + group.shape[1]
+            g0, g1 = s0 // block, -(-s1 // block)
+            times = [_log_time(k * block, rec.fs, origin) for k in range(g0, g1)]
             for j, cid in enumerate(cids):
                 row = group[j]
                 for k in range(g0, g1):
                     a = k * block
-                    b = min(n, a + block)
+                    b = min(s1, a + block)
                     payload = _HEADER.pack(a, b - a, 1, code, FORMAT_VERSION) + \
                         row[a - s0:b - s0].tobytes()
-                    w.add_message(cid, times[k], payload, times[k], sequence=k & 0xFFFFFFFF)
+                    w.add_message(cid, times[k - g0], payload, times[k - g0], sequence=k & 0xFFFFFFFF)
                 w.flush()  # close the chunk: one channel per chunk
+
+        # groups of per_chunk messages, (channels, samples), little-endian
+        buf = np.empty((nch, min(group_len, max(n, 1))), dtype=le)
+        fill = pos = 0
+        for blk in blocks:
+            blk = np.asarray(blk)
+            if blk.ndim != 2 or blk.shape[1] != nch:
+                raise ValueError(f"blocks must be (samples, {nch}) arrays, got shape {blk.shape}")
+            k = blk.shape[0]
+            if pos + fill + k > n:
+                raise ValueError(f"blocks hold more than the header's n_samples = {n}")
+            i = 0
+            while i < k:
+                if fill == 0 and k - i >= group_len:
+                    put(np.ascontiguousarray(blk[i:i + group_len].T, dtype=le), pos)
+                    pos += group_len
+                    i += group_len
+                    continue
+                m = min(group_len - fill, k - i)
+                buf[:, fill:fill + m] = blk[i:i + m].T
+                fill += m
+                i += m
+                if fill == group_len:
+                    put(buf, pos)
+                    pos += group_len
+                    fill = 0
+        if fill:
+            put(buf[:, :fill], pos)
+            pos += fill
+        if pos != n:
+            raise ValueError(f"blocks hold {pos} samples, the header says n_samples = {n}")
         w.finish()

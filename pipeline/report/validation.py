@@ -101,7 +101,11 @@ def build_report(ctx, out_dir) -> Path:
 
     if "onsets" in r:
         s = rep.section("Engagement onsets")
-        rec = r["condition"]["recording"]
+        # the conditioned signal is streamed, not kept: the condition stage keeps its first
+        # minute (pipeline.stream.EXCERPT_SECONDS) for this figure
+        rec = r["condition"].get("excerpt")
+        if rec is None:
+            rec = r["condition"]["recording"]
         rows = []
         for ch, o in r["onsets"]["by_channel"].items():
             sm = o.summary()
@@ -116,11 +120,13 @@ def build_report(ctx, out_dir) -> Path:
             if ch is None or ch not in r["onsets"]["by_channel"]:
                 continue
             o = r["onsets"]["by_channel"][ch]
-            if not len(o):
+            if not len(o) or ch not in rec.names or not rec.n_samples:
                 continue
             # a stretch showing ~2 relative revolutions
             span = 8 * float(np.median(np.diff(o.times))) * 4 if len(o) > 2 else rec.duration
             t0 = float(o.times[0]) - 0.05 * span
+            if t0 >= rec.t_end:          # the first pulse comes after the excerpt
+                continue
             i0, i1 = rec.sample_range(max(rec.t0, t0), min(rec.t_end, t0 + span), strict=False)
             tt = rec.times()[i0:i1]
             x = rec.channel(ch)[i0:i1]

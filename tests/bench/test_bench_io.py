@@ -92,3 +92,50 @@ def test_strain_recording_bad_input():
         strain_recording(10.5, 2)
     with pytest.raises(ValueError):
         strain_recording(10, 0)
+
+
+def test_cli_bench_io_prints_the_peak_rss_of_convert_and_process(tmp_path, capsys, monkeypatch):
+    # `meshphase bench io --rss-minutes` measures convert and process in child processes
+    # and prints one line per measurement; only the report's shape is asserted (the numbers
+    # are measured: the 10 min / 1 h / 3 h ones are in the io bench's Markdown)
+    from pipeline import bench
+    from pipeline.bench import io as bio
+    from pipeline.cli import main
+
+    real = bio.run_io_bench
+
+    def small(out, **kw):          # a tiny read-throughput part; the RSS lengths as given
+        kw.update(minutes=0.02, n_channels=2, formats=("hdf5",), repeats=1, progress=False)
+        return real(out, **kw)
+
+    monkeypatch.setattr(bio, "run_io_bench", small)
+    assert main(["bench", "io", "--out", str(tmp_path / "b"), "--rss-minutes", "0.05"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    conv = [ln for ln in out if ln.startswith("convert")]
+    proc = [ln for ln in out if ln.startswith("process")]
+    assert len(conv) == 2 and len(proc) == 1                   # hdf5 -> mcap -> hdf5; process
+    assert all("0.05 min x 8 ch" in ln and "peak RSS" in ln for ln in conv + proc)
+    js = json.loads((tmp_path / "b" / "io_bench.json").read_text())
+    assert js["process"][0]["peak_rss_mb"] > 0 and js["process"][0]["n_onsets"] > 0
+    md = (tmp_path / "b" / "io_bench.md").read_text()
+    assert "meshphase process: peak memory" in md and "meshphase convert: peak memory" in md
+    assert bench.rss_summary({}) == []                         # nothing measured: no line
+
+
+@pytest.mark.parametrize("arg", ["ten", "10,-1", "nan", "10,,60"])
+def test_cli_bench_rss_minutes_bad_value_is_a_usage_error(tmp_path, arg, capsys):
+    from pipeline.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "io", "--out", str(tmp_path / "b"), "--rss-minutes", arg])
+    assert exc.value.code == 2 and "--rss-minutes" in capsys.readouterr().err
+    assert not (tmp_path / "b").exists()
+
+
+def test_run_bench_rss_minutes_bad_type(tmp_path):
+    from pipeline.bench import run_bench
+
+    with pytest.raises(TypeError, match="rss_minutes"):
+        run_bench("io", tmp_path, rss_minutes="10")
+    with pytest.raises(ValueError, match="rss_minutes"):
+        run_bench("io", tmp_path, rss_minutes=(0.0,))

@@ -643,9 +643,20 @@ def _reading_raises(exc_type):
         def boom_iter(*a, **k):
             boom()
             yield  # pragma: no cover
-        for name in ("read", "read_info"):
-            mp.setattr(pio, name, boom)
-        mp.setattr(pio, "iter_blocks", boom_iter)
+        # the public functions and the format modules' own (the streamed load reads a file
+        # through its format module, block by block: pipeline.stream.FileSource)
+        mods = [pio]
+        for fmt in ("hdf5", "mcap", "csv", "tdms"):
+            try:
+                mods.append(pio.get_format(fmt))
+            except ImportError:         # an optional reader missing: nothing to patch
+                pass
+        for mod in mods:
+            for name in ("read", "read_info"):
+                if hasattr(mod, name):
+                    mp.setattr(mod, name, boom)
+            if hasattr(mod, "iter_blocks"):
+                mp.setattr(mod, "iter_blocks", boom_iter)
     return patch
 
 
