@@ -232,6 +232,11 @@ LIMITS = {
     # float64 copies of its samples alive (measured peak RSS 7.6x the samples for 8 min of
     # seed_rig through phasing + load sharing); refused above the machine's physical memory
     "processing_copies": 8,
+    # input torque [N·m]: ten times the largest wind-turbine gearbox's (~1e7 N·m)
+    "torque_Nm": 1e8,
+    # analysis block of the onset detector [s]: it learns a template from the pulses of one
+    # block, so a block shorter than this holds too few of them at any rig's speed
+    "block_s_min": 0.01,
 }
 
 #: Monte Carlo kernel throughput for the run-time estimate [evaluations/s] (DESIGN.md)
@@ -495,6 +500,10 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
         tol["sampler"] = t.get("sampler", "sobol")
         tol["window"] = t.get("window_s")
         tol["seed"] = t.get("seed", 0)
+        if "seed" in t and (isinstance(t["seed"], bool) or not isinstance(t["seed"], int)
+                            or t["seed"] < 0):
+            raise err(["tolerances", "seed"], f"seed = {t['seed']!r}: the Monte Carlo's random "
+                      "seed is a non-negative integer")
         if gearset is not None:
             for g in ("sun", "ring"):
                 reach = sum(tol[f"{p}e_{m}"] for p in ("", "mean_") for m in (g, "planet"))
@@ -517,7 +526,12 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
             raise err(["bearing", "c_g_N_per_mm_um"], f"{b['c_g_N_per_mm_um']:g} N/(mm·µm) is outside "
                       f"{lo:g} .. {hi:g} (ISO 6336: 20 by default); the key is in N/(mm·µm), "
                       "not SI (20 N/(mm·µm) = 2e10 N/m^2)")
-        bearing = {"case": case, "input_torque": b.get("input_torque_Nm"),
+        torque = b.get("input_torque_Nm")
+        if torque is not None and not abs(torque) <= LIMITS["torque_Nm"]:
+            raise err(["bearing", "input_torque_Nm"], f"{torque:g} N·m is beyond "
+                      f"+-{LIMITS['torque_Nm']:.0e} N·m (the largest wind-turbine gearboxes carry "
+                      "~1e7 N·m); the key is in N·m")
+        bearing = {"case": case, "input_torque": torque,
                    "z_s": b.get("z_s_mm", 0.0) * 1e-3, "z_r": b.get("z_r_mm", 0.0) * 1e-3,
                    "c_g": b.get("c_g_N_per_mm_um", 20.0) * 1e9}
         k = b.get("k_tilt_Nm_per_rad")
@@ -525,6 +539,12 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
         for key in ("double_pinion_beta_deg", "double_pinion_gamma_deg"):
             if key in b:
                 bearing[key.replace("_deg", "")] = [math.radians(v) for v in b[key]]
+    block_s = raw.get("processing", {}).get("block_s")
+    if isinstance(block_s, (int, float)) and not isinstance(block_s, bool) \
+            and not block_s >= LIMITS["block_s_min"]:
+        raise err(["processing", "block_s"], f"block_s = {block_s:g} s is shorter than "
+                  f"{LIMITS['block_s_min']:g} s: the onset detector learns its template from the "
+                  "pulses of one block (default: 2^20 samples)")
     scene = Scene(
         path=Path(path) if path is not None else None,
         name=raw.get("name", Path(path).stem if path is not None else "scene"),
