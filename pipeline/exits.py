@@ -50,6 +50,10 @@ from collections import OrderedDict
 from pathlib import Path
 from typing import Iterator
 
+# one definition of "this host" and "that writer is gone" for the temp files and the
+# output folders (a process under another user counts as alive: not ours to recover)
+from .io.base import _host_tag, _pid_alive
+
 __all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_USAGE", "EXIT_PARTIAL", "EXIT_INTERRUPTED",
            "EXIT_PIPE", "BENIGN_SKIPS", "RESULT_OF_STAGE", "run_status", "status_line",
            "OutputDir", "recording_read_errors", "foreign_entries", "recover_output_dirs",
@@ -209,20 +213,6 @@ _NO_FSYNC = {errno.EINVAL, errno.EBADF, errno.EACCES, errno.EPERM, errno.EISDIR,
 _PUBLISHED: "OrderedDict[str, str]" = OrderedDict()
 
 
-def _host_tag() -> str:
-    return hashlib.blake2s(socket.gethostname().encode("utf-8", "replace"), digest_size=2).hexdigest()
-
-
-def _pid_alive(pid: int) -> bool:
-    if pid <= 0:
-        return False
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except (PermissionError, OverflowError, OSError):
-        return True  # exists under another user (or cannot tell): not ours to recover
-    return True
 
 
 def _work_name(kind: str, token: str) -> str:
