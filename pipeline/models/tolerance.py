@@ -49,9 +49,9 @@ from ..validate import (as_choice, as_finite_array, as_float, as_int, as_nonnega
                         as_positive, as_positive_int)
 from . import _kernels
 from .gearset import Gearset, Speeds
-from .mesh_phasing import (TWO_PI, ShaftHoleErrors, _broadcast_errors, _check_error_size,
-                           _check_gearset, _check_speeds, _cos_sin, _direction_sign,
-                           _rotation_angle, MAX_PHASE)
+from ._geometry import (MAX_PHASE, TWO_PI, ShaftHoleErrors, broadcast_errors, check_error_size,
+                        check_gearset, check_speeds, cos_sin, direction_sign,
+                        rotation_angle_unchecked)
 
 __all__ = [
     "ObservationWindow",
@@ -148,7 +148,7 @@ def observation_window(speeds: Speeds, kind: str = "slowest-offset", *, t0: floa
         When no offset turns (all relative speeds zero) or no common period exists within
         ``max_revolutions``.
     """
-    sp = _check_speeds(speeds)
+    sp = check_speeds(speeds)
     kind = as_choice(kind, "kind", WINDOW_KINDS)
     t0 = as_float(t0, "t0")
     max_rev = as_positive_int(max_revolutions, "max_revolutions")
@@ -207,7 +207,7 @@ def default_n_times(speeds: Speeds, window, *, points_per_rev: int = 64,
     int
         ``max(min_points, ceil(points_per_rev T max|w| / 2 pi))``.
     """
-    sp = _check_speeds(speeds)
+    sp = check_speeds(speeds)
     win = _as_window(window, sp)
     ppr = as_positive_int(points_per_rev, "points_per_rev")
     mp = as_positive_int(min_points, "min_points")
@@ -266,14 +266,14 @@ class _Grid:
             if abs(w) * tmax > MAX_PHASE:
                 raise ValueError(f"|{name} t| must be <= {MAX_PHASE:g} rad over the window, got "
                                  f"{name} = {w!r} rad/s, max |t| = {tmax:g} s; shift the window")
-            r = _rotation_angle(w, self.t)
+            r = rotation_angle_unchecked(w, self.t)
             arrays += [np.cos(r), np.sin(r)]
         self.arrays = arrays
         psi = gearset.angles
         self.cpsi = np.cos(psi)
         self.spsi = np.sin(psi)
         self.R = gearset.carrier_radius
-        sign = _direction_sign(gearset.direction)
+        sign = direction_sign(gearset.direction)
         self.g_s = sign * gearset.z_sun / TWO_PI
         self.g_r = -sign * gearset.z_ring / TWO_PI
         self.n_planets = psi.size
@@ -284,9 +284,9 @@ class _Grid:
         outs = [np.empty((n_s, self.n_planets)) for _ in range(4)]
         if n_s == 0:
             return outs
-        cks, sks = _cos_sin(ks)
-        ckr, skr = _cos_sin(kr)
-        ckp, skp = _cos_sin(kp)
+        cks, sks = cos_sin(ks)
+        ckr, skr = cos_sin(kr)
+        ckp, skp = cos_sin(kp)
         fn = _kernels.stats_numba if engine == "numba" else _kernels.stats_numpy
         fn(*self.arrays, self.cpsi, self.spsi, self.R,
            np.ascontiguousarray(es, dtype=float), cks, sks,
@@ -341,14 +341,14 @@ def phasing_statistics(gearset: Gearset, speeds: Speeds, errors: ShaftHoleErrors
     :func:`pipeline.models.mesh_phasing.phasing_deviation` (``wrap=False``) on the grid of
     :func:`time_grid`.
     """
-    g = _check_gearset(gearset)
-    sp = _check_speeds(speeds)
+    g = check_gearset(gearset)
+    sp = check_speeds(speeds)
     win = _as_window(window, sp)
     n_t = _resolve_n_times(sp, win, n_times, points_per_rev)
     eng = _kernels.resolve_engine(engine)
     bs = as_positive_int(batch_size, "batch_size")
-    shape, b = _broadcast_errors(errors, g.n_planets)
-    _check_error_size(b, g.carrier_radius)
+    shape, b = broadcast_errors(errors, g.n_planets)
+    check_error_size(b, g.carrier_radius)
     grid = _Grid(g, sp, win, n_t)
     flat = int(np.prod(shape, dtype=np.int64))
     n_p = g.n_planets
@@ -840,8 +840,8 @@ def monte_carlo(gearset: Gearset, speeds: Speeds, tolerances: Tolerances, window
     mapped through the inverse CDF of each band (the same mapping for both samplers).
     """
     t_start = time.perf_counter()
-    g = _check_gearset(gearset)
-    sp = _check_speeds(speeds)
+    g = check_gearset(gearset)
+    sp = check_speeds(speeds)
     if not isinstance(tolerances, Tolerances):
         raise TypeError(f"tolerances must be a Tolerances, got {type(tolerances).__name__}")
     tolerances.check(g.carrier_radius)
