@@ -124,7 +124,8 @@ def rotation_angle_unchecked(w, t, phase=0.0):
     else:
         wh, wl = _split(np.float64(w))
         th, tl = _split(t)
-        r = reduce_unchecked(reduce_unchecked(wh * th) + reduce_unchecked(wh * tl) + reduce_unchecked(wl * th) + wl * tl)
+        r = reduce_unchecked(reduce_unchecked(wh * th) + reduce_unchecked(wh * tl)
+                             + reduce_unchecked(wl * th) + wl * tl)
     if np.ndim(phase) == 0 and float(phase) == 0.0:
         return r
     return reduce_unchecked(r + reduce_unchecked(np.asarray(phase, dtype=float)))

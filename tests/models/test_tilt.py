@@ -264,7 +264,7 @@ def test_stiffness_sweep_is_continuous_and_monotonic(case1):
        b=st.floats(5e-3, 0.08), logcg=st.floats(9.0, 11.0))
 def test_random_single_pinions_converge(phi1, phi2, b1, b2, ratio, logk, b, logcg):
     g = SinglePinion(r_sun=0.03, r_ps=0.02, r_pr=0.02 * ratio, phi_1=phi1, phi_2=phi2,
-                     beta_1=b1, beta_2=b2, n_planets=3, face_width=b)
+                     helix_1=b1, helix_2=b2, n_planets=3, face_width=b)
     sol = solve_tilt(g, 500.0, 10 ** logk, c_g=10 ** logcg)
     assert bool(sol.converged)
     assert np.all(np.abs(sol.z) < b / 2)
@@ -306,8 +306,8 @@ def test_fallback_and_convergence_warning(case1, monkeypatch):
 
 def test_no_axial_force_means_no_shift():
     # spur-like pinion (zero helix): no overturning moment, centred patterns at every k_t
-    g = SinglePinion(r_sun=0.03, r_ps=0.02, r_pr=0.02, phi_1=0.35, phi_2=0.35, beta_1=0.0,
-                     beta_2=0.0, n_planets=3, face_width=B)
+    g = SinglePinion(r_sun=0.03, r_ps=0.02, r_pr=0.02, phi_1=0.35, phi_2=0.35, helix_1=0.0,
+                     helix_2=0.0, n_planets=3, face_width=B)
     sol = solve_tilt(g, 500.0, [0.0, 1.0, 1e6, np.inf])
     assert np.all(sol.z == 0) and np.all(sol.tilt == 0) and np.all(sol.contact_fraction == 1)
     assert np.all(sol.converged)
@@ -446,8 +446,8 @@ def test_bad_inputs(case1):
         solve_tilt(g, 1.0, 1e5, face_width=[0.01, 0.02, 0.03])
     with pytest.raises(ValueError, match="face_width"):
         solve_tilt(g, 1.0, 1e5, face_width=float("nan"))
-    nofw = SinglePinion(r_sun=0.03, r_ps=0.02, r_pr=0.021, phi_1=0.37, phi_2=0.41, beta_1=0.36,
-                        beta_2=0.37, n_planets=3)
+    nofw = SinglePinion(r_sun=0.03, r_ps=0.02, r_pr=0.021, phi_1=0.37, phi_2=0.41, helix_1=0.36,
+                        helix_2=0.37, n_planets=3)
     with pytest.raises(ValueError, match="face_width"):
         solve_tilt(nofw, 1.0, 1e5)
     with pytest.raises(ValueError, match="load_basis"):
