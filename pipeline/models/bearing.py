@@ -323,7 +323,8 @@ class DoublePinion:
     helix_1, helix_2, helix_3 : float
         Operating helix angles at the same meshes [rad] (named ``helix_*`` as in
         :class:`SinglePinion`; the seed uses beta for an included angle). Positive values give
-        the seed's axial force signs (Table 5: FzSUN > 0, FzRP < 0 on SP; FzSP > 0, FzRING < 0 on RP).
+        the seed's axial force signs (Table 5: FzSUN > 0, FzRP < 0 on SP; FzSP > 0,
+        FzRING < 0 on RP).
     n_planets : int
         Number of SP-RP pinion pairs sharing the input torque [-].
     included_angle_sun : float, optional

@@ -235,7 +235,8 @@ def test_offsets_are_self_correcting(case1):
 CASE2_PRINTED = dict(r_sun=29.805 * MM, r_sp_sun=22.14 * MM, r_sp_rp=22.23 * MM,
                      r_rp_sp=20.52 * MM, r_rp_ring=20.68 * MM, included_angle_sp=75.768 * DEG,
                      included_angle_rp=59.230 * DEG, phi_1=21.30 * DEG, phi_2=21.88 * DEG,
-                     phi_3=22.98 * DEG, helix_1=21.00 * DEG, helix_2=21.08 * DEG, helix_3=21.23 * DEG)
+                     phi_3=22.98 * DEG, helix_1=21.00 * DEG, helix_2=21.08 * DEG,
+                     helix_3=21.23 * DEG)
 # (phi_2, phi_3 and helix_2, helix_3 are not printed by the seed: our derived values rounded
 # to 0.01 deg, given the same unit as the printed angles)
 CASE2_UNITS = dict(r_sun=0.001 * MM, r_sp_sun=0.01 * MM, r_sp_rp=0.01 * MM, r_rp_sp=0.01 * MM,
