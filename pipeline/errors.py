@@ -17,6 +17,7 @@ __all__ = [
     "ConvergenceWarning",
     "ProcessingWarning",
     "SceneWarning",
+    "DeprecatedNameWarning",
 ]
 
 
@@ -47,3 +48,8 @@ class ProcessingWarning(MeshphaseWarning):
 class SceneWarning(MeshphaseWarning):
     """A scene value that is valid but worth a second look before the run (e.g. a Monte Carlo
     that will take a long time); the message names the file, the key and the line."""
+
+
+class DeprecatedNameWarning(MeshphaseWarning, FutureWarning):
+    """A renamed parameter, attribute or scene key was used under its old name. It still
+    works; the message names the new one (a FutureWarning, so it shows by default)."""

@@ -92,8 +92,10 @@ class Scene:
     tolerances : dict or None
         Bands in SI ([m], [rad] or "uniform"), ``samples``, ``sampler``, ``window`` [s], ``seed``.
     bearing : dict or None
-        ``case``, ``input_torque`` [N·m], ``z_s``/``z_r`` [m], ``k_tilt`` [N·m/rad] list,
-        ``c_g`` [N/m^2], double-pinion angle sweeps [rad].
+        ``case``, ``input_torque`` [N·m], ``z_s``/``z_r`` [m], ``k_tilt`` [N·m/rad] list (from
+        ``k_tilt_Nm_per_rad`` or ``k_tilt_Nmm_per_rad``), ``c_g`` [N/m^2], double-pinion
+        included-angle sweeps ``double_pinion_included_angle_sp``/``_rp`` [rad] (old keys
+        ``double_pinion_beta_deg``/``_gamma_deg`` still read, with a DeprecatedNameWarning).
     output : Path or None
     raw : dict
         The parsed TOML as written.
@@ -534,11 +536,12 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
         bearing = {"case": case, "input_torque": torque,
                    "z_s": b.get("z_s_mm", 0.0) * 1e-3, "z_r": b.get("z_r_mm", 0.0) * 1e-3,
                    "c_g": b.get("c_g_N_per_mm_um", 20.0) * 1e9}
-        k = b.get("k_tilt_Nm_per_rad")
-        bearing["k_tilt"] = None if k is None else ([k] if isinstance(k, (int, float)) else list(k))
-        for key in ("double_pinion_beta_deg", "double_pinion_gamma_deg"):
-            if key in b:
-                bearing[key.replace("_deg", "")] = [math.radians(v) for v in b[key]]
+        bearing["k_tilt"] = _k_tilt_key(b, err)
+        for key, old in (("double_pinion_included_angle_sp_deg", "double_pinion_beta_deg"),
+                         ("double_pinion_included_angle_rp_deg", "double_pinion_gamma_deg")):
+            given = _renamed_key(b, key, old, err, label, text)
+            if given is not None:
+                bearing[key.replace("_deg", "")] = [math.radians(v) for v in given]
     block_s = raw.get("processing", {}).get("block_s")
     if isinstance(block_s, (int, float)) and not isinstance(block_s, bool) \
             and not block_s >= LIMITS["block_s_min"]:
@@ -871,8 +874,37 @@ def _check_consistency(scene: Scene, text: str, label, *, check_files: bool = Tr
         raise SceneError(label, "bearing", "bearing results need a [bearing] table",
                          _line_of(text, ["results"]))
     if "tilt" in stages and not (scene.bearing or {}).get("k_tilt"):
-        raise SceneError(label, "bearing.k_tilt_Nm_per_rad", "result 'tilt' needs k_tilt_Nm_per_rad",
+        raise SceneError(label, "bearing.k_tilt_Nm_per_rad", "result 'tilt' needs k_tilt_Nm_per_rad "
+                         "(or k_tilt_Nmm_per_rad, in the bearing catalogues' N·mm/rad)",
                          _line_of(text, ["bearing"]))
+
+
+def _k_tilt_key(b: dict, err):
+    """[bearing] tilting stiffness list [N·m/rad] from k_tilt_Nm_per_rad or, in the bearing
+    catalogues' unit, k_tilt_Nmm_per_rad [N·mm/rad] (x 1e-3); None when neither is given."""
+    if "k_tilt_Nm_per_rad" in b and "k_tilt_Nmm_per_rad" in b:
+        raise err(["bearing", "k_tilt_Nmm_per_rad"], "give k_tilt_Nm_per_rad [N·m/rad] or "
+                  "k_tilt_Nmm_per_rad [N·mm/rad], not both")
+    scale = 1e-3 if "k_tilt_Nmm_per_rad" in b else 1.0
+    k = b.get("k_tilt_Nmm_per_rad", b.get("k_tilt_Nm_per_rad"))
+    if k is None:
+        return None
+    return [k * scale] if isinstance(k, (int, float)) else [v * scale for v in k]
+
+
+def _renamed_key(b: dict, key: str, old: str, err, label, text):
+    """[bearing] value under its new key, or its old key (with a DeprecatedNameWarning)."""
+    if old not in b:
+        return b.get(key)
+    if key in b:
+        raise err(["bearing", old], f"{old} is the old name of {key}; give only {key}")
+    from .errors import DeprecatedNameWarning
+
+    line = _line_of(text, ["bearing", old])
+    warnings.warn(f"{label}" + (f", line {line}" if line else "") + f": [bearing] {old} is "
+                  f"renamed {key} (same values, deg); the old key will be removed",
+                  DeprecatedNameWarning, stacklevel=3)
+    return b[old]
 
 
 def plan(scene: Scene, *, check: bool = True) -> list[str]:

@@ -232,6 +232,35 @@ def test_bearing_results_need_bearing_table_and_tilt_needs_stiffness():
     assert e.line == 2
 
 
+def test_bearing_stiffness_in_either_named_unit():
+    # seed 001 Table 10 prints N·mm/rad: GA, GB, GC = 8.8e9, 8.8e7, 8.8e6 -> 8.8e6, 8.8e4, 8.8e3
+    nmm = parse_scene('results = ["tilt"]\n[bearing]\ncase = "1"\n'
+                      "k_tilt_Nmm_per_rad = [8.8e9, 8.8e7, 8.8e6]\n")
+    assert nmm.bearing["k_tilt"] == pytest.approx([8.8e6, 8.8e4, 8.8e3], rel=1e-15)
+    one = parse_scene('results = ["tilt"]\n[bearing]\ncase = "1"\nk_tilt_Nmm_per_rad = 8.8e7\n')
+    assert one.bearing["k_tilt"] == pytest.approx([8.8e4], rel=1e-15)
+    e = _err('results = ["tilt"]\n[bearing]\ncase = "1"\nk_tilt_Nm_per_rad = 8.8e4\n'
+             "k_tilt_Nmm_per_rad = 8.8e7\n")
+    assert e.key == "bearing.k_tilt_Nmm_per_rad" and "not both" in str(e)
+
+
+def test_double_pinion_angle_keys_old_and_new():
+    from pipeline.errors import DeprecatedNameWarning
+
+    head = 'results = ["bearing_moments"]\n[bearing]\ncase = "2-B"\n'
+    new = parse_scene(head + "double_pinion_included_angle_sp_deg = [90.0, 111.0]\n"
+                      "double_pinion_included_angle_rp_deg = [67.0]\n")
+    assert new.bearing["double_pinion_included_angle_sp"] == pytest.approx(
+        [math.pi / 2, math.radians(111.0)])
+    assert new.bearing["double_pinion_included_angle_rp"] == pytest.approx([math.radians(67.0)])
+    with pytest.warns(DeprecatedNameWarning, match="double_pinion_beta_deg is renamed"):
+        old = parse_scene(head + "double_pinion_beta_deg = [90.0, 111.0]\n")
+    assert old.bearing["double_pinion_included_angle_sp"] == new.bearing[
+        "double_pinion_included_angle_sp"]
+    e = _err(head + "double_pinion_beta_deg = [90.0]\ndouble_pinion_included_angle_sp_deg = [90.0]\n")
+    assert e.key == "bearing.double_pinion_beta_deg"
+
+
 @pytest.mark.parametrize("written, canonical", [("1", "1"), ("case1", "1"), ("Case 1", "1"),
                                                 ("2-B", "2-B"), ("case2B", "2-B"), ("2a", "2-A")])
 def test_bearing_case_spellings(written, canonical):

@@ -7,6 +7,8 @@
 - :mod:`.bearing`       planet bearing moments, single and double pinion (spec section 4)
 - :mod:`.tilt`          coupled bearing tilt / load distribution solve (spec section 5)
 - :mod:`.load_sharing`  planet load sharing from ring strain (spec section 6)
+- :mod:`._geometry`     angle reduction, ShaftHoleErrors, argument checks shared by
+                        mesh_phasing and tolerance
 """
 
 from .gearset import Gearset, Speeds, rad_s_to_rpm, rpm_to_rad_s

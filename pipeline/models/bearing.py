@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..validate import as_choice, as_float, as_positive, as_positive_int
+from ._renamed import accept_old_names, renamed_kwargs
 
 __all__ = [
     "SinglePinion",
@@ -98,6 +99,22 @@ def _torque_array(value, name="input_torque") -> np.ndarray:
             f"{name} must be >= 0 [N·m] (the force directions assume the drive flanks; reverse "
             f"torque loads the other flanks), got min {float(arr.min())!r}")
     return arr
+
+
+def _mm(value, name) -> float:
+    """A length given in [mm], returned in [m] (validated as a finite number)."""
+    return as_float(value, name) * 1e-3
+
+
+def _deg(value, name) -> float:
+    """An angle given in [deg], returned in [rad] (validated as a finite number)."""
+    return math.radians(as_float(value, name))
+
+
+def _scalar(x):
+    """A Python float (bool) for a 0-d result, the array itself otherwise."""
+    arr = np.asarray(x)
+    return arr.item() if arr.ndim == 0 else x
 
 
 # --------------------------------------------------------------------------------------------
@@ -218,16 +235,24 @@ class SinglePinion:
         Operating pitch radius of the pinion at the ring mesh R_pR [m].
     phi_1, phi_2 : float
         Operating transverse pressure angles at the sun and ring meshes [rad], in (0, pi/2).
-    beta_1, beta_2 : float
-        Operating helix angles at the sun and ring meshes [rad], in (-pi/2, pi/2). Positive
-        values give the seed's axial force signs (FzS > 0 > FzR for a positive input torque);
-        a negative value flips the axial force of that mesh (opposite hand).
+    helix_1, helix_2 : float
+        Operating helix angles at the sun and ring meshes [rad], in (-pi/2, pi/2) (the seed's
+        beta_1, beta_2; named ``helix_*`` as in :class:`DoublePinion`, where the seed's beta is
+        an included angle). Positive values give the seed's axial force signs (FzS > 0 > FzR
+        for a positive input torque); a negative value flips the axial force of that mesh
+        (opposite hand).
     n_planets : int
         Number of planets N sharing the input torque [-].
     face_width : float, optional
         Contact face width b of both meshes [m] (used by :mod:`pipeline.models.tilt`).
     name : str
         Free label.
+
+    Notes
+    -----
+    Everything is SI; :meth:`from_mm_deg` takes the drawing's units (mm, deg). The old names
+    ``beta_1``, ``beta_2`` still work as keywords and attributes, with a
+    :class:`~pipeline.errors.DeprecatedNameWarning`.
     """
 
     r_sun: float
@@ -235,8 +260,8 @@ class SinglePinion:
     r_pr: float
     phi_1: float
     phi_2: float
-    beta_1: float
-    beta_2: float
+    helix_1: float
+    helix_2: float
     n_planets: int
     face_width: float | None = None
     name: str = ""
@@ -246,7 +271,7 @@ class SinglePinion:
             object.__setattr__(self, n, as_positive(getattr(self, n), n))
         for n in ("phi_1", "phi_2"):
             object.__setattr__(self, n, _angle(getattr(self, n), n, 0.0, _HALF_PI))
-        for n in ("beta_1", "beta_2"):
+        for n in ("helix_1", "helix_2"):
             object.__setattr__(self, n, _angle(getattr(self, n), n, -_HALF_PI, _HALF_PI))
         object.__setattr__(self, "n_planets", as_positive_int(self.n_planets, "n_planets"))
         if self.face_width is not None:
@@ -255,6 +280,25 @@ class SinglePinion:
             raise TypeError(f"name must be a string, got {self.name!r}")
 
     mesh_names = ("sun", "ring")
+
+    @classmethod
+    def from_mm_deg(cls, *, r_sun_mm, r_ps_mm, r_pr_mm, phi_1_deg, phi_2_deg, helix_1_deg,
+                    helix_2_deg, n_planets, face_width_mm=None, name="") -> "SinglePinion":
+        """Build from a gear drawing's units: radii and face width in [mm], angles in [deg].
+
+        Every argument is keyword-only and carries its unit in its name, so a value in the
+        wrong unit cannot slip in silently (see the class for the meaning of each).
+        """
+        return cls(r_sun=_mm(r_sun_mm, "r_sun_mm"), r_ps=_mm(r_ps_mm, "r_ps_mm"),
+                   r_pr=_mm(r_pr_mm, "r_pr_mm"), phi_1=_deg(phi_1_deg, "phi_1_deg"),
+                   phi_2=_deg(phi_2_deg, "phi_2_deg"), helix_1=_deg(helix_1_deg, "helix_1_deg"),
+                   helix_2=_deg(helix_2_deg, "helix_2_deg"), n_planets=n_planets,
+                   face_width=None if face_width_mm is None else _mm(face_width_mm,
+                                                                      "face_width_mm"),
+                   name=name)
+
+
+accept_old_names(SinglePinion, {"beta_1": "helix_1", "beta_2": "helix_2"})
 
 
 @dataclass(frozen=True)
@@ -269,25 +313,34 @@ class DoublePinion:
         Operating pitch radii of SP at the sun and RP meshes, R_SP-SUN, R_SP-RP [m].
     r_rp_sp, r_rp_ring : float
         Operating pitch radii of RP at the SP and ring meshes, R_RP-SP, R_RP-RING [m].
-    beta, gamma : float
-        Included angles of the triangle of centres (sun axis, SP, RP) at SP and at RP [rad];
-        beta in (0, pi], gamma in [0, pi), beta + gamma <= pi. beta = pi, gamma = 0 puts the
-        meshes of each pinion diametrically opposite (seed Case 2-A).
+    included_angle_sp, included_angle_rp : float
+        Included angles of the triangle of centres (sun axis, SP, RP) at SP and at RP [rad]
+        (the seed's beta and gamma); included_angle_sp in (0, pi], included_angle_rp in
+        [0, pi), their sum <= pi. pi and 0 put the meshes of each pinion diametrically
+        opposite (seed Case 2-A).
     phi_1, phi_2, phi_3 : float
         Operating transverse pressure angles at the sun-SP, SP-RP and RP-ring meshes [rad].
     helix_1, helix_2, helix_3 : float
-        Operating helix angles at the same meshes [rad] (named ``helix_*`` because the seed
-        uses beta for an included angle). Positive values give the seed's axial force signs
-        (Table 5: FzSUN > 0, FzRP < 0 on SP; FzSP > 0, FzRING < 0 on RP).
+        Operating helix angles at the same meshes [rad] (named ``helix_*`` as in
+        :class:`SinglePinion`; the seed uses beta for an included angle). Positive values give
+        the seed's axial force signs (Table 5: FzSUN > 0, FzRP < 0 on SP; FzSP > 0,
+        FzRING < 0 on RP).
     n_planets : int
         Number of SP-RP pinion pairs sharing the input torque [-].
-    alpha : float, optional
-        Included angle at the sun axis [rad]; derived as pi - beta - gamma when omitted, and
-        checked against it (1e-3 rad, the seed prints angles to 0.001 deg) when given.
+    included_angle_sun : float, optional
+        Included angle at the sun axis [rad] (the seed's alpha); derived as
+        pi - included_angle_sp - included_angle_rp when omitted, and checked against it
+        (1e-3 rad, the seed prints angles to 0.001 deg) when given.
     face_width : float, optional
         Contact face width b of the three meshes [m].
     name : str
         Free label.
+
+    Notes
+    -----
+    Everything is SI; :meth:`from_mm_deg` takes the drawing's units (mm, deg). The old names
+    ``beta``, ``gamma``, ``alpha`` still work as keywords and attributes, with a
+    :class:`~pipeline.errors.DeprecatedNameWarning`.
     """
 
     r_sun: float
@@ -295,8 +348,8 @@ class DoublePinion:
     r_sp_rp: float
     r_rp_sp: float
     r_rp_ring: float
-    beta: float
-    gamma: float
+    included_angle_sp: float
+    included_angle_rp: float
     phi_1: float
     phi_2: float
     phi_3: float
@@ -304,27 +357,30 @@ class DoublePinion:
     helix_2: float
     helix_3: float
     n_planets: int
-    alpha: float | None = None
+    included_angle_sun: float | None = None
     face_width: float | None = None
     name: str = ""
 
     def __post_init__(self):
         for n in ("r_sun", "r_sp_sun", "r_sp_rp", "r_rp_sp", "r_rp_ring"):
             object.__setattr__(self, n, as_positive(getattr(self, n), n))
-        beta = _angle(self.beta, "beta", 0.0, math.pi, hi_open=False)
-        gamma = _angle(self.gamma, "gamma", 0.0, math.pi, lo_open=False)
-        if beta + gamma > math.pi + 1e-12:
-            raise ValueError(f"beta + gamma must not exceed pi, got beta={beta!r}, gamma={gamma!r}")
-        object.__setattr__(self, "beta", beta)
-        object.__setattr__(self, "gamma", gamma)
-        alpha = max(0.0, math.pi - beta - gamma)
-        if self.alpha is not None:
-            a = as_float(self.alpha, "alpha")
-            if abs(a - alpha) > 1e-3:
+        sp = _angle(self.included_angle_sp, "included_angle_sp", 0.0, math.pi, hi_open=False)
+        rp = _angle(self.included_angle_rp, "included_angle_rp", 0.0, math.pi, lo_open=False)
+        if sp + rp > math.pi + 1e-12:
+            raise ValueError("included_angle_sp + included_angle_rp must not exceed pi, got "
+                             f"included_angle_sp={sp!r}, included_angle_rp={rp!r}")
+        object.__setattr__(self, "included_angle_sp", sp)
+        object.__setattr__(self, "included_angle_rp", rp)
+        sun = max(0.0, math.pi - sp - rp)
+        if self.included_angle_sun is not None:
+            a = as_float(self.included_angle_sun, "included_angle_sun")
+            if abs(a - sun) > 1e-3:
                 raise ValueError(
-                    f"alpha + beta + gamma must equal pi (triangle of centres), got alpha={a!r}, "
-                    f"beta={beta!r}, gamma={gamma!r} (sum {a + beta + gamma!r})")
-        object.__setattr__(self, "alpha", alpha)
+                    "included_angle_sun + included_angle_sp + included_angle_rp (the seed's "
+                    "alpha + beta + gamma) must equal pi (triangle of centres), got "
+                    f"included_angle_sun={a!r}, included_angle_sp={sp!r}, "
+                    f"included_angle_rp={rp!r} (sum {a + sp + rp!r})")
+        object.__setattr__(self, "included_angle_sun", sun)
         for n in ("phi_1", "phi_2", "phi_3"):
             object.__setattr__(self, n, _angle(getattr(self, n), n, 0.0, _HALF_PI))
         for n in ("helix_1", "helix_2", "helix_3"):
@@ -336,6 +392,36 @@ class DoublePinion:
             raise TypeError(f"name must be a string, got {self.name!r}")
 
     mesh_names = ("sun-SP", "SP-RP", "RP-ring")
+
+    @classmethod
+    def from_mm_deg(cls, *, r_sun_mm, r_sp_sun_mm, r_sp_rp_mm, r_rp_sp_mm, r_rp_ring_mm,
+                    included_angle_sp_deg, included_angle_rp_deg, phi_1_deg, phi_2_deg,
+                    phi_3_deg, helix_1_deg, helix_2_deg, helix_3_deg, n_planets,
+                    included_angle_sun_deg=None, face_width_mm=None, name="") -> "DoublePinion":
+        """Build from a gear drawing's units: radii and face width in [mm], angles in [deg].
+
+        Every argument is keyword-only and carries its unit in its name (see the class for
+        the meaning of each).
+        """
+        opt = {}
+        if included_angle_sun_deg is not None:
+            opt["included_angle_sun"] = _deg(included_angle_sun_deg, "included_angle_sun_deg")
+        if face_width_mm is not None:
+            opt["face_width"] = _mm(face_width_mm, "face_width_mm")
+        return cls(r_sun=_mm(r_sun_mm, "r_sun_mm"), r_sp_sun=_mm(r_sp_sun_mm, "r_sp_sun_mm"),
+                   r_sp_rp=_mm(r_sp_rp_mm, "r_sp_rp_mm"), r_rp_sp=_mm(r_rp_sp_mm, "r_rp_sp_mm"),
+                   r_rp_ring=_mm(r_rp_ring_mm, "r_rp_ring_mm"),
+                   included_angle_sp=_deg(included_angle_sp_deg, "included_angle_sp_deg"),
+                   included_angle_rp=_deg(included_angle_rp_deg, "included_angle_rp_deg"),
+                   phi_1=_deg(phi_1_deg, "phi_1_deg"), phi_2=_deg(phi_2_deg, "phi_2_deg"),
+                   phi_3=_deg(phi_3_deg, "phi_3_deg"), helix_1=_deg(helix_1_deg, "helix_1_deg"),
+                   helix_2=_deg(helix_2_deg, "helix_2_deg"),
+                   helix_3=_deg(helix_3_deg, "helix_3_deg"), n_planets=n_planets, name=name,
+                   **opt)
+
+
+accept_old_names(DoublePinion, {"beta": "included_angle_sp", "gamma": "included_angle_rp",
+                                "alpha": "included_angle_sun"})
 
 
 # --------------------------------------------------------------------------------------------
@@ -409,9 +495,9 @@ def _layout(geom) -> _Layout:
         ft_r = ft_s * geom.r_ps / geom.r_pr                        # -FyR per N·m
         p1, p2 = geom.phi_1, geom.phi_2
         s_sun = _side((-geom.r_ps, 0.0), (math.sin(p1), -math.cos(p1)), ft_s / math.cos(p1),
-                      ft_s * math.tan(geom.beta_1))
+                      ft_s * math.tan(geom.helix_1))
         s_ring = _side((geom.r_pr, 0.0), (-math.sin(p2), -math.cos(p2)), ft_r / math.cos(p2),
-                       -ft_r * math.tan(geom.beta_2))
+                       -ft_r * math.tan(geom.helix_2))
         sides = (s_sun, s_ring)
         return _Layout(sides=("sun", "ring"), meshes=SinglePinion.mesh_names,
                        pinion=np.array([0, 0]), mesh=np.array([0, 1]),
@@ -419,7 +505,7 @@ def _layout(geom) -> _Layout:
                        force=np.array([s[1] for s in sides], dtype=float),
                        u=np.array([s[2] for s in sides], dtype=float), n_pinions=1)
     if isinstance(geom, DoublePinion):
-        b, g = geom.beta, geom.gamma
+        b, g = geom.included_angle_sp, geom.included_angle_rp
         p1, p2, p3 = geom.phi_1, geom.phi_2, geom.phi_3
         ft1 = 1.0 / (geom.n_planets * geom.r_sun)                  # sun-SP tangential per N·m
         ft2 = ft1 * geom.r_sp_sun / geom.r_sp_rp                   # SP-RP (Mz = 0 on SP)
@@ -505,8 +591,51 @@ class MeshForces:
         return np.sqrt(self.fx ** 2 + self.fy ** 2 + self.fz ** 2)
 
 
+class _CommonMoments:
+    """The names :class:`BearingMoments` and :class:`DoublePinionMoments` share.
+
+    A :class:`~pipeline.models.tilt.TiltSolution` holds either; code that reads these names
+    works for both (a single pinion is one pinion with meshes sun and ring; a double pinion
+    has pinions SP and RP and meshes sun-SP, SP-RP, RP-ring).
+
+    Attributes
+    ----------
+    mesh_names : tuple of str
+        Mesh order of :attr:`z` (last axis).
+    pinion_names : tuple of str
+        Pinion order of :attr:`bending`.
+    loa_names : tuple of str
+        Order of the line-of-action moments in :attr:`loa`: one per mesh side on a pinion
+        (single: 'sun', 'ring'; double: 'sp_sun', 'sp_rp', 'rp_sp', 'rp_ring').
+
+    Both also have ``m_loa_sun`` and ``m_loa_ring`` (the LOA moments at the sun and ring
+    meshes [N·m]; double pinion: M_SP-SUN and M_RP-RING), ``loa`` (..., len(loa_names))
+    [N·m], ``z`` (..., len(mesh_names)) [m] and ``bending`` (..., len(pinion_names), 2),
+    the (Mx, My) of each pinion [N·m].
+    """
+
+    def _scalar_fields(self, names):
+        for n in names:
+            object.__setattr__(self, n, _scalar(getattr(self, n)))
+
+    @property
+    def z_sun(self):
+        """Load-centroid offset at the sun mesh [m]."""
+        return _scalar(np.asarray(self.z)[..., 0])
+
+    @property
+    def z_ring(self):
+        """Load-centroid offset at the ring mesh [m]."""
+        return _scalar(np.asarray(self.z)[..., -1])
+
+    def loa_of(self, name: str):
+        """One line-of-action moment by its name in :attr:`loa_names` [N·m]."""
+        i = self.loa_names.index(as_choice(name, "name", self.loa_names))
+        return _scalar(self.loa[..., i])
+
+
 @dataclass(frozen=True)
-class BearingMoments:
+class BearingMoments(_CommonMoments):
     """Forces and moments on a single pinion (seed Tables 3, 7, 8, 9).
 
     Attributes
@@ -525,6 +654,13 @@ class BearingMoments:
         The offsets used [m].
     forces : MeshForces
         The mesh forces (sides 'sun', 'ring') [N].
+
+    Notes
+    -----
+    Values are Python floats when the inputs were scalars. The names shared with
+    :class:`DoublePinionMoments` (``m_loa_sun``, ``m_loa_ring``, ``z``, ``z_sun``,
+    ``z_ring``, ``loa``, ``loa_names``, ``loa_of``, ``bending``, ``mesh_names``,
+    ``pinion_names``) are listed in ``_CommonMoments``.
     """
 
     mx: np.ndarray
@@ -540,19 +676,37 @@ class BearingMoments:
     z_r: np.ndarray
     forces: MeshForces
 
+    mesh_names = SinglePinion.mesh_names
+    pinion_names = ("pinion",)
+    loa_names = ("sun", "ring")
+
+    def __post_init__(self):
+        self._scalar_fields(("mx", "my", "mz", "m_loa_sun", "m_loa_ring", "mx_ld", "my_ld",
+                             "m_loa_sun_ld", "m_loa_ring_ld", "z_s", "z_r"))
+
     @property
     def total(self) -> np.ndarray:
         """Magnitude of the bending moment hypot(Mx, My) [N·m]."""
-        return np.hypot(self.mx, self.my)
+        return _scalar(np.hypot(self.mx, self.my))
 
     @property
     def loa(self) -> np.ndarray:
         """LOA moments stacked on a last axis (sun, ring) [N·m]."""
         return np.stack([self.m_loa_sun, self.m_loa_ring], axis=-1)
 
+    @property
+    def z(self) -> np.ndarray:
+        """Offsets stacked on a last axis (sun, ring) [m]."""
+        return np.stack([self.z_s, self.z_r], axis=-1)
+
+    @property
+    def bending(self) -> np.ndarray:
+        """Pinion bending moments (Mx, My), shape (..., 1, 2) [N·m]."""
+        return np.stack([self.mx, self.my], axis=-1)[..., None, :]
+
 
 @dataclass(frozen=True)
-class DoublePinionMoments:
+class DoublePinionMoments(_CommonMoments):
     """Forces and moments on the SP and RP pinions (seed Tables 4, 5, 11).
 
     Attributes
@@ -571,6 +725,13 @@ class DoublePinionMoments:
         Offsets used for the sun-SP, SP-RP and RP-ring meshes [m].
     forces : MeshForces
         Mesh forces (sides 'sp_sun', 'sp_rp' in the SP frame; 'rp_sp', 'rp_ring' in RP's) [N].
+
+    Notes
+    -----
+    Values are Python floats when the inputs were scalars. ``m_loa_sun`` (= ``m_sp_sun``),
+    ``m_loa_ring`` (= ``m_rp_ring``), ``z_sun``, ``z_ring``, ``loa_names``, ``loa_of``,
+    ``bending``, ``mesh_names`` and ``pinion_names`` are the names shared with
+    :class:`BearingMoments`.
     """
 
     mx_sp: np.ndarray
@@ -587,15 +748,42 @@ class DoublePinionMoments:
     z: np.ndarray = field(compare=False, default=None)
     forces: MeshForces = field(compare=False, default=None)
 
+    mesh_names = DoublePinion.mesh_names
+    pinion_names = ("SP", "RP")
+    loa_names = ("sp_sun", "sp_rp", "rp_sp", "rp_ring")
+
+    def __post_init__(self):
+        self._scalar_fields(("mx_sp", "my_sp", "mx_rp", "my_rp", "m_sp_sun", "m_sp_rp",
+                             "m_rp_sp", "m_rp_ring", "mz_sp", "mz_rp"))
+        if isinstance(self.contributions, dict):
+            object.__setattr__(self, "contributions", {
+                k: tuple(_scalar(v) for v in pair) for k, pair in self.contributions.items()})
+
+    @property
+    def m_loa_sun(self):
+        """LOA moment at the sun mesh, M_SP-SUN [N·m] (same name as the single pinion's)."""
+        return self.m_sp_sun
+
+    @property
+    def m_loa_ring(self):
+        """LOA moment at the ring mesh, M_RP-RING [N·m] (same name as the single pinion's)."""
+        return self.m_rp_ring
+
+    @property
+    def bending(self) -> np.ndarray:
+        """Pinion bending moments (Mx, My) of SP and RP, shape (..., 2, 2) [N·m]."""
+        return np.stack([np.stack([self.mx_sp, self.my_sp], axis=-1),
+                         np.stack([self.mx_rp, self.my_rp], axis=-1)], axis=-2)
+
     @property
     def total_sp(self) -> np.ndarray:
         """Bending moment magnitude on SP hypot(Mx_SP, My_SP) [N·m]."""
-        return np.hypot(self.mx_sp, self.my_sp)
+        return _scalar(np.hypot(self.mx_sp, self.my_sp))
 
     @property
     def total_rp(self) -> np.ndarray:
         """Bending moment magnitude on RP [N·m]."""
-        return np.hypot(self.mx_rp, self.my_rp)
+        return _scalar(np.hypot(self.mx_rp, self.my_rp))
 
     @property
     def loa(self) -> np.ndarray:
@@ -840,7 +1028,7 @@ def offsets_from_moments(geom: SinglePinion, input_torque, mx, my):
     t, mx, my = np.broadcast_arrays(t, mx, my)
     rhs = np.stack([mx, my], axis=-1) / np.where(t == 0, 1.0, t)[..., None] - m0
     z = np.linalg.solve(a, rhs[..., None])[..., 0] if rhs.size else np.zeros(rhs.shape)
-    return z[..., 0], z[..., 1]
+    return _scalar(z[..., 0]), _scalar(z[..., 1])
 
 
 def loa_from_moments(geom: SinglePinion, mx, my):
@@ -863,7 +1051,7 @@ def loa_from_moments(geom: SinglePinion, mx, my):
     mx = _real_array(mx, "mx")
     my = _real_array(my, "my")
     u = _layout(geom).u
-    return mx * u[0, 0] + my * u[0, 1], mx * u[1, 0] + my * u[1, 1]
+    return _scalar(mx * u[0, 0] + my * u[0, 1]), _scalar(mx * u[1, 0] + my * u[1, 1])
 
 
 def double_pinion_offsets_from_moments(geom: DoublePinion, input_torque, mx_sp, my_sp, mx_rp,
@@ -901,7 +1089,7 @@ def double_pinion_offsets_from_moments(geom: DoublePinion, input_torque, mx_sp, 
     rhs = np.stack(arrs, axis=-1) / np.where(t == 0, 1.0, t)[..., None] - m0
     pinv = np.linalg.pinv(a)
     z = rhs @ pinv.T
-    return z[..., 0], z[..., 1], z[..., 2]
+    return _scalar(z[..., 0]), _scalar(z[..., 1]), _scalar(z[..., 2])
 
 
 # --------------------------------------------------------------------------------------------
@@ -927,8 +1115,9 @@ def _radius_pair(r_mesh, r_inter):
     return rm, ri
 
 
-def sp_sun_moment(axial_force, r_mesh, phi, beta, r_inter=None):
-    """Sun-SP misaligning moment as a function of the included angle beta (seed Fig. 6a).
+@renamed_kwargs({"beta": "included_angle_sp"})
+def sp_sun_moment(axial_force, r_mesh, phi, included_angle_sp, r_inter=None):
+    """Sun-SP misaligning moment as a function of the included angle at SP (seed Fig. 6a).
 
     Parameters
     ----------
@@ -938,8 +1127,8 @@ def sp_sun_moment(axial_force, r_mesh, phi, beta, r_inter=None):
         Pitch radius of SP at the sun mesh R_SP-SUN [m].
     phi : array_like
         Transverse pressure angle, taken equal at both SP meshes [rad], in (0, pi/2).
-    beta : array_like
-        Included angle at SP [rad].
+    included_angle_sp : array_like
+        Included angle at SP, the seed's beta [rad] (old keyword ``beta``: deprecated).
     r_inter : array_like, optional
         Pitch radius of SP at the RP mesh R_SP-RP [m]; defaults to ``r_mesh`` (the seed's
         R_SP-RP ~ R_SP-SUN = R_SP approximation).
@@ -959,12 +1148,13 @@ def sp_sun_moment(axial_force, r_mesh, phi, beta, r_inter=None):
     fa = _real_array(axial_force, "axial_force")
     rm, ri = _radius_pair(r_mesh, r_inter)
     p = _pressure_array(phi)
-    b = _real_array(beta, "beta")
-    return fa * (ri * np.sin(b - p) + rm * np.sin(p))
+    b = _real_array(included_angle_sp, "included_angle_sp")
+    return _scalar(fa * (ri * np.sin(b - p) + rm * np.sin(p)))
 
 
-def rp_ring_moment(axial_force, r_mesh, phi, gamma, r_inter=None):
-    """RP-ring misaligning moment as a function of the included angle gamma (seed Fig. 6b).
+@renamed_kwargs({"gamma": "included_angle_rp"})
+def rp_ring_moment(axial_force, r_mesh, phi, included_angle_rp, r_inter=None):
+    """RP-ring misaligning moment as a function of the included angle at RP (seed Fig. 6b).
 
     Parameters
     ----------
@@ -974,8 +1164,8 @@ def rp_ring_moment(axial_force, r_mesh, phi, gamma, r_inter=None):
         Pitch radius of RP at the ring mesh R_RP-RING [m].
     phi : array_like
         Transverse pressure angle, taken equal at both RP meshes [rad].
-    gamma : array_like
-        Included angle at RP [rad].
+    included_angle_rp : array_like
+        Included angle at RP, the seed's gamma [rad] (old keyword ``gamma``: deprecated).
     r_inter : array_like, optional
         Pitch radius of RP at the SP mesh R_RP-SP [m]; defaults to ``r_mesh``.
 
@@ -992,8 +1182,8 @@ def rp_ring_moment(axial_force, r_mesh, phi, gamma, r_inter=None):
     fa = _real_array(axial_force, "axial_force")
     rm, ri = _radius_pair(r_mesh, r_inter)
     p = _pressure_array(phi)
-    g = _real_array(gamma, "gamma")
-    return fa * (ri * np.sin(g + p) + rm * np.sin(p))
+    g = _real_array(included_angle_rp, "included_angle_rp")
+    return _scalar(fa * (ri * np.sin(g + p) + rm * np.sin(p)))
 
 
 def worst_case_angles(phi):
@@ -1006,12 +1196,13 @@ def worst_case_angles(phi):
 
     Returns
     -------
-    beta_worst, gamma_worst : ndarray
-        beta = pi/2 + phi (sun-SP mesh) and gamma = pi/2 - phi (RP-ring mesh) [rad], where
+    included_angle_sp_worst, included_angle_rp_worst : ndarray or float
+        The seed's beta = pi/2 + phi (sun-SP mesh) and gamma = pi/2 - phi (RP-ring mesh)
+        [rad], where
         d M / d beta = F_A R cos(beta - phi) = 0 and d M / d gamma = F_A R cos(gamma + phi) = 0.
     """
     p = _pressure_array(phi)
-    return _HALF_PI + p, _HALF_PI - p
+    return _scalar(_HALF_PI + p), _scalar(_HALF_PI - p)
 
 
 def worst_case_moment(axial_force, r_mesh, phi, r_inter=None):
@@ -1046,7 +1237,7 @@ def worst_case_moment(axial_force, r_mesh, phi, r_inter=None):
     fa = _real_array(axial_force, "axial_force")
     rm, ri = _radius_pair(r_mesh, r_inter)
     p = _pressure_array(phi)
-    return fa * (ri + rm * np.sin(p))
+    return _scalar(fa * (ri + rm * np.sin(p)))
 
 
 def single_equivalent_moment(axial_force, r_mesh, phi, r_inter=None):
@@ -1072,7 +1263,7 @@ def single_equivalent_moment(axial_force, r_mesh, phi, r_inter=None):
     fa = _real_array(axial_force, "axial_force")
     rm, ri = _radius_pair(r_mesh, r_inter)
     p = _pressure_array(phi)
-    return fa * (rm + ri) * np.sin(p)
+    return _scalar(fa * (rm + ri) * np.sin(p))
 
 
 def same_as_single_angle(phi, mesh: str = "sp_sun"):
@@ -1083,7 +1274,8 @@ def same_as_single_angle(phi, mesh: str = "sp_sun"):
     phi : array_like
         Transverse pressure angle [rad].
     mesh : {"sp_sun", "rp_ring"}
-        Which mesh: sun-SP (angle beta) or RP-ring (angle gamma).
+        Which mesh: sun-SP (included angle at SP, the seed's beta) or RP-ring (included
+        angle at RP, the seed's gamma).
 
     Returns
     -------
@@ -1094,7 +1286,7 @@ def same_as_single_angle(phi, mesh: str = "sp_sun"):
     """
     p = _pressure_array(phi)
     mesh = as_choice(mesh, "mesh", ("sp_sun", "rp_ring"))
-    return 2.0 * p if mesh == "sp_sun" else math.pi - 2.0 * p
+    return _scalar(2.0 * p if mesh == "sp_sun" else math.pi - 2.0 * p)
 
 
 def worst_to_single_ratio(phi, r_mesh=1.0, r_inter=None):
@@ -1118,7 +1310,7 @@ def worst_to_single_ratio(phi, r_mesh=1.0, r_inter=None):
     """
     rm, ri = _radius_pair(r_mesh, r_inter)
     p = _pressure_array(phi)
-    return (ri + rm * np.sin(p)) / ((rm + ri) * np.sin(p))
+    return _scalar((ri + rm * np.sin(p)) / ((rm + ri) * np.sin(p)))
 
 
 # --------------------------------------------------------------------------------------------
@@ -1201,7 +1393,7 @@ def seed_case(name: str) -> SeedCase:
         ring = operating_mesh(26, 86, center_distance=51.945 * _MM, internal=True, **common)
         geom = SinglePinion(r_sun=sun.r_w_1, r_ps=sun.r_w_2, r_pr=ring.r_w_1,
                             phi_1=sun.pressure_angle, phi_2=ring.pressure_angle,
-                            beta_1=sun.helix_angle, beta_2=ring.helix_angle,
+                            helix_1=sun.helix_angle, helix_2=ring.helix_angle,
                             n_planets=g["n_planets"], face_width=g["face_width_pinion"],
                             name="seed 001 Case 1")
         return SeedCase("1", geom, g["input_torque"], "seed 001 Table 1")
@@ -1216,8 +1408,9 @@ def seed_case(name: str) -> SeedCase:
         label = "seed 001 Case 2-A"
         source = "seed 001 Table 5 text (Case 2 with meshes 180 deg apart)"
     geom = DoublePinion(r_sun=sun.r_w_1, r_sp_sun=sun.r_w_2, r_sp_rp=mid.r_w_1,
-                        r_rp_sp=mid.r_w_2, r_rp_ring=ring.r_w_1, beta=beta, gamma=gamma,
-                        alpha=alpha, phi_1=sun.pressure_angle, phi_2=mid.pressure_angle,
+                        r_rp_sp=mid.r_w_2, r_rp_ring=ring.r_w_1, included_angle_sp=beta,
+                        included_angle_rp=gamma, included_angle_sun=alpha,
+                        phi_1=sun.pressure_angle, phi_2=mid.pressure_angle,
                         phi_3=ring.pressure_angle, helix_1=sun.helix_angle,
                         helix_2=mid.helix_angle, helix_3=ring.helix_angle,
                         n_planets=g["n_planets"], face_width=g["face_width_pinion"], name=label)

@@ -13,7 +13,10 @@ reduced model of the same loop:
   unit face width, ISO 6336 default 20 N/(mm·µm) = 20e9 N/m^2), delta_j set by the mesh force;
 * feedback: the centroid Z_j of w_j enters the moments (seed Table 7).
 
-SI inside: [m], [N], [N·m], [rad]; c_g in [N/m^2].
+SI inside: [m], [N], [N·m], [rad]; c_g in [N/m^2] (ISO 6336 quotes N/(mm·µm): x 1e9) and
+k_t in [N·m/rad] (bearing catalogues and the seed quote N·mm/rad: x 1e-3). :func:`solve_tilt`
+takes either unit through keywords that name it (``k_tilt_Nmm_per_rad=8.8e7``,
+``c_g_N_per_mm_um=20``), so a catalogue value cannot slip in 1000x too stiff unnoticed.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ from .bearing import (
     _layout,
     _offset_system,
     _real_array,
+    _scalar,
     double_pinion_moments,
     seed_case,
     single_pinion_moments,
@@ -56,6 +60,8 @@ __all__ = [
 
 #: ISO 6336 default mesh stiffness per unit face width, 20 N/(mm·µm), in [N/m^2].
 C_G_DEFAULT = 20e9
+#: 1 N/(mm·µm) (ISO 6336's unit of c_gamma) in [N/m^2].
+_N_PER_MM_UM = 1e9
 _LOAD_BASES = ("normal", "tangential")
 
 
@@ -93,6 +99,10 @@ class LoadDistribution:
     delta: np.ndarray
     face_load_factor: np.ndarray
     full_contact: np.ndarray
+
+    def __post_init__(self):   # Python floats (bool) for scalar inputs
+        for n in self.__dataclass_fields__:
+            object.__setattr__(self, n, _scalar(getattr(self, n)))
 
 
 def _distribution(force, theta, b, cg):
@@ -187,7 +197,7 @@ def load_intensity(z, force_n, tilt, face_width, c_g=C_G_DEFAULT):
     b = _positive_array(face_width, "face_width")
     cg = _positive_array(c_g, "c_g")
     w = cg * np.maximum(0.0, d.delta - t * zz)
-    return np.where(np.abs(zz) <= 0.5 * b, w, 0.0)
+    return _scalar(np.where(np.abs(zz) <= 0.5 * b, w, 0.0))
 
 
 def _h(z, force, b, cg):
@@ -244,7 +254,7 @@ def tilt_from_centroid(centroid, force_n, face_width, c_g=C_G_DEFAULT):
     if zb.size and np.any(np.abs(zb) >= 0.5 * bb):
         raise ValueError("centroid must lie strictly inside (-face_width/2, face_width/2); "
                          f"got max |Z| / (b/2) = {float(np.max(np.abs(zb) / (0.5 * bb)))!r}")
-    return _h(z, f, b, cg)
+    return _scalar(_h(z, f, b, cg))
 
 
 # --------------------------------------------------------------------------------------------
@@ -437,8 +447,9 @@ class TiltSolution:
         The geometry solved.
     mesh_names : tuple of str
         Mesh order of the last axis of the per-mesh arrays.
-    input_torque, k_tilt : ndarray
-        Inputs broadcast to the batch shape [N·m], [N·m/rad].
+    input_torque, k_tilt : ndarray or float
+        Inputs broadcast to the batch shape [N·m], [N·m/rad] (SI whichever unit was given;
+        floats for scalar inputs).
     c_g : float
         Mesh stiffness per unit face width [N/m^2].
     face_width : ndarray, shape (J,)
@@ -455,7 +466,9 @@ class TiltSolution:
     contact_fraction, peak_load, face_load_factor : ndarray, shape (..., J)
         Loaded fraction of the face [-], peak load per unit face width [N/m], K_Hbeta [-].
     moments : BearingMoments or DoublePinionMoments
-        Moments evaluated at the converged offsets.
+        Moments evaluated at the converged offsets. Both types answer to the same names for
+        what they share (``m_loa_sun``, ``m_loa_ring``, ``loa``, ``loa_names``, ``z_sun``,
+        ``z_ring``, ``bending``, ``mesh_names``, ``pinion_names``).
     iterations : ndarray of int
         Newton iterations (plus fallback sweeps) per element [-].
     residual : ndarray
@@ -487,6 +500,12 @@ class TiltSolution:
     converged: np.ndarray = field(compare=False, default=None)
     method: np.ndarray = field(compare=False, default=None)
 
+    def __post_init__(self):
+        # physical scalars as Python floats; the solver's bookkeeping (iterations, converged,
+        # method) stays ndarray so that .all() / .item() work for any batch shape
+        for n in ("input_torque", "k_tilt", "residual"):
+            object.__setattr__(self, n, _scalar(getattr(self, n)))
+
     def intensity(self, z) -> np.ndarray:
         """Load per unit face width w(z) of every mesh at axial positions ``z`` [N/m].
 
@@ -514,32 +533,34 @@ class TiltSolution:
     @property
     def z_s(self) -> np.ndarray:
         """Offset at the sun (sun-SP) mesh [m]."""
-        return self.z[..., 0]
+        return _scalar(self.z[..., 0])
 
     @property
     def z_r(self) -> np.ndarray:
         """Offset at the ring (RP-ring) mesh [m]."""
-        return self.z[..., -1]
+        return _scalar(self.z[..., -1])
 
 
-def _k_array(value) -> np.ndarray:
+def _k_array(value, name="k_tilt") -> np.ndarray:
+    unit = "N·mm/rad" if name.endswith("Nmm_per_rad") else "N·m/rad"
     if isinstance(value, (str, bytes)):
-        raise TypeError(f"k_tilt must be numeric array_like, got {value!r}")
+        raise TypeError(f"{name} must be numeric array_like, got {value!r}")
     try:
         k = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise TypeError(f"k_tilt must be numeric array_like, got {value!r}") from exc
+        raise TypeError(f"{name} must be numeric array_like, got {value!r}") from exc
     if k.size and np.any(np.isnan(k)):
-        raise ValueError(f"k_tilt must not be NaN, got {int(np.isnan(k).sum())} NaN value(s)")
+        raise ValueError(f"{name} must not be NaN, got {int(np.isnan(k).sum())} NaN value(s)")
     if k.size and np.any(k < 0):
-        raise ValueError(f"k_tilt must be >= 0 [N·m/rad] (inf = rigid, 0 = edge-loaded limit), "
+        raise ValueError(f"{name} must be >= 0 [{unit}] (inf = rigid, 0 = edge-loaded limit), "
                          f"got min {float(k.min())!r}")
     return k
 
 
-def solve_tilt(geom, input_torque, k_tilt, c_g=C_G_DEFAULT, face_width=None,
+def solve_tilt(geom, input_torque, k_tilt=None, c_g=None, face_width=None,
                load_basis: str = "normal", rtol: float = 1e-12, atol: float = 1e-30,
-               max_iter: int = 100) -> TiltSolution:
+               max_iter: int = 100, *, k_tilt_Nm_per_rad=None, k_tilt_Nmm_per_rad=None,
+               c_g_N_per_mm_um=None) -> TiltSolution:
     """Solve the coupled bearing tilt / load distribution problem for (Z_S, Z_R) (spec 5).
 
     Parameters
@@ -549,10 +570,15 @@ def solve_tilt(geom, input_torque, k_tilt, c_g=C_G_DEFAULT, face_width=None,
     input_torque : array_like
         Sun input torque [N·m], > 0.
     k_tilt : array_like
-        Needle-bearing tilting stiffness k_t [N·m/rad], >= 0; ``np.inf`` gives the rigid
-        solution (Z = 0), 0 the edge-loaded limit. Broadcasts with ``input_torque``.
-    c_g : float
-        Mesh stiffness per unit face width [N/m^2]; default 20 N/(mm·µm) = 20e9 N/m^2.
+        Needle-bearing tilting stiffness k_t [N·m/rad] (SI; bearing catalogues and the seed
+        print N·mm/rad, 1000x larger: pass those as ``k_tilt_Nmm_per_rad``), >= 0;
+        ``np.inf`` gives the rigid solution (Z = 0), 0 the edge-loaded limit. Broadcasts with
+        ``input_torque``. Give exactly one of ``k_tilt``, ``k_tilt_Nm_per_rad``,
+        ``k_tilt_Nmm_per_rad`` (TypeError otherwise).
+    c_g : float, optional
+        Mesh stiffness per unit face width [N/m^2] (SI; ISO 6336 quotes N/(mm·µm), 1e9x
+        smaller: pass those as ``c_g_N_per_mm_um``); default :data:`C_G_DEFAULT`,
+        20 N/(mm·µm) = 2e10 N/m^2.
     face_width : float or sequence of float, optional
         Contact face width per mesh [m] (one value for all, or one per mesh); defaults to
         ``geom.face_width``.
@@ -566,10 +592,19 @@ def solve_tilt(geom, input_torque, k_tilt, c_g=C_G_DEFAULT, face_width=None,
         only a floor against subnormal arithmetic (geometries with vanishing axial forces).
     max_iter : int
         Newton iteration limit before the bracketed coordinate fallback.
+    k_tilt_Nm_per_rad : array_like, optional
+        Same as ``k_tilt``, with the unit in the name [N·m/rad] (the scene key's spelling).
+    k_tilt_Nmm_per_rad : array_like, optional
+        Tilting stiffness in the vendors' unit [N·mm/rad] (seed 001 Table 10: 8.8e9, 8.8e7,
+        8.8e6), converted to N·m/rad (x 1e-3).
+    c_g_N_per_mm_um : float, optional
+        Mesh stiffness per unit face width in ISO 6336's unit [N/(mm·µm)] (x 1e9 -> N/m^2);
+        not together with ``c_g``.
 
     Returns
     -------
     TiltSolution
+        ``k_tilt`` and ``c_g`` in it are SI [N·m/rad], [N/m^2] whichever spelling was given.
 
     Raises
     ------
@@ -623,14 +658,65 @@ def solve_tilt(geom, input_torque, k_tilt, c_g=C_G_DEFAULT, face_width=None,
     theta / F only, so Z does not depend on the torque in this reduced model (no other
     misalignment source); the solve is done per unit torque and the moments scale with T.
     This is why it behaves identically from 1e-3 to 1e5 N·m.
+
+    Code layout: argument checks (``_tilt_inputs``), the unit-torque solve for every k_t
+    (``_solve_unit_torque``), the misalignment at the solution (``_unit_misalignment``) and the
+    scaled, evaluated result (``_tilt_solution``); the convergence warning stays here so that
+    it points at the caller.
     """
+    t, k, cg, basis, rtol, atol, max_iter, b = _tilt_inputs(
+        geom, input_torque, k_tilt, c_g, face_width, load_basis, rtol, atol, max_iter,
+        k_tilt_Nm_per_rad, k_tilt_Nmm_per_rad, c_g_N_per_mm_um)
+    sysm = _system(geom, b, cg, basis)
+    z, iters, res, method, kinv, fin, edge = _solve_unit_torque(sysm, k.reshape(-1), atol, rtol,
+                                                                max_iter)
+    if not np.all(np.isfinite(z)):
+        raise ArithmeticError("solve_tilt produced non-finite offsets; please report the inputs "
+                              f"(k_tilt={k!r} N·m/rad, c_g={cg!r} N/m^2, face_width={b!r} m)")
+    converged = res <= atol + rtol * np.max(np.abs(z), axis=-1)
+    if not converged.all():
+        warnings.warn(f"solve_tilt: {int((~converged).sum())} of {z.shape[0]} element(s) did not "
+                      f"reach atol={atol:g} m + rtol={rtol:g} |Z|; worst residual "
+                      f"{float(res.max()):.3g} m (see .residual)",
+                      ConvergenceWarning, stacklevel=2)
+    theta_u = _unit_misalignment(sysm, z, kinv, fin, edge)
+    return _tilt_solution(geom, sysm, t, k, basis, z, theta_u, iters, res, converged, method)
+
+
+def _k_tilt_si(k_tilt, k_tilt_Nm_per_rad, k_tilt_Nmm_per_rad):
+    """The one tilting stiffness given, in [N·m/rad] (TypeError for none or several)."""
+    given = {name: v for name, v in (("k_tilt", k_tilt), ("k_tilt_Nm_per_rad", k_tilt_Nm_per_rad),
+                                     ("k_tilt_Nmm_per_rad", k_tilt_Nmm_per_rad))
+             if v is not None}
+    if len(given) != 1:
+        raise TypeError("give the tilting stiffness once, as k_tilt or k_tilt_Nm_per_rad "
+                        "[N·m/rad] or k_tilt_Nmm_per_rad [N·mm/rad, bearing catalogues], got "
+                        f"{sorted(given) or 'none'}")
+    (name, value), = given.items()
+    k = _k_array(value, name)
+    return k * _NMM if name == "k_tilt_Nmm_per_rad" else k
+
+
+def _c_g_si(c_g, c_g_N_per_mm_um):
+    """Mesh stiffness per unit face width in [N/m^2] from either spelling (default C_G_DEFAULT)."""
+    if c_g_N_per_mm_um is None:
+        return as_positive(C_G_DEFAULT if c_g is None else c_g, "c_g")
+    if c_g is not None:
+        raise TypeError(f"give c_g [N/m^2] or c_g_N_per_mm_um [N/(mm·µm)], not both; got "
+                        f"c_g={c_g!r}, c_g_N_per_mm_um={c_g_N_per_mm_um!r}")
+    return as_positive(c_g_N_per_mm_um, "c_g_N_per_mm_um") * _N_PER_MM_UM
+
+
+def _tilt_inputs(geom, input_torque, k_tilt, c_g, face_width, load_basis, rtol, atol, max_iter,
+                 k_tilt_Nm_per_rad, k_tilt_Nmm_per_rad, c_g_N_per_mm_um):
+    """Validate the arguments of :func:`solve_tilt`; SI values and the per-mesh face widths."""
     if not isinstance(geom, (SinglePinion, DoublePinion)):
         raise TypeError(f"geom must be a SinglePinion or DoublePinion, got {type(geom).__name__}")
     t = _real_array(input_torque, "input_torque")
     if t.size and np.any(t <= 0):
         raise ValueError(f"input_torque must be > 0 [N·m], got min {float(t.min())!r}")
-    k = _k_array(k_tilt)
-    cg = as_positive(c_g, "c_g")
+    k = _k_tilt_si(k_tilt, k_tilt_Nm_per_rad, k_tilt_Nmm_per_rad)
+    cg = _c_g_si(c_g, c_g_N_per_mm_um)
     basis = as_choice(load_basis, "load_basis", _LOAD_BASES)
     rtol = as_positive(rtol, "rtol")
     atol = as_nonnegative(atol, "atol")
@@ -647,9 +733,16 @@ def solve_tilt(geom, input_torque, k_tilt, c_g=C_G_DEFAULT, face_width=None,
     if np.any(b <= 0):
         raise ValueError(f"face_width must be > 0 [m], got {b.tolist()!r}")
     b = np.broadcast_to(b.reshape(-1), (nmesh,)).astype(float).copy()
+    return t, k, cg, basis, rtol, atol, max_iter, b
 
-    sysm = _system(geom, b, cg, basis)
-    kflat = k.reshape(-1)
+
+def _solve_unit_torque(sysm, kflat, atol, rtol, max_iter):
+    """Offsets per unit torque for each k_t: rigid, Newton (+ coordinate fallback), edge limit.
+
+    Returns z (n, J), iterations, residual, method (n,), 1/k_t of the non-zero k_t, and the
+    masks of the non-zero (``fin``) and zero (``edge``) stiffnesses.
+    """
+    nmesh = sysm.b.size
     n = kflat.size
     z = np.zeros((n, nmesh))
     iters = np.zeros(n, dtype=int)
@@ -682,26 +775,28 @@ def solve_tilt(geom, input_torque, k_tilt, c_g=C_G_DEFAULT, face_width=None,
     if edge.any():
         z[edge] = _edge_limit(sysm)
         res[edge] = 0.0
-    if not np.all(np.isfinite(z)):
-        raise ArithmeticError("solve_tilt produced non-finite offsets; please report the inputs "
-                              f"(k_tilt={k_tilt!r}, c_g={c_g!r}, face_width={face_width!r})")
-    converged = res <= atol + rtol * np.max(np.abs(z), axis=-1)
-    if not converged.all():
-        warnings.warn(f"solve_tilt: {int((~converged).sum())} of {n} element(s) did not reach "
-                      f"atol={atol:g} m + rtol={rtol:g} |Z|; worst residual "
-                      f"{float(res.max()):.3g} m (see .residual)",
-                      ConvergenceWarning, stacklevel=2)
+    return z, iters, res, method, kinv, fin, edge
 
-    # per-unit-torque misalignment at the solution; k = 0 uses h(Z) (finite inside, inf at ends)
-    theta_u = np.zeros((n, nmesh))
+
+def _unit_misalignment(sysm, z, kinv, fin, edge):
+    """Per-unit-torque mesh misalignment at the solution [rad/(N·m)].
+
+    Non-zero k_t: (theta0 + A Z) / k_t; k_t = 0 uses h(Z) (finite inside, +-inf at the ends).
+    """
+    theta_u = np.zeros(z.shape)
     if fin.any():
         theta_u[fin] = kinv[:, None] * (sysm.theta0 + z[fin] @ sysm.a.T)
     if edge.any():
         ze = z[edge]
-        at_end = np.abs(ze) >= 0.5 * b * (1 - 1e-12)
-        hz = _h(np.where(at_end, 0.0, ze), sysm.fn, b, cg)
+        at_end = np.abs(ze) >= 0.5 * sysm.b * (1 - 1e-12)
+        hz = _h(np.where(at_end, 0.0, ze), sysm.fn, sysm.b, sysm.cg)
         theta_u[edge] = np.where(at_end, np.copysign(np.inf, -ze), hz)
+    return theta_u
 
+
+def _tilt_solution(geom, sysm, t, k, basis, z, theta_u, iters, res, converged, method):
+    """Scale the unit-torque solution to the torques, broadcast to the batch shape, evaluate."""
+    nmesh = sysm.b.size
     kshape = k.shape
     shape = np.broadcast_shapes(t.shape, kshape)
     zk = z.reshape(kshape + (nmesh,))
@@ -709,7 +804,7 @@ def solve_tilt(geom, input_torque, k_tilt, c_g=C_G_DEFAULT, face_width=None,
     tfull = np.broadcast_to(t, shape)
     theta = tfull[..., None] * np.broadcast_to(theta_u.reshape(kshape + (nmesh,)), shape + (nmesh,))
     force = tfull[..., None] * sysm.fn
-    dist = _distribution(force, theta, b, cg)
+    dist = _distribution(force, theta, sysm.b, sysm.cg)
     if isinstance(geom, SinglePinion):
         moments = single_pinion_moments(geom, tfull, zfull[..., 0], zfull[..., 1])
     else:
@@ -717,7 +812,7 @@ def solve_tilt(geom, input_torque, k_tilt, c_g=C_G_DEFAULT, face_width=None,
     bshape = lambda a: np.broadcast_to(a.reshape(kshape), shape)  # noqa: E731
     return TiltSolution(
         geometry=geom, mesh_names=tuple(geom.mesh_names), input_torque=tfull,
-        k_tilt=np.broadcast_to(k, shape), c_g=cg, face_width=b, load_basis=basis,
+        k_tilt=np.broadcast_to(k, shape), c_g=sysm.cg, face_width=sysm.b, load_basis=basis,
         z=zfull, tilt=theta, force=force, contact_fraction=dist.contact_fraction,
         peak_load=dist.peak_load,
         face_load_factor=dist.face_load_factor, moments=moments, iterations=bshape(iters),

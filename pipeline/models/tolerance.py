@@ -2,7 +2,10 @@
 
 Spec section 2 (seed 000): for one realisation of the errors, over an explicit observation
 window [t0, t0 + T], Ave_jn is the time mean and Dev_jn = max - min of the phasing deviation
-gamma_jn(t) - gamma_jn,ideal (j = s sun-planet, r ring-planet; planet n relative to planet 1).
+gamma_jn(t) - gamma_jn,ideal (j = s sun-planet, r ring-planet). Two references are kept side by
+side: relative to planet 1 (``ave_s`` ..., planet 1 identically 0, what a rig measures from
+onset differences) and absolute (``ave_s_abs`` ..., each mesh's own phase
+gamma_jn = +-Z_j psi_ejpn / 2 pi as seed 000 writes it, so planet 1 has its own Ave and Dev).
 The Monte Carlo draws the error parameters from tolerance bands (normal with the band read as
 +-3 sigma, or uniform) and returns the distributions of Ave and Dev.
 
@@ -49,9 +52,9 @@ from ..validate import (as_choice, as_finite_array, as_float, as_int, as_nonnega
                         as_positive, as_positive_int)
 from . import _kernels
 from .gearset import Gearset, Speeds
-from .mesh_phasing import (TWO_PI, ShaftHoleErrors, _broadcast_errors, _check_error_size,
-                           _check_gearset, _check_speeds, _cos_sin, _direction_sign,
-                           _rotation_angle, MAX_PHASE)
+from ._geometry import (MAX_PHASE, TWO_PI, ShaftHoleErrors, broadcast_errors, check_error_size,
+                        check_gearset, check_speeds, cos_sin, direction_sign,
+                        rotation_angle_unchecked)
 
 __all__ = [
     "ObservationWindow",
@@ -67,11 +70,17 @@ __all__ = [
     "monte_carlo",
     "table2_case",
     "STATISTICS",
+    "ABSOLUTE_STATISTICS",
+    "ALL_STATISTICS",
     "WINDOW_KINDS",
     "SAMPLERS",
 ]
 
+#: Statistics relative to planet 1 (planet 1 is 0 by construction).
 STATISTICS = ("ave_s", "dev_s", "ave_r", "dev_r")
+#: The same statistics of each mesh's own (absolute) phasing deviation, seed 000's gamma_jn.
+ABSOLUTE_STATISTICS = ("ave_s_abs", "dev_s_abs", "ave_r_abs", "dev_r_abs")
+ALL_STATISTICS = STATISTICS + ABSOLUTE_STATISTICS
 WINDOW_KINDS = ("slowest-offset", "fastest-offset", "common-period")
 SAMPLERS = ("random", "sobol")
 #: Quantile levels reported by default; the first and last are the two-sided 3-sigma levels
@@ -148,7 +157,7 @@ def observation_window(speeds: Speeds, kind: str = "slowest-offset", *, t0: floa
         When no offset turns (all relative speeds zero) or no common period exists within
         ``max_revolutions``.
     """
-    sp = _check_speeds(speeds)
+    sp = check_speeds(speeds)
     kind = as_choice(kind, "kind", WINDOW_KINDS)
     t0 = as_float(t0, "t0")
     max_rev = as_positive_int(max_revolutions, "max_revolutions")
@@ -207,7 +216,7 @@ def default_n_times(speeds: Speeds, window, *, points_per_rev: int = 64,
     int
         ``max(min_points, ceil(points_per_rev T max|w| / 2 pi))``.
     """
-    sp = _check_speeds(speeds)
+    sp = check_speeds(speeds)
     win = _as_window(window, sp)
     ppr = as_positive_int(points_per_rev, "points_per_rev")
     mp = as_positive_int(min_points, "min_points")
@@ -237,13 +246,19 @@ class PhasingStats:
     ----------
     ave_s, dev_s, ave_r, dev_r : numpy.ndarray
         Time mean and max - min over the window of gamma_jn(t) - gamma_jn,ideal [-]
-        (mesh cycles), shape (*S, N); planet 1 is 0.
+        (mesh cycles), phasing relative to planet 1, shape (*S, N); planet 1 is 0.
     window : ObservationWindow
         The observation window.
     n_times : int
         Number of time samples on the window [-].
     engine : str
         "numba" or "numpy".
+    ave_s_abs, dev_s_abs, ave_r_abs, dev_r_abs : numpy.ndarray
+        The same for each mesh's own (absolute) phase, seed 000's
+        gamma_sn = s Z_s psi_espn / 2 pi and gamma_rn = -s Z_r psi_erpn / 2 pi less their
+        ideal values: s Z_s delta_s,n / 2 pi and -s Z_r delta_r,n / 2 pi [-], shape (*S, N);
+        planet 1 has its own values. The relative ones are their differences to planet 1
+        as functions of time (Ave_rel,n = Ave_abs,n - Ave_abs,1 exactly; Dev is not additive).
     """
 
     ave_s: np.ndarray
@@ -253,6 +268,10 @@ class PhasingStats:
     window: ObservationWindow
     n_times: int
     engine: str
+    ave_s_abs: np.ndarray = None
+    dev_s_abs: np.ndarray = None
+    ave_r_abs: np.ndarray = None
+    dev_r_abs: np.ndarray = None
 
 
 class _Grid:
@@ -266,33 +285,37 @@ class _Grid:
             if abs(w) * tmax > MAX_PHASE:
                 raise ValueError(f"|{name} t| must be <= {MAX_PHASE:g} rad over the window, got "
                                  f"{name} = {w!r} rad/s, max |t| = {tmax:g} s; shift the window")
-            r = _rotation_angle(w, self.t)
+            r = rotation_angle_unchecked(w, self.t)
             arrays += [np.cos(r), np.sin(r)]
         self.arrays = arrays
         psi = gearset.angles
         self.cpsi = np.cos(psi)
         self.spsi = np.sin(psi)
         self.R = gearset.carrier_radius
-        sign = _direction_sign(gearset.direction)
+        sign = direction_sign(gearset.direction)
         self.g_s = sign * gearset.z_sun / TWO_PI
         self.g_r = -sign * gearset.z_ring / TWO_PI
         self.n_planets = psi.size
 
     def run(self, es, ks, er, kr, ep, kp, engine):
-        """Stats for flat realisations: es.. (S,), ep, kp (S, N). Returns 4 arrays (S, N)."""
+        """Stats for flat realisations: es.. (S,), ep, kp (S, N).
+
+        Returns 8 arrays (S, N): ave_s, dev_s, ave_r, dev_r relative to planet 1, then the
+        same four absolute (each mesh's own deviation), the order of :data:`ALL_STATISTICS`.
+        """
         n_s = es.shape[0]
-        outs = [np.empty((n_s, self.n_planets)) for _ in range(4)]
+        outs = [np.empty((n_s, self.n_planets)) for _ in range(8)]
         if n_s == 0:
             return outs
-        cks, sks = _cos_sin(ks)
-        ckr, skr = _cos_sin(kr)
-        ckp, skp = _cos_sin(kp)
+        cks, sks = cos_sin(ks)
+        ckr, skr = cos_sin(kr)
+        ckp, skp = cos_sin(kp)
         fn = _kernels.stats_numba if engine == "numba" else _kernels.stats_numpy
         fn(*self.arrays, self.cpsi, self.spsi, self.R,
            np.ascontiguousarray(es, dtype=float), cks, sks,
            np.ascontiguousarray(er, dtype=float), ckr, skr,
            np.ascontiguousarray(ep, dtype=float), np.ascontiguousarray(ckp),
-           np.ascontiguousarray(skp), self.g_s, self.g_r, *outs)
+           np.ascontiguousarray(skp), self.g_s, self.g_r, *outs[:4], out_abs=outs[4:])
         return outs
 
 
@@ -339,30 +362,33 @@ def phasing_statistics(gearset: Gearset, speeds: Speeds, errors: ShaftHoleErrors
     Seed 000: Ave_jn = mean over the window of gamma_jn(t) - gamma_jn,ideal and
     Dev_jn = max - min of it, with the continuous deviation of
     :func:`pipeline.models.mesh_phasing.phasing_deviation` (``wrap=False``) on the grid of
-    :func:`time_grid`.
+    :func:`time_grid` (relative to planet 1), and of the unwrapped mesh-line deviations
+    s Z_s delta_s / 2 pi, -s Z_r delta_r / 2 pi of
+    :func:`pipeline.models.mesh_phasing.mesh_angle_deviations` (absolute, ``*_abs``).
     """
-    g = _check_gearset(gearset)
-    sp = _check_speeds(speeds)
+    g = check_gearset(gearset)
+    sp = check_speeds(speeds)
     win = _as_window(window, sp)
     n_t = _resolve_n_times(sp, win, n_times, points_per_rev)
     eng = _kernels.resolve_engine(engine)
     bs = as_positive_int(batch_size, "batch_size")
-    shape, b = _broadcast_errors(errors, g.n_planets)
-    _check_error_size(b, g.carrier_radius)
+    shape, b = broadcast_errors(errors, g.n_planets)
+    check_error_size(b, g.carrier_radius)
     grid = _Grid(g, sp, win, n_t)
     flat = int(np.prod(shape, dtype=np.int64))
     n_p = g.n_planets
     es, ks = b.es.reshape(flat), b.ks.reshape(flat)
     er, kr = b.er.reshape(flat), b.kr.reshape(flat)
     ep, kp = b.ep.reshape(flat, n_p), b.kp.reshape(flat, n_p)
-    outs = [np.empty((flat, n_p)) for _ in range(4)]
+    outs = [np.empty((flat, n_p)) for _ in range(8)]
     for a in range(0, flat, bs):
         z = min(flat, a + bs)
         res = grid.run(es[a:z], ks[a:z], er[a:z], kr[a:z], ep[a:z], kp[a:z], eng)
         for o, r in zip(outs, res):
             o[a:z] = r
     outs = [o.reshape(tuple(shape) + (n_p,)) for o in outs]
-    return PhasingStats(*outs, window=win, n_times=n_t, engine=eng)
+    return PhasingStats(*outs[:4], window=win, n_times=n_t, engine=eng,
+                        **dict(zip(ABSOLUTE_STATISTICS, outs[4:])))
 
 
 # ----------------------------------------------------------------------------- tolerances
@@ -585,7 +611,11 @@ class MonteCarloResult:
     Attributes
     ----------
     ave_s, dev_s, ave_r, dev_r : StatSummary
-        Distributions of Ave_sn, Dev_sn, Ave_rn, Dev_rn over the samples [-].
+        Distributions of Ave_sn, Dev_sn, Ave_rn, Dev_rn over the samples [-], phasing
+        relative to planet 1 (planet 1 is 0).
+    ave_s_abs, dev_s_abs, ave_r_abs, dev_r_abs : StatSummary
+        The same for each mesh's own (absolute) phasing, as seed 000 defines gamma_jn
+        (see :class:`PhasingStats`); planet 1 has its own distribution.
     n_samples : int
         Number of error realisations [-].
     sampler : str
@@ -603,7 +633,8 @@ class MonteCarloResult:
     tolerances : Tolerances
         The bands sampled.
     samples : dict or None
-        Per-sample arrays {"ave_s", "dev_s", "ave_r", "dev_r"} of shape (n_samples, N) when kept.
+        Per-sample arrays {"ave_s", ..., "dev_r_abs"} (:data:`ALL_STATISTICS`) of shape
+        (n_samples, N) when kept.
     exact_quantiles : bool
         False when the quantiles and histograms come from the bounded-memory fine histograms.
     """
@@ -622,10 +653,14 @@ class MonteCarloResult:
     tolerances: Tolerances
     samples: dict | None = None
     exact_quantiles: bool = True
+    ave_s_abs: StatSummary | None = None
+    dev_s_abs: StatSummary | None = None
+    ave_r_abs: StatSummary | None = None
+    dev_r_abs: StatSummary | None = None
 
     def stat(self, name: str) -> StatSummary:
-        """The summary of ``name`` in ("ave_s", "dev_s", "ave_r", "dev_r")."""
-        return getattr(self, as_choice(name, "name", STATISTICS))
+        """The summary of ``name`` in :data:`ALL_STATISTICS` ("ave_s" ... "dev_r_abs")."""
+        return getattr(self, as_choice(name, "name", ALL_STATISTICS))
 
     def to_dict(self, include_samples: bool = False) -> dict:
         """JSON-friendly dict (per-sample arrays only with ``include_samples``)."""
@@ -635,8 +670,9 @@ class MonteCarloResult:
             "wall_time": self.wall_time, "tolerances": self.tolerances.to_dict(),
             "exact_quantiles": self.exact_quantiles,
         }
-        for s in STATISTICS:
-            out[s] = getattr(self, s).to_dict()
+        for s in ALL_STATISTICS:
+            if getattr(self, s) is not None:
+                out[s] = getattr(self, s).to_dict()
         if include_samples and self.samples is not None:
             out["samples"] = {k: v.tolist() for k, v in self.samples.items()}
         return out
@@ -821,8 +857,8 @@ def monte_carlo(gearset: Gearset, speeds: Speeds, tolerances: Tolerances, window
     points_per_rev : int
         Used by the default ``n_times`` [-].
     max_memory : float
-        Bytes allowed for keeping the per-sample results; beyond, bounded-memory fine
-        histograms are used (``exact_quantiles=False``).
+        Bytes allowed for keeping the per-sample results (8 statistics x N planets x 8 B per
+        sample); beyond, bounded-memory fine histograms are used (``exact_quantiles=False``).
     keep_samples : bool, optional
         Force keeping (True) or not keeping (False) the per-sample arrays.
     progress : callable, optional
@@ -838,10 +874,58 @@ def monte_carlo(gearset: Gearset, speeds: Speeds, tolerances: Tolerances, window
     distribution of Ave_jn / Dev_jn over S samples estimates their probability densities.
     Each sample's Ave / Dev are those of :func:`phasing_statistics`. Unit-cube points are
     mapped through the inverse CDF of each band (the same mapping for both samplers).
+    Every statistic comes relative to planet 1 and absolute (``*_abs``), from the same samples.
+
+    Code layout: argument checks (``_mc_inputs``), the unit-cube sampler per replicate
+    (``_unit_draws``), the batched evaluation (``_run_batches``) and the summaries here; the
+    Sobol balance warning stays here so that it points at the caller.
     """
     t_start = time.perf_counter()
-    g = _check_gearset(gearset)
-    sp = _check_speeds(speeds)
+    g, sp, win, n, sampler, n_t, bs, reps, bins, levels, max_memory, eng = _mc_inputs(
+        gearset, speeds, tolerances, window, n_samples, sampler, n_times, batch_size,
+        replicates, bins, quantile_levels, max_memory, engine, progress, points_per_rev)
+    gen = np.random.default_rng(rng)
+    n_p = g.n_planets
+    d = tolerances.n_random(n_p)
+    reps = min(reps, n) if n > 0 else reps
+    bounds = _replicate_bounds(n, reps)
+    n_stat = len(ALL_STATISTICS)
+    keep = n * n_stat * n_p * 8 <= max_memory if keep_samples is None else bool(keep_samples)
+    grid = _Grid(g, sp, win, n_t)
+    if sampler == "sobol":
+        bs = 1 << (bs.bit_length() - 1)
+        sizes = np.diff(bounds)
+        if n > 0 and d > 0 and np.any(sizes & (sizes - 1)):
+            warnings.warn(f"monte_carlo: sobol replicates of {sorted(set(sizes.tolist()))} "
+                          "samples are not powers of 2 (balance properties lost); use "
+                          f"n_samples = {reps} * 2**m", ModelWarning, stacklevel=2)
+    draw = _unit_draws(sampler, gen, d, reps)
+    store = np.empty((n_stat, n, n_p)) if keep else None
+    stream = _run_batches(grid, tolerances, g.carrier_radius, draw, bounds, bs, eng, store,
+                          progress)
+    if n == 0:
+        summaries = [_nan_summary(n_p, levels, bins) for _ in ALL_STATISTICS]
+        samples = {s: np.zeros((0, n_p)) for s in ALL_STATISTICS} if keep else None
+    elif keep:
+        summaries = [_summary_exact(store[i], levels, bins, bounds) for i in range(n_stat)]
+        samples = {s: store[i] for i, s in enumerate(ALL_STATISTICS)}
+    else:
+        summaries = stream.summaries(levels, bins)
+        samples = None
+    wall = time.perf_counter() - t_start
+    logger.debug("monte_carlo: %d samples (%s, %s engine, %d times) in %.3f s", n, sampler, eng,
+                 n_t, wall)
+    return MonteCarloResult(*summaries[:4], n_samples=n, sampler=sampler, window=win,
+                            n_times=n_t, replicates=reps, engine=eng, wall_time=wall,
+                            tolerances=tolerances, samples=samples, exact_quantiles=keep,
+                            **dict(zip(ABSOLUTE_STATISTICS, summaries[4:])))
+
+
+def _mc_inputs(gearset, speeds, tolerances, window, n_samples, sampler, n_times, batch_size,
+               replicates, bins, quantile_levels, max_memory, engine, progress, points_per_rev):
+    """Validate the arguments of :func:`monte_carlo` (ValueError / TypeError naming them)."""
+    g = check_gearset(gearset)
+    sp = check_speeds(speeds)
     if not isinstance(tolerances, Tolerances):
         raise TypeError(f"tolerances must be a Tolerances, got {type(tolerances).__name__}")
     tolerances.check(g.carrier_radius)
@@ -861,72 +945,52 @@ def monte_carlo(gearset: Gearset, speeds: Speeds, tolerances: Tolerances, window
     eng = _kernels.resolve_engine(engine)
     if progress is not None and not callable(progress):
         raise TypeError(f"progress must be callable or None, got {progress!r}")
-    gen = np.random.default_rng(rng)
-    n_p = g.n_planets
-    d = tolerances.n_random(n_p)
-    reps = min(reps, n) if n > 0 else reps
-    bounds = _replicate_bounds(n, reps)
-    if keep_samples is None:
-        keep = n * 4 * n_p * 8 <= max_memory
-    else:
-        keep = bool(keep_samples)
-    grid = _Grid(g, sp, win, n_t)
-    if sampler == "sobol":
-        bs = 1 << (bs.bit_length() - 1)
-        sizes = np.diff(bounds)
-        if n > 0 and d > 0 and np.any(sizes & (sizes - 1)):
-            warnings.warn(f"monte_carlo: sobol replicates of {sorted(set(sizes.tolist()))} "
-                          "samples are not powers of 2 (balance properties lost); use "
-                          f"n_samples = {reps} * 2**m", ModelWarning, stacklevel=2)
-        engines = [qmc.Sobol(max(d, 1), scramble=True, rng=child) for child in gen.spawn(reps)]
+    return g, sp, win, n, sampler, n_t, bs, reps, bins, levels, max_memory, eng
 
-    store = np.empty((4, n, n_p)) if keep else None
+
+def _unit_draws(sampler, gen, d, reps):
+    """draw(r, m, first) -> (m, d) unit-cube points of replicate r (its first batch: first)."""
+    if sampler == "random":
+        return lambda r, m, first: gen.random((m, d))
+    engines = [qmc.Sobol(max(d, 1), scramble=True, rng=child) for child in gen.spawn(reps)]
+
+    def draw(r, m, first):
+        if first and (m & (m - 1)):
+            return engines[r].random(_next_pow2(m))[:m, :d]
+        return engines[r].random(m)[:, :d]
+    return draw
+
+
+def _run_batches(grid, tolerances, carrier_radius, draw, bounds, bs, eng, store, progress):
+    """Evaluate every replicate in batches; results into ``store`` or a bounded-memory stream.
+
+    Returns the :class:`_Stream` (None when ``store`` keeps the samples or nothing ran).
+    """
+    n_p = grid.n_planets
+    n = int(bounds[-1])
     stream = None
     done = 0
-    for r in range(reps):
+    for r in range(len(bounds) - 1):
         a0, a1 = int(bounds[r]), int(bounds[r + 1])
-        first_draw = True
         for a in range(a0, a1, bs):
             z = min(a1, a + bs)
             m = z - a
-            if sampler == "random":
-                u = gen.random((m, d))
-            else:
-                if first_draw and (m & (m - 1)):
-                    u = engines[r].random(_next_pow2(m))[:m, :d]
-                else:
-                    u = engines[r].random(m)[:, :d]
-            first_draw = False
-            es, ks, er, kr, ep, kp = _map_samples(u, tolerances, n_p)
+            es, ks, er, kr, ep, kp = _map_samples(draw(r, m, a == a0), tolerances, n_p)
             for name, e in (("e_sun", es), ("e_ring", er)):
-                if np.any(e + ep.max(axis=1) >= g.carrier_radius):
+                if np.any(e + ep.max(axis=1) >= carrier_radius):
                     raise ValueError(f"monte_carlo: a sampled {name} + e_planet reached the "
-                                     f"carrier radius {g.carrier_radius!r} m; narrow the bands")
+                                     f"carrier radius {carrier_radius!r} m; narrow the bands")
             res = np.stack(grid.run(es, ks, er, kr, ep, kp, eng))
-            if keep:
+            if store is not None:
                 store[:, a:z] = res
             else:
                 if stream is None:
-                    stream = _Stream(res, reps)
+                    stream = _Stream(res, len(bounds) - 1)
                 stream.add(res, r)
             done += m
             if progress is not None:
                 progress(done, n)
-    if n == 0:
-        summaries = [_nan_summary(n_p, levels, bins) for _ in STATISTICS]
-        samples = {s: np.zeros((0, n_p)) for s in STATISTICS} if keep else None
-    elif keep:
-        summaries = [_summary_exact(store[i], levels, bins, bounds) for i in range(4)]
-        samples = {s: store[i] for i, s in enumerate(STATISTICS)}
-    else:
-        summaries = stream.summaries(levels, bins)
-        samples = None
-    wall = time.perf_counter() - t_start
-    logger.debug("monte_carlo: %d samples (%s, %s engine, %d times) in %.3f s", n, sampler, eng,
-                 n_t, wall)
-    return MonteCarloResult(*summaries, n_samples=n, sampler=sampler, window=win, n_times=n_t,
-                            replicates=reps, engine=eng, wall_time=wall, tolerances=tolerances,
-                            samples=samples, exact_quantiles=keep)
+    return stream
 
 
 # ----------------------------------------------------------------------------- seed 000 scenes

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..models.bearing import BearingMoments
 from . import figures
 from .html import Report
 
@@ -287,7 +288,7 @@ def build_report(ctx, out_dir) -> Path:
         m = b["concentrated"]
         from ..models.tilt import TABLE11_THEORY, table10_cases, table11_cases
 
-        if hasattr(m, "m_loa_sun"):
+        if isinstance(m, BearingMoments):
             rows = [{"load": "model, concentrated (Z = 0)", "Mx [N·m]": m.mx, "My [N·m]": m.my,
                      "M_LOA sun [N·m]": m.m_loa_sun, "M_LOA ring [N·m]": m.m_loa_ring}]
             if "measured" in b:
@@ -333,7 +334,7 @@ def build_report(ctx, out_dir) -> Path:
                    "contact": float(np.min(sol.contact_fraction)),
                    "iterations": f"{int(np.max(sol.iterations))} ({np.ravel(sol.method)[0]})",
                    "residual [m]": float(np.max(sol.residual))}
-            if hasattr(mom, "my"):
+            if isinstance(mom, BearingMoments):
                 row["My [N·m]"] = float(np.ravel(mom.my)[0])
                 row["M_LOA sun [N·m]"] = float(np.ravel(mom.m_loa_sun)[0])
                 row["M_LOA ring [N·m]"] = float(np.ravel(mom.m_loa_ring)[0])

@@ -6,6 +6,7 @@ differences, `_input_rounding`). A full unit covers both the seed's own rounding
 and the distance of our geometry (derived from the gear data) from the printed values.
 """
 
+import dataclasses
 import math
 
 import numpy as np
@@ -40,9 +41,9 @@ DEG = math.pi / 180.0
 
 # printed inputs of Case 1 (seed text under Table 3) and their printed units
 CASE1_PRINTED = dict(r_sun=29.805 * MM, r_ps=22.141 * MM, r_pr=22.510 * MM, phi_1=21.30 * DEG,
-                     phi_2=23.59 * DEG, beta_1=21.00 * DEG, beta_2=21.32 * DEG)
+                     phi_2=23.59 * DEG, helix_1=21.00 * DEG, helix_2=21.32 * DEG)
 CASE1_UNITS = dict(r_sun=0.001 * MM, r_ps=0.001 * MM, r_pr=0.001 * MM, phi_1=0.01 * DEG,
-                   phi_2=0.01 * DEG, beta_1=0.01 * DEG, beta_2=0.01 * DEG)
+                   phi_2=0.01 * DEG, helix_1=0.01 * DEG, helix_2=0.01 * DEG)
 T_IN = 1378.7   # Table 1, printed to 0.1 N·m (relative 4e-5: included in the bounds below)
 
 
@@ -85,8 +86,8 @@ def test_operating_geometry_reproduces_printed_case1_values(case1):
     # angles printed to 0.01 deg: half a unit
     assert g.phi_1 / DEG == pytest.approx(21.30, abs=0.005)
     assert g.phi_2 / DEG == pytest.approx(23.59, abs=0.005)
-    assert g.beta_1 / DEG == pytest.approx(21.00, abs=0.005)
-    assert g.beta_2 / DEG == pytest.approx(21.32, abs=0.005)
+    assert g.helix_1 / DEG == pytest.approx(21.00, abs=0.005)
+    assert g.helix_2 / DEG == pytest.approx(21.32, abs=0.005)
 
 
 def test_operating_geometry_reproduces_printed_case2_values(case2b):
@@ -96,9 +97,9 @@ def test_operating_geometry_reproduces_printed_case2_values(case2b):
     assert g.r_sp_rp / MM == pytest.approx(22.23, abs=0.005)
     assert g.r_rp_sp / MM == pytest.approx(20.52, abs=0.005)
     assert g.r_rp_ring / MM == pytest.approx(20.68, abs=0.005)
-    assert g.alpha / DEG == pytest.approx(45.002, abs=5e-4)
-    assert g.beta / DEG == pytest.approx(75.768, abs=5e-4)
-    assert g.gamma / DEG == pytest.approx(59.230, abs=5e-4)
+    assert g.included_angle_sun / DEG == pytest.approx(45.002, abs=5e-4)
+    assert g.included_angle_sp / DEG == pytest.approx(75.768, abs=5e-4)
+    assert g.included_angle_rp / DEG == pytest.approx(59.230, abs=5e-4)
     # Fig. 6 worst angles 111 = 90 + phi_1 and 67 = 90 - phi_3 (printed to 1 deg)
     assert 90 + g.phi_1 / DEG == pytest.approx(111, abs=0.5)
     assert 90 - g.phi_3 / DEG == pytest.approx(67, abs=0.5)
@@ -153,8 +154,8 @@ def test_table3_forces(case1):
     assert fyr == pytest.approx(fys * g.r_ps / g.r_pr, rel=1e-14)
     assert f.fx[0] == pytest.approx(-fys * math.tan(g.phi_1), rel=1e-14)
     assert f.fx[1] == pytest.approx(fyr * math.tan(g.phi_2), rel=1e-14)
-    assert f.fz[0] == pytest.approx(-fys * math.tan(g.beta_1), rel=1e-14)
-    assert f.fz[1] == pytest.approx(fyr * math.tan(g.beta_2), rel=1e-14)
+    assert f.fz[0] == pytest.approx(-fys * math.tan(g.helix_1), rel=1e-14)
+    assert f.fz[1] == pytest.approx(fyr * math.tan(g.helix_2), rel=1e-14)
 
 
 def _case1_moments(p, torque):
@@ -232,15 +233,16 @@ def test_offsets_are_self_correcting(case1):
 # Table 5 and Table 11 theory row (double pinion)
 # ----------------------------------------------------------------------------------------------
 CASE2_PRINTED = dict(r_sun=29.805 * MM, r_sp_sun=22.14 * MM, r_sp_rp=22.23 * MM,
-                     r_rp_sp=20.52 * MM, r_rp_ring=20.68 * MM, beta=75.768 * DEG,
-                     gamma=59.230 * DEG, phi_1=21.30 * DEG, phi_2=21.88 * DEG, phi_3=22.98 * DEG,
-                     helix_1=21.00 * DEG, helix_2=21.08 * DEG, helix_3=21.23 * DEG)
+                     r_rp_sp=20.52 * MM, r_rp_ring=20.68 * MM, included_angle_sp=75.768 * DEG,
+                     included_angle_rp=59.230 * DEG, phi_1=21.30 * DEG, phi_2=21.88 * DEG,
+                     phi_3=22.98 * DEG, helix_1=21.00 * DEG, helix_2=21.08 * DEG,
+                     helix_3=21.23 * DEG)
 # (phi_2, phi_3 and helix_2, helix_3 are not printed by the seed: our derived values rounded
 # to 0.01 deg, given the same unit as the printed angles)
 CASE2_UNITS = dict(r_sun=0.001 * MM, r_sp_sun=0.01 * MM, r_sp_rp=0.01 * MM, r_rp_sp=0.01 * MM,
-                   r_rp_ring=0.01 * MM, beta=0.001 * DEG, gamma=0.001 * DEG,
-                   phi_1=0.01 * DEG, phi_2=0.01 * DEG, phi_3=0.01 * DEG, helix_1=0.01 * DEG,
-                   helix_2=0.01 * DEG, helix_3=0.01 * DEG)
+                   r_rp_ring=0.01 * MM, included_angle_sp=0.001 * DEG,
+                   included_angle_rp=0.001 * DEG, phi_1=0.01 * DEG, phi_2=0.01 * DEG,
+                   phi_3=0.01 * DEG, helix_1=0.01 * DEG, helix_2=0.01 * DEG, helix_3=0.01 * DEG)
 
 
 def _table5(p, torque):
@@ -315,11 +317,11 @@ def test_table5_case2a(case1):
 def test_double_pinion_reduces_to_single_pinion():
     # Table 4 reduces to Table 3 on beta = 180 deg, gamma = 0 (seed); use radii/angles of a
     # single pinion for SP and compare every SP output, with offsets too
-    s = SinglePinion(r_sun=0.03, r_ps=0.022, r_pr=0.0225, phi_1=0.37, phi_2=0.41, beta_1=0.36,
-                     beta_2=0.37, n_planets=4)
+    s = SinglePinion(r_sun=0.03, r_ps=0.022, r_pr=0.0225, phi_1=0.37, phi_2=0.41, helix_1=0.36,
+                     helix_2=0.37, n_planets=4)
     d = DoublePinion(r_sun=0.03, r_sp_sun=0.022, r_sp_rp=0.0225, r_rp_sp=0.02, r_rp_ring=0.021,
-                     beta=math.pi, gamma=0.0, phi_1=0.37, phi_2=0.41, phi_3=0.4, helix_1=0.36,
-                     helix_2=0.37, helix_3=0.37, n_planets=4)
+                     included_angle_sp=math.pi, included_angle_rp=0.0, phi_1=0.37, phi_2=0.41,
+                     phi_3=0.4, helix_1=0.36, helix_2=0.37, helix_3=0.37, n_planets=4)
     zs, zr = np.array([0.0, 1e-3, -2e-3]), np.array([0.0, 3e-3, 1e-3])
     ms = single_pinion_moments(s, 900.0, zs, zr)
     md = double_pinion_moments(d, 900.0, zs, zr, 0.0)
@@ -334,15 +336,15 @@ def test_double_pinion_loa_formulas_of_the_seed(case2b):
     g = case2b.geometry
     m = double_pinion_moments(g, 1000.0)
     fz = m.forces.fz
-    mx_sp = -fz[1] * g.r_sp_rp * math.sin(g.beta)
-    my_sp = fz[0] * g.r_sp_sun + fz[1] * g.r_sp_rp * math.cos(g.beta)
-    mx_rp = fz[2] * g.r_rp_sp * math.sin(g.gamma)
-    my_rp = fz[2] * g.r_rp_sp * math.cos(g.gamma) - fz[3] * g.r_rp_ring
+    mx_sp = -fz[1] * g.r_sp_rp * math.sin(g.included_angle_sp)
+    my_sp = fz[0] * g.r_sp_sun + fz[1] * g.r_sp_rp * math.cos(g.included_angle_sp)
+    mx_rp = fz[2] * g.r_rp_sp * math.sin(g.included_angle_rp)
+    my_rp = fz[2] * g.r_rp_sp * math.cos(g.included_angle_rp) - fz[3] * g.r_rp_ring
     assert m.mx_sp == pytest.approx(mx_sp, rel=1e-12)
     assert m.my_sp == pytest.approx(my_sp, rel=1e-12)
     assert m.mx_rp == pytest.approx(mx_rp, rel=1e-12)
     assert m.my_rp == pytest.approx(my_rp, rel=1e-12)
-    b, gm, p1, p2, p3 = g.beta, g.gamma, g.phi_1, g.phi_2, g.phi_3
+    b, gm, p1, p2, p3 = g.included_angle_sp, g.included_angle_rp, g.phi_1, g.phi_2, g.phi_3
     assert m.m_sp_sun == pytest.approx(mx_sp * math.cos(p1) + my_sp * math.sin(p1), rel=1e-12)
     assert m.m_sp_rp == pytest.approx(-mx_sp * math.cos(b - p2) - my_sp * math.sin(b - p2),
                                       rel=1e-12)
@@ -429,10 +431,10 @@ def test_parametric_matches_full_double_pinion_model(case2b):
     # (the operating helix angles of the geometry make F_zSUN = -F_zRP exactly)
     g = case2b.geometry
     p = {k: getattr(g, k) for k in CASE2_PRINTED}
-    p.update(phi_2=g.phi_1, gamma=0.0)
+    p.update(phi_2=g.phi_1, included_angle_rp=0.0)
     fa = single_pinion_forces(seed_case("1").geometry, case2b.input_torque).fz[0]
     for beta in (60 * DEG, 90 * DEG, 111 * DEG, math.pi):
-        p["beta"] = beta
+        p["included_angle_sp"] = beta
         d = DoublePinion(n_planets=3, **p)
         m = double_pinion_moments(d, case2b.input_torque)
         fz = m.forces.fz
@@ -449,8 +451,8 @@ def test_parametric_matches_full_double_pinion_model(case2b):
 @given(zs=st.floats(-0.02, 0.02), zr=st.floats(-0.02, 0.02), t=st.floats(1e-3, 1e5),
        phi1=st.floats(0.1, 0.6), phi2=st.floats(0.1, 0.6), b1=st.floats(-0.6, 0.6))
 def test_inverse_is_exact_inverse_of_forward(zs, zr, t, phi1, phi2, b1):
-    g = SinglePinion(r_sun=0.03, r_ps=0.02, r_pr=0.021, phi_1=phi1, phi_2=phi2, beta_1=b1,
-                     beta_2=0.3, n_planets=3)
+    g = SinglePinion(r_sun=0.03, r_ps=0.02, r_pr=0.021, phi_1=phi1, phi_2=phi2, helix_1=b1,
+                     helix_2=0.3, n_planets=3)
     mx, my = moments_from_offsets(g, t, zs, zr)
     zs2, zr2 = offsets_from_moments(g, t, mx, my)
     assert zs2 == pytest.approx(zs, abs=1e-12)
@@ -514,8 +516,8 @@ def test_torque_balance_mz_zero(t, zs, zr, beta, gamma):
     d = seed_case("2-B").geometry
     if beta + gamma > math.pi:
         gamma = math.pi - beta
-    dd = DoublePinion(**{**{k: getattr(d, k) for k in CASE2_PRINTED}, "beta": beta,
-                         "gamma": gamma, "n_planets": 3})
+    dd = DoublePinion(**{**{k: getattr(d, k) for k in CASE2_PRINTED}, "included_angle_sp": beta,
+                         "included_angle_rp": gamma, "n_planets": 3})
     m = double_pinion_moments(dd, t, zs, 0.0, zr)
     assert m.mz_sp == pytest.approx(0.0, abs=1e-9 * (1 + t))
     assert m.mz_rp == pytest.approx(0.0, abs=1e-9 * (1 + t))
@@ -561,22 +563,22 @@ def test_empty_inputs(case1, case2b):
 
 
 def test_bad_geometry():
-    ok = dict(r_sun=0.03, r_ps=0.02, r_pr=0.021, phi_1=0.37, phi_2=0.41, beta_1=0.36,
-              beta_2=0.37, n_planets=3)
+    ok = dict(r_sun=0.03, r_ps=0.02, r_pr=0.021, phi_1=0.37, phi_2=0.41, helix_1=0.36,
+              helix_2=0.37, n_planets=3)
     SinglePinion(**ok)
     for key, val, exc in (("r_sun", float("nan"), ValueError), ("r_ps", -1.0, ValueError),
                           ("phi_1", 0.0, ValueError), ("phi_2", 2.0, ValueError),
-                          ("beta_1", float("inf"), ValueError), ("n_planets", 0, ValueError),
+                          ("helix_1", float("inf"), ValueError), ("n_planets", 0, ValueError),
                           ("r_pr", "x", TypeError), ("face_width", 0.0, ValueError)):
         with pytest.raises(exc, match=key):
             SinglePinion(**{**ok, key: val})
     d = {k: getattr(seed_case("2-B").geometry, k) for k in CASE2_PRINTED}
     with pytest.raises(ValueError, match="alpha"):
-        DoublePinion(n_planets=3, alpha=1.0, **d)
-    with pytest.raises(ValueError, match="beta"):
-        DoublePinion(n_planets=3, **{**d, "beta": 0.0})
-    with pytest.raises(ValueError, match="beta \\+ gamma"):
-        DoublePinion(n_planets=3, **{**d, "beta": 2.5, "gamma": 1.0})
+        DoublePinion(n_planets=3, included_angle_sun=1.0, **d)
+    with pytest.raises(ValueError, match="included_angle_sp"):
+        DoublePinion(n_planets=3, **{**d, "included_angle_sp": 0.0})
+    with pytest.raises(ValueError, match="included_angle_sp \\+ included_angle_rp"):
+        DoublePinion(n_planets=3, **{**d, "included_angle_sp": 2.5, "included_angle_rp": 1.0})
     with pytest.raises(ValueError, match="name"):
         seed_case("3")
 
@@ -617,9 +619,9 @@ def test_bad_inputs_to_functions(case1, case2b):
         single_equivalent_moment(1.0, -0.02, 0.3)
     with pytest.raises(ValueError, match="r_inter"):
         worst_to_single_ratio(0.3, 0.02, 0.0)
-    with pytest.raises(ValueError, match="beta"):
+    with pytest.raises(ValueError, match="included_angle_sp"):
         sp_sun_moment(1.0, 0.02, 0.3, float("inf"))
-    with pytest.raises(ValueError, match="gamma"):
+    with pytest.raises(ValueError, match="included_angle_rp"):
         rp_ring_moment(1.0, 0.02, 0.3, float("nan"))
     with pytest.raises(ValueError, match="axial_force"):
         sp_sun_moment(float("nan"), 0.02, 0.3, 1.0)
@@ -627,3 +629,85 @@ def test_bad_inputs_to_functions(case1, case2b):
         same_as_single_angle(0.3, "ring")
     with pytest.raises(ValueError, match="name"):
         single_pinion_forces(g, 1.0).side("planet")
+
+
+# ----------------------------------------------------------------------------------------------
+# API: one meaning per name, unit-explicit constructors, shared result names, Python floats
+# ----------------------------------------------------------------------------------------------
+def test_old_parameter_names_still_work_and_warn():
+    from pipeline.errors import DeprecatedNameWarning
+
+    new = seed_case("1").geometry
+    kw = {k: getattr(new, k) for k in ("r_sun", "r_ps", "r_pr", "phi_1", "phi_2", "n_planets")}
+    with pytest.warns(DeprecatedNameWarning, match="'beta_1' is renamed 'helix_1'"):
+        old = SinglePinion(beta_1=new.helix_1, beta_2=new.helix_2, **kw)
+    assert old == SinglePinion(helix_1=new.helix_1, helix_2=new.helix_2, **kw)
+    with pytest.warns(DeprecatedNameWarning, match="helix_2"):
+        assert old.beta_2 == new.helix_2
+    d = seed_case("2-B").geometry
+    dkw = {f.name: getattr(d, f.name) for f in dataclasses.fields(d)}
+    for k in ("included_angle_sp", "included_angle_rp", "included_angle_sun"):
+        dkw.pop(k)
+    with pytest.warns(DeprecatedNameWarning, match="included_angle_sp"):
+        dold = DoublePinion(beta=d.included_angle_sp, gamma=d.included_angle_rp, **dkw)
+    assert dold == d
+    with pytest.warns(DeprecatedNameWarning, match="included_angle_rp"):
+        assert dold.gamma == d.included_angle_rp
+    with pytest.raises(TypeError, match="helix_1"):
+        SinglePinion(beta_1=0.3, helix_1=0.3, helix_2=0.3, **kw)
+    with pytest.raises(AttributeError):
+        new.beta
+    with pytest.warns(DeprecatedNameWarning, match="included_angle_sp"):
+        assert sp_sun_moment(1.0, 0.02, 0.3, beta=1.2) == sp_sun_moment(1.0, 0.02, 0.3, 1.2)
+
+
+def test_from_mm_deg_matches_si():
+    # seed 001 Table 1 operating values, in the units the seed prints them
+    g = SinglePinion.from_mm_deg(r_sun_mm=29.805, r_ps_mm=22.141, r_pr_mm=22.510, phi_1_deg=21.30,
+                                 phi_2_deg=23.59, helix_1_deg=21.00, helix_2_deg=21.32,
+                                 n_planets=3, face_width_mm=29.0)
+    assert g == SinglePinion(r_sun=29.805 * MM, r_ps=22.141 * MM, r_pr=22.510 * MM,
+                             phi_1=21.30 * DEG, phi_2=23.59 * DEG, helix_1=21.00 * DEG,
+                             helix_2=21.32 * DEG, n_planets=3, face_width=29.0 * MM)
+    d = DoublePinion.from_mm_deg(
+        r_sun_mm=29.805, r_sp_sun_mm=22.14, r_sp_rp_mm=22.23, r_rp_sp_mm=20.52, r_rp_ring_mm=20.68,
+        included_angle_sp_deg=75.768, included_angle_rp_deg=59.230, included_angle_sun_deg=45.002,
+        phi_1_deg=21.30, phi_2_deg=21.88, phi_3_deg=22.98, helix_1_deg=21.00, helix_2_deg=21.08,
+        helix_3_deg=21.23, n_planets=3)
+    assert d == DoublePinion(n_planets=3, **CASE2_PRINTED)
+    with pytest.raises(TypeError):
+        SinglePinion.from_mm_deg(29.805, 22.141, 22.510, 21.30, 23.59, 21.0, 21.32, 3)
+    with pytest.raises(ValueError, match="r_sun_mm"):
+        SinglePinion.from_mm_deg(r_sun_mm=float("nan"), r_ps_mm=22.141, r_pr_mm=22.510,
+                                 phi_1_deg=21.30, phi_2_deg=23.59, helix_1_deg=21.00,
+                                 helix_2_deg=21.32, n_planets=3)
+
+
+def test_single_and_double_moments_share_names():
+    c1, c2 = seed_case("1"), seed_case("2-B")
+    s = single_pinion_moments(c1.geometry, c1.input_torque, 1e-3, 2e-3)
+    d = double_pinion_moments(c2.geometry, c2.input_torque, 1e-3, 0.0, 2e-3)
+    for m, n_mesh, n_pin in ((s, 2, 1), (d, 3, 2)):
+        assert len(m.mesh_names) == n_mesh and np.shape(m.z) == (n_mesh,)
+        assert np.shape(m.bending) == (n_pin, 2) and len(m.pinion_names) == n_pin
+        assert np.shape(m.loa) == (len(m.loa_names),)
+        assert m.z_sun == 1e-3 and m.z_ring == 2e-3
+        assert m.loa_of(m.loa_names[0]) == m.m_loa_sun
+        assert m.loa_of(m.loa_names[-1]) == m.m_loa_ring
+    assert d.m_loa_sun == d.m_sp_sun and d.m_loa_ring == d.m_rp_ring
+    assert s.m_loa_sun == s.loa[0] and (s.mx, s.my) == tuple(s.bending[0])
+
+
+def test_scalar_inputs_give_python_floats():
+    c1, c2 = seed_case("1"), seed_case("2-B")
+    s = single_pinion_moments(c1.geometry, c1.input_torque)
+    d = double_pinion_moments(c2.geometry, c2.input_torque)
+    for v in (s.mx, s.my, s.m_loa_sun, s.m_loa_ring_ld, s.z_s, s.total, d.m_sp_rp, d.mx_rp,
+              d.total_sp, d.contributions["FzSUN"][0], sp_sun_moment(1.0, 0.02, 0.3, 1.2),
+              worst_case_moment(1.0, 0.02, 0.3), worst_to_single_ratio(0.3),
+              worst_case_angles(0.3)[0], same_as_single_angle(0.3),
+              *offsets_from_moments(c1.geometry, 1000.0, 10.0, 200.0),
+              *loa_from_moments(c1.geometry, 10.0, 200.0)):
+        assert type(v) is float
+    # arrays stay arrays
+    assert single_pinion_moments(c1.geometry, [1.0, 2.0]).mx.shape == (2,)

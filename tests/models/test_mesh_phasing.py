@@ -218,8 +218,8 @@ def test_reduce_angle_against_mpmath():
         ref = mp.mpf(float(xi)) - 2 * mp.pi * mp.nint(mp.mpf(float(xi)) / (2 * mp.pi))
         assert abs(float(mp.mpf(float(ri)) - ref)) <= 4e-16
     # the 2 pi split constants carry 2 pi to ~1e-28
-    from pipeline.models import mesh_phasing as mph
-    assert abs(mp.mpf(mph._C1) + mp.mpf(mph._C2) + mp.mpf(mph._C3) - 2 * mp.pi) < 1e-27
+    from pipeline.models import _geometry as geo
+    assert abs(mp.mpf(geo._C1) + mp.mpf(geo._C2) + mp.mpf(geo._C3) - 2 * mp.pi) < 1e-27
     assert reduce_angle([]).shape == (0,)
     with pytest.raises(ValueError):
         reduce_angle([MAX_PHASE * 2])

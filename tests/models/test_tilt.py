@@ -264,7 +264,7 @@ def test_stiffness_sweep_is_continuous_and_monotonic(case1):
        b=st.floats(5e-3, 0.08), logcg=st.floats(9.0, 11.0))
 def test_random_single_pinions_converge(phi1, phi2, b1, b2, ratio, logk, b, logcg):
     g = SinglePinion(r_sun=0.03, r_ps=0.02, r_pr=0.02 * ratio, phi_1=phi1, phi_2=phi2,
-                     beta_1=b1, beta_2=b2, n_planets=3, face_width=b)
+                     helix_1=b1, helix_2=b2, n_planets=3, face_width=b)
     sol = solve_tilt(g, 500.0, 10 ** logk, c_g=10 ** logcg)
     assert bool(sol.converged)
     assert np.all(np.abs(sol.z) < b / 2)
@@ -306,8 +306,8 @@ def test_fallback_and_convergence_warning(case1, monkeypatch):
 
 def test_no_axial_force_means_no_shift():
     # spur-like pinion (zero helix): no overturning moment, centred patterns at every k_t
-    g = SinglePinion(r_sun=0.03, r_ps=0.02, r_pr=0.02, phi_1=0.35, phi_2=0.35, beta_1=0.0,
-                     beta_2=0.0, n_planets=3, face_width=B)
+    g = SinglePinion(r_sun=0.03, r_ps=0.02, r_pr=0.02, phi_1=0.35, phi_2=0.35, helix_1=0.0,
+                     helix_2=0.0, n_planets=3, face_width=B)
     sol = solve_tilt(g, 500.0, [0.0, 1.0, 1e6, np.inf])
     assert np.all(sol.z == 0) and np.all(sol.tilt == 0) and np.all(sol.contact_fraction == 1)
     assert np.all(sol.converged)
@@ -446,8 +446,8 @@ def test_bad_inputs(case1):
         solve_tilt(g, 1.0, 1e5, face_width=[0.01, 0.02, 0.03])
     with pytest.raises(ValueError, match="face_width"):
         solve_tilt(g, 1.0, 1e5, face_width=float("nan"))
-    nofw = SinglePinion(r_sun=0.03, r_ps=0.02, r_pr=0.021, phi_1=0.37, phi_2=0.41, beta_1=0.36,
-                        beta_2=0.37, n_planets=3)
+    nofw = SinglePinion(r_sun=0.03, r_ps=0.02, r_pr=0.021, phi_1=0.37, phi_2=0.41, helix_1=0.36,
+                        helix_2=0.37, n_planets=3)
     with pytest.raises(ValueError, match="face_width"):
         solve_tilt(nofw, 1.0, 1e5)
     with pytest.raises(ValueError, match="load_basis"):
@@ -460,3 +460,46 @@ def test_bad_inputs(case1):
         solve_tilt("case 1", 1.0, 1e5)
     with pytest.raises(ValueError, match="c_g"):
         compare_gsam(c_g=-1.0)
+
+
+# ----------------------------------------------------------------------------------------------
+# API: units named in the keywords, floats for scalars, same moment names for both planets
+# ----------------------------------------------------------------------------------------------
+def test_stiffness_units_are_explicit():
+    c = seed_case("1")
+    # seed 001 Table 10 GB: 8.8e7 N·mm/rad = 8.8e4 N·m/rad; ISO 6336 c_g 20 N/(mm·µm)
+    ref = solve_tilt(c.geometry, c.input_torque, 8.8e4)
+    for kw in ({"k_tilt_Nmm_per_rad": 8.8e7}, {"k_tilt_Nm_per_rad": 8.8e4},
+               {"k_tilt_Nmm_per_rad": 8.8e7, "c_g_N_per_mm_um": 20.0}):
+        sol = solve_tilt(c.geometry, c.input_torque, **kw)
+        assert sol.k_tilt == ref.k_tilt and sol.c_g == ref.c_g == C_G_DEFAULT
+        np.testing.assert_array_equal(sol.z, ref.z)
+    with pytest.raises(TypeError, match="k_tilt_Nmm_per_rad"):
+        solve_tilt(c.geometry, c.input_torque)
+    with pytest.raises(TypeError, match="once"):
+        solve_tilt(c.geometry, c.input_torque, 8.8e4, k_tilt_Nmm_per_rad=8.8e7)
+    with pytest.raises(TypeError, match="not both"):
+        solve_tilt(c.geometry, c.input_torque, 8.8e4, c_g=2e10, c_g_N_per_mm_um=20.0)
+    with pytest.raises(ValueError, match="k_tilt_Nmm_per_rad must be >= 0 \\[N·mm/rad\\]"):
+        solve_tilt(c.geometry, c.input_torque, k_tilt_Nmm_per_rad=-1.0)
+    with pytest.raises(ValueError, match="c_g_N_per_mm_um"):
+        solve_tilt(c.geometry, c.input_torque, 8.8e4, c_g_N_per_mm_um=0.0)
+
+
+def test_tilt_scalars_are_floats_and_moment_names_agree():
+    c1, c2 = seed_case("1"), seed_case("2-B")
+    s = solve_tilt(c1.geometry, c1.input_torque, 8.8e4)
+    d = solve_tilt(c2.geometry, c2.input_torque, 8.8e4)
+    for v in (s.input_torque, s.k_tilt, s.residual, s.z_s, s.z_r, d.z_r,
+              s.moments.m_loa_sun, d.moments.m_loa_ring,
+              load_distribution(1e4, 1e-4, B).centroid, tilt_from_centroid(1e-3, 1e4, B)):
+        assert type(v) is float
+    assert type(load_distribution(1e4, 1e-4, B).full_contact) is bool
+    for sol in (s, d):
+        m = sol.moments
+        assert m.mesh_names == sol.mesh_names
+        np.testing.assert_array_equal(m.z, sol.z)
+        assert (m.z_sun, m.z_ring) == (sol.z_s, sol.z_r)
+        assert m.m_loa_sun == m.loa_of(m.loa_names[0])
+    # batches stay arrays
+    assert solve_tilt(c1.geometry, c1.input_torque, [8.8e4, 8.8e3]).residual.shape == (2,)
