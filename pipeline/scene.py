@@ -270,7 +270,16 @@ def load_scene(path) -> Scene:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such scene file")
-    text = path.read_text(encoding="utf-8")
+    try:
+        data = path.read_bytes()
+    except OSError as exc:  # EIO from a failing disk carries no file name: add it
+        raise OSError(exc.errno, f"{path}: cannot read the scene: {exc.strerror or exc}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise SceneError(path, "", f"not UTF-8 text (byte 0x{data[exc.start]:02x} at offset "
+                         f"{exc.start}): save the scene as UTF-8", line) from None
     return parse_scene(text, path)
 
 
@@ -326,6 +335,11 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
     label = path if path is not None else "<scene>"
     try:
         raw = tomllib.loads(text)
+    except RecursionError:
+        # tomllib recurses once per nesting level of arrays / inline tables
+        depth = max(text.count("["), text.count("{"))
+        raise SceneError(label, "", f"nested arrays or inline tables too deep to read ({depth} "
+                         "brackets): a scene nests at most a few levels", 1) from None
     except tomllib.TOMLDecodeError as exc:
         m = re.search(r"line (\d+)", str(exc))
         line = int(m.group(1)) if m else None

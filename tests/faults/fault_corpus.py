@@ -612,13 +612,8 @@ def _deny_reading(target_key: str):
     return patch
 
 
-_SCENE_READ = ("pipeline/scene.py load_scene: an OSError of read() (EIO from /proc/self/mem, a "
-               "failing disk) carries no file name; the message is 'Input/output error' alone. "
-               "Catch OSError around read_text and re-raise it with the scene path")
 #: (role, kind) -> reason: known faults outside the CLI/io scope
 SPECIAL_XFAIL = {
-    ("scene", "proc-mem"): _SCENE_READ,
-    ("gearset", "proc-mem"): _SCENE_READ,
     ("scene-input", "symlink-loop"): (
         "pipeline/scene.py parse_scene: (base / recording).resolve() raises RuntimeError('Symlink "
         "loop from ...'): exit 1 with 'RuntimeError: ... (unexpected ...)', no scene file, key or "
@@ -888,12 +883,6 @@ def _wrong_type_cases() -> list[FaultCase]:
     return cases
 
 
-_NOT_UTF8 = ("pipeline/scene.py load_scene: Path.read_text(encoding='utf-8') raises "
-             "UnicodeDecodeError, whose message names neither the file nor the line; catch it and "
-             "raise SceneError(path, '', 'not UTF-8 text (byte 0x.. at line L)', L)")
-_RECURSION = ("pipeline/scene.py parse_scene: tomllib recurses once per nesting level and raises "
-              "RecursionError (message: 'maximum recursion depth exceeded', no file); catch "
-              "RecursionError around tomllib.loads and raise SceneError naming the line")
 _RANGE = ("pipeline/scene.py (item 5: range checks up front with key and line): ")
 
 
@@ -974,19 +963,19 @@ def scene_cases() -> list[FaultCase]:
                   (RUN,), names=("scene",)),
         FaultCase("scene/binary-garbage", "scene",
                   _scene_text(bytes(np.random.default_rng(0).integers(0, 256, 4096, dtype=np.uint8))),
-                  (RUN, CAMPAIGN, GEARSET_RUN), names=("scene",), xfail=_NOT_UTF8),
+                  (RUN, CAMPAIGN, GEARSET_RUN), names=("scene",)),
         FaultCase("scene/ascii-garbage", "scene", _scene_text("}{ ][ = = \n\x7f\x01 ]]\n"), (RUN,),
                   names=("scene",), contains=("line",)),
         FaultCase("scene/nul-bytes", "scene", _scene_text(base_text.replace("\n[speeds]", "\n\x00\x00[speeds]")),
                   (RUN,), names=("scene",), contains=("line",)),
         FaultCase("scene/not-utf8-latin1", "scene", _scene_text(latin1), (RUN, CAMPAIGN, GEARSET_RUN),
-                  names=("scene",), xfail=_NOT_UTF8),
+                  names=("scene",)),
         FaultCase("scene/not-utf8-utf16", "scene", _scene_text(base_text.encode("utf-16")), (RUN,),
-                  names=("scene",), xfail=_NOT_UTF8),
+                  names=("scene",)),
         FaultCase("scene/deeply-nested-arrays", "scene", _scene_text(nested_arrays), (RUN, GEARSET_RUN),
-                  names=("scene",), xfail=_RECURSION),
+                  names=("scene",)),
         FaultCase("scene/deeply-nested-inline-tables", "scene", _scene_text(nested_tables), (RUN,),
-                  names=("scene",), xfail=_RECURSION),
+                  names=("scene",)),
         FaultCase("scene/10MB-comments-then-unknown-table", "scene", _big_scene("comment"), (RUN,),
                   names=("scene",), contains=("speeds2", "line 1000")),
         FaultCase("scene/10MB-of-channels-not-in-the-file", "scene", _big_scene("channels"), (RUN,),
