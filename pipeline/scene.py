@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import stat
 import tomllib
 import warnings
 from dataclasses import dataclass, field
@@ -59,6 +60,19 @@ RESULTS: dict[str, tuple[str, ...]] = {
 }
 
 _NEEDS_RECORDING = {"load"}
+
+
+def _file_state(path) -> str:
+    """``"file"`` for a regular file, else why it is not one (never raises)."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return "no such recording file"
+    except OSError as e:  # ELOOP, ENAMETOOLONG, ENOTDIR, EACCES on a parent
+        return f"the recording cannot be reached ({e.strerror or e})"
+    if not stat.S_ISREG(st.st_mode):
+        return "not a regular file (a folder, FIFO or device)"
+    return "file"
 
 
 class SceneError(ValueError):
@@ -487,7 +501,9 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
         raise err(["input", "stop_s"], f"stop_s = {inp['stop_s']:g} s is not after start_s = "
                   f"{inp['start_s']:g} s: the window is empty")
     if "recording" in inp:
-        inp["recording"] = (base / inp["recording"]).resolve()
+        # absolute, not resolved: a symlink loop or an over-long name is reported by the
+        # file check below (with the key and line), not raised here
+        inp["recording"] = Path(os.path.normpath(os.path.abspath(base / inp["recording"])))
     if "start_s" in inp:
         inp["start"] = inp.pop("start_s")
     if "stop_s" in inp:
@@ -575,7 +591,7 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
     if "tolerance" in stages:
         _check_monte_carlo(scene, err)
     rec = scene.input.get("recording")
-    if "load" in stages and rec and Path(rec).is_file():
+    if "load" in stages and rec and _file_state(rec) == "file":
         from . import io
 
         try:
@@ -866,11 +882,10 @@ def _check_consistency(scene: Scene, text: str, label, *, check_files: bool = Tr
         raise SceneError(label, "input", f"results {scene.results} need an [input] recording or "
                          "synthetic scenario", _line_of(text, ["results"]))
     rec = scene.input.get("recording")
-    if check_files and set(stages) & _NEEDS_RECORDING and rec and not Path(rec).is_file():
+    state = _file_state(rec) if rec else "file"
+    if check_files and set(stages) & _NEEDS_RECORDING and state != "file":
         # checked only when a stage will read it: a bearing scene never opens its recording
-        what = ("not a regular file (a folder, FIFO or device)" if Path(rec).exists()
-                else "no such recording file")
-        raise SceneError(label, "input.recording", f"{what}: {rec}",
+        raise SceneError(label, "input.recording", f"{state}: {rec}",
                          _line_of(text, ["input", "recording"]))
     if set(stages) & _NEEDS_RECORDING and not rec and scene.input.get("synthetic"):
         cfg = _synthetic_config(scene.input)

@@ -52,6 +52,7 @@ import math
 import os
 import re
 import uuid
+import zlib
 import warnings
 from collections import OrderedDict
 from pathlib import Path
@@ -282,7 +283,7 @@ def _cache_key(f, path) -> tuple | None:
     """Key identifying this exact file content, or None (no caching) for files without a
     ``file_id`` (a random UUID our writer stores at every write, so a file rewritten at the
     same path never hits a stale entry; size and mtime guard against in-place edits)."""
-    file_id = f.attrs.get("file_id")
+    file_id = _plain(f.attrs.get("file_id"))
     if not isinstance(file_id, str):
         return None
     st = os.stat(path)
@@ -321,6 +322,13 @@ def _parse_header(f, path) -> tuple[dict, tuple, tuple]:
     from data_schemas import validate
 
     attrs = {k: _plain(v) for k, v in f.attrs.items()}
+    for key in ("meta", "history"):
+        crc = attrs.pop(f"{key}_crc32", None)
+        text = attrs.get(key)
+        if crc is not None and isinstance(text, str) and zlib.crc32(text.encode("utf-8")) != crc:
+            raise CorruptFileError(path, f"root attribute {key}",
+                                   f"CRC32 mismatch: the {len(text)}-character text is damaged "
+                                   f"(or was edited without updating {key}_crc32)")
     if attrs.get("meshphase_format") != "recording":
         raise RecordingFileError(path, "an HDF5 file but not a meshphase recording "
                                        "(root attribute meshphase_format='recording' missing)")
@@ -664,19 +672,23 @@ def _write_open(f, header, dtype, meta: str, history: str, chunk_samples: int, c
 
     n = int(header.n_samples)
     names = [c.name for c in header.channels]
-    f.attrs["meshphase_format"] = "recording"
+    f.attrs["meshphase_format"] = _fixed_text("recording")
     f.attrs["format_version"] = np.int64(FORMAT_VERSION)
     f.attrs["fs"] = np.float64(header.fs)
     f.attrs["t0"] = np.float64(header.t0)
     f.attrs["n_samples"] = np.int64(n)
-    f.attrs["dtype"] = str(np.dtype(dtype))
+    f.attrs["dtype"] = _fixed_text(str(np.dtype(dtype)))
     if header.start_datetime is not None:
-        f.attrs["start_datetime"] = header.start_datetime
-    f.attrs["channel_order"] = np.array(names, dtype=h5py.string_dtype())
-    f.attrs["meta"] = meta
-    f.attrs["history"] = history
-    f.attrs["created_by"] = f"meshphase {_version_string()}"
-    f.attrs["file_id"] = str(uuid.uuid4())
+        f.attrs["start_datetime"] = _fixed_text(header.start_datetime)
+    f.attrs["channel_order"] = _fixed_text(names)
+    for key, text in (("meta", meta), ("history", history)):
+        f.attrs[key] = _fixed_text(text)
+        b = text.encode("utf-8")
+        if len(b) > DENSE_ATTR_BYTES:
+            # too large for the checksummed object header: its CRC32 goes there instead
+            f.attrs[f"{key}_crc32"] = np.int64(zlib.crc32(b))
+    f.attrs["created_by"] = _fixed_text(f"meshphase {_version_string()}")
+    f.attrs["file_id"] = _fixed_text(str(uuid.uuid4()))
     group = f.create_group(_GROUP)
     kw = {}
     if n:
@@ -697,9 +709,35 @@ def _write_open(f, header, dtype, meta: str, history: str, chunk_samples: int, c
                 value = np.float64(value)
             elif isinstance(value, int):
                 value = np.int64(value)
+            elif isinstance(value, str):
+                value = _fixed_text(value)
             ds.attrs[key] = value
         dsets.append(ds)
     return dsets
+
+
+#: text attributes longer than this [bytes] leave the object header (HDF5 dense storage)
+DENSE_ATTR_BYTES = 60_000
+
+
+def _fixed_text(value):
+    """A text attribute value stored as fixed-length UTF-8 (a str, or a list of str).
+
+    Fixed-length strings live in the object header, which HDF5 1.10 checksums on every read,
+    so a damaged letter is an error; variable-length strings would live in the global heap,
+    which HDF5 does not checksum (a flipped byte would read back as a different, valid
+    text). Attributes over 64 KiB go to HDF5's dense storage, which is not checksummed
+    either: for ``meta``/``history`` text that large, :func:`write_blocks` stores its CRC32
+    as an integer attribute (``meta_crc32``, ``history_crc32``), checked on read. Files whose
+    attributes were edited later with variable-length strings (h5py's default) still read.
+    """
+    import h5py
+
+    if isinstance(value, str):
+        b = value.encode("utf-8")
+        return np.array(b, dtype=h5py.string_dtype("utf-8", max(len(b), 1)))
+    enc = [v.encode("utf-8") for v in value]
+    return np.array(enc, dtype=h5py.string_dtype("utf-8", max([len(b) for b in enc] + [1])))
 
 
 def _write_samples(dsets: list, blocks, n: int, dtype, cs: int) -> None:

@@ -127,15 +127,16 @@ def test_empty_recording_and_zero_channels_round_trip(tmp_path):
 def test_layout_is_channel_major_chunked_with_spec_attributes(tmp_path, recording):
     path = _write(recording, tmp_path / "l.h5", chunk_samples=512)
     with h5py.File(path, "r") as f:
-        assert f.attrs["meshphase_format"] == "recording"
+        # text attributes are fixed-length UTF-8 (checksummed object header): bytes in h5py
+        assert f.attrs["meshphase_format"] == b"recording"
         assert f.attrs["format_version"] == hdf5.FORMAT_VERSION
-        assert list(f.attrs["channel_order"]) == recording.names
+        assert [n.decode() for n in f.attrs["channel_order"]] == recording.names
         assert json.loads(f.attrs["meta"]) == recording.meta
         for spec in recording.channels:
             ds = f["channels"][spec.name]
             assert ds.shape == (recording.n_samples,) and ds.chunks == (512,)
             assert ds.compression is None
-            assert ds.attrs["kind"] == spec.kind and ds.attrs["gain"] == spec.gain
+            assert ds.attrs["kind"].decode() == spec.kind and ds.attrs["gain"] == spec.gain
             assert ("tooth" in ds.attrs) == (spec.tooth is not None)
 
 
@@ -404,3 +405,43 @@ def test_schema_loader():
         load_schema("../pyproject")
     with pytest.raises(TypeError, match="schema name must be a string"):
         validate({}, 3)
+
+
+# ------------------------------------------------------------------ text attribute integrity
+def test_damaged_text_attribute_is_an_error_naming_the_file(tmp_path, recording):
+    """A letter of a channel attribute changed in the file: fixed-length text attributes live
+    in the object header, whose checksum HDF5 checks (variable-length ones, in the global
+    heap, would read back silently changed)."""
+    path = _write(recording, tmp_path / "t.h5")
+    blob = bytearray(path.read_bytes())
+    off = blob.index(recording.channels[0].name.encode(), 2048)
+    blob[off] ^= 0x20
+    bad = tmp_path / "bad.h5"
+    bad.write_bytes(bytes(blob))
+    with pytest.raises(CorruptFileError, match="bad.h5"):
+        pio.read(bad)
+
+
+def test_large_meta_carries_a_crc_that_is_checked(tmp_path, recording):
+    """meta over 60 kB leaves the checksummed object header: its CRC32 stays there and
+    catches a changed letter; the text still round-trips."""
+    rec = Recording(recording.data, recording.fs, recording.channels,
+                    meta={"note": "x" * 70_000, "rig": "bench 3"})
+    path = _write(rec, tmp_path / "m.h5")
+    assert pio.read(path).meta == rec.meta
+    with h5py.File(path, "r+") as f:
+        assert "meta_crc32" in f.attrs
+        f.attrs["meta"] = json.dumps({"note": "x" * 70_000, "rig": "bench 4"})
+    with pytest.raises(CorruptFileError, match="root attribute meta.*CRC32"):
+        pio.read(path)
+
+
+def test_attributes_edited_with_h5py_defaults_still_read(tmp_path, recording):
+    """A user editing a small attribute with h5py (variable-length str) is not damage."""
+    path = _write(recording, tmp_path / "e.h5")
+    with h5py.File(path, "r+") as f:
+        f.attrs["meta"] = json.dumps({"operator": "K. Lee"})
+        f["channels"][hdf5.dataset_name(recording.channels[0].name)].attrs["units"] = "V"
+    back = pio.read(path)
+    assert back.meta == {"operator": "K. Lee"}
+    assert back.channels[0].units == "V"
