@@ -60,8 +60,9 @@ import traceback
 import uuid
 import warnings
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Callable, Iterable
 
+from .jsonable import to_jsonable
 from .log import logger
 from .validate import as_positive, as_positive_int, as_regular_file
 
@@ -699,7 +700,7 @@ def _campaign_task(task: Callable[..., dict], scene_path: str, recording_path: s
         d = Path(out_dir)
         try:
             d.mkdir(parents=True, exist_ok=True)
-            _write_text_atomic(d / DONE_NAME, json.dumps(_jsonable({"meshphase_done": 1, "key": done_key,
+            _write_text_atomic(d / DONE_NAME, json.dumps(to_jsonable({"meshphase_done": 1, "key": done_key,
                                                                     "record": rec}), indent=1))
         except OSError as exc:
             rec.setdefault("messages", []).append(f"campaign: completion marker not written ({exc}); "
@@ -825,18 +826,6 @@ def campaign_rows(records: list[dict]) -> list[dict]:
     per_planet = sorted((k for k in keys if k.startswith(("gamma_", "load_sharing_"))), key=planet_key)
     order = fixed + per_planet + tail
     return [{k: row.get(k) for k in order} for row in rows]
-
-
-def _jsonable(v: Any) -> Any:
-    if isinstance(v, dict):
-        return {str(k): _jsonable(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_jsonable(x) for x in v]
-    if isinstance(v, float):
-        return v if math.isfinite(v) else None
-    if isinstance(v, Path):
-        return str(v)
-    return v
 
 
 def campaign_exit_code(campaign: dict) -> int:
@@ -1145,7 +1134,7 @@ def _campaign_body(scene, scene_path, inputs, files, skipped, names, out, opts) 
     json_path = out / "campaign.json"
     result["files"] = {"campaign.json": final_of(json_path), "campaign.csv": final_of(csv_path),
                        "campaign_report.html": final_of(report_path)}
-    _write_text_atomic(json_path, json.dumps(_jsonable(result), indent=2))
+    _write_text_atomic(json_path, json.dumps(to_jsonable(result), indent=2))
     logger.info("campaign %s: %d ok, %d unreliable, %d partial, %d failed in %.1f s -> %s",
                 scene.name, counts["ok"], counts["unreliable"], counts["partial"], counts["failed"],
                 timing["total"], final)

@@ -11,12 +11,13 @@ from __future__ import annotations
 import copy
 import datetime as _dt
 import math
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass
 from typing import Any, Iterator, Sequence
 
 import numpy as np
 
-from .validate import as_float, as_nonnegative, as_positive, as_positive_int
+from .jsonable import to_jsonable
+from .validate import as_float, as_nonnegative, as_positive
 
 __all__ = ["ChannelSpec", "Recording", "CHANNEL_KINDS", "sample_index"]
 
@@ -349,7 +350,7 @@ class Recording:
     def with_history(self, step: str, **params: Any) -> "Recording":
         """A shallow copy with one processing step appended to the history."""
         entry = {"step": step, "time": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
-        entry.update({k: _jsonable(v) for k, v in params.items()})
+        entry.update({k: to_jsonable(v, nonfinite="keep") for k, v in params.items()})
         return self._derive(history=self.history + [entry])
 
     def replace_data(self, data, step: str | None = None, **params) -> "Recording":
@@ -383,15 +384,3 @@ class Recording:
 
         return [dict(channel=c.name, **channel_quality(self.data[:, i], kind=c.kind))
                 for i, c in enumerate(self.channels)]
-
-
-def _jsonable(v: Any) -> Any:
-    if isinstance(v, (np.floating, np.integer)):
-        return v.item()
-    if isinstance(v, np.ndarray):
-        return v.tolist()
-    if isinstance(v, (list, tuple)):
-        return [_jsonable(x) for x in v]
-    if isinstance(v, dict):
-        return {str(k): _jsonable(x) for k, x in v.items()}
-    return v

@@ -15,11 +15,12 @@ import time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Callable
 
 import numpy as np
 
 from .errors import MeshphaseWarning, ProcessingWarning
+from .jsonable import to_jsonable
 from .log import logger
 from .recording import ChannelSpec, Recording
 from .scene import Scene, plan
@@ -905,25 +906,6 @@ def new_output_dir(base: Path, *, overwrite: bool = False) -> Path:
     return out
 
 
-def _jsonable(v: Any) -> Any:
-    if isinstance(v, dict):
-        return {str(k): _jsonable(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_jsonable(x) for x in v]
-    if isinstance(v, np.ndarray):
-        return _jsonable(v.tolist())
-    if isinstance(v, (np.floating, float)):
-        f = float(v)
-        return f if math.isfinite(f) else None
-    if isinstance(v, (np.integer,)):
-        return int(v)
-    if isinstance(v, (np.bool_,)):
-        return bool(v)
-    if isinstance(v, Path):
-        return str(v)
-    return v
-
-
 def summary_dict(ctx: RunContext) -> dict:
     """The machine-readable summary of a run (JSON-friendly)."""
     from .campaign import phasing_reliability
@@ -988,7 +970,7 @@ def summary_dict(ctx: RunContext) -> dict:
                       "iterations": sol.iterations, "residual_m": sol.residual,
                       "contact_fraction": sol.contact_fraction, "moments": _moments_dict(sol.moments)}
                      for k, sol in r["tilt"]["solutions"]]
-    return _jsonable(s)
+    return to_jsonable(s)
 
 
 def _moments_dict(m) -> dict:

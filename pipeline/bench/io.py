@@ -49,6 +49,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..jsonable import json_default
 from ..log import logger
 from ..recording import ChannelSpec, Recording
 from ..validate import as_positive, as_positive_int
@@ -469,7 +470,7 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
     }
     files = {"json": str(out / "io_bench.json"), "md": str(out / "io_bench.md")}
     result["files"] = files
-    Path(files["json"]).write_text(json.dumps(result, indent=2, default=_json_default) + "\n",
+    Path(files["json"]).write_text(json.dumps(result, indent=2, default=json_default) + "\n",
                                    encoding="utf-8")
     Path(files["md"]).write_text(_markdown(result), encoding="utf-8")
     return result
@@ -517,12 +518,6 @@ def convert_rss_rows(work, minutes, *, seed: int = 1) -> tuple[list, list]:
         for p in (h5, mc, back):
             p.unlink(missing_ok=True)
     return rows, skipped
-
-
-def _json_default(obj):
-    if isinstance(obj, np.generic):
-        return obj.item()
-    raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
 
 
 def _fmt(v, digits=3) -> str:

@@ -61,6 +61,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from ..errors import DataQualityWarning, FormatWarning
+from ..jsonable import json_default
 from ..log import logger
 from ..quality import nonfinite_runs
 from ..recording import ChannelSpec, Recording
@@ -122,16 +123,6 @@ def warn_nonfinite(path, data: np.ndarray, names, i0: int = 0) -> None:
             f"kept in the data"), stacklevel=3)
 
 
-def _json_default(obj: Any):
-    if isinstance(obj, (np.floating, np.integer, np.bool_)):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, (_dt.datetime, _dt.date)):
-        return obj.isoformat()
-    raise TypeError(f"value of type {type(obj).__name__} is not JSON-serialisable: {obj!r:.80}")
-
-
 def _same_json(a: Any, b: Any) -> bool:
     """Equality that treats NaN == NaN and requires equal container types (tuple != list)."""
     if type(a) is not type(b):
@@ -153,7 +144,7 @@ def dumps_json(obj: Any, what: str) -> str:
     become strings, numpy values become Python values).
     """
     try:
-        text = json.dumps(obj, default=_json_default, ensure_ascii=False, allow_nan=True)
+        text = json.dumps(obj, default=json_default, ensure_ascii=False, allow_nan=True)
     except TypeError as exc:
         raise TypeError(f"{what}: {exc}") from exc
     except ValueError as exc:  # circular reference
@@ -668,8 +659,6 @@ def _write_open(f, header, dtype, meta: str, history: str, chunk_samples: int, c
                 compression_opts, shuffle: bool, fletcher32: bool) -> list:
     """Write the header of the new, open HDF5 file ``f`` and create one dataset per channel
     (see :func:`write_blocks`); returns the datasets in column order."""
-    import h5py
-
     n = int(header.n_samples)
     names = [c.name for c in header.channels]
     f.attrs["meshphase_format"] = _fixed_text("recording")

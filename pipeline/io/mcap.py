@@ -63,6 +63,7 @@ from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, IndexType, Writer
 
+from ..jsonable import json_default
 from ..recording import ChannelSpec, Recording
 from ..validate import as_choice, as_int, as_positive, as_positive_int
 from .base import CorruptFileError, RecordingFileError, RecordingInfo
@@ -1146,17 +1147,9 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *,
 
 
 # ---------------------------------------------------------------------------------- writing
-def _json_default(obj):
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    raise TypeError(f"{type(obj).__name__} {obj!r} is not JSON serialisable")
-
-
 def _dumps(value, what: str) -> str:
     try:
-        return json.dumps(value, default=_json_default)
+        return json.dumps(value, default=json_default)
     except (TypeError, ValueError) as exc:
         raise TypeError(f"recording {what} must be JSON-friendly: {exc}") from exc
 

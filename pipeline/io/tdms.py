@@ -62,6 +62,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from ..errors import FormatWarning
+from ..jsonable import to_jsonable
 from ..recording import CHANNEL_KINDS, Recording
 from ..validate import as_int, as_positive, as_positive_int
 from .base import CorruptFileError, RecordingFileError, RecordingInfo
@@ -170,25 +171,15 @@ class _Plan:
 
 
 def _jsonable(v: Any) -> Any:
-    if isinstance(v, np.datetime64):
-        return _iso(v)
-    if isinstance(v, (np.integer, np.floating, np.bool_)):
-        return v.item()
-    if isinstance(v, float) and not math.isfinite(v):
-        return repr(v)
-    if isinstance(v, bytes):
-        return v.decode("latin-1")
-    if isinstance(v, (str, int, float, bool)) or v is None:
-        return v
-    if isinstance(v, np.ndarray):
-        return [_jsonable(x) for x in v.tolist()]
-    if isinstance(v, dict):
-        return {str(k): _jsonable(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_jsonable(x) for x in v]
+    """TDMS property values as strict JSON (non-finite floats as their repr text)."""
     if hasattr(v, "as_datetime64"):  # npTDMS TdmsTimestamp
-        return _iso(v.as_datetime64("us"))
-    return str(v)
+        v = v.as_datetime64("us")
+    elif isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    elif isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    out = to_jsonable(v, nonfinite="repr")
+    return out if out is None or isinstance(out, (str, int, float, bool, list, dict)) else str(out)
 
 
 def _iso(v: np.datetime64) -> str:
