@@ -660,7 +660,8 @@ def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str 
     PassTable
         Rows for planets 2..N (planet 1 is the reference, gamma = 0 by definition).
     """
-    from .angles import Kinematics, fit_angle_model, gauge_train, tacho_train
+    from .angle_windows import fit_angle_windows
+    from .angles import Kinematics, gauge_train, tacho_train
 
     t = as_finite_array(times, "times", ndim=1)
     lab = np.asarray(planets)
@@ -709,7 +710,7 @@ def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str 
     # relative to the carrier is no ripple rate: at the passes it equals the offsets)
     zp = int(z_planet or 0)
     kin = Kinematics(z, z, zp, None, {"planet": float(zp)} if zp > 0 else {}, None)
-    model = fit_angle_model(trains, kin, n)
+    model = fit_angle_windows(trains, kin, n)
     tab = phasing_from_model(model, tr, z, n, gauge=gauge)
     tab.notes = list(model.notes) + tab.notes
     return tab
@@ -938,7 +939,8 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
     -------
     PhasingResult
     """
-    from .angles import fit_angle_model, gauge_train, kinematics, tacho_train
+    from .angle_windows import fit_angle_windows
+    from .angles import gauge_train, kinematics, tacho_train
 
     n = gearset.n_planets
     psi = gearset.angles
@@ -1044,7 +1046,7 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
     tables: dict = {}
     reliability: dict = {}
     if any(tr.kind in ("sun", "ring") and len(tr) >= 2 for tr in trains):
-        model = fit_angle_model(trains, kin, n)
+        model = fit_angle_windows(trains, kin, n)
         notes.extend(model.notes)
         for gear, lab in labels.items():
             tr = train_of.get(lab.channel)

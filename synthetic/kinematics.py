@@ -342,10 +342,15 @@ class SpeedProfile:
             t = 2.0 * tau / (1.0 + np.sqrt(disc))
         else:
             t = tau.copy()
+        # converged when the step is within the rounding of tau(t) itself: a few ulps of its
+        # largest term (t, the ramp's r t^2 / 2, each ripple's a / (2 pi f)); a bound on t
+        # alone (2 ulps) is never met when those rounding errors exceed it
+        spread = sum(2.0 * abs(a) / (TWO_PI * f) for a, f, _ in self.ripple if a)
         for _ in range(60):
             dt = (self._time_tau(t) - tau) / self._time_factor(t)
             t = t - dt
-            if np.all(np.abs(dt) <= 4e-16 * np.maximum(1.0, np.abs(t))):
+            tol = 8.0 * np.finfo(float).eps * (1.0 + np.abs(t) + 0.5 * abs(r) * t * t + spread)
+            if np.all(np.abs(dt) <= tol):
                 break
         else:
             raise ValueError("could not invert the speed profile tau(t) (speed factor too close to 0?)")
