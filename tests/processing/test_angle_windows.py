@@ -8,7 +8,6 @@ against truth and the reported uncertainty can be compared directly.
 from __future__ import annotations
 
 import json
-import math
 import tracemalloc
 
 import numpy as np
