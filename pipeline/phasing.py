@@ -923,10 +923,6 @@ class GaugeLabels:
     decided_by: str
     n_unassigned: int = 0
 
-    def as_tuple(self):
-        """(channel, times, planet, amplitude, sigma): the pre-typed hand-off."""
-        return (self.channel, self.times, self.planet, self.amplitude, self.sigma)
-
 
 @dataclass
 class PhasingResult:
