@@ -64,6 +64,7 @@ from typing import Callable, Iterable
 
 from .jsonable import to_jsonable
 from .log import logger
+from .results import phasing_verdict
 from .validate import as_positive, as_positive_int, as_regular_file
 
 __all__ = ["run_recording", "run_campaign", "cli_campaign", "collect_recordings",
@@ -94,15 +95,13 @@ STATUSES = ("ok", "unreliable", "partial", "failed")
 
 
 # ---------------------------------------------------------------------------- reliability
-_NOT_RELIABLE = re.compile(r"ProcessingWarning: (?:(?P<gauge>[A-Za-z0-9_]+) gauge\b)?.*not reliable")
-
-
 def phasing_reliability(ctx) -> dict:
     """Whether each gauge's measured phasing is reliable, and why not.
 
     The one place that decides it (campaign status, ``process`` / ``run`` status line,
-    summary.json): ``ctx.results["phasing"]["reliability"]`` when the phasing stage provides
-    it (``{gauge: {"reliable": bool, "reasons": [str, ...]}}``); otherwise the
+    summary.json; :func:`pipeline.results.phasing_verdict`): ``ctx.phasing.reliability``
+    when the phasing stage provides it (``{gauge: {"reliable": bool, "reasons": [str,
+    ...]}}``); otherwise the
     ProcessingWarning messages of the run (``ctx.messages``) that say "not reliable",
     attributed to the gauge they name ("sun gauge: ...") or, when they name none, to every
     gauge with a phasing table (to ``"phasing"`` if there is none).
@@ -120,30 +119,12 @@ def phasing_reliability(ctx) -> dict:
     Raises
     ------
     TypeError
-        ``ctx`` has no ``results`` dict or ``messages`` list (not a run context).
+        ``ctx`` has no ``phasing`` result slot or ``messages`` list (not a run context).
     """
-    results, messages = getattr(ctx, "results", None), getattr(ctx, "messages", None)
-    if not isinstance(results, dict) or not isinstance(messages, (list, tuple)):
+    messages = getattr(ctx, "messages", None)
+    if not hasattr(ctx, "phasing") or not isinstance(messages, (list, tuple)):
         raise TypeError(f"ctx must be a RunContext (pipeline.stages.run_scene), got {type(ctx).__name__}")
-    phasing = results.get("phasing") if isinstance(results.get("phasing"), dict) else {}
-    given = phasing.get("reliability")
-    if isinstance(given, dict):
-        return {str(g): {"reliable": bool(v.get("reliable", True)),
-                         "reasons": [str(r) for r in v.get("reasons") or []]}
-                for g, v in given.items()}
-    out = {str(g): {"reliable": True, "reasons": []} for g in phasing.get("tables") or {}}
-    for m in messages:
-        hit = _NOT_RELIABLE.search(str(m))
-        if hit is None:
-            continue
-        reason = str(m).split("ProcessingWarning: ", 1)[1]
-        gauges = [hit.group("gauge")] if hit.group("gauge") else (list(out) or ["phasing"])
-        for g in gauges:
-            entry = out.setdefault(g, {"reliable": True, "reasons": []})
-            entry["reliable"] = False
-            if reason not in entry["reasons"]:
-                entry["reasons"].append(reason)
-    return out
+    return phasing_verdict(ctx.phasing, messages)
 
 
 # ---------------------------------------------------------------------------- inputs
@@ -361,20 +342,21 @@ def _apply_bands(ctx, bands: dict) -> None:
 
     from .compare import band_coverage
 
-    comp = ctx.results.get("compare") or {}
-    tables = ctx.results.get("phasing", {}).get("tables", {})
-    ideal = ctx.results.get("ideal") or {}
-    for gear, row in comp.items():
-        if gear not in bands or gear not in tables or not ideal:
+    comp, phasing, ideal = ctx.compare, ctx.phasing, ctx.ideal
+    if comp is None or phasing is None or ideal is None:
+        return
+    for gear, row in comp.by_gear.items():
+        if gear not in bands or gear not in phasing.tables:
             continue
-        tab = tables[gear]
+        tab = phasing.tables[gear]
         lo, hi = np.asarray(bands[gear]["lo"]), np.asarray(bands[gear]["hi"])
+        comp = comp.with_gauge(gear, row.with_band(lo, hi))
         try:
-            row["band"] = {"lo": lo, "hi": hi}
-            row["coverage"] = band_coverage(tab.gamma, tab.planet,
-                                            ideal["gamma_s" if gear == "sun" else "gamma_r"], lo, hi)
+            cov = band_coverage(tab.gamma, tab.planet, ideal.gamma(gear), lo, hi)
+            comp = comp.with_gauge(gear, row.with_band(lo, hi, cov))
         except ValueError as exc:
             ctx.messages.append(f"compare: band coverage of the {gear} gauge: {exc}")
+    ctx.record("compare", comp)
 
 
 # ---------------------------------------------------------------------------- the task

@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import contextlib
 import errno
-import hashlib
 import json
 import os
 import re
@@ -52,7 +51,11 @@ from typing import Iterator
 
 # one definition of "this host" and "that writer is gone" for the temp files and the
 # output folders (a process under another user counts as alive: not ours to recover)
+from . import __version__
+from .io import RecordingFileError, atomic_path
 from .io.base import _host_tag, _pid_alive
+from .log import logger
+from .results import phasing_verdict
 
 __all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_USAGE", "EXIT_PARTIAL", "EXIT_INTERRUPTED",
            "EXIT_PIPE", "BENIGN_SKIPS", "RESULT_OF_STAGE", "run_status", "status_line",
@@ -120,7 +123,7 @@ def run_status(ctx) -> dict:
     Parameters
     ----------
     ctx : pipeline.stages.RunContext
-        A finished run (``failed``, ``ran``, ``results``, ``messages``).
+        A finished run (``failed``, ``ran``, ``phasing``, ``messages``).
 
     Returns
     -------
@@ -131,21 +134,20 @@ def run_status(ctx) -> dict:
         ``error`` (the cause of "failed", else None); ``missing_results``: one dict per
         result not computed, ``{"result", "stage", "cause"}`` (the cause of a skipped
         stage names the stage that failed behind it); ``unreliable``: gauge -> reasons
-        (from :func:`pipeline.campaign.phasing_reliability`).
+        (:func:`pipeline.results.phasing_verdict`, as
+        :func:`pipeline.campaign.phasing_reliability` gives it).
 
     Raises
     ------
     TypeError
         ``ctx`` is not a run context.
     """
-    from .campaign import phasing_reliability
-
-    if not all(hasattr(ctx, a) for a in ("failed", "ran", "results", "messages")):
+    if not all(hasattr(ctx, a) for a in ("failed", "ran", "phasing", "messages")):
         raise TypeError(f"ctx must be a RunContext (pipeline.stages.run_scene), got {type(ctx).__name__}")
     failed = {k: v for k, v in ctx.failed.items() if str(v) not in BENIGN_SKIPS}
     missing = [{"result": RESULT_OF_STAGE[s], "stage": s, "cause": _cause(failed, s)}
                for s in failed if s in RESULT_OF_STAGE]
-    rel = phasing_reliability(ctx)
+    rel = phasing_verdict(ctx.phasing, ctx.messages)
     unreliable = {g: list(v["reasons"]) for g, v in rel.items() if not v["reliable"]}
     error = None
     if "load" in failed:
@@ -250,8 +252,6 @@ def _fsync_tree(root: Path) -> None:
 
 
 def _write_json_atomic(path: Path, obj) -> None:
-    from .io import atomic_path
-
     data = json.dumps(obj, indent=1).encode("utf-8")
     with atomic_path(path, overwrite=True) as tmp:
         with open(tmp, "wb") as fh:
@@ -459,8 +459,6 @@ def recover_output_dirs(parent) -> list[str]:
     list of str
         One line per action taken.
     """
-    from .log import logger
-
     parent = Path(parent)
     host, now = _host_tag(), time.time()
     try:
@@ -612,7 +610,7 @@ class OutputDir:
         self._state = "new"
 
     def __enter__(self) -> "OutputDir":
-        from . import stages
+        from . import stages  # here, not above: stages imports this module
 
         base = self.base
         if os.path.islink(base):
@@ -720,8 +718,6 @@ class OutputDir:
         self._write_stage_manifest(self.path)
 
     def _manifest(self, state: str) -> dict:
-        from . import __version__
-
         return {"meshphase_output": 1, "state": state, "target": self.final.name,
                 "meshphase": __version__, "written": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
                 "files": _files_under(self.path)}
@@ -744,8 +740,6 @@ class OutputDir:
         return self.final
 
     def _fail(self) -> None:
-        from .log import logger
-
         if self._keep and self.is_staged and self.path.is_dir():
             dest = self.final.with_name(self.final.name + PARTIAL_SUFFIX)
             try:
@@ -789,8 +783,6 @@ def recording_read_errors(path) -> Iterator[None]:
     file name (permission, ...), with ``path`` as their file name when they do not (EIO
     from ``read()``).
     """
-    from .io import RecordingFileError
-
     try:
         yield
     except RecordingFileError:

@@ -21,7 +21,7 @@ from .validate import as_finite_array, as_float, as_positive, as_positive_int
 _FULL_CONTACT_TOL = 1e-12
 
 __all__ = ["LoadSharingResult", "load_sharing_from_amplitudes", "CentroidResult",
-           "facewidth_centroid", "centroid_of_shape"]
+           "facewidth_centroid", "facewidth_readings", "centroid_of_shape"]
 
 
 @dataclass
@@ -262,3 +262,56 @@ def facewidth_centroid(readings, positions, face_width: float, gains=None) -> Ce
     else:
         se = float("nan")
     return CentroidResult(float(zc), se, float(frac), shape, rms)
+
+
+def facewidth_readings(times, amplitudes, good, widths, fs: float) -> np.ndarray:
+    """Per pass, the peak strain each face-width gauge of one gear reads [strain], for
+    :func:`facewidth_centroid`.
+
+    The passes are timed on the gauge that sees the most load (most clean pulses, then the
+    largest median amplitude): with partial contact the gauges at the unloaded end of the
+    face read nothing. For each of its clean pulses, every gauge reads the |amplitude| of its
+    pulse nearest in time when that lies within the reference gauge's median pulse width
+    (at least one sample), else 0 (no pulse: unloaded there).
+
+    Parameters
+    ----------
+    times, amplitudes, good, widths : sequence of G array_like
+        Per gauge: onset times [s], signed pulse amplitudes [strain], the clean-pulse mask
+        and the pulse widths [s] (the fields of :class:`pipeline.onsets.Onsets`).
+    fs : float
+        Sample rate [Hz].
+
+    Returns
+    -------
+    ndarray, shape (m, G)
+        One row per clean pulse of the reference gauge; rows with a non-finite reading are
+        left out. Shape (0, G) when the reference gauge has no clean pulse.
+    """
+    fs = as_positive(fs, "fs")
+    gauges = [(np.asarray(t, dtype=float), np.asarray(a, dtype=float), np.asarray(g, dtype=bool),
+               np.asarray(w, dtype=float)) for t, a, g, w in zip(times, amplitudes, good, widths)]
+    if not (len(gauges) == len(times) == len(amplitudes) == len(good) == len(widths)):
+        raise ValueError("times, amplitudes, good and widths need one entry per gauge, got "
+                         f"{len(times)}, {len(amplitudes)}, {len(good)} and {len(widths)}")
+    for k, (t, a, g, w) in enumerate(gauges):
+        if not (t.ndim == 1 and a.shape == g.shape == w.shape == t.shape):
+            raise ValueError(f"gauge {k}: times, amplitudes, good and widths must be 1-D of one "
+                             f"length, got shapes {t.shape}, {a.shape}, {g.shape}, {w.shape}")
+    if not gauges:
+        return np.empty((0, 0))
+    ref_t, ref_a, ref_g, ref_w = max(gauges, key=lambda o: (
+        int(o[2].sum()), float(np.nanmedian(np.abs(o[1]))) if o[0].size else 0.0))
+    rows = []
+    for t0 in ref_t[ref_g]:
+        row = []
+        for t, a, _, _ in gauges:
+            if t.size == 0:
+                row.append(0.0)  # no pulse at all on this gauge: unloaded end of the face
+                continue
+            j = int(np.argmin(np.abs(t - t0)))
+            width = float(np.nanmedian(ref_w)) if ref_t.size else 0.0
+            row.append(abs(a[j]) if abs(t[j] - t0) < max(width, 1 / fs) else 0.0)
+        rows.append(row)
+    readings = np.asarray(rows, dtype=float).reshape(-1, len(gauges))
+    return readings[np.all(np.isfinite(readings), axis=1)]

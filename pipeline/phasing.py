@@ -47,7 +47,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
-from .angles import AngleModel, PassTrain, revolution_numbers
+from .angle_windows import fit_angle_windows
+from .angles import (AngleModel, Kinematics, PassTrain, gauge_train, held_member, kinematics, label_shift_costs, mesh_cycles_per_carrier_turn,
+                     relabel_train, revolution_numbers, tacho_train)
 from .errors import ProcessingWarning
 from .validate import as_finite_array, as_positive_int
 
@@ -59,6 +61,8 @@ __all__ = [
     "GaugeEncoder",
     "assign_planets_by_pattern",
     "assign_planets_by_tacho",
+    "TachoRelabel",
+    "relabel_by_tacho",
     "phasing_from_model",
     "measured_phasing",
     "GaugePasses",
@@ -280,83 +284,22 @@ def assign_planets_by_pattern(times, planet_angles, order: int, *, first: int = 
         info["ambiguous"] = True
         info["position"] = q_first + np.arange(t.size, dtype=np.int64)
         return seq[(q_first + np.arange(t.size)) % n], info
-    # relative revolution period: median of N-step intervals (robust to a missing pulse),
-    # taken locally (a running median over ~2 revolutions) so speed ramps are followed. If a
-    # planet is missing altogether, N - 1 (or fewer) pulses make a revolution: the candidate
-    # step counts are tried and the one whose gaps fit the planet pattern best is kept.
-    mid = 0.5 * (t[1:] + t[:-1])
-
-    def gap_periods(k):
-        spans = t[k:] - t[:-k]
-        w = min(spans.size, 2 * k + 1)
-        if spans.size >= w >= 3:
-            pad = np.pad(spans, (w // 2, w - 1 - w // 2), mode="edge")
-            local = np.median(np.lib.stride_tricks.sliding_window_view(pad, w), axis=1)
-            return np.interp(mid, 0.5 * (t[k:] + t[:-k]), local), float(np.median(spans))
-        return np.full(t.size - 1, float(np.median(spans))), float(np.median(spans))
-
-    def step_periods():
-        """Equal spacing, sparse trains (pulses lost to dropouts): every gap between
-        consecutive pulses is a whole number of planet steps, so the step is the local median
-        of gap / round(gap / step), started from the short gaps (single steps) and refined
-        twice; the period is N steps."""
-        g = np.diff(t)
-        s = float(np.quantile(g, 0.2))
-        if not s > 0:
-            return None
-        loc = np.full(g.size, s)
-        for _ in range(3):
-            m = np.maximum(1.0, np.rint(g / loc))
-            est = g / m
-            w = min(est.size, 4 * n + 1)
-            if w >= 3:
-                pad = np.pad(est, (w // 2, w - 1 - w // 2), mode="edge")
-                loc = np.median(np.lib.stride_tricks.sliding_window_view(pad, w), axis=1)
-            else:
-                loc = np.full(g.size, float(np.median(est)))
-        return n * loc, float(n * np.median(loc))
-
-    best = None
-    cands = [k for k in range(n, max(1, n - 2), -1) if t.size >= k + 2]
-    symmetric_steps = bool(np.allclose(step, step[0], atol=1e-9))
-    for k in cands + (["steps"] if symmetric_steps and t.size >= 3 else []):
-        got = step_periods() if k == "steps" else gap_periods(k)
-        if got is None:
-            continue
-        gp, per = got
-        probe = _walk(np.diff(t) / gp, fs, q_first, tol * spacing)
-        score = (np.count_nonzero(~probe[1]), probe[2])
-        if best is None or score < best[0]:
-            best = (score, gp, per)
-        if score[0] == 0:
-            break
-    gap_period, period = best[1], best[2]
+    gap_period, period = _revolution_period(t, n, fs, step, q_first, tol * spacing)
     info["period"] = period
     gaps = np.diff(t) / gap_period
     symmetric = bool(np.allclose(step, step[0], atol=1e-9))
-    starts = [q_first] if symmetric else list(range(n))
-    walks = {q0: _walk(gaps, fs, q0, tol * spacing) for q0 in starts}
     if symmetric:
-        q0 = q_first
-        pos, ok, _ = walks[q0]
+        pos, ok, _ = _walk(gaps, fs, q_first, tol * spacing)
         info["ambiguous"] = True
         if reference_amplitudes is not None and amplitudes is not None:
-            a = as_finite_array(amplitudes, "amplitudes", ndim=1)
-            ref = as_finite_array(reference_amplitudes, "reference_amplitudes", ndim=1)
-            if a.size != t.size or ref.size != n:
-                raise ValueError(f"amplitudes must have one value per onset ({t.size}) and "
-                                 f"reference_amplitudes one per planet ({n})")
-            mean_a = np.array([np.mean(a[ok & (pos == q)]) if np.any(ok & (pos == q)) else np.nan
-                               for q in range(n)])
-            if np.all(np.isfinite(mean_a)) and np.ptp(ref) > 0 and np.ptp(mean_a) > 0:
-                scores = np.array([np.corrcoef(mean_a, ref[seq[(np.arange(n) + s) % n]])[0, 1]
-                                   for s in range(n)])
-                best = int(np.argmax(scores))
+            got = _amplitude_shift(amplitudes, reference_amplitudes, pos, ok, seq, t.size)
+            if got is not None:
+                best, info["ambiguous"] = got
                 info["shift_decided_by"] = "amplitude"
-                info["ambiguous"] = bool(scores[best] - np.sort(scores)[-2] < 0.2)
-                pos = pos + (best - q0) % n
+                pos = pos + (best - q_first) % n
     else:
-        q0 = min(starts, key=lambda q: (np.count_nonzero(~walks[q][1]), walks[q][2]))
+        walks = {q0: _walk(gaps, fs, q0, tol * spacing) for q0 in range(n)}
+        q0 = min(walks, key=lambda q: (np.count_nonzero(~walks[q][1]), walks[q][2]))
         pos, ok, _ = walks[q0]
         info["shift_decided_by"] = "pattern"
     planet = np.where(ok, seq[pos % n], -1)
@@ -365,6 +308,89 @@ def assign_planets_by_pattern(times, planet_angles, order: int, *, first: int = 
     return planet, info
 
 
+def _revolution_period(t: np.ndarray, n: int, fs: np.ndarray, step: np.ndarray, q_first: int,
+                       tol: float) -> tuple[np.ndarray, float]:
+    """The local relative revolution period at each gap of the onset times ``t`` [s] and its
+    median [s], for :func:`assign_planets_by_pattern`.
+
+    The median of N-step intervals (robust to a missing pulse), taken locally (a running
+    median over ~2 revolutions) so speed ramps are followed. If a planet is missing
+    altogether, N - 1 (or fewer) pulses make a revolution: the candidate step counts are
+    tried and the one whose gaps fit the planet pattern (fractions ``fs`` in pass order,
+    gaps ``step`` between them) best is kept; a symmetric layout also tries the planet step
+    of sparse trains (:func:`_step_periods`).
+    """
+    best = None
+    cands = [k for k in range(n, max(1, n - 2), -1) if t.size >= k + 2]
+    symmetric_steps = bool(np.allclose(step, step[0], atol=1e-9))
+    for k in cands + (["steps"] if symmetric_steps and t.size >= 3 else []):
+        got = _step_periods(t, n) if k == "steps" else _gap_periods(t, k)
+        if got is None:
+            continue
+        gp, per = got
+        probe = _walk(np.diff(t) / gp, fs, q_first, tol)
+        score = (np.count_nonzero(~probe[1]), probe[2])
+        if best is None or score < best[0]:
+            best = (score, gp, per)
+        if score[0] == 0:
+            break
+    return best[1], best[2]
+
+
+def _gap_periods(t: np.ndarray, k: int) -> tuple[np.ndarray, float]:
+    """Revolution period [s] at each gap of ``t`` when ``k`` pulses make a revolution: the
+    running median (over 2 k + 1) of the k-step spans, and their median."""
+    mid = 0.5 * (t[1:] + t[:-1])
+    spans = t[k:] - t[:-k]
+    w = min(spans.size, 2 * k + 1)
+    if spans.size >= w >= 3:
+        pad = np.pad(spans, (w // 2, w - 1 - w // 2), mode="edge")
+        local = np.median(np.lib.stride_tricks.sliding_window_view(pad, w), axis=1)
+        return np.interp(mid, 0.5 * (t[k:] + t[:-k]), local), float(np.median(spans))
+    return np.full(t.size - 1, float(np.median(spans))), float(np.median(spans))
+
+
+def _step_periods(t: np.ndarray, n: int) -> tuple[np.ndarray, float] | None:
+    """Equal spacing, sparse trains (pulses lost to dropouts): every gap between
+    consecutive pulses is a whole number of planet steps, so the step is the local median
+    of gap / round(gap / step), started from the short gaps (single steps) and refined
+    twice; the period is N steps. None when the short gaps are not positive."""
+    g = np.diff(t)
+    s = float(np.quantile(g, 0.2))
+    if not s > 0:
+        return None
+    loc = np.full(g.size, s)
+    for _ in range(3):
+        m = np.maximum(1.0, np.rint(g / loc))
+        est = g / m
+        w = min(est.size, 4 * n + 1)
+        if w >= 3:
+            pad = np.pad(est, (w // 2, w - 1 - w // 2), mode="edge")
+            loc = np.median(np.lib.stride_tricks.sliding_window_view(pad, w), axis=1)
+        else:
+            loc = np.full(g.size, float(np.median(est)))
+    return n * loc, float(n * np.median(loc))
+
+
+def _amplitude_shift(amplitudes, reference_amplitudes, pos, ok, seq, m: int):
+    """(shift, ambiguous) of a symmetric layout's labels from the pulse amplitudes: the
+    cyclic shift whose planets' expected amplitudes (``reference_amplitudes``) correlate
+    best with the mean amplitude per pass-order place; ambiguous when the next best is
+    within 0.2. None when a place has no pulse or either pattern is flat."""
+    n = seq.size
+    a = as_finite_array(amplitudes, "amplitudes", ndim=1)
+    ref = as_finite_array(reference_amplitudes, "reference_amplitudes", ndim=1)
+    if a.size != m or ref.size != n:
+        raise ValueError(f"amplitudes must have one value per onset ({m}) and "
+                         f"reference_amplitudes one per planet ({n})")
+    mean_a = np.array([np.mean(a[ok & (pos == q)]) if np.any(ok & (pos == q)) else np.nan
+                       for q in range(n)])
+    if not (np.all(np.isfinite(mean_a)) and np.ptp(ref) > 0 and np.ptp(mean_a) > 0):
+        return None
+    scores = np.array([np.corrcoef(mean_a, ref[seq[(np.arange(n) + s) % n]])[0, 1]
+                       for s in range(n)])
+    best = int(np.argmax(scores))
+    return best, bool(scores[best] - np.sort(scores)[-2] < 0.2)
 def _walk(gaps: np.ndarray, fs: np.ndarray, q0: int, tol: float):
     """Positions in pass order of a pulse train whose first pulse is at position ``q0``.
 
@@ -494,6 +520,100 @@ def assign_planets_by_tacho(times, tacho_times, planet_angles, gauge_angle: floa
     return out
 
 
+@dataclass(frozen=True, eq=False)
+class TachoRelabel:
+    """A gauge's pattern labels after a carrier tacho's vote on planet 1
+    (:func:`relabel_by_tacho`).
+
+    Attributes
+    ----------
+    planet : ndarray of int, shape (m,)
+        0-based planet per pulse, -1 unassigned (moved only when ``accepted``).
+    position : ndarray of int, shape (m,)
+        Pass-order position per pulse (moved with ``planet``).
+    shift : int
+        Places along the pass order the tacho's majority moves planet 1 by (-1: no pulse
+        was labelled by both).
+    agree : int
+        Pulses whose tacho label agrees with that shift.
+    compared : int
+        Pulses labelled both by the pattern and by the tacho.
+    accepted : bool
+        At least the asked share of the compared pulses agree: the labels moved.
+    """
+
+    planet: np.ndarray
+    position: np.ndarray
+    shift: int
+    agree: int
+    compared: int
+    accepted: bool
+
+
+def relabel_by_tacho(times, planet, position, tacho_times, planet_angles, gauge_angle: float, *,
+                     pass_order: int, carrier_sense: int, key_angle: float = 0.0,
+                     agreement: float = 0.8) -> TachoRelabel:
+    """Name planet 1 of a held-member gauge's pattern labels with a carrier tacho.
+
+    The pass pattern (:func:`assign_planets_by_pattern`) labels the pulses up to a cyclic
+    shift along the pass order; the tacho (:func:`assign_planets_by_tacho`) labels each pulse
+    absolutely but loosely. Every pulse labelled by both votes for the shift between the two
+    labels; the majority shift is taken when at least ``agreement`` of the votes agree.
+
+    Parameters
+    ----------
+    times : array_like, shape (m,)
+        Pass times [s], increasing.
+    planet : array_like of int, shape (m,)
+        0-based pattern label per pulse, -1 unassigned.
+    position : array_like of int, shape (m,)
+        Pass-order position per pulse (``info["position"]`` of the pattern labelling).
+    tacho_times : array_like, shape (r,)
+        Carrier tacho edges [s] (>= 2 when ``times`` is not empty).
+    planet_angles : array_like, shape (N,)
+        psi_n [rad].
+    gauge_angle : float
+        Ground angle of the gauged tooth of the held member [rad].
+    pass_order : {+1, -1}
+        Sense in which the gauge meets the planets (:func:`pass_order`).
+    carrier_sense : {+1, -1}
+        Sense of the carrier's rotation (+1: counter-clockwise).
+    key_angle : float
+        Carrier-frame angle of the tacho key from planet 1 [rad].
+    agreement : float
+        Share of the compared pulses that must agree, in (0, 1] [-].
+
+    Returns
+    -------
+    TachoRelabel
+    """
+    t = as_finite_array(times, "times", ndim=1)
+    pl = np.asarray(planet)
+    pos = np.asarray(position)
+    if pl.shape != t.shape or pos.shape != t.shape:
+        raise ValueError(f"planet and position must have the shape of times {t.shape}, got "
+                         f"{pl.shape} and {pos.shape}")
+    if not 0.0 < float(agreement) <= 1.0:
+        raise ValueError(f"agreement must lie in (0, 1], got {agreement!r}")
+    psi = as_finite_array(planet_angles, "planet_angles", ndim=1, allow_empty=False)
+    n = psi.size
+    seq = np.argsort(planet_fractions(psi, pass_order), kind="stable")
+    tl = assign_planets_by_tacho(t, tacho_times, psi, gauge_angle, carrier_sense,
+                                 key_angle=key_angle)
+    both = (tl >= 0) & (pl >= 0)
+    if not np.any(both):
+        return TachoRelabel(pl, pos, -1, 0, 0, False)
+    place = np.empty(n, dtype=np.int64)
+    place[seq] = np.arange(n)
+    votes = np.bincount(np.mod(place[tl[both]] - place[pl[both]], n), minlength=n)
+    best = int(np.argmax(votes))
+    agree, compared = int(votes[best]), int(both.sum())
+    if votes[best] >= agreement * both.sum():
+        new_pl, new_pos = _shift_labels(pl, pos, seq, best)
+        return TachoRelabel(new_pl, new_pos, best, agree, compared, True)
+    return TachoRelabel(pl, pos, best, agree, compared, False)
+
+
 def _gap_between(t_a: np.ndarray, t_b: np.ndarray, gaps) -> np.ndarray:
     """True where a gap interval [g0, g1) lies (partly) between t_a and t_b."""
     out = np.zeros(t_a.size, bool)
@@ -526,7 +646,7 @@ def phasing_from_model(model: AngleModel, train: PassTrain, z_gear: int, n_plane
     Parameters
     ----------
     model : AngleModel
-        From :func:`pipeline.angles.fit_angle_model` (``train`` among its trains).
+        From :func:`pipeline.angle_windows.fit_angle_windows` (``train`` among its trains).
     train : PassTrain
         The gauge's passes (:func:`pipeline.angles.gauge_train`).
     z_gear : int
@@ -625,7 +745,7 @@ def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str 
     """Phasing per pass of ONE gauge's labelled onsets, with an angle model fitted to them.
 
     The convenience path for a single pass train (the pipeline fits every gauge and the tacho
-    together: :func:`pipeline.angles.fit_angle_model`, :func:`phasing_from_model`). The
+    together: :func:`pipeline.angle_windows.fit_angle_windows`, :func:`phasing_from_model`). The
     gauged member's angle comes from the train itself (every planet's passes, each at its own
     offset, plus planet-spin terms when ``z_planet`` is given), never from nominal speed.
 
@@ -660,9 +780,6 @@ def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str 
     PassTable
         Rows for planets 2..N (planet 1 is the reference, gamma = 0 by definition).
     """
-    from .angle_windows import fit_angle_windows
-    from .angles import Kinematics, gauge_train, tacho_train
-
     t = as_finite_array(times, "times", ndim=1)
     lab = np.asarray(planets)
     if lab.shape != t.shape:
@@ -806,10 +923,6 @@ class GaugeLabels:
     decided_by: str
     n_unassigned: int = 0
 
-    def as_tuple(self):
-        """(channel, times, planet, amplitude, sigma): the pre-typed hand-off."""
-        return (self.channel, self.times, self.planet, self.amplitude, self.sigma)
-
 
 @dataclass
 class PhasingResult:
@@ -857,8 +970,6 @@ def relabel_gauge(result: PhasingResult, gear: str, shift: int, gearset) -> tupl
     along its pass order, recomputed from the same angle model (a cyclic relabelling of a
     symmetric layout: what :func:`pipeline.stages.stage_identify` tries when a gauge's labels
     are only relative)."""
-    from .angles import relabel_train
-
     lab = result.labels[gear]
     tr = result.trains[lab.channel]
     frac = result.fractions[lab.channel]
@@ -939,101 +1050,29 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
     -------
     PhasingResult
     """
-    from .angle_windows import fit_angle_windows
-    from .angles import gauge_train, kinematics, tacho_train
-
     n = gearset.n_planets
-    psi = gearset.angles
     notes: list[str] = []
     passes = [p for p in passes if isinstance(p, GaugePasses)]
-    labels: dict = {}
-    all_labels: dict = {}
-    relative: list = []
     mounts = dict(mounts or {})
     tach = None if tacho_times is None else np.asarray(tacho_times, dtype=float)
-    # the held member from the data: mesh cycles per carrier turn, counted over one interval
-    # (the pass pattern's positions of the busiest gauge; which pulse is planet 1 does not
-    # matter for a count)
     if check_held and tach is not None and tach.size >= 2 and passes:
-        from .angles import held_member, mesh_cycles_per_carrier_turn
-
-        p0 = max(passes, key=lambda p: p.times.size)
-        o0 = pass_order(gearset.direction, p0.gear)
-        pl0, inf0 = assign_planets_by_pattern(p0.times, psi, o0)
-        ok0 = pl0 >= 0
-        if np.count_nonzero(ok0) >= 2:
-            z0 = gearset.z_sun if p0.gear == "sun" else gearset.z_ring
-            tr0 = gauge_train(p0.name, p0.gear, p0.times[ok0], pl0[ok0].astype(int),
-                              inf0["position"][ok0].astype(np.int64),
-                              planet_fractions(psi, o0), z0)
-            ratio = mesh_cycles_per_carrier_turn(tr0, tach)
-            if math.isfinite(ratio):
-                fixed, fixed_reason = held_member(gearset.z_sun, gearset.z_ring, speeds,
-                                                  resolution=speeds_resolution,
-                                                  mesh_rate=ratio, carrier_rate=1.0)
+        fixed, fixed_reason = _held_from_data(passes, gearset, tach, speeds, speeds_resolution,
+                                              (fixed, fixed_reason))
     if carrier_sense is None:
         # clockwise planets: the sun turns counter-clockwise relative to the carrier; with
         # the ring held the carrier turns with the sun (ccw), with the sun held against it
         cw = gearset.direction == "cw"
         carrier_sense = (1 if cw else -1) * (1 if fixed != "sun" else -1)
-    ring_load = None
-    # ring first: its loads may name the sun's planets
-    for p in sorted(passes, key=lambda p: (p.gear != "ring", not p.main)):
-        order = pass_order(gearset.direction, p.gear)
-        frac = planet_fractions(psi, order)
-        seq = np.argsort(frac, kind="stable")
-        ref = ring_load if (p.gear == "sun" and p.main) else None
-        pl, inf = assign_planets_by_pattern(p.times, psi, order, amplitudes=np.abs(p.amplitude),
-                                            reference_amplitudes=ref)
-        pos = inf["position"]
-        decided = {"pattern": "pattern", "amplitude": "amplitude"}.get(inf["shift_decided_by"],
-                                                                         "first pulse")
-        if inf.get("ambiguous"):
-            decided = "first pulse"
-        held_gauge = p.gear == fixed and p.name in mounts and key_angle is not None
-        if held_gauge and tach is not None and tach.size >= 2 and np.any(pl >= 0):
-            tl = assign_planets_by_tacho(p.times, tach, psi, mounts[p.name], carrier_sense,
-                                         key_angle=key_angle)
-            both = (tl >= 0) & (pl >= 0)
-            if np.any(both):
-                place = np.empty(n, dtype=np.int64)
-                place[seq] = np.arange(n)
-                votes = np.bincount(np.mod(place[tl[both]] - place[pl[both]], n), minlength=n)
-                best = int(np.argmax(votes))
-                if votes[best] >= 0.8 * both.sum():
-                    pl, pos = _shift_labels(pl, pos, seq, best)
-                    decided = "tacho"
-                else:
-                    notes.append(f"{p.name}: the tacho and the pass pattern disagree on planet 1 "
-                                 f"({votes[best]} of {int(both.sum())} passes agree); labels "
-                                 "left relative")
-        lab = GaugeLabels(p.name, p.times, p.amplitude, p.sigma, pl, pos, decided,
-                          int(inf.get("n_unassigned", 0)))
-        all_labels[p.name] = (lab, frac, p)
-        if p.main and p.gear not in labels:
-            labels[p.gear] = lab
-            if decided == "first pulse":
-                relative.append(p.gear)
-            if p.gear == "ring" and np.any(pl >= 0):
-                ring_load = _ring_loads(lab, n)
-    trains, train_of = [], {}
-    for name, (lab, frac, p) in all_labels.items():
-        ok = lab.planet >= 0
-        if np.count_nonzero(ok) < 2:
-            continue
-        z = gearset.z_sun if p.gear == "sun" else gearset.z_ring
-        sig = None if p.sigma is None else np.asarray(p.sigma)[ok]
-        tr = gauge_train(name, p.gear, p.times[ok], lab.planet[ok].astype(int),
-                         lab.position[ok].astype(np.int64), frac, z, sigma=sig,
-                         order=pass_order(gearset.direction, p.gear))
-        trains.append(tr)
-        train_of[name] = tr
+    held = _HeldGauges(fixed, tach, key_angle, mounts, carrier_sense)
+    labels, all_labels, relative = _label_gauges(passes, gearset, held, notes)
+    trains, train_of = _gauge_trains(all_labels, gearset)
     # one angle model from every train (and the tacho when a member is held)
     kin = kinematics(gearset.z_sun, gearset.z_ring, gearset.z_planet, fixed=fixed, speeds=speeds)
     # the planet terms are shared by every gauge, so every gauge must name the same physical
     # planet alike: align the relatively labelled gauges to the absolute ones (or to the
     # largest), by the planets' own offsets where they differ enough to tell
-    symmetric = bool(np.allclose(np.diff(np.sort(planet_fractions(psi, 1))), 1.0 / n, atol=1e-9))
+    symmetric = bool(np.allclose(np.diff(np.sort(planet_fractions(gearset.angles, 1))), 1.0 / n,
+                                 atol=1e-9))
     if symmetric and n > 1 and kin.planet_period and len(train_of) > 1:
         trains, train_of = _align_labels(trains, train_of, all_labels, labels, kin, n, notes)
         relative = [gear for gear, lab in labels.items() if lab.decided_by == "first pulse"]
@@ -1048,19 +1087,132 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
     if any(tr.kind in ("sun", "ring") and len(tr) >= 2 for tr in trains):
         model = fit_angle_windows(trains, kin, n)
         notes.extend(model.notes)
-        for gear, lab in labels.items():
-            tr = train_of.get(lab.channel)
-            if tr is None:
-                continue
-            z = gearset.z_sun if gear == "sun" else gearset.z_ring
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", ProcessingWarning)
-                tab = phasing_from_model(model, tr, z, n, gauge=gear, gaps=gaps)
-            tables[gear] = tab
-            reliability[gear] = _reliability(model, tr, tab)
+        tables, reliability = _gear_tables(model, labels, train_of, gearset, gaps)
     return PhasingResult(tables, labels, model, fixed, fixed_reason, reliability, relative, notes,
                          dict(train_of), {nm: v[1] for nm, v in all_labels.items()},
                          None if gaps is None else np.asarray(gaps, dtype=float))
+
+
+def _held_from_data(passes, gearset, tach: np.ndarray, speeds, resolution, given: tuple) -> tuple:
+    """(held member, reason) from the data: mesh cycles per carrier turn, counted over one
+    tacho interval on the busiest gauge's pass pattern (which pulse is planet 1 does not
+    matter for a count), with the nominal ``speeds`` (:func:`pipeline.angles.held_member`);
+    ``given`` when the count cannot be made."""
+    psi = gearset.angles
+    p0 = max(passes, key=lambda p: p.times.size)
+    o0 = pass_order(gearset.direction, p0.gear)
+    pl0, inf0 = assign_planets_by_pattern(p0.times, psi, o0)
+    ok0 = pl0 >= 0
+    if np.count_nonzero(ok0) < 2:
+        return given
+    z0 = gearset.z_sun if p0.gear == "sun" else gearset.z_ring
+    tr0 = gauge_train(p0.name, p0.gear, p0.times[ok0], pl0[ok0].astype(int),
+                      inf0["position"][ok0].astype(np.int64), planet_fractions(psi, o0), z0)
+    ratio = mesh_cycles_per_carrier_turn(tr0, tach)
+    if not math.isfinite(ratio):
+        return given
+    return held_member(gearset.z_sun, gearset.z_ring, speeds, resolution=resolution,
+                       mesh_rate=ratio, carrier_rate=1.0)
+
+
+@dataclass(frozen=True)
+class _HeldGauges:
+    """What names planet 1 of a gauge on the held member: the held member, the tacho edges
+    [s], the key's carrier-frame angle [rad], the gauges' ground angles [rad] and the
+    carrier's sense (+1 counter-clockwise)."""
+
+    fixed: str | None
+    tacho: np.ndarray | None
+    key_angle: float | None
+    mounts: dict
+    carrier_sense: int
+
+    def applies(self, p: GaugePasses, planet: np.ndarray) -> bool:
+        return (p.gear == self.fixed and p.name in self.mounts and self.key_angle is not None
+                and self.tacho is not None and self.tacho.size >= 2 and bool(np.any(planet >= 0)))
+
+
+def _label_gauges(passes, gearset, held: _HeldGauges, notes: list) -> tuple[dict, dict, list]:
+    """Planet labels of every gauge, ring gauges first (their loads may name the sun's
+    planets): by the pass pattern, then by the tacho for a gauge on the held member.
+
+    Returns (labels of each gear's main gauge, {channel: (labels, fractions, passes)} of
+    every gauge, gears whose labels are relative)."""
+    psi = gearset.angles
+    n = gearset.n_planets
+    labels: dict = {}
+    all_labels: dict = {}
+    relative: list = []
+    ring_load = None
+    for p in sorted(passes, key=lambda p: (p.gear != "ring", not p.main)):
+        order = pass_order(gearset.direction, p.gear)
+        frac = planet_fractions(psi, order)
+        ref = ring_load if (p.gear == "sun" and p.main) else None
+        pl, inf = assign_planets_by_pattern(p.times, psi, order, amplitudes=np.abs(p.amplitude),
+                                            reference_amplitudes=ref)
+        pos = inf["position"]
+        decided = {"pattern": "pattern", "amplitude": "amplitude"}.get(inf["shift_decided_by"],
+                                                                         "first pulse")
+        if inf.get("ambiguous"):
+            decided = "first pulse"
+        if held.applies(p, pl):
+            vote = relabel_by_tacho(p.times, pl, pos, held.tacho, psi, held.mounts[p.name],
+                                    pass_order=order, carrier_sense=held.carrier_sense,
+                                    key_angle=held.key_angle)
+            pl, pos = vote.planet, vote.position
+            if vote.accepted:
+                decided = "tacho"
+            elif vote.compared:
+                notes.append(f"{p.name}: the tacho and the pass pattern disagree on planet 1 "
+                             f"({vote.agree} of {vote.compared} passes agree); labels "
+                             "left relative")
+        lab = GaugeLabels(p.name, p.times, p.amplitude, p.sigma, pl, pos, decided,
+                          int(inf.get("n_unassigned", 0)))
+        all_labels[p.name] = (lab, frac, p)
+        if p.main and p.gear not in labels:
+            labels[p.gear] = lab
+            if decided == "first pulse":
+                relative.append(p.gear)
+            if p.gear == "ring" and np.any(pl >= 0):
+                ring_load = _ring_loads(lab, n)
+    return labels, all_labels, relative
+
+
+def _gauge_trains(all_labels: dict, gearset) -> tuple[list, dict]:
+    """The angle train of every gauge with two or more labelled passes
+    (:func:`pipeline.angles.gauge_train`), as a list and by channel."""
+    trains, train_of = [], {}
+    for name, (lab, frac, p) in all_labels.items():
+        ok = lab.planet >= 0
+        if np.count_nonzero(ok) < 2:
+            continue
+        z = gearset.z_sun if p.gear == "sun" else gearset.z_ring
+        sig = None if p.sigma is None else np.asarray(p.sigma)[ok]
+        tr = gauge_train(name, p.gear, p.times[ok], lab.planet[ok].astype(int),
+                         lab.position[ok].astype(np.int64), frac, z, sigma=sig,
+                         order=pass_order(gearset.direction, p.gear))
+        trains.append(tr)
+        train_of[name] = tr
+    return trains, train_of
+
+
+def _gear_tables(model: AngleModel, labels: dict, train_of: dict, gearset, gaps) -> tuple[dict, dict]:
+    """Per gear with a main-gauge train: its phasing table from the angle model
+    (:func:`phasing_from_model`) and its reliability (:func:`_reliability`)."""
+    n = gearset.n_planets
+    tables: dict = {}
+    reliability: dict = {}
+    for gear, lab in labels.items():
+        tr = train_of.get(lab.channel)
+        if tr is None:
+            continue
+        z = gearset.z_sun if gear == "sun" else gearset.z_ring
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ProcessingWarning)
+            tab = phasing_from_model(model, tr, z, n, gauge=gear, gaps=gaps)
+        tables[gear] = tab
+        reliability[gear] = _reliability(model, tr, tab)
+    return tables, reliability
 
 
 def _align_labels(trains, train_of, all_labels, labels, kin, n, notes):
@@ -1069,8 +1221,6 @@ def _align_labels(trains, train_of, all_labels, labels, kin, n, notes):
     A shift is taken only when its misfit stands clearly apart (the next best is worse by more
     than 25 times the fit's variance per observation); otherwise the planets' offsets look
     alike, nothing is changed and a note says so."""
-    from .angles import label_shift_costs, relabel_train
-
     absolute = [nm for nm in train_of if all_labels[nm][0].decided_by in ("tacho", "pattern")]
     rel = [nm for nm in train_of if nm not in absolute]
     if not rel:

@@ -85,7 +85,7 @@ from pipeline.compare import PARAMETER_NAMES, _vector_from_errors, truth_compari
 from pipeline.errors import ProcessingWarning
 from pipeline.models.mesh_phasing import ShaftHoleErrors
 from pipeline.scene import SceneError, load_scene, parse_scene
-from pipeline.stages import RunContext, _gearset, run_scene, summary_dict
+from pipeline.stages import RunContext, run_scene, summary_dict
 from synthetic import SCENARIOS, generate, list_scenarios
 
 SEED = 3
@@ -185,7 +185,8 @@ def _nearest(sorted_t: np.ndarray, t: np.ndarray) -> np.ndarray:
 def truth_labels(ctx: RunContext, truth, gear: str):
     """(times, our 0-based labels, the truth's 0-based labels, onset-to-engagement offset [s])
     of the onsets a gauge's phasing used."""
-    ch, times, pl = ctx.results["phasing"]["labels"][gear][:3]
+    lab = ctx.phasing.labels[gear]
+    ch, times, pl = lab.channel, lab.times, lab.planet
     et = np.asarray(truth.events[ch].time)
     off = float(np.median(times - et[_nearest(et, times)]))
     tl = np.asarray(truth.events[ch].planet)[_nearest(et, times - off)] - 1
@@ -244,7 +245,7 @@ def test_truth_helpers_agree_with_the_runs_own_truth_comparison():
     run's own label_match; the truth-labelled rebuild reproduces vs_truth exactly."""
     ctx = synthetic_run("seed_rig")
     truth = ctx.results["load"]["truth"]
-    g = _gearset(ctx)
+    g = ctx.gearset
     for gear in ("sun", "ring"):
         times, pl, tl, off = truth_labels(ctx, truth, gear)
         vt = ctx.results["compare"][gear]["vs_truth"]
@@ -281,7 +282,7 @@ def test_phasing_matches_truth(name):
             assert any(f"'{gear}'" in m for m in ctx.messages), (gear, ctx.messages)
             continue
         vt = ctx.results["compare"][gear]["vs_truth"]
-        n_truth = len(truth.gamma_table(ctx.results["phasing"]["labels"][gear][0]).time)
+        n_truth = len(truth.gamma_table(ctx.phasing.labels[gear].channel).time)
         assert vt["n"] >= exp.min_passes * n_truth, (gear, vt["n"], n_truth)
         assert vt["rms"] <= tol, (gear, vt)
         assert vt["max_abs"] <= 4 * tol, (gear, vt)
@@ -345,7 +346,7 @@ def test_identified_errors_recover_the_truth(name):
     ctx = synthetic_run(name)
     truth = ctx.results["load"]["truth"]
     ident = ctx.results["identify"]
-    g = _gearset(ctx)
+    g = ctx.gearset
     assert ident.n_passes > 0 and math.isfinite(ident.rms_after)
     assert ident.rms_after <= ident.rms_before
     if kind[0] == "zero":
@@ -372,7 +373,7 @@ BIAS_FREE = ["seed_rig", "table2_case1", "table2_case2", "facewidth_offcentre"]
 def test_identification_has_no_onset_offset_bias(name):
     ctx = synthetic_run(name)
     truth = ctx.results["load"]["truth"]
-    assert _ident_ratio(ctx.results["identify"], mapped_true_errors(ctx, truth, _gearset(ctx))) <= 0.05
+    assert _ident_ratio(ctx.results["identify"], mapped_true_errors(ctx, truth, ctx.gearset)) <= 0.05
 
 
 @pytest.mark.parametrize("name", _params("centroids", FACEWIDTH))
@@ -456,7 +457,7 @@ def test_a_minute_of_table1_stays_accurate():
         assert label_map(ctx, truth, gear)[1] == 1.0
         assert ctx.results["compare"][gear]["vs_truth"]["rms"] <= 5e-4
         assert ctx.results["compare"][gear]["vs_model"]["rms"] <= 5e-4
-    true = mapped_true_errors(ctx, truth, _gearset(ctx))
+    true = mapped_true_errors(ctx, truth, ctx.gearset)
     assert _ident_ratio(ctx.results["identify"], true) <= 0.25
 
 
@@ -525,9 +526,9 @@ def truth_phasing_error(ctx: RunContext, truth, gear: str, g=None) -> dict:
     """Phasing error against the truth for a run without it (a file): every measured pass
     against the true mesh angle turned between its two pulses
     (:func:`pipeline.compare.truth_comparison`)."""
-    ch, times, pl, _, _ = ctx.results["phasing"]["labels"][gear]
-    out = truth_comparison(ctx.results["phasing"]["tables"][gear], truth, ch, times=times, planets=pl)
-    out["table"] = ctx.results["phasing"]["tables"][gear]
+    lab, table = ctx.phasing.labels[gear], ctx.phasing.tables[gear]
+    out = truth_comparison(table, truth, lab.channel, times=lab.times, planets=lab.planet)
+    out["table"] = table
     return out
 
 
@@ -718,7 +719,7 @@ def test_gap_across_a_revolution_keeps_the_accuracy(gap_run):
     # from all samples, the MAD (and the threshold) collapsed and 7 of the 54 sun pulses
     # outside the gap were found; the ring, left on its own encoder, came out 0.29 cycles off
     ctx, truth = gap_run
-    g = _gearset(ctx)
+    g = ctx.gearset
     et = np.asarray(truth.events["sun"].time)
     outside = np.count_nonzero((et < GAP[0] - 1.0) | (et > GAP[1] + 1.0))
     assert len(ctx.results["onsets"]["by_channel"]["sun"]) >= 0.9 * outside

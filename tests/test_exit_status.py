@@ -281,18 +281,33 @@ def test_failed_stage_is_partial_exit_3_with_causes(rig, tmp_path, monkeypatch, 
 
 def test_failed_result_stage_itself_is_partial(rig, tmp_path, monkeypatch, capsys):
     def boom(ctx):
-        raise KeyError("planet_count")
+        raise ValueError("planet_count: 0 planets in the file")
 
     monkeypatch.setitem(STAGE_FUNCTIONS, "load_sharing", boom)
     out = tmp_path / "o"
     assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
                  "--out", str(out)]) == EXIT_PARTIAL
     err = _err_lines(capsys)
-    assert err == ["meshphase process: partial: load_sharing not computed: KeyError: 'planet_count'"]
+    assert err == ["meshphase process: partial: load_sharing not computed: ValueError: "
+                   "planet_count: 0 planets in the file"]
     summ = json.loads((out / "summary.json").read_text())
     assert summ["status"] == "partial"
     assert summ["missing_results"] == [{"result": "load_sharing", "stage": "load_sharing",
-                                        "cause": "KeyError: 'planet_count'"}]
+                                        "cause": "ValueError: planet_count: 0 planets in the file"}]
+
+
+def test_key_error_in_a_stage_is_a_bug_exit_1_not_partial(rig, tmp_path, monkeypatch, capsys):
+    # a mistyped key is a bug: it stops the run (one line, nothing written), it is not
+    # reported as a result that could not be computed
+    def typo(ctx):
+        raise KeyError("planet_count")
+
+    monkeypatch.setitem(STAGE_FUNCTIONS, "load_sharing", typo)
+    out = tmp_path / "o"
+    assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
+                 "--out", str(out)]) == EXIT_ERROR
+    assert _err_lines(capsys) == ["meshphase process: error: missing key 'planet_count'"]
+    assert not out.exists()
 
 
 def test_unreliable_phasing_exits_3_with_status_line(rig, tmp_path, monkeypatch, capsys):

@@ -17,11 +17,13 @@ import pandas as pd
 import pytest
 
 import pipeline.io
-import pipeline.loads
-import pipeline.models.tolerance
+import pipeline.stages
 from pipeline.scene import STAGES, Scene, load_scene, parse_scene, plan
-from pipeline.stages import (STAGE_FUNCTIONS, RunContext, new_output_dir, process_recording,
-                             run_scene, summary_dict, write_outputs)
+from pipeline.phasing import relabel_gauge
+from pipeline.results import IdentifyStage, PhasingStage
+from pipeline.stages import (STAGE_FUNCTIONS, RunContext, new_output_dir,
+                             process_recording, run_scene, stage_identify, summary_dict,
+                             write_outputs)
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
@@ -136,7 +138,7 @@ def test_bearing_scene_opens_no_recording(tmp_path, monkeypatch):
 
 
 def test_scene_without_face_width_gauges_does_no_centroid_work(tmp_path, monkeypatch):
-    monkeypatch.setattr(pipeline.loads, "facewidth_centroid", _fail("facewidth_centroid"))
+    monkeypatch.setattr(pipeline.stages, "facewidth_centroid", _fail("facewidth_centroid"))
     scene = parse_scene('results = ["centroids"]\n[input]\nsynthetic = "seed_rig"\n'
                         'minutes = 0.25\n', tmp_path / "c.toml")
     ctx = run_scene(scene)
@@ -178,7 +180,7 @@ def test_example_tolerance_study_runs_monte_carlo_only(tmp_path):
 
 @pytest.mark.parametrize("name, cases", [("bearing_moments.toml", 3), ("bearing_double_pinion.toml", 2)])
 def test_example_bearing_scenes_run(name, cases, monkeypatch):
-    monkeypatch.setattr(pipeline.models.tolerance, "monte_carlo", _fail("monte_carlo"))
+    monkeypatch.setattr(pipeline.stages, "monte_carlo", _fail("monte_carlo"))
     ctx = run_scene(load_scene(EXAMPLES / name))
     assert ctx.ran == ["bearing_moments", "tilt"] and ctx.failed == {}
     sols = ctx.results["tilt"]["solutions"]
@@ -234,6 +236,76 @@ def test_bad_inputs():
         write_outputs(ctx, Path("/nonexistent/meshphase/out"))
 
 
+def test_a_key_error_in_a_stage_is_a_bug_not_a_failed_stage(monkeypatch):
+    # a mistyped key must fail loudly, not become a line of the report
+    def typo(ctx):
+        return {}["tilt_solutions"]
+
+    monkeypatch.setitem(STAGE_FUNCTIONS, "tilt", typo)
+    with pytest.raises(KeyError, match="tilt_solutions"):
+        run_scene(load_scene(EXAMPLES / "bearing_moments.toml"))
+    # bad data (a ValueError) stays a failed stage, the run goes on
+    def bad(ctx):
+        raise ValueError("k_tilt out of range")
+
+    monkeypatch.setitem(STAGE_FUNCTIONS, "tilt", bad)
+    ctx = run_scene(load_scene(EXAMPLES / "bearing_moments.toml"))
+    assert ctx.failed == {"tilt": "ValueError: k_tilt out of range"} and ctx.ran == ["bearing_moments"]
+
+
+def test_a_stage_out_of_order_says_what_it_needs():
+    ctx = RunContext(parse_scene('results = ["phasing"]\n[input]\nsynthetic = "seed_rig"\n'))
+    for name in ("condition", "onsets", "phasing", "load_sharing", "centroids", "identify", "compare"):
+        with pytest.raises(RuntimeError, match="did not run"):
+            STAGE_FUNCTIONS[name](ctx)
+    assert ctx.results == {} and ctx.error_estimates == {}
+
+
+def test_stages_give_typed_results(rig_run):
+    ctx, _, _ = rig_run
+    for name in ctx.ran:
+        r = ctx.result(name)
+        assert r is getattr(ctx, name) and r.error_estimate == ctx.error_estimates[name]
+    assert isinstance(ctx.phasing, PhasingStage)
+    assert set(ctx.phasing.labels) == {"sun", "ring"}
+    assert ctx.phasing.labels["ring"].channel == "ring"
+    assert ctx.results["phasing"]["assignment"] == ctx.phasing.assignment
+
+
+def test_identify_relabelling_supersedes_the_phasing(rig_run, monkeypatch):
+    """A relative gauge whose relabelling halves the identification residual is relabelled:
+    the identify stage's revised phasing replaces the phasing stage's in the run context."""
+    ctx, _, _ = rig_run
+    ph, g = ctx.phasing, ctx.gearset
+    gear = ph.labels_relative[0]
+    target = relabel_gauge(ph.result, gear, 2, g)[0]
+    real = pipeline.stages.identify_errors
+
+    def fits_only_the_target(tables, gearset):
+        ident = real(tables, gearset)
+        hit = any(len(t) == len(target) and np.array_equal(t.planet, target.planet)
+                  and t.gauge == gear for t in tables)
+        ident.rms_after = 0.1 if hit else 1.0
+        return ident
+
+    monkeypatch.setattr(pipeline.stages, "identify_errors", fits_only_the_target)
+    c2 = RunContext(ctx.scene)
+    c2.record("phasing", ph)
+    st = stage_identify(c2)
+    assert isinstance(st, IdentifyStage) and st.relabelled == ((gear, 2),)
+    assert c2.identify is st and c2.phasing is st.phasing is not ph
+    np.testing.assert_array_equal(c2.phasing.tables[gear].planet, target.planet)
+    assert c2.phasing.labels[gear].decided_by == "identification"
+    assert gear not in c2.phasing.labels_relative and gear in ph.labels_relative
+    assert summary_dict(c2)["phasing"][gear]["assignment"]["shift_decided_by"] == "identification"
+    assert any("relabelled by 2 place(s)" in n for n in st.identification.notes)
+    # no relabelling helps: the phasing stays the phasing stage's
+    monkeypatch.setattr(pipeline.stages, "identify_errors", real)
+    c3 = RunContext(ctx.scene)
+    c3.record("phasing", ph)
+    assert stage_identify(c3).phasing is None and c3.phasing is ph
+
+
 def test_stage_registry_matches_the_graph():
     assert set(STAGE_FUNCTIONS) == set(STAGES)
     assert isinstance(run_scene(Scene(path=None, name="empty", results=[])), RunContext)
@@ -271,7 +343,7 @@ def seed_rig_file(tmp_path_factory):
 def test_process_recording_writes_next_to_input_without_monte_carlo(seed_rig_file, monkeypatch):
     path, gs = seed_rig_file
     # no [tolerances] in the gearset file: the run must not touch the Monte Carlo
-    monkeypatch.setattr(pipeline.models.tolerance, "monte_carlo", _fail("monte_carlo"))
+    monkeypatch.setattr(pipeline.stages, "monte_carlo", _fail("monte_carlo"))
     before = path.read_bytes()
     ctx, files = process_recording(path, gs)
     assert "tolerance" not in ctx.ran and "tolerance" not in ctx.results

@@ -14,7 +14,8 @@ from scipy.integrate import quad
 
 from pipeline.errors import ProcessingWarning
 from pipeline.loads import (CentroidResult, LoadSharingResult, centroid_of_shape,
-                            facewidth_centroid, load_sharing_from_amplitudes)
+                            facewidth_centroid, facewidth_readings,
+                            load_sharing_from_amplitudes)
 
 B = 40e-3  # face width [m] of the synthetic scenarios (synthetic.scenarios.FACE_WIDTH)
 
@@ -265,3 +266,41 @@ def test_facewidth_bad_inputs(readings, positions, kwargs, match):
         facewidth_centroid(readings, positions, B, **kwargs)
     with pytest.raises(ValueError, match="face_width"):
         facewidth_centroid([1.0, 2.0], [-0.01, 0.01], -B)
+
+
+# ----------------------------------------------------------------------------- face-width passes
+def test_facewidth_readings_per_pass_of_the_most_loaded_gauge():
+    fs = 1000.0
+    t = np.array([1.0, 2.0, 3.0, 4.0])
+    # gauge 0 (most clean pulses) times the passes; gauge 1 misses the 3rd pass and is 2 ms
+    # late; gauge 2 is the unloaded end of the face (no pulse at all)
+    times = [t, np.array([1.002, 2.002, 4.002]), np.empty(0)]
+    amps = [np.array([1.0, 1.1, 1.2, 1.3]), np.array([-0.5, -0.6, -0.7]), np.empty(0)]
+    good = [np.array([1, 1, 1, 1], bool), np.array([1, 1, 1], bool), np.empty(0, bool)]
+    widths = [np.full(4, 0.004), np.full(3, 0.004), np.empty(0)]
+    r = facewidth_readings(times, amps, good, widths, fs)
+    np.testing.assert_allclose(r, [[1.0, 0.5, 0.0], [1.1, 0.6, 0.0], [1.2, 0.0, 0.0],
+                                   [1.3, 0.7, 0.0]])
+    # a pass further off than the reference's median width reads 0
+    r = facewidth_readings([t, t + 0.01], amps[:1] * 2, good[:1] * 2, [np.full(4, 0.004)] * 2, fs)
+    np.testing.assert_allclose(r[:, 1], 0.0)
+    # only the reference gauge's clean pulses are passes; a NaN reading drops the row
+    amps2 = [amps[0], np.array([np.nan, 0.6, 0.7])]
+    good2 = [np.array([1, 0, 1, 1], bool), good[1]]
+    r = facewidth_readings(times[:2], amps2, good2, widths[:2], fs)
+    np.testing.assert_allclose(r, [[1.2, 0.0], [1.3, 0.7]])
+
+
+def test_facewidth_readings_empty_and_bad_input():
+    assert facewidth_readings([], [], [], [], 1000.0).shape == (0, 0)
+    none_clean = facewidth_readings([np.array([1.0])] * 2, [np.array([1.0])] * 2,
+                                    [np.array([False])] * 2, [np.array([0.01])] * 2, 1000.0)
+    assert none_clean.shape == (0, 2)
+    with pytest.raises(ValueError, match="one entry per gauge"):
+        facewidth_readings([np.array([1.0])] * 2, [np.array([1.0])], [np.array([True])] * 2,
+                           [np.array([0.01])] * 2, 1000.0)
+    with pytest.raises(ValueError, match="1-D of one length"):
+        facewidth_readings([np.array([1.0, 2.0])], [np.array([1.0])], [np.array([True])],
+                           [np.array([0.01])], 1000.0)
+    with pytest.raises(ValueError, match="fs"):
+        facewidth_readings([], [], [], [], 0.0)

@@ -13,8 +13,9 @@ import pytest
 from hypothesis import given, strategies as st
 
 from pipeline.errors import ProcessingWarning
-from pipeline.phasing import (PassTable, assign_planets_by_pattern, assign_planets_by_tacho,
-                              measured_phasing, pass_order, planet_fractions, revolution_numbers)
+from pipeline.phasing import (PassTable, TachoRelabel, assign_planets_by_pattern,
+                              assign_planets_by_tacho, measured_phasing, pass_order,
+                              planet_fractions, relabel_by_tacho, revolution_numbers)
 
 TWO_PI = 2 * math.pi
 
@@ -219,3 +220,62 @@ def test_bad_pass_order_args():
         planet_fractions([0.0, 1.0], 0)
     with pytest.raises(ValueError, match="tacho"):
         assign_planets_by_tacho([0.5], [0.0], np.arange(3.0), 0.0, 1)
+
+
+# ----------------------------------------------------------------------------- tacho relabelling
+def _held_ring_passes(gauge_angle=3.0):
+    """A 3-planet ring gauge on a held ring, carrier counter-clockwise at 0.5 rev/s: pass
+    times, true 0-based planets, tacho edges (key at planet 1)."""
+    psi = TWO_PI * np.arange(3) / 3
+    w_c = 0.5
+    tacho = np.arange(0, 12) / w_c
+    rev = ((gauge_angle - psi) / TWO_PI) % 1.0
+    tt = ((np.arange(11)[:, None] + rev[None, :]) / w_c).ravel()
+    lab = np.tile(np.arange(3), 11)
+    o = np.argsort(tt)
+    return psi, tt[o], lab[o], tacho
+
+
+def test_relabel_by_tacho_names_planet_one_of_the_pattern_labels():
+    psi, t, truth, tacho = _held_ring_passes()
+    order = pass_order("cw", "ring")
+    pl, info = assign_planets_by_pattern(t, psi, order)
+    assert info["ambiguous"] and not np.array_equal(pl, truth)   # the pattern alone: relative
+    v = relabel_by_tacho(t, pl, info["position"], tacho, psi, 3.0, pass_order=order,
+                         carrier_sense=1)
+    assert isinstance(v, TachoRelabel) and v.accepted
+    assert v.compared == v.agree == t.size and v.shift > 0
+    np.testing.assert_array_equal(v.planet, truth)
+    np.testing.assert_array_equal(v.position - info["position"], v.shift)
+
+
+def test_relabel_by_tacho_keeps_labels_the_tacho_does_not_back():
+    psi, t, truth, tacho = _held_ring_passes()
+    pl = np.random.default_rng(2).integers(0, 3, t.size)     # labels that follow no pattern
+    pos = np.arange(t.size)
+    v = relabel_by_tacho(t, pl, pos, tacho, psi, 3.0, pass_order=-1, carrier_sense=1)
+    assert not v.accepted and v.compared == t.size and v.agree < 0.8 * t.size
+    assert v.planet is pl and v.position is pos
+    # a stricter or looser share decides the same votes differently
+    assert relabel_by_tacho(t, pl, pos, tacho, psi, 3.0, pass_order=-1, carrier_sense=1,
+                            agreement=v.agree / t.size).accepted
+
+
+def test_relabel_by_tacho_empty_and_bad_input():
+    psi, t, truth, tacho = _held_ring_passes()
+    e = np.empty(0)
+    v = relabel_by_tacho(e, e.astype(int), e.astype(int), tacho, psi, 3.0, pass_order=-1,
+                         carrier_sense=1)
+    assert not v.accepted and v.compared == 0 and v.shift == -1 and v.planet.size == 0
+    unlabelled = np.full(t.size, -1)
+    assert relabel_by_tacho(t, unlabelled, np.arange(t.size), tacho, psi, 3.0, pass_order=-1,
+                            carrier_sense=1).compared == 0
+    with pytest.raises(ValueError, match="shape of times"):
+        relabel_by_tacho(t, truth[:-1], np.arange(t.size), tacho, psi, 3.0, pass_order=-1,
+                         carrier_sense=1)
+    with pytest.raises(ValueError, match="agreement"):
+        relabel_by_tacho(t, truth, np.arange(t.size), tacho, psi, 3.0, pass_order=-1,
+                         carrier_sense=1, agreement=0.0)
+    with pytest.raises(ValueError, match="tacho"):
+        relabel_by_tacho(t, truth, np.arange(t.size), tacho[:1], psi, 3.0, pass_order=-1,
+                         carrier_sense=1)

@@ -1,0 +1,207 @@
+"""What a run writes: the machine-readable summary (summary.json), the CSV tables, the
+arrays (arrays.h5) and the HTML report, from the run context's typed stage results
+(:mod:`pipeline.results`); the output folder a run writes into (:func:`new_output_dir`).
+
+``summary.json`` keys: scene, status, missing_results, phasing_reliability,
+results_requested, stages_ran, stages_failed, timings_s, error_estimates, messages,
+channels_unused and, for what ran, gearset, recording, onsets, ideal, phasing,
+phasing_labels, held_member, angle_model, load_sharing, centroids_m, tolerance, identify,
+compare, bearing_moments, tilt.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .exits import run_status
+from .jsonable import to_jsonable
+from .results import PhasingStage, RunContext, phasing_verdict
+
+__all__ = ["new_output_dir", "summary_dict", "write_outputs"]
+
+
+def new_output_dir(base: Path, *, overwrite: bool = False) -> Path:
+    """``base`` if it does not exist (or ``overwrite``), else ``base-2``, ``base-3``, ...:
+    a run never overwrites an earlier one unless asked."""
+    base = Path(base)
+    if overwrite or not base.exists():
+        base.mkdir(parents=True, exist_ok=True)
+        return base
+    i = 2
+    while Path(f"{base}-{i}").exists():
+        i += 1
+    out = Path(f"{base}-{i}")
+    out.mkdir(parents=True)
+    return out
+
+
+def summary_dict(ctx: RunContext) -> dict:
+    """The machine-readable summary of a run (JSON-friendly)."""
+    st = run_status(ctx)
+    s: dict = {"scene": ctx.scene.name, "status": st["status"],
+               "missing_results": st["missing_results"],
+               "phasing_reliability": phasing_verdict(ctx.phasing, ctx.messages),
+               "results_requested": ctx.scene.results,
+               "stages_ran": ctx.ran, "stages_failed": ctx.failed,
+               "timings_s": ctx.timings, "error_estimates": ctx.error_estimates,
+               "messages": ctx.messages, "channels_unused": ctx.channels_unused}
+    g = ctx.gearset
+    if g is not None:
+        s["gearset"] = g.to_dict()
+    if ctx.load is not None:
+        rec = ctx.load.recording
+        s["recording"] = {"source": ctx.load.source, "fs_hz": rec.fs, "n_samples": rec.n_samples,
+                          "duration_s": rec.duration, "channels": [c.to_dict() for c in rec.channels]}
+    if ctx.onsets is not None:
+        s["onsets"] = {k: o.summary() for k, o in ctx.onsets.by_channel.items()}
+    if ctx.ideal is not None:
+        i = ctx.ideal
+        s["ideal"] = {"gamma_s": i.gamma_s, "gamma_r": i.gamma_r, "classification": i.classification}
+    if ctx.phasing is not None:
+        s.update(_phasing_summary(ctx.phasing))
+    if ctx.load_sharing is not None and ctx.load_sharing.sharing is not None:
+        s["load_sharing"] = ctx.load_sharing.sharing.to_rows()
+    if ctx.centroids is not None and ctx.centroids.by_gear:
+        s["centroids_m"] = {k: (None if v is None else vars(v)) for k, v in ctx.centroids.by_gear.items()}
+    if ctx.tolerance is not None:
+        s["tolerance"] = ctx.tolerance.monte_carlo.to_dict()
+    if ctx.identify is not None:
+        i = ctx.identify.identification
+        s["identify"] = {"table": i.table, "rms_before": i.rms_before, "rms_after": i.rms_after,
+                         "n_passes": i.n_passes, "identifiable": i.identifiable, "notes": i.notes,
+                         "singular_values": i.singular_values}
+    if ctx.compare is not None:
+        s["compare"] = {k: {kk: vv for kk, vv in v.as_dict().items() if kk not in ("ideal", "model")}
+                        for k, v in ctx.compare.by_gear.items()}
+    s.update(_bearing_summary(ctx))
+    return to_jsonable(s)
+
+
+def _phasing_summary(ph: PhasingStage) -> dict:
+    """``phasing`` (per gear: passes, per-planet statistics, notes, labels, reliability),
+    ``phasing_labels``, ``held_member`` and ``angle_model`` of the summary."""
+    assignment, reliability = ph.assignment, ph.reliability or {}
+    s = {"phasing": {k: {"n_passes": len(t), "per_planet": t.summary(), "notes": t.notes,
+                         "assignment": assignment.get(k), "reliability": reliability.get(k)}
+                     for k, t in ph.tables.items()}}
+    rel = ph.labels_relative or []
+    s["phasing_labels"] = (
+        f"planet labels of the {' and '.join(rel)} gauge(s) are relative: planet 1 is the "
+        "first pulse seen (no tacho geometry, unequal spacing or unequal loads named it)"
+        if rel else "planet labels absolute")
+    s["held_member"] = {"fixed": ph.fixed, "reason": ph.fixed_reason}
+    if ph.model is not None:
+        s["angle_model"] = ph.model.summary()
+    return s
+
+
+def _bearing_summary(ctx: RunContext) -> dict:
+    """``bearing_moments`` and ``tilt`` of the summary."""
+    s: dict = {}
+    if ctx.bearing_moments is not None:
+        b = ctx.bearing_moments
+        s["bearing_moments"] = {"case": b.case.name, "input_torque_Nm": b.torque,
+                                "concentrated": _moments_dict(b.concentrated),
+                                **({"measured": _moments_dict(b.measured)}
+                                   if b.measured is not None else {})}
+    if ctx.tilt is not None:
+        s["tilt"] = [{"k_tilt_Nm_per_rad": k, "z_m": sol.z, "converged": sol.converged,
+                      "iterations": sol.iterations, "residual_m": sol.residual,
+                      "contact_fraction": sol.contact_fraction, "moments": _moments_dict(sol.moments)}
+                     for k, sol in ctx.tilt.solutions]
+    return s
+
+
+def _moments_dict(m) -> dict:
+    out = {}
+    for k, v in vars(m).items():
+        if isinstance(v, (np.ndarray, float, int, np.floating)):
+            out[k] = v
+    return out
+
+
+def write_outputs(ctx: RunContext, out_dir: Path, *, report: bool = True) -> dict:
+    """Write summary.json, CSV tables, arrays.h5 and (optionally) report.html into ``out_dir``.
+
+    Returns a dict name -> path of what was written.
+    """
+    import pandas as pd  # heavy: only when writing
+
+    if not isinstance(ctx, RunContext):
+        raise TypeError(f"ctx must be a RunContext (from run_scene), got {type(ctx).__name__}")
+    out_dir = Path(out_dir)
+    if not out_dir.is_dir():
+        raise FileNotFoundError(f"{out_dir}: output folder does not exist (see new_output_dir)")
+    files = {}
+    p = out_dir / "summary.json"
+    p.write_text(json.dumps(summary_dict(ctx), indent=2))
+    files["summary"] = p
+    files.update(_write_tables(ctx, out_dir))
+    p = out_dir / "stages.csv"
+    pd.DataFrame([{"stage": s, "wall_time_s": ctx.timings.get(s, float("nan")),
+                   "error_estimate": ctx.error_estimates.get(s, ""),
+                   "status": "ran" if s in ctx.ran else ctx.failed.get(s, "")}
+                  for s in list(ctx.timings) + [k for k in ctx.failed if k not in ctx.timings]],
+                 columns=["stage", "wall_time_s", "error_estimate", "status"]).to_csv(p, index=False)
+    files["stages"] = p
+    files["arrays"] = _write_arrays(ctx, out_dir / "arrays.h5")
+    if report:
+        from .report.validation import build_report  # matplotlib: only for the report
+
+        files["report"] = build_report(ctx, out_dir)
+    return files
+
+
+def _write_tables(ctx: RunContext, out_dir: Path) -> dict:
+    """passes_<gear>.csv, load_sharing.csv, identified_errors.csv and tilt.csv of what ran."""
+    import pandas as pd  # heavy: only when writing
+
+    files = {}
+    if ctx.phasing is not None:
+        cmp = ctx.compare.by_gear if ctx.compare is not None else {}
+        for gear, t in ctx.phasing.tables.items():
+            df = t.to_dataframe()
+            if gear in cmp:
+                df["gamma_ideal"] = cmp[gear].ideal
+                if cmp[gear].model is not None:
+                    df["gamma_model"] = cmp[gear].model
+            p = out_dir / f"passes_{gear}.csv"
+            df.to_csv(p, index=False)
+            files[f"passes_{gear}"] = p
+    if ctx.load_sharing is not None and ctx.load_sharing.sharing is not None:
+        p = out_dir / "load_sharing.csv"
+        pd.DataFrame(ctx.load_sharing.sharing.to_rows()).to_csv(p, index=False)
+        files["load_sharing"] = p
+    if ctx.identify is not None:
+        p = out_dir / "identified_errors.csv"
+        pd.DataFrame(ctx.identify.identification.table).to_csv(p, index=False)
+        files["identified_errors"] = p
+    if ctx.tilt is not None:
+        p = out_dir / "tilt.csv"
+        pd.DataFrame([{"k_tilt_Nm_per_rad": k, "z_s_m": float(np.ravel(s.z)[0]),
+                       "z_r_m": float(np.ravel(s.z)[-1]), "converged": bool(np.all(s.converged)),
+                       "iterations": int(np.max(s.iterations)), "residual_m": float(np.max(s.residual))}
+                      for k, s in ctx.tilt.solutions]).to_csv(p, index=False)
+        files["tilt"] = p
+    return files
+
+
+def _write_arrays(ctx: RunContext, path: Path) -> Path:
+    """arrays.h5: the onsets per channel and the Monte Carlo samples."""
+    import h5py  # heavy: only when writing
+
+    with h5py.File(path, "w") as f:
+        if ctx.onsets is not None:
+            grp = f.create_group("onsets")
+            for ch, o in ctx.onsets.by_channel.items():
+                gch = grp.create_group(ch)
+                for a in ("times", "corr", "amplitude", "width", "flags"):
+                    gch.create_dataset(a, data=getattr(o, a))
+        if ctx.tolerance is not None and ctx.tolerance.monte_carlo.samples is not None:
+            grp = f.create_group("monte_carlo")
+            for k, v in ctx.tolerance.monte_carlo.samples.items():
+                grp.create_dataset(k, data=v)
+    return path

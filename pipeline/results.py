@@ -1,0 +1,681 @@
+"""Typed results of the stages a scene runs: one frozen dataclass per stage, and the run
+context that holds them.
+
+:func:`pipeline.stages.run_scene` keeps them in its :class:`RunContext`, one attribute per
+stage (``ctx.load``, ``ctx.phasing``, ``ctx.compare``, ...; None for a stage
+that did not run); :func:`pipeline.stages.summary_dict`, :func:`pipeline.stages.write_outputs`,
+the HTML report and the run status read them there. Units are SI; phasing in mesh cycles [-].
+
+The dataclasses are frozen (a stage's result is not changed by a later stage: a stage that
+revises an earlier result, as the identification relabelling a gauge, returns the revised one
+in :meth:`StageResult.supersedes`); the arrays and dicts they hold are not copied.
+
+``ctx.results`` (:class:`LegacyResults`) shows the same results in the shape they had before
+they were typed, a dict of dicts keyed by stage name, for code written against that shape.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from collections.abc import Mapping, MutableMapping
+from dataclasses import dataclass, field
+from typing import Any, Callable, ClassVar, Generic, TypeVar
+
+import numpy as np
+
+from .models.gearset import Gearset
+
+__all__ = ["StageResult", "LoadStage", "ConditionStage", "OnsetsStage", "PhasingStage",
+           "LoadSharingStage", "CentroidsStage", "IdealStage", "ToleranceStage",
+           "IdentifyStage", "GaugeComparison", "CompareStage", "BearingStage", "TiltStage",
+           "RESULT_TYPES", "LegacyResults", "RunContext", "phasing_verdict"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class StageResult:
+    """What every stage result carries.
+
+    Attributes
+    ----------
+    error_estimate : str
+        The stage's error estimate in words (what "error against run time" lists).
+    """
+
+    error_estimate: str = ""
+
+    #: the keys of the stage's dict before the results were typed, in their order
+    #: (:meth:`legacy`, :meth:`from_legacy`)
+    LEGACY_KEYS: ClassVar[tuple] = ()
+
+    def supersedes(self) -> dict:
+        """Results of earlier stages this one revises: stage name -> its new result."""
+        return {}
+
+    def legacy(self) -> Any:
+        """This result in its shape before typing (a dict of :attr:`LEGACY_KEYS`)."""
+        return {k: getattr(self, k) for k in self.LEGACY_KEYS}
+
+    @classmethod
+    def from_legacy(cls, value) -> "StageResult":
+        """The typed result from its pre-typing shape (a dict with some of
+        :attr:`LEGACY_KEYS`; missing keys take their defaults)."""
+        if not isinstance(value, Mapping):
+            raise TypeError(f"a {cls.__name__} is made from a dict, got {type(value).__name__}")
+        names = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{k: value[k] for k in cls.LEGACY_KEYS if k in value and k in names})
+
+
+# ----------------------------------------------------------------------------- the recording
+@dataclass(frozen=True, kw_only=True)
+class LoadStage(StageResult):
+    """The recording opened and its raw samples scanned (``load`` stage).
+
+    Attributes
+    ----------
+    recording : Recording or StreamedRecording
+        The recording's header (channels, fs [Hz], t0 [s], metadata); a file's samples are
+        not held, the later stages stream them again from ``stream``.
+    source : str
+        The file path, or ``synthetic:<scenario>``.
+    quality : list of dict
+        Raw-sample quality per channel (:meth:`pipeline.recording.Recording.quality`).
+    truth : synthetic.truth.Truth or None
+        The generator's truth for a synthetic input.
+    true_errors : ShaftHoleErrors or None
+        The shaft hole errors of that truth.
+    stream : pipeline.stream.BlockSource or None
+        Where the samples come from for each pass.
+    scan : pipeline.stream.RawScan or None
+        What passes 1 and 2 found (tacho edges, hum windows, quality).
+    channels_unused : tuple of str
+        Channels no planned stage reads.
+    """
+
+    recording: Any
+    source: str
+    quality: list
+    truth: Any = None
+    true_errors: Any = None
+    stream: Any = None
+    scan: Any = None
+    channels_unused: tuple = ()
+
+    LEGACY_KEYS = ("recording", "truth", "source", "true_errors", "quality", "stream", "scan")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ConditionStage(StageResult):
+    """The channels conditioned and the gauges' pulses timed in one streamed pass
+    (``condition`` stage).
+
+    Attributes
+    ----------
+    recording : StreamedRecording or Recording
+        The conditioned recording's header.
+    quality : dict of str to ChannelQuality
+        Per conditioned channel (SNR [dB], hum, conditioned gap runs, noise RMS).
+    excerpt : Recording or None
+        The first minute of the conditioned channels (for the report's figure).
+    onsets : dict of str to Onsets or None
+        Onsets per gauge channel found in the pass (None: the onsets stage detects them).
+    onset_warnings : list of (category, message)
+        The detector's warnings, issued again by the onsets stage.
+    timings : dict of str to float
+        Seconds spent conditioning and detecting onsets [s].
+    memory : dict of str to int
+        Memory estimate of the pass [B].
+    scan : pipeline.stream.RawScan or None
+        The raw-sample scan the pass used (the load stage's, or one made here).
+    """
+
+    recording: Any
+    quality: dict
+    excerpt: Any = None
+    onsets: dict | None = None
+    onset_warnings: list = field(default_factory=list)
+    timings: dict = field(default_factory=dict)
+    memory: dict = field(default_factory=dict)
+    scan: Any = None
+
+    LEGACY_KEYS = ("recording", "quality", "excerpt", "onsets", "onset_warnings", "timings",
+                   "memory")
+
+
+@dataclass(frozen=True, kw_only=True)
+class OnsetsStage(StageResult):
+    """Tooth-engagement onsets of every gauge channel (``onsets`` stage).
+
+    Attributes
+    ----------
+    by_channel : dict of str to Onsets
+        Per gauge channel, in the recording's channel order.
+    tacho_times : ndarray or None
+        Edge times of the first tacho channel [s].
+    """
+
+    by_channel: dict
+    tacho_times: np.ndarray | None = None
+
+    LEGACY_KEYS = ("by_channel", "tacho_times")
+
+
+# ----------------------------------------------------------------------------- measured
+@dataclass(frozen=True, kw_only=True)
+class PhasingStage(StageResult):
+    """Measured mesh phasing per gauged gear (``phasing`` stage).
+
+    Attributes
+    ----------
+    tables : dict of str to PassTable
+        Per gear ("sun", "ring"): gamma per pass [-] with uncertainties; an empty table for a
+        main gauge without a measurable pass.
+    labels : dict of str to GaugeLabels
+        Per gear: planet labels of its main gauge's pulses.
+    model : AngleModel or None
+        The angle model of the whole recording.
+    reliability : dict of str to dict or None
+        Per gear: ``reliable``, ``reasons``, ``error_estimate`` [-], ``floor`` [-], ...
+        (None: not given, the run's messages decide, :func:`phasing_verdict`).
+    fixed : {"ring", "sun", None}
+        Held member; ``fixed_reason`` says how it was decided.
+    fixed_reason : str
+    labels_relative : list of str
+        Gears whose planet 1 is only the first pulse seen.
+    notes : list of str
+    result : PhasingResult or None
+        The whole measurement (trains, fractions) :func:`pipeline.phasing.relabel_gauge`
+        recomputes from.
+    """
+
+    tables: dict
+    labels: dict = field(default_factory=dict)
+    model: Any = None
+    reliability: dict | None = None
+    fixed: str | None = None
+    fixed_reason: str = ""
+    labels_relative: list = field(default_factory=list)
+    notes: list = field(default_factory=list)
+    result: Any = None
+
+    LEGACY_KEYS = ("tables", "labels", "assignment", "model", "reliability", "fixed",
+                   "fixed_reason", "labels_relative", "notes", "result")
+
+    @property
+    def assignment(self) -> dict:
+        """Per gear: ``shift_decided_by`` (what named planet 1), ``n_unassigned``,
+        ``ambiguous`` (planet 1 is only the first pulse seen)."""
+        return {k: {"shift_decided_by": v.decided_by, "n_unassigned": v.n_unassigned,
+                    "ambiguous": v.decided_by == "first pulse"} for k, v in self.labels.items()}
+
+    def relabelled(self, gear: str, table, labels) -> "PhasingStage":
+        """This result with ``gear``'s table and labels replaced (a gauge relabelled
+        cyclically, :func:`pipeline.phasing.relabel_gauge`); the gear's labels are then no
+        longer relative."""
+        tables = {**self.tables, gear: table}
+        labs = {**self.labels, gear: labels}
+        result = self.result
+        if result is not None:
+            result = dataclasses.replace(result, tables={**result.tables, gear: table},
+                                         labels={**result.labels, gear: labels})
+        return dataclasses.replace(self, tables=tables, labels=labs, result=result,
+                                   labels_relative=[g for g in self.labels_relative if g != gear])
+
+    def legacy(self) -> dict:
+        out = super().legacy()
+        # labels as the positional (channel, times, planet, amplitude, sigma) of old
+        out["labels"] = {k: (v.channel, v.times, v.planet, v.amplitude, v.sigma)
+                         if hasattr(v, "channel") else v for k, v in self.labels.items()}
+        return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class LoadSharingStage(StageResult):
+    """Planet load sharing from the ring gauge's pulse amplitudes (``load_sharing`` stage).
+
+    Attributes
+    ----------
+    sharing : LoadSharingResult or None
+        Factors per planet [-]; None without a ring gauge.
+    channel : str or None
+        The ring gauge read.
+    """
+
+    sharing: Any = None
+    channel: str | None = None
+
+    def legacy(self):
+        return self.sharing
+
+    @classmethod
+    def from_legacy(cls, value) -> "LoadSharingStage":
+        return cls(sharing=value)
+
+
+@dataclass(frozen=True, kw_only=True)
+class CentroidsStage(StageResult):
+    """Face-width load centroids (``centroids`` stage).
+
+    Attributes
+    ----------
+    by_gear : dict of str to CentroidResult or None
+        Per gear with face-width gauges: Z [m] and its standard error [m]; None where it has
+        fewer than two positioned gauges or no face width.
+    """
+
+    by_gear: dict = field(default_factory=dict)
+
+    def legacy(self):
+        return self.by_gear
+
+    @classmethod
+    def from_legacy(cls, value) -> "CentroidsStage":
+        return cls(by_gear=dict(value))
+
+
+# ----------------------------------------------------------------------------- models
+@dataclass(frozen=True, kw_only=True)
+class IdealStage(StageResult):
+    """Ideal mesh phasing of the gearset (``ideal`` stage, Parker & Lin 2004).
+
+    Attributes
+    ----------
+    gamma_s, gamma_r : ndarray, shape (N,)
+        Sun-planet and ring-planet phasing of each planet relative to planet 1 [-].
+    classification : str
+        "in-phase", "sequential", "counter-phase" or "mixed".
+    assembly : AssemblyCheck
+    """
+
+    gamma_s: np.ndarray
+    gamma_r: np.ndarray
+    classification: str
+    assembly: Any = None
+
+    LEGACY_KEYS = ("gamma_s", "gamma_r", "classification", "assembly")
+
+    def gamma(self, gear: str) -> np.ndarray:
+        """The ideal phasing of ``gear`` ("sun" or "ring") [-]."""
+        return self.gamma_s if gear == "sun" else self.gamma_r
+
+
+@dataclass(frozen=True, kw_only=True)
+class ToleranceStage(StageResult):
+    """Monte Carlo phasing statistics under the scene's tolerances (``tolerance`` stage).
+
+    Attributes
+    ----------
+    monte_carlo : MonteCarloResult
+    """
+
+    monte_carlo: Any
+
+    def legacy(self):
+        return self.monte_carlo
+
+    @classmethod
+    def from_legacy(cls, value) -> "ToleranceStage":
+        return cls(monte_carlo=value)
+
+    def band(self, gear: str) -> tuple[np.ndarray, np.ndarray]:
+        """The 3-sigma band of ``gear``'s phasing deviation from the ideal per planet [-]:
+        (Ave bound3 low - half the upper Dev bound, Ave bound3 high + half of it)."""
+        mc = self.monte_carlo
+        ave = mc.ave_s if gear == "sun" else mc.ave_r
+        dev = mc.dev_s if gear == "sun" else mc.dev_r
+        return ave.bound3[0] - dev.bound3[1] / 2, ave.bound3[1] + dev.bound3[1] / 2
+
+
+@dataclass(frozen=True, kw_only=True)
+class IdentifyStage(StageResult):
+    """Shaft hole errors identified from the measured phasing (``identify`` stage).
+
+    Attributes
+    ----------
+    identification : pipeline.compare.Identification
+    relabelled : tuple of (str, int)
+        Gears whose relative planet labels the identification moved, with the shift [places].
+    phasing : PhasingStage or None
+        The phasing with those gears relabelled (None: unchanged); it supersedes the phasing
+        stage's result.
+    """
+
+    identification: Any
+    relabelled: tuple = ()
+    phasing: PhasingStage | None = None
+
+    def supersedes(self) -> dict:
+        return {} if self.phasing is None else {"phasing": self.phasing}
+
+    def legacy(self):
+        return self.identification
+
+    @classmethod
+    def from_legacy(cls, value) -> "IdentifyStage":
+        return cls(identification=value)
+
+
+@dataclass(frozen=True, kw_only=True)
+class GaugeComparison:
+    """One gauge's measured phasing against the models.
+
+    Attributes
+    ----------
+    ideal : ndarray, shape (n,)
+        Ideal phasing at each pass [-].
+    model : ndarray, shape (n,) or None
+        The identified error model's phasing at each pass [-] (None: no identification).
+    vs_ideal, vs_model : dict or None
+        :func:`pipeline.compare.residual_stats` of the passes against them [-].
+    band : dict or None
+        ``lo``, ``hi``: the Monte Carlo 3-sigma band per planet around the ideal [-].
+    coverage : dict or None
+        :func:`pipeline.compare.band_coverage` of the passes in that band.
+    vs_truth : dict or None
+        :func:`pipeline.compare.truth_comparison` against the synthetic truth.
+    scored_against_truth : bool
+        The input had a truth to score against (``vs_truth`` None then: no labels).
+    """
+
+    ideal: np.ndarray
+    model: np.ndarray | None
+    vs_ideal: dict
+    vs_model: dict | None
+    band: dict | None = None
+    coverage: dict | None = None
+    vs_truth: dict | None = None
+    scored_against_truth: bool = False
+
+    def with_band(self, lo, hi, coverage=None) -> "GaugeComparison":
+        """This comparison with the band ``lo``, ``hi`` [-] and, when given, its coverage."""
+        return dataclasses.replace(self, band={"lo": lo, "hi": hi},
+                                   coverage=self.coverage if coverage is None else coverage)
+
+    def as_dict(self) -> dict:
+        """ideal, model, vs_ideal, vs_model, then band and coverage (with a band) and
+        vs_truth (when scored)."""
+        out = {"ideal": self.ideal, "model": self.model, "vs_ideal": self.vs_ideal,
+               "vs_model": self.vs_model}
+        if self.band is not None:
+            out["band"] = self.band
+            if self.coverage is not None:
+                out["coverage"] = self.coverage
+        if self.scored_against_truth:
+            out["vs_truth"] = self.vs_truth
+        return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class CompareStage(StageResult):
+    """Measured phasing against the ideal, the identified model and the Monte Carlo band
+    (``compare`` stage).
+
+    Attributes
+    ----------
+    by_gear : dict of str to GaugeComparison
+        Per gear with a non-empty phasing table, sun first.
+    """
+
+    by_gear: dict = field(default_factory=dict)
+
+    def with_gauge(self, gear: str, comparison: GaugeComparison) -> "CompareStage":
+        """This result with ``gear``'s comparison replaced."""
+        return dataclasses.replace(self, by_gear={**self.by_gear, gear: comparison})
+
+    def legacy(self) -> dict:
+        return {k: v.as_dict() for k, v in self.by_gear.items()}
+
+    @classmethod
+    def from_legacy(cls, value) -> "CompareStage":
+        keys = {f.name for f in dataclasses.fields(GaugeComparison)}
+        return cls(by_gear={g: GaugeComparison(**{k: v for k, v in row.items() if k in keys},
+                                               scored_against_truth="vs_truth" in row)
+                            for g, row in value.items()})
+
+
+@dataclass(frozen=True, kw_only=True)
+class BearingStage(StageResult):
+    """Bearing moments of a seed 001 case (``bearing_moments`` stage).
+
+    Attributes
+    ----------
+    case : SeedCase
+    torque : float
+        Input torque [N·m].
+    concentrated : BearingMoments or DoublePinionMoments
+        With the loads at the face centres [N·m].
+    with_offsets : BearingMoments or None
+        Single pinion: with the scene's centroid offsets z_s, z_r.
+    measured : BearingMoments or None
+        Single pinion: with the measured centroids (centroids stage).
+    """
+
+    case: Any
+    torque: float
+    concentrated: Any
+    with_offsets: Any = None
+    measured: Any = None
+
+    LEGACY_KEYS = ("case", "torque", "concentrated", "with_offsets", "measured")
+
+    def legacy(self) -> dict:
+        return {k: v for k, v in super().legacy().items()
+                if v is not None or k not in ("with_offsets", "measured")}
+
+
+@dataclass(frozen=True, kw_only=True)
+class TiltStage(StageResult):
+    """Coupled bearing tilt and load distribution (``tilt`` stage).
+
+    Attributes
+    ----------
+    case : SeedCase
+    torque : float
+        Input torque [N·m].
+    solutions : list of (float, TiltSolution)
+        Per bearing tilt stiffness k_tilt [N·m/rad], its solution.
+    """
+
+    case: Any
+    torque: float
+    solutions: list
+
+    LEGACY_KEYS = ("case", "torque", "solutions")
+
+
+#: stage name -> the type of its result
+RESULT_TYPES: dict[str, type[StageResult]] = {
+    "load": LoadStage, "condition": ConditionStage, "onsets": OnsetsStage,
+    "phasing": PhasingStage, "load_sharing": LoadSharingStage, "centroids": CentroidsStage,
+    "ideal": IdealStage, "tolerance": ToleranceStage, "identify": IdentifyStage,
+    "compare": CompareStage, "bearing_moments": BearingStage, "tilt": TiltStage,
+}
+
+
+class LegacyResults(MutableMapping):
+    """The stage results as a dict of dicts (their shape before they were typed).
+
+    Reading a typed result gives its :meth:`StageResult.legacy` shape (the arrays, tables and
+    dicts inside are the result's own, not copies); a value stored here (a dict written by
+    code of that time) is kept as it is, given back as it is, and read by the typed
+    accessors through :meth:`StageResult.from_legacy`.
+    """
+
+    def __init__(self, store: dict):
+        self._store = store
+
+    def __getitem__(self, name: str):
+        v = self._store[name]
+        return v.legacy() if isinstance(v, StageResult) else v
+
+    def __setitem__(self, name: str, value) -> None:
+        self._store[name] = value
+
+    def __delitem__(self, name: str) -> None:
+        del self._store[name]
+
+    def __iter__(self):
+        return iter(self._store)
+
+    def __len__(self) -> int:
+        return len(self._store)
+
+    def __repr__(self) -> str:
+        return f"LegacyResults({list(self._store)})"
+
+
+# ----------------------------------------------------------------------------- the run
+_R = TypeVar("_R", bound=StageResult)
+
+
+class _StageAttr(Generic[_R]):
+    """A run context's typed result of one stage (read only; None until the stage ran)."""
+
+    def __init__(self, cls: type[_R]):
+        self.cls = cls
+
+    def __set_name__(self, owner, name: str) -> None:
+        self.name = name
+
+    def __get__(self, ctx, owner=None) -> _R | None:
+        return self if ctx is None else ctx.result(self.name)
+
+
+@dataclass
+class RunContext:
+    """Everything a run produces.
+
+    Attributes
+    ----------
+    scene : pipeline.scene.Scene
+    ran : list of str
+        Stages that ran, in order.
+    timings : dict
+        Wall time per stage [s].
+    error_estimates : dict
+        Per stage, a short text with its error estimate (what "error against run time" lists).
+    messages : list of str
+        Warnings raised during the run (category: message).
+    failed : dict
+        Stage -> error message for stages that raised (the run goes on with what it has).
+    channels_unused : list of str
+        Channels of the recording that no planned stage reads (set by the load stage).
+    load, condition, onsets, phasing, load_sharing, centroids, ideal, tolerance, identify, \
+compare, bearing_moments, tilt : StageResult or None
+        The typed result of each stage (:mod:`pipeline.results`: :class:`LoadStage`,
+        :class:`PhasingStage`, ...), None while the stage has not run.
+    results : LegacyResults
+        The same results as a dict of dicts by stage name, the shape they had before they
+        were typed (for code written against it).
+    gearset : Gearset or None
+        The scene's, else the recording's (read only).
+    """
+
+    scene: Any                      # pipeline.scene.Scene (which imports the stages)
+    ran: list = field(default_factory=list)
+    timings: dict = field(default_factory=dict)
+    error_estimates: dict = field(default_factory=dict)
+    messages: list = field(default_factory=list)
+    failed: dict = field(default_factory=dict)
+    progress: Callable | None = None
+    channels_unused: list = field(default_factory=list)
+    _store: dict = field(default_factory=dict, init=False, repr=False)
+
+    load = _StageAttr(LoadStage)
+    condition = _StageAttr(ConditionStage)
+    onsets = _StageAttr(OnsetsStage)
+    phasing = _StageAttr(PhasingStage)
+    load_sharing = _StageAttr(LoadSharingStage)
+    centroids = _StageAttr(CentroidsStage)
+    ideal = _StageAttr(IdealStage)
+    tolerance = _StageAttr(ToleranceStage)
+    identify = _StageAttr(IdentifyStage)
+    compare = _StageAttr(CompareStage)
+    bearing_moments = _StageAttr(BearingStage)
+    tilt = _StageAttr(TiltStage)
+
+    @property
+    def gearset(self) -> Gearset | None:
+        """The scene's gearset, else the one in the recording's metadata (synthetic files
+        carry one); None without either."""
+        g = self.scene.gearset
+        if g is None and self.load is not None:
+            meta = self.load.recording.meta.get("gearset")
+            if meta:
+                g = Gearset.from_dict(meta)
+        return g
+
+    def result(self, name: str) -> StageResult | None:
+        """The typed result of stage ``name``; None while it has not run. A value stored in
+        the pre-typing shape (``ctx.results[name] = {...}``) is read through
+        :meth:`~pipeline.results.StageResult.from_legacy`."""
+        cls = RESULT_TYPES[name]
+        r = self._store.get(name)
+        if r is None or isinstance(r, cls):
+            return r
+        return cls.from_legacy(r)
+
+    def record(self, name: str, result: StageResult) -> StageResult:
+        """Keep ``result`` as stage ``name``'s (with the results it supersedes) and its error
+        estimate; returns it."""
+        cls = RESULT_TYPES[name]
+        if not isinstance(result, cls):
+            raise TypeError(f"stage {name!r} gives a {cls.__name__}, got {type(result).__name__}")
+        self._store[name] = result
+        self._store.update(result.supersedes())
+        self.error_estimates[name] = result.error_estimate
+        return result
+
+    @property
+    def results(self) -> LegacyResults:
+        return LegacyResults(self._store)
+
+    @results.setter
+    def results(self, value) -> None:
+        self._store = dict(value)
+
+
+_NOT_RELIABLE = re.compile(r"ProcessingWarning: (?:(?P<gauge>[A-Za-z0-9_]+) gauge\b)?.*not reliable")
+
+
+def phasing_verdict(phasing: PhasingStage | None, messages) -> dict:
+    """Whether each gauge's measured phasing is reliable, and why not.
+
+    Parameters
+    ----------
+    phasing : PhasingStage or None
+        Its ``reliability`` decides when given; otherwise ``messages`` do.
+    messages : sequence of str
+        The run's "stage: Category: message" lines: a ProcessingWarning that says "not
+        reliable" flags the gauge it names ("sun gauge: ..."), or every gauge with a phasing
+        table when it names none (``"phasing"`` if there is none).
+
+    Returns
+    -------
+    dict
+        gauge -> ``{"reliable": bool, "reasons": list of str}``; empty when no phasing ran
+        and nothing was flagged.
+    """
+    if phasing is not None and not isinstance(phasing, PhasingStage):
+        raise TypeError(f"phasing must be a PhasingStage or None, got {type(phasing).__name__}")
+    if not isinstance(messages, (list, tuple)):
+        raise TypeError(f"messages must be a list of str, got {type(messages).__name__}")
+    given = None if phasing is None else phasing.reliability
+    if isinstance(given, dict):
+        return {str(g): {"reliable": bool(v.get("reliable", True)),
+                         "reasons": [str(r) for r in v.get("reasons") or []]}
+                for g, v in given.items()}
+    tables = {} if phasing is None else (phasing.tables or {})
+    out = {str(g): {"reliable": True, "reasons": []} for g in tables}
+    for m in messages:
+        hit = _NOT_RELIABLE.search(str(m))
+        if hit is None:
+            continue
+        reason = str(m).split("ProcessingWarning: ", 1)[1]
+        gauges = [hit.group("gauge")] if hit.group("gauge") else (list(out) or ["phasing"])
+        for g in gauges:
+            entry = out.setdefault(g, {"reliable": True, "reasons": []})
+            entry["reliable"] = False
+            if reason not in entry["reasons"]:
+                entry["reasons"].append(reason)
+    return out
