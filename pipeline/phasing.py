@@ -48,8 +48,9 @@ import numpy as np
 from scipy.interpolate import PchipInterpolator
 
 from .angle_windows import fit_angle_windows
-from .angles import (AngleModel, Kinematics, PassTrain, gauge_train, held_member, kinematics, label_shift_costs, mesh_cycles_per_carrier_turn,
-                     relabel_train, revolution_numbers, tacho_train)
+from .angles import (AngleModel, Kinematics, PassTrain, gauge_train, held_member, kinematics,
+                     label_shift_costs, mesh_cycles_per_carrier_turn, relabel_train,
+                     revolution_numbers, tacho_train)
 from .errors import ProcessingWarning
 from .validate import as_finite_array, as_positive_int
 
