@@ -41,6 +41,7 @@ from pathlib import Path
 
 from . import __version__
 from .exits import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_PIPE
+from .heap import limit_heap_growth
 from .log import logger
 
 __all__ = ["main", "build_parser", "describe_error"]
@@ -570,6 +571,7 @@ def main(argv=None) -> int:
     exit code; ``--debug`` / ``MESHPHASE_DEBUG=1`` re-raises instead."""
     parser = build_parser()
     args = parser.parse_args(argv)        # usage errors: argparse prints them, exits 2
+    limit_heap_growth()                   # streamed runs: peak memory flat in length
     debug = bool(args.debug) or os.environ.get("MESHPHASE_DEBUG", "").strip() not in ("", "0")
     level = logging.DEBUG if debug else logging.WARNING - 10 * min(args.verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")

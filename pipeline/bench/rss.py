@@ -105,6 +105,9 @@ def _vmhwm() -> float | None:
 
 
 def _child(spec: str) -> None:
+    from ..heap import limit_heap_growth
+
+    limit_heap_growth()                   # as ``meshphase`` does at start (pipeline/heap.py)
     job = json.loads(spec)
     fn = globals()[job["job"]]
     t = time.perf_counter()
