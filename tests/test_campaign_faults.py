@@ -273,6 +273,22 @@ def test_local_cluster_listens_on_loopback_only(cluster):
     assert _listening(psutil.Process()) == {"127.0.0.1"}
 
 
+def test_open_client_joins_a_cluster_and_warms_its_workers(cluster):
+    info = {}
+    with cluster_mod.open_client(cluster.scheduler_address, None, None, os.getpid, info) as client:
+        assert client.scheduler.address == cluster.scheduler_address
+    assert info == {"n_workers": 1, "scheduler": cluster.scheduler_address}
+    with pytest.raises(ValueError, match="cannot import meshphase"):
+        with cluster_mod.open_client(cluster.scheduler_address, None, None, _no_meshphase, {}):
+            pass
+
+
+def _no_meshphase():
+    """Shipped by reference: the workers cannot import this test module (as a worker
+    without meshphase cannot import the warm-up), and if they could, it raises the same."""
+    raise ImportError("No module named 'pipeline'")
+
+
 def test_dashboard_addresses_and_bad_input():
     assert cluster_mod._dashboard_address(True) == "127.0.0.1:0"
     assert cluster_mod._dashboard_address("8787") == "127.0.0.1:8787"
