@@ -399,30 +399,6 @@ def test_campaign_rows_empty_bad_and_columns():
     assert rows[1]["load_sharing_p1"] == 1.01 and rows[0]["error"] == "boom"
 
 
-def test_measure_speedup_bad_input():
-    with pytest.raises(ValueError, match="n_recordings"):
-        cp.measure_speedup(n_recordings=0)
-    with pytest.raises(ValueError, match="minutes"):
-        cp.measure_speedup(minutes=-1)
-    with pytest.raises(ValueError, match="workers"):
-        cp.measure_speedup(workers=())
-    with pytest.raises(TypeError, match="workers"):
-        cp.measure_speedup(workers=2)
-    with pytest.raises(ValueError, match="repeats"):
-        cp.measure_speedup(repeats=0)
-    with pytest.raises(ValueError, match="scenario"):
-        cp.measure_speedup(scenario="no_such_scenario")
-
-
-@pytest.mark.bench
-def test_measure_speedup_smoke(tmp_path):
-    res = cp.measure_speedup(n_recordings=2, minutes=0.25, workers=(1, 2), work_dir=tmp_path)
-    assert [r["workers"] for r in res["runs"]] == [1, 2]
-    assert res["best_wall_s"][1] == res["runs"][0]["wall_s"]
-    assert all(r["n_ok"] == 2 for r in res["runs"])
-    assert res["speedup"][1] == pytest.approx(1.0) and res["speedup"][2] > 0
-
-
 # ---------------------------------------------------------------------------- report
 def test_campaign_report_empty_and_bad(tmp_path):
     p = crep.build_campaign_report({"scene": "s", "recordings": []}, tmp_path)

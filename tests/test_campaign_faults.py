@@ -27,6 +27,8 @@ from seed_rig_toml import SEED_RIG_GEARSET
 
 import pipeline.io
 from pipeline import campaign as cp
+from pipeline import cluster as cluster_mod
+from pipeline.campaign_job import campaign_task
 from pipeline.cli import build_parser
 from pipeline.exits import EXIT_OK, EXIT_PARTIAL, MANIFEST_NAME, PARTIAL_SUFFIX
 
@@ -148,7 +150,7 @@ def test_hung_task_times_out_and_hostile_names_never_collide(rigs, cluster, tmp_
 def test_hung_task_on_a_cluster_not_ours_restarts_its_worker(rigs, cluster, tmp_path, monkeypatch):
     """A worker that is not a child of this process (another machine's) is restarted through
     the scheduler (its Nanny waits for the blocked thread, then kills it): the same outcome."""
-    monkeypatch.setattr(cp, "_own_child", lambda pid: False)
+    monkeypatch.setattr(cluster_mod, "own_child", lambda pid: False)
     with _tasks_by_value():
         res = cp.run_campaign(rigs / "scene.toml", [rigs / "hang.h5", rigs / "rig0.h5"], tmp_path / "c",
                               scheduler=cluster.scheduler_address, progress=False, task=_light_task,
@@ -271,11 +273,27 @@ def test_local_cluster_listens_on_loopback_only(cluster):
     assert _listening(psutil.Process()) == {"127.0.0.1"}
 
 
+def test_open_client_joins_a_cluster_and_warms_its_workers(cluster):
+    info = {}
+    with cluster_mod.open_client(cluster.scheduler_address, None, None, os.getpid, info) as client:
+        assert client.scheduler.address == cluster.scheduler_address
+    assert info == {"n_workers": 1, "scheduler": cluster.scheduler_address}
+    with pytest.raises(ValueError, match="cannot import meshphase"):
+        with cluster_mod.open_client(cluster.scheduler_address, None, None, _no_meshphase, {}):
+            pass
+
+
+def _no_meshphase():
+    """Shipped by reference: the workers cannot import this test module (as a worker
+    without meshphase cannot import the warm-up), and if they could, it raises the same."""
+    raise ImportError("No module named 'pipeline'")
+
+
 def test_dashboard_addresses_and_bad_input():
-    assert cp._dashboard_address(True) == "127.0.0.1:0"
-    assert cp._dashboard_address("8787") == "127.0.0.1:8787"
-    assert cp._dashboard_address(":8787") == "127.0.0.1:8787"  # distributed: all interfaces
-    assert cp._dashboard_address("10.0.0.5:8787") == "10.0.0.5:8787"  # named: as given
+    assert cluster_mod._dashboard_address(True) == "127.0.0.1:0"
+    assert cluster_mod._dashboard_address("8787") == "127.0.0.1:8787"
+    assert cluster_mod._dashboard_address(":8787") == "127.0.0.1:8787"  # distributed: all interfaces
+    assert cluster_mod._dashboard_address("10.0.0.5:8787") == "10.0.0.5:8787"  # named: as given
     with pytest.raises(TypeError, match="dashboard"):
         cp.local_cluster(1, dashboard=1.5)
     with pytest.raises(ValueError, match="n_workers"):
@@ -362,12 +380,12 @@ def test_recording_names_hostile_cases():
 
 def test_task_takes_paths_only_and_writes_no_marker_for_a_failure(tmp_path):
     with open(os.devnull) as handle, pytest.raises(TypeError, match="recording_path must be a path string"):
-        cp._campaign_task(_light_task, "s.toml", handle, str(tmp_path / "o"))
+        campaign_task(_light_task, "s.toml", handle, str(tmp_path / "o"))
     failed = {"status": "failed", "error": "boom"}
-    rec = cp._campaign_task(lambda *a, **k: dict(failed), "s.toml", "r.h5", str(tmp_path / "o"),
+    rec = campaign_task(lambda *a, **k: dict(failed), "s.toml", "r.h5", str(tmp_path / "o"),
                             None, {"recording": "r.h5"})
     assert rec == failed and not (tmp_path / "o").exists()
-    ok = cp._campaign_task(lambda *a, **k: {"status": "ok", "messages": []}, "s.toml", "r.h5",
+    ok = campaign_task(lambda *a, **k: {"status": "ok", "messages": []}, "s.toml", "r.h5",
                            str(tmp_path / "o"), None, {"recording": "r.h5"})
     marker = json.loads((tmp_path / "o" / cp.DONE_NAME).read_text())
     assert marker["key"] == {"recording": "r.h5"} and marker["record"] == ok

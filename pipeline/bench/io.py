@@ -311,8 +311,6 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
     """
     minutes, n_channels, fs, formats, block_budget_mb, repeats = _check_args(
         minutes, n_channels, fs, formats, block_budget_mb, repeats)
-    from .. import io as pio
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     n = int(round(minutes * 60.0 * fs))
@@ -320,28 +318,15 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
         raise ValueError(f"minutes={minutes!r} at fs={fs!r} Hz gives {n} sample(s); need at least 2")
     gen = np.random.default_rng(rng)
     rec = strain_recording(n, n_channels, fs, gen)
-    total = rec.data.size
     if block_budget_mb is None:
         block_budget_mb = min(64.0, rec.data.nbytes / 4 / 1e6)
     budget_samples = max(2, int(block_budget_mb * 1e6 // (8 * n_channels)))
-    block_s = budget_samples / fs
-
-    present, skipped = [], []
-    for fmt in formats:
-        if importlib.util.find_spec(f"pipeline.io.{fmt}") is None:
-            logger.warning("io bench: format %s skipped: module pipeline.io.%s is missing", fmt, fmt)
-            skipped.append({"format": fmt, "reason": f"module pipeline.io.{fmt} is missing"})
-        else:
-            present.append(fmt)
-    plan = [(fmt, *v) for fmt in present for v in _variants(fmt)]
-
+    plan, skipped = _plan(formats)
     bar = None
     if progress:
         from tqdm.auto import tqdm
 
         bar = tqdm(total=len(plan) + 1, desc="io bench", unit="step")
-    caught: list[str] = []
-    rows = []
     work = Path(tempfile.mkdtemp(prefix="io_bench_", dir=out))
     try:
         logger.info("io bench: raw reference (%d samples x %d channels)", n, n_channels)
@@ -349,131 +334,174 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
         (work / "raw.npy").unlink()
         if bar:
             bar.update(1)
-        mid = rec.names[n_channels // 2]
-        w0 = rec.t0 + 0.45 * rec.duration
-        w1 = rec.t0 + 0.55 * rec.duration
-        i0, i1 = rec.sample_range(w0, w1)
-        small = strain_recording(budget_samples, n_channels, fs, gen)
-        large = strain_recording(4 * budget_samples, n_channels, fs, gen)
+        bench = _ReadBench(rec, raw, work, repeats, budget_samples, gen)
+        rows, caught = [], []
         for fmt, variant, suffix, writer in plan:
-            logger.info("io bench: %s (%s)", fmt, variant)
-            if bar:
-                bar.set_postfix_str(f"{fmt} {variant}")
-            row = dict.fromkeys(COLUMNS)
-            row.update(format=fmt, variant=variant, target_ratio=TARGETS.get(fmt))
-            path = work / f"rec_{fmt}_{len(rows)}{suffix}"
-            with warnings.catch_warnings(record=True) as wlist:
-                warnings.simplefilter("always")
-                t = time.perf_counter()
-                writer(rec, path)
-                row["write_s"] = time.perf_counter() - t
-                row["file_mb"] = path.stat().st_size / 1e6
-                t_full, back = _best(lambda: pio.read(path), repeats)
-                row["exact"] = bool(back.data.shape == rec.data.shape
-                                    and np.array_equal(back.data, rec.data))
-                back = None
-                row["read_s"] = t_full
-                row["read_msps"] = total / t_full / 1e6
-                row["ratio_to_raw"] = row["read_msps"] / raw["prealloc_msps"]
-                if row["target_ratio"] is not None:
-                    row["meets_target"] = bool(row["ratio_to_raw"] >= row["target_ratio"])
-                t1, _ = _best(lambda: pio.read(path, channels=[mid]), repeats)
-                row["one_channel_msps"] = n / t1 / 1e6
-                tw, _ = _best(lambda: pio.read(path, start=w0, stop=w1), repeats)
-                row["window_msps"] = (i1 - i0) * n_channels / tw / 1e6
-                if fmt == "csv":
-                    tp = _pandas_c(path, repeats)
-                    row["pandas_c_msps"] = total / tp / 1e6
-                    row["csv_over_pandas"] = tp / t_full  # >= 1: our reader is as fast or faster
-                    row["meets_target"] = bool(row["csv_over_pandas"] >= 1.0)
-                path.unlink()
-                peaks = []
-                for k, r in (("1x", small), ("4x", large)):
-                    p = work / f"stream_{k}{suffix}"
-                    writer(r, p)
-                    peak, _ = _stream_peak(p, block_s)
-                    peaks.append(peak)
-                    p.unlink()
-                row["stream_peak_mb_1x"] = peaks[0] / 1e6
-                row["stream_peak_mb_4x"] = peaks[1] / 1e6
-                row["stream_peak_ratio"] = peaks[1] / peaks[0] if peaks[0] > 0 else None
-            for wm in wlist:
-                text = f"{fmt} ({variant}): {wm.category.__name__}: {wm.message}"
-                if text not in caught:
-                    caught.append(text)
-                    logger.info("io bench: %s", text)
-            rows.append(row)
-            logger.info("io bench: %s (%s): %.1f MS/s = %.2f x raw", fmt, variant,
-                        row["read_msps"], row["ratio_to_raw"])
-            if bar:
-                bar.update(1)
-        convert, conv_skipped = convert_rss_rows(work, convert_minutes)
-        skipped += conv_skipped
-        process = []
-        if process_minutes:
-            from .processing import process_rss_rows
-
-            process, proc_skipped, _ = process_rss_rows(work / "process", process_minutes)
-            skipped += [{"format": f"process {s['minutes']:g} min", "reason": s["reason"]}
-                        for s in proc_skipped]
+            rows.append(bench.row(fmt, variant, suffix, writer, len(rows), caught, bar))
+        convert, process = _rss_tables(work, convert_minutes, process_minutes, skipped)
     finally:
         if bar:
             bar.close()
         if not keep_files:
             shutil.rmtree(work, ignore_errors=True)
-
-    result = {
-        "config": {
-            "minutes": minutes, "n_channels": n_channels, "fs": fs, "n_samples": n,
-            "total_samples": total, "dtype": "float64", "data_mb": rec.data.nbytes / 1e6,
-            "formats": list(formats), "repeats": repeats, "block_budget_mb": block_budget_mb,
-            "stream_block_samples": budget_samples, "stream_block_s": block_s,
-            "window_s": [w0, w1], "one_channel": mid,
-            "tdms_segments": [_TDMS_LARGE_SEGMENT, _TDMS_SMALL_SEGMENT],
-            "python": platform.python_version(), "numpy": np.__version__,
-            "machine": platform.machine(), "cpus": os.cpu_count(),
-            "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        },
-        "raw": raw,
-        "rows": rows,
-        "convert": convert,
-        "process": process,
-        "skipped": skipped,
-        "warnings": caught,
-        "notes": [
-            "Throughput in MSamples/s (1 sample = one value of one channel), best of "
-            f"{repeats} reads of a file just written (page cache warm).",
-            "ratio_to_raw = read_msps / raw prealloc_msps: the raw reference reads the same "
-            "samples from a .npy file with readinto into a buffer allocated and touched "
-            "beforehand; format readers allocate their output on every read (first-touch "
-            "page faults are costly on this machine), np_load_msps shows the allocating case.",
-            "one_channel_msps and window_msps count the samples delivered (one channel; the "
-            "middle 10% of the recording, all channels).",
-            "CSV is held against pandas.read_csv(engine='c') alone on the same file: "
-            "csv_over_pandas = pandas time / our time (>= 1 meets the target).",
-            "stream_peak_mb_*: tracemalloc peak (Python + numpy allocations; HDF5/TDMS C "
-            "internals not seen) while streaming pipeline.io.iter_blocks in blocks of the "
-            "block budget over a recording of 1x and 4x the budget; flat = ratio near 1.",
-            "convert table: `meshphase convert` of the 8-channel benchmark recording "
-            "(pipeline.bench.rss.bench_config, float64, 5120 Hz) in a child process; peak_rss_mb "
-            "is its VmHWM (every page its address space touched, C libraries included), "
-            "rss_over_data its ratio to the samples' size; streamed block by block, so flat "
-            "in the length. Before streaming (one buffer for the whole recording) convert "
-            "peaked at ~1.2x the samples' size.",
-            "process table: `meshphase process` (the seed rig's gearset) of the same recording "
-            "in a child process; peak_rss_mb as above; streamed_peak_mb the peak (VmHWM) when "
-            "the three streamed passes (load, condition, onsets) are done; the later stages "
-            "work on the onsets, whose number grows with the length. Before streaming, process "
-            "peaked at ~5x the samples' size.",
-            "Measured, never asserted.",
-        ],
-    }
+    config = _config(minutes, n_channels, fs, n, rec, formats, repeats, block_budget_mb, budget_samples,
+                     bench)
+    result = {"config": config, "raw": raw, "rows": rows, "convert": convert, "process": process,
+              "skipped": skipped, "warnings": caught, "notes": _notes(repeats)}
     files = {"json": str(out / "io_bench.json"), "md": str(out / "io_bench.md")}
     result["files"] = files
     Path(files["json"]).write_text(json.dumps(result, indent=2, default=json_default) + "\n",
                                    encoding="utf-8")
     Path(files["md"]).write_text(_markdown(result), encoding="utf-8")
     return result
+
+
+def _plan(formats) -> tuple[list, list]:
+    """((format, variant, suffix, writer) per variant of each present format, skipped formats)."""
+    present, skipped = [], []
+    for fmt in formats:
+        if importlib.util.find_spec(f"pipeline.io.{fmt}") is None:
+            logger.warning("io bench: format %s skipped: module pipeline.io.%s is missing", fmt, fmt)
+            skipped.append({"format": fmt, "reason": f"module pipeline.io.{fmt} is missing"})
+        else:
+            present.append(fmt)
+    return [(fmt, *v) for fmt in present for v in _variants(fmt)], skipped
+
+
+class _ReadBench:
+    """One row per format variant: write, full / one-channel / window reads, streaming peaks."""
+
+    def __init__(self, rec: Recording, raw: dict, work: Path, repeats: int, budget_samples: int, gen):
+        self.rec, self.raw, self.work, self.repeats = rec, raw, work, repeats
+        n_channels = rec.n_channels
+        self.block_s = budget_samples / rec.fs
+        self.mid = rec.names[n_channels // 2]
+        self.w0 = rec.t0 + 0.45 * rec.duration
+        self.w1 = rec.t0 + 0.55 * rec.duration
+        self.i0, self.i1 = rec.sample_range(self.w0, self.w1)
+        self.small = strain_recording(budget_samples, n_channels, rec.fs, gen)
+        self.large = strain_recording(4 * budget_samples, n_channels, rec.fs, gen)
+
+    def row(self, fmt, variant, suffix, writer, k: int, caught: list, bar) -> dict:
+        """The row of one variant (file ``rec_<fmt>_<k><suffix>``); its warnings join ``caught``."""
+        logger.info("io bench: %s (%s)", fmt, variant)
+        if bar:
+            bar.set_postfix_str(f"{fmt} {variant}")
+        row = dict.fromkeys(COLUMNS)
+        row.update(format=fmt, variant=variant, target_ratio=TARGETS.get(fmt))
+        with warnings.catch_warnings(record=True) as wlist:
+            warnings.simplefilter("always")
+            self._reads(row, fmt, writer, self.work / f"rec_{fmt}_{k}{suffix}")
+            self._stream(row, suffix, writer)
+        for wm in wlist:
+            text = f"{fmt} ({variant}): {wm.category.__name__}: {wm.message}"
+            if text not in caught:
+                caught.append(text)
+                logger.info("io bench: %s", text)
+        logger.info("io bench: %s (%s): %.1f MS/s = %.2f x raw", fmt, variant,
+                    row["read_msps"], row["ratio_to_raw"])
+        if bar:
+            bar.update(1)
+        return row
+
+    def _reads(self, row: dict, fmt: str, writer, path: Path) -> None:
+        from .. import io as pio
+
+        rec, repeats = self.rec, self.repeats
+        total, n = rec.data.size, rec.n_samples
+        t = time.perf_counter()
+        writer(rec, path)
+        row["write_s"] = time.perf_counter() - t
+        row["file_mb"] = path.stat().st_size / 1e6
+        t_full, back = _best(lambda: pio.read(path), repeats)
+        row["exact"] = bool(back.data.shape == rec.data.shape and np.array_equal(back.data, rec.data))
+        back = None
+        row["read_s"] = t_full
+        row["read_msps"] = total / t_full / 1e6
+        row["ratio_to_raw"] = row["read_msps"] / self.raw["prealloc_msps"]
+        if row["target_ratio"] is not None:
+            row["meets_target"] = bool(row["ratio_to_raw"] >= row["target_ratio"])
+        t1, _ = _best(lambda: pio.read(path, channels=[self.mid]), repeats)
+        row["one_channel_msps"] = n / t1 / 1e6
+        tw, _ = _best(lambda: pio.read(path, start=self.w0, stop=self.w1), repeats)
+        row["window_msps"] = (self.i1 - self.i0) * rec.n_channels / tw / 1e6
+        if fmt == "csv":
+            tp = _pandas_c(path, repeats)
+            row["pandas_c_msps"] = total / tp / 1e6
+            row["csv_over_pandas"] = tp / t_full  # >= 1: our reader is as fast or faster
+            row["meets_target"] = bool(row["csv_over_pandas"] >= 1.0)
+        path.unlink()
+
+    def _stream(self, row: dict, suffix: str, writer) -> None:
+        peaks = []
+        for k, r in (("1x", self.small), ("4x", self.large)):
+            p = self.work / f"stream_{k}{suffix}"
+            writer(r, p)
+            peak, _ = _stream_peak(p, self.block_s)
+            peaks.append(peak)
+            p.unlink()
+        row["stream_peak_mb_1x"] = peaks[0] / 1e6
+        row["stream_peak_mb_4x"] = peaks[1] / 1e6
+        row["stream_peak_ratio"] = peaks[1] / peaks[0] if peaks[0] > 0 else None
+
+
+def _rss_tables(work: Path, convert_minutes, process_minutes, skipped: list) -> tuple[list, list]:
+    """(convert rows, process rows) of the peak-memory tables; skipped lengths join ``skipped``."""
+    convert, conv_skipped = convert_rss_rows(work, convert_minutes)
+    skipped += conv_skipped
+    process = []
+    if process_minutes:
+        from .processing import process_rss_rows
+
+        process, proc_skipped, _ = process_rss_rows(work / "process", process_minutes)
+        skipped += [{"format": f"process {s['minutes']:g} min", "reason": s["reason"]}
+                    for s in proc_skipped]
+    return convert, process
+
+
+def _config(minutes, n_channels, fs, n, rec, formats, repeats, block_budget_mb, budget_samples,
+            bench: _ReadBench) -> dict:
+    return {
+        "minutes": minutes, "n_channels": n_channels, "fs": fs, "n_samples": n,
+        "total_samples": rec.data.size, "dtype": "float64", "data_mb": rec.data.nbytes / 1e6,
+        "formats": list(formats), "repeats": repeats, "block_budget_mb": block_budget_mb,
+        "stream_block_samples": budget_samples, "stream_block_s": bench.block_s,
+        "window_s": [bench.w0, bench.w1], "one_channel": bench.mid,
+        "tdms_segments": [_TDMS_LARGE_SEGMENT, _TDMS_SMALL_SEGMENT],
+        "python": platform.python_version(), "numpy": np.__version__,
+        "machine": platform.machine(), "cpus": os.cpu_count(),
+        "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+    }
+
+
+def _notes(repeats: int) -> list[str]:
+    return [
+        "Throughput in MSamples/s (1 sample = one value of one channel), best of "
+        f"{repeats} reads of a file just written (page cache warm).",
+        "ratio_to_raw = read_msps / raw prealloc_msps: the raw reference reads the same "
+        "samples from a .npy file with readinto into a buffer allocated and touched "
+        "beforehand; format readers allocate their output on every read (first-touch "
+        "page faults are costly on this machine), np_load_msps shows the allocating case.",
+        "one_channel_msps and window_msps count the samples delivered (one channel; the "
+        "middle 10% of the recording, all channels).",
+        "CSV is held against pandas.read_csv(engine='c') alone on the same file: "
+        "csv_over_pandas = pandas time / our time (>= 1 meets the target).",
+        "stream_peak_mb_*: tracemalloc peak (Python + numpy allocations; HDF5/TDMS C "
+        "internals not seen) while streaming pipeline.io.iter_blocks in blocks of the "
+        "block budget over a recording of 1x and 4x the budget; flat = ratio near 1.",
+        "convert table: `meshphase convert` of the 8-channel benchmark recording "
+        "(pipeline.bench.rss.bench_config, float64, 5120 Hz) in a child process; peak_rss_mb "
+        "is its VmHWM (every page its address space touched, C libraries included), "
+        "rss_over_data its ratio to the samples' size; streamed block by block, so flat "
+        "in the length. Before streaming (one buffer for the whole recording) convert "
+        "peaked at ~1.2x the samples' size.",
+        "process table: `meshphase process` (the seed rig's gearset) of the same recording "
+        "in a child process; peak_rss_mb as above; streamed_peak_mb the peak (VmHWM) when "
+        "the three streamed passes (load, condition, onsets) are done; the later stages "
+        "work on the onsets, whose number grows with the length. Before streaming, process "
+        "peaked at ~5x the samples' size.",
+        "Measured, never asserted.",
+    ]
 
 
 def convert_rss_rows(work, minutes, *, seed: int = 1) -> tuple[list, list]:

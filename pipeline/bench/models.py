@@ -137,12 +137,40 @@ def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 1
     g, sp, tol = table2_case(3)
     win = observation_window(sp, window)
     engine = _kernels.resolve_engine("auto")
+    case = (g, sp, tol, win)
 
     t = time.perf_counter()
     monte_carlo(g, sp, tol, win, 16, rng=0, replicates=2)       # JIT compile / cache load
     warmup = time.perf_counter() - t
 
     ref_seed, run_seeds, case_seed = seeds.spawn(3)
+    ref, reference, scale, active = _reference(case, ref_n, ref_seed, replicates)
+    rows = []
+    config_seeds = iter(run_seeds.spawn(len(samplers) * len(counts)))
+    for sampler in samplers:
+        for n0 in counts:
+            n = _sobol_count(n0, replicates) if sampler == "sobol" else n0
+            rows.append(_error_row(case, sampler, n, next(config_seeds), n_repeats, replicates,
+                                   ref, scale, active))
+    crossover = _crossover(rows, samplers, active)
+    case3 = {} if quick else _case3(case, case3_samples, case_seed, replicates)
+    meta = {"case": "seed000 Table 2 case 3 (angles given)", "window": win.to_dict(),
+            "n_times": ref.n_times, "engine": engine, "replicates": replicates,
+            "jit_warmup_s": warmup, "cpu_count": os.cpu_count(),
+            "python": platform.python_version(),
+            "numpy": np.__version__, "quick": quick,
+            "error_unit": "RMS over repeats of |estimate - reference| / reference std, "
+                          "worst planet (2..N)"}
+    result = {"rows": rows, "reference": reference, "crossover": crossover, "case3": case3,
+              "meta": meta, "files": {}}
+    _write(result, out, figure)
+    return result
+
+
+def _reference(case, ref_n: int, ref_seed, replicates: int):
+    """(reference result, its table entry, std per statistic, metrics with a spread) of the
+    converged Sobol run."""
+    g, sp, tol, win = case
     t = time.perf_counter()
     ref = monte_carlo(g, sp, tol, win, ref_n, sampler="sobol", rng=np.random.default_rng(ref_seed),
                       replicates=replicates)
@@ -155,60 +183,54 @@ def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 1
                  "stderr": {f"{k}_{s}": (_metric_se(ref, s, k) / np.where(
                      scale[s] > 0, scale[s], np.inf)).tolist() for s, k in METRICS},
                  "skipped_metrics": [f"{k}_{s}" for s, k in METRICS if (s, k) not in active]}
+    return ref, reference, scale, active
 
-    rows = []
-    config_seeds = iter(run_seeds.spawn(len(samplers) * len(counts)))
-    for sampler in samplers:
-        for n0 in counts:
-            n = _sobol_count(n0, replicates) if sampler == "sobol" else n0
-            sq = next(config_seeds)
-            errs = {m: [] for m in METRICS}
-            times = []
-            for child in sq.spawn(n_repeats):
-                res = monte_carlo(g, sp, tol, win, n, sampler=sampler,
-                                  rng=np.random.default_rng(child), replicates=replicates)
-                times.append(res.wall_time)
-                for s, k in METRICS:
-                    if (s, k) not in active:
-                        continue
-                    d = (_metric_values(res, s, k) - _metric_values(ref, s, k))[1:]
-                    errs[(s, k)].append(float(np.max(np.abs(d) / scale[s][1:])))
-            row = {"sampler": sampler, "n_samples": n, "repeats": n_repeats,
-                   "wall_time_s": float(np.median(times))}
-            for s, k in METRICS:
-                e = errs[(s, k)]
-                row[f"err_{k}_{s}"] = float(np.sqrt(np.mean(np.square(e)))) if e else float("nan")
-            for col, kinds in (("err_moments", ("mean", "m3s")), ("err_quantile", ("q3s",)),
-                               ("err_max", KINDS)):
-                vals = [row[f"err_{k}_{s}"] for s, k in active if k in kinds]
-                row[col] = float(np.max(vals)) if vals else float("nan")
-            rows.append(row)
-            logger.info("bench models: %s n=%d  %.3f s  err_max=%.3g", sampler, n,
-                        row["wall_time_s"], row["err_max"])
 
-    crossover = _crossover(rows, samplers, active)
+def _error_row(case, sampler: str, n: int, sq, n_repeats: int, replicates: int, ref, scale,
+               active) -> dict:
+    """Errors against the reference and median wall time of ``n_repeats`` runs of one
+    (sampler, sample count) configuration."""
+    g, sp, tol, win = case
+    errs = {m: [] for m in METRICS}
+    times = []
+    for child in sq.spawn(n_repeats):
+        res = monte_carlo(g, sp, tol, win, n, sampler=sampler,
+                          rng=np.random.default_rng(child), replicates=replicates)
+        times.append(res.wall_time)
+        for s, k in METRICS:
+            if (s, k) not in active:
+                continue
+            d = (_metric_values(res, s, k) - _metric_values(ref, s, k))[1:]
+            errs[(s, k)].append(float(np.max(np.abs(d) / scale[s][1:])))
+    row = {"sampler": sampler, "n_samples": n, "repeats": n_repeats,
+           "wall_time_s": float(np.median(times))}
+    for s, k in METRICS:
+        e = errs[(s, k)]
+        row[f"err_{k}_{s}"] = float(np.sqrt(np.mean(np.square(e)))) if e else float("nan")
+    for col, kinds in (("err_moments", ("mean", "m3s")), ("err_quantile", ("q3s",)),
+                       ("err_max", KINDS)):
+        vals = [row[f"err_{k}_{s}"] for s, k in active if k in kinds]
+        row[col] = float(np.max(vals)) if vals else float("nan")
+    logger.info("bench models: %s n=%d  %.3f s  err_max=%.3g", sampler, n,
+                row["wall_time_s"], row["err_max"])
+    return row
 
-    case3 = {}
-    if not quick:
-        t = time.perf_counter()
-        res = monte_carlo(g, sp, tol, win, case3_samples, sampler="random",
-                          rng=np.random.default_rng(case_seed), replicates=replicates)
-        case3 = {"n_samples": case3_samples, "sampler": "random", "wall_time_s":
-                 time.perf_counter() - t, "window": win.to_dict(), "n_times": res.n_times,
-                 "dev_s_bound3_hi": res.dev_s.bound3[1].tolist(),
-                 "dev_r_bound3_hi": res.dev_r.bound3[1].tolist(),
-                 "ave_r_bound3": res.ave_r.bound3.tolist()}
 
-    meta = {"case": "seed000 Table 2 case 3 (angles given)", "window": win.to_dict(),
-            "n_times": ref.n_times, "engine": engine, "replicates": replicates,
-            "jit_warmup_s": warmup, "cpu_count": os.cpu_count(),
-            "python": platform.python_version(),
-            "numpy": np.__version__, "quick": quick,
-            "error_unit": "RMS over repeats of |estimate - reference| / reference std, "
-                          "worst planet (2..N)"}
-    result = {"rows": rows, "reference": reference, "crossover": crossover, "case3": case3,
-              "meta": meta, "files": {}}
+def _case3(case, case3_samples: int, case_seed, replicates: int) -> dict:
+    """The separately timed seed case 3 run (plain random)."""
+    g, sp, tol, win = case
+    t = time.perf_counter()
+    res = monte_carlo(g, sp, tol, win, case3_samples, sampler="random",
+                      rng=np.random.default_rng(case_seed), replicates=replicates)
+    return {"n_samples": case3_samples, "sampler": "random", "wall_time_s":
+            time.perf_counter() - t, "window": win.to_dict(), "n_times": res.n_times,
+            "dev_s_bound3_hi": res.dev_s.bound3[1].tolist(),
+            "dev_r_bound3_hi": res.dev_r.bound3[1].tolist(),
+            "ave_r_bound3": res.ave_r.bound3.tolist()}
 
+
+def _write(result: dict, out: Path, figure: bool) -> None:
+    """models_bench.json, .md (and .png when ``figure``) into ``out``; sets ``result["files"]``."""
     jpath = out / "models_bench.json"
     mpath = out / "models_bench.md"
     jpath.write_text(json.dumps(result, indent=2, default=float))
@@ -220,7 +242,6 @@ def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 1
         save_models_bench_figure(result, fpath)
         result["files"]["figure"] = str(fpath)
     jpath.write_text(json.dumps(result, indent=2, default=float))
-    return result
 
 
 def _crossover(rows, samplers, active):

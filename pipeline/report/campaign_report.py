@@ -312,25 +312,50 @@ def build_campaign_report(campaign: dict, out_dir, *, filename: str = "campaign_
     out_dir = Path(out_dir)
     if not out_dir.is_dir():
         raise FileNotFoundError(f"{out_dir}: output folder does not exist")
-    fig_dir = out_dir / "figures"
+    figs = _Figures(out_dir / "figures")
     names = [str(r.get("name", f"#{i + 1}")) for i, r in enumerate(recs)]
     counts = campaign.get("counts") or {s: sum(r.get("status") == s for r in recs)
                                         for s in ("ok", "unreliable", "partial", "failed")}
-    timing = campaign.get("timing_s") or {}
-    cluster = campaign.get("cluster") or {}
     rep = Report(f"meshphase campaign — {campaign.get('scene', '')}",
                  f"{len(recs)} recording(s) · {counts.get('ok', 0)} ok, "
                  + (f"{counts['unreliable']} unreliable, " if counts.get("unreliable") else "")
                  + f"{counts.get('partial', 0)} partial, {counts.get('failed', 0)} failed")
+    _overview_section(rep, campaign, recs)
+    if recs:
+        _recordings_sections(rep, recs, names, campaign.get("out_dir") or out_dir, figs)
+    _phasing_section(rep, recs, names, figs)
+    _load_sharing_section(rep, recs, names, figs)
+    if campaign.get("scene_level"):
+        _scene_level_section(rep, campaign["scene_level"])
+    msg_rows = [{"recording": names[i], "message": m} for i, r in enumerate(recs)
+                for m in (r.get("messages") or [])[:8]]
+    if msg_rows:
+        s = rep.section("Warnings per recording")
+        s.table(msg_rows, max_rows=300)
+    path = out_dir / filename
+    with atomic_path(path, overwrite=True) as tmp:  # never a half-written page
+        rep.write(tmp)
+    return path
 
-    def add_fig(section, fig, name, caption):
+
+class _Figures:
+    """Adds a figure to a report section and keeps its PNG in ``fig_dir``, atomically."""
+
+    def __init__(self, fig_dir: Path):
+        self.fig_dir = fig_dir
+
+    def add(self, section, fig, name: str, caption: str) -> None:
         png = figure_to_png(fig)
-        fig_dir.mkdir(exist_ok=True)
-        with atomic_path(fig_dir / f"{name}.png", overwrite=True) as tmp:
+        self.fig_dir.mkdir(exist_ok=True)
+        with atomic_path(self.fig_dir / f"{name}.png", overwrite=True) as tmp:
             tmp.write_bytes(png)
         section.figure(png, caption)
 
-    # --- overview
+
+def _overview_section(rep, campaign: dict, recs: list) -> None:
+    """The "Campaign" section: scene, results, cluster, step times, inputs left out."""
+    timing = campaign.get("timing_s") or {}
+    cluster = campaign.get("cluster") or {}
     s = rep.section("Campaign")
     s.text(f"Scene {campaign.get('scene_path', campaign.get('scene', ''))}; per-recording results: "
            f"{', '.join(campaign.get('results_per_recording', [])) or '–'}; computed once for the scene: "
@@ -356,115 +381,120 @@ def build_campaign_report(campaign: dict, out_dir, *, filename: str = "campaign_
         s.text("Folder entries left out: " + "; ".join(
             f"{len(v)} {k} ({', '.join(v[:6])}{', ...' if len(v) > 6 else ''})" for k, v in by_reason.items()))
 
-    # --- per recording
-    if recs:
-        s = rep.section("Recordings")
-        s.html(_records_table(recs, campaign.get("out_dir") or out_dir))
-        s.text("RMS residuals are of the measured phasing [mesh cycles] against the ideal phasing "
-               "and against the shaft-hole-error model identified from the recording itself; band "
-               "coverage is the fraction of passes inside the tolerance Monte Carlo 3-sigma band.")
-        add_fig(s, wall_times_across_recordings(names, [_num(r.get("wall_time_s")) for r in recs],
-                                                [r.get("status", "failed") for r in recs]),
-                "wall_times", "Task wall time per recording")
-        bad = [r for r in recs if r.get("status") in ("failed", "partial", "unreliable")]
-        if bad:
-            s = rep.section("Failures")
-            s.table([{"recording": r.get("name"), "status": r.get("status"), "error": r.get("error") or "",
-                      "file": r.get("recording")} for r in bad])
-        retried = [r for r in recs if r.get("retries")]
-        if retried:
-            s = rep.section("Retries")
-            s.text("Tasks whose worker was lost (killed, crashed, out of memory, or restarted after "
-                   "another task's timeout) are given to another worker by Dask; each loss is listed.")
-            s.table([{"recording": r.get("name"), "attempts": r.get("attempts"), "status": r.get("status"),
-                      "cause": c} for r in retried for c in r["retries"]])
 
-    # --- phasing
+def _recordings_sections(rep, recs: list, names: list, base, figs: _Figures) -> None:
+    """The "Recordings" table and wall-time figure; "Failures" and "Retries" when any."""
+    s = rep.section("Recordings")
+    s.html(_records_table(recs, base))
+    s.text("RMS residuals are of the measured phasing [mesh cycles] against the ideal phasing "
+           "and against the shaft-hole-error model identified from the recording itself; band "
+           "coverage is the fraction of passes inside the tolerance Monte Carlo 3-sigma band.")
+    figs.add(s, wall_times_across_recordings(names, [_num(r.get("wall_time_s")) for r in recs],
+                                             [r.get("status", "failed") for r in recs]),
+             "wall_times", "Task wall time per recording")
+    bad = [r for r in recs if r.get("status") in ("failed", "partial", "unreliable")]
+    if bad:
+        s = rep.section("Failures")
+        s.table([{"recording": r.get("name"), "status": r.get("status"), "error": r.get("error") or "",
+                  "file": r.get("recording")} for r in bad])
+    retried = [r for r in recs if r.get("retries")]
+    if retried:
+        s = rep.section("Retries")
+        s.text("Tasks whose worker was lost (killed, crashed, out of memory, or restarted after "
+               "another task's timeout) are given to another worker by Dask; each loss is listed.")
+        s.table([{"recording": r.get("name"), "attempts": r.get("attempts"), "status": r.get("status"),
+                  "cause": c} for r in retried for c in r["retries"]])
+
+
+def _per_planet(r: dict, g: str, p: str) -> dict:
+    return (((r.get("phasing") or {}).get(g) or {}).get("per_planet") or {}).get(p) or {}
+
+
+def _phasing_rows(recs: list, names: list, g: str, planets: list, ideal: dict):
+    """(table rows, {planet: (mean, std)} arrays across recordings) of gauge ``g``."""
+    rows = []
+    if g in ideal:
+        rows.append({"recording": "ideal", **{f"planet {p}": _fmt(ideal[g].get(p), "{:.5f}")
+                                              for p in planets}})
+    data = {}
+    for p in planets:
+        mean, std = [], []
+        for r in recs:
+            v = _per_planet(r, g, p)
+            mean.append(_num(v.get("mean")))
+            std.append(_num(v.get("std")))
+        data[p] = (np.array(mean), np.array(std))
+    for i, r in enumerate(recs):
+        row = {"recording": names[i]}
+        for p in planets:
+            v = _per_planet(r, g, p)
+            row[f"planet {p}"] = ("–" if v.get("mean") is None else
+                                  f"{v['mean']:.5f} ± {_fmt(v.get('std'), '{:.1e}')} "
+                                  f"(n={v.get('n', '–')})")
+        rows.append(row)
+    return rows, data
+
+
+def _phasing_section(rep, recs: list, names: list, figs: _Figures) -> None:
+    """"Phasing per planet": a table per gauge, the phasing and residual-RMS figures."""
     ideal = _ideal(recs)
     gauges = [g for g in ("sun", "ring") if _planets(recs, g)]
-    if gauges:
-        s = rep.section("Phasing per planet")
-        data = {}
-        for g in gauges:
-            planets = _planets(recs, g)
-            rows = []
-            if g in ideal:
-                rows.append({"recording": "ideal", **{f"planet {p}": _fmt(ideal[g].get(p), "{:.5f}")
-                                                      for p in planets}})
-            data[g] = {}
-            for p in planets:
-                mean, std = [], []
-                for r in recs:
-                    v = (((r.get("phasing") or {}).get(g) or {}).get("per_planet") or {}).get(p) or {}
-                    mean.append(_num(v.get("mean")))
-                    std.append(_num(v.get("std")))
-                data[g][p] = (np.array(mean), np.array(std))
-            for i, r in enumerate(recs):
-                row = {"recording": names[i]}
-                for p in planets:
-                    v = (((r.get("phasing") or {}).get(g) or {}).get("per_planet") or {}).get(p) or {}
-                    row[f"planet {p}"] = ("–" if v.get("mean") is None else
-                                          f"{v['mean']:.5f} ± {_fmt(v.get('std'), '{:.1e}')} "
-                                          f"(n={v.get('n', '–')})")
-                rows.append(row)
-            s.heading(f"{g} gauge: measured gamma [mesh cycles], mean ± pass-to-pass std (passes)")
-            s.table(rows)
-        add_fig(s, phasing_across_recordings(names, data, {g: ideal[g] for g in gauges if g in ideal} or None),
-                "phasing_across_recordings", "Mean measured phasing per planet and recording (deviation from "
-                "the ideal), error bars the pass-to-pass standard deviation")
-        rms = {f"{g} vs {ref}": np.array([_num(((r.get("compare") or {}).get(g) or {}).get(f"rms_vs_{ref}"))
-                                          for r in recs])
-               for g in gauges for ref in ("ideal", "model")}
-        rms = {k: v for k, v in rms.items() if np.isfinite(v).any()}
-        if rms:
-            add_fig(s, residual_rms_across_recordings(names, rms, label="RMS residual of the measured phasing"),
-                    "residual_rms", "RMS of the measured phasing against the ideal and against the "
-                    "error model identified from each recording")
+    if not gauges:
+        return
+    s = rep.section("Phasing per planet")
+    data = {}
+    for g in gauges:
+        rows, data[g] = _phasing_rows(recs, names, g, _planets(recs, g), ideal)
+        s.heading(f"{g} gauge: measured gamma [mesh cycles], mean ± pass-to-pass std (passes)")
+        s.table(rows)
+    figs.add(s, phasing_across_recordings(names, data, {g: ideal[g] for g in gauges if g in ideal} or None),
+             "phasing_across_recordings", "Mean measured phasing per planet and recording (deviation from "
+             "the ideal), error bars the pass-to-pass standard deviation")
+    rms = {f"{g} vs {ref}": np.array([_num(((r.get("compare") or {}).get(g) or {}).get(f"rms_vs_{ref}"))
+                                      for r in recs])
+           for g in gauges for ref in ("ideal", "model")}
+    rms = {k: v for k, v in rms.items() if np.isfinite(v).any()}
+    if rms:
+        figs.add(s, residual_rms_across_recordings(names, rms, label="RMS residual of the measured phasing"),
+                 "residual_rms", "RMS of the measured phasing against the ideal and against the "
+                 "error model identified from each recording")
 
-    # --- load sharing
+
+def _load_sharing_section(rep, recs: list, names: list, figs: _Figures) -> None:
+    """"Load sharing": factor ± standard error per planet and recording, table and figure."""
     n_pl = max((len(r.get("load_sharing") or []) for r in recs), default=0)
-    if n_pl:
-        s = rep.section("Load sharing")
-        ls = np.full((len(recs), n_pl), np.nan)
-        se = np.full((len(recs), n_pl), np.nan)
+    if not n_pl:
+        return
+    s = rep.section("Load sharing")
+    ls = np.full((len(recs), n_pl), np.nan)
+    se = np.full((len(recs), n_pl), np.nan)
+    rows = []
+    for i, r in enumerate(recs):
+        row = {"recording": names[i]}
+        for d in r.get("load_sharing") or []:
+            k = int(d["planet"]) - 1
+            ls[i, k], se[i, k] = _num(d.get("load_sharing")), _num(d.get("std_error"))
+            row[f"planet {k + 1}"] = ("–" if d.get("load_sharing") is None else
+                                      f"{d['load_sharing']:.4f} ± {_fmt(d.get('std_error'), '{:.1e}')}")
+        rows.append(row)
+    s.table(rows, columns=["recording"] + [f"planet {k + 1}" for k in range(n_pl)],
+            caption="load-sharing factor [-] ± standard error (1 = equal share)")
+    figs.add(s, load_sharing_across_recordings(names, ls, se), "load_sharing_across_recordings",
+             "Load-sharing factor per planet and recording")
+
+
+def _scene_level_section(rep, sl: dict) -> None:
+    """"Scene-level results (computed once)": stages, their times, the Monte Carlo band."""
+    s = rep.section("Scene-level results (computed once)")
+    s.text(f"Stages: {', '.join(sl.get('stages_ran', []))}"
+           + (f"; failed: {sl.get('stages_failed')}" if sl.get("stages_failed") else ""))
+    s.table([{"stage": k, "wall time [s]": float(v),
+              "error estimate": (sl.get("error_estimates") or {}).get(k, "")}
+             for k, v in (sl.get("timings_s") or {}).items()])
+    bands = sl.get("bands") or {}
+    if bands:
         rows = []
-        for i, r in enumerate(recs):
-            row = {"recording": names[i]}
-            for d in r.get("load_sharing") or []:
-                k = int(d["planet"]) - 1
-                ls[i, k], se[i, k] = _num(d.get("load_sharing")), _num(d.get("std_error"))
-                row[f"planet {k + 1}"] = ("–" if d.get("load_sharing") is None else
-                                          f"{d['load_sharing']:.4f} ± {_fmt(d.get('std_error'), '{:.1e}')}")
-            rows.append(row)
-        s.table(rows, columns=["recording"] + [f"planet {k + 1}" for k in range(n_pl)],
-                caption="load-sharing factor [-] ± standard error (1 = equal share)")
-        add_fig(s, load_sharing_across_recordings(names, ls, se), "load_sharing_across_recordings",
-                "Load-sharing factor per planet and recording")
-
-    # --- scene level
-    sl = campaign.get("scene_level")
-    if sl:
-        s = rep.section("Scene-level results (computed once)")
-        s.text(f"Stages: {', '.join(sl.get('stages_ran', []))}"
-               + (f"; failed: {sl.get('stages_failed')}" if sl.get("stages_failed") else ""))
-        s.table([{"stage": k, "wall time [s]": float(v),
-                  "error estimate": (sl.get("error_estimates") or {}).get(k, "")}
-                 for k, v in (sl.get("timings_s") or {}).items()])
-        bands = sl.get("bands") or {}
-        if bands:
-            rows = []
-            for g, b in bands.items():
-                for k, (lo, hi) in enumerate(zip(b["lo"], b["hi"])):
-                    rows.append({"gauge": g, "planet": k + 1, "band lo [cycles]": lo, "band hi [cycles]": hi})
-            s.table(rows, caption="tolerance Monte Carlo 3-sigma band of the deviation from ideal phasing")
-
-    # --- messages
-    msg_rows = [{"recording": names[i], "message": m} for i, r in enumerate(recs)
-                for m in (r.get("messages") or [])[:8]]
-    if msg_rows:
-        s = rep.section("Warnings per recording")
-        s.table(msg_rows, max_rows=300)
-    path = out_dir / filename
-    with atomic_path(path, overwrite=True) as tmp:  # never a half-written page
-        rep.write(tmp)
-    return path
+        for g, b in bands.items():
+            for k, (lo, hi) in enumerate(zip(b["lo"], b["hi"])):
+                rows.append({"gauge": g, "planet": k + 1, "band lo [cycles]": lo, "band hi [cycles]": hi})
+        s.table(rows, caption="tolerance Monte Carlo 3-sigma band of the deviation from ideal phasing")

@@ -1,0 +1,450 @@
+"""The Dask job of a campaign: one task per recording, watched, one record per recording.
+
+:func:`run_job` opens the cluster (:func:`pipeline.cluster.open_client`), submits every
+recording still to do as one task (:func:`campaign_task`: paths only, never open handles)
+and collects one record per recording: the task's own, or a failure when the task was lost
+(the worker died more often than Dask retries, the task raised) or ran past its timeout.
+
+A task's timeout (:func:`default_task_timeout`, ``--task-timeout``) counts from the moment
+it starts on a worker, which tells the client through a Dask event; past it the task is
+failed and its worker ended (:func:`pipeline.cluster.end_worker`). Workers lost under a
+task are seen in the scheduler's "remove-worker" events; Dask retries the task and the
+record lists each retry with its cause.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import os
+import queue
+import re
+import shutil
+import sys
+import time
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Sequence
+
+from .campaign_resume import relocate, write_marker
+from .cluster import end_worker, open_client
+from .log import logger
+
+__all__ = ["Job", "run_job", "campaign_task", "failed_record", "default_task_timeout",
+           "task_limits", "warm_up", "TIMEOUT_BASE_S", "TIMEOUT_RATE_BPS"]
+
+#: default ``--task-timeout`` of a recording of ``size`` bytes: TIMEOUT_BASE_S +
+#: size / TIMEOUT_RATE_BPS seconds (see :func:`default_task_timeout`)
+TIMEOUT_BASE_S = 300.0
+TIMEOUT_RATE_BPS = 100e3
+# worker -> client event when a task starts (its key, worker, pid): start of its timeout
+_START_TOPIC = "meshphase-task-start"
+
+
+# ---------------------------------------------------------------------------- timeouts
+def default_task_timeout(size_bytes) -> float:
+    """The default ``--task-timeout`` of a recording of ``size_bytes`` bytes [s].
+
+    ``TIMEOUT_BASE_S + size_bytes / TIMEOUT_RATE_BPS``: 300 s plus 10 s per MB. The campaign of
+    8 x 2-min noisy seed-rig recordings (HDF5, 15.7 MB each) took 3-6 s per task on a loaded
+    2-core machine (about 3-5 MB/s), so the rate of 0.1 MB/s leaves a margin of 30-50 for
+    slower machines, compressed files (more samples per byte) and contention, and the 300 s
+    the start-up of a cold worker (imports, numba compilation); a 3-h recording of 8 channels
+    (about 1.4 GB) gets about 4 h. It exists to end a task that hangs (a read blocked on a
+    dead network file system, a deadlock), not to bound slow ones: give ``--task-timeout``
+    for a tighter limit.
+
+    Parameters
+    ----------
+    size_bytes : int or float
+        File size [B].
+
+    Returns
+    -------
+    float
+        Timeout [s].
+    """
+    from .validate import as_nonnegative
+
+    return TIMEOUT_BASE_S + as_nonnegative(size_bytes, "size_bytes") / TIMEOUT_RATE_BPS
+
+
+def task_limits(keys: Sequence, task_timeout: float | None) -> dict[int, float | None]:
+    """Each recording's timeout [s]: None for none.
+
+    Parameters
+    ----------
+    keys : sequence of dict or None
+        The recordings' keys (:func:`pipeline.campaign_resume.recording_key`: their ``size``);
+        None for a recording gone since it was listed.
+    task_timeout : float or None
+        ``--task-timeout`` [s]: 0 none, None :func:`default_task_timeout` of each size.
+
+    Returns
+    -------
+    dict
+        Recording index -> timeout [s] or None.
+    """
+    if isinstance(keys, (str, bytes)) or not hasattr(keys, "__len__"):
+        raise TypeError(f"keys must be a sequence of recording keys, got {type(keys).__name__}")
+    tt = task_timeout
+    return {i: (None if tt == 0 else tt if tt is not None
+                else default_task_timeout(key["size"] if key else 0))
+            for i, key in enumerate(keys)}
+
+
+# ---------------------------------------------------------------------------- the task
+def warm_up() -> int:
+    """Import the processing stack in a worker (so task wall times measure processing).
+
+    Returns
+    -------
+    int
+        The worker's pid.
+    """
+    import pipeline.compare  # noqa: F401
+    import pipeline.condition  # noqa: F401
+    import pipeline.io  # noqa: F401
+    import pipeline.loads  # noqa: F401
+    import pipeline.models.mesh_phasing  # noqa: F401
+    import pipeline.onsets  # noqa: F401
+    import pipeline.phasing  # noqa: F401
+    import pipeline.stages  # noqa: F401
+    from pipeline.io import FORMATS, get_format
+
+    for name in FORMATS:  # the readers import h5py, mcap, pandas, npTDMS
+        get_format(name)
+    return os.getpid()
+
+
+def failed_record(path, name: str, out_dir, error: str) -> dict:
+    """The campaign record of a recording whose task gave none (lost, timed out, no dict).
+
+    Parameters
+    ----------
+    path : str or Path
+        The recording.
+    name : str
+        Its name in the campaign.
+    out_dir : str or Path
+        Its results folder.
+    error : str
+        The cause.
+
+    Returns
+    -------
+    dict
+        ``status`` "failed", ``error``, and the keys of :func:`pipeline.campaign.run_recording`'s
+        record, empty.
+    """
+    return {"recording": str(path), "name": name, "out_dir": str(out_dir), "status": "failed",
+            "error": error, "format": None, "wall_time_s": float("nan"), "worker": None,
+            "timings_s": {}, "stages_ran": [], "stages_failed": {}, "messages": [], "files": {}}
+
+
+def campaign_task(task: Callable[..., dict], scene_path: str, recording_path: str, out_dir: str,
+                  dask_key: str | None = None, done_key: dict | None = None, **kw) -> dict:
+    """What a campaign worker runs for one recording.
+
+    Tells the client the task started (its timeout counts from here), runs ``task``, and when
+    its results are usable (status ok, unreliable or partial) writes the completion marker
+    (:func:`pipeline.campaign_resume.write_marker`) last, atomically. Gets paths only, never
+    open handles.
+
+    Parameters
+    ----------
+    task : callable
+        ``task(scene_path, recording_path, out_dir, **kw) -> dict``.
+    scene_path, recording_path, out_dir : str
+    dask_key : str, optional
+        The task's key, sent with its start; None: not in a Dask job.
+    done_key : dict, optional
+        The recording's key for its marker; None: no marker.
+    **kw
+        Passed to ``task``.
+
+    Returns
+    -------
+    dict
+        What ``task`` returned (a note added to its ``messages`` when the marker could not
+        be written).
+
+    Raises
+    ------
+    TypeError
+        A path is not a string.
+    """
+    for what, v in (("scene_path", scene_path), ("recording_path", recording_path), ("out_dir", out_dir)):
+        if not isinstance(v, str):
+            raise TypeError(f"{what} must be a path string (tasks get paths, never handles), got "
+                            f"{type(v).__name__}")
+    if dask_key is not None:
+        try:
+            from distributed import get_worker
+
+            w = get_worker()
+            w.log_event(_START_TOPIC, {"key": dask_key, "worker": w.address, "pid": os.getpid()})
+        except ValueError:  # not in a worker (called directly)
+            pass
+    rec = task(scene_path, recording_path, out_dir, **kw)
+    if done_key is not None and isinstance(rec, dict) and rec.get("status") in ("ok", "unreliable", "partial"):
+        try:
+            write_marker(out_dir, done_key, rec)
+        except OSError as exc:
+            rec.setdefault("messages", []).append(f"campaign: completion marker not written ({exc}); "
+                                                  "--resume will redo this recording")
+    return rec
+
+
+# ---------------------------------------------------------------------------- the job
+@dataclass
+class Job:
+    """The recordings a campaign hands to Dask.
+
+    Attributes
+    ----------
+    task : callable
+        The per-recording function (:func:`campaign_task` wraps it).
+    scene_path : str
+    files : list of Path
+        Every recording of the campaign.
+    names : list of str
+        Their names.
+    rec_dirs : list of Path
+        Their results folders (staging).
+    keys : list of dict or None
+        Their keys (completion markers).
+    limits : dict
+        Index -> timeout [s] or None (:func:`task_limits`).
+    todo : list of int
+        Indices of the recordings to run.
+    bands : dict or None
+        The client's Monte Carlo band, passed to each task.
+    recording_report : bool
+        Each task also writes its HTML report.
+    progress : bool
+        A tqdm bar on stderr.
+    final_of : callable
+        A staging path -> the path it will have in the finished campaign.
+    on_usable : callable
+        Called after each recording that did not fail (the campaign folder is worth keeping).
+    """
+
+    task: Callable[..., dict]
+    scene_path: str
+    files: list
+    names: list
+    rec_dirs: list
+    keys: list
+    limits: dict
+    todo: list
+    bands: dict | None
+    recording_report: bool
+    progress: bool
+    final_of: Callable[[Path], str]
+    on_usable: Callable[[], None]
+
+
+def _dask_key(token: str, i: int, name: str) -> str:
+    return f"meshphase-{token}-{i}-{re.sub(r'[^A-Za-z0-9_.-]', '_', name)[:40]}"
+
+
+def run_job(job: Job, records: dict, *, scheduler: str | None, workers: int | None, dashboard,
+            cluster_info: dict, timing: dict) -> None:
+    """Run the recordings ``job.todo`` on the cluster and put one record per recording into
+    ``records``: results, failures, timeouts (worker ended) and retries (worker lost).
+
+    Parameters
+    ----------
+    job : Job
+    records : dict
+        Index -> record; the records already there (resumed) count as done on the bar.
+    scheduler, workers, dashboard
+        The cluster (:func:`pipeline.cluster.open_client`).
+    cluster_info : dict
+        Filled in: ``dashboard``, ``n_workers``, ``scheduler``.
+    timing : dict
+        Filled in: ``cluster_start`` and ``processing`` [s].
+    """
+    if not isinstance(job, Job) or not isinstance(records, dict):
+        raise TypeError(f"job must be a Job and records a dict, got {type(job).__name__} and "
+                        f"{type(records).__name__}")
+    t = time.perf_counter()
+    with open_client(scheduler, workers, dashboard, warm_up, cluster_info) as client:
+        timing["cluster_start"] = time.perf_counter() - t
+        t = time.perf_counter()
+        token = uuid.uuid4().hex[:10]  # task keys unique on a shared scheduler
+        dkeys = {i: _dask_key(token, i, job.names[i]) for i in job.todo}
+        watch = _Watch({k: i for i, k in dkeys.items()})
+        with watch.subscribed(client):
+            _Collection(client, job, records, watch, dkeys).run()
+        timing["processing"] = time.perf_counter() - t
+
+
+def _event_message(event):
+    return event[1] if isinstance(event, (tuple, list)) and len(event) == 2 else event
+
+
+class _Watch:
+    """What the cluster tells about the job's tasks: when and where each started, and the
+    workers lost under them. The handlers run on the client's event loop thread, before the
+    collection sees the futures they concern (events and results come on one ordered
+    stream)."""
+
+    def __init__(self, index_of: dict):
+        self.index_of = index_of
+        self.starts: dict[str, list[dict]] = {}
+        self.lost: dict[str, list[dict]] = {}
+        self.restarted: set = set()  # workers this campaign restarted (after a timeout)
+
+    def on_start(self, event) -> None:
+        msg = _event_message(event)
+        if isinstance(msg, dict) and msg.get("key") in self.index_of:
+            self.starts.setdefault(msg["key"], []).append({"t": time.monotonic(), "worker": msg.get("worker"),
+                                                           "pid": msg.get("pid")})
+
+    def on_cluster(self, event) -> None:
+        msg = _event_message(event)
+        if not isinstance(msg, dict) or msg.get("action") != "remove-worker":
+            return
+        w = msg.get("worker")
+        for k in msg.get("processing-tasks") or ():
+            if k not in self.index_of:
+                continue
+            st = self.starts.get(k) or []
+            ran = bool(st) and st[-1]["worker"] == w
+            # a worker that dies at once may not have sent the task's start: "held"
+            cause = (f"worker {w} (pid {st[-1]['pid']}) was lost while running it" if ran
+                     else f"worker {w} was lost while it held the task")
+            cause += (" (restarted after another task's timeout)" if w in self.restarted
+                      else " (killed, crashed or out of memory)")
+            self.lost.setdefault(k, []).append({"cause": cause, "worker": w, "running": ran})
+
+    @contextlib.contextmanager
+    def subscribed(self, client):
+        client.subscribe_topic(_START_TOPIC, self.on_start)
+        client.subscribe_topic("all", self.on_cluster)
+        try:
+            yield self
+        finally:
+            # before the client closes: else the scheduler fails to send it the "remove-client"
+            # event of topic "all" and logs that as CRITICAL
+            for topic in (_START_TOPIC, "all"):
+                with contextlib.suppress(Exception):
+                    client.unsubscribe_topic(topic)
+
+
+class _Collection:
+    """Submit the job's tasks, then collect a record for each: from its future, or a
+    failure when it was lost or timed out."""
+
+    def __init__(self, client, job: Job, records: dict, watch: _Watch, dkeys: dict):
+        self.client, self.job, self.records, self.watch, self.dkeys = client, job, records, watch, dkeys
+        self.pending = set(job.todo)
+        self.n_failed = 0
+        self.bar = None
+        self.done_q: queue.SimpleQueue = queue.SimpleQueue()
+
+    def submit(self) -> dict:
+        job, todo = self.job, self.job.todo
+        kw = {"bands": job.bands, "recording_report": job.recording_report}
+        fn = functools.partial(campaign_task, job.task)
+        # one map call = one graph: the tasks form one group, which the scheduler queues
+        # (root-ish tasks) when there are more than twice as many as worker threads
+        futs = self.client.map(fn, [job.scene_path] * len(todo), [str(job.files[i]) for i in todo],
+                               [str(job.rec_dirs[i]) for i in todo], [self.dkeys[i] for i in todo],
+                               [job.keys[i] for i in todo], key=[self.dkeys[i] for i in todo],
+                               pure=False, **kw)
+        for f in futs:
+            f.add_done_callback(self.done_q.put)
+        return dict(zip(todo, futs))
+
+    def finish(self, i: int, rec) -> None:
+        job = self.job
+        if not isinstance(rec, dict):
+            rec = failed_record(job.files[i], job.names[i], job.rec_dirs[i],
+                                f"task returned {type(rec).__name__}, not a dict")
+        rec = relocate(rec, job.rec_dirs[i], job.final_of(job.rec_dirs[i]))
+        retries = self.watch.lost.get(self.dkeys[i], [])
+        rec["retries"] = [r["cause"] for r in retries]
+        rec["attempts"] = 1 + len(retries)
+        rec["resumed"] = False
+        if retries:
+            logger.warning("campaign: %s: %s; retried (attempt %d)", job.files[i], retries[-1]["cause"],
+                           rec["attempts"])
+        self.records[i] = rec
+        self.pending.discard(i)
+        if rec.get("status") == "failed":
+            self.n_failed += 1
+        else:
+            job.on_usable()
+        self.bar.set_postfix_str(f"failed {self.n_failed}")
+        self.bar.update(1)
+
+    def record_of(self, f, i: int):
+        """The record of recording ``i`` from its done future ``f``."""
+        job = self.job
+        if f.status == "finished":
+            try:
+                return f.result()
+            except Exception as exc:  # noqa: BLE001 - a result that cannot be fetched
+                return failed_record(job.files[i], job.names[i], job.rec_dirs[i],
+                                     f"task lost: {type(exc).__name__}: {exc}")
+        # the worker died too often (KilledWorker), or the task raised
+        exc = f.exception() if f.status == "error" else None
+        err = (f"{type(exc).__name__}: {exc}" if exc is not None else f"dask future {f.status}")
+        rec = failed_record(job.files[i], job.names[i], job.rec_dirs[i], f"task lost: {err}")
+        shutil.rmtree(job.rec_dirs[i], ignore_errors=True)  # whatever it half wrote
+        logger.warning("campaign: %s: %s", job.files[i], rec["error"])
+        return rec
+
+    def check_timeouts(self, now: float, fut_of: dict) -> None:
+        job = self.job
+        for i in sorted(self.pending):
+            st = self.watch.starts.get(self.dkeys[i])
+            if job.limits[i] is None or not st or now - st[-1]["t"] <= job.limits[i]:
+                continue
+            self.watch.restarted.add(st[-1]["worker"])
+            self.finish(i, _timed_out(self.client, fut_of[i], job.files[i], job.names[i], job.rec_dirs[i],
+                                      job.limits[i], st[-1]))
+
+    def run(self) -> None:
+        from tqdm import tqdm
+
+        fut_of = self.submit()
+        index_of = self.watch.index_of
+        with tqdm(total=len(self.records) + len(self.job.todo), initial=len(self.records), desc="recordings",
+                  unit="rec", disable=not self.job.progress, file=sys.stderr, leave=False) as self.bar:
+            next_check = 0.0
+            while self.pending:
+                try:
+                    f = self.done_q.get(timeout=0.5)
+                except queue.Empty:
+                    f = None
+                if f is not None:
+                    i = index_of.get(f.key)
+                    if i in self.pending:
+                        self.finish(i, self.record_of(f, i))
+                    f.release()
+                now = time.monotonic()
+                if now < next_check:
+                    continue
+                next_check = now + 0.5
+                self.check_timeouts(now, fut_of)
+
+
+def _timed_out(client, fut, path, name, rec_dir, limit, start) -> dict:
+    """Fail a task that ran past its timeout: cancel it, end its worker (the only way to stop
+    a thread blocked in a read: :func:`pipeline.cluster.end_worker`), drop what it half
+    wrote."""
+    client.cancel([fut])
+    w, pid = start["worker"], start["pid"]
+    how = end_worker(client, w, pid)
+    shutil.rmtree(rec_dir, ignore_errors=True)
+    rec = failed_record(path, name, rec_dir, f"timeout: no result {limit:.4g} s after the task started "
+                                             f"(--task-timeout); its worker {w} (pid {pid}) was {how}")
+    rec["timed_out"] = True
+    rec["worker"] = w
+    logger.warning("campaign: %s: %s", path, rec["error"])
+    return rec

@@ -1,0 +1,290 @@
+"""The Dask cluster a campaign runs on: its own, or one it joins; and ending a stuck worker.
+
+:func:`local_cluster` starts the campaign's own :class:`distributed.LocalCluster` (on
+127.0.0.1 only, no dashboard unless asked, one single-threaded worker *process* per core by
+default: the stages are numpy/Python code that holds the GIL for long stretches, and
+``warnings.catch_warnings`` in :func:`pipeline.stages.run_scene` is not thread-safe).
+:func:`open_client` gives a client on that cluster or on an existing scheduler
+(``tcp://host:8786``, whose workers must have meshphase installed and see the same paths),
+with the workers warmed up, and closes what it started. :func:`end_worker` ends a worker
+whose task ran past its timeout (the only way to stop a thread blocked in a read).
+
+``distributed`` is imported inside the functions: it is a heavy dependency that only a
+campaign needs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+from typing import Callable, Iterator
+
+from .log import logger
+from .validate import as_positive_int
+
+__all__ = ["local_cluster", "open_client", "check_cluster_options", "cores", "own_child",
+           "end_worker"]
+
+
+def cores() -> int:
+    """The cores this process may run on (at least 1): the default number of local workers.
+
+    Returns
+    -------
+    int
+    """
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _check_dashboard(dashboard) -> None:
+    if not isinstance(dashboard, (bool, int, str)):
+        raise TypeError(f"dashboard must be None, a bool, a port or 'host:port', got "
+                        f"{type(dashboard).__name__} {dashboard!r}")
+
+
+def check_cluster_options(scheduler, workers, dashboard) -> int | None:
+    """Check a campaign's cluster options before anything starts.
+
+    Parameters
+    ----------
+    scheduler : str or None
+        Address of an existing scheduler; None: a local cluster.
+    workers : int or None
+        Local worker processes.
+    dashboard : None, bool, int or str
+        The local cluster's dashboard (:func:`local_cluster`).
+
+    Returns
+    -------
+    int or None
+        ``workers``, checked.
+
+    Raises
+    ------
+    TypeError
+        ``scheduler`` is not a string, ``dashboard`` of a wrong type.
+    ValueError
+        ``workers`` not a positive integer, or ``workers`` / ``dashboard`` given together
+        with ``scheduler`` (they apply to the local cluster only).
+    """
+    if scheduler is not None and not isinstance(scheduler, str):
+        raise TypeError(f"scheduler must be an address string like 'tcp://host:8786', got "
+                        f"{type(scheduler).__name__} {scheduler!r}")
+    if workers is not None:
+        workers = as_positive_int(workers, "workers")
+        if scheduler is not None:
+            raise ValueError(f"workers={workers} applies to the local cluster only; the cluster at "
+                             f"{scheduler!r} has its own workers")
+    if dashboard is not None and dashboard is not False:
+        _check_dashboard(dashboard)
+        if scheduler is not None:
+            raise ValueError(f"dashboard={dashboard!r} applies to the local cluster only; the cluster "
+                             f"at {scheduler!r} has its own dashboard")
+    return workers
+
+
+def _dashboard_address(dashboard) -> str:
+    """``--dashboard`` value -> the HTTP address: loopback unless a host is named."""
+    text = "" if dashboard is True else str(dashboard).strip()
+    if not text:
+        return "127.0.0.1:0"
+    if text.isdigit():
+        return f"127.0.0.1:{text}"
+    if text.startswith(":"):  # ":8787" means all interfaces to distributed; here loopback
+        return "127.0.0.1" + text
+    return text
+
+
+def local_cluster(n_workers: int, *, dashboard=None):
+    """The campaign's own Dask cluster: ``n_workers`` single-threaded worker processes.
+
+    Everything listens on the loopback interface only: the scheduler and the workers
+    (``host="127.0.0.1"``) and the scheduler's HTTP server, which distributed always starts
+    (health and metrics routes) and which serves the dashboard - unauthenticated - when asked
+    (``dashboard``); it is off by default. ``worker-saturation = 1.0``: a worker holds only
+    the task it runs (inputs are paths, prefetching buys nothing), so when a worker dies or a
+    task hangs only that task is concerned.
+
+    Parameters
+    ----------
+    n_workers : int
+    dashboard : None, bool, int or str
+        None/False: no dashboard (the HTTP server on 127.0.0.1, a free port). True: the
+        dashboard on 127.0.0.1, a free port. A port (8787, ":8787"): on 127.0.0.1 at that
+        port. ``host:port``: there, as given (another interface only when named: it has no
+        authentication; a warning is logged).
+
+    Returns
+    -------
+    distributed.LocalCluster
+        Its ``dashboard_link`` is the dashboard's address.
+    """
+    import dask
+    from distributed import LocalCluster
+
+    n_workers = as_positive_int(n_workers, "n_workers")
+    if dashboard is not None:
+        _check_dashboard(dashboard)
+    on = dashboard is not None and dashboard is not False
+    address = _dashboard_address(dashboard) if on else "127.0.0.1:0"
+    host = address.rsplit(":", 1)[0].strip("[]")
+    if on and host not in ("127.0.0.1", "localhost", "::1"):
+        logger.warning("campaign: the Dask dashboard listens on %s without authentication", address)
+    # the workers' own distributed logs (a cancelled task, a restart) reach stderr only when
+    # our logger is verbose (meshphase -v): the campaign reports those events itself
+    quiet = logging.WARNING if logger.isEnabledFor(logging.INFO) else logging.ERROR
+    with dask.config.set({"distributed.scheduler.worker-saturation": 1.0}):
+        return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
+                            host="127.0.0.1", dashboard_address=address, silence_logs=quiet,
+                            scheduler_kwargs={"dashboard": on})
+
+
+@contextlib.contextmanager
+def _quiet_distributed() -> Iterator[None]:
+    """distributed logs cluster life (start, connections, close) at INFO and worker restarts
+    at WARNING; show them only when our own logger is verbose (meshphase -v): the campaign
+    reports lost workers, retries and timeouts itself."""
+    dlog = logging.getLogger("distributed")
+    old_level = dlog.level
+    if not logger.isEnabledFor(logging.INFO):
+        dlog.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        dlog.setLevel(old_level)
+
+
+def _connect(scheduler, workers, dashboard, info: dict):
+    """(client, cluster): a new local cluster (``scheduler`` None) or the one at ``scheduler``
+    (cluster None)."""
+    from distributed import Client
+
+    if scheduler is not None:
+        try:
+            return Client(scheduler), None
+        except OSError as exc:
+            raise ValueError(f"scheduler {scheduler!r}: cannot connect: {exc}") from None
+    cluster = local_cluster(workers or cores(), dashboard=dashboard)
+    try:
+        client = Client(cluster)
+    except BaseException:
+        cluster.close()
+        raise
+    if dashboard not in (None, False):
+        info["dashboard"] = cluster.dashboard_link
+        logger.warning("campaign: Dask dashboard at %s", cluster.dashboard_link)
+    return client, cluster
+
+
+@contextlib.contextmanager
+def open_client(scheduler: str | None, workers: int | None, dashboard, warm_up: Callable[[], int],
+                info: dict) -> Iterator:
+    """A Dask client on the campaign's own local cluster or on the one at ``scheduler``, its
+    workers warmed up; closes the client, and the local cluster it started, on exit.
+
+    Parameters
+    ----------
+    scheduler : str or None
+        Address of an existing scheduler; None: a :func:`local_cluster`.
+    workers : int or None
+        Local worker processes (default :func:`cores`).
+    dashboard : None, bool, int or str
+        The local cluster's dashboard (:func:`local_cluster`).
+    warm_up : callable
+        Run once on every worker (``client.run``): imports what the tasks need; returns the
+        worker's pid.
+    info : dict
+        Filled in: ``dashboard`` (its link, when asked), ``n_workers``, ``scheduler`` (the
+        address).
+
+    Yields
+    ------
+    distributed.Client
+
+    Raises
+    ------
+    ValueError
+        The scheduler cannot be reached, or its workers cannot import meshphase.
+    """
+    if not callable(warm_up) or not isinstance(info, dict):
+        raise TypeError(f"warm_up must be callable and info a dict, got {type(warm_up).__name__} and "
+                        f"{type(info).__name__}")
+    with _quiet_distributed():
+        client, cluster = _connect(scheduler, workers, dashboard, info)
+        try:
+            with client:
+                try:
+                    pids = client.run(warm_up)
+                except ImportError as exc:
+                    raise ValueError(f"the workers of {client.scheduler.address} cannot import "
+                                     f"meshphase ({exc}); install it where the workers run") from None
+                info["n_workers"] = len(pids)
+                if not pids:
+                    logger.warning("campaign: the cluster at %s has no workers yet; the tasks wait "
+                                   "for workers to join", client.scheduler.address)
+                info["scheduler"] = client.scheduler.address
+                yield client
+        finally:
+            if cluster is not None:
+                cluster.close()
+
+
+def own_child(pid) -> bool:
+    """True when ``pid`` is a process this one started (a worker of our LocalCluster).
+
+    Parameters
+    ----------
+    pid : int
+
+    Returns
+    -------
+    bool
+        False for anything else, also for a non-integer.
+    """
+    import psutil
+
+    try:
+        return isinstance(pid, int) and any(c.pid == pid for c in psutil.Process().children(recursive=True))
+    except psutil.Error:
+        return False
+
+
+def end_worker(client, worker: str, pid) -> str:
+    """End the worker ``worker`` (process ``pid``) whose task ran past its timeout.
+
+    A worker of our own LocalCluster is killed at once (SIGKILL; its Nanny starts a new one:
+    a graceful restart would wait for the blocked thread first); another cluster's worker is
+    restarted through the scheduler (which needs a Nanny there).
+
+    Parameters
+    ----------
+    client : distributed.Client
+    worker : str
+        The worker's address.
+    pid : int
+        Its process id, as it told the client.
+
+    Returns
+    -------
+    str
+        How it went, to follow "its worker ... was": "killed (its Nanny starts a new one)",
+        "restarted", or "not stopped (...)" / "not restarted (...)" with the cause.
+    """
+    import signal
+
+    if own_child(pid):
+        try:
+            os.kill(pid, getattr(signal, "SIGKILL", signal.SIGTERM))
+            return "killed (its Nanny starts a new one)"
+        except OSError as exc:
+            return f"not stopped ({exc}): it may stay busy"
+    try:
+        res = client.restart_workers([worker], timeout=120, raise_for_error=False)
+        state = res.get(worker, "?") if isinstance(res, dict) else "?"
+    except Exception as exc:  # noqa: BLE001 - the campaign goes on either way
+        state = f"{type(exc).__name__}: {exc}"
+    return "restarted" if state == "OK" else f"not restarted ({state}): it may stay busy"

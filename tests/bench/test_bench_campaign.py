@@ -1,0 +1,40 @@
+"""The campaign speed-up benchmark (:func:`pipeline.bench.campaign.measure_speedup`): the
+same campaign timed with 1 and 2 local workers. Measured, never asserted: the smoke run only
+checks the table's shape."""
+
+from __future__ import annotations
+
+import pytest
+
+from pipeline.bench.campaign import measure_speedup
+
+
+def test_measure_speedup_lives_in_bench_only():
+    # a benchmark: pipeline.campaign does not reach up into bench/ for it
+    from pipeline import campaign
+
+    assert not hasattr(campaign, "measure_speedup")
+
+
+def test_measure_speedup_bad_input():
+    with pytest.raises(ValueError, match="n_recordings"):
+        measure_speedup(n_recordings=0)
+    with pytest.raises(ValueError, match="minutes"):
+        measure_speedup(minutes=-1)
+    with pytest.raises(ValueError, match="workers"):
+        measure_speedup(workers=())
+    with pytest.raises(TypeError, match="workers"):
+        measure_speedup(workers=2)
+    with pytest.raises(ValueError, match="repeats"):
+        measure_speedup(repeats=0)
+    with pytest.raises(ValueError, match="scenario"):
+        measure_speedup(scenario="no_such_scenario")
+
+
+@pytest.mark.bench
+def test_measure_speedup_smoke(tmp_path):
+    res = measure_speedup(n_recordings=2, minutes=0.25, workers=(1, 2), work_dir=tmp_path)
+    assert [r["workers"] for r in res["runs"]] == [1, 2]
+    assert res["best_wall_s"][1] == res["runs"][0]["wall_s"]
+    assert all(r["n_ok"] == 2 for r in res["runs"])
+    assert res["speedup"][1] == pytest.approx(1.0) and res["speedup"][2] > 0

@@ -1,0 +1,233 @@
+"""The pieces a campaign is built from, without a cluster: the tolerance band, the client's
+scene, task timeouts and records, completion markers and --resume reuse, the cluster options
+and ending a stuck worker (with stand-ins for the Dask client)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from seed_rig_toml import SEED_RIG_GEARSET
+
+from pipeline import campaign as cp
+from pipeline import campaign_job as cj
+from pipeline import campaign_resume as cr
+from pipeline import cluster
+from pipeline.scene import load_scene
+from pipeline.tolerance_band import phasing_band
+
+
+# ---------------------------------------------------------------------------- the band
+def _mc(n_planets: int):
+    def stat(lo, hi):
+        return SimpleNamespace(bound3=np.array([np.full(n_planets, lo), np.full(n_planets, hi)]))
+
+    return SimpleNamespace(ave_s=stat(-0.1, 0.2), dev_s=stat(0.0, 0.04),
+                           ave_r=stat(-0.3, 0.3), dev_r=stat(0.0, 0.1))
+
+
+def test_phasing_band_widens_the_mean_band_by_half_the_deviation():
+    lo, hi = phasing_band(_mc(4), "sun")
+    np.testing.assert_allclose(lo, [-0.12] * 4)
+    np.testing.assert_allclose(hi, [0.22] * 4)
+    lo, hi = phasing_band(_mc(4), "ring")
+    np.testing.assert_allclose(hi - lo, [0.7] * 4)
+    assert cp._bands(_mc(3)) == {"sun": {"lo": pytest.approx([-0.12] * 3), "hi": pytest.approx([0.22] * 3)},
+                                 "ring": {"lo": pytest.approx([-0.35] * 3), "hi": pytest.approx([0.35] * 3)}}
+
+
+def test_phasing_band_empty_and_bad():
+    lo, hi = phasing_band(_mc(0), "sun")
+    assert lo.shape == hi.shape == (0,)
+    with pytest.raises(ValueError, match="gear"):
+        phasing_band(_mc(4), "planet")
+    with pytest.raises(TypeError, match="Monte Carlo"):
+        phasing_band(object(), "ring")
+
+
+# ---------------------------------------------------------------------------- scenes
+SCENE = ('name = "parts"\nresults = ["phasing", "tolerance"]\n\n' + SEED_RIG_GEARSET
+         + '\n[input]\nsynthetic = "seed_rig"\nminutes = 0.1\n\n[tolerances]\ne_sun_mm = 0.2\n'
+         'e_ring_mm = 0.5\ne_planet_mm = 0.2\nsamples = 64\n')
+
+
+def test_client_scene_keeps_the_client_results_only(tmp_path):
+    (tmp_path / "s.toml").write_text(SCENE)
+    scene = load_scene(tmp_path / "s.toml")
+    c = cp.client_scene(scene)
+    assert c.results == ["tolerance"] and c.input == {} and scene.results == ["phasing", "tolerance"]
+    (tmp_path / "p.toml").write_text(SCENE.replace('"phasing", "tolerance"', '"phasing"'))
+    assert cp.client_scene(load_scene(tmp_path / "p.toml")).results == []  # nothing on the client
+    with pytest.raises(TypeError, match="Scene"):
+        cp.client_scene({"results": []})
+
+
+# ---------------------------------------------------------------------------- the job's pieces
+def test_task_limits_per_recording():
+    keys = [{"size": 0}, None, {"size": 15.7e6}]
+    assert cj.task_limits(keys, 0) == {0: None, 1: None, 2: None}
+    assert cj.task_limits(keys, 7.5) == {0: 7.5, 1: 7.5, 2: 7.5}
+    by_size = cj.task_limits(keys, None)
+    assert by_size[0] == by_size[1] == cj.TIMEOUT_BASE_S and by_size[2] == cj.default_task_timeout(15.7e6)
+    assert cj.task_limits([], None) == {}
+    with pytest.raises(TypeError, match="keys"):
+        cj.task_limits(3, None)
+    with pytest.raises(TypeError, match="keys"):
+        cj.task_limits("abc", None)
+
+
+def test_failed_record_has_the_task_record_keys():
+    rec = cj.failed_record(Path("/r/a.h5"), "a", Path("/o/a"), "boom")
+    assert rec["status"] == "failed" and rec["error"] == "boom" and rec["recording"] == "/r/a.h5"
+    assert rec["out_dir"] == "/o/a" and rec["files"] == {} and np.isnan(rec["wall_time_s"])
+    assert cj.failed_record("", "", "", "")["recording"] == ""
+
+
+def test_warm_up_returns_this_process_id():
+    assert cj.warm_up() == os.getpid()
+
+
+def test_run_job_bad_input():
+    with pytest.raises(TypeError, match="Job"):
+        cj.run_job({}, {}, scheduler=None, workers=None, dashboard=None, cluster_info={}, timing={})
+
+
+# ---------------------------------------------------------------------------- markers, resume
+def test_sha256_file_empty_and_missing(tmp_path):
+    (tmp_path / "e").write_bytes(b"")
+    assert cr.sha256_file(tmp_path / "e") == hashlib.sha256(b"").hexdigest()
+    with pytest.raises(FileNotFoundError):
+        cr.sha256_file(tmp_path / "missing")
+
+
+def test_recording_keys_empty_gone_and_bad(tmp_path):
+    (tmp_path / "a.h5").write_bytes(b"12")
+    keys = cr.recording_keys([tmp_path / "a.h5", tmp_path / "gone.h5"], "ff", {"recording_report": False})
+    assert keys[0] == cr.recording_key(tmp_path / "a.h5", "ff", {"recording_report": False})
+    assert keys[1] is None
+    assert cr.recording_keys([], "ff") == []
+    with pytest.raises(TypeError, match="list of paths"):
+        cr.recording_keys(str(tmp_path / "a.h5"), "ff")
+
+
+def test_write_marker_round_trip_and_bad(tmp_path):
+    cr.write_marker(tmp_path / "r", {"recording": "/x.h5"}, {"status": "ok", "gamma": np.float64(0.5)})
+    assert cr.completed_recordings(tmp_path) == {}  # not under recordings/
+    cr.write_marker(tmp_path / cr.RECORDINGS_DIR_NAME / "x", {"recording": "/x.h5"}, {})
+    (path, marker), = cr.completed_recordings(tmp_path).values()
+    assert path.name == "x" and marker == {"meshphase_done": 1, "key": {"recording": "/x.h5"}, "record": {}}
+    assert json.loads((tmp_path / "r" / cr.DONE_NAME).read_text())["record"]["gamma"] == 0.5
+    with pytest.raises(TypeError, match="dicts"):
+        cr.write_marker(tmp_path / "r", None, {})
+
+
+def test_relocate_empty_and_bad():
+    rec = cr.relocate({"out_dir": "/a/s", "files": {"summary": "/a/s/summary.json", "x": "/else/y"}},
+                      "/ignored", "/b/s")
+    assert rec == {"out_dir": "/b/s", "files": {"summary": "/b/s/summary.json", "x": "/else/y"}}
+    assert cr.relocate({}, "/a", "/b") == {"out_dir": "/b", "files": {}}
+    with pytest.raises(TypeError, match="record"):
+        cr.relocate(None, "/a", "/b")
+
+
+def test_resume_sources_skip_missing_and_linked(tmp_path):
+    (tmp_path / "camp" / cr.RECORDINGS_DIR_NAME).mkdir(parents=True)
+    (tmp_path / "link").symlink_to(tmp_path / "camp")
+    (tmp_path / "bare").mkdir()
+    found = cr.resume_sources([tmp_path / "camp", tmp_path / "link", tmp_path / "bare", tmp_path / "no"])
+    assert found == [str(tmp_path / "camp")]
+    assert cr.resume_sources([]) == []
+    with pytest.raises(TypeError, match="list of folders"):
+        cr.resume_sources(str(tmp_path))
+
+
+def test_reuse_completed_takes_matching_markers_only(tmp_path):
+    rec_file = tmp_path / "a.h5"
+    rec_file.write_bytes(b"abc")
+    key = cr.recording_key(rec_file, "ff")
+    old = tmp_path / "old" / cr.RECORDINGS_DIR_NAME / "a"
+    old.mkdir(parents=True)
+    (old / "summary.json").write_text("{}")
+    cr.write_marker(old, key, {"status": "ok", "out_dir": str(old), "files": {"summary": str(old / "summary.json")}})
+    new = tmp_path / "new"
+    got = cr.reuse_completed([tmp_path / "old"], [key, None], [new / "a", new / "b"], ["a", "b"],
+                             lambda p: str(Path("/final") / Path(p).name))
+    assert list(got) == [0] and got[0]["resumed"] and got[0]["name"] == "a"
+    assert got[0]["files"]["summary"] == "/final/a/summary.json" and (new / "a" / "summary.json").is_file()
+    stale = dict(key, size=99)
+    assert cr.reuse_completed([tmp_path / "old"], [stale], [tmp_path / "n2"], ["a"], str) == {}
+    assert cr.reuse_completed([], [], [], [], str) == {}
+    with pytest.raises(ValueError, match="one entry per recording"):
+        cr.reuse_completed([], [key], [], ["a"], str)
+
+
+# ---------------------------------------------------------------------------- the cluster
+def test_cores_is_at_least_one():
+    assert isinstance(cluster.cores(), int) and cluster.cores() >= 1
+
+
+def test_check_cluster_options_empty_and_bad():
+    assert cluster.check_cluster_options(None, None, None) is None
+    assert cluster.check_cluster_options(None, 3, True) == 3
+    assert cluster.check_cluster_options("tcp://h:8786", None, False) is None
+    with pytest.raises(TypeError, match="scheduler"):
+        cluster.check_cluster_options(8786, None, None)
+    with pytest.raises(ValueError, match="workers"):
+        cluster.check_cluster_options(None, 0, None)
+    with pytest.raises(ValueError, match="local cluster only"):
+        cluster.check_cluster_options("tcp://h:8786", 2, None)
+    with pytest.raises(TypeError, match="dashboard"):
+        cluster.check_cluster_options(None, None, 1.5)
+
+
+def test_open_client_bad_input():
+    with pytest.raises(TypeError, match="warm_up"):
+        with cluster.open_client(None, 1, None, "not callable", {}):
+            pass
+    with pytest.raises(TypeError, match="info"):
+        with cluster.open_client(None, 1, None, os.getpid, None):
+            pass
+
+
+def test_own_child_only_for_our_children():
+    proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        assert cluster.own_child(proc.pid)
+    finally:
+        proc.kill()
+        proc.wait()
+    assert not cluster.own_child(os.getpid()) and not cluster.own_child(None)
+    assert not cluster.own_child("123")
+
+
+class _Client:
+    """Stands in for distributed.Client.restart_workers."""
+
+    def __init__(self, answer):
+        self.answer, self.asked = answer, []
+
+    def restart_workers(self, workers, timeout, raise_for_error):
+        self.asked.append((workers, timeout, raise_for_error))
+        if isinstance(self.answer, Exception):
+            raise self.answer
+        return self.answer
+
+
+def test_end_worker_kills_our_child_and_restarts_another():
+    proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    assert cluster.end_worker(None, "tcp://127.0.0.1:1", proc.pid) == "killed (its Nanny starts a new one)"
+    assert proc.wait(timeout=10) != 0
+    ok = _Client({"tcp://w:1": "OK"})
+    assert cluster.end_worker(ok, "tcp://w:1", None) == "restarted"
+    assert ok.asked == [(["tcp://w:1"], 120, False)]
+    assert (cluster.end_worker(_Client({}), "tcp://w:1", None)
+            == "not restarted (?): it may stay busy")
+    assert (cluster.end_worker(_Client(RuntimeError("no nanny")), "tcp://w:1", os.getpid())
+            == "not restarted (RuntimeError: no nanny): it may stay busy")
