@@ -64,6 +64,7 @@ from .campaign_resume import (DONE_NAME, RECORDINGS_DIR_NAME, completed_recordin
                               recording_key, recording_keys, resume_sources, reuse_completed,
                               sha256_file)
 from .cluster import check_cluster_options, local_cluster
+from .heap import limit_heap_growth
 from .jsonable import to_jsonable
 from .log import logger
 from .results import phasing_verdict
@@ -434,6 +435,7 @@ def run_recording(scene_path: str, recording_path: str, out_dir: str, *, bands: 
         ``messages``, ``files`` and the compact results (``phasing``, ``load_sharing``,
         ``compare``, ``identify``, ``ideal``, ``recording_info`` ... when computed).
     """
+    limit_heap_growth()          # a worker streams recording after recording (pipeline/heap.py)
     t0, c0 = time.perf_counter(), time.process_time()
     rec_path = Path(recording_path)
     out: dict = {"recording": str(recording_path), "name": Path(out_dir).name, "out_dir": str(out_dir),
@@ -847,8 +849,8 @@ def _scene_level(scene, out: Path, opts: _Options):
     write_outputs(sctx, sdir, report=False)
     scene_level = summary_dict(sctx)
     bands = None
-    if opts.mc_on_client and "tolerance" in sctx.results:
-        bands = _bands(sctx.results["tolerance"])
+    if opts.mc_on_client and sctx.tolerance is not None:
+        bands = _bands(sctx.tolerance.monte_carlo)
         scene_level["bands"] = bands
     elif opts.mc_on_client:
         logger.warning("campaign: the tolerance Monte Carlo failed (%s); no band coverage",

@@ -25,6 +25,7 @@ from typing import Any, Callable, ClassVar, Generic, TypeVar
 import numpy as np
 
 from .models.gearset import Gearset
+from .tolerance_band import phasing_band
 
 __all__ = ["StageResult", "LoadStage", "ConditionStage", "OnsetsStage", "PhasingStage",
            "LoadSharingStage", "CentroidsStage", "IdealStage", "ToleranceStage",
@@ -318,12 +319,9 @@ class ToleranceStage(StageResult):
         return cls(monte_carlo=value)
 
     def band(self, gear: str) -> tuple[np.ndarray, np.ndarray]:
-        """The 3-sigma band of ``gear``'s phasing deviation from the ideal per planet [-]:
-        (Ave bound3 low - half the upper Dev bound, Ave bound3 high + half of it)."""
-        mc = self.monte_carlo
-        ave = mc.ave_s if gear == "sun" else mc.ave_r
-        dev = mc.dev_s if gear == "sun" else mc.dev_r
-        return ave.bound3[0] - dev.bound3[1] / 2, ave.bound3[1] + dev.bound3[1] / 2
+        """The 3-sigma band of ``gear``'s phasing deviation from the ideal per planet [mesh
+        cycles] (:func:`pipeline.tolerance_band.phasing_band`)."""
+        return phasing_band(self.monte_carlo, gear)
 
 
 @dataclass(frozen=True, kw_only=True)
