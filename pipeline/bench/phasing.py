@@ -88,7 +88,6 @@ def matrix_cases(quick: bool = False) -> list[PhasingCase]:
 
 def case_config(case: PhasingCase):
     """The scenario's :class:`synthetic.config.SynthConfig` changed as the case says."""
-    from synthetic.kinematics import SpeedProfile
     from synthetic.scenarios import get_scenario
 
     cfg = get_scenario(case.scenario)
@@ -126,12 +125,13 @@ def run_case(case: PhasingCase, *, seed: int = 0, results=("phasing", "compare")
         ctx = run_scene(scene)
     wall = time.perf_counter() - t
     rows = {}
-    ph = ctx.results.get("phasing")
-    truth = ctx.results.get("load", {}).get("truth")
+    ph = ctx.phasing
+    truth = ctx.load.truth if ctx.load is not None else None
     if ph is not None and truth is not None:
-        model = ph.get("model")
-        for gear, tab in ph["tables"].items():
-            ch, times, pl, _, _ = ph["labels"][gear]
+        model = ph.model
+        for gear, tab in ph.tables.items():
+            lab = ph.labels[gear]
+            ch, times, pl = lab.channel, lab.times, lab.planet
             tc = truth_comparison(tab, truth, ch, times=times, planets=pl) if len(tab) else None
             if tc is None:
                 continue
@@ -143,9 +143,9 @@ def run_case(case: PhasingCase, *, seed: int = 0, results=("phasing", "compare")
                           "z_rms": tc["z_rms"], "coverage95": tc["coverage95"],
                           # a gauge whose planets cannot be named (declared relative in the
                           # run's summary) has no label to match: said, not scored as 0
-                          "label_match": ("relative" if gear in (ph.get("labels_relative") or ())
+                          "label_match": ("relative" if gear in (ph.labels_relative or ())
                                           else tc["label_match"]),
-                          "reliable": bool(ph["reliability"].get(gear, {}).get("reliable", False)),
+                          "reliable": bool((ph.reliability or {}).get(gear, {}).get("reliable", False)),
                           "model": model.terms if model is not None else "",
                           "process_s": wall, "errors": tc["errors"],
                           "sigma": np.asarray(tab.uncertainty)}

@@ -218,12 +218,13 @@ def process_job(path: str, gearset: str, out_dir: str) -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         ctx, files = process_recording(path, gearset, out_dir=out_dir, overwrite=True)
-    ons = ctx.results.get("onsets", {}).get("by_channel", {})
-    cond = ctx.results.get("condition", {})
+    ons = ctx.onsets.by_channel if ctx.onsets is not None else {}
+    timings = ctx.condition.timings if ctx.condition is not None else {}
+    memory = ctx.condition.memory if ctx.condition is not None else {}
     return {"status": run_status(ctx)["status"], "timings": dict(ctx.timings), "hwm_mb": hwm,
             "failed": dict(ctx.failed), "n_onsets": int(sum(len(o) for o in ons.values())),
-            "onsets_s": float(cond.get("timings", {}).get("onsets_s", float("nan"))),
-            "memory_estimate_mb": (cond.get("memory", {}).get("total", 0) / 2**20) or None}
+            "onsets_s": float(timings.get("onsets_s", float("nan"))),
+            "memory_estimate_mb": (memory.get("total", 0) / 2**20) or None}
 
 
 def sosfiltfilt_job(n: int = 1 << 22, repeats: int = 3) -> dict:
