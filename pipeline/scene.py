@@ -23,7 +23,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import jsonschema
 import numpy as np
 
 from data_schemas import load_schema
@@ -423,6 +422,8 @@ def _check_schema(raw: dict, text: str, label, err) -> None:
     for keys, v in _walk(raw):
         if isinstance(v, float) and not math.isfinite(v):
             raise err(keys, f"{v} is not a finite number (TOML reads inf and nan as numbers)")
+    import jsonschema  # ~90 modules (attrs, referencing, importlib.metadata): only for a scene
+
     validator = jsonschema.Draft202012Validator(load_schema("scene"))
     errors = sorted(validator.iter_errors(raw), key=lambda e: [str(k) for k in e.absolute_path])
     if errors:
