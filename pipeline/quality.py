@@ -1461,7 +1461,8 @@ class _SampleWindows:
 
 @dataclass(eq=False)
 class ScanResult:
-    """What :class:`ChannelScan` found on one channel (raw samples).
+    """What :class:`ChannelScan` found on one channel (raw samples): the scan's raw findings,
+    rail runs and flat runs apart; :func:`quality_from_scan` makes the channel's report.
 
     Attributes
     ----------
