@@ -1,7 +1,7 @@
 """The ``meshphase`` command.
 
-Subcommands import what they need lazily, so ``meshphase info`` never pays for Dask or
-matplotlib.
+Dask, matplotlib and the synthetic generator are imported only by the subcommands that use
+them, so ``meshphase info`` never pays for them.
 
 Exit status (every subcommand; README.md "Exit status"; constants in :mod:`pipeline.exits`):
 
@@ -30,26 +30,40 @@ runs a corpus of faulty inputs and outputs through this boundary.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import errno
 import json
 import logging
 import math
 import os
 import sys
+import time
 import warnings
 from pathlib import Path
 
+import numpy as np
+from tqdm import tqdm
+
 from . import __version__
-from .exits import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_PIPE
+from .bench import rss_summary, run_bench
+from .campaign import cli_campaign
+from .demo import demo_scene_path
+from .errors import DataQualityWarning
+from .exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_PIPE, OutputDir, recording_read_errors,
+                    run_status, status_line)
 from .heap import limit_heap_growth
+from .io import detect_format, iter_blocks, read_info, write_blocks
 from .log import logger
+from .quality import channel_quality
+from .recording import Recording
+from .scene import SceneError, load_scene
+from .stages import process_recording, run_scene, summary_dict, write_outputs
+from .validate import as_regular_file
 
 __all__ = ["main", "build_parser", "describe_error"]
 
 
 def _progress(total: int | None, desc: str, enabled: bool):
-    from tqdm import tqdm
-
     return tqdm(total=total, desc=desc, unit="S", unit_scale=True, disable=not enabled,
                 leave=False, file=sys.stderr)
 
@@ -64,11 +78,6 @@ def _fmt_seconds(s: float) -> str:
 
 
 def cmd_info(args) -> int:
-    from .exits import recording_read_errors
-    from .io import read_info, iter_blocks, detect_format
-    from .quality import channel_quality
-    from .validate import as_regular_file
-
     path = as_regular_file(args.file, "the recording")  # a FIFO would block detect_format
     with recording_read_errors(path):
         fmt = detect_format(path)
@@ -85,7 +94,6 @@ def cmd_info(args) -> int:
                            "min": float("inf"), "max": float("-inf")} for c in info.channels}
         block_s = max(1.0, 2**22 / info.fs)
         with warnings.catch_warnings():
-            from .errors import DataQualityWarning
             warnings.simplefilter("ignore", DataQualityWarning)  # counted below instead
             with _progress(info.n_samples, "quality", not args.quiet) as bar, \
                     recording_read_errors(path):
@@ -130,14 +138,6 @@ def cmd_info(args) -> int:
 
 # ---------------------------------------------------------------------------- convert
 def cmd_convert(args) -> int:
-    import dataclasses
-
-    from .exits import recording_read_errors
-    from .io import detect_format, iter_blocks, read_info, write_blocks
-    from .recording import Recording
-    from .validate import as_regular_file
-    import numpy as np
-
     src, dst = as_regular_file(args.input, "the input recording"), Path(args.output)
     with recording_read_errors(src):
         fmt = detect_format(src)
@@ -178,7 +178,7 @@ def cmd_convert(args) -> int:
 
 # ---------------------------------------------------------------------------- synth
 def cmd_synth(args) -> int:
-    from synthetic import cli_synth, describe_scenarios
+    from synthetic import cli_synth, describe_scenarios  # heavy (numba, scipy.stats): only here
 
     if args.list or not args.scenario or not args.output:
         rows = describe_scenarios()
@@ -197,8 +197,6 @@ def cmd_synth(args) -> int:
 
 # ---------------------------------------------------------------------------- bench
 def cmd_bench(args) -> int:
-    from .bench import rss_summary, run_bench
-
     out = Path(args.out)
     res = run_bench(args.what, out, minutes=args.minutes, quick=args.quick,
                     rss_minutes=args.rss_minutes)
@@ -228,8 +226,6 @@ def _minutes_list(text: str) -> tuple:
 def _stage_progress(enabled: bool):
     if not enabled:
         return None
-    from tqdm import tqdm
-
     bar = {"b": None}
 
     def cb(name, i, n):
@@ -244,8 +240,6 @@ def _stage_progress(enabled: bool):
 
 
 def _print_run(ctx, files) -> None:
-    from .stages import summary_dict
-
     s = summary_dict(ctx)
     print(f"scene     {ctx.scene.name}")
     print(f"stages    {', '.join(ctx.ran)}" + (f"  (failed: {', '.join(ctx.failed)})" if ctx.failed else ""))
@@ -278,8 +272,6 @@ def _print_run(ctx, files) -> None:
 
 def _finish_run(args, ctx, files) -> int:
     """Print a run, its status line, one stderr line per cause; return the exit code."""
-    from .exits import run_status, status_line
-
     st = run_status(ctx)
     if st["status"] == "failed":
         # nothing usable and nothing written: the cause is the whole story
@@ -302,9 +294,6 @@ def _run_and_write(args, scene, base, *, report: bool = True):
     ``scene`` is a Scene or a function of the reserved folder returning one (the demo writes
     its scene file there first). The folder is removed again when the run fails or is
     interrupted (:class:`pipeline.exits.OutputDir`)."""
-    from .exits import OutputDir, run_status
-    from .stages import run_scene, write_outputs
-
     with OutputDir(base, overwrite=args.overwrite, staged=True) as out:
         if callable(scene):
             scene = scene(out.path)
@@ -318,13 +307,8 @@ def _run_and_write(args, scene, base, *, report: bool = True):
 
 
 def cmd_run(args) -> int:
-    from .scene import load_scene
-    from .validate import as_regular_file
-
     scene = load_scene(as_regular_file(args.scene, "the scene"))
     if not scene.results:
-        from .scene import SceneError
-
         # an empty scene (or a gearset file) would "succeed" at computing nothing
         raise SceneError(args.scene, "results", "no results requested, nothing to run; add e.g. "
                          'results = ["ideal_phasing", "phasing"] (`meshphase process FILE --gearset '
@@ -336,9 +320,6 @@ def cmd_run(args) -> int:
 
 
 def cmd_process(args) -> int:
-    from .stages import process_recording
-    from .validate import as_regular_file
-
     as_regular_file(args.gearset, "the gearset scene (--gearset)")
     # process_recording returns the paths as published (the output folder's final name)
     ctx, files = process_recording(args.file, args.gearset, out_dir=args.out, overwrite=args.overwrite,
@@ -347,11 +328,6 @@ def cmd_process(args) -> int:
 
 
 def cmd_demo(args) -> int:
-    import time
-
-    from .demo import demo_scene_path
-    from .scene import load_scene
-
     t = time.perf_counter()
     # the scene file goes into the output folder first: `meshphase run` on it reproduces the run
     ctx, files = _run_and_write(args, lambda out: load_scene(demo_scene_path(out)), Path(args.out))
@@ -362,10 +338,6 @@ def cmd_demo(args) -> int:
 
 
 def cmd_campaign(args) -> int:
-    from .campaign import cli_campaign
-    from .exits import status_line
-    from .validate import as_regular_file
-
     as_regular_file(args.scene, "the scene")
     res = cli_campaign(args.scene, args.inputs, scheduler=args.scheduler, workers=args.workers,
                        out=args.out, overwrite=args.overwrite, progress=not args.quiet,
@@ -405,6 +377,7 @@ def _seconds(text: str) -> float:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``meshphase`` argument parser: global options, one subparser per command."""
     p = argparse.ArgumentParser(
         prog="meshphase",
         description="Planetary gear rig strain recordings -> measured mesh phasing vs models.")
@@ -414,13 +387,28 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--debug", action="store_true",
                    help="developers: re-raise errors with their traceback (also MESHPHASE_DEBUG=1)")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _add_info(sub)
+    _add_convert(sub)
+    _add_synth(sub)
+    _add_demo(sub)
+    _add_run(sub)
+    _add_process(sub)
+    _add_campaign(sub)
+    _add_bench(sub)
+    return p
 
+
+def _add_info(sub) -> None:
+    """The ``meshphase info`` subcommand."""
     s = sub.add_parser("info", help="channels, kinds, fs, duration, start and a quality summary of a recording")
     s.add_argument("file")
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.add_argument("--no-quality", action="store_true", help="header only (do not scan the samples)")
     s.set_defaults(func=cmd_info)
 
+
+def _add_convert(sub) -> None:
+    """The ``meshphase convert`` subcommand."""
     s = sub.add_parser("convert", help="convert a recording between formats (hdf5, mcap, csv; tdms read)")
     s.add_argument("input")
     s.add_argument("output")
@@ -429,6 +417,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--overwrite", action="store_true", help="replace an existing output file")
     s.set_defaults(func=cmd_convert)
 
+
+def _add_synth(sub) -> None:
+    """The ``meshphase synth`` subcommand."""
     s = sub.add_parser("synth", help="write a synthetic recording of a named scenario plus its truth sidecar")
     s.add_argument("scenario", nargs="?", help="scenario name (see `meshphase synth --list`)")
     s.add_argument("output", nargs="?", help="output file: .h5, .mcap, .csv or .tdms")
@@ -439,12 +430,18 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--overwrite", action="store_true")
     s.set_defaults(func=cmd_synth)
 
+
+def _add_demo(sub) -> None:
+    """The ``meshphase demo`` subcommand."""
     s = sub.add_parser("demo", help="generate the seed rig recording, run the full scene on it, write the report")
     s.add_argument("--out", default="meshphase-demo", help="output folder (default ./meshphase-demo; never overwritten: -2, -3, ...)")
     s.add_argument("--overwrite", action="store_true",
                    help="replace the output folder (atomically, when the run finishes)")
     s.set_defaults(func=cmd_demo)
 
+
+def _add_run(sub) -> None:
+    """The ``meshphase run`` subcommand."""
     s = sub.add_parser("run", help="run a scene (TOML) and write results, figures and the HTML report")
     s.add_argument("scene")
     s.add_argument("--out", help="output folder (default: the scene's `output`, else SCENE-out)")
@@ -453,6 +450,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-report", action="store_true", help="results only, no HTML/figures")
     s.set_defaults(func=cmd_run)
 
+
+def _add_process(sub) -> None:
+    """The ``meshphase process`` subcommand."""
     s = sub.add_parser("process", help="process one recording: phasing, load sharing, comparison")
     s.add_argument("file")
     s.add_argument("--gearset", required=True, help="gearset TOML (scene format: [gearset], [[channels]], ...)")
@@ -461,6 +461,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="replace the output folder (atomically, when the run finishes)")
     s.set_defaults(func=cmd_process)
 
+
+def _add_campaign(sub) -> None:
+    """The ``meshphase campaign`` subcommand."""
     s = sub.add_parser("campaign", help="process many recordings with one scene as a Dask job")
     s.add_argument("scene", help="scene TOML (gearset, tolerances, results); each recording replaces [input]")
     s.add_argument("inputs", nargs="+", metavar="DIR_OR_FILE", help="recording files or folders of them")
@@ -481,6 +484,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--recording-reports", action="store_true", help="an HTML report per recording too")
     s.set_defaults(func=cmd_campaign)
 
+
+def _add_bench(sub) -> None:
+    """The ``meshphase bench`` subcommand."""
     s = sub.add_parser("bench", help="benchmarks: io, models, processing or all (tables + figures)")
     s.add_argument("what", nargs="?", default="all", choices=["io", "models", "processing", "all"])
     s.add_argument("--out", default="bench-results", help="output folder (default ./bench-results)")
@@ -491,7 +497,6 @@ def build_parser() -> argparse.ArgumentParser:
                         "and process is measured (default io: 10,60,180, a few minutes for the "
                         "3 h one; processing: 2,10,60,180; --quick: 0.5,1; none: skip)")
     s.set_defaults(func=cmd_bench)
-    return p
 
 
 def _one_line(text) -> str:

@@ -489,6 +489,60 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
     Identification
     """
     t_start = time.perf_counter()
+    tables, gears = _identify_inputs(tables, gearset, gears)
+    rcond = as_positive(rcond, "rcond")
+    max_nfev = as_positive_int(max_nfev, "max_nfev")
+    n_pl = gearset.n_planets
+    names = PARAMETER_NAMES(n_pl)
+    free = np.array([(n.split("_")[0].rstrip("0123456789") in gears) for n in names])
+    if not tables:
+        warnings.warn("identify_errors: no measured passes; nothing identified",
+                      ProcessingWarning, stacklevel=2)
+        return Identification(ShaftHoleErrors(), [], {}, np.empty(0), float("nan"), float("nan"),
+                              float("nan"), 0, int(free.sum()), 0, 0.0, False,
+                              ["no measured passes"])
+    fit = _PhasingFit(tables, gearset, free)
+    x0 = np.zeros(int(free.sum()))
+    # offsets are small against the carrier radius: bound each component to 5 % of R_c so the
+    # flat (unidentifiable) directions cannot wander to geometrically impossible layouts
+    bound = 0.05 * gearset.carrier_radius / fit.scale
+    sol = least_squares(fit.resid, x0, method="trf", x_scale=1.0, diff_step=1e-6,
+                        max_nfev=max_nfev, bounds=(-bound, bound))
+    U, s, Vt = np.linalg.svd(sol.jac, full_matrices=False)
+    keep = s > rcond * (s[0] if s.size and s[0] > 0 else 1.0)
+    ident = np.sum(Vt[keep] ** 2, axis=0) > 0.95               # resolution of each parameter
+    Vk = Vt[keep].T
+    cov_free = fit.covariance(sol, U, s, Vk, keep, pass_offset_std)
+    p_hat = np.zeros(len(names))
+    # the fitted model keeps the whole solution (started at 0, the trust-region steps stay in
+    # the range of J^T, i.e. unidentifiable combinations sit at minimum norm); only the
+    # identifiable parameters are reported as estimates
+    est = sol.x * fit.scale
+    p_hat[free] = est
+    cov = np.zeros((len(names), len(names)))
+    fi = np.flatnonzero(free)
+    cov[np.ix_(fi, fi)] = cov_free
+    r1 = wrap(fit.meas - fit.model(est / fit.scale))
+    ok = fit.ok
+    ident_full = np.zeros(len(names), bool)
+    ident_full[fi] = ident
+    params = {nm: (float(p_hat[i]), float(math.sqrt(max(cov[i, i], 0.0))), bool(ident_full[i]))
+              for i, nm in enumerate(names) if free[i]}
+    rows, notes = _gear_rows(p_hat, cov, free, ident_full, {t.gauge for t in tables}, n_pl)
+    if not sol.success:
+        notes.append(f"least squares stopped: {sol.message}")
+    return Identification(
+        errors=_errors_from_vector(p_hat, n_pl), table=rows, parameters=params,
+        singular_values=s, rms_before=fit.rms_before,
+        rms_after=float(np.sqrt(np.mean(r1[ok] ** 2))) if ok.any() else float("nan"),
+        sigma=float(np.std(r1[ok])) if ok.any() else float("nan"), n_passes=int(ok.sum()),
+        n_parameters=int(free.sum()), cost_evaluations=fit.n_eval,
+        wall_time=time.perf_counter() - t_start,
+        identifiable=bool(np.all(ident)), notes=notes, projector=Vk @ Vk.T, free=free)
+
+
+def _identify_inputs(tables, gearset, gears) -> tuple[list, tuple]:
+    """:func:`identify_errors`' tables (the non-empty ones) and gears, checked."""
     if isinstance(tables, PassTable):
         tables = [tables]
     tables = list(tables)
@@ -498,8 +552,6 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
     tables = [t for t in tables if len(t) > 0]
     if not isinstance(gearset, Gearset):
         raise TypeError(f"gearset must be a Gearset, got {type(gearset).__name__}")
-    n_pl = gearset.n_planets
-    names = PARAMETER_NAMES(n_pl)
     if isinstance(gears, str):
         gears = (gears,)
     gears = tuple(gears)
@@ -507,91 +559,76 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
     if bad or not gears:
         raise ValueError("gears must be a non-empty selection of 'sun', 'ring', 'planet', got "
                          f"{gears!r}")
-    rcond = as_positive(rcond, "rcond")
-    max_nfev = as_positive_int(max_nfev, "max_nfev")
-    free = np.array([(n.split("_")[0].rstrip("0123456789") in gears) for n in names])
-    zero = ShaftHoleErrors()
-    if not tables:
-        warnings.warn("identify_errors: no measured passes; nothing identified",
-                      ProcessingWarning, stacklevel=2)
-        return Identification(zero, [], {}, np.empty(0), float("nan"), float("nan"),
-                              float("nan"), 0, int(free.sum()), 0, 0.0, False,
-                              ["no measured passes"])
-    speeds = {id(t): _table_speeds(t, gearset) for t in tables}
-    meas = np.concatenate([t.gamma for t in tables])
-    unc = np.concatenate([t.uncertainty for t in tables])
-    ideal = np.concatenate([predict_pass_phasing(t, gearset, None, speeds=speeds[id(t)]) for t in tables])
-    r0 = wrap(meas - ideal)
-    ok = np.isfinite(r0)
-    rms_before = float(np.sqrt(np.mean(r0[ok] ** 2))) if ok.any() else float("nan")
-    # weights: given per-pass uncertainties, else the scatter of the residual about its mean
-    floor = max(1e-6, 0.1 * float(np.nanmedian(unc))) if np.any(np.isfinite(unc)) else 1e-6
-    w = 1.0 / np.where(np.isfinite(unc) & (unc > 0), np.maximum(unc, floor), np.nan)
-    if not np.any(np.isfinite(w)):
-        w = np.ones_like(meas)
-    w = np.where(np.isfinite(w), w, np.nanmedian(w))
-    scale = 1e-4 * gearset.carrier_radius  # parameter scale ~ a typical offset [m]
-    n_eval = [0]
+    return tables, gears
 
-    def model(p_free):
-        p = np.zeros(len(names))
-        p[free] = p_free * scale
-        err = _errors_from_vector(p, n_pl)
-        n_eval[0] += 1
-        return np.concatenate([predict_pass_phasing(t, gearset, err, speeds=speeds[id(t)])
-                               for t in tables])
 
-    def resid(p_free):
-        r = wrap(meas - model(p_free)) * w
-        return np.where(ok, r, 0.0)
+class _PhasingFit:
+    """The weighted residuals of :func:`identify_errors`: measured phasing of the passes of
+    ``tables`` against :func:`predict_pass_phasing` with the ``free`` Cartesian offset
+    parameters (scaled by ``scale`` [m]); counts the model evaluations."""
 
-    x0 = np.zeros(int(free.sum()))
-    # offsets are small against the carrier radius: bound each component to 5 % of R_c so the
-    # flat (unidentifiable) directions cannot wander to geometrically impossible layouts
-    bound = 0.05 * gearset.carrier_radius / scale
-    sol = least_squares(resid, x0, method="trf", x_scale=1.0, diff_step=1e-6, max_nfev=max_nfev,
-                        bounds=(-bound, bound))
-    J = sol.jac
-    U, s, Vt = np.linalg.svd(J, full_matrices=False)
-    keep = s > rcond * (s[0] if s.size and s[0] > 0 else 1.0)
-    resolution = np.sum(Vt[keep] ** 2, axis=0)
-    ident = resolution > 0.95
-    dof = max(1, int(ok.sum()) - int(keep.sum()))
-    chi2 = float(np.sum(sol.fun ** 2))
-    s2 = chi2 / dof  # reduced chi-square: rescales the given uncertainties to the scatter
-    Vk = Vt[keep].T
-    cov_free = s2 * (Vk / s[keep] ** 2) @ Vk.T * scale ** 2
-    if pass_offset_std and pass_offset_std > 0 and s.size:
-        # systematic part: parameters' response to a common shift of where the passes are
-        # timed relative to the engagement (pseudo-inverse of the weighted Jacobian applied
-        # to the change of the weighted residuals)
-        h = 0.01
-        p_now = np.zeros(len(names))
-        p_now[free] = sol.x * scale
-        err_now = _errors_from_vector(p_now, n_pl)
-        shifted = np.concatenate([predict_pass_phasing(t, gearset, err_now, speeds=speeds[id(t)],
-                                                       pass_offset=h) for t in tables])
-        base = model(sol.x)
-        dr = np.where(ok, wrap(shifted - base) * w, 0.0) / h       # d(weighted prediction)/d offset
-        dp = (Vk / s[keep]) @ (U[:, keep].T @ dr) * scale          # d(parameters)/d offset [m]
-        cov_free = cov_free + pass_offset_std ** 2 * np.outer(dp, dp)
-    p_hat = np.zeros(len(names))
-    # the fitted model keeps the whole solution (started at 0, the trust-region steps stay in
-    # the range of J^T, i.e. unidentifiable combinations sit at minimum norm); only the
-    # identifiable parameters are reported as estimates
-    est = sol.x * scale
-    p_hat[free] = est
-    cov = np.zeros((len(names), len(names)))
-    fi = np.flatnonzero(free)
-    cov[np.ix_(fi, fi)] = cov_free
-    err_hat = _errors_from_vector(p_hat, n_pl)
-    r1 = wrap(meas - model(est / scale))
-    rms_after = float(np.sqrt(np.mean(r1[ok] ** 2))) if ok.any() else float("nan")
-    sigma_res = float(np.std(r1[ok])) if ok.any() else float("nan")
-    ident_full = np.zeros(len(names), bool)
-    ident_full[fi] = ident
-    params = {nm: (float(p_hat[i]), float(math.sqrt(max(cov[i, i], 0.0))), bool(ident_full[i]))
-              for i, nm in enumerate(names) if free[i]}
+    def __init__(self, tables: list, gearset: Gearset, free: np.ndarray):
+        self.tables, self.gearset, self.free = tables, gearset, free
+        self.n_pl = gearset.n_planets
+        self.speeds = {id(t): _table_speeds(t, gearset) for t in tables}
+        self.meas = np.concatenate([t.gamma for t in tables])
+        unc = np.concatenate([t.uncertainty for t in tables])
+        ideal = np.concatenate([predict_pass_phasing(t, gearset, None, speeds=self.speeds[id(t)])
+                                for t in tables])
+        r0 = wrap(self.meas - ideal)
+        self.ok = ok = np.isfinite(r0)
+        self.rms_before = float(np.sqrt(np.mean(r0[ok] ** 2))) if ok.any() else float("nan")
+        # weights: given per-pass uncertainties, else the scatter of the residual about its mean
+        floor = max(1e-6, 0.1 * float(np.nanmedian(unc))) if np.any(np.isfinite(unc)) else 1e-6
+        w = 1.0 / np.where(np.isfinite(unc) & (unc > 0), np.maximum(unc, floor), np.nan)
+        if not np.any(np.isfinite(w)):
+            w = np.ones_like(self.meas)
+        self.w = np.where(np.isfinite(w), w, np.nanmedian(w))
+        self.scale = 1e-4 * gearset.carrier_radius  # parameter scale ~ a typical offset [m]
+        self.n_eval = 0
+
+    def _predict(self, p_free, pass_offset: float = 0.0) -> np.ndarray:
+        p = np.zeros(self.free.size)
+        p[self.free] = p_free * self.scale
+        err = _errors_from_vector(p, self.n_pl)
+        return np.concatenate([predict_pass_phasing(t, self.gearset, err, speeds=self.speeds[id(t)],
+                                                    pass_offset=pass_offset)
+                               for t in self.tables])
+
+    def model(self, p_free) -> np.ndarray:
+        """Predicted phasing of every pass [mesh cycles] (one model evaluation)."""
+        self.n_eval += 1
+        return self._predict(p_free)
+
+    def resid(self, p_free) -> np.ndarray:
+        """Weighted wrapped residuals (0 where the measurement is not finite)."""
+        r = wrap(self.meas - self.model(p_free)) * self.w
+        return np.where(self.ok, r, 0.0)
+
+    def covariance(self, sol, U, s, Vk, keep, pass_offset_std: float) -> np.ndarray:
+        """Covariance of the free parameters [m^2]: sigma^2 (J^T J)^+ on the identifiable
+        subspace, plus the systematic term of ``pass_offset_std`` [mesh cycles]."""
+        dof = max(1, int(self.ok.sum()) - int(keep.sum()))
+        s2 = float(np.sum(sol.fun ** 2)) / dof  # reduced chi-square: rescales the given
+        cov_free = s2 * (Vk / s[keep] ** 2) @ Vk.T * self.scale ** 2     # uncertainties
+        if pass_offset_std and pass_offset_std > 0 and s.size:
+            # systematic part: parameters' response to a common shift of where the passes are
+            # timed relative to the engagement (pseudo-inverse of the weighted Jacobian applied
+            # to the change of the weighted residuals)
+            h = 0.01
+            shifted = self._predict(sol.x, pass_offset=h)
+            base = self.model(sol.x)
+            dr = np.where(self.ok, wrap(shifted - base) * self.w, 0.0) / h   # d(prediction)/d offset
+            dp = (Vk / s[keep]) @ (U[:, keep].T @ dr) * self.scale        # d(parameters)/d offset [m]
+            cov_free = cov_free + pass_offset_std ** 2 * np.outer(dp, dp)
+        return cov_free
+
+
+def _gear_rows(p_hat: np.ndarray, cov: np.ndarray, free: np.ndarray, ident_full: np.ndarray,
+               watched: set, n_pl: int) -> tuple[list, list]:
+    """The per-gear table of :class:`Identification` (e, kappa and their uncertainties by
+    the delta method) and the notes on what the data cannot see (``watched``: the gauged
+    gears)."""
     rows = []
     notes = []
     gear_list = [("sun", 0), ("ring", 2)] + [(f"planet{i + 1}", 4 + 2 * i) for i in range(n_pl)]
@@ -612,7 +649,6 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
         note = ""
         if not idf:
             note = "not identifiable from these data"
-            watched = {t.gauge for t in tables}
             if gear in watched:
                 note += f" (a {gear} gauge turns with the {gear} offset and cannot see it)"
             notes.append(f"{gear}: {note}")
@@ -622,14 +658,7 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
                      "e_ci95": [e - 1.96 * e_std, e + 1.96 * e_std] if idf else [float("nan")] * 2,
                      "kappa": math.atan2(y, x) if idf and e > 0 else float("nan"),
                      "kappa_std": k_std, "identifiable": idf, "note": note})
-    if not sol.success:
-        notes.append(f"least squares stopped: {sol.message}")
-    return Identification(
-        errors=err_hat, table=rows, parameters=params, singular_values=s,
-        rms_before=rms_before, rms_after=rms_after, sigma=sigma_res, n_passes=int(ok.sum()),
-        n_parameters=int(free.sum()), cost_evaluations=n_eval[0],
-        wall_time=time.perf_counter() - t_start,
-        identifiable=bool(np.all(ident)), notes=notes, projector=Vk @ Vk.T, free=free)
+    return rows, notes
 
 
 def truth_comparison(table: PassTable, truth, channel: str, *, times=None, planets=None) -> dict | None:

@@ -61,7 +61,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -69,7 +69,8 @@ from scipy import ndimage, signal
 
 from .errors import DataQualityWarning, ProcessingWarning
 from .log import logger
-from .quality import (DROPOUT_MIN_RUN, FALSE_ALARM, ChannelScan, ScanResult, find_runs)
+from .quality import (DROPOUT_MIN_RUN, FALSE_ALARM, ChannelQuality, ChannelScan, HumReport,
+                      find_runs, merge_runs, quality_from_scan)
 from .recording import Recording
 from .validate import as_signal, as_choice, as_float, as_nonnegative, as_positive, as_positive_int
 
@@ -547,46 +548,6 @@ def remove_drift(x, fs: float, *, method: str = "median", window: float | None =
 
 
 # ====================================================================== mains hum
-@dataclass(frozen=True)
-class HumReport:
-    """Result of :func:`detect_hum`.
-
-    Attributes
-    ----------
-    mains : float or None
-        Detected mains family fundamental [Hz] (50 or 60), None when no hum was found.
-    freqs : ndarray
-        Hum lines found above the threshold [Hz] (empty when none).
-    candidates : ndarray
-        Lines examined [Hz] (harmonics of the examined families below 0.45 fs).
-    excess_db : ndarray
-        Line power over the local noise floor for each candidate [dB] (NaN when excluded).
-    threshold_db : float
-        Detection threshold [dB].
-    checked : bool
-        False when the data were too short (< 2 s of finite samples) to resolve the lines.
-    """
-
-    mains: float | None
-    freqs: np.ndarray
-    candidates: np.ndarray
-    excess_db: np.ndarray
-    threshold_db: float
-    checked: bool = True
-
-    @property
-    def present(self) -> bool:
-        """True when at least one hum line was found."""
-        return bool(self.freqs.size)
-
-    def to_dict(self) -> dict:
-        """JSON-friendly dict."""
-        return {"mains": self.mains, "freqs": self.freqs.tolist(),
-                "candidates": self.candidates.tolist(),
-                "excess_db": [None if not np.isfinite(v) else float(v) for v in self.excess_db],
-                "threshold_db": self.threshold_db, "checked": self.checked}
-
-
 def _fill_nonfinite(x: np.ndarray) -> np.ndarray:
     bad = ~np.isfinite(x)
     if not bad.any():
@@ -841,166 +802,6 @@ def _run_max(z: np.ndarray, runs: np.ndarray) -> np.ndarray:
     return np.maximum.reduceat(z, edges)[::2]
 
 
-@dataclass
-class ChannelQuality:
-    """Data-quality report of one channel (what later stages must respect).
-
-    Runs are ``[start, stop)`` sample indices relative to the first sample of the assessed
-    data; sample ``i`` is at ``t0 + i / fs`` [s].
-
-    Attributes
-    ----------
-    name : str
-        Channel name.
-    fs : float
-        Sample rate [Hz].
-    t0 : float
-        Time of sample 0 [s].
-    n_samples : int
-    gap_runs : ndarray of int64, shape (k, 2)
-        Gaps: runs of non-finite samples (NaN, +-inf; missing samples are stored as NaN by
-        the readers and the streaming stages). Dropouts are listed apart
-        (``dropout_runs``); :meth:`all_gap_runs` merges both.
-    nan_runs : ndarray of int64, shape (k, 2)
-        Runs of NaN only.
-    clipped_runs : ndarray of int64, shape (k, 2)
-        Clipped samples, found on the raw data: runs of >= ``clip_min_run`` samples held at
-        the channel's extreme value (converter saturation; not when the run is a dropout
-        that happens to sit at the extreme, e.g. zeros on a positive channel) and clipped
-        plateaus at any level (:func:`pipeline.quality.flat_runs`), merged.
-    snr_db : float
-        Peak-power SNR estimate [dB] (:func:`estimate_snr`), NaN when unknown.
-    signal_peak : float
-        Pulse peak amplitude estimate [units].
-    noise_rms : float
-        Noise standard deviation estimate [units].
-    settle : float
-        Guard time around gaps within which filter transients may distort the data [s]
-        (set by :func:`condition_recording`; the onset stage flags pulses that close).
-    hum : HumReport or None
-        Mains hum found (None when not examined).
-    dropout_runs : ndarray of int64, shape (k, 2)
-        DAQ dropouts found on the raw data: runs of exact zeros or of one held value longer
-        than chance allows (:func:`pipeline.quality.flat_runs`); gaps for every later stage.
-    dropout_min_run : int or None
-        Shortest run of equal samples counted as a dropout on this channel [samples] (None:
-        not examined).
-    p_equal : float
-        Estimated probability that a run of equal samples continues, by chance [-] (NaN:
-        not examined).
-    quant_step : float
-        Quantisation step found [units]; 0.0 for continuous data or when not examined.
-    conditioned_gap_runs : ndarray of int64, shape (k, 2), or None
-        Runs of non-finite samples of the conditioned channel: its gaps and dropouts plus
-        the stretches between gaps too short for the filters (set by
-        :func:`condition_recording` and the streaming stage; None when not conditioned).
-        What the phasing stage checks a pulse's window against.
-    """
-
-    name: str
-    fs: float
-    t0: float
-    n_samples: int
-    gap_runs: np.ndarray
-    nan_runs: np.ndarray
-    clipped_runs: np.ndarray
-    snr_db: float = float("nan")
-    signal_peak: float = float("nan")
-    noise_rms: float = float("nan")
-    settle: float = 0.0
-    hum: HumReport | None = None
-    dropout_runs: np.ndarray = field(default_factory=lambda: np.empty((0, 2), dtype=np.int64))
-    dropout_min_run: int | None = None
-    p_equal: float = float("nan")
-    quant_step: float = 0.0
-    conditioned_gap_runs: np.ndarray | None = None
-
-    @property
-    def n_gap_samples(self) -> int:
-        """Samples inside gaps [-]."""
-        return int((self.gap_runs[:, 1] - self.gap_runs[:, 0]).sum())
-
-    @property
-    def n_clipped_samples(self) -> int:
-        """Samples inside clipped runs [-]."""
-        return int((self.clipped_runs[:, 1] - self.clipped_runs[:, 0]).sum())
-
-    @property
-    def n_dropout_samples(self) -> int:
-        """Samples inside dropout runs [-]."""
-        return int((self.dropout_runs[:, 1] - self.dropout_runs[:, 0]).sum())
-
-    @property
-    def ok(self) -> bool:
-        """True when there are no gaps, no dropouts and no clipped runs."""
-        return not (len(self.gap_runs) or len(self.clipped_runs) or len(self.dropout_runs))
-
-    def all_gap_runs(self) -> np.ndarray:
-        """Gaps and dropouts merged into sorted, non-overlapping ``[start, stop)`` rows: the
-        samples that are NaN in the conditioned channel (``dropouts="nan"``)."""
-        return merge_runs(np.concatenate([self.gap_runs, self.dropout_runs]))
-
-    def bad_runs(self) -> np.ndarray:
-        """Gaps, dropouts and clipped runs merged into sorted, non-overlapping
-        ``[start, stop)`` rows."""
-        return merge_runs(np.concatenate([self.gap_runs, self.dropout_runs, self.clipped_runs]))
-
-    def runs_time(self, which: str = "gap") -> np.ndarray:
-        """Runs of one kind as ``[t_start, t_stop)`` [s]: "gap" (non-finite), "nan",
-        "dropout", "clipped", "bad" (all of them) or "all_gaps" (gaps and dropouts, as
-        :func:`gap_intervals`)."""
-        which = as_choice(which, "which", ("gap", "nan", "dropout", "clipped", "bad", "all_gaps"))
-        runs = {"gap": self.gap_runs, "nan": self.nan_runs, "dropout": self.dropout_runs,
-                "clipped": self.clipped_runs}.get(which)
-        if runs is None:
-            runs = self.bad_runs() if which == "bad" else self.all_gap_runs()
-        return self.t0 + runs.astype(np.float64) / self.fs
-
-    def gap_intervals(self) -> np.ndarray:
-        """Gaps and dropouts as ``[t_start, t_stop)`` rows [s] (see :func:`gap_intervals`)."""
-        return gap_intervals(self)
-
-    def summary(self) -> str:
-        """One line for logs and warnings."""
-        return (f"channel {self.name!r}: {len(self.gap_runs)} gap run(s) ({self.n_gap_samples} "
-                f"samples), {len(self.dropout_runs)} dropout run(s) ({self.n_dropout_samples} "
-                f"samples), {len(self.clipped_runs)} clipped run(s) ({self.n_clipped_samples} "
-                f"samples), SNR {self.snr_db:.1f} dB")
-
-    def to_dict(self) -> dict:
-        """JSON-friendly dict (runs as lists; non-finite floats as None)."""
-        def fl(v):
-            return None if v is None or not np.isfinite(v) else float(v)
-        return {"name": self.name, "fs": self.fs, "t0": self.t0, "n_samples": self.n_samples,
-                "gap_runs": self.gap_runs.tolist(), "nan_runs": self.nan_runs.tolist(),
-                "clipped_runs": self.clipped_runs.tolist(), "snr_db": fl(self.snr_db),
-                "signal_peak": fl(self.signal_peak), "noise_rms": fl(self.noise_rms),
-                "settle": self.settle, "hum": None if self.hum is None else self.hum.to_dict(),
-                "dropout_runs": self.dropout_runs.tolist(), "dropout_min_run": self.dropout_min_run,
-                "p_equal": fl(self.p_equal), "quant_step": float(self.quant_step),
-                "conditioned_gap_runs": (None if self.conditioned_gap_runs is None
-                                         else self.conditioned_gap_runs.tolist())}
-
-
-def merge_runs(runs) -> np.ndarray:
-    """Sort ``[start, stop)`` rows and merge overlapping or touching ones."""
-    r = np.asarray(runs)
-    if r.size and r.dtype.kind not in "iuf":
-        raise TypeError(f"runs must be integer [start, stop) rows, got dtype {r.dtype}")
-    if r.size and (r.ndim != 2 or r.shape[1] != 2):
-        raise ValueError(f"runs must have shape (k, 2), got {r.shape}")
-    r = r.astype(np.int64).reshape(-1, 2)
-    if len(r) == 0:
-        return np.empty((0, 2), dtype=np.int64)
-    r = r[np.argsort(r[:, 0], kind="stable")]
-    ends = np.maximum.accumulate(r[:, 1])
-    new = np.ones(len(r), dtype=bool)
-    new[1:] = r[1:, 0] > ends[:-1]
-    starts = r[new, 0]
-    stops = np.maximum.reduceat(r[:, 1], np.flatnonzero(new))
-    return np.stack([starts, stops], axis=1)
-
-
 def gap_intervals(quality_or_mask, fs: float | None = None, t0: float | None = None) -> np.ndarray:
     """Gap intervals of a channel in seconds: non-finite gaps and dropout runs together.
 
@@ -1033,22 +834,21 @@ def gap_intervals(quality_or_mask, fs: float | None = None, t0: float | None = N
             raise ValueError(f"fs {fs!r} Hz contradicts the quality report's {q.fs!r} Hz")
         if t0 is not None and as_float(t0, "t0") != q.t0:
             raise ValueError(f"t0 {t0!r} s contradicts the quality report's {q.t0!r} s")
-        runs, fs, t0 = q.all_gap_runs(), q.fs, q.t0
-    else:
-        if isinstance(quality_or_mask, (str, bytes, dict)) or quality_or_mask is None:
-            raise TypeError("quality_or_mask must be a ChannelQuality, a boolean mask or the "
-                            f"samples of a channel, got {type(quality_or_mask).__name__}")
-        arr = np.asarray(quality_or_mask)
-        if arr.dtype.kind not in "bf":
-            raise TypeError(f"quality_or_mask must be a ChannelQuality, a boolean mask or float "
-                            f"samples, got an array of dtype {arr.dtype}")
-        if arr.ndim != 1:
-            raise ValueError(f"quality_or_mask must be 1-D (one channel), got shape {arr.shape}")
-        if fs is None:
-            raise ValueError("fs [Hz] is required with a mask or samples, got None")
-        fs = as_positive(fs, "fs")
-        t0 = 0.0 if t0 is None else as_float(t0, "t0")
-        runs = find_runs(arr if arr.dtype.kind == "b" else ~np.isfinite(arr))
+        return q.gap_intervals()
+    if isinstance(quality_or_mask, (str, bytes, dict)) or quality_or_mask is None:
+        raise TypeError("quality_or_mask must be a ChannelQuality, a boolean mask or the "
+                        f"samples of a channel, got {type(quality_or_mask).__name__}")
+    arr = np.asarray(quality_or_mask)
+    if arr.dtype.kind not in "bf":
+        raise TypeError(f"quality_or_mask must be a ChannelQuality, a boolean mask or float "
+                        f"samples, got an array of dtype {arr.dtype}")
+    if arr.ndim != 1:
+        raise ValueError(f"quality_or_mask must be 1-D (one channel), got shape {arr.shape}")
+    if fs is None:
+        raise ValueError("fs [Hz] is required with a mask or samples, got None")
+    fs = as_positive(fs, "fs")
+    t0 = 0.0 if t0 is None else as_float(t0, "t0")
+    runs = find_runs(arr if arr.dtype.kind == "b" else ~np.isfinite(arr))
     return t0 + runs.astype(np.float64) / fs
 
 
@@ -1121,25 +921,11 @@ def assess_quality(x, fs: float, *, t0: float = 0.0, name: str = "", clip_min_ru
     scan.feed2(x)
     rep = quality_from_scan(scan.result(), name, fs, t0)
     if snr:
-        rep.snr_db, rep.signal_peak, rep.noise_rms = estimate_snr(x)
+        snr_db, peak, noise = estimate_snr(x)
+        rep = replace(rep, snr_db=snr_db, signal_peak=peak, noise_rms=noise)
     if warn:
         _warn_quality(rep, snr_warn_db)
     return rep
-
-
-def quality_from_scan(res: ScanResult, name: str, fs: float, t0: float) -> ChannelQuality:
-    """The :class:`ChannelQuality` (no SNR yet) of a channel scanned by
-    :class:`pipeline.quality.ChannelScan` (whole, or streamed in blocks: the same report)."""
-    if res.n == 0:
-        e = np.empty((0, 2), dtype=np.int64)
-        return ChannelQuality(name, fs, t0, 0, e, e.copy(), e.copy())
-    extra = {}
-    if res.flat is not None:
-        fr = res.flat
-        extra = dict(dropout_runs=fr.dropout_runs, dropout_min_run=fr.min_run,
-                     p_equal=fr.p_equal, quant_step=fr.quant_step)
-    return ChannelQuality(name, fs, t0, int(res.n), res.nonfinite_runs, res.nan_runs,
-                          res.clipped(), **extra)
 
 
 def _warn_quality(rep: ChannelQuality, snr_warn_db: float) -> None:
@@ -1353,7 +1139,7 @@ def condition_recording(rec: Recording, *, channels: Sequence[str] | str | None 
     if hum:
         out, reports = _notch_rec(out, names, None, "auto", 30.0, ())
         for nm, r in reports.items():
-            quality[nm].hum = r
+            quality[nm] = replace(quality[nm], hum=r)
             if r is not None and r.present:
                 # a notch of quality q rings for ~q / (pi f) seconds
                 settle = max(settle, 2.0 * 30.0 / (math.pi * float(np.min(r.freqs))))
@@ -1366,8 +1152,8 @@ def condition_recording(rec: Recording, *, channels: Sequence[str] | str | None 
     # SNR on the drift-free, not yet band-limited data: its noise is still the white
     # per-sample noise the peak-power SNR is defined with (a low-pass would hide it)
     for nm in names:
-        q = quality[nm]
-        q.snr_db, q.signal_peak, q.noise_rms = estimate_snr(out.channel(nm))
+        snr_db, peak, noise = estimate_snr(out.channel(nm))
+        quality[nm] = replace(quality[nm], snr_db=snr_db, signal_peak=peak, noise_rms=noise)
     low = None if highpass is None else _check_freq(highpass, "highpass", rec.fs)
     if isinstance(lowpass, str):
         as_choice(lowpass, "lowpass", ("auto",))
@@ -1382,16 +1168,10 @@ def condition_recording(rec: Recording, *, channels: Sequence[str] | str | None 
         out = filter_recording(out, channels=names, kind=kind, low=low, high=high, order=order)
         settle = max(settle, _settle_time(low, high))
     for nm in names:
-        q = quality[nm]
-        q.settle = settle
-        q.conditioned_gap_runs = find_runs(~np.isfinite(out.channel(nm)))
+        q = quality[nm] = replace(quality[nm], settle=settle,
+                                  conditioned_gap_runs=find_runs(~np.isfinite(out.channel(nm))))
         if warn:
             _warn_quality(q, 6.0)
     out = out.with_history("condition.quality", settle_s=settle,
-                           quality={nm: {"gap_runs": len(quality[nm].gap_runs),
-                                         "dropout_runs": len(quality[nm].dropout_runs),
-                                         "clipped_runs": len(quality[nm].clipped_runs),
-                                         "snr_db": (None if not np.isfinite(quality[nm].snr_db)
-                                                    else round(quality[nm].snr_db, 2))}
-                                    for nm in names})
+                           quality={nm: quality[nm].history_entry() for nm in names})
     return Conditioned(out, quality)

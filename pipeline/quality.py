@@ -1,6 +1,10 @@
-"""Array functions for data-quality flags: runs of NaN/inf, clipped runs, gaps, dropouts.
+"""Array functions for data-quality flags: runs of NaN/inf, clipped runs, gaps, dropouts;
+and the per-channel quality report they make.
 
-Numpy in, numpy out; no Recording here (see :meth:`pipeline.Recording.quality`).
+Numpy in, numpy out; no Recording here (see :meth:`pipeline.Recording.quality`). A channel is
+scanned by :class:`ChannelScan` (whole, or in blocks) and reported as one
+:class:`ChannelQuality`, the report that conditioning (:mod:`pipeline.condition`), the
+streamed stages (:mod:`pipeline.stream`) and the onset stage read.
 
 Flat runs: DAQ dropouts and clipped plateaus
 --------------------------------------------
@@ -97,15 +101,17 @@ ms per million samples; the candidate runs add work in proportion to their numbe
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+
+from .validate import as_choice
 
 __all__ = ["find_runs", "nonfinite_runs", "clipped_runs", "channel_quality", "equal_runs",
            "quantisation_step", "chance_min_run", "FlatRuns", "flat_runs", "dropout_runs",
            "plateau_runs", "outside_runs", "FALSE_ALARM", "DROPOUT_MIN_RUN", "CLIP_MIN_RUN",
            "FlatScan", "FlatStats", "classify_flat_runs", "ChannelScan", "ScanResult",
-           "FLAT_WINDOW"]
+           "FLAT_WINDOW", "ChannelQuality", "HumReport", "quality_from_scan", "merge_runs"]
 
 #: Expected number of chance runs over a channel below which a run is significant [-].
 FALSE_ALARM = 1e-3
@@ -605,13 +611,34 @@ def _extend(x: np.ndarray, runs: np.ndarray, v: np.ndarray, q: float,
     return out
 
 
-def _merge_sorted(r: np.ndarray) -> np.ndarray:
+def merge_runs(runs) -> np.ndarray:
+    """Sort ``[start, stop)`` rows and merge overlapping or touching ones.
+
+    Parameters
+    ----------
+    runs : array_like of int, shape (k, 2)
+        ``[start, stop)`` sample indices [-], in any order.
+
+    Returns
+    -------
+    ndarray of int64, shape (m, 2)
+        Sorted, disjoint, non-touching rows; shape (0, 2) when ``runs`` is empty.
+    """
+    r = np.asarray(runs)
+    if r.size and r.dtype.kind not in "iuf":
+        raise TypeError(f"runs must be integer [start, stop) rows, got dtype {r.dtype}")
+    if r.size and (r.ndim != 2 or r.shape[1] != 2):
+        raise ValueError(f"runs must have shape (k, 2), got {r.shape}")
+    r = r.astype(np.int64).reshape(-1, 2)
+    if len(r) == 0:
+        return np.empty((0, 2), dtype=np.int64)
     r = r[np.argsort(r[:, 0], kind="stable")]
     ends = np.maximum.accumulate(r[:, 1])
     new = np.ones(len(r), dtype=bool)
     new[1:] = r[1:, 0] > ends[:-1]
-    return np.stack([r[new, 0], np.maximum.reduceat(r[:, 1], np.flatnonzero(new))],
-                    axis=1).astype(np.int64)
+    starts = r[new, 0]
+    stops = np.maximum.reduceat(r[:, 1], np.flatnonzero(new))
+    return np.stack([starts, stops], axis=1)
 
 
 def _as_runs(runs, name: str) -> np.ndarray:
@@ -645,6 +672,277 @@ def plateau_runs(x, **kwargs) -> np.ndarray:
     """Clipped plateaus (at any level) of one channel, ``[start, stop)`` rows
     (:func:`flat_runs`)."""
     return flat_runs(x, **kwargs).clipped_runs
+
+
+# ====================================================================== the report
+@dataclass(frozen=True)
+class HumReport:
+    """Mains hum found on one channel (:func:`pipeline.condition.detect_hum`).
+
+    Attributes
+    ----------
+    mains : float or None
+        Detected mains family fundamental [Hz] (50 or 60), None when no hum was found.
+    freqs : ndarray
+        Hum lines found above the threshold [Hz] (empty when none).
+    candidates : ndarray
+        Lines examined [Hz] (harmonics of the examined families below 0.45 fs).
+    excess_db : ndarray
+        Line power over the local noise floor for each candidate [dB] (NaN when excluded).
+    threshold_db : float
+        Detection threshold [dB].
+    checked : bool
+        False when the data were too short (< 2 s of finite samples) to resolve the lines.
+    """
+
+    mains: float | None
+    freqs: np.ndarray
+    candidates: np.ndarray
+    excess_db: np.ndarray
+    threshold_db: float
+    checked: bool = True
+
+    @property
+    def present(self) -> bool:
+        """True when at least one hum line was found."""
+        return bool(self.freqs.size)
+
+    def to_dict(self) -> dict:
+        """JSON-friendly dict."""
+        return {"mains": self.mains, "freqs": self.freqs.tolist(),
+                "candidates": self.candidates.tolist(),
+                "excess_db": [None if not np.isfinite(v) else float(v) for v in self.excess_db],
+                "threshold_db": self.threshold_db, "checked": self.checked}
+
+
+def _no_runs() -> np.ndarray:
+    return np.empty((0, 2), dtype=np.int64)
+
+
+@dataclass(frozen=True, eq=False)
+class ChannelQuality:
+    """Data-quality report of one channel: what every later stage must respect.
+
+    The one quality report of the package. :func:`quality_from_scan` makes it from a
+    :class:`ChannelScan` (whole arrays and streamed blocks alike);
+    :func:`pipeline.condition.assess_quality`, :func:`pipeline.condition.condition_recording`
+    and :func:`pipeline.stream.condition_stream` return it, the conditioning steps adding
+    their findings (SNR, hum, ``settle``, ``conditioned_gap_runs``) to a copy
+    (:func:`dataclasses.replace`). Two plain forms: :meth:`to_dict` (a conditioned channel's
+    report, JSON-friendly) and :meth:`summary_dict` (the raw-data summary of
+    :func:`channel_quality` and :meth:`pipeline.recording.Recording.quality`).
+
+    Runs are ``[start, stop)`` sample indices relative to the first sample of the assessed
+    data; sample ``i`` is at ``t0 + i / fs`` [s].
+
+    Attributes
+    ----------
+    name : str
+        Channel name.
+    fs : float or None
+        Sample rate [Hz]; None for a report of bare samples (:func:`channel_quality`), whose
+        runs have no times.
+    t0 : float
+        Time of sample 0 [s].
+    n_samples : int
+        Samples assessed [-].
+    gap_runs : ndarray of int64, shape (k, 2)
+        Gaps: runs of non-finite samples (NaN, +-inf; missing samples are stored as NaN by
+        the readers and the streaming stages). Dropouts are listed apart
+        (``dropout_runs``); :meth:`all_gap_runs` merges both.
+    nan_runs : ndarray of int64, shape (k, 2)
+        Runs of NaN only.
+    clipped_runs : ndarray of int64, shape (k, 2)
+        Clipped samples, found on the raw data: runs of >= ``clip_min_run`` samples held at
+        the channel's extreme value (converter saturation; not when the run is a dropout
+        that happens to sit at the extreme, e.g. zeros on a positive channel) and clipped
+        plateaus at any level (:func:`flat_runs`), merged.
+    snr_db : float
+        Peak-power SNR estimate [dB] (:func:`pipeline.condition.estimate_snr`), NaN when
+        unknown.
+    signal_peak : float
+        Pulse peak amplitude estimate [units].
+    noise_rms : float
+        Noise standard deviation estimate [units].
+    settle : float
+        Guard time around gaps within which filter transients may distort the data [s]
+        (set by :func:`pipeline.condition.condition_recording`; the onset stage flags pulses
+        that close).
+    hum : HumReport or None
+        Mains hum found (None when not examined).
+    dropout_runs : ndarray of int64, shape (k, 2)
+        DAQ dropouts found on the raw data: runs of exact zeros or of one held value longer
+        than chance allows (:func:`flat_runs`); gaps for every later stage.
+    dropout_min_run : int or None
+        Shortest run of equal samples counted as a dropout on this channel [samples] (None:
+        not examined).
+    p_equal : float
+        Estimated probability that a run of equal samples continues, by chance [-] (NaN:
+        not examined).
+    quant_step : float
+        Quantisation step found [units]; 0.0 for continuous data or when not examined.
+    conditioned_gap_runs : ndarray of int64, shape (k, 2), or None
+        Runs of non-finite samples of the conditioned channel: its gaps and dropouts plus
+        the stretches between gaps too short for the filters (set by
+        :func:`pipeline.condition.condition_recording` and the streaming stage; None when not
+        conditioned). What the phasing stage checks a pulse's window against.
+    min, max : float
+        Smallest and largest finite raw sample [units]; NaN when none is finite.
+    rms : float
+        Root mean square of the finite raw samples [units]; NaN when none is finite.
+    """
+
+    name: str
+    fs: float | None
+    t0: float
+    n_samples: int
+    gap_runs: np.ndarray
+    nan_runs: np.ndarray
+    clipped_runs: np.ndarray
+    snr_db: float = float("nan")
+    signal_peak: float = float("nan")
+    noise_rms: float = float("nan")
+    settle: float = 0.0
+    hum: HumReport | None = None
+    dropout_runs: np.ndarray = field(default_factory=_no_runs)
+    dropout_min_run: int | None = None
+    p_equal: float = float("nan")
+    quant_step: float = 0.0
+    conditioned_gap_runs: np.ndarray | None = None
+    min: float = float("nan")
+    max: float = float("nan")
+    rms: float = float("nan")
+
+    @property
+    def n_gap_samples(self) -> int:
+        """Samples inside gaps [-]."""
+        return int((self.gap_runs[:, 1] - self.gap_runs[:, 0]).sum())
+
+    @property
+    def n_clipped_samples(self) -> int:
+        """Samples inside clipped runs [-]."""
+        return int((self.clipped_runs[:, 1] - self.clipped_runs[:, 0]).sum())
+
+    @property
+    def n_dropout_samples(self) -> int:
+        """Samples inside dropout runs [-]."""
+        return int((self.dropout_runs[:, 1] - self.dropout_runs[:, 0]).sum())
+
+    @property
+    def ok(self) -> bool:
+        """True when there are no gaps, no dropouts and no clipped runs."""
+        return not (len(self.gap_runs) or len(self.clipped_runs) or len(self.dropout_runs))
+
+    def all_gap_runs(self) -> np.ndarray:
+        """Gaps and dropouts merged into sorted, non-overlapping ``[start, stop)`` rows: the
+        samples that are NaN in the conditioned channel (``dropouts="nan"``)."""
+        return merge_runs(np.concatenate([self.gap_runs, self.dropout_runs]))
+
+    def bad_runs(self) -> np.ndarray:
+        """Gaps, dropouts and clipped runs merged into sorted, non-overlapping
+        ``[start, stop)`` rows."""
+        return merge_runs(np.concatenate([self.gap_runs, self.dropout_runs, self.clipped_runs]))
+
+    def runs_time(self, which: str = "gap") -> np.ndarray:
+        """Runs of one kind as ``[t_start, t_stop)`` [s]: "gap" (non-finite), "nan",
+        "dropout", "clipped", "bad" (all of them) or "all_gaps" (gaps and dropouts, as
+        :func:`pipeline.condition.gap_intervals`)."""
+        which = as_choice(which, "which", ("gap", "nan", "dropout", "clipped", "bad", "all_gaps"))
+        if self.fs is None:
+            raise ValueError(f"channel {self.name!r}: a report of bare samples has no sample "
+                             "rate, so its runs have no times")
+        runs = {"gap": self.gap_runs, "nan": self.nan_runs, "dropout": self.dropout_runs,
+                "clipped": self.clipped_runs}.get(which)
+        if runs is None:
+            runs = self.bad_runs() if which == "bad" else self.all_gap_runs()
+        return self.t0 + runs.astype(np.float64) / self.fs
+
+    def gap_intervals(self) -> np.ndarray:
+        """Gaps and dropouts as ``[t_start, t_stop)`` rows [s] (see
+        :func:`pipeline.condition.gap_intervals`)."""
+        return self.runs_time("all_gaps")
+
+    def summary(self) -> str:
+        """One line for logs and warnings."""
+        return (f"channel {self.name!r}: {len(self.gap_runs)} gap run(s) ({self.n_gap_samples} "
+                f"samples), {len(self.dropout_runs)} dropout run(s) ({self.n_dropout_samples} "
+                f"samples), {len(self.clipped_runs)} clipped run(s) ({self.n_clipped_samples} "
+                f"samples), SNR {self.snr_db:.1f} dB")
+
+    def to_dict(self) -> dict:
+        """JSON-friendly dict (runs as lists; non-finite floats as None)."""
+        def fl(v):
+            return None if v is None or not np.isfinite(v) else float(v)
+        return {"name": self.name, "fs": self.fs, "t0": self.t0, "n_samples": self.n_samples,
+                "gap_runs": self.gap_runs.tolist(), "nan_runs": self.nan_runs.tolist(),
+                "clipped_runs": self.clipped_runs.tolist(), "snr_db": fl(self.snr_db),
+                "signal_peak": fl(self.signal_peak), "noise_rms": fl(self.noise_rms),
+                "settle": self.settle, "hum": None if self.hum is None else self.hum.to_dict(),
+                "dropout_runs": self.dropout_runs.tolist(), "dropout_min_run": self.dropout_min_run,
+                "p_equal": fl(self.p_equal), "quant_step": float(self.quant_step),
+                "conditioned_gap_runs": (None if self.conditioned_gap_runs is None
+                                         else self.conditioned_gap_runs.tolist())}
+
+    def history_entry(self) -> dict:
+        """The short form a conditioned recording's history keeps: numbers of gap, dropout
+        and clipped runs, and the SNR to 0.01 dB (None when unknown)."""
+        return {"gap_runs": len(self.gap_runs), "dropout_runs": len(self.dropout_runs),
+                "clipped_runs": len(self.clipped_runs),
+                "snr_db": None if not np.isfinite(self.snr_db) else round(self.snr_db, 2)}
+
+    def summary_dict(self) -> dict:
+        """The raw-data summary (:func:`channel_quality`): counts and runs of non-finite,
+        dropout and clipped samples, and the range of the finite samples."""
+        nf, cl, dr = self.gap_runs, self.clipped_runs, self.dropout_runs
+        nl, dl = nf[:, 1] - nf[:, 0], dr[:, 1] - dr[:, 0]
+        return {
+            "n_samples": int(self.n_samples),
+            "n_nonfinite": int(nl.sum()),
+            "nonfinite_runs": nf.tolist(),
+            "longest_nonfinite_run": int(nl.max()) if nl.size else 0,
+            "n_clipped_runs": int(len(cl)),
+            "clipped_runs": cl.tolist(),
+            "n_dropout_runs": int(len(dr)),
+            "dropout_runs": dr.tolist(),
+            "n_dropout_samples": int(dl.sum()),
+            "longest_dropout_run": int(dl.max()) if dl.size else 0,
+            "dropout_min_run": self.dropout_min_run,
+            "min": self.min, "max": self.max, "rms": self.rms,
+        }
+
+
+def quality_from_scan(res: ScanResult, name: str = "", fs: float | None = None,
+                      t0: float = 0.0) -> ChannelQuality:
+    """The :class:`ChannelQuality` (no SNR, hum or conditioning yet) of a channel scanned by
+    :class:`ChannelScan` (whole, or streamed in blocks: the same report).
+
+    Parameters
+    ----------
+    res : ScanResult
+        :meth:`ChannelScan.result`.
+    name : str
+        Channel name.
+    fs : float or None
+        Sample rate [Hz] (None: bare samples).
+    t0 : float
+        Time of sample 0 [s].
+
+    Returns
+    -------
+    ChannelQuality
+    """
+    if not isinstance(res, ScanResult):
+        raise TypeError(f"res must be the ScanResult of ChannelScan.result(), got {type(res).__name__}")
+    if res.n == 0:
+        e = _no_runs()
+        return ChannelQuality(name, fs, t0, 0, e, e.copy(), e.copy())
+    extra = {}
+    if res.flat is not None:
+        fr = res.flat
+        extra = dict(dropout_runs=fr.dropout_runs, dropout_min_run=fr.min_run,
+                     p_equal=fr.p_equal, quant_step=fr.quant_step)
+    return ChannelQuality(name, fs, t0, int(res.n), res.nonfinite_runs, res.nan_runs,
+                          res.clipped(), min=res.min, max=res.max, rms=res.rms, **extra)
 
 
 def channel_quality(x, *, kind: str | None = None) -> dict:
@@ -683,7 +981,7 @@ def channel_quality(x, *, kind: str | None = None) -> dict:
     scan.feed1(x)
     scan.end1()
     scan.feed2(x)
-    return scan.result().to_dict()
+    return quality_from_scan(scan.result()).summary_dict()
 
 
 # ====================================================================== streaming scans
@@ -1163,7 +1461,8 @@ class _SampleWindows:
 
 @dataclass(eq=False)
 class ScanResult:
-    """What :class:`ChannelScan` found on one channel (raw samples).
+    """What :class:`ChannelScan` found on one channel (raw samples): the scan's raw findings,
+    rail runs and flat runs apart; :func:`quality_from_scan` makes the channel's report.
 
     Attributes
     ----------
@@ -1195,30 +1494,12 @@ class ScanResult:
         if self.flat is not None:
             cl = outside_runs(cl, self.flat.dropout_runs)
             if len(self.flat.clipped_runs):
-                cl = _merge_sorted(np.concatenate([cl, self.flat.clipped_runs]))
+                cl = merge_runs(np.concatenate([cl, self.flat.clipped_runs]))
         return cl
 
     def to_dict(self) -> dict:
-        """The summary :func:`channel_quality` returns."""
-        nf = self.nonfinite_runs
-        cl = self.clipped()
-        dr = self.flat.dropout_runs if self.flat is not None else _EMPTY_RUNS.copy()
-        thr = self.flat.min_run if self.flat is not None else None
-        dl = dr[:, 1] - dr[:, 0]
-        return {
-            "n_samples": int(self.n),
-            "n_nonfinite": int((nf[:, 1] - nf[:, 0]).sum()),
-            "nonfinite_runs": nf.tolist(),
-            "longest_nonfinite_run": int((nf[:, 1] - nf[:, 0]).max()) if len(nf) else 0,
-            "n_clipped_runs": int(len(cl)),
-            "clipped_runs": cl.tolist(),
-            "n_dropout_runs": int(len(dr)),
-            "dropout_runs": dr.tolist(),
-            "n_dropout_samples": int(dl.sum()),
-            "longest_dropout_run": int(dl.max()) if dl.size else 0,
-            "dropout_min_run": thr,
-            "min": self.min, "max": self.max, "rms": self.rms,
-        }
+        """The summary :func:`channel_quality` returns (:meth:`ChannelQuality.summary_dict`)."""
+        return quality_from_scan(self).summary_dict()
 
 
 class ChannelScan:

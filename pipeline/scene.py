@@ -25,7 +25,14 @@ from typing import Any
 
 import numpy as np
 
+from data_schemas import load_schema
+
+from . import io
+from .errors import DeprecatedNameWarning, SceneWarning
+from .models.assembly import (CLEARANCE_ATOL, assemblable_planet_counts, coaxiality_error,
+                              max_equal_planets, tip_clearance)
 from .models.gearset import Gearset, Speeds, rpm_to_rad_s
+from .recording import Recording
 
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "plan", "check_recording",
            "STAGES", "RESULTS", "LIMITS"]
@@ -347,8 +354,45 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
         estimate).
     """
     label = path if path is not None else "<scene>"
+    raw = _read_toml(text, label)
+    err = _error_maker(label, text)
+    _check_schema(raw, text, label, err)
+    base = Path(path).resolve().parent if path is not None else Path.cwd()
+    gearset, profile_shift = _parse_gearset(raw, err)
+    speeds, resolution = _parse_speeds(raw, gearset, err)
+    channels, mounts = _parse_channels(raw, gearset, err)
+    tacho = _parse_tacho(raw)
+    inp = _parse_input(raw, base, err)
+    tol = _parse_tolerances(raw, gearset, err)
+    bearing = _parse_bearing(raw, err, label, text)
+    _check_block(raw, err)
+    scene = Scene(
+        path=Path(path) if path is not None else None,
+        name=raw.get("name", Path(path).stem if path is not None else "scene"),
+        results=list(raw.get("results", [])), gearset=gearset, speeds=speeds, channels=channels, input=inp,
+        processing=dict(raw.get("processing", {})), tolerances=tol, bearing=bearing,
+        output=(base / raw["output"]) if "output" in raw else None, raw=raw,
+        speeds_resolution=resolution or None, fixed=raw.get("speeds", {}).get("fixed"), tacho=tacho, mounts=mounts,
+        profile_shift=profile_shift, text=text)
+    _check_consistency(scene, text, label)
+    stages = plan(scene, check=False)
+    if "tolerance" in stages:
+        _check_monte_carlo(scene, err)
+    rec = scene.input.get("recording")
+    if "load" in stages and rec and _file_state(rec) == "file":
+        try:
+            info = io.read_info(rec)
+        except Exception:  # noqa: BLE001 - unreadable files are the load stage's to report
+            info = None
+        if info is not None:
+            check_recording(scene, info)
+    return scene
+
+
+def _read_toml(text: str, label) -> dict:
+    """The parsed TOML document; syntax errors as a SceneError with their line."""
     try:
-        raw = tomllib.loads(text)
+        return tomllib.loads(text)
     except RecursionError:
         # tomllib recurses once per nesting level of arrays / inline tables
         depth = max(text.count("["), text.count("{"))
@@ -361,18 +405,24 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
             line = max(1, len(text.splitlines()))
         raise SceneError(label, "", f"TOML syntax error: {exc}", line) from None
 
+
+def _error_maker(label, text: str):
+    """``err(keys, problem)``: the SceneError naming the key path and its line in ``text``."""
     def err(keys, problem):
         return SceneError(label, ".".join(str(k) for k in keys), problem, _line_of(text, list(keys)))
+    return err
 
+
+def _check_schema(raw: dict, text: str, label, err) -> None:
+    """An empty scene, non-finite numbers, then ``data_schemas/scene.schema.json`` (the first
+    problem named, with the number of the others)."""
     if not set(raw) - {"name", "description", "output"}:
         raise SceneError(label, "results", "the scene is empty (nothing to run): "
                          + _EMPTY_HELP.format(results=", ".join(RESULTS)), 1)
     for keys, v in _walk(raw):
         if isinstance(v, float) and not math.isfinite(v):
             raise err(keys, f"{v} is not a finite number (TOML reads inf and nan as numbers)")
-    from data_schemas import load_schema
-
-    import jsonschema
+    import jsonschema  # ~90 modules (attrs, referencing, importlib.metadata): only for a scene
 
     validator = jsonschema.Draft202012Validator(load_schema("scene"))
     errors = sorted(validator.iter_errors(raw), key=lambda e: [str(k) for k in e.absolute_path])
@@ -392,79 +442,90 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
             msg += f" ({e.schema['description']})"   # what the key means says why the limit
         more = f" (and {len(errors) - 1} more problem(s))" if len(errors) > 1 else ""
         raise SceneError(label, key, msg + more, _line_of(text, keys))
-    base = Path(path).resolve().parent if path is not None else Path.cwd()
 
-    results = list(raw.get("results", []))
-    gearset = None
+
+def _parse_gearset(raw: dict, err) -> tuple[Gearset | None, bool]:
+    """``[gearset]`` -> (the checked Gearset, SI inside, or None; profile shifted)."""
     profile_shift = False
-    if "gearset" in raw:
-        g = raw["gearset"]
-        profile_shift = bool(g.get("profile_shift", False))
-        lo, hi = LIMITS["length_mm"]
-        for k in ("carrier_radius_mm", "face_width_mm"):
-            if k in g and not lo <= g[k] <= hi:
-                raise err(["gearset", k], f"{g[k]:g} mm is outside {lo:g} .. {hi:g} mm, where "
-                          f"gear dimensions lie; {_mm_hint(g[k], lo, hi)}")
-        if "planet_angles_deg" in g:
-            angles = tuple(math.radians(a) for a in g["planet_angles_deg"])
-        else:
-            n = g["n_planets"]
-            angles = tuple(2 * math.pi * k / n for k in range(n))
-        try:
-            gearset = Gearset(g["z_sun"], g["z_ring"], g.get("z_planet", 0), angles,
-                              g["carrier_radius_mm"] * 1e-3, direction=g.get("direction", "cw"),
-                              name=g.get("name", ""),
-                              face_width=g["face_width_mm"] * 1e-3 if "face_width_mm" in g else None)
-        except (ValueError, TypeError) as exc:
-            raise err(["gearset", "z_ring"] if "z_ring" in str(exc) else ["gearset"], str(exc)) from None
-        gearset = _check_gearset(gearset, g, profile_shift, err)
-    speeds = None
-    resolution = None
-    if "speeds" in raw and gearset is not None:
-        from .angles import typed_resolution
+    if "gearset" not in raw:
+        return None, profile_shift
+    g = raw["gearset"]
+    profile_shift = bool(g.get("profile_shift", False))
+    lo, hi = LIMITS["length_mm"]
+    for k in ("carrier_radius_mm", "face_width_mm"):
+        if k in g and not lo <= g[k] <= hi:
+            raise err(["gearset", k], f"{g[k]:g} mm is outside {lo:g} .. {hi:g} mm, where "
+                      f"gear dimensions lie; {_mm_hint(g[k], lo, hi)}")
+    if "planet_angles_deg" in g:
+        angles = tuple(math.radians(a) for a in g["planet_angles_deg"])
+    else:
+        n = g["n_planets"]
+        angles = tuple(2 * math.pi * k / n for k in range(n))
+    try:
+        gearset = Gearset(g["z_sun"], g["z_ring"], g.get("z_planet", 0), angles,
+                          g["carrier_radius_mm"] * 1e-3, direction=g.get("direction", "cw"),
+                          name=g.get("name", ""),
+                          face_width=g["face_width_mm"] * 1e-3 if "face_width_mm" in g else None)
+    except (ValueError, TypeError) as exc:
+        raise err(["gearset", "z_ring"] if "z_ring" in str(exc) else ["gearset"], str(exc)) from None
+    gearset = _check_gearset(gearset, g, profile_shift, err)
+    return gearset, profile_shift
 
-        s = raw["speeds"]
-        conv = {}
-        resolution = {}
-        for m in ("sun", "carrier", "ring", "planet"):
-            if f"{m}_rpm" in s and f"{m}_rad_s" in s:
-                raise err(["speeds", f"{m}_rad_s"], f"give {m}_rpm or {m}_rad_s, not both")
-            if f"{m}_rpm" in s:
-                conv[m] = rpm_to_rad_s(s[f"{m}_rpm"])
-                resolution[m] = abs(rpm_to_rad_s(typed_resolution(s[f"{m}_rpm"])))
-            elif f"{m}_rad_s" in s:
-                conv[m] = float(s[f"{m}_rad_s"])
-                resolution[m] = typed_resolution(s[f"{m}_rad_s"])
-            if m in conv and abs(conv[m]) > rpm_to_rad_s(LIMITS["speed_rpm"]):
-                k = f"{m}_rpm" if f"{m}_rpm" in s else f"{m}_rad_s"
-                raise err(["speeds", k], f"{s[k]:g} {'r/min' if k.endswith('rpm') else 'rad/s'} is "
-                          f"faster than gear rigs run (limit {LIMITS['speed_rpm']:g} r/min = "
-                          f"{rpm_to_rad_s(LIMITS['speed_rpm']):.0f} rad/s); check the value and its unit")
-        if "sun" in conv and "carrier" in conv:
-            w_s, w_c = conv["sun"], conv["carrier"]
-            if w_s == w_c:
-                k = "sun_rpm" if "sun_rpm" in s else "sun_rad_s"
-                raise err(["speeds", k], f"the sun turns with the carrier (both {w_s:.6g} rad/s): "
-                          "the gearset turns as one block and no tooth meshes")
-            # Willis, no planet teeth needed: w_r - w_c = -(Z_s / Z_r)(w_s - w_c)
-            ring = w_c - gearset.z_sun / gearset.z_ring * (w_s - w_c)
-            if "planet" in conv:
-                speeds = Speeds(w_s, w_c, conv["planet"], conv.get("ring", ring))
-            elif gearset.z_planet == 0:
-                # the planet speed is unknown without Z_p (0 here); the results that need it
-                # require z_planet (_check_consistency)
-                speeds = Speeds(w_s, w_c, 0.0, conv.get("ring", ring))
-            else:
-                speeds = Speeds.kinematic(gearset, w_s, w_c)
-            # nominal speeds are typed rounded (the seed's ring: -3.862 r/min): 0.1 % slack
-            scale = max(abs(w_s), abs(w_c), abs(ring))
-            if "ring" in conv and abs(ring - conv["ring"]) > 1e-3 * scale:
-                raise err(["speeds", "ring_rpm" if "ring_rpm" in s else "ring_rad_s"],
-                          f"ring speed {conv['ring']:.6g} rad/s is not consistent with sun/carrier "
-                          f"and the tooth counts (kinematics give {ring:.6g} rad/s)")
-        elif any(k != "fixed" for k in s):
-            raise err(["speeds"], "give both the sun and the carrier speed")
-    fixed = raw.get("speeds", {}).get("fixed")
+
+def _parse_speeds(raw: dict, gearset: Gearset | None, err) -> tuple[Speeds | None, dict | None]:
+    """``[speeds]`` -> (nominal Speeds [rad/s] or None, the typed speeds' resolution
+    [rad/s] by member or None)."""
+    speeds = None
+    if "speeds" not in raw or gearset is None:
+        return speeds, None
+    from .angles import typed_resolution   # angles imports scipy.optimize: only when needed
+
+    s = raw["speeds"]
+    conv = {}
+    resolution = {}
+    for m in ("sun", "carrier", "ring", "planet"):
+        if f"{m}_rpm" in s and f"{m}_rad_s" in s:
+            raise err(["speeds", f"{m}_rad_s"], f"give {m}_rpm or {m}_rad_s, not both")
+        if f"{m}_rpm" in s:
+            conv[m] = rpm_to_rad_s(s[f"{m}_rpm"])
+            resolution[m] = abs(rpm_to_rad_s(typed_resolution(s[f"{m}_rpm"])))
+        elif f"{m}_rad_s" in s:
+            conv[m] = float(s[f"{m}_rad_s"])
+            resolution[m] = typed_resolution(s[f"{m}_rad_s"])
+        if m in conv and abs(conv[m]) > rpm_to_rad_s(LIMITS["speed_rpm"]):
+            k = f"{m}_rpm" if f"{m}_rpm" in s else f"{m}_rad_s"
+            raise err(["speeds", k], f"{s[k]:g} {'r/min' if k.endswith('rpm') else 'rad/s'} is "
+                      f"faster than gear rigs run (limit {LIMITS['speed_rpm']:g} r/min = "
+                      f"{rpm_to_rad_s(LIMITS['speed_rpm']):.0f} rad/s); check the value and its unit")
+    if "sun" in conv and "carrier" in conv:
+        w_s, w_c = conv["sun"], conv["carrier"]
+        if w_s == w_c:
+            k = "sun_rpm" if "sun_rpm" in s else "sun_rad_s"
+            raise err(["speeds", k], f"the sun turns with the carrier (both {w_s:.6g} rad/s): "
+                      "the gearset turns as one block and no tooth meshes")
+        # Willis, no planet teeth needed: w_r - w_c = -(Z_s / Z_r)(w_s - w_c)
+        ring = w_c - gearset.z_sun / gearset.z_ring * (w_s - w_c)
+        if "planet" in conv:
+            speeds = Speeds(w_s, w_c, conv["planet"], conv.get("ring", ring))
+        elif gearset.z_planet == 0:
+            # the planet speed is unknown without Z_p (0 here); the results that need it
+            # require z_planet (_check_consistency)
+            speeds = Speeds(w_s, w_c, 0.0, conv.get("ring", ring))
+        else:
+            speeds = Speeds.kinematic(gearset, w_s, w_c)
+        # nominal speeds are typed rounded (the seed's ring: -3.862 r/min): 0.1 % slack
+        scale = max(abs(w_s), abs(w_c), abs(ring))
+        if "ring" in conv and abs(ring - conv["ring"]) > 1e-3 * scale:
+            raise err(["speeds", "ring_rpm" if "ring_rpm" in s else "ring_rad_s"],
+                      f"ring speed {conv['ring']:.6g} rad/s is not consistent with sun/carrier "
+                      f"and the tooth counts (kinematics give {ring:.6g} rad/s)")
+    elif any(k != "fixed" for k in s):
+        raise err(["speeds"], "give both the sun and the carrier speed")
+    return speeds, resolution
+
+
+def _parse_channels(raw: dict, gearset: Gearset | None, err) -> tuple[list, dict]:
+    """``[[channels]]`` -> (the overrides, SI inside; mount angle [rad] by channel)."""
     channels = []
     mounts = {}
     seen = {}
@@ -480,12 +541,23 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
         if "mount_angle_deg" in c:
             mounts[c["name"]] = math.radians(c["mount_angle_deg"])
         channels.append(d)
+    return channels, mounts
+
+
+def _parse_tacho(raw: dict) -> dict:
+    """``[tacho]`` -> ``key_angle`` [rad], ``channel``."""
     tacho = {}
     if "tacho" in raw:
         if "key_angle_deg" in raw["tacho"]:
             tacho["key_angle"] = math.radians(raw["tacho"]["key_angle_deg"])
         if "channel" in raw["tacho"]:
             tacho["channel"] = raw["tacho"]["channel"]
+    return tacho
+
+
+def _parse_input(raw: dict, base: Path, err) -> dict:
+    """``[input]`` -> ``recording`` (absolute Path) or ``synthetic`` (a known scenario that
+    fits in memory), ``minutes``, ``seed``, ``start``/``stop`` [s]."""
     inp = dict(raw.get("input", {}))
     if "recording" in inp and "synthetic" in inp:
         raise err(["input", "synthetic"], "give either recording or synthetic, not both")
@@ -509,107 +581,100 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
     if "stop_s" in inp:
         inp["stop"] = inp.pop("stop_s")
     if "synthetic" in inp:
-        from synthetic.scenarios import SCENARIOS
+        from synthetic.scenarios import SCENARIOS  # synthetic: imported only when named
 
         if inp["synthetic"] not in SCENARIOS:
             raise err(["input", "synthetic"], f"unknown scenario {inp['synthetic']!r}; known: "
                       f"{', '.join(sorted(SCENARIOS))}")
         _check_synthetic_size(inp, err)
-    tol = None
-    if "tolerances" in raw:
-        t = raw["tolerances"]
-        if t.get("samples", 0) > LIMITS["samples_max"]:
-            raise err(["tolerances", "samples"], f"{t['samples']:g} Monte Carlo samples is more "
-                      f"than {LIMITS['samples_max']:.0e} (the statistics of Ave and Dev settle "
-                      "long before: their standard errors fall as 1/sqrt(samples)); use 1e4 .. 1e6")
-        tol = {}
-        for g in ("sun", "ring", "planet"):
-            tol[f"e_{g}"] = t.get(f"e_{g}_mm", 0.0) * 1e-3
-            tol[f"mean_e_{g}"] = t.get(f"mean_e_{g}_mm", 0.0) * 1e-3
-            k = t.get(f"kappa_{g}_deg", "uniform")
-            tol[f"kappa_{g}"] = k if k == "uniform" else math.radians(k)
-        tol["samples"] = t.get("samples", 20000)
-        tol["sampler"] = t.get("sampler", "sobol")
-        tol["window"] = t.get("window_s")
-        tol["seed"] = t.get("seed", 0)
-        if "seed" in t and (isinstance(t["seed"], bool) or not isinstance(t["seed"], int)
-                            or t["seed"] < 0):
-            raise err(["tolerances", "seed"], f"seed = {t['seed']!r}: the Monte Carlo's random "
-                      "seed is a non-negative integer")
-        if gearset is not None:
-            for g in ("sun", "ring"):
-                reach = sum(tol[f"{p}e_{m}"] for p in ("", "mean_") for m in (g, "planet"))
-                if reach >= gearset.carrier_radius:
-                    k = f"e_{g}_mm" if f"e_{g}_mm" in t else f"mean_e_{g}_mm"
-                    raise err(["tolerances", k if k in t else "e_planet_mm"],
-                              f"the {g} and planet bands reach {reach * 1e3:g} mm (mean + 3-sigma "
-                              f"band, both gears), beyond the carrier radius "
-                              f"{gearset.carrier_radius * 1e3:g} mm: the offset model needs "
-                              "e_" + g + " + e_planet < R_c; are these values in µm?")
-    bearing = None
-    if "bearing" in raw:
-        b = raw["bearing"]
-        case = _bearing_case(b.get("case", "1"))
-        if case is None:
-            raise err(["bearing", "case"], f"unknown case {b['case']!r}; known: seed 001 cases "
-                      f"{', '.join(sorted(set(_BEARING_CASES.values())))} (also written case1, case2B)")
-        lo, hi = LIMITS["c_g"]
-        if "c_g_N_per_mm_um" in b and not lo <= b["c_g_N_per_mm_um"] <= hi:
-            raise err(["bearing", "c_g_N_per_mm_um"], f"{b['c_g_N_per_mm_um']:g} N/(mm·µm) is outside "
-                      f"{lo:g} .. {hi:g} (ISO 6336: 20 by default); the key is in N/(mm·µm), "
-                      "not SI (20 N/(mm·µm) = 2e10 N/m^2)")
-        torque = b.get("input_torque_Nm")
-        if torque is not None and not abs(torque) <= LIMITS["torque_Nm"]:
-            raise err(["bearing", "input_torque_Nm"], f"{torque:g} N·m is beyond "
-                      f"+-{LIMITS['torque_Nm']:.0e} N·m (the largest wind-turbine gearboxes carry "
-                      "~1e7 N·m); the key is in N·m")
-        bearing = {"case": case, "input_torque": torque,
-                   "z_s": b.get("z_s_mm", 0.0) * 1e-3, "z_r": b.get("z_r_mm", 0.0) * 1e-3,
-                   "c_g": b.get("c_g_N_per_mm_um", 20.0) * 1e9}
-        bearing["k_tilt"] = _k_tilt_key(b, err)
-        for key, old in (("double_pinion_included_angle_sp_deg", "double_pinion_beta_deg"),
-                         ("double_pinion_included_angle_rp_deg", "double_pinion_gamma_deg")):
-            given = _renamed_key(b, key, old, err, label, text)
-            if given is not None:
-                bearing[key.replace("_deg", "")] = [math.radians(v) for v in given]
+    return inp
+
+
+def _parse_tolerances(raw: dict, gearset: Gearset | None, err) -> dict | None:
+    """``[tolerances]`` -> bands in SI ([m], [rad] or "uniform"), ``samples``, ``sampler``,
+    ``window`` [s], ``seed``; None without the table."""
+    if "tolerances" not in raw:
+        return None
+    t = raw["tolerances"]
+    if t.get("samples", 0) > LIMITS["samples_max"]:
+        raise err(["tolerances", "samples"], f"{t['samples']:g} Monte Carlo samples is more "
+                  f"than {LIMITS['samples_max']:.0e} (the statistics of Ave and Dev settle "
+                  "long before: their standard errors fall as 1/sqrt(samples)); use 1e4 .. 1e6")
+    tol = {}
+    for g in ("sun", "ring", "planet"):
+        tol[f"e_{g}"] = t.get(f"e_{g}_mm", 0.0) * 1e-3
+        tol[f"mean_e_{g}"] = t.get(f"mean_e_{g}_mm", 0.0) * 1e-3
+        k = t.get(f"kappa_{g}_deg", "uniform")
+        tol[f"kappa_{g}"] = k if k == "uniform" else math.radians(k)
+    tol["samples"] = t.get("samples", 20000)
+    tol["sampler"] = t.get("sampler", "sobol")
+    tol["window"] = t.get("window_s")
+    tol["seed"] = t.get("seed", 0)
+    if "seed" in t and (isinstance(t["seed"], bool) or not isinstance(t["seed"], int)
+                        or t["seed"] < 0):
+        raise err(["tolerances", "seed"], f"seed = {t['seed']!r}: the Monte Carlo's random "
+                  "seed is a non-negative integer")
+    if gearset is not None:
+        for g in ("sun", "ring"):
+            reach = sum(tol[f"{p}e_{m}"] for p in ("", "mean_") for m in (g, "planet"))
+            if reach >= gearset.carrier_radius:
+                k = f"e_{g}_mm" if f"e_{g}_mm" in t else f"mean_e_{g}_mm"
+                raise err(["tolerances", k if k in t else "e_planet_mm"],
+                          f"the {g} and planet bands reach {reach * 1e3:g} mm (mean + 3-sigma "
+                          f"band, both gears), beyond the carrier radius "
+                          f"{gearset.carrier_radius * 1e3:g} mm: the offset model needs "
+                          "e_" + g + " + e_planet < R_c; are these values in µm?")
+    return tol
+
+
+def _parse_bearing(raw: dict, err, label, text: str) -> dict | None:
+    """``[bearing]`` -> ``case``, ``input_torque`` [N·m], ``z_s``/``z_r`` [m], ``c_g``
+    [N/m^2], ``k_tilt`` [N·m/rad] list, included-angle sweeps [rad]; None without the table."""
+    if "bearing" not in raw:
+        return None
+    b = raw["bearing"]
+    case = _bearing_case(b.get("case", "1"))
+    if case is None:
+        raise err(["bearing", "case"], f"unknown case {b['case']!r}; known: seed 001 cases "
+                  f"{', '.join(sorted(set(_BEARING_CASES.values())))} (also written case1, case2B)")
+    lo, hi = LIMITS["c_g"]
+    if "c_g_N_per_mm_um" in b and not lo <= b["c_g_N_per_mm_um"] <= hi:
+        raise err(["bearing", "c_g_N_per_mm_um"], f"{b['c_g_N_per_mm_um']:g} N/(mm·µm) is outside "
+                  f"{lo:g} .. {hi:g} (ISO 6336: 20 by default); the key is in N/(mm·µm), "
+                  "not SI (20 N/(mm·µm) = 2e10 N/m^2)")
+    torque = b.get("input_torque_Nm")
+    if torque is not None and not abs(torque) <= LIMITS["torque_Nm"]:
+        raise err(["bearing", "input_torque_Nm"], f"{torque:g} N·m is beyond "
+                  f"+-{LIMITS['torque_Nm']:.0e} N·m (the largest wind-turbine gearboxes carry "
+                  "~1e7 N·m); the key is in N·m")
+    bearing = {"case": case, "input_torque": torque,
+               "z_s": b.get("z_s_mm", 0.0) * 1e-3, "z_r": b.get("z_r_mm", 0.0) * 1e-3,
+               "c_g": b.get("c_g_N_per_mm_um", 20.0) * 1e9}
+    bearing["k_tilt"] = _k_tilt_key(b, err)
+    for key, old in (("double_pinion_included_angle_sp_deg", "double_pinion_beta_deg"),
+                     ("double_pinion_included_angle_rp_deg", "double_pinion_gamma_deg")):
+        given = _renamed_key(b, key, old, err, label, text)
+        if given is not None:
+            bearing[key.replace("_deg", "")] = [math.radians(v) for v in given]
+    return bearing
+
+
+def _check_block(raw: dict, err) -> None:
+    """``[processing] block_s`` long enough for the onset detector's template."""
     block_s = raw.get("processing", {}).get("block_s")
     if isinstance(block_s, (int, float)) and not isinstance(block_s, bool) \
             and not block_s >= LIMITS["block_s_min"]:
         raise err(["processing", "block_s"], f"block_s = {block_s:g} s is shorter than "
                   f"{LIMITS['block_s_min']:g} s: the onset detector learns its template from the "
                   "pulses of one block (default: 2^20 samples)")
-    scene = Scene(
-        path=Path(path) if path is not None else None,
-        name=raw.get("name", Path(path).stem if path is not None else "scene"),
-        results=results, gearset=gearset, speeds=speeds, channels=channels, input=inp,
-        processing=dict(raw.get("processing", {})), tolerances=tol, bearing=bearing,
-        output=(base / raw["output"]) if "output" in raw else None, raw=raw,
-        speeds_resolution=resolution or None, fixed=fixed, tacho=tacho, mounts=mounts,
-        profile_shift=profile_shift, text=text)
-    _check_consistency(scene, text, label)
-    stages = plan(scene, check=False)
-    if "tolerance" in stages:
-        _check_monte_carlo(scene, err)
-    rec = scene.input.get("recording")
-    if "load" in stages and rec and _file_state(rec) == "file":
-        from . import io
-
-        try:
-            info = io.read_info(rec)
-        except Exception:  # noqa: BLE001 - unreadable files are the load stage's to report
-            info = None
-        if info is not None:
-            check_recording(scene, info)
-    return scene
 
 
 def _check_gearset(gearset: Gearset, g: dict, profile_shift: bool, err) -> Gearset:
     """Coaxiality, assembly and planet tip clearance of the scene's gearset (``g``: the
     ``[gearset]`` table as written); returns the gearset with typed planet angles snapped to
     the assemblable ones."""
+    # heavy: angles imports scipy.optimize, mesh_phasing numba; only a gearset needs them
     from .angles import typed_resolution
-    from .models.assembly import (CLEARANCE_ATOL, assemblable_planet_counts, coaxiality_error,
-                                  max_equal_planets, tip_clearance)
     from .models.mesh_phasing import assembly_check
 
     zs, zr, zp = gearset.z_sun, gearset.z_ring, gearset.z_planet
@@ -701,7 +766,7 @@ def _synthetic_config(inp: dict):
     """The synthetic scenario's configuration (no samples generated), or None."""
     if inp.get("config") is not None:
         return inp["config"]
-    from synthetic.scenarios import SCENARIOS, get_scenario
+    from synthetic.scenarios import SCENARIOS, get_scenario  # synthetic: heavy, only when named
 
     return get_scenario(inp["synthetic"]) if inp.get("synthetic") in SCENARIOS else None
 
@@ -730,7 +795,7 @@ def _check_monte_carlo(scene: Scene, err) -> None:
     """Size of the Monte Carlo (realisations x time points x planets) before it runs: refused
     above ``LIMITS["mc_evals_max"]``, a SceneWarning with the run-time estimate above
     ``LIMITS["samples_warn"]`` realisations."""
-    from .errors import SceneWarning
+    # heavy: tolerance imports scipy.stats and numba; only a Monte Carlo scene needs it
     from .models.tolerance import default_n_times, observation_window
 
     t, sp, g = scene.tolerances, scene.speeds, scene.gearset
@@ -803,9 +868,6 @@ def check_recording(scene: Scene, info=None) -> None:
     SceneError
         Naming the scene file, the key and its line.
     """
-    from . import io
-    from .recording import Recording
-
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a Scene (pipeline.scene.load_scene), got {type(scene).__name__}")
     rec_path = scene.input.get("recording")
@@ -839,6 +901,7 @@ def check_recording(scene: Scene, info=None) -> None:
         raise SceneError(label, "tacho.channel", f"{source}: tacho channel {tacho!r} is not in the "
                          f"file; channels present: {', '.join(info.names) or 'none'}",
                          _line_of(text, ["tacho", "channel"]))
+    # stages imports this module: the load stage's channel rules are imported when used
     from .stages import RunContext, _apply_channel_overrides, _check_gauges
 
     empty = Recording(np.empty((0, len(info.channels))), info.fs, info.channels, info.t0,
@@ -927,12 +990,10 @@ def _renamed_key(b: dict, key: str, old: str, err, label, text):
         return b.get(key)
     if key in b:
         raise err(["bearing", old], f"{old} is the old name of {key}; give only {key}")
-    from .errors import DeprecatedNameWarning
-
     line = _line_of(text, ["bearing", old])
     warnings.warn(f"{label}" + (f", line {line}" if line else "") + f": [bearing] {old} is "
                   f"renamed {key} (same values, deg); the old key will be removed",
-                  DeprecatedNameWarning, stacklevel=3)
+                  DeprecatedNameWarning, stacklevel=4)
     return b[old]
 
 

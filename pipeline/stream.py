@@ -55,17 +55,23 @@ through its format module), :class:`MemorySource` (a Recording in memory) and
 from __future__ import annotations
 
 import math
+import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
 import numpy as np
 from scipy import ndimage, signal
 
+from .condition import (_apply_finite, _block_means, _block_medians, _check_freq, _drift_window,
+                        _noise_from_diffs, _resolve_band, _settle_time, _short_segments_message,
+                        _short_signal_message, _snr_combine, _snr_peak, _warn_quality, default_band,
+                        design_filter, detect_hum, finite_apply_gaps)
 from .errors import DataQualityWarning
+from .quality import ChannelQuality, ChannelScan, _RunTracker, merge_runs, quality_from_scan
 from .recording import ChannelSpec, Recording
-from .validate import as_positive
+from .validate import as_choice, as_positive
 
 __all__ = ["StreamedRecording", "BlockSource", "FileSource", "MemorySource", "GeneratorSource",
            "RawScan",
@@ -572,7 +578,9 @@ class RawScan:
     results : dict of str -> pipeline.quality.ScanResult
         Per channel (all of them).
     quality : list of dict
-        :meth:`pipeline.recording.Recording.quality` of the recording.
+        :meth:`pipeline.recording.Recording.quality` of the recording (the
+        :meth:`~pipeline.quality.ChannelQuality.summary_dict` of ``reports``, with the
+        channel's name).
     hum_window : dict of str -> ndarray
         First ``HUM_SECONDS`` of each conditioned channel, dropouts set to NaN (for
         :func:`pipeline.condition.detect_hum`).
@@ -581,6 +589,8 @@ class RawScan:
         flat one).
     n_blocks : int
         Blocks read per pass.
+    reports : dict of str -> pipeline.quality.ChannelQuality
+        The raw-data quality report of every channel.
     """
 
     header: StreamedRecording
@@ -589,6 +599,7 @@ class RawScan:
     hum_window: dict = field(default_factory=dict)
     tacho_times: np.ndarray | None = None
     n_blocks: int = 0
+    reports: dict = field(default_factory=dict)
 
 
 class _TachoEdges:
@@ -645,8 +656,6 @@ def scan_source(source: BlockSource, *, conditioned: Sequence[str] = (), tacho: 
     -------
     RawScan
     """
-    from .quality import ChannelScan
-
     if not isinstance(source, BlockSource):
         raise TypeError(f"source must be a BlockSource (FileSource, MemorySource, "
                         f"GeneratorSource), got {type(source).__name__}")
@@ -696,8 +705,10 @@ def scan_source(source: BlockSource, *, conditioned: Sequence[str] = (), tacho: 
             for s0, s1 in fr.dropout_runs:
                 if s0 < n_hum:
                     x[s0:min(s1, n_hum)] = np.nan
-    quality = [dict(channel=c.name, **results[c.name].to_dict()) for c in specs]
-    return RawScan(h, results, quality, hum, None if edges is None else edges.times(), nblk)
+    reports = {c.name: quality_from_scan(results[c.name], c.name, h.fs, h.t0) for c in specs}
+    quality = [dict(channel=c.name, **reports[c.name].summary_dict()) for c in specs]
+    return RawScan(h, results, quality, hum, None if edges is None else edges.times(), nblk,
+                   reports)
 
 
 # ============================================================================ filter chains
@@ -750,8 +761,6 @@ class _ZeroPhase:
 
     def __init__(self, sos: np.ndarray, n_total: int, *, what: str, chunk: int = BLOCK_SAMPLES,
                  fill_max: int = _FILL_MAX):
-        from .condition import _apply_finite
-
         self._apply = _apply_finite
         self.sos = sos
         self.padlen = 3 * (2 * len(sos) + 1)
@@ -847,8 +856,6 @@ class _Drift:
 
     # -------------------------------------------------------------- block values
     def _values(self, final: bool) -> None:
-        from .condition import _block_means, _block_medians
-
         k = min(self.acc_n // self.b, self.nb - self.j_next)
         if final and self.acc_n > k * self.b and self.j_next + k < self.nb:
             k += 1                              # the partial last block (medians only)
@@ -1079,8 +1086,6 @@ class _SnrTap:
         self.q = q
 
     def add(self, x: np.ndarray) -> None:
-        from .condition import _snr_peak
-
         if x.size == 0:
             return
         xx = x if self.last is None else np.concatenate([self.last, x])
@@ -1102,8 +1107,6 @@ class _SnrTap:
         self.pos += x.size
 
     def result(self) -> tuple[float, float, float]:
-        from .condition import _noise_from_diffs, _snr_combine
-
         if self.rank != self.expect:
             raise RuntimeError(f"SNR tap saw {self.rank} finite differences, expected {self.expect}")
         d = np.concatenate(self.parts) if self.parts else np.empty(0)
@@ -1172,9 +1175,6 @@ class StreamResult:
 
 def _band(fs: float, mesh_freq, lowpass, highpass, order):
     """(kind, low, high, sos) of condition_recording's band limit, or None."""
-    from .condition import _check_freq, _resolve_band, default_band, design_filter
-    from .validate import as_choice
-
     low = None if highpass is None else _check_freq(highpass, "highpass", fs)
     if isinstance(lowpass, str):
         as_choice(lowpass, "lowpass", ("auto",))
@@ -1198,8 +1198,6 @@ def _pairs_finite(bad: np.ndarray, n: int) -> int:
         return 0
     if len(bad) == 0:
         return n - 1
-    from .condition import merge_runs
-
     r = bad.copy()
     r[:, 0] = np.maximum(r[:, 0] - 1, 0)          # pair i is lost when i or i + 1 is bad
     r[:, 1] = np.minimum(r[:, 1], n - 1)
@@ -1243,19 +1241,59 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
     -------
     StreamResult
     """
-    import time
+    plans = _check_plans(source, scan, plans, drift)
+    h = source.header
+    n, fs = h.n_samples, h.fs
+    quality = {p.name: quality_from_scan(scan.results[p.name], p.name, fs, h.t0) for p in plans}
+    settle = {p.group: 0.0 for p in plans}
+    notch_sos = _hum_notches(plans, scan, quality, settle, fs, hum)
+    scan.hum_window = {}                        # not needed any more
+    chains, notes = {}, []
+    est_overlap, est_drift = 0, 0
+    for p in plans:
+        chains[p.name], chain_l, drift_b = _channel_chain(
+            p, quality[p.name], notch_sos.get(p.name), settle, notes, n=n, fs=fs, block=block,
+            dtype=h.dtype, drift=drift, drift_window=drift_window, lowpass=lowpass,
+            highpass=highpass, order=order)
+        est_overlap = max(est_overlap, chain_l)        # the longest chain's overlaps
+        est_drift = max(est_drift, drift_b)
+    for p in plans:
+        quality[p.name] = replace(quality[p.name], settle=settle[p.group])
+    onsets, est_onset = _onset_streams(plans, quality, fs, h.t0)
+    est = stream_memory(fs, n, h.n_channels, len(plans), overlap=est_overlap,
+                        drift_block=est_drift, onset_block=est_onset,
+                        itemsize=h.dtype.itemsize, block=block)
+    _check_budget(est, memory_budget, fs, "conditioning")
+    run = _Pass3(plans, chains, onsets, n, min(n, int(min(EXCERPT_SECONDS * fs, _EXCERPT_MAX))))
+    run.read(source, block, on_samples, progress)
+    out_on = run.finish()
+    # ---- quality: SNR, conditioned gaps, warnings as condition_recording issues them
+    for p in plans:
+        snr_db, peak, noise = chains[p.name].snr.result()
+        quality[p.name] = replace(quality[p.name], snr_db=snr_db, signal_peak=peak,
+                                  noise_rms=noise, conditioned_gap_runs=run.gaps[p.name].runs())
+    if warn:
+        for msg in notes:
+            warnings.warn(msg, DataQualityWarning, stacklevel=2)
+        for p in plans:
+            _warn_quality(quality[p.name], 6.0)
+    names = [p.name for p in plans]
+    rec = _stream_history(h, quality, names, hum=hum, drift=drift, n_blocks=run.n_blocks)
+    specs = [h.spec(nm) for nm in names]
+    ex = Recording(np.stack([run.excerpts[nm] for nm in names], axis=1) if names
+                   else np.empty((run.n_ex, 0)), fs, specs, h.t0, h.start_datetime, h.meta)
+    return StreamResult(quality, out_on, ex, rec,
+                        [(w.category, str(w.message)) for w in run.caught],
+                        {"condition_s": run.t_cond, "onsets_s": run.t_on}, est, run.n_blocks)
 
-    from .condition import (_drift_window, _short_segments_message,
-                            _short_signal_message, _warn_quality, detect_hum,
-                            finite_apply_gaps, quality_from_scan)
-    from .onsets import OnsetStream
 
+def _check_plans(source, scan, plans, drift) -> list:
+    """The arguments of :func:`condition_stream`, checked; the plans as a list."""
     if not isinstance(source, BlockSource):
         raise TypeError(f"source must be a BlockSource, got {type(source).__name__}")
     if not isinstance(scan, RawScan):
         raise TypeError(f"scan must be the RawScan of scan_source, got {type(scan).__name__}")
     h = source.header
-    n, fs = h.n_samples, h.fs
     plans = list(plans)
     for p in plans:
         if not isinstance(p, ChannelPlan):
@@ -1264,148 +1302,156 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
             raise ValueError(f"plan for channel {p.name!r}: not in the recording; channels: {h.names}")
     if drift is not None and drift not in ("median", "savgol", "highpass"):
         raise ValueError(f"drift must be 'median', 'savgol', 'highpass' or None, got {drift!r}")
-    quality = {}
-    for p in plans:
-        quality[p.name] = quality_from_scan(scan.results[p.name], p.name, fs, h.t0)
-    # ---- hum lines from the first HUM_SECONDS (what detect_hum looks at), settle per group
-    settle = {}
+    return plans
+
+
+def _hum_notches(plans, scan: RawScan, quality: dict, settle: dict, fs: float,
+                 hum: bool) -> dict:
+    """Hum lines of each planned channel from the first HUM_SECONDS (what
+    :func:`pipeline.condition.detect_hum` looks at): its report into ``quality``, the
+    notches' ringing into its group's ``settle`` [s]; returns name -> notch sos."""
     notch_sos = {}
+    if not hum:
+        return notch_sos
     for p in plans:
-        settle.setdefault(p.group, 0.0)
-        if not hum:
-            continue
         x = scan.hum_window.get(p.name, np.empty(0))
         rep = detect_hum(x, fs, mains="auto", exclude=())
-        quality[p.name].hum = rep
+        quality[p.name] = replace(quality[p.name], hum=rep)
         if rep.present:
             settle[p.group] = max(settle[p.group], 2.0 * 30.0 / (math.pi * float(np.min(rep.freqs))))
             notch_sos[p.name] = np.concatenate([signal.tf2sos(*signal.iirnotch(f, 30.0, fs=fs))
                                                 for f in rep.freqs])
-    scan.hum_window = {}                        # not needed any more
-    chains, taps, onsets, gaps, excerpts, notes = {}, {}, {}, {}, {}, []
-    n_ex = min(n, int(min(EXCERPT_SECONDS * fs, _EXCERPT_MAX)))
-    est_overlap, est_drift, est_onset = 0, 0, 1 << 20
+    return notch_sos
+
+
+def _through_gaps(bad: np.ndarray, n: int, st: _ZeroPhase, notes: list) -> np.ndarray:
+    """The runs that are NaN after the zero-phase stage ``st`` (``bad`` before it), noting
+    the stretches too short for it as the whole-array filter warns about them."""
+    out, n_short, whole = finite_apply_gaps(bad, n, min_len=st.min_len, fill_max=_FILL_MAX)
+    if whole:
+        notes.append(_short_signal_message(st.what, n, st.min_len))
+    elif n_short:
+        notes.append(_short_segments_message(st.what, n_short, st.min_len))
+    return out
+
+
+def _channel_chain(p: ChannelPlan, q: ChannelQuality, notch_sos, settle: dict, notes: list, *,
+                   n: int, fs: float, block: int, dtype, drift, drift_window, lowpass,
+                   highpass, order) -> tuple:
+    """One channel's conditioning chain (:class:`_Chain`), the overlap it needs [samples]
+    and its drift block [samples]; its filters' settling goes into its group's ``settle``."""
+    bad = q.all_gap_runs()                                 # masked input: gaps + dropouts
+    notch = None
+    chain_l = drift_b = 0
+    if notch_sos is not None:
+        notch = _ZeroPhase(notch_sos, n, what="notch_hum", chunk=block)
+        bad = _through_gaps(bad, n, notch, notes)
+    dr = None
+    if drift is not None:
+        w = _drift_window(drift_window, p.mesh_freq)
+        if drift == "highpass":
+            sos = design_filter(fs, kind="highpass", low=min(1.0 / w, 0.25 * fs), order=2)
+            dr = _ZeroPhase(sos, n, what="filter_signal(highpass)", chunk=block)
+            bad = _through_gaps(bad, n, dr, notes)
+            settle[p.group] = max(settle[p.group], 2.0 * w)
+            chain_l = dr.L
+        else:
+            dr = _Drift(n, fs, method=drift, window=w, pulse_period=p.pulse_period)
+            drift_b = dr.b
+    snr = _SnrTap(n, _pairs_finite(bad, n))
+    band = None
+    bd = _band(fs, p.mesh_freq, lowpass, highpass, order)
+    if bd is not None:
+        kind, low, high, sos = bd
+        band = _ZeroPhase(sos, n, what=f"filter_signal({kind})", chunk=block)
+        _through_gaps(bad, n, band, notes)
+        settle[p.group] = max(settle[p.group], _settle_time(low, high))
+    chain_l += sum(st.L for st in (notch, band) if st is not None)
+    chain = _Chain(n, dropouts=q.dropout_runs, notch=notch,
+                   drift=dr if dr is not None else _Identity(), snr=snr, band=band, dtype=dtype)
+    return chain, chain_l, drift_b
+
+
+def _onset_streams(plans, quality: dict, fs: float, t0: float) -> tuple[dict, int]:
+    """The onset detector of every planned gauge (flagging its clipped runs, guarding its
+    gaps by ``settle``, its dropouts as gaps), and the largest analysis block [samples]."""
+    from .onsets import OnsetStream
+
+    onsets, est_onset = {}, 1 << 20
     for p in plans:
+        if not p.onsets:
+            continue
         q = quality[p.name]
-        bad = q.all_gap_runs()                                 # masked input: gaps + dropouts
-        notch = None
-        chain_l = 0
-        if p.name in notch_sos:
-            notch = _ZeroPhase(notch_sos[p.name], n, what="notch_hum", chunk=block)
-            out, n_short, whole = finite_apply_gaps(bad, n, min_len=notch.min_len, fill_max=_FILL_MAX)
-            if whole:
-                notes.append(_short_signal_message("notch_hum", n, notch.min_len))
-            elif n_short:
-                notes.append(_short_segments_message("notch_hum", n_short, notch.min_len))
-            bad = out
-        dr = None
-        if drift is not None:
-            w = _drift_window(drift_window, p.mesh_freq)
-            if drift == "highpass":
-                from .condition import design_filter
+        kw = dict(p.onset_kwargs)
+        kw.setdefault("flag_runs", q.clipped_runs)
+        kw.setdefault("gap_guard", q.settle)
+        if len(q.dropout_runs):
+            kw.setdefault("gap_runs", q.dropout_runs)
+        onsets[p.name] = OnsetStream(fs, t0=t0, channel=p.name, **kw)
+        mf = kw.get("mesh_freq")
+        if mf:
+            w_s = 0.8 * fs / mf
+            est_onset = max(est_onset, int(16 * w_s))
+    return onsets, est_onset
 
-                sos = design_filter(fs, kind="highpass", low=min(1.0 / w, 0.25 * fs), order=2)
-                dr = _ZeroPhase(sos, n, what="filter_signal(highpass)", chunk=block)
-                out, n_short, whole = finite_apply_gaps(bad, n, min_len=dr.min_len, fill_max=_FILL_MAX)
-                if whole:
-                    notes.append(_short_signal_message("filter_signal(highpass)", n, dr.min_len))
-                elif n_short:
-                    notes.append(_short_segments_message("filter_signal(highpass)", n_short, dr.min_len))
-                bad = out
-                settle[p.group] = max(settle[p.group], 2.0 * w)
-                chain_l = dr.L
-            else:
-                dr = _Drift(n, fs, method=drift, window=w, pulse_period=p.pulse_period)
-                est_drift = max(est_drift, dr.b)
-        snr = _SnrTap(n, _pairs_finite(bad, n))
-        band = None
-        bd = _band(fs, p.mesh_freq, lowpass, highpass, order)
-        if bd is not None:
-            kind, low, high, sos = bd
-            band = _ZeroPhase(sos, n, what=f"filter_signal({kind})", chunk=block)
-            out, n_short, whole = finite_apply_gaps(bad, n, min_len=band.min_len, fill_max=_FILL_MAX)
-            if whole:
-                notes.append(_short_signal_message(f"filter_signal({kind})", n, band.min_len))
-            elif n_short:
-                notes.append(_short_segments_message(f"filter_signal({kind})", n_short, band.min_len))
-            from .condition import _settle_time
 
-            settle[p.group] = max(settle[p.group], _settle_time(low, high))
-        chain_l += sum(st.L for st in (notch, band) if st is not None)
-        est_overlap = max(est_overlap, chain_l)        # the longest chain's overlaps
-        chains[p.name] = _Chain(n, dropouts=q.dropout_runs, notch=notch,
-                                drift=dr if dr is not None else _Identity(), snr=snr, band=band,
-                                dtype=h.dtype)
-        taps[p.name] = snr
-        gaps[p.name] = _RunTrack()
-        excerpts[p.name] = np.empty(n_ex)
-    for p in plans:
-        quality[p.name].settle = settle[p.group]
-        if p.onsets:
-            q = quality[p.name]
-            kw = dict(p.onset_kwargs)
-            kw.setdefault("flag_runs", q.clipped_runs)
-            kw.setdefault("gap_guard", q.settle)
-            if len(q.dropout_runs):
-                kw.setdefault("gap_runs", q.dropout_runs)
-            onsets[p.name] = OnsetStream(fs, t0=h.t0, channel=p.name, **kw)
-            mf = kw.get("mesh_freq")
-            if mf:
-                w_s = 0.8 * fs / mf
-                est_onset = max(est_onset, int(16 * w_s))
-    est = stream_memory(fs, n, h.n_channels, len(plans), overlap=est_overlap,
-                        drift_block=est_drift, onset_block=est_onset,
-                        itemsize=h.dtype.itemsize, block=block)
-    _check_budget(est, memory_budget, fs, "conditioning")
-    # ---- the pass
-    idx = {c.name: j for j, c in enumerate(h.channels)}
-    t_cond = t_on = 0.0
-    caught: list = []
-    done = {p.name: 0 for p in plans}
-    nblk = 0
-    for a, data in _rechunk(source, block):
-        nblk += 1
-        for p in plans:
-            t = time.perf_counter()
-            # a fresh float64 copy: the stages hold on to what they are given
-            y = chains[p.name].push(np.array(data[:, idx[p.name]], dtype=np.float64))
-            t_cond += time.perf_counter() - t
-            if on_samples is not None and y.size:
-                on_samples(p.name, done[p.name], y)
-            _deliver(p, y, done, gaps, excerpts, n_ex)
-            if p.name in onsets and y.size:
+class _Pass3:
+    """The read of pass 3: every block through the chains, the conditioned samples to the
+    onset detectors, the excerpt and the conditioned gap runs; timings and the onset
+    detectors' warnings kept."""
+
+    def __init__(self, plans, chains: dict, onsets: dict, n: int, n_ex: int):
+        self.plans, self.chains, self.onsets, self.n, self.n_ex = plans, chains, onsets, n, n_ex
+        self.gaps = {p.name: _RunTrack() for p in plans}
+        self.excerpts = {p.name: np.empty(n_ex) for p in plans}
+        self.done = {p.name: 0 for p in plans}
+        self.caught: list = []
+        self.t_cond = self.t_on = 0.0
+        self.n_blocks = 0
+
+    def read(self, source: BlockSource, block: int, on_samples, progress) -> None:
+        h = source.header
+        idx = {c.name: j for j, c in enumerate(h.channels)}
+        for a, data in _rechunk(source, block):
+            self.n_blocks += 1
+            for p in self.plans:
                 t = time.perf_counter()
-                with warnings.catch_warnings(record=True) as wl:
-                    warnings.simplefilter("always")
-                    onsets[p.name].feed(y)
-                caught.extend(wl)
-                t_on += time.perf_counter() - t
-        if progress:
-            progress("condition + onsets", a + data.shape[0], n)
-    out_on = {}
-    for p in plans:
-        if done[p.name] != n:
-            raise RuntimeError(f"channel {p.name!r}: the conditioning chain delivered "
-                               f"{done[p.name]} of {n} samples")
-        if p.name in onsets:
-            t = time.perf_counter()
-            with warnings.catch_warnings(record=True) as wl:
-                warnings.simplefilter("always")
-                out_on[p.name] = onsets[p.name].finish()
-            caught.extend(wl)
-            t_on += time.perf_counter() - t
-    # ---- quality: SNR, conditioned gaps, warnings as condition_recording issues them
-    for p in plans:
-        q = quality[p.name]
-        q.snr_db, q.signal_peak, q.noise_rms = taps[p.name].result()
-        q.conditioned_gap_runs = gaps[p.name].runs()
-    if warn:
-        for msg in notes:
-            warnings.warn(msg, DataQualityWarning, stacklevel=2)
-        for p in plans:
-            _warn_quality(quality[p.name], 6.0)
+                # a fresh float64 copy: the stages hold on to what they are given
+                y = self.chains[p.name].push(np.array(data[:, idx[p.name]], dtype=np.float64))
+                self.t_cond += time.perf_counter() - t
+                if on_samples is not None and y.size:
+                    on_samples(p.name, self.done[p.name], y)
+                _deliver(p, y, self.done, self.gaps, self.excerpts, self.n_ex)
+                if p.name in self.onsets and y.size:
+                    self._timed_onsets(lambda: self.onsets[p.name].feed(y))
+            if progress:
+                progress("condition + onsets", a + data.shape[0], self.n)
+
+    def _timed_onsets(self, call):
+        t = time.perf_counter()
+        with warnings.catch_warnings(record=True) as wl:
+            warnings.simplefilter("always")
+            out = call()
+        self.caught.extend(wl)
+        self.t_on += time.perf_counter() - t
+        return out
+
+    def finish(self) -> dict:
+        """The onsets of every gauge, once every sample went through."""
+        out_on = {}
+        for p in self.plans:
+            if self.done[p.name] != self.n:
+                raise RuntimeError(f"channel {p.name!r}: the conditioning chain delivered "
+                                   f"{self.done[p.name]} of {self.n} samples")
+            if p.name in self.onsets:
+                out_on[p.name] = self._timed_onsets(self.onsets[p.name].finish)
+        return out_on
+
+
+def _stream_history(h: StreamedRecording, quality: dict, names: list, *, hum: bool,
+                    drift, n_blocks: int) -> StreamedRecording:
+    """The conditioned recording's header: the history entries condition_recording writes."""
     rec = h
-    names = [p.name for p in plans]
     masked = {nm: quality[nm].n_dropout_samples for nm in names if len(quality[nm].dropout_runs)}
     if masked:
         rec = rec.with_history("condition.mask_dropouts", samples=masked)
@@ -1415,25 +1461,12 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
             for nm in names})
     if drift is not None:
         rec = rec.with_history("condition.remove_drift", method=drift, channels=names)
-    rec = rec.with_history("condition.quality", streamed=True, blocks=nblk,
-                           quality={nm: {"gap_runs": len(quality[nm].gap_runs),
-                                         "dropout_runs": len(quality[nm].dropout_runs),
-                                         "clipped_runs": len(quality[nm].clipped_runs),
-                                         "snr_db": (None if not np.isfinite(quality[nm].snr_db)
-                                                    else round(quality[nm].snr_db, 2))}
-                                    for nm in names})
-    specs = [h.spec(nm) for nm in names]
-    ex = Recording(np.stack([excerpts[nm] for nm in names], axis=1) if names else np.empty((n_ex, 0)),
-                   fs, specs, h.t0, h.start_datetime, h.meta)
-    return StreamResult(quality, out_on, ex, rec,
-                        [(w.category, str(w.message)) for w in caught],
-                        {"condition_s": t_cond, "onsets_s": t_on}, est, nblk)
+    return rec.with_history("condition.quality", streamed=True, blocks=n_blocks,
+                            quality={nm: quality[nm].history_entry() for nm in names})
 
 
 class _RunTrack:
     def __init__(self):
-        from .quality import _RunTracker
-
         self.t = _RunTracker()
 
     def add(self, y):

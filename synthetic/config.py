@@ -15,8 +15,10 @@ from typing import Mapping
 
 import numpy as np
 
+from pipeline.models.bearing import seed_case
 from pipeline.models.gearset import Gearset, Speeds
 from pipeline.models.mesh_phasing import ShaftHoleErrors
+from pipeline.models.tilt import solve_tilt
 from pipeline.models.tolerance import ToleranceBand, Tolerances
 from pipeline.validate import (as_choice, as_finite_array, as_float, as_int, as_nonnegative,
                                as_positive, as_positive_int)
@@ -175,9 +177,6 @@ class TiltSource:
 
     def solve(self, face_width: float):
         """The TiltSolution for face width ``face_width`` [m]."""
-        from pipeline.models.bearing import seed_case
-        from pipeline.models.tilt import solve_tilt
-
         c = seed_case(self.case)
         torque = c.input_torque if self.input_torque is None else self.input_torque
         return solve_tilt(c.geometry, torque, self.k_tilt, c_g=self.c_g, face_width=face_width)
@@ -426,6 +425,24 @@ class SynthConfig:
     description: str = ""
 
     def __post_init__(self):
+        self._check_types_and_speeds()
+        object.__setattr__(self, "fs", as_positive(self.fs, "fs"))
+        object.__setattr__(self, "duration", as_positive(self.duration, "duration"))
+        self._check_channels()
+        self._check_errors()
+        self._check_loads()
+        object.__setattr__(self, "sun_angle0", as_float(self.sun_angle0, "sun_angle0"))
+        if self.ring_angle0 is not None:
+            object.__setattr__(self, "ring_angle0", as_float(self.ring_angle0, "ring_angle0"))
+        object.__setattr__(self, "t0", as_float(self.t0, "t0"))
+        as_choice(self.dtype, "dtype", DTYPES)
+        if self.artefacts.snr_db is not None and self.artefacts.pink_fraction > 0 \
+                and self.artefacts.pink_fmin >= self.fs / 20.0:
+            raise ValueError(f"pink_fmin must be below fs / 20 = {self.fs / 20.0!r} Hz, got "
+                             f"{self.artefacts.pink_fmin!r}")
+
+    def _check_types_and_speeds(self) -> None:
+        """Name, the parts' types, and a gearset direction that the speeds agree with."""
         if not isinstance(self.name, str) or not self.name:
             raise ValueError(f"name must be a non-empty string, got {self.name!r}")
         if not isinstance(self.gearset, Gearset):
@@ -445,8 +462,11 @@ class SynthConfig:
             raise ValueError(f"gearset.direction={g.direction!r} contradicts the speeds: w_sc = "
                              f"{sp.w_sc!r} rad/s turns the planets {'clockwise' if want == 'cw' else 'counter-clockwise'} "
                              f"(direction={want!r})")
-        object.__setattr__(self, "fs", as_positive(self.fs, "fs"))
-        object.__setattr__(self, "duration", as_positive(self.duration, "duration"))
+
+    def _check_channels(self) -> None:
+        """Gauges and tacho: types, unique names, existing teeth, gain errors of known gauges,
+        a turning carrier for a tacho (``gauges`` stored as a tuple)."""
+        g, sp = self.gearset, self.speeds
         gauges = tuple(self.gauges)
         if not all(isinstance(x, GaugeConfig) for x in gauges):
             raise TypeError("gauges must be GaugeConfig instances")
@@ -472,11 +492,20 @@ class SynthConfig:
                                  f"{[x.name for x in gauges]}")
         if self.tacho is not None and sp.carrier == 0.0:
             raise ValueError("a carrier tacho needs a turning carrier (speeds.carrier != 0)")
+
+    def _check_errors(self) -> None:
+        """``errors``: None, bands, or one realisation of the shaft hole errors."""
+        g = self.gearset
         if self.errors is not None and not isinstance(self.errors, (ShaftHoleErrors, Tolerances)):
             raise TypeError(f"errors must be ShaftHoleErrors, Tolerances or None, got {type(self.errors).__name__}")
         if isinstance(self.errors, ShaftHoleErrors) and self.errors.sample_shape(g.n_planets) != ():
             raise ValueError("errors must be one realisation (no sample dimensions), got sample shape "
                              f"{self.errors.sample_shape(g.n_planets)}")
+
+    def _check_loads(self) -> None:
+        """Load sharing (mean 1) and centroid offsets [m] per planet (stored as tuples), the
+        tilt solve, and the face width [m] that centroids and face-width gauges need."""
+        g, gauges = self.gearset, self.gauges
         n = g.n_planets
         if self.load_sharing is not None:
             ls = _per_planet(self.load_sharing, "load_sharing", n, positive=True)
@@ -507,15 +536,6 @@ class SynthConfig:
                 if x.face_position is not None and abs(x.face_position) > 0.5 * b:
                     raise ValueError(f"gauge {x.name!r}: face_position must be within the face "
                                      f"(|z| <= {0.5 * b!r} m), got {x.face_position!r}")
-        object.__setattr__(self, "sun_angle0", as_float(self.sun_angle0, "sun_angle0"))
-        if self.ring_angle0 is not None:
-            object.__setattr__(self, "ring_angle0", as_float(self.ring_angle0, "ring_angle0"))
-        object.__setattr__(self, "t0", as_float(self.t0, "t0"))
-        as_choice(self.dtype, "dtype", DTYPES)
-        if self.artefacts.snr_db is not None and self.artefacts.pink_fraction > 0 \
-                and self.artefacts.pink_fmin >= self.fs / 20.0:
-            raise ValueError(f"pink_fmin must be below fs / 20 = {self.fs / 20.0!r} Hz, got "
-                             f"{self.artefacts.pink_fmin!r}")
 
     # ------------------------------------------------------------------ derived values
     @property

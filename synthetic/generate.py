@@ -35,6 +35,7 @@ import sys
 from typing import Iterator
 
 import numpy as np
+from tqdm import tqdm
 
 from pipeline.log import logger
 from pipeline.models.mesh_phasing import ShaftHoleErrors, ideal_phasing, time_varying_phasing
@@ -47,6 +48,7 @@ from .config import SynthConfig, errors_to_dict
 from .gauges import (AnglePulses, PulseTable, angle_pulse_map, face_load_factor, pulse_peak_offset, render_angle_pulses,
                      render_box, render_pulses)
 from .kinematics import EngagementEvents, engagement_events, event_times_for_angles, gauge_rates
+from .scenarios import get_scenario
 from .truth import EventTable, GroundTruth, PassTruth
 
 __all__ = ["generate", "generate_blocks", "SyntheticStream", "resolve_seed", "resolve_config",
@@ -93,8 +95,6 @@ def resolve_config(scenario_or_config) -> SynthConfig:
     if isinstance(scenario_or_config, SynthConfig):
         return scenario_or_config
     if isinstance(scenario_or_config, str):
-        from .scenarios import get_scenario
-
         return get_scenario(scenario_or_config)
     raise TypeError(f"scenario_or_config must be a scenario name or a SynthConfig, got "
                     f"{type(scenario_or_config).__name__}")
@@ -138,6 +138,49 @@ class _Channel:
                  "reach", "angle")
 
 
+def _planet_loads(cfg: SynthConfig) -> tuple:
+    """(load sharing [-], sun and ring centroid offsets [m] per planet, tilt solve summary
+    or None): the centroids from the coupled tilt solve when the config asks for it."""
+    g, n_p = cfg.gearset, cfg.gearset.n_planets
+    ls = np.ones(n_p) if cfg.load_sharing is None else np.asarray(cfg.load_sharing)
+    zs = np.asarray(cfg.centroid_sun)
+    zr = np.asarray(cfg.centroid_ring)
+    tilt_info = None
+    if cfg.tilt is not None:
+        sol = cfg.tilt.solve(g.face_width)
+        zs = np.full(n_p, float(sol.z_s))
+        zr = np.full(n_p, float(sol.z_r))
+        tilt_info = {"z_s": float(sol.z_s), "z_r": float(sol.z_r),
+                     "residual": float(np.max(sol.residual)),
+                     "converged": bool(np.all(sol.converged)),
+                     "face_width": g.face_width}
+    return ls, zs, zr, tilt_info
+
+
+def _pulse_amplitudes(cfg: SynthConfig, gauge, ev: EngagementEvents, loads: tuple) -> np.ndarray:
+    """Pulse amplitude of each event [m/m]: nominal x load sharing x face load factor."""
+    ls, zs, zr, _ = loads
+    fac = np.ones(cfg.gearset.n_planets)
+    if gauge.face_position is not None:
+        cz = zs if gauge.gear == "sun" else zr
+        fac = face_load_factor(gauge.face_position, cz, cfg.gearset.face_width)
+    amp_planet = gauge.amplitude * ls * fac
+    return amp_planet[ev.planet - 1] if len(ev) else np.empty(0)
+
+
+def _gain_error(gauge, a, draw) -> float:
+    """The gauge's relative gain error [-]: the configured one plus its random draw."""
+    ge = 0.0
+    if isinstance(a.gain_error, dict):
+        ge = a.gain_error.get(gauge.name, 0.0)
+    elif a.gain_error is not None:
+        ge = a.gain_error
+    ge = float(ge + draw)
+    if ge <= -1.0:
+        raise ValueError(f"gauge {gauge.name!r}: drawn gain error {ge!r} <= -1 (gain_error_std too large)")
+    return ge
+
+
 class _Plan:
     """Everything computed before the first sample: events, amplitudes, artefact draws, truth."""
 
@@ -150,40 +193,46 @@ class _Plan:
             raise ValueError(f"duration {duration!r} s gives no sample at fs = {cfg.fs!r} Hz")
         dur = self.n_samples / self.fs
         cfg.speed.check(dur)
-        g, sp = cfg.gearset, cfg.speeds
         #: the speed profile bound to the nominal speeds: one angle time for everything
-        self.clock = clock = cfg.speed.clock(sp)
-        n_p = g.n_planets
-        a = cfg.artefacts
+        self.clock = cfg.speed.clock(cfg.speeds)
         self.dtype = np.dtype(cfg.dtype)
         # errors realisation
         if isinstance(cfg.errors, Tolerances):
-            errors = draw_errors(cfg.errors, n_p, seed)
+            self.errors = draw_errors(cfg.errors, cfg.gearset.n_planets, seed)
         else:
-            errors = cfg.errors
-        self.errors = errors
-        ls = np.ones(n_p) if cfg.load_sharing is None else np.asarray(cfg.load_sharing)
-        zs = np.asarray(cfg.centroid_sun)
-        zr = np.asarray(cfg.centroid_ring)
-        tilt_info = None
-        if cfg.tilt is not None:
-            sol = cfg.tilt.solve(g.face_width)
-            zs = np.full(n_p, float(sol.z_s))
-            zr = np.full(n_p, float(sol.z_r))
-            tilt_info = {"z_s": float(sol.z_s), "z_r": float(sol.z_r),
-                         "residual": float(np.max(sol.residual)),
-                         "converged": bool(np.all(sol.converged)),
-                         "face_width": g.face_width}
+            self.errors = cfg.errors
+        loads = _planet_loads(cfg)
+        gauge_truth = self._gauge_channels(dur, loads)
+        tacho_times = self._tacho_channel(dur)
+        a = cfg.artefacts
+        self.hum = (art.HumSource(self.fs, a.hum_amplitude, a.hum_frequency, a.hum_harmonics)
+                    if a.hum_amplitude else None)
+        # gaps
+        self.gaps = art.draw_gaps(art.stream_rng(seed, "gaps"), self.n_samples, self.fs,
+                                  a.gap_rate, a.gap_length, a.dropout_rate)
+        self.specs = tuple([c.spec for c in self.channels] + ([self.tacho_spec] if self.tacho else []))
+        self.meta = {
+            "source": "synthetic", "scenario": cfg.name, "seed": seed,
+            "generator": f"synthetic/{GENERATOR_VERSION}",
+            "gearset": cfg.gearset.to_dict(), "speeds_nominal": cfg.speeds.to_dict(),
+        }
+        self.history = [{"step": "synthetic.generate", "scenario": cfg.name, "seed": seed,
+                         "generator": GENERATOR_VERSION}]
+        self.truth = self._truth(dur, loads, gauge_truth, tacho_times)
+
+    def _gauge_channels(self, dur: float, loads: tuple) -> dict:
+        """The gauge channels (events, amplitudes, gains, pulse maps, noise and hum draws);
+        returns their truth by kind (events, passes, pulse, gain errors, noise, hum phases)."""
+        cfg, a = self.cfg, self.cfg.artefacts
         # artefact draws (independent streams so switching one does not move the others)
-        setup = art.stream_rng(seed, "setup", 0)
+        setup = art.stream_rng(self.seed, "setup", 0)
         gain_rand = setup.standard_normal(len(cfg.gauges)) * a.gain_error_std
-        hum_rng = art.stream_rng(seed, "setup", 1)
+        hum_rng = art.stream_rng(self.seed, "setup", 1)
         n_harm = len(a.hum_harmonics)
         s_min = cfg.speed.bounds(dur)[0]
         self.channels: list[_Channel] = []
-        events_truth, passes_truth, pulse_info = {}, {}, {}
-        gain_errors, noise_rms, hum_phases = {}, {}, {}
-        gam_ideal_s, gam_ideal_r = ideal_phasing(g)
+        truth = {k: {} for k in ("events", "passes", "pulse", "gain_errors", "noise_rms",
+                                 "hum_phases")}
         for gi, gauge in enumerate(cfg.gauges):
             ch = _Channel()
             ch.gauge = gauge
@@ -192,26 +241,13 @@ class _Plan:
                 tooth=gauge.tooth, face_position=gauge.face_position,
                 description=f"synthetic {gauge.gear} tooth-root strain gauge, tooth {gauge.tooth}")
             ch.table = PulseTable(gauge.contact_ratio, gauge.side_lobe, gauge.skew)
-            w, z = gauge_rates(g, sp, gauge.gear)
+            w, z = gauge_rates(cfg.gearset, cfg.speeds, gauge.gear)
             t_mesh_max = TWO_PI / (z * abs(w) * s_min)
             margin = ch.table.half * t_mesh_max + 2.0 / self.fs
-            ev = engagement_events(g, sp, gauge.gear, cfg.tooth_angle(gauge), -margin,
-                                   dur + margin, errors=errors, profile=clock)
-            # amplitudes: nominal x load sharing x face load factor
-            fac = np.ones(n_p)
-            if gauge.face_position is not None:
-                cz = zs if gauge.gear == "sun" else zr
-                fac = face_load_factor(gauge.face_position, cz, g.face_width)
-            amp_planet = gauge.amplitude * ls * fac
-            amp = amp_planet[ev.planet - 1] if len(ev) else np.empty(0)
-            ge = 0.0
-            if isinstance(a.gain_error, dict):
-                ge = a.gain_error.get(gauge.name, 0.0)
-            elif a.gain_error is not None:
-                ge = a.gain_error
-            ge = float(ge + gain_rand[gi])
-            if ge <= -1.0:
-                raise ValueError(f"gauge {gauge.name!r}: drawn gain error {ge!r} <= -1 (gain_error_std too large)")
+            ev = engagement_events(cfg.gearset, cfg.speeds, gauge.gear, cfg.tooth_angle(gauge),
+                                   -margin, dur + margin, errors=self.errors, profile=self.clock)
+            amp = _pulse_amplitudes(cfg, gauge, ev, loads)
+            ge = _gain_error(gauge, a, gain_rand[gi])
             ch.gain = 1.0 + ge
             ch.pos = ev.time * self.fs
             ch.per = ev.mesh_period * self.fs
@@ -220,72 +256,80 @@ class _Plan:
             t_angle = TWO_PI / (z * abs(w))                 # one mesh period of angle [s]
             ch.angle = None
             map_info = {"degree": 1, "fit_error": 0.0}
-            if not clock.is_constant:
+            if not self.clock.is_constant:
                 # the pulse lasts a fixed angle: follow tau(t) within every pulse
-                ch.angle = angle_pulse_map(ev.tau, t_angle, clock.tau, clock.time_of, self.fs,
-                                           ch.table)
+                ch.angle = angle_pulse_map(ev.tau, t_angle, self.clock.tau, self.clock.time_of,
+                                           self.fs, ch.table)
                 map_info = {"degree": ch.angle.degree, "fit_error": ch.angle.fit_error}
             ch.sigma = gauge.amplitude / 10.0 ** (a.snr_db / 20.0) if a.snr_db is not None else 0.0
             ch.hum_phases = hum_rng.uniform(0.0, TWO_PI, n_harm)
             self.channels.append(ch)
-            inside = (ev.time >= 0.0) & (ev.time < dur)
-            evt = EngagementEvents(ev.time[inside], ev.tau[inside], ev.planet[inside],
-                                   ev.revolution[inside], ev.mesh_period[inside])
-            events_truth[gauge.name] = EventTable(
-                time=cfg.t0 + evt.time, planet=evt.planet, revolution=evt.revolution,
-                tau=evt.tau, mesh_period=evt.mesh_period, amplitude=amp[inside])
-            passes_truth[gauge.name] = self._passes(evt, gauge.gear, w, z, errors)
-            pulse_info[gauge.name] = {
-                "contact_ratio": gauge.contact_ratio, "side_lobe": gauge.side_lobe,
-                "skew": gauge.skew, "support": ch.table.half,
-                "peak_offset": pulse_peak_offset(gauge.contact_ratio, gauge.side_lobe, gauge.skew),
-                "domain": "angle", "nominal_mesh_period": t_angle, "angle_map": map_info}
-            gain_errors[gauge.name] = ge
-            noise_rms[gauge.name] = ch.sigma
-            hum_phases[gauge.name] = ch.hum_phases.tolist() if a.hum_amplitude else []
-        # tacho
+            self._gauge_truth(truth, ch, ev, amp, dur, (w, z, t_angle), map_info, ge)
+        return truth
+
+    def _gauge_truth(self, truth: dict, ch: _Channel, ev: EngagementEvents, amp: np.ndarray,
+                     dur: float, rates: tuple, map_info: dict, ge: float) -> None:
+        """A gauge's events and passes inside the recording, its pulse, gain error, noise and
+        hum phases into ``truth`` (``rates``: its relative speed [rad/s], tooth count and
+        mesh period of angle time [s])."""
+        cfg, gauge = self.cfg, ch.gauge
+        w, z, t_angle = rates
+        inside = (ev.time >= 0.0) & (ev.time < dur)
+        evt = EngagementEvents(ev.time[inside], ev.tau[inside], ev.planet[inside],
+                               ev.revolution[inside], ev.mesh_period[inside])
+        truth["events"][gauge.name] = EventTable(
+            time=cfg.t0 + evt.time, planet=evt.planet, revolution=evt.revolution,
+            tau=evt.tau, mesh_period=evt.mesh_period, amplitude=amp[inside])
+        truth["passes"][gauge.name] = self._passes(evt, gauge.gear, w, z, self.errors)
+        truth["pulse"][gauge.name] = {
+            "contact_ratio": gauge.contact_ratio, "side_lobe": gauge.side_lobe,
+            "skew": gauge.skew, "support": ch.table.half,
+            "peak_offset": pulse_peak_offset(gauge.contact_ratio, gauge.side_lobe, gauge.skew),
+            "domain": "angle", "nominal_mesh_period": t_angle, "angle_map": map_info}
+        truth["gain_errors"][gauge.name] = ge
+        truth["noise_rms"][gauge.name] = ch.sigma
+        truth["hum_phases"][gauge.name] = ch.hum_phases.tolist() if cfg.artefacts.hum_amplitude else []
+
+    def _tacho_channel(self, dur: float) -> tuple[np.ndarray, np.ndarray]:
+        """The carrier tacho's pulses (``self.tacho``) and spec; returns the start and stop
+        times of its pulses inside the recording [s] (empty without a tacho)."""
+        cfg = self.cfg
         self.tacho = None
-        tacho_t = tacho_stop = np.empty(0)
-        if cfg.tacho is not None:
-            tc = cfg.tacho
-            t_rev = TWO_PI / (abs(sp.carrier) * s_min)
-            st, sp_ = event_times_for_angles(sp.carrier, cfg.tacho_angle(), -tc.width * t_rev - 2.0 / self.fs,
-                                             dur, width=tc.width, profile=clock)
-            self.tacho = (st * self.fs, sp_ * self.fs, tc.level)
-            self.tacho_spec = ChannelSpec(tc.name, kind="tacho", units="V", gain=1.0, gear="carrier",
-                                          description="synthetic carrier once-per-revolution tacho")
-            keep = (st >= 0.0) & (st < dur)
-            tacho_t, tacho_stop = cfg.t0 + st[keep], cfg.t0 + sp_[keep]
-        self.hum = (art.HumSource(self.fs, a.hum_amplitude, a.hum_frequency, a.hum_harmonics)
-                    if a.hum_amplitude else None)
-        # gaps
-        self.gaps = art.draw_gaps(art.stream_rng(seed, "gaps"), self.n_samples, self.fs,
-                                  a.gap_rate, a.gap_length, a.dropout_rate)
-        specs = [c.spec for c in self.channels] + ([self.tacho_spec] if self.tacho else [])
-        self.specs = tuple(specs)
-        self.meta = {
-            "source": "synthetic", "scenario": cfg.name, "seed": seed,
-            "generator": f"synthetic/{GENERATOR_VERSION}",
-            "gearset": g.to_dict(), "speeds_nominal": sp.to_dict(),
-        }
-        self.history = [{"step": "synthetic.generate", "scenario": cfg.name, "seed": seed,
-                         "generator": GENERATOR_VERSION}]
+        if cfg.tacho is None:
+            return np.empty(0), np.empty(0)
+        tc = cfg.tacho
+        t_rev = TWO_PI / (abs(cfg.speeds.carrier) * cfg.speed.bounds(dur)[0])
+        st, sp_ = event_times_for_angles(cfg.speeds.carrier, cfg.tacho_angle(),
+                                         -tc.width * t_rev - 2.0 / self.fs, dur, width=tc.width,
+                                         profile=self.clock)
+        self.tacho = (st * self.fs, sp_ * self.fs, tc.level)
+        self.tacho_spec = ChannelSpec(tc.name, kind="tacho", units="V", gain=1.0, gear="carrier",
+                                      description="synthetic carrier once-per-revolution tacho")
+        keep = (st >= 0.0) & (st < dur)
+        return cfg.t0 + st[keep], cfg.t0 + sp_[keep]
+
+    def _truth(self, dur: float, loads: tuple, gauge_truth: dict, tacho_times: tuple) -> GroundTruth:
+        """The recording's ground truth."""
+        cfg, clock, errors = self.cfg, self.clock, self.errors
+        ls, zs, zr, tilt_info = loads
+        gam_ideal_s, gam_ideal_r = ideal_phasing(cfg.gearset)
         s_grid = clock.factor(np.linspace(0.0, dur, 1001))
-        self.truth = GroundTruth(
-            scenario=cfg.name, seed=seed, fs=self.fs, t0=cfg.t0, n_samples=self.n_samples,
+        return GroundTruth(
+            scenario=cfg.name, seed=self.seed, fs=self.fs, t0=cfg.t0, n_samples=self.n_samples,
             config=cfg.to_dict(), errors=errors_to_dict(errors) if isinstance(errors, ShaftHoleErrors) else None,
-            events=events_truth, passes=passes_truth,
+            events=gauge_truth["events"], passes=gauge_truth["passes"],
             ideal_phasing={"sun": gam_ideal_s.tolist(), "ring": gam_ideal_r.tolist()},
             load_sharing=ls.copy(), centroid_sun=zs.copy(), centroid_ring=zr.copy(),
-            tacho_times=tacho_t, tacho_stop_times=tacho_stop, gain_errors=gain_errors,
-            noise_rms=noise_rms, hum_phases=hum_phases, gaps=self.gaps, pulse=pulse_info,
+            tacho_times=tacho_times[0], tacho_stop_times=tacho_times[1],
+            gain_errors=gauge_truth["gain_errors"], noise_rms=gauge_truth["noise_rms"],
+            hum_phases=gauge_truth["hum_phases"], gaps=self.gaps, pulse=gauge_truth["pulse"],
             extra={"generator": GENERATOR_VERSION,
                    "speed_factor_range": [float(s_grid.min()), float(s_grid.max())],
                    "speed_clock_panels": clock.n_panels,
                    "tacho_angle": cfg.tacho_angle() if cfg.tacho else None,
                    "tilt_solution": tilt_info,
                    "tooth_angles": {x.name: cfg.tooth_angle(x) for x in cfg.gauges},
-                   "channels": [c.name for c in specs]})
+                   "channels": [c.name for c in self.specs]})
 
     def _passes(self, ev: EngagementEvents, gear: str, w: float, z: int, errors) -> PassTruth:
         cfg = self.cfg
@@ -404,8 +448,6 @@ def _progress_callback(progress, total: int, desc: str):
     if progress is None or progress is False:
         return (lambda n: None), (lambda: None)
     if progress is True:
-        from tqdm import tqdm
-
         bar = tqdm(total=total, desc=desc, unit="S", unit_scale=True, file=sys.stderr, leave=False)
         return bar.update, bar.close
     if callable(progress):

@@ -662,6 +662,22 @@ class MonteCarloResult:
         """The summary of ``name`` in :data:`ALL_STATISTICS` ("ave_s" ... "dev_r_abs")."""
         return getattr(self, as_choice(name, "name", ALL_STATISTICS))
 
+    def phasing_band(self, gear: str) -> tuple[np.ndarray, np.ndarray]:
+        """The band of planet-1-relative phasing that the tolerances allow for a gauge on
+        ``gear`` ("sun" or "ring"), per planet [mesh cycles]: Ave's 3-sigma bounds widened
+        by half of Dev's upper bound, ``lo = Ave.bound3[0] - Dev.bound3[1] / 2``,
+        ``hi = Ave.bound3[1] + Dev.bound3[1] / 2`` (what measured passes are checked
+        against, :func:`pipeline.compare.band_coverage`).
+
+        Returns
+        -------
+        lo, hi : numpy.ndarray
+            Shape (N,) each.
+        """
+        gear = as_choice(gear, "gear", ("sun", "ring"))
+        ave, dev = (self.ave_s, self.dev_s) if gear == "sun" else (self.ave_r, self.dev_r)
+        return ave.bound3[0] - dev.bound3[1] / 2, ave.bound3[1] + dev.bound3[1] / 2
+
     def to_dict(self, include_samples: bool = False) -> dict:
         """JSON-friendly dict (per-sample arrays only with ``include_samples``)."""
         out = {

@@ -326,6 +326,22 @@ def test_mc_empty_and_bad_inputs(case3):
         monte_carlo(g, sp, Tolerances(e_sun=ToleranceBand(0.0, 0.2)), w, 10)
 
 
+def test_mc_phasing_band(case3):
+    g, sp, tol = case3
+    w = observation_window(sp)
+    res = monte_carlo(g, sp, tol, w, 1000, rng=0)
+    for gear, ave, dev in (("sun", res.ave_s, res.dev_s), ("ring", res.ave_r, res.dev_r)):
+        lo, hi = res.phasing_band(gear)
+        np.testing.assert_array_equal(lo, ave.bound3[0] - dev.bound3[1] / 2)
+        np.testing.assert_array_equal(hi, ave.bound3[1] + dev.bound3[1] / 2)
+        assert lo.shape == (g.n_planets,) and np.all(lo <= hi)
+    lo, hi = monte_carlo(g, sp, tol, w, 0, rng=0).phasing_band("sun")    # no samples: NaN
+    assert np.all(np.isnan(lo)) and np.all(np.isnan(hi))
+    for bad in ("", "planet"):
+        with pytest.raises(ValueError, match="gear"):
+            res.phasing_band(bad)
+
+
 def test_table2_cases_in_si():
     g, sp, e1 = table2_case(1)
     assert (g.z_sun, g.z_ring, g.z_planet, g.n_planets) == (25, 87, 29, 4)

@@ -690,3 +690,43 @@ def test_assess_quality_new_options_and_report_fields(rig_recs):
         assess_quality(y, 5120.0, false_alarm=1.5)
     with pytest.raises(ValueError, match="which"):
         q.runs_time("dropouts")
+
+
+# ---------------------------------------------------------------- the one report type
+def test_channel_quality_is_the_one_frozen_report():
+    from dataclasses import FrozenInstanceError
+
+    from pipeline import quality as pq
+
+    assert ChannelQuality is pq.ChannelQuality and HumReport is pq.HumReport
+    x = np.sin(np.arange(4000) / 7.0)
+    x[100:110] = np.nan
+    x[2000:2100] = 0.0                                        # a dropout of zeros
+    q = assess_quality(x, 100.0, t0=2.0, name="g", warn=False)
+    with pytest.raises(FrozenInstanceError):
+        q.settle = 1.0
+    # the raw-data summary of channel_quality, from the same report
+    assert q.summary_dict() == pq.channel_quality(x, kind="sun")
+    assert (q.min, q.max) == (np.nanmin(np.where(np.isfinite(x), x, np.nan)), np.nanmax(x))
+    h = q.history_entry()
+    assert h == {"gap_runs": 1, "dropout_runs": 1, "clipped_runs": len(q.clipped_runs),
+                 "snr_db": round(q.snr_db, 2)}
+    json.dumps(q.to_dict())
+
+
+def test_quality_from_scan_empty_bare_and_bad():
+    from pipeline.quality import ChannelScan, quality_from_scan
+
+    scan = ChannelScan(0)
+    scan.end1()
+    e = quality_from_scan(scan.result())                      # empty, bare samples
+    assert e.n_samples == 0 and e.ok and e.fs is None and e.name == ""
+    assert e.summary_dict()["n_samples"] == 0 and e.history_entry()["snr_db"] is None
+    with pytest.raises(ValueError, match="no sample rate"):
+        e.runs_time("gap")
+    with pytest.raises(ValueError, match="no sample rate"):
+        gap_intervals(e)
+    with pytest.raises(TypeError, match="ScanResult"):
+        quality_from_scan({"n": 0})
+    with pytest.raises(ValueError, match="which"):
+        ChannelQuality("g", 10.0, 0.0, 0, *(np.empty((0, 2), np.int64),) * 3).runs_time("holes")
