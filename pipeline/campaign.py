@@ -23,7 +23,7 @@ matches their inputs (:func:`recording_key`) in ``OUT`` and in ``OUT.partial`` (
 unfinished campaign kept; :mod:`pipeline.campaign_resume`).
 
 Results that need no recording are computed once, on the client, not once per recording:
-the tolerance Monte Carlo (its 3-sigma phasing band, :func:`pipeline.tolerance_band.phasing_band`,
+the tolerance Monte Carlo (its 3-sigma phasing band, :meth:`pipeline.models.tolerance.MonteCarloResult.phasing_band`,
 is passed to the tasks, which then compute the band coverage of their own passes exactly as
 :func:`pipeline.stages.stage_compare` does), the tilt solve and the (unmeasured) bearing
 moments. They go to ``OUT/scene/``.
@@ -68,7 +68,6 @@ from .heap import limit_heap_growth
 from .jsonable import to_jsonable
 from .log import logger
 from .results import phasing_verdict
-from .tolerance_band import phasing_band
 from .validate import as_regular_file
 
 __all__ = ["run_recording", "run_campaign", "cli_campaign", "collect_recordings",
@@ -336,11 +335,11 @@ def client_scene(scene):
 
 
 def _bands(mc) -> dict:
-    """The phasing band around the ideal per gauge (:func:`pipeline.tolerance_band.phasing_band`,
+    """The phasing band around the ideal per gauge (:meth:`pipeline.models.tolerance.MonteCarloResult.phasing_band`,
     as :func:`stages.stage_compare` builds it), as lists."""
     out = {}
     for gear in ("sun", "ring"):
-        lo, hi = phasing_band(mc, gear)
+        lo, hi = mc.phasing_band(gear)
         out[gear] = {"lo": [float(v) for v in lo], "hi": [float(v) for v in hi]}
     return out
 

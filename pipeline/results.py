@@ -25,7 +25,6 @@ from typing import Any, Callable, ClassVar, Generic, TypeVar
 import numpy as np
 
 from .models.gearset import Gearset
-from .tolerance_band import phasing_band
 
 __all__ = ["StageResult", "LoadStage", "ConditionStage", "OnsetsStage", "PhasingStage",
            "LoadSharingStage", "CentroidsStage", "IdealStage", "ToleranceStage",
@@ -320,8 +319,8 @@ class ToleranceStage(StageResult):
 
     def band(self, gear: str) -> tuple[np.ndarray, np.ndarray]:
         """The 3-sigma band of ``gear``'s phasing deviation from the ideal per planet [mesh
-        cycles] (:func:`pipeline.tolerance_band.phasing_band`)."""
-        return phasing_band(self.monte_carlo, gear)
+        cycles] (:meth:`pipeline.models.tolerance.MonteCarloResult.phasing_band`)."""
+        return self.monte_carlo.phasing_band(gear)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -85,6 +85,9 @@ def test_tolerance_band_is_ave_bound3_widened_by_half_the_upper_dev():
     stat = lambda lo, hi: SimpleNamespace(bound3=(np.array(lo), np.array(hi)))  # noqa: E731
     mc = SimpleNamespace(ave_s=stat([-0.1], [0.2]), dev_s=stat([0.0], [0.4]),
                          ave_r=stat([-1.0], [1.0]), dev_r=stat([0.0], [2.0]))
+    from pipeline.models.tolerance import MonteCarloResult
+
+    mc.phasing_band = lambda gear: MonteCarloResult.phasing_band(mc, gear)
     lo, hi = ToleranceStage(monte_carlo=mc).band("sun")
     np.testing.assert_allclose([lo[0], hi[0]], [-0.3, 0.4])
     lo, hi = ToleranceStage(monte_carlo=mc).band("ring")
