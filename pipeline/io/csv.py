@@ -59,8 +59,8 @@ import numpy as np
 from ..errors import FormatWarning
 from ..recording import ChannelSpec, Recording
 from ..validate import as_int, as_positive_int
-from .base import CorruptFileError, RecordingFileError, RecordingInfo
-from .hdf5 import check_start_datetime, dumps_json, spec_from_dict, warn_nonfinite
+from .base import (CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime, check_verify,
+                   dumps_json, spec_from_dict, warn_nonfinite)
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "FORMAT_VERSION", "TIME_TOLERANCE", "sniff", "read_info",
            "read", "write", "write_blocks", "iter_blocks"]
@@ -433,11 +433,6 @@ def _scan_structure(path, head: _Head) -> tuple[int, bytes, bytes]:
     return n_rows, first, last
 
 
-def _check_verify(verify) -> None:
-    if not isinstance(verify, (bool, np.bool_)):
-        raise TypeError(f"verify must be a bool, got {verify!r}")
-
-
 def read_info(path, *, verify: bool = True) -> RecordingInfo:
     """Header of a CSV recording.
 
@@ -446,7 +441,7 @@ def read_info(path, *, verify: bool = True) -> RecordingInfo:
     time value to infer fs (no samples are parsed). ``verify`` is accepted for the
     registry's uniform options: CSV stores no checksum, the structure is always checked.
     """
-    _check_verify(verify)
+    check_verify(verify)
     head = _read_head(path)
     if head.preamble is not None:
         return _check_preamble(path, head)
@@ -602,7 +597,7 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *, verify: boo
     Recording
         float32 when the preamble says so, else float64; Fortran-ordered (channel-major).
     """
-    _check_verify(verify)
+    check_verify(verify)
     head, info, names, cols, perm, dtype = _setup(path, channels)
     n = info.n_samples
     i0 = as_int(i0, "i0")
@@ -649,7 +644,7 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *,
     n_overlap = as_int(n_overlap, "n_overlap")
     if n_overlap < 0:
         raise ValueError(f"n_overlap must be >= 0, got {n_overlap}")
-    _check_verify(verify)
+    check_verify(verify)
     head, info, names, cols, perm, dtype = _setup(path, channels)
     n = info.n_samples
     if n == 0:

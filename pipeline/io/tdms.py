@@ -65,8 +65,7 @@ from ..errors import FormatWarning
 from ..jsonable import to_jsonable
 from ..recording import CHANNEL_KINDS, Recording
 from ..validate import as_int, as_positive, as_positive_int
-from .base import CorruptFileError, RecordingFileError, RecordingInfo
-from .hdf5 import spec_from_dict, warn_nonfinite
+from .base import CorruptFileError, RecordingFileError, RecordingInfo, check_verify, spec_from_dict, warn_nonfinite
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "sniff", "read_info", "read", "iter_blocks", "kind_from_name"]
 
@@ -232,11 +231,6 @@ def _has_scale_props(props) -> bool:
     if n is not None:
         return int(n) > 0
     return any(k.startswith("NI_Scale[") and k.endswith("_Scale_Type") for k in props)
-
-
-def _check_verify(verify) -> None:
-    if not isinstance(verify, (bool, np.bool_)):
-        raise TypeError(f"verify must be a bool, got {verify!r}")
 
 
 class _Collect(logging.Filter):
@@ -610,7 +604,7 @@ def read_info(path, *, fs: float | None = None, raw: bool = False, verify: bool 
         Accepted for the registry's uniform options: TDMS stores no checksum; the segment
         structure is always checked.
     """
-    _check_verify(verify)
+    check_verify(verify)
     path, tdms, plan = _prepare(path, fs, raw)
     if tdms is not None:
         tdms.close()
@@ -652,7 +646,7 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *, fs: float |
     CorruptFileError
         Truncated or damaged segment structure (segment and byte offset named).
     """
-    _check_verify(verify)
+    check_verify(verify)
     path, tdms, plan = _prepare(path, fs, raw)
     with contextlib.ExitStack() as stack:
         if tdms is not None:
@@ -675,7 +669,7 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *, fs: float 
 
     Block k covers samples [k n_block, (k + 1) n_block + n_overlap), clipped to the recording.
     """
-    _check_verify(verify)
+    check_verify(verify)
     n_block = as_positive_int(n_block, "n_block")
     n_overlap = as_int(n_overlap, "n_overlap")
     if n_overlap < 0:

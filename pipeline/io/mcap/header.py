@@ -21,7 +21,7 @@ from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
 from ...recording import ChannelSpec
-from ..base import CorruptFileError, RecordingFileError, RecordingInfo
+from ..base import CorruptFileError, RecordingFileError, RecordingInfo, check_verify
 from .crc import _check_data_crc, _check_summary_crc
 from .layout import (_DTYPE_CODES, FORMAT_VERSION, MAGIC, MESSAGE_ENCODING, NAME, RECORDING_METADATA,
                      SCHEMA_ENCODING, SCHEMA_NAME, _log_time, _schema_problem)
@@ -276,17 +276,11 @@ _LOCK = threading.Lock()
 
 
 
-def _check_verify(verify) -> bool:
-    if not isinstance(verify, (bool, np.bool_)):
-        raise TypeError(f"verify must be a bool, got {verify!r}")
-    return bool(verify)
-
-
 
 @contextlib.contextmanager
 def _open(path, verify: bool = True):
     path = Path(path)
-    verify = _check_verify(verify)
+    verify = check_verify(verify)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file")
     with open(path, "rb") as fh:
