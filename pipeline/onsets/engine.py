@@ -12,7 +12,7 @@ import warnings
 
 import numpy as np
 
-from ..condition import ChannelQuality
+from ..condition import ChannelQuality, merge_runs
 from ..errors import ProcessingWarning
 from ..log import logger
 from ..quality import find_runs
@@ -24,7 +24,7 @@ from .matched import _gather, _Matcher, _sublags, _window_baseline
 from .options import _options, _Options
 from .results import (FLAG_CLIPPED, FLAG_EDGE, FLAG_GAP, FLAG_LOW_CORR, FLAG_TEMPLATE, Onsets, Template,
                       _empty_onsets)
-from .runs import _inside_runs, _merge, _runs_overlap
+from .runs import _inside_runs, _runs_overlap
 
 __all__ = ["detect_onsets", "detect_onsets_recording"]
 
@@ -216,7 +216,7 @@ class _Engine:
         peaks, *_ = _coarse_dec(yd, w_d, spacing / self.d, o.k_sigma)
         if peaks.size == 0:
             return
-        bad_runs = _merge(np.concatenate([gaps, o.flag_runs]))
+        bad_runs = merge_runs(np.concatenate([gaps, o.flag_runs]))
         tpl, fallback = self._learn_block(yd, peaks, lo, self.d, w_d, h_half, kk, bad_runs)
         if tpl is None:
             logger.info("%sblock %d: %d coarse detection(s) but no template could be learnt; "

@@ -5,18 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..condition import merge_runs
+
 __all__: list[str] = []
-
-
-def _merge(runs: np.ndarray) -> np.ndarray:
-    r = np.asarray(runs, dtype=np.int64).reshape(-1, 2)
-    if len(r) == 0:
-        return np.empty((0, 2), dtype=np.int64)
-    r = r[np.argsort(r[:, 0], kind="stable")]
-    ends = np.maximum.accumulate(r[:, 1])
-    new = np.ones(len(r), dtype=bool)
-    new[1:] = r[1:, 0] > ends[:-1]
-    return np.stack([r[new, 0], np.maximum.reduceat(r[:, 1], np.flatnonzero(new))], axis=1)
 
 
 def _runs_overlap(a: np.ndarray, b: np.ndarray, runs: np.ndarray) -> np.ndarray:
@@ -49,7 +40,7 @@ def _check_runs(runs, name: str) -> np.ndarray:
     if r.dtype.kind not in "iu" or r.ndim != 2 or r.shape[1] != 2:
         raise ValueError(f"{name} must be an integer array of [start, stop) rows, got "
                          f"dtype {r.dtype}, shape {r.shape}")
-    return _merge(r)
+    return merge_runs(r)
 
 
 def _time_runs(times, name: str, fs: float, t0: float) -> np.ndarray | None:
