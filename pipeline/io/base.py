@@ -206,7 +206,6 @@ def warn_nonfinite(path, data: np.ndarray, names, i0: int = 0) -> None:
             f"kept in the data"), stacklevel=3)
 
 
-
 def _same_json(a: Any, b: Any) -> bool:
     """Equality that treats NaN == NaN and requires equal container types (tuple != list)."""
     if type(a) is not type(b):
@@ -218,7 +217,6 @@ def _same_json(a: Any, b: Any) -> bool:
     if isinstance(a, list):
         return len(a) == len(b) and all(_same_json(x, y) for x, y in zip(a, b))
     return a == b
-
 
 
 def dumps_json(obj: Any, what: str) -> str:
@@ -241,7 +239,6 @@ def dumps_json(obj: Any, what: str) -> str:
     return text
 
 
-
 def check_start_datetime(value, path) -> str | None:
     """Check an ISO 8601 start time read from a file (None passes)."""
     if value is None:
@@ -255,7 +252,6 @@ def check_start_datetime(value, path) -> str | None:
     return value
 
 
-
 def spec_from_dict(d: dict, path, where: str, *, checked: bool = False) -> ChannelSpec:
     """A ChannelSpec from a dict read from a file, checked against channel_spec.schema.json
     (unless ``checked``: already validated as part of a larger schema)."""
@@ -267,7 +263,6 @@ def spec_from_dict(d: dict, path, where: str, *, checked: bool = False) -> Chann
         return ChannelSpec.from_dict(d)
     except (ValueError, TypeError) as exc:
         raise RecordingFileError(path, f"bad channel spec: {exc}") from exc
-
 
 
 # ---------------------------------------------------------------------------- atomic writes

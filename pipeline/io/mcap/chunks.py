@@ -17,7 +17,6 @@ __all__: list[str] = []
 _CRC_ASYNC_MIN = 1 << 16  # chunks at least this large [B] get their CRC in the worker thread
 
 
-
 class _ChunkReader:
     """Reads the uncompressed records of one chunk given its ChunkIndex (summary section).
 
@@ -172,7 +171,6 @@ class _ChunkReader:
         return data
 
 
-
 def _payloads(recs: memoryview, ids, path: Path):
     """(channel id, payload offset, payload length, log_time) of the messages of the wanted
     channel ids in the uncompressed records of one chunk, in file order."""
@@ -192,7 +190,6 @@ def _payloads(recs: memoryview, ids, path: Path):
             if cid in ids:
                 yield cid, q + 9 + _MSG_HEAD.size, length - _MSG_HEAD.size, log_time
         q = nxt
-
 
 
 def _decode(buf, off: int, size: int, lay: _Layout, path: Path, name: str) -> tuple[int, int]:

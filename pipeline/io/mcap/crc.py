@@ -36,7 +36,6 @@ def _crc_mulmod(a: int, b: int) -> int:
     return p
 
 
-
 def _x2n_table() -> list[int]:
     t = [0] * 32
     p = 1 << 30  # x^1
@@ -46,9 +45,7 @@ def _x2n_table() -> list[int]:
     return t
 
 
-
 _X2N = _x2n_table()  # x^(2^k) mod P
-
 
 
 @lru_cache(maxsize=1024)
@@ -62,7 +59,6 @@ def _x8n(n: int) -> int:
         n >>= 1
         k += 1
     return p
-
 
 
 def crc32_combine(crc1: int, crc2: int, len2: int) -> int:
@@ -86,7 +82,6 @@ def crc32_combine(crc1: int, crc2: int, len2: int) -> int:
     if len2 < 0:
         raise ValueError(f"len2 must be >= 0, got {len2}")
     return _crc_mulmod(_x8n(len2), crc1 & 0xFFFFFFFF) ^ (crc2 & 0xFFFFFFFF)
-
 
 
 _FOOTER = struct.Struct("<BQQQI")  # opcode, length (20), summary_start, summary_offset_start, crc
@@ -121,7 +116,6 @@ def _check_summary_crc(fh, path: Path) -> tuple[int, int]:
                                    f"index, channel or schema records are damaged")
     fh.seek(0)
     return pos, start
-
 
 
 def _check_data_crc(fh, path: Path, data_end_limit: int) -> bool:

@@ -56,7 +56,6 @@ class _Layout:
         return _log_time(i, self.info.fs, self.origin_ns)
 
 
-
 @contextlib.contextmanager
 def _lib_errors(path: Path, what: str):
     """Turn errors of the mcap package into RecordingFileError naming the file."""
@@ -68,7 +67,6 @@ def _lib_errors(path: Path, what: str):
         detail = str(exc) or type(exc).__name__
         raise RecordingFileError(path, f"malformed MCAP while {what}: {type(exc).__name__}: "
                                        f"{detail}") from exc
-
 
 
 def _check_ends(fh, path: Path) -> None:
@@ -97,13 +95,11 @@ def _check_ends(fh, path: Path) -> None:
                                f"missing; the write was probably interrupted")
 
 
-
 def _summary(fh, path: Path, verify: bool):
     """(reader, summary) from ``mcap.reader.make_reader`` (summary None when absent)."""
     with _lib_errors(path, "reading the summary section"):
         reader = make_reader(fh, validate_crcs=verify)
         return reader, reader.get_summary()
-
 
 
 def _read_layout(fh, path: Path, verify: bool = True, opened=None) -> tuple[object, _Layout]:
@@ -275,10 +271,10 @@ _VERIFIED: OrderedDict = OrderedDict()
 _LOCK = threading.Lock()
 
 
-
-
 @contextlib.contextmanager
 def _open(path, verify: bool = True):
+    """Open ``path`` (once per file identity: the CRC checks and the parsed header are
+    cached); yields (path, open file, :class:`_Layout`)."""
     path = Path(path)
     verify = check_verify(verify)
     if not path.is_file():

@@ -85,7 +85,6 @@ def _json_schema(filename: str) -> dict:
     raise FileNotFoundError(f"data_schemas/{filename} not found")
 
 
-
 @lru_cache(maxsize=None)
 def _validator(kind: str):
     from jsonschema import Draft202012Validator
@@ -99,7 +98,6 @@ def _validator(kind: str):
     return Draft202012Validator(schema)
 
 
-
 def _schema_problem(kind: str, instance) -> str | None:
     """First validation problem of ``instance`` against schema ``kind``, or None."""
     from jsonschema.exceptions import best_match
@@ -109,7 +107,6 @@ def _schema_problem(kind: str, instance) -> str | None:
         return None
     where = "/".join(str(p) for p in err.absolute_path)
     return f"{where + ': ' if where else ''}{err.message}"
-
 
 
 def log_time_ns(first_sample: int, fs: float, origin_ns: int = 0) -> int:
@@ -141,11 +138,9 @@ def log_time_ns(first_sample: int, fs: float, origin_ns: int = 0) -> int:
     return _log_time(first_sample, as_positive(fs, "fs"), origin_ns)
 
 
-
 def _log_time(first_sample: int, fs: float, origin_ns: int) -> int:
     p, q = fs.as_integer_ratio()
     return origin_ns + (first_sample * 1_000_000_000 * q) // p
-
 
 
 def _origin_ns(t0: float) -> int:
@@ -153,7 +148,6 @@ def _origin_ns(t0: float) -> int:
     if 0.0 <= x < 2.0 ** 63:
         return int(round(x))
     return 0
-
 
 
 def sniff(head: bytes) -> bool:

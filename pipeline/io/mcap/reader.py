@@ -27,7 +27,6 @@ _RECORD_VIEW = np.dtype({
     "itemsize": 47})
 
 
-
 def _uniform_chunk(recs: memoryview, lay: _Layout, col: dict, i0: int, i1: int):
     """Fast path of :func:`read` for the chunks :func:`write` produces.
 
@@ -61,7 +60,6 @@ def _uniform_chunk(recs: memoryview, lay: _Layout, col: dict, i0: int, i1: int):
     return col[cid], first, samples
 
 
-
 def _check_tiling(path: Path, name: str, spans: list, i0: int, i1: int) -> None:
     """Samples [i0, i1) of one channel must be covered exactly once by ``spans``."""
     if i1 <= i0:
@@ -82,14 +80,12 @@ def _check_tiling(path: Path, name: str, spans: list, i0: int, i1: int) -> None:
         raise RecordingFileError(path, f"channel {name!r}: {what} (messages lost or duplicated)")
 
 
-
 def _names(info: RecordingInfo, channels) -> list:
     """Channel selection; the registry passes [] for a file with no channels at all."""
     if channels is None or (not info.channels and not isinstance(channels, str)
                             and len(list(channels)) == 0):
         return info.names
     return info.check_channels(channels)
-
 
 
 def _recording(lay: _Layout, data: np.ndarray, names: list, i0: int) -> Recording:
@@ -100,11 +96,9 @@ def _recording(lay: _Layout, data: np.ndarray, names: list, i0: int) -> Recordin
                      history=copy.deepcopy(info.history))
 
 
-
 def _window_ns(lay: _Layout, i0: int, i1: int) -> tuple[int, int]:
     """Inclusive log-time range [ns] of every message that can hold a sample of [i0, i1)."""
     return lay.log_time(max(0, i0 - lay.block + 1)), lay.log_time(i1 - 1)
-
 
 
 def _select_chunks(lay: _Layout, ids, start_ns: int, end_ns: int) -> list:
@@ -119,7 +113,6 @@ def _select_chunks(lay: _Layout, ids, start_ns: int, end_ns: int) -> list:
         out.append(ci)
     out.sort(key=lambda ci: (ci.message_start_time, ci.chunk_start_offset))
     return out
-
 
 
 def read_info(path, *, verify: bool = True) -> RecordingInfo:
@@ -139,7 +132,6 @@ def read_info(path, *, verify: bool = True) -> RecordingInfo:
     """
     with _open(path, verify) as (_, _, lay):
         return copy.deepcopy(lay.info)
-
 
 
 def read(path, channels=None, i0: int = 0, i1: int | None = None, *,
@@ -220,7 +212,6 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *,
             for c, name in enumerate(names):
                 _check_tiling(path, name, spans[c], i0, i1)
         return _recording(lay, out, names, i0)
-
 
 
 def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *,

@@ -27,7 +27,6 @@ def _dumps(value, what: str) -> str:
         raise TypeError(f"recording {what} must be JSON-friendly: {exc}") from exc
 
 
-
 def _channel_metadata(spec: ChannelSpec, index: int, fs: float, dtype_name: str) -> dict:
     """The string map stored as MCAP channel metadata for one channel."""
     md = {"name": spec.name, "index": str(index), "kind": spec.kind, "units": spec.units,
@@ -40,7 +39,6 @@ def _channel_metadata(spec: ChannelSpec, index: int, fs: float, dtype_name: str)
     if spec.face_position is not None:
         md["face_position"] = repr(float(spec.face_position))
     return md
-
 
 
 def _recording_metadata(rec, block: int, compression: str, origin: int,
@@ -58,7 +56,6 @@ def _recording_metadata(rec, block: int, compression: str, origin: int,
     if rec.start_datetime is not None:
         md["start_datetime"] = rec.start_datetime
     return md
-
 
 
 def write(recording: Recording, path, *, block: int = DEFAULT_BLOCK, compression: str = "none",
@@ -84,7 +81,6 @@ def write(recording: Recording, path, *, block: int = DEFAULT_BLOCK, compression
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
     write_blocks(recording, [recording.data], path, dtype=recording.data.dtype, block=block,
                  compression=compression, chunk_size=chunk_size)
-
 
 
 def write_blocks(header, blocks, path, *, dtype="float64", block: int = DEFAULT_BLOCK,
