@@ -1,4 +1,6 @@
-"""What every format module shares: the header type, the file errors, atomic writes.
+"""What every format module shares: the header type, the file errors, the helpers of the
+readers and writers (option and header checks, JSON text, warnings about NaN runs) and
+atomic writes. Format modules share code only through this module.
 
 A format module (``hdf5``, ``mcap``, ``csv``, ``tdms``) provides
 
@@ -24,8 +26,11 @@ mismatch, truncation, a malformed row), with the position of the damage.
 from __future__ import annotations
 
 import contextlib
+import datetime as _dt
 import errno
 import hashlib
+import json
+import math
 import os
 import re
 import secrets
@@ -34,15 +39,23 @@ import socket
 import stat
 import threading
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
+import numpy as np
+
+from ..errors import DataQualityWarning, FormatWarning
+from ..jsonable import json_default
 from ..log import logger
+from ..quality import nonfinite_runs
 from ..recording import ChannelSpec, sample_index
 from ..validate import as_float, as_nonnegative
 
 __all__ = ["RecordingFileError", "CorruptFileError", "RecordingInfo", "atomic_path",
-           "clean_stale_partials", "TEMP_PREFIX", "TEMP_SUFFIX", "STALE_AGE"]
+           "clean_stale_partials", "TEMP_PREFIX", "TEMP_SUFFIX", "STALE_AGE", "check_verify",
+           "warn_nonfinite", "dumps_json", "check_start_datetime", "spec_from_dict"]
 
 
 class RecordingFileError(ValueError):
@@ -150,6 +163,106 @@ class RecordingInfo:
             raise ValueError(f"{self.path}: channel selection repeats a channel: {channels}")
         return channels
 
+
+# ---------------------------------------------------------------------------- shared helpers
+def check_verify(verify) -> bool:
+    """The ``verify`` option of a format's readers, checked: a bool (TypeError otherwise)."""
+    if not isinstance(verify, (bool, np.bool_)):
+        raise TypeError(f"verify must be a bool, got {verify!r}")
+    return bool(verify)
+
+
+def warn_nonfinite(path, data: np.ndarray, names, i0: int = 0) -> None:
+    """Issue one DataQualityWarning per channel holding NaN/inf runs (the data are kept).
+
+    Parameters
+    ----------
+    path : str or Path
+        File the samples came from (named in the message).
+    data : ndarray, shape (n_samples, n_channels)
+    names : sequence of str
+        Channel names, one per column.
+    i0 : int
+        File sample index of ``data[0]`` (so the message gives file sample indices).
+    """
+    if data.size == 0:
+        return
+    for j, name in enumerate(names):
+        col = data[:, j]
+        # a finite sum proves every sample finite (NaN and inf propagate); only a non-finite
+        # sum (or an overflow) pays for the exact scan
+        with np.errstate(invalid="ignore", over="ignore"):
+            total = np.add.reduce(col, dtype=np.float64)
+        if np.isfinite(total):
+            continue
+        runs = nonfinite_runs(col)
+        if not len(runs):  # the sum overflowed; every sample is finite
+            continue
+        lengths = runs[:, 1] - runs[:, 0]
+        first = int(runs[0, 0]) + i0
+        warnings.warn(DataQualityWarning(
+            f"{path}: channel {name!r} has {len(runs)} run(s) of NaN/inf samples "
+            f"({int(lengths.sum())} samples, longest {int(lengths.max())}, first at sample {first}); "
+            f"kept in the data"), stacklevel=3)
+
+
+def _same_json(a: Any, b: Any) -> bool:
+    """Equality that treats NaN == NaN and requires equal container types (tuple != list)."""
+    if type(a) is not type(b):
+        return False
+    if isinstance(a, float):
+        return a == b or (math.isnan(a) and math.isnan(b))
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(_same_json(a[k], b[k]) for k in a)
+    if isinstance(a, list):
+        return len(a) == len(b) and all(_same_json(x, y) for x, y in zip(a, b))
+    return a == b
+
+
+def dumps_json(obj: Any, what: str) -> str:
+    """One-line JSON text of ``obj`` (numpy scalars/arrays and datetimes converted).
+
+    Raises TypeError naming ``what`` for values JSON cannot hold; warns (FormatWarning) when
+    reading the text back will not give an equal object (tuples become lists, non-string keys
+    become strings, numpy values become Python values).
+    """
+    try:
+        text = json.dumps(obj, default=json_default, ensure_ascii=False, allow_nan=True)
+    except TypeError as exc:
+        raise TypeError(f"{what}: {exc}") from exc
+    except ValueError as exc:  # circular reference
+        raise ValueError(f"{what}: {exc}") from exc
+    if not _same_json(json.loads(text), obj):
+        warnings.warn(FormatWarning(
+            f"{what} is stored as JSON and will read back changed (tuples become lists, "
+            f"non-string keys become strings, numpy values become Python values)"), stacklevel=3)
+    return text
+
+
+def check_start_datetime(value, path) -> str | None:
+    """Check an ISO 8601 start time read from a file (None passes)."""
+    if value is None:
+        return None
+    if not isinstance(value, str):
+        raise RecordingFileError(path, f"start_datetime must be an ISO 8601 string, got {value!r}")
+    try:
+        _dt.datetime.fromisoformat(value)
+    except ValueError as exc:
+        raise RecordingFileError(path, f"start_datetime {value!r} is not ISO 8601") from exc
+    return value
+
+
+def spec_from_dict(d: dict, path, where: str, *, checked: bool = False) -> ChannelSpec:
+    """A ChannelSpec from a dict read from a file, checked against channel_spec.schema.json
+    (unless ``checked``: already validated as part of a larger schema)."""
+    from data_schemas import validate
+
+    try:
+        if not checked:
+            validate(d, "channel_spec", where=where)
+        return ChannelSpec.from_dict(d)
+    except (ValueError, TypeError) as exc:
+        raise RecordingFileError(path, f"bad channel spec: {exc}") from exc
 
 
 # ---------------------------------------------------------------------------- atomic writes

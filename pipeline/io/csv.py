@@ -59,8 +59,8 @@ import numpy as np
 from ..errors import FormatWarning
 from ..recording import ChannelSpec, Recording
 from ..validate import as_int, as_positive_int
-from .base import CorruptFileError, RecordingFileError, RecordingInfo
-from .hdf5 import check_start_datetime, dumps_json, spec_from_dict, warn_nonfinite
+from .base import (CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime, check_verify,
+                   dumps_json, spec_from_dict, warn_nonfinite)
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "FORMAT_VERSION", "TIME_TOLERANCE", "sniff", "read_info",
            "read", "write", "write_blocks", "iter_blocks"]
@@ -343,99 +343,115 @@ def _scan(path, head: _Head) -> tuple[int, bytes, bytes]:
 
 
 def _scan_structure(path, head: _Head) -> tuple[int, bytes, bytes]:
-    expected = len(head.fields) - 1   # commas per data line
-    own = head.preamble is not None
+    """The structure scan of :func:`_scan`, uncached: the data lines read in blocks of
+    ``_SCAN_BLOCK`` bytes (see :class:`_RowScan`), then the file's end checked."""
+    scan = _RowScan(path, head)
     buf = bytearray(_SCAN_BLOCK)
-    pos = head.data_offset            # file offset of buf[0]
-    line = head.n_head + 1            # file line number of the next line to end
-    line_start = pos                  # its byte offset
-    carry = 0                         # commas seen so far in that line
-    prev_byte = -1                    # last byte of the previous block
-    blank_from = None                 # (line, offset) of the first blank line of a trailing run
-    n_rows = 0
-    last_span = None                  # (start, end) of the last non-blank line
-
-    def bad_line(ln, off, problem):
-        return CorruptFileError(path, f"line {ln} (byte {off})", problem)
-
     with open(path, "rb", buffering=0) as fh:
-        fh.seek(pos)
+        fh.seek(scan.pos)
         while True:
             k = fh.readinto(buf)
             if not k:
                 break
-            a = np.frombuffer(buf, np.uint8, k)
-            nl = np.flatnonzero(a == 10)
-            if not nl.size:
-                carry += int(np.count_nonzero(a == 44))
-                prev_byte = int(a[-1])
-                pos += k
-                continue
-            cm = np.flatnonzero(a == 44)
-            before = np.searchsorted(cm, nl)
-            counts = np.diff(before, prepend=0)
-            counts[0] += carry
-            carry = int(cm.size - before[-1])
-            starts = np.empty_like(nl)
-            starts[0] = line_start - pos
-            starts[1:] = nl[:-1] + 1
-            lengths = nl - starts
-            # byte before each newline ('\r' of a CRLF blank line), from the previous block if needed
-            cr = np.where(nl > 0, a[np.maximum(nl - 1, 0)], prev_byte) == 13
-            blank = (counts == 0) & ((lengths == 0) | ((lengths == 1) & cr))
-            rows = ~blank
-            if blank_from is not None and rows.any():  # a blank run of earlier blocks, then a row
-                ln, off = blank_from
-                raise bad_line(ln, off, "blank line inside the data rows")
-            wrong = (counts != expected) & rows
-            problems = []  # (index in block, message): the first one in the file is reported
-            if wrong.any():
-                i = int(np.argmax(wrong))
-                problems.append((i, f"{int(counts[i]) + 1} field(s), the header has {expected + 1}: "
-                                    f"malformed row"))
-            if blank.any():
-                i = int(np.argmax(blank))
-                if own:
-                    problems.append((i, "blank line in a meshphase CSV (none are written)"))
-                elif rows[i:].any():
-                    problems.append((i, "blank line inside the data rows"))
-            if problems:
-                i, problem = min(problems)
-                raise bad_line(line + i, pos + int(starts[i]), problem)
-            n_rows += int(rows.sum())
-            if rows.any():
-                j = int(np.flatnonzero(rows)[-1])
-                last_span = (pos + int(starts[j]), pos + int(nl[j]))
-            if blank[-1]:
-                if blank_from is None:
-                    run = np.flatnonzero(~blank)
-                    i = int(run[-1]) + 1 if run.size else 0
-                    blank_from = (line + i, pos + int(starts[i]))
-            else:
-                blank_from = None
-            line += nl.size
-            line_start = pos + int(nl[-1]) + 1
-            prev_byte = int(a[-1])
-            pos += k
-        size = pos
-        if line_start < size:
-            fh.seek(max(line_start, size - 40))
+            scan.feed(np.frombuffer(buf, np.uint8, k))
+        size = scan.pos
+        if scan.line_start < size:
+            fh.seek(max(scan.line_start, size - 40))
             tail = fh.read(40)
-            raise bad_line(line, line_start, f"truncated: the last line does not end with a newline: the file was "
-                                             f"cut mid-row (it ends with {tail.decode('latin-1')!r}; if the file is "
-                                             f"complete, add a final newline)")
+            raise scan.bad_line(scan.line, scan.line_start,
+                                f"truncated: the last line does not end with a newline: the file was "
+                                f"cut mid-row (it ends with {tail.decode('latin-1')!r}; if the file is "
+                                f"complete, add a final newline)")
         first = last = b""
-        if n_rows:
+        if scan.n_rows:
             fh.seek(head.data_offset)
             first = fh.readline()
-            fh.seek(last_span[0])
-            last = fh.read(last_span[1] - last_span[0])
-    return n_rows, first, last
+            fh.seek(scan.last_span[0])
+            last = fh.read(scan.last_span[1] - scan.last_span[0])
+    return scan.n_rows, first, last
 
 
-def _check_verify(verify) -> None:
-    if not isinstance(verify, (bool, np.bool_)):
-        raise TypeError(f"verify must be a bool, got {verify!r}")
+class _RowScan:
+    """Counts the data rows of a CSV block by block (vectorised over each block's lines) and
+    raises CorruptFileError at the first malformed row (wrong field count) or misplaced
+    blank line; a line may span blocks."""
+
+    def __init__(self, path, head: _Head):
+        self.path = path
+        self.expected = len(head.fields) - 1   # commas per data line
+        self.own = head.preamble is not None
+        self.pos = head.data_offset            # file offset of the next block
+        self.line = head.n_head + 1            # file line number of the next line to end
+        self.line_start = self.pos             # its byte offset
+        self.carry = 0                         # commas seen so far in that line
+        self.prev_byte = -1                    # last byte of the previous block
+        self.blank_from = None                 # (line, offset) of the first blank line of a trailing run
+        self.n_rows = 0
+        self.last_span = None                  # (start, end) of the last non-blank line
+
+    def bad_line(self, ln, off, problem) -> CorruptFileError:
+        return CorruptFileError(self.path, f"line {ln} (byte {off})", problem)
+
+    def feed(self, a: np.ndarray) -> None:
+        """Scan the next block ``a`` of the file (bytes as uint8)."""
+        k = a.size
+        nl = np.flatnonzero(a == 10)
+        if not nl.size:
+            self.carry += int(np.count_nonzero(a == 44))
+            self.prev_byte = int(a[-1])
+            self.pos += k
+            return
+        cm = np.flatnonzero(a == 44)
+        before = np.searchsorted(cm, nl)
+        counts = np.diff(before, prepend=0)
+        counts[0] += self.carry
+        self.carry = int(cm.size - before[-1])
+        starts = np.empty_like(nl)
+        starts[0] = self.line_start - self.pos
+        starts[1:] = nl[:-1] + 1
+        lengths = nl - starts
+        # byte before each newline ('\r' of a CRLF blank line), from the previous block if needed
+        cr = np.where(nl > 0, a[np.maximum(nl - 1, 0)], self.prev_byte) == 13
+        blank = (counts == 0) & ((lengths == 0) | ((lengths == 1) & cr))
+        rows = ~blank
+        self._check(counts, starts, blank, rows)
+        self.n_rows += int(rows.sum())
+        if rows.any():
+            j = int(np.flatnonzero(rows)[-1])
+            self.last_span = (self.pos + int(starts[j]), self.pos + int(nl[j]))
+        if blank[-1]:
+            if self.blank_from is None:
+                run = np.flatnonzero(~blank)
+                i = int(run[-1]) + 1 if run.size else 0
+                self.blank_from = (self.line + i, self.pos + int(starts[i]))
+        else:
+            self.blank_from = None
+        self.line += nl.size
+        self.line_start = self.pos + int(nl[-1]) + 1
+        self.prev_byte = int(a[-1])
+        self.pos += k
+
+    def _check(self, counts, starts, blank, rows) -> None:
+        """Raise at the first problem among the lines of a block (field ``counts`` - 1,
+        ``starts`` in the block, ``blank`` and data ``rows`` masks)."""
+        if self.blank_from is not None and rows.any():  # a blank run of earlier blocks, then a row
+            ln, off = self.blank_from
+            raise self.bad_line(ln, off, "blank line inside the data rows")
+        wrong = (counts != self.expected) & rows
+        problems = []  # (index in block, message): the first one in the file is reported
+        if wrong.any():
+            i = int(np.argmax(wrong))
+            problems.append((i, f"{int(counts[i]) + 1} field(s), the header has {self.expected + 1}: "
+                                f"malformed row"))
+        if blank.any():
+            i = int(np.argmax(blank))
+            if self.own:
+                problems.append((i, "blank line in a meshphase CSV (none are written)"))
+            elif rows[i:].any():
+                problems.append((i, "blank line inside the data rows"))
+        if problems:
+            i, problem = min(problems)
+            raise self.bad_line(self.line + i, self.pos + int(starts[i]), problem)
 
 
 def read_info(path, *, verify: bool = True) -> RecordingInfo:
@@ -446,7 +462,7 @@ def read_info(path, *, verify: bool = True) -> RecordingInfo:
     time value to infer fs (no samples are parsed). ``verify`` is accepted for the
     registry's uniform options: CSV stores no checksum, the structure is always checked.
     """
-    _check_verify(verify)
+    check_verify(verify)
     head = _read_head(path)
     if head.preamble is not None:
         return _check_preamble(path, head)
@@ -602,7 +618,7 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *, verify: boo
     Recording
         float32 when the preamble says so, else float64; Fortran-ordered (channel-major).
     """
-    _check_verify(verify)
+    check_verify(verify)
     head, info, names, cols, perm, dtype = _setup(path, channels)
     n = info.n_samples
     i0 = as_int(i0, "i0")
@@ -649,7 +665,7 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *,
     n_overlap = as_int(n_overlap, "n_overlap")
     if n_overlap < 0:
         raise ValueError(f"n_overlap must be >= 0, got {n_overlap}")
-    _check_verify(verify)
+    check_verify(verify)
     head, info, names, cols, perm, dtype = _setup(path, channels)
     n = info.n_samples
     if n == 0:

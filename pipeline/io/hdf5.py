@@ -37,15 +37,11 @@ checking the checksum (to salvage the undamaged samples of a damaged file); chun
 compression are always checked (h5py exposes no switch to skip it). Files are written with
 no chunk cache (``rdcc_nbytes=0``), so a failed write (ENOSPC) leaves no dirty chunk for
 HDF5 to flush while closing: the write raises a clean OSError.
-
-The helpers :func:`warn_nonfinite`, :func:`dumps_json` and :func:`loads_json` are shared with
-the CSV and TDMS modules.
 """
 
 from __future__ import annotations
 
 import copy
-import datetime as _dt
 import errno
 import json
 import math
@@ -53,20 +49,17 @@ import os
 import re
 import uuid
 import zlib
-import warnings
 from collections import OrderedDict
 from pathlib import Path
 from typing import Any, Iterator
 
 import numpy as np
 
-from ..errors import DataQualityWarning, FormatWarning
-from ..jsonable import json_default
 from ..log import logger
-from ..quality import nonfinite_runs
-from ..recording import ChannelSpec, Recording
+from ..recording import Recording
 from ..validate import as_choice, as_int, as_positive_int
-from .base import CorruptFileError, RecordingFileError, RecordingInfo
+from .base import (CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime, check_verify,
+                   dumps_json, spec_from_dict, warn_nonfinite)
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "FORMAT_VERSION", "DEFAULT_CHUNK_SAMPLES", "sniff",
            "read_info", "read", "write", "write_blocks", "iter_blocks"]
@@ -88,74 +81,7 @@ _USERBLOCK_OFFSETS = (0, 512, 1024, 2048)
 _GROUP = "channels"
 
 
-# ---------------------------------------------------------------------------- shared helpers
-def warn_nonfinite(path, data: np.ndarray, names, i0: int = 0) -> None:
-    """Issue one DataQualityWarning per channel holding NaN/inf runs (the data are kept).
-
-    Parameters
-    ----------
-    path : str or Path
-        File the samples came from (named in the message).
-    data : ndarray, shape (n_samples, n_channels)
-    names : sequence of str
-        Channel names, one per column.
-    i0 : int
-        File sample index of ``data[0]`` (so the message gives file sample indices).
-    """
-    if data.size == 0:
-        return
-    for j, name in enumerate(names):
-        col = data[:, j]
-        # a finite sum proves every sample finite (NaN and inf propagate); only a non-finite
-        # sum (or an overflow) pays for the exact scan
-        with np.errstate(invalid="ignore", over="ignore"):
-            total = np.add.reduce(col, dtype=np.float64)
-        if np.isfinite(total):
-            continue
-        runs = nonfinite_runs(col)
-        if not len(runs):  # the sum overflowed; every sample is finite
-            continue
-        lengths = runs[:, 1] - runs[:, 0]
-        first = int(runs[0, 0]) + i0
-        warnings.warn(DataQualityWarning(
-            f"{path}: channel {name!r} has {len(runs)} run(s) of NaN/inf samples "
-            f"({int(lengths.sum())} samples, longest {int(lengths.max())}, first at sample {first}); "
-            f"kept in the data"), stacklevel=3)
-
-
-def _same_json(a: Any, b: Any) -> bool:
-    """Equality that treats NaN == NaN and requires equal container types (tuple != list)."""
-    if type(a) is not type(b):
-        return False
-    if isinstance(a, float):
-        return a == b or (math.isnan(a) and math.isnan(b))
-    if isinstance(a, dict):
-        return a.keys() == b.keys() and all(_same_json(a[k], b[k]) for k in a)
-    if isinstance(a, list):
-        return len(a) == len(b) and all(_same_json(x, y) for x, y in zip(a, b))
-    return a == b
-
-
-def dumps_json(obj: Any, what: str) -> str:
-    """One-line JSON text of ``obj`` (numpy scalars/arrays and datetimes converted).
-
-    Raises TypeError naming ``what`` for values JSON cannot hold; warns (FormatWarning) when
-    reading the text back will not give an equal object (tuples become lists, non-string keys
-    become strings, numpy values become Python values).
-    """
-    try:
-        text = json.dumps(obj, default=json_default, ensure_ascii=False, allow_nan=True)
-    except TypeError as exc:
-        raise TypeError(f"{what}: {exc}") from exc
-    except ValueError as exc:  # circular reference
-        raise ValueError(f"{what}: {exc}") from exc
-    if not _same_json(json.loads(text), obj):
-        warnings.warn(FormatWarning(
-            f"{what} is stored as JSON and will read back changed (tuples become lists, "
-            f"non-string keys become strings, numpy values become Python values)"), stacklevel=3)
-    return text
-
-
+# ---------------------------------------------------------------------------- helpers
 def loads_json(text: Any, path, what: str, kind: type):
     """Parse JSON text read from a file; RecordingFileError naming the file and ``what``."""
     if isinstance(text, bytes):
@@ -170,32 +96,6 @@ def loads_json(text: Any, path, what: str, kind: type):
         raise RecordingFileError(path, f"{what} must be a JSON {'object' if kind is dict else 'array'}, "
                                        f"got {type(value).__name__}")
     return value
-
-
-def check_start_datetime(value, path) -> str | None:
-    """Check an ISO 8601 start time read from a file (None passes)."""
-    if value is None:
-        return None
-    if not isinstance(value, str):
-        raise RecordingFileError(path, f"start_datetime must be an ISO 8601 string, got {value!r}")
-    try:
-        _dt.datetime.fromisoformat(value)
-    except ValueError as exc:
-        raise RecordingFileError(path, f"start_datetime {value!r} is not ISO 8601") from exc
-    return value
-
-
-def spec_from_dict(d: dict, path, where: str, *, checked: bool = False) -> ChannelSpec:
-    """A ChannelSpec from a dict read from a file, checked against channel_spec.schema.json
-    (unless ``checked``: already validated as part of a larger schema)."""
-    from data_schemas import validate
-
-    try:
-        if not checked:
-            validate(d, "channel_spec", where=where)
-        return ChannelSpec.from_dict(d)
-    except (ValueError, TypeError) as exc:
-        raise RecordingFileError(path, f"bad channel spec: {exc}") from exc
 
 
 def _plain(v: Any) -> Any:
@@ -397,7 +297,7 @@ def read_info(path, *, verify: bool = True) -> RecordingInfo:
         ``hdf5_layout.schema.json``, missing or non-positive sample rate, channels of unequal
         length, duplicate channel names.
     """
-    _check_verify(verify)
+    check_verify(verify)
     with _open(path) as f, _MetaErrors(path):
         attrs, specs, dsets = _header(f, path)
         extra = {"format_version": attrs["format_version"],
@@ -409,12 +309,6 @@ def read_info(path, *, verify: bool = True) -> RecordingInfo:
     return RecordingInfo(path=str(path), format=NAME, fs=float(attrs["fs"]), n_samples=int(attrs["n_samples"]),
                          channels=specs, t0=float(attrs["t0"]), start_datetime=attrs["start_datetime"],
                          meta=attrs["meta"], history=attrs["history"], extra=extra)
-
-
-def _check_verify(verify) -> bool:
-    if not isinstance(verify, (bool, np.bool_)):
-        raise TypeError(f"verify must be a bool, got {verify!r}")
-    return bool(verify)
 
 
 def _unverified_ok(ds) -> bool:
@@ -520,7 +414,7 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *, verify: boo
         A chunk's checksum does not match (dataset, sample range and byte offset named),
         the file is truncated, or its metadata are damaged.
     """
-    verify = _check_verify(verify)
+    verify = check_verify(verify)
     with _open(path) as f:
         attrs, specs, dsets = _header(f, path)
         names = _names(path, specs, channels)
@@ -535,7 +429,7 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *,
     Block k covers samples [k n_block, (k + 1) n_block + n_overlap), clipped to the recording.
     ``verify`` as in :func:`read`.
     """
-    verify = _check_verify(verify)
+    verify = check_verify(verify)
     n_block = as_positive_int(n_block, "n_block")
     n_overlap = as_int(n_overlap, "n_overlap")
     if n_overlap < 0:

@@ -63,10 +63,9 @@ import numpy as np
 
 from ..errors import FormatWarning
 from ..jsonable import to_jsonable
-from ..recording import CHANNEL_KINDS, Recording
+from ..recording import CHANNEL_KINDS, ChannelSpec, Recording
 from ..validate import as_int, as_positive, as_positive_int
-from .base import CorruptFileError, RecordingFileError, RecordingInfo
-from .hdf5 import spec_from_dict, warn_nonfinite
+from .base import CorruptFileError, RecordingFileError, RecordingInfo, check_verify, spec_from_dict, warn_nonfinite
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "sniff", "read_info", "read", "iter_blocks", "kind_from_name"]
 
@@ -234,11 +233,6 @@ def _has_scale_props(props) -> bool:
     return any(k.startswith("NI_Scale[") and k.endswith("_Scale_Type") for k in props)
 
 
-def _check_verify(verify) -> None:
-    if not isinstance(verify, (bool, np.bool_)):
-        raise TypeError(f"verify must be a bool, got {verify!r}")
-
-
 class _Collect(logging.Filter):
     """Keeps npTDMS's log records instead of letting them through (a logger filter that
     returns False stops the record before any handler and before propagation)."""
@@ -292,9 +286,41 @@ def _open(path):
 
 
 def _plan(tdms, path, n_segments: int, fs_opt, raw: bool) -> _Plan:
-    from nptdms import scaling as _sc
-
+    """What a read of this open TDMS file needs: its header as a RecordingInfo, the
+    channels to read (with npTDMS's scaling unless ``raw``) and the fast-path extents."""
     path = Path(path)
+    groups, usable, names = _usable_channels(tdms, path, n_segments)
+    n_samples = _n_samples(path, names, usable)
+    fs, t0, start_datetime = _timing(path, names, usable, fs_opt)
+    chans = {}
+    specs = []
+    scaled_names = []
+    for n, (g, ch) in zip(names, usable):
+        spec, chans[n], scaled = _channel(tdms, path, n, g, ch, raw)
+        specs.append(spec)
+        if scaled:
+            scaled_names.append(n)
+    out_kinds = [(c.raw_dtype if (raw or c.scaling is None) else np.dtype(c.ch.dtype)) for c in chans.values()]
+    dtype = np.dtype(np.float32) if all(k == np.float32 for k in out_kinds) else np.dtype(np.float64)
+    fast = _build_extents(tdms, path, chans, raw)
+    file_props = dict(tdms.properties)
+    meta = _json_property(file_props.pop("meshphase_meta", None), path, "meshphase_meta", dict) or {}
+    history = _json_property(file_props.pop("meshphase_history", None), path, "meshphase_history", list) or []
+    meta["tdms"] = {"file": _jsonable(file_props),
+                    "groups": {g.name: _jsonable(dict(g.properties)) for g in groups},
+                    "channels": {n: _jsonable(dict(ch.properties)) for n, (_, ch) in zip(names, usable)}}
+    history.append({"step": "read_tdms", "file": path.name, "scaled": not raw, "ni_scaled_channels": scaled_names})
+    info = RecordingInfo(path=str(path), format=NAME, fs=fs, n_samples=int(n_samples), channels=specs, t0=t0,
+                         start_datetime=start_datetime, meta=meta, history=history,
+                         extra={"n_segments": n_segments, "groups": [g.name for g in groups],
+                                "tdms_paths": {n: ch.path for n, (_, ch) in zip(names, usable)},
+                                "scaled": not raw, "fast_path": fast})
+    return _Plan(info=info, chans=chans, dtype=dtype, raw=raw, fast=fast)
+
+
+def _usable_channels(tdms, path: Path, n_segments: int) -> tuple[list, list, list]:
+    """(groups, [(group, channel)] of the numeric channels, their names): the plain channel
+    names, or ``group/channel`` where plain names repeat."""
     reader = getattr(tdms, "_reader", None)
     segs = getattr(reader, "_segments", None)
     if segs is not None and len(segs) != n_segments:
@@ -313,7 +339,7 @@ def _plan(tdms, path, n_segments: int, fs_opt, raw: bool) -> _Plan:
             dt = np.dtype("V8")
         if ch.data_type is None or dt.kind not in "biuf":
             warnings.warn(FormatWarning(f"{path}: skipped channel {g.name}/{ch.name}: no numeric data "
-                                        f"(type {getattr(ch.data_type, '__name__', ch.data_type)})"), stacklevel=4)
+                                        f"(type {getattr(ch.data_type, '__name__', ch.data_type)})"), stacklevel=5)
             continue
         usable.append((g, ch))
     if not usable:
@@ -324,7 +350,12 @@ def _plan(tdms, path, n_segments: int, fs_opt, raw: bool) -> _Plan:
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise RecordingFileError(path, f"duplicate channel name(s) {dup}")
+    return groups, usable, names
 
+
+def _n_samples(path: Path, names: list, usable: list) -> int:
+    """The common length of the channels; a meshphase file shorter than its wf_samples is
+    truncated."""
     lengths = {n: len(ch) for n, (_, ch) in zip(names, usable)}
     for n, (_, ch) in zip(names, usable):
         # meshphase writes the total sample count as wf_samples (NI writers use it for other
@@ -336,9 +367,12 @@ def _plan(tdms, path, n_segments: int, fs_opt, raw: bool) -> _Plan:
                                    f"cut at a segment boundary)")
     if len(set(lengths.values())) > 1:
         raise RecordingFileError(path, f"channels of unequal length: {lengths}")
-    n_samples = next(iter(lengths.values()))
+    return next(iter(lengths.values()))
 
-    # sample rate, t0, start time
+
+def _timing(path: Path, names: list, usable: list, fs_opt) -> tuple[float, float, str | None]:
+    """(fs [Hz], t0 [s], start_datetime) common to the channels, from their waveform
+    properties (``fs_opt`` [Hz], when given, overrides wf_increment)."""
     incs = {}
     for n, (_, ch) in zip(names, usable):
         incs[n] = _prop_float(ch.properties, "wf_increment", path, n)
@@ -347,7 +381,7 @@ def _plan(tdms, path, n_segments: int, fs_opt, raw: bool) -> _Plan:
         clash = {n: v for n, v in incs.items() if v is not None and v > 0 and abs(v * fs - 1) > 1e-9}
         if clash:
             warnings.warn(FormatWarning(f"{path}: fs={fs!r} Hz given overrides the file's wf_increment {clash}"),
-                          stacklevel=4)
+                          stacklevel=5)
     else:
         bad = {n: v for n, v in incs.items() if v is None or not (math.isfinite(v) and v > 0)}
         if bad:
@@ -375,60 +409,44 @@ def _plan(tdms, path, n_segments: int, fs_opt, raw: bool) -> _Plan:
         if spread > 0.5 / fs:
             raise RecordingFileError(path, f"channels start at different times (wf_start_time spread {spread!r} s)")
         start_datetime = _iso(min(vals))
+    return fs, t0, start_datetime
 
-    # channel specs and scaling
-    chans = {}
-    specs = []
-    scaled_names = []
-    for n, (g, ch) in zip(names, usable):
-        props = ch.properties
-        scaling = _sc.get_scaling(props, g.properties, tdms.properties)
-        wants_scaling = any(_has_scale_props(p) for p in (props, g.properties, tdms.properties))
-        if wants_scaling and scaling is None:
-            warnings.warn(FormatWarning(f"{path}: channel {n!r} has NI scaling properties that npTDMS cannot "
-                                        f"apply; its samples are the raw (unscaled) values"), stacklevel=4)
-        if scaling is not None:
-            scaled_names.append(n)
-        kind = props.get("meshphase_kind")
-        if kind is None:
-            kind = kind_from_name(ch.name, g.name)
-        elif kind not in CHANNEL_KINDS:
-            raise RecordingFileError(path, f"channel {n!r}: property meshphase_kind = {kind!r} is not one of "
-                                           f"{CHANNEL_KINDS}")
-        units = props.get("unit_string", props.get("NI_UnitDescription", ""))
-        gain = _prop_float(props, "meshphase_gain", path, n)
-        gain = 1.0 if gain is None else gain
-        if raw and scaling is not None:
-            lin = _linear_gain(scaling)
-            if lin is not None and lin != 0:
-                gain *= lin
-            else:
-                units, gain = "raw", 1.0
-        tooth = props.get("meshphase_tooth")
-        d = {"name": n, "kind": kind, "units": str(units), "gain": gain,
-             "gear": props.get("meshphase_gear"),
-             "tooth": int(tooth) if isinstance(tooth, (int, np.integer)) else tooth,
-             "face_position": _prop_float(props, "meshphase_face_position", path, n),
-             "description": str(props.get("meshphase_description", props.get("description", "")))}
-        specs.append(spec_from_dict(_jsonable(d), path, f"channel {n!r}"))
-        raw_dtype = np.dtype(ch._raw_data_dtype()) if hasattr(ch, "_raw_data_dtype") else np.dtype(ch.dtype)
-        chans[n] = _Chan(n, ch, None if raw else scaling, raw_dtype)
-    out_kinds = [(c.raw_dtype if (raw or c.scaling is None) else np.dtype(c.ch.dtype)) for c in chans.values()]
-    dtype = np.dtype(np.float32) if all(k == np.float32 for k in out_kinds) else np.dtype(np.float64)
-    fast = _build_extents(tdms, path, chans, raw)
-    file_props = dict(tdms.properties)
-    meta = _json_property(file_props.pop("meshphase_meta", None), path, "meshphase_meta", dict) or {}
-    history = _json_property(file_props.pop("meshphase_history", None), path, "meshphase_history", list) or []
-    meta["tdms"] = {"file": _jsonable(file_props),
-                    "groups": {g.name: _jsonable(dict(g.properties)) for g in groups},
-                    "channels": {n: _jsonable(dict(ch.properties)) for n, (_, ch) in zip(names, usable)}}
-    history.append({"step": "read_tdms", "file": path.name, "scaled": not raw, "ni_scaled_channels": scaled_names})
-    info = RecordingInfo(path=str(path), format=NAME, fs=fs, n_samples=int(n_samples), channels=specs, t0=t0,
-                         start_datetime=start_datetime, meta=meta, history=history,
-                         extra={"n_segments": n_segments, "groups": [g.name for g in groups],
-                                "tdms_paths": {n: ch.path for n, (_, ch) in zip(names, usable)},
-                                "scaled": not raw, "fast_path": fast})
-    return _Plan(info=info, chans=chans, dtype=dtype, raw=raw, fast=fast)
+
+def _channel(tdms, path: Path, n: str, g, ch, raw: bool) -> tuple[ChannelSpec, _Chan, bool]:
+    """(spec, read plan, whether npTDMS scales it) of channel ``ch`` of group ``g``, named
+    ``n``: kind, units and gain from the meshphase properties, else from NI's."""
+    from nptdms import scaling as _sc
+
+    props = ch.properties
+    scaling = _sc.get_scaling(props, g.properties, tdms.properties)
+    wants_scaling = any(_has_scale_props(p) for p in (props, g.properties, tdms.properties))
+    if wants_scaling and scaling is None:
+        warnings.warn(FormatWarning(f"{path}: channel {n!r} has NI scaling properties that npTDMS cannot "
+                                    f"apply; its samples are the raw (unscaled) values"), stacklevel=5)
+    kind = props.get("meshphase_kind")
+    if kind is None:
+        kind = kind_from_name(ch.name, g.name)
+    elif kind not in CHANNEL_KINDS:
+        raise RecordingFileError(path, f"channel {n!r}: property meshphase_kind = {kind!r} is not one of "
+                                       f"{CHANNEL_KINDS}")
+    units = props.get("unit_string", props.get("NI_UnitDescription", ""))
+    gain = _prop_float(props, "meshphase_gain", path, n)
+    gain = 1.0 if gain is None else gain
+    if raw and scaling is not None:
+        lin = _linear_gain(scaling)
+        if lin is not None and lin != 0:
+            gain *= lin
+        else:
+            units, gain = "raw", 1.0
+    tooth = props.get("meshphase_tooth")
+    d = {"name": n, "kind": kind, "units": str(units), "gain": gain,
+         "gear": props.get("meshphase_gear"),
+         "tooth": int(tooth) if isinstance(tooth, (int, np.integer)) else tooth,
+         "face_position": _prop_float(props, "meshphase_face_position", path, n),
+         "description": str(props.get("meshphase_description", props.get("description", "")))}
+    spec = spec_from_dict(_jsonable(d), path, f"channel {n!r}")
+    raw_dtype = np.dtype(ch._raw_data_dtype()) if hasattr(ch, "_raw_data_dtype") else np.dtype(ch.dtype)
+    return spec, _Chan(n, ch, None if raw else scaling, raw_dtype), scaling is not None
 
 
 def _build_extents(tdms, path, chans: dict, raw: bool) -> bool:
@@ -610,7 +628,7 @@ def read_info(path, *, fs: float | None = None, raw: bool = False, verify: bool 
         Accepted for the registry's uniform options: TDMS stores no checksum; the segment
         structure is always checked.
     """
-    _check_verify(verify)
+    check_verify(verify)
     path, tdms, plan = _prepare(path, fs, raw)
     if tdms is not None:
         tdms.close()
@@ -652,7 +670,7 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *, fs: float |
     CorruptFileError
         Truncated or damaged segment structure (segment and byte offset named).
     """
-    _check_verify(verify)
+    check_verify(verify)
     path, tdms, plan = _prepare(path, fs, raw)
     with contextlib.ExitStack() as stack:
         if tdms is not None:
@@ -675,7 +693,7 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *, fs: float 
 
     Block k covers samples [k n_block, (k + 1) n_block + n_overlap), clipped to the recording.
     """
-    _check_verify(verify)
+    check_verify(verify)
     n_block = as_positive_int(n_block, "n_block")
     n_overlap = as_int(n_overlap, "n_overlap")
     if n_overlap < 0:

@@ -19,6 +19,8 @@ from mcap.reader import make_reader
 
 import pipeline.io as pio
 from pipeline.io import mcap as m
+from pipeline.io.mcap import layout as mlayout
+from pipeline.io.mcap import writer as mwriter
 from pipeline.recording import ChannelSpec, Recording
 
 pytestmark = pytest.mark.interop
@@ -78,7 +80,7 @@ def test_typescript_reader_sees_same_samples_times_and_metadata(node, tmp_path, 
     p = pio.write(rec, tmp_path / "r.mcap", block=block, compression=compression, chunk_size=50_000)
     out = _node_read(node, p)
 
-    origin = m._origin_ns(t0)
+    origin = mlayout._origin_ns(t0)
     assert origin == (12_500_000_000 if t0 == 12.5 else 0)
     starts = list(range(0, rec.n_samples, block))
     want_times = [str(m.log_time_ns(a, rec.fs, origin)) for a in starts]
@@ -91,9 +93,9 @@ def test_typescript_reader_sees_same_samples_times_and_metadata(node, tmp_path, 
     for i, spec in enumerate(rec.channels):
         c = chans[spec.name]
         assert c["messageEncoding"] == m.MESSAGE_ENCODING
-        assert c["metadata"] == m._channel_metadata(spec, i, rec.fs, rec.data.dtype.name)
+        assert c["metadata"] == mwriter._channel_metadata(spec, i, rec.fs, rec.data.dtype.name)
     (md,) = [x for x in out["metadata"] if x["name"] == m.RECORDING_METADATA]
-    assert md["metadata"] == m._recording_metadata(rec, block, compression, origin)
+    assert md["metadata"] == mwriter._recording_metadata(rec, block, compression, origin)
     assert float(md["metadata"]["fs"]) == rec.fs and float(md["metadata"]["t0"]) == rec.t0
     assert out["statistics"]["messageCount"] == str(len(starts) * rec.n_channels)
 
@@ -127,7 +129,7 @@ def test_time_window_end_is_inclusive_in_typescript_half_open_in_python(node, tm
     assert ts == [2000, 4000, 6000]  # @mcap/core: [startTime, endTime], end included
 
     with open(p, "rb") as fh:
-        py = sorted(m._HEADER.unpack_from(x.data)[0] for _, _, x in make_reader(fh).iter_messages(
+        py = sorted(mlayout._HEADER.unpack_from(x.data)[0] for _, _, x in make_reader(fh).iter_messages(
             topics=["sun_1"], starting_at=t_start, ending_before=t_end))
     assert py == [2000, 4000]  # mcap (Python): [start, end), end excluded
 

@@ -24,11 +24,13 @@ import struct
 import h5py
 import numpy as np
 import pytest
+from mcap.reader import make_reader
 
 import pipeline.io as pio
 from pipeline.io import CorruptFileError, RecordingFileError
 from pipeline.io import csv as mcsv
 from pipeline.io import mcap as m
+from pipeline.io.mcap import header as mheader
 from pipeline.recording import ChannelSpec, Recording
 
 pytestmark = pytest.mark.timeout(120)
@@ -60,7 +62,7 @@ def _flip(path, offset, rng):
 def _chunk_records(path):
     """(chunk number, start, end) of the uncompressed records of every chunk (file bytes)."""
     with open(path, "rb") as fh:
-        summary = m.make_reader(fh).get_summary()
+        summary = make_reader(fh).get_summary()
         out = []
         for k, ci in enumerate(summary.chunk_indexes):
             fh.seek(ci.chunk_start_offset + 9 + 28)
@@ -173,8 +175,8 @@ def test_mcap_verify_is_checked_once_per_file(tmp_path, monkeypatch):
     p = tmp_path / "once.mcap"
     pio.write(rec, p, block=1000)
     calls = []
-    real = m._check_data_crc
-    monkeypatch.setattr(m, "_check_data_crc", lambda *a: calls.append(1) or real(*a))
+    real = mheader._check_data_crc
+    monkeypatch.setattr(mheader, "_check_data_crc", lambda *a: calls.append(1) or real(*a))
     for _ in range(3):
         assert pio.read(p) == rec
     assert len(calls) == 1

@@ -15,6 +15,7 @@ import pytest
 
 import pipeline.io as pio
 from pipeline.io import hdf5, mcap
+from pipeline.io.mcap import header as mheader
 from pipeline.recording import ChannelSpec, Recording
 
 pytestmark = [pytest.mark.bench, pytest.mark.timeout(1800)]
@@ -56,8 +57,8 @@ def test_mcap_crc_cost(rec, tmp_path):
         assert pio.read(p) == rec
         off = _best(lambda: mcap.read(p, verify=False))
         on = _best(lambda: mcap.read(p, verify=True))
-        first = _best(lambda: mcap.read(p, verify=True), before=mcap._VERIFIED.clear)
-        opened = _best(lambda: mcap.read_info(p, verify=True), before=mcap._VERIFIED.clear)
+        first = _best(lambda: mcap.read(p, verify=True), before=mheader._VERIFIED.clear)
+        opened = _best(lambda: mcap.read_info(p, verify=True), before=mheader._VERIFIED.clear)
         print()
         _row(f"MCAP {comp:4} read, verify=False", *off)
         _row(f"MCAP {comp:4} read, verify=True (file checked)", *on, base=off[0])

@@ -15,11 +15,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from mcap.reader import make_reader
-from mcap.writer import CompressionType, Writer
+from mcap.writer import CompressionType, IndexType, Writer
 
 import pipeline.io as pio
 from pipeline.io import CorruptFileError, RecordingFileError
 from pipeline.io import mcap as m
+from pipeline.io.mcap import layout as mlayout
+from pipeline.io.mcap import reader as mreader
+from pipeline.io.mcap import writer as mwriter
 from pipeline.recording import ChannelSpec, Recording
 
 
@@ -85,18 +88,18 @@ def _corrupt_chunk(path, offset):
 def _custom_file(path, rec, *, block=100, drop=None, duplicate=None, recording_md=None,
                  channel_md=None, payload_edit=None):
     """Write an MCAP file the way meshphase does, with one thing changed (tests only)."""
-    origin = m._origin_ns(rec.t0)
-    rmd = m._recording_metadata(rec, block, "none", origin)
+    origin = mlayout._origin_ns(rec.t0)
+    rmd = mwriter._recording_metadata(rec, block, "none", origin)
     if recording_md:
         rmd = recording_md(rmd)
-    code = m._DTYPE_CODES[rec.data.dtype.name]
+    code = mlayout._DTYPE_CODES[rec.data.dtype.name]
     with open(path, "wb") as fh:
         w = Writer(fh, compression=CompressionType.NONE)
         w.start(profile="meshphase", library="test")
         sid = w.register_schema(m.SCHEMA_NAME, m.SCHEMA_ENCODING, json.dumps(m.LAYOUT).encode())
         cids = []
         for i, s in enumerate(rec.channels):
-            cmd = m._channel_metadata(s, i, rec.fs, rec.data.dtype.name)
+            cmd = mwriter._channel_metadata(s, i, rec.fs, rec.data.dtype.name)
             if channel_md:
                 cmd = channel_md(i, cmd)
             cids.append(w.register_channel(s.name, m.MESSAGE_ENCODING, sid, cmd))
@@ -107,7 +110,7 @@ def _custom_file(path, rec, *, block=100, drop=None, duplicate=None, recording_m
                 if drop == (j, k):
                     continue
                 b = min(rec.n_samples, a + block)
-                payload = m._HEADER.pack(a, b - a, 1, code, 1) + col[a:b].tobytes()
+                payload = mlayout._HEADER.pack(a, b - a, 1, code, 1) + col[a:b].tobytes()
                 if payload_edit:
                     payload = payload_edit(j, k, payload)
                 t = m.log_time_ns(a, rec.fs, origin)
@@ -327,7 +330,7 @@ def test_log_times_follow_the_documented_rule(tmp_path, t0, origin):
     rec = _recording(3000, t0=t0, fs=1000.0 / 3.0)
     p = _write(rec, tmp_path / "r.mcap", block=250)
     with open(p, "rb") as fh:
-        msgs = [(msg.log_time, m._HEADER.unpack_from(msg.data)[0])
+        msgs = [(msg.log_time, mlayout._HEADER.unpack_from(msg.data)[0])
                 for _, ch, msg in make_reader(fh).iter_messages(topics=["sun_1"])]
     assert len(msgs) == 12
     for lt, first in msgs:
@@ -370,9 +373,9 @@ def test_python_reader_window_is_half_open(tmp_path):
     t2 = m.log_time_ns(2000, rec.fs, 0)
     with open(p, "rb") as fh:
         r = make_reader(fh)
-        excl = [m._HEADER.unpack_from(x.data)[0]
+        excl = [mlayout._HEADER.unpack_from(x.data)[0]
                 for _, _, x in r.iter_messages(topics=["sun_1"], starting_at=0, ending_before=t2)]
-        incl = [m._HEADER.unpack_from(x.data)[0]
+        incl = [mlayout._HEADER.unpack_from(x.data)[0]
                 for _, _, x in r.iter_messages(topics=["sun_1"], starting_at=0, ending_at=t2)]
     assert excl == [0, 1000] and incl == [0, 1000, 2000]
 
@@ -389,7 +392,7 @@ def test_mcap_library_decodes_the_same_samples(tmp_path):
         assert (schema.name, schema.encoding) == (m.SCHEMA_NAME, m.SCHEMA_ENCODING)
         assert json.loads(schema.data) == m.LAYOUT
         for _, ch, msg in r.iter_messages():
-            first, n, nch, code, ver = m._HEADER.unpack_from(msg.data)
+            first, n, nch, code, ver = mlayout._HEADER.unpack_from(msg.data)
             assert (nch, code, ver) == (1, 1, 1) and ch.message_encoding == m.MESSAGE_ENCODING
             out[first:first + n, int(ch.metadata["index"])] = np.frombuffer(msg.data, "<f4", n, 16)
         md = {x.name: x.metadata for x in r.iter_metadata()}
@@ -402,14 +405,14 @@ def test_schema_files_are_valid_and_describe_what_we_write(tmp_path):
     from jsonschema import Draft202012Validator
 
     for name in ("mcap_message.schema.json", "mcap_channel_metadata.schema.json"):
-        Draft202012Validator.check_schema(m._json_schema(name))
-    assert m._schema_problem("layout", m.LAYOUT) is None
+        Draft202012Validator.check_schema(mlayout._json_schema(name))
+    assert mlayout._schema_problem("layout", m.LAYOUT) is None
     rec = _recording(10)
-    assert m._schema_problem("recording", m._recording_metadata(rec, 5120, "none", 0)) is None
+    assert mlayout._schema_problem("recording", mwriter._recording_metadata(rec, 5120, "none", 0)) is None
     for i, s in enumerate(rec.channels):
-        assert m._schema_problem("channel", m._channel_metadata(s, i, rec.fs, "float64")) is None
+        assert mlayout._schema_problem("channel", mwriter._channel_metadata(s, i, rec.fs, "float64")) is None
     bad = dict(m.LAYOUT, version=2)
-    assert m._schema_problem("layout", bad) == "version: 1 was expected"
+    assert mlayout._schema_problem("layout", bad) == "version: 1 was expected"
 
 
 # ---------------------------------------------------------------------------------- bad input
@@ -471,7 +474,7 @@ def test_foreign_mcap_file_raises_clear_error(tmp_path):
 def test_mcap_without_summary_raises(tmp_path):
     p = tmp_path / "nosum.mcap"
     with open(p, "wb") as fh:
-        w = Writer(fh, index_types=m.IndexType.NONE, repeat_channels=False, repeat_schemas=False,
+        w = Writer(fh, index_types=IndexType.NONE, repeat_channels=False, repeat_schemas=False,
                    use_statistics=False, use_summary_offsets=False, use_chunking=False)
         w.start()
         w.finish()
@@ -593,12 +596,12 @@ def test_whole_chunk_copies_match_message_by_message(tmp_path, monkeypatch):
     rec = _recording(40_000, dtype=np.float32)
     p = _write(rec, tmp_path / "r.mcap", block=1000, chunk_size=10_000)
     hits = []
-    real = m._uniform_chunk
-    monkeypatch.setattr(m, "_uniform_chunk", lambda *a: hits.append(real(*a)) or hits[-1])
+    real = mreader._uniform_chunk
+    monkeypatch.setattr(mreader, "_uniform_chunk", lambda *a: hits.append(real(*a)) or hits[-1])
     fast = pio.read(p)
     n_chunks = pio.read_info(p).extra["n_chunks"]
     # every chunk but the first (it also holds the schema and channel records) in one copy
     assert sum(h is not None for h in hits) == n_chunks - 1
-    monkeypatch.setattr(m, "_uniform_chunk", lambda *a: None)
+    monkeypatch.setattr(mreader, "_uniform_chunk", lambda *a: None)
     slow = pio.read(p)
     assert fast == slow == rec
