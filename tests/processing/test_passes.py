@@ -3,6 +3,7 @@ timing bound from the one Cramer-Rao function, gap intervals, every gauge's pass
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 
@@ -118,7 +119,7 @@ def _quality(gaps=None, dropouts=None, conditioned=None, t0=0.0):
     q = ChannelQuality("g", FS, t0, 10_000, e if gaps is None else np.asarray(gaps), e, e,
                        dropout_runs=e if dropouts is None else np.asarray(dropouts))
     if conditioned is not None:
-        q.conditioned_gap_runs = np.asarray(conditioned)
+        q = dataclasses.replace(q, conditioned_gap_runs=np.asarray(conditioned))
     return q
 
 
@@ -182,7 +183,7 @@ def test_gauge_passes_main_gauges_and_facewidth():
            "r": _onsets([0.12, 0.22], flags=[0, FLAG_CLIPPED], templates=[tp]),
            "fw": _onsets([0.13], templates=[tp])}
     quality = {"s1": _quality()}
-    quality["s1"].noise_rms = 1e-3
+    quality["s1"] = dataclasses.replace(quality["s1"], noise_rms=1e-3)   # frozen report
     passes, mains = gauge_passes(chans, ons, quality, FS, 0.0)
     assert mains == {"sun": "s1", "ring": "r"}
     assert [(p.name, p.gear, p.main) for p in passes] == [
