@@ -14,10 +14,10 @@ import hashlib
 import json
 import os
 import shutil
-import stat
 from pathlib import Path
 from typing import Callable, Sequence
 
+from .exits import read_json_object
 from .jsonable import to_jsonable
 from .log import logger
 
@@ -119,17 +119,6 @@ def recording_keys(files: Sequence, scene_sha256: str, options: dict | None = No
     return keys
 
 
-def _read_json(path: Path) -> dict | None:
-    try:
-        if not stat.S_ISREG(os.lstat(path).st_mode):
-            return None
-        with open(path, "rb") as fh:
-            d = json.loads(fh.read(16 * 2**20).decode("utf-8"))
-    except (OSError, ValueError):
-        return None
-    return d if isinstance(d, dict) else None
-
-
 def write_marker(out_dir, done_key: dict, record: dict) -> None:
     """Write a recording's completion marker :data:`DONE_NAME` into ``out_dir`` (created),
     atomically: ``{"meshphase_done": 1, "key": done_key, "record": record}``.
@@ -184,7 +173,7 @@ def completed_recordings(folder) -> dict[str, tuple[Path, dict]]:
     for e in entries:
         if not e.is_dir(follow_symlinks=False):
             continue
-        m = _read_json(Path(e.path) / DONE_NAME)
+        m = read_json_object(Path(e.path) / DONE_NAME, 16 * 2**20)
         if m and isinstance(m.get("key"), dict) and isinstance(m.get("record"), dict):
             out.setdefault(str(m["key"].get("recording")), (Path(e.path), m))
     return out

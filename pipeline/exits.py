@@ -258,16 +258,22 @@ def _write_json_atomic(path: Path, obj) -> None:
             fh.write(data)
 
 
-def _read_manifest(folder) -> dict | None:
-    p = Path(folder) / MANIFEST_NAME
+def read_json_object(path, max_bytes: int = 64 * 2**20) -> dict | None:
+    """The JSON object in the regular file ``path`` (first ``max_bytes`` bytes), or None when
+    it is missing, not a regular file (symlinks are not followed), unreadable or not a JSON
+    object: a marker or manifest that cannot be trusted counts as absent."""
     try:
-        if not stat.S_ISREG(os.lstat(p).st_mode):
+        if not stat.S_ISREG(os.lstat(path).st_mode):
             return None
-        with open(p, "rb") as fh:
-            m = json.loads(fh.read(64 * 2**20).decode("utf-8"))
+        with open(path, "rb") as fh:
+            m = json.loads(fh.read(max_bytes).decode("utf-8"))
     except (OSError, ValueError):
         return None
     return m if isinstance(m, dict) else None
+
+
+def _read_manifest(folder) -> dict | None:
+    return read_json_object(Path(folder) / MANIFEST_NAME)
 
 
 def _files_under(root: Path) -> list[str]:

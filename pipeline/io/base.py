@@ -42,7 +42,7 @@ import time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -55,7 +55,8 @@ from ..validate import as_float, as_nonnegative
 
 __all__ = ["RecordingFileError", "CorruptFileError", "RecordingInfo", "atomic_path",
            "clean_stale_partials", "TEMP_PREFIX", "TEMP_SUFFIX", "STALE_AGE", "check_verify",
-           "warn_nonfinite", "dumps_json", "check_start_datetime", "spec_from_dict"]
+           "warn_nonfinite", "dumps_json", "check_start_datetime", "spec_from_dict",
+           "regroup_blocks"]
 
 
 class RecordingFileError(ValueError):
@@ -579,3 +580,39 @@ def atomic_path(path, *, overwrite: bool = False, size_hint: int | None = None):
             if tmp is not None:
                 with contextlib.suppress(FileNotFoundError):
                     os.unlink(tmp)
+
+
+def regroup_blocks(blocks, nch: int, n: int, group_len: int, dtype: np.dtype) -> Iterator[tuple[np.ndarray, int]]:
+    """The samples of ``blocks`` (each (k, nch), any k) regrouped by a streaming writer:
+    (samples, first sample) of consecutive groups of ``group_len`` samples (the last may be
+    shorter) from blocks of any length: ``samples`` is (channels, samples) of ``dtype``, a
+    buffer re-used for the next group. ValueError when the blocks do not hold ``n`` rows."""
+    buf = np.empty((nch, min(group_len, max(n, 1))), dtype=dtype)
+    fill = pos = 0
+    for blk in blocks:
+        blk = np.asarray(blk)
+        if blk.ndim != 2 or blk.shape[1] != nch:
+            raise ValueError(f"blocks must be (samples, {nch}) arrays, got shape {blk.shape}")
+        k = blk.shape[0]
+        if pos + fill + k > n:
+            raise ValueError(f"blocks hold more than the header's n_samples = {n}")
+        i = 0
+        while i < k:
+            if fill == 0 and k - i >= group_len:
+                yield np.ascontiguousarray(blk[i:i + group_len].T, dtype=dtype), pos
+                pos += group_len
+                i += group_len
+                continue
+            m = min(group_len - fill, k - i)
+            buf[:, fill:fill + m] = blk[i:i + m].T
+            fill += m
+            i += m
+            if fill == group_len:
+                yield buf, pos
+                pos += group_len
+                fill = 0
+    if fill:
+        yield buf[:, :fill], pos
+        pos += fill
+    if pos != n:
+        raise ValueError(f"blocks hold {pos} samples, the header says n_samples = {n}")

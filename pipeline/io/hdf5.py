@@ -59,7 +59,7 @@ from ..log import logger
 from ..recording import Recording
 from ..validate import as_choice, as_int, as_positive_int
 from .base import (CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime, check_verify,
-                   dumps_json, spec_from_dict, warn_nonfinite)
+                   dumps_json, regroup_blocks, spec_from_dict, warn_nonfinite)
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "FORMAT_VERSION", "DEFAULT_CHUNK_SAMPLES", "sniff",
            "read_info", "read", "write", "write_blocks", "iter_blocks"]
@@ -624,43 +624,11 @@ def _fixed_text(value):
 
 
 def _write_samples(dsets: list, blocks, n: int, dtype, cs: int) -> None:
-    """Write consecutive blocks into the datasets, chunk-aligned (``cs`` samples)."""
-    nc = len(dsets)
-    buf = np.empty((nc, cs), dtype=dtype)
-    fill = pos = 0
-
-    for blk in blocks:
-        blk = np.asarray(blk)
-        if blk.ndim != 2 or blk.shape[1] != nc:
-            raise ValueError(f"blocks must be (samples, {nc}) arrays, got shape {blk.shape}")
-        k = blk.shape[0]
-        if pos + fill + k > n:
-            raise ValueError(f"blocks hold more than the header's n_samples = {n}")
-        i = 0
-        while i < k:
-            if fill == 0 and k - i >= cs:
-                m = ((k - i) // cs) * cs
-                for j, ds in enumerate(dsets):
-                    ds.write_direct(np.ascontiguousarray(blk[i:i + m, j], dtype=dtype),
-                                    dest_sel=np.s_[pos:pos + m])
-                pos += m
-                i += m
-            else:
-                m = min(cs - fill, k - i)
-                buf[:, fill:fill + m] = blk[i:i + m].T
-                fill += m
-                i += m
-                if fill == cs:
-                    for j, ds in enumerate(dsets):
-                        ds.write_direct(buf[j], dest_sel=np.s_[pos:pos + cs])
-                    pos += cs
-                    fill = 0
-    if fill:
+    """Write consecutive blocks into the datasets, one chunk (``cs`` samples) at a time."""
+    for group, pos in regroup_blocks(blocks, len(dsets), n, cs, dtype):
+        m = group.shape[1]
         for j, ds in enumerate(dsets):
-            ds.write_direct(np.ascontiguousarray(buf[j, :fill]), dest_sel=np.s_[pos:pos + fill])
-        pos += fill
-    if pos != n:
-        raise ValueError(f"blocks hold {pos} samples, the header says n_samples = {n}")
+            ds.write_direct(np.ascontiguousarray(group[j]), dest_sel=np.s_[pos:pos + m])
 
 
 _ERRNO_RE = re.compile(r"errno = (\d+)")

@@ -4,13 +4,13 @@ in messages of ``block`` samples, one channel per chunk, chunk groups in time or
 from __future__ import annotations
 
 import json
-from typing import Iterator
 
 import numpy as np
 
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, IndexType, Writer
 
 from ...jsonable import json_default
+from ..base import regroup_blocks
 from ...recording import ChannelSpec, Recording
 from ...validate import as_choice, as_positive_int
 from .layout import (_DTYPE_CODES, _HEADER, _MAX_LOG_TIME, COMPRESSIONS, DEFAULT_BLOCK, DEFAULT_CHUNK_SIZE,
@@ -128,7 +128,7 @@ def write_blocks(header, blocks, path, *, dtype="float64", block: int = DEFAULT_
     per_chunk = max(1, chunk_size // (HEADER_SIZE + block * le.itemsize))
     with open(path, "wb") as fh:
         w, cids = _start_writer(fh, compression, rec, rec_md, ch_md)
-        for group, s0 in _groups(blocks, nch, n, per_chunk * block, le):
+        for group, s0 in regroup_blocks(blocks, nch, n, per_chunk * block, le):
             _put_group(w, cids, group, s0, block=block, fs=rec.fs, origin=origin, code=code)
         w.finish()
 
@@ -160,41 +160,6 @@ def _start_writer(fh, compression: str, rec, rec_md: dict, ch_md: list) -> tuple
             for s, md in zip(rec.channels, ch_md)]
     w.add_metadata(RECORDING_METADATA, rec_md)
     return w, cids
-
-
-def _groups(blocks, nch: int, n: int, group_len: int, dtype: np.dtype) -> Iterator[tuple[np.ndarray, int]]:
-    """(samples, first sample) of consecutive groups of ``group_len`` samples (the last may be
-    shorter) from blocks of any length: ``samples`` is (channels, samples) of ``dtype``, a
-    buffer re-used for the next group. ValueError when the blocks do not hold ``n`` rows."""
-    buf = np.empty((nch, min(group_len, max(n, 1))), dtype=dtype)
-    fill = pos = 0
-    for blk in blocks:
-        blk = np.asarray(blk)
-        if blk.ndim != 2 or blk.shape[1] != nch:
-            raise ValueError(f"blocks must be (samples, {nch}) arrays, got shape {blk.shape}")
-        k = blk.shape[0]
-        if pos + fill + k > n:
-            raise ValueError(f"blocks hold more than the header's n_samples = {n}")
-        i = 0
-        while i < k:
-            if fill == 0 and k - i >= group_len:
-                yield np.ascontiguousarray(blk[i:i + group_len].T, dtype=dtype), pos
-                pos += group_len
-                i += group_len
-                continue
-            m = min(group_len - fill, k - i)
-            buf[:, fill:fill + m] = blk[i:i + m].T
-            fill += m
-            i += m
-            if fill == group_len:
-                yield buf, pos
-                pos += group_len
-                fill = 0
-    if fill:
-        yield buf[:, :fill], pos
-        pos += fill
-    if pos != n:
-        raise ValueError(f"blocks hold {pos} samples, the header says n_samples = {n}")
 
 
 def _put_group(w: Writer, cids: list, group: np.ndarray, s0: int, *, block: int, fs: float,
