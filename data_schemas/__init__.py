@@ -5,7 +5,7 @@ refer to each other by file name (``{"$ref": "channel_spec.schema.json"}``): all
 registered under ``https://meshphase.invalid/schemas/<file name>`` (a base that is never
 fetched), or under their own ``$id`` when they set one.
 
->>> from data_schemas import load_schema, validate
+>>> from meshphase.data_schemas import load_schema, validate
 >>> validate({"name": "sun_1", "kind": "sun"}, "channel_spec")
 
 Functions

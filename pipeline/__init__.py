@@ -1,6 +1,6 @@
 """meshphase: planetary gear test-rig strain recordings -> measured mesh phasing.
 
-The core (this package without :mod:`pipeline.report`) never imports matplotlib.
+The core (this package without :mod:`meshphase.report`) never imports matplotlib.
 """
 
 from __future__ import annotations

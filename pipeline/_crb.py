@@ -1,6 +1,6 @@
 """Cramer-Rao bound on the arrival time of a known pulse in white Gaussian noise.
 
-Used to hold the onset detector (:mod:`pipeline.onsets`) against the physical limit.
+Used to hold the onset detector (:mod:`meshphase.onsets`) against the physical limit.
 
 Model: samples ``x[n] = A s(t_n - tau) + b + w[n]``, ``w[n]`` white Gaussian with variance
 ``sigma^2``, pulse shape ``s`` known. The Fisher information of the delay ``tau`` is

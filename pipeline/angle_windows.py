@@ -1,6 +1,6 @@
 """The angle model of a long recording, fitted in overlapping windows and stitched (array code).
 
-:func:`pipeline.angles.fit_angle_model` holds a dense Jacobian of every observation times
+:func:`meshphase.angles.fit_angle_model` holds a dense Jacobian of every observation times
 every candidate column while it chooses the model order: its memory and time grow with the
 number of passes (about 6 kB and 6 ms per observation on the seed rig's eight trains). A
 recording of hours would make the angle fit the largest allocation of a run. Here the record
@@ -23,7 +23,7 @@ Every model order is chosen per window from that window's data (a long record's 
 needs more spline intervals than one window's); per-pass phasing, uncertainties, residuals
 and outlier flags come from the window whose core holds the pass (or the pair's midpoint).
 A record of at most ``max_obs`` observations is fitted whole, exactly as
-:func:`~pipeline.angles.fit_angle_model` does. Memory of the fit is then bounded by
+:func:`~meshphase.angles.fit_angle_model` does. Memory of the fit is then bounded by
 ``max_obs`` whatever the length, and the time is linear in the record's length.
 """
 
@@ -50,7 +50,7 @@ _STITCH_POINTS = 33
 
 @dataclass
 class WindowedAngleModel(AngleModel):
-    """An :class:`~pipeline.angles.AngleModel` made of windowed fits (module notes).
+    """An :class:`~meshphase.angles.AngleModel` made of windowed fits (module notes).
 
     Attributes (beyond AngleModel's)
     --------------------------------
@@ -225,14 +225,14 @@ def fit_angle_windows(trains, kin: Kinematics, n_planets: int, *, max_obs: int =
     Parameters
     ----------
     trains, kin, n_planets
-        As :func:`pipeline.angles.fit_angle_model`.
+        As :func:`meshphase.angles.fit_angle_model`.
     max_obs : int
         Observations above which the record is fitted in windows [-] (default
         :data:`WINDOW_OBS`).
     progress : callable, optional
         ``progress(done, total)`` after each window.
     **kwargs
-        Passed to :func:`~pipeline.angles.fit_angle_model` for every window.
+        Passed to :func:`~meshphase.angles.fit_angle_model` for every window.
 
     Returns
     -------
@@ -243,7 +243,7 @@ def fit_angle_windows(trains, kin: Kinematics, n_planets: int, *, max_obs: int =
     Raises
     ------
     TypeError, ValueError
-        As :func:`~pipeline.angles.fit_angle_model`; ``max_obs`` not a positive integer.
+        As :func:`~meshphase.angles.fit_angle_model`; ``max_obs`` not a positive integer.
     """
     if isinstance(max_obs, bool) or not isinstance(max_obs, (int, np.integer)) or max_obs < 100:
         raise ValueError(f"max_obs must be an integer >= 100, got {max_obs!r}")

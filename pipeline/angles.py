@@ -14,7 +14,7 @@ the sun, relative to the carrier, has turned to the planet's direction, i.e. at
     A = Z_s (k + f_n) + c + d_n + h_n          (sun gauge, relative revolution k)        (1)
 
 with ``f_n`` the planet's fraction of a revolution in the gauge's pass order
-(:func:`pipeline.phasing.planet_fractions`), ``c`` a constant of the gauge (which tooth, which
+(:func:`meshphase.phasing.planet_fractions`), ``c`` a constant of the gauge (which tooth, which
 pulse feature is timed), ``d_n`` planet n's phasing deviation from the ideal (the quantity of
 interest) and ``h_n`` its time-varying part (a planet's own shaft hole offset turns with the
 planet and moves its passes: terms periodic in the planet's spin, Z_p mesh cycles per turn).
@@ -113,7 +113,7 @@ class PassTrain:
     z : int
         Tooth count of the gauged gear (0 for a tacho) [-].
     order : {+1, -1}
-        Sense in which the gauge meets the planets (:func:`pipeline.phasing.pass_order`):
+        Sense in which the gauge meets the planets (:func:`meshphase.phasing.pass_order`):
         a planet's carrier-frame angle shift d psi moves its passes by
         ``order * z * d psi / 2 pi`` mesh cycles.
     """
@@ -167,18 +167,18 @@ def gauge_train(name: str, gear: str, times, planet, position, fractions, z_gear
     planet : array_like of int, shape (m,)
         0-based planet per pass (>= 0: pass unassigned pulses separately, not here).
     position : array_like of int, shape (m,)
-        Pass-order position of each pass (:func:`pipeline.phasing.assign_planets_by_pattern`
+        Pass-order position of each pass (:func:`meshphase.phasing.assign_planets_by_pattern`
         ``info["position"]``): consecutive planets differ by 1, a revolution by N.
     fractions : array_like, shape (N,)
         Fraction of a revolution from planet 1 to planet n in pass order [-]
-        (:func:`pipeline.phasing.planet_fractions`).
+        (:func:`meshphase.phasing.planet_fractions`).
     z_gear : int
         Tooth count of the gauged gear [-].
     sigma : float or array_like, optional
         Timing uncertainty per pass [s] (the onset timing bound). None: unknown (the
         train's scatter sets it).
     order : {+1, -1}
-        The gauge's pass order (:func:`pipeline.phasing.pass_order`), which sets the sign
+        The gauge's pass order (:func:`meshphase.phasing.pass_order`), which sets the sign
         with which a planet's own angle shift moves its passes.
     """
     if order not in (1, -1):
@@ -317,7 +317,7 @@ def kinematics(z_sun: int, z_ring: int, z_planet: int = 0, *, fixed: str | None 
         Tooth counts [-] (z_planet 0: unknown).
     fixed : {"ring", "sun", None}
         Held member; None for a differential (then ``speeds`` give the shaft ratios).
-    speeds : pipeline.models.gearset.Speeds, optional
+    speeds : meshphase.models.gearset.Speeds, optional
         Nominal speeds [rad/s]; used only for a differential (ratios of shaft speeds to the
         mesh frequency). Without them a differential gets no shaft-ripple terms.
 
@@ -1065,7 +1065,7 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
     """
     t_start = time.perf_counter()
     if not isinstance(kin, Kinematics):
-        raise TypeError(f"kin must be a Kinematics (pipeline.angles.kinematics), got {type(kin).__name__}")
+        raise TypeError(f"kin must be a Kinematics (meshphase.angles.kinematics), got {type(kin).__name__}")
     trains = list(trains)
     for tr in trains:
         if not isinstance(tr, PassTrain):

@@ -3,32 +3,32 @@
 The scene supplies the gearset, channel map, tolerances and the results wanted; each
 recording file replaces the scene's ``[input]``. Every recording is one Dask task that gets
 *file paths* (scene, recording, output folder), never open handles or arrays, loads the
-scene in the worker, runs :func:`pipeline.stages.run_scene` and writes its own results into
+scene in the worker, runs :func:`meshphase.stages.run_scene` and writes its own results into
 ``OUT/recordings/<recording name>/`` (:func:`recording_names`; a name space of their own,
 so no recording can collide with the campaign's files), its completion marker
 (:data:`DONE_NAME`) last. The task returns a small JSON-friendly dict; a recording that
 fails (unreadable file, a stage raising, the worker process dying more often than Dask
 retries, a task running past its timeout) is reported as failed and the others finish. The
 client then writes ``campaign.json``, ``campaign.csv`` and ``campaign_report.html``
-(:mod:`pipeline.report.campaign_report`) across all recordings, each atomically; the whole
-folder is built beside ``OUT`` and swapped in when finished (:class:`pipeline.exits.OutputDir`).
+(:mod:`meshphase.report.campaign_report`) across all recordings, each atomically; the whole
+folder is built beside ``OUT`` and swapped in when finished (:class:`meshphase.exits.OutputDir`).
 
 Faults: a task's timeout (:func:`default_task_timeout`, ``--task-timeout``) counts from the
 moment it starts on a worker (the worker tells the client through a Dask event); past it the
 task is failed and its worker killed (our LocalCluster: the Nanny starts a new one) or
 restarted (another cluster). Workers lost under a task are seen in the scheduler's
 "remove-worker" events; Dask retries the task and the campaign records each retry with its
-cause (:mod:`pipeline.campaign_job`). ``--resume`` reuses the recordings whose marker
+cause (:mod:`meshphase.campaign_job`). ``--resume`` reuses the recordings whose marker
 matches their inputs (:func:`recording_key`) in ``OUT`` and in ``OUT.partial`` (what an
-unfinished campaign kept; :mod:`pipeline.campaign_resume`).
+unfinished campaign kept; :mod:`meshphase.campaign_resume`).
 
 Results that need no recording are computed once, on the client, not once per recording:
-the tolerance Monte Carlo (its 3-sigma phasing band, :meth:`pipeline.models.tolerance.MonteCarloResult.phasing_band`,
+the tolerance Monte Carlo (its 3-sigma phasing band, :meth:`meshphase.models.tolerance.MonteCarloResult.phasing_band`,
 is passed to the tasks, which then compute the band coverage of their own passes exactly as
-:func:`pipeline.stages.stage_compare` does), the tilt solve and the (unmeasured) bearing
+:func:`meshphase.stages.stage_compare` does), the tilt solve and the (unmeasured) bearing
 moments. They go to ``OUT/scene/``.
 
-Cluster (:mod:`pipeline.cluster`): a :class:`distributed.LocalCluster` (:func:`local_cluster`:
+Cluster (:mod:`meshphase.cluster`): a :class:`distributed.LocalCluster` (:func:`local_cluster`:
 on 127.0.0.1 only, no dashboard unless asked) with one single-threaded worker *process* per
 core by default (processes, because the stages are numpy/Python code that holds the GIL for
 long stretches, and because ``warnings.catch_warnings`` inside :func:`run_scene` is not
@@ -39,7 +39,7 @@ Per-recording HTML reports are off by default (``recording_reports=False``): bui
 with its figures took about twice as long as processing a 1-min seed rig recording on the
 reference machine (2.8 s vs 1.3 s), and the combined report is the product of a campaign;
 ``meshphase process`` / ``meshphase run`` give the full single-recording report.
-The campaign speed-up benchmark is :func:`pipeline.bench.campaign.measure_speedup`.
+The campaign speed-up benchmark is :func:`meshphase.bench.campaign.measure_speedup`.
 """
 
 from __future__ import annotations
@@ -79,7 +79,7 @@ __all__ = ["run_recording", "run_campaign", "cli_campaign", "collect_recordings"
 #: sub-folder of the campaign output that holds the scene-level results
 SCENE_DIR_NAME = "scene"
 _SKIP_SUFFIXES = (".truth.json", ".tdms_index")
-#: a recording's status in a campaign, best first (pipeline.exits.run_status)
+#: a recording's status in a campaign, best first (meshphase.exits.run_status)
 STATUSES = ("ok", "unreliable", "partial", "failed")
 
 
@@ -88,7 +88,7 @@ def phasing_reliability(ctx) -> dict:
     """Whether each gauge's measured phasing is reliable, and why not.
 
     The one place that decides it (campaign status, ``process`` / ``run`` status line,
-    summary.json; :func:`pipeline.results.phasing_verdict`): ``ctx.phasing.reliability``
+    summary.json; :func:`meshphase.results.phasing_verdict`): ``ctx.phasing.reliability``
     when the phasing stage provides it (``{gauge: {"reliable": bool, "reasons": [str,
     ...]}}``); otherwise the
     ProcessingWarning messages of the run (``ctx.messages``) that say "not reliable",
@@ -97,7 +97,7 @@ def phasing_reliability(ctx) -> dict:
 
     Parameters
     ----------
-    ctx : pipeline.stages.RunContext
+    ctx : meshphase.stages.RunContext
 
     Returns
     -------
@@ -112,7 +112,7 @@ def phasing_reliability(ctx) -> dict:
     """
     messages = getattr(ctx, "messages", None)
     if not hasattr(ctx, "phasing") or not isinstance(messages, (list, tuple)):
-        raise TypeError(f"ctx must be a RunContext (pipeline.stages.run_scene), got {type(ctx).__name__}")
+        raise TypeError(f"ctx must be a RunContext (meshphase.stages.run_scene), got {type(ctx).__name__}")
     return phasing_verdict(ctx.phasing, messages)
 
 
@@ -127,7 +127,7 @@ def collect_recordings(inputs: Iterable) -> tuple[list[Path], list[dict]]:
     """The recording files named by ``inputs`` (files or folders), in a stable order.
 
     A folder contributes every file directly inside it (not recursively) that is a recording
-    by content (:func:`pipeline.io.detect_format`) or carries a recording suffix (.h5, .mcap,
+    by content (:func:`meshphase.io.detect_format`) or carries a recording suffix (.h5, .mcap,
     .csv, .tdms, ...: a corrupt recording is kept so that the campaign reports it failed);
     truth sidecars (``*.truth.json``), TDMS index files, hidden files and anything else are
     skipped. A file named explicitly is always taken. Duplicates are dropped.
@@ -196,7 +196,7 @@ _MAX_NAME_BYTES = 120
 
 def _safe_name(stem: str) -> str:
     """A folder name from a file stem: no leading dot (hidden, and the working names of
-    :mod:`pipeline.exits` start with one), never empty, at most 120 bytes (longer: cut, plus
+    :mod:`meshphase.exits` start with one), never empty, at most 120 bytes (longer: cut, plus
     a hash of the whole, so room is left for the suffixes that tell names apart)."""
     name = re.sub(r"^\.+", lambda m: "_" * len(m.group()), stem.replace("\0", "")) or "recording"
     raw = name.encode("utf-8", "surrogateescape")
@@ -265,7 +265,7 @@ def split_results(scene) -> tuple[list[str], list[str], bool]:
 
     Parameters
     ----------
-    scene : pipeline.scene.Scene
+    scene : meshphase.scene.Scene
 
     Returns
     -------
@@ -313,11 +313,11 @@ def client_scene(scene):
 
     Parameters
     ----------
-    scene : pipeline.scene.Scene
+    scene : meshphase.scene.Scene
 
     Returns
     -------
-    pipeline.scene.Scene
+    meshphase.scene.Scene
         Its ``results`` may be empty (nothing to run on the client).
 
     Raises
@@ -326,7 +326,7 @@ def client_scene(scene):
         ``scene`` is not a scene (no ``results``).
     """
     if not hasattr(scene, "results"):
-        raise TypeError(f"scene must be a pipeline.scene.Scene, got {type(scene).__name__}")
+        raise TypeError(f"scene must be a meshphase.scene.Scene, got {type(scene).__name__}")
     client, _, _ = split_results(scene)
     s = copy.copy(scene)
     s.input = {}
@@ -335,7 +335,7 @@ def client_scene(scene):
 
 
 def _bands(mc) -> dict:
-    """The phasing band around the ideal per gauge (:meth:`pipeline.models.tolerance.MonteCarloResult.phasing_band`,
+    """The phasing band around the ideal per gauge (:meth:`meshphase.models.tolerance.MonteCarloResult.phasing_band`,
     as :func:`stages.stage_compare` builds it), as lists."""
     out = {}
     for gear in ("sun", "ring"):
@@ -427,7 +427,7 @@ def run_recording(scene_path: str, recording_path: str, out_dir: str, *, bands: 
     dict
         ``recording``, ``name``, ``out_dir``, ``status`` ("ok"; "unreliable": all computed,
         phasing flagged unreliable; "partial": a result not computed; "failed": nothing
-        usable; :func:`pipeline.exits.run_status`), ``error`` (None or the cause(s)),
+        usable; :func:`meshphase.exits.run_status`), ``error`` (None or the cause(s)),
         ``missing_results`` and ``unreliable`` (as run_status gives them), ``format``,
         ``wall_time_s`` and ``cpu_time_s`` (this process's CPU time) [s], ``worker``,
         ``timings_s``, ``stages_ran``, ``stages_failed``,
@@ -499,7 +499,7 @@ def run_recording(scene_path: str, recording_path: str, out_dir: str, *, bands: 
 
 
 def _write_atomic(path: Path, write: Callable[[Path], None]) -> None:
-    """``write(tmp)`` to a temporary file beside ``path``, fsync, rename (pipeline.io)."""
+    """``write(tmp)`` to a temporary file beside ``path``, fsync, rename (meshphase.io)."""
     from .io import atomic_path
 
     with atomic_path(path, overwrite=True) as tmp:
@@ -574,7 +574,7 @@ def campaign_rows(records: list[dict]) -> list[dict]:
 
 
 def campaign_exit_code(campaign: dict) -> int:
-    """The exit code of ``meshphase campaign`` (table in :mod:`pipeline.exits`).
+    """The exit code of ``meshphase campaign`` (table in :mod:`meshphase.exits`).
 
     0 when every recording is "ok" (and the scene-level results, if any, too); 1 when every
     recording failed (nothing usable); 3 otherwise: any recording failed, partial or
@@ -609,7 +609,7 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
                  task_timeout: float | None = None, resume: bool = False, dashboard=None) -> dict:
     """Process many recordings with one scene as one Dask job.
 
-    The output folder is written whole or not at all (:class:`pipeline.exits.OutputDir`: a
+    The output folder is written whole or not at all (:class:`meshphase.exits.OutputDir`: a
     staging folder swapped in at the end). Each recording's results go to
     ``recordings/<name>/`` (:func:`recording_names`) with a completion marker written last
     (:data:`DONE_NAME`); ``resume`` reuses the results whose marker matches the recording
@@ -642,7 +642,7 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
         LocalCluster worker processes (one thread each); default one per core.
     overwrite : bool
         Replace ``out_dir`` if it exists (atomically; refused when it holds files meshphase
-        did not write or symbolic links: :class:`pipeline.exits.OutputDir`).
+        did not write or symbolic links: :class:`meshphase.exits.OutputDir`).
     progress : bool
         A tqdm progress bar (recordings done) on stderr.
     recording_reports : bool
@@ -667,7 +667,7 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
         ``local``, ``dashboard``), ``timing_s`` (``total``, ``scene_level``,
         ``cluster_start``, ``processing``, ``report``), ``counts`` (ok / unreliable / partial
         / failed), ``skipped_inputs``, ``scene_level`` (summary of the client-side results or
-        None), ``scene_status`` (their :func:`pipeline.exits.run_status`, or None),
+        None), ``scene_status`` (their :func:`meshphase.exits.run_status`, or None),
         ``task_timeout`` (``mode`` "size" / "fixed" / "off", ``seconds``), ``resume``
         (``enabled``, ``n_resumed``, ``sources``), ``recordings`` (one dict per recording, in
         input order, with ``attempts``, ``retries`` and ``resumed``), ``exit_code``
@@ -705,7 +705,7 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
                     sources=[base, partial] if resume else [], dashboard=dashboard)
     # the folder is reserved now; the campaign fills a staging folder beside it, swapped in
     # when it finishes; if it raises or is interrupted (Ctrl-C) nothing is left but the
-    # recordings it had finished, in <out>.partial (pipeline.exits.OutputDir)
+    # recordings it had finished, in <out>.partial (meshphase.exits.OutputDir)
     with OutputDir(base, overwrite=overwrite or resume, staged=True) as guard:
         opts.guard = guard
         result = _campaign_body(scene, scene_path, inputs, files, skipped, names, guard.path.resolve(), opts)

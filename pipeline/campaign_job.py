@@ -1,13 +1,13 @@
 """The Dask job of a campaign: one task per recording, watched, one record per recording.
 
-:func:`run_job` opens the cluster (:func:`pipeline.cluster.open_client`), submits every
+:func:`run_job` opens the cluster (:func:`meshphase.cluster.open_client`), submits every
 recording still to do as one task (:func:`campaign_task`: paths only, never open handles)
 and collects one record per recording: the task's own, or a failure when the task was lost
 (the worker died more often than Dask retries, the task raised) or ran past its timeout.
 
 A task's timeout (:func:`default_task_timeout`, ``--task-timeout``) counts from the moment
 it starts on a worker, which tells the client through a Dask event; past it the task is
-failed and its worker ended (:func:`pipeline.cluster.end_worker`). Workers lost under a
+failed and its worker ended (:func:`meshphase.cluster.end_worker`). Workers lost under a
 task are seen in the scheduler's "remove-worker" events; Dask retries the task and the
 record lists each retry with its cause.
 """
@@ -76,7 +76,7 @@ def task_limits(keys: Sequence, task_timeout: float | None) -> dict[int, float |
     Parameters
     ----------
     keys : sequence of dict or None
-        The recordings' keys (:func:`pipeline.campaign_resume.recording_key`: their ``size``);
+        The recordings' keys (:func:`meshphase.campaign_resume.recording_key`: their ``size``);
         None for a recording gone since it was listed.
     task_timeout : float or None
         ``--task-timeout`` [s]: 0 none, None :func:`default_task_timeout` of each size.
@@ -103,15 +103,15 @@ def warm_up() -> int:
     int
         The worker's pid.
     """
-    import pipeline.compare  # noqa: F401
-    import pipeline.condition  # noqa: F401
-    import pipeline.io  # noqa: F401
-    import pipeline.loads  # noqa: F401
-    import pipeline.models.mesh_phasing  # noqa: F401
-    import pipeline.onsets  # noqa: F401
-    import pipeline.phasing  # noqa: F401
-    import pipeline.stages  # noqa: F401
-    from pipeline.io import FORMATS, get_format
+    import meshphase.compare  # noqa: F401
+    import meshphase.condition  # noqa: F401
+    import meshphase.io  # noqa: F401
+    import meshphase.loads  # noqa: F401
+    import meshphase.models.mesh_phasing  # noqa: F401
+    import meshphase.onsets  # noqa: F401
+    import meshphase.phasing  # noqa: F401
+    import meshphase.stages  # noqa: F401
+    from meshphase.io import FORMATS, get_format
 
     for name in FORMATS:  # the readers import h5py, mcap, pandas, npTDMS
         get_format(name)
@@ -135,7 +135,7 @@ def failed_record(path, name: str, out_dir, error: str) -> dict:
     Returns
     -------
     dict
-        ``status`` "failed", ``error``, and the keys of :func:`pipeline.campaign.run_recording`'s
+        ``status`` "failed", ``error``, and the keys of :func:`meshphase.campaign.run_recording`'s
         record, empty.
     """
     return {"recording": str(path), "name": name, "out_dir": str(out_dir), "status": "failed",
@@ -149,7 +149,7 @@ def campaign_task(task: Callable[..., dict], scene_path: str, recording_path: st
 
     Tells the client the task started (its timeout counts from here), runs ``task``, and when
     its results are usable (status ok, unreliable or partial) writes the completion marker
-    (:func:`pipeline.campaign_resume.write_marker`) last, atomically. Gets paths only, never
+    (:func:`meshphase.campaign_resume.write_marker`) last, atomically. Gets paths only, never
     open handles.
 
     Parameters
@@ -261,7 +261,7 @@ def run_job(job: Job, records: dict, *, scheduler: str | None, workers: int | No
     records : dict
         Index -> record; the records already there (resumed) count as done on the bar.
     scheduler, workers, dashboard
-        The cluster (:func:`pipeline.cluster.open_client`).
+        The cluster (:func:`meshphase.cluster.open_client`).
     cluster_info : dict
         Filled in: ``dashboard``, ``n_workers``, ``scheduler``.
     timing : dict
@@ -436,7 +436,7 @@ class _Collection:
 
 def _timed_out(client, fut, path, name, rec_dir, limit, start) -> dict:
     """Fail a task that ran past its timeout: cancel it, end its worker (the only way to stop
-    a thread blocked in a read: :func:`pipeline.cluster.end_worker`), drop what it half
+    a thread blocked in a read: :func:`meshphase.cluster.end_worker`), drop what it half
     wrote."""
     client.cancel([fut])
     w, pid = start["worker"], start["pid"]

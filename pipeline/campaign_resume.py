@@ -189,7 +189,7 @@ def relocate(record: dict, old_dir, new_dir) -> dict:
     Parameters
     ----------
     record : dict
-        A recording's campaign record (:func:`pipeline.campaign.run_recording`).
+        A recording's campaign record (:func:`meshphase.campaign.run_recording`).
     old_dir, new_dir : str or Path
 
     Returns

@@ -3,7 +3,7 @@
 Dask, matplotlib and the synthetic generator are imported only by the subcommands that use
 them, so ``meshphase info`` never pays for them.
 
-Exit status (every subcommand; README.md "Exit status"; constants in :mod:`pipeline.exits`):
+Exit status (every subcommand; README.md "Exit status"; constants in :mod:`meshphase.exits`):
 
 ====  ==========================================================================================
 0     ok: every requested result computed
@@ -178,7 +178,7 @@ def cmd_convert(args) -> int:
 
 # ---------------------------------------------------------------------------- synth
 def cmd_synth(args) -> int:
-    from synthetic import cli_synth, describe_scenarios  # heavy (numba, scipy.stats): only here
+    from meshphase.synthetic import cli_synth, describe_scenarios  # heavy (numba, scipy.stats): only here
 
     if args.list or not args.scenario or not args.output:
         rows = describe_scenarios()
@@ -293,7 +293,7 @@ def _run_and_write(args, scene, base, *, report: bool = True):
 
     ``scene`` is a Scene or a function of the reserved folder returning one (the demo writes
     its scene file there first). The folder is removed again when the run fails or is
-    interrupted (:class:`pipeline.exits.OutputDir`)."""
+    interrupted (:class:`meshphase.exits.OutputDir`)."""
     with OutputDir(base, overwrite=args.overwrite, staged=True) as out:
         if callable(scene):
             scene = scene(out.path)

@@ -3,7 +3,7 @@
 :func:`local_cluster` starts the campaign's own :class:`distributed.LocalCluster` (on
 127.0.0.1 only, no dashboard unless asked, one single-threaded worker *process* per core by
 default: the stages are numpy/Python code that holds the GIL for long stretches, and
-``warnings.catch_warnings`` in :func:`pipeline.stages.run_scene` is not thread-safe).
+``warnings.catch_warnings`` in :func:`meshphase.stages.run_scene` is not thread-safe).
 :func:`open_client` gives a client on that cluster or on an existing scheduler
 (``tcp://host:8786``, whose workers must have meshphase installed and see the same paths),
 with the workers warmed up, and closes what it started. :func:`end_worker` ends a worker

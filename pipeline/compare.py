@@ -4,13 +4,13 @@ Carlo band coverage, identification of the shaft hole errors, bearing moments.
 What a gauge measures
 ---------------------
 A gauged sun tooth meets planet n when its direction about the actual sun centre equals the
-line of centres psi_es,n (synthetic.kinematics gives the same condition), so between the
+line of centres psi_es,n (meshphase.synthetic.kinematics gives the same condition), so between the
 planet-1 pass (angle time tau_1) and the planet-n pass (tau_n) the tooth turns
 
     lag_n = psi_es,n(tau_n) - psi_es,1(tau_1)        (mod 2 pi, in the gear's sense)
 
 and the measured phasing is gamma_n = frac(o Z lag_n / 2 pi) with o = +-1 the gauge's
-sense of rotation (:func:`pipeline.phasing.pass_order`). The model therefore has to be
+sense of rotation (:func:`meshphase.phasing.pass_order`). The model therefore has to be
 evaluated at the two engagement instants, not at one common time as in seed 000's
 gamma(t): :func:`predict_pass_phasing` does that, on the pulse-train encoder angle of each
 pass (so speed drift does not accumulate into the offset angles).
@@ -92,7 +92,7 @@ def _angle_zero_time(table: PassTable) -> float:
     """Time [s] at which the table's encoder angle is 0: its first reference pass.
 
     ``table.origin`` is documented as that instant, but a ring table driven by the sun's
-    encoder (:class:`pipeline.phasing.ScaledEncoder`) reports the start of the overlap of the
+    encoder (:class:`meshphase.phasing.ScaledEncoder`) reports the start of the overlap of the
     two encoders there, which is later than its first reference pass whenever the sun's
     first planet-1 pass comes after the ring's; the angles still count from the ring's first
     reference pass. Both encoders keep their reference times in ``full_t``, so take the
@@ -668,13 +668,13 @@ def truth_comparison(table: PassTable, truth, channel: str, *, times=None, plane
     both are matched to the truth's engagements of ``channel`` (after removing the median
     offset of the timed pulse feature from the engagement instant) and the true phasing of
     exactly that pair is the mesh angle the gear turned between them,
-    ``Z |w| (tau_n - tau_1) / 2 pi`` with tau the truth's angle time (``synthetic.truth``).
+    ``Z |w| (tau_n - tau_1) / 2 pi`` with tau the truth's angle time (``meshphase.synthetic.truth``).
     So the error is the measurement's own, whatever the planet labels.
 
     Parameters
     ----------
     table : PassTable
-    truth : synthetic.truth.GroundTruth
+    truth : meshphase.synthetic.truth.GroundTruth
         Anything with ``events[channel]`` (``time``, ``tau``, ``planet``) and ``config``
         (``gearset``, ``speeds``).
     channel : str

@@ -1,7 +1,7 @@
 """Signal conditioning of tooth-root strain channels, and the per-channel quality report.
 
 Array functions at the bottom (numpy in, numpy out, sample rate ``fs`` in [Hz]) and thin
-:class:`~pipeline.recording.Recording` wrappers that convert, apply per channel and append
+:class:`~meshphase.recording.Recording` wrappers that convert, apply per channel and append
 one entry to the recording's history.
 
 Steps
@@ -25,7 +25,7 @@ Dropouts and clipped plateaus
 -----------------------------
 A DAQ that drops samples may write exact zeros or hold its last sample instead of NaN; an
 ADC or amplifier stage may saturate below the nominal full scale, or on one polarity only.
-:func:`pipeline.quality.flat_runs` finds both on the raw data, with a run-length threshold
+:func:`meshphase.quality.flat_runs` finds both on the raw data, with a run-length threshold
 from the channel's own statistics (a quantised quiet channel repeats values by chance) and
 tells them apart by where the flat run sits: a clip bounds a pulse extreme and is entered
 steeply, a dropout sits at 0 or at a value the signal passes through (see that module's
@@ -54,7 +54,7 @@ Filtering never smears NaN: interior non-finite runs of at most ``fill_max`` sam
 bridged by linear interpolation for the filter, longer runs split the signal into segments
 filtered independently, and every sample that was non-finite on input is NaN on output
 (mask back). Segments too short for the filter's edge padding come out NaN, with a
-:class:`~pipeline.errors.DataQualityWarning`.
+:class:`~meshphase.errors.DataQualityWarning`.
 """
 
 from __future__ import annotations
@@ -870,18 +870,18 @@ def assess_quality(x, fs: float, *, t0: float = 0.0, name: str = "", clip_min_ru
     name : str
         Channel name for messages.
     clip_min_run, clip_rtol
-        See :func:`pipeline.quality.clipped_runs`; ``clip_min_run`` is also the shortest
+        See :func:`meshphase.quality.clipped_runs`; ``clip_min_run`` is also the shortest
         clipped plateau at other levels [samples].
     snr : bool
         Estimate the SNR (:func:`estimate_snr`); meaningful on drift-free data.
     warn : bool
-        Issue a :class:`~pipeline.errors.DataQualityWarning` when gaps, dropouts or clipped
+        Issue a :class:`~meshphase.errors.DataQualityWarning` when gaps, dropouts or clipped
         runs are found, or the SNR is below ``snr_warn_db``.
     snr_warn_db : float
         SNR below which to warn [dB].
     detect_flat : bool
         Look for dropout runs and clipped plateaus at any level
-        (:func:`pipeline.quality.flat_runs`); False: non-finite gaps and rail clipping only.
+        (:func:`meshphase.quality.flat_runs`); False: non-finite gaps and rail clipping only.
         Meant for analogue (strain) channels, not pulse trains.
     dropout_min_run : int
         Floor of the dropout run-length threshold [samples], >= 2 (the threshold itself
@@ -1106,7 +1106,7 @@ def condition_recording(rec: Recording, *, channels: Sequence[str] | str | None 
         "nan": the dropout runs found on the raw data become NaN before any filtering (one
         ``"condition.mask_dropouts"`` history entry when there are any), so that they are
         gaps for every later stage; "keep": leave the samples (the report still lists them;
-        pass ``quality=`` to :func:`pipeline.onsets.detect_onsets_recording`).
+        pass ``quality=`` to :func:`meshphase.onsets.detect_onsets_recording`).
     pulse_period : float, optional
         Period of the channels' pulse train [s] (one relative revolution of the gauged gear):
         the drift baseline then averages whole periods (:func:`drift_baseline`).

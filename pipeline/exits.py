@@ -1,7 +1,7 @@
 """Exit status of the ``meshphase`` command and the run status behind it.
 
 One table, used by every subcommand (also in README.md, "Exit status", and in the
-:mod:`pipeline.cli` docstring):
+:mod:`meshphase.cli` docstring):
 
 ====  ==========================================================================================
 code  meaning
@@ -24,13 +24,13 @@ code  meaning
       the status a process killed by SIGPIPE gets
 ====  ==========================================================================================
 
-:func:`run_status` turns a :class:`pipeline.stages.RunContext` into that status (it goes into
+:func:`run_status` turns a :class:`meshphase.stages.RunContext` into that status (it goes into
 ``summary.json`` and decides the exit code); :class:`OutputDir` reserves a run's output folder,
 lets the run fill a staging folder beside it and swaps that in atomically when the run
 finishes (nothing of a failed or interrupted run is left; ``--overwrite`` leaves no stale file
 and never writes through symbolic links);
 :func:`recording_read_errors` turns the HDF5 library's exceptions into a
-:class:`~pipeline.io.RecordingFileError` naming the file.
+:class:`~meshphase.io.RecordingFileError` naming the file.
 """
 
 from __future__ import annotations
@@ -73,7 +73,7 @@ EXIT_PIPE = 141
 #: does not have (no face-width gauges: no centroid work), by design of the scene planner
 BENIGN_SKIPS = ("skipped: the recording has no face-width gauges",)
 
-#: stage -> the result name a scene requests it by (``pipeline.scene.RESULTS`` inverted)
+#: stage -> the result name a scene requests it by (``meshphase.scene.RESULTS`` inverted)
 RESULT_OF_STAGE = {"ideal": "ideal_phasing", "phasing": "phasing", "load_sharing": "load_sharing",
                    "centroids": "centroids", "compare": "compare", "identify": "identify",
                    "tolerance": "tolerance", "bearing_moments": "bearing_moments",
@@ -122,7 +122,7 @@ def run_status(ctx) -> dict:
 
     Parameters
     ----------
-    ctx : pipeline.stages.RunContext
+    ctx : meshphase.stages.RunContext
         A finished run (``failed``, ``ran``, ``phasing``, ``messages``).
 
     Returns
@@ -134,8 +134,8 @@ def run_status(ctx) -> dict:
         ``error`` (the cause of "failed", else None); ``missing_results``: one dict per
         result not computed, ``{"result", "stage", "cause"}`` (the cause of a skipped
         stage names the stage that failed behind it); ``unreliable``: gauge -> reasons
-        (:func:`pipeline.results.phasing_verdict`, as
-        :func:`pipeline.campaign.phasing_reliability` gives it).
+        (:func:`meshphase.results.phasing_verdict`, as
+        :func:`meshphase.campaign.phasing_reliability` gives it).
 
     Raises
     ------
@@ -143,7 +143,7 @@ def run_status(ctx) -> dict:
         ``ctx`` is not a run context.
     """
     if not all(hasattr(ctx, a) for a in ("failed", "ran", "phasing", "messages")):
-        raise TypeError(f"ctx must be a RunContext (pipeline.stages.run_scene), got {type(ctx).__name__}")
+        raise TypeError(f"ctx must be a RunContext (meshphase.stages.run_scene), got {type(ctx).__name__}")
     failed = {k: v for k, v in ctx.failed.items() if str(v) not in BENIGN_SKIPS}
     missing = [{"result": RESULT_OF_STAGE[s], "stage": s, "cause": _cause(failed, s)}
                for s in failed if s in RESULT_OF_STAGE]
@@ -202,7 +202,7 @@ STALE_DIR_AGE = 7 * 24 * 3600.0
 #: previous folder set aside during the swap) and ``.swap`` (the swap journal)
 _WORK_RE = re.compile(r"^\.mp-(?P<host>[0-9a-f]{4})-(?P<pid>[0-9]{1,10})-(?P<tok>[0-9a-f]{8})"
                       r"\.(?P<kind>new|old|swap)$")
-# temporary files of pipeline.io.atomic_path (a killed writer's leftovers are no foreign files)
+# temporary files of meshphase.io.atomic_path (a killed writer's leftovers are no foreign files)
 _TEMP_FILE_RE = re.compile(r"^\.mp-[0-9a-f]{4}-[0-9]{1,10}-[0-9a-f]{8}\.partial$")
 # what meshphase versions without a manifest wrote into an output folder (any depth; PNGs in
 # a ``figures`` folder): such a folder may be replaced by --overwrite too
@@ -550,7 +550,7 @@ class OutputDir:
     """A run's output folder, written whole or not at all.
 
     ``with OutputDir(base, overwrite=...) as out:`` reserves the output folder up front (as
-    :func:`pipeline.stages.new_output_dir` does: ``base``, else ``base-2``, ...; with
+    :func:`meshphase.stages.new_output_dir` does: ``base``, else ``base-2``, ...; with
     ``overwrite`` an existing ``base``), so an unwritable location fails in a second, not
     after the processing. The run writes into ``out.path``: a new, empty staging folder beside
     it with a short name (``.mp-<host>-<pid>-<hex>.new``) - always with ``overwrite`` or

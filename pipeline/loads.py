@@ -1,7 +1,7 @@
 """Planet load sharing and face-width load centroids from measured pulse amplitudes.
 
 Array functions (spec sections 6 and 7); the bearing moments that follow from the centroids
-are :func:`pipeline.models.bearing.moments_from_offsets`.
+are :func:`meshphase.models.bearing.moments_from_offsets`.
 """
 
 from __future__ import annotations
@@ -278,7 +278,7 @@ def facewidth_readings(times, amplitudes, good, widths, fs: float) -> np.ndarray
     ----------
     times, amplitudes, good, widths : sequence of G array_like
         Per gauge: onset times [s], signed pulse amplitudes [strain], the clean-pulse mask
-        and the pulse widths [s] (the fields of :class:`pipeline.onsets.Onsets`).
+        and the pulse widths [s] (the fields of :class:`meshphase.onsets.Onsets`).
     fs : float
         Sample rate [Hz].
 

@@ -1,6 +1,6 @@
 """What a run writes: the machine-readable summary (summary.json), the CSV tables, the
 arrays (arrays.h5) and the HTML report, from the run context's typed stage results
-(:mod:`pipeline.results`); the output folder a run writes into (:func:`new_output_dir`).
+(:mod:`meshphase.results`); the output folder a run writes into (:func:`new_output_dir`).
 
 ``summary.json`` keys: scene, status, missing_results, phasing_reliability,
 results_requested, stages_ran, stages_failed, timings_s, error_estimates, messages,

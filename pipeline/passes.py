@@ -1,11 +1,11 @@
 """Pass selection: which of a gauge's onsets its phasing uses, when each pass happened and
 how well it is timed.
 
-The onset detector (:mod:`pipeline.onsets`) times every pulse of a gauge channel; the phasing
-(:mod:`pipeline.phasing`) wants passes: the usable pulses (:func:`usable_onsets`: clean, or
+The onset detector (:mod:`meshphase.onsets`) times every pulse of a gauge channel; the phasing
+(:mod:`meshphase.phasing`) wants passes: the usable pulses (:func:`usable_onsets`: clean, or
 flagged only for a gap that conditioning bridged), each at its template's timing centre (a
 fixed angle of the gauged gear, :func:`pass_times`), with a timing bound (:func:`onset_sigma`,
-the Cramer-Rao bound of :func:`pipeline._crb.crb_delay_std` with a resolution floor).
+the Cramer-Rao bound of :func:`meshphase._crb.crb_delay_std` with a resolution floor).
 :func:`gauge_passes` does that for every gauge of a recording; :func:`gap_intervals_of`
 gives the gaps the phasing must not bridge.
 """
@@ -35,7 +35,7 @@ _GAUGE_KINDS = ("sun", "ring", "facewidth")
 
 def _as_onsets(on) -> Onsets:
     if not isinstance(on, Onsets):
-        raise TypeError(f"onsets must be an Onsets (pipeline.onsets), got {type(on).__name__}")
+        raise TypeError(f"onsets must be an Onsets (meshphase.onsets), got {type(on).__name__}")
     return on
 
 
@@ -52,7 +52,7 @@ def timing_centre(template: Template) -> float:
 
     Parameters
     ----------
-    template : pipeline.onsets.Template
+    template : meshphase.onsets.Template
         With at least two samples.
 
     Returns
@@ -61,7 +61,7 @@ def timing_centre(template: Template) -> float:
         The centre [template samples]; the template's peak when it has no slope.
     """
     if not isinstance(template, Template):
-        raise TypeError(f"template must be a Template (pipeline.onsets), got {type(template).__name__}")
+        raise TypeError(f"template must be a Template (meshphase.onsets), got {type(template).__name__}")
     h = np.asarray(template.samples, dtype=float)
     if h.ndim != 1 or h.size < 2:
         raise ValueError(f"template.samples must be 1-D with at least 2 samples, got shape {h.shape}")
@@ -98,7 +98,7 @@ def usable_onsets(onsets: Onsets, gap_runs, fs: float, t0: float) -> np.ndarray:
 
     Parameters
     ----------
-    onsets : pipeline.onsets.Onsets
+    onsets : meshphase.onsets.Onsets
     gap_runs : array_like of int, shape (k, 2), or None
         The ``[start, stop)`` sample runs where the conditioned channel is not finite
         (:func:`conditioned_gap_runs`), sorted; None: none known.
@@ -133,7 +133,7 @@ def usable_onsets(onsets: Onsets, gap_runs, fs: float, t0: float) -> np.ndarray:
 
 def conditioned_gap_runs(quality):
     """The ``[start, stop)`` sample runs where a conditioned channel is not finite, from its
-    quality report (:class:`pipeline.condition.ChannelQuality`): its conditioned gap runs,
+    quality report (:class:`meshphase.condition.ChannelQuality`): its conditioned gap runs,
     else its gaps and dropouts; None without a report."""
     if quality is None:
         return None
@@ -170,7 +170,7 @@ def gap_intervals_of(quality: dict) -> np.ndarray:
 def onset_sigma(onsets: Onsets, noise_rms: float) -> np.ndarray:
     """Per-onset timing uncertainty [s]: the Cramer-Rao bound for the learnt template at the
     fitted amplitude in white noise of the conditioned channel's RMS
-    (:func:`pipeline._crb.crb_delay_std`, Kay 1993 eq. 3.14); the onset tests hold the
+    (:func:`meshphase._crb.crb_delay_std`, Kay 1993 eq. 3.14); the onset tests hold the
     detector within ~1.1x of it.
 
     It never claims better than the detector resolves a noise-free pulse: its sub-sample
@@ -181,7 +181,7 @@ def onset_sigma(onsets: Onsets, noise_rms: float) -> np.ndarray:
 
     Parameters
     ----------
-    onsets : pipeline.onsets.Onsets
+    onsets : meshphase.onsets.Onsets
     noise_rms : float
         RMS of the conditioned channel's noise [data units]; not a positive finite float:
         the floor alone.

@@ -26,7 +26,7 @@ the measured value against section 1 on both gears and both directions).
 
 Speed. The rig's speed is never assumed. Z_j lag_n / 2 pi is the mesh angle turned between
 the two passes, and the mesh angle A(t) of the whole gear train is fitted to every pass train
-and the tacho at once (:mod:`pipeline.angles`: smooth drift plus ripple locked to the shaft
+and the tacho at once (:mod:`meshphase.angles`: smooth drift plus ripple locked to the shaft
 angles, per-planet offsets and planet-spin terms told apart by how they sample the shafts),
 so gamma_n = frac(A(t_n) - A(t_1)) (:func:`phasing_from_model`). Each pass carries the
 one-sigma uncertainty of its two onsets' timing and of the model.
@@ -427,7 +427,7 @@ class GaugeEncoder:
 
     ``angle(t) = 2 pi (A(t) - A(origin)) / Z`` [rad]: the angle the gauged gear has turned
     relative to the carrier since its first reference (planet-1) pass, in its own sense of
-    rotation. :mod:`pipeline.compare` runs the models on it.
+    rotation. :mod:`meshphase.compare` runs the models on it.
 
     Attributes
     ----------
@@ -647,9 +647,9 @@ def phasing_from_model(model: AngleModel, train: PassTrain, z_gear: int, n_plane
     Parameters
     ----------
     model : AngleModel
-        From :func:`pipeline.angle_windows.fit_angle_windows` (``train`` among its trains).
+        From :func:`meshphase.angle_windows.fit_angle_windows` (``train`` among its trains).
     train : PassTrain
-        The gauge's passes (:func:`pipeline.angles.gauge_train`).
+        The gauge's passes (:func:`meshphase.angles.gauge_train`).
     z_gear : int
         Tooth count of the gauged gear [-].
     n_planets : int
@@ -746,7 +746,7 @@ def measured_phasing(times, planets, z_gear: int, n_planets: int, *, gauge: str 
     """Phasing per pass of ONE gauge's labelled onsets, with an angle model fitted to them.
 
     The convenience path for a single pass train (the pipeline fits every gauge and the tacho
-    together: :func:`pipeline.angle_windows.fit_angle_windows`, :func:`phasing_from_model`). The
+    together: :func:`meshphase.angle_windows.fit_angle_windows`, :func:`phasing_from_model`). The
     gauged member's angle comes from the train itself (every planet's passes, each at its own
     offset, plus planet-spin terms when ``z_planet`` is given), never from nominal speed.
 
@@ -969,7 +969,7 @@ class PhasingResult:
 def relabel_gauge(result: PhasingResult, gear: str, shift: int, gearset) -> tuple:
     """(PassTable, GaugeLabels) of ``gear``'s main gauge with planet 1 moved ``shift`` places
     along its pass order, recomputed from the same angle model (a cyclic relabelling of a
-    symmetric layout: what :func:`pipeline.stages.stage_identify` tries when a gauge's labels
+    symmetric layout: what :func:`meshphase.stages.stage_identify` tries when a gauge's labels
     are only relative)."""
     lab = result.labels[gear]
     tr = result.trains[lab.channel]
@@ -1027,7 +1027,7 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
         Every sun, ring and face-width gauge with its usable pulses.
     gearset : Gearset
     fixed : {"ring", "sun", None}
-        Held member (:func:`pipeline.angles.held_member`); ``fixed_reason`` says why.
+        Held member (:func:`meshphase.angles.held_member`); ``fixed_reason`` says why.
     tacho_times : array_like, optional
         Carrier tacho edges [s]: an angle train when a member is held, and planet 1 of the
         held member's gauge when ``key_angle`` and that gauge's ``mounts`` entry are known.
@@ -1043,9 +1043,9 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
         Sense of the carrier's rotation (default from the direction and the held member).
     check_held : bool
         Decide the held member again from the data (mesh cycles per carrier turn measured
-        between tacho edges, :func:`pipeline.angles.mesh_cycles_per_carrier_turn`) together
+        between tacho edges, :func:`meshphase.angles.mesh_cycles_per_carrier_turn`) together
         with ``speeds`` and their typed ``speeds_resolution``
-        (:func:`pipeline.angles.held_member`); ``fixed`` is then only the starting guess.
+        (:func:`meshphase.angles.held_member`); ``fixed`` is then only the starting guess.
 
     Returns
     -------
@@ -1097,7 +1097,7 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
 def _held_from_data(passes, gearset, tach: np.ndarray, speeds, resolution, given: tuple) -> tuple:
     """(held member, reason) from the data: mesh cycles per carrier turn, counted over one
     tacho interval on the busiest gauge's pass pattern (which pulse is planet 1 does not
-    matter for a count), with the nominal ``speeds`` (:func:`pipeline.angles.held_member`);
+    matter for a count), with the nominal ``speeds`` (:func:`meshphase.angles.held_member`);
     ``given`` when the count cannot be made."""
     psi = gearset.angles
     p0 = max(passes, key=lambda p: p.times.size)
@@ -1181,7 +1181,7 @@ def _label_gauges(passes, gearset, held: _HeldGauges, notes: list) -> tuple[dict
 
 def _gauge_trains(all_labels: dict, gearset) -> tuple[list, dict]:
     """The angle train of every gauge with two or more labelled passes
-    (:func:`pipeline.angles.gauge_train`), as a list and by channel."""
+    (:func:`meshphase.angles.gauge_train`), as a list and by channel."""
     trains, train_of = [], {}
     for name, (lab, frac, p) in all_labels.items():
         ok = lab.planet >= 0
@@ -1218,7 +1218,7 @@ def _gear_tables(model: AngleModel, labels: dict, train_of: dict, gearset, gaps)
 
 def _align_labels(trains, train_of, all_labels, labels, kin, n, notes):
     """Relabel relatively labelled gauge trains cyclically so that their planet numbers name
-    the same planets as the reference trains' (see :func:`pipeline.angles.label_shift_costs`).
+    the same planets as the reference trains' (see :func:`meshphase.angles.label_shift_costs`).
     A shift is taken only when its misfit stands clearly apart (the next best is worse by more
     than 25 times the fit's variance per observation); otherwise the planets' offsets look
     alike, nothing is changed and a note says so."""

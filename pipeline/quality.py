@@ -3,8 +3,8 @@ and the per-channel quality report they make.
 
 Numpy in, numpy out; no Recording here (see :meth:`pipeline.Recording.quality`). A channel is
 scanned by :class:`ChannelScan` (whole, or in blocks) and reported as one
-:class:`ChannelQuality`, the report that conditioning (:mod:`pipeline.condition`), the
-streamed stages (:mod:`pipeline.stream`) and the onset stage read.
+:class:`ChannelQuality`, the report that conditioning (:mod:`meshphase.condition`), the
+streamed stages (:mod:`meshphase.stream`) and the onset stage read.
 
 Flat runs: DAQ dropouts and clipped plateaus
 --------------------------------------------
@@ -677,7 +677,7 @@ def plateau_runs(x, **kwargs) -> np.ndarray:
 # ====================================================================== the report
 @dataclass(frozen=True)
 class HumReport:
-    """Mains hum found on one channel (:func:`pipeline.condition.detect_hum`).
+    """Mains hum found on one channel (:func:`meshphase.condition.detect_hum`).
 
     Attributes
     ----------
@@ -725,12 +725,12 @@ class ChannelQuality:
 
     The one quality report of the package. :func:`quality_from_scan` makes it from a
     :class:`ChannelScan` (whole arrays and streamed blocks alike);
-    :func:`pipeline.condition.assess_quality`, :func:`pipeline.condition.condition_recording`
-    and :func:`pipeline.stream.condition_stream` return it, the conditioning steps adding
+    :func:`meshphase.condition.assess_quality`, :func:`meshphase.condition.condition_recording`
+    and :func:`meshphase.stream.condition_stream` return it, the conditioning steps adding
     their findings (SNR, hum, ``settle``, ``conditioned_gap_runs``) to a copy
     (:func:`dataclasses.replace`). Two plain forms: :meth:`to_dict` (a conditioned channel's
     report, JSON-friendly) and :meth:`summary_dict` (the raw-data summary of
-    :func:`channel_quality` and :meth:`pipeline.recording.Recording.quality`).
+    :func:`channel_quality` and :meth:`meshphase.recording.Recording.quality`).
 
     Runs are ``[start, stop)`` sample indices relative to the first sample of the assessed
     data; sample ``i`` is at ``t0 + i / fs`` [s].
@@ -758,7 +758,7 @@ class ChannelQuality:
         that happens to sit at the extreme, e.g. zeros on a positive channel) and clipped
         plateaus at any level (:func:`flat_runs`), merged.
     snr_db : float
-        Peak-power SNR estimate [dB] (:func:`pipeline.condition.estimate_snr`), NaN when
+        Peak-power SNR estimate [dB] (:func:`meshphase.condition.estimate_snr`), NaN when
         unknown.
     signal_peak : float
         Pulse peak amplitude estimate [units].
@@ -766,7 +766,7 @@ class ChannelQuality:
         Noise standard deviation estimate [units].
     settle : float
         Guard time around gaps within which filter transients may distort the data [s]
-        (set by :func:`pipeline.condition.condition_recording`; the onset stage flags pulses
+        (set by :func:`meshphase.condition.condition_recording`; the onset stage flags pulses
         that close).
     hum : HumReport or None
         Mains hum found (None when not examined).
@@ -784,7 +784,7 @@ class ChannelQuality:
     conditioned_gap_runs : ndarray of int64, shape (k, 2), or None
         Runs of non-finite samples of the conditioned channel: its gaps and dropouts plus
         the stretches between gaps too short for the filters (set by
-        :func:`pipeline.condition.condition_recording` and the streaming stage; None when not
+        :func:`meshphase.condition.condition_recording` and the streaming stage; None when not
         conditioned). What the phasing stage checks a pulse's window against.
     min, max : float
         Smallest and largest finite raw sample [units]; NaN when none is finite.
@@ -846,7 +846,7 @@ class ChannelQuality:
     def runs_time(self, which: str = "gap") -> np.ndarray:
         """Runs of one kind as ``[t_start, t_stop)`` [s]: "gap" (non-finite), "nan",
         "dropout", "clipped", "bad" (all of them) or "all_gaps" (gaps and dropouts, as
-        :func:`pipeline.condition.gap_intervals`)."""
+        :func:`meshphase.condition.gap_intervals`)."""
         which = as_choice(which, "which", ("gap", "nan", "dropout", "clipped", "bad", "all_gaps"))
         if self.fs is None:
             raise ValueError(f"channel {self.name!r}: a report of bare samples has no sample "
@@ -859,7 +859,7 @@ class ChannelQuality:
 
     def gap_intervals(self) -> np.ndarray:
         """Gaps and dropouts as ``[t_start, t_stop)`` rows [s] (see
-        :func:`pipeline.condition.gap_intervals`)."""
+        :func:`meshphase.condition.gap_intervals`)."""
         return self.runs_time("all_gaps")
 
     def summary(self) -> str:
@@ -953,7 +953,7 @@ def channel_quality(x, *, kind: str | None = None) -> dict:
     x : array_like, shape (n,)
         Raw samples of one channel [any unit].
     kind : str, optional
-        Channel kind (:class:`pipeline.recording.ChannelSpec`). A "tacho" is a pulse train,
+        Channel kind (:class:`meshphase.recording.ChannelSpec`). A "tacho" is a pulse train,
         flat by design: its dropout and plateau analysis is skipped (the rail runs at its
         two levels are still listed as clipped, as before). Without a kind, a channel whose
         finite samples take at most 8 distinct values (among 4096 evenly strided ones) is
@@ -1509,7 +1509,7 @@ class ChannelScan:
     (extremes, strided subsamples, run-length counts: :class:`FlatScan`), pass 2
     (:meth:`feed2`) the runs at the rails and the candidate flat runs with the samples
     around them; :meth:`result` classifies them. The result equals that of the whole array
-    (:func:`channel_quality`, :func:`pipeline.condition.assess_quality`) whatever the
+    (:func:`channel_quality`, :func:`meshphase.condition.assess_quality`) whatever the
     pieces, in memory bounded by the subsamples plus ~2 * ``FLAT_WINDOW`` samples per
     candidate flat run (the faults found) and the run lists themselves.
 

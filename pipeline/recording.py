@@ -377,7 +377,7 @@ class Recording:
         """Per-channel quality summary: NaN/inf runs, longest run, min/max, clipped runs,
         dropout runs.
 
-        Uses :func:`pipeline.quality.channel_quality` on each channel (with its kind: a tacho's
+        Uses :func:`meshphase.quality.channel_quality` on each channel (with its kind: a tacho's
         flat levels are not analysed as dropouts or clipped plateaus).
         """
         from .quality import channel_quality

@@ -1,9 +1,9 @@
 """Typed results of the stages a scene runs: one frozen dataclass per stage, and the run
 context that holds them.
 
-:func:`pipeline.stages.run_scene` keeps them in its :class:`RunContext`, one attribute per
+:func:`meshphase.stages.run_scene` keeps them in its :class:`RunContext`, one attribute per
 stage (``ctx.load``, ``ctx.phasing``, ``ctx.compare``, ...; None for a stage
-that did not run); :func:`pipeline.stages.summary_dict`, :func:`pipeline.stages.write_outputs`,
+that did not run); :func:`meshphase.stages.summary_dict`, :func:`meshphase.stages.write_outputs`,
 the HTML report and the run status read them there. Units are SI; phasing in mesh cycles [-].
 
 The dataclasses are frozen (a stage's result is not changed by a later stage: a stage that
@@ -79,14 +79,14 @@ class LoadStage(StageResult):
     source : str
         The file path, or ``synthetic:<scenario>``.
     quality : list of dict
-        Raw-sample quality per channel (:meth:`pipeline.recording.Recording.quality`).
-    truth : synthetic.truth.Truth or None
+        Raw-sample quality per channel (:meth:`meshphase.recording.Recording.quality`).
+    truth : meshphase.synthetic.truth.Truth or None
         The generator's truth for a synthetic input.
     true_errors : ShaftHoleErrors or None
         The shaft hole errors of that truth.
-    stream : pipeline.stream.BlockSource or None
+    stream : meshphase.stream.BlockSource or None
         Where the samples come from for each pass.
-    scan : pipeline.stream.RawScan or None
+    scan : meshphase.stream.RawScan or None
         What passes 1 and 2 found (tacho edges, hum windows, quality).
     channels_unused : tuple of str
         Channels no planned stage reads.
@@ -125,7 +125,7 @@ class ConditionStage(StageResult):
         Seconds spent conditioning and detecting onsets [s].
     memory : dict of str to int
         Memory estimate of the pass [B].
-    scan : pipeline.stream.RawScan or None
+    scan : meshphase.stream.RawScan or None
         The raw-sample scan the pass used (the load stage's, or one made here).
     """
 
@@ -184,7 +184,7 @@ class PhasingStage(StageResult):
         Gears whose planet 1 is only the first pulse seen.
     notes : list of str
     result : PhasingResult or None
-        The whole measurement (trains, fractions) :func:`pipeline.phasing.relabel_gauge`
+        The whole measurement (trains, fractions) :func:`meshphase.phasing.relabel_gauge`
         recomputes from.
     """
 
@@ -210,7 +210,7 @@ class PhasingStage(StageResult):
 
     def relabelled(self, gear: str, table, labels) -> "PhasingStage":
         """This result with ``gear``'s table and labels replaced (a gauge relabelled
-        cyclically, :func:`pipeline.phasing.relabel_gauge`); the gear's labels are then no
+        cyclically, :func:`meshphase.phasing.relabel_gauge`); the gear's labels are then no
         longer relative."""
         tables = {**self.tables, gear: table}
         labs = {**self.labels, gear: labels}
@@ -319,7 +319,7 @@ class ToleranceStage(StageResult):
 
     def band(self, gear: str) -> tuple[np.ndarray, np.ndarray]:
         """The 3-sigma band of ``gear``'s phasing deviation from the ideal per planet [mesh
-        cycles] (:meth:`pipeline.models.tolerance.MonteCarloResult.phasing_band`)."""
+        cycles] (:meth:`meshphase.models.tolerance.MonteCarloResult.phasing_band`)."""
         return self.monte_carlo.phasing_band(gear)
 
 
@@ -329,7 +329,7 @@ class IdentifyStage(StageResult):
 
     Attributes
     ----------
-    identification : pipeline.compare.Identification
+    identification : meshphase.compare.Identification
     relabelled : tuple of (str, int)
         Gears whose relative planet labels the identification moved, with the shift [places].
     phasing : PhasingStage or None
@@ -363,13 +363,13 @@ class GaugeComparison:
     model : ndarray, shape (n,) or None
         The identified error model's phasing at each pass [-] (None: no identification).
     vs_ideal, vs_model : dict or None
-        :func:`pipeline.compare.residual_stats` of the passes against them [-].
+        :func:`meshphase.compare.residual_stats` of the passes against them [-].
     band : dict or None
         ``lo``, ``hi``: the Monte Carlo 3-sigma band per planet around the ideal [-].
     coverage : dict or None
-        :func:`pipeline.compare.band_coverage` of the passes in that band.
+        :func:`meshphase.compare.band_coverage` of the passes in that band.
     vs_truth : dict or None
-        :func:`pipeline.compare.truth_comparison` against the synthetic truth.
+        :func:`meshphase.compare.truth_comparison` against the synthetic truth.
     scored_against_truth : bool
         The input had a truth to score against (``vs_truth`` None then: no labels).
     """
@@ -544,7 +544,7 @@ class RunContext:
 
     Attributes
     ----------
-    scene : pipeline.scene.Scene
+    scene : meshphase.scene.Scene
     ran : list of str
         Stages that ran, in order.
     timings : dict
@@ -559,7 +559,7 @@ class RunContext:
         Channels of the recording that no planned stage reads (set by the load stage).
     load, condition, onsets, phasing, load_sharing, centroids, ideal, tolerance, identify, \
 compare, bearing_moments, tilt : StageResult or None
-        The typed result of each stage (:mod:`pipeline.results`: :class:`LoadStage`,
+        The typed result of each stage (:mod:`meshphase.results`: :class:`LoadStage`,
         :class:`PhasingStage`, ...), None while the stage has not run.
     results : LegacyResults
         The same results as a dict of dicts by stage name, the shape they had before they
@@ -568,7 +568,7 @@ compare, bearing_moments, tilt : StageResult or None
         The scene's, else the recording's (read only).
     """
 
-    scene: Any                      # pipeline.scene.Scene (which imports the stages)
+    scene: Any                      # meshphase.scene.Scene (which imports the stages)
     ran: list = field(default_factory=list)
     timings: dict = field(default_factory=dict)
     error_estimates: dict = field(default_factory=dict)
@@ -605,7 +605,7 @@ compare, bearing_moments, tilt : StageResult or None
     def result(self, name: str) -> StageResult | None:
         """The typed result of stage ``name``; None while it has not run. A value stored in
         the pre-typing shape (``ctx.results[name] = {...}``) is read through
-        :meth:`~pipeline.results.StageResult.from_legacy`."""
+        :meth:`~meshphase.results.StageResult.from_legacy`."""
         cls = RESULT_TYPES[name]
         r = self._store.get(name)
         if r is None or isinstance(r, cls):

@@ -4,11 +4,11 @@ A scene names the gearset, the gauges, the inputs (a recording file or a synthet
 scenario), the tolerances and the results wanted (``data_schemas/scene.schema.json``,
 documented in ``data_schemas/scene.md``). It is validated up front; errors name the key and
 the line of the scene file (what is checked: ``data_schemas/scene.md``, "What is checked before
-anything runs"; the gearset itself with :mod:`pipeline.models.assembly`, and the scene against
+anything runs"; the gearset itself with :mod:`meshphase.models.assembly`, and the scene against
 the recording's header with :func:`check_recording`). :func:`plan` turns the requested results into the ordered list of
 stages that must run, and nothing else: a bearing-moment scene opens no recording, a scene
 without tolerances runs no Monte Carlo, a scene without face-width gauges does no centroid
-work. The stages themselves live in :mod:`pipeline.stages`.
+work. The stages themselves live in :mod:`meshphase.stages`.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from data_schemas import load_schema
+from meshphase.data_schemas import load_schema
 
 from . import io
 from .errors import DeprecatedNameWarning, SceneWarning
@@ -221,7 +221,7 @@ def _line_of(text: str, keys: list) -> int | None:
     return tab[2]
 
 
-#: seed 001 bearing cases (:func:`pipeline.models.bearing.seed_case`) and the spellings accepted
+#: seed 001 bearing cases (:func:`meshphase.models.bearing.seed_case`) and the spellings accepted
 _BEARING_CASES = {"1": "1", "2a": "2-A", "2b": "2-B"}
 
 
@@ -581,7 +581,7 @@ def _parse_input(raw: dict, base: Path, err) -> dict:
     if "stop_s" in inp:
         inp["stop"] = inp.pop("stop_s")
     if "synthetic" in inp:
-        from synthetic.scenarios import SCENARIOS  # synthetic: imported only when named
+        from meshphase.synthetic.scenarios import SCENARIOS  # synthetic: imported only when named
 
         if inp["synthetic"] not in SCENARIOS:
             raise err(["input", "synthetic"], f"unknown scenario {inp['synthetic']!r}; known: "
@@ -766,7 +766,7 @@ def _synthetic_config(inp: dict):
     """The synthetic scenario's configuration (no samples generated), or None."""
     if inp.get("config") is not None:
         return inp["config"]
-    from synthetic.scenarios import SCENARIOS, get_scenario  # synthetic: heavy, only when named
+    from meshphase.synthetic.scenarios import SCENARIOS, get_scenario  # synthetic: heavy, only when named
 
     return get_scenario(inp["synthetic"]) if inp.get("synthetic") in SCENARIOS else None
 
@@ -853,15 +853,15 @@ def check_recording(scene: Scene, info=None) -> None:
     files carry one); ``processing.notch_hz`` below the Nyquist frequency; the
     ``start_s``/``stop_s`` window inside the recording; every ``[[channels]]`` name and the
     ``[tacho] channel`` present, and a gauge channel when measured results are wanted (the
-    same rules and messages as the load stage, :func:`pipeline.stages._apply_channel_overrides`
-    and :func:`pipeline.stages._check_gauges`).
+    same rules and messages as the load stage, :func:`meshphase.stages._apply_channel_overrides`
+    and :func:`meshphase.stages._check_gauges`).
 
     Parameters
     ----------
     scene : Scene
         With ``input["recording"]`` set.
-    info : pipeline.io.RecordingInfo, optional
-        The recording's header; read with :func:`pipeline.io.read_info` when None.
+    info : meshphase.io.RecordingInfo, optional
+        The recording's header; read with :func:`meshphase.io.read_info` when None.
 
     Raises
     ------
@@ -869,7 +869,7 @@ def check_recording(scene: Scene, info=None) -> None:
         Naming the scene file, the key and its line.
     """
     if not isinstance(scene, Scene):
-        raise TypeError(f"scene must be a Scene (pipeline.scene.load_scene), got {type(scene).__name__}")
+        raise TypeError(f"scene must be a Scene (meshphase.scene.load_scene), got {type(scene).__name__}")
     rec_path = scene.input.get("recording")
     if not rec_path:
         raise ValueError("scene.input has no recording to check against")

@@ -2,14 +2,14 @@
 
 Each stage is a short function ``stage(ctx)``: it checks what it needs, reads the typed
 results of the stages before it from the run context (``ctx.load``, ``ctx.phasing``, ...),
-calls the functions of the modules that hold the algorithms (:mod:`pipeline.stream`,
-:mod:`pipeline.passes`, :mod:`pipeline.phasing`, :mod:`pipeline.loads`,
-:mod:`pipeline.compare`, :mod:`pipeline.models`, ...) and returns ONE frozen dataclass of
-:mod:`pipeline.results`, which the context records (:meth:`RunContext.record`).
-:func:`run_scene` runs exactly the stages that :func:`pipeline.scene.plan` asks for, times
+calls the functions of the modules that hold the algorithms (:mod:`meshphase.stream`,
+:mod:`meshphase.passes`, :mod:`meshphase.phasing`, :mod:`meshphase.loads`,
+:mod:`meshphase.compare`, :mod:`meshphase.models`, ...) and returns ONE frozen dataclass of
+:mod:`meshphase.results`, which the context records (:meth:`RunContext.record`).
+:func:`run_scene` runs exactly the stages that :func:`meshphase.scene.plan` asks for, times
 each one and keeps its error estimate ("error against run time"). Files are written by
-:mod:`pipeline.outputs` (:func:`write_outputs`, :func:`summary_dict`, also importable from
-here); the HTML report by :mod:`pipeline.report.validation` (the only place that plots).
+:mod:`meshphase.outputs` (:func:`write_outputs`, :func:`summary_dict`, also importable from
+here); the HTML report by :mod:`meshphase.report.validation` (the only place that plots).
 """
 
 from __future__ import annotations
@@ -76,7 +76,7 @@ def _inputs(ctx: RunContext, *names: str) -> tuple:
     missing = [n for n, r in zip(names, got) if r is None]
     if missing:
         raise RuntimeError(f"this stage reads the results of {', '.join(missing)}, which did not "
-                           "run (run_scene runs the stages in pipeline.scene.plan's order)")
+                           "run (run_scene runs the stages in meshphase.scene.plan's order)")
     return got
 
 
@@ -212,7 +212,7 @@ SYNTHETIC_WHOLE_BYTES = 256 * 2**20
 
 @_records("load")
 def stage_load(ctx: RunContext) -> LoadStage:
-    """Open the recording and scan its raw samples (passes 1 and 2 of :mod:`pipeline.stream`):
+    """Open the recording and scan its raw samples (passes 1 and 2 of :mod:`meshphase.stream`):
     the quality of every channel, the tacho's edges, the hum windows. A file is never held
     in memory: the later stages stream it again. A synthetic recording up to
     :data:`SYNTHETIC_WHOLE_BYTES` is generated whole, once; a longer one is generated again,
@@ -257,7 +257,7 @@ def _open_file(scene: Scene) -> tuple:
 def _open_synthetic(scene: Scene) -> tuple:
     """(source, header, name, truth) of the scene's synthetic recording: generated whole up
     to :data:`SYNTHETIC_WHOLE_BYTES`, else again block by block for every pass."""
-    from synthetic import generate_blocks  # the generator: optional for the core
+    from meshphase.synthetic import generate_blocks  # the generator: optional for the core
 
     inp, overrides = scene.input, scene.channels
     minutes = inp.get("minutes")
@@ -302,7 +302,7 @@ def _load_stream(ctx: RunContext):
 @_records("condition")
 def stage_condition(ctx: RunContext) -> ConditionStage:
     """Condition every non-tacho channel and time the gauges' pulses, in one streamed pass
-    (pass 3 of :mod:`pipeline.stream`): the conditioned samples are not kept, only the
+    (pass 3 of :mod:`meshphase.stream`): the conditioned samples are not kept, only the
     quality reports, the onsets (handed to the onsets stage) and a short excerpt."""
     src, scan = _load_stream(ctx)
     res = condition_stream(src, scan, _channel_plans(ctx, src.header))
@@ -383,8 +383,8 @@ def _warn_aliased(ctx: RunContext, fs: float) -> None:
 
 @_records("phasing")
 def stage_phasing(ctx: RunContext) -> PhasingStage:
-    """Measured phasing of every gauged gear (:func:`pipeline.phasing.measure_phasing`) from
-    the gauges' usable passes (:func:`pipeline.passes.gauge_passes`)."""
+    """Measured phasing of every gauged gear (:func:`meshphase.phasing.measure_phasing`) from
+    the gauges' usable passes (:func:`meshphase.passes.gauge_passes`)."""
     _inputs(ctx, "load")
     cond, ons = _inputs(ctx, "condition", "onsets")
     g = ctx.gearset
@@ -467,7 +467,7 @@ def stage_load_sharing(ctx: RunContext) -> LoadSharingStage:
 @_records("centroids")
 def stage_centroids(ctx: RunContext) -> CentroidsStage:
     """Face-width load centroid of each gear with two or more positioned face-width gauges
-    (:func:`pipeline.loads.facewidth_readings`, :func:`pipeline.loads.facewidth_centroid`)."""
+    (:func:`meshphase.loads.facewidth_readings`, :func:`meshphase.loads.facewidth_centroid`)."""
     cond, onsets = _inputs(ctx, "condition", "onsets")
     rec, ons = cond.recording, onsets.by_channel
     g = ctx.gearset
@@ -532,7 +532,7 @@ def stage_tolerance(ctx: RunContext) -> ToleranceStage:
 
 @_records("identify")
 def stage_identify(ctx: RunContext) -> IdentifyStage:
-    """Shaft hole errors from the measured phasing (:func:`pipeline.compare.identify_errors`).
+    """Shaft hole errors from the measured phasing (:func:`meshphase.compare.identify_errors`).
 
     A gauge whose planet numbering is only relative is tried in every cyclic relabelling: the
     error model ties the gauges' numberings together (a planet's offset moves its mean
@@ -670,12 +670,12 @@ def run_scene(scene: Scene, *, progress: Callable[[str, int, int], None] | None 
     ``ctx.failed`` and the stages that depend on it are skipped (with the reason); the others
     still run, so a run always returns what it could compute. Any other exception (a KeyError
     or AttributeError is a bug, not a failed stage) propagates. Our warnings
-    (:class:`~pipeline.errors.MeshphaseWarning` and subclasses) are collected into
+    (:class:`~meshphase.errors.MeshphaseWarning` and subclasses) are collected into
     ``ctx.messages`` as "stage: Category: message" and not issued again (the CLI prints
     them, the report lists them); other warnings are collected and re-issued.
     """
     if not isinstance(scene, Scene):
-        raise TypeError(f"scene must be a Scene (pipeline.scene.load_scene), got {type(scene).__name__}")
+        raise TypeError(f"scene must be a Scene (meshphase.scene.load_scene), got {type(scene).__name__}")
     ctx = RunContext(scene)
     stages = plan(scene)
     for i, name in enumerate(stages):
@@ -727,7 +727,7 @@ def process_recording(path, gearset_scene_path, *, out_dir=None, overwrite=False
     The output folder is reserved before the run (an unwritable location fails at once) and
     removed again when the run raises or is interrupted; when the recording cannot be loaded
     (nothing usable) nothing is written and ``files`` is empty: see
-    :func:`pipeline.exits.run_status` for the status of the run.
+    :func:`meshphase.exits.run_status` for the status of the run.
 
     Returns (RunContext, files).
     """

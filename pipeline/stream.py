@@ -1,19 +1,19 @@
 """Recordings processed in blocks: conditioning, quality and onsets in bounded memory.
 
-The stages ``load``, ``condition`` and ``onsets`` (:mod:`pipeline.stages`) run through this
+The stages ``load``, ``condition`` and ``onsets`` (:mod:`meshphase.stages`) run through this
 module, for recording files and for recordings already in memory alike. A recording is read
 three times, block by block, channel-major, in the dtype it is stored in:
 
-1. **Statistics** (pass 1, :class:`pipeline.quality.ChannelScan`): per channel the extremes,
+1. **Statistics** (pass 1, :class:`meshphase.quality.ChannelScan`): per channel the extremes,
    the strided subsamples and run-length counts that the dropout / plateau thresholds come
    from, the runs of non-finite samples.
 2. **Runs** (pass 2): the runs at the rails, the candidate flat runs with the samples around
    them (classified at the end of the pass), the tacho's rising edges, and the first
    ``HUM_SECONDS`` of each conditioned channel, in which the mains hum is looked for (what
-   :func:`pipeline.condition.detect_hum` examines of a whole channel).
+   :func:`meshphase.condition.detect_hum` examines of a whole channel).
 3. **Conditioning and onsets** (pass 3, :func:`condition_stream`): dropouts to NaN, hum
    notches, drift removal, band limit, SNR estimate, and the onset detector
-   (:class:`pipeline.onsets.OnsetStream`), each channel through a chain of streaming
+   (:class:`meshphase.onsets.OnsetStream`), each channel through a chain of streaming
    filters; only the onsets, the quality reports and a short excerpt of the conditioned
    signal are kept.
 
@@ -30,8 +30,8 @@ the whole-array filter does. The drift baseline is computed from the same block 
 at least two) as the whole array; its output for a sample waits until every block value that
 sample depends on is known (about 9 blocks ahead, further across a gap; stretches of all-NaN
 samples are held as their length only). So the conditioned signal equals the whole-array
-:func:`pipeline.condition.condition_recording` to ~1e-12 of its amplitude and the onset
-times equal those of :func:`pipeline.onsets.detect_onsets_recording` to far below a
+:func:`meshphase.condition.condition_recording` to ~1e-12 of its amplitude and the onset
+times equal those of :func:`meshphase.onsets.detect_onsets_recording` to far below a
 microsample (tests/processing/test_stream.py states and checks the tolerances).
 
 Memory
@@ -47,7 +47,7 @@ candidate flat run, the onsets). :func:`scan_memory` (passes 1 and 2) and
 every buffer that grows with fs is capped at the recording's own length, so a high fs costs
 at most the recording's size.
 
-Sources: :class:`FileSource` (a file of any :mod:`pipeline.io` format, read block by block
+Sources: :class:`FileSource` (a file of any :mod:`meshphase.io` format, read block by block
 through its format module), :class:`MemorySource` (a Recording in memory) and
 :class:`GeneratorSource` (a synthetic recording generated again for every pass).
 """
@@ -82,7 +82,7 @@ __all__ = ["StreamedRecording", "BlockSource", "FileSource", "MemorySource", "Ge
 #: Samples per channel read at a time [-] (one block of every channel is held).
 BLOCK_SAMPLES = 1 << 18
 #: Seconds at the start of each conditioned channel examined for mains hum [s]
-#: (:func:`pipeline.condition.detect_hum`'s ``max_seconds``).
+#: (:func:`meshphase.condition.detect_hum`'s ``max_seconds``).
 HUM_SECONDS = 120.0
 #: Seconds of conditioned signal kept per channel for the report [s] (at most 2**19 samples).
 EXCERPT_SECONDS = 60.0
@@ -103,7 +103,7 @@ _SNR_SAMPLES = 1 << 20  # condition._SUBSAMPLE
 
 # ============================================================================ the header
 class StreamedRecording:
-    """Everything of a :class:`~pipeline.recording.Recording` but its samples.
+    """Everything of a :class:`~meshphase.recording.Recording` but its samples.
 
     What the stages after ``load`` read of a recording that is streamed: sample rate, time
     origin, channel specs, metadata, history and length. Asking for samples raises a
@@ -279,13 +279,13 @@ class MemorySource(BlockSource):
 
 
 class FileSource(BlockSource):
-    """A recording file (any format of :mod:`pipeline.io`), or a time window of it.
+    """A recording file (any format of :mod:`meshphase.io`), or a time window of it.
 
     Parameters
     ----------
     path : str or Path
     start, stop : float, optional
-        Time window [s] on the recording's axis (as :func:`pipeline.io.read`).
+        Time window [s] on the recording's axis (as :func:`meshphase.io.read`).
     channels : sequence of ChannelSpec, optional
         Specs replacing the file's (channel overrides).
     gains : list of (int, float), optional
@@ -379,7 +379,7 @@ class FileSource(BlockSource):
                 close()
 
     def warn_nonfinite(self, results: dict) -> None:
-        """One DataQualityWarning per channel with NaN/inf runs, as :func:`pipeline.io.read`
+        """One DataQualityWarning per channel with NaN/inf runs, as :func:`meshphase.io.read`
         of the whole window issues it (``results``: the ScanResults by channel)."""
         for name in self.names:
             runs = results[name].nonfinite_runs if name in results else None
@@ -399,12 +399,12 @@ class FileSource(BlockSource):
 
 class GeneratorSource(BlockSource):
     """A synthetic recording generated block by block, again for every pass (the generator
-    is deterministic: :func:`synthetic.generate_blocks` gives the same samples each time).
+    is deterministic: :func:`meshphase.synthetic.generate_blocks` gives the same samples each time).
 
     Parameters
     ----------
-    stream : synthetic.generate.SyntheticStream
-        (:func:`synthetic.generate_blocks`); its own block length is used.
+    stream : meshphase.synthetic.generate.SyntheticStream
+        (:func:`meshphase.synthetic.generate_blocks`); its own block length is used.
     channels : sequence of ChannelSpec, optional
         Specs replacing the stream's (channel overrides).
     gains : list of (int, float), optional
@@ -575,21 +575,21 @@ class RawScan:
     Attributes
     ----------
     header : StreamedRecording
-    results : dict of str -> pipeline.quality.ScanResult
+    results : dict of str -> meshphase.quality.ScanResult
         Per channel (all of them).
     quality : list of dict
-        :meth:`pipeline.recording.Recording.quality` of the recording (the
-        :meth:`~pipeline.quality.ChannelQuality.summary_dict` of ``reports``, with the
+        :meth:`meshphase.recording.Recording.quality` of the recording (the
+        :meth:`~meshphase.quality.ChannelQuality.summary_dict` of ``reports``, with the
         channel's name).
     hum_window : dict of str -> ndarray
         First ``HUM_SECONDS`` of each conditioned channel, dropouts set to NaN (for
-        :func:`pipeline.condition.detect_hum`).
+        :func:`meshphase.condition.detect_hum`).
     tacho_times : ndarray or None
         Rising half-level crossings of the first tacho channel [s] (None: no tacho, or a
         flat one).
     n_blocks : int
         Blocks read per pass.
-    reports : dict of str -> pipeline.quality.ChannelQuality
+    reports : dict of str -> meshphase.quality.ChannelQuality
         The raw-data quality report of every channel.
     """
 
@@ -811,7 +811,7 @@ class _ZeroPhase:
 
 
 class _Drift:
-    """Streaming :func:`pipeline.condition.remove_drift` with method "median" or "savgol"
+    """Streaming :func:`meshphase.condition.remove_drift` with method "median" or "savgol"
     (the baseline of block medians / means, smoothed over 17 blocks, interpolated)."""
 
     def __init__(self, n_total: int, fs: float, *, method: str, window: float,
@@ -1067,7 +1067,7 @@ class _Identity:
 
 
 class _SnrTap:
-    """:func:`pipeline.condition.estimate_snr` of the drift-free signal, streamed: the noise
+    """:func:`meshphase.condition.estimate_snr` of the drift-free signal, streamed: the noise
     from the first differences at the same stride over the finite ones, the pulse peak from
     the first 2**20 samples."""
 
@@ -1130,7 +1130,7 @@ class ChannelPlan:
     onsets : bool
         Detect onsets on it (a gauge).
     onset_kwargs : dict
-        Passed to :class:`pipeline.onsets.OnsetStream` (``mesh_freq``).
+        Passed to :class:`meshphase.onsets.OnsetStream` (``mesh_freq``).
     """
 
     name: str
@@ -1214,7 +1214,7 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
                      progress: Callable[[str, int, int], None] | None = None) -> StreamResult:
     """Pass 3: condition the planned channels and detect onsets on the gauges, streamed.
 
-    The chain per channel is that of :func:`pipeline.condition.condition_recording`
+    The chain per channel is that of :func:`meshphase.condition.condition_recording`
     (dropouts to NaN, hum notches for the lines found in the first ``HUM_SECONDS``, drift
     removal, band limit) with its defaults; channels of one ``group`` share the gap guard
     ``settle`` as channels conditioned in one call do there.
@@ -1227,7 +1227,7 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
         Its passes 1 and 2 (:func:`scan_source`).
     plans : sequence of ChannelPlan
     hum, drift, drift_window, lowpass, highpass, order, warn
-        As :func:`pipeline.condition.condition_recording`.
+        As :func:`meshphase.condition.condition_recording`.
     block : int
         Samples per channel read at a time.
     memory_budget : float
@@ -1308,7 +1308,7 @@ def _check_plans(source, scan, plans, drift) -> list:
 def _hum_notches(plans, scan: RawScan, quality: dict, settle: dict, fs: float,
                  hum: bool) -> dict:
     """Hum lines of each planned channel from the first HUM_SECONDS (what
-    :func:`pipeline.condition.detect_hum` looks at): its report into ``quality``, the
+    :func:`meshphase.condition.detect_hum` looks at): its report into ``quality``, the
     notches' ringing into its group's ``settle`` [s]; returns name -> notch sos."""
     notch_sos = {}
     if not hum:

@@ -16,7 +16,7 @@ __all__ = ["true_errors", "tacho_geometry", "phasing_vs_truth"]
 
 def _check_truth(truth) -> None:
     if truth is None or not hasattr(truth, "config"):
-        raise TypeError(f"truth must be a synthetic truth (synthetic.generate), got {type(truth).__name__}")
+        raise TypeError(f"truth must be a synthetic truth (meshphase.synthetic.generate), got {type(truth).__name__}")
 
 
 def true_errors(truth):
@@ -25,7 +25,7 @@ def true_errors(truth):
     if truth is None or getattr(truth, "errors", None) is None:
         return None
     if isinstance(truth.errors, dict):
-        from synthetic.config import errors_from_dict  # the generator: optional for the core
+        from meshphase.synthetic.config import errors_from_dict  # the generator: optional for the core
 
         return errors_from_dict(truth.errors)
     return truth.errors
@@ -39,7 +39,7 @@ def tacho_geometry(truth) -> tuple:
     ground angle. The key angle is None without a tacho in the configuration.
     """
     _check_truth(truth)
-    from synthetic.config import SynthConfig  # the generator: optional for the core
+    from meshphase.synthetic.config import SynthConfig  # the generator: optional for the core
 
     cfg = SynthConfig.from_dict(truth.config)
     key = -cfg.tacho_angle() if cfg.tacho is not None else None
@@ -48,11 +48,11 @@ def tacho_geometry(truth) -> tuple:
 
 def phasing_vs_truth(table: PassTable, labels: GaugeLabels | None, truth) -> dict | None:
     """A gauge's measured phasing against the truth, pass by pass
-    (:func:`pipeline.compare.truth_comparison` with the labels the phasing used); None
+    (:func:`meshphase.compare.truth_comparison` with the labels the phasing used); None
     without labels."""
     _check_truth(truth)
     if labels is None:
         return None
     if not isinstance(labels, GaugeLabels):
-        raise TypeError(f"labels must be GaugeLabels (pipeline.phasing), got {type(labels).__name__}")
+        raise TypeError(f"labels must be GaugeLabels (meshphase.phasing), got {type(labels).__name__}")
     return truth_comparison(table, truth, labels.channel, times=labels.times, planets=labels.planet)

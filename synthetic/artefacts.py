@@ -1,8 +1,8 @@
 """What real rig recordings carry besides the gear physics.
 
-Every artefact is switchable and off by default (:class:`synthetic.config.Artefacts`); a
+Every artefact is switchable and off by default (:class:`meshphase.synthetic.config.Artefacts`); a
 scenario that asks for none gets none and pays nothing for them. The functions here are
-array functions (numpy in, numpy out); the generator (:mod:`synthetic.generate`) applies them
+array functions (numpy in, numpy out); the generator (:mod:`meshphase.synthetic.generate`) applies them
 per block in this order::
 
     strain = (1 + gain_error) * pulses               mechanical strain seen by the gauge
@@ -58,7 +58,7 @@ import math
 import numpy as np
 from scipy import signal
 
-from pipeline.validate import as_nonnegative, as_positive, as_positive_int
+from meshphase.validate import as_nonnegative, as_positive, as_positive_int
 
 __all__ = ["NOISE_CHUNK", "STREAMS", "stream_rng", "pink_filter", "NoiseSource", "drift",
            "hum", "HumSource", "clip", "quantise", "draw_gaps", "apply_gaps"]

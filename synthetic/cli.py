@@ -2,16 +2,16 @@
 
 :func:`cli_synth` generates a named scenario and writes the recording in any of the four
 formats plus the ground-truth sidecar (``OUT.truth.json``). TDMS is written block by block
-(flat memory, :mod:`synthetic.tdms_export`); HDF5, MCAP and CSV through
-``pipeline.io.write_blocks``, block by block as well.
+(flat memory, :mod:`meshphase.synthetic.tdms_export`); HDF5, MCAP and CSV through
+``meshphase.io.write_blocks``, block by block as well.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from pipeline.log import logger
-from pipeline.validate import as_positive
+from meshphase.log import logger
+from meshphase.validate import as_positive
 
 from .generate import generate_blocks
 from .truth import truth_path_for
@@ -45,7 +45,7 @@ def cli_synth(scenario: str, out, minutes: float | None = None, seed: int | None
     Parameters
     ----------
     scenario : str
-        Scenario name (:func:`synthetic.scenarios.list_scenarios`).
+        Scenario name (:func:`meshphase.synthetic.scenarios.list_scenarios`).
     out : str or Path
         Output recording file; the format comes from ``format`` or the suffix
         (.h5/.hdf5, .mcap, .csv, .tdms).
@@ -81,7 +81,7 @@ def cli_synth(scenario: str, out, minutes: float | None = None, seed: int | None
 
         write_tdms(iter(stream), out, n_samples=stream.n_samples, overwrite=overwrite)
     else:
-        from pipeline.io import write_blocks
+        from meshphase.io import write_blocks
 
         # block by block too: flat memory whatever the duration
         write_blocks(stream, (blk.data for blk in stream), out, format=fmt,

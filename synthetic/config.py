@@ -1,7 +1,7 @@
 """Typed description of a synthetic recording: gearset, speeds, gauges, artefacts.
 
-A :class:`SynthConfig` is everything :func:`synthetic.generate.generate` needs; the named
-scenarios (:mod:`synthetic.scenarios`) are functions returning one. Every field is SI
+A :class:`SynthConfig` is everything :func:`meshphase.synthetic.generate.generate` needs; the named
+scenarios (:mod:`meshphase.synthetic.scenarios`) are functions returning one. Every field is SI
 (m, rad, rad/s, s, Hz, strain m/m) and is validated on construction (ValueError / TypeError
 naming the field). ``to_dict`` / ``from_dict`` give a JSON-friendly round trip, which is how
 the configuration travels in the ground-truth sidecar.
@@ -15,12 +15,12 @@ from typing import Mapping
 
 import numpy as np
 
-from pipeline.models.bearing import seed_case
-from pipeline.models.gearset import Gearset, Speeds
-from pipeline.models.mesh_phasing import ShaftHoleErrors
-from pipeline.models.tilt import solve_tilt
-from pipeline.models.tolerance import ToleranceBand, Tolerances
-from pipeline.validate import (as_choice, as_finite_array, as_float, as_int, as_nonnegative,
+from meshphase.models.bearing import seed_case
+from meshphase.models.gearset import Gearset, Speeds
+from meshphase.models.mesh_phasing import ShaftHoleErrors
+from meshphase.models.tilt import solve_tilt
+from meshphase.models.tolerance import ToleranceBand, Tolerances
+from meshphase.validate import (as_choice, as_finite_array, as_float, as_int, as_nonnegative,
                                as_positive, as_positive_int)
 
 from .kinematics import SpeedProfile
@@ -148,13 +148,13 @@ class TachoConfig:
 class TiltSource:
     """Load centroid offsets from the coupled bearing tilt solve (spec section 5).
 
-    :func:`pipeline.models.tilt.solve_tilt` on the planet geometry of a seed 001 case, with the
+    :func:`meshphase.models.tilt.solve_tilt` on the planet geometry of a seed 001 case, with the
     gearset's face width; the converged (Z_S, Z_R) apply to every planet.
 
     Parameters
     ----------
     case : {"1", "2-A", "2-B"}
-        Seed 001 case giving the planet geometry (:func:`pipeline.models.bearing.seed_case`).
+        Seed 001 case giving the planet geometry (:func:`meshphase.models.bearing.seed_case`).
     k_tilt : float
         Needle-bearing tilting stiffness k_t [N·m/rad], > 0.
     input_torque : float, optional
@@ -188,7 +188,7 @@ class TiltSource:
 
 @dataclass(frozen=True)
 class Artefacts:
-    """Acquisition artefacts; each is off unless set (see :mod:`synthetic.artefacts`).
+    """Acquisition artefacts; each is off unless set (see :mod:`meshphase.synthetic.artefacts`).
 
     Parameters
     ----------
@@ -383,7 +383,7 @@ class SynthConfig:
         Take Z_S, Z_R from the coupled tilt solve instead (then leave the centroids at 0).
     speed : SpeedProfile
         Speed fluctuation: ramp, ripple at fixed frequencies and ripple locked to a member's
-        rotation angle (:class:`synthetic.kinematics.ShaftRipple`).
+        rotation angle (:class:`meshphase.synthetic.kinematics.ShaftRipple`).
     artefacts : Artefacts
         Noise, drift, hum, ADC, clipping, gaps, gain error.
     tacho : TachoConfig, optional

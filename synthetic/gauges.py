@@ -14,13 +14,13 @@ variable is the angle turned since the engagement, in mesh periods::
     u = Z |w_rel| (tau(t) - tau_e) / (2 pi)
 
 (``Z`` the tooth count of the gauged gear, ``w_rel`` its nominal speed relative to the
-carrier [rad/s], ``tau`` the angle time of :mod:`synthetic.kinematics`, ``tau_e`` that of the
+carrier [rad/s], ``tau`` the angle time of :mod:`meshphase.synthetic.kinematics`, ``tau_e`` that of the
 engagement). So the pulse stretches and shrinks with the local speed, also within one pulse:
 a pulse lasts ``2 * half`` mesh periods of angle, ``2 * half * T_m`` [s] at a steady local
 mesh period ``T_m = 2 pi / (Z |w_rel| s)``. At constant speed this is ``u = (t - t_e) / T_m``.
 The engagement instant is the instant the gauged tooth's centre line crosses the line of
 centres of the actual gear centre and the actual planet centre, i.e. the middle of the
-tooth's contact with that planet (see :mod:`synthetic.kinematics`).
+tooth's contact with that planet (see :mod:`meshphase.synthetic.kinematics`).
 
 The tooth carries load while ``|u| < eps / 2`` (``eps`` the contact ratio): a single-contact
 plateau of half-width ``a = eps/2 - r`` and, at each end, a double-contact zone of width
@@ -62,7 +62,7 @@ Beyond, the contact runs off the face (spec section 5, partial contact): the loa
 triangular, zero at ``z0`` and largest at the loaded edge, with contact length
 ``L_c = 3 (b/2 - |Z|)`` so that its centroid is ``Z`` and its integral ``F``. A gauge at
 ``z`` reads ``w(z) / (F / b)`` times its nominal amplitude. Both shapes are those of the
-section 5 model in :mod:`pipeline.models.tilt` (``load_intensity``), which is what
+section 5 model in :mod:`meshphase.models.tilt` (``load_intensity``), which is what
 :func:`face_load_factor` evaluates.
 """
 
@@ -74,7 +74,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.validate import as_finite_array, as_float, as_nonnegative, as_positive
+from meshphase.validate import as_finite_array, as_float, as_nonnegative, as_positive
 
 __all__ = ["pulse_shape", "pulse_support", "pulse_peak_offset", "face_load_factor",
            "PulseTable", "render_pulses", "render_box", "AnglePulses", "angle_pulse_map",
@@ -203,12 +203,12 @@ def face_load_factor(z, centroid, face_width: float) -> np.ndarray:
 
     Notes
     -----
-    Evaluated with the section 5 model of :mod:`pipeline.models.tilt`: the misalignment that
+    Evaluated with the section 5 model of :mod:`meshphase.models.tilt`: the misalignment that
     puts the centroid at Z (``tilt_from_centroid``) and the load pattern it gives
     (``load_intensity``), with a unit force; the shape does not depend on the force or the
     mesh stiffness.
     """
-    from pipeline.models.tilt import load_intensity, tilt_from_centroid
+    from meshphase.models.tilt import load_intensity, tilt_from_centroid
 
     b = as_positive(face_width, "face_width")
     zz = as_finite_array(z, "z")

@@ -1,7 +1,7 @@
 """Generate synthetic rig recordings, whole or block by block, with their ground truth.
 
-:func:`generate` returns one :class:`~pipeline.recording.Recording` and its
-:class:`~synthetic.truth.GroundTruth`; :func:`generate_blocks` returns a
+:func:`generate` returns one :class:`~meshphase.recording.Recording` and its
+:class:`~meshphase.synthetic.truth.GroundTruth`; :func:`generate_blocks` returns a
 :class:`SyntheticStream` that yields the same samples as consecutive Recordings of a given
 block length, with flat memory (the one-hour scenarios). The same seed gives the same samples
 bit for bit, whichever way the recording is cut.
@@ -9,19 +9,19 @@ bit for bit, whichever way the recording is cut.
 How a block is made
 -------------------
 1. Up front (cheap: events, not samples): the shaft hole error realisation, the exact
-   engagement times of every gauged tooth (:mod:`synthetic.kinematics`), the pulse
-   amplitudes from load sharing and the face-width load (:mod:`synthetic.gauges`), the tacho
-   edges, the gain errors, hum phases and gaps (:mod:`synthetic.artefacts`), and the truth.
+   engagement times of every gauged tooth (:mod:`meshphase.synthetic.kinematics`), the pulse
+   amplitudes from load sharing and the face-width load (:mod:`meshphase.synthetic.gauges`), the tacho
+   edges, the gain errors, hum phases and gaps (:mod:`meshphase.synthetic.artefacts`), and the truth.
 2. Per block and channel: the pulses of the events whose support meets the block are
    scattered into the buffer from a tabulated pulse shape (work proportional to the pulse
    samples, not events x samples); then only the artefacts the scenario asks for are added,
-   in the order of :mod:`synthetic.artefacts`.
+   in the order of :mod:`meshphase.synthetic.artefacts`.
 
-One :class:`~synthetic.kinematics.SpeedClock` (the speed profile bound to the nominal speeds)
+One :class:`~meshphase.synthetic.kinematics.SpeedClock` (the speed profile bound to the nominal speeds)
 gives the engagements, the tacho edges, the pulses and the truth, so they share one angle
-time ``tau``. Pulses last a fixed angle of the gauged gear (:mod:`synthetic.gauges`): at
+time ``tau``. Pulses last a fixed angle of the gauged gear (:mod:`meshphase.synthetic.gauges`): at
 constant speed they are rendered linear in time, otherwise through
-:func:`~synthetic.gauges.angle_pulse_map` (a per-event polynomial in the sample offset that
+:func:`~meshphase.synthetic.gauges.angle_pulse_map` (a per-event polynomial in the sample offset that
 follows ``tau(t)`` to 1e-9 mesh periods).
 
 Channels appear in the order of ``config.gauges``, the tacho last. Samples are in physical
@@ -37,11 +37,11 @@ from typing import Iterator
 import numpy as np
 from tqdm import tqdm
 
-from pipeline.log import logger
-from pipeline.models.mesh_phasing import ShaftHoleErrors, ideal_phasing, time_varying_phasing
-from pipeline.models.tolerance import Tolerances
-from pipeline.recording import ChannelSpec, Recording
-from pipeline.validate import as_int, as_positive
+from meshphase.log import logger
+from meshphase.models.mesh_phasing import ShaftHoleErrors, ideal_phasing, time_varying_phasing
+from meshphase.models.tolerance import Tolerances
+from meshphase.recording import ChannelSpec, Recording
+from meshphase.validate import as_int, as_positive
 
 from . import artefacts as art
 from .config import SynthConfig, errors_to_dict
@@ -216,7 +216,7 @@ class _Plan:
             "generator": f"synthetic/{GENERATOR_VERSION}",
             "gearset": cfg.gearset.to_dict(), "speeds_nominal": cfg.speeds.to_dict(),
         }
-        self.history = [{"step": "synthetic.generate", "scenario": cfg.name, "seed": seed,
+        self.history = [{"step": "meshphase.synthetic.generate", "scenario": cfg.name, "seed": seed,
                          "generator": GENERATOR_VERSION}]
         self.truth = self._truth(dur, loads, gauge_truth, tacho_times)
 
@@ -545,7 +545,7 @@ def generate_blocks(scenario_or_config, *, duration: float | None = None, block:
     Parameters
     ----------
     scenario_or_config : str or SynthConfig
-        Scenario name (:data:`synthetic.scenarios.SCENARIOS`) or a config.
+        Scenario name (:data:`meshphase.synthetic.scenarios.SCENARIOS`) or a config.
     duration : float, optional
         Duration [s] (default: the scenario's).
     block : float, optional
@@ -576,7 +576,7 @@ def generate(scenario_or_config, *, duration: float | None = None, seed: int | N
     Parameters
     ----------
     scenario_or_config : str or SynthConfig
-        Scenario name (:data:`synthetic.scenarios.SCENARIOS`) or a config.
+        Scenario name (:data:`meshphase.synthetic.scenarios.SCENARIOS`) or a config.
     duration : float, optional
         Duration [s] (default: the scenario's).
     seed : int, optional

@@ -18,7 +18,7 @@ a shaft::
 ``r`` a ramp rate [1/s]; ``a_i, f_i, phi_i`` slow ripple components at fixed frequencies;
 ``b_j, m_j, phi_j`` ripple locked to the rotation angle ``theta_j = w_j tau`` of a member
 (:class:`ShaftRipple`): the carrier, sun or ring at its absolute speed ``w_j`` (carrier,
-sun, ring of :class:`~pipeline.models.gearset.Speeds`), or the planet's spin relative to the
+sun, ring of :class:`~meshphase.models.gearset.Speeds`), or the planet's spin relative to the
 carrier, ``w_pc``. Shaft-locked ripple is the physics of drive and eccentricity ripple: it
 repeats once per ``1 / m_j`` turn of the shaft, so it follows the shaft when the speed ramps,
 and it follows the member's actual angle in either sense of rotation (``w_j < 0`` turns
@@ -44,7 +44,7 @@ directions (negative times are the margins before the first sample), always in t
 sequence, so the result does not depend on the order of the requests. The test suite holds
 it against ``scipy.integrate.solve_ivp`` (DOP853) on the ODE itself.
 
-The shaft-hole-error geometry of :func:`pipeline.models.mesh_phasing.mesh_angles`, which
+The shaft-hole-error geometry of :func:`meshphase.models.mesh_phasing.mesh_angles`, which
 turns each offset by ``w t``, is therefore evaluated at ``tau`` instead of ``t``: that *is*
 the geometry as a function of the actual rotation angles, with no second implementation of it
 (the tests check that the engagement angles hold at the actual angles, integrated
@@ -68,7 +68,7 @@ with ``w_rc`` (= -w_c for a fixed ring: each planet passes once per carrier revo
 
 **Truth engagement time**: the instant the gauged tooth's centre line crosses the line of
 centres (actual gear centre -> actual planet centre), i.e. the middle of the tooth's contact
-with that planet. The strain pulse (:mod:`synthetic.gauges`) is defined relative to it, in
+with that planet. The strain pulse (:mod:`meshphase.synthetic.gauges`) is defined relative to it, in
 the angle of the gauged gear.
 
 The equation is solved per event in angle time: from the ideal root
@@ -88,9 +88,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.polynomial import chebyshev as _cheb
 
-from pipeline.models.gearset import Gearset, Speeds
-from pipeline.models.mesh_phasing import ShaftHoleErrors, mesh_angles, rotation_angle
-from pipeline.validate import as_choice, as_float, as_int, as_nonnegative
+from meshphase.models.gearset import Gearset, Speeds
+from meshphase.models.mesh_phasing import ShaftHoleErrors, mesh_angles, rotation_angle
+from meshphase.validate import as_choice, as_float, as_int, as_nonnegative
 
 __all__ = ["SpeedProfile", "ShaftRipple", "SpeedClock", "MEMBERS", "member_rate",
            "EngagementEvents", "engagement_events", "event_times_for_angles", "gauge_rates",

@@ -1,13 +1,13 @@
 """Registry of named synthetic scenarios (tests parametrize over :data:`SCENARIOS`).
 
 Each entry is a :class:`Scenario` whose ``config()`` builds a fresh
-:class:`~synthetic.config.SynthConfig`. ``get_scenario(name)`` returns the config;
+:class:`~meshphase.synthetic.config.SynthConfig`. ``get_scenario(name)`` returns the config;
 ``list_scenarios()`` the names.
 
 Gearsets
 --------
 ``table1``
-    Seed 000 Table 1 as :func:`pipeline.models.tolerance.table2_case` gives it: Z_s 25,
+    Seed 000 Table 1 as :func:`meshphase.models.tolerance.table2_case` gives it: Z_s 25,
     Z_r 87, Z_p 29, four equally spaced planets, R_c 112.5 mm, fixed ring, w_s 448,
     w_c 100 rad/s (w_s / w_c = 4.48 = 1 + Z_r / Z_s), clockwise planets. Mesh frequency
     Z_s w_sc / 2 pi = 1385 Hz, so it is sampled at 51.2 kHz (the NI 9234 maximum), 37 samples
@@ -54,7 +54,7 @@ Table 2 errors; case 3 draws one realisation from the tolerance bands with the s
 ``seed_rig`` (case 1 errors, clean), ``noisy``, ``adc16_clipped``, ``speed_ripple``
 (``speed_ripple_fast`` as a stress case),
 ``speed_ramp``, ``gaps``, ``facewidth_offcentre``, ``facewidth_partial``, ``facewidth_tilt``,
-``rig_realistic``, ``one_hour`` (generate it with :func:`synthetic.generate_blocks`).
+``rig_realistic``, ``one_hour`` (generate it with :func:`meshphase.synthetic.generate_blocks`).
 
 The ``rig`` family changes one factor each from ``rig_steady`` (no speed variation):
 ``rig_ripple1`` / ``rig_ripple3`` (1 % / 3 % speed ripple once per carrier revolution, locked
@@ -66,7 +66,7 @@ speed reversed, counter-clockwise planets), ``rig_3planets`` (three unequally sp
 assemblable planets at p_n = 0, 36, 75 of 2 pi / 112, i.e. 0, 115.7, 241.1 deg: mixed
 phasing; 1 % carrier ripple), ``rig_5planets`` (Z 25/85/30, five equally spaced planets,
 1 % carrier ripple). Shaft-locked ripple follows the member's angle
-(:class:`synthetic.kinematics.ShaftRipple`), so it stays locked to the shaft through a ramp.
+(:class:`meshphase.synthetic.kinematics.ShaftRipple`), so it stays locked to the shaft through a ramp.
 
 Each entry's ``description`` says what it holds; :func:`describe_scenarios` lists them.
 """
@@ -77,8 +77,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Callable
 
-from pipeline.models.gearset import Gearset, Speeds, rpm_to_rad_s
-from pipeline.models.tolerance import table2_case
+from meshphase.models.gearset import Gearset, Speeds, rpm_to_rad_s
+from meshphase.models.tolerance import table2_case
 
 from .config import Artefacts, GaugeConfig, SynthConfig, TachoConfig, TiltSource
 from .kinematics import ShaftRipple, SpeedProfile

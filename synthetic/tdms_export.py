@@ -1,6 +1,6 @@
 """Write synthetic recordings as NI TDMS files (npTDMS ``TdmsWriter``), block by block.
 
-``pipeline.io`` reads TDMS but does not write it (real TDMS files come from NI DAQ
+``meshphase.io`` reads TDMS but does not write it (real TDMS files come from NI DAQ
 hardware); synthetic TDMS files are written here, laid out the way an NI rig writes them so
 that they exercise the same reader path (``pipeline/io/tdms.py``,
 ``data_schemas/tdms_mapping.md``):
@@ -25,8 +25,8 @@ from typing import Iterable
 
 import numpy as np
 
-from pipeline.io.base import atomic_path
-from pipeline.recording import Recording
+from meshphase.io.base import atomic_path
+from meshphase.recording import Recording
 
 __all__ = ["write_tdms", "LABVIEW_ZERO"]
 

@@ -7,11 +7,11 @@ Definitions
 Engagement time
     The instant the gauged tooth's centre line crosses the line of centres from the gauged
     gear's actual pitch centre to the actual centre of the planet, i.e. the middle of the
-    tooth's contact with that planet (:mod:`synthetic.kinematics`). Times are on the
+    tooth's contact with that planet (:mod:`meshphase.synthetic.kinematics`). Times are on the
     recording's time axis (``t0 + i / fs``) [s]; ``tau`` is the engagement's angle time.
 Pulse position (angle, not time)
     A pulse is a function of the gauged gear's rotation angle relative to the carrier
-    (:mod:`synthetic.gauges`): the tensile lobe spans ``contact_ratio`` mesh periods *of angle*
+    (:mod:`meshphase.synthetic.gauges`): the tensile lobe spans ``contact_ratio`` mesh periods *of angle*
     centred on the engagement, its maximum lies ``pulse[name]["peak_offset"]`` mesh periods of
     angle after it, and the support is ``pulse[name]["support"]`` mesh periods of angle either
     side. One mesh period of angle is ``2 pi / Z`` of relative rotation, i.e. angle time
@@ -24,7 +24,7 @@ Pulse position (angle, not time)
     mesh periods of angle, which is expected.
 Planet numbers
     1-based, planet 1 = ``gearset.planet_angles[0]`` (as in the papers and
-    :class:`pipeline.phasing.PassTable`).
+    :class:`meshphase.phasing.PassTable`).
 Pass
     One relative revolution of the gauged gear starting at its engagement with planet 1; the
     pass holds the following engagement of every other planet before planet 1 comes again.
@@ -41,7 +41,7 @@ True phasing per pass (``gamma``)
     with a minus sign, which holds when t_n - t_1 is counted backwards. Values within 1e-9 of a
     whole cycle are stored as 0.
 Model phasing (``gamma_model``)
-    :func:`pipeline.models.mesh_phasing.time_varying_phasing` evaluated at the angle time of
+    :func:`meshphase.models.mesh_phasing.time_varying_phasing` evaluated at the angle time of
     planet n's engagement: the instantaneous model value. It differs from ``gamma`` by the
     change of the errors' geometry during the pass (of the order of Dev).
 SNR
@@ -189,7 +189,7 @@ class GroundTruth:
     n_samples : int
         Samples per channel.
     config : dict
-        The full :class:`synthetic.config.SynthConfig` (``to_dict``): gearset, nominal
+        The full :class:`meshphase.synthetic.config.SynthConfig` (``to_dict``): gearset, nominal
         speeds, gauges, artefacts, speed profile, tacho.
     errors : dict or None
         The shaft hole error realisation used (ShaftHoleErrors fields, SI), drawn from the
@@ -302,7 +302,7 @@ class GroundTruth:
 
     def write(self, path, *, overwrite: bool = False) -> Path:
         """Write the sidecar JSON to ``path`` (atomically); FileExistsError unless overwrite."""
-        from pipeline.io.base import atomic_path
+        from meshphase.io.base import atomic_path
 
         path = Path(path)
         text = json.dumps(self.to_dict(), allow_nan=False, separators=(",", ":"))
@@ -321,7 +321,7 @@ class GroundTruth:
         return cls.from_dict(d)
 
     def speed_clock(self):
-        """The recording's :class:`~synthetic.kinematics.SpeedClock` (speed profile bound to the
+        """The recording's :class:`~meshphase.synthetic.kinematics.SpeedClock` (speed profile bound to the
         nominal speeds, both from ``config``): ``tau(t)`` and ``t(tau)`` with t from the first
         sample [s]."""
         from .config import SynthConfig

@@ -22,9 +22,9 @@ from seed_rig_toml import SEED_RIG_GEARSET
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline import campaign as cp
-from pipeline.report import campaign_report as crep
-from pipeline.scene import load_scene
+from meshphase import campaign as cp
+from meshphase.report import campaign_report as crep
+from meshphase.scene import load_scene
 
 SCENE = """\
 name = "campaign test scene"
@@ -50,7 +50,7 @@ GOOD = ("rig_a.h5", "rig_b.csv", "rig_c.mcap")
 def data(tmp_path_factory):
     """Scene + a folder with 3 good recordings (hdf5, csv, mcap; truth sidecars beside
     them) and one truncated HDF5 file."""
-    from synthetic import cli_synth
+    from meshphase.synthetic import cli_synth
 
     root = tmp_path_factory.mktemp("campaign")
     scene = root / "scene.toml"
@@ -212,7 +212,7 @@ def _phasing_only_scene(folder: Path) -> Path:
 def test_campaign_cli_exit_codes(data, cluster, tmp_path, capsys):
     """`meshphase campaign`: any recording failed -> exit 3 (the table lists all, the failed one
     with its cause on stderr); every recording failed -> exit 1 (nothing usable)."""
-    from pipeline.cli import main
+    from meshphase.cli import main
 
     rec = data["recordings"]
     out = tmp_path / "camp"
@@ -238,8 +238,8 @@ def test_run_recording_unreliable_phasing_is_not_ok(data, tmp_path, monkeypatch)
     """A recording whose phasing the run flags unreliable is "unreliable" (exit 3), not "ok"."""
     import warnings
 
-    from pipeline.errors import ProcessingWarning
-    from pipeline.stages import STAGE_FUNCTIONS
+    from meshphase.errors import ProcessingWarning
+    from meshphase.stages import STAGE_FUNCTIONS
 
     original = STAGE_FUNCTIONS["phasing"]
 
@@ -262,7 +262,7 @@ def test_run_recording_unreliable_phasing_is_not_ok(data, tmp_path, monkeypatch)
 
 def test_campaign_interrupted_exits_130_and_leaves_no_folder(data, tmp_path, monkeypatch, capsys):
     """Ctrl-C during a campaign: exit 130, the campaign folder it had reserved is removed."""
-    from pipeline.cli import main
+    from meshphase.cli import main
 
     def ctrl_c(scene, scene_path, inputs, files, skipped, names, out, *rest):
         (out / "campaign.csv").write_text("half written")

@@ -1,7 +1,7 @@
 """Campaign faults: a hung task, a worker killed mid-task, a rerun, hostile recording names,
 the local cluster's network exposure, and failures while the combined outputs are written.
 
-The recordings are 10 s of the seed rig (``synthetic.generate``, ``pipeline.io.write``). Most
+The recordings are 10 s of the seed rig (``meshphase.synthetic.generate``, ``meshphase.io.write``). Most
 runs use a light task (reads the recording's header, writes a summary; shipped to the workers
 by value) on a 1-worker LocalCluster: what is tested is the campaign's machinery, not the
 processing. The resume test runs the real task. Timeouts are a few seconds: the hung task
@@ -25,12 +25,12 @@ from pathlib import Path
 import pytest
 from seed_rig_toml import SEED_RIG_GEARSET
 
-import pipeline.io
-from pipeline import campaign as cp
-from pipeline import cluster as cluster_mod
-from pipeline.campaign_job import campaign_task
-from pipeline.cli import build_parser
-from pipeline.exits import EXIT_OK, EXIT_PARTIAL, MANIFEST_NAME, PARTIAL_SUFFIX
+import meshphase.io
+from meshphase import campaign as cp
+from meshphase import cluster as cluster_mod
+from meshphase.campaign_job import campaign_task
+from meshphase.cli import build_parser
+from meshphase.exits import EXIT_OK, EXIT_PARTIAL, MANIFEST_NAME, PARTIAL_SUFFIX
 
 SCENE = ('name = "campaign fault scene"\nresults = ["phasing"]\n\n' + SEED_RIG_GEARSET
          + '\n[input]\nsynthetic = "seed_rig"\nminutes = 0.1\n')
@@ -44,14 +44,14 @@ def rigs(tmp_path_factory):
     """The scene and 10-s seed-rig recordings under hostile names: ``campaign.json.h5`` and
     ``figures.h5`` (the campaign's own names), ``a/x.h5`` and ``b/x.h5`` (one stem, two
     folders), ``hang.h5`` (the light task hangs on it), and two distinct ones for resume."""
-    from synthetic import generate
+    from meshphase.synthetic import generate
 
     d = tmp_path_factory.mktemp("faults")
     (d / "scene.toml").write_text(SCENE, encoding="utf-8")
     rec, _ = generate("seed_rig", duration=10.0, seed=0)
-    src = Path(pipeline.io.write(rec, d / "rig0.h5"))
+    src = Path(meshphase.io.write(rec, d / "rig0.h5"))
     rec1, _ = generate("seed_rig", duration=10.0, seed=1)
-    pipeline.io.write(rec1, d / "rig1.h5")
+    meshphase.io.write(rec1, d / "rig1.h5")
     for rel in ("campaign.json.h5", "figures.h5", "a/x.h5", "b/x.h5", "hang.h5", "victim.h5"):
         (d / rel).parent.mkdir(exist_ok=True)
         shutil.copyfile(src, d / rel)
@@ -60,7 +60,7 @@ def rigs(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def cluster():
-    """The campaign's own kind of cluster (:func:`pipeline.campaign.local_cluster`: 1 worker
+    """The campaign's own kind of cluster (:func:`meshphase.campaign.local_cluster`: 1 worker
     under a Nanny, loopback only, no dashboard), shared through its address (one cluster start
     for the module; the campaign starting its own is tested in test_campaign.py)."""
     with cp.local_cluster(1) as cl:
@@ -83,7 +83,7 @@ def _light_task(scene_path, recording_path, out_dir, **kw):
     """Reads the recording's header from its path and writes a summary: the campaign's
     machinery without the processing time. Hangs on ``hang.h5`` (a read blocked on a dead
     file server)."""
-    from pipeline.io import read_info
+    from meshphase.io import read_info
 
     if Path(recording_path).name == "hang.h5":
         time.sleep(600)
@@ -191,7 +191,7 @@ def test_resume_skips_complete_redoes_changed_and_keeps_an_unfinished_run(rigs, 
     started); a rewritten recording is redone; a campaign that does not finish keeps what it
     had in OUT.partial, which the next --resume uses; a write failing with ENOSPC leaves the
     previous campaign folder as it was."""
-    from synthetic import generate
+    from meshphase.synthetic import generate
 
     src = tmp_path / "in"
     src.mkdir()
@@ -212,7 +212,7 @@ def test_resume_skips_complete_redoes_changed_and_keeps_an_unfinished_run(rigs, 
         assert Path(r["files"]["summary"]).is_file() and Path(r["out_dir"]).parent == out.resolve() / "recordings"
     # one input rewritten: only that one is redone
     other, _ = generate("seed_rig", duration=10.0, seed=7)
-    pipeline.io.write(other, src / "rig1.h5", overwrite=True)
+    meshphase.io.write(other, src / "rig1.h5", overwrite=True)
     r3 = cp.run_campaign(scene, [src], out, resume=True, scheduler=sched, progress=False)
     by = {r["name"]: r for r in r3["recordings"]}
     assert by["rig0"]["resumed"] and not by["rig1"]["resumed"] and by["rig1"]["status"] in USABLE
@@ -220,7 +220,7 @@ def test_resume_skips_complete_redoes_changed_and_keeps_an_unfinished_run(rigs, 
     assert marker["key"]["size"] == (src / "rig1.h5").stat().st_size
     # interrupted after the recordings are done: OUT stays as it was, OUT.partial keeps them
     before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
-    import pipeline.report.campaign_report as crep
+    import meshphase.report.campaign_report as crep
 
     def ctrl_c(*a, **k):
         raise KeyboardInterrupt
@@ -286,7 +286,7 @@ def test_open_client_joins_a_cluster_and_warms_its_workers(cluster):
 def _no_meshphase():
     """Shipped by reference: the workers cannot import this test module (as a worker
     without meshphase cannot import the warm-up), and if they could, it raises the same."""
-    raise ImportError("No module named 'pipeline'")
+    raise ImportError("No module named 'meshphase'")
 
 
 def test_dashboard_addresses_and_bad_input():

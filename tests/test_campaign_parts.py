@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 from seed_rig_toml import SEED_RIG_GEARSET
 
-from pipeline import campaign as cp
-from pipeline import campaign_job as cj
-from pipeline import campaign_resume as cr
-from pipeline import cluster
-from pipeline.scene import load_scene
-from pipeline.models.tolerance import MonteCarloResult
+from meshphase import campaign as cp
+from meshphase import campaign_job as cj
+from meshphase import campaign_resume as cr
+from meshphase import cluster
+from meshphase.scene import load_scene
+from meshphase.models.tolerance import MonteCarloResult
 
 
 # ---------------------------------------------------------------------------- the band

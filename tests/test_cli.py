@@ -3,7 +3,7 @@ ones, the report carries its sections, bad input exits 1 naming the file (exit t
 pipeline/exits.py; more in test_exit_status.py); info, convert and
 synth on small generated files (issue 6, item 3).
 
-Most tests call :func:`pipeline.cli.main` in-process (no interpreter start-up); one runs the
+Most tests call :func:`meshphase.cli.main` in-process (no interpreter start-up); one runs the
 module as a subprocess to check the real exit code.
 """
 
@@ -23,9 +23,9 @@ import numpy as np
 import pytest
 from seed_rig_toml import SEED_RIG_GEARSET
 
-import pipeline.io
-from pipeline.cli import main
-from pipeline.recording import ChannelSpec, Recording
+import meshphase.io
+from meshphase.cli import main
+from meshphase.recording import ChannelSpec, Recording
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
@@ -95,7 +95,7 @@ def test_process_missing_recording_exits_1(tmp_path, capsys):
 def test_exit_code_of_the_real_command(tmp_path):
     p = tmp_path / "syntax.toml"
     p.write_text('results = ["phasing"\n', encoding="utf-8")
-    r = subprocess.run([sys.executable, "-m", "pipeline.cli", "-q", "run", str(p)],
+    r = subprocess.run([sys.executable, "-m", "meshphase.cli", "-q", "run", str(p)],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 1                     # a bad scene: input error (2 is usage only)
     assert str(p) in r.stderr and "TOML syntax error" in r.stderr
@@ -208,12 +208,12 @@ def test_rig_report_figures_are_not_empty(rig_cli_run):
 
 # --------------------------------------------------------------------------- process
 def test_process_writes_next_to_the_input(tmp_path, capsys):
-    from synthetic import generate
+    from meshphase.synthetic import generate
 
     # 40 s: a shorter noise-free record cannot fit the planets' own offsets apart from the
     # speed (too few passes) and is, rightly, flagged unreliable against its tiny floor
     rec, _ = generate("seed_rig", duration=40.0, seed=5)
-    path = Path(pipeline.io.write(rec, tmp_path / "rig.h5"))
+    path = Path(meshphase.io.write(rec, tmp_path / "rig.h5"))
     gs = tmp_path / "gearset.toml"
     gs.write_text(GEARSET_TOML, encoding="utf-8")
     before = sorted(p.name for p in tmp_path.iterdir())
@@ -240,7 +240,7 @@ def _small_recording(n: int = 3000) -> Recording:
 
 
 def test_info_text_and_json(tmp_path, capsys):
-    p = Path(pipeline.io.write(_small_recording(), tmp_path / "small.h5"))
+    p = Path(meshphase.io.write(_small_recording(), tmp_path / "small.h5"))
     assert main(["-q", "info", str(p)]) == 0
     out = capsys.readouterr().out
     assert "hdf5" in out and "5120 Hz" in out and "3000" in out
@@ -265,13 +265,13 @@ def test_info_missing_and_unknown_files(tmp_path, capsys):
 
 def test_convert_round_trip_is_bit_exact(tmp_path, capsys):
     rec = _small_recording()
-    h5 = Path(pipeline.io.write(rec, tmp_path / "a.h5"))
+    h5 = Path(meshphase.io.write(rec, tmp_path / "a.h5"))
     csv = tmp_path / "b.csv"
     back = tmp_path / "c.h5"
     assert main(["-q", "convert", str(h5), str(csv)]) == 0
     assert main(["-q", "convert", str(csv), str(back)]) == 0
-    assert pipeline.io.detect_format(csv) == "csv"
-    out = pipeline.io.read(back)
+    assert meshphase.io.detect_format(csv) == "csv"
+    out = meshphase.io.read(back)
     assert out.data.shape == rec.data.shape
     # bit-exact: compare the raw float64 bit patterns (keeps -0.0 and the last ulp)
     np.testing.assert_array_equal(out.data.astype(np.float64).view(np.int64),
@@ -311,6 +311,6 @@ def test_demo_runs_quickly_and_writes_the_report(tmp_path, capsys):
     sec = _sections((d / "report.html").read_text(encoding="utf-8"))
     assert "Measured phasing against the models" in sec and "Error against run time" in sec
     # the scene written next to the outputs reproduces the run with `meshphase run`
-    from pipeline.scene import load_scene
+    from meshphase.scene import load_scene
 
     assert load_scene(d / "demo_scene.toml").input["synthetic"] == "rig_ripple1"

@@ -1,4 +1,4 @@
-"""The core never imports matplotlib (DESIGN.md: only pipeline/report/ may)."""
+"""The core never imports matplotlib (DESIGN.md: only meshphase.report may)."""
 
 import subprocess
 import sys
@@ -6,8 +6,8 @@ import sys
 import pytest
 
 
-@pytest.mark.parametrize("module", ["pipeline", "pipeline.io", "pipeline.models", "pipeline.cli",
-                                    "pipeline.models.gearset", "pipeline.recording"])
+@pytest.mark.parametrize("module", ["meshphase", "meshphase.io", "meshphase.models", "meshphase.cli",
+                                    "meshphase.models.gearset", "meshphase.recording"])
 def test_core_import_leaves_matplotlib_out(module):
     code = (f"import sys, {module}; "
             "bad = [m for m in sys.modules if m == 'matplotlib' or m.startswith('matplotlib.')]; "
@@ -17,7 +17,7 @@ def test_core_import_leaves_matplotlib_out(module):
 
 
 def test_cli_version():
-    from pipeline.cli import main
+    from meshphase.cli import main
 
     with pytest.raises(SystemExit) as exc:
         main(["--version"])

@@ -1,8 +1,8 @@
 """End to end: every synthetic scenario through ``run_scene``, held against its truth (issue 5,
 item 6), and bad inputs that must give clear warnings and partial results.
 
-Each registry scenario (:data:`synthetic.SCENARIOS`) is generated with seed 3 and processed by
-``pipeline.stages.run_scene`` (phasing, load sharing, compare, identify, centroids). The run's
+Each registry scenario (:data:`meshphase.synthetic.SCENARIOS`) is generated with seed 3 and processed by
+``meshphase.stages.run_scene`` (phasing, load sharing, compare, identify, centroids). The run's
 own truth comparison (``results["compare"][gear]["vs_truth"]``: the measured phasing with the
 onsets labelled as the truth labels them) must lie within the tolerance of the table below;
 load sharing, face-width centroids and identified shaft hole errors are checked against the
@@ -64,7 +64,7 @@ warning, a missing planet that took a second one with it, a revolution-long NaN 
 collapsed the onset threshold, the partial-contact ring centroid, NaN without a warning, and
 no warning for speed_ripple_fast: plain tests now.
 
-Bad inputs go the recording-file route (HDF5 written with ``pipeline.io.write``, a scene with
+Bad inputs go the recording-file route (HDF5 written with ``meshphase.io.write``, a scene with
 ``[input] recording``), as a user's file would.
 """
 
@@ -80,13 +80,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import pipeline.io
-from pipeline.compare import PARAMETER_NAMES, _vector_from_errors, truth_comparison, wrap
-from pipeline.errors import ProcessingWarning
-from pipeline.models.mesh_phasing import ShaftHoleErrors
-from pipeline.scene import SceneError, load_scene, parse_scene
-from pipeline.stages import RunContext, run_scene, summary_dict
-from synthetic import SCENARIOS, generate, list_scenarios
+import meshphase.io
+from meshphase.compare import PARAMETER_NAMES, _vector_from_errors, truth_comparison, wrap
+from meshphase.errors import ProcessingWarning
+from meshphase.models.mesh_phasing import ShaftHoleErrors
+from meshphase.scene import SceneError, load_scene, parse_scene
+from meshphase.stages import RunContext, run_scene, summary_dict
+from meshphase.synthetic import SCENARIOS, generate, list_scenarios
 
 SEED = 3
 RESULTS = '["phasing", "load_sharing", "compare", "identify", "centroids"]'
@@ -513,7 +513,7 @@ def run_file(tmp_path: Path, rec, *, z_sun: int = 25, z_ring: int = 87) -> RunCo
     """Write ``rec`` as HDF5 and process it through a scene file, as a user would (tooth counts
     other than the file's 25/87/31 are declared profile shifted, so that they pass the scene's
     coaxiality check and reach the processing)."""
-    pipeline.io.write(rec, tmp_path / "rec.h5")
+    meshphase.io.write(rec, tmp_path / "rec.h5")
     shift = "false" if (z_sun, z_ring) == (25, 87) else "true"
     text = (f'name = "bad input"\nresults = {RESULTS}\n'
             + GEARSET.format(z_sun=z_sun, z_ring=z_ring, profile_shift=shift)
@@ -525,7 +525,7 @@ def run_file(tmp_path: Path, rec, *, z_sun: int = 25, z_ring: int = 87) -> RunCo
 def truth_phasing_error(ctx: RunContext, truth, gear: str, g=None) -> dict:
     """Phasing error against the truth for a run without it (a file): every measured pass
     against the true mesh angle turned between its two pulses
-    (:func:`pipeline.compare.truth_comparison`)."""
+    (:func:`meshphase.compare.truth_comparison`)."""
     lab, table = ctx.phasing.labels[gear], ctx.phasing.tables[gear]
     out = truth_comparison(table, truth, lab.channel, times=lab.times, planets=lab.planet)
     out["table"] = table
@@ -601,7 +601,7 @@ def _remove_planet_pulses(rec, truth, channel: str, planet: int):
 
 
 def _gearset_of(rec):
-    from pipeline.models.gearset import Gearset
+    from meshphase.models.gearset import Gearset
 
     return Gearset.from_dict(rec.meta["gearset"])
 

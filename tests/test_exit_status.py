@@ -1,7 +1,7 @@
 """Exit status is the truth: one exit-code table (pipeline/exits.py, README "Exit status") for
 every subcommand, one line per cause on stderr, never a traceback.
 
-The CLI runs in-process through :func:`pipeline.cli.main` (a few cases as a subprocess, to see
+The CLI runs in-process through :func:`meshphase.cli.main` (a few cases as a subprocess, to see
 the real exit code and that no "Traceback" reaches stderr). Recordings are 5 s of the seed rig
 (the exit codes do not depend on how many passes the run measures; 5 s keeps each run under a
 second).
@@ -21,17 +21,17 @@ import h5py
 import pytest
 from seed_rig_toml import SEED_RIG_GEARSET
 
-import pipeline.io
-import pipeline.stages
-from pipeline import cli
-from pipeline.campaign import phasing_reliability
-from pipeline.cli import describe_error, main
-from pipeline.errors import ProcessingWarning
-from pipeline.exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK, EXIT_PARTIAL, EXIT_PIPE,
+import meshphase.io
+import meshphase.stages
+from meshphase import cli
+from meshphase.campaign import phasing_reliability
+from meshphase.cli import describe_error, main
+from meshphase.errors import ProcessingWarning
+from meshphase.exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK, EXIT_PARTIAL, EXIT_PIPE,
                             OutputDir, run_status, status_line)
-from pipeline.recording import ChannelSpec, Recording
-from pipeline.stages import STAGE_FUNCTIONS, RunContext
-from pipeline.validate import as_regular_file
+from meshphase.recording import ChannelSpec, Recording
+from meshphase.stages import STAGE_FUNCTIONS, RunContext
+from meshphase.validate import as_regular_file
 
 GEARSET_TOML = 'name = "seed rig gearset"\n' + SEED_RIG_GEARSET
 REPO = Path(__file__).resolve().parents[1]
@@ -41,11 +41,11 @@ REPO = Path(__file__).resolve().parents[1]
 def rig(tmp_path_factory):
     """5 s of the seed rig as HDF5 (channels sun, ring, tacho), its gearset file, and a copy of
     the recording truncated to a third (HDF5 magic intact, body cut off)."""
-    from synthetic import generate
+    from meshphase.synthetic import generate
 
     d = tmp_path_factory.mktemp("exit_rig")
     rec, _ = generate("seed_rig", duration=5.0, seed=0)
-    path = Path(pipeline.io.write(rec, d / "rig.h5"))
+    path = Path(meshphase.io.write(rec, d / "rig.h5"))
     gs = d / "gearset.toml"
     gs.write_text(GEARSET_TOML, encoding="utf-8")
     raw = path.read_bytes()
@@ -55,8 +55,8 @@ def rig(tmp_path_factory):
 
 
 def _run_cli(*args, env=None, timeout=120, **kw):
-    """``python -m pipeline.cli ARGS`` as a subprocess (the real exit code and stderr)."""
-    return subprocess.run([sys.executable, "-m", "pipeline.cli", "-q", *map(str, args)],
+    """``python -m meshphase.cli ARGS`` as a subprocess (the real exit code and stderr)."""
+    return subprocess.run([sys.executable, "-m", "meshphase.cli", "-q", *map(str, args)],
                           capture_output=True, text=True, timeout=timeout, cwd=REPO, env=env, **kw)
 
 
@@ -115,7 +115,7 @@ def test_recording_without_gauge_channels_exits_1_naming_kinds(rig, tmp_path, ca
     rec = rig["rec"]
     specs = [ChannelSpec("ch_a", kind="other"), ChannelSpec("ch_b", kind="other"),
              ChannelSpec("tacho", kind="tacho", units="V")]
-    path = pipeline.io.write(Recording(rec.data, rec.fs, specs), tmp_path / "nogauge.h5")
+    path = meshphase.io.write(Recording(rec.data, rec.fs, specs), tmp_path / "nogauge.h5")
     assert main(["-q", "process", str(path), "--gearset", str(rig["gearset"]),
                  "--out", str(tmp_path / "o")]) == EXIT_ERROR
     err = _err_lines(capsys)
@@ -210,7 +210,7 @@ def test_permission_denied_output_folder_injected_exits_1(rig, tmp_path, monkeyp
     def denied(base, *, overwrite=False):
         raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(base))
 
-    monkeypatch.setattr(pipeline.stages, "new_output_dir", denied)
+    monkeypatch.setattr(meshphase.stages, "new_output_dir", denied)
     out = tmp_path / "locked" / "out"
     assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
                  "--out", str(out)]) == EXIT_ERROR
@@ -235,7 +235,7 @@ def test_no_space_left_while_writing_exits_1_and_cleans_up(rig, tmp_path, monkey
         (Path(out_dir) / "summary.json").write_text("{")     # half written when the disk fills
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(Path(out_dir) / "arrays.h5"))
 
-    monkeypatch.setattr(pipeline.stages, "write_outputs", full)
+    monkeypatch.setattr(meshphase.stages, "write_outputs", full)
     out = tmp_path / "o"
     assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
                  "--out", str(out)]) == EXIT_ERROR
@@ -338,7 +338,7 @@ def test_clean_run_exits_0_and_lists_unused_channels(rig, tmp_path, capsys):
     rec = rig["rec"]
     extra = Recording(rec.data[:, [0, 1, 2, 2]], rec.fs,
                       list(rec.channels) + [ChannelSpec("oil_temp", kind="other", units="V")])
-    path = pipeline.io.write(extra, tmp_path / "extra.h5")
+    path = meshphase.io.write(extra, tmp_path / "extra.h5")
     out = tmp_path / "o"
     assert main(["-q", "process", str(path), "--gearset", str(rig["gearset"]),
                  "--out", str(out)]) == EXIT_OK
@@ -369,13 +369,13 @@ def test_keyboard_interrupt_while_writing_leaves_the_previous_folder_intact(rig,
     assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
                  "--out", str(out)]) in (EXIT_OK, EXIT_PARTIAL)
     before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
-    real = pipeline.stages.write_outputs
+    real = meshphase.stages.write_outputs
 
     def interrupted(ctx, out_dir, **kw):
         real(ctx, out_dir, **kw)
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(pipeline.stages, "write_outputs", interrupted)
+    monkeypatch.setattr(meshphase.stages, "write_outputs", interrupted)
     assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
                  "--out", str(out), "--overwrite"]) == EXIT_INTERRUPTED
     assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
@@ -414,7 +414,7 @@ def test_keyboard_interrupt_in_run_scene_exits_130(tmp_path, monkeypatch, capsys
 # --------------------------------------------------------------------------- 141: closed pipe
 def test_info_json_into_a_closed_pipe_exits_quietly(rig):
     # the reader closes its end before meshphase writes (imports alone take longer): EPIPE for sure
-    p = subprocess.Popen([sys.executable, "-m", "pipeline.cli", "-q", "info", "--json",
+    p = subprocess.Popen([sys.executable, "-m", "meshphase.cli", "-q", "info", "--json",
                           "--no-quality", str(rig["path"])], stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, cwd=REPO)
     p.stdout.close()
@@ -424,7 +424,7 @@ def test_info_json_into_a_closed_pipe_exits_quietly(rig):
 
 
 def test_info_json_piped_to_head_has_no_traceback(rig):
-    cmd = (f"{sys.executable} -m pipeline.cli -q info --json {rig['path']} | head -c 10; "
+    cmd = (f"{sys.executable} -m meshphase.cli -q info --json {rig['path']} | head -c 10; "
            "echo \" rc=${PIPESTATUS[0]}\"")
     r = subprocess.run(["bash", "-c", cmd], capture_output=True, text=True, timeout=120, cwd=REPO)
     # the JSON may fit the pipe buffer before head exits (0) or not (141): both are quiet
@@ -451,7 +451,7 @@ def test_usage_error_is_2():
 
 # --------------------------------------------------------------------------- helpers
 def _ctx(failed=None, ran=None, messages=None, results=None):
-    from pipeline.scene import parse_scene
+    from meshphase.scene import parse_scene
 
     scene = parse_scene('results = ["tilt"]\n[bearing]\ncase = "1"\nk_tilt_Nm_per_rad = 1e6\n')
     ctx = RunContext(scene)

@@ -1,11 +1,11 @@
-"""pipeline.heap: glibc's mmap threshold fixed for streamed runs."""
+"""meshphase.heap: glibc's mmap threshold fixed for streamed runs."""
 
 import subprocess
 import sys
 
 import pytest
 
-from pipeline.heap import limit_heap_growth
+from meshphase.heap import limit_heap_growth
 
 
 def test_bad_threshold():
@@ -23,7 +23,7 @@ def _child(code: str, env=None) -> str:
 def test_threshold_fixed_once_in_a_fresh_process():
     # a fresh interpreter: the first call sets it, the second reports the same answer; on a
     # glibc system mallopt accepts the value (returns 1)
-    out = _child("from pipeline.heap import limit_heap_growth as f; print(f(), f())")
+    out = _child("from meshphase.heap import limit_heap_growth as f; print(f(), f())")
     a, b = out.split()
     assert a == b
     import platform
@@ -34,5 +34,5 @@ def test_threshold_fixed_once_in_a_fresh_process():
 def test_environment_setting_is_left_alone():
     import os
     env = dict(os.environ, MALLOC_MMAP_THRESHOLD_="262144")
-    out = _child("from pipeline.heap import limit_heap_growth as f; print(f())", env=env)
+    out = _child("from meshphase.heap import limit_heap_growth as f; print(f())", env=env)
     assert out == "True"

@@ -1,4 +1,4 @@
-"""pipeline.jsonable: the one JSON conversion (results strict, metadata lossless)."""
+"""meshphase.jsonable: the one JSON conversion (results strict, metadata lossless)."""
 
 import datetime as dt
 import json
@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from pipeline.jsonable import json_default, to_jsonable
+from meshphase.jsonable import json_default, to_jsonable
 
 
 def test_numpy_paths_dates_and_containers():

@@ -1,6 +1,6 @@
 """Measured phasing on a real rig's conditions, end to end, against the synthetic truth.
 
-The matrix of the measured-phasing issue (pipeline.bench.phasing, which ``meshphase bench
+The matrix of the measured-phasing issue (meshphase.bench.phasing, which ``meshphase bench
 processing`` also runs and tabulates): the seed 000 Table 1 gearset on the seed's rig with a
 held ring, 0.2 mm shaft hole errors, white noise, hum and drift, under 1 % and 3 % speed ripple
 at the carrier rate, 1 % at the sun rate, +-10 % ramps, both senses, three unequally spaced
@@ -21,7 +21,7 @@ The default suite runs the 2-minute, 20 dB cells of every condition plus the tac
 import numpy as np
 import pytest
 
-from pipeline.bench.phasing import PhasingCase, matrix_cases, run_case
+from meshphase.bench.phasing import PhasingCase, matrix_cases, run_case
 
 FAST = [PhasingCase(s) for s in ("rig_steady", "rig_ripple1", "rig_ripple3", "rig_ripple_sun",
                                  "rig_ramp_up", "rig_ramp_down", "rig_ccw", "rig_3planets",
@@ -84,7 +84,7 @@ def test_without_a_tacho_labels_are_relative_and_said_once():
     res = run(PhasingCase("rig_ripple1", tacho=False))
     ph = res["ctx"].results["phasing"]
     assert ph["assignment"]["ring"]["shift_decided_by"] != "tacho"
-    from pipeline.stages import summary_dict
+    from meshphase.stages import summary_dict
 
     s = summary_dict(res["ctx"])
     assert "relative" in s["phasing_labels"] or ph["labels_relative"] == []

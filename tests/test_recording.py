@@ -9,10 +9,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.quality import (FlatRuns, chance_min_run, channel_quality, clipped_runs,
+from meshphase.quality import (FlatRuns, chance_min_run, channel_quality, clipped_runs,
                               dropout_runs, equal_runs, find_runs, flat_runs, nonfinite_runs,
                               outside_runs, plateau_runs, quantisation_step)
-from pipeline.recording import CHANNEL_KINDS, ChannelSpec, Recording, sample_index
+from meshphase.recording import CHANNEL_KINDS, ChannelSpec, Recording, sample_index
 
 
 def _rec(n=100, n_ch=3, fs=100.0, t0=0.0, dtype=np.float64, **kw):

@@ -1,4 +1,4 @@
-"""Typed stage results (pipeline.results) and the run context that holds them: one frozen
+"""Typed stage results (meshphase.results) and the run context that holds them: one frozen
 dataclass per stage, the dict-of-dicts view of old, the phasing verdict."""
 
 from __future__ import annotations
@@ -9,12 +9,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from pipeline.phasing import GaugeLabels, PassTable, PhasingResult
-from pipeline.results import (RESULT_TYPES, CompareStage, GaugeComparison, IdentifyStage,
+from meshphase.phasing import GaugeLabels, PassTable, PhasingResult
+from meshphase.results import (RESULT_TYPES, CompareStage, GaugeComparison, IdentifyStage,
                               LegacyResults, LoadSharingStage, LoadStage, PhasingStage,
                               StageResult, ToleranceStage, phasing_verdict)
-from pipeline.scene import STAGES, parse_scene
-from pipeline.stages import STAGE_FUNCTIONS, RunContext
+from meshphase.scene import STAGES, parse_scene
+from meshphase.stages import STAGE_FUNCTIONS, RunContext
 
 
 def _labels(channel="r", decided="pattern", n_unassigned=0) -> GaugeLabels:
@@ -85,7 +85,7 @@ def test_tolerance_band_is_ave_bound3_widened_by_half_the_upper_dev():
     stat = lambda lo, hi: SimpleNamespace(bound3=(np.array(lo), np.array(hi)))  # noqa: E731
     mc = SimpleNamespace(ave_s=stat([-0.1], [0.2]), dev_s=stat([0.0], [0.4]),
                          ave_r=stat([-1.0], [1.0]), dev_r=stat([0.0], [2.0]))
-    from pipeline.models.tolerance import MonteCarloResult
+    from meshphase.models.tolerance import MonteCarloResult
 
     mc.phasing_band = lambda gear: MonteCarloResult.phasing_band(mc, gear)
     lo, hi = ToleranceStage(monte_carlo=mc).band("sun")

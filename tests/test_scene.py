@@ -12,8 +12,8 @@ from seed_rig_toml import SEED_RIG_GEARSET
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.models.gearset import rpm_to_rad_s
-from pipeline.scene import RESULTS, STAGES, Scene, SceneError, load_scene, parse_scene, plan
+from meshphase.models.gearset import rpm_to_rad_s
+from meshphase.scene import RESULTS, STAGES, Scene, SceneError, load_scene, parse_scene, plan
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
@@ -245,7 +245,7 @@ def test_bearing_stiffness_in_either_named_unit():
 
 
 def test_double_pinion_angle_keys_old_and_new():
-    from pipeline.errors import DeprecatedNameWarning
+    from meshphase.errors import DeprecatedNameWarning
 
     head = 'results = ["bearing_moments"]\n[bearing]\ncase = "2-B"\n'
     new = parse_scene(head + "double_pinion_included_angle_sp_deg = [90.0, 111.0]\n"

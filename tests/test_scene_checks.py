@@ -20,11 +20,11 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from seed_rig_toml import SEED_RIG_GEARSET
 
-import pipeline.io
-import pipeline.scene as scene_mod
-from pipeline.errors import SceneWarning
-from pipeline.recording import ChannelSpec, Recording
-from pipeline.scene import LIMITS, Scene, SceneError, check_recording, load_scene, parse_scene, plan
+import meshphase.io
+import meshphase.scene as scene_mod
+from meshphase.errors import SceneWarning
+from meshphase.recording import ChannelSpec, Recording
+from meshphase.scene import LIMITS, Scene, SceneError, check_recording, load_scene, parse_scene, plan
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = REPO / "examples"
@@ -56,11 +56,11 @@ def _names(e: SceneError, key: str, text: str, fragment: str, path=FILE) -> None
 def rig_files(tmp_path_factory):
     """2 s of the seed rig (4 planets, 5120 Hz; channels sun, ring, tacho) in every writable
     format (each carries the generator's gearset in its metadata)."""
-    from synthetic import generate
+    from meshphase.synthetic import generate
 
     d = tmp_path_factory.mktemp("scene_checks")
     rec, _ = generate("seed_rig", duration=2.0, seed=0)
-    return {ext: Path(pipeline.io.write(rec, d / f"rig.{ext}")) for ext in ("h5", "mcap", "csv")}
+    return {ext: Path(meshphase.io.write(rec, d / f"rig.{ext}")) for ext in ("h5", "mcap", "csv")}
 
 
 @pytest.fixture(scope="module")
@@ -346,7 +346,7 @@ def test_window_outside_the_recording(rig_file, tmp_path):
 
 
 def test_mapped_channel_missing_from_the_recording(rig_file, tmp_path):
-    # the load stage's message (pipeline.stages._apply_channel_overrides), with key and line
+    # the load stage's message (meshphase.stages._apply_channel_overrides), with key and line
     body = ('results = ["phasing"]\n' + G + '[[channels]]\nname = "sun"\nkind = "sun"\n'
             '[[channels]]\nname = "ring_gauge"\nkind = "ring"\n')
     p, text = _with_file(rig_file, body, tmp_path)
@@ -367,10 +367,10 @@ def test_tacho_channel_missing_from_the_recording(rig_file, tmp_path):
 
 
 def test_recording_without_any_gauge(rig_file, tmp_path):
-    rec = pipeline.io.read(rig_file)
+    rec = meshphase.io.read(rig_file)
     specs = [ChannelSpec("a", kind="other"), ChannelSpec("b", kind="other"),
              ChannelSpec("tacho", kind="tacho", units="V")]
-    path = pipeline.io.write(Recording(rec.data, rec.fs, specs), tmp_path / "nogauge.h5")
+    path = meshphase.io.write(Recording(rec.data, rec.fs, specs), tmp_path / "nogauge.h5")
     p, text = _with_file(path, 'results = ["phasing"]\n' + G, tmp_path)
     with pytest.raises(SceneError) as info:
         load_scene(p)
@@ -388,9 +388,9 @@ def test_unreadable_recording_is_left_to_the_load_stage(tmp_path):
 def test_check_recording_reads_only_the_header(rig_file, tmp_path, monkeypatch):
     p, _ = _with_file(rig_file, 'results = ["phasing"]\n' + G, tmp_path)
     scene = load_scene(p)
-    monkeypatch.setattr(pipeline.io, "read", lambda *a, **k: pytest.fail("samples read"))
+    monkeypatch.setattr(meshphase.io, "read", lambda *a, **k: pytest.fail("samples read"))
     check_recording(scene)                                  # reads the header itself
-    check_recording(scene, pipeline.io.read_info(rig_file))
+    check_recording(scene, meshphase.io.read_info(rig_file))
 
 
 def test_check_recording_bad_inputs():
@@ -409,7 +409,7 @@ def test_every_example_still_loads(name):
 
 
 def test_seed_rig_toml_and_the_demo_scene_load(tmp_path):
-    from pipeline.demo import demo_scene_path
+    from meshphase.demo import demo_scene_path
 
     parse_scene('results = ["ideal_phasing", "tolerance"]\n' + G
                 + "[tolerances]\ne_sun_mm = 0.2\nsamples = 64\n", FILE)
@@ -430,7 +430,7 @@ def test_end_to_end_scenes_load(rig_file, tmp_path):
 
 
 def test_phasing_accuracy_scenes_plan():
-    from pipeline.bench.phasing import case_config, matrix_cases
+    from meshphase.bench.phasing import case_config, matrix_cases
 
     for case in matrix_cases():
         scene = Scene(path=None, name=case.name, results=["phasing", "compare"],
@@ -454,7 +454,7 @@ def _scenario_scene(cfg) -> str:
 
 
 def test_every_synthetic_scenario_gearset_loads_as_a_scene():
-    from synthetic.scenarios import SCENARIOS, get_scenario
+    from meshphase.synthetic.scenarios import SCENARIOS, get_scenario
 
     for name in SCENARIOS:
         cfg = get_scenario(name)
@@ -471,7 +471,7 @@ def test_gearset_verdicts_match_the_formulas(zs, zp, d, coax, n, shift):
     assume(zr > zs)                               # a ring smaller than the sun: schema/Gearset
     text = (f'results = ["ideal_phasing"]\n[gearset]\nz_sun = {zs}\nz_ring = {zr}\nz_planet = {zp}\n'
             f"n_planets = {n}\ncarrier_radius_mm = 100\nprofile_shift = {str(shift).lower()}\n")
-    # the formulas, written out independently of pipeline.models.assembly
+    # the formulas, written out independently of meshphase.models.assembly
     coaxial = zr == zs + 2 * zp
     assemblable = (zs + zr) % n == 0
     radius = zs + zp if coaxial else (zs + zr) / 2        # 2 R_c / m

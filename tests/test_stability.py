@@ -1,7 +1,7 @@
 """Stability report of meshphase (issue 6, item 6): the extreme and stiff cases, end to end.
 
 Every case below asserts finite, bounded, documented behaviour: a number with its
-uncertainty, or a clear warning of our own class (``pipeline.errors.*Warning``), or a
+uncertainty, or a clear warning of our own class (``meshphase.errors.*Warning``), or a
 ``ValueError`` that names the parameter for input outside the documented domain; never a
 silent NaN, never a crash. The table is the report; each row names the test that holds it.
 
@@ -122,18 +122,18 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.compare import wrap
-from pipeline.models.bearing import seed_case
-from pipeline.models.mesh_phasing import (ShaftHoleErrors, mesh_angle_deviations, mesh_angles,
+from meshphase.compare import wrap
+from meshphase.models.bearing import seed_case
+from meshphase.models.mesh_phasing import (ShaftHoleErrors, mesh_angle_deviations, mesh_angles,
                                           time_varying_phasing)
-from pipeline.models.tilt import solve_tilt
-from pipeline.models.tolerance import ToleranceBand, Tolerances, monte_carlo, table2_case
-from pipeline.scene import parse_scene
-from pipeline.stages import STAGE_FUNCTIONS, run_scene
-from synthetic import generate
-from synthetic.config import Artefacts, errors_from_dict
-from synthetic.kinematics import SpeedProfile
-from synthetic.scenarios import get_scenario
+from meshphase.models.tilt import solve_tilt
+from meshphase.models.tolerance import ToleranceBand, Tolerances, monte_carlo, table2_case
+from meshphase.scene import parse_scene
+from meshphase.stages import STAGE_FUNCTIONS, run_scene
+from meshphase.synthetic import generate
+from meshphase.synthetic.config import Artefacts, errors_from_dict
+from meshphase.synthetic.kinematics import SpeedProfile
+from meshphase.synthetic.scenarios import get_scenario
 
 # ============================================================================ models
 

@@ -16,12 +16,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import pipeline.io
-import pipeline.stages
-from pipeline.scene import STAGES, Scene, load_scene, parse_scene, plan
-from pipeline.phasing import relabel_gauge
-from pipeline.results import IdentifyStage, PhasingStage
-from pipeline.stages import (STAGE_FUNCTIONS, RunContext, new_output_dir,
+import meshphase.io
+import meshphase.stages
+from meshphase.scene import STAGES, Scene, load_scene, parse_scene, plan
+from meshphase.phasing import relabel_gauge
+from meshphase.results import IdentifyStage, PhasingStage
+from meshphase.stages import (STAGE_FUNCTIONS, RunContext, new_output_dir,
                              process_recording, run_scene, stage_identify, summary_dict,
                              write_outputs)
 
@@ -126,8 +126,8 @@ def test_bearing_scene_opens_no_recording(tmp_path, monkeypatch):
     p.write_text(text, encoding="utf-8")
     scene = load_scene(p)                      # the missing file does not matter to it
     for name in ("read", "detect_format", "read_info", "iter_blocks"):
-        monkeypatch.setattr(pipeline.io, name, _fail(f"pipeline.io.{name}"))
-    monkeypatch.setattr("synthetic.generate", _fail("synthetic.generate"))
+        monkeypatch.setattr(meshphase.io, name, _fail(f"meshphase.io.{name}"))
+    monkeypatch.setattr("meshphase.synthetic.generate", _fail("meshphase.synthetic.generate"))
     ctx = run_scene(scene)
     assert ctx.ran == ["bearing_moments", "tilt"]
     assert "load" not in ctx.ran and "load" not in ctx.results and ctx.failed == {}
@@ -138,7 +138,7 @@ def test_bearing_scene_opens_no_recording(tmp_path, monkeypatch):
 
 
 def test_scene_without_face_width_gauges_does_no_centroid_work(tmp_path, monkeypatch):
-    monkeypatch.setattr(pipeline.stages, "facewidth_centroid", _fail("facewidth_centroid"))
+    monkeypatch.setattr(meshphase.stages, "facewidth_centroid", _fail("facewidth_centroid"))
     scene = parse_scene('results = ["centroids"]\n[input]\nsynthetic = "seed_rig"\n'
                         'minutes = 0.25\n', tmp_path / "c.toml")
     ctx = run_scene(scene)
@@ -148,7 +148,7 @@ def test_scene_without_face_width_gauges_does_no_centroid_work(tmp_path, monkeyp
 
 
 def test_face_width_centroids_recovered():
-    # facewidth_offcentre truth (synthetic.scenarios): Z_S = -2 mm on every planet; Z_R = +3,
+    # facewidth_offcentre truth (meshphase.synthetic.scenarios): Z_S = -2 mm on every planet; Z_R = +3,
     # +2.5, +3.5, +3 mm per planet (mean +3 mm); clean signals, so a single centroid over the
     # passes lands on the mean within a few 0.1 mm (ring: planets differ by +-0.5 mm).
     scene = parse_scene('results = ["centroids"]\n[input]\nsynthetic = "facewidth_offcentre"\n'
@@ -180,7 +180,7 @@ def test_example_tolerance_study_runs_monte_carlo_only(tmp_path):
 
 @pytest.mark.parametrize("name, cases", [("bearing_moments.toml", 3), ("bearing_double_pinion.toml", 2)])
 def test_example_bearing_scenes_run(name, cases, monkeypatch):
-    monkeypatch.setattr(pipeline.stages, "monte_carlo", _fail("monte_carlo"))
+    monkeypatch.setattr(meshphase.stages, "monte_carlo", _fail("monte_carlo"))
     ctx = run_scene(load_scene(EXAMPLES / name))
     assert ctx.ran == ["bearing_moments", "tilt"] and ctx.failed == {}
     sols = ctx.results["tilt"]["solutions"]
@@ -279,7 +279,7 @@ def test_identify_relabelling_supersedes_the_phasing(rig_run, monkeypatch):
     ph, g = ctx.phasing, ctx.gearset
     gear = ph.labels_relative[0]
     target = relabel_gauge(ph.result, gear, 2, g)[0]
-    real = pipeline.stages.identify_errors
+    real = meshphase.stages.identify_errors
 
     def fits_only_the_target(tables, gearset):
         ident = real(tables, gearset)
@@ -288,7 +288,7 @@ def test_identify_relabelling_supersedes_the_phasing(rig_run, monkeypatch):
         ident.rms_after = 0.1 if hit else 1.0
         return ident
 
-    monkeypatch.setattr(pipeline.stages, "identify_errors", fits_only_the_target)
+    monkeypatch.setattr(meshphase.stages, "identify_errors", fits_only_the_target)
     c2 = RunContext(ctx.scene)
     c2.record("phasing", ph)
     st = stage_identify(c2)
@@ -300,7 +300,7 @@ def test_identify_relabelling_supersedes_the_phasing(rig_run, monkeypatch):
     assert summary_dict(c2)["phasing"][gear]["assignment"]["shift_decided_by"] == "identification"
     assert any("relabelled by 2 place(s)" in n for n in st.identification.notes)
     # no relabelling helps: the phasing stays the phasing stage's
-    monkeypatch.setattr(pipeline.stages, "identify_errors", real)
+    monkeypatch.setattr(meshphase.stages, "identify_errors", real)
     c3 = RunContext(ctx.scene)
     c3.record("phasing", ph)
     assert stage_identify(c3).phasing is None and c3.phasing is ph
@@ -327,12 +327,12 @@ def test_new_output_dir_never_overwrites(tmp_path):
 # --------------------------------------------------------------------------- process
 @pytest.fixture(scope="module")
 def seed_rig_file(tmp_path_factory):
-    """seed_rig, 0.5 min, written with pipeline.io.write as HDF5, and a gearset TOML."""
-    from synthetic import generate
+    """seed_rig, 0.5 min, written with meshphase.io.write as HDF5, and a gearset TOML."""
+    from meshphase.synthetic import generate
 
     d = tmp_path_factory.mktemp("proc")
     rec, _ = generate("seed_rig", duration=30.0, seed=11)
-    path = pipeline.io.write(rec, d / "run.h5")
+    path = meshphase.io.write(rec, d / "run.h5")
     gs = d / "gearset.toml"
     gs.write_text('name = "seed rig gearset"\n[gearset]\nz_sun = 25\nz_ring = 87\nz_planet = 31\n'
                   'n_planets = 4\ncarrier_radius_mm = 112.5\nface_width_mm = 40\ndirection = "cw"\n'
@@ -343,7 +343,7 @@ def seed_rig_file(tmp_path_factory):
 def test_process_recording_writes_next_to_input_without_monte_carlo(seed_rig_file, monkeypatch):
     path, gs = seed_rig_file
     # no [tolerances] in the gearset file: the run must not touch the Monte Carlo
-    monkeypatch.setattr(pipeline.stages, "monte_carlo", _fail("monte_carlo"))
+    monkeypatch.setattr(meshphase.stages, "monte_carlo", _fail("monte_carlo"))
     before = path.read_bytes()
     ctx, files = process_recording(path, gs)
     assert "tolerance" not in ctx.ran and "tolerance" not in ctx.results

@@ -1,7 +1,7 @@
 """Campaign speed-up: the same campaign timed with different numbers of local workers.
 
 :func:`measure_speedup` generates synthetic recordings once, then runs
-:func:`pipeline.campaign.run_campaign` on them with each worker count on a fresh
+:func:`meshphase.campaign.run_campaign` on them with each worker count on a fresh
 LocalCluster and reports wall times and speed-ups. Measured, never asserted.
 """
 
@@ -33,7 +33,7 @@ def _check_args(n_recordings, minutes, repeats, workers, scenario):
     workers = [as_positive_int(w, "workers") for w in workers]
     if not workers:
         raise ValueError("workers must name at least one worker count, got an empty sequence")
-    from synthetic.scenarios import SCENARIOS
+    from meshphase.synthetic.scenarios import SCENARIOS
 
     if scenario not in SCENARIOS:
         raise ValueError(f"scenario must be one of {sorted(SCENARIOS)}, got {scenario!r}")
@@ -43,7 +43,7 @@ def _check_args(n_recordings, minutes, repeats, workers, scenario):
 def _prepare(work: Path, n_recordings: int, minutes: float, scenario: str, seed: int, scene_path):
     """Generate the recordings (those missing) and the scene; warm the client up. Returns
     (recordings folder, scene path)."""
-    from synthetic import cli_synth
+    from meshphase.synthetic import cli_synth
 
     rec_dir = work / "recordings"
     rec_dir.mkdir(exist_ok=True)
@@ -108,9 +108,9 @@ def measure_speedup(n_recordings: int = 8, minutes: float = 2.0, workers=(1, 2),
     repeats : int
         Timed runs per worker count.
     scenario : str
-        Synthetic scenario (:data:`synthetic.SCENARIOS`).
+        Synthetic scenario (:data:`meshphase.synthetic.SCENARIOS`).
     scene_path : str or Path, optional
-        Scene to run (default: the demo scene, :data:`pipeline.demo.DEMO_SCENE`).
+        Scene to run (default: the demo scene, :data:`meshphase.demo.DEMO_SCENE`).
     work_dir : str or Path, optional
         Where recordings and outputs go (default: a temporary folder, removed afterwards).
     seed : int

@@ -3,15 +3,15 @@
 For each format (HDF5, MCAP with no / lz4 / zstd compression, CSV, NI TDMS written by
 ``nptdms.TdmsWriter`` with large and with many small segments) a generated strain-like
 recording (1 h x 8 channels at 5120 Hz by default) is written and read back through
-:mod:`pipeline.io`, and measured:
+:mod:`meshphase.io`, and measured:
 
-* full read throughput [MSamples/s] (``pipeline.io.read``), and its ratio to the raw
+* full read throughput [MSamples/s] (``meshphase.io.read``), and its ratio to the raw
   reference read of the same samples from a ``.npy`` file in the same run (read with
   ``readinto`` into a buffer allocated and touched beforehand; ``np.load``, which allocates
   its output like the format readers do, is reported alongside);
 * one-channel read and one-time-window read throughput (samples delivered per second);
 * for CSV, ``pandas.read_csv(engine="c")`` alone on the same file;
-* peak memory of a streaming read (``pipeline.io.iter_blocks`` with blocks of the block
+* peak memory of a streaming read (``meshphase.io.iter_blocks`` with blocks of the block
   budget) of a recording equal to the block budget and of one four times as long, measured
   with :mod:`tracemalloc` (Python and numpy allocations; memory held inside the HDF5 or
   TDMS C code is not seen). Flat means the 4x peak stays near the 1x peak.
@@ -22,12 +22,12 @@ are measured and reported against the issue's targets (HDF5 >= 0.5 x raw, MCAP a
 reader module is missing is skipped with a logged message.
 
 Peak memory of ``meshphase convert`` (``convert_minutes``; ``meshphase bench io`` measures
-10 min, 1 h and 3 h): the 8-channel benchmark recording (:func:`pipeline.bench.rss.bench_config`,
+10 min, 1 h and 3 h): the 8-channel benchmark recording (:func:`meshphase.bench.rss.bench_config`,
 5120 Hz, float64) is generated and written block by block to HDF5, converted to MCAP and back
 (each conversion a child process: its peak RSS (VmHWM), wall time); flat means the
 same peak RSS whatever the length. A length whose files do not fit on the disk (2.2 x the
 samples' size free) is skipped and listed. Peak memory of ``meshphase process`` on the same
-recordings (``process_minutes``, :func:`pipeline.bench.processing.process_rss_rows`) is
+recordings (``process_minutes``, :func:`meshphase.bench.processing.process_rss_rows`) is
 measured alongside, so that one table shows both streamed commands flat in the length.
 """
 
@@ -120,7 +120,7 @@ def strain_recording(n_samples: int, n_channels: int = 8, fs: float = 5120.0, rn
             data[a:b, j] = col
     kinds = ("sun", "ring", "facewidth", "other")
     specs = [ChannelSpec(f"gauge_{j}", kind=kinds[j % len(kinds)], units="m/m") for j in range(n_channels)]
-    return Recording(data, fs, specs, t0=0.0, meta={"generated_by": "pipeline.bench.io"})
+    return Recording(data, fs, specs, t0=0.0, meta={"generated_by": "meshphase.bench.io"})
 
 
 # ---------------------------------------------------------------------------------- writers
@@ -297,7 +297,7 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
         :data:`CONVERT_MINUTES`).
     process_minutes : sequence of float
         Lengths [min] of the 8-channel recordings whose ``meshphase process`` peak memory and
-        wall time are measured (:func:`pipeline.bench.processing.process_rss_rows`; default
+        wall time are measured (:func:`meshphase.bench.processing.process_rss_rows`; default
         none, ``meshphase bench io`` passes :data:`CONVERT_MINUTES`).
 
     Returns
@@ -305,7 +305,7 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
     dict
         ``{"config", "raw", "rows", "convert", "process", "skipped", "warnings", "notes",
         "files"}`` (``convert``: rows with the keys :data:`CONVERT_COLUMNS`; ``process``: rows
-        with the keys :data:`pipeline.bench.processing.PROCESS_COLUMNS`); ``rows`` is a
+        with the keys :data:`meshphase.bench.processing.PROCESS_COLUMNS`); ``rows`` is a
         list of dicts with the keys :data:`COLUMNS`, throughputs in MSamples/s, sizes in MB,
         times in s (None where a column does not apply).
     """
@@ -360,9 +360,9 @@ def _plan(formats) -> tuple[list, list]:
     """((format, variant, suffix, writer) per variant of each present format, skipped formats)."""
     present, skipped = [], []
     for fmt in formats:
-        if importlib.util.find_spec(f"pipeline.io.{fmt}") is None:
-            logger.warning("io bench: format %s skipped: module pipeline.io.%s is missing", fmt, fmt)
-            skipped.append({"format": fmt, "reason": f"module pipeline.io.{fmt} is missing"})
+        if importlib.util.find_spec(f"meshphase.io.{fmt}") is None:
+            logger.warning("io bench: format %s skipped: module meshphase.io.%s is missing", fmt, fmt)
+            skipped.append({"format": fmt, "reason": f"module meshphase.io.{fmt} is missing"})
         else:
             present.append(fmt)
     return [(fmt, *v) for fmt in present for v in _variants(fmt)], skipped
@@ -487,10 +487,10 @@ def _notes(repeats: int) -> list[str]:
         "CSV is held against pandas.read_csv(engine='c') alone on the same file: "
         "csv_over_pandas = pandas time / our time (>= 1 meets the target).",
         "stream_peak_mb_*: tracemalloc peak (Python + numpy allocations; HDF5/TDMS C "
-        "internals not seen) while streaming pipeline.io.iter_blocks in blocks of the "
+        "internals not seen) while streaming meshphase.io.iter_blocks in blocks of the "
         "block budget over a recording of 1x and 4x the budget; flat = ratio near 1.",
         "convert table: `meshphase convert` of the 8-channel benchmark recording "
-        "(pipeline.bench.rss.bench_config, float64, 5120 Hz) in a child process; peak_rss_mb "
+        "(meshphase.bench.rss.bench_config, float64, 5120 Hz) in a child process; peak_rss_mb "
         "is its VmHWM (every page its address space touched, C libraries included), "
         "rss_over_data its ratio to the samples' size; streamed block by block, so flat "
         "in the length. Before streaming (one buffer for the whole recording) convert "

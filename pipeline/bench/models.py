@@ -110,7 +110,7 @@ def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 1
     replicates : int
         Replicates per Monte Carlo run (standard errors; Sobol randomisation) [-].
     window : str
-        Observation window kind (:func:`pipeline.models.tolerance.observation_window`).
+        Observation window kind (:func:`meshphase.models.tolerance.observation_window`).
     case3_samples : int
         Sample count of the separately timed seed case 3 run (plain random) [-].
     figure : bool

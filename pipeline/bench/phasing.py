@@ -2,14 +2,14 @@
 
 The accuracy matrix of the measured-phasing issue: the seed 000 Table 1 gearset on the seed's
 rig (Z 25/87/29, four planets, held ring, sun 18.19 r/min, 5120 Hz, 0.2 mm shaft hole errors,
-white noise, hum, drift; scenarios ``rig_*`` of :mod:`synthetic.scenarios`) under 1 % and 3 %
+white noise, hum, drift; scenarios ``rig_*`` of :mod:`meshphase.synthetic.scenarios`) under 1 % and 3 %
 speed ripple at the carrier rate, 1 % at the sun rate, +-10 % ramps, both senses, three
 unequally spaced planets, five planets, with and without the carrier tacho, at 20 and 10 dB,
 over 2 and 10 minutes.
 
 Per case and gauge: the per-pass RMS phasing error against the truth [mesh cycles] (every
 measured pass against the true mesh angle turned between its two pulses,
-:func:`pipeline.compare.truth_comparison`), the floor the two onsets' timing bounds set (RMS
+:func:`meshphase.compare.truth_comparison`), the floor the two onsets' timing bounds set (RMS
 of the per-pass timing floor), their ratio, the target ``max(2e-3, 1.3 x floor)``, the
 calibration of the per-pass uncertainty (RMS of error / sigma, share inside 1.96 sigma), the
 planet-label match, whether the run flagged the phasing unreliable, the angle model chosen,
@@ -47,7 +47,7 @@ class PhasingCase:
     Attributes
     ----------
     scenario : str
-        A ``rig_*`` scenario of :mod:`synthetic.scenarios`.
+        A ``rig_*`` scenario of :mod:`meshphase.synthetic.scenarios`.
     tacho : bool
         Keep the carrier tacho channel.
     snr_db : float
@@ -87,8 +87,8 @@ def matrix_cases(quick: bool = False) -> list[PhasingCase]:
 
 
 def case_config(case: PhasingCase):
-    """The scenario's :class:`synthetic.config.SynthConfig` changed as the case says."""
-    from synthetic.scenarios import get_scenario
+    """The scenario's :class:`meshphase.synthetic.config.SynthConfig` changed as the case says."""
+    from meshphase.synthetic.scenarios import get_scenario
 
     cfg = get_scenario(case.scenario)
     dur = 60.0 * case.minutes
@@ -179,7 +179,7 @@ def pooled_calibration(rows) -> dict:
 
 def error_vs_runtime_figure(rows, path) -> None:
     """Scatter of error / target against processing time, one point per case and gauge
-    (matplotlib through pipeline.report.figures, the one plotting module)."""
+    (matplotlib through meshphase.report.figures, the one plotting module)."""
     from ..report.figures import error_vs_runtime
 
     curves = {}

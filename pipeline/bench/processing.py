@@ -2,10 +2,10 @@
 
 ``run_processing_bench(out_dir)`` writes ``processing_bench.json`` and
 ``processing_bench.md`` (and ``phasing_error_vs_runtime.png``): the measured-phasing
-accuracy matrix of :mod:`pipeline.bench.phasing` (error, timing floor, calibration and run
+accuracy matrix of :mod:`meshphase.bench.phasing` (error, timing floor, calibration and run
 time per rig condition), and, for pulse trains with known truth (generated here, see
 :class:`PulseShape` and :func:`pulse_train`), the timing error of each detector setting at
-several SNRs next to the Cramer-Rao bound (:func:`pipeline._crb.crb_delay_std`), and the
+several SNRs next to the Cramer-Rao bound (:func:`meshphase._crb.crb_delay_std`), and the
 throughput of each stage in MSamples per CPU-second (``time.process_time``: all threads of
 the process counted, so a multi-threaded BLAS cannot flatter it; that is the one-core
 figure) next to the wall time. Measured, never asserted.
@@ -16,11 +16,11 @@ mean amplitude, ``sigma`` the white-noise standard deviation per sample.
 
 Detector settings
 -----------------
-``coarse``        :func:`pipeline.onsets.coarse_peaks` alone (smoothed maximum, integer
+``coarse``        :func:`meshphase.onsets.coarse_peaks` alone (smoothed maximum, integer
                   samples at the decimated rate).
-``refine_once``   :func:`pipeline.onsets.detect_onsets` with the template learnt once
+``refine_once``   :func:`meshphase.onsets.detect_onsets` with the template learnt once
                   (``relearn="never"``).
-``refine_block``  :func:`pipeline.onsets.detect_onsets` defaults (template re-learnt per
+``refine_block``  :func:`meshphase.onsets.detect_onsets` defaults (template re-learnt per
                   analysis block).
 ``refine_oracle`` matched filter with the template learnt from the noise-free train (the
                   shape known exactly: the setting the bound speaks about).
@@ -30,7 +30,7 @@ constant offset between features, irrelevant to phasing) removed and reported se
 
 Peak memory and wall time of ``meshphase process`` (``process_minutes``; ``meshphase bench
 processing`` measures 2 min, 10 min, 1 h and 3 h): the 8-channel benchmark recording
-(:func:`pipeline.bench.rss.bench_config`, float64 HDF5 written block by block) processed with
+(:func:`meshphase.bench.rss.bench_config`, float64 HDF5 written block by block) processed with
 the seed rig's gearset in a child process (peak RSS: its VmHWM), with each stage's
 time, and the whole run and the streamed stages (load, condition, onsets: the three passes
 over the samples) as multiples of one :func:`scipy.signal.sosfiltfilt` pass over the same
@@ -53,6 +53,7 @@ import numpy as np
 from .._crb import crb_delay_std
 from ..log import logger
 from ..validate import as_float, as_nonnegative, as_positive
+from .rss import child_env
 
 __all__ = ["PulseShape", "pulse_train", "pulse_scenario", "match_onsets", "run_processing_bench",
            "process_rss_rows", "ACCURACY_COLUMNS", "THROUGHPUT_COLUMNS", "PROCESS_COLUMNS",
@@ -439,7 +440,7 @@ def _markdown(res: dict) -> str:
                   f"max({TARGET_ABS:g}, {TARGET_FLOOR_RATIO:g} x floor); z_rms = RMS of error / "
                   "sigma and coverage95 = share of passes inside 1.96 sigma (calibration of the "
                   "per-pass uncertainty); process_s = wall time of the stages (load to compare). "
-                  "Scenarios: pipeline.bench.phasing.", "",
+                  "Scenarios: meshphase.bench.phasing.", "",
                   f"Pooled calibration over the table: z_rms {cal['z_rms']:.2f}, coverage95 "
                   f"{cal['coverage95']:.3f} over {cal['n']} passes; {cal['n_ok']} of "
                   f"{cal['n_rows']} rows meet the target.", "", markdown_table(res["phasing"])]
@@ -545,11 +546,9 @@ def run_processing_bench(out_dir, *, quick: bool = False, rng=0, process_minutes
     if all(os.environ.get(v) == "1" for v in _THREAD_VARS):
         res = _run(out, quick, rng, process_minutes)
     else:
-        env = dict(os.environ, **{v: "1" for v in _THREAD_VARS})
-        code = ("import sys; from pipeline.bench.processing import _run; "
+        env = child_env(**{v: "1" for v in _THREAD_VARS})
+        code = ("import sys; from meshphase.bench.processing import _run; "
                 f"_run(sys.argv[1], {bool(quick)!r}, {rng!r}, {process_minutes!r})")
-        root = str(Path(__file__).resolve().parents[2])
-        env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
         proc = subprocess.run([sys.executable, "-c", code, str(out)], env=env,
                               capture_output=True, text=True)
         if proc.returncode != 0:

@@ -61,10 +61,10 @@ def bench_config(duration: float, dtype: str = "float64"):
 
     Returns
     -------
-    synthetic.config.SynthConfig
+    meshphase.synthetic.config.SynthConfig
     """
-    from synthetic.config import Artefacts, GaugeConfig, SynthConfig, TachoConfig
-    from synthetic.scenarios import FACE_WIDTH, seed_rig_gearset, seed_rig_speeds
+    from meshphase.synthetic.config import Artefacts, GaugeConfig, SynthConfig, TachoConfig
+    from meshphase.synthetic.scenarios import FACE_WIDTH, seed_rig_gearset, seed_rig_speeds
 
     from ..models.tolerance import table2_case
 
@@ -139,15 +139,13 @@ def run_child(job: str, **kwargs) -> dict:
 
     if job not in __all__ or not job.endswith("_job"):
         raise ValueError(f"job must be one of the *_job functions of {__name__}, got {job!r}")
-    root = str(Path(__file__).resolve().parents[2])
-    env = dict(os.environ)
-    env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
+    env = child_env()
     # BLAS on one thread unless the caller chose: the per-core figures of the processing
     # bench; a multi-threaded BLAS on a loaded 2-core machine made the phasing stage's
     # least-squares fits up to 10x slower (spinning threads), not faster
     for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         env.setdefault(v, "1")
-    code = "import sys; from pipeline.bench.rss import _child; _child(sys.argv[1])"
+    code = "import sys; from meshphase.bench.rss import _child; _child(sys.argv[1])"
     spec = json.dumps({"job": job, "kwargs": kwargs})
     with tempfile.TemporaryDirectory(prefix="meshphase-rss-") as tmp:
         out_p, err_p = os.path.join(tmp, "out"), os.path.join(tmp, "err")
@@ -180,7 +178,7 @@ def run_child(job: str, **kwargs) -> dict:
 def write_job(path: str, minutes: float, dtype: str = "float64", seed: int = 1) -> dict:
     """Write the benchmark recording (:func:`bench_config`) of ``minutes`` to ``path``
     (format from the suffix), generated and written block by block."""
-    from synthetic import generate_blocks
+    from meshphase.synthetic import generate_blocks
 
     from .. import io
 
@@ -241,3 +239,12 @@ def sosfiltfilt_job(n: int = 1 << 22, repeats: int = 3) -> dict:
         signal.sosfiltfilt(sos, x)
         best = min(best, time.perf_counter() - t)
     return {"n": int(n), "best_s": best, "samples_per_s": n / best}
+
+
+def child_env(**extra: str) -> dict:
+    """The environment of a bench child process: this one's, plus ``extra``, with
+    PYTHONPATH set to this interpreter's ``sys.path`` so the child imports the very same
+    meshphase (editable checkout, wheel or source tree alike)."""
+    env = dict(os.environ, **extra)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)
+    return env

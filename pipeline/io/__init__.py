@@ -14,7 +14,7 @@ ValueError) naming the file, the position and the problem. ``verify=False`` (a f
 option of :func:`read`, :func:`read_info` and :func:`iter_blocks`) skips the checksum
 checks (MCAP, HDF5); structural checks always run.
 
-Writes are atomic and safe: see :func:`~pipeline.io.base.atomic_path`.
+Writes are atomic and safe: see :func:`~meshphase.io.base.atomic_path`.
 """
 
 from __future__ import annotations
@@ -197,7 +197,7 @@ def write(recording: Recording, path, format: str | None = None, *, overwrite: b
     -----
     The file is written to a temporary ``.mp-*.partial`` file in the same directory
     (created with O_EXCL), fsync'ed and then published (see
-    :func:`~pipeline.io.base.atomic_path`); a reader never sees a partial file under
+    :func:`~meshphase.io.base.atomic_path`); a reader never sees a partial file under
     ``path``.
     """
     if not isinstance(recording, Recording):

@@ -256,7 +256,7 @@ def check_start_datetime(value, path) -> str | None:
 def spec_from_dict(d: dict, path, where: str, *, checked: bool = False) -> ChannelSpec:
     """A ChannelSpec from a dict read from a file, checked against channel_spec.schema.json
     (unless ``checked``: already validated as part of a larger schema)."""
-    from data_schemas import validate
+    from meshphase.data_schemas import validate
 
     try:
         if not checked:

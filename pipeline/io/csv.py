@@ -27,7 +27,7 @@ raises RecordingFileError "non-monotonic time at line L"; a step between rows mo
 :data:`TIME_TOLERANCE` sample intervals off the grid, raises "non-uniform time at line L".
 
 Structure (every file, once per file identity, one vectorised pass over the bytes; raises
-:class:`~pipeline.io.base.CorruptFileError` with the line number and byte offset):
+:class:`~meshphase.io.base.CorruptFileError` with the line number and byte offset):
 
 * the file ends with a newline: a last line without one was cut short (a number cut
   mid-token, "-7.85" of "-7.85e-11", is recognisable only this way, or by a missing field);

@@ -30,7 +30,7 @@ Format options of :func:`write`: ``compression`` (None | "gzip" | "lzf", default
 Integrity: files are written in the HDF5 1.10 file format (``libver=("v110", "v110")``:
 superblock, object headers, attributes and the chunk index carry checksums that HDF5 checks
 when it reads them) with a fletcher32 checksum on every sample chunk, which HDF5 checks on
-every read of that chunk. A mismatch raises :class:`~pipeline.io.base.CorruptFileError`
+every read of that chunk. A mismatch raises :class:`~meshphase.io.base.CorruptFileError`
 naming the file, the dataset, the sample range of the chunk and its byte offset.
 ``read(..., verify=False)`` reads chunks stored with fletcher32 as the only filter without
 checking the checksum (to salvage the undamaged samples of a damaged file); chunks with
@@ -210,7 +210,7 @@ def _header_checked(f, path) -> tuple[dict, list, list]:
 
 def _parse_header(f, path) -> tuple[dict, tuple, tuple]:
     import h5py
-    from data_schemas import validate
+    from meshphase.data_schemas import validate
 
     attrs = {k: _plain(v) for k, v in f.attrs.items()}
     for key in ("meta", "history"):
@@ -657,6 +657,6 @@ def _close_after_failure(f, path) -> None:
 
 
 def _version_string() -> str:
-    from pipeline import __version__
+    from meshphase import __version__
 
     return str(__version__)

@@ -3,7 +3,7 @@
 One home for what both modules need: the exact reduction of rotation angles (Cody-Waite
 with a Veltkamp-split product), the :class:`ShaftHoleErrors` container and its broadcasting
 to (realisations, planets), the bound e_sun + e_planet < R_c, and the argument checks of
-:class:`~pipeline.models.gearset.Gearset`, :class:`~pipeline.models.gearset.Speeds` and
+:class:`~meshphase.models.gearset.Gearset`, :class:`~meshphase.models.gearset.Speeds` and
 the planet rotation direction. The conventions are those of :mod:`.mesh_phasing` (carrier
 frame, counter-clockwise phases); the public names are re-exported there.
 """
@@ -178,7 +178,7 @@ class ShaftHoleErrors:
     Values must be finite and radial sizes non-negative (ValueError otherwise). The bound
     ``e_sun + e_planet < R_c`` (and ``e_ring + e_planet < R_c``) is checked by the functions
     that know the gearset. Seed 000 Table 2 lists the angles of planet 1 only ("kappa_s1",
-    "kappa_p1"); :func:`pipeline.models.tolerance.table2_case` applies them to every planet.
+    "kappa_p1"); :func:`meshphase.models.tolerance.table2_case` applies them to every planet.
     """
 
     e_sun: ArrayLike = 0.0

@@ -8,7 +8,7 @@ Inputs (all float64):
 
 - ``cs, ss`` / ``cr, sr`` / ``cp, sp`` : cos and sin of the reduced offset rotation angles
   w_sc t, w_rc t, w_pc t on the time grid, shape (n_t,) [-]. They come from
-  :func:`pipeline.models.mesh_phasing.rotation_cos_sin`, which reduces w t modulo 2 pi
+  :func:`meshphase.models.mesh_phasing.rotation_cos_sin`, which reduces w t modulo 2 pi
   exactly, so no large argument ever reaches a trig function here.
 - ``cpsi, spsi`` : cos and sin of the nominal planet angles psi_n, shape (N,) [-].
 - ``R`` : carrier radius [m].

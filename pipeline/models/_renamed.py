@@ -1,7 +1,7 @@
 """Old names of renamed model parameters: accepted, translated, announced.
 
 A gear engineer's old call (``SinglePinion(beta_1=...)``, ``DoublePinion(beta=...)``) keeps
-working with a :class:`~pipeline.errors.DeprecatedNameWarning` that names the new parameter.
+working with a :class:`~meshphase.errors.DeprecatedNameWarning` that names the new parameter.
 """
 
 from __future__ import annotations

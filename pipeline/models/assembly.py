@@ -1,7 +1,7 @@
 """Can this planetary gearset be built? Coaxiality and planet tip clearance, in tooth counts.
 
 Assembly itself (which planet angles fit the sun and ring teeth) is
-:func:`pipeline.models.mesh_phasing.assembly_check`; this module adds the two other checks a
+:func:`meshphase.models.mesh_phasing.assembly_check`; this module adds the two other checks a
 gearset must pass before any model of it means anything, both module-free (tooth counts and
 angles only), so they run on a scene before anything else:
 

@@ -63,7 +63,7 @@ _HALF_PI = 0.5 * math.pi
 
 
 # --------------------------------------------------------------------------------------------
-# validation helpers (thin wrappers over pipeline.validate)
+# validation helpers (thin wrappers over meshphase.validate)
 # --------------------------------------------------------------------------------------------
 def _angle(value, name, lo, hi, *, lo_open=True, hi_open=True) -> float:
     """A finite angle [rad] inside (lo, hi) (open or closed ends as flagged)."""
@@ -244,7 +244,7 @@ class SinglePinion:
     n_planets : int
         Number of planets N sharing the input torque [-].
     face_width : float, optional
-        Contact face width b of both meshes [m] (used by :mod:`pipeline.models.tilt`).
+        Contact face width b of both meshes [m] (used by :mod:`meshphase.models.tilt`).
     name : str
         Free label.
 
@@ -252,7 +252,7 @@ class SinglePinion:
     -----
     Everything is SI; :meth:`from_mm_deg` takes the drawing's units (mm, deg). The old names
     ``beta_1``, ``beta_2`` still work as keywords and attributes, with a
-    :class:`~pipeline.errors.DeprecatedNameWarning`.
+    :class:`~meshphase.errors.DeprecatedNameWarning`.
     """
 
     r_sun: float
@@ -340,7 +340,7 @@ class DoublePinion:
     -----
     Everything is SI; :meth:`from_mm_deg` takes the drawing's units (mm, deg). The old names
     ``beta``, ``gamma``, ``alpha`` still work as keywords and attributes, with a
-    :class:`~pipeline.errors.DeprecatedNameWarning`.
+    :class:`~meshphase.errors.DeprecatedNameWarning`.
     """
 
     r_sun: float
@@ -594,7 +594,7 @@ class MeshForces:
 class _CommonMoments:
     """The names :class:`BearingMoments` and :class:`DoublePinionMoments` share.
 
-    A :class:`~pipeline.models.tilt.TiltSolution` holds either; code that reads these names
+    A :class:`~meshphase.models.tilt.TiltSolution` holds either; code that reads these names
     works for both (a single pinion is one pinion with meshes sun and ring; a double pinion
     has pinions SP and RP and meshes sun-SP, SP-RP, RP-ring).
 

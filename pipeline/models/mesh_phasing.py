@@ -534,7 +534,7 @@ def mesh_angles(t: ArrayLike, gearset: Gearset, speeds: Speeds,
     e_s + e_p < R_c so that v_u > 0. Accuracy against an mpmath reference: |delta error| <=
     1e-12 (e_s + e_p) / R_c for e / R_c in [1e-12, 0.99] and |t| <= 1e6 s (tests; measured
     worst 1.4e-15). Memory: the full (*S, n_t, N) broadcast with ~10 temporaries; for many
-    realisations use :func:`pipeline.models.tolerance.phasing_statistics`, which batches.
+    realisations use :func:`meshphase.models.tolerance.phasing_statistics`, which batches.
     """
     g, sp, t, shape, b = _prepare(t, gearset, speeds, errors)
     d_s, d_r = _deltas(t, g, sp, shape, b)
@@ -641,7 +641,7 @@ def phasing_deviation(t: ArrayLike, gearset: Gearset, speeds: Speeds,
         Wrap into [-0.5, 0.5) (default). With ``wrap=False`` the continuous deviation
         s Z_s (delta_n - delta_1) / 2 pi is returned; the two agree whenever its magnitude
         is below 0.5, and the continuous one is what Ave / Dev
-        (:func:`pipeline.models.tolerance.phasing_statistics`) are computed on, so that a
+        (:func:`meshphase.models.tolerance.phasing_statistics`) are computed on, so that a
         deviation crossing +-0.5 does not fold.
 
     Returns

@@ -1,6 +1,6 @@
 """Coupled planet-bearing tilt and mesh load distribution (spec section 5; seed 001).
 
-The seed (001) shows that the bearing moments of :mod:`pipeline.models.bearing` tilt the
+The seed (001) shows that the bearing moments of :mod:`meshphase.models.bearing` tilt the
 pinion on its needle bearing, the tilt shifts the load pattern along the face width, and the
 shifted pattern changes the moments ("the tilting of the bearing and the load distribution at
 the gear meshes should be solved simultaneously"). It uses GSAM for that; this module solves a

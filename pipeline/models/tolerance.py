@@ -361,10 +361,10 @@ def phasing_statistics(gearset: Gearset, speeds: Speeds, errors: ShaftHoleErrors
     -----
     Seed 000: Ave_jn = mean over the window of gamma_jn(t) - gamma_jn,ideal and
     Dev_jn = max - min of it, with the continuous deviation of
-    :func:`pipeline.models.mesh_phasing.phasing_deviation` (``wrap=False``) on the grid of
+    :func:`meshphase.models.mesh_phasing.phasing_deviation` (``wrap=False``) on the grid of
     :func:`time_grid` (relative to planet 1), and of the unwrapped mesh-line deviations
     s Z_s delta_s / 2 pi, -s Z_r delta_r / 2 pi of
-    :func:`pipeline.models.mesh_phasing.mesh_angle_deviations` (absolute, ``*_abs``).
+    :func:`meshphase.models.mesh_phasing.mesh_angle_deviations` (absolute, ``*_abs``).
     """
     g = check_gearset(gearset)
     sp = check_speeds(speeds)
@@ -667,7 +667,7 @@ class MonteCarloResult:
         ``gear`` ("sun" or "ring"), per planet [mesh cycles]: Ave's 3-sigma bounds widened
         by half of Dev's upper bound, ``lo = Ave.bound3[0] - Dev.bound3[1] / 2``,
         ``hi = Ave.bound3[1] + Dev.bound3[1] / 2`` (what measured passes are checked
-        against, :func:`pipeline.compare.band_coverage`).
+        against, :func:`meshphase.compare.band_coverage`).
 
         Returns
         -------

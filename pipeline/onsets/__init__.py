@@ -33,7 +33,7 @@ Pipeline (per analysis block, vectorised)
    maxima, aligned to sub-sample precision against the running template (Fourier shifts)
    and averaged with least-squares amplitude weights; baseline 0, tensile peak 1, tapered.
    Its peak and level crossings are located by local least-squares fits (not by the noisy
-   maximum), see :mod:`pipeline.onsets.features`.
+   maximum), see :mod:`meshphase.onsets.features`.
 4. Refinement of every detection: correlation with the zero-mean template at lags
    ``-K..K`` in steps of ``1/U`` (one BLAS product with a Toeplitz matrix of shifted
    templates; ``U = ceil(4 / w_D)``, i.e. > 1 only for pulses a few samples wide, whose

@@ -1,9 +1,9 @@
 """Coarse pulse detection: block-mean decimation, robust noise level, smoothed maxima.
 
-Steps 1 and 2 of the pipeline (see :mod:`pipeline.onsets`): the signal is decimated by
+Steps 1 and 2 of the pipeline (see :mod:`meshphase.onsets`): the signal is decimated by
 ``D = max(1, floor(w / 16))``, smoothed over ``w / 2`` and thresholded at ``median + k_sigma
 * noise``; one maximum per run above the threshold. Timing to about +-w/4; the refinement
-(:mod:`pipeline.onsets.matched`) is what makes onsets.
+(:mod:`meshphase.onsets.matched`) is what makes onsets.
 """
 
 from __future__ import annotations

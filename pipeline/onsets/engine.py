@@ -2,7 +2,7 @@
 template-learnt and refined; and the whole-array entry points built on it.
 
 Blocks are processed with margins and on a fixed grid, so a recording fed whole or as a
-stream of chunks of any size gives bit-identical onsets (see :mod:`pipeline.onsets`).
+stream of chunks of any size gives bit-identical onsets (see :mod:`meshphase.onsets`).
 """
 
 from __future__ import annotations
@@ -350,7 +350,7 @@ def detect_onsets(x, fs: float, *, t0: float = 0.0, width: float | None = None,
     Parameters
     ----------
     x : array_like, shape (n,)
-        Conditioned samples (drift removed, see :mod:`pipeline.condition`) [data units];
+        Conditioned samples (drift removed, see :mod:`meshphase.condition`) [data units];
         NaN/inf mark gaps. float32 or float64.
     fs : float
         Sample rate [Hz].
@@ -371,7 +371,7 @@ def detect_onsets(x, fs: float, *, t0: float = 0.0, width: float | None = None,
     polarity : {"positive", "negative", "auto"}, optional
         Sign of the tensile peak in ``x``; default positive (or the template's).
     reference : {"rise", "peak"}
-        Onset feature of the template (see :mod:`pipeline.onsets`).
+        Onset feature of the template (see :mod:`meshphase.onsets`).
     level : float
         Level of the "rise" feature, fraction of the tensile peak [-], in [0, 1).
     k_sigma : float
@@ -410,8 +410,8 @@ def detect_onsets(x, fs: float, *, t0: float = 0.0, width: float | None = None,
 
     Notes
     -----
-    See :mod:`pipeline.onsets` for the method and the onset definition. Measured timing
-    jitter (``pipeline.bench.processing``, 400 pulses each): 0.95-1.14 times the
+    See :mod:`meshphase.onsets` for the method and the onset definition. Measured timing
+    jitter (``meshphase.bench.processing``, 400 pulses each): 0.95-1.14 times the
     Cramer-Rao bound at 10, 20 and 30 dB peak SNR for pulses of 80 and 574 samples FWHM,
     and at 20 and 30 dB for 2-sample pulses (mesh frequency 0.4 fs); constant feature
     offset below 0.2 samples (0.9 at 10 dB for 574-sample pulses). Pulses of only a few
@@ -439,7 +439,7 @@ def detect_onsets_recording(rec: Recording, channel: str, *, quality=None, **kwa
     channel : str
         Channel name.
     quality : ChannelQuality, optional
-        The channel's report from :mod:`pipeline.condition`: its clipped runs are flagged
+        The channel's report from :mod:`meshphase.condition`: its clipped runs are flagged
         (``FLAG_CLIPPED``), its dropout runs are gaps (``gap_runs``; already NaN in a
         recording conditioned with ``dropouts="nan"``) and its ``settle`` time is used as
         ``gap_guard``.

@@ -1,10 +1,10 @@
 """Template learning: the pulse shape averaged from a recording's own clean pulses, and the
 pulse width estimate that sizes it.
 
-Step 3 of the pipeline (see :mod:`pipeline.onsets`): windows around the coarse maxima,
+Step 3 of the pipeline (see :mod:`meshphase.onsets`): windows around the coarse maxima,
 aligned to sub-sample precision against the running template (Fourier shifts) and averaged
 with least-squares amplitude weights; baseline 0, tensile peak 1, tapered. Its peak and
-level crossings come from :mod:`pipeline.onsets.features`.
+level crossings come from :mod:`meshphase.onsets.features`.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Matched-filter refinement: pulse windows correlated with the zero-mean template at
 (sub-)sample lags, the correlation peak interpolated.
 
-Step 4 of the pipeline (see :mod:`pipeline.onsets`): one BLAS product with a Toeplitz
+Step 4 of the pipeline (see :mod:`meshphase.onsets`): one BLAS product with a Toeplitz
 matrix of shifted templates per block; ``U = ceil(4 / w_D)`` sub-lags per sample (> 1 only
 for pulses a few samples wide, whose fractional shifts are band-limited FFT shifts).
 """

@@ -1,4 +1,4 @@
-"""The checked options of one detection run (:func:`~pipeline.onsets.detect_onsets`'s
+"""The checked options of one detection run (:func:`~meshphase.onsets.detect_onsets`'s
 keywords in samples), shared by the whole-array and the streaming entry points."""
 
 from __future__ import annotations

@@ -46,7 +46,7 @@ class Template:
     fwhm : float
         Full width at half maximum of the tensile lobe [s].
     reference : str
-        "rise" or "peak" (see :mod:`pipeline.onsets`).
+        "rise" or "peak" (see :mod:`meshphase.onsets`).
     level : float
         Level of the "rise" feature, fraction of the peak height [-].
     n_pulses : int

@@ -1,5 +1,5 @@
 """Onsets of a stream: samples or recording blocks fed one after another, in bounded
-memory, with the same result as :func:`~pipeline.onsets.detect_onsets` on the whole."""
+memory, with the same result as :func:`~meshphase.onsets.detect_onsets` on the whole."""
 
 from __future__ import annotations
 
@@ -69,7 +69,7 @@ def detect_onsets_stream(blocks: Iterable[Recording], channel: str, *, flag_time
     ----------
     blocks : iterable of Recording
         Consecutive pieces of one recording (``Recording.blocks``,
-        ``pipeline.io.iter_blocks``...), possibly overlapping; samples already seen are
+        ``meshphase.io.iter_blocks``...), possibly overlapping; samples already seen are
         skipped (by each block's ``t0``), missing samples between blocks become a gap (NaN,
         with a DataQualityWarning).
     channel : str

@@ -1,4 +1,4 @@
-"""Figure of the Monte Carlo error-vs-runtime benchmark (:mod:`pipeline.bench.models`)."""
+"""Figure of the Monte Carlo error-vs-runtime benchmark (:mod:`meshphase.bench.models`)."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ def models_bench_figure(result: dict):
     Parameters
     ----------
     result : dict
-        The dict returned by :func:`pipeline.bench.models.run_models_bench`.
+        The dict returned by :func:`meshphase.bench.models.run_models_bench`.
 
     Returns
     -------

@@ -5,8 +5,8 @@ phasing per planet and the load sharing per recording as tables, and figures acr
 recordings: each planet's mean phasing (deviation from the ideal, with its pass-to-pass
 spread), the load sharing, the residual RMS and the wall time per recording. Failed
 recordings are listed with their error message. Input: the dict that
-:func:`pipeline.campaign.run_campaign` builds (per-recording dicts from
-:func:`pipeline.campaign.run_recording`).
+:func:`meshphase.campaign.run_campaign` builds (per-recording dicts from
+:func:`meshphase.campaign.run_recording`).
 """
 
 from __future__ import annotations
@@ -290,8 +290,8 @@ def build_campaign_report(campaign: dict, out_dir, *, filename: str = "campaign_
     Parameters
     ----------
     campaign : dict
-        As built by :func:`pipeline.campaign.run_campaign`: ``recordings`` (list of dicts
-        from :func:`pipeline.campaign.run_recording`) and optionally ``scene``, ``counts``,
+        As built by :func:`meshphase.campaign.run_campaign`: ``recordings`` (list of dicts
+        from :func:`meshphase.campaign.run_recording`) and optionally ``scene``, ``counts``,
         ``timing_s``, ``cluster``, ``scene_level``, ``skipped_inputs`` and ``out_dir`` (the
         folder the page will be read in: links to the recordings' results are relative to it;
         default ``out_dir`` below).

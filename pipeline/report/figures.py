@@ -1,7 +1,7 @@
 """Figures of the validation report (matplotlib, Agg backend, no display needed).
 
 Every function takes plain arrays / tables and returns a matplotlib Figure; the caller embeds
-it (:meth:`pipeline.report.html.Section.figure`) or saves it. Units on every axis.
+it (:meth:`meshphase.report.html.Section.figure`) or saves it. Units on every axis.
 """
 
 from __future__ import annotations

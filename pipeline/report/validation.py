@@ -5,7 +5,7 @@ shown): recording quality, onsets over the signal, measured vs predicted phasing
 Monte Carlo band, residual histograms, identified errors, load sharing, centroids, bearing
 moments (with seed 001's GSAM table side by side for that gearset), tilt solve, and "error
 against run time" with each stage's wall time and error estimate. Each section is built by
-its own function from the run's typed stage results (:mod:`pipeline.results`).
+its own function from the run's typed stage results (:mod:`meshphase.results`).
 """
 
 from __future__ import annotations
@@ -141,7 +141,7 @@ def _onsets_section(rep: Report, ctx, figs: _Figures) -> None:
     s = rep.section("Engagement onsets")
     by_channel = ctx.onsets.by_channel
     # the conditioned signal is streamed, not kept: the condition stage keeps its first
-    # minute (pipeline.stream.EXCERPT_SECONDS) for this figure
+    # minute (meshphase.stream.EXCERPT_SECONDS) for this figure
     rec = ctx.condition.excerpt
     if rec is None:
         rec = ctx.condition.recording

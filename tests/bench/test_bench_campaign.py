@@ -1,4 +1,4 @@
-"""The campaign speed-up benchmark (:func:`pipeline.bench.campaign.measure_speedup`): the
+"""The campaign speed-up benchmark (:func:`meshphase.bench.campaign.measure_speedup`): the
 same campaign timed with 1 and 2 local workers. Measured, never asserted: the smoke run only
 checks the table's shape."""
 
@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import pytest
 
-from pipeline.bench.campaign import measure_speedup
+from meshphase.bench.campaign import measure_speedup
 
 
 def test_measure_speedup_lives_in_bench_only():
-    # a benchmark: pipeline.campaign does not reach up into bench/ for it
-    from pipeline import campaign
+    # a benchmark: meshphase.campaign does not reach up into bench/ for it
+    from meshphase import campaign
 
     assert not hasattr(campaign, "measure_speedup")
 

@@ -12,11 +12,11 @@ import json
 import numpy as np
 import pytest
 
-from pipeline.bench.io import COLUMNS, IO_FORMATS, TARGETS, run_io_bench, strain_recording
+from meshphase.bench.io import COLUMNS, IO_FORMATS, TARGETS, run_io_bench, strain_recording
 
 
 def _present():
-    return [f for f in IO_FORMATS if importlib.util.find_spec(f"pipeline.io.{f}") is not None]
+    return [f for f in IO_FORMATS if importlib.util.find_spec(f"meshphase.io.{f}") is not None]
 
 
 @pytest.fixture(scope="module")
@@ -98,9 +98,9 @@ def test_cli_bench_io_prints_the_peak_rss_of_convert_and_process(tmp_path, capsy
     # `meshphase bench io --rss-minutes` measures convert and process in child processes
     # and prints one line per measurement; only the report's shape is asserted (the numbers
     # are measured: the 10 min / 1 h / 3 h ones are in the io bench's Markdown)
-    from pipeline import bench
-    from pipeline.bench import io as bio
-    from pipeline.cli import main
+    from meshphase import bench
+    from meshphase.bench import io as bio
+    from meshphase.cli import main
 
     real = bio.run_io_bench
 
@@ -124,7 +124,7 @@ def test_cli_bench_io_prints_the_peak_rss_of_convert_and_process(tmp_path, capsy
 
 @pytest.mark.parametrize("arg", ["ten", "10,-1", "nan", "10,,60"])
 def test_cli_bench_rss_minutes_bad_value_is_a_usage_error(tmp_path, arg, capsys):
-    from pipeline.cli import main
+    from meshphase.cli import main
 
     with pytest.raises(SystemExit) as exc:
         main(["bench", "io", "--out", str(tmp_path / "b"), "--rss-minutes", arg])
@@ -133,7 +133,7 @@ def test_cli_bench_rss_minutes_bad_value_is_a_usage_error(tmp_path, arg, capsys)
 
 
 def test_run_bench_rss_minutes_bad_type(tmp_path):
-    from pipeline.bench import run_bench
+    from meshphase.bench import run_bench
 
     with pytest.raises(TypeError, match="rss_minutes"):
         run_bench("io", tmp_path, rss_minutes="10")

@@ -1,4 +1,4 @@
-"""Smoke run of the processing benchmark (pipeline.bench.processing): outputs and columns
+"""Smoke run of the processing benchmark (meshphase.bench.processing): outputs and columns
 only; numbers are measured, never asserted (see processing_bench.md of a full run)."""
 
 import json
@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from pipeline.bench.processing import (ACCURACY_COLUMNS, THROUGHPUT_COLUMNS, PulseShape,
+from meshphase.bench.processing import (ACCURACY_COLUMNS, THROUGHPUT_COLUMNS, PulseShape,
                                        match_onsets, pulse_scenario, pulse_train,
                                        run_processing_bench)
 

@@ -68,7 +68,7 @@ __all__ = ["FaultCase", "Originals", "build_originals", "corpus", "toml_dumps", 
            "SCENE_RESULTS_CHEAP", "schema_leaf_keys", "INFO", "PROCESS", "CONVERT", "RUN",
            "CAMPAIGN", "GEARSET_RUN"]
 
-EXIT_ERROR = 1  # pipeline.exits.EXIT_ERROR; the corpus is plain data, the runner imports pipeline
+EXIT_ERROR = 1  # meshphase.exits.EXIT_ERROR; the corpus is plain data, the runner imports pipeline
 
 # --------------------------------------------------------------------------- commands
 #: argv templates; ``{name}`` is replaced by the case's value of that name
@@ -158,7 +158,7 @@ class Originals:
         The seed rig's gearset scene (valid for ``process --gearset``).
     scene : Path
         :data:`BASE_SCENE` naming the HDF5 recording (valid for ``run``).
-    rec : pipeline.recording.Recording
+    rec : meshphase.recording.Recording
         The recording all files hold.
     """
 
@@ -220,13 +220,13 @@ def build_originals(directory) -> Originals:
     """Write the valid recordings and the gearset scene into ``directory``.
 
     5 s of the ``seed_rig`` scenario (seed 0, 3 channels at 5120 Hz): HDF5, MCAP and CSV by
-    :func:`pipeline.io.write`, a plain CSV (the same file without its ``# meshphase``
+    :func:`meshphase.io.write`, a plain CSV (the same file without its ``# meshphase``
     preamble: what a spreadsheet exports), and NI TDMS in five 1-s segments by
-    :func:`synthetic.tdms_export.write_tdms` (npTDMS ``TdmsWriter``).
+    :func:`meshphase.synthetic.tdms_export.write_tdms` (npTDMS ``TdmsWriter``).
     """
-    import pipeline.io as pio
-    from synthetic import generate
-    from synthetic.tdms_export import write_tdms
+    import meshphase.io as pio
+    from meshphase.synthetic import generate
+    from meshphase.synthetic.tdms_export import write_tdms
 
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
@@ -283,7 +283,7 @@ def _minus(ranges, holes):
 
 
 def hdf5_regions(path) -> dict:
-    """Byte ranges of an HDF5 recording written by :mod:`pipeline.io.hdf5`.
+    """Byte ranges of an HDF5 recording written by :mod:`meshphase.io.hdf5`.
 
     ``data``: the stored sample chunks without their 4-byte fletcher32 checksum (found
     through h5py's chunk index); ``checksum``: those fletcher32 fields and the superblock
@@ -615,7 +615,7 @@ SPECIAL_KINDS = ("fifo", "directory", "devnull", "symlink-loop", "dangling-symli
 def _reading_raises(exc_type):
     """Every read of a recording raises ``exc_type`` (out of memory, Ctrl-C while reading)."""
     def patch(mp, values):
-        import pipeline.io as pio
+        import meshphase.io as pio
 
         def boom(*a, **k):
             raise exc_type("Unable to allocate 7.32 GiB for an array" if exc_type is MemoryError else "")
@@ -624,7 +624,7 @@ def _reading_raises(exc_type):
             boom()
             yield  # pragma: no cover
         # the public functions and the format modules' own (the streamed load reads a file
-        # through its format module, block by block: pipeline.stream.FileSource)
+        # through its format module, block by block: meshphase.stream.FileSource)
         mods = [pio]
         for fmt in ("hdf5", "mcap", "csv", "tdms"):
             try:
@@ -808,7 +808,7 @@ _EXCLUSIVE = {("gearset", "planet_angles_deg"): "n_planets"}
 def schema_leaf_keys() -> list[tuple[tuple, dict]]:
     """Every key of the scene schema with its schema: ``(path, subschema)``; array-of-table
     items appear with index 0 (``("channels", 0, "tooth")``)."""
-    from data_schemas import load_schema
+    from meshphase.data_schemas import load_schema
 
     out = []
 

@@ -1,5 +1,5 @@
 """Unit tests of the fixes the fault corpus led to (issue 10, items 1-3): the output checks of
-:func:`pipeline.io.base.atomic_path`, file names on read() errors, npTDMS log records as
+:func:`meshphase.io.base.atomic_path`, file names on read() errors, npTDMS log records as
 warnings, each CLI warning line once, ``run`` of a scene without results.
 """
 
@@ -14,12 +14,12 @@ import warnings
 import numpy as np
 import pytest
 
-import pipeline.io as pio
-from pipeline.cli import main
-from pipeline.errors import FormatWarning
-from pipeline.exits import _load_error, recording_read_errors
-from pipeline.io.base import atomic_path
-from pipeline.recording import ChannelSpec, Recording
+import meshphase.io as pio
+from meshphase.cli import main
+from meshphase.errors import FormatWarning
+from meshphase.exits import _load_error, recording_read_errors
+from meshphase.io.base import atomic_path
+from meshphase.recording import ChannelSpec, Recording
 
 
 def _rec(n=200):
@@ -189,7 +189,7 @@ def test_nptdms_log_records_are_dropped_when_the_read_fails(tmp_path, tdms_write
 
 @pytest.fixture
 def tdms_writer():
-    from synthetic.tdms_export import write_tdms
+    from meshphase.synthetic.tdms_export import write_tdms
 
     def make(path):
         rec = _rec(1000)

@@ -13,8 +13,8 @@ For every case and every command it names, the command must show (issue 10, item
 * no hang: a per-case pytest-timeout (in-process), or a killed child process (cases that
   could hang inside compiled code run as a subprocess).
 
-Most cases run in-process through :func:`pipeline.cli.main` (fast); a sample runs as the
-real command (``python -m pipeline.cli``) to see the real stderr. The default suite runs the
+Most cases run in-process through :func:`meshphase.cli.main` (fast); a sample runs as the
+real command (``python -m meshphase.cli``) to see the real stderr. The default suite runs the
 bounded selection; ``-m slow`` runs the sweep (more offsets, seeds and keys).
 Known product faults outside the CLI/io scope are ``xfail(strict=True)`` with the file to fix
 in the reason (``fault_corpus.py``).
@@ -32,8 +32,8 @@ from pathlib import Path
 import pytest
 from fault_corpus import OUTPUTS, Skip, Workspace, build_originals, corpus
 
-import pipeline.io as pio
-from pipeline.cli import main
+import meshphase.io as pio
+from meshphase.cli import main
 
 REPO = Path(__file__).resolve().parents[2]
 DOCUMENTED = {0, 1, 2, 3, 130, 141}        # pipeline/exits.py
@@ -119,7 +119,7 @@ def _run_inprocess(argv, capsys) -> tuple[int, str, str]:
 
 def _run_subprocess(argv, timeout) -> tuple[int, str, str]:
     try:
-        r = subprocess.run([sys.executable, "-m", "pipeline.cli", *argv], capture_output=True,
+        r = subprocess.run([sys.executable, "-m", "meshphase.cli", *argv], capture_output=True,
                            text=True, timeout=timeout, cwd=REPO, stdin=subprocess.DEVNULL)
     except subprocess.TimeoutExpired:
         pytest.fail(f"meshphase {' '.join(argv)}: no answer after {timeout} s (a hang; the "

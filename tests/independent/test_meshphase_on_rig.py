@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.scene import parse_scene
-from pipeline.stages import run_scene
+from meshphase.scene import parse_scene
+from meshphase.stages import run_scene
 from . import rig as R
 
 DEG = math.pi / 180.0
@@ -147,7 +147,7 @@ def test_independent_rig_every_preset(files, preset):
 def test_tdms_and_csv_of_one_recording_give_the_same_phasing(files, tmp_path):
     # the same samples through two formats: the CSV's time column and the TDMS waveform
     # timing differ by rounding (~1e-9 s); nothing in the phasing may depend on it
-    import pipeline.io as pio
+    import meshphase.io as pio
 
     p, truth = make(files, "ripple1_carrier")
     rec = pio.read(p)

@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-import pipeline.io as pio
-from pipeline.io import mcap as m
-from pipeline.io.mcap import layout as mlayout
-from pipeline.io.mcap import writer as mwriter
-from pipeline.recording import ChannelSpec, Recording
+import meshphase.io as pio
+from meshphase.io import mcap as m
+from meshphase.io.mcap import layout as mlayout
+from meshphase.io.mcap import writer as mwriter
+from meshphase.recording import ChannelSpec, Recording
 
 pytestmark = pytest.mark.interop
 

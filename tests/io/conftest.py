@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.recording import ChannelSpec, Recording
+from meshphase.recording import ChannelSpec, Recording
 
 
 def build_recording(n: int = 2000, n_channels: int = 4, *, dtype=np.float64, fs: float = 5120.0,

@@ -1,4 +1,4 @@
-"""The helpers that the format modules share through pipeline.io.base."""
+"""The helpers that the format modules share through meshphase.io.base."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.errors import DataQualityWarning, FormatWarning
-from pipeline.io.base import (RecordingFileError, check_start_datetime, check_verify, dumps_json,
+from meshphase.errors import DataQualityWarning, FormatWarning
+from meshphase.io.base import (RecordingFileError, check_start_datetime, check_verify, dumps_json,
                               spec_from_dict, warn_nonfinite)
-from pipeline.recording import ChannelSpec
+from meshphase.recording import ChannelSpec
 
 
 def _imported_modules(path: Path, package: str) -> set[str]:
@@ -32,11 +32,11 @@ def _imported_modules(path: Path, package: str) -> set[str]:
 @pytest.mark.parametrize("name", ["hdf5", "mcap", "csv", "tdms"])
 def test_format_modules_share_helpers_only_through_base(name):
     # no format module imports another: what they share lives in io/base.py
-    mod = importlib.import_module(f"pipeline.io.{name}")
+    mod = importlib.import_module(f"meshphase.io.{name}")
     path = Path(mod.__file__)
     files = sorted(path.parent.glob("*.py")) if path.name == "__init__.py" else [path]
-    package = mod.__name__ if path.name == "__init__.py" else "pipeline.io"
-    others = {f"pipeline.io.{o}" for o in ("hdf5", "mcap", "csv", "tdms") if o != name}
+    package = mod.__name__ if path.name == "__init__.py" else "meshphase.io"
+    others = {f"meshphase.io.{o}" for o in ("hdf5", "mcap", "csv", "tdms") if o != name}
     for f in files:
         bad = {m for m in _imported_modules(f, package) if m in others or m.rsplit(".", 1)[0] in others}
         assert not bad, f"{f.name} imports {sorted(bad)}"

@@ -11,11 +11,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import pipeline.io as pio
-from pipeline.errors import DataQualityWarning, FormatWarning
-from pipeline.io import csv as mcsv
-from pipeline.io.base import CorruptFileError, RecordingFileError
-from pipeline.recording import ChannelSpec, Recording
+import meshphase.io as pio
+from meshphase.errors import DataQualityWarning, FormatWarning
+from meshphase.io import csv as mcsv
+from meshphase.io.base import CorruptFileError, RecordingFileError
+from meshphase.recording import ChannelSpec, Recording
 
 
 def _bits_equal(a, b):

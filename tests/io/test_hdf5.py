@@ -11,12 +11,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import pipeline.io as pio
-from data_schemas import validate
-from pipeline.errors import DataQualityWarning, FormatWarning
-from pipeline.io import hdf5
-from pipeline.io.base import CorruptFileError, RecordingFileError
-from pipeline.recording import ChannelSpec, Recording
+import meshphase.io as pio
+from meshphase.data_schemas import validate
+from meshphase.errors import DataQualityWarning, FormatWarning
+from meshphase.io import hdf5
+from meshphase.io.base import CorruptFileError, RecordingFileError
+from meshphase.recording import ChannelSpec, Recording
 
 
 def _write(rec, path, **kw):
@@ -387,7 +387,7 @@ def test_no_warning_for_clean_data(tmp_path, recording):
 
 # ---------------------------------------------------------------------------- schema loader
 def test_schema_loader():
-    from data_schemas import load_schema, schema_names
+    from meshphase.data_schemas import load_schema, schema_names
 
     assert {"channel_spec", "hdf5_layout"} <= set(schema_names())
     a = load_schema("hdf5_layout")

@@ -26,12 +26,12 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-import pipeline.io as pio
-from pipeline.io import CorruptFileError, RecordingFileError
-from pipeline.io import csv as mcsv
-from pipeline.io import mcap as m
-from pipeline.io.mcap import header as mheader
-from pipeline.recording import ChannelSpec, Recording
+import meshphase.io as pio
+from meshphase.io import CorruptFileError, RecordingFileError
+from meshphase.io import csv as mcsv
+from meshphase.io import mcap as m
+from meshphase.io.mcap import header as mheader
+from meshphase.recording import ChannelSpec, Recording
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -313,7 +313,7 @@ def _files(tmp_path, build_recording, write_tdms):
     out = {}
     for fmt, suffix in [("hdf5", "h5"), ("mcap", "mcap"), ("csv", "csv")]:
         out[fmt] = pio.write(rec, tmp_path / f"full.{suffix}")
-    # as synthetic.tdms_export writes them: wf_samples = the total, meshphase_kind set
+    # as meshphase.synthetic.tdms_export writes them: wf_samples = the total, meshphase_kind set
     props = {"wf_increment": 1.0 / rec.fs, "wf_start_offset": 0.0, "wf_samples": 3000, "meshphase_kind": "sun"}
     out["tdms"] = write_tdms(tmp_path / "full.tdms", [("meshphase", name, rec.data[:, j], dict(props))
                                                       for j, name in enumerate(rec.names)], segments=4)

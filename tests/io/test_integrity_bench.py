@@ -13,10 +13,10 @@ import time
 import numpy as np
 import pytest
 
-import pipeline.io as pio
-from pipeline.io import hdf5, mcap
-from pipeline.io.mcap import header as mheader
-from pipeline.recording import ChannelSpec, Recording
+import meshphase.io as pio
+from meshphase.io import hdf5, mcap
+from meshphase.io.mcap import header as mheader
+from meshphase.recording import ChannelSpec, Recording
 
 pytestmark = [pytest.mark.bench, pytest.mark.timeout(1800)]
 

@@ -17,13 +17,13 @@ from hypothesis import strategies as st
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, IndexType, Writer
 
-import pipeline.io as pio
-from pipeline.io import CorruptFileError, RecordingFileError
-from pipeline.io import mcap as m
-from pipeline.io.mcap import layout as mlayout
-from pipeline.io.mcap import reader as mreader
-from pipeline.io.mcap import writer as mwriter
-from pipeline.recording import ChannelSpec, Recording
+import meshphase.io as pio
+from meshphase.io import CorruptFileError, RecordingFileError
+from meshphase.io import mcap as m
+from meshphase.io.mcap import layout as mlayout
+from meshphase.io.mcap import reader as mreader
+from meshphase.io.mcap import writer as mwriter
+from meshphase.recording import ChannelSpec, Recording
 
 
 # ---------------------------------------------------------------------------------- helpers

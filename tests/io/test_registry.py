@@ -1,16 +1,16 @@
-"""The pipeline.io registry: format by content, clear errors, atomic writes, streaming."""
+"""The meshphase.io registry: format by content, clear errors, atomic writes, streaming."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-import pipeline.io as pio
-from pipeline.errors import DataQualityWarning
-from pipeline.io import csv as mcsv
-from pipeline.io import hdf5, tdms
-from pipeline.io.base import RecordingFileError, atomic_path
-from pipeline.recording import Recording
+import meshphase.io as pio
+from meshphase.errors import DataQualityWarning
+from meshphase.io import csv as mcsv
+from meshphase.io import hdf5, tdms
+from meshphase.io.base import RecordingFileError, atomic_path
+from meshphase.recording import Recording
 
 WRITABLE = ["hdf5", "csv"]
 

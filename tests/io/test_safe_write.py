@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import pipeline.io as pio
-from pipeline.io import base
-from pipeline.io.base import TEMP_SUFFIX, atomic_path, clean_stale_partials
-from pipeline.recording import ChannelSpec, Recording
+import meshphase.io as pio
+from meshphase.io import base
+from meshphase.io.base import TEMP_SUFFIX, atomic_path, clean_stale_partials
+from meshphase.recording import ChannelSpec, Recording
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -207,7 +207,7 @@ def test_clean_stale_partials_empty_and_bad_input(tmp_path):
 
 _KILLED_WRITER = textwrap.dedent("""
     import sys, time
-    from pipeline.io.base import atomic_path
+    from meshphase.io.base import atomic_path
     with atomic_path(sys.argv[1]) as tmp:
         tmp.write_bytes(b"x" * 1_000_000)
         print(tmp, flush=True)
@@ -300,9 +300,9 @@ def test_not_enough_space_is_refused_before_writing(tmp_path, monkeypatch):
 _FULL_DISK = textwrap.dedent("""
     import errno, os, sys
     import numpy as np
-    import pipeline.io as pio
-    from pipeline.io import base
-    from pipeline.recording import ChannelSpec, Recording
+    import meshphase.io as pio
+    from meshphase.io import base
+    from meshphase.recording import ChannelSpec, Recording
     fmt, target, preflight = sys.argv[1], sys.argv[2], sys.argv[3] == "1"
     if not preflight:  # make the format's own writer hit ENOSPC
         base._check_space = lambda path, size_hint: None

@@ -8,10 +8,10 @@ import struct
 import numpy as np
 import pytest
 
-import pipeline.io as pio
-from pipeline.errors import DataQualityWarning, FormatWarning
-from pipeline.io import tdms
-from pipeline.io.base import CorruptFileError, RecordingFileError
+import meshphase.io as pio
+from meshphase.errors import DataQualityWarning, FormatWarning
+from meshphase.io import tdms
+from meshphase.io.base import CorruptFileError, RecordingFileError
 
 FS = 5120.0
 

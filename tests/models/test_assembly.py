@@ -1,9 +1,9 @@
 """Can the gearset be built: coaxiality and planet tip clearance in tooth counts
-(pipeline.models.assembly).
+(meshphase.models.assembly).
 
 Reference conditions: coaxial standard gears Z_r = Z_s + 2 Z_p; N equally spaced planets clear
 when (Z_s + Z_p) sin(pi / N) > Z_p + 2 (tip diameter m (Z_p + 2), e.g. Lynwander, Gear Drive
-Systems, 1983, ch. 5). Numbers for the seed gearsets from synthetic/scenarios.py's docstring.
+Systems, 1983, ch. 5). Numbers for the seed gearsets from meshphase.synthetic/scenarios.py's docstring.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.models.assembly import (CLEARANCE_ATOL, assemblable_planet_counts, coaxiality_error,
+from meshphase.models.assembly import (CLEARANCE_ATOL, assemblable_planet_counts, coaxiality_error,
                                       max_equal_planets, tip_clearance)
 
 

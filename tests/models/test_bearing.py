@@ -1,4 +1,4 @@
-"""Tests of pipeline.models.bearing (spec section 4, seed 001 Tables 3, 5, 6, 8, 9, 10, 11).
+"""Tests of meshphase.models.bearing (spec section 4, seed 001 Tables 3, 5, 6, 8, 9, 10, 11).
 
 Tolerances on seed values: half a unit of the printed output precision, plus the change of the
 output when every printed *input* moves by one printed unit (computed here with finite
@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.models.bearing import (
+from meshphase.models.bearing import (
     DoublePinion,
     MeshForces,
     SinglePinion,
@@ -635,7 +635,7 @@ def test_bad_inputs_to_functions(case1, case2b):
 # API: one meaning per name, unit-explicit constructors, shared result names, Python floats
 # ----------------------------------------------------------------------------------------------
 def test_old_parameter_names_still_work_and_warn():
-    from pipeline.errors import DeprecatedNameWarning
+    from meshphase.errors import DeprecatedNameWarning
 
     new = seed_case("1").geometry
     kw = {k: getattr(new, k) for k in ("r_sun", "r_ps", "r_pr", "phi_1", "phi_2", "n_planets")}

@@ -1,4 +1,4 @@
-"""Smoke test of the Monte Carlo error-vs-runtime benchmark (pipeline.bench.models).
+"""Smoke test of the Monte Carlo error-vs-runtime benchmark (meshphase.bench.models).
 
 Timings are measured, never asserted: only the files, the table layout and the sanity of the
 errors are checked.
@@ -9,7 +9,7 @@ import math
 
 import pytest
 
-from pipeline.bench.models import TABLE_COLUMNS, _interp_crossover, _sobol_count, run_models_bench
+from meshphase.bench.models import TABLE_COLUMNS, _interp_crossover, _sobol_count, run_models_bench
 
 
 def test_quick_bench_writes_table_json_and_figure(tmp_path):

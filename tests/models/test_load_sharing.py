@@ -1,4 +1,4 @@
-"""Tests of pipeline.models.load_sharing (spec section 6, Ligata, Kahraman & Singh 2008)."""
+"""Tests of meshphase.models.load_sharing (spec section 6, Ligata, Kahraman & Singh 2008)."""
 
 import numpy as np
 import pytest
@@ -6,8 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from pipeline.errors import DataQualityWarning
-from pipeline.models.load_sharing import load_sharing
+from meshphase.errors import DataQualityWarning
+from meshphase.models.load_sharing import load_sharing
 
 
 def test_equal_sharing_is_one():

@@ -1,4 +1,4 @@
-"""Ideal and time-varying mesh phasing (spec sections 1 and 2; pipeline.models.mesh_phasing)."""
+"""Ideal and time-varying mesh phasing (spec sections 1 and 2; meshphase.models.mesh_phasing)."""
 
 import math
 
@@ -8,9 +8,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.errors import ModelWarning
-from pipeline.models.gearset import Gearset, Speeds
-from pipeline.models.mesh_phasing import (
+from meshphase.errors import ModelWarning
+from meshphase.models.gearset import Gearset, Speeds
+from meshphase.models.mesh_phasing import (
     MAX_PHASE,
     ShaftHoleErrors,
     assembly_check,
@@ -218,7 +218,7 @@ def test_reduce_angle_against_mpmath():
         ref = mp.mpf(float(xi)) - 2 * mp.pi * mp.nint(mp.mpf(float(xi)) / (2 * mp.pi))
         assert abs(float(mp.mpf(float(ri)) - ref)) <= 4e-16
     # the 2 pi split constants carry 2 pi to ~1e-28
-    from pipeline.models import _geometry as geo
+    from meshphase.models import _geometry as geo
     assert abs(mp.mpf(geo._C1) + mp.mpf(geo._C2) + mp.mpf(geo._C3) - 2 * mp.pi) < 1e-27
     assert reduce_angle([]).shape == (0,)
     with pytest.raises(ValueError):
@@ -362,7 +362,7 @@ def test_seed_cases_dev_linear_in_e_sun_ave_flat(case, e):
     Ave_sn stays nearly constant ("changes are under 4e-5"). Over a window in which every
     offset turns whole revolutions ("common-period"), first-order terms average out; the
     seed's 4e-5 is the tolerance."""
-    from pipeline.models.tolerance import observation_window, phasing_statistics, table2_case
+    from meshphase.models.tolerance import observation_window, phasing_statistics, table2_case
     g, sp, err = table2_case(case)
     es = np.linspace(0.0, 1.0, 5) * e
     sweep = ShaftHoleErrors(e_sun=es, kappa_sun=err.kappa_sun, e_ring=err.e_ring,

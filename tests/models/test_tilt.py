@@ -1,4 +1,4 @@
-"""Tests of pipeline.models.tilt (spec section 5; seed 001 Tables 10 and 11)."""
+"""Tests of meshphase.models.tilt (spec section 5; seed 001 Tables 10 and 11)."""
 
 import math
 
@@ -8,10 +8,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import quad
 
-from pipeline.errors import ConvergenceWarning
-from pipeline.models import tilt
-from pipeline.models.bearing import SinglePinion, seed_case, single_pinion_moments
-from pipeline.models.tilt import (
+from meshphase.errors import ConvergenceWarning
+from meshphase.models import tilt
+from meshphase.models.bearing import SinglePinion, seed_case, single_pinion_moments
+from meshphase.models.tilt import (
     C_G_DEFAULT,
     TABLE11_THEORY,
     compare_gsam,

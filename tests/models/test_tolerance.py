@@ -1,4 +1,4 @@
-"""Phasing statistics and tolerance Monte Carlo (spec section 2; pipeline.models.tolerance)."""
+"""Phasing statistics and tolerance Monte Carlo (spec section 2; meshphase.models.tolerance)."""
 
 import json
 import logging
@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 from scipy import special
 
-from pipeline.errors import ModelWarning
-from pipeline.models import _kernels
-from pipeline.models.gearset import Speeds
-from pipeline.models.mesh_phasing import ShaftHoleErrors, phasing_deviation
-from pipeline.models.tolerance import (
+from meshphase.errors import ModelWarning
+from meshphase.models import _kernels
+from meshphase.models.gearset import Speeds
+from meshphase.models.mesh_phasing import ShaftHoleErrors, phasing_deviation
+from meshphase.models.tolerance import (
     MonteCarloResult,
     ObservationWindow,
     ToleranceBand,
@@ -179,7 +179,7 @@ def test_tolerance_band():
 
 
 def test_negative_radial_samples_flip_the_angle():
-    from pipeline.models.tolerance import _map_samples
+    from meshphase.models.tolerance import _map_samples
     tol = Tolerances(e_sun=ToleranceBand(0.0, 3e-4), kappa_sun=0.5)
     u = np.array([[0.1], [0.9]])
     es, ks, *_ = _map_samples(u, tol, 4)
@@ -392,7 +392,7 @@ def test_absolute_statistics_by_definition(engine):
     s Z_s delta_s,n / 2 pi and -s Z_r delta_r,n / 2 pi on the window's grid. Held against
     mesh_angle_deviations (libm atan2; the numba path's Cephes atan is within 1 ulp: 1e-12
     in mesh cycles is ~100 ulp of the values summed)."""
-    from pipeline.models.mesh_phasing import mesh_angle_deviations
+    from meshphase.models.mesh_phasing import mesh_angle_deviations
 
     g, sp, e = table2_case(1)
     w = observation_window(sp)

@@ -1,6 +1,6 @@
 """Pulse trains with known truth for the conditioning and onset tests.
 
-The trains are generated in code with :mod:`pipeline.bench.processing` (a sin^2 tensile
+The trains are generated in code with :mod:`meshphase.bench.processing` (a sin^2 tensile
 lobe of ``contact_ratio`` mesh periods between two compressive lobes, per-planet amplitudes,
 load drift, jittered spacing, white noise of a given peak SNR); the end-to-end scenarios of
 ``synthetic/`` are tested elsewhere.
@@ -9,7 +9,7 @@ load drift, jittered spacing, white noise of a given peak SNR); the end-to-end s
 import numpy as np
 import pytest
 
-from pipeline.bench.processing import PulseShape, pulse_scenario
+from meshphase.bench.processing import PulseShape, pulse_scenario
 
 FS = 5120.0
 

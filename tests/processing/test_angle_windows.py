@@ -1,6 +1,6 @@
-"""pipeline.angle_windows: the angle model of long records in bounded memory.
+"""meshphase.angle_windows: the angle model of long records in bounded memory.
 
-Truth: exact engagement instants from synthetic.kinematics (tests/processing/test_angles.py's
+Truth: exact engagement instants from meshphase.synthetic.kinematics (tests/processing/test_angles.py's
 ``trains_from_truth``), timing jitter 20 us with its sigma given, so the per-pass error
 against truth and the reported uncertainty can be compared directly.
 """
@@ -13,11 +13,11 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from pipeline.angle_windows import WindowedAngleModel, fit_angle_windows
-from pipeline.angles import fit_angle_model, kinematics
-from pipeline.jsonable import to_jsonable
-from pipeline.models.tolerance import table2_case
-from synthetic.kinematics import ShaftRipple, SpeedProfile
+from meshphase.angle_windows import WindowedAngleModel, fit_angle_windows
+from meshphase.angles import fit_angle_model, kinematics
+from meshphase.jsonable import to_jsonable
+from meshphase.models.tolerance import table2_case
+from meshphase.synthetic.kinematics import ShaftRipple, SpeedProfile
 
 from test_angles import per_pass_error, rig, trains_from_truth  # tests/processing, on sys.path
 

@@ -1,6 +1,6 @@
-"""The angle model of a whole recording (pipeline.angles), on pass trains with known truth.
+"""The angle model of a whole recording (meshphase.angles), on pass trains with known truth.
 
-Truth here is the synthetic kinematics' exact engagement instants (synthetic.kinematics:
+Truth here is the synthetic kinematics' exact engagement instants (meshphase.synthetic.kinematics:
 the geometric condition solved in angle time to ~1e-15 relative) and their true phasing,
 Z |w| (tau_n - tau_1) / 2 pi per pass. The passes are fed in exactly (no onset detector), so
 what is left is the angle model's own error; the tolerances below say what limits it.
@@ -12,14 +12,14 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from pipeline.angles import (AngleModel, Kinematics, PassTrain, fit_angle_model, gauge_train,
+from meshphase.angles import (AngleModel, Kinematics, PassTrain, fit_angle_model, gauge_train,
                              held_member, kinematics, label_shift_costs, relabel_train,
                              revolution_numbers, tacho_train, typed_resolution)
-from pipeline.models.gearset import Gearset, Speeds, rpm_to_rad_s
-from pipeline.models.tolerance import table2_case
-from pipeline.phasing import (assign_planets_by_pattern, pass_order, phasing_from_model,
+from meshphase.models.gearset import Gearset, Speeds, rpm_to_rad_s
+from meshphase.models.tolerance import table2_case
+from meshphase.phasing import (assign_planets_by_pattern, pass_order, phasing_from_model,
                               planet_fractions)
-from synthetic.kinematics import SpeedProfile, engagement_events, event_times_for_angles
+from meshphase.synthetic.kinematics import SpeedProfile, engagement_events, event_times_for_angles
 
 TWO_PI = 2 * math.pi
 
@@ -161,7 +161,7 @@ def test_property_ripple_and_ramp_followed(amplitude, phase, ramp):
     # any 0-3 % ripple locked to the carrier's angle (drive ripple follows the shaft) with a
     # +-10 % ramp over the record, exact passes: within 2e-3 cycles (the ramp makes a
     # relative ripple's amplitude in angle drift by up to 10 %: the modulated terms take it)
-    from synthetic.kinematics import ShaftRipple
+    from meshphase.synthetic.kinematics import ShaftRipple
 
     g, sp = rig()
     dur = 120.0
@@ -206,7 +206,7 @@ def test_label_shift_costs_find_the_planets_by_their_own_offsets():
     # unequal planet errors (Table 2 case 3 drawn) tell the planets apart when the ring gauge
     # sees them turn (Z_r / Z_p = 87 / 31 not an integer): a ring train relabelled by one
     # place is recognised and the misfit of the right shift stands out
-    from synthetic.generate import draw_errors
+    from meshphase.synthetic.generate import draw_errors
 
     g, sp = rig(zp=31)
     err = draw_errors(table2_case(3)[2], 4, 5)

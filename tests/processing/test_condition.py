@@ -1,4 +1,4 @@
-"""Signal conditioning and quality report (pipeline.condition).
+"""Signal conditioning and quality report (meshphase.condition).
 
 Pulse trains from tests/processing/conftest.py; drift, hum, gaps and clipping are added
 here with known values, so every check compares against what was put in.
@@ -14,18 +14,18 @@ from hypothesis import given, settings, strategies as st
 
 from scipy.signal import find_peaks
 
-from pipeline.condition import (ChannelQuality, Conditioned, HumReport, assess_quality,
+from meshphase.condition import (ChannelQuality, Conditioned, HumReport, assess_quality,
                                 assess_quality_recording, condition_recording, default_band,
                                 design_filter, detect_hum, drift_baseline, estimate_noise,
                                 estimate_snr, filter_recording, filter_signal, gap_intervals,
                                 merge_runs, notch_hum, notch_hum_recording, remove_drift,
                                 remove_drift_recording)
-from pipeline.errors import DataQualityWarning, ProcessingWarning
-from pipeline.onsets import FLAG_CLIPPED, FLAG_GAP, detect_onsets_recording
-from pipeline.quality import clipped_runs, find_runs
-from pipeline.recording import ChannelSpec, Recording
-from synthetic import generate
-from synthetic.scenarios import list_scenarios, seed_rig_gearset, seed_rig_speeds
+from meshphase.errors import DataQualityWarning, ProcessingWarning
+from meshphase.onsets import FLAG_CLIPPED, FLAG_GAP, detect_onsets_recording
+from meshphase.quality import clipped_runs, find_runs
+from meshphase.recording import ChannelSpec, Recording
+from meshphase.synthetic import generate
+from meshphase.synthetic.scenarios import list_scenarios, seed_rig_gearset, seed_rig_speeds
 
 FS = 5120.0               # the pulse trains of conftest.make_train
 
@@ -696,7 +696,7 @@ def test_assess_quality_new_options_and_report_fields(rig_recs):
 def test_channel_quality_is_the_one_frozen_report():
     from dataclasses import FrozenInstanceError
 
-    from pipeline import quality as pq
+    from meshphase import quality as pq
 
     assert ChannelQuality is pq.ChannelQuality and HumReport is pq.HumReport
     x = np.sin(np.arange(4000) / 7.0)
@@ -715,7 +715,7 @@ def test_channel_quality_is_the_one_frozen_report():
 
 
 def test_quality_from_scan_empty_bare_and_bad():
-    from pipeline.quality import ChannelScan, quality_from_scan
+    from meshphase.quality import ChannelScan, quality_from_scan
 
     scan = ChannelScan(0)
     scan.end1()

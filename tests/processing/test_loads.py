@@ -1,4 +1,4 @@
-"""Load sharing and face-width centroids from pulse amplitudes (pipeline.loads).
+"""Load sharing and face-width centroids from pulse amplitudes (meshphase.loads).
 
 Truth here is worked by hand (load-sharing factors of a small table, the centroid of a linear
 or triangular load shape) or integrated numerically with scipy.integrate.quad, so a slip in
@@ -12,12 +12,12 @@ import pytest
 from hypothesis import example, given, settings, strategies as st
 from scipy.integrate import quad
 
-from pipeline.errors import ProcessingWarning
-from pipeline.loads import (CentroidResult, LoadSharingResult, centroid_of_shape,
+from meshphase.errors import ProcessingWarning
+from meshphase.loads import (CentroidResult, LoadSharingResult, centroid_of_shape,
                             facewidth_centroid, facewidth_readings,
                             load_sharing_from_amplitudes)
 
-B = 40e-3  # face width [m] of the synthetic scenarios (synthetic.scenarios.FACE_WIDTH)
+B = 40e-3  # face width [m] of the synthetic scenarios (meshphase.synthetic.scenarios.FACE_WIDTH)
 
 
 # ----------------------------------------------------------------------------- load sharing

@@ -1,9 +1,9 @@
-"""Engagement onsets (pipeline.onsets) on pulse trains with known truth.
+"""Engagement onsets (meshphase.onsets) on pulse trains with known truth.
 
-Truth: the pulses of tests/processing/conftest.py (pipeline.bench.processing.PulseShape),
+Truth: the pulses of tests/processing/conftest.py (meshphase.bench.processing.PulseShape),
 whose leading-edge half-amplitude point lies T_c / 4 after the contact start (T_c the
 contact duration): the feature detect_onsets reports with reference="rise", level=0.5.
-The physical limit is the Cramer-Rao bound of a known pulse in white noise (pipeline._crb,
+The physical limit is the Cramer-Rao bound of a known pulse in white noise (meshphase._crb,
 Kay 1993 eq. 3.14): the brief's target is a timing error within 2x of it at >= 10 dB.
 """
 
@@ -13,15 +13,15 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from pipeline._crb import crb_delay_std
-from pipeline.bench.processing import match_onsets
-from pipeline.condition import assess_quality
-from pipeline.errors import DataQualityWarning, ProcessingWarning
-from pipeline.onsets import (FLAG_CLIPPED, FLAG_EDGE, FLAG_GAP, FLAG_LOW_CORR, FLAG_TEMPLATE,
+from meshphase._crb import crb_delay_std
+from meshphase.bench.processing import match_onsets
+from meshphase.condition import assess_quality
+from meshphase.errors import DataQualityWarning, ProcessingWarning
+from meshphase.onsets import (FLAG_CLIPPED, FLAG_EDGE, FLAG_GAP, FLAG_LOW_CORR, FLAG_TEMPLATE,
                              CoarsePeaks, Onsets, Template, coarse_peaks, detect_onsets,
                              detect_onsets_recording, detect_onsets_stream,
                              estimate_pulse_width, learn_template)
-from pipeline.recording import ChannelSpec, Recording
+from meshphase.recording import ChannelSpec, Recording
 
 FS = 5120.0               # the pulse trains of conftest.make_train
 
@@ -495,7 +495,7 @@ def test_crb_closed_forms():
 
 def test_crb_matches_monte_carlo_of_the_ml_estimator():
     # the bound is tight for the ML (matched-filter) estimator at high SNR: simulate it
-    # directly on a Gaussian pulse with a fine-grid search (independent of pipeline.onsets)
+    # directly on a Gaussian pulse with a fine-grid search (independent of meshphase.onsets)
     rng = np.random.default_rng(3)
     t = np.arange(-40, 41, dtype=float)
     w = 5.0

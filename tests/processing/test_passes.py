@@ -1,4 +1,4 @@
-"""Pass selection (pipeline.passes): usable onsets, pass times at the timing centre, the
+"""Pass selection (meshphase.passes): usable onsets, pass times at the timing centre, the
 timing bound from the one Cramer-Rao function, gap intervals, every gauge's passes."""
 
 from __future__ import annotations
@@ -10,14 +10,14 @@ import warnings
 import numpy as np
 import pytest
 
-from pipeline._crb import crb_delay_std
-from pipeline.condition import ChannelQuality
-from pipeline.errors import ProcessingWarning
-from pipeline.onsets import FLAG_CLIPPED, FLAG_GAP, Onsets, Template
-from pipeline.passes import (ONSET_RESOLUTION, conditioned_gap_runs, gap_intervals_of,
+from meshphase._crb import crb_delay_std
+from meshphase.condition import ChannelQuality
+from meshphase.errors import ProcessingWarning
+from meshphase.onsets import FLAG_CLIPPED, FLAG_GAP, Onsets, Template
+from meshphase.passes import (ONSET_RESOLUTION, conditioned_gap_runs, gap_intervals_of,
                              gauge_passes, onset_sigma, pass_times, timing_centre, usable_onsets)
-from pipeline.phasing import GaugePasses
-from pipeline.recording import ChannelSpec
+from meshphase.phasing import GaugePasses
+from meshphase.recording import ChannelSpec
 
 FS = 1000.0
 
@@ -40,7 +40,7 @@ def _onsets(times, *, amp=None, flags=None, width=None, tid=None, templates=None
 
 
 def _old_onset_sigma(on, noise_rms):
-    """The stages module's own bound before it used pipeline._crb (kept to hold the numbers)."""
+    """The stages module's own bound before it used meshphase._crb (kept to hold the numbers)."""
     out = np.full(len(on), np.nan)
     if not len(on) or not on.templates:
         return out

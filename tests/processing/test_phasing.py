@@ -1,4 +1,4 @@
-"""Measured phasing from onset times (pipeline.phasing), on pass trains with known truth.
+"""Measured phasing from onset times (meshphase.phasing), on pass trains with known truth.
 
 The truth here is spec section 1 (ideal phasing, gamma_sn = frac(+-Z_s psi_n / 2 pi),
 gamma_rn = frac(-+Z_r psi_n / 2 pi)) evaluated by hand, so a sign slip in the measured
@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from hypothesis import given, strategies as st
 
-from pipeline.errors import ProcessingWarning
-from pipeline.phasing import (PassTable, TachoRelabel, assign_planets_by_pattern,
+from meshphase.errors import ProcessingWarning
+from meshphase.phasing import (PassTable, TachoRelabel, assign_planets_by_pattern,
                               assign_planets_by_tacho, measured_phasing, pass_order,
                               planet_fractions, relabel_by_tacho, revolution_numbers)
 

@@ -1,4 +1,4 @@
-"""The streaming stages (pipeline.stream) against the whole-array functions they replace.
+"""The streaming stages (meshphase.stream) against the whole-array functions they replace.
 
 Tolerances (claims about the method, see pipeline/stream.py):
 
@@ -26,18 +26,18 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from pipeline import io
-from pipeline.condition import (condition_recording, drift_baseline, finite_apply_gaps,
+from meshphase import io
+from meshphase.condition import (condition_recording, drift_baseline, finite_apply_gaps,
                                 quality_from_scan)
-from pipeline.errors import DataQualityWarning, ProcessingWarning
-from pipeline.onsets import OnsetStream, detect_onsets, detect_onsets_recording
-from pipeline.quality import ChannelScan, FlatScan, channel_quality, classify_flat_runs
-from pipeline.recording import ChannelSpec, Recording
-from pipeline.stream import (ChannelPlan, FileSource, MemorySource, StreamedRecording,
+from meshphase.errors import DataQualityWarning, ProcessingWarning
+from meshphase.onsets import OnsetStream, detect_onsets, detect_onsets_recording
+from meshphase.quality import ChannelScan, FlatScan, channel_quality, classify_flat_runs
+from meshphase.recording import ChannelSpec, Recording
+from meshphase.stream import (ChannelPlan, FileSource, MemorySource, StreamedRecording,
                              _ZeroPhase, condition_stream, filter_overlap, scan_source,
                              stream_memory)
-from synthetic import generate
-from synthetic.scenarios import seed_rig_gearset, seed_rig_speeds
+from meshphase.synthetic import generate
+from meshphase.synthetic.scenarios import seed_rig_gearset, seed_rig_speeds
 
 BLOCK = 4000            # samples: ~40 blocks over 30 s at 5120 Hz, many more filter windows
 
@@ -231,7 +231,7 @@ def test_filter_overlap_makes_blocks_equal_the_whole_filter(kind):
     x[1000:1004] = np.nan                       # bridged
     x[3 * L:3 * L + 500] = np.nan               # splits the signal
     padlen = 3 * (2 * len(sos) + 1)
-    from pipeline.condition import _apply_finite
+    from meshphase.condition import _apply_finite
 
     ref = _apply_finite(x, lambda s: signal.sosfiltfilt(sos, s, padlen=padlen),
                         min_len=padlen + 1, fill_max=8, what="t")
@@ -427,7 +427,7 @@ def test_write_blocks_bad_header_and_dtype(tmp_path):
 
 # ---------------------------------------------------------------- peak memory of process
 def test_run_child_measures_a_child_and_refuses_other_jobs():
-    from pipeline.bench.rss import run_child
+    from meshphase.bench.rss import run_child
 
     r = run_child("sosfiltfilt_job", n=1 << 16, repeats=1)
     assert r["returncode"] == 0 and r["samples_per_s"] > 0
@@ -440,7 +440,7 @@ def test_run_child_peak_is_the_childs_own_not_the_parents():
     # the kernel carries a posix_spawn'ed child's parent's high-water mark into its
     # ru_maxrss; the peak reported is the child's own VmHWM. 400 MB held here (touched)
     # against a child that needs ~100 MB: the child's peak stays far below the 400 MB
-    from pipeline.bench.rss import run_child
+    from meshphase.bench.rss import run_child
 
     held = np.ones(400 * 2**20 // 8)
     r = run_child("sosfiltfilt_job", n=1 << 16, repeats=1)
@@ -452,9 +452,9 @@ def test_run_child_peak_is_the_childs_own_not_the_parents():
 def test_process_peak_rss_on_a_30_minute_file_stays_under_the_budget(tmp_path):
     # meshphase process on 30 min x 8 channels (float64 HDF5: 590 MB of samples): a child
     # process, its peak RSS (VmHWM). Before streaming it peaked at ~5x the samples
-    # (~2.9 GB); the streaming stages hold a fixed budget (pipeline.stream.PROCESS_RSS_BUDGET)
-    from pipeline.bench.rss import BENCH_GEARSET, run_child
-    from pipeline.stream import PROCESS_RSS_BUDGET
+    # (~2.9 GB); the streaming stages hold a fixed budget (meshphase.stream.PROCESS_RSS_BUDGET)
+    from meshphase.bench.rss import BENCH_GEARSET, run_child
+    from meshphase.stream import PROCESS_RSS_BUDGET
 
     path = tmp_path / "rec30.h5"
     w = run_child("write_job", path=str(path), minutes=30.0)
@@ -472,9 +472,9 @@ def test_process_peak_rss_on_a_30_minute_file_stays_under_the_budget(tmp_path):
 def test_generator_source_equals_the_generated_recording():
     # a long synthetic scene streams from the generator, generated again for every pass:
     # the same samples as generated whole
-    from synthetic import generate_blocks
+    from meshphase.synthetic import generate_blocks
 
-    from pipeline.stream import GeneratorSource
+    from meshphase.stream import GeneratorSource
 
     rec, _ = generate("gaps", seed=4, duration=6.0)
     gen = GeneratorSource(generate_blocks("gaps", seed=4, duration=6.0, block=1.3))
@@ -520,9 +520,9 @@ def test_long_synthetic_scene_streams_from_the_generator(monkeypatch):
     # above SYNTHETIC_WHOLE_BYTES the load stage generates the recording again for every
     # pass instead of holding it; with the same blocks the result is the same to rounding
     # (the conditioning is block-wise either way: only where the samples come from differs)
-    from pipeline import stages
-    from pipeline.scene import parse_scene
-    from pipeline.stream import GeneratorSource
+    from meshphase import stages
+    from meshphase.scene import parse_scene
+    from meshphase.stream import GeneratorSource
 
     text = ('name = "gen"\nresults = ["phasing"]\n[input]\nsynthetic = "gaps"\nminutes = 0.1\n'
             'seed = 3\n[[channels]]\nname = "sun"\ngain = 2.0\n')
@@ -547,10 +547,10 @@ def test_long_synthetic_scene_streams_from_the_generator(monkeypatch):
 def test_convert_and_process_never_read_the_recording_whole(tmp_path, monkeypatch, capsys):
     # the commands stream whatever the length: with every whole-recording read made to
     # fail, convert (HDF5 -> MCAP) and process (of the MCAP file) still complete
-    from synthetic import generate_blocks
+    from meshphase.synthetic import generate_blocks
 
-    from pipeline.bench.rss import BENCH_GEARSET, bench_config
-    from pipeline.cli import main
+    from meshphase.bench.rss import BENCH_GEARSET, bench_config
+    from meshphase.cli import main
 
     stream = generate_blocks(bench_config(30.0), seed=1)
     src = tmp_path / "r.h5"

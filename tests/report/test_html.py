@@ -7,8 +7,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipeline.report import Report
-from pipeline.report import figures
+from meshphase.report import Report
+from meshphase.report import figures
 
 
 def test_report_is_self_contained_and_escaped(tmp_path):
@@ -44,14 +44,14 @@ def test_empty_table_and_long_table(tmp_path):
     (figures.quality_overview, ([{"channel": "a", "n_nonfinite": 3, "n_clipped_runs": 1}],)),
 ])
 def test_figures_render(fn, args):
-    from pipeline.report.html import figure_to_png
+    from meshphase.report.html import figure_to_png
 
     png = figure_to_png(fn(*args))
     assert png[:4] == b"\x89PNG" and len(png) > 2000
 
 
 def test_phasing_over_time_with_band_and_model():
-    from pipeline.report.html import figure_to_png
+    from meshphase.report.html import figure_to_png
 
     df = pd.DataFrame({"time_s": [0, 1, 2, 0, 1, 2], "planet": [2, 2, 2, 3, 3, 3],
                        "gamma": [0.24, 0.26, 0.99, 0.5, 0.51, 0.49], "uncertainty": [0.01] * 6})

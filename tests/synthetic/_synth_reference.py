@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 
-from synthetic.kinematics import SpeedProfile, gauge_rates
+from meshphase.synthetic.kinematics import SpeedProfile, gauge_rates
 
 TWO_PI = 2 * math.pi
 

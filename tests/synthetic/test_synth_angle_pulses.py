@@ -9,14 +9,14 @@ import pytest
 from hypothesis import given, settings, strategies as st
 from scipy.optimize import brentq
 
-from pipeline.models.mesh_phasing import assembly_check, classify_phasing
-from pipeline.models.gearset import rad_s_to_rpm
-from synthetic import (SCENARIOS, Artefacts, GaugeConfig, SynthConfig, generate, generate_blocks,
+from meshphase.models.mesh_phasing import assembly_check, classify_phasing
+from meshphase.models.gearset import rad_s_to_rpm
+from meshphase.synthetic import (SCENARIOS, Artefacts, GaugeConfig, SynthConfig, generate, generate_blocks,
                        get_scenario)
-from synthetic.gauges import (AnglePulses, PulseTable, angle_pulse_map, pulse_shape,
+from meshphase.synthetic.gauges import (AnglePulses, PulseTable, angle_pulse_map, pulse_shape,
                               render_angle_pulses)
-from synthetic.kinematics import SpeedProfile, gauge_rates
-from synthetic.scenarios import RIG_3PLANETS_P, RIG_SCENARIOS, rig_gearset, rig_speeds
+from meshphase.synthetic.kinematics import SpeedProfile, gauge_rates
+from meshphase.synthetic.scenarios import RIG_3PLANETS_P, RIG_SCENARIOS, rig_gearset, rig_speeds
 
 TWO_PI = 2 * math.pi
 
@@ -289,7 +289,7 @@ def test_rig_without_tacho_and_other_snr(name):
 def test_cli_lists_the_rig_family(capsys):
     import re
 
-    from pipeline.cli import main
+    from meshphase.cli import main
 
     assert main(["synth", "--list"]) == 0
     out = capsys.readouterr().out

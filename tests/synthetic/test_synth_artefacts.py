@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from synthetic import artefacts as art
+from meshphase.synthetic import artefacts as art
 
 
 def _noise(sigma, pf, n, fs=5120.0, blocks=None, seed=7, fmin=0.05):

@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from synthetic import generate_blocks
+from meshphase.synthetic import generate_blocks
 
 
 def _rate(name, duration, block=None, repeat=3):

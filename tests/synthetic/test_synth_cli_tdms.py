@@ -6,12 +6,12 @@ import warnings
 import numpy as np
 import pytest
 
-from pipeline.errors import DataQualityWarning
-from pipeline.io import read
-from pipeline.recording import Recording
-from synthetic import GroundTruth, cli_synth, generate, generate_blocks
-from synthetic.cli import format_for_path
-from synthetic.tdms_export import write_tdms
+from meshphase.errors import DataQualityWarning
+from meshphase.io import read
+from meshphase.recording import Recording
+from meshphase.synthetic import GroundTruth, cli_synth, generate, generate_blocks
+from meshphase.synthetic.cli import format_for_path
+from meshphase.synthetic.tdms_export import write_tdms
 
 
 @pytest.mark.parametrize("suffix", [".h5", ".mcap", ".csv", ".tdms"])

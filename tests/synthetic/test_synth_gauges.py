@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from synthetic.gauges import (PulseTable, face_load_factor, pulse_peak_offset, pulse_shape,
+from meshphase.synthetic.gauges import (PulseTable, face_load_factor, pulse_peak_offset, pulse_shape,
                               pulse_support, render_box, render_pulses)
 
 

@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from pipeline.models.mesh_phasing import ideal_phasing
-from pipeline.recording import Recording
-from synthetic import (SCENARIOS, Artefacts, GroundTruth, generate, generate_blocks,
+from meshphase.models.mesh_phasing import ideal_phasing
+from meshphase.recording import Recording
+from meshphase.synthetic import (SCENARIOS, Artefacts, GroundTruth, generate, generate_blocks,
                        get_scenario, list_scenarios)
-from synthetic.generate import draw_errors, resolve_seed
-from synthetic.gauges import face_load_factor
-from synthetic.kinematics import gauge_rates
+from meshphase.synthetic.generate import draw_errors, resolve_seed
+from meshphase.synthetic.gauges import face_load_factor
+from meshphase.synthetic.kinematics import gauge_rates
 
 from _synth_reference import residual_ref
 
@@ -62,8 +62,8 @@ def test_every_scenario_generates_consistently(name):
 
 
 def test_registry_api():
-    from synthetic import describe_scenarios
-    from synthetic.scenarios import Scenario, register
+    from meshphase.synthetic import describe_scenarios
+    from meshphase.synthetic.scenarios import Scenario, register
 
     assert "seed_rig" in SCENARIOS and "one_hour" in list_scenarios()
     rows = describe_scenarios()

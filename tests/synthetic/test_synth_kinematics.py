@@ -7,10 +7,10 @@ import pytest
 from hypothesis import given, settings, strategies as st
 from scipy.optimize import brentq
 
-from pipeline.models.gearset import Gearset, Speeds
-from pipeline.models.mesh_phasing import ShaftHoleErrors, mesh_angles
-from pipeline.models.tolerance import table2_case
-from synthetic.kinematics import (EngagementEvents, SpeedProfile, engagement_events,
+from meshphase.models.gearset import Gearset, Speeds
+from meshphase.models.mesh_phasing import ShaftHoleErrors, mesh_angles
+from meshphase.models.tolerance import table2_case
+from meshphase.synthetic.kinematics import (EngagementEvents, SpeedProfile, engagement_events,
                                   event_times_for_angles, gauge_rates)
 
 TWO_PI = 2 * math.pi
@@ -125,7 +125,7 @@ def test_pass_order_and_rates(gear, reverse):
 
 
 def test_rotating_ring_rate_follows_willis():
-    from synthetic.scenarios import seed_rig_gearset, seed_rig_speeds
+    from meshphase.synthetic.scenarios import seed_rig_gearset, seed_rig_speeds
 
     g = seed_rig_gearset()
     sp = seed_rig_speeds(g)

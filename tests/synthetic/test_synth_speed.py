@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from pipeline.models.gearset import Speeds
-from pipeline.models.tolerance import table2_case
-from synthetic import SynthConfig, generate, get_scenario
-from synthetic.kinematics import (MEMBERS, ShaftRipple, SpeedClock, SpeedProfile, engagement_events,
+from meshphase.models.gearset import Speeds
+from meshphase.models.tolerance import table2_case
+from meshphase.synthetic import SynthConfig, generate, get_scenario
+from meshphase.synthetic.kinematics import (MEMBERS, ShaftRipple, SpeedClock, SpeedProfile, engagement_events,
                                   event_times_for_angles, gauge_rates, member_rate)
-from synthetic.scenarios import rig_gearset, rig_speeds
+from meshphase.synthetic.scenarios import rig_gearset, rig_speeds
 
 from _synth_reference import ode_tau_ref, residual_tau_ref, tau_ref
 
@@ -201,7 +201,7 @@ def test_shaft_profile_round_trips_through_config_and_truth_sidecar(tmp_path):
     assert back.speed == prof and back.to_dict() == cfg.to_dict()
     _, truth = generate(cfg, duration=12.0, seed=5)
     p = truth.write(tmp_path / "r.truth.json")
-    from synthetic import GroundTruth
+    from meshphase.synthetic import GroundTruth
 
     read = GroundTruth.read(p)
     assert read == truth

@@ -5,12 +5,12 @@ import json
 import numpy as np
 import pytest
 
-from pipeline.models.gearset import Gearset, Speeds
-from pipeline.models.mesh_phasing import ShaftHoleErrors
-from synthetic import (Artefacts, GaugeConfig, GroundTruth, SynthConfig, TachoConfig, generate,
+from meshphase.models.gearset import Gearset, Speeds
+from meshphase.models.mesh_phasing import ShaftHoleErrors
+from meshphase.synthetic import (Artefacts, GaugeConfig, GroundTruth, SynthConfig, TachoConfig, generate,
                        get_scenario, list_scenarios, truth_path_for)
-from synthetic.config import TiltSource, errors_from_dict, errors_to_dict
-from synthetic.truth import TRUTH_FORMAT
+from meshphase.synthetic.config import TiltSource, errors_from_dict, errors_to_dict
+from meshphase.synthetic.truth import TRUTH_FORMAT
 
 
 # ----------------------------------------------------------------------------- truth

@@ -5,7 +5,7 @@ Layout (full description, with the reasons, in ``data_schemas/mcap.md``):
 * One Schema record ``meshphase.SampleBlock`` (encoding ``meshphase-layout``) whose data is a
   JSON description of the payload, validated by ``data_schemas/mcap_message.schema.json``.
 * One MCAP channel per recording channel: topic = channel name, message encoding
-  ``meshphase-block``, channel metadata = every :class:`~pipeline.recording.ChannelSpec`
+  ``meshphase-block``, channel metadata = every :class:`~meshphase.recording.ChannelSpec`
   field plus ``fs``, ``index`` and ``dtype`` (``data_schemas/mcap_channel_metadata.schema.json``).
 * One Metadata record ``meshphase.recording``: fs, t0, n_samples, channel order, dtype, block,
   log-time origin, start_datetime, meta and history (JSON).
@@ -27,7 +27,7 @@ preallocated Fortran-order output array (a chunk of full messages of one channel
 :func:`write` makes them, in a single strided copy). Every wanted sample must arrive
 exactly once. Anything the file does not hold as promised (truncated, another writer's
 MCAP, metadata missing or inconsistent, samples missing) raises
-:class:`~pipeline.io.base.RecordingFileError` naming the file and the problem.
+:class:`~meshphase.io.base.RecordingFileError` naming the file and the problem.
 
 Integrity (``verify=True``, the default of :func:`read`, :func:`read_info` and
 :func:`iter_blocks`; ``data_schemas/mcap.md`` has the details): once per file (cached by
@@ -37,7 +37,7 @@ worker thread while the samples are copied. Together they cover every byte of th
 the leading magic. The data-section CRC is checked without reading the uncompressed chunks'
 records: their stored CRC is combined in (``crc32_combine``), and each record byte is checked
 by its chunk's CRC when that chunk is read. A mismatch raises
-:class:`~pipeline.io.base.CorruptFileError` naming the file, the chunk (number and byte
+:class:`~meshphase.io.base.CorruptFileError` naming the file, the chunk (number and byte
 offset) or byte range, and the CRCs.
 
 Modules: ``layout`` (names, record framing, payload header, log times, schemas), ``crc``

@@ -72,7 +72,7 @@ _OP_CHUNK = 0x06
 
 
 def _json_schema(filename: str) -> dict:
-    import data_schemas
+    from meshphase import data_schemas
 
     if hasattr(data_schemas, "load_schema"):
         return data_schemas.load_schema(filename)

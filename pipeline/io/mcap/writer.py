@@ -60,7 +60,7 @@ def _recording_metadata(rec, block: int, compression: str, origin: int,
 
 def write(recording: Recording, path, *, block: int = DEFAULT_BLOCK, compression: str = "none",
           chunk_size: int = DEFAULT_CHUNK_SIZE) -> None:
-    """Write a recording as MCAP (called through :func:`pipeline.io.write`).
+    """Write a recording as MCAP (called through :func:`meshphase.io.write`).
 
     Parameters
     ----------
