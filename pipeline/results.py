@@ -9,18 +9,14 @@ the HTML report and the run status read them there. Units are SI; phasing in mes
 The dataclasses are frozen (a stage's result is not changed by a later stage: a stage that
 revises an earlier result, as the identification relabelling a gauge, returns the revised one
 in :meth:`StageResult.supersedes`); the arrays and dicts they hold are not copied.
-
-``ctx.results`` (:class:`LegacyResults`) shows the same results in the shape they had before
-they were typed, a dict of dicts keyed by stage name, for code written against that shape.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import re
-from collections.abc import Mapping, MutableMapping
 from dataclasses import dataclass, field
-from typing import Any, Callable, ClassVar, Generic, TypeVar
+from typing import Any, Callable, Generic, TypeVar
 
 import numpy as np
 
@@ -29,7 +25,7 @@ from .models.gearset import Gearset
 __all__ = ["StageResult", "LoadStage", "ConditionStage", "OnsetsStage", "PhasingStage",
            "LoadSharingStage", "CentroidsStage", "IdealStage", "ToleranceStage",
            "IdentifyStage", "GaugeComparison", "CompareStage", "BearingStage", "TiltStage",
-           "RESULT_TYPES", "LegacyResults", "RunContext", "phasing_verdict"]
+           "RESULT_TYPES", "RunContext", "phasing_verdict"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -44,26 +40,10 @@ class StageResult:
 
     error_estimate: str = ""
 
-    #: the keys of the stage's dict before the results were typed, in their order
-    #: (:meth:`legacy`, :meth:`from_legacy`)
-    LEGACY_KEYS: ClassVar[tuple] = ()
 
     def supersedes(self) -> dict:
         """Results of earlier stages this one revises: stage name -> its new result."""
         return {}
-
-    def legacy(self) -> Any:
-        """This result in its shape before typing (a dict of :attr:`LEGACY_KEYS`)."""
-        return {k: getattr(self, k) for k in self.LEGACY_KEYS}
-
-    @classmethod
-    def from_legacy(cls, value) -> "StageResult":
-        """The typed result from its pre-typing shape (a dict with some of
-        :attr:`LEGACY_KEYS`; missing keys take their defaults)."""
-        if not isinstance(value, Mapping):
-            raise TypeError(f"a {cls.__name__} is made from a dict, got {type(value).__name__}")
-        names = {f.name for f in dataclasses.fields(cls)}
-        return cls(**{k: value[k] for k in cls.LEGACY_KEYS if k in value and k in names})
 
 
 # ----------------------------------------------------------------------------- the recording
@@ -101,8 +81,6 @@ class LoadStage(StageResult):
     scan: Any = None
     channels_unused: tuple = ()
 
-    LEGACY_KEYS = ("recording", "truth", "source", "true_errors", "quality", "stream", "scan")
-
 
 @dataclass(frozen=True, kw_only=True)
 class ConditionStage(StageResult):
@@ -138,9 +116,6 @@ class ConditionStage(StageResult):
     memory: dict = field(default_factory=dict)
     scan: Any = None
 
-    LEGACY_KEYS = ("recording", "quality", "excerpt", "onsets", "onset_warnings", "timings",
-                   "memory")
-
 
 @dataclass(frozen=True, kw_only=True)
 class OnsetsStage(StageResult):
@@ -156,8 +131,6 @@ class OnsetsStage(StageResult):
 
     by_channel: dict
     tacho_times: np.ndarray | None = None
-
-    LEGACY_KEYS = ("by_channel", "tacho_times")
 
 
 # ----------------------------------------------------------------------------- measured
@@ -198,8 +171,6 @@ class PhasingStage(StageResult):
     notes: list = field(default_factory=list)
     result: Any = None
 
-    LEGACY_KEYS = ("tables", "labels", "assignment", "model", "reliability", "fixed",
-                   "fixed_reason", "labels_relative", "notes", "result")
 
     @property
     def assignment(self) -> dict:
@@ -221,13 +192,6 @@ class PhasingStage(StageResult):
         return dataclasses.replace(self, tables=tables, labels=labs, result=result,
                                    labels_relative=[g for g in self.labels_relative if g != gear])
 
-    def legacy(self) -> dict:
-        out = super().legacy()
-        # labels as the positional (channel, times, planet, amplitude, sigma) of old
-        out["labels"] = {k: (v.channel, v.times, v.planet, v.amplitude, v.sigma)
-                         if hasattr(v, "channel") else v for k, v in self.labels.items()}
-        return out
-
 
 @dataclass(frozen=True, kw_only=True)
 class LoadSharingStage(StageResult):
@@ -244,13 +208,6 @@ class LoadSharingStage(StageResult):
     sharing: Any = None
     channel: str | None = None
 
-    def legacy(self):
-        return self.sharing
-
-    @classmethod
-    def from_legacy(cls, value) -> "LoadSharingStage":
-        return cls(sharing=value)
-
 
 @dataclass(frozen=True, kw_only=True)
 class CentroidsStage(StageResult):
@@ -264,13 +221,6 @@ class CentroidsStage(StageResult):
     """
 
     by_gear: dict = field(default_factory=dict)
-
-    def legacy(self):
-        return self.by_gear
-
-    @classmethod
-    def from_legacy(cls, value) -> "CentroidsStage":
-        return cls(by_gear=dict(value))
 
 
 # ----------------------------------------------------------------------------- models
@@ -292,7 +242,6 @@ class IdealStage(StageResult):
     classification: str
     assembly: Any = None
 
-    LEGACY_KEYS = ("gamma_s", "gamma_r", "classification", "assembly")
 
     def gamma(self, gear: str) -> np.ndarray:
         """The ideal phasing of ``gear`` ("sun" or "ring") [-]."""
@@ -310,12 +259,6 @@ class ToleranceStage(StageResult):
 
     monte_carlo: Any
 
-    def legacy(self):
-        return self.monte_carlo
-
-    @classmethod
-    def from_legacy(cls, value) -> "ToleranceStage":
-        return cls(monte_carlo=value)
 
     def band(self, gear: str) -> tuple[np.ndarray, np.ndarray]:
         """The 3-sigma band of ``gear``'s phasing deviation from the ideal per planet [mesh
@@ -343,13 +286,6 @@ class IdentifyStage(StageResult):
 
     def supersedes(self) -> dict:
         return {} if self.phasing is None else {"phasing": self.phasing}
-
-    def legacy(self):
-        return self.identification
-
-    @classmethod
-    def from_legacy(cls, value) -> "IdentifyStage":
-        return cls(identification=value)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -419,16 +355,6 @@ class CompareStage(StageResult):
         """This result with ``gear``'s comparison replaced."""
         return dataclasses.replace(self, by_gear={**self.by_gear, gear: comparison})
 
-    def legacy(self) -> dict:
-        return {k: v.as_dict() for k, v in self.by_gear.items()}
-
-    @classmethod
-    def from_legacy(cls, value) -> "CompareStage":
-        keys = {f.name for f in dataclasses.fields(GaugeComparison)}
-        return cls(by_gear={g: GaugeComparison(**{k: v for k, v in row.items() if k in keys},
-                                               scored_against_truth="vs_truth" in row)
-                            for g, row in value.items()})
-
 
 @dataclass(frozen=True, kw_only=True)
 class BearingStage(StageResult):
@@ -453,12 +379,6 @@ class BearingStage(StageResult):
     with_offsets: Any = None
     measured: Any = None
 
-    LEGACY_KEYS = ("case", "torque", "concentrated", "with_offsets", "measured")
-
-    def legacy(self) -> dict:
-        return {k: v for k, v in super().legacy().items()
-                if v is not None or k not in ("with_offsets", "measured")}
-
 
 @dataclass(frozen=True, kw_only=True)
 class TiltStage(StageResult):
@@ -477,8 +397,6 @@ class TiltStage(StageResult):
     torque: float
     solutions: list
 
-    LEGACY_KEYS = ("case", "torque", "solutions")
-
 
 #: stage name -> the type of its result
 RESULT_TYPES: dict[str, type[StageResult]] = {
@@ -487,38 +405,6 @@ RESULT_TYPES: dict[str, type[StageResult]] = {
     "ideal": IdealStage, "tolerance": ToleranceStage, "identify": IdentifyStage,
     "compare": CompareStage, "bearing_moments": BearingStage, "tilt": TiltStage,
 }
-
-
-class LegacyResults(MutableMapping):
-    """The stage results as a dict of dicts (their shape before they were typed).
-
-    Reading a typed result gives its :meth:`StageResult.legacy` shape (the arrays, tables and
-    dicts inside are the result's own, not copies); a value stored here (a dict written by
-    code of that time) is kept as it is, given back as it is, and read by the typed
-    accessors through :meth:`StageResult.from_legacy`.
-    """
-
-    def __init__(self, store: dict):
-        self._store = store
-
-    def __getitem__(self, name: str):
-        v = self._store[name]
-        return v.legacy() if isinstance(v, StageResult) else v
-
-    def __setitem__(self, name: str, value) -> None:
-        self._store[name] = value
-
-    def __delitem__(self, name: str) -> None:
-        del self._store[name]
-
-    def __iter__(self):
-        return iter(self._store)
-
-    def __len__(self) -> int:
-        return len(self._store)
-
-    def __repr__(self) -> str:
-        return f"LegacyResults({list(self._store)})"
 
 
 # ----------------------------------------------------------------------------- the run
@@ -536,6 +422,10 @@ class _StageAttr(Generic[_R]):
 
     def __get__(self, ctx, owner=None) -> _R | None:
         return self if ctx is None else ctx.result(self.name)
+
+    def __set__(self, ctx, value) -> None:
+        raise AttributeError(f"ctx.{self.name} is the stage's recorded result: record a new "
+                             f"one with ctx.record({self.name!r}, result)")
 
 
 @dataclass
@@ -561,9 +451,6 @@ class RunContext:
 compare, bearing_moments, tilt : StageResult or None
         The typed result of each stage (:mod:`meshphase.results`: :class:`LoadStage`,
         :class:`PhasingStage`, ...), None while the stage has not run.
-    results : LegacyResults
-        The same results as a dict of dicts by stage name, the shape they had before they
-        were typed (for code written against it).
     gearset : Gearset or None
         The scene's, else the recording's (read only).
     """
@@ -603,14 +490,10 @@ compare, bearing_moments, tilt : StageResult or None
         return g
 
     def result(self, name: str) -> StageResult | None:
-        """The typed result of stage ``name``; None while it has not run. A value stored in
-        the pre-typing shape (``ctx.results[name] = {...}``) is read through
-        :meth:`~meshphase.results.StageResult.from_legacy`."""
-        cls = RESULT_TYPES[name]
-        r = self._store.get(name)
-        if r is None or isinstance(r, cls):
-            return r
-        return cls.from_legacy(r)
+        """The typed result of stage ``name``; None while it has not run."""
+        if name not in RESULT_TYPES:
+            raise KeyError(f"no stage {name!r}; stages: {', '.join(RESULT_TYPES)}")
+        return self._store.get(name)
 
     def record(self, name: str, result: StageResult) -> StageResult:
         """Keep ``result`` as stage ``name``'s (with the results it supersedes) and its error
@@ -622,14 +505,6 @@ compare, bearing_moments, tilt : StageResult or None
         self._store.update(result.supersedes())
         self.error_estimates[name] = result.error_estimate
         return result
-
-    @property
-    def results(self) -> LegacyResults:
-        return LegacyResults(self._store)
-
-    @results.setter
-    def results(self, value) -> None:
-        self._store = dict(value)
 
 
 _NOT_RELIABLE = re.compile(r"ProcessingWarning: (?:(?P<gauge>[A-Za-z0-9_]+) gauge\b)?.*not reliable")

@@ -246,7 +246,7 @@ def test_run_recording_unreliable_phasing_is_not_ok(data, tmp_path, monkeypatch)
     def flagged(ctx):
         original(ctx)
         reason = "sun gauge: encoder misfit 3e-2 mesh cycles; phasing not reliable"
-        ctx.results["phasing"]["reliability"]["sun"] = {"reliable": False, "reasons": [reason]}
+        ctx.phasing.reliability["sun"] = {"reliable": False, "reasons": [reason]}
         warnings.warn(reason, ProcessingWarning, stacklevel=2)
 
     monkeypatch.setitem(STAGE_FUNCTIONS, "phasing", flagged)

@@ -3,7 +3,7 @@ item 6), and bad inputs that must give clear warnings and partial results.
 
 Each registry scenario (:data:`meshphase.synthetic.SCENARIOS`) is generated with seed 3 and processed by
 ``meshphase.stages.run_scene`` (phasing, load sharing, compare, identify, centroids). The run's
-own truth comparison (``results["compare"][gear]["vs_truth"]``: the measured phasing with the
+own truth comparison (``ctx.compare.by_gear[gear].vs_truth``: the measured phasing with the
 onsets labelled as the truth labels them) must lie within the tolerance of the table below;
 load sharing, face-width centroids and identified shaft hole errors are checked against the
 truth the generator wrote. A new scenario without a row here fails
@@ -207,8 +207,8 @@ def label_map(ctx: RunContext, truth, gear: str, n: int = 4):
 def mapped_true_errors(ctx: RunContext, truth, gearset) -> ShaftHoleErrors:
     """The true shaft hole errors in our planet numbering (the sun gauge's, which the fit's
     planet 1 follows): planet errors permuted, sun/ring phases turned by our planet 1's angle."""
-    te = ctx.results["load"]["true_errors"]
-    tabs = ctx.results["phasing"]["tables"]
+    te = ctx.load.true_errors
+    tabs = ctx.phasing.tables
     gear = "sun" if len(tabs.get("sun", ())) else "ring"
     m, purity = label_map(ctx, truth, gear, gearset.n_planets)
     if purity < 1.0 or np.any(m < 0) or len(set(m.tolist())) != m.size:
@@ -244,11 +244,11 @@ def test_truth_helpers_agree_with_the_runs_own_truth_comparison():
     """The label helpers used below (truth labels from the nearest engagement) reproduce the
     run's own label_match; the truth-labelled rebuild reproduces vs_truth exactly."""
     ctx = synthetic_run("seed_rig")
-    truth = ctx.results["load"]["truth"]
+    truth = ctx.load.truth
     g = ctx.gearset
     for gear in ("sun", "ring"):
         times, pl, tl, off = truth_labels(ctx, truth, gear)
-        vt = ctx.results["compare"][gear]["vs_truth"]
+        vt = ctx.compare.by_gear[gear].vs_truth
         assert off == pytest.approx(vt["onset_offset_s"], abs=1e-12)
         assert float(np.mean(tl[pl >= 0] == pl[pl >= 0])) == pytest.approx(vt["label_match"])
         err = truth_phasing_error(ctx, truth, gear, g)
@@ -260,7 +260,7 @@ def test_truth_helpers_agree_with_the_runs_own_truth_comparison():
 @pytest.mark.parametrize("name", _params("stages", ALL))
 def test_every_requested_stage_runs(name):
     ctx = synthetic_run(name)
-    fw = any(c.kind == "facewidth" for c in ctx.results["load"]["recording"].channels)
+    fw = any(c.kind == "facewidth" for c in ctx.load.recording.channels)
     expected_failed = {} if fw else {"centroids": CENTROIDS_SKIPPED}
     assert ctx.failed == expected_failed
     for stage in ("load", "condition", "onsets", "phasing", "load_sharing", "identify", "compare"):
@@ -272,16 +272,16 @@ def test_every_requested_stage_runs(name):
 def test_phasing_matches_truth(name):
     exp = EXPECT[name]
     ctx = synthetic_run(name)
-    truth = ctx.results["load"]["truth"]
-    tables = ctx.results["phasing"]["tables"]
+    truth = ctx.load.truth
+    tables = ctx.phasing.tables
     for gear, tol in (("sun", exp.sun), ("ring", exp.ring)):
         if tol is None:
             # no phasing for this gauge: it must be empty (not a number) and a warning says why
             assert len(tables.get(gear, ())) == 0, gear
-            assert "vs_truth" not in ctx.results["compare"].get(gear, {})
+            assert gear not in ctx.compare.by_gear or ctx.compare.by_gear[gear].vs_truth is None
             assert any(f"'{gear}'" in m for m in ctx.messages), (gear, ctx.messages)
             continue
-        vt = ctx.results["compare"][gear]["vs_truth"]
+        vt = ctx.compare.by_gear[gear].vs_truth
         n_truth = len(truth.gamma_table(ctx.phasing.labels[gear].channel).time)
         assert vt["n"] >= exp.min_passes * n_truth, (gear, vt["n"], n_truth)
         assert vt["rms"] <= tol, (gear, vt)
@@ -297,8 +297,8 @@ def test_planet_labels_are_a_consistent_relabelling_of_the_truth(name):
     # but within a gauge the labels must follow one map: every onset of our planet q belongs
     # to the same true planet
     ctx = synthetic_run(name)
-    truth = ctx.results["load"]["truth"]
-    for gear, t in ctx.results["phasing"]["tables"].items():
+    truth = ctx.load.truth
+    for gear, t in ctx.phasing.tables.items():
         if not len(t):
             continue
         m, purity = label_map(ctx, truth, gear)
@@ -311,12 +311,12 @@ def test_unequal_load_sharing_fixes_the_sun_labels():
     # ring's per-planet amplitudes and must agree with the ring's numbering; the ring's first
     # pulse is planet 1 in this generator (ring gauge tooth at pi/8), so both equal the truth
     ctx = synthetic_run("facewidth_offcentre")
-    truth = ctx.results["load"]["truth"]
-    cmp = ctx.results["compare"]
-    assert ctx.results["phasing"]["assignment"]["sun"]["shift_decided_by"] == "amplitude"
+    truth = ctx.load.truth
+    cmp = ctx.compare.by_gear
+    assert ctx.phasing.assignment["sun"]["shift_decided_by"] == "amplitude"
     assert np.array_equal(label_map(ctx, truth, "sun")[0], label_map(ctx, truth, "ring")[0])
-    assert cmp["sun"]["vs_truth"]["label_match"] == 1.0
-    assert cmp["ring"]["vs_truth"]["label_match"] == 1.0
+    assert cmp["sun"].vs_truth["label_match"] == 1.0
+    assert cmp["ring"].vs_truth["label_match"] == 1.0
     assert not _messages(ctx, "sun gauge: which pulse is planet 1")
 
 
@@ -324,8 +324,8 @@ def test_unequal_load_sharing_fixes_the_sun_labels():
 def test_load_sharing_matches_truth(name):
     exp = EXPECT[name]
     ctx = synthetic_run(name)
-    truth = ctx.results["load"]["truth"]
-    ls = ctx.results["load_sharing"]
+    truth = ctx.load.truth
+    ls = ctx.load_sharing.sharing
     if exp.load_sharing is None:
         # no ring pulses: NaN factors, said so, never a number
         assert np.all(np.isnan(ls.factors)) and np.all(ls.n_passes == 0)
@@ -344,8 +344,8 @@ def test_load_sharing_matches_truth(name):
 def test_identified_errors_recover_the_truth(name):
     kind = EXPECT[name].ident
     ctx = synthetic_run(name)
-    truth = ctx.results["load"]["truth"]
-    ident = ctx.results["identify"]
+    truth = ctx.load.truth
+    ident = ctx.identify.identification
     g = ctx.gearset
     assert ident.n_passes > 0 and math.isfinite(ident.rms_after)
     assert ident.rms_after <= ident.rms_before
@@ -372,16 +372,16 @@ BIAS_FREE = ["seed_rig", "table2_case1", "table2_case2", "facewidth_offcentre"]
 @pytest.mark.parametrize("name", BIAS_FREE)
 def test_identification_has_no_onset_offset_bias(name):
     ctx = synthetic_run(name)
-    truth = ctx.results["load"]["truth"]
-    assert _ident_ratio(ctx.results["identify"], mapped_true_errors(ctx, truth, ctx.gearset)) <= 0.05
+    truth = ctx.load.truth
+    assert _ident_ratio(ctx.identify.identification, mapped_true_errors(ctx, truth, ctx.gearset)) <= 0.05
 
 
 @pytest.mark.parametrize("name", _params("centroids", FACEWIDTH))
 def test_sun_centroid_matches_truth(name):
     # noise-free linear load across three gauges: exact up to rounding (1 µm tolerance)
     ctx = synthetic_run(name)
-    truth = ctx.results["load"]["truth"]
-    c = ctx.results["centroids"]["sun"]
+    truth = ctx.load.truth
+    c = ctx.centroids.by_gear["sun"]
     assert c.shape == "linear" and c.contact_fraction == 1.0
     assert c.centroid == pytest.approx(float(np.mean(truth.centroid_sun)), abs=1e-6)
     assert np.ptp(truth.centroid_sun) == 0.0
@@ -390,8 +390,8 @@ def test_sun_centroid_matches_truth(name):
 def _pass_weighted_ring_centroid(ctx, truth) -> float:
     """sum LS_n Z_n / sum LS_n over the ring face-width passes the run used (their planets
     from the truth): what a centroid from the mean gauge readings measures."""
-    ons = ctx.results["onsets"]["by_channel"]
-    fw = [c.name for c in ctx.results["load"]["recording"].channels
+    ons = ctx.onsets.by_channel
+    fw = [c.name for c in ctx.load.recording.channels
           if c.kind == "facewidth" and c.gear == "ring"]
     best = max(fw, key=lambda c: int(np.count_nonzero(ons[c].good)))
     t = ons[best].times[ons[best].good]
@@ -404,8 +404,8 @@ def _pass_weighted_ring_centroid(ctx, truth) -> float:
 @pytest.mark.parametrize("name", ["facewidth_offcentre", "facewidth_tilt"])
 def test_ring_centroid_matches_truth(name):
     ctx = synthetic_run(name)
-    truth = ctx.results["load"]["truth"]
-    c = ctx.results["centroids"]["ring"]
+    truth = ctx.load.truth
+    c = ctx.centroids.by_gear["ring"]
     assert c.shape == "linear" and c.contact_fraction == 1.0
     # against the planets the passes came from: 2e-4 mm measured (pulse sampling), 0.01 mm
     assert c.centroid == pytest.approx(_pass_weighted_ring_centroid(ctx, truth), abs=1e-5)
@@ -420,8 +420,8 @@ def test_partial_contact_ring_centroid_matches_truth():
     # reads nothing at the unloaded end of a partial contact: no rows, centroid NaN (shape
     # 'none') and no warning
     ctx = synthetic_run("facewidth_partial")
-    truth = ctx.results["load"]["truth"]
-    c = ctx.results["centroids"]["ring"]
+    truth = ctx.load.truth
+    c = ctx.centroids.by_gear["ring"]
     assert c.shape == "partial"
     assert c.centroid == pytest.approx(float(np.mean(truth.centroid_ring)), abs=5e-5)
     # triangle centroid b/2 - L/3 = 9 mm with b = 40 mm: loaded length 33 mm of 40
@@ -431,7 +431,7 @@ def test_partial_contact_ring_centroid_matches_truth():
 @pytest.mark.parametrize("name", [n for n in ALL if n not in FACEWIDTH and n not in SLOW])
 def test_no_centroid_work_without_facewidth_gauges(name):
     ctx = synthetic_run(name)
-    assert "centroids" not in ctx.results
+    assert ctx.centroids is None
     assert ctx.failed.get("centroids") == CENTROIDS_SKIPPED
 
 
@@ -440,8 +440,8 @@ def test_centroids_are_numbers_for_every_gear(name):
     # every gear with face-width gauges gets a finite centroid with a finite std error, or
     # (a failure) a warning naming the gear: never a silent NaN
     ctx = synthetic_run(name)
-    assert set(ctx.results["centroids"]) == {"sun", "ring"}
-    for gear, c in ctx.results["centroids"].items():
+    assert set(ctx.centroids.by_gear) == {"sun", "ring"}
+    for gear, c in ctx.centroids.by_gear.items():
         if c is None or not math.isfinite(c.centroid):
             assert any(gear in m and "centroid" in m for m in ctx.messages), (gear, ctx.messages)
         else:
@@ -451,14 +451,14 @@ def test_centroids_are_numbers_for_every_gear(name):
 def test_a_minute_of_table1_stays_accurate():
     # table2_case1 at 1 min instead of its 0.5 s: 3 MSamples per channel, ~10 s to run
     ctx = run_scene(parse_scene(_scene_text("table2_case1", 1.0)))
-    truth = ctx.results["load"]["truth"]
+    truth = ctx.load.truth
     assert not _messages(ctx, "fit no planet") and not _messages(ctx, "not reliable")
     for gear in ("sun", "ring"):
         assert label_map(ctx, truth, gear)[1] == 1.0
-        assert ctx.results["compare"][gear]["vs_truth"]["rms"] <= 5e-4
-        assert ctx.results["compare"][gear]["vs_model"]["rms"] <= 5e-4
+        assert ctx.compare.by_gear[gear].vs_truth["rms"] <= 5e-4
+        assert ctx.compare.by_gear[gear].vs_model["rms"] <= 5e-4
     true = mapped_true_errors(ctx, truth, ctx.gearset)
-    assert _ident_ratio(ctx.results["identify"], true) <= 0.25
+    assert _ident_ratio(ctx.identify.identification, true) <= 0.25
 
 
 # ----------------------------------------------------------------------------- stress case
@@ -469,15 +469,15 @@ def test_fast_ripple_failure_is_visible():
     # stays at the same size (0.19-0.25 measured) instead of the 1e-4 of a clean run, and
     # the fit does not absorb it (rms_after > 0.1).
     ctx = synthetic_run("speed_ripple_fast")
-    cmp = ctx.results["compare"]
+    cmp = ctx.compare.by_gear
     clean = synthetic_run("speed_ripple")
     for gear in ("sun", "ring"):
-        assert cmp[gear]["vs_truth"]["rms"] > 0.1
-        assert cmp[gear]["vs_model"]["rms"] > 0.1
-        assert cmp[gear]["vs_model"]["rms"] > 5 * clean.results["compare"][gear]["vs_model"]["rms"]
-    ident = ctx.results["identify"]
+        assert cmp[gear].vs_truth["rms"] > 0.1
+        assert cmp[gear].vs_model["rms"] > 0.1
+        assert cmp[gear].vs_model["rms"] > 5 * clean.compare.by_gear[gear].vs_model["rms"]
+    ident = ctx.identify.identification
     assert ident.rms_after > 0.1
-    assert ident.rms_after > 5 * clean.results["identify"].rms_after
+    assert ident.rms_after > 5 * clean.identify.identification.rms_after
 
 
 def test_fast_ripple_is_warned_about():
@@ -549,13 +549,13 @@ def test_recording_without_pulses_gives_warnings_and_no_numbers(tmp_path, rig, k
     ctx = run_file(tmp_path, rec.replace_data(data))
     # nothing crashed: every stage ran or was skipped with a reason
     assert set(ctx.failed) <= {"centroids"}
-    tables = ctx.results["phasing"]["tables"]
+    tables = ctx.phasing.tables
     assert all(len(t) == 0 for t in tables.values())
-    assert ctx.results["compare"] == {}
-    ls = ctx.results["load_sharing"]
+    assert ctx.compare.by_gear == {}
+    ls = ctx.load_sharing.sharing
     assert np.all(np.isnan(ls.factors)) and np.all(ls.n_passes == 0)
     assert _messages(ctx, "load_sharing: ProcessingWarning", "no pulse from planet(s) [1, 2, 3, 4]")
-    ident = ctx.results["identify"]
+    ident = ctx.identify.identification
     assert ident.n_passes == 0 and math.isnan(ident.rms_after) and not ident.identifiable
     assert _messages(ctx, "identify: ProcessingWarning", "no measured passes")
     if kind == "noise":
@@ -572,11 +572,11 @@ def test_dead_gauge_is_named_in_a_warning(tmp_path, rig):
     data[:, rec.index("sun")] = 0.0
     ctx = run_file(tmp_path, rec.replace_data(data))
     assert set(ctx.failed) <= {"centroids"}
-    assert len(ctx.results["phasing"]["tables"]["sun"]) == 0
+    assert len(ctx.phasing.tables["sun"]) == 0
     assert [m for m in ctx.messages if m.startswith(("onsets:", "phasing:"))
             and "Warning" in m and "sun" in m and "planet 1 cannot be told" not in m]
-    assert len(ctx.results["phasing"]["tables"]["ring"]) > 0
-    assert set(ctx.results["compare"]) == {"ring"}
+    assert len(ctx.phasing.tables["ring"]) > 0
+    assert set(ctx.compare.by_gear) == {"ring"}
     # the ring alone (its own encoder, 12 passes): 1.6e-3 against the truth as in adc16_clipped
     assert truth_phasing_error(ctx, truth, "ring", _gearset_of(rec))["rms"] <= 5e-3
     _json_has_no_nan(ctx)
@@ -612,7 +612,7 @@ def test_missing_planet_is_warned_and_the_others_are_given(tmp_path, rig):
     assert n_removed >= 4
     ctx = run_file(tmp_path, spoilt)
     assert set(ctx.failed) <= {"centroids"}
-    ls = ctx.results["load_sharing"]
+    ls = ctx.load_sharing.sharing
     # planet 3 is named; every factor is either a finite number from >= 2 passes or NaN with
     # no pass behind it (never a NaN or a number presented the other way round)
     msgs = _messages(ctx, "load_sharing: ProcessingWarning", "no pulse from planet(s)")
@@ -625,7 +625,7 @@ def test_missing_planet_is_warned_and_the_others_are_given(tmp_path, rig):
     g = _gearset_of(rec)
     assert truth_phasing_error(ctx, truth, "sun", g)["rms"] <= 1e-4
     # the ring phasing that is given is right
-    assert len(ctx.results["phasing"]["tables"]["ring"]) > 0
+    assert len(ctx.phasing.tables["ring"]) > 0
     assert truth_phasing_error(ctx, truth, "ring", g)["rms"] <= 5e-4
     _json_has_no_nan(ctx)
 
@@ -637,7 +637,7 @@ def test_missing_planet_costs_only_that_planet(tmp_path, rig):
     rec, truth = rig
     spoilt, _ = _remove_planet_pulses(rec, truth, "ring", 3)
     ctx = run_file(tmp_path, spoilt)
-    ls = ctx.results["load_sharing"]
+    ls = ctx.load_sharing.sharing
     assert ls.n_passes.tolist()[:2] + ls.n_passes.tolist()[3:] == [5, 5, 5]
     assert not _messages(ctx, "fit no planet")
 
@@ -658,23 +658,23 @@ def test_wrong_tooth_counts_blow_up_the_residuals(tmp_path, rig):
     for sub in ("right", "z24", "z29", "z91"):
         (tmp_path / sub).mkdir()
     right = run_file(tmp_path / "right", rec)
-    base = {gear: right.results["compare"][gear]["vs_model"]["rms"] for gear in ("sun", "ring")}
+    base = {gear: right.compare.by_gear[gear].vs_model["rms"] for gear in ("sun", "ring")}
     assert base["sun"] < 2e-4 and base["ring"] < 5e-4
-    assert all(r["reliable"] for r in right.results["phasing"]["reliability"].values())
+    assert all(r["reliable"] for r in right.phasing.reliability.values())
     with pytest.raises(SceneError, match=r"\[gearset.n_planets\] 4 equally spaced planets cannot be assembled"):
         run_file(tmp_path / "z24", rec, z_sun=24)
     z29 = run_file(tmp_path / "z29", rec, z_sun=29)
     z91 = run_file(tmp_path / "z91", rec, z_ring=91)
     for ctx in (z29, z91):
         assert set(ctx.failed) <= {"centroids"}
-        model = ctx.results["phasing"]["model"]
+        model = ctx.phasing.model
         assert min(t.scale for t in model.trains) > 30
         for gear in ("sun", "ring"):
-            rel = ctx.results["phasing"]["reliability"][gear]
+            rel = ctx.phasing.reliability[gear]
             assert not rel["reliable"] and any("beyond their timing bound" in r for r in rel["reasons"])
             assert _messages(ctx, f"{gear} gauge: phasing not reliable")
-        assert ctx.results["compare"]["ring"]["vs_model"]["rms"] > 30 * base["ring"]
-        assert ctx.results["identify"].rms_after > 30 * right.results["identify"].rms_after
+        assert ctx.compare.by_gear["ring"].vs_model["rms"] > 30 * base["ring"]
+        assert ctx.identify.identification.rms_after > 30 * right.identify.identification.rms_after
 
 
 GAP = (20.0, 33.0)   # [s]: longer than a relative ring revolution (12.2 s), ~4 sun ones
@@ -698,9 +698,9 @@ def test_gap_across_a_revolution_gives_no_onset_inside_and_finite_results(gap_ru
     assert set(ctx.failed) <= {"centroids"}
     for ch in ("sun", "ring"):
         assert _messages(ctx, "DataQualityWarning", f"'{ch}'", "non-finite")
-        o = ctx.results["onsets"]["by_channel"][ch]
+        o = ctx.onsets.by_channel[ch]
         assert not np.any((o.times >= GAP[0]) & (o.times < GAP[1])), ch
-    given = {g: t for g, t in ctx.results["phasing"]["tables"].items() if len(t)}
+    given = {g: t for g, t in ctx.phasing.tables.items() if len(t)}
     assert given, "no phasing at all"
     for gear, t in given.items():
         assert np.all(np.isfinite(t.gamma)) and np.all(np.isfinite(t.time))
@@ -708,8 +708,8 @@ def test_gap_across_a_revolution_gives_no_onset_inside_and_finite_results(gap_ru
         # and the table says so
         assert any("bridged" in n or "dropped" in n for n in t.notes), t.notes
         assert not np.any((t.time >= GAP[0]) & (t.time < GAP[1]))
-        assert math.isfinite(ctx.results["compare"][gear]["vs_ideal"]["rms"])
-    ls = ctx.results["load_sharing"]
+        assert math.isfinite(ctx.compare.by_gear[gear].vs_ideal["rms"])
+    ls = ctx.load_sharing.sharing
     assert np.all(np.isfinite(ls.factors))
     _json_has_no_nan(ctx)
 
@@ -722,7 +722,7 @@ def test_gap_across_a_revolution_keeps_the_accuracy(gap_run):
     g = ctx.gearset
     et = np.asarray(truth.events["sun"].time)
     outside = np.count_nonzero((et < GAP[0] - 1.0) | (et > GAP[1] + 1.0))
-    assert len(ctx.results["onsets"]["by_channel"]["sun"]) >= 0.9 * outside
+    assert len(ctx.onsets.by_channel["sun"]) >= 0.9 * outside
     # with the fixes: sun 1.2e-3 (36 passes, 4 revolutions bridged), ring 2e-3
     assert truth_phasing_error(ctx, truth, "sun", g)["rms"] <= 5e-3
     assert truth_phasing_error(ctx, truth, "ring", g)["rms"] <= 1e-2

@@ -9,6 +9,8 @@ second).
 
 from __future__ import annotations
 
+import dataclasses
+
 import errno
 import json
 import os
@@ -316,7 +318,7 @@ def test_unreliable_phasing_exits_3_with_status_line(rig, tmp_path, monkeypatch,
     def flagged(ctx):
         original(ctx)
         reason = "sun gauge: the pass train does not follow one smooth speed; phasing not reliable"
-        ctx.results["phasing"]["reliability"]["sun"] = {"reliable": False, "reasons": [reason]}
+        ctx.phasing.reliability["sun"] = {"reliable": False, "reasons": [reason]}
         warnings.warn(reason, ProcessingWarning, stacklevel=2)
 
     monkeypatch.setitem(STAGE_FUNCTIONS, "phasing", flagged)
@@ -450,13 +452,16 @@ def test_usage_error_is_2():
 
 
 # --------------------------------------------------------------------------- helpers
-def _ctx(failed=None, ran=None, messages=None, results=None):
+def _ctx(failed=None, ran=None, messages=None, tables=None):
+    from meshphase.results import PhasingStage
     from meshphase.scene import parse_scene
 
     scene = parse_scene('results = ["tilt"]\n[bearing]\ncase = "1"\nk_tilt_Nm_per_rad = 1e6\n')
     ctx = RunContext(scene)
     ctx.failed, ctx.ran = dict(failed or {}), list(ran or [])
-    ctx.messages, ctx.results = list(messages or []), dict(results or {})
+    ctx.messages = list(messages or [])
+    if tables is not None:
+        ctx.record("phasing", PhasingStage(tables=tables))
     return ctx
 
 
@@ -495,15 +500,15 @@ def test_phasing_reliability_prefers_the_stage_key_and_falls_back_to_messages():
     assert phasing_reliability(_ctx()) == {}                         # nothing ran: nothing flagged
     msg = "phasing: ProcessingWarning: ring gauge: encoder misfit; phasing not reliable"
     ctx = _ctx(messages=[msg, "onsets: DataQualityWarning: sun gauge: aliased, not reliable"],
-               results={"phasing": {"tables": {"sun": [], "ring": []}}})
+               tables={"sun": [], "ring": []})
     assert phasing_reliability(ctx) == {
         "sun": {"reliable": True, "reasons": []},                    # DataQualityWarning: not ours
         "ring": {"reliable": False, "reasons": ["ring gauge: encoder misfit; phasing not reliable"]}}
     anon = _ctx(messages=["compare: ProcessingWarning: residuals not reliable"],
-                results={"phasing": {"tables": {"sun": []}}})
+                tables={"sun": []})
     assert phasing_reliability(anon)["sun"]["reliable"] is False
     given = {"sun": {"reliable": False, "reasons": ["from the stage"]}}
-    ctx.results["phasing"]["reliability"] = given                    # the rewritten stage's key wins
+    ctx.record("phasing", dataclasses.replace(ctx.phasing, reliability=given))  # the stage's key wins
     assert phasing_reliability(ctx) == given
     with pytest.raises(TypeError, match="RunContext"):
         phasing_reliability(object())

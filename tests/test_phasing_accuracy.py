@@ -46,11 +46,11 @@ def _check(case):
         # the target, with the floor printed next to the error in the message
         assert r["rms"] <= r["target"], (case.name, gear, r["rms"], r["floor"], r["model"])
         assert r["reliable"], (case.name, gear, res["ctx"].messages)
-    ph = res["ctx"].results["phasing"]
+    ph = res["ctx"].phasing
     if case.tacho:
         # the ring gauge sits on the held ring: planet 1 from the tacho (or from the pattern
         # itself when the planets are unequally spaced), and right
-        assert ph["assignment"]["ring"]["shift_decided_by"] in ("tacho", "pattern")
+        assert ph.assignment["ring"]["shift_decided_by"] in ("tacho", "pattern")
         assert res["gauges"]["ring"]["label_match"] == 1.0
     assert not [m for m in res["ctx"].messages if "not reliable" in m]
 
@@ -82,11 +82,11 @@ def test_uncertainty_is_calibrated_over_the_matrix():
 
 def test_without_a_tacho_labels_are_relative_and_said_once():
     res = run(PhasingCase("rig_ripple1", tacho=False))
-    ph = res["ctx"].results["phasing"]
-    assert ph["assignment"]["ring"]["shift_decided_by"] != "tacho"
+    ph = res["ctx"].phasing
+    assert ph.assignment["ring"]["shift_decided_by"] != "tacho"
     from meshphase.stages import summary_dict
 
     s = summary_dict(res["ctx"])
-    assert "relative" in s["phasing_labels"] or ph["labels_relative"] == []
+    assert "relative" in s["phasing_labels"] or ph.labels_relative == []
     # no warning about it on a clean run: one line in the summary is enough
     assert not [m for m in res["ctx"].messages if "planet 1" in m]

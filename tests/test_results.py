@@ -1,5 +1,5 @@
 """Typed stage results (meshphase.results) and the run context that holds them: one frozen
-dataclass per stage, the dict-of-dicts view of old, the phasing verdict."""
+dataclass per stage, the phasing verdict."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 
 from meshphase.phasing import GaugeLabels, PassTable, PhasingResult
 from meshphase.results import (RESULT_TYPES, CompareStage, GaugeComparison, IdentifyStage,
-                              LegacyResults, LoadSharingStage, LoadStage, PhasingStage,
+                              LoadSharingStage, PhasingStage,
                               StageResult, ToleranceStage, phasing_verdict)
 from meshphase.scene import STAGES, parse_scene
 from meshphase.stages import STAGE_FUNCTIONS, RunContext
@@ -56,18 +56,6 @@ def test_phasing_assignment_and_relabelled():
                                       "ambiguous": False}
 
 
-def test_legacy_shapes():
-    ph = _phasing()
-    old = ph.legacy()
-    assert list(old) == list(PhasingStage.LEGACY_KEYS)
-    ch, times, planet, amp, sigma = old["labels"]["ring"]     # the positional hand-off of old
-    assert ch == "r" and planet.tolist() == [0, 1, 2] and sigma is None
-    assert old["reliability"] is ph.reliability               # the result's own dict
-    assert LoadSharingStage(sharing=None).legacy() is None
-    ident = SimpleNamespace(table=[])
-    assert IdentifyStage(identification=ident).legacy() is ident
-
-
 def test_gauge_comparison_keys_follow_what_was_computed():
     row = GaugeComparison(ideal=np.zeros(2), model=None, vs_ideal={"rms": 0.0}, vs_model=None)
     assert list(row.as_dict()) == ["ideal", "model", "vs_ideal", "vs_model"]
@@ -77,8 +65,6 @@ def test_gauge_comparison_keys_follow_what_was_computed():
     assert scored.as_dict()["vs_truth"] is None
     cmp = CompareStage(by_gear={"sun": row})
     assert cmp.with_gauge("sun", banded).by_gear["sun"] is banded and cmp.by_gear["sun"] is row
-    back = CompareStage.from_legacy(CompareStage(by_gear={"sun": scored}).legacy())
-    assert back.by_gear["sun"].scored_against_truth
 
 
 def test_tolerance_band_is_ave_bound3_widened_by_half_the_upper_dev():
@@ -94,34 +80,21 @@ def test_tolerance_band_is_ave_bound3_widened_by_half_the_upper_dev():
     np.testing.assert_allclose([lo[0], hi[0]], [-2.0, 2.0])
 
 
-def test_from_legacy_bad_input():
-    with pytest.raises(TypeError, match="dict"):
-        PhasingStage.from_legacy([("tables", {})])
-    with pytest.raises(TypeError):
-        LoadStage.from_legacy({"truth": None})          # no recording: not a load result
-    assert PhasingStage.from_legacy({"tables": {}, "assignment": {}}).tables == {}   # derived keys ignored
-
-
-def test_run_context_records_typed_results_and_shows_the_old_shape():
+def test_run_context_records_typed_results():
     ctx = _ctx()
-    assert ctx.phasing is None and ctx.results == {} and len(ctx.results) == 0
+    assert ctx.phasing is None and ctx.result("phasing") is None
     ph = _phasing(error_estimate="3 passes")
     assert ctx.record("phasing", ph) is ph
-    assert ctx.phasing is ph and ctx.error_estimates == {"phasing": "3 passes"}
-    assert "phasing" in ctx.results and ctx.results["phasing"]["tables"] is ph.tables
+    assert ctx.phasing is ph and ctx.result("phasing") is ph
+    assert ctx.error_estimates == {"phasing": "3 passes"}
     # a stage that revises an earlier result: its revision replaces it
     revised = ph.relabelled("ring", PassTable.empty("ring"), _labels(decided="identification"))
     ctx.record("identify", IdentifyStage(identification=SimpleNamespace(), phasing=revised))
     assert ctx.phasing is revised
-    # the old way of writing a result still reads as a typed one
-    ctx.results["load_sharing"] = None
-    assert ctx.load_sharing is None
-    ctx.results = {"phasing": {"tables": {"sun": []}}}
-    ctx.results["phasing"]["reliability"] = {"sun": {"reliable": False, "reasons": ["x"]}}
-    assert isinstance(ctx.phasing, PhasingStage)
-    assert ctx.phasing.reliability == {"sun": {"reliable": False, "reasons": ["x"]}}
-    del ctx.results["phasing"]
-    assert ctx.phasing is None and isinstance(ctx.results, LegacyResults)
+    # results are typed only: no dict-shaped view to write around them
+    assert not hasattr(ctx, "results")
+    with pytest.raises(AttributeError):
+        ctx.phasing = ph
 
 
 def test_run_context_bad_input():
@@ -132,8 +105,6 @@ def test_run_context_bad_input():
         ctx.record("phasing", LoadSharingStage())
     with pytest.raises(KeyError):
         ctx.result("phasnig")                            # a mistyped stage is a bug
-    with pytest.raises(KeyError):
-        ctx.results["phasing"]
 
 
 def test_phasing_verdict_given_or_from_messages():

@@ -128,6 +128,7 @@ from meshphase.models.mesh_phasing import (ShaftHoleErrors, mesh_angle_deviation
                                           time_varying_phasing)
 from meshphase.models.tilt import solve_tilt
 from meshphase.models.tolerance import ToleranceBand, Tolerances, monte_carlo, table2_case
+from meshphase.results import LoadStage
 from meshphase.scene import parse_scene
 from meshphase.stages import STAGE_FUNCTIONS, run_scene
 from meshphase.synthetic import generate
@@ -322,7 +323,7 @@ def _moment_arrays(m):
 @pytest.mark.parametrize("case", ["1", "2-A", "2-B"])
 def test_tilt_sweep(case):
     geom = seed_case(case).geometry
-    sol = solve_tilt(geom, TORQUES[:, None], K_T[None, :])   # no ConvergenceWarning allowed
+    sol = solve_tilt(geom, TORQUES[:, None], k_tilt_Nm_per_rad=K_T[None, :])   # no ConvergenceWarning allowed
     b = sol.face_width
     assert sol.z.shape == (TORQUES.size, K_T.size, len(geom.mesh_names))
     assert np.all(sol.converged) and set(sol.method.ravel()) == {"newton"}
@@ -421,9 +422,9 @@ class _Run:
                        else truth.errors)
 
         def load(ctx):   # stages.stage_load, fed with the generated recording
-            ctx.results["load"] = {"recording": rec, "truth": truth,
-                                   "source": f"synthetic:{cfg.name}", "true_errors": true_errors,
-                                   "quality": rec.quality()}
+            return ctx.record("load", LoadStage(recording=rec, truth=truth,
+                                               source=f"synthetic:{cfg.name}",
+                                               true_errors=true_errors, quality=rec.quality()))
 
         orig = STAGE_FUNCTIONS["load"]
         STAGE_FUNCTIONS["load"] = load
@@ -434,11 +435,12 @@ class _Run:
 
     @property
     def tables(self):
-        return self.ctx.results.get("phasing", {}).get("tables", {})
+        return {} if self.ctx.phasing is None else self.ctx.phasing.tables
 
     def error(self, gear) -> float:
         """RMS phasing error against the synthetic truth [cycles] (NaN: not measurable)."""
-        vt = self.ctx.results.get("compare", {}).get(gear, {}).get("vs_truth")
+        cmp = self.ctx.compare
+        vt = None if cmp is None or gear not in cmp.by_gear else cmp.by_gear[gear].vs_truth
         return float(vt["rms"]) if vt else float("nan")
 
     def scatter(self, gear) -> float:
@@ -461,7 +463,7 @@ def _unwarned_problems(run: _Run) -> list[str]:
         probs = []
         tab = run.tables.get(gear)
         n_true = len(run.truth.events[gear].time)
-        n_on = len(run.ctx.results["onsets"]["by_channel"][gear])
+        n_on = len(run.ctx.onsets.by_channel[gear])
         if n_on < 0.5 * n_true:
             probs.append(f"{n_on} of {n_true} pulses detected")
         if tab is None or len(tab) == 0:
@@ -491,10 +493,11 @@ def _check_finite(run: _Run):
             assert np.all(np.isfinite(getattr(tab, name))), (gear, name)
         assert np.all((tab.gamma >= 0) & (tab.gamma < 1))
         assert np.all(tab.mesh_period > 0)
-    for gear, row in ctx.results["compare"].items():
+    for gear, row in ctx.compare.by_gear.items():
         for key in ("vs_ideal", "vs_model"):
-            assert math.isfinite(row[key]["rms"]) and 0 <= row[key]["rms"] <= 0.5, (gear, key)
-    ident = ctx.results["identify"]
+            rms = getattr(row, key)["rms"]
+            assert math.isfinite(rms) and 0 <= rms <= 0.5, (gear, key)
+    ident = ctx.identify.identification
     assert math.isfinite(ident.sigma) and ident.sigma > 0
     for row in ident.table:
         if row["identifiable"]:
@@ -532,7 +535,7 @@ def test_snr_sweep(snr):
         for v in run.tables[gear].summary().values():
             assert v["n"] >= 2 and math.isfinite(v["std"]) and v["std"] > 0   # std error > 0
     # planet offsets (truth: 0.2 mm each, Table 2 case 1) recovered within 4 standard errors
-    planets = [r for r in run.ctx.results["identify"].table if r["gear"].startswith("planet")]
+    planets = [r for r in run.ctx.identify.identification.table if r["gear"].startswith("planet")]
     assert len(planets) == 4
     for r in planets:
         assert r["identifiable"] and abs(r["e"] - 0.2e-3) <= 4 * r["e_std"] + 1e-5, r
@@ -547,10 +550,10 @@ def test_snr_sweep(snr):
 def test_snr_sweep_error_grows_as_snr_drops():
     runs = [_snr_run(s) for s in (40, 10, 0)]
     err = [r.error("sun") for r in runs]
-    sig = [r.ctx.results["identify"].sigma for r in runs]
+    sig = [r.ctx.identify.identification.sigma for r in runs]
     assert err[0] < err[1] < err[2]
     assert sig[0] < sig[1] < sig[2]
-    e_std = [max(x["e_std"] for x in r.ctx.results["identify"].table if x["identifiable"])
+    e_std = [max(x["e_std"] for x in r.ctx.identify.identification.table if x["identifiable"])
              for r in runs]
     assert e_std[0] < e_std[1] < e_std[2]
 
@@ -630,11 +633,11 @@ def test_speed_ramps(rate):
     # the only message allowed is the "not reliable" verdict, and only where it is true: a
     # flagged gauge's error exceeds 3x its timing floor (a 30-s record's 10 ring passes
     # under a 20 %/min ramp), an unflagged one's does not (x1.5 slack for the estimate)
-    rel = run.ctx.results["phasing"]["reliability"]
+    rel = run.ctx.phasing.reliability
     for m in run.messages():
         assert "phasing not reliable" in m, m
     for gear, r in rel.items():
-        floor = run.ctx.results["compare"][gear]["vs_truth"]["floor_rms"]
+        floor = run.ctx.compare.by_gear[gear].vs_truth["floor_rms"]
         if r["reliable"]:
             assert run.error(gear) <= 1.5 * 3 * floor, (gear, run.error(gear), floor)
         else:
@@ -666,7 +669,7 @@ def test_time_offset_1e6_s():
     a, b = _t0_run(0.0), _t0_run(1e6)
     assert b.rec.t0 == 1e6
     for gear in ("sun", "ring"):
-        oa, ob = (r.ctx.results["onsets"]["by_channel"][gear] for r in (a, b))
+        oa, ob = (r.ctx.onsets.by_channel[gear] for r in (a, b))
         assert len(oa) == len(ob) > 0
         # t0 + index / fs with the same index: equal to the 1.16e-10 s ulp of 1e6 s
         np.testing.assert_allclose(ob.times - 1e6, oa.times, rtol=0, atol=1.2e-10)
@@ -678,8 +681,8 @@ def test_time_offset_1e6_s():
         assert np.max(np.abs(wrap(ta.gamma - tb.gamma))) <= 3.3e-9
         np.testing.assert_allclose(tb.mesh_period, ta.mesh_period, rtol=1e-9)
         for key in ("vs_ideal", "vs_truth"):
-            assert abs(a.ctx.results["compare"][gear][key]["rms"]
-                       - b.ctx.results["compare"][gear][key]["rms"]) <= 3.3e-9
+            assert abs(getattr(a.ctx.compare.by_gear[gear], key)["rms"]
+                       - getattr(b.ctx.compare.by_gear[gear], key)["rms"]) <= 3.3e-9
 
 
 def test_time_offset_1e6_s_identifies():
@@ -688,5 +691,5 @@ def test_time_offset_1e6_s_identifies():
     assert "identify" in b.ctx.ran, b.ctx.failed
     # the time axis at 1e6 s carries 1.2e-10 s ulps (4 ulp = 3.3e-9 cycles of phasing); the
     # weighted fit's residual sigma follows to ~1e-6 relative, 1e-4 leaves margin
-    assert b.ctx.results["identify"].sigma == pytest.approx(a.ctx.results["identify"].sigma,
+    assert b.ctx.identify.identification.sigma == pytest.approx(a.ctx.identify.identification.sigma,
                                                             rel=1e-4)

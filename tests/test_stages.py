@@ -64,22 +64,22 @@ def test_rig_run_ran_the_planned_stages_in_order(rig_run):
     assert all(ctx.error_estimates.get(s) for s in ctx.ran)
     # the symmetric 4-planet layout of a differential rig (no held member: the tacho cannot
     # name planet 1): the labels are relative, said once in the summary, not warned each run
-    assert set(ctx.results["phasing"]["labels_relative"]) >= {"ring"}
+    assert set(ctx.phasing.labels_relative) >= {"ring"}
     assert not any("planet 1" in m for m in ctx.messages)
 
 
 def test_rig_compare_uses_the_identified_model_and_the_band(rig_run):
     # regression: compare once ran before identify/tolerance and silently had neither
     ctx, _, _ = rig_run
-    cmp = ctx.results["compare"]
+    cmp = ctx.compare.by_gear
     assert set(cmp) == {"sun", "ring"}
     for gear, c in cmp.items():
-        assert c["vs_model"] is not None, gear
-        assert c["model"] is not None and len(c["model"]) == len(ctx.results["phasing"]["tables"][gear])
-        assert 0.0 <= c["coverage"]["inside_fraction"] <= 1.0
-        assert np.all(np.asarray(c["band"]["lo"]) <= np.asarray(c["band"]["hi"]))
+        assert c.vs_model is not None, gear
+        assert c.model is not None and len(c.model) == len(ctx.phasing.tables[gear])
+        assert 0.0 <= c.coverage["inside_fraction"] <= 1.0
+        assert np.all(np.asarray(c.band["lo"]) <= np.asarray(c.band["hi"]))
         # the synthetic truth is there, so the measurement error is reported as well
-        assert c["vs_truth"] is not None and math.isfinite(c["vs_truth"]["rms"])
+        assert c.vs_truth is not None and math.isfinite(c.vs_truth["rms"])
 
 
 def test_rig_outputs(rig_run):
@@ -99,7 +99,7 @@ def test_rig_outputs(rig_run):
 
     sun = pd.read_csv(out / "passes_sun.csv")
     assert {"time_s", "planet", "gamma", "gamma_ideal", "gamma_model"} <= set(sun.columns)
-    assert len(sun) == len(ctx.results["phasing"]["tables"]["sun"])
+    assert len(sun) == len(ctx.phasing.tables["sun"])
     ls = pd.read_csv(out / "load_sharing.csv")
     assert list(ls["planet"]) == [1, 2, 3, 4]
     stages = pd.read_csv(out / "stages.csv")
@@ -107,7 +107,7 @@ def test_rig_outputs(rig_run):
     assert (stages["status"] == "ran").all()
 
     with h5py.File(out / "arrays.h5", "r") as f:
-        for ch, o in ctx.results["onsets"]["by_channel"].items():
+        for ch, o in ctx.onsets.by_channel.items():
             np.testing.assert_array_equal(f[f"onsets/{ch}/times"][()], o.times)
         assert "monte_carlo" in f
 
@@ -130,10 +130,10 @@ def test_bearing_scene_opens_no_recording(tmp_path, monkeypatch):
     monkeypatch.setattr("meshphase.synthetic.generate", _fail("meshphase.synthetic.generate"))
     ctx = run_scene(scene)
     assert ctx.ran == ["bearing_moments", "tilt"]
-    assert "load" not in ctx.ran and "load" not in ctx.results and ctx.failed == {}
+    assert "load" not in ctx.ran and ctx.load is None and ctx.failed == {}
     files = write_outputs(ctx, new_output_dir(tmp_path / "out"), report=False)
     assert "recording" not in json.loads(files["summary"].read_text())
-    (k, sol), = ctx.results["tilt"]["solutions"]
+    (k, sol), = ctx.tilt.solutions
     assert k == 8.8e4 and bool(np.all(sol.converged))
 
 
@@ -142,7 +142,7 @@ def test_scene_without_face_width_gauges_does_no_centroid_work(tmp_path, monkeyp
     scene = parse_scene('results = ["centroids"]\n[input]\nsynthetic = "seed_rig"\n'
                         'minutes = 0.25\n', tmp_path / "c.toml")
     ctx = run_scene(scene)
-    assert "centroids" not in ctx.ran and "centroids" not in ctx.results
+    assert "centroids" not in ctx.ran and ctx.centroids is None
     assert ctx.failed["centroids"].startswith("skipped")
     assert ctx.ran == ["load", "condition", "onsets"]
 
@@ -155,7 +155,7 @@ def test_face_width_centroids_recovered():
                         'minutes = 0.5\nseed = 3\n')
     ctx = run_scene(scene)
     assert ctx.ran == ["load", "condition", "onsets", "centroids"]
-    cen = ctx.results["centroids"]
+    cen = ctx.centroids.by_gear
     assert cen["sun"].centroid == pytest.approx(-2e-3, abs=0.1e-3)
     assert cen["ring"].centroid == pytest.approx(3e-3, abs=0.3e-3)
     assert "Z =" in ctx.error_estimates["centroids"]
@@ -168,10 +168,10 @@ def test_example_tolerance_study_runs_monte_carlo_only(tmp_path):
                         EXAMPLES / "tolerance_study.toml")
     ctx = run_scene(scene)
     assert ctx.ran == ["ideal", "tolerance"] and ctx.failed == {}
-    mc = ctx.results["tolerance"]
+    mc = ctx.tolerance.monte_carlo
     assert mc.n_samples == 1000 and mc.sampler == "random"
     # seed 000 Table 1 gearset (Z 25/87, 4 planets equally spaced): ideal gamma = n/4 exactly
-    np.testing.assert_allclose(ctx.results["ideal"]["gamma_s"], [0, 0.25, 0.5, 0.75], atol=1e-12)
+    np.testing.assert_allclose(ctx.ideal.gamma_s, [0, 0.25, 0.5, 0.75], atol=1e-12)
     files = write_outputs(ctx, new_output_dir(tmp_path / "tol"), report=False)
     with h5py.File(files["arrays"], "r") as f:
         assert "onsets" not in f
@@ -183,7 +183,7 @@ def test_example_bearing_scenes_run(name, cases, monkeypatch):
     monkeypatch.setattr(meshphase.stages, "monte_carlo", _fail("monte_carlo"))
     ctx = run_scene(load_scene(EXAMPLES / name))
     assert ctx.ran == ["bearing_moments", "tilt"] and ctx.failed == {}
-    sols = ctx.results["tilt"]["solutions"]
+    sols = ctx.tilt.solutions
     assert len(sols) == cases
     assert all(bool(np.all(s.converged)) for _, s in sols)
 
@@ -193,7 +193,7 @@ def test_bearing_case1_matches_gsam_rigid_row():
     # concentrated loads gives 264 N·m (regression value 264.28; the seed's own theory column
     # is within 2 % of GSAM GA), so 3 % holds both.
     ctx = run_scene(load_scene(EXAMPLES / "bearing_moments.toml"))
-    my = float(np.ravel(ctx.results["bearing_moments"]["concentrated"].my)[0])
+    my = float(np.ravel(ctx.bearing_moments.concentrated.my)[0])
     assert my == pytest.approx(260.0, rel=0.03)
 
 
@@ -220,7 +220,7 @@ def test_failed_load_skips_dependents_and_the_rest_runs(tmp_path):
 def test_empty_scene_runs_nothing_and_writes_outputs(tmp_path):
     # built in code: an empty scene *file* is refused up front (tests/test_scene_checks.py)
     ctx = run_scene(Scene(path=None, name="empty", results=[]))
-    assert ctx.ran == [] and ctx.results == {} and ctx.failed == {}
+    assert ctx.ran == [] and not any(ctx.result(n) for n in STAGE_FUNCTIONS) and ctx.failed == {}
     files = write_outputs(ctx, new_output_dir(tmp_path / "e"), report=True)
     assert json.loads(files["summary"].read_text())["stages_ran"] == []
     assert "Error against run time" in files["report"].read_text(encoding="utf-8")
@@ -258,7 +258,7 @@ def test_a_stage_out_of_order_says_what_it_needs():
     for name in ("condition", "onsets", "phasing", "load_sharing", "centroids", "identify", "compare"):
         with pytest.raises(RuntimeError, match="did not run"):
             STAGE_FUNCTIONS[name](ctx)
-    assert ctx.results == {} and ctx.error_estimates == {}
+    assert not any(ctx.result(n) for n in STAGE_FUNCTIONS) and ctx.error_estimates == {}
 
 
 def test_stages_give_typed_results(rig_run):
@@ -269,7 +269,7 @@ def test_stages_give_typed_results(rig_run):
     assert isinstance(ctx.phasing, PhasingStage)
     assert set(ctx.phasing.labels) == {"sun", "ring"}
     assert ctx.phasing.labels["ring"].channel == "ring"
-    assert ctx.results["phasing"]["assignment"] == ctx.phasing.assignment
+    assert ctx.phasing.assignment == ctx.phasing.assignment
 
 
 def test_identify_relabelling_supersedes_the_phasing(rig_run, monkeypatch):
@@ -346,7 +346,7 @@ def test_process_recording_writes_next_to_input_without_monte_carlo(seed_rig_fil
     monkeypatch.setattr(meshphase.stages, "monte_carlo", _fail("monte_carlo"))
     before = path.read_bytes()
     ctx, files = process_recording(path, gs)
-    assert "tolerance" not in ctx.ran and "tolerance" not in ctx.results
+    assert "tolerance" not in ctx.ran and ctx.tolerance is None
     assert {"load", "phasing", "load_sharing", "identify", "compare"} <= set(ctx.ran)
     assert ctx.failed == {}
     out = path.with_name("run-meshphase")

@@ -73,7 +73,7 @@ def per_pass_errors(ctx, truth: R.RigTruth, gear: str) -> dict:
     cfg = R.RigConfig.from_dict(truth.config)
     rig = R.Rig(cfg)
     names = {c["kind"]: c["name"] for c in truth.channels}
-    tab = ctx.results["phasing"]["tables"][gear]
+    tab = ctx.phasing.tables[gear]
     eng = truth.engagements[names[gear]]
     et, epl = np.asarray(eng["t"]), np.asarray(eng["planet"])
 
@@ -121,10 +121,10 @@ def check(ctx, truth):
         target = max(TARGET_ABS, TARGET_RATIO * e["floor"])
         assert e["n"] >= 15
         assert e["rms"] <= target, (gear, e["rms"], e["floor"])
-    ph = ctx.results["phasing"]
-    assert ph["fixed"] == "ring"
+    ph = ctx.phasing
+    assert ph.fixed == "ring"
     if truth.tacho:
-        assert ph["assignment"]["ring"]["shift_decided_by"] == "tacho"
+        assert ph.assignment["ring"]["shift_decided_by"] == "tacho"
         assert per_pass_errors(ctx, truth, "ring")["labels"] == 1.0
 
 
@@ -159,8 +159,8 @@ def test_tdms_and_csv_of_one_recording_give_the_same_phasing(files, tmp_path):
         scene.write_text(scene_text(truth, path), encoding="utf-8")
         out[label] = run_scene(parse_scene(scene.read_text(encoding="utf-8"), scene))
     for gear in ("sun", "ring"):
-        a = out["tdms"].results["phasing"]["tables"][gear]
-        b = out["csv"].results["phasing"]["tables"][gear]
+        a = out["tdms"].phasing.tables[gear]
+        b = out["csv"].phasing.tables[gear]
         assert len(a) == len(b)
         d = (a.gamma - b.gamma + 0.5) % 1.0 - 0.5
         assert np.max(np.abs(d)) < 1e-7

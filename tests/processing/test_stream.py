@@ -532,13 +532,13 @@ def test_long_synthetic_scene_streams_from_the_generator(monkeypatch):
         whole = stages.run_scene(parse_scene(text))
         monkeypatch.setattr(stages, "SYNTHETIC_WHOLE_BYTES", 0)
         gen = stages.run_scene(parse_scene(text))
-    assert isinstance(gen.results["load"]["stream"], GeneratorSource)
-    assert isinstance(whole.results["load"]["stream"], MemorySource)
-    assert gen.results["load"]["recording"].history[-1]["step"] == "channel_overrides"
-    assert whole.results["load"]["quality"] == gen.results["load"]["quality"]
-    assert len(whole.results["condition"]["onsets"]["sun"]) > 3
-    for ch, on in whole.results["condition"]["onsets"].items():
-        other = gen.results["condition"]["onsets"][ch]
+    assert isinstance(gen.load.stream, GeneratorSource)
+    assert isinstance(whole.load.stream, MemorySource)
+    assert gen.load.recording.history[-1]["step"] == "channel_overrides"
+    assert whole.load.quality == gen.load.quality
+    assert len(whole.condition.onsets["sun"]) > 3
+    for ch, on in whole.condition.onsets.items():
+        other = gen.condition.onsets[ch]
         assert len(on) == len(other)
         # same samples, same blocks: equal up to float rounding of the summation order
         np.testing.assert_allclose(on.times, other.times, rtol=0, atol=1e-9 / 5120)
