@@ -641,7 +641,7 @@ def stage_tilt(ctx: RunContext) -> TiltStage:
     """The coupled tilt / load-distribution solve at each of the scene's tilt stiffnesses."""
     b = ctx.scene.bearing
     case, torque = _bearing_case(ctx)
-    sols = [(k, solve_tilt(case.geometry, torque, k, c_g=b["c_g"])) for k in b["k_tilt"]]
+    sols = [(k, solve_tilt(case.geometry, torque, k_tilt_Nm_per_rad=k, c_g=b["c_g"])) for k in b["k_tilt"]]
     res = max(float(np.max(s.residual)) for _, s in sols)
     its = max(int(np.max(s.iterations)) for _, s in sols)
     return TiltStage(case=case, torque=torque, solutions=sols,

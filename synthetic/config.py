@@ -179,7 +179,8 @@ class TiltSource:
         """The TiltSolution for face width ``face_width`` [m]."""
         c = seed_case(self.case)
         torque = c.input_torque if self.input_torque is None else self.input_torque
-        return solve_tilt(c.geometry, torque, self.k_tilt, c_g=self.c_g, face_width=face_width)
+        return solve_tilt(c.geometry, torque, k_tilt_Nm_per_rad=self.k_tilt, c_g=self.c_g,
+                          face_width=face_width)
 
     def to_dict(self) -> dict:
         return {"case": self.case, "k_tilt": self.k_tilt, "input_torque": self.input_torque,

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import brentq
 
-from ..errors import ConvergenceWarning
+from ..errors import ConvergenceWarning, ModelWarning
 from ..log import logger
 from ..validate import as_choice, as_nonnegative, as_positive, as_positive_int
 from .bearing import (
@@ -683,6 +683,12 @@ def solve_tilt(geom, input_torque, k_tilt=None, c_g=None, face_width=None,
     return _tilt_solution(geom, sysm, t, k, basis, z, theta_u, iters, res, converged, method)
 
 
+#: a finite tilting stiffness at or above this, given as the unit-less ``k_tilt``, is taken
+#: for a catalogue N·mm/rad value and warned about [N·m/rad]: seed 001's stiffest bearing
+#: (GA) is 8.8e6 N·m/rad
+K_TILT_SUSPECT = 1e7
+
+
 def _k_tilt_si(k_tilt, k_tilt_Nm_per_rad, k_tilt_Nmm_per_rad):
     """The one tilting stiffness given, in [N·m/rad] (TypeError for none or several)."""
     given = {name: v for name, v in (("k_tilt", k_tilt), ("k_tilt_Nm_per_rad", k_tilt_Nm_per_rad),
@@ -694,6 +700,14 @@ def _k_tilt_si(k_tilt, k_tilt_Nm_per_rad, k_tilt_Nmm_per_rad):
                         f"{sorted(given) or 'none'}")
     (name, value), = given.items()
     k = _k_array(value, name)
+    if name == "k_tilt" and np.any(np.isfinite(k) & (k >= K_TILT_SUSPECT)):
+        # the unit-less name is the one a catalogue value in N·mm/rad slips into: 1000x
+        # too stiff, and the answer looks plausible. The unit-named keywords never warn.
+        warnings.warn(f"k_tilt={float(np.max(k[np.isfinite(k)])):.4g} N·m/rad is stiffer than "
+                      f"any planet needle bearing (seed 001's stiffest, GA: 8.8e6 N·m/rad); a "
+                      "bearing catalogue's N·mm/rad value goes in k_tilt_Nmm_per_rad. Give "
+                      "k_tilt_Nm_per_rad to state the unit (np.inf: a rigid bearing)",
+                      ModelWarning, stacklevel=4)
     return k * _NMM if name == "k_tilt_Nmm_per_rad" else k
 
 
@@ -942,10 +956,10 @@ def compare_gsam(c_g=C_G_DEFAULT, load_basis: str = "normal") -> tuple:
     c2 = seed_case("2-B")
     out = []
     for case in table10_cases():
-        out.append((case, solve_tilt(c1.geometry, c1.input_torque, case.k_tilt,
-                                     c_g=cg * case.c_g_scale, load_basis=basis)))
+        out.append((case, solve_tilt(c1.geometry, c1.input_torque,
+                                     k_tilt_Nm_per_rad=case.k_tilt, c_g=cg * case.c_g_scale, load_basis=basis)))
     for case in table11_cases():
-        out.append((case, solve_tilt(c2.geometry, c2.input_torque, case.k_tilt, c_g=cg,
+        out.append((case, solve_tilt(c2.geometry, c2.input_torque, k_tilt_Nm_per_rad=case.k_tilt, c_g=cg,
                                      load_basis=basis)))
     return tuple(out)
 

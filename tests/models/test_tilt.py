@@ -1,6 +1,7 @@
 """Tests of meshphase.models.tilt (spec section 5; seed 001 Tables 10 and 11)."""
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -8,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import quad
 
-from meshphase.errors import ConvergenceWarning
+from meshphase.errors import ConvergenceWarning, ModelWarning
 from meshphase.models import tilt
 from meshphase.models.bearing import SinglePinion, seed_case, single_pinion_moments
 from meshphase.models.tilt import (
@@ -110,7 +111,7 @@ TORQUES = np.array([1e-3, 1.0, 1378.7, 1e5])[:, None]     # N·m
 
 
 def test_converges_over_stiffness_and_torque_range(case1):
-    sol = solve_tilt(case1.geometry, TORQUES, K_RANGE)
+    sol = solve_tilt(case1.geometry, TORQUES, k_tilt_Nm_per_rad=K_RANGE)
     assert sol.z.shape == (4, 41, 2)
     assert np.all(sol.converged)
     assert np.all(sol.residual <= 1e-12 * np.abs(sol.z).max(axis=-1))
@@ -124,7 +125,7 @@ def test_converges_over_stiffness_and_torque_range(case1):
 
 
 def test_converges_for_the_double_pinion(case2b):
-    sol = solve_tilt(case2b.geometry, 1378.7, K_RANGE)
+    sol = solve_tilt(case2b.geometry, 1378.7, k_tilt_Nm_per_rad=K_RANGE)
     assert np.all(sol.converged) and sol.iterations.max() <= 10
     assert sol.z.shape == (41, 3)
     # seed: the SP-RP mesh stays reasonably centred while sun-SP and RP-ring run off
@@ -187,7 +188,7 @@ def test_rigid_limit(case1):
     # seed Table 3: My 264.3 N·m at the rigid solution
     assert float(rigid.moments.my) == pytest.approx(264.3, abs=0.3)
     # |Z| ~ 1/k: k Z converges as k grows
-    stiff = solve_tilt(g, t, [1e10, 1e11, 1e12])
+    stiff = solve_tilt(g, t, k_tilt_Nm_per_rad=[1e10, 1e11, 1e12])
     kz = stiff.z * np.array([1e10, 1e11, 1e12])[:, None]
     np.testing.assert_allclose(kz[2], kz[1], rtol=1e-5)
     assert np.all(np.abs(stiff.z[2]) < 1e-9)
@@ -238,7 +239,7 @@ def test_edge_limit_with_an_interior_mesh(case2b):
 def test_stiffness_sweep_is_continuous_and_monotonic(case1):
     g, t = case1.geometry, case1.input_torque
     ks = np.logspace(-2, 12, 281)
-    sol = solve_tilt(g, t, ks)
+    sol = solve_tilt(g, t, k_tilt_Nm_per_rad=ks)
     zs, zr = sol.z[:, 0], sol.z[:, 1]
     m = sol.moments
     # monotonic trends as the bearing stiffens: offsets shrink, My and |M_LOA| recover,
@@ -265,7 +266,7 @@ def test_stiffness_sweep_is_continuous_and_monotonic(case1):
 def test_random_single_pinions_converge(phi1, phi2, b1, b2, ratio, logk, b, logcg):
     g = SinglePinion(r_sun=0.03, r_ps=0.02, r_pr=0.02 * ratio, phi_1=phi1, phi_2=phi2,
                      helix_1=b1, helix_2=b2, n_planets=3, face_width=b)
-    sol = solve_tilt(g, 500.0, 10 ** logk, c_g=10 ** logcg)
+    sol = solve_tilt(g, 500.0, k_tilt_Nm_per_rad=10 ** logk, c_g=10 ** logcg)
     assert bool(sol.converged)
     assert np.all(np.abs(sol.z) < b / 2)
     # each centroid sits where its own misalignment pushes it
@@ -503,3 +504,21 @@ def test_tilt_scalars_are_floats_and_moment_names_agree():
         assert m.m_loa_sun == m.loa_of(m.loa_names[0])
     # batches stay arrays
     assert solve_tilt(c1.geometry, c1.input_torque, [8.8e4, 8.8e3]).residual.shape == (2,)
+
+
+def test_catalogue_value_under_the_unitless_name_warns():
+    # the 1000x trap: a bearing catalogue prints 8.8e7 N·mm/rad (seed 001 GB); given as the
+    # unit-less k_tilt it would be read as 8.8e7 N·m/rad, stiffer than any needle bearing
+    c = seed_case("1")
+    with pytest.warns(ModelWarning, match="k_tilt_Nmm_per_rad"):
+        trap = solve_tilt(c.geometry, c.input_torque, 8.8e7)
+    assert trap.k_tilt == pytest.approx(8.8e7)             # still computed as given
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                     # the unit-named spellings are silent
+        right = solve_tilt(c.geometry, c.input_torque, k_tilt_Nmm_per_rad=8.8e7)
+        solve_tilt(c.geometry, c.input_torque, k_tilt_Nm_per_rad=8.8e7)
+        solve_tilt(c.geometry, c.input_torque, np.inf)    # the rigid limit, said explicitly
+        solve_tilt(c.geometry, c.input_torque, 8.8e6)     # GA, the stiffest seed bearing
+    assert right.k_tilt == pytest.approx(8.8e4)
+    with pytest.warns(ModelWarning, match="1e\\+07|1e\\+10"):
+        solve_tilt(c.geometry, c.input_torque, [1e3, 1e10, np.inf])   # the largest finite named
