@@ -30,7 +30,6 @@ runs a corpus of faulty inputs and outputs through this boundary.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import errno
 import json
 import logging
@@ -41,21 +40,18 @@ import time
 import warnings
 from pathlib import Path
 
-import numpy as np
 from tqdm import tqdm
 
 from . import __version__
-from .bench import rss_summary, run_bench
 from .campaign import cli_campaign
 from .demo import demo_scene_path
 from .errors import DataQualityWarning
 from .exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_PIPE, OutputDir, recording_read_errors,
                     run_status, status_line)
 from .heap import limit_heap_growth
-from .io import detect_format, iter_blocks, read_info, write_blocks
+from .io import convert, detect_format, iter_blocks, read_info
 from .log import logger
 from .quality import channel_quality
-from .recording import Recording
 from .scene import SceneError, load_scene
 from .stages import process_recording, run_scene, summary_dict, write_outputs
 from .validate import as_regular_file
@@ -138,41 +134,14 @@ def cmd_info(args) -> int:
 
 # ---------------------------------------------------------------------------- convert
 def cmd_convert(args) -> int:
-    src, dst = as_regular_file(args.input, "the input recording"), Path(args.output)
-    with recording_read_errors(src):
-        fmt = detect_format(src)
-        info = read_info(src, format=fmt)
-    # streamed: each block read is written at once (flat memory: one block plus the writer's
-    # chunk buffer), the output published atomically when complete
-    history = Recording(np.empty((0, len(info.channels))), info.fs, info.channels,
-                        history=info.history).with_history(
-        "convert", source=str(src), source_format=fmt).history
-    header = dataclasses.replace(info, history=history)
-    # 2**18 samples per channel per block: 16 MB of 8 float64 channels
-    blocks = iter_blocks(src, 2**18 / info.fs, format=fmt)
-    first = None
-    with recording_read_errors(src):
-        first = next(blocks, None)
-    dtype = first.data.dtype if first is not None else np.dtype(np.float64)
-
-    def data():
-        with _progress(info.n_samples, f"{fmt} -> {args.format or dst.suffix.lstrip('.')}",
-                       not args.quiet) as bar, recording_read_errors(src):
-            if first is not None:
-                yield first.data
-                bar.update(first.n_samples)
-            for block in blocks:
-                yield block.data
-                bar.update(block.n_samples)
-
-    options = {}
-    if args.compression:
-        options["compression"] = args.compression
-    out = write_blocks(header, data(), dst, format=args.format, dtype=dtype,
-                       overwrite=args.overwrite, **options)
-    logger.info("wrote %s", out)
+    src = as_regular_file(args.input, "the input recording")
+    options = {"compression": args.compression} if args.compression else {}
+    done = convert(src, args.output, format=args.format, overwrite=args.overwrite,
+                   progress=lambda total, desc: _progress(total, desc, not args.quiet), **options)
+    logger.info("wrote %s", done.path)
     if not args.quiet:
-        print(f"{src} ({fmt}) -> {out} ({info.n_samples} samples x {len(info.channels)} channels)")
+        print(f"{src} ({done.source_format}) -> {done.path} ({done.n_samples} samples x "
+              f"{done.n_channels} channels)")
     return 0
 
 
@@ -197,6 +166,10 @@ def cmd_synth(args) -> int:
 
 # ---------------------------------------------------------------------------- bench
 def cmd_bench(args) -> int:
+    # bench drives the CLI's own commands (bench.rss runs `convert` through main), so it is
+    # imported here, not at the top: cli -> bench only when benchmarking, no import loop
+    from .bench import rss_summary, run_bench
+
     out = Path(args.out)
     res = run_bench(args.what, out, minutes=args.minutes, quick=args.quick,
                     rss_minutes=args.rss_minutes)

@@ -47,19 +47,19 @@ import stat
 import time
 from collections import OrderedDict
 from pathlib import Path
-from typing import Iterator
 
 # one definition of "this host" and "that writer is gone" for the temp files and the
 # output folders (a process under another user counts as alive: not ours to recover)
 from . import __version__
-from .io import RecordingFileError, atomic_path
+from .io import atomic_path
+from .io.base import recording_read_errors  # noqa: F401 (public here too)
 from .io.base import _host_tag, _pid_alive
 from .log import logger
 from .results import phasing_verdict
 
 __all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_USAGE", "EXIT_PARTIAL", "EXIT_INTERRUPTED",
            "EXIT_PIPE", "BENIGN_SKIPS", "RESULT_OF_STAGE", "run_status", "status_line",
-           "OutputDir", "recording_read_errors", "foreign_entries", "recover_output_dirs",
+           "OutputDir", "new_output_dir", "recording_read_errors", "foreign_entries", "recover_output_dirs",
            "published_path", "remove_partial", "MANIFEST_NAME", "PARTIAL_SUFFIX", "STALE_DIR_AGE"]
 
 EXIT_OK = 0
@@ -546,11 +546,26 @@ def published_path(path) -> Path:
     return p
 
 
+def new_output_dir(base: Path, *, overwrite: bool = False) -> Path:
+    """``base`` if it does not exist (or ``overwrite``), else ``base-2``, ``base-3``, ...:
+    a run never overwrites an earlier one unless asked."""
+    base = Path(base)
+    if overwrite or not base.exists():
+        base.mkdir(parents=True, exist_ok=True)
+        return base
+    i = 2
+    while Path(f"{base}-{i}").exists():
+        i += 1
+    out = Path(f"{base}-{i}")
+    out.mkdir(parents=True)
+    return out
+
+
 class OutputDir:
     """A run's output folder, written whole or not at all.
 
     ``with OutputDir(base, overwrite=...) as out:`` reserves the output folder up front (as
-    :func:`meshphase.stages.new_output_dir` does: ``base``, else ``base-2``, ...; with
+    :func:`new_output_dir` does: ``base``, else ``base-2``, ...; with
     ``overwrite`` an existing ``base``), so an unwritable location fails in a second, not
     after the processing. The run writes into ``out.path``: a new, empty staging folder beside
     it with a short name (``.mp-<host>-<pid>-<hex>.new``) - always with ``overwrite`` or
@@ -616,8 +631,6 @@ class OutputDir:
         self._state = "new"
 
     def __enter__(self) -> "OutputDir":
-        from . import stages  # here, not above: stages imports this module
-
         base = self.base
         if os.path.islink(base):
             raise _link_error(base)
@@ -643,7 +656,7 @@ class OutputDir:
             self.final = base
             self._snapshot = _identity(base)
         else:
-            self.final = Path(stages.new_output_dir(base, overwrite=self.overwrite))
+            self.final = Path(new_output_dir(base, overwrite=self.overwrite))
             self._reserved = True
         if self.staged is False and not self._reserved:
             raise ValueError(f"{base}: replacing an existing folder needs a staging folder (staged=False "
@@ -776,31 +789,3 @@ class OutputDir:
             with contextlib.suppress(OSError):
                 os.rmdir(self.final)  # only when empty: never deletes anything else
         self._state = "discarded"
-
-
-@contextlib.contextmanager
-def recording_read_errors(path) -> Iterator[None]:
-    """Turn the HDF5 library's errors while reading ``path`` into a RecordingFileError.
-
-    h5py reports HDF5 failures as ``OSError`` without an errno ("Can't synchronously read
-    data (filter returned failure during read)"), ``RuntimeError`` ("Special link traversal
-    failed (too many links)": a soft-link loop) or ``KeyError`` ("Unable to open object");
-    none names the file. OS errors with an errno pass through: unchanged when they carry a
-    file name (permission, ...), with ``path`` as their file name when they do not (EIO
-    from ``read()``).
-    """
-    try:
-        yield
-    except RecordingFileError:
-        raise
-    except OSError as exc:
-        if exc.errno is not None and exc.filename is None:
-            # read() errors (EIO from a failing disk or /proc/self/mem) carry no file name
-            raise type(exc)(exc.errno, exc.strerror, str(path)) from exc
-        if exc.errno is not None or type(exc) is not OSError:  # ours name the file already
-            raise
-        raise RecordingFileError(path, f"read error, file corrupt? ({exc})") from exc
-    except RuntimeError as exc:
-        raise RecordingFileError(path, f"read error ({exc})") from exc
-    except KeyError as exc:
-        raise RecordingFileError(path, f"read error ({exc.args[0] if exc.args else exc})") from exc

@@ -1,6 +1,7 @@
 """What a run writes: the machine-readable summary (summary.json), the CSV tables, the
 arrays (arrays.h5) and the HTML report, from the run context's typed stage results
-(:mod:`meshphase.results`); the output folder a run writes into (:func:`new_output_dir`).
+(:mod:`meshphase.results`). The output folder a run writes into is
+:func:`meshphase.exits.new_output_dir`'s (re-exported here and from :mod:`meshphase.stages`).
 
 ``summary.json`` keys: scene, status, missing_results, phasing_reliability,
 results_requested, stages_ran, stages_failed, timings_s, error_estimates, messages,
@@ -16,26 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .exits import run_status
+from .exits import new_output_dir, run_status
 from .jsonable import to_jsonable
 from .results import PhasingStage, RunContext, phasing_verdict
 
 __all__ = ["new_output_dir", "summary_dict", "write_outputs"]
-
-
-def new_output_dir(base: Path, *, overwrite: bool = False) -> Path:
-    """``base`` if it does not exist (or ``overwrite``), else ``base-2``, ``base-3``, ...:
-    a run never overwrites an earlier one unless asked."""
-    base = Path(base)
-    if overwrite or not base.exists():
-        base.mkdir(parents=True, exist_ok=True)
-        return base
-    i = 2
-    while Path(f"{base}-{i}").exists():
-        i += 1
-    out = Path(f"{base}-{i}")
-    out.mkdir(parents=True)
-    return out
 
 
 def summary_dict(ctx: RunContext) -> dict:

@@ -24,6 +24,7 @@ import pytest
 from seed_rig_toml import SEED_RIG_GEARSET
 
 import meshphase.io
+import meshphase.exits
 import meshphase.stages
 from meshphase import cli
 from meshphase.campaign import phasing_reliability
@@ -212,7 +213,7 @@ def test_permission_denied_output_folder_injected_exits_1(rig, tmp_path, monkeyp
     def denied(base, *, overwrite=False):
         raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(base))
 
-    monkeypatch.setattr(meshphase.stages, "new_output_dir", denied)
+    monkeypatch.setattr(meshphase.exits, "new_output_dir", denied)
     out = tmp_path / "locked" / "out"
     assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
                  "--out", str(out)]) == EXIT_ERROR

@@ -29,7 +29,7 @@ from ..recording import Recording
 from ..validate import as_nonnegative, as_positive
 from .base import CorruptFileError, RecordingFileError, RecordingInfo, atomic_path, clean_stale_partials
 
-__all__ = ["read", "write", "write_blocks", "read_info", "iter_blocks", "detect_format", "FORMATS",
+__all__ = ["read", "write", "write_blocks", "convert", "read_info", "iter_blocks", "detect_format", "FORMATS",
            "RecordingFileError", "CorruptFileError", "RecordingInfo", "get_format", "atomic_path",
            "clean_stale_partials"]
 
@@ -269,3 +269,6 @@ def _hint(n: int, nc: int, itemsize: int, name: str, options: dict) -> int | Non
     if name == "csv":  # at least one digit and one separator per value
         return 2 * n * (nc + 1)
     return int(n * nc * itemsize)
+
+
+from .convert import convert  # noqa: E402 (uses the functions above)

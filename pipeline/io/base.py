@@ -56,7 +56,7 @@ from ..validate import as_float, as_nonnegative
 __all__ = ["RecordingFileError", "CorruptFileError", "RecordingInfo", "atomic_path",
            "clean_stale_partials", "TEMP_PREFIX", "TEMP_SUFFIX", "STALE_AGE", "check_verify",
            "warn_nonfinite", "dumps_json", "check_start_datetime", "spec_from_dict",
-           "regroup_blocks"]
+           "regroup_blocks", "recording_read_errors"]
 
 
 class RecordingFileError(ValueError):
@@ -616,3 +616,31 @@ def regroup_blocks(blocks, nch: int, n: int, group_len: int, dtype: np.dtype) ->
         pos += fill
     if pos != n:
         raise ValueError(f"blocks hold {pos} samples, the header says n_samples = {n}")
+
+
+@contextlib.contextmanager
+def recording_read_errors(path) -> Iterator[None]:
+    """Turn the HDF5 library's errors while reading ``path`` into a RecordingFileError.
+
+    h5py reports HDF5 failures as ``OSError`` without an errno ("Can't synchronously read
+    data (filter returned failure during read)"), ``RuntimeError`` ("Special link traversal
+    failed (too many links)": a soft-link loop) or ``KeyError`` ("Unable to open object");
+    none names the file. OS errors with an errno pass through: unchanged when they carry a
+    file name (permission, ...), with ``path`` as their file name when they do not (EIO
+    from ``read()``).
+    """
+    try:
+        yield
+    except RecordingFileError:
+        raise
+    except OSError as exc:
+        if exc.errno is not None and exc.filename is None:
+            # read() errors (EIO from a failing disk or /proc/self/mem) carry no file name
+            raise type(exc)(exc.errno, exc.strerror, str(path)) from exc
+        if exc.errno is not None or type(exc) is not OSError:  # ours name the file already
+            raise
+        raise RecordingFileError(path, f"read error, file corrupt? ({exc})") from exc
+    except RuntimeError as exc:
+        raise RecordingFileError(path, f"read error ({exc})") from exc
+    except KeyError as exc:
+        raise RecordingFileError(path, f"read error ({exc.args[0] if exc.args else exc})") from exc
