@@ -740,6 +740,18 @@ class _Fit:
         return n * math.log(max(self.chi2 / n, self.floor)) + self.rank * math.log(n)
 
 
+def _conv_tol(d: _Design, spec: _Spec, lay: dict, theta: np.ndarray, rows: np.ndarray) -> float:
+    """With timing bounds, a step that moves no prediction by 1e-3 of its own bound changes
+    nothing that matters: that move is the convergence tolerance [mesh cycles] (0 without)."""
+    if not all(tr.sigma_given for tr in d.trains):
+        return 0.0
+    _, _, r0 = d.evaluate(theta, lay, spec, rows, jac=False)
+    r0 = _fix_rate(r0)
+    if np.all(np.isfinite(r0)) and np.any(r0 != 1.0):
+        return 1e-3 * float(np.min(d.sig[rows] * r0))
+    return 0.0
+
+
 def _solve(d: _Design, spec: _Spec, theta0: np.ndarray | None, scale: np.ndarray, *,
            max_iter: int = 12, tol: float = 1e-10, full: bool = False,
            recheck: bool = True) -> _Fit:
@@ -750,18 +762,10 @@ def _solve(d: _Design, spec: _Spec, theta0: np.ndarray | None, scale: np.ndarray
     rows = np.flatnonzero(d.active)
     keep = None
     conv = False
-    # with timing bounds, a step that moves no prediction by 1e-3 of its own bound changes
-    # nothing that matters: converged [mesh cycles]
-    conv_tol = 0.0
-    if all(tr.sigma_given for tr in d.trains):
-        f0, _, r0 = d.evaluate(theta, lay, spec, rows, jac=False)
-        r0 = _fix_rate(r0)
-        if np.all(np.isfinite(r0)) and np.any(r0 != 1.0):
-            conv_tol = 1e-3 * float(np.min(d.sig[rows] * r0))
+    conv_tol = _conv_tol(d, spec, lay, theta, rows)
     it = 0
     budget = max_iter
     rechecked = not recheck
-    chi_prev = None
 
     def weighted(theta_):
         f_, J_, rate_ = d.evaluate(theta_, lay, spec, rows)
@@ -824,6 +828,13 @@ def _solve(d: _Design, spec: _Spec, theta0: np.ndarray | None, scale: np.ndarray
             return _solve(d, spec, theta, scale, max_iter=max_iter, tol=tol, full=full,
                           recheck=False) if max_iter > 1 else _solve(d, spec, theta, scale,
                                                                        max_iter=2, full=full)
+    return _finish(d, spec, lay, theta, keep, scale, rows, it, conv, full)
+
+
+def _finish(d: _Design, spec: _Spec, lay: dict, theta: np.ndarray, keep: np.ndarray,
+            scale: np.ndarray, rows: np.ndarray, it: int, conv: bool, full: bool) -> _Fit:
+    """The :class:`_Fit` of converged parameters: residuals and rates at every observation,
+    the weighted misfit and, with ``full``, the covariance and the leverages."""
     f, J, rate = d.evaluate(theta, lay, spec, np.arange(d.t.size), jac=full)
     resid = d.y - f
     rate = _fix_rate(rate)
@@ -1064,14 +1075,46 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
         No gauge train with at least 2 passes; n_planets < 1.
     """
     t_start = time.perf_counter()
+    use = _usable_trains(trains, kin, n_planets)
+    gauges = [tr for tr in use if tr.kind in ("sun", "ring")]
+    notes: list[str] = []
+    d = _Design(use, kin, int(n_planets))
+    ladder = _knot_ladder(d, kin, gauges, max_knots)
+    rates = _ripple_rates(d, kin, planet_ripple, notes)
+    spec = _Spec(knots=ladder[0], harm={r: 0 for r in rates}, mod={r: False for r in rates})
+    # 1. base fit and gross outliers (mislabelled pulses are whole planet spacings off)
+    fit = _drop_gross_outliers(d, use, spec, outlier_k)
+    # 2. forward selection on BIC (weights from the timing bounds alone)
+    spec, fit, selection = _select_terms(d, spec, fit, ladder, rates, kin, max_harmonics,
+                                         max_planet_harmonics)
+    # 3. variance factors per train, outliers against the final model, final fit
+    scale, fit = _variance_factors(d, use, spec, fit, outlier_k)
+    dropped, dnotes = _dropped_notes(d, fit.lay, fit.keep)
+    notes.extend(dnotes)
+    tfits = _train_fits(d, use, fit, scale, notes)
+    act = d.active
+    wall = time.perf_counter() - t_start
+    if not fit.converged:
+        warnings.warn(f"angle model: Gauss-Newton did not converge in {fit.iterations} iterations "
+                      "(speed ripple too strong for its series?)", ProcessingWarning, stacklevel=2)
+    return AngleModel(
+        t_span=(d.t_lo, d.t_hi), terms=spec.describe(), rank=fit.rank,
+        n_parameters=fit.lay["p"], dropped=dropped, trains=tfits,
+        residual_rms=float(np.sqrt(np.mean(fit.resid[act] ** 2))) if act.any() else float("nan"),
+        selection=selection, notes=notes, wall_time=wall, iterations=fit.iterations,
+        converged=fit.converged, offsets=_offsets(use, fit), _design=d, _fit=fit)
+
+
+def _usable_trains(trains, kin, n_planets) -> list:
+    """The trains the fit uses (2 or more observations), checked: the gauge with most passes
+    first (its constant is the spline's), then the tacho."""
     if not isinstance(kin, Kinematics):
         raise TypeError(f"kin must be a Kinematics (meshphase.angles.kinematics), got {type(kin).__name__}")
     trains = list(trains)
     for tr in trains:
         if not isinstance(tr, PassTrain):
             raise TypeError(f"trains must hold PassTrain objects, got {type(tr).__name__}")
-    N = int(n_planets)
-    if N < 1:
+    if int(n_planets) < 1:
         raise ValueError(f"n_planets must be >= 1, got {n_planets!r}")
     use = [tr for tr in trains if len(tr) >= 2]
     gauges = [tr for tr in use if tr.kind in ("sun", "ring")]
@@ -1080,34 +1123,42 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
     names = [tr.name for tr in use]
     if len(set(names)) != len(names):
         raise ValueError(f"train names must be unique, got {names}")
-    # the gauge with most passes first: its constant is the spline's
-    use = sorted(gauges, key=lambda tr: -len(tr)) + [tr for tr in use if tr.kind == "tacho"]
-    notes: list[str] = []
-    d = _Design(use, kin, N)
+    return sorted(gauges, key=lambda tr: -len(tr)) + [tr for tr in use if tr.kind == "tacho"]
+
+
+def _knot_ladder(d: _Design, kin: Kinematics, gauges: list, max_knots) -> list:
+    """Spline interval counts tried: knots at least two relative revolutions of the densest
+    gauge train apart, at most 64 intervals (or ``max_knots``)."""
     span = d.t_hi - d.t_lo
-    # densest gauge train's relative revolution [s]: knots at least two of them apart
     rev = min(float(np.ptp(tr.times)) / max(1.0, (tr.target[-1] - tr.target[0]) /
                                              (kin.z_sun if tr.kind == "sun" else kin.z_ring))
               for tr in gauges)
     kmax = int(max(1, min(64, math.floor(span / (2.0 * rev)) if rev > 0 else 1)))
     if max_knots is not None:
         kmax = max(1, min(kmax, int(max_knots)))
-    n_obs = d.t.size
-    ladder = [k for k in KNOT_LADDER if k <= kmax]
-    rates = list(kin.periods)
-    # a shaft must turn at least once over the record for its ripple to be told from drift
+    return [k for k in KNOT_LADDER if k <= kmax]
+
+
+def _ripple_rates(d: _Design, kin: Kinematics, planet_ripple: bool, notes: list) -> list:
+    """Shafts whose speed ripple may be fitted: a shaft must turn at least once over the
+    record for its ripple to be told from drift (the others are named in ``notes``)."""
+    span = d.t_hi - d.t_lo
     mean_rate = (d.y.max() - d.y.min()) / span if span > 0 else 0.0
     turns = {r: mean_rate * span / P for r, P in kin.periods.items()}
-    rates = [r for r in rates if turns[r] >= 1.0 and (planet_ripple or r != "planet")]
+    rates = [r for r in kin.periods if turns[r] >= 1.0 and (planet_ripple or r != "planet")]
     skipped = [r for r in kin.periods if r not in rates and (planet_ripple or r != "planet")]
     if skipped:
         notes.append(f"no ripple terms for {', '.join(skipped)}: fewer than one turn in the record")
+    return rates
+
+
+def _drop_gross_outliers(d: _Design, use: list, spec: _Spec, outlier_k: float) -> _Fit:
+    """The base fit, refitted without gross outliers (at most 3 rounds; ``d.active`` is
+    updated): mislabelled pulses are whole planet spacings off."""
     ones = np.ones(len(use))
-    spec = _Spec(knots=ladder[0], harm={r: 0 for r in rates}, mod={r: False for r in rates})
-    # 1. base fit and gross outliers (mislabelled pulses are whole planet spacings off)
     fit = _solve(d, spec, None, ones)
     for _ in range(3):
-        out = np.zeros(n_obs, bool)
+        out = np.zeros(d.t.size, bool)
         for q in range(len(use)):
             m = (d.q == q) & d.active
             r = fit.resid[m]
@@ -1129,7 +1180,14 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
             break
         d.active &= ~out
         fit = _solve(d, spec, None, ones)
-    # 2. forward selection on BIC (weights from the timing bounds alone)
+    return fit
+
+
+def _select_terms(d: _Design, spec: _Spec, fit: _Fit, ladder: list, rates: list,
+                  kin: Kinematics, max_harmonics: int, max_planet_harmonics: int):
+    """Forward selection of the model terms on BIC, weights from the timing bounds alone:
+    (spec, fit, selection steps)."""
+    ones = np.ones(len(d.trains))
     selection = [(0, spec.describe(), fit.bic())]
     step = 0
     while True:
@@ -1177,8 +1235,15 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
         fit = full if full.bic() <= best.bic() + 1e-9 * abs(best.bic()) else best
         spec = best.spec
         selection.append((step, spec.describe(), fit.bic()))
-    # 3. variance factors per train, outliers against the final model, final fit (each round
-    # judges every observation afresh: one left out early by a poorer model may come back)
+    return spec, fit, selection
+
+
+def _variance_factors(d: _Design, use: list, spec: _Spec, fit: _Fit, outlier_k: float):
+    """Variance factors per train and outliers against the final model, then the final fit:
+    (scale, fit). Each round judges every observation afresh: one left out early by a poorer
+    model may come back."""
+    n_obs = d.t.size
+    ones = np.ones(len(use))
     base_active = d.active.copy()
     scale = ones.copy()
     for _ in range(4):
@@ -1208,9 +1273,11 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
             break
         d.active = active
         scale = new
-    fit = _solve(d, spec, fit.theta, scale, full=True)
-    dropped, dnotes = _dropped_notes(d, fit.lay, fit.keep)
-    notes.extend(dnotes)
+    return scale, _solve(d, spec, fit.theta, scale, full=True)
+
+
+def _train_fits(d: _Design, use: list, fit: _Fit, scale: np.ndarray, notes: list) -> list:
+    """One :class:`TrainFit` per train (outliers left out are named in ``notes``)."""
     tfits = []
     w = 1.0 / (d.sig * fit.rate)
     for q, tr in enumerate(use):
@@ -1224,9 +1291,11 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
         if tfits[-1].n_outliers:
             notes.append(f"{tr.name}: {tfits[-1].n_outliers} observation(s) far off the model "
                          "(mislabelled or spurious pulses) left out")
-    act = d.active
-    wall = time.perf_counter() - t_start
-    # per-planet offsets with their standard deviation [mesh cycles]
+    return tfits
+
+
+def _offsets(use: list, fit: _Fit) -> dict:
+    """Per train and planet: the fitted offset and its standard deviation [mesh cycles]."""
     offsets = {}
     ob = fit.lay["blocks"]["off"]
     kept_idx = np.cumsum(fit.keep) - 1
@@ -1235,15 +1304,7 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
         n = int(n)
         std = float(math.sqrt(max(fit.cov[kept_idx[col], kept_idx[col]], 0.0))) if fit.keep[col] else float("nan")
         offsets.setdefault(use[q].name, {})[n] = (float(fit.theta[col]), std)
-    if not fit.converged:
-        warnings.warn(f"angle model: Gauss-Newton did not converge in {fit.iterations} iterations "
-                      "(speed ripple too strong for its series?)", ProcessingWarning, stacklevel=2)
-    return AngleModel(
-        t_span=(d.t_lo, d.t_hi), terms=spec.describe(), rank=fit.rank,
-        n_parameters=fit.lay["p"], dropped=dropped, trains=tfits,
-        residual_rms=float(np.sqrt(np.mean(fit.resid[act] ** 2))) if act.any() else float("nan"),
-        selection=selection, notes=notes, wall_time=wall, iterations=fit.iterations,
-        converged=fit.converged, offsets=offsets, _design=d, _fit=fit)
+    return offsets
 
 
 def _extend(fit: _Fit, spec: _Spec, d: _Design) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""The core never imports matplotlib (DESIGN.md: only meshphase.report may)."""
+"""The core never imports matplotlib (DESIGN.md: only meshphase.report may), and stays light."""
 
 import subprocess
 import sys
@@ -22,3 +22,20 @@ def test_cli_version():
     with pytest.raises(SystemExit) as exc:
         main(["--version"])
     assert exc.value.code == 0
+
+
+HEAVY = ("scipy", "pandas", "matplotlib", "dask", "distributed", "numba", "h5py", "mcap",
+         "nptdms", "jsonschema", "tqdm")
+
+
+@pytest.mark.parametrize("module", ["meshphase", "meshphase.io", "meshphase.models",
+                                    "meshphase.recording"])
+def test_core_import_is_light(module):
+    # the core (the Recording, the format registry, the model package's face) loads numpy
+    # and nothing heavy: formats and solvers import their libraries when first used. The
+    # start-up time this buys is measured by the bench, not asserted here.
+    code = (f"import sys, {module}; "
+            "print(','.join(sorted({m.split('.')[0] for m in sys.modules} & set(sys.argv[1:]))))")
+    res = subprocess.run([sys.executable, "-c", code, *HEAVY], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "", f"{module} loaded {res.stdout.strip()}"
