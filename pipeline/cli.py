@@ -323,7 +323,7 @@ def cmd_process(args) -> int:
     as_regular_file(args.gearset, "the gearset scene (--gearset)")
     # process_recording returns the paths as published (the output folder's final name)
     ctx, files = process_recording(args.file, args.gearset, out_dir=args.out, overwrite=args.overwrite,
-                                   progress=_stage_progress(not args.quiet))
+                                   progress=_stage_progress(not args.quiet), tolerance=args.tolerance)
     return _finish_run(args, ctx, files)
 
 
@@ -453,12 +453,21 @@ def _add_run(sub) -> None:
 
 def _add_process(sub) -> None:
     """The ``meshphase process`` subcommand."""
-    s = sub.add_parser("process", help="process one recording: phasing, load sharing, comparison")
-    s.add_argument("file")
-    s.add_argument("--gearset", required=True, help="gearset TOML (scene format: [gearset], [[channels]], ...)")
-    s.add_argument("--out", help="output folder (default FILE-meshphase next to the input, never overwritten)")
+    s = sub.add_parser(
+        "process", help="process one recording: phasing, load sharing, comparison with the ideal "
+        "and identified model (CSV + summary.json, no report; no Monte Carlo unless --tolerance)")
+    s.add_argument("file", help="the recording (.h5, .mcap, .csv, .tdms)")
+    s.add_argument("--gearset", required=True,
+                   help="scene TOML with [gearset], [speeds], [[channels]], ... (its [input] is "
+                        "replaced by FILE; of its results only centroids are computed: `meshphase "
+                        "run` a scene for the others)")
+    s.add_argument("--out", help="output folder (default: STEM-meshphase beside FILE, e.g. rig.h5 -> "
+                                 "rig-meshphase; an existing folder is never overwritten: -2, -3, ...)")
     s.add_argument("--overwrite", action="store_true",
                    help="replace the output folder (atomically, when the run finishes)")
+    s.add_argument("--tolerance", action="store_true",
+                   help="also run the tolerance Monte Carlo of the gearset file's [tolerances] "
+                        "(band coverage in the comparison)")
     s.set_defaults(func=cmd_process)
 
 
