@@ -249,6 +249,10 @@ def _stage_progress(enabled: bool):
     return cb
 
 
+#: warnings of a run printed at most (all are in summary.json ``messages``)
+_MAX_MESSAGES = 10
+
+
 def _print_run(ctx, files, command: str) -> None:
     """The results of a run on stdout; its warnings on stderr (:func:`message_line`)."""
     s = summary_dict(ctx)
@@ -283,9 +287,6 @@ def _print_run(ctx, files, command: str) -> None:
         print(message_line(command, "warning", f"{len(ctx.messages) - _MAX_MESSAGES} more warning(s) "
                            "in summary.json (messages)"), file=sys.stderr)
 
-
-#: warnings of a run printed at most (all are in summary.json ``messages``)
-_MAX_MESSAGES = 10
 
 
 def _finish_run(args, ctx, files) -> int:

@@ -6,8 +6,8 @@ warning collected in a run, a Python warning, a log record), reads::
 
     meshphase COMMAND: LEVEL: [WHERE: ]TEXT
 
-``LEVEL`` is ``error``, ``warning``, ``info``, ``debug``, ``partial``, ``unreliable`` or
-``interrupted``; ``WHERE`` is the stage (``phasing``), the warning class
+``LEVEL`` is ``error``, ``warning``, ``info``, ``debug``, ``partial``, ``unreliable``,
+``interrupted`` or (a campaign's recording) ``failed``; ``WHERE`` is the stage (``phasing``), the warning class
 (``FormatWarning``) or the library that logged it (``distributed.scheduler``).
 """
 

@@ -20,7 +20,7 @@ from meshphase.log import MessageFormatter, message_line
 from meshphase.synthetic import list_scenarios
 
 REPO = Path(__file__).resolve().parents[1]
-STYLE = re.compile(r"^meshphase( \w+)?: (error|warning|info|debug|partial|unreliable|interrupted)(: .+)?$")
+STYLE = re.compile(r"^meshphase( \w+)?: (error|warning|info|debug|partial|unreliable|interrupted|failed)(: .+)?$")
 
 
 # --------------------------------------------------------------------------- message_line
