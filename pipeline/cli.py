@@ -20,10 +20,14 @@ Exit status (every subcommand; README.md "Exit status"; constants in :mod:`meshp
 141   standard output closed by the reader (``| head``): no message
 ====  ==========================================================================================
 
-Errors are one line per cause on stderr, ``meshphase COMMAND: error: ...``, never a
-traceback; ``--debug`` (or ``MESHPHASE_DEBUG=1``) re-raises them with the traceback and logs
-the traceback of each failed stage. Warnings are one line each
-(``meshphase COMMAND: FormatWarning: ...``), each distinct line once. ``tests/faults``
+Every message is one line on stderr in one style, ``meshphase COMMAND: LEVEL: TEXT``
+(:func:`meshphase.log.message_line`; the log formatter too): errors, one per cause,
+``meshphase COMMAND: error: ...``, never a traceback (``--debug`` or ``MESHPHASE_DEBUG=1``
+re-raises them with the traceback and logs the traceback of each failed stage); a run's
+``partial`` / ``unreliable`` causes; warnings, each distinct line once, ``meshphase COMMAND:
+warning: FormatWarning: ...`` and, collected by a run, ``meshphase COMMAND: warning: STAGE:
+ProcessingWarning: ...``; log records ``meshphase COMMAND: info: ...``. Results go to
+stdout. ``tests/faults``
 runs a corpus of faulty inputs and outputs through this boundary.
 """
 
@@ -50,7 +54,7 @@ from .exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_PIPE, OutputDir, recordin
                     run_status, status_line)
 from .heap import limit_heap_growth
 from .io import convert, detect_format, iter_blocks, read_info
-from .log import logger
+from .log import MessageFormatter, logger, message_line
 from .quality import channel_quality
 from .scene import SceneError, load_scene
 from .stages import process_recording, run_scene, summary_dict, write_outputs
@@ -134,9 +138,12 @@ def cmd_info(args) -> int:
 
 # ---------------------------------------------------------------------------- convert
 def cmd_convert(args) -> int:
-    src = as_regular_file(args.input, "the input recording")
+    src, dst = as_regular_file(args.input, "the input recording"), Path(args.output)
+    if args.compression and (args.format or dst.suffix.lower().lstrip(".")) == "csv":
+        raise ValueError(f"--compression {args.compression}: CSV is written uncompressed "
+                         "(compression is for hdf5 and mcap)")
     options = {"compression": args.compression} if args.compression else {}
-    done = convert(src, args.output, format=args.format, overwrite=args.overwrite,
+    done = convert(src, dst, format=args.format, overwrite=args.overwrite,
                    progress=lambda total, desc: _progress(total, desc, not args.quiet), **options)
     logger.info("wrote %s", done.path)
     if not args.quiet:
@@ -154,7 +161,10 @@ def cmd_synth(args) -> int:
         for r in rows:
             print(f"{r['name']:<24} {r['fs']:>8g} Hz {r['duration']:>7g} s  {r['description']}")
         if not args.list:
-            print("\nusage: meshphase synth SCENARIO OUT [--minutes M] [--seed N]", file=sys.stderr)
+            print("usage: meshphase synth SCENARIO OUT [--minutes M] [--seed N] [--format F]",
+                  file=sys.stderr)
+            print(message_line("synth", "error", "SCENARIO and OUT are required (the scenarios are "
+                               "listed above)"), file=sys.stderr)
             return 2
         return 0
 
@@ -212,7 +222,12 @@ def _stage_progress(enabled: bool):
     return cb
 
 
-def _print_run(ctx, files) -> None:
+#: warnings of a run printed at most (all are in summary.json ``messages``)
+_MAX_MESSAGES = 10
+
+
+def _print_run(ctx, files, command: str) -> None:
+    """The results of a run on stdout; its warnings on stderr (:func:`message_line`)."""
     s = summary_dict(ctx)
     print(f"scene     {ctx.scene.name}")
     print(f"stages    {', '.join(ctx.ran)}" + (f"  (failed: {', '.join(ctx.failed)})" if ctx.failed else ""))
@@ -237,10 +252,14 @@ def _print_run(ctx, files) -> None:
         print(f"{gear}: RMS residual vs model " + ("–" if rms is None else f"{rms:.2e}") + f" cycles{extra}")
     for stage, t in ctx.timings.items():
         print(f"  {stage:<16} {t:8.3f} s  {ctx.error_estimates.get(stage, '')}")
-    for m in ctx.messages[:10]:
-        print(f"warning: {m}")
     for name, p in files.items():
         print(f"{name:<18} {p}")
+    for m in ctx.messages[:_MAX_MESSAGES]:
+        print(message_line(command, "warning", m), file=sys.stderr)  # "stage: Category: text"
+    if len(ctx.messages) > _MAX_MESSAGES:
+        print(message_line(command, "warning", f"{len(ctx.messages) - _MAX_MESSAGES} more warning(s) "
+                           "in summary.json (messages)"), file=sys.stderr)
+
 
 
 def _finish_run(args, ctx, files) -> int:
@@ -248,16 +267,16 @@ def _finish_run(args, ctx, files) -> int:
     st = run_status(ctx)
     if st["status"] == "failed":
         # nothing usable and nothing written: the cause is the whole story
-        print(f"meshphase {args.command}: error: {_one_line(st['error'])}", file=sys.stderr)
+        print(message_line(args.command, "error", st["error"]), file=sys.stderr)
         return st["exit_code"]
-    _print_run(ctx, files)
+    _print_run(ctx, files, args.command)
     print(f"status    {status_line(st)}")
     for m in st["missing_results"]:
-        print(f"meshphase {args.command}: partial: {m['result']} not computed: "
-              f"{_one_line(m['cause'])}", file=sys.stderr)
+        print(message_line(args.command, "partial", f"{m['result']} not computed: {m['cause']}"),
+              file=sys.stderr)
     for gauge, reasons in st["unreliable"].items():
-        print(f"meshphase {args.command}: unreliable: {gauge} gauge phasing: "
-              f"{_one_line('; '.join(reasons) or 'flagged unreliable')}", file=sys.stderr)
+        print(message_line(args.command, "unreliable", f"{gauge} gauge phasing: "
+                           f"{'; '.join(reasons) or 'flagged unreliable'}"), file=sys.stderr)
     return st["exit_code"]
 
 
@@ -296,7 +315,7 @@ def cmd_process(args) -> int:
     as_regular_file(args.gearset, "the gearset scene (--gearset)")
     # process_recording returns the paths as published (the output folder's final name)
     ctx, files = process_recording(args.file, args.gearset, out_dir=args.out, overwrite=args.overwrite,
-                                   progress=_stage_progress(not args.quiet))
+                                   progress=_stage_progress(not args.quiet), tolerance=args.tolerance)
     return _finish_run(args, ctx, files)
 
 
@@ -327,11 +346,13 @@ def cmd_campaign(args) -> int:
                                 "missing_results": r.get("missing_results") or [],
                                 "unreliable": r.get("unreliable") or {}})
             print(f"{r.get('status', 'failed'):<11}{r.get('name')}")
-            print(f"meshphase campaign: {r.get('recording')}: {_one_line(line)}", file=sys.stderr)
+            level, _, rest = line.partition(": ")
+            print(message_line("campaign", level, f"{r.get('recording')}: {rest}"), file=sys.stderr)
     scene_status = res.get("scene_status") or {}
     if scene_status.get("status", "ok") != "ok":
         print(f"scene     {status_line(scene_status)}")
-        print(f"meshphase campaign: scene-level results {status_line(scene_status)}", file=sys.stderr)
+        level, _, rest = status_line(scene_status).partition(": ")
+        print(message_line("campaign", level, f"scene-level results: {rest}"), file=sys.stderr)
     for name, p in res["files"].items():
         print(f"{name:<22} {p}")
     return res["exit_code"]
@@ -356,7 +377,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Planetary gear rig strain recordings -> measured mesh phasing vs models.")
     p.add_argument("--version", action="version", version=f"meshphase {__version__}")
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv debug)")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    p.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress bars (convert: no summary line either)")
     p.add_argument("--debug", action="store_true",
                    help="developers: re-raise errors with their traceback (also MESHPHASE_DEBUG=1)")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -383,10 +405,10 @@ def _add_info(sub) -> None:
 def _add_convert(sub) -> None:
     """The ``meshphase convert`` subcommand."""
     s = sub.add_parser("convert", help="convert a recording between formats (hdf5, mcap, csv; tdms read)")
-    s.add_argument("input")
-    s.add_argument("output")
+    s.add_argument("input", help="recording to read (.h5, .mcap, .csv, .tdms)")
+    s.add_argument("output", help="file to write (.h5, .mcap, .csv)")
     s.add_argument("--format", choices=["hdf5", "mcap", "csv"], help="output format (default: from the suffix)")
-    s.add_argument("--compression", help="hdf5: gzip|lzf; mcap: lz4|zstd (default none)")
+    s.add_argument("--compression", help="hdf5: gzip|lzf; mcap: lz4|zstd; csv: none (default none)")
     s.add_argument("--overwrite", action="store_true", help="replace an existing output file")
     s.set_defaults(func=cmd_convert)
 
@@ -399,8 +421,10 @@ def _add_synth(sub) -> None:
     s.add_argument("--list", action="store_true", help="list the scenarios and exit")
     s.add_argument("--minutes", type=float, help="duration [min] (default: the scenario's)")
     s.add_argument("--seed", type=int, help="random seed (recorded in the truth sidecar)")
-    s.add_argument("--format", choices=["hdf5", "mcap", "csv", "tdms"])
-    s.add_argument("--overwrite", action="store_true")
+    s.add_argument("--format", choices=["hdf5", "mcap", "csv", "tdms"],
+                   help="output format (default: from the suffix)")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace an existing output file and its truth sidecar")
     s.set_defaults(func=cmd_synth)
 
 
@@ -416,8 +440,10 @@ def _add_demo(sub) -> None:
 def _add_run(sub) -> None:
     """The ``meshphase run`` subcommand."""
     s = sub.add_parser("run", help="run a scene (TOML) and write results, figures and the HTML report")
-    s.add_argument("scene")
-    s.add_argument("--out", help="output folder (default: the scene's `output`, else SCENE-out)")
+    s.add_argument("scene", help="scene file (TOML; data_schemas/scene.md)")
+    s.add_argument("--out", help="output folder (default: the scene's `output`, relative to the scene "
+                                 "file, else STEM-out beside it, e.g. rig.toml -> rig-out; never "
+                                 "overwritten: -2, -3, ...)")
     s.add_argument("--overwrite", action="store_true",
                    help="replace the output folder (atomically, when the run finishes)")
     s.add_argument("--no-report", action="store_true", help="results only, no HTML/figures")
@@ -426,12 +452,21 @@ def _add_run(sub) -> None:
 
 def _add_process(sub) -> None:
     """The ``meshphase process`` subcommand."""
-    s = sub.add_parser("process", help="process one recording: phasing, load sharing, comparison")
-    s.add_argument("file")
-    s.add_argument("--gearset", required=True, help="gearset TOML (scene format: [gearset], [[channels]], ...)")
-    s.add_argument("--out", help="output folder (default FILE-meshphase next to the input, never overwritten)")
+    s = sub.add_parser(
+        "process", help="process one recording: phasing, load sharing, comparison with the ideal "
+        "and identified model (CSV + summary.json, no report; no Monte Carlo unless --tolerance)")
+    s.add_argument("file", help="the recording (.h5, .mcap, .csv, .tdms)")
+    s.add_argument("--gearset", required=True,
+                   help="scene TOML with [gearset], [speeds], [[channels]], ... (its [input] is "
+                        "replaced by FILE; of its results only centroids are computed: `meshphase "
+                        "run` a scene for the others)")
+    s.add_argument("--out", help="output folder (default: STEM-meshphase beside FILE, e.g. rig.h5 -> "
+                                 "rig-meshphase; an existing folder is never overwritten: -2, -3, ...)")
     s.add_argument("--overwrite", action="store_true",
                    help="replace the output folder (atomically, when the run finishes)")
+    s.add_argument("--tolerance", action="store_true",
+                   help="also run the tolerance Monte Carlo of the gearset file's [tolerances] "
+                        "(band coverage in the comparison)")
     s.set_defaults(func=cmd_process)
 
 
@@ -461,7 +496,8 @@ def _add_campaign(sub) -> None:
 def _add_bench(sub) -> None:
     """The ``meshphase bench`` subcommand."""
     s = sub.add_parser("bench", help="benchmarks: io, models, processing or all (tables + figures)")
-    s.add_argument("what", nargs="?", default="all", choices=["io", "models", "processing", "all"])
+    s.add_argument("what", nargs="?", default="all", choices=["io", "models", "processing", "all"],
+                   help="which benchmarks (default all)")
     s.add_argument("--out", default="bench-results", help="output folder (default ./bench-results)")
     s.add_argument("--minutes", type=float, default=60.0, help="io: recording length [min] (default 60)")
     s.add_argument("--quick", action="store_true", help="small sizes, for a smoke run")
@@ -552,15 +588,17 @@ def main(argv=None) -> int:
     limit_heap_growth()                   # streamed runs: peak memory flat in length
     debug = bool(args.debug) or os.environ.get("MESHPHASE_DEBUG", "").strip() not in ("", "0")
     level = logging.DEBUG if debug else logging.WARNING - 10 * min(args.verbose, 2)
-    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    handler = logging.StreamHandler()          # stderr, one style with every other message
+    handler.setFormatter(MessageFormatter(args.command))
+    logging.basicConfig(level=level, handlers=[handler])
     logger.setLevel(level)
     logging.captureWarnings(False)
-    # warnings on one line each ("meshphase info: FormatWarning: ..."), not file:line + source,
+    # warnings on one line each ("meshphase info: warning: FormatWarning: ..."), not file:line + source,
     # and each line once (a warning repeats when a block reader meets it again, or when a
     # filter change resets the registry that "default" uses to show it once)
     old_format, old_show = warnings.formatwarning, warnings.showwarning
     warnings.formatwarning = lambda message, category, *_a, **_k: (
-        f"meshphase {args.command}: {category.__name__}: {_one_line(message)}\n")
+        message_line(args.command, "warning", f"{category.__name__}: {message}") + "\n")
     warnings.showwarning = _once(old_show)
     try:
         rc = int(args.func(args) or 0)
@@ -571,13 +609,13 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         if debug:
             raise
-        print(f"meshphase {args.command}: interrupted", file=sys.stderr)
+        print(message_line(args.command, "interrupted", ""), file=sys.stderr)
         return EXIT_INTERRUPTED
     except Exception as exc:  # noqa: BLE001 - the boundary: one line, never a traceback
         if debug:
             raise
         try:
-            print(f"meshphase {args.command}: error: {describe_error(exc)}", file=sys.stderr)
+            print(message_line(args.command, "error", describe_error(exc)), file=sys.stderr)
         except OSError:
             pass
         return EXIT_ERROR

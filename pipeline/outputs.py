@@ -8,6 +8,13 @@ results_requested, stages_ran, stages_failed, timings_s, error_estimates, messag
 channels_unused and, for what ran, gearset, recording, onsets, ideal, phasing,
 phasing_labels, held_member, angle_model, load_sharing, centroids_m, tolerance, identify,
 compare, bearing_moments, tilt.
+
+CSV tables (columns in ``data_schemas/outputs.md``): passes_<gear>.csv, load_sharing.csv,
+identified_errors.csv, bearing_moments.csv, tilt.csv and stages.csv, each of what ran. SI
+values, the unit in the header (``time_s``, ``gamma_cycles``, ``e_m``, ``my_Nm``, ...; no
+suffix: a label, count, flag, text or a dimensionless ratio), one number per field (an
+interval is two columns, ``..._ci95_lo_m`` and ``..._ci95_hi_m``), NaN (not computed) as an
+empty field, infinities as ``inf`` / ``-inf``.
 """
 
 from __future__ import annotations
@@ -126,13 +133,12 @@ def write_outputs(ctx: RunContext, out_dir: Path, *, report: bool = True) -> dic
     p.write_text(json.dumps(summary_dict(ctx), indent=2))
     files["summary"] = p
     files.update(_write_tables(ctx, out_dir))
-    p = out_dir / "stages.csv"
-    pd.DataFrame([{"stage": s, "wall_time_s": ctx.timings.get(s, float("nan")),
-                   "error_estimate": ctx.error_estimates.get(s, ""),
-                   "status": "ran" if s in ctx.ran else ctx.failed.get(s, "")}
-                  for s in list(ctx.timings) + [k for k in ctx.failed if k not in ctx.timings]],
-                 columns=["stage", "wall_time_s", "error_estimate", "status"]).to_csv(p, index=False)
-    files["stages"] = p
+    files["stages"] = _csv(pd.DataFrame(
+        [{"stage": s, "wall_time_s": ctx.timings.get(s, float("nan")),
+          "error_estimate": ctx.error_estimates.get(s, ""),
+          "status": "ran" if s in ctx.ran else ctx.failed.get(s, "")}
+         for s in list(ctx.timings) + [k for k in ctx.failed if k not in ctx.timings]],
+        columns=["stage", "wall_time_s", "error_estimate", "status"]), out_dir / "stages.csv")
     files["arrays"] = _write_arrays(ctx, out_dir / "arrays.h5")
     if report:
         from .report.validation import build_report  # matplotlib: only for the report
@@ -141,38 +147,97 @@ def write_outputs(ctx: RunContext, out_dir: Path, *, report: bool = True) -> dic
     return files
 
 
-def _write_tables(ctx: RunContext, out_dir: Path) -> dict:
-    """passes_<gear>.csv, load_sharing.csv, identified_errors.csv and tilt.csv of what ran."""
-    import pandas as pd  # heavy: only when writing
+#: passes_<gear>.csv: PassTable.to_dataframe's columns -> the header written (unit suffix)
+PASS_COLUMNS = {"gauge": "gauge", "time_s": "time_s", "planet": "planet",
+                "revolution": "revolution", "gamma": "gamma_cycles",
+                "uncertainty": "uncertainty_cycles", "mesh_period_s": "mesh_period_s",
+                "ref_time_s": "ref_time_s", "angle_rad": "angle_rad",
+                "timing_floor": "timing_floor_cycles", "model_sigma": "model_sigma_cycles"}
 
+
+def _write_tables(ctx: RunContext, out_dir: Path) -> dict:
+    """passes_<gear>.csv, load_sharing.csv, identified_errors.csv, bearing_moments.csv and
+    tilt.csv of what ran: SI values with the unit in each header (``_s``, ``_m``, ``_rad``,
+    ``_cycles`` (of one mesh cycle), ``_strain`` (m/m), ``_N``, ``_Nm``, ...; no suffix: a
+    label, count, flag or a dimensionless ratio); NaN (not computed) as an empty field."""
     files = {}
     if ctx.phasing is not None:
         cmp = ctx.compare.by_gear if ctx.compare is not None else {}
         for gear, t in ctx.phasing.tables.items():
-            df = t.to_dataframe()
+            df = t.to_dataframe().rename(columns=PASS_COLUMNS)
             if gear in cmp:
-                df["gamma_ideal"] = cmp[gear].ideal
+                df["gamma_ideal_cycles"] = cmp[gear].ideal
                 if cmp[gear].model is not None:
-                    df["gamma_model"] = cmp[gear].model
-            p = out_dir / f"passes_{gear}.csv"
-            df.to_csv(p, index=False)
-            files[f"passes_{gear}"] = p
+                    df["gamma_model_cycles"] = cmp[gear].model
+            files[f"passes_{gear}"] = _csv(df, out_dir / f"passes_{gear}.csv")
     if ctx.load_sharing is not None and ctx.load_sharing.sharing is not None:
-        p = out_dir / "load_sharing.csv"
-        pd.DataFrame(ctx.load_sharing.sharing.to_rows()).to_csv(p, index=False)
-        files["load_sharing"] = p
+        rows = [{"planet": r["planet"], "load_sharing": r["load_sharing"], "std_error": r["std_error"],
+                 "n_passes": r["n_passes"], "mean_amplitude_strain": r["mean_amplitude"]}
+                for r in ctx.load_sharing.sharing.to_rows()]
+        files["load_sharing"] = _csv(rows, out_dir / "load_sharing.csv")
     if ctx.identify is not None:
-        p = out_dir / "identified_errors.csv"
-        pd.DataFrame(ctx.identify.identification.table).to_csv(p, index=False)
-        files["identified_errors"] = p
+        rows = [{"gear": r["gear"], "e_m": r["e"], "e_std_m": r["e_std"],
+                 "e_ci95_lo_m": r["e_ci95"][0], "e_ci95_hi_m": r["e_ci95"][1],
+                 "kappa_rad": r["kappa"], "kappa_std_rad": r["kappa_std"],
+                 "identifiable": r["identifiable"], "note": r["note"]}
+                for r in ctx.identify.identification.table]
+        files["identified_errors"] = _csv(rows, out_dir / "identified_errors.csv")
+    if ctx.bearing_moments is not None:
+        b = ctx.bearing_moments
+        rows = [{"moments": name, "input_torque_Nm": b.torque, **_moment_columns(m)}
+                for name, m in (("concentrated", b.concentrated), ("with_offsets", b.with_offsets),
+                                ("measured", b.measured)) if m is not None]
+        files["bearing_moments"] = _csv(rows, out_dir / "bearing_moments.csv")
     if ctx.tilt is not None:
-        p = out_dir / "tilt.csv"
-        pd.DataFrame([{"k_tilt_Nm_per_rad": k, "z_s_m": float(np.ravel(s.z)[0]),
-                       "z_r_m": float(np.ravel(s.z)[-1]), "converged": bool(np.all(s.converged)),
-                       "iterations": int(np.max(s.iterations)), "residual_m": float(np.max(s.residual))}
-                      for k, s in ctx.tilt.solutions]).to_csv(p, index=False)
-        files["tilt"] = p
+        rows = [_tilt_columns(k, sol, ctx.tilt.torque) for k, sol in ctx.tilt.solutions]
+        files["tilt"] = _csv(rows, out_dir / "tilt.csv")
     return files
+
+
+def _csv(rows, path: Path) -> Path:
+    """Rows (list of dicts or a DataFrame) as CSV: NaN and None as an empty field."""
+    import pandas as pd  # heavy: only when writing
+
+    df = rows if isinstance(rows, pd.DataFrame) else pd.DataFrame(rows)
+    df.to_csv(path, index=False, na_rep="")
+    return path
+
+
+def _mesh_key(name: str) -> str:
+    """A mesh name as a column part: 'sun-SP' -> 'sun_sp'."""
+    return name.lower().replace("-", "_")
+
+
+def _scalar_or_nan(v) -> float:
+    a = np.ravel(np.asarray(v, dtype=float))
+    return float(a[0]) if a.size == 1 else float("nan")
+
+
+def _moment_columns(m) -> dict:
+    """One row's columns of a BearingMoments or DoublePinionMoments (scalar inputs): every
+    moment ``<name>_Nm`` [N·m], then the load-centroid offset of each mesh ``z_<mesh>_m`` [m]."""
+    out = {f"{k}_Nm": _scalar_or_nan(v) for k, v in vars(m).items()
+           if k not in ("z_s", "z_r", "z") and isinstance(v, (np.ndarray, float, int, np.floating))}
+    z = np.atleast_1d(np.asarray(m.z, dtype=float))
+    out.update({f"z_{_mesh_key(n)}_m": float(z[..., j].ravel()[0]) for j, n in enumerate(m.mesh_names)})
+    return out
+
+
+def _tilt_columns(k: float, sol, torque: float) -> dict:
+    """One tilt.csv row: the stiffness, convergence, per mesh the offset [m], misalignment
+    [rad], force [N], contact fraction [-], peak load [N/m] and K_Hbeta [-], then the moments
+    at the converged offsets [N·m]."""
+    row = {"k_tilt_Nm_per_rad": float(k), "input_torque_Nm": float(torque),
+           "converged": bool(np.all(sol.converged)), "iterations": int(np.max(sol.iterations)),
+           "residual_m": float(np.max(sol.residual)), "method": str(np.ravel(sol.method)[0])}
+    per_mesh = (("z", "m"), ("tilt", "rad"), ("force", "N"), ("contact_fraction", ""),
+                ("peak_load", "N_per_m"), ("face_load_factor", ""))
+    for j, mesh in enumerate(sol.mesh_names):
+        for attr, unit in per_mesh:
+            v = np.asarray(getattr(sol, attr), dtype=float)
+            row[f"{attr}_{_mesh_key(mesh)}" + (f"_{unit}" if unit else "")] = float(v[..., j].ravel()[0])
+    row.update({k2: v for k2, v in _moment_columns(sol.moments).items() if not k2.startswith("z_")})
+    return row
 
 
 def _write_arrays(ctx: RunContext, path: Path) -> Path:

@@ -46,7 +46,7 @@ from .results import (BearingStage, CentroidsStage, CompareStage, ConditionStage
                       GaugeComparison, IdealStage, IdentifyStage, LoadSharingStage, LoadStage,
                       OnsetsStage, PhasingStage, RunContext, StageResult, TiltStage,
                       ToleranceStage)
-from .scene import STAGES, Scene, load_scene, plan
+from .scene import STAGES, Scene, SceneError, load_scene, plan
 from .stream import (BLOCK_SAMPLES, ChannelPlan, FileSource, GeneratorSource, MemorySource,
                      condition_stream, scan_source)
 from .truth import phasing_vs_truth, tacho_geometry, true_errors
@@ -719,24 +719,59 @@ def _collect_warnings(ctx: RunContext, stage: str, caught) -> None:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
 
 
+#: what ``meshphase process`` computes (compare pulls in ideal and identify)
+PROCESS_RESULTS = ("phasing", "load_sharing", "compare")
+
+
 def process_recording(path, gearset_scene_path, *, out_dir=None, overwrite=False,
-                      progress: Callable[[str, int, int], None] | None = None) -> tuple:
+                      progress: Callable[[str, int, int], None] | None = None,
+                      tolerance: bool = False) -> tuple:
     """``meshphase process FILE --gearset GEARSET.toml``: the recording-processing results
-    (phasing, load sharing, centroids, comparison with the ideal and identified model).
+    (phasing, load sharing, comparison with the ideal and identified model; face-width
+    centroids too when the gearset file's ``results`` name them).
+
+    The gearset file's other results (bearing moments, tilt, tolerance) are not computed:
+    ``meshphase run`` a scene for those. No Monte Carlo runs unless ``tolerance`` (the band
+    coverage of the comparison then comes with it), even when the file has ``[tolerances]``.
 
     The output folder is reserved before the run (an unwritable location fails at once) and
     removed again when the run raises or is interrupted; when the recording cannot be loaded
     (nothing usable) nothing is written and ``files`` is empty: see
     :func:`meshphase.exits.run_status` for the status of the run.
 
-    Returns (RunContext, files).
+    Parameters
+    ----------
+    path : str or Path
+        The recording.
+    gearset_scene_path : str or Path
+        A scene file with ``[gearset]``, ``[speeds]``, ``[[channels]]`` ...
+    out_dir : str or Path, optional
+        Output folder (default: ``STEM-meshphase`` beside the recording; an existing folder
+        gets ``-2``, ``-3``, ... unless ``overwrite``).
+    overwrite : bool
+        Replace the output folder (atomically, when the run finishes).
+    progress : callable, optional
+        ``progress(stage, i, n)``.
+    tolerance : bool
+        Also run the tolerance Monte Carlo (needs ``[tolerances]`` in the gearset file).
+
+    Returns
+    -------
+    (RunContext, dict)
+        The run and the files written (name -> path).
     """
     path = as_regular_file(path, "the recording")  # stat only: a FIFO never blocks here
     scene = load_scene(gearset_scene_path)
+    if tolerance and scene.tolerances is None:
+        raise SceneError(gearset_scene_path, "tolerances", "--tolerance (tolerance=True) needs a "
+                         "[tolerances] table in the gearset file")
     scene.input = {"recording": Path(path).resolve()}
-    wanted = ["phasing", "load_sharing", "compare"]
-    scene.results = [r for r in dict.fromkeys(list(scene.results) + wanted)
-                     if r not in ("tolerance",) or scene.tolerances is not None]
+    # only what process's outputs need: without tolerance=True the scene's [tolerances]
+    # are set aside, so compare pulls in no Monte Carlo (plan adds it when tolerances exist)
+    scene.results = (list(PROCESS_RESULTS) + (["centroids"] if "centroids" in scene.results else [])
+                     + (["tolerance"] if tolerance else []))
+    if not tolerance:
+        scene.tolerances = None
     base = Path(out_dir) if out_dir else Path(path).with_name(Path(path).stem + "-meshphase")
     # staged: the folder is built beside its final name and swapped in whole, so a killed
     # run never leaves a half-written result folder under the name a reader expects

@@ -387,7 +387,7 @@ register(Scenario(
 register(Scenario(
     "one_hour",
     "One hour of the seed rig with realistic acquisition (30 dB SNR, 1/f, drift, hum, 24-bit): "
-    "18.4 MSamples per channel, for benchmarks; generate it with generate_blocks (flat memory).",
+    "18.4 MSamples per channel, for benchmarks; written block by block (flat memory).",
     lambda: _seed_rig("one_hour", "one hour of the seed rig, realistic acquisition",
                       duration=3600.0, artefacts=_REALISTIC),
     ("long", "noise", "bench")))

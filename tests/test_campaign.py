@@ -224,7 +224,8 @@ def test_campaign_cli_exit_codes(data, cluster, tmp_path, capsys):
     assert "1 ok, 0 unreliable, 0 partial, 1 failed" in cap.out
     assert "failed     broken" in cap.out
     err = cap.err.strip().splitlines()
-    assert len(err) == 1 and "broken.h5: failed: cannot load the recording" in err[0]
+    assert len(err) == 1 and err[0].startswith("meshphase campaign: failed: ")
+    assert "broken.h5: cannot load the recording" in err[0]
     assert "truncated" in err[0]
     rows = (out / "campaign.csv").read_text().splitlines()
     assert len(rows) == 3 and {r.split(",")[0] for r in rows[1:]} == {"rig_a", "broken"}

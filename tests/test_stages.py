@@ -98,7 +98,7 @@ def test_rig_outputs(rig_run):
     assert summary["tolerance"]
 
     sun = pd.read_csv(out / "passes_sun.csv")
-    assert {"time_s", "planet", "gamma", "gamma_ideal", "gamma_model"} <= set(sun.columns)
+    assert {"time_s", "planet", "gamma_cycles", "gamma_ideal_cycles", "gamma_model_cycles"} <= set(sun.columns)
     assert len(sun) == len(ctx.phasing.tables["sun"])
     ls = pd.read_csv(out / "load_sharing.csv")
     assert list(ls["planet"]) == [1, 2, 3, 4]

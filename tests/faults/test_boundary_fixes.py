@@ -210,7 +210,7 @@ def test_each_warning_line_once(tmp_path, capsys):
             warnings.formatwarning(m, c, f, ln, line), end="", file=__import__("sys").stderr)
         assert main(["-q", "info", str(p)]) == 0
     err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
-    assert len(err) == 1 and err[0].startswith("meshphase info: FormatWarning: ") and "'sun'" in err[0]
+    assert len(err) == 1 and err[0].startswith("meshphase info: warning: FormatWarning: ") and "'sun'" in err[0]
 
 
 @pytest.mark.parametrize("text", ["", "# a comment only\n", 'name = "gearset only"\n[gearset]\nz_sun = 25\n'

@@ -231,7 +231,7 @@ def test_fault_case_real_command(name, originals, tmp_path, capsys, monkeypatch)
 @pytest.mark.timeout(120, func_only=True)
 def test_nptdms_log_lines_become_one_warning_line(originals, tmp_path):
     """npTDMS logs through its own stderr handler (and the root one): the real command shows
-    one ``meshphase info: FormatWarning: FILE: npTDMS: ...`` line instead. The file is a TDMS
+    one ``meshphase info: warning: FormatWarning: FILE: npTDMS: ...`` line instead. The file is a TDMS
     whose first lead-in says version 4713 and the others 4712 (harmless: no checksum covers
     it, the samples read the same)."""
     blob = bytearray(originals.blob("tdms"))
@@ -240,7 +240,7 @@ def test_nptdms_log_lines_become_one_warning_line(originals, tmp_path):
     p.write_bytes(bytes(blob))
     rc, out, err = _run_subprocess(["-q", "info", "--no-quality", str(p)], 60)
     assert rc == 0, err
-    assert err.splitlines() == [f"meshphase info: FormatWarning: {p}: npTDMS: Segment version "
+    assert err.splitlines() == [f"meshphase info: warning: FormatWarning: {p}: npTDMS: Segment version "
                                 "mismatch, 4712 != 4713"]
 
 
