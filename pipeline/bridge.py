@@ -26,8 +26,9 @@ and, with gauge factor GF, Poisson's ratio nu, lead resistance R_L and gauge res
     full_III               strain = -2 V_r / (GF ((nu + 1) - V_r (nu - 1)))
 
 (NI's sign convention, with their wiring; a bridge wired the other way round gives the
-strain negated: a negative ``gain`` flips the volts back). The full bridges carry no lead term in NI's equations (remote sensing compensates the leads), so a
-lead resistance is refused there. ``quarter``, ``half`` and ``full`` are the bending forms
+strain negated: a negative ``gain`` flips the volts back). The full bridges carry no lead
+term in NI's equations (remote sensing compensates the leads), so a lead resistance is
+refused there. ``quarter``, ``half`` and ``full`` are the bending forms
 quarter_I, half_II and full_I.
 
 The initial offset ``V_init`` is the mean of ``V_out`` over a named window of the recording

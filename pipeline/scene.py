@@ -29,7 +29,8 @@ from meshphase.data_schemas import load_schema
 
 from . import io
 from .bridge import BridgeConfig
-from .channels import ChannelMapError, apply_channel_overrides, check_gauges, is_glob
+from .channels import (ChannelMapError, apply_channel_overrides, check_gauges, is_glob,
+                       map_channels)
 from .errors import DeprecatedNameWarning, SceneWarning
 from .models.assembly import (CLEARANCE_ATOL, assemblable_planet_counts, coaxiality_error,
                               max_equal_planets, tip_clearance)
@@ -107,7 +108,9 @@ class Scene:
     speeds : Speeds or None
         Nominal speeds [rad/s] (a hint, never used for measured phasing).
     channels : list of dict
-        Gauge-to-channel overrides (``name``, ``kind``, ``tooth``, ``face_position`` [m], ``gain``).
+        The ``[[channels]]`` entries (:mod:`meshphase.channels`): ``name`` (exact or glob) or
+        ``regex``, ``kind``, ``gear``, ``tooth``, ``face_position`` [m], ``gain``,
+        ``mount_angle`` [rad], ``bridge`` (a :class:`meshphase.bridge.BridgeConfig`).
     input : dict
         ``recording`` (Path) or ``synthetic`` (scenario name) with ``minutes``, ``seed``,
         ``start``/``stop`` [s].
@@ -570,7 +573,8 @@ def _channel_key(c: dict, i: int, err) -> str:
     try:
         rx = re.compile(c["regex"])
     except re.error as exc:
-        raise err(["channels", i, "regex"], f"{c['regex']!r} is not a regular expression: {exc}") from None
+        raise err(["channels", i, "regex"],
+                  f"{c['regex']!r} is not a regular expression: {exc}") from None
     if "tooth" in rx.groupindex and "tooth" in c:
         raise err(["channels", i, "tooth"], "the regex's tooth group gives the tooth number; "
                   "give it there or here, not both")
@@ -968,11 +972,29 @@ def check_recording(scene: Scene, info=None) -> None:
         key = ["channels"] if exc.entry is None else ["channels", exc.entry, exc.key]
         raise SceneError(label, ".".join(map(str, key)), str(exc), _line_of(text, key)) from None
     _check_null_windows(scene, t0, t_end, span)
+    _check_regex_teeth(scene, info.names)
     try:
         check_gauges(mapped, plan(scene, check=False), scene.results, source)
     except ValueError as exc:
         key = ["input", "recording"]
         raise SceneError(label, ".".join(key), str(exc), _line_of(text, key)) from None
+
+
+def _check_regex_teeth(scene: Scene, names) -> None:
+    """A tooth number a regex's ``tooth`` group reads from a channel name below its gear's
+    tooth count (as a ``tooth`` key is checked when the scene is read)."""
+    g = scene.gearset
+    if g is None or not any("regex" in c for c in scene.channels):
+        return
+    for m in map_channels(names, scene.channels).matches:
+        c = scene.channels[m.entry]
+        gear = c.get("gear") or (c.get("kind") if c.get("kind") in ("sun", "ring") else None)
+        z = {"sun": g.z_sun, "ring": g.z_ring, "planet": g.z_planet or None}.get(gear)
+        if m.tooth is not None and z and m.tooth >= z:
+            key = ["channels", m.entry, "regex"]
+            raise SceneError(scene.path or "<scene>", ".".join(map(str, key)),
+                             f"channel {m.channel!r} reads as tooth {m.tooth}, but the {gear} has "
+                             f"{z} teeth, numbered 0 .. {z - 1}", _line_of(scene.text, key))
 
 
 def _check_null_windows(scene: Scene, t0: float, t_end: float, span: str) -> None:

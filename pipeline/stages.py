@@ -28,7 +28,8 @@ from .angles import held_member
 from .bridge import bridge_recording
 from .bridge_source import BridgeSource
 from .channels import (GAUGE_KINDS, apply_channel_overrides, bridge_configs, channels_present,
-                       check_gauges, entry_values, map_channels, mapped_specs, overridden, unmapped_message)
+                       check_gauges, entry_values, map_channels, mapped_specs, overridden,
+                       unmapped_message)
 from .compare import band_coverage, identify_errors, predict_pass_phasing, residual_stats
 from .errors import DataQualityWarning, MeshphaseWarning, ProcessingWarning, SceneWarning
 from .exits import OutputDir, recording_read_errors, run_status

@@ -300,3 +300,17 @@ def test_report_has_a_channel_mapping_section(rig_names_file, tmp_path):
     html = Path(files["report"]).read_text(encoding="utf-8")
     assert "Channel mapping" in html and "SG03_ring_T5" in html and "unmapped (as in the file)" in html
     assert "Not mapped by the scene" in html
+
+
+def test_regex_tooth_beyond_the_gear_is_refused(tmp_path):
+    # the seed rig's sun has 25 teeth (0 .. 24): "T7" reads as tooth 7, "T40" as 40
+    f = tmp_path / "r.h5"
+    meshphase.io.write(_rec(["SG01_sun_T7", "SG02_sun_T40"], 50), f)
+    ok = _scene(tmp_path, f, "[[channels]]\nregex = 'SG01_sun_T(?P<tooth>\\d+)'\nkind = \"sun\"\n")
+    assert load_scene(ok).channels[0]["regex"] == r"SG01_sun_T(?P<tooth>\d+)"
+    bad = _scene(tmp_path, f, "[[channels]]\nregex = 'SG\\d+_sun_T(?P<tooth>\\d+)'\nkind = \"sun\"\n")
+    with pytest.raises(SceneError) as info:
+        load_scene(bad)
+    e = info.value
+    assert e.key == "channels.0.regex" and "'SG02_sun_T40' reads as tooth 40" in str(e)
+    assert "the sun has 25 teeth" in str(e)
