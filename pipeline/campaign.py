@@ -123,18 +123,24 @@ def _recording_suffixes() -> tuple[str, ...]:
     return tuple(s for f in FORMATS for s in get_format(f).SUFFIXES)
 
 
-def collect_recordings(inputs: Iterable) -> tuple[list[Path], list[dict]]:
+def collect_recordings(inputs: Iterable, *, recursive: bool = False) -> tuple[list[Path], list[dict]]:
     """The recording files named by ``inputs`` (files or folders), in a stable order.
 
-    A folder contributes every file directly inside it (not recursively) that is a recording
-    by content (:func:`meshphase.io.detect_format`) or carries a recording suffix (.h5, .mcap,
-    .csv, .tdms, ...: a corrupt recording is kept so that the campaign reports it failed);
-    truth sidecars (``*.truth.json``), TDMS index files, hidden files and anything else are
-    skipped. A file named explicitly is always taken. Duplicates are dropped.
+    A folder contributes every file directly inside it (with ``recursive``, also inside its
+    subfolders, depth first in name order) that is a recording by content
+    (:func:`meshphase.io.detect_format`) or carries a recording suffix (.h5, .mcap, .csv,
+    .tdms, ...: a corrupt recording is kept so that the campaign reports it failed); truth
+    sidecars (``*.truth.json``), TDMS index files, hidden files and anything else are
+    skipped. Subfolders are entered only with ``recursive``, and then never a hidden one, a
+    symbolic link to a folder (a link could loop) or a folder meshphase wrote (it holds
+    ``.meshphase.json``: a run's or a campaign's outputs, whose CSV tables are no
+    recordings). A file named explicitly is always taken. Duplicates are dropped.
 
     Parameters
     ----------
     inputs : iterable of str or Path
+    recursive : bool
+        Look into subfolders too (``meshphase campaign --recursive``).
 
     Returns
     -------
@@ -152,8 +158,6 @@ def collect_recordings(inputs: Iterable) -> tuple[list[Path], list[dict]]:
     ValueError
         A named input is a FIFO, a device or a socket (not a regular file, not a folder).
     """
-    from .io import detect_format
-
     if isinstance(inputs, (str, bytes, os.PathLike)):
         raise TypeError(f"inputs must be a list of paths, got a single path {inputs!r}")
     suffixes = _recording_suffixes()
@@ -169,26 +173,50 @@ def collect_recordings(inputs: Iterable) -> tuple[list[Path], list[dict]]:
             # a named FIFO or device is refused here, before a worker could block on it
             files.append(as_regular_file(p, "a campaign input").resolve())
             continue
-        for q in sorted(p.iterdir()):
-            name = q.name.lower()
-            if not q.is_file():
-                reason = "not a file"
-            elif q.name.startswith("."):
-                reason = "hidden file"
-            elif name.endswith(_SKIP_SUFFIXES):
-                reason = "truth sidecar" if name.endswith(".truth.json") else "TDMS index"
-            else:
-                try:
-                    detect_format(q)
-                    reason = None
-                except ValueError as exc:  # RecordingFileError is a ValueError
-                    reason = None if q.suffix.lower() in suffixes else f"not a recording: {exc}"
+        for q in _folder_files(p, recursive, skipped):
+            reason = _not_a_recording(q, suffixes)
             if reason is None:
                 files.append(q.resolve())
             else:
                 skipped.append({"path": str(q), "reason": reason})
     unique = list(dict.fromkeys(files))
     return unique, skipped
+
+
+def _folder_files(folder: Path, recursive: bool, skipped: list):
+    """The entries of ``folder`` in name order (with ``recursive``, those of its subfolders
+    in their place, depth first); the subfolders not entered go to ``skipped``."""
+    from .exits import MANIFEST_NAME
+
+    for q in sorted(folder.iterdir()):
+        if not (recursive and q.is_dir()):
+            yield q
+        elif q.is_symlink():
+            skipped.append({"path": str(q), "reason": "symbolic link to a folder (not followed)"})
+        elif q.name.startswith("."):
+            skipped.append({"path": str(q), "reason": "hidden folder"})
+        elif (q / MANIFEST_NAME).exists():
+            skipped.append({"path": str(q), "reason": "meshphase output folder"})
+        else:
+            yield from _folder_files(q, recursive, skipped)
+
+
+def _not_a_recording(q: Path, suffixes: tuple) -> str | None:
+    """Why the folder entry ``q`` is not taken as a recording, or None when it is."""
+    from .io import detect_format
+
+    name = q.name.lower()
+    if not q.is_file():
+        return "not a file"
+    if q.name.startswith("."):
+        return "hidden file"
+    if name.endswith(_SKIP_SUFFIXES):
+        return "truth sidecar" if name.endswith(".truth.json") else "TDMS index"
+    try:
+        detect_format(q)
+        return None
+    except ValueError as exc:  # RecordingFileError is a ValueError
+        return None if q.suffix.lower() in suffixes else f"not a recording: {exc}"
 
 
 _MAX_NAME_BYTES = 120
@@ -606,7 +634,8 @@ def campaign_exit_code(campaign: dict) -> int:
 def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = None,
                  workers: int | None = None, overwrite: bool = False, progress: bool = True,
                  recording_reports: bool = False, task: Callable[..., dict] | None = None,
-                 task_timeout: float | None = None, resume: bool = False, dashboard=None) -> dict:
+                 task_timeout: float | None = None, resume: bool = False, dashboard=None,
+                 recursive: bool = False) -> dict:
     """Process many recordings with one scene as one Dask job.
 
     The output folder is written whole or not at all (:class:`meshphase.exits.OutputDir`: a
@@ -659,6 +688,8 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
     dashboard : None, bool, int or str
         The local cluster's Dask dashboard (:func:`local_cluster`): off by default; True or
         a port: on 127.0.0.1.
+    recursive : bool
+        Look for recordings in the input folders' subfolders too (:func:`collect_recordings`).
 
     Returns
     -------
@@ -692,7 +723,7 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
 
     workers, task_timeout, task = _check_options(scheduler, workers, dashboard, task_timeout, task)
     scene_path = Path(scene_path).resolve()
-    scene, inputs, files, skipped = _scene_and_recordings(scene_path, inputs)
+    scene, inputs, files, skipped = _scene_and_recordings(scene_path, inputs, recursive)
     client_results, worker_results, mc_on_client = split_results(scene)
     names = recording_names(files)
     base = Path(out_dir) if out_dir is not None else scene_path.with_name(scene_path.stem + "-campaign")
@@ -749,7 +780,7 @@ def _check_options(scheduler, workers, dashboard, task_timeout, task):
     return workers, task_timeout, task
 
 
-def _scene_and_recordings(scene_path: Path, inputs):
+def _scene_and_recordings(scene_path: Path, inputs, recursive: bool = False):
     """(scene, inputs as a list, recording files, skipped entries): the scene loaded, the
     recordings found, and the per-recording scene validated once, up front."""
     from .scene import load_scene, plan
@@ -757,7 +788,7 @@ def _scene_and_recordings(scene_path: Path, inputs):
     scene = load_scene(scene_path)  # FileNotFoundError / SceneError (a ValueError) up front
     if not isinstance(inputs, (str, bytes, os.PathLike)):
         inputs = list(inputs)  # read twice below: a generator would be empty the second time
-    files, skipped = collect_recordings(inputs)
+    files, skipped = collect_recordings(inputs, recursive=recursive)
     if not files:
         left = [Path(s["path"]).name for s in skipped]
         raise ValueError(f"no recording files found in inputs {[str(i) for i in inputs]!r}"
@@ -884,7 +915,8 @@ def _write_campaign_files(result: dict, out: Path, final_of, t_all: float) -> No
 def cli_campaign(scene_path, inputs: list[str], *, scheduler: str | None = None,
                  workers: int | None = None, out=None, overwrite: bool = False,
                  progress: bool = True, recording_reports: bool = False,
-                 task_timeout: float | None = None, resume: bool = False, dashboard=None) -> dict:
+                 task_timeout: float | None = None, resume: bool = False, dashboard=None,
+                 recursive: bool = False) -> dict:
     """``meshphase campaign SCENE DIR...``: :func:`run_campaign` with the CLI's arguments.
 
     Parameters
@@ -908,6 +940,8 @@ def cli_campaign(scene_path, inputs: list[str], *, scheduler: str | None = None,
         ``--resume``: reuse complete results.
     dashboard : None, bool or str
         ``--dashboard [ADDRESS]``.
+    recursive : bool
+        ``--recursive``: look into the folders' subfolders too.
 
     Returns
     -------
@@ -916,4 +950,5 @@ def cli_campaign(scene_path, inputs: list[str], *, scheduler: str | None = None,
     """
     return run_campaign(scene_path, list(inputs), out, scheduler=scheduler, workers=workers,
                         overwrite=overwrite, progress=progress, recording_reports=recording_reports,
-                        task_timeout=task_timeout, resume=resume, dashboard=dashboard)
+                        task_timeout=task_timeout, resume=resume, dashboard=dashboard,
+                        recursive=recursive)

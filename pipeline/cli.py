@@ -48,6 +48,7 @@ from tqdm import tqdm
 
 from . import __version__
 from .campaign import cli_campaign
+from .channels import mapping_report
 from .demo import demo_scene_path
 from .errors import DataQualityWarning
 from .exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_PIPE, OutputDir, recording_read_errors,
@@ -88,6 +89,8 @@ def cmd_info(args) -> int:
         "channels": [c.to_dict() for c in info.channels], "meta": info.meta,
         "history": info.history,
     }
+    if getattr(args, "scene", None):   # before the scan: a bad scene fails at once
+        out["channel_map"] = _channel_map(args.scene, info.channels, str(path))
     if not args.no_quality:
         # quality summary streamed in blocks: memory stays flat on long files
         totals = {c.name: {"n_nonfinite": 0, "nonfinite_runs": 0, "clipped_runs": 0,
@@ -133,7 +136,27 @@ def cmd_info(args) -> int:
         print(line)
     if info.history:
         print(f"history   {len(info.history)} step(s): " + ", ".join(str(h.get('step', h)) for h in info.history))
+    if "channel_map" in out:
+        _print_channel_map(out["channel_map"])
     return 0
+
+
+def _channel_map(scene_path, channels, source: str) -> dict:
+    """``info --scene``: the scene's channel mapping of the recording
+    (:func:`meshphase.channels.mapping_report`)."""
+    scene = load_scene(as_regular_file(scene_path, "the scene"))
+    return dict(mapping_report(channels, scene.channels, source), scene=str(scene_path))
+
+
+def _print_channel_map(m: dict) -> None:
+    print(f"mapping   scene {m['scene']}")
+    print(f"  {'channel':<16} {'kind':<10} {'gear':<7} {'tooth':>5} {'units':<6} scene entry")
+    for r in m["rows"]:
+        how = f" [{r['matched by']}]" if r["matched by"] else ""
+        print(f"  {r['channel']:<16} {r['kind']:<10} {r['gear']:<7} {r['tooth']!s:>5} "
+              f"{r['units']:<6} {r['scene entry']}{how}")
+    if m["unmapped"]:
+        print(f"unmapped  {', '.join(m['unmapped'])}: as the file describes them")
 
 
 # ---------------------------------------------------------------------------- convert
@@ -334,7 +357,7 @@ def cmd_campaign(args) -> int:
     res = cli_campaign(args.scene, args.inputs, scheduler=args.scheduler, workers=args.workers,
                        out=args.out, overwrite=args.overwrite, progress=not args.quiet,
                        recording_reports=args.recording_reports, task_timeout=args.task_timeout,
-                       resume=args.resume, dashboard=args.dashboard)
+                       resume=args.resume, dashboard=args.dashboard, recursive=args.recursive)
     c = res["counts"]
     print(f"campaign  {res['scene']}: {c['ok']} ok, {c['unreliable']} unreliable, {c['partial']} partial, "
           f"{c['failed']} failed in {res['timing_s'].get('total', float('nan')):.1f} s "
@@ -399,6 +422,8 @@ def _add_info(sub) -> None:
     s.add_argument("file")
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.add_argument("--no-quality", action="store_true", help="header only (do not scan the samples)")
+    s.add_argument("--scene", metavar="SCENE",
+                   help="also list what the scene's [[channels]] map each channel to, and what they leave unmapped")
     s.set_defaults(func=cmd_info)
 
 
@@ -490,6 +515,9 @@ def _add_campaign(sub) -> None:
                    help="serve the Dask dashboard of the local cluster (default off; without ADDRESS "
                         "on 127.0.0.1, a free port; it has no authentication)")
     s.add_argument("--recording-reports", action="store_true", help="an HTML report per recording too")
+    s.add_argument("--recursive", action="store_true",
+                   help="look for recordings in the folders' subfolders too (not hidden ones, "
+                        "symbolic links or meshphase output folders)")
     s.set_defaults(func=cmd_campaign)
 
 

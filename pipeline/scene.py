@@ -28,6 +28,9 @@ import numpy as np
 from meshphase.data_schemas import load_schema
 
 from . import io
+from .bridge import BridgeConfig
+from .channels import (ChannelMapError, apply_channel_overrides, check_gauges, is_glob,
+                       map_channels)
 from .errors import DeprecatedNameWarning, SceneWarning
 from .models.assembly import (CLEARANCE_ATOL, assemblable_planet_counts, coaxiality_error,
                               max_equal_planets, tip_clearance)
@@ -105,7 +108,9 @@ class Scene:
     speeds : Speeds or None
         Nominal speeds [rad/s] (a hint, never used for measured phasing).
     channels : list of dict
-        Gauge-to-channel overrides (``name``, ``kind``, ``tooth``, ``face_position`` [m], ``gain``).
+        The ``[[channels]]`` entries (:mod:`meshphase.channels`): ``name`` (exact or glob) or
+        ``regex``, ``kind``, ``gear``, ``tooth``, ``face_position`` [m], ``gain``,
+        ``mount_angle`` [rad], ``bridge`` (a :class:`meshphase.bridge.BridgeConfig`).
     input : dict
         ``recording`` (Path) or ``synthetic`` (scenario name) with ``minutes``, ``seed``,
         ``start``/``stop`` [s].
@@ -525,23 +530,80 @@ def _parse_speeds(raw: dict, gearset: Gearset | None, err) -> tuple[Speeds | Non
 
 
 def _parse_channels(raw: dict, gearset: Gearset | None, err) -> tuple[list, dict]:
-    """``[[channels]]`` -> (the overrides, SI inside; mount angle [rad] by channel)."""
+    """``[[channels]]`` -> (the entries, SI inside: ``face_position`` [m], ``mount_angle``
+    [rad], ``bridge`` a :class:`meshphase.bridge.BridgeConfig`; mount angle [rad] by the
+    channel of each exact name)."""
     channels = []
     mounts = {}
     seen = {}
     for i, c in enumerate(raw.get("channels", [])):
-        if c["name"] in seen:
-            raise err(["channels", i, "name"], f"channel {c['name']!r} is mapped twice (also "
-                      f"[[channels]] number {seen[c['name']] + 1}); map each channel once")
-        seen[c["name"]] = i
+        key = _channel_key(c, i, err)
+        if (key, c[key]) in seen:
+            raise err(["channels", i, key], f"channel {c[key]!r} is mapped twice (also "
+                      f"[[channels]] number {seen[(key, c[key])] + 1}); map each channel once")
+        seen[(key, c[key])] = i
         _check_channel(c, i, gearset, err)
-        d = {k: v for k, v in c.items() if k not in ("face_position_mm", "mount_angle_deg")}
+        d = {k: v for k, v in c.items() if k not in ("face_position_mm", "mount_angle_deg")
+             and k not in _BRIDGE_KEYS}
         if "face_position_mm" in c:
             d["face_position"] = c["face_position_mm"] * 1e-3
         if "mount_angle_deg" in c:
-            mounts[c["name"]] = math.radians(c["mount_angle_deg"])
+            d["mount_angle"] = math.radians(c["mount_angle_deg"])
+            if key == "name" and not is_glob(c["name"]):
+                mounts[c["name"]] = d["mount_angle"]
+        if "bridge" in c or any(k in c for k in _BRIDGE_KEYS):
+            d["bridge"] = _parse_bridge_keys(c, i, err)
         channels.append(d)
     return channels, mounts
+
+
+#: [[channels]] keys of a bridge channel (its volts converted to strain: meshphase.bridge)
+_BRIDGE_KEYS = ("bridge", "gauge_factor", "excitation_V", "poisson", "lead_ohm", "gauge_ohm",
+                "null_window_s")
+
+
+def _channel_key(c: dict, i: int, err) -> str:
+    """``name`` or ``regex``: the key by which a ``[[channels]]`` entry maps (one of them; a
+    regex that compiles, its ``tooth`` group not next to a ``tooth`` key)."""
+    if ("name" in c) == ("regex" in c):
+        raise err(["channels", i], "give name (a channel's name, or a glob such as "
+                  '"SG*_sun*") or regex (a regular expression), one of them')
+    if "name" in c:
+        return "name"
+    try:
+        rx = re.compile(c["regex"])
+    except re.error as exc:
+        raise err(["channels", i, "regex"],
+                  f"{c['regex']!r} is not a regular expression: {exc}") from None
+    if "tooth" in rx.groupindex and "tooth" in c:
+        raise err(["channels", i, "tooth"], "the regex's tooth group gives the tooth number; "
+                  "give it there or here, not both")
+    return "regex"
+
+
+def _parse_bridge_keys(c: dict, i: int, err):
+    """The bridge of one ``[[channels]]`` entry (:class:`meshphase.bridge.BridgeConfig`, SI),
+    its problems as a SceneError at the key at fault."""
+    if "bridge" not in c:
+        given = next(k for k in _BRIDGE_KEYS if k in c)
+        raise err(["channels", i, given], f"{given} belongs to a bridge channel: give its "
+                  'bridge too (bridge = "quarter_I", ... : data_schemas/scene.md)')
+    for k in ("gauge_factor", "excitation_V"):
+        if k not in c:
+            raise err(["channels", i, "bridge"], f"a bridge channel needs {k}")
+    try:
+        return BridgeConfig(c["bridge"], c["gauge_factor"], c["excitation_V"],
+                            poisson=c.get("poisson"), lead_resistance=c.get("lead_ohm", 0.0),
+                            gauge_resistance=c.get("gauge_ohm"),
+                            null_window=c.get("null_window_s"))
+    except ValueError as exc:
+        text = str(exc)
+        key = next((k for word, k in (("null_window", "null_window_s"),
+                                      ("gauge_factor", "gauge_factor"),
+                                      ("excitation", "excitation_V"), ("oisson", "poisson"),
+                                      ("lead", "lead_ohm"), ("gauge_resistance", "gauge_ohm"))
+                    if word in text), "bridge")
+        raise err(["channels", i, key], text) from None
 
 
 def _parse_tacho(raw: dict) -> dict:
@@ -853,8 +915,9 @@ def check_recording(scene: Scene, info=None) -> None:
     files carry one); ``processing.notch_hz`` below the Nyquist frequency; the
     ``start_s``/``stop_s`` window inside the recording; every ``[[channels]]`` name and the
     ``[tacho] channel`` present, and a gauge channel when measured results are wanted (the
-    same rules and messages as the load stage, :func:`meshphase.stages._apply_channel_overrides`
-    and :func:`meshphase.stages._check_gauges`).
+    same rules and messages as the load stage: :func:`meshphase.channels.map_channels`,
+    :func:`meshphase.channels.check_gauges`), each bridge channel's ``null_window_s`` inside
+    the recording.
 
     Parameters
     ----------
@@ -901,22 +964,48 @@ def check_recording(scene: Scene, info=None) -> None:
         raise SceneError(label, "tacho.channel", f"{source}: tacho channel {tacho!r} is not in the "
                          f"file; channels present: {', '.join(info.names) or 'none'}",
                          _line_of(text, ["tacho", "channel"]))
-    # stages imports this module: the load stage's channel rules are imported when used
-    from .stages import RunContext, _apply_channel_overrides, _check_gauges
-
     empty = Recording(np.empty((0, len(info.channels))), info.fs, info.channels, info.t0,
                       meta=info.meta)
     try:
-        mapped = _apply_channel_overrides(empty, scene.channels, source)
-    except ValueError as exc:
-        i = next((i for i, c in enumerate(scene.channels) if c["name"] not in info.names), None)
-        key = ["channels"] if i is None else ["channels", i, "name"]
+        mapped = apply_channel_overrides(empty, scene.channels, source)
+    except ChannelMapError as exc:
+        key = ["channels"] if exc.entry is None else ["channels", exc.entry, exc.key]
         raise SceneError(label, ".".join(map(str, key)), str(exc), _line_of(text, key)) from None
+    _check_null_windows(scene, t0, t_end, span)
+    _check_regex_teeth(scene, info.names)
     try:
-        _check_gauges(RunContext(scene), mapped, source)
+        check_gauges(mapped, plan(scene, check=False), scene.results, source)
     except ValueError as exc:
         key = ["input", "recording"]
         raise SceneError(label, ".".join(key), str(exc), _line_of(text, key)) from None
+
+
+def _check_regex_teeth(scene: Scene, names) -> None:
+    """A tooth number a regex's ``tooth`` group reads from a channel name below its gear's
+    tooth count (as a ``tooth`` key is checked when the scene is read)."""
+    g = scene.gearset
+    if g is None or not any("regex" in c for c in scene.channels):
+        return
+    for m in map_channels(names, scene.channels).matches:
+        c = scene.channels[m.entry]
+        gear = c.get("gear") or (c.get("kind") if c.get("kind") in ("sun", "ring") else None)
+        z = {"sun": g.z_sun, "ring": g.z_ring, "planet": g.z_planet or None}.get(gear)
+        if m.tooth is not None and z and m.tooth >= z:
+            key = ["channels", m.entry, "regex"]
+            raise SceneError(scene.path or "<scene>", ".".join(map(str, key)),
+                             f"channel {m.channel!r} reads as tooth {m.tooth}, but the {gear} has "
+                             f"{z} teeth, numbered 0 .. {z - 1}", _line_of(scene.text, key))
+
+
+def _check_null_windows(scene: Scene, t0: float, t_end: float, span: str) -> None:
+    """Each bridge channel's ``null_window_s`` inside the recording [t0, t_end] [s]."""
+    for i, c in enumerate(scene.channels):
+        w = getattr(c.get("bridge"), "null_window", None)
+        if w is not None and not (t0 <= w[0] and w[1] <= t_end):
+            key = ["channels", i, "null_window_s"]
+            raise SceneError(scene.path or "<scene>", ".".join(map(str, key)),
+                             f"null_window_s [{w[0]:g}, {w[1]:g}] s is not inside the "
+                             f"recording: {span}", _line_of(scene.text, key))
 
 
 def _check_consistency(scene: Scene, text: str, label, *, check_files: bool = True) -> None:

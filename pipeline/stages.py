@@ -15,7 +15,6 @@ here); the HTML report by :mod:`meshphase.report.validation` (the only place tha
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import functools
 import math
 import time
@@ -26,8 +25,13 @@ from typing import Callable
 import numpy as np
 
 from .angles import held_member
+from .bridge import bridge_recording
+from .bridge_source import BridgeSource
+from .channels import (GAUGE_KINDS, apply_channel_overrides, bridge_configs, channels_present,
+                       check_gauges, entry_values, map_channels, mapped_specs, overridden,
+                       unmapped_message)
 from .compare import band_coverage, identify_errors, predict_pass_phasing, residual_stats
-from .errors import DataQualityWarning, MeshphaseWarning, ProcessingWarning
+from .errors import DataQualityWarning, MeshphaseWarning, ProcessingWarning, SceneWarning
 from .exits import OutputDir, recording_read_errors, run_status
 from .loads import facewidth_centroid, facewidth_readings, load_sharing_from_amplitudes
 from .log import logger
@@ -41,7 +45,7 @@ from .outputs import new_output_dir, summary_dict, write_outputs  # noqa: F401 (
 from .passes import ONSET_RESOLUTION, gap_intervals_of, gauge_passes  # noqa: F401 (was here)
 from .phasing import (PassTable, assign_planets_by_pattern, measure_phasing, pass_order,
                       relabel_gauge)
-from .recording import ChannelSpec, Recording
+from .recording import Recording
 from .results import (BearingStage, CentroidsStage, CompareStage, ConditionStage,
                       GaugeComparison, IdealStage, IdentifyStage, LoadSharingStage, LoadStage,
                       OnsetsStage, PhasingStage, RunContext, StageResult, TiltStage,
@@ -80,56 +84,6 @@ def _inputs(ctx: RunContext, *names: str) -> tuple:
     return got
 
 
-def _channels_present(rec: Recording) -> str:
-    """``name (kind), ...`` of every channel of ``rec``, for error messages."""
-    return ", ".join(f"{c.name} ({c.kind})" for c in rec.channels) or "none"
-
-
-def _channel_overrides(names: list[str], specs, overrides: list[dict], source: str | None,
-                       present: str) -> tuple[list, list]:
-    """The channel specs after the scene's ``[[channels]]`` overrides, and the gains they ask
-    for ([(column, gain)], applied in that order); ValueError naming the channels present for
-    an unknown name."""
-    missing = [o["name"] for o in overrides if o["name"] not in names]
-    if missing:
-        def near(m):  # a name present inside the one asked for ("sun" in "sun_gauge"), or alike
-            inside = [n for n in names if n.lower() in m.lower() or m.lower() in n.lower()]
-            return (inside or difflib.get_close_matches(m, names, n=1))[:1]
-
-        hints = [f"{m!r} -> {close[0]!r}?" for m in missing if (close := near(m))]
-        raise ValueError(f"{source or 'the recording'}: the scene's [[channels]] name "
-                         f"{', '.join(repr(m) for m in missing)} is not in the file; channels "
-                         f"present: {present}"
-                         + (f" (did you mean {', '.join(hints)})" if hints else ""))
-    specs = list(specs)
-    gains = []
-    for o in overrides:
-        i = names.index(o["name"])
-        d = specs[i].to_dict()
-        d.update({k: v for k, v in o.items() if k != "name"})
-        if "kind" in o and "gear" not in o and o["kind"] in ("sun", "ring"):
-            d["gear"] = o["kind"]
-        specs[i] = ChannelSpec.from_dict(d)
-        if "gain" in o:
-            gains.append((i, o["gain"]))
-    return specs, gains
-
-
-def _apply_channel_overrides(rec: Recording, overrides: list[dict], source: str | None = None) -> Recording:
-    if not overrides:
-        return rec
-    specs, gains = _channel_overrides(rec.names, rec.channels, overrides, source,
-                                      _channels_present(rec))
-    data = rec.data
-    if gains:
-        data = data.copy()
-        for o in overrides:
-            if "gain" in o:
-                data[:, rec.index(o["name"])] *= o["gain"]
-    out = Recording(data, rec.fs, specs, rec.t0, rec.start_datetime, rec.meta, rec.history)
-    return out.with_history("channel_overrides", channels=[o["name"] for o in overrides])
-
-
 def _nominal_speeds(ctx: RunContext):
     """The scene's nominal speeds, else the recording's (synthetic files carry them)."""
     sp = ctx.scene.speeds
@@ -164,7 +118,12 @@ def _tacho_geometry(ctx: RunContext) -> tuple:
     the recording's metadata, else (synthetic input) the generator's configuration."""
     key = ctx.scene.tacho.get("key_angle")
     mounts = dict(ctx.scene.mounts)
-    meta = ctx.load.recording.meta
+    rec = ctx.load.recording
+    if ctx.scene.channels:   # entries by pattern: the channels they matched
+        for k, v in entry_values(map_channels(rec.names, ctx.scene.channels),
+                                 "mount_angle").items():
+            mounts.setdefault(k, v)
+    meta = rec.meta
     if key is None and meta.get("tacho_key_angle") is not None:
         key = float(meta["tacho_key_angle"])
     for k, v in (meta.get("mount_angles") or {}).items():
@@ -180,31 +139,6 @@ def _tacho_geometry(ctx: RunContext) -> tuple:
 
 
 # ----------------------------------------------------------------------------- stages
-#: channel kinds the onset detector times (the gauges)
-_GAUGE_KINDS = ("sun", "ring", "facewidth")
-
-
-def _check_gauges(ctx: RunContext, rec: Recording, source: str) -> list[str]:
-    """Refuse a recording without any gauge when the scene wants measured results; return
-    the channels that no planned stage reads."""
-    stages = plan(ctx.scene, check=False)
-    measured = [r for r in ctx.scene.results if r in ("phasing", "load_sharing", "centroids",
-                                                      "compare", "identify")]
-    if "onsets" in stages and not any(c.kind in _GAUGE_KINDS for c in rec.channels):
-        first = rec.channels[0].name if rec.channels else "CHANNEL"
-        raise ValueError(f"{source}: no gauge channel (kind sun, ring or facewidth) for the "
-                         f"results {', '.join(measured) or 'wanted'}; channels present: "
-                         f"{_channels_present(rec)}; say which channel is which gauge in the "
-                         f'scene, e.g. [[channels]] name = "{first}", kind = "sun"')
-    used = set()
-    if "onsets" in stages:
-        used |= {c.name for c in rec.channels if c.kind in _GAUGE_KINDS}
-    tacho = [c.name for c in rec.channels if c.kind == "tacho"]
-    if "phasing" in stages and tacho:
-        used.add(tacho[0])  # the ring pulse that is planet 1, from the first tacho only
-    return [c.name for c in rec.channels if c.name not in used]
-
-
 #: A synthetic recording up to this size [B] is generated whole, once; a longer one is
 #: generated block by block again for each pass over its samples (bounded memory).
 SYNTHETIC_WHOLE_BYTES = 256 * 2**20
@@ -222,7 +156,8 @@ def stage_load(ctx: RunContext) -> LoadStage:
     else:
         src, rec, source, truth = _open_synthetic(ctx.scene)
     # said at once: a recording whose samples then fail to read still names them
-    ctx.channels_unused = _check_gauges(ctx, rec, source)
+    ctx.channels_unused = check_gauges(rec, plan(ctx.scene, check=False), ctx.scene.results,
+                                       source)
     errors = true_errors(truth)
     scan = _scan(src)
     if hasattr(src, "warn_nonfinite"):
@@ -237,21 +172,44 @@ def stage_load(ctx: RunContext) -> LoadStage:
 
 def _open_file(scene: Scene) -> tuple:
     """(source, header, name, None) of the scene's recording file, with its channel
-    overrides; a FIFO or device is refused before opening it could block."""
-    inp, overrides = scene.input, scene.channels
+    mapping (and bridge channels in strain); a FIFO or device is refused before opening it
+    could block."""
+    inp = scene.input
     path = as_regular_file(inp["recording"], "the recording")   # stat only
     source = str(inp["recording"])
+    start, stop = inp.get("start"), inp.get("stop")
     with recording_read_errors(path):
-        src = FileSource(path, start=inp.get("start"), stop=inp.get("stop"))
-        h = src.header
-        if overrides:
-            specs, gains = _channel_overrides(h.names, h.channels, overrides, source,
-                                              _channels_present(h))
-            src = FileSource(path, start=inp.get("start"), stop=inp.get("stop"),
-                             channels=specs, gains=gains, format=src.fmt)
-            src.header = src.header.with_history(
-                "channel_overrides", channels=[o["name"] for o in overrides])
+        src = FileSource(path, start=start, stop=stop)
+        if scene.channels:
+            fmt = src.fmt
+            src = _mapped_source(
+                src.header, scene.channels, source,
+                lambda specs, gains: FileSource(path, start=start, stop=stop, channels=specs,
+                                                gains=gains, format=fmt),
+                lambda specs, gains: FileSource(path, channels=specs, gains=gains, format=fmt))
     return src, src.header, source, None
+
+
+def _mapped_source(header, entries: list, source: str, make: Callable, make_whole: Callable):
+    """The source with the scene's ``[[channels]]`` applied (:mod:`meshphase.channels`):
+    ``make(specs, gains)`` opens it; unmapped channels said as a SceneWarning; bridge
+    channels converted to strain as read (:class:`meshphase.bridge.BridgeSource`, the null
+    windows read from ``make_whole(specs, gains)``, the whole recording)."""
+    cmap = map_channels(header.names, entries, source, channels_present(header))
+    specs, gains = mapped_specs(header.channels, cmap)
+    src = make(specs, gains)
+    src.header = src.header.with_history("channel_overrides", channels=overridden(cmap))
+    _say_unmapped(cmap, specs, source)
+    bridges = bridge_configs(cmap)
+    if bridges:
+        src = BridgeSource(src, bridges, make_whole(specs, gains))
+    return src
+
+
+def _say_unmapped(cmap, specs, source: str) -> None:
+    msg = unmapped_message(cmap, specs)
+    if msg:
+        warnings.warn(f"{source}: {msg}", SceneWarning, stacklevel=3)
 
 
 def _open_synthetic(scene: Scene) -> tuple:
@@ -259,7 +217,7 @@ def _open_synthetic(scene: Scene) -> tuple:
     to :data:`SYNTHETIC_WHOLE_BYTES`, else again block by block for every pass."""
     from meshphase.synthetic import generate_blocks  # the generator: optional for the core
 
-    inp, overrides = scene.input, scene.channels
+    inp, entries = scene.input, scene.channels
     minutes = inp.get("minutes")
     # a config built in code (benchmarks, tests) wins over the registered scenario's
     stream = generate_blocks(inp.get("config") or inp["synthetic"],
@@ -268,15 +226,19 @@ def _open_synthetic(scene: Scene) -> tuple:
     source = f"synthetic:{inp['synthetic']}"
     size = stream.n_samples * len(stream.channels) * stream.dtype.itemsize
     if size <= SYNTHETIC_WHOLE_BYTES:
-        rec = _apply_channel_overrides(stream.collect(), overrides, source)
+        rec = apply_channel_overrides(stream.collect(), entries, source)
+        if entries:
+            cmap = map_channels(stream.names, entries, source)
+            _say_unmapped(cmap, rec.channels, source)
+            rec = bridge_recording(rec, bridge_configs(cmap))
         return MemorySource(rec), rec, source, stream.truth
-    specs, gains = _channel_overrides(stream.names, stream.channels, overrides, source,
-                                      _channels_present(stream))
     stream.block_samples = BLOCK_SAMPLES       # the blocks the file path reads
-    src = GeneratorSource(stream, channels=specs, gains=gains)
-    if overrides:
-        src.header = src.header.with_history(
-            "channel_overrides", channels=[o["name"] for o in overrides])
+    if not entries:
+        src = GeneratorSource(stream)
+    else:
+        src = _mapped_source(stream, entries, source,
+                             lambda specs, gains: GeneratorSource(stream, channels=specs, gains=gains),
+                             lambda specs, gains: GeneratorSource(stream, channels=specs, gains=gains))
     return src, src.header, source, stream.truth
 
 
@@ -331,7 +293,7 @@ def _channel_plans(ctx: RunContext, rec) -> list:
         period = None
         if fm and g is not None:
             period = (g.z_sun if gear == "sun" else g.z_ring) / fm
-        onsets = c.kind in _GAUGE_KINDS
+        onsets = c.kind in GAUGE_KINDS
         kw = {}
         if onsets:
             og = c.gear or c.kind
@@ -355,12 +317,12 @@ def stage_onsets(ctx: RunContext) -> OnsetsStage:
     if found is None:                           # a condition stage that kept the samples
         found = {}
         for c in rec.channels:
-            if c.kind in _GAUGE_KINDS:
+            if c.kind in GAUGE_KINDS:
                 gear = c.gear or c.kind
                 fm = _mesh_freq(ctx, gear) if gear in ("sun", "ring") else None
                 found[c.name] = detect_onsets_recording(rec, c.name, quality=cond.quality.get(c.name),
                                                         **({"mesh_freq": fm} if fm else {}))
-    out = {c.name: found[c.name] for c in rec.channels if c.kind in _GAUGE_KINDS and c.name in found}
+    out = {c.name: found[c.name] for c in rec.channels if c.kind in GAUGE_KINDS and c.name in found}
     scan = cond.scan if cond.scan is not None else ctx.load.scan
     n = sum(len(o) for o in out.values())
     jit = [float(np.median(o.corr)) for o in out.values() if len(o) and np.isfinite(o.corr).any()]

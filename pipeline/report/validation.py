@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..channels import mapping_report
 from ..compare import wrap
 from ..models.bearing import BearingMoments
 from ..models.tilt import TABLE11_THEORY, table10_cases, table11_cases
@@ -67,6 +68,8 @@ def build_report(ctx, out_dir) -> Path:
     _summary_section(rep, ctx)
     if ctx.load is not None:
         _recording_section(rep, ctx, figs)
+        if ctx.scene.channels:
+            _channel_map_section(rep, ctx)
     if ctx.onsets is not None:
         _onsets_section(rep, ctx, figs)
     if ctx.ideal is not None:
@@ -121,6 +124,30 @@ def _recording_section(rep: Report, ctx, figs: _Figures) -> None:
                  "Non-finite samples and clipped runs per channel (tacho pulse trains: no clipping count).")
     else:  # an all-zero bar chart says nothing a sentence does not
         s.text("No non-finite samples and no clipped runs in any gauge channel.", cls="note ok")
+
+
+def _channel_map_section(rep: Report, ctx) -> None:
+    """Which recording channel the scene's [[channels]] map to what; the bridge channels'
+    conversion to strain (from the recording's history)."""
+    rec = ctx.load.recording
+    m = mapping_report(rec.channels, ctx.scene.channels, ctx.load.source)
+    s = rep.section("Channel mapping")
+    s.table(m["rows"])
+    if m["unmapped"]:
+        s.text(f"Not mapped by the scene's [[channels]]: {', '.join(m['unmapped'])} "
+               "(kept as the file describes them).", cls="note")
+    bridges = [h for h in rec.history if h.get("step") == "bridge_strain"]
+    if bridges:
+        s.heading("Bridge volts converted to strain")
+        s.table([{"channel": name, "bridge": b["bridge"], "gauge factor": b["gauge_factor"],
+                  "excitation [V]": b["excitation_V"], "1 + R_L/R_g": _lead(b),
+                  "null window [s]": b["null_window_s"] or "none",
+                  "V_init [mV]": _f(b["v_init_V"], scale=1e3)}
+                 for h in bridges for name, b in h["channels"].items()])
+
+
+def _lead(b: dict) -> str:
+    return _f(1.0 + b["lead_ohm"] / b["gauge_ohm"]) if b.get("lead_ohm") else "1"
 
 
 def _conditioned_rows(quality: dict) -> list:
