@@ -372,6 +372,40 @@ class Recording:
         kw.update(changes)
         return Recording(**kw)
 
+    # ------------------------------------------------------------------ notebooks
+    def plot(self, channels=None, start: float | None = None, stop: float | None = None,
+             onsets=None, *, ax=None, max_points: int = 20000):
+        """Plot channels against time, one panel each, with onsets marked (matplotlib,
+        imported now; :func:`meshphase.report.notebook.plot_recording`).
+
+        Parameters
+        ----------
+        channels : str or sequence of str, optional
+            Channels to draw (default all).
+        start, stop : float, optional
+            Time window [s] (half-open; default the whole recording).
+        onsets : array_like, dict, Result or RunContext, optional
+            Onset times [s] to mark: one array for every channel, a dict channel -> times
+            (or Onsets, or (times, 1-based planets)), or a :class:`meshphase.Result` (its
+            onsets, coloured by planet).
+        ax : matplotlib Axes, optional
+            Draw a single channel into it.
+        max_points : int
+            Samples drawn per channel at most (decimated by striding).
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        from .report.notebook import plot_recording  # matplotlib: only when plotting
+
+        return plot_recording(self, channels, start, stop, onsets, ax=ax, max_points=max_points)
+
+    def _repr_html_(self) -> str:
+        from .html_repr import recording_html
+
+        return recording_html(self)
+
     # ------------------------------------------------------------------ quality
     def quality(self) -> list[dict]:
         """Per-channel quality summary: NaN/inf runs, longest run, min/max, clipped runs,
