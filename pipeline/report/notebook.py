@@ -45,10 +45,12 @@ def _scale(units: str) -> tuple[float, str]:
 
 
 def _signal_panel(ax, t, x, units: str, title: str, marks, max_points: int) -> None:
-    """One channel's samples (decimated to about ``max_points``) with vertical onset marks
+    """One channel's samples (decimated to at most ``max_points``) with vertical onset marks
     ``marks``: (times [s], 1-based planets or None)."""
+    if isinstance(max_points, bool) or not isinstance(max_points, int) or max_points < 2:
+        raise ValueError(f"max_points must be an integer >= 2, got {max_points!r}")
     k, unit = _scale(units)
-    step = max(1, t.size // max(1, max_points))
+    step = max(1, -(-t.size // max_points))     # ceil: at most max_points
     ax.plot(t[::step], x[::step] * k, lw=0.6, color="0.3")
     ax.set_ylabel(f"{title} [{unit}]")
     if marks is None:
