@@ -37,11 +37,11 @@ def _toml_value(v, key: str) -> str:
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, int):
-        return str(v)
+        return str(int(v))
     if isinstance(v, float):
         if math.isnan(v):
             return "nan"
-        return repr(v) if math.isfinite(v) else ("inf" if v > 0 else "-inf")
+        return repr(float(v)) if math.isfinite(v) else ("inf" if v > 0 else "-inf")
     if isinstance(v, str):
         return json.dumps(v, ensure_ascii=False)   # JSON's escapes are TOML basic-string escapes
     if isinstance(v, os.PathLike):
