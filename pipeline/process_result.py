@@ -10,14 +10,16 @@ The tables come from :mod:`meshphase.result_frames`, the plots from
 
 from __future__ import annotations
 
+import html
 import math
 import os
 
 from . import result_frames as rf
+from .html_repr import html_table
 from .exits import run_status
 from .results import RunContext, phasing_verdict
 
-__all__ = ["Result", "PLOT_KINDS"]
+__all__ = ["Result", "PLOT_KINDS", "run_html"]
 
 #: what :meth:`Result.plot` draws
 PLOT_KINDS = ("phasing", "onsets", "load_sharing", "residuals")
@@ -204,6 +206,42 @@ class Result:
         return f"Result({self.status}{src}{'; ' + gauges if gauges else ''})"
 
     def _repr_html_(self) -> str:
-        from .html_repr import run_html
-
         return run_html(self.context, run_status(self.context))
+
+
+def run_html(ctx, status: dict) -> str:
+    """A run's status, input and per-planet phasing (and load sharing), as HTML.
+
+    Parameters
+    ----------
+    ctx : RunContext
+    status : dict
+        :func:`meshphase.exits.run_status` of ``ctx``.
+    """
+    parts = [f"<p><b>meshphase result: {html.escape(status['status'])}</b>"]
+    if ctx.load is not None:
+        rec = ctx.load.recording
+        parts.append(f" &middot; {html.escape(str(ctx.load.source))} &middot; {rec.n_channels} "
+                     f"channel(s) at {rec.fs:g} Hz, {rec.duration:.6g} s")
+    g = ctx.gearset
+    if g is not None:
+        parts.append(f" &middot; gearset Z {g.z_sun}/{g.z_ring}/{g.z_planet}, {g.n_planets} planets")
+    parts.append("</p>")
+    for m in status.get("missing_results") or []:
+        parts.append(f"<p>not computed: {html.escape(str(m['result']))} "
+                     f"({html.escape(str(m['cause']))})</p>")
+    for gauge, reasons in (status.get("unreliable") or {}).items():
+        parts.append(f"<p>{html.escape(gauge)} phasing not reliable: "
+                     f"{html.escape('; '.join(reasons))}</p>")
+    rows = rf.phasing_rows(ctx)
+    if rows:
+        parts.append(html_table(rows, ["gauge", "planet", "n_passes", "mean_cycles", "sd_cycles",
+                                       "ideal_cycles", "model_cycles", "residual_model_rms_cycles"],
+                                caption="Measured phasing per planet [mesh cycles]"))
+    ls = rf.load_sharing_rows(ctx)
+    if ls:
+        parts.append(html_table(ls, ["planet", "load_sharing", "std_error", "n_passes"],
+                                caption="Load sharing [-]"))
+    if ctx.messages:
+        parts.append(f"<p>{len(ctx.messages)} message(s): see <code>.messages</code></p>")
+    return "".join(parts)

@@ -376,7 +376,7 @@ class Recording:
     def plot(self, channels=None, start: float | None = None, stop: float | None = None,
              onsets=None, *, ax=None, max_points: int = 20000):
         """Plot channels against time, one panel each, with onsets marked (matplotlib,
-        imported now; :func:`meshphase.report.notebook.plot_recording`).
+        imported now; :func:`meshphase.report.notebook.plot_channels`).
 
         Parameters
         ----------
@@ -397,14 +397,31 @@ class Recording:
         -------
         matplotlib.figure.Figure
         """
-        from .report.notebook import plot_recording  # matplotlib: only when plotting
+        if self.n_samples == 0 or self.n_channels == 0:
+            raise ValueError("the recording is empty: nothing to plot")
+        part = self.select(channels).slice_time(start, stop)
+        if part.n_samples == 0:
+            raise ValueError(f"no samples in the window [{start}, {stop}) s")
+        from .report.notebook import plot_channels  # matplotlib: only when plotting
 
-        return plot_recording(self, channels, start, stop, onsets, ax=ax, max_points=max_points)
+        return plot_channels(part.times(), part.data, part.channels, onsets, ax=ax,
+                             max_points=max_points)
 
     def _repr_html_(self) -> str:
-        from .html_repr import recording_html
+        """The channels, sample rate, duration and start as an HTML table (notebooks)."""
+        from .html_repr import html_table
 
-        return recording_html(self)
+        cap = (f"Recording: {self.n_channels} channel(s) at {self.fs:g} Hz, {self.duration:.6g} s "
+               f"({self.n_samples} samples), t0 = {self.t0:g} s"
+               + (f", started {self.start_datetime}" if self.start_datetime else ""))
+        rows = [{"channel": c.name, "kind": c.kind, "units": c.units, "gear": c.gear,
+                 "tooth": c.tooth, "face_position_mm": (None if c.face_position is None
+                                                        else c.face_position * 1e3),
+                 "description": c.description} for c in self.channels]
+        cols = ["channel", "kind", "units", "gear"]
+        cols += [k for k in ("tooth", "face_position_mm", "description")
+                 if any(r[k] not in (None, "") for r in rows)]
+        return html_table(rows, cols, caption=cap)
 
     # ------------------------------------------------------------------ quality
     def quality(self) -> list[dict]:

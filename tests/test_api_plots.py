@@ -175,6 +175,20 @@ def test_recording_plot_empty_and_bad_input(rec):
         rec.plot("sun", 0.0, 1.0, max_points=1)
 
 
+def test_plot_channels_empty_and_bad_input():
+    from meshphase.report.notebook import plot_channels
+
+    spec = [ChannelSpec("x", kind="sun")]
+    with pytest.raises(ValueError, match="must be samples x channels"):
+        plot_channels([], np.empty((0, 1)), spec)
+    with pytest.raises(ValueError, match="must be samples x channels"):
+        plot_channels([0.0, 1.0], np.zeros((2, 2)), spec)
+    with pytest.raises(ValueError, match="must be samples x channels"):
+        plot_channels([0.0, 1.0], np.zeros(2), spec)
+    fig = plot_channels([0.0, 1.0], np.array([[1e-6], [2e-6]]), spec)
+    np.testing.assert_allclose(fig.axes[0].lines[0].get_ydata(), [1.0, 2.0])   # microstrain
+
+
 # ----------------------------------------------------------------------------- HTML
 def test_recording_repr_html(rec):
     h = rec._repr_html_()
@@ -201,15 +215,14 @@ def test_result_repr_html(res):
 
 
 def test_html_table_bad_input():
-    from meshphase.html_repr import html_table, recording_html, run_html
+    from meshphase.html_repr import html_table
+    from meshphase.process_result import run_html
 
     assert "<tbody></tbody>" in html_table([], ["a"])
     with pytest.raises(TypeError, match="rows must be"):
         html_table({"a": 1}, ["a"])
     with pytest.raises(ValueError, match="columns is empty"):
         html_table([{"a": 1}], [])
-    with pytest.raises(TypeError, match="must be a Recording"):
-        recording_html("rec")
     assert "meshphase result: ok" in run_html(
         RunContext(Scene(path=None, name="e", results=[])), {"status": "ok"})
 

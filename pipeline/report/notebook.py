@@ -14,10 +14,9 @@ import numpy as np
 import matplotlib.pyplot as plt
 
 from ..compare import wrap
-from ..recording import Recording
 from ..results import RunContext
 
-__all__ = ["plot_recording", "plot_result_onsets", "plot_phasing", "plot_load_sharing",
+__all__ = ["plot_channels", "plot_result_onsets", "plot_phasing", "plot_load_sharing",
            "plot_residuals", "onset_marks"]
 
 _GAUGES = ("sun", "ring")
@@ -102,17 +101,18 @@ def onset_marks(source, channel: str):
     return arr.astype(float), None
 
 
-def plot_recording(rec: Recording, channels=None, start=None, stop=None, onsets=None, *, ax=None,
-                   max_points: int = 20000):
-    """A recording's channels against time, one panel each, with onsets marked.
+def plot_channels(t, data, channels, onsets=None, *, ax=None, max_points: int = 20000):
+    """Channels against time, one panel each, with onsets marked
+    (:meth:`meshphase.Recording.plot` cuts the window and channels).
 
     Parameters
     ----------
-    rec : Recording
-    channels : str or sequence of str, optional
-        Channels to draw (default all).
-    start, stop : float, optional
-        Time window [s] (half-open; default the whole recording).
+    t : array_like, shape (n,)
+        Sample times [s].
+    data : array_like, shape (n, c)
+        Samples, one column per channel, in the channels' units.
+    channels : sequence of ChannelSpec
+        One per column (name, kind, units).
     onsets : array_like, dict, Result or RunContext, optional
         Onset times to mark (:func:`onset_marks`); coloured by planet when labelled.
     ax : matplotlib Axes, optional
@@ -124,19 +124,15 @@ def plot_recording(rec: Recording, channels=None, start=None, stop=None, onsets=
     -------
     matplotlib.figure.Figure
     """
-    if not isinstance(rec, Recording):
-        raise TypeError(f"rec must be a Recording, got {type(rec).__name__}")
-    if rec.n_samples == 0 or rec.n_channels == 0:
-        raise ValueError("the recording is empty: nothing to plot")
-    part = rec.select(channels).slice_time(start, stop)
-    if part.n_samples == 0:
-        raise ValueError(f"no samples in the window [{start}, {stop}) s")
-    fig, axes = _axes(part.n_channels, ax)
-    t = part.times()
-    for a, c in zip(axes, part.channels):
+    t = np.asarray(t, dtype=float)
+    data = np.asarray(data)
+    if data.ndim != 2 or data.shape != (t.size, len(channels)) or not t.size:
+        raise ValueError(f"data must be samples x channels matching t ({t.size}) and "
+                         f"channels ({len(channels)}), got shape {data.shape}")
+    fig, axes = _axes(len(channels), ax)
+    for j, (a, c) in enumerate(zip(axes, channels)):
         marks = None if onsets is None else onset_marks(onsets, c.name)
-        _signal_panel(a, t, part.channel(c.name), c.units, f"{c.name} ({c.kind})", marks,
-                      max_points)
+        _signal_panel(a, t, data[:, j], c.units, f"{c.name} ({c.kind})", marks, max_points)
     axes[-1].set_xlabel("time [s]")
     fig.tight_layout()
     return fig
@@ -157,7 +153,11 @@ def plot_result_onsets(ctx: RunContext, gauge=None, *, ax=None, revolutions: flo
     ``revolutions`` relative revolutions from its first onset, onsets coloured by planet."""
     cond = ctx.condition
     rec = None if cond is None else (cond.excerpt if cond.excerpt is not None else cond.recording)
-    if not isinstance(rec, Recording) or ctx.onsets is None:
+    try:
+        has_samples = rec is not None and rec.data is not None
+    except TypeError:                     # a streamed recording's header holds no samples
+        has_samples = False
+    if not has_samples or ctx.onsets is None:
         raise ValueError("nothing to plot: this run kept no conditioned signal and onsets "
                          f"(stages ran: {', '.join(ctx.ran) or 'none'})")
     chans = {g: next((c.name for c in rec.channels if c.kind == g), None) for g in _GAUGES}
