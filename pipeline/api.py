@@ -85,7 +85,8 @@ def process(recording, gearset=None, *, scene=None, results=None, start: float |
     Raises
     ------
     TypeError
-        ``recording``, ``gearset``, ``scene`` or ``results`` of the wrong type.
+        ``recording``, ``gearset``, ``scene``, ``results``, ``start``/``stop`` or
+        ``progress`` of the wrong type.
     ValueError
         An empty recording, no gearset anywhere, unknown results, a scene that does not
         validate (SceneError), a window outside the recording.
@@ -95,6 +96,9 @@ def process(recording, gearset=None, *, scene=None, results=None, start: float |
         The run produced nothing usable (e.g. no gauge channel); the message says why.
     """
     _check_window(start, stop)
+    if progress is not None and not callable(progress):
+        raise TypeError(f"progress must be callable(stage, i, n) or None, got "
+                        f"{type(progress).__name__}")
     if isinstance(recording, Recording):
         if recording.n_samples == 0 or recording.n_channels == 0:
             raise ValueError(f"the recording is empty ({recording.n_samples} samples x "

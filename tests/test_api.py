@@ -107,8 +107,11 @@ def test_process_file_equals_memory(res, rig_file, scene_path):
 
 
 def test_process_default_gearset_from_metadata_and_window(rig_file, synthetic):
-    r = meshphase.process(rig_file, start=0.0, stop=30.0, results=["phasing"])
+    seen = []
+    r = meshphase.process(rig_file, start=0.0, stop=30.0, results=["phasing"],
+                          progress=lambda stage, i, n: seen.append(stage))
     ctx = r.context
+    assert seen == ctx.ran + ["done"]
     assert ctx.gearset.z_sun == synthetic.meta["gearset"]["z_sun"]
     assert ctx.load.recording.duration == pytest.approx(30.0)
     assert ctx.scene.results == ["phasing"]
@@ -142,6 +145,8 @@ def test_process_bad_input(synthetic, scene_path, tmp_path):
         meshphase.process(synthetic, scene_path, start="0")
     with pytest.raises(ValueError, match="outside the recording"):
         meshphase.process(synthetic, scene_path, start=100.0, stop=200.0)
+    with pytest.raises(TypeError, match="progress must be"):
+        meshphase.process(synthetic, scene_path, progress="yes")
 
 
 def test_process_without_a_gearset_says_so(synthetic):
