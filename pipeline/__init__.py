@@ -1,6 +1,9 @@
 """meshphase: planetary gear test-rig strain recordings -> measured mesh phasing.
 
-The core (this package without :mod:`meshphase.report`) never imports matplotlib.
+The Python API: :func:`read` a recording, :func:`process` it into a :class:`Result`
+(:mod:`meshphase.api`). ``read``, ``process`` and ``Result`` are imported on first use, so
+``import meshphase`` stays light. The core (this package without :mod:`meshphase.report`)
+never imports matplotlib.
 """
 
 from __future__ import annotations
@@ -12,7 +15,27 @@ from .recording import ChannelSpec, Recording, CHANNEL_KINDS
 
 __version__ = "0.1.0"
 
+#: names imported on first use: name -> module that holds it
+_LAZY = {"read": "meshphase.io", "process": "meshphase.api", "Result": "meshphase.process_result",
+         "ProcessingFailed": "meshphase.api"}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'meshphase' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
+
+
 __all__ = [
+    "read", "process", "Result", "ProcessingFailed",
     "Recording", "ChannelSpec", "CHANNEL_KINDS", "logger", "__version__",
     "MeshphaseWarning", "DataQualityWarning", "FormatWarning", "ModelWarning",
     "ConvergenceWarning", "ProcessingWarning",

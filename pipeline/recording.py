@@ -372,6 +372,57 @@ class Recording:
         kw.update(changes)
         return Recording(**kw)
 
+    # ------------------------------------------------------------------ notebooks
+    def plot(self, channels=None, start: float | None = None, stop: float | None = None,
+             onsets=None, *, ax=None, max_points: int = 20000):
+        """Plot channels against time, one panel each, with onsets marked (matplotlib,
+        imported now; :func:`meshphase.report.notebook.plot_channels`).
+
+        Parameters
+        ----------
+        channels : str or sequence of str, optional
+            Channels to draw (default all).
+        start, stop : float, optional
+            Time window [s] (half-open; default the whole recording).
+        onsets : array_like, dict, Result or RunContext, optional
+            Onset times [s] to mark: one array for every channel, a dict channel -> times
+            (or Onsets, or (times, 1-based planets)), or a :class:`meshphase.Result` (its
+            onsets, coloured by planet).
+        ax : matplotlib Axes, optional
+            Draw a single channel into it.
+        max_points : int
+            Samples drawn per channel at most (decimated by striding).
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        if self.n_samples == 0 or self.n_channels == 0:
+            raise ValueError("the recording is empty: nothing to plot")
+        part = self.select(channels).slice_time(start, stop)
+        if part.n_samples == 0:
+            raise ValueError(f"no samples in the window [{start}, {stop}) s")
+        from .report.notebook import plot_channels  # matplotlib: only when plotting
+
+        return plot_channels(part.times(), part.data, part.channels, onsets, ax=ax,
+                             max_points=max_points)
+
+    def _repr_html_(self) -> str:
+        """The channels, sample rate, duration and start as an HTML table (notebooks)."""
+        from .html_repr import html_table
+
+        cap = (f"Recording: {self.n_channels} channel(s) at {self.fs:g} Hz, {self.duration:.6g} s "
+               f"({self.n_samples} samples), t0 = {self.t0:g} s"
+               + (f", started {self.start_datetime}" if self.start_datetime else ""))
+        rows = [{"channel": c.name, "kind": c.kind, "units": c.units, "gear": c.gear,
+                 "tooth": c.tooth, "face_position_mm": (None if c.face_position is None
+                                                        else c.face_position * 1e3),
+                 "description": c.description} for c in self.channels]
+        cols = ["channel", "kind", "units", "gear"]
+        cols += [k for k in ("tooth", "face_position_mm", "description")
+                 if any(r[k] not in (None, "") for r in rows)]
+        return html_table(rows, cols, caption=cap)
+
     # ------------------------------------------------------------------ quality
     def quality(self) -> list[dict]:
         """Per-channel quality summary: NaN/inf runs, longest run, min/max, clipped runs,

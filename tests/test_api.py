@@ -1,0 +1,300 @@
+"""meshphase.read / meshphase.process / Result: the tables equal the typed stage results they
+come from, the summary, the output files, and clear errors for empty and bad input."""
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import meshphase
+from meshphase.demo import demo_scene_path
+from meshphase.io import RecordingFileError, write
+from meshphase.process_result import Result
+from meshphase.recording import ChannelSpec, Recording
+from meshphase.results import RunContext
+from meshphase.scene import Scene
+
+
+@pytest.fixture(scope="module")
+def synthetic():
+    """1 min of the demo's rig (a recording in memory)."""
+    from meshphase.synthetic import generate
+
+    rec, truth = generate("rig_ripple1", duration=60.0, seed=1)
+    return rec
+
+
+@pytest.fixture(scope="module")
+def scene_path(tmp_path_factory):
+    return demo_scene_path(tmp_path_factory.mktemp("scene"))
+
+
+@pytest.fixture(scope="module")
+def res(synthetic, scene_path):
+    """The demo scene (tolerances, so a Monte Carlo band) on the recording in memory."""
+    return meshphase.process(synthetic, scene_path)
+
+
+@pytest.fixture(scope="module")
+def rig_file(synthetic, tmp_path_factory):
+    return write(synthetic, tmp_path_factory.mktemp("rec") / "rig.h5")
+
+
+# ----------------------------------------------------------------------------- import
+def test_import_meshphase_stays_light():
+    code = ("import sys, meshphase; "
+            "heavy = [m for m in ('pandas', 'matplotlib', 'scipy', 'meshphase.stages', "
+            "'meshphase.api') if m in sys.modules]; print(heavy); sys.exit(1 if heavy else 0)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stdout + out.stderr
+
+
+def test_public_names():
+    from meshphase import api, io
+
+    assert meshphase.read is io.read
+    assert meshphase.process is api.process
+    assert meshphase.Result is Result
+    assert meshphase.Recording is Recording
+    assert {"read", "process", "Result", "Recording"} <= set(meshphase.__all__)
+    assert {"read", "process", "Result"} <= set(dir(meshphase))
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        meshphase.nope  # noqa: B018
+
+
+# ----------------------------------------------------------------------------- read
+def test_read_gives_the_recording(synthetic, rig_file):
+    rec = meshphase.read(rig_file)
+    assert rec.names == synthetic.names
+    np.testing.assert_array_equal(rec.data, synthetic.data)
+    part = meshphase.read(rig_file, channels=["sun"], start=1.0, stop=2.0)
+    assert part.names == ["sun"] and part.n_samples == int(synthetic.fs)
+
+
+def test_read_empty_and_bad_input(tmp_path, rig_file):
+    empty = tmp_path / "empty.h5"
+    empty.write_bytes(b"")
+    with pytest.raises(RecordingFileError, match="empty"):
+        meshphase.read(empty)
+    with pytest.raises(FileNotFoundError):
+        meshphase.read(tmp_path / "missing.h5")
+    with pytest.raises(TypeError):
+        meshphase.read(42)
+    with pytest.raises(TypeError):
+        meshphase.read(rig_file, not_an_option=True)
+
+
+# ----------------------------------------------------------------------------- process
+def test_process_runs_the_cli_stages(res):
+    ctx = res.context
+    assert isinstance(ctx, RunContext)
+    assert res.status == "ok"
+    for stage in ("load", "condition", "onsets", "phasing", "load_sharing", "ideal", "identify",
+                  "tolerance", "compare"):
+        assert stage in ctx.ran
+    assert ctx.load.source == "<Recording in memory>"
+    assert ctx.load.stream is None       # the temporary file is gone; nothing points at it
+
+
+def test_process_file_equals_memory(res, rig_file, scene_path):
+    from_file = meshphase.process(rig_file, scene_path)
+    assert from_file.context.load.source == str(rig_file.resolve())
+    for gear, t in res.context.phasing.tables.items():
+        np.testing.assert_array_equal(from_file.context.phasing.tables[gear].gamma, t.gamma)
+
+
+def test_process_default_gearset_from_metadata_and_window(rig_file, synthetic):
+    seen = []
+    r = meshphase.process(rig_file, start=0.0, stop=30.0, results=["phasing"],
+                          progress=lambda stage, i, n: seen.append(stage))
+    ctx = r.context
+    assert seen == ctx.ran + ["done"]
+    assert ctx.gearset.z_sun == synthetic.meta["gearset"]["z_sun"]
+    assert ctx.load.recording.duration == pytest.approx(30.0)
+    assert ctx.scene.results == ["phasing"]
+    assert "compare" not in ctx.ran and "tolerance" not in ctx.ran
+    assert r.comparison.empty and list(r.comparison.columns)[0] == "gauge"
+    assert r.passes["time_s"].max() < 30.0
+
+
+def test_process_empty_recording(synthetic):
+    empty = Recording(np.empty((0, 3)), 5120.0, synthetic.channels, meta=synthetic.meta)
+    with pytest.raises(ValueError, match="empty"):
+        meshphase.process(empty)
+
+
+def test_process_bad_input(synthetic, scene_path, tmp_path):
+    with pytest.raises(TypeError, match="recording must be"):
+        meshphase.process(42, scene_path)
+    with pytest.raises(TypeError, match="recording must be"):
+        meshphase.process(synthetic.data, scene_path)
+    with pytest.raises(FileNotFoundError):
+        meshphase.process(tmp_path / "missing.h5", scene_path)
+    with pytest.raises(TypeError, match="gearset must be"):
+        meshphase.process(synthetic, 42)
+    with pytest.raises(TypeError, match="not both"):
+        meshphase.process(synthetic, scene_path, scene=scene_path)
+    with pytest.raises(ValueError, match="unknown result"):
+        meshphase.process(synthetic, scene_path, results=["phasing", "nope"])
+    with pytest.raises(ValueError, match="results is empty"):
+        meshphase.process(synthetic, scene_path, results=[])
+    with pytest.raises(TypeError, match="start must be"):
+        meshphase.process(synthetic, scene_path, start="0")
+    with pytest.raises(ValueError, match="outside the recording"):
+        meshphase.process(synthetic, scene_path, start=100.0, stop=200.0)
+    with pytest.raises(TypeError, match="progress must be"):
+        meshphase.process(synthetic, scene_path, progress="yes")
+
+
+def test_process_without_a_gearset_says_so(synthetic):
+    bare = Recording(synthetic.data[:5120], synthetic.fs, synthetic.channels)  # no metadata
+    with pytest.raises(ValueError, match="needs a gearset"):
+        meshphase.process(bare)
+
+
+def test_process_with_nothing_usable_raises_with_the_cause(synthetic):
+    others = Recording(synthetic.data[:51200], synthetic.fs,
+                       [ChannelSpec(n, kind="other") for n in synthetic.names], meta=synthetic.meta)
+    with pytest.raises(meshphase.ProcessingFailed, match="no gauge channel") as exc:
+        meshphase.process(others)
+    assert "meshphase-" not in str(exc.value)    # the temporary file is not named
+    assert isinstance(exc.value.context, RunContext)
+    assert isinstance(exc.value, ValueError)
+
+
+# ----------------------------------------------------------------------------- tables
+def test_passes_equal_the_phasing_tables(res):
+    ctx, df = res.context, res.passes
+    assert list(df.columns[:6]) == ["gauge", "planet", "revolution", "time_s", "phasing_cycles",
+                                    "sigma_cycles"]
+    for gear, t in ctx.phasing.tables.items():
+        d = df[df["gauge"] == gear]
+        assert len(d) == len(t) > 0
+        np.testing.assert_array_equal(d["time_s"], t.time)
+        np.testing.assert_array_equal(d["planet"], t.planet)
+        np.testing.assert_array_equal(d["phasing_cycles"], t.gamma)
+        np.testing.assert_array_equal(d["sigma_cycles"], t.uncertainty)
+        np.testing.assert_array_equal(d["mesh_period_s"], t.mesh_period)
+        cmp = ctx.compare.by_gear[gear]
+        np.testing.assert_array_equal(d["ideal_cycles"], cmp.ideal)
+        np.testing.assert_array_equal(d["model_cycles"], cmp.model)
+        r = d["residual_model_cycles"].to_numpy()
+        assert np.all(np.abs(r) < 0.5)
+        np.testing.assert_allclose(np.sqrt(np.mean(r ** 2)), cmp.vs_model["rms"], rtol=1e-12)
+
+
+def test_phasing_equals_table_summary_and_comparison(res):
+    ctx, df = res.context, res.phasing
+    assert {"mean_cycles", "sd_cycles", "ideal_cycles", "model_cycles",
+            "residual_model_rms_cycles", "band_dev_lo_cycles"} <= set(df.columns)
+    for gear, t in ctx.phasing.tables.items():
+        cmp = ctx.compare.by_gear[gear]
+        lo, hi = ctx.tolerance.band(gear)
+        for planet, s in t.summary().items():
+            row = df[(df["gauge"] == gear) & (df["planet"] == planet)].iloc[0]
+            assert row["n_passes"] == s["n"]
+            assert row["mean_cycles"] == s["mean"] and row["sd_cycles"] == s["std"]
+            assert row["ideal_cycles"] == ctx.ideal.gamma(gear)[planet - 1]
+            assert row["residual_model_rms_cycles"] == cmp.vs_model["per_planet"][planet]["rms"]
+            assert row["residual_ideal_mean_cycles"] == cmp.vs_ideal["per_planet"][planet]["mean"]
+            assert row["band_dev_lo_cycles"] == lo[planet - 1]
+            assert row["band_dev_hi_cycles"] == hi[planet - 1]
+            assert abs(row["model_cycles"] - row["mean_cycles"]) < 0.01
+
+
+def test_load_sharing_and_comparison_equal_the_stage_results(res):
+    ctx = res.context
+    ls = ctx.load_sharing.sharing
+    df = res.load_sharing
+    assert list(df.columns) == ["planet", "load_sharing", "std_error", "n_passes",
+                                "mean_amplitude_ustrain"]
+    np.testing.assert_array_equal(df["load_sharing"], ls.factors)
+    np.testing.assert_array_equal(df["std_error"], ls.std_error)
+    np.testing.assert_array_equal(df["n_passes"], ls.n_passes)
+    np.testing.assert_allclose(df["mean_amplitude_ustrain"], ls.mean_amplitude * 1e6, rtol=1e-15)
+    cmp = res.comparison
+    assert "rms_cycles" in cmp.columns and "inside_band_fraction" in cmp.columns
+    for gear, c in ctx.compare.by_gear.items():
+        for ref, stats in (("ideal", c.vs_ideal), ("model", c.vs_model)):
+            row = cmp[(cmp["gauge"] == gear) & (cmp["reference"] == ref)].iloc[0]
+            assert row["rms_cycles"] == stats["rms"] and row["n_passes"] == stats["n"]
+            assert row["inside_band_fraction"] == c.coverage["inside_fraction"]
+
+
+def test_identification_equals_the_table_in_um_and_deg(res):
+    table = res.context.identify.identification.table
+    df = res.identification
+    assert list(df.columns) == ["gear", "e_um", "e_std_um", "e_ci95_lo_um", "e_ci95_hi_um",
+                                "kappa_deg", "kappa_std_deg", "identifiable", "note"]
+    assert list(df["gear"]) == [r["gear"] for r in table]
+    np.testing.assert_array_equal(df["e_um"], [r["e"] * 1e6 for r in table])
+    np.testing.assert_array_equal(df["kappa_deg"], [math.degrees(r["kappa"]) for r in table])
+    np.testing.assert_array_equal(df["identifiable"], [r["identifiable"] for r in table])
+
+
+def test_centroids_empty_without_facewidth_gauges(res):
+    df = res.centroids
+    assert df.empty and list(df.columns) == ["gear", "centroid_mm", "std_error_mm",
+                                             "contact_fraction", "shape", "residual_rms"]
+
+
+def test_summary(res):
+    s = res.summary()
+    ctx = res.context
+    assert s["status"] == "ok" and s["error"] is None
+    assert s["duration_s"] == pytest.approx(60.0) and s["fs_hz"] == 5120.0
+    assert s["sun_passes"] == len(ctx.phasing.tables["sun"])
+    assert s["sun_reliable"] is True
+    assert s["sun_sigma_cycles"] == ctx.phasing.reliability["sun"]["error_estimate"]
+    assert s["ring_rms_vs_model_cycles"] == ctx.compare.by_gear["ring"].vs_model["rms"]
+    assert s["load_sharing_max_dev"] == pytest.approx(
+        np.max(np.abs(ctx.load_sharing.sharing.factors - 1)))
+    assert s["identify_rms_after_cycles"] == ctx.identify.identification.rms_after
+    json.dumps(s)                                  # plain values only
+
+
+def test_repr(res):
+    assert repr(res).startswith("Result(ok, <Recording in memory>; ")
+
+
+def test_write_outputs(res, tmp_path):
+    files = res.write(tmp_path / "out", report=False)
+    assert files["summary"] == tmp_path / "out" / "summary.json"
+    summary = json.loads(files["summary"].read_text())
+    assert summary["status"] == "ok"
+    assert summary["recording"]["source"] == "<Recording in memory>"
+    assert (tmp_path / "out" / "passes_sun.csv").is_file()
+    again = res.write(tmp_path / "out", report=False)       # kept: a new folder beside it
+    assert again["summary"].parent == tmp_path / "out-2"
+
+
+def test_write_bad_input(res, tmp_path):
+    with pytest.raises(TypeError, match="folder must be a path"):
+        res.write(42)
+    with pytest.raises(ValueError, match="empty path"):
+        res.write("")
+
+
+# ----------------------------------------------------------------------------- Result alone
+def _empty_ctx():
+    return RunContext(Scene(path=None, name="empty", results=[]))
+
+
+def test_result_of_an_empty_run_has_empty_tables():
+    r = Result(_empty_ctx())
+    for name in ("passes", "phasing", "load_sharing", "comparison", "identification", "centroids"):
+        df = getattr(r, name)
+        assert df.empty and len(df.columns) > 2, name
+    s = r.summary()
+    assert s["status"] == r.status and "sun_passes" not in s and "load_sharing_max_dev" not in s
+    assert f"meshphase result: {r.status}" in r._repr_html_()
+
+
+def test_result_bad_input():
+    with pytest.raises(TypeError, match="RunContext"):
+        Result({"phasing": {}})
+    with pytest.raises(TypeError, match="RunContext"):
+        Result(None)
