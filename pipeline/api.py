@@ -54,7 +54,8 @@ def _check_window(start, stop) -> None:
 
 def process(recording, gearset=None, *, scene=None, results=None, start: float | None = None,
             stop: float | None = None,
-            progress: Callable[[str, int, int], None] | None = None) -> Result:
+            progress: Callable[[str, int, int], None] | None = None,
+            tolerance: bool = False) -> Result:
     """Process a recording as ``meshphase process`` does and return its :class:`Result`.
 
     Parameters
@@ -72,11 +73,14 @@ def process(recording, gearset=None, *, scene=None, results=None, start: float |
         A whole scene instead of ``gearset`` (not both).
     results : sequence of str, optional
         Results to compute (``meshphase.scene.RESULTS``); default those of ``meshphase
-        process`` (phasing, load_sharing, compare and what the scene asks for).
+        process`` (phasing, load_sharing, compare; centroids when the scene asks).
     start, stop : float, optional
         Time window [s] of the recording to process (half-open).
     progress : callable(stage, i, n), optional
         Called before each stage.
+    tolerance : bool
+        Also run the scene's Monte Carlo (its ``[tolerances]``) and compare the measured
+        phasing against its band, as ``meshphase process --tolerance``.
 
     Returns
     -------
@@ -116,7 +120,9 @@ def process(recording, gearset=None, *, scene=None, results=None, start: float |
     else:
         raise TypeError(f"recording must be a meshphase.Recording or a recording file path, got "
                         f"{type(recording).__name__}")
-    sc = build_scene(gearset, scene, results, meta_gearset=meta)
+    if not isinstance(tolerance, bool):
+        raise TypeError(f"tolerance must be True or False, got {tolerance!r}")
+    sc = build_scene(gearset, scene, results, meta_gearset=meta, tolerance=tolerance)
     if isinstance(recording, Recording):
         ctx = _run_in_memory(sc, recording, progress)
     else:

@@ -19,11 +19,9 @@ from collections.abc import Mapping
 
 from .models.gearset import Gearset
 from .scene import RESULTS, Scene, load_scene, parse_scene
+from .stages import PROCESS_RESULTS
 
-__all__ = ["build_scene", "toml_text", "gearset_table", "PROCESS_RESULTS"]
-
-#: the results ``meshphase process`` computes besides those its scene asks for
-PROCESS_RESULTS = ("phasing", "load_sharing", "compare")
+__all__ = ["build_scene", "toml_text", "gearset_table"]
 
 #: a scene built here asks only for a result that needs no recording until the input is set
 _PLACEHOLDER_RESULTS = ["ideal_phasing"]
@@ -160,12 +158,13 @@ def _scene_of_scene(scene, label: str) -> Scene:
                     f"{type(scene).__name__}")
 
 
-def _results(scene: Scene, results) -> list[str]:
-    """The results to compute: ``results`` as given, else the scene's and
-    :data:`PROCESS_RESULTS` (``meshphase process``); ``tolerance`` only with tolerances."""
+def _results(scene: Scene, results, tolerance: bool = False) -> list[str]:
+    """The results to compute: ``results`` as given, else what ``meshphase process``
+    computes (:data:`meshphase.stages.PROCESS_RESULTS`, plus centroids when the scene asks);
+    the Monte Carlo only when ``tolerance`` (or ``results`` names it)."""
     if results is None:
-        want = list(scene.results) + list(PROCESS_RESULTS)
-        return [r for r in dict.fromkeys(want) if r != "tolerance" or scene.tolerances is not None]
+        want = list(PROCESS_RESULTS) + (["centroids"] if "centroids" in scene.results else [])
+        return want + (["tolerance"] if tolerance else [])
     if isinstance(results, str):
         results = [results]
     if not isinstance(results, (list, tuple)) or not all(isinstance(r, str) for r in results):
@@ -176,11 +175,11 @@ def _results(scene: Scene, results) -> list[str]:
     if unknown:
         raise ValueError(f"unknown result(s) {', '.join(map(repr, unknown))}; choose from "
                          f"{', '.join(RESULTS)}")
-    return list(dict.fromkeys(results))
+    return list(dict.fromkeys(list(results) + (["tolerance"] if tolerance else [])))
 
 
 def build_scene(gearset=None, scene=None, results=None, *, meta_gearset=None,
-                label: str = "meshphase.process") -> Scene:
+                label: str = "meshphase.process", tolerance: bool = False) -> Scene:
     """The validated scene a :func:`meshphase.process` call runs (its input is set later).
 
     Parameters
@@ -190,13 +189,17 @@ def build_scene(gearset=None, scene=None, results=None, *, meta_gearset=None,
     scene : Scene, str, Path or dict, optional
         A whole scene (tolerances, speeds, channel mapping ...); not together with ``gearset``.
     results : sequence of str, optional
-        Results to compute (:data:`meshphase.scene.RESULTS`); default the scene's and those
-        of ``meshphase process`` (:data:`PROCESS_RESULTS`).
+        Results to compute (:data:`meshphase.scene.RESULTS`); default those of
+        ``meshphase process`` (:data:`meshphase.stages.PROCESS_RESULTS`, plus centroids when
+        the scene asks for them).
     meta_gearset : callable, optional
         Returns the recording's metadata gearset (a :meth:`Gearset.to_dict` dict) or None;
         asked only when neither argument gives a gearset.
     label : str
         Names the scene in messages.
+    tolerance : bool
+        Run the scene's Monte Carlo (``[tolerances]``) and compare against its band, as
+        ``meshphase process --tolerance``; without it the tolerances are set aside.
 
     Returns
     -------
@@ -231,5 +234,9 @@ def build_scene(gearset=None, scene=None, results=None, *, meta_gearset=None,
             raise ValueError(f"{sc.path or label}: the scene has no [gearset] table and the "
                              "recording's metadata carries none; meshphase.process needs one")
         sc.gearset = Gearset.from_dict(meta)
-    sc.results = _results(sc, results)
+    sc.results = _results(sc, results, tolerance)
+    if "tolerance" not in sc.results:
+        sc.tolerances = None         # the plan would pull the Monte Carlo in for compare's band
+    elif sc.tolerances is None:
+        raise ValueError(f"{sc.path or label}: tolerance needs a [tolerances] table in the scene")
     return sc

@@ -35,7 +35,7 @@ def scene_path(tmp_path_factory):
 @pytest.fixture(scope="module")
 def res(synthetic, scene_path):
     """The demo scene (tolerances, so a Monte Carlo band) on the recording in memory."""
-    return meshphase.process(synthetic, scene_path)
+    return meshphase.process(synthetic, scene_path, tolerance=True)
 
 
 @pytest.fixture(scope="module")
@@ -97,6 +97,15 @@ def test_process_runs_the_cli_stages(res):
         assert stage in ctx.ran
     assert ctx.load.source == "<Recording in memory>"
     assert ctx.load.stream is None       # the temporary file is gone; nothing points at it
+
+
+def test_process_runs_the_monte_carlo_only_when_asked(rig_file, scene_path):
+    # as `meshphase process`: the scene's [tolerances] are set aside unless tolerance=True
+    r = meshphase.process(rig_file, scene_path)
+    assert "tolerance" not in r.context.ran and r.context.scene.tolerances is None
+    assert "compare" in r.context.ran
+    with pytest.raises(TypeError, match="tolerance"):
+        meshphase.process(rig_file, scene_path, tolerance="yes")
 
 
 def test_process_file_equals_memory(res, rig_file, scene_path):

@@ -8,7 +8,8 @@ import tomllib
 import numpy as np
 import pytest
 
-from meshphase.api_scene import PROCESS_RESULTS, build_scene, gearset_table, toml_text
+from meshphase.api_scene import build_scene, gearset_table, toml_text
+from meshphase.stages import PROCESS_RESULTS
 from meshphase.compare import Identification, wrap
 from meshphase.demo import demo_scene_path
 from meshphase.loads import CentroidResult
@@ -42,9 +43,12 @@ def test_every_gearset_form_gives_the_same_gearset(tmp_path):
 
 def test_results_default_to_the_cli_process(tmp_path):
     sc = build_scene(demo_scene_path(tmp_path))
-    assert set(PROCESS_RESULTS) <= set(sc.results)
-    assert "tolerance" in sc.results                     # the demo scene has tolerances
-    assert "tolerance" not in build_scene(TABLE).results  # a bare gearset has none
+    assert sc.results == list(PROCESS_RESULTS)           # as `meshphase process`
+    assert sc.tolerances is None                         # set aside: no Monte Carlo unless asked
+    mc = build_scene(demo_scene_path(tmp_path), tolerance=True)
+    assert mc.results == list(PROCESS_RESULTS) + ["tolerance"] and mc.tolerances is not None
+    with pytest.raises(ValueError, match="tolerances"):
+        build_scene(TABLE, tolerance=True)               # a bare gearset has none
     assert build_scene(TABLE, results="phasing").results == ["phasing"]
 
 
