@@ -45,17 +45,20 @@ NCC_REL = 0.25       # ... or this fraction of the learnt misfit 1 - NCC
 
 
 def _period(peaks: np.ndarray) -> float | None:
-    """Mean pulse period of a block [decimated samples] from its coarse maxima: the span
-    over the number of periods, each interval counted as its nearest multiple of the
-    median interval (a missed pulse counts twice); None with fewer than 8 maxima."""
+    """Mean pulse period of a block [decimated samples] from its coarse maxima: the
+    least-squares slope of their positions against their period count, each interval
+    counted as its nearest multiple of the median interval (a missed pulse counts twice);
+    None with fewer than 8 maxima."""
     if peaks.size < 8:
         return None
     dif = np.diff(peaks).astype(np.float64)
     med = float(np.median(dif))
     if not med > 0:
         return None
-    count = float(np.rint(dif / med).sum())
-    return float(peaks[-1] - peaks[0]) / count if count > 0 else None
+    c = np.concatenate([[0.0], np.cumsum(np.rint(dif / med))])
+    c -= c.mean()
+    den = float(c @ c)
+    return float(c @ (peaks - peaks.mean())) / den if den > 0 else None
 
 
 def _good_median(ncc: np.ndarray, flags: np.ndarray) -> float:
