@@ -29,7 +29,9 @@ Pipeline (per analysis block, vectorised)
    (MAD noise of the pulse-free parts: +-1.5 w around strong maxima masked, because pulses
    every ~8 widths would otherwise inflate a plain MAD), runs above it merged within
    ``min_spacing``, one maximum per run.
-3. Template (re-)learning from the block's own clean pulses: windows around the coarse
+3. Template learning, once per operating point (``relearn="auto"``: a later block keeps
+   the template while its pulse period and correlations still fit it, see
+   :mod:`meshphase.onsets.relearn`; ``"block"`` learns in every block), from the block's own clean pulses: windows around the coarse
    maxima, aligned to sub-sample precision against the running template (Fourier shifts)
    and averaged with least-squares amplitude weights; baseline 0, tensile peak 1, tapered.
    Its peak and level crossings are located by local least-squares fits (not by the noisy
@@ -57,6 +59,7 @@ Modules
 ``coarse``     step 1 and 2: decimation, robust noise level, coarse maxima (:func:`coarse_peaks`)
 ``learning``   step 3: template learning (:func:`learn_template`) and the pulse width
                (:func:`estimate_pulse_width`); ``features`` measures a template
+``relearn``    when a learnt template is kept for the next block (speed and shape checks)
 ``matched``    step 4: matched-filter refinement at (sub-)sample lags
 ``engine``     the block engine and :func:`detect_onsets`, :func:`detect_onsets_recording`;
                ``options`` checks their keywords, ``runs`` handles gap and flag runs

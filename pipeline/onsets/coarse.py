@@ -30,17 +30,17 @@ def _decimation(w: float) -> int:
 def _decimate(seg: np.ndarray, d: int) -> np.ndarray:
     """Block means of ``d`` samples (trailing partial block dropped).
 
-    Summing the ``d`` strided columns is ~5x faster than ``reshape(-1, d).mean(axis=1)``
-    for small ``d`` (no per-row reduction overhead).
+    One BLAS matrix-vector product of the ``(n / d, d)`` view with ``ones(d) / d``: a
+    single pass over contiguous samples for any ``d`` (a strided column sum per pass, or
+    ``reshape(-1, d).sum(1)`` with its per-row reduction overhead, cost 5-100x more for
+    ``d`` of 2 to 35); a strided input is made contiguous first. Equal to the plain block
+    mean to ~4e-16 relative (the summation order differs).
     """
     if d == 1:
         return seg
-    v = seg[:(seg.size // d) * d].reshape(-1, d)
-    acc = v[:, 0].copy()
-    for j in range(1, d):                       # d columns, each a vectorised pass
-        acc += v[:, j]
-    acc *= 1.0 / d
-    return acc
+    m = (seg.size // d) * d
+    v = np.ascontiguousarray(seg[:m]).reshape(-1, d)
+    return v @ np.full(d, 1.0 / d)
 
 
 def _fill_nan(seg: np.ndarray) -> np.ndarray:

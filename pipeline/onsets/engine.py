@@ -22,6 +22,7 @@ from .coarse import _coarse_dec, _decimate, _decimation, _fill_nan
 from .learning import _half_length, _learn_dec, _refine_width, _width_autocorr
 from .matched import _gather, _Matcher, _sublags, _window_baseline
 from .options import _options, _Options
+from .relearn import _Fit, _good_median, _period
 from .results import (FLAG_CLIPPED, FLAG_EDGE, FLAG_GAP, FLAG_LOW_CORR, FLAG_TEMPLATE, Onsets, Template,
                       _empty_onsets)
 from .runs import _inside_runs, _runs_overlap
@@ -48,6 +49,7 @@ class _Engine:
         self.d = 1
         self.B = opt.block
         self.template: Template | None = opt.template
+        self.fit: _Fit | None = None  # how the learnt template fitted its block (relearn="auto")
         self.templates: list[Template] = []
         self.out: list[tuple] = []
         self.last_index = -np.inf
@@ -102,7 +104,8 @@ class _Engine:
                 continue
             parts.append(a[max(lo, s) - s:min(hi, e) - s])
         seg = parts[0] if len(parts) == 1 else np.concatenate(parts)
-        seg = seg.astype(np.float64, copy=False)
+        # contiguous float64 (one copy of a strided column or of float32 samples, else none)
+        seg = np.ascontiguousarray(seg, dtype=np.float64)
         gr = self.o.gap_runs
         if len(gr):
             # finite samples that are gaps (dropouts) read as NaN, like any other gap
@@ -207,8 +210,9 @@ class _Engine:
         return None, False
 
     def _process(self, k: int, final: bool) -> None:
-        """Analyse block ``k``: read its segment, detect, learn the template, refine the pulses
-        the block owns and keep the onsets not already found."""
+        """Analyse block ``k``: read its segment, detect, learn the template (or reuse it, see
+        :meth:`_reuse`), refine the pulses the block owns and keep the onsets not already
+        found."""
         o = self.o
         w_d, h_half, kk, margin = self._geom()
         lo, hi, gaps, yd = self._segment(k, final, w_d, min(margin, self.B))
@@ -217,22 +221,55 @@ class _Engine:
         if peaks.size == 0:
             return
         bad_runs = merge_runs(np.concatenate([gaps, o.flag_runs]))
-        tpl, fallback = self._learn_block(yd, peaks, lo, self.d, w_d, h_half, kk, bad_runs)
+        period = _period(peaks)
+        reused = self._reuse(period)
+        if reused:
+            tpl, fallback = self.template, False
+        else:
+            tpl, fallback = self._learn_block(yd, peaks, lo, self.d, w_d, h_half, kk, bad_runs)
         if tpl is None:
             logger.info("%sblock %d: %d coarse detection(s) but no template could be learnt; "
                         "skipped", self._who(), k, peaks.size)
             return
+        own = self._owned(k, final, peaks, lo, h_half)
+        if own.size == 0:
+            if not reused:                   # as a learnt block, without measuring the fit
+                self.template = tpl
+                self.n_fallback += int(fallback)
+            return
+        res = self._refine(yd, own, lo, tpl, kk, gaps, fallback)
+        if reused and not self.fit.holds(res[2], res[4]):
+            logger.debug("%sblock %d: pulses no longer fit the template (median NCC %.3f, "
+                         "learnt at %.3f): re-learnt", self._who(), k,
+                         _good_median(res[2], res[4]), self.fit.ncc)
+            tpl, fallback = self._learn_block(yd, peaks, lo, self.d, w_d, h_half, kk, bad_runs)
+            if tpl is None:
+                return
+            res = self._refine(yd, own, lo, tpl, kk, gaps, fallback)
+            reused = False
+        if not reused:
+            self._adopt(tpl, fallback, res, period)
+        self._keep(*res, hi, gaps, tpl, spacing)
+
+    def _reuse(self, period: float | None) -> bool:
+        """``relearn="auto"``: keep the template learnt in an earlier block when the speed
+        (pulse period of this block) moved it by less than ``_SHIFT_TOL`` of the timing bound;
+        the shape check follows the refinement (:meth:`_Fit.holds`)."""
+        if self.o.relearn != "auto" or self.fit is None or self.template is None:
+            return False
+        return self.fit.speed_holds(period)
+
+    def _adopt(self, tpl: Template, fallback: bool, res, period: float | None) -> None:
+        """Make ``tpl`` the current template; a newly learnt one (not a fallback) also
+        becomes the reference of the fit checks and sets the width for the next block."""
         self.template = tpl
         if fallback:
             self.n_fallback += 1
-        peaks = self._owned(k, final, peaks, lo, h_half)
-        if peaks.size == 0:
             return
-        index, amp, ncc, width, flags = self._refine(yd, peaks, lo, tpl, kk, gaps, fallback)
-        self._keep(index, amp, ncc, width, flags, hi, gaps, tpl, spacing)
-        # ---- follow the speed: the next block uses this template's width
-        if not fallback and o.template is None:
-            self.w = tpl.fwhm * o.fs
+        if self.o.template is None:
+            self.w = tpl.fwhm * self.o.fs
+            if self.o.relearn == "auto" and res is not None:
+                self.fit = _Fit.measure(tpl, res[2], res[4], period)
 
     def _segment(self, k: int, final: bool, w_d: float, margin: int):
         """Block ``k`` with ``margin`` samples before it, polarity-corrected and decimated:
@@ -339,7 +376,7 @@ def _auto_polarity(seg: np.ndarray) -> int:
 
 def detect_onsets(x, fs: float, *, t0: float = 0.0, width: float | None = None,
                   mesh_freq: float | None = None, min_spacing: float | None = None,
-                  template: Template | None = None, relearn: str = "block",
+                  template: Template | None = None, relearn: str = "auto",
                   polarity: str | None = None, reference: str = "rise", level: float = 0.5,
                   k_sigma: float = 5.0, min_corr: float = 0.5, block: float | None = None,
                   decimation: int | None = None, max_template_pulses: int = 256,
@@ -365,9 +402,13 @@ def detect_onsets(x, fs: float, *, t0: float = 0.0, width: float | None = None,
         Minimum time between two pulses [s]; default twice the width.
     template : Template, optional
         A fixed template (e.g. from :func:`learn_template` or an earlier run); no learning.
-    relearn : {"block", "never"}
-        Re-learn the template in every analysis block (follows load and speed), or learn it
-        once from the first block with enough pulses.
+    relearn : {"auto", "block", "never"}
+        ``"auto"``: learn the template once per operating point and reuse it in later
+        analysis blocks while their pulses fit it: re-learnt when the pulse period changed
+        enough to move the onset by a tenth of the per-pulse timing bound, or when the
+        median correlation fell (see :mod:`meshphase.onsets.relearn`). ``"block"``:
+        re-learn in every analysis block (the former default, for comparison).
+        ``"never"``: learn once from the first block with enough pulses.
     polarity : {"positive", "negative", "auto"}, optional
         Sign of the tensile peak in ``x``; default positive (or the template's).
     reference : {"rise", "peak"}
@@ -381,7 +422,8 @@ def detect_onsets(x, fs: float, *, t0: float = 0.0, width: float | None = None,
         is left out of the template [-].
     block : float, optional
         Analysis block length [s] (default 2**20 samples; at least 4 pulse windows). The
-        template is re-learnt per block; results do not depend on how data are chunked.
+        template is learnt or checked per block (``relearn``); results do not depend on how
+        data are chunked.
     decimation : int, optional
         Block-mean decimation factor (default ``max(1, floor(w / 16))`` samples).
     max_template_pulses, min_template_pulses : int

@@ -43,7 +43,7 @@ class _Options:
 
 
 def _options(fs, *, t0=0.0, width=None, mesh_freq=None, min_spacing=None, template=None,
-             relearn="block", polarity=None, reference="rise", level=0.5, k_sigma=5.0,
+             relearn="auto", polarity=None, reference="rise", level=0.5, k_sigma=5.0,
              min_corr=0.5, block=None, decimation=None, max_template_pulses=256,
              min_template_pulses=8, n_align=2, flag_runs=None, gap_guard=0.0,
              channel=None, gap_runs=None) -> _Options:
@@ -59,7 +59,7 @@ def _options(fs, *, t0=0.0, width=None, mesh_freq=None, min_spacing=None, templa
         raise TypeError(f"template must be a Template, got {type(template).__name__}")
     if template is not None and template.fs != fs:
         raise ValueError(f"template was learnt at fs = {template.fs!r} Hz, data are at {fs!r} Hz")
-    relearn = as_choice(relearn, "relearn", ("block", "never"))
+    relearn = as_choice(relearn, "relearn", ("auto", "block", "never"))
     if polarity is not None:
         polarity = as_choice(polarity, "polarity", ("positive", "negative", "auto"))
         if template is not None and polarity != "auto" and \

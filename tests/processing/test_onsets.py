@@ -127,9 +127,10 @@ def test_float32_input_matches_float64(make_train):
 def test_stream_in_blocks_gives_identical_onsets(block, overlap, make_train):
     x, _, _ = make_train(n_pulses=150, snr_db=20.0, rng=21)
     rec = Recording(x, FS, [ChannelSpec("sun1", kind="sun")], t0=12.5)
-    whole = detect_onsets_recording(rec, "sun1", block=2.0)
+    whole = detect_onsets_recording(rec, "sun1", block=2.0, relearn="block")
     assert len(whole.templates) > 2                  # several analysis blocks, re-learnt
-    streamed = detect_onsets_stream(rec.blocks(block, overlap), "sun1", block=2.0)
+    streamed = detect_onsets_stream(rec.blocks(block, overlap), "sun1", block=2.0,
+                                    relearn="block")
     for name in ("times", "index", "corr", "amplitude", "width", "flags", "template_id"):
         np.testing.assert_array_equal(getattr(streamed, name), getattr(whole, name), err_msg=name)
     assert whole.times[0] > 12.5
@@ -140,7 +141,7 @@ def test_block_processing_keeps_the_accuracy(make_train):
     # fraction of the timing jitter, and the accuracy stays at the bound
     x, truth, _ = make_train(n_pulses=200, snr_db=20.0, rng=6)
     one = detect_onsets(x, FS)
-    many = detect_onsets(x, FS, block=2.0)
+    many = detect_onsets(x, FS, block=2.0, relearn="block")
     assert len(many.templates) >= 4
     assert len(one) == len(many) == truth["onset"].size
     crb = float(np.sqrt(np.mean(truth["crb"] ** 2))) * FS
@@ -371,7 +372,7 @@ def test_relearn_never_keeps_one_template(make_train):
     x, _, _ = make_train(n_pulses=150, snr_db=20.0, rng=1)
     on = detect_onsets(x, FS, relearn="never", block=2.0)
     assert len(on.templates) == 1
-    assert len(detect_onsets(x, FS, block=2.0).templates) > 1
+    assert len(detect_onsets(x, FS, block=2.0, relearn="block").templates) > 1
 
 
 @pytest.mark.parametrize("mesh,band", [(40.0, None), (100.0, None), (2.5, 0.45)])
