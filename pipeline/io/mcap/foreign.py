@@ -96,11 +96,15 @@ def _as_values(x):
         return None
     if isinstance(x, np.ndarray) or hasattr(x, "__len__"):
         try:
-            items = list(x)
-        except TypeError:
+            arr = np.asarray(x)
+        except (TypeError, ValueError):
             return None
-        if all(_is_number(v) or v is None for v in items):
-            return np.array([math.nan if v is None else v for v in items], dtype=np.float64)
+        if arr.ndim == 1 and arr.dtype.kind in "iuf":
+            return arr.astype(np.float64)
+        if arr.ndim == 1 and arr.dtype.kind == "O":  # JSON nulls among the numbers
+            items = arr.tolist()
+            if all(_is_number(v) or v is None for v in items):
+                return np.array([math.nan if v is None else v for v in items], dtype=np.float64)
     return None
 
 
