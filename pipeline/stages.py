@@ -242,13 +242,13 @@ def _open_file(scene: Scene) -> tuple:
     path = as_regular_file(inp["recording"], "the recording")   # stat only
     source = str(inp["recording"])
     with recording_read_errors(path):
-        src = FileSource(path, start=inp.get("start"), stop=inp.get("stop"))
+        src = FileSource(path, start=inp.get("start"), stop=inp.get("stop"), options=inp.get("mcap"))
         h = src.header
         if overrides:
             specs, gains = _channel_overrides(h.names, h.channels, overrides, source,
                                               _channels_present(h))
             src = FileSource(path, start=inp.get("start"), stop=inp.get("stop"),
-                             channels=specs, gains=gains, format=src.fmt)
+                             channels=specs, gains=gains, format=src.fmt, options=inp.get("mcap"))
             src.header = src.header.with_history(
                 "channel_overrides", channels=[o["name"] for o in overrides])
     return src, src.header, source, None
