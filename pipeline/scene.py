@@ -605,6 +605,15 @@ def _parse_input_mcap(inp: dict, err) -> dict:
     if "recording" not in inp:
         raise err(["input", "mcap"], "[input.mcap] maps the topics of an MCAP recording file: "
                   "give [input] recording = \"FILE.mcap\" too")
+    fmt = None
+    if _file_state(inp["recording"]) == "file":
+        try:
+            fmt = io.detect_format(inp["recording"])
+        except (OSError, ValueError):
+            pass  # unreadable: the load stage reports it
+    if fmt not in (None, "mcap"):
+        raise err(["input", "mcap"], f"{inp['recording'].name} is a {fmt} file; [input.mcap] maps "
+                  "the topics of an MCAP file")
     m = inp["mcap"]
     chans = []
     for c in m.get("channels", []):

@@ -346,7 +346,7 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
         for fmt, variant, suffix, writer in plan:
             rows.append(bench.row(fmt, variant, suffix, writer, len(rows), caught, bar))
         convert, process = _rss_tables(work, convert_minutes, process_minutes, skipped)
-        mcap_paths = (mcap_path_rows(rec, work, repeats)  # own fast path vs generic decoders
+        mcap_paths = (mcap_path_rows(rec, work, lambda fn: _best(fn, repeats))  # own vs generic
                       if any(f == "mcap" for f, *_ in plan) else [])
     finally:
         if bar:

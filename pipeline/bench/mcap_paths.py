@@ -62,17 +62,7 @@ def _ros2_arrays(rec: Recording, path: Path) -> dict:
     return {n: f"/{n}:gauges" for n in rec.names}
 
 
-def _best(fn, repeats: int) -> tuple[float, object]:
-    best, out = float("inf"), None
-    for _ in range(repeats):
-        out = None
-        t = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t)
-    return best, out
-
-
-def mcap_path_rows(rec: Recording, work: Path, repeats: int = 3) -> list[dict]:
+def mcap_path_rows(rec: Recording, work: Path, timer) -> list[dict]:
     """Read throughput of each MCAP path on the first :data:`SECONDS` of ``rec``.
 
     Parameters
@@ -82,8 +72,9 @@ def mcap_path_rows(rec: Recording, work: Path, repeats: int = 3) -> list[dict]:
         number of Hz for the foreign files' stamps).
     work : Path
         Folder for the files (removed after each row).
-    repeats : int
-        Best of this many reads.
+    timer : callable
+        ``timer(fn) -> (best wall time [s], last result)`` of repeated calls of ``fn`` (the
+        io bench's best-of-``repeats``).
 
     Returns
     -------
@@ -95,6 +86,8 @@ def mcap_path_rows(rec: Recording, work: Path, repeats: int = 3) -> list[dict]:
     from .. import io as pio
     from ..io.mcap import foreign
 
+    if rec.n_samples < 2:
+        raise ValueError(f"the MCAP paths need a recording of at least 2 samples, got {rec.n_samples}")
     n = min(rec.n_samples, max(2, int(SECONDS * rec.fs)))
     short = rec.slice_samples(0, n)
     short = Recording(np.ascontiguousarray(short.data), short.fs, short.channels)
@@ -119,7 +112,7 @@ def mcap_path_rows(rec: Recording, work: Path, repeats: int = 3) -> list[dict]:
             foreign._CACHE.clear()  # decode anew every time (the registry keeps one file)
             return pio.read(p, topics=topics)
 
-        read_s, back = _best(read, repeats)
+        read_s, back = timer(read)
         with open(p, "rb") as fh:
             stats = make_reader(fh).get_summary().statistics
         rows.append({"layout": layout, "reader": reader, "messages": int(stats.message_count),

@@ -400,3 +400,47 @@ def test_foxglove_layout_streaming_and_bad_options(tmp_path):
     empty = Recording(np.empty((0, 1)), 10.0, ["a"])
     e = pio.write(empty, tmp_path / "e.mcap", layout="foxglove")
     assert pio.read(e) == empty
+
+
+def test_nulls_booleans_and_publish_time(tmp_path):
+    p = _json_file(tmp_path / "n.mcap", n=30, body=lambda k: {"a": [k, None], "b": None if k == 3 else k,
+                                                               "flag": True, "flags": [True, False]})
+    rec = pio.read(p, topics={"a": "/rig/strain:a"}, stamp="publish_time")
+    assert rec.fs == pytest.approx(2000.0) and np.isnan(rec.data[1::2, 0]).all()
+    np.testing.assert_array_equal(rec.data[0::2, 0], np.arange(30))
+    assert np.isnan(pio.read(p, topics={"b": "/rig/strain:b"}).data[3, 0])
+    with pytest.raises(RecordingFileError, match=r"channel 'a' .*its stamps give 2000 Hz, other channels "
+                                                 r"1[0-9.]+ Hz; a recording has one sample rate"):
+        pio.read(p, topics={"a": "/rig/strain:a", "b": "/rig/strain:b", "c": "/rig/strain:b"})
+    for f in ("flag", "flags"):
+        with pytest.raises(RecordingFileError, match="not a number or an array of numbers"):
+            pio.read(p, topics={"x": f"/rig/strain:{f}"})
+    with pytest.raises(RecordingFileError, match="holds a number, earlier messages a array|holds a array"):
+        pio.read(_json_file(tmp_path / "mix.mcap", n=5, body=lambda k: {"v": [1.0] if k else 1.0}),
+                 topics={"v": "/rig/strain:v"}, fs=1.0)
+    with pytest.raises(RecordingFileError, match="stamp field 'ts' not found"):
+        pio.read(p, topics={"b": "/rig/strain:b"}, stamp="ts")
+    with pytest.raises(RecordingFileError, match="a stamp is"):
+        pio.read(p, topics={"b": "/rig/strain:b"}, stamp="flags")
+
+
+def test_json_decoder_factory_and_describe_fields(tmp_path):
+    f = JsonDecoderFactory()
+    assert f.decoder_for("cbor", None) is None
+    assert f.decoder_for("json", None)(b'{"x": [1, 2]}') == {"x": [1, 2]}
+    p = _json_file(tmp_path / "d.mcap", n=3)
+    (t,) = m.describe(p)
+    assert (t.topic, t.schema, t.schema_encoding, t.message_encoding, t.messages) == (
+        "/rig/strain", "rig.Strain", "jsonschema", "json", 3)
+    assert t.fields == [("gauges.sun_T3", "number"), ("gauges.ring", "number"), ("stamp.sec", "number"),
+                        ("stamp.nsec", "number")]
+    with pytest.raises(FileNotFoundError):
+        m.describe(tmp_path / "nope.mcap")
+
+
+def test_mcap_bench_paths_bad_input(tmp_path):
+    from meshphase.bench.mcap_paths import markdown, mcap_path_rows
+
+    assert markdown([], 8, 5120.0) == []
+    with pytest.raises(ValueError, match="at least 2 samples"):
+        mcap_path_rows(Recording(np.empty((1, 2)), 10.0, ["a", "b"]), tmp_path, lambda fn: (1.0, fn()))

@@ -89,6 +89,9 @@ def test_input_mcap_mistakes_name_their_key(files):
     with pytest.raises(SceneError, match=r"input.mcap.channels.*scael"):
         parse_scene(base + '[input]\nrecording = "rig.mcap"\n[input.mcap]\n'
                     '[[input.mcap.channels]]\nname = "a"\ntopic = "/a"\nfield = "v"\nscael = 2\n', d / "c.toml")
+    with pytest.raises(SceneError, match=r"input.mcap.*rig.h5 is a hdf5 file"):
+        parse_scene(base + '[input]\nrecording = "rig.h5"\n[input.mcap]\n'
+                    '[[input.mcap.channels]]\nname = "a"\ntopic = "/a"\nfield = "v"\n', d / "c.toml")
     # a mapping naming a topic the file lacks: the load stage fails and says which
     ctx = run_scene(parse_scene(base + '[input]\nrecording = "rig.mcap"\n[input.mcap]\n'
                                 '[[input.mcap.channels]]\nname = "sun"\ntopic = "/nope"\nfield = "v"\n'

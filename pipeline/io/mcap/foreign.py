@@ -317,12 +317,22 @@ def _assemble(path: Path, entries: list[TopicField], got: dict, fs, max_jitter) 
     than ``max_jitter`` is an error)."""
     series = {e.name: _series(*got[e.name]) for e in entries}
     what = {e.name: _where(e) for e in entries}
+    given = fs is not None
     try:
-        if fs is None:
-            rates = [fit_grid(t, c, max_jitter=max_jitter, what=what[k]).fs for k, (t, c, _) in series.items()]
-            fs = float(np.median(rates))
-        grids = {k: fit_grid(t, c, fs=fs, max_jitter=max_jitter, what=what[k])
-                 for k, (t, c, _) in series.items()}
+        own = {} if given else {k: fit_grid(t, c, max_jitter=max_jitter, what=what[k]).fs
+                                for k, (t, c, _) in series.items()}
+        fs = fs if given else float(np.median(list(own.values())))
+        grids = {}
+        for k, (t, c, _) in series.items():
+            try:
+                grids[k] = fit_grid(t, c, fs=fs, max_jitter=max_jitter, what=what[k])
+            except ValueError:
+                if given or abs(own[k] - fs) <= 1e-9 * fs:
+                    raise
+                raise ValueError(f"{what[k]}: its stamps give {own[k]:.10g} Hz, other channels "
+                                 f"{fs:.10g} Hz; a recording has one sample rate: map channels of "
+                                 f"one rate together (rates: " + ", ".join(
+                                     f"{n} {r:.10g} Hz" for n, r in own.items()) + ")") from None
     except ValueError as exc:
         raise RecordingFileError(path, str(exc)) from None
     origin = max(g.origin_ns for g in grids.values())
