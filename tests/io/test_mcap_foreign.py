@@ -389,6 +389,9 @@ def test_foxglove_layout_streaming_and_bad_options(tmp_path):
     b = pio.write_blocks(rec, [rec.data[:333], rec.data[333:]], tmp_path / "b.mcap", layout="foxglove",
                          topic="/rig/all")
     assert a.read_bytes() == b.read_bytes()
+    assert pio.read(a, fs=rec.fs).n_samples == 1000  # the stored rate may be repeated
+    with pytest.raises(ValueError, match="stores its rate"):
+        pio.read(a, fs=1.0)
     with pytest.raises(ValueError, match="block sets the samples per message"):
         pio.write(rec, tmp_path / "c.mcap", layout="foxglove", block=100)
     with pytest.raises(ValueError, match="layout"):

@@ -382,33 +382,39 @@ def _embedded(reader, path: Path):
     return entries, header
 
 
+def _written_back(path: Path, data: np.ndarray, entries: list, header: dict) -> Recording:
+    """The recording a ``foxglove`` layout file holds (its header from the Metadata record)."""
+    if data.shape[0] != header["n_samples"]:
+        raise RecordingFileError(path, f"{data.shape[0]} sample times decoded, the "
+                                       f"{FOXGLOVE_METADATA!r} record says {header['n_samples']}")
+    return Recording(data.astype(header["dtype"], order="F"), header["fs"], [e.spec for e in entries],
+                     t0=header["t0"], start_datetime=header["start_datetime"], meta=header["meta"],
+                     history=header["history"])
+
+
 def _decode_file(path: Path, entries, fs, max_jitter, verify: bool) -> Recording:
     """The whole mapped recording of a foreign file (``entries`` None: the embedded mapping
     of a ``foxglove`` layout file, else the no-mapping error)."""
+    header = None
     with open(path, "rb") as fh, _lib_errors(path, "decoding messages"):
         _check_ends(fh, path)
         reader = make_reader(fh, validate_crcs=verify, decoder_factories=decoder_factories())
-        header = None
         if entries is None:
             emb = _embedded(reader, path)
             if emb is None:
                 raise no_mapping_error(path, verify)
             entries, header = emb
+            if fs is not None and fs != header["fs"]:
+                raise ValueError(f"{path}: a foxglove-layout file stores its rate ({header['fs']!r} Hz); "
+                                 f"leave fs out (got {fs!r})")
             fs = header["fs"]
-        if header is not None and header["n_samples"] == 0:
-            data = np.empty((0, len(entries)))  # an empty recording written as foxglove layout
-        else:
-            got = _collect(reader, path, entries)
-    if header is None or header["n_samples"]:
-        data, fs, origin, notes = _assemble(path, entries, got, fs, max_jitter)
-    specs = [e.spec for e in entries]
+            if header["n_samples"] == 0:
+                return _written_back(path, np.empty((0, len(entries))), entries, header)
+        got = _collect(reader, path, entries)
+    data, fs, origin, notes = _assemble(path, entries, got, fs, max_jitter)
     if header is not None:
-        if data.shape[0] != header["n_samples"]:
-            raise RecordingFileError(path, f"{data.shape[0]} sample times decoded, the "
-                                           f"{FOXGLOVE_METADATA!r} record says {header['n_samples']}")
-        return Recording(data.astype(header["dtype"], order="F"), header["fs"], specs, t0=header["t0"],
-                         start_datetime=header["start_datetime"], meta=header["meta"],
-                         history=header["history"])
+        return _written_back(path, data, entries, header)
+    specs = [e.spec for e in entries]
     start = None
     if origin >= _EPOCH_NS:
         start = _dt.datetime.fromtimestamp(origin // 10**9, _dt.timezone.utc).replace(
