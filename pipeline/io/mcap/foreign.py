@@ -253,6 +253,10 @@ def _collect(reader, path: Path, entries: list[TopicField]) -> dict:
                 try:
                     raw = _get(decoded, e.path)
                 except _FieldError as exc:
+                    if e.missing_is_nan:
+                        stamps.append(msg.log_time)  # the foxglove layout stamps by log time
+                        values.append(math.nan)
+                        continue
                     found: list = []
                     _numeric_fields(decoded, (), found)
                     raise RecordingFileError(path, f"{_where(e)}: message {len(stamps)} has no field "
@@ -371,7 +375,8 @@ def _embedded(reader, path: Path):
     md = dict(recs[0].metadata)
     try:
         specs = [ChannelSpec.from_dict(d) for d in json.loads(md["channels"])]
-        entries = [TopicField(spec=s, topic=md["topic"], path=("channels", s.name)) for s in specs]
+        entries = [TopicField(spec=s, topic=md["topic"], path=("channels", s.name), missing_is_nan=True)
+                   for s in specs]
         header = {"fs": float(md["fs"]), "t0": float(md["t0"]), "n_samples": int(md["n_samples"]),
                   "dtype": md["dtype"], "meta": json.loads(md["meta"]), "history": json.loads(md["history"]),
                   "start_datetime": md.get("start_datetime")}

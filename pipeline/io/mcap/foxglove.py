@@ -42,7 +42,10 @@ _ROWS = 4096  # sample times formatted at once
 
 def sample_schema(specs) -> dict:
     """The JSON schema of one message: ``timestamp`` {sec, nsec}, ``sample`` index and one
-    number (or null for NaN/inf) per channel under ``channels``."""
+    number per channel under ``channels`` (absent where the sample is NaN or inf).
+
+    Only what Foxglove's JSON Schema parser accepts: ``"type"`` a single string (it refuses
+    lists such as ``["number", "null"]`` and ``"null"``), objects with ``properties``."""
     return {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "title": FOXGLOVE_SCHEMA_NAME,
@@ -54,9 +57,9 @@ def sample_schema(specs) -> dict:
                                          "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999}},
                           "required": ["sec", "nsec"]},
             "sample": {"type": "integer", "minimum": 0, "description": "sample index in the recording"},
-            "channels": {"type": "object", "required": [s.name for s in specs],
-                         "properties": {s.name: {"type": ["number", "null"],
-                                                 "description": f"{s.kind} [{s.units}]; null = NaN or inf"}
+            "channels": {"type": "object", "additionalProperties": False,
+                         "properties": {s.name: {"type": "number",
+                                                 "description": f"{s.kind} [{s.units}]; absent: NaN or inf"}
                                         for s in specs}},
         },
         "required": ["timestamp", "sample", "channels"],
@@ -100,7 +103,8 @@ def write_foxglove(header, blocks, path, *, dtype="float64", compression: str = 
     value, ...}}`` with ``log_time = publish_time`` = that timestamp =
     ``log_time_origin_ns + floor(k * 1e9 / fs)`` (as the block layout's). Values are written
     with Python's shortest round-trip ``repr``, so finite values read back bit-exact (-0.0
-    included); NaN and +-inf are written as ``null`` and read back as NaN.
+    included); a NaN or +-inf sample is left out of its message (JSON has no NaN, and
+    Foxglove's schema parser takes no ``null`` type) and reads back as NaN.
     """
     compression = as_choice(compression, "compression", COMPRESSIONS)
     if not isinstance(topic, str) or not topic:
@@ -116,8 +120,6 @@ def write_foxglove(header, blocks, path, *, dtype="float64", compression: str = 
     md = _header_metadata(header, topic, dtype_name, origin)
     comp = {"none": CompressionType.NONE, "lz4": CompressionType.LZ4, "zstd": CompressionType.ZSTD}[compression]
     names = [json.dumps(s.name) for s in specs]
-    body = ",".join(f"{nm}:%s" for nm in names)
-    template = '{"timestamp":{"sec":%d,"nsec":%d},"sample":%d,"channels":{' + body + "}}"
     with open(path, "wb") as fh:
         w = Writer(fh, chunk_size=chunk_size, compression=comp, index_types=IndexType.ALL,
                    use_chunking=True, use_statistics=True, use_summary_offsets=True,
@@ -129,19 +131,26 @@ def write_foxglove(header, blocks, path, *, dtype="float64", compression: str = 
                                  {"fs": repr(float(header.fs)), "channels": json.dumps([s.name for s in specs])})
         w.add_metadata(FOXGLOVE_METADATA, md)
         for group, s0 in regroup_blocks(blocks, nch, n, _ROWS, np.dtype(dtype_name)):
-            _put_rows(w, cid, template, group, s0, header.fs, origin)
+            _put_rows(w, cid, names, group, s0, header.fs, origin)
         w.finish()
 
 
-def _put_rows(w: Writer, cid: int, template: str, group: np.ndarray, s0: int, fs: float,
+def _put_rows(w: Writer, cid: int, names: list, group: np.ndarray, s0: int, fs: float,
               origin: int) -> None:
-    """One message per column of ``group`` (channels x samples), samples s0, s0 + 1, ..."""
+    """One message per column of ``group`` (channels x samples), samples s0, s0 + 1, ...;
+    ``names``: the channel names as JSON strings. A NaN or inf sample is left out."""
+    head = '{"timestamp":{"sec":%d,"nsec":%d},"sample":%d,"channels":{'
+    every = head + ",".join(f"{nm}:%r" for nm in names) + "}}"
     finite = np.isfinite(group)
+    whole = finite.all(axis=0).tolist()
     cols = group.astype(np.float64).T.tolist()
-    ok = finite.T.tolist()
-    for j, (vals, good) in enumerate(zip(cols, ok)):
+    for j, vals in enumerate(cols):
         k = s0 + j
         t = _log_time(k, fs, origin)
-        text = template % ((t // 1_000_000_000, t % 1_000_000_000, k)
-                           + tuple(repr(v) if g else "null" for v, g in zip(vals, good)))
+        stamp = (t // 1_000_000_000, t % 1_000_000_000, k)
+        if whole[j]:
+            text = every % (stamp + tuple(vals))
+        else:
+            text = (head % stamp + ",".join(f"{nm}:{v!r}" for nm, v, ok in zip(names, vals, finite[:, j])
+                                            if ok) + "}}")
         w.add_message(cid, t, text.encode("utf-8"), t, sequence=k & 0xFFFFFFFF)

@@ -122,6 +122,9 @@ class TopicField:
         ``"log_time"`` (default), ``"publish_time"``, or the field path of a time stamp in
         the message (``{sec, nsec|nanosec}`` or ``{seconds, nanos}`` struct; an integer is
         [ns], a float [s]).
+    missing_is_nan : bool
+        A message without the field holds NaN (the ``foxglove`` layout leaves NaN and inf
+        out) instead of being an error.
     """
 
     spec: ChannelSpec
@@ -129,6 +132,7 @@ class TopicField:
     path: tuple
     scale: float = 1.0
     stamp: Any = "log_time"
+    missing_is_nan: bool = False
 
     @property
     def name(self) -> str:
@@ -242,7 +246,7 @@ def parse_topics(topics, *, stamp=None) -> list[TopicField]:
 
 def mapping_key(entries: list[TopicField]) -> tuple:
     """A hashable key of a mapping (for caches)."""
-    return tuple((e.spec, e.topic, e.path, e.scale, e.stamp) for e in entries)
+    return tuple((e.spec, e.topic, e.path, e.scale, e.stamp, e.missing_is_nan) for e in entries)
 
 
 @dataclass
