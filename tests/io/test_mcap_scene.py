@@ -78,6 +78,12 @@ def test_scene_with_input_mcap_gives_the_phasing_of_the_same_samples(files):
 def test_input_mcap_mistakes_name_their_key(files):
     d, rec = files
     base = 'name = "x"\nresults = ["phasing"]\n' + GEARSET
+    ok = parse_scene(base + '[input]\nrecording = "rig.mcap"\n[input.mcap]\nmax_jitter_s = 1e-4\n'
+                     'stamp = "header.stamp"\n[[input.mcap.channels]]\nname = "fw"\ntopic = "/a"\n'
+                     'field = "v"\nkind = "facewidth"\nface_position_mm = 5.0\nscale = 1e-6\n', d / "c.toml")
+    assert ok.input["mcap"] == {"topics": [{"name": "fw", "topic": "/a", "field": "v", "kind": "facewidth",
+                                            "face_position": 0.005, "scale": 1e-6}],
+                                "max_jitter": 1e-4, "stamp": "header.stamp"}
     with pytest.raises(SceneError, match=r"input.mcap.*give \[input\] recording"):
         parse_scene(base + '[input]\nsynthetic = "seed_rig"\n[input.mcap]\n'
                     '[[input.mcap.channels]]\nname = "a"\ntopic = "/a"\nfield = "v"\n', d / "c.toml")
