@@ -113,7 +113,8 @@ class Scene:
         ``mount_angle`` [rad], ``bridge`` (a :class:`meshphase.bridge.BridgeConfig`).
     input : dict
         ``recording`` (Path) or ``synthetic`` (scenario name) with ``minutes``, ``seed``,
-        ``start``/``stop`` [s].
+        ``start``/``stop`` [s]; ``mcap``: the format options mapping an MCAP file of
+        another tool (``topics``, ``fs``, ``max_jitter``, ``stamp``).
     processing : dict
     tolerances : dict or None
         Bands in SI ([m], [rad] or "uniform"), ``samples``, ``sampler``, ``window`` [s], ``seed``.
@@ -386,7 +387,7 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
     rec = scene.input.get("recording")
     if "load" in stages and rec and _file_state(rec) == "file":
         try:
-            info = io.read_info(rec)
+            info = io.read_info(rec, **scene.input.get("mcap", {}))
         except Exception:  # noqa: BLE001 - unreadable files are the load stage's to report
             info = None
         if info is not None:
@@ -642,6 +643,8 @@ def _parse_input(raw: dict, base: Path, err) -> dict:
         inp["start"] = inp.pop("start_s")
     if "stop_s" in inp:
         inp["stop"] = inp.pop("stop_s")
+    if "mcap" in inp:
+        inp["mcap"] = _parse_input_mcap(inp, err)
     if "synthetic" in inp:
         from meshphase.synthetic.scenarios import SCENARIOS  # synthetic: imported only when named
 
@@ -650,6 +653,50 @@ def _parse_input(raw: dict, base: Path, err) -> dict:
                       f"{', '.join(sorted(SCENARIOS))}")
         _check_synthetic_size(inp, err)
     return inp
+
+
+def _parse_input_mcap(inp: dict, err) -> dict:
+    """``[input.mcap]`` (an MCAP file written by another tool) -> the format options of
+    :func:`meshphase.io.read`: ``topics`` (the ``[[input.mcap.channels]]`` tables, each
+    ``name``, ``topic``, ``field`` and optionally ``kind``, ``units``, ``scale``, ``stamp``,
+    ``gear``, ``tooth``, ``face_position_mm``, ``description``), ``fs`` [Hz], ``max_jitter``
+    [s], ``stamp``. The mapping is checked here (:func:`meshphase.io.mcap.parse_topics`);
+    the file against it when it is read."""
+    from .io.mcap import parse_topics  # the MCAP mapping: only scenes that give one
+
+    if "recording" not in inp:
+        raise err(["input", "mcap"], "[input.mcap] maps the topics of an MCAP recording file: "
+                  "give [input] recording = \"FILE.mcap\" too")
+    fmt = None
+    if _file_state(inp["recording"]) == "file":
+        try:
+            fmt = io.detect_format(inp["recording"])
+        except (OSError, ValueError):
+            pass  # unreadable: the load stage reports it
+    if fmt not in (None, "mcap"):
+        raise err(["input", "mcap"], f"{inp['recording'].name} is a {fmt} file; [input.mcap] maps "
+                  "the topics of an MCAP file")
+    m = inp["mcap"]
+    chans = []
+    for c in m.get("channels", []):
+        c = dict(c)
+        if "face_position_mm" in c:
+            c["face_position"] = c.pop("face_position_mm") * 1e-3
+        chans.append(c)
+    if not chans:
+        raise err(["input", "mcap"], "[input.mcap] needs [[input.mcap.channels]] tables (name, "
+                  "topic, field): which topic fields are the channels")
+    try:
+        parse_topics(chans, stamp=m.get("stamp"))
+    except (TypeError, ValueError) as exc:
+        i = next((k for k, _ in enumerate(chans) if f"topics[{k}]" in str(exc)), None)
+        keys = ["input", "mcap", "channels"] + ([i] if i is not None else [])
+        raise err(keys, str(exc)) from None
+    out = {"topics": chans}
+    for key, opt in (("fs_Hz", "fs"), ("max_jitter_s", "max_jitter"), ("stamp", "stamp")):
+        if key in m:
+            out[opt] = m[key]
+    return out
 
 
 def _parse_tolerances(raw: dict, gearset: Gearset | None, err) -> dict | None:
@@ -937,7 +984,7 @@ def check_recording(scene: Scene, info=None) -> None:
     if not rec_path:
         raise ValueError("scene.input has no recording to check against")
     if info is None:
-        info = io.read_info(rec_path)
+        info = io.read_info(rec_path, **scene.input.get("mcap", {}))
     text, label = scene.text, scene.path or "<scene>"
     source = str(rec_path)
     if not (math.isfinite(info.fs) and info.fs > 0):

@@ -179,14 +179,16 @@ def _open_file(scene: Scene) -> tuple:
     source = str(inp["recording"])
     start, stop = inp.get("start"), inp.get("stop")
     with recording_read_errors(path):
-        src = FileSource(path, start=start, stop=stop)
+        opts = inp.get("mcap")
+        src = FileSource(path, start=start, stop=stop, options=opts)
         if scene.channels:
             fmt = src.fmt
             src = _mapped_source(
                 src.header, scene.channels, source,
                 lambda specs, gains: FileSource(path, start=start, stop=stop, channels=specs,
-                                                gains=gains, format=fmt),
-                lambda specs, gains: FileSource(path, channels=specs, gains=gains, format=fmt))
+                                                gains=gains, format=fmt, options=opts),
+                lambda specs, gains: FileSource(path, channels=specs, gains=gains, format=fmt,
+                                                options=opts))
     return src, src.header, source, None
 
 

@@ -291,16 +291,20 @@ class FileSource(BlockSource):
     gains : list of (int, float), optional
         (column, factor) applied to the samples, in order.
     format : str, optional
+    options : dict, optional
+        Format options of every read (e.g. an MCAP mapping: ``topics``, ``fs``).
     """
 
     def __init__(self, path, *, start: float | None = None, stop: float | None = None,
-                 channels=None, gains: list | None = None, format: str | None = None):
+                 channels=None, gains: list | None = None, format: str | None = None,
+                 options: dict | None = None):
         from . import io
 
         self.path = Path(path)
         self.fmt = format or io.detect_format(self.path)
         self.mod = io.get_format(self.fmt)
-        info = self.mod.read_info(self.path)
+        self.options = dict(options or {})
+        info = self.mod.read_info(self.path, **self.options)
         self.info = info
         self.names = info.names
         if start is None and stop is None:
@@ -326,13 +330,13 @@ class FileSource(BlockSource):
         i0, i1 = self.i0, self.i1
         with recording_read_errors(self.path):
             if i0 == 0 and i1 == self.info.n_samples and hasattr(self.mod, "iter_blocks"):
-                for blk in self._quiet(self.mod.iter_blocks(self.path, n_block, 0, self.names)):
+                for blk in self._quiet(self.mod.iter_blocks(self.path, n_block, 0, self.names, **self.options)):
                     a = int(round((blk.t0 - self.info.t0) * self.info.fs))
                     self._note_dtype(blk.data)
                     yield a, _apply_gains(blk.data, self.gains, copy=False)
                 return
             if self.fmt == "hdf5" or not hasattr(self.mod, "iter_blocks"):
-                reads = (self.mod.read(self.path, self.names, a, min(i1, a + n_block))
+                reads = (self.mod.read(self.path, self.names, a, min(i1, a + n_block), **self.options)
                          for a in range(i0, i1, n_block))
                 for blk in self._quiet(reads):
                     self._note_dtype(blk.data)
@@ -341,7 +345,7 @@ class FileSource(BlockSource):
                 return
             # other formats stream from the start: skip to the window, stop after it
             pos = 0
-            for blk in self._quiet(self.mod.iter_blocks(self.path, n_block, 0, self.names)):
+            for blk in self._quiet(self.mod.iter_blocks(self.path, n_block, 0, self.names, **self.options)):
                 a, b = pos, pos + blk.n_samples
                 pos = b
                 if b <= i0:

@@ -29,6 +29,10 @@ same peak RSS whatever the length. A length whose files do not fit on the disk (
 samples' size free) is skipped and listed. Peak memory of ``meshphase process`` on the same
 recordings (``process_minutes``, :func:`meshphase.bench.processing.process_rss_rows`) is
 measured alongside, so that one table shows both streamed commands flat in the length.
+
+MCAP paths (:mod:`meshphase.bench.mcap_paths`): on the first 10 s of the recording, the own
+block layout read by the fast path against the generic decoder path (the ``foxglove`` layout,
+a foreign JSON file with one message per sample time, a ROS 2 file with arrays per message).
 """
 
 from __future__ import annotations
@@ -53,6 +57,7 @@ from ..jsonable import json_default
 from ..log import logger
 from ..recording import ChannelSpec, Recording
 from ..validate import as_positive, as_positive_int
+from .mcap_paths import markdown as mcap_paths_markdown, mcap_path_rows
 
 __all__ = ["run_io_bench", "strain_recording", "convert_rss_rows", "IO_FORMATS", "TARGETS",
            "COLUMNS", "CONVERT_COLUMNS", "CONVERT_MINUTES"]
@@ -303,8 +308,10 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
     Returns
     -------
     dict
-        ``{"config", "raw", "rows", "convert", "process", "skipped", "warnings", "notes",
-        "files"}`` (``convert``: rows with the keys :data:`CONVERT_COLUMNS`; ``process``: rows
+        ``{"config", "raw", "rows", "convert", "process", "mcap_paths", "skipped", "warnings",
+        "notes", "files"}`` (``mcap_paths``: own MCAP layout by the fast path against the
+        generic decoder path, :func:`meshphase.bench.mcap_paths.mcap_path_rows`, when MCAP is
+        benchmarked; ``convert``: rows with the keys :data:`CONVERT_COLUMNS`; ``process``: rows
         with the keys :data:`meshphase.bench.processing.PROCESS_COLUMNS`); ``rows`` is a
         list of dicts with the keys :data:`COLUMNS`, throughputs in MSamples/s, sizes in MB,
         times in s (None where a column does not apply).
@@ -339,6 +346,8 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
         for fmt, variant, suffix, writer in plan:
             rows.append(bench.row(fmt, variant, suffix, writer, len(rows), caught, bar))
         convert, process = _rss_tables(work, convert_minutes, process_minutes, skipped)
+        mcap_paths = (mcap_path_rows(rec, work, lambda fn: _best(fn, repeats))  # own vs generic
+                      if any(f == "mcap" for f, *_ in plan) else [])
     finally:
         if bar:
             bar.close()
@@ -347,7 +356,7 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
     config = _config(minutes, n_channels, fs, n, rec, formats, repeats, block_budget_mb, budget_samples,
                      bench)
     result = {"config": config, "raw": raw, "rows": rows, "convert": convert, "process": process,
-              "skipped": skipped, "warnings": caught, "notes": _notes(repeats)}
+              "mcap_paths": mcap_paths, "skipped": skipped, "warnings": caught, "notes": _notes(repeats)}
     files = {"json": str(out / "io_bench.json"), "md": str(out / "io_bench.md")}
     result["files"] = files
     Path(files["json"]).write_text(json.dumps(result, indent=2, default=json_default) + "\n",
@@ -603,6 +612,7 @@ def _markdown(res: dict) -> str:
                          f"| {r['n_onsets']} | {r['wall_s']:.1f} | {r['peak_rss_mb']:.0f} "
                          f"| {_fmt(r.get('streamed_peak_mb'))} | {r['rss_over_data']:.3f} |")
         lines.append("")
+    lines += mcap_paths_markdown(res.get("mcap_paths") or [], c["n_channels"], c["fs"])
     if res["skipped"]:
         lines.append("Skipped: " + "; ".join(f"{s['format']} ({s['reason']})" for s in res["skipped"]))
         lines.append("")

@@ -120,7 +120,10 @@ def read(path, channels=None, start: float | None = None, stop: float | None = N
         Format options: every format takes ``verify`` (default True: check the stored
         checksums, MCAP CRC32 and HDF5 fletcher32; False skips them, structural checks
         still run); TDMS also ``fs=`` when the file has no ``wf_increment`` and ``raw=True``
-        to keep unscaled values. An unknown option raises TypeError.
+        to keep unscaled values; MCAP written by other tools ``topics=`` (the mapping of
+        topic fields onto channels, e.g. ``{"sun_T3": "/rig/strain:gauges.sun_T3"}``),
+        ``fs=``, ``max_jitter=`` [s] and ``stamp=`` (``data_schemas/mcap.md``). An unknown
+        option raises TypeError.
 
     Raises
     ------
@@ -177,7 +180,8 @@ def write(recording: Recording, path, format: str | None = None, *, overwrite: b
     overwrite : bool
         Replace an existing file (default False: FileExistsError).
     **options
-        Format options (e.g. ``compression="gzip"`` for HDF5, ``block=5120`` for MCAP).
+        Format options (e.g. ``compression="gzip"`` for HDF5, ``block=5120`` for MCAP,
+        ``layout="foxglove"`` for MCAP that Foxglove plots).
 
     Returns
     -------
@@ -264,8 +268,8 @@ def _size_hint(recording: Recording, name: str, options: dict) -> int | None:
 
 
 def _hint(n: int, nc: int, itemsize: int, name: str, options: dict) -> int | None:
-    if options.get("compression") not in (None, "none"):
-        return None
+    if options.get("compression") not in (None, "none") or options.get("layout") == "foxglove":
+        return None  # compressed (the foxglove layout is zstd by default): size unknown
     if name == "csv":  # at least one digit and one separator per value
         return 2 * n * (nc + 1)
     return int(n * nc * itemsize)

@@ -55,8 +55,14 @@ def test_tiny_run_writes_json_and_markdown(tiny):
         else:
             assert r["pandas_c_msps"] is None and r["csv_over_pandas"] is None
     # the markdown table has a header, a rule and one line per row
-    table = [ln for ln in md.splitlines() if ln.startswith("|")]
+    table = [ln for ln in md.split("\n## ")[0].splitlines() if ln.startswith("|")]
     assert len(table) == 2 + len(rows)
+    if "mcap" in present:  # own MCAP layout (fast path) against the generic decoder path
+        paths = js["mcap_paths"]
+        assert [r["reader"].split(" (")[0] for r in paths][:2] == ["fast path", "generic decoder path"]
+        assert all(r["exact"] is True and r["read_msps"] > 0 and r["messages"] > 0 for r in paths)
+        assert paths[0]["x_fast"] == 1.0
+        assert "## MCAP: own layout (fast path) against the generic decoder path" in md
     assert "read MS/s" in table[0] and "x raw" in table[0] and "stream peak 4x MB" in table[0]
     assert res["files"]["json"].endswith("io_bench.json")
     # the written test files are cleaned up

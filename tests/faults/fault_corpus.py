@@ -789,7 +789,9 @@ def _scene_with(path: tuple, value, results=None, *, drop: bool = False):
         if results is not None:
             scene["results"] = results
         node = scene
-        for k in path[:-1]:
+        for i, k in enumerate(path[:-1]):
+            if isinstance(node, dict) and k not in node:   # a table the base scene leaves out
+                node[k] = json.loads(json.dumps(_OPTIONAL_TABLES[tuple(path[:i + 1])]))
             node = node[k]
         if drop:
             node.pop(path[-1], None)
@@ -800,6 +802,11 @@ def _scene_with(path: tuple, value, results=None, *, drop: bool = False):
         return _scene(ws, scene)
     return make
 
+
+#: tables BASE_SCENE leaves out (they need another kind of recording), with a valid content
+#: for the keys under them: ``[input.mcap]`` maps the topics of an MCAP file of another tool
+_OPTIONAL_TABLES = {("input", "mcap"): {"channels": [{"name": "sun", "topic": "/rig/strain",
+                                                      "field": "gauges.sun"}]}}
 
 #: keys the scene schema allows only instead of another (``oneOf``)
 _EXCLUSIVE = {("gearset", "planet_angles_deg"): "n_planets"}

@@ -7,6 +7,10 @@
 // n_samples uint32, n_channels uint16, dtype uint8 (1 = float32, 2 = float64), version uint8;
 // then n_channels * n_samples little-endian samples, channel-major).
 //
+// JSON channels (message encoding "json", e.g. meshphase's layout="foxglove"): each message is
+// parsed with JSON.parse and listed per topic under "jsonTopics" (log times, the decoded
+// messages), so the test can hold them against the recording and the channel's jsonschema.
+//
 // Usage: node read_mcap.mjs FILE.mcap [--start NS --end NS]
 //   --start/--end: also run readMessages({startTime, endTime}) over that log-time range
 //   (@mcap/core treats endTime as INCLUSIVE) and list the messages it returns.
@@ -100,6 +104,7 @@ async function main() {
       metadata: [],
       statistics: null,
       topics: {},
+      jsonTopics: {},
     };
     for (const s of reader.schemasById.values()) {
       const text = new TextDecoder().decode(s.data);
@@ -137,6 +142,21 @@ async function main() {
     const perTopic = new Map();
     for await (const msg of reader.readMessages()) {
       const ch = reader.channelsById.get(msg.channelId);
+      if (ch.messageEncoding === "json") {
+        if (!(ch.topic in out.jsonTopics)) {
+          const sc = reader.schemasById.get(ch.schemaId);
+          out.jsonTopics[ch.topic] = {
+            schemaName: sc ? sc.name : "",
+            schemaEncoding: sc ? sc.encoding : "",
+            logTimes: [],
+            messages: [],
+          };
+        }
+        const jt = out.jsonTopics[ch.topic];
+        jt.logTimes.push(String(msg.logTime));
+        jt.messages.push(JSON.parse(new TextDecoder().decode(msg.data)));
+        continue;
+      }
       if (ch.messageEncoding !== "meshphase-block") continue;
       const h = decodeHeader(msg.data, `${ch.topic} @ ${msg.logTime}`);
       if (!perTopic.has(ch.topic)) perTopic.set(ch.topic, []);

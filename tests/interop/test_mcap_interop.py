@@ -1,8 +1,8 @@
 """MCAP files written by meshphase read back with the independent TypeScript reader.
 
 ``read_mcap.mjs`` uses ``@mcap/core`` (McapIndexedReader, from the npm registry) and decodes
-the payload itself from the layout documented in ``data_schemas/mcap.md``; nothing is shared
-with the Python code. Set up once with ``(cd tests/interop && npm ci --no-audit --no-fund)``.
+the payload itself from the layout documented in ``data_schemas/mcap.md`` (JSON messages of
+the ``foxglove`` layout with ``JSON.parse``); nothing is shared with the Python code. Set up once with ``(cd tests/interop && npm ci --no-audit --no-fund)``.
 """
 
 from __future__ import annotations
@@ -137,3 +137,30 @@ def test_time_window_end_is_inclusive_in_typescript_half_open_in_python(node, tm
     i0, i1 = 2500, 6001
     got = pio.read(p, start=rec.t0 + i0 / rec.fs, stop=rec.t0 + i1 / rec.fs)
     assert got == rec.slice_samples(i0, i1)
+
+
+@pytest.mark.parametrize("compression", ["none", "zstd"])
+def test_typescript_reader_decodes_foxglove_layout(node, tmp_path, compression):
+    rec = _recording(np.float64, 12.5).slice_samples(0, 1500)
+    p = pio.write(rec, tmp_path / "fox.mcap", layout="foxglove", compression=compression)
+    out = _node_read(node, p)
+    assert out["topics"] == {}  # no meshphase-block channel
+    (topic,) = out["jsonTopics"]
+    jt = out["jsonTopics"][topic]
+    assert topic == "/meshphase/samples"
+    assert (jt["schemaName"], jt["schemaEncoding"]) == (m.FOXGLOVE_SCHEMA_NAME, "jsonschema")
+    (schema,) = [s["data"] for s in out["schemas"] if s["name"] == m.FOXGLOVE_SCHEMA_NAME]
+    assert set(schema["properties"]["channels"]["properties"]) == set(rec.names)
+    origin = mlayout._origin_ns(rec.t0)
+    want_ns = [m.log_time_ns(k, rec.fs, origin) for k in range(rec.n_samples)]
+    assert [int(t) for t in jt["logTimes"]] == want_ns
+    msgs = jt["messages"]
+    assert [x["sample"] for x in msgs] == list(range(rec.n_samples))
+    assert [x["timestamp"]["sec"] * 10**9 + x["timestamp"]["nsec"] for x in msgs] == want_ns
+    for j, name in enumerate(rec.names):
+        got = np.array([x["channels"].get(name, np.nan) for x in msgs])  # NaN/inf left out
+        want = np.where(np.isfinite(rec.data[:, j]), rec.data[:, j], np.nan)
+        np.testing.assert_array_equal(got, want)  # finite values bit-exact through JSON
+    # and meshphase reads the same file back without a mapping
+    back = pio.read(p)
+    assert back.fs == rec.fs and back.t0 == rec.t0 and back.names == rec.names

@@ -40,6 +40,14 @@ by its chunk's CRC when that chunk is read. A mismatch raises
 :class:`~meshphase.io.base.CorruptFileError` naming the file, the chunk (number and byte
 offset) or byte range, and the CRCs.
 
+MCAP written by other tools (ROS 2 CDR, protobuf, JSON): :func:`read`, :func:`read_info` and
+:func:`iter_blocks` take a mapping (``topics=``, see :mod:`.mapping`) of topic fields onto
+channels and decode the messages with the mcap project's decoders (:mod:`.foreign`, the
+generic path; :mod:`.timing` fits the stamps to one sample grid); without a mapping the
+error lists the file's topics, schemas and numeric fields (:func:`describe`).
+``write(..., layout="foxglove")`` (:mod:`.foxglove`) writes one self-describing JSON message
+per sample time, which Foxglove plots, and which reads back without a mapping.
+
 Modules: ``layout`` (names, record framing, payload header, log times, schemas), ``crc``
 (summary and data-section CRCs, ``crc32_combine``), ``header`` (opening a file: summary,
 recording header, per-file cache), ``chunks`` (the chunk reader), ``reader`` (:func:`read`,
@@ -50,10 +58,18 @@ from .crc import crc32_combine
 from .layout import (CAN_WRITE, COMPRESSIONS, DEFAULT_BLOCK, DEFAULT_CHUNK_SIZE, FORMAT_VERSION, HEADER_SIZE,
                      LAYOUT, MAGIC, MESSAGE_ENCODING, NAME, PROFILE, RECORDING_METADATA, SCHEMA_ENCODING,
                      SCHEMA_NAME, SUFFIXES, log_time_ns, sniff)
+from .foreign import describe, read_foreign
+from .foxglove import FOXGLOVE_METADATA, FOXGLOVE_SCHEMA_NAME, LAYOUTS, write_foxglove
+from .header import ForeignMcapError
+from .mapping import TopicField, parse_field_path, parse_topics
 from .reader import iter_blocks, read, read_info
+from .timing import fit_grid
 from .writer import write, write_blocks
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "MAGIC", "SCHEMA_NAME", "MESSAGE_ENCODING",
            "RECORDING_METADATA", "COMPRESSIONS", "DEFAULT_BLOCK", "sniff", "read_info", "read",
            "write", "write_blocks", "iter_blocks", "log_time_ns", "crc32_combine", "SCHEMA_ENCODING",
-           "PROFILE", "FORMAT_VERSION", "DEFAULT_CHUNK_SIZE", "HEADER_SIZE", "LAYOUT"]
+           "PROFILE", "FORMAT_VERSION", "DEFAULT_CHUNK_SIZE", "HEADER_SIZE", "LAYOUT",
+           "describe", "read_foreign", "write_foxglove", "LAYOUTS", "FOXGLOVE_METADATA",
+           "FOXGLOVE_SCHEMA_NAME", "ForeignMcapError", "TopicField", "parse_topics",
+           "parse_field_path", "fit_grid"]

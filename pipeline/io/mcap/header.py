@@ -26,7 +26,12 @@ from .crc import _check_data_crc, _check_summary_crc
 from .layout import (_DTYPE_CODES, FORMAT_VERSION, MAGIC, MESSAGE_ENCODING, NAME, RECORDING_METADATA,
                      SCHEMA_ENCODING, SCHEMA_NAME, _log_time, _schema_problem)
 
-__all__: list[str] = []
+__all__: list[str] = ["ForeignMcapError"]
+
+
+class ForeignMcapError(RecordingFileError):
+    """An MCAP file without meshphase's block layout (another tool's file): the foreign path
+    (:mod:`.foreign`) reads it with a mapping."""
 
 # Exceptions the mcap package (and its codecs) raise on malformed input; wrapped into
 # RecordingFileError so a caller never sees a raw struct/EOF error.
@@ -139,7 +144,7 @@ def _our_schema(summary, path: Path):
     if not ours:
         schemas = sorted({f"{s.name} ({s.encoding})" for s in summary.schemas.values()})
         topics = sorted({c.topic for c in summary.channels.values()})
-        raise RecordingFileError(
+        raise ForeignMcapError(
             path, f"not a meshphase recording: the MCAP file has no {SCHEMA_NAME!r} schema "
                   f"(schemas: {schemas or 'none'}; topics: {topics[:10] or 'none'}"
                   f"{' ...' if len(topics) > 10 else ''})")

@@ -8,6 +8,7 @@ import struct
 from functools import lru_cache
 from pathlib import Path
 
+from ...jsonable import json_default
 from ...validate import as_int, as_positive
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "MAGIC", "SCHEMA_NAME", "MESSAGE_ENCODING",
@@ -154,3 +155,10 @@ def sniff(head: bytes) -> bool:
     """True when ``head`` (the first bytes of a file) starts with the MCAP magic."""
     return bytes(head[:8]) == MAGIC
 
+
+def _dumps(value, what: str) -> str:
+    """``value`` (a recording's meta or history) as JSON text; TypeError naming ``what``."""
+    try:
+        return json.dumps(value, default=json_default)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"recording {what} must be JSON-friendly: {exc}") from exc

@@ -14,7 +14,8 @@ from ...recording import Recording
 from ...validate import as_positive_int
 from ..base import RecordingFileError, RecordingInfo
 from .chunks import _ChunkReader, _decode, _payloads
-from .header import _Layout, _lib_errors, _open
+from .foreign import foreign_info, read_foreign
+from .header import ForeignMcapError, _Layout, _lib_errors, _open
 from .layout import _MAX_LOG_TIME, _MSG_HEAD, _OP_MESSAGE, _REC, FORMAT_VERSION, HEADER_SIZE
 
 __all__ = ["read_info", "read", "iter_blocks"]
@@ -96,6 +97,30 @@ def _recording(lay: _Layout, data: np.ndarray, names: list, i0: int) -> Recordin
                      history=copy.deepcopy(info.history))
 
 
+def _mapped(path, verify, topics, fs, max_jitter, stamp) -> Recording | None:
+    """The whole recording decoded through a mapping (:mod:`.foreign`), or None for
+    meshphase's own block layout read without one."""
+    if topics is not None:
+        return read_foreign(path, topics=topics, fs=fs, max_jitter=max_jitter, stamp=stamp, verify=verify)
+    try:
+        with _open(path, verify):
+            pass
+    except ForeignMcapError:
+        return read_foreign(path, fs=fs, max_jitter=max_jitter, stamp=stamp, verify=verify)
+    if fs is not None or max_jitter is not None or stamp is not None:
+        raise ValueError(f"{path}: fs, max_jitter and stamp apply to MCAP files of other tools "
+                         f"(with topics=); this is a meshphase recording, which carries its own")
+    return None
+
+
+def _part(rec: Recording, names: list, i0: int, i1: int) -> Recording:
+    """Samples [i0, i1) of the named channels of a decoded recording, as a new Recording."""
+    idx = [rec.index(n) for n in names]
+    return Recording(np.array(rec.data[i0:i1, idx], order="F"), rec.fs, [rec.channels[i] for i in idx],
+                     t0=rec.t0 + i0 / rec.fs, start_datetime=rec.start_datetime,
+                     meta=copy.deepcopy(rec.meta), history=copy.deepcopy(rec.history))
+
+
 def _window_ns(lay: _Layout, i0: int, i1: int) -> tuple[int, int]:
     """Inclusive log-time range [ns] of every message that can hold a sample of [i0, i1)."""
     return lay.log_time(max(0, i0 - lay.block + 1)), lay.log_time(i1 - 1)
@@ -115,7 +140,8 @@ def _select_chunks(lay: _Layout, ids, start_ns: int, end_ns: int) -> list:
     return out
 
 
-def read_info(path, *, verify: bool = True) -> RecordingInfo:
+def read_info(path, *, verify: bool = True, topics=None, fs: float | None = None,
+              max_jitter: float | None = None, stamp: str | None = None) -> RecordingInfo:
     """Header of an MCAP recording (channels, fs, n_samples, t0, metadata); no samples read.
 
     Parameters
@@ -123,6 +149,9 @@ def read_info(path, *, verify: bool = True) -> RecordingInfo:
     path : str or Path
     verify : bool
         Check the summary and data-section CRCs (default True; once per file identity).
+    topics, fs, max_jitter, stamp
+        The mapping of a file written by another tool (:func:`.foreign.read_foreign`): its
+        messages are decoded once (kept for the following :func:`read`) to know the length.
 
     Returns
     -------
@@ -130,12 +159,16 @@ def read_info(path, *, verify: bool = True) -> RecordingInfo:
         ``extra`` holds ``block`` [samples per message], ``dtype``, ``compression``,
         ``n_chunks``, ``n_messages`` and ``log_time_origin_ns`` [ns].
     """
+    rec = _mapped(path, verify, topics, fs, max_jitter, stamp)
+    if rec is not None:
+        return foreign_info(path, rec)
     with _open(path, verify) as (_, _, lay):
         return copy.deepcopy(lay.info)
 
 
 def read(path, channels=None, i0: int = 0, i1: int | None = None, *,
-         verify: bool = True) -> Recording:
+         verify: bool = True, topics=None, fs: float | None = None,
+         max_jitter: float | None = None, stamp: str | None = None) -> Recording:
     """Samples ``i0 <= i < i1`` of the named channels of an MCAP recording.
 
     Parameters
@@ -149,6 +182,9 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *,
         Check the CRCs (default True): summary and data-section CRC once per file, and the
         CRC of every chunk read (computed in a worker thread while the samples are copied).
         False skips them (a damaged chunk then reads as whatever its bytes say).
+    topics, fs, max_jitter, stamp
+        The mapping of a file written by another tool (:func:`.foreign.read_foreign`, the
+        generic decoder path); a file in meshphase's ``foxglove`` layout needs none.
 
     Returns
     -------
@@ -171,8 +207,16 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *,
     CorruptFileError
         A CRC does not match or the file is truncated (the chunk or byte range is named).
     RecordingFileError
-        The file is not a meshphase MCAP recording or does not hold what its index says.
+        The file is not a meshphase MCAP recording or does not hold what its index says;
+        a foreign file without a mapping (the message lists its topics and numeric fields).
     """
+    rec = _mapped(path, verify, topics, fs, max_jitter, stamp)
+    if rec is not None:
+        names = foreign_info(path, rec).check_channels(channels)
+        i1 = rec.n_samples if i1 is None else int(i1)
+        if not 0 <= int(i0) <= i1 <= rec.n_samples:
+            raise ValueError(f"{path}: sample range [{i0}, {i1}) is outside [0, {rec.n_samples}]")
+        return _part(rec, names, int(i0), i1)
     with _open(path, verify) as (path, fh, lay):
         info = lay.info
         names = _names(info, channels)
@@ -215,7 +259,8 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *,
 
 
 def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *,
-                verify: bool = True) -> Iterator[Recording]:
+                verify: bool = True, topics=None, fs: float | None = None,
+                max_jitter: float | None = None, stamp: str | None = None) -> Iterator[Recording]:
     """Stream an MCAP recording in blocks of ``n_block`` samples plus ``n_overlap``.
 
     One pass over the chunks in log-time order; each message's samples are copied at once
@@ -238,6 +283,9 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *,
     verify : bool
         Check the CRCs as :func:`read` does (default True); every chunk feeding a block has
         passed its CRC before the block is handed out.
+    topics, fs, max_jitter, stamp
+        The mapping of a file written by another tool: that file is decoded whole (the
+        generic path holds the recording), then handed out block by block.
 
     Yields
     ------
@@ -247,6 +295,12 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *,
     if isinstance(n_overlap, bool) or not isinstance(n_overlap, (int, np.integer)) or n_overlap < 0:
         raise ValueError(f"n_overlap must be a non-negative integer, got {n_overlap!r}")
     n_overlap = int(n_overlap)
+    rec = _mapped(path, verify, topics, fs, max_jitter, stamp)
+    if rec is not None:
+        names = foreign_info(path, rec).check_channels(channels)
+        for b0 in range(0, rec.n_samples, n_block):
+            yield _part(rec, names, b0, min(rec.n_samples, b0 + n_block + n_overlap))
+        return
     with _open(path, verify) as (path, fh, lay):
         names = _names(lay.info, channels)
         n_total = lay.info.n_samples

@@ -9,22 +9,15 @@ import numpy as np
 
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, IndexType, Writer
 
-from ...jsonable import json_default
 from ..base import regroup_blocks
 from ...recording import ChannelSpec, Recording
 from ...validate import as_choice, as_positive_int
+from .foxglove import DEFAULT_TOPIC, LAYOUTS, write_foxglove
 from .layout import (_DTYPE_CODES, _HEADER, _MAX_LOG_TIME, COMPRESSIONS, DEFAULT_BLOCK, DEFAULT_CHUNK_SIZE,
                      FORMAT_VERSION, HEADER_SIZE, LAYOUT, MESSAGE_ENCODING, PROFILE, RECORDING_METADATA,
-                     SCHEMA_ENCODING, SCHEMA_NAME, _log_time, _origin_ns, _schema_problem)
+                     SCHEMA_ENCODING, SCHEMA_NAME, _dumps, _log_time, _origin_ns, _schema_problem)
 
 __all__ = ["write", "write_blocks"]
-
-
-def _dumps(value, what: str) -> str:
-    try:
-        return json.dumps(value, default=json_default)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"recording {what} must be JSON-friendly: {exc}") from exc
 
 
 def _channel_metadata(spec: ChannelSpec, index: int, fs: float, dtype_name: str) -> dict:
@@ -58,8 +51,9 @@ def _recording_metadata(rec, block: int, compression: str, origin: int,
     return md
 
 
-def write(recording: Recording, path, *, block: int = DEFAULT_BLOCK, compression: str = "none",
-          chunk_size: int = DEFAULT_CHUNK_SIZE) -> None:
+def write(recording: Recording, path, *, layout: str = "meshphase", block: int | None = None,
+          compression: str | None = None, chunk_size: int = DEFAULT_CHUNK_SIZE,
+          topic: str | None = None) -> None:
     """Write a recording as MCAP (called through :func:`meshphase.io.write`).
 
     Parameters
@@ -67,24 +61,34 @@ def write(recording: Recording, path, *, block: int = DEFAULT_BLOCK, compression
     recording : Recording
     path : str or Path
         Written directly (the registry wraps this in a temporary file and a rename).
+    layout : {"meshphase", "foxglove"}
+        ``"meshphase"`` (default): blocks of samples per message, one MCAP channel per
+        recording channel, read back by the fast path. ``"foxglove"``: one self-describing
+        JSON message (``jsonschema``) per sample time on one topic, which Foxglove plots
+        (:func:`~meshphase.io.mcap.foxglove.write_foxglove`; read back by the generic
+        decoder path).
+    topic : str, optional
+        Topic of the ``foxglove`` layout (default ``/meshphase/samples``).
     block : int
         Samples per message [-] (default 5120; DESIGN.md: fewer makes the per-message cost of
         the readers dominate).
     compression : {"none", "lz4", "zstd"}
-        Chunk compression (default none: fastest to read; lz4 reads ~0.7x as fast, zstd is
-        codec-bound near 0.3 GS/s per core; noisy strain compresses little).
+        Chunk compression (default none for the meshphase layout: fastest to read; lz4 reads
+        ~0.7x as fast, zstd is codec-bound near 0.3 GS/s per core; noisy strain compresses
+        little. Default zstd for the foxglove layout: JSON text compresses).
     chunk_size : int
         Target uncompressed chunk size [B] (default 1 MiB); each chunk holds whole messages
         of one channel.
     """
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
-    write_blocks(recording, [recording.data], path, dtype=recording.data.dtype, block=block,
-                 compression=compression, chunk_size=chunk_size)
+    write_blocks(recording, [recording.data], path, dtype=recording.data.dtype, layout=layout,
+                 block=block, compression=compression, chunk_size=chunk_size, topic=topic)
 
 
-def write_blocks(header, blocks, path, *, dtype="float64", block: int = DEFAULT_BLOCK,
-                 compression: str = "none", chunk_size: int = DEFAULT_CHUNK_SIZE) -> None:
+def write_blocks(header, blocks, path, *, dtype="float64", layout: str = "meshphase",
+                 block: int | None = None, compression: str | None = None,
+                 chunk_size: int = DEFAULT_CHUNK_SIZE, topic: str | None = None) -> None:
     """Write a recording given as a header and consecutive blocks of samples (streaming).
 
     Parameters
@@ -96,7 +100,7 @@ def write_blocks(header, blocks, path, *, dtype="float64", block: int = DEFAULT_
         The samples, in order; together exactly ``header.n_samples`` rows.
     path : str or Path
     dtype : {"float32", "float64"}
-    block, compression, chunk_size
+    layout, block, compression, chunk_size, topic
         As :func:`write`.
 
     Notes
@@ -105,7 +109,21 @@ def write_blocks(header, blocks, path, *, dtype="float64", block: int = DEFAULT_
     chunks as they come, so one chunk group (about n_channels x chunk_size bytes) is
     buffered, whatever the length.
     """
-    block = as_positive_int(block, "block")
+    layout = as_choice(layout, "layout", LAYOUTS)
+    if layout == "foxglove":
+        if block is not None:
+            raise ValueError("block sets the samples per message of the meshphase layout; the "
+                             "foxglove layout writes one message per sample time")
+        chunk_size = as_positive_int(chunk_size, "chunk_size")
+        write_foxglove(header, blocks, path, dtype=dtype, chunk_size=chunk_size,
+                       compression="zstd" if compression is None else compression,
+                       topic=DEFAULT_TOPIC if topic is None else topic)
+        return
+    if topic is not None:
+        raise ValueError("topic names the topic of the foxglove layout; the meshphase layout "
+                         "has one topic per channel (its name)")
+    block = as_positive_int(DEFAULT_BLOCK if block is None else block, "block")
+    compression = "none" if compression is None else compression
     if block > 2 ** 32 - 1:
         raise ValueError(f"block must be < 2**32 samples, got {block}")
     compression = as_choice(compression, "compression", COMPRESSIONS)

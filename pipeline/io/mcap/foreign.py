@@ -1,0 +1,518 @@
+"""Reading MCAP files written by other tools (ROS 2, Foxglove bridges, DAQ loggers): their
+messages are decoded by the mcap project's decoders (JSON here, protobuf by
+``mcap-protobuf-support``, ROS 2 CDR by ``mcap-ros2-support``) and the mapped fields
+(:mod:`.mapping`) become channels of one uniform-rate recording (:mod:`.timing`).
+
+This is the generic path: every message goes through ``McapReader.iter_decoded_messages``
+and Python objects, ~10-100x slower per sample than meshphase's own block layout (``meshphase
+bench io`` measures both). A decoded file is kept (one at a time, by file identity and
+mapping) so that the registry's ``read_info`` + ``read`` decode it once.
+"""
+
+from __future__ import annotations
+
+import copy
+import datetime as _dt
+import json
+import math
+import os
+import threading
+from collections import OrderedDict
+from pathlib import Path
+
+import numpy as np
+
+from mcap.decoder import DecoderFactory
+from mcap.exceptions import DecoderNotFoundError
+from mcap.reader import make_reader
+
+from ...recording import ChannelSpec, Recording
+from ..base import RecordingFileError, RecordingInfo, check_verify
+from .foxglove import FOXGLOVE_METADATA
+from .header import _check_ends, _lib_errors
+from .mapping import TopicField, TopicSummary, format_field_path, mapping_key, parse_topics
+from .timing import fit_grid
+
+__all__ = ["read_foreign", "describe", "JsonDecoderFactory", "decoder_factories", "FOREIGN_OPTIONS"]
+
+#: Format options of the foreign path (besides ``verify``).
+FOREIGN_OPTIONS = ("topics", "fs", "max_jitter", "stamp")
+_EPOCH_NS = 10 ** 18  # stamps from 2001-09-09 on are taken as Unix time (start_datetime)
+_MAX_LISTED_FIELDS = 40
+
+
+class JsonDecoderFactory(DecoderFactory):
+    """Decoder of ``json`` messages (schema ``jsonschema`` or none) for ``mcap``'s readers."""
+
+    def decoder_for(self, message_encoding, schema):
+        if message_encoding != "json":
+            return None
+        return lambda data: json.loads(bytes(data).decode("utf-8"))
+
+
+def decoder_factories() -> list:
+    """The decoders of the foreign path: JSON, protobuf and ROS 2 (CDR)."""
+    # protobuf's runtime and the ROS 2 message parser load in ~0.1 s: only foreign files need them
+    from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
+    from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
+
+    return [JsonDecoderFactory(), ProtobufDecoderFactory(), Ros2DecoderFactory()]
+
+
+# -- field access ------------------------------------------------------------------------
+
+class _FieldError(LookupError):
+    pass
+
+
+def _get(obj, path: tuple):
+    """The value at ``path`` in a decoded message (dict, protobuf message, ROS 2 object)."""
+    for i, p in enumerate(path):
+        try:
+            if isinstance(p, int):
+                obj = obj[p]
+            elif isinstance(obj, dict):
+                obj = obj[p]
+            else:
+                obj = getattr(obj, p)
+        except (KeyError, IndexError, AttributeError, TypeError):
+            where = format_field_path(path[:i + 1])
+            raise _FieldError(where) from None
+    return obj
+
+
+def _is_number(x) -> bool:
+    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
+
+
+def _as_values(x):
+    """A float (one sample) or a 1-D float64 array (samples), or None when not numeric.
+    JSON null reads as NaN."""
+    if _is_number(x):
+        return float(x)
+    if x is None:
+        return math.nan
+    if isinstance(x, (str, bytes, dict)):
+        return None
+    if isinstance(x, np.ndarray) or hasattr(x, "__len__"):
+        try:
+            arr = np.asarray(x)
+        except (TypeError, ValueError):
+            return None
+        if arr.ndim == 1 and arr.dtype.kind in "iuf":
+            return arr.astype(np.float64)
+        if arr.ndim == 1 and arr.dtype.kind == "O":  # JSON nulls among the numbers
+            items = arr.tolist()
+            if all(_is_number(v) or v is None for v in items):
+                return np.array([math.nan if v is None else v for v in items], dtype=np.float64)
+    return None
+
+
+def _stamp_ns(stamp, msg, decoded, where: str) -> int:
+    if stamp == "log_time":
+        return int(msg.log_time)
+    if stamp == "publish_time":
+        return int(msg.publish_time)
+    try:
+        v = _get(decoded, stamp)
+    except _FieldError as exc:
+        raise ValueError(f"{where}: stamp field {format_field_path(stamp)!r} not found "
+                         f"(at {exc})") from None
+    for sec, nsec in (("sec", "nsec"), ("sec", "nanosec"), ("seconds", "nanos")):
+        try:
+            s, ns = (v[sec], v[nsec]) if isinstance(v, dict) else (getattr(v, sec), getattr(v, nsec))
+        except (KeyError, AttributeError, TypeError):
+            continue
+        return int(s) * 1_000_000_000 + int(ns)
+    if _is_number(v) and math.isfinite(float(v)):
+        return int(v) if isinstance(v, (int, np.integer)) else int(round(float(v) * 1e9))
+    raise ValueError(f"{where}: stamp field {format_field_path(stamp)!r} is {v!r}; a stamp is "
+                     f"{{sec, nsec}}, {{sec, nanosec}}, {{seconds, nanos}}, an integer [ns] or a float [s]")
+
+
+# -- what a file holds -------------------------------------------------------------------
+
+def _numeric_fields(obj, prefix: tuple, out: list, depth: int = 0) -> None:
+    """(path text, "number" / "array[n]") of the numeric fields of a decoded message."""
+    if len(out) >= _MAX_LISTED_FIELDS or depth > 8:
+        return
+    v = _as_values(obj) if prefix else None
+    if isinstance(v, float):
+        out.append((format_field_path(prefix), "number"))
+        return
+    if isinstance(v, np.ndarray):
+        if v.size:
+            out.append((format_field_path(prefix), f"array[{v.size}]"))
+        return
+    if isinstance(obj, dict):
+        items = list(obj.items())
+    elif hasattr(obj, "DESCRIPTOR") and hasattr(obj.DESCRIPTOR, "fields"):  # protobuf
+        items = [(f.name, getattr(obj, f.name)) for f in obj.DESCRIPTOR.fields]
+    elif hasattr(obj, "__slots__"):  # mcap_ros2's message classes
+        items = [(k, getattr(obj, k)) for k in obj.__slots__ if not k.startswith("_")]
+    elif isinstance(obj, (list, tuple)) and obj:
+        items = [(0, obj[0])]
+    else:
+        return
+    for k, val in items:
+        _numeric_fields(val, prefix + (k,), out, depth + 1)
+
+
+def describe(path, *, verify: bool = True) -> list[TopicSummary]:
+    """What an MCAP file holds, topic by topic, for writing a mapping.
+
+    Parameters
+    ----------
+    path : str or Path
+    verify : bool
+        Check chunk CRCs of what is read (default True).
+
+    Returns
+    -------
+    list of TopicSummary
+        Per topic: schema name and encoding, message encoding, message count, and the numeric
+        fields of its first message (decoded with :func:`decoder_factories`; JSON, protobuf
+        and ROS 2) as (field path, ``"number"`` or ``"array[n]"``).
+    """
+    path = Path(path)
+    verify = check_verify(verify)
+    with open(path, "rb") as fh, _lib_errors(path, "listing topics"):
+        _check_ends(fh, path)
+        reader = make_reader(fh, validate_crcs=verify, decoder_factories=decoder_factories())
+        summary = reader.get_summary()
+        channels = dict(summary.channels) if summary is not None else {}
+        schemas = dict(summary.schemas) if summary is not None else {}
+        stats = summary.statistics if summary is not None else None
+        counts = dict(stats.channel_message_counts) if stats is not None else {}
+        out = []
+        for cid, ch in sorted(channels.items()):
+            sc = schemas.get(ch.schema_id)
+            ts = TopicSummary(topic=ch.topic, schema=sc.name if sc else "", message_encoding=ch.message_encoding,
+                              schema_encoding=sc.encoding if sc else "",
+                              messages=counts.get(cid, 0 if stats is not None else None))
+            try:
+                for _, _, _, decoded in reader.iter_decoded_messages(topics=[ch.topic]):
+                    _numeric_fields(decoded, (), ts.fields)
+                    break
+            except DecoderNotFoundError:
+                ts.fields = None  # no decoder for this encoding
+            out.append(ts)
+    return out
+
+
+def listing(topics: list[TopicSummary]) -> str:
+    """The text of :func:`describe`'s result, one line per topic."""
+    if not topics:
+        return "the file has no topics (no MCAP channels)"
+    lines = []
+    for t in topics:
+        fields = ("no decoder for this encoding" if t.fields is None
+                  else ", ".join(f"{p} ({k})" for p, k in t.fields) or "no numeric fields")
+        lines.append(f"  {t.topic}: schema {t.schema or '(none)'} ({t.schema_encoding or 'none'}), "
+                     f"messages {t.message_encoding}, {t.messages if t.messages is not None else '?'} "
+                     f"message(s); numeric fields: {fields}")
+    return "\n".join(lines)
+
+
+def no_mapping_error(path: Path, verify: bool) -> RecordingFileError:
+    """The error for a foreign MCAP opened without a mapping: what it holds, and how to map it."""
+    text = listing(describe(path, verify=verify))
+    return RecordingFileError(
+        path, "not a meshphase recording: an MCAP file written by another tool (no "
+              "meshphase block layout): say which topic "
+              "fields are channels, e.g. meshphase.io.read(path, topics={'sun_T3': "
+              "'/rig/strain:gauges.sun_T3'}) or a scene's [[input.mcap.channels]] table "
+              "(data_schemas/mcap.md). The file holds:\n" + text)
+
+
+# -- decoding and assembling -------------------------------------------------------------
+
+def _collect(reader, path: Path, entries: list[TopicField]) -> dict:
+    """Per entry name: (stamps [ns] list, values list of float or 1-D arrays), in message
+    order. Checks every mapped topic exists and has messages, fields exist and are numeric,
+    and each field keeps its shape (number or array) from message to message."""
+    summary = reader.get_summary()
+    present = sorted({c.topic for c in summary.channels.values()}) if summary is not None else None
+    wanted = sorted({e.topic for e in entries})
+    if present is not None:
+        missing = [t for t in wanted if t not in present]
+        if missing:
+            raise RecordingFileError(path, f"topic(s) {missing} not in the file; topics present: "
+                                           f"{present or 'none'}")
+    by_topic: dict = {}
+    for e in entries:
+        by_topic.setdefault(e.topic, []).append(e)
+    got = {e.name: ([], []) for e in entries}
+    shape: dict = {}
+    try:
+        # file order (log_time_order=False skips the library's heap merge, ~40 % of the time);
+        # each channel's messages are put in stamp order in _series
+        for _, channel, msg, decoded in reader.iter_decoded_messages(topics=wanted, log_time_order=False):
+            for e in by_topic.get(channel.topic, ()):
+                stamps, values = got[e.name]
+                try:
+                    raw = _get(decoded, e.path)
+                except _FieldError as exc:
+                    if e.missing_is_nan:
+                        stamps.append(msg.log_time)  # the foxglove layout stamps by log time
+                        values.append(math.nan)
+                        continue
+                    found: list = []
+                    _numeric_fields(decoded, (), found)
+                    raise RecordingFileError(path, f"{_where(e)}: message {len(stamps)} has no field "
+                                                   f"{str(exc)!r}; numeric fields of that message: "
+                                                   f"{', '.join(p for p, _ in found) or 'none'}") from None
+                v = _as_values(raw)
+                if v is None:
+                    raise RecordingFileError(path, f"{_where(e)}: message {len(stamps)} holds "
+                                                   f"{type(raw).__name__} {str(raw)[:60]!r}, not a number "
+                                                   f"or an array of numbers")
+                kind = "number" if isinstance(v, float) else "array"
+                if shape.setdefault(e.name, kind) != kind:
+                    raise RecordingFileError(path, f"{_where(e)}: message {len(stamps)} holds a {kind}, "
+                                                   f"earlier messages a {shape[e.name]}")
+                stamps.append(_stamp_ns(e.stamp, msg, decoded, _where(e)) if not isinstance(e.stamp, str)
+                              else msg.log_time if e.stamp == "log_time" else msg.publish_time)
+                values.append(v)
+    except DecoderNotFoundError as exc:
+        raise RecordingFileError(path, f"cannot decode the messages of a mapped topic: {exc}; "
+                                       f"decoded here: json, protobuf, cdr (ros2msg)") from None
+    for e in entries:
+        if not got[e.name][0]:
+            raise RecordingFileError(path, f"channel {e.name!r}: topic {e.topic!r} has no messages")
+    return got
+
+
+def _where(e: TopicField) -> str:
+    return f"channel {e.name!r} (topic {e.topic!r}, field {e.field!r})"
+
+
+def _series(stamps: list, values: list):
+    """(stamps ns int64, counts, samples float64) of one channel, in stamp order (stable:
+    messages with equal stamps keep their order in the file)."""
+    t = np.asarray(stamps, dtype=np.int64)
+    if isinstance(values[0], float):
+        counts = np.ones(t.size, dtype=np.int64)
+        parts = None
+        samples = np.asarray(values, dtype=np.float64)
+    else:
+        counts = np.array([v.size for v in values], dtype=np.int64)
+        parts = values
+        samples = None
+    if np.any(t[1:] < t[:-1]):
+        order = np.argsort(t, kind="stable")
+        t, counts = t[order], counts[order]
+        if parts is None:
+            samples = samples[order]
+        else:
+            parts = [parts[i] for i in order]
+    if samples is None:
+        samples = np.concatenate(parts) if parts else np.empty(0)
+    return t, counts, samples
+
+
+def _assemble(path: Path, entries: list[TopicField], got: dict, fs, max_jitter) -> tuple:
+    """(data, fs, origin_ns, notes) of the mapped channels on one uniform grid.
+
+    Each channel's stamps are fitted to a uniform grid (:func:`fit_grid`); without ``fs`` each
+    channel's own rate is derived first, their median is the recording's rate and every
+    channel is checked against it. The channels then start at the latest first sample
+    and end at the earliest last one (whole samples; a start offset off the grid by more
+    than ``max_jitter`` is an error)."""
+    series = {e.name: _series(*got[e.name]) for e in entries}
+    what = {e.name: _where(e) for e in entries}
+    given = fs is not None
+    try:
+        own = {} if given else {k: fit_grid(t, c, max_jitter=max_jitter, what=what[k]).fs
+                                for k, (t, c, _) in series.items()}
+        fs = fs if given else float(np.median(list(own.values())))
+        grids = {}
+        for k, (t, c, _) in series.items():
+            try:
+                grids[k] = fit_grid(t, c, fs=fs, max_jitter=max_jitter, what=what[k])
+            except ValueError:
+                if given or abs(own[k] - fs) <= 1e-9 * fs:
+                    raise
+                raise ValueError(f"{what[k]}: its stamps give {own[k]:.10g} Hz, other channels "
+                                 f"{fs:.10g} Hz; a recording has one sample rate: map channels of "
+                                 f"one rate together (rates: " + ", ".join(
+                                     f"{n} {r:.10g} Hz" for n, r in own.items()) + ")") from None
+    except ValueError as exc:
+        raise RecordingFileError(path, str(exc)) from None
+    origin = max(g.origin_ns for g in grids.values())
+    tol = 0.5 if max_jitter is None else float(max_jitter) * fs  # [samples]
+    offsets = {}
+    for k, g in grids.items():
+        off = (origin - g.origin_ns) * 1e-9 * fs
+        o = int(round(off))
+        if abs(off - o) > tol:
+            raise RecordingFileError(path, f"{what[k]} starts {abs(off - o):.3g} samples off the sample "
+                                           f"grid of the other channels (fs = {fs:.10g} Hz): the "
+                                           f"channels are not sampled together")
+        offsets[k] = o
+    n = min(g.n_samples - offsets[k] for k, g in grids.items())
+    if n <= 0:
+        raise RecordingFileError(path, "the mapped channels do not overlap in time: "
+                                       + "; ".join(f"{what[k]} covers {g.origin_ns} ns + {g.n_samples} "
+                                                   f"samples" for k, g in grids.items()))
+    data = np.empty((n, len(entries)), dtype=np.float64, order="F")
+    for j, e in enumerate(entries):
+        o = offsets[e.name]
+        data[:, j] = series[e.name][2][o:o + n]
+        if e.scale != 1.0:
+            data[:, j] *= e.scale
+    notes = {k: {"dropped_start": offsets[k], "dropped_end": grids[k].n_samples - offsets[k] - n,
+                 "max_stamp_residual_s": grids[k].max_residual} for k in grids}
+    return data, fs, origin, notes
+
+
+def _embedded(reader, path: Path):
+    """(mapping, header map) of a file meshphase wrote in the ``foxglove`` layout, else None."""
+    with _lib_errors(path, "reading metadata records"):
+        recs = [m for m in reader.iter_metadata() if m.name == FOXGLOVE_METADATA]
+    if not recs:
+        return None
+    md = dict(recs[0].metadata)
+    try:
+        specs = [ChannelSpec.from_dict(d) for d in json.loads(md["channels"])]
+        entries = [TopicField(spec=s, topic=md["topic"], path=("channels", s.name), missing_is_nan=True)
+                   for s in specs]
+        header = {"fs": float(md["fs"]), "t0": float(md["t0"]), "n_samples": int(md["n_samples"]),
+                  "dtype": md["dtype"], "meta": json.loads(md["meta"]), "history": json.loads(md["history"]),
+                  "start_datetime": md.get("start_datetime")}
+    except (KeyError, TypeError, ValueError) as exc:
+        raise RecordingFileError(path, f"Metadata record {FOXGLOVE_METADATA!r}: {exc}") from None
+    if header["dtype"] not in ("float32", "float64"):
+        raise RecordingFileError(path, f"Metadata record {FOXGLOVE_METADATA!r}: dtype {header['dtype']!r}")
+    return entries, header
+
+
+def _written_back(path: Path, data: np.ndarray, entries: list, header: dict) -> Recording:
+    """The recording a ``foxglove`` layout file holds (its header from the Metadata record)."""
+    if data.shape[0] != header["n_samples"]:
+        raise RecordingFileError(path, f"{data.shape[0]} sample times decoded, the "
+                                       f"{FOXGLOVE_METADATA!r} record says {header['n_samples']}")
+    return Recording(data.astype(header["dtype"], order="F"), header["fs"], [e.spec for e in entries],
+                     t0=header["t0"], start_datetime=header["start_datetime"], meta=header["meta"],
+                     history=header["history"])
+
+
+def _decode_file(path: Path, entries, fs, max_jitter, verify: bool) -> Recording:
+    """The whole mapped recording of a foreign file (``entries`` None: the embedded mapping
+    of a ``foxglove`` layout file, else the no-mapping error)."""
+    header = None
+    with open(path, "rb") as fh, _lib_errors(path, "decoding messages"):
+        _check_ends(fh, path)
+        reader = make_reader(fh, validate_crcs=verify, decoder_factories=decoder_factories())
+        if entries is None:
+            emb = _embedded(reader, path)
+            if emb is None:
+                raise no_mapping_error(path, verify)
+            entries, header = emb
+            if fs is not None and fs != header["fs"]:
+                raise ValueError(f"{path}: a foxglove-layout file stores its rate ({header['fs']!r} Hz); "
+                                 f"leave fs out (got {fs!r})")
+            fs = header["fs"]
+            if header["n_samples"] == 0:
+                return _written_back(path, np.empty((0, len(entries))), entries, header)
+        got = _collect(reader, path, entries)
+    data, fs, origin, notes = _assemble(path, entries, got, fs, max_jitter)
+    if header is not None:
+        return _written_back(path, data, entries, header)
+    specs = [e.spec for e in entries]
+    start = None
+    if origin >= _EPOCH_NS:
+        start = _dt.datetime.fromtimestamp(origin // 10**9, _dt.timezone.utc).replace(
+            microsecond=(origin % 10**9) // 1000).isoformat()
+    mapping = [{"name": e.name, "topic": e.topic, "field": e.field, "scale": e.scale,
+                "stamp": e.stamp_text()} for e in entries]
+    meta = {"mcap_origin_ns": origin, "mcap_mapping": mapping}
+    history = [{"step": "mcap_foreign_read", "fs": fs, "channels": notes}]
+    return Recording(data, fs, specs, t0=0.0, start_datetime=start, meta=meta, history=history)
+
+
+# one decoded file: (key, Recording); the registry reads the header, then the samples
+_CACHE: OrderedDict = OrderedDict()
+_CACHE_MAX = 1
+_LOCK = threading.Lock()
+
+
+def _options(topics, fs, max_jitter, stamp):
+    entries = None if topics is None else parse_topics(topics, stamp=stamp)
+    if topics is None and stamp is not None:
+        raise ValueError("stamp applies to a mapping: give topics= too")
+    if fs is not None:
+        if isinstance(fs, bool) or not isinstance(fs, (int, float)) or not (math.isfinite(fs) and fs > 0):
+            raise ValueError(f"fs must be a finite number > 0 [Hz], got {fs!r}")
+        fs = float(fs)
+    if max_jitter is not None:
+        if isinstance(max_jitter, bool) or not isinstance(max_jitter, (int, float)) \
+                or not (math.isfinite(max_jitter) and max_jitter >= 0):
+            raise ValueError(f"max_jitter must be a finite number >= 0 [s], got {max_jitter!r}")
+        max_jitter = float(max_jitter)
+    return entries, fs, max_jitter
+
+
+def read_foreign(path, *, topics=None, fs=None, max_jitter=None, stamp=None,
+                 verify: bool = True) -> Recording:
+    """The whole recording mapped from an MCAP file written by another tool.
+
+    Parameters
+    ----------
+    path : str or Path
+    topics : dict or list, optional
+        The mapping (:func:`~meshphase.io.mcap.mapping.parse_topics`); None reads a file
+        meshphase wrote in the ``foxglove`` layout (its mapping is stored in it) and
+        otherwise raises an error listing the file's topics, schemas and numeric fields.
+    fs : float, optional
+        Sample rate [Hz]; derived from the stamps when None.
+    max_jitter : float, optional
+        Largest allowed distance of a message stamp from the uniform sample grid [s] (half
+        a sample period when None).
+    stamp : str, optional
+        Default stamp of every mapping entry (``"log_time"``, ``"publish_time"`` or a field
+        path).
+    verify : bool
+        Check chunk CRCs (default True).
+
+    Returns
+    -------
+    Recording
+        Samples x scale (SI), ``t0 = 0`` at the first common sample, ``start_datetime`` from
+        the stamps when they are Unix time, ``meta["mcap_origin_ns"]`` (stamp of sample 0
+        [ns]) and ``meta["mcap_mapping"]``; a ``foxglove`` layout file gives back the
+        recording that was written (fs, t0, specs, meta, history).
+
+    Raises
+    ------
+    RecordingFileError
+        No mapping (with the listing), unknown topic, missing or non-numeric field, topic
+        without messages, irregular stamps, channels that do not overlap.
+    """
+    path = Path(path)
+    verify = check_verify(verify)
+    entries, fs, max_jitter = _options(topics, fs, max_jitter, stamp)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file")
+    st = os.stat(path)
+    key = (str(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns,
+           None if entries is None else mapping_key(entries), fs, max_jitter, verify)
+    with _LOCK:
+        rec = _CACHE.get(key)
+    if rec is None:
+        rec = _decode_file(path, entries, fs, max_jitter, verify)
+        with _LOCK:
+            _CACHE[key] = rec
+            while len(_CACHE) > _CACHE_MAX:
+                _CACHE.popitem(last=False)
+    return rec
+
+
+def foreign_info(path, rec: Recording) -> RecordingInfo:
+    """The header of a recording read by :func:`read_foreign`."""
+    return RecordingInfo(path=str(path), format="mcap", fs=rec.fs, n_samples=rec.n_samples,
+                         channels=list(rec.channels), t0=rec.t0, start_datetime=rec.start_datetime,
+                         meta=copy.deepcopy(rec.meta), history=copy.deepcopy(rec.history),
+                         extra={"layout": "decoded messages (foreign or foxglove layout)",
+                                "mapping": rec.meta.get("mcap_mapping")})
+
