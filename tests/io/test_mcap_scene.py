@@ -68,7 +68,7 @@ def test_scene_with_input_mcap_gives_the_phasing_of_the_same_samples(files):
     foreign._CACHE.clear()
     ctx = run_scene(scene)
     assert own.failed == {} and ctx.failed == {}, ctx.failed
-    loaded = ctx.results["load"]["recording"]
+    loaded = ctx.load.recording
     assert loaded.names == rec.names and loaded.fs == rec.fs and loaded.n_samples == rec.n_samples
     assert [c.kind for c in loaded.channels] == [c.kind for c in rec.channels]
     a, b = summary_dict(own)["phasing"], summary_dict(ctx)["phasing"]
