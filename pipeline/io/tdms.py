@@ -494,13 +494,23 @@ def _read_channel(mm, c: _Chan, i0: int, i1: int, dest: np.ndarray) -> None:
     dest[:] = c.scaling.apply(tmp)
 
 
+#: Samples per channel read from interleaved data before moving on to the next channel, so
+#: the rows just read are still in the CPU cache for the other channels.
+_INTERLEAVED_BLOCK = 1 << 15
+
+
 def _read_fast(mm, plan: _Plan, names, i0, i1, buf, path):
-    for j, name in enumerate(names):
-        try:
-            _read_channel(mm, plan.chans[name], i0, i1, buf[j])
-        except (TypeError, ValueError) as exc:   # a strided view past the end of the file
-            raise CorruptFileError(path, f"channel {name!r}, samples [{i0}, {i1})",
-                                   f"truncated or corrupt: {exc}") from exc
+    chans = [plan.chans[name] for name in names]
+    interleaved = any(r.value_stride != r.dtype.itemsize for c in chans for r in c.runs)
+    step = _INTERLEAVED_BLOCK if interleaved and len(chans) > 1 else max(1, i1 - i0)
+    for a in range(i0, i1, step):
+        b = min(i1, a + step)
+        for j, c in enumerate(chans):
+            try:
+                _read_channel(mm, c, a, b, buf[j, a - i0:b - i0])
+            except (TypeError, ValueError) as exc:   # a strided view past the end of the file
+                raise CorruptFileError(path, f"channel {c.name!r}, samples [{a}, {b})",
+                                       f"truncated or corrupt: {exc}") from exc
 
 
 def _read_general(plan: _Plan, names, i0, i1, buf, path):

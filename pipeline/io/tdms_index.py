@@ -311,19 +311,58 @@ class _Scan:
             meta = mm[pos + LEAD_IN:pos + LEAD_IN + raw_off] if raw_off else b""
             self.digest.update(mm[pos:pos + LEAD_IN])
             self.digest.update(meta)
+            steady = True
             if self.index.unsupported is None:
                 try:
-                    self._segment(where, toc, meta, pos + LEAD_IN + raw_off, next_off - raw_off)
+                    steady = self._segment(where, toc, meta, pos + LEAD_IN + raw_off, next_off - raw_off,
+                                           LEAD_IN + next_off)
                 except (_Unsupported, struct.error) as exc:
                     self.index.unsupported = f"{where}: {exc}"
             pos = nxt
             n += 1
+            if steady and pos < size:
+                m = self._repeats(pos - LEAD_IN - next_off, LEAD_IN + next_off, LEAD_IN + raw_off)
+                if m:
+                    self._extend(m, LEAD_IN + next_off)
+                    self.digest.update(b"repeated %d" % m)
+                    pos += m * (LEAD_IN + next_off)
+                    n += m
         self._close_run()
         self.index.n_segments = n
         self.index.digest = self.digest.digest()
         return self.index
 
-    def _segment(self, where: str, toc: int, meta: bytes, data_pos: int, data_len: int) -> None:
+    def _repeats(self, pos: int, length: int, head: int) -> int:
+        """How many segments right after the one at ``pos`` (``length`` bytes) repeat its
+        lead-in and metadata (its first ``head`` bytes) exactly, back to back."""
+        k_max = (self.size - pos) // length - 1
+        if k_max <= 0:
+            return 0
+        first = np.frombuffer(self.mm, dtype=np.uint8, count=head, offset=pos)
+        m, step = 0, 16
+        while m < k_max:
+            k = min(step, k_max - m)
+            rows = np.ndarray((k, head), dtype=np.uint8, buffer=self.mm, offset=pos + (m + 1) * length,
+                              strides=(length, 1))
+            same = (rows == first).all(axis=1)
+            if not same.all():
+                return m + int(np.argmin(same))
+            m += k
+            step *= 16
+        return m
+
+    def _extend(self, m: int, seg_len: int) -> None:
+        """The last segment (``seg_len`` bytes), repeated ``m`` more times back to back."""
+        r = self.run_
+        if self.index.unsupported is None and r is not None:
+            if r[4] == 1:
+                r[3] = seg_len
+            r[4] += m
+
+    def _segment(self, where: str, toc: int, meta: bytes, data_pos: int, data_len: int, seg_len: int) -> bool:
+        """Add one segment; True when an exact repeat of it right after would continue the
+        open run (same object list after it, its data the run's last segment)."""
+        before = self.state
         if toc & TOC_DAQMX:
             raise _Unsupported("DAQmx raw data")
         if toc & TOC_META:
@@ -347,8 +386,9 @@ class _Scan:
         elif self.layout is None or (toc & (TOC_BIG_ENDIAN | TOC_INTERLEAVED)) != self._flags(self.layout):
             self.layout = self._layout_of(self.state, toc)
         lay = self.layout
+        steady = self.state == before
         if not toc & TOC_RAW or lay.chunk == 0 or data_len == 0:
-            return
+            return False
         if lay.unsupported:
             raise _Unsupported(lay.unsupported)
         n_chunks, rest = divmod(data_len, lay.chunk)
@@ -356,16 +396,19 @@ class _Scan:
             self.index.partial = (f"{where}: truncated or corrupt: the segment holds a partial chunk of data "
                                   f"({data_len} bytes of data, chunks of {lay.chunk} bytes)")
         if n_chunks == 0:
-            return
+            return False
         r = self.run_
         if r is not None and r[0] is lay and r[1] == n_chunks and (
                 (r[4] == 1) or data_pos - r[2] == r[3] * r[4]):
             if r[4] == 1:
                 r[3] = data_pos - r[2]
             r[4] += 1
-            return
-        self._close_run()
-        self.run_ = [lay, n_chunks, data_pos, 0, 1]
+        else:
+            self._close_run()
+            self.run_ = r = [lay, n_chunks, data_pos, 0, 1]
+        # a repeat lies one segment length further on: it continues the run when the
+        # spacing is still open (one segment) or equals the segment length
+        return steady and (r[4] == 1 or r[3] == seg_len)
 
     def _flags(self, lay: _Layout) -> int:
         return self.flags[id(lay)]
@@ -435,3 +478,4 @@ def read_runs(buf, runs: list, starts: np.ndarray, i0: int, i1: int, dest: np.nd
             pos += n
         if e1:                                        # the head of the last one
             out[pos:] = view[e0].reshape(-1)[:e1]
+
