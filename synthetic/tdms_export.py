@@ -249,6 +249,8 @@ def write_ni_log(rec: Recording, path, *, samples_per_segment: int = 512, interl
 
 def _block(rec: Recording, a: int, b: int, interleaved: bool, spc: int | None = None) -> bytes:
     """Raw data of samples [a, b) as segments of ``spc`` samples (one segment when None)."""
+    if b <= a:
+        return b""
     x = np.asarray(rec.data[a:b], dtype="<f8")
     spc = b - a if spc is None else spc
     x = x.reshape((b - a) // spc, spc, rec.n_channels)
