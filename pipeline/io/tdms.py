@@ -66,7 +66,8 @@ from ..validate import as_int, as_positive, as_positive_int
 from . import tdms_index, tdms_scaling
 from .base import CorruptFileError, RecordingFileError, RecordingInfo, check_verify, spec_from_dict, warn_nonfinite
 
-__all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "sniff", "read_info", "read", "iter_blocks", "kind_from_name"]
+__all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "sniff", "read_info", "read", "iter_blocks", "kind_from_name",
+           "reading_path"]
 
 NAME = "tdms"
 SUFFIXES = (".tdms",)
@@ -572,7 +573,7 @@ def _prepare(path, fs, raw):
     if plan.fast:
         tdms.close()
         tdms = None
-        if key is not None:
+        if key is not None and _PLAN_CACHE_SIZE > 0:
             _PLAN_CACHE[key] = plan
             while len(_PLAN_CACHE) > _PLAN_CACHE_SIZE:
                 _PLAN_CACHE.popitem(last=False)
@@ -586,6 +587,38 @@ def _map(stack: contextlib.ExitStack, path, plan: _Plan):
         return None
     fh = stack.enter_context(open(path, "rb"))
     return stack.enter_context(tdms_index.open_map(fh))
+
+
+@contextlib.contextmanager
+def reading_path(*, computed_offsets: bool = True, cache_plans: bool = True):
+    """Choose how TDMS files are read inside the ``with`` block (``meshphase bench io``
+    measures both ways; results are the same).
+
+    Parameters
+    ----------
+    computed_offsets : bool
+        True (default): samples by computed offsets from the segment index when the file
+        allows; False: every sample through npTDMS's public ``TdmsChannel.read_data``.
+    cache_plans : bool
+        True (default): a file's read plan (npTDMS's metadata parse, channel specs, offsets)
+        is kept for the next read of the unchanged file; False: every read builds it anew.
+    """
+    global _USE_FAST_PATH, _PLAN_CACHE_SIZE
+    for name, v in (("computed_offsets", computed_offsets), ("cache_plans", cache_plans)):
+        if not isinstance(v, (bool, np.bool_)):
+            raise TypeError(f"{name} must be a bool, got {v!r}")
+    saved = _USE_FAST_PATH, _PLAN_CACHE_SIZE, list(_PLAN_CACHE.items())
+    _USE_FAST_PATH = bool(computed_offsets)
+    if not cache_plans:
+        _PLAN_CACHE_SIZE = 0
+        _PLAN_CACHE.clear()
+    try:
+        yield
+    finally:
+        _USE_FAST_PATH, _PLAN_CACHE_SIZE, items = saved
+        if not cache_plans:
+            _PLAN_CACHE.clear()
+            _PLAN_CACHE.update(items)
 
 
 def read_info(path, *, fs: float | None = None, raw: bool = False, verify: bool = True) -> RecordingInfo:

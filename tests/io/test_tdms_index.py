@@ -359,3 +359,25 @@ def test_reader_uses_only_public_nptdms_names():
                 owner = ast.unparse(node.value)
                 assert owner in {"self", "tdms", "tdms_index", "tdms_scaling"} or owner.startswith("self."), \
                     f"{name}: {owner}.{node.attr}"
+
+
+def test_reading_path_switches_and_restores(tmp_path):
+    rec = _rec(1500, 2)
+    path = write_ni_log(rec, tmp_path / "x.tdms", samples_per_segment=512)
+    assert tdms.read_info(path).extra["fast_path"] is True
+    with tdms.reading_path(computed_offsets=False):
+        assert tdms.read_info(path).extra["fast_path"] is False
+        np.testing.assert_array_equal(tdms.read(path).data, rec.data)
+    with tdms.reading_path(cache_plans=False):
+        assert tdms._PLAN_CACHE_SIZE == 0 and not tdms._PLAN_CACHE
+        tdms.read(path)
+        assert not tdms._PLAN_CACHE
+    assert tdms._USE_FAST_PATH is True and tdms._PLAN_CACHE_SIZE > 0 and tdms._PLAN_CACHE
+    with pytest.raises(TypeError, match="computed_offsets must be a bool"):
+        with tdms.reading_path(computed_offsets="no"):
+            pass
+    with pytest.raises(TypeError, match="cache_plans must be a bool"):
+        with tdms.reading_path(cache_plans=None):
+            pass
+    with tdms.reading_path():        # nothing asked: nothing changes
+        assert tdms.read_info(path).extra["read_path"] == "computed offsets"
