@@ -34,11 +34,18 @@ of data, and, in files written by meshphase (channel property ``meshphase_kind``
 samples than ``wf_samples`` says (a cut exactly at a segment boundary). TDMS stores no
 checksums: a flipped byte in the raw data cannot be detected.
 
-Reading: metadata through ``TdmsFile.open``; the samples of plain segments (contiguous,
-little-endian, non-DAQmx) are read with ``readinto`` straight into the preallocated output
-(in file order, scaling applied per segment); other files go through npTDMS's
-``read_data(offset, length)`` per channel. :func:`iter_blocks` keeps the file open and reads
-block after block, so memory stays flat.
+Reading uses npTDMS's public API only (``TdmsFile.open``, groups, channels, properties,
+``len``, ``dtype`` and ``TdmsChannel.read_data(offset, length, scaled)``). The samples of
+plain numeric data (any byte order, contiguous or interleaved, any segment size) are read
+by byte offsets computed from the segment index that :mod:`meshphase.io.tdms_index` reads
+from the file after NI's published format (one pass; segments repeating the previous
+lead-in and metadata are taken together), through a memory map, NI-scaled by
+:mod:`meshphase.io.tdms_scaling` (linear and polynomial scales): each channel's length
+must equal npTDMS's and its first and last samples must equal what ``read_data`` returns,
+else, and for DAQmx raw data or scales only npTDMS computes, ``read_data`` reads every
+sample (``read_info(...).extra["read_path"]`` says which path and why). The read plan is
+cached under a digest of the lead-ins and metadata. :func:`iter_blocks` keeps the file open
+and reads block after block, so memory stays flat.
 """
 
 from __future__ import annotations
@@ -236,7 +243,8 @@ def _plan(tdms, path, index, fs_opt, raw: bool) -> _Plan:
         if scaled:
             scaled_names.append(n)
     out_kinds = [(c.raw_dtype if (raw or not c.scaled) else np.dtype(c.ch.dtype)) for c in chans.values()]
-    dtype = np.dtype(np.float32) if all(k == np.float32 for k in out_kinds) else np.dtype(np.float64)
+    dtype = (np.dtype(np.float32) if all(k.newbyteorder("=") == np.float32 for k in out_kinds)
+             else np.dtype(np.float64))
     fast, why = _use_index(path, index, chans, raw, n_samples)
     file_props = dict(tdms.properties)
     meta = _json_property(file_props.pop("meshphase_meta", None), path, "meshphase_meta", dict) or {}
@@ -539,9 +547,9 @@ _PLAN_CACHE_SIZE = 32
 
 
 def _prepare(path, fs, raw):
-    """(path, open TdmsFile or None, plan). Plans of plain files (fast path) are cached under a
+    """(path, open TdmsFile or None, plan). Plans read by computed offsets are cached under a
     digest of the file's lead-ins and metadata, so the registry's read_info + read parse the
-    TDMS metadata once; the general path keeps the TdmsFile open for npTDMS's reader."""
+    TDMS metadata once; the read_data path keeps the TdmsFile open for npTDMS's reader."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such file")

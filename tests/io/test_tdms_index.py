@@ -381,3 +381,13 @@ def test_reading_path_switches_and_restores(tmp_path):
             pass
     with tdms.reading_path():        # nothing asked: nothing changes
         assert tdms.read_info(path).extra["read_path"] == "computed offsets"
+
+
+def test_big_endian_float32_stays_float32(tmp_path, monkeypatch):
+    x = np.linspace(-1, 1, 40, dtype=np.float32)
+    path = tmp_path / "be.tdms"
+    path.write_bytes(_props_segment(["/'g'/'a'"]) + _seg(0, [("/'g'/'a'", 9, 40)], x.astype(">f4").tobytes(),
+                                                         ">", new_list=False))
+    got = _both(path, monkeypatch, windows=((0, None),))
+    assert got.data.dtype == np.float32
+    np.testing.assert_array_equal(got.channel("a"), x)
