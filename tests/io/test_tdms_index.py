@@ -391,3 +391,26 @@ def test_big_endian_float32_stays_float32(tmp_path, monkeypatch):
     got = _both(path, monkeypatch, windows=((0, None),))
     assert got.data.dtype == np.float32
     np.testing.assert_array_equal(got.channel("a"), x)
+
+
+def test_read_runs_and_open_map_bad_input(tmp_path):
+    rec = _rec(1000, 1)
+    path = write_ni_log(rec, tmp_path / "x.tdms", samples_per_segment=100)
+    idx = tdms_index.scan(path)
+    (p,) = idx.runs
+    with open(path, "rb") as fh, tdms_index.open_map(fh) as mm:
+        with pytest.raises(ValueError):
+            tdms_index.read_runs(mm, idx.runs[p], idx.starts(p), 0, 50, np.empty(10))   # wrong length
+        assert len(idx.starts(p)) == len(idx.runs[p])
+    (tmp_path / "e").write_bytes(b"")
+    with open(tmp_path / "e", "rb") as fh, pytest.raises(ValueError):
+        tdms_index.open_map(fh)
+
+
+def test_tdms_scaling_empty_and_bad():
+    assert tdms_scaling.has_scales({}) is False
+    assert tdms_scaling.has_scales({"NI_Number_Of_Scales": 0}) is False
+    with pytest.raises(ValueError):
+        tdms_scaling.has_scales({"NI_Number_Of_Scales": "two"})
+    chain = tdms_scaling.Chain((tdms_scaling.Scale("Linear", (2.0, 1.0), tdms_scaling.RAW_INPUT),))
+    assert chain.apply(np.empty(0)).shape == (0,)
