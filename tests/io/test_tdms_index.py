@@ -414,3 +414,29 @@ def test_tdms_scaling_empty_and_bad():
         tdms_scaling.has_scales({"NI_Number_Of_Scales": "two"})
     chain = tdms_scaling.Chain((tdms_scaling.Scale("Linear", (2.0, 1.0), tdms_scaling.RAW_INPUT),))
     assert chain.apply(np.empty(0)).shape == (0,)
+
+
+@pytest.mark.parametrize("chans", [["sun_0", "sun_1"], ["sun_1", "sun_2"], ["sun_2", "sun_0"], ["sun_0", "sun_2"]])
+def test_interleaved_channel_subsets(tmp_path, chans):
+    """Consecutive columns in order are read together (shared rows), others one by one."""
+    rec = _rec(3000, 3)
+    path = write_ni_log(rec, tmp_path / "x.tdms", samples_per_segment=512, interleaved=True)
+    cols = [rec.names.index(c) for c in chans]
+    for a, b in ((0, 3000), (100, 2900), (511, 1537), (2999, 3000)):
+        np.testing.assert_array_equal(tdms.read(path, chans, a, b).data, rec.data[a:b, cols])
+
+
+def test_iter_blocks_frees_each_block_before_the_next(tmp_path):
+    rec = _rec(64 * 1024, 4)
+    path = write_ni_log(rec, tmp_path / "x.tdms", samples_per_segment=1000)
+    tdms.read_info(path)
+    block_bytes = 8192 * 4 * 8
+    tracemalloc.start()
+    try:
+        base = tracemalloc.get_traced_memory()[0]
+        for blk in tdms.iter_blocks(path, 8192, 0):
+            del blk
+        peak = tracemalloc.get_traced_memory()[1] - base
+    finally:
+        tracemalloc.stop()
+    assert peak < 1.5 * block_bytes
