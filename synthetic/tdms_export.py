@@ -14,12 +14,20 @@ that they exercise the same reader path (``pipeline/io/tdms.py``,
 * file properties: ``name``, ``meshphase_meta`` and ``meshphase_history`` (JSON text);
 * one segment per block (blocks of >= 1e5 samples keep the per-segment overhead of the
   reader negligible), so memory stays flat however long the recording.
+
+:func:`write_ni_log` writes the layout NI-DAQmx logging produces instead (written here byte
+by byte after NI's published TDMS format, since npTDMS's writer cannot): small segments of a
+fixed number of samples per channel (512 or 1000 are typical), channel data contiguous or
+interleaved, the metadata in the first segment only and the following segments made of a
+lead-in and raw data ("same layout as before"); a shorter last segment repeats the raw data
+index with its own count.
 """
 
 from __future__ import annotations
 
 import datetime as _dt
 import json
+import struct
 from pathlib import Path
 from typing import Iterable
 
@@ -28,7 +36,7 @@ import numpy as np
 from meshphase.io.base import atomic_path
 from meshphase.recording import Recording
 
-__all__ = ["write_tdms", "LABVIEW_ZERO"]
+__all__ = ["write_tdms", "write_ni_log", "LABVIEW_ZERO"]
 
 #: TDMS timestamp zero (LabVIEW epoch): "start time not set".
 LABVIEW_ZERO = np.datetime64("1904-01-01T00:00:00", "us")
@@ -132,3 +140,118 @@ def write_tdms(blocks: Recording | Iterable[Recording], path, *, n_samples: int 
             if first is None:
                 raise ValueError("no blocks to write")
     return path
+
+
+# ---------------------------------------------------------------------------- NI-DAQmx log layout
+_TOC_META, _TOC_NEW_OBJ_LIST, _TOC_RAW, _TOC_INTERLEAVED = 1 << 1, 1 << 2, 1 << 3, 1 << 5
+_VERSION = 4713
+_NO_DATA = 0xFFFFFFFF
+
+
+def _tdms_string(text: str) -> bytes:
+    b = text.encode("utf-8")
+    return struct.pack("<I", len(b)) + b
+
+
+def _tdms_property(name: str, value) -> bytes:
+    """One property (name, type code, value) in TDMS encoding."""
+    if isinstance(value, (bool, np.bool_)):
+        body = struct.pack("<IB", 0x21, int(value))
+    elif isinstance(value, (int, np.integer)):
+        body = struct.pack("<Ii", 0x03, int(value)) if -2**31 <= value < 2**31 else struct.pack("<Iq", 0x04, int(value))
+    elif isinstance(value, (float, np.floating)):
+        body = struct.pack("<Id", 0x0A, float(value))
+    elif isinstance(value, np.datetime64):
+        us = int((value.astype("datetime64[us]") - LABVIEW_ZERO) / np.timedelta64(1, "us"))
+        sec, frac_us = divmod(us, 1_000_000)
+        body = struct.pack("<IQq", 0x44, (frac_us << 64) // 1_000_000, sec)
+    elif isinstance(value, str):
+        body = struct.pack("<I", 0x20) + _tdms_string(value)
+    else:
+        raise TypeError(f"property {name!r}: cannot write a {type(value).__name__} to TDMS")
+    return _tdms_string(name) + body
+
+
+def _object(path: str, props: dict, n_values: int | None) -> bytes:
+    index = struct.pack("<I", _NO_DATA) if n_values is None else struct.pack("<IIIQ", 20, 10, 1, n_values)
+    return (_tdms_string(path) + index + struct.pack("<I", len(props))
+            + b"".join(_tdms_property(k, v) for k, v in props.items()))
+
+
+def _segment(toc: int, meta: bytes, data: bytes) -> bytes:
+    return b"TDSm" + struct.pack("<IIQQ", toc, _VERSION, len(meta) + len(data), len(meta)) + meta + data
+
+
+def write_ni_log(rec: Recording, path, *, samples_per_segment: int = 512, interleaved: bool = False,
+                 group: str = "meshphase", overwrite: bool = False) -> Path:
+    """Write a recording as NI-DAQmx logging lays TDMS out: many small segments (atomically).
+
+    Parameters
+    ----------
+    rec : Recording
+        Written as float64, one channel per recording channel, with the channel properties
+        of :func:`write_tdms`.
+    path : str or Path
+        Output file (``.tdms``).
+    samples_per_segment : int
+        Samples per channel per segment [-] (NI-DAQmx logging: 512 or 1000, say).
+    interleaved : bool
+        Store the samples interleaved (one row of every channel per sample) instead of one
+        contiguous run per channel and segment.
+    group : str
+        TDMS group name.
+    overwrite : bool
+        Replace an existing file (default False: FileExistsError).
+
+    Returns
+    -------
+    Path
+    """
+    if not isinstance(rec, Recording):
+        raise TypeError(f"rec must be a Recording, got {type(rec).__name__}")
+    if isinstance(samples_per_segment, bool) or not isinstance(samples_per_segment, (int, np.integer)) \
+            or samples_per_segment < 1:
+        raise ValueError(f"samples_per_segment must be a positive int, got {samples_per_segment!r}")
+    if not isinstance(interleaved, (bool, np.bool_)):
+        raise TypeError(f"interleaved must be a bool, got {interleaved!r}")
+    if not isinstance(group, str) or not group:
+        raise ValueError(f"group must be a non-empty string, got {group!r}")
+    n, spc, nch = rec.n_samples, int(samples_per_segment), rec.n_channels
+    if nch == 0:
+        raise ValueError("the recording has no channels")
+    flag = _TOC_INTERLEAVED if interleaved else 0
+    gpath = "/'" + group.replace("'", "''") + "'"
+    cpaths = [gpath + "/'" + spec.name.replace("'", "''") + "'" for spec in rec.channels]
+    root = {"name": Path(path).stem, "meshphase_meta": json.dumps(rec.meta, default=str),
+            "meshphase_history": json.dumps(rec.history, default=str)}
+    props = _channel_props(rec, n)
+    path = Path(path)
+    with atomic_path(path, overwrite=overwrite) as tmp, open(tmp, "wb") as fh:
+        first = min(n, spc)
+        meta = (struct.pack("<I", 2 + nch) + _object("/", root, None) + _object(gpath, {}, None)
+                + b"".join(_object(cp, props[j], first) for j, cp in enumerate(cpaths)))
+        fh.write(_segment(_TOC_META | _TOC_NEW_OBJ_LIST | _TOC_RAW | flag, meta, _block(rec, 0, first, interleaved)))
+        full_end = first + (n - first) // spc * spc
+        lead = np.frombuffer(_segment(_TOC_RAW | flag, b"", b"\0" * (spc * nch * 8))[:28], dtype=np.uint8)
+        step = max(1, (1 << 22) // (spc * nch))        # segments per write: ~32 MB of samples
+        for a in range(first, full_end, step * spc):
+            b = min(full_end, a + step * spc)
+            k = (b - a) // spc
+            out = np.empty((k, 28 + spc * nch * 8), dtype=np.uint8)
+            out[:, :28] = lead
+            out[:, 28:] = np.frombuffer(_block(rec, a, b, interleaved, spc), dtype=np.uint8).reshape(k, -1)
+            fh.write(out.tobytes())
+        if full_end < n:     # a shorter last segment: new raw data index, same objects
+            meta = struct.pack("<I", nch) + b"".join(_object(cp, {}, n - full_end) for cp in cpaths)
+            fh.write(_segment(_TOC_META | _TOC_RAW | flag, meta, _block(rec, full_end, n, interleaved)))
+    return path
+
+
+def _block(rec: Recording, a: int, b: int, interleaved: bool, spc: int | None = None) -> bytes:
+    """Raw data of samples [a, b) as segments of ``spc`` samples (one segment when None)."""
+    if b <= a:
+        return b""
+    x = np.asarray(rec.data[a:b], dtype="<f8")
+    spc = b - a if spc is None else spc
+    x = x.reshape((b - a) // spc, spc, rec.n_channels)
+    return (x if interleaved else x.transpose(0, 2, 1)).tobytes()

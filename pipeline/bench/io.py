@@ -1,9 +1,9 @@
 """I/O benchmark (``meshphase bench io``): read throughput per format against a raw read.
 
-For each format (HDF5, MCAP with no / lz4 / zstd compression, CSV, NI TDMS written by
-``nptdms.TdmsWriter`` with large and with many small segments) a generated strain-like
-recording (1 h x 8 channels at 5120 Hz by default) is written and read back through
-:mod:`meshphase.io`, and measured:
+For each format (HDF5, MCAP with no / lz4 / zstd compression, CSV, NI TDMS with large
+segments written by ``nptdms.TdmsWriter`` and with the small segments of NI-DAQmx logging)
+a generated strain-like recording (1 h x 8 channels at 5120 Hz by default) is written and
+read back through :mod:`meshphase.io`, and measured:
 
 * full read throughput [MSamples/s] (``meshphase.io.read``), and its ratio to the raw
   reference read of the same samples from a ``.npy`` file in the same run (read with
@@ -37,6 +37,7 @@ a foreign JSON file with one message per sample time, a ROS 2 file with arrays p
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import importlib.util
 import json
@@ -78,7 +79,10 @@ CONVERT_COLUMNS = ("minutes", "n_channels", "n_samples", "data_mb", "source", "t
 CONVERT_MINUTES = (10.0, 60.0, 180.0)
 _MCAP_VARIANTS = ("none", "lz4", "zstd")
 _TDMS_LARGE_SEGMENT = 1 << 20  # samples per channel per segment (8 MiB of float64)
-_TDMS_SMALL_SEGMENT = 512
+_TDMS_SMALL_SEGMENTS = (512, 1000)  # NI-DAQmx logging, contiguous and interleaved
+#: TDMS variants read another way than the default (meshphase.io.tdms.reading_path)
+_TDMS_PUBLIC = ", npTDMS read_data"
+_TDMS_COLD = ", plan not cached"
 
 
 # ---------------------------------------------------------------------------------- data
@@ -148,6 +152,18 @@ def _write_tdms(rec: Recording, path: Path, segment: int) -> None:
             w.write_segment(objs)
 
 
+def _tdms_reading(fmt: str, variant: str):
+    """How a TDMS variant is read: computed offsets with the read plan cached (default),
+    the plan built anew on every read (``_TDMS_COLD``), or every sample through npTDMS's
+    public ``read_data`` (``_TDMS_PUBLIC``)."""
+    if fmt != "tdms":
+        return contextlib.nullcontext()
+    from ..io.tdms import reading_path
+
+    return reading_path(computed_offsets=not variant.endswith(_TDMS_PUBLIC),
+                        cache_plans=not variant.endswith(_TDMS_COLD))
+
+
 def _variants(fmt: str) -> list[tuple[str, str, Callable[[Recording, Path], None]]]:
     """(variant name, file suffix, writer) of one format."""
     from .. import io as pio
@@ -160,10 +176,18 @@ def _variants(fmt: str) -> list[tuple[str, str, Callable[[Recording, Path], None
     if fmt == "csv":
         return [("default", ".csv", lambda r, p: pio.write(r, p, format="csv"))]
     if fmt == "tdms":
-        return [(f"{_TDMS_LARGE_SEGMENT} samples/segment", ".tdms",
-                 lambda r, p: _write_tdms(r, p, _TDMS_LARGE_SEGMENT)),
-                (f"{_TDMS_SMALL_SEGMENT} samples/segment", ".tdms",
-                 lambda r, p: _write_tdms(r, p, _TDMS_SMALL_SEGMENT))]
+        from ..synthetic.tdms_export import write_ni_log
+
+        def ni_log(spc, il):
+            return lambda r, p: write_ni_log(r, p, samples_per_segment=spc, interleaved=il)
+
+        small = _TDMS_SMALL_SEGMENTS[0]
+        return ([(f"{_TDMS_LARGE_SEGMENT} samples/segment", ".tdms",
+                  lambda r, p: _write_tdms(r, p, _TDMS_LARGE_SEGMENT))]
+                + [(f"{spc} samples/segment{', interleaved' if il else ''}", ".tdms", ni_log(spc, il))
+                   for spc in _TDMS_SMALL_SEGMENTS for il in (False, True)]
+                + [(f"{small} samples/segment{how}", ".tdms", ni_log(small, False))
+                   for how in (_TDMS_COLD, _TDMS_PUBLIC)])
     raise ValueError(f"unknown format {fmt!r}")
 
 
@@ -398,7 +422,7 @@ class _ReadBench:
             bar.set_postfix_str(f"{fmt} {variant}")
         row = dict.fromkeys(COLUMNS)
         row.update(format=fmt, variant=variant, target_ratio=TARGETS.get(fmt))
-        with warnings.catch_warnings(record=True) as wlist:
+        with warnings.catch_warnings(record=True) as wlist, _tdms_reading(fmt, variant):
             warnings.simplefilter("always")
             self._reads(row, fmt, writer, self.work / f"rec_{fmt}_{k}{suffix}")
             self._stream(row, suffix, writer)
@@ -476,7 +500,7 @@ def _config(minutes, n_channels, fs, n, rec, formats, repeats, block_budget_mb, 
         "formats": list(formats), "repeats": repeats, "block_budget_mb": block_budget_mb,
         "stream_block_samples": budget_samples, "stream_block_s": bench.block_s,
         "window_s": [bench.w0, bench.w1], "one_channel": bench.mid,
-        "tdms_segments": [_TDMS_LARGE_SEGMENT, _TDMS_SMALL_SEGMENT],
+        "tdms_segments": [_TDMS_LARGE_SEGMENT, *_TDMS_SMALL_SEGMENTS],
         "python": platform.python_version(), "numpy": np.__version__,
         "machine": platform.machine(), "cpus": os.cpu_count(),
         "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
@@ -493,6 +517,12 @@ def _notes(repeats: int) -> list[str]:
         "page faults are costly on this machine), np_load_msps shows the allocating case.",
         "one_channel_msps and window_msps count the samples delivered (one channel; the "
         "middle 10% of the recording, all channels).",
+        "TDMS: 1048576 samples/segment written by npTDMS's TdmsWriter; 512 and 1000 "
+        "samples/segment (contiguous, interleaved) laid out as NI-DAQmx logging writes them "
+        "(meshphase.synthetic.tdms_export.write_ni_log). Read by computed offsets from the "
+        "segment index, the read plan (npTDMS's metadata parse) cached by the first read; "
+        "'plan not cached': every read parses the metadata through npTDMS again; "
+        "'npTDMS read_data': every sample through npTDMS's public read_data.",
         "CSV is held against pandas.read_csv(engine='c') alone on the same file: "
         "csv_over_pandas = pandas time / our time (>= 1 meets the target).",
         "stream_peak_mb_*: tracemalloc peak (Python + numpy allocations; HDF5/TDMS C "

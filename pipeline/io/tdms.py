@@ -34,18 +34,24 @@ of data, and, in files written by meshphase (channel property ``meshphase_kind``
 samples than ``wf_samples`` says (a cut exactly at a segment boundary). TDMS stores no
 checksums: a flipped byte in the raw data cannot be detected.
 
-Reading: metadata through ``TdmsFile.open``; the samples of plain segments (contiguous,
-little-endian, non-DAQmx) are read with ``readinto`` straight into the preallocated output
-(in file order, scaling applied per segment); other files go through npTDMS's
-``read_data(offset, length)`` per channel. :func:`iter_blocks` keeps the file open and reads
-block after block, so memory stays flat.
+Reading uses npTDMS's public API only (``TdmsFile.open``, groups, channels, properties,
+``len``, ``dtype`` and ``TdmsChannel.read_data(offset, length, scaled)``). The samples of
+plain numeric data (any byte order, contiguous or interleaved, any segment size) are read
+by byte offsets computed from the segment index that :mod:`meshphase.io.tdms_index` reads
+from the file after NI's published format (one pass; segments repeating the previous
+lead-in and metadata are taken together), through a memory map, NI-scaled by
+:mod:`meshphase.io.tdms_scaling` (linear and polynomial scales): each channel's length
+must equal npTDMS's and its first and last samples must equal what ``read_data`` returns,
+else, and for DAQmx raw data or scales only npTDMS computes, ``read_data`` reads every
+sample (``read_info(...).extra["read_path"]`` says which path and why). The read plan is
+cached under a digest of the lead-ins and metadata. :func:`iter_blocks` keeps the file open
+and reads block after block, so memory stays flat.
 """
 
 from __future__ import annotations
 
 import contextlib
 import copy
-import hashlib
 import json
 import logging
 import math
@@ -53,7 +59,6 @@ import os
 import sys
 from collections import OrderedDict
 import re
-import struct
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -65,22 +70,22 @@ from ..errors import FormatWarning
 from ..jsonable import to_jsonable
 from ..recording import CHANNEL_KINDS, ChannelSpec, Recording
 from ..validate import as_int, as_positive, as_positive_int
+from . import tdms_index, tdms_scaling
 from .base import CorruptFileError, RecordingFileError, RecordingInfo, check_verify, spec_from_dict, warn_nonfinite
 
-__all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "sniff", "read_info", "read", "iter_blocks", "kind_from_name"]
+__all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "sniff", "read_info", "read", "iter_blocks", "kind_from_name",
+           "reading_path"]
 
 NAME = "tdms"
 SUFFIXES = (".tdms",)
 CAN_WRITE = False
 
-_LEAD_IN = 28
-_TOC_RAW = 1 << 3
-_TOC_INTERLEAVED = 1 << 5
-_TOC_BIG_ENDIAN = 1 << 6
-_TOC_DAQMX = 1 << 7
-_INCOMPLETE = 0xFFFFFFFFFFFFFFFF
-#: Read plain segments with readinto (tests switch it off to compare with npTDMS's reader).
+#: Read through the segment index and computed offsets (tests switch it off to compare with
+#: npTDMS's public ``read_data``, the path every file can take).
 _USE_FAST_PATH = True
+#: Samples at each end of every channel compared with npTDMS's ``read_data`` before the
+#: computed-offset path is trusted for a file.
+_CHECK_SAMPLES = 64
 _LABVIEW_ZERO = np.datetime64("1904-01-01T00:00:00", "us")
 
 _KIND_PATTERNS = (
@@ -105,59 +110,16 @@ def sniff(head: bytes) -> bool:
     return head[:4] == b"TDSm"
 
 
-# ---------------------------------------------------------------------------- structure check
-def _walk_segments(path) -> tuple[int, bytes]:
-    """Follow the segment lead-ins from byte 0 to the end; RecordingFileError on any cut.
-
-    Returns the number of segments and a digest of every lead-in and metadata block (all that
-    the read plan depends on; the raw data are not hashed).
-    """
-    size = os.path.getsize(path)
-    if size == 0:
-        raise RecordingFileError(path, "file is empty (0 bytes)")
-    digest = hashlib.blake2b(digest_size=16)
-    digest.update(struct.pack("<Q", size))
-    n = 0
-    pos = 0
-    with open(path, "rb") as fh:
-        while pos < size:
-            if size - pos < _LEAD_IN:
-                raise CorruptFileError(path, f"segment {n} at byte {pos}", f"truncated: incomplete lead-in "
-                                                                           f"({size - pos} of {_LEAD_IN} bytes)")
-            fh.seek(pos)
-            lead = fh.read(_LEAD_IN)
-            if lead[:4] != b"TDSm":
-                raise CorruptFileError(path, f"segment {n} at byte {pos}", f"corrupt: the lead-in does not start "
-                                                                           f"with b'TDSm' (found {lead[:4]!r})")
-            toc = struct.unpack("<I", lead[4:8])[0]
-            endian = ">" if toc & _TOC_BIG_ENDIAN else "<"
-            _version, next_off, raw_off = struct.unpack(endian + "IQQ", lead[8:28])
-            if next_off == _INCOMPLETE:
-                raise CorruptFileError(path, f"segment {n} at byte {pos}", "truncated: the segment was never "
-                                       "finished (next-segment offset unset; the writer stopped mid-segment)")
-            if raw_off > next_off:
-                raise CorruptFileError(path, f"segment {n} at byte {pos}", f"corrupt: raw-data offset {raw_off} "
-                                                                           f"beyond the segment length {next_off}")
-            nxt = pos + _LEAD_IN + next_off
-            if nxt > size:
-                raise CorruptFileError(path, f"segment {n} at byte {pos}", f"truncated: the segment needs {nxt} "
-                                                                           f"bytes, the file has {size}")
-            digest.update(lead)
-            if raw_off:
-                digest.update(fh.read(raw_off))
-            pos = nxt
-            n += 1
-    return n, digest.digest()
-
-
 # ---------------------------------------------------------------------------- plan
 @dataclass
 class _Chan:
     name: str
-    ch: Any                 # npTDMS TdmsChannel
-    scaling: Any            # npTDMS scaling or None
-    raw_dtype: np.dtype
-    extents: tuple | None = None   # (starts, counts, offsets) arrays for the fast path
+    ch: Any                 # npTDMS TdmsChannel (public API only)
+    scaling: Any            # tdms_scaling.Chain applied on the computed-offset path, or None
+    raw_dtype: np.dtype     # stored type (byte order included on the computed-offset path)
+    scaled: bool = False    # npTDMS scales this channel (read scaled=True on its path)
+    runs: list | None = None        # tdms_index.Run list for the computed-offset path
+    starts: np.ndarray | None = None
 
 
 @dataclass
@@ -209,28 +171,6 @@ def _json_property(text, path, key: str, kind: type):
         raise RecordingFileError(path, f"file property {key} must hold a JSON {'object' if kind is dict else 'array'}, "
                                        f"got {type(value).__name__}")
     return value
-
-
-def _linear_gain(scaling) -> float | None:
-    """Slope of a single, zero-intercept linear scale on the raw data, else None."""
-    from nptdms import scaling as _sc
-
-    scales = getattr(scaling, "scalings", None)
-    if not scales or len(scales) != 1:
-        return None
-    s = scales[0]
-    if isinstance(s, _sc.LinearScaling) and s.intercept == 0 and s.input_source == _sc.RAW_DATA_INPUT_SOURCE:
-        return float(s.slope)
-    return None
-
-
-def _has_scale_props(props) -> bool:
-    if props.get("NI_Scaling_Status", "unscaled") == "scaled":
-        return False
-    n = props.get("NI_Number_Of_Scales")
-    if n is not None:
-        return int(n) > 0
-    return any(k.startswith("NI_Scale[") and k.endswith("_Scale_Type") for k in props)
 
 
 class _Collect(logging.Filter):
@@ -285,24 +225,27 @@ def _open(path):
         raise RecordingFileError(path, f"cannot parse as TDMS ({type(exc).__name__}: {exc})") from exc
 
 
-def _plan(tdms, path, n_segments: int, fs_opt, raw: bool) -> _Plan:
+def _plan(tdms, path, index, fs_opt, raw: bool) -> _Plan:
     """What a read of this open TDMS file needs: its header as a RecordingInfo, the
-    channels to read (with npTDMS's scaling unless ``raw``) and the fast-path extents."""
+    channels to read (NI-scaled unless ``raw``) and, when the segment ``index`` allows and
+    agrees with npTDMS, the computed-offset runs of every channel."""
     path = Path(path)
-    groups, usable, names = _usable_channels(tdms, path, n_segments)
+    n_segments = index.n_segments
+    groups, usable, names, unapplied = _usable_channels(tdms, path)
     n_samples = _n_samples(path, names, usable)
     fs, t0, start_datetime = _timing(path, names, usable, fs_opt)
     chans = {}
     specs = []
     scaled_names = []
     for n, (g, ch) in zip(names, usable):
-        spec, chans[n], scaled = _channel(tdms, path, n, g, ch, raw)
+        spec, chans[n], scaled = _channel(tdms, path, n, g, ch, raw, index, n in unapplied)
         specs.append(spec)
         if scaled:
             scaled_names.append(n)
-    out_kinds = [(c.raw_dtype if (raw or c.scaling is None) else np.dtype(c.ch.dtype)) for c in chans.values()]
-    dtype = np.dtype(np.float32) if all(k == np.float32 for k in out_kinds) else np.dtype(np.float64)
-    fast = _build_extents(tdms, path, chans, raw)
+    out_kinds = [(c.raw_dtype if (raw or not c.scaled) else np.dtype(c.ch.dtype)) for c in chans.values()]
+    dtype = (np.dtype(np.float32) if all(k.newbyteorder("=") == np.float32 for k in out_kinds)
+             else np.dtype(np.float64))
+    fast, why = _use_index(path, index, chans, raw, n_samples)
     file_props = dict(tdms.properties)
     meta = _json_property(file_props.pop("meshphase_meta", None), path, "meshphase_meta", dict) or {}
     history = _json_property(file_props.pop("meshphase_history", None), path, "meshphase_history", list) or []
@@ -314,29 +257,29 @@ def _plan(tdms, path, n_segments: int, fs_opt, raw: bool) -> _Plan:
                          start_datetime=start_datetime, meta=meta, history=history,
                          extra={"n_segments": n_segments, "groups": [g.name for g in groups],
                                 "tdms_paths": {n: ch.path for n, (_, ch) in zip(names, usable)},
-                                "scaled": not raw, "fast_path": fast})
+                                "scaled": not raw, "fast_path": fast, "read_path": why})
     return _Plan(info=info, chans=chans, dtype=dtype, raw=raw, fast=fast)
 
 
-def _usable_channels(tdms, path: Path, n_segments: int) -> tuple[list, list, list]:
-    """(groups, [(group, channel)] of the numeric channels, their names): the plain channel
-    names, or ``group/channel`` where plain names repeat."""
-    reader = getattr(tdms, "_reader", None)
-    segs = getattr(reader, "_segments", None)
-    if segs is not None and len(segs) != n_segments:
-        raise RecordingFileError(path, f"the metadata npTDMS read lists {len(segs)} segments but the file holds "
-                                       f"{n_segments} (stale .tdms_index file?)")
+def _usable_channels(tdms, path: Path) -> tuple[list, list, list, set]:
+    """(groups, [(group, channel)] of the numeric channels, their names, the names whose NI
+    scaling npTDMS cannot apply): the plain channel names, or ``group/channel`` where plain
+    names repeat."""
     groups = tdms.groups()
     found = []
     for g in groups:
         for ch in g.channels():
             found.append((g, ch))
     usable = []
+    unapplied = set()
     for g, ch in found:
         try:
-            dt = np.dtype(ch.dtype)
+            with _scale_complaints() as said:   # the first dtype access sets up the scaling
+                dt = np.dtype(ch.dtype)
         except TypeError:
             dt = np.dtype("V8")
+        if said:
+            unapplied.add(ch.path)
         if ch.data_type is None or dt.kind not in "biuf":
             warnings.warn(FormatWarning(f"{path}: skipped channel {g.name}/{ch.name}: no numeric data "
                                         f"(type {getattr(ch.data_type, '__name__', ch.data_type)})"), stacklevel=5)
@@ -350,7 +293,30 @@ def _usable_channels(tdms, path: Path, n_segments: int) -> tuple[list, list, lis
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise RecordingFileError(path, f"duplicate channel name(s) {dup}")
-    return groups, usable, names
+    unapplied = {n for n, (_, ch) in zip(names, usable) if ch.path in unapplied}
+    return groups, usable, names, unapplied
+
+
+@contextlib.contextmanager
+def _scale_complaints():
+    """Collects npTDMS's "Unsupported scale type" log records (its public signal that it
+    leaves a channel unscaled) while the block runs; the list is truthy when one came."""
+    said: list = []
+
+    class _Grab(logging.Filter):
+        def filter(self, record):
+            if record.getMessage().startswith("Unsupported scale type"):
+                said.append(record.getMessage())
+                return False
+            return True
+
+    grab = _Grab()
+    lg = logging.getLogger("nptdms.scaling")
+    lg.filters.insert(0, grab)      # ahead of _nptdms_logs_as_warnings' filter, which drops all
+    try:
+        yield said
+    finally:
+        lg.removeFilter(grab)
 
 
 def _n_samples(path: Path, names: list, usable: list) -> int:
@@ -412,17 +378,15 @@ def _timing(path: Path, names: list, usable: list, fs_opt) -> tuple[float, float
     return fs, t0, start_datetime
 
 
-def _channel(tdms, path: Path, n: str, g, ch, raw: bool) -> tuple[ChannelSpec, _Chan, bool]:
-    """(spec, read plan, whether npTDMS scales it) of channel ``ch`` of group ``g``, named
+def _channel(tdms, path: Path, n: str, g, ch, raw: bool, index, unapplied: bool) -> tuple[ChannelSpec, _Chan, bool]:
+    """(spec, read plan, whether NI scaling applies) of channel ``ch`` of group ``g``, named
     ``n``: kind, units and gain from the meshphase properties, else from NI's."""
-    from nptdms import scaling as _sc
-
     props = ch.properties
-    scaling = _sc.get_scaling(props, g.properties, tdms.properties)
-    wants_scaling = any(_has_scale_props(p) for p in (props, g.properties, tdms.properties))
-    if wants_scaling and scaling is None:
+    wants, chain = tdms_scaling.parse(props, g.properties, tdms.properties)
+    if unapplied:
         warnings.warn(FormatWarning(f"{path}: channel {n!r} has NI scaling properties that npTDMS cannot "
                                     f"apply; its samples are the raw (unscaled) values"), stacklevel=5)
+    scaled = wants and not unapplied
     kind = props.get("meshphase_kind")
     if kind is None:
         kind = kind_from_name(ch.name, g.name)
@@ -432,8 +396,8 @@ def _channel(tdms, path: Path, n: str, g, ch, raw: bool) -> tuple[ChannelSpec, _
     units = props.get("unit_string", props.get("NI_UnitDescription", ""))
     gain = _prop_float(props, "meshphase_gain", path, n)
     gain = 1.0 if gain is None else gain
-    if raw and scaling is not None:
-        lin = _linear_gain(scaling)
+    if raw and scaled:
+        lin = tdms_scaling.linear_gain(chain)
         if lin is not None and lin != 0:
             gain *= lin
         else:
@@ -445,113 +409,123 @@ def _channel(tdms, path: Path, n: str, g, ch, raw: bool) -> tuple[ChannelSpec, _
          "face_position": _prop_float(props, "meshphase_face_position", path, n),
          "description": str(props.get("meshphase_description", props.get("description", "")))}
     spec = spec_from_dict(_jsonable(d), path, f"channel {n!r}")
-    raw_dtype = np.dtype(ch._raw_data_dtype()) if hasattr(ch, "_raw_data_dtype") else np.dtype(ch.dtype)
-    return spec, _Chan(n, ch, None if raw else scaling, raw_dtype), scaling is not None
+    raw_dtype = index.dtypes.get(ch.path) if index.unsupported is None else None
+    if raw_dtype is None:
+        raw_dtype = _stored_dtype(ch, path, n, scaled)
+    use_chain = chain if (scaled and not raw) else None
+    return spec, _Chan(n, ch, use_chain, np.dtype(raw_dtype), scaled), scaled
 
 
-def _build_extents(tdms, path, chans: dict, raw: bool) -> bool:
-    """Byte extents of every selected channel in plain segments; False when the file needs
-    npTDMS's general reader (interleaved, big-endian or DAQmx data, unusual types)."""
-    reader = getattr(tdms, "_reader", None)
-    segs = getattr(reader, "_segments", None)
-    if segs is None or not _USE_FAST_PATH:
-        return False
-    by_path = {c.ch.path: c for c in chans.values()}
-    ext = {p: ([], [], []) for p in by_path}
-    done = {p: 0 for p in by_path}
-    try:
-        for seg in segs:
-            if seg.segment_incomplete or seg.final_chunk_lengths_override is not None:
-                raise CorruptFileError(path, f"segment at byte {seg.position}", "truncated or corrupt: the segment "
-                                                                                "holds a partial chunk of data")
-            toc = seg.toc_mask
-            if not toc & _TOC_RAW:
-                continue
-            if toc & (_TOC_INTERLEAVED | _TOC_BIG_ENDIAN | _TOC_DAQMX):
-                return False
-            objs = [o for o in seg.ordered_objects if o.has_data]
-            chunk = 0
-            for o in objs:
-                if o.data_type is None or o.data_type.size is None:
-                    if o.path in by_path or o.data_size:
-                        return False
-                chunk += int(o.data_size)
-            if chunk == 0:
-                continue
-            for c in range(int(seg.num_chunks)):
-                pos = int(seg.data_position) + c * chunk
-                for o in objs:
-                    e = ext.get(o.path)
-                    nv = int(o.number_values)
-                    if e is not None and nv:
-                        if np.dtype(o.data_type.nptype) != by_path[o.path].raw_dtype:
-                            return False
-                        e[0].append(done[o.path])
-                        e[1].append(nv)
-                        e[2].append(pos)
-                        done[o.path] += nv
-                    pos += int(o.data_size)
-    except AttributeError:  # a future npTDMS without these internals: use the general reader
-        return False
-    for p, c in by_path.items():
-        if done[p] != len(c.ch):
-            return False
-        starts, counts, offs = (np.asarray(a, dtype=np.int64) for a in ext[p])
-        c.extents = (starts, counts, offs)
-    return True
+def _stored_dtype(ch, path, n, scaled: bool) -> np.dtype:
+    """The stored (unscaled) type of a channel from npTDMS's public API: its dtype when
+    unscaled, else the type of one raw value read back."""
+    if not scaled or len(ch) == 0:
+        return np.dtype(ch.dtype)
+    with _nptdms_logs_as_warnings(path):
+        try:
+            one = ch.read_data(offset=0, length=1, scaled=False)
+        except Exception as exc:  # npTDMS raises plain Exception for some malformed data
+            raise RecordingFileError(path, f"channel {n!r}: npTDMS cannot read the data "
+                                           f"({type(exc).__name__}: {exc})") from exc
+    if isinstance(one, dict):   # DAQmx raw scaler data: read scaled or through its one scaler
+        return np.dtype(next(iter(one.values())).dtype) if len(one) == 1 else np.dtype(np.float64)
+    return np.dtype(one.dtype)
+
+
+def _use_index(path, index, chans: dict, raw: bool, n_samples: int) -> tuple[bool, str]:
+    """(True, "computed offsets") when every channel can be read from the segment index and
+    its first and last samples equal npTDMS's ``read_data``; else (False, why npTDMS reads).
+    A segment holding a partial chunk raises CorruptFileError either way."""
+    if index.partial is not None and index.unsupported is None:
+        raise CorruptFileError(path, index.partial.split(": ", 1)[0], index.partial.split(": ", 1)[1])
+    if not _USE_FAST_PATH:
+        return False, "npTDMS read_data (computed offsets switched off)"
+    if index.unsupported is not None:
+        return False, f"npTDMS read_data ({index.unsupported})"
+    for c in chans.values():
+        p = c.ch.path
+        if c.scaled and not raw and c.scaling is None:
+            return False, f"npTDMS read_data (channel {c.name!r}: NI scaling computed by npTDMS only)"
+        if index.lengths.get(p, 0) != len(c.ch) or (len(c.ch) and p not in index.runs):
+            return False, (f"npTDMS read_data (channel {c.name!r}: {index.lengths.get(p, 0)} samples in the "
+                           f"segment index, npTDMS says {len(c.ch)})")
+        if p in index.runs:
+            c.runs, c.starts = index.runs[p], index.starts(p)
+    return _agrees(path, chans, raw, n_samples)
+
+
+def _agrees(path, chans: dict, raw: bool, n_samples: int) -> tuple[bool, str]:
+    """Compare the first and last samples of every channel read by computed offsets with
+    npTDMS's ``read_data`` (exact, NaN equal to NaN)."""
+    k = min(_CHECK_SAMPLES, n_samples)
+    if k == 0:
+        return True, "computed offsets"
+    with open(path, "rb") as fh, tdms_index.open_map(fh) as mm:
+        for c in chans.values():
+            for i0 in sorted({0, n_samples - k}):
+                mine = np.empty(k, dtype=np.float64)
+                _read_channel(mm, c, i0, i0 + k, mine)
+                try:
+                    with _nptdms_logs_as_warnings(path):
+                        theirs = c.ch.read_data(offset=i0, length=k, scaled=not raw)
+                except Exception:  # npTDMS cannot read it: its own path will say why
+                    return False, f"npTDMS read_data (channel {c.name!r}: npTDMS could not read the check samples)"
+                if isinstance(theirs, dict) or not np.array_equal(mine, np.asarray(theirs, dtype=np.float64),
+                                                                  equal_nan=True):
+                    return False, (f"npTDMS read_data (channel {c.name!r}: samples [{i0}, {i0 + k}) by computed "
+                                   f"offsets differ from npTDMS's)")
+    return True, "computed offsets"
 
 
 # ---------------------------------------------------------------------------- reading
-def _read_window(fh, plan: _Plan, names, i0: int, i1: int, path) -> np.ndarray:
-    """Samples [i0, i1) of ``names`` as a Fortran-ordered (n, n_channels) array."""
+def _read_window(mm, plan: _Plan, names, i0: int, i1: int, path) -> np.ndarray:
+    """Samples [i0, i1) of ``names`` as a Fortran-ordered (n, n_channels) array (``mm``: the
+    file's memory map on the computed-offset path, else None)."""
     n = i1 - i0
     buf = np.empty((len(names), n), dtype=plan.dtype)   # channel-major; data = buf.T
     if n == 0:
         return buf.T
     if plan.fast:
-        _read_fast(fh, plan, names, i0, i1, buf, path)
+        _read_fast(mm, plan, names, i0, i1, buf, path)
     else:
         _read_general(plan, names, i0, i1, buf, path)
     return buf.T
 
 
-def _read_fast(fh, plan: _Plan, names, i0, i1, buf, path):
-    from nptdms.base_segment import RawChannelDataChunk
+def _read_channel(mm, c: _Chan, i0: int, i1: int, dest: np.ndarray) -> None:
+    """Samples [i0, i1) of one channel by computed offsets into ``dest``, NI-scaled when
+    its plan says so (on the stored type first, as npTDMS computes it)."""
+    if c.scaling is None:
+        tdms_index.read_runs(mm, c.runs, c.starts, i0, i1, dest)
+        return
+    tmp = np.empty(i1 - i0, dtype=c.raw_dtype.newbyteorder("="))
+    tdms_index.read_runs(mm, c.runs, c.starts, i0, i1, tmp)
+    dest[:] = c.scaling.apply(tmp)
 
-    jobs = []   # (file offset, column, dest start, count)
-    for j, name in enumerate(names):
-        starts, counts, offs = plan.chans[name].extents
-        k0 = max(0, int(np.searchsorted(starts, i0, side="right")) - 1)
-        k1 = int(np.searchsorted(starts, i1, side="left"))
-        item = plan.chans[name].raw_dtype.itemsize
-        for k in range(k0, k1):
-            s = max(int(starts[k]), i0)
-            e = min(int(starts[k] + counts[k]), i1)
-            if e > s:
-                jobs.append((int(offs[k]) + (s - int(starts[k])) * item, j, s - i0, e - s))
-    jobs.sort()
-    tmp = {}
-    for off, j, d0, cnt in jobs:
-        c = plan.chans[names[j]]
-        dest = buf[j, d0:d0 + cnt]
-        direct = c.scaling is None and c.raw_dtype == buf.dtype and c.raw_dtype.isnative
-        fh.seek(off)
-        if direct:
-            target = dest
-        else:
-            t = tmp.get(c.raw_dtype)
-            if t is None or len(t) < cnt:
-                t = tmp[c.raw_dtype] = np.empty(max(cnt, 65536), dtype=c.raw_dtype)
-            target = t[:cnt]
-        got = fh.readinto(memoryview(target).cast("B"))
-        if got != target.nbytes:
-            raise CorruptFileError(path, f"byte {off}", f"truncated: {got} of {target.nbytes} bytes of channel "
-                                                        f"{names[j]!r}")
-        if not direct:
-            if c.scaling is not None:
-                dest[:] = c.scaling.scale(RawChannelDataChunk.channel_data(target))
-            else:
-                dest[:] = target
+
+#: Samples per channel read from interleaved data before moving on to the next channel, so
+#: the rows just read are still in the CPU cache for the other channels.
+_INTERLEAVED_BLOCK = 1 << 15
+
+
+def _read_fast(mm, plan: _Plan, names, i0, i1, buf, path):
+    chans = [plan.chans[name] for name in names]
+    if all(c.scaling is None for c in chans) and tdms_index.shared_rows([c.runs for c in chans]):
+        try:   # interleaved channels side by side: all at once, through a cache-sized buffer
+            tdms_index.read_rows(mm, [c.runs for c in chans], chans[0].starts, i0, i1, buf)
+        except (TypeError, ValueError) as exc:   # a strided view past the end of the file
+            raise CorruptFileError(path, f"samples [{i0}, {i1})", f"truncated or corrupt: {exc}") from exc
+        return
+    interleaved = any(r.value_stride != r.dtype.itemsize for c in chans for r in c.runs)
+    step = _INTERLEAVED_BLOCK if interleaved and len(chans) > 1 else max(1, i1 - i0)
+    for a in range(i0, i1, step):
+        b = min(i1, a + step)
+        for j, c in enumerate(chans):
+            try:
+                _read_channel(mm, c, a, b, buf[j, a - i0:b - i0])
+            except (TypeError, ValueError) as exc:   # a strided view past the end of the file
+                raise CorruptFileError(path, f"channel {c.name!r}, samples [{a}, {b})",
+                                       f"truncated or corrupt: {exc}") from exc
 
 
 def _read_general(plan: _Plan, names, i0, i1, buf, path):
@@ -579,9 +553,9 @@ _PLAN_CACHE_SIZE = 32
 
 
 def _prepare(path, fs, raw):
-    """(path, open TdmsFile or None, plan). Plans of plain files (fast path) are cached under a
+    """(path, open TdmsFile or None, plan). Plans read by computed offsets are cached under a
     digest of the file's lead-ins and metadata, so the registry's read_info + read parse the
-    TDMS metadata once; the general path keeps the TdmsFile open for npTDMS's reader."""
+    TDMS metadata once; the read_data path keeps the TdmsFile open for npTDMS's reader."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such file")
@@ -589,10 +563,16 @@ def _prepare(path, fs, raw):
         raise TypeError(f"raw must be a bool, got {raw!r}")
     if fs is not None:
         fs = as_positive(fs, "fs")
-    n_segments, digest = _walk_segments(path)
+    index = tdms_index.scan(path)
     key = None
-    if _USE_FAST_PATH and not Path(str(path) + "_index").exists():
-        key = (os.path.realpath(path), digest, fs, bool(raw))
+    index_file = Path(str(path) + "_index")
+    if index_file.exists():
+        listed = tdms_index.count_index_segments(index_file)
+        if listed != index.n_segments:
+            raise RecordingFileError(path, f"the .tdms_index file lists {listed} segments but the file holds "
+                                           f"{index.n_segments} (stale .tdms_index file?)")
+    elif _USE_FAST_PATH:
+        key = (os.path.realpath(path), index.digest, fs, bool(raw))
         plan = _PLAN_CACHE.get(key)
         if plan is not None:
             _PLAN_CACHE.move_to_end(key)
@@ -600,18 +580,59 @@ def _prepare(path, fs, raw):
     with _nptdms_logs_as_warnings(path):     # shown only when the file passes the checks
         tdms = _open(path)
         try:
-            plan = _plan(tdms, path, n_segments, fs, bool(raw))
+            plan = _plan(tdms, path, index, fs, bool(raw))
         except BaseException:
             tdms.close()
             raise
     if plan.fast:
         tdms.close()
         tdms = None
-        if key is not None:
+        if key is not None and _PLAN_CACHE_SIZE > 0:
             _PLAN_CACHE[key] = plan
             while len(_PLAN_CACHE) > _PLAN_CACHE_SIZE:
                 _PLAN_CACHE.popitem(last=False)
     return path, tdms, plan
+
+
+def _map(stack: contextlib.ExitStack, path, plan: _Plan):
+    """The file's read-only memory map on the computed-offset path (closed with ``stack``),
+    else None."""
+    if not plan.fast:
+        return None
+    fh = stack.enter_context(open(path, "rb"))
+    return stack.enter_context(tdms_index.open_map(fh))
+
+
+@contextlib.contextmanager
+def reading_path(*, computed_offsets: bool = True, cache_plans: bool = True):
+    """Choose how TDMS files are read inside the ``with`` block (``meshphase bench io``
+    measures both ways; results are the same).
+
+    Parameters
+    ----------
+    computed_offsets : bool
+        True (default): samples by computed offsets from the segment index when the file
+        allows; False: every sample through npTDMS's public ``TdmsChannel.read_data``.
+    cache_plans : bool
+        True (default): a file's read plan (npTDMS's metadata parse, channel specs, offsets)
+        is kept for the next read of the unchanged file; False: every read builds it anew.
+    """
+    global _USE_FAST_PATH, _PLAN_CACHE_SIZE
+    for name, v in (("computed_offsets", computed_offsets), ("cache_plans", cache_plans)):
+        if not isinstance(v, (bool, np.bool_)):
+            raise TypeError(f"{name} must be a bool, got {v!r}")
+    saved = _USE_FAST_PATH, _PLAN_CACHE_SIZE, list(_PLAN_CACHE.items())
+    _USE_FAST_PATH = bool(computed_offsets)
+    if not cache_plans:
+        _PLAN_CACHE_SIZE = 0
+        _PLAN_CACHE.clear()
+    try:
+        yield
+    finally:
+        _USE_FAST_PATH, _PLAN_CACHE_SIZE, items = saved
+        if not cache_plans:
+            _PLAN_CACHE.clear()
+            _PLAN_CACHE.update(items)
 
 
 def read_info(path, *, fs: float | None = None, raw: bool = False, verify: bool = True) -> RecordingInfo:
@@ -681,8 +702,8 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *, fs: float |
         i1 = n if i1 is None else as_int(i1, "i1")
         if not 0 <= i0 <= i1 <= n:
             raise ValueError(f"{path}: sample range [{i0}, {i1}) outside the recording's [0, {n})")
-        fh = stack.enter_context(open(path, "rb"))
-        data = _read_window(fh, plan, names, i0, i1, path)
+        mm = _map(stack, path, plan)
+        data = _read_window(mm, plan, names, i0, i1, path)
     warn_nonfinite(path, data, names, i0)
     return _recording(plan, data, names, i0)
 
@@ -702,11 +723,16 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *, fs: float 
     with contextlib.ExitStack() as stack:
         if tdms is not None:
             stack.enter_context(tdms)
-        fh = stack.enter_context(open(path, "rb"))
+        mm = _map(stack, path, plan)
         names = plan.info.check_channels(channels)
         n = plan.info.n_samples
         for i0 in range(0, n, n_block):
-            i1 = min(n, i0 + n_block + n_overlap)
-            data = _read_window(fh, plan, names, i0, i1, path)
-            warn_nonfinite(path, data, names, i0)
-            yield _recording(plan, data, names, i0)
+            # no name in this frame holds the block: once the caller drops it, it is freed
+            # before the next one is read
+            yield _read_block(mm, plan, names, i0, min(n, i0 + n_block + n_overlap), path)
+
+
+def _read_block(mm, plan: _Plan, names, i0: int, i1: int, path) -> Recording:
+    data = _read_window(mm, plan, names, i0, i1, path)
+    warn_nonfinite(path, data, names, i0)
+    return _recording(plan, data, names, i0)
