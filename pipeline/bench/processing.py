@@ -394,6 +394,12 @@ def _fmt(v) -> str:
     return str(v)
 
 
+def _md_table(rows, cols) -> list:
+    """Markdown lines of a table: header ``cols``, one line per row (missing keys blank)."""
+    return (["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+            + ["| " + " | ".join(_fmt(r.get(c)) for c in cols) + " |" for r in rows])
+
+
 def _markdown(res: dict) -> str:
     lines = ["# Processing benchmark: onset timing vs the Cramer-Rao bound", "",
              f"Machine: {res['meta']['machine']}; quick={res['meta']['quick']}.", "",
@@ -401,17 +407,9 @@ def _markdown(res: dict) -> str:
              "Errors in samples, bias (a constant feature offset) removed from std; crb = RMS "
              "over pulses of the Cramer-Rao bound (known pulse, white noise, amplitude and "
              "baseline unknown).", "", "## Timing error", ""]
-    cols = ACCURACY_COLUMNS
-    lines.append("| " + " | ".join(cols) + " |")
-    lines.append("|" + "---|" * len(cols))
-    for r in res["accuracy"]:
-        lines.append("| " + " | ".join(_fmt(r[c]) for c in cols) + " |")
+    lines += _md_table(res["accuracy"], ACCURACY_COLUMNS)
     lines += ["", "## Throughput (MSamples per CPU-second; runtime_s is CPU time)", ""]
-    cols = THROUGHPUT_COLUMNS
-    lines.append("| " + " | ".join(cols) + " |")
-    lines.append("|" + "---|" * len(cols))
-    for r in res["throughput"]:
-        lines.append("| " + " | ".join(_fmt(r[c]) for c in cols) + " |")
+    lines += _md_table(res["throughput"], THROUGHPUT_COLUMNS)
     if res.get("process"):
         lines += ["", "## meshphase process: peak memory and time against recording length", "",
                   "8 channels (sun, ring, 5 face-width gauges, tacho) at 5120 Hz, float64 HDF5; "
@@ -424,11 +422,7 @@ def _markdown(res: dict) -> str:
                   "number grows with the length). Before "
                   "streaming, process peaked at ~5x the samples' size (10 min: 0.96 GB, 1 h: "
                   "5.1 GB, measured on this machine; 3 h would need ~15 GB).", ""]
-        cols = PROCESS_COLUMNS
-        lines.append("| " + " | ".join(cols) + " |")
-        lines.append("|" + "---|" * len(cols))
-        for r in res["process"]:
-            lines.append("| " + " | ".join(_fmt(r.get(c)) for c in cols) + " |")
+        lines += _md_table(res["process"], PROCESS_COLUMNS)
         for sk in res.get("process_skipped", []):
             lines.append(f"\nSkipped {sk['minutes']:g} min: {sk['reason']}")
     if res.get("identify"):
@@ -437,11 +431,7 @@ def _markdown(res: dict) -> str:
                   "offsets, every offset free); 2-point = scipy finite differences (before), "
                   "analytic = closed form (meshphase.models.phasing_jacobian). The share of a "
                   "run is identify_share in the process table.", ""]
-        cols = IDENTIFY_COLUMNS
-        lines.append("| " + " | ".join(cols) + " |")
-        lines.append("|" + "---|" * len(cols))
-        for r in res["identify"]:
-            lines.append("| " + " | ".join(_fmt(r.get(c)) for c in cols) + " |")
+        lines += _md_table(res["identify"], IDENTIFY_COLUMNS)
     if res.get("phasing"):
         from .phasing import TARGET_ABS, TARGET_FLOOR_RATIO, markdown_table, pooled_calibration
 
