@@ -36,13 +36,15 @@ from scipy.optimize import least_squares
 from .errors import ProcessingWarning
 from .models.gearset import Gearset, Speeds
 from .models.mesh_phasing import ShaftHoleErrors, ideal_phasing, mesh_angle_deviations
+from .models.phasing_jacobian import mesh_angle_gradient, n_offset_parameters
 from .phasing import PassTable, pass_order
-from .validate import as_positive, as_positive_int
+from .validate import as_choice, as_positive, as_positive_int
 
 __all__ = [
     "truth_comparison",
     "relative_speeds",
     "predict_pass_phasing",
+    "pass_phasing_jacobian",
     "wrap",
     "residual_stats",
     "band_coverage",
@@ -230,6 +232,82 @@ def predict_pass_phasing(table: PassTable, gearset: Gearset, errors: ShaftHoleEr
     engagements (tests/processing/test_compare.py): <= 1e-5 cycles with the true angles,
     the residual being second order in e / R_c.
     """
+    setup = _pass_setup(table, gearset, errors, speeds, pass_offset)
+    if setup is None:
+        return np.empty(0)
+    out = np.full(len(table), np.nan)
+    if not np.any(setup.ok):
+        return out
+    ok, sp, idx = setup.ok, setup.speeds, setup.index
+    if errors is None or errors.is_zero:
+        d_n = np.zeros(np.count_nonzero(ok))
+        d_1 = d_n
+    else:
+        # deviations of each pass's own planet at its own time, and of planet 1 at tau_1
+        which = 0 if setup.mesh == "sun" else 1
+        dn = mesh_angle_deviations(setup.tau_n[ok], gearset, sp, errors)[which]
+        d1 = mesh_angle_deviations(setup.tau_1[ok], gearset, sp, errors)[which]
+        rows = np.arange(dn.shape[-2])
+        d_n = dn[..., rows, idx[ok]]
+        d_1 = d1[..., rows, 0]
+    out[ok] = _gamma_of(setup, gearset, d_n - d_1)
+    return out
+
+
+def pass_phasing_jacobian(table: PassTable, gearset: Gearset, errors: ShaftHoleErrors | None,
+                          *, speeds: Speeds | None = None,
+                          pass_offset: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Model phasing at each measured pass and its derivative in the Cartesian offsets.
+
+    Parameters
+    ----------
+    table, gearset, errors, speeds, pass_offset
+        As :func:`predict_pass_phasing`.
+
+    Returns
+    -------
+    gamma : ndarray, shape (n_passes,)
+        Equal (bit for bit) to :func:`predict_pass_phasing` [-].
+    jac : ndarray, shape (n_passes, 4 + 2 N)
+        d gamma / d p [mesh cycles / m], p the Cartesian offsets in :data:`PARAMETER_NAMES`
+        order; NaN rows where the reference pass is unknown.
+
+    Raises
+    ------
+    TypeError, ValueError
+        As :func:`predict_pass_phasing`.
+
+    Notes
+    -----
+    gamma = frac(o Z (psi_n - psi_1 + delta_n(tau_n) - delta_1(tau_1)) / 2 pi), so away from
+    the wrap d gamma / d p = o Z (d delta_n / dp - d delta_1 / dp) / 2 pi with the closed-form
+    gradients of :func:`meshphase.models.phasing_jacobian.mesh_angle_gradient`.
+    """
+    setup = _pass_setup(table, gearset, errors, speeds, pass_offset)
+    n_par = n_offset_parameters(gearset.n_planets)
+    if setup is None:
+        return np.empty(0), np.empty((0, n_par))
+    return _gamma_and_jacobian(setup, gearset, errors)
+
+
+@dataclass(frozen=True)
+class _PassSetup:
+    """What the model needs of a pass table besides the errors: the gauge's sense ``o`` and
+    tooth count ``z``, the mesh, the relative speeds, the angle times [s] of each pass and of
+    its reference pass, the 0-based planet index and which rows have both times."""
+
+    o: float
+    z: int
+    mesh: str
+    speeds: Speeds
+    tau_n: np.ndarray
+    tau_1: np.ndarray
+    index: np.ndarray
+    ok: np.ndarray
+
+
+def _pass_setup(table, gearset, errors, speeds, pass_offset) -> _PassSetup | None:
+    """The checked, error-independent part of :func:`predict_pass_phasing` (None: no passes)."""
     if not isinstance(table, PassTable):
         raise TypeError(f"table must be a PassTable, got {type(table).__name__}")
     if not isinstance(gearset, Gearset):
@@ -238,9 +316,8 @@ def predict_pass_phasing(table: PassTable, gearset: Gearset, errors: ShaftHoleEr
         raise TypeError(f"errors must be a ShaftHoleErrors or None, got {type(errors).__name__}")
     if speeds is not None and not isinstance(speeds, Speeds):
         raise TypeError(f"speeds must be a Speeds or None, got {type(speeds).__name__}")
-    n = len(table)
-    if n == 0:
-        return np.empty(0)
+    if len(table) == 0:
+        return None
     gauge = table.gauge
     o = pass_order(gearset.direction, gauge)  # ValueError for a gauge other than sun/ring
     z = gearset.z_sun if gauge == "sun" else gearset.z_ring
@@ -260,27 +337,36 @@ def predict_pass_phasing(table: PassTable, gearset: Gearset, errors: ShaftHoleEr
     if pass_offset:
         back = TWO_PI * float(pass_offset) / (z * w_gauge)     # [s] of angle time
         tau_n, tau_1 = tau_n - back, tau_1 - back
-    psi = gearset.angles
     idx = table.planet - 1
-    out = np.full(n, np.nan)
     ok = np.isfinite(tau_1) & np.isfinite(tau_n)
+    return _PassSetup(o, z, gauge, sp, tau_n, tau_1, idx, ok)
+
+
+def _gamma_of(setup: _PassSetup, gearset: Gearset, d_lag: np.ndarray) -> np.ndarray:
+    """frac(o Z lag / 2 pi) of the rows ``setup.ok``, lag = psi_n - psi_1 + ``d_lag`` [rad]."""
+    psi = gearset.angles
+    lag = (psi[setup.index[setup.ok]] - psi[0]) + d_lag
+    g = (setup.o * setup.z * lag / TWO_PI) % 1.0
+    return np.where(g >= 1.0, 0.0, g)  # x % 1.0 rounds to 1.0 for x = -tiny
+
+
+def _gamma_and_jacobian(setup: _PassSetup, gearset: Gearset, errors) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`pass_phasing_jacobian` on a prepared table."""
+    n = setup.ok.size
+    gamma = np.full(n, np.nan)
+    jac = np.full((n, n_offset_parameters(gearset.n_planets)), np.nan)
+    ok = setup.ok
     if not np.any(ok):
-        return out
-    which = 0 if gauge == "sun" else 1
-    if errors is None or errors.is_zero:
-        d_n = np.zeros(np.count_nonzero(ok))
-        d_1 = d_n
-    else:
-        # deviations of each pass's own planet at its own time, and of planet 1 at tau_1
-        dn = mesh_angle_deviations(tau_n[ok], gearset, sp, errors)[which]
-        d1 = mesh_angle_deviations(tau_1[ok], gearset, sp, errors)[which]
-        rows = np.arange(dn.shape[-2])
-        d_n = dn[..., rows, idx[ok]]
-        d_1 = d1[..., rows, 0]
-    lag = (psi[idx[ok]] - psi[0]) + (d_n - d_1)
-    g = (o * z * lag / TWO_PI) % 1.0
-    out[ok] = np.where(g >= 1.0, 0.0, g)  # x % 1.0 rounds to 1.0 for x = -tiny
-    return out
+        return gamma, jac
+    d_n, j_n = mesh_angle_gradient(setup.tau_n[ok], setup.index[ok] + 1, gearset, setup.speeds,
+                                   errors, mesh=setup.mesh)
+    d_1, j_1 = mesh_angle_gradient(setup.tau_1[ok], 1, gearset, setup.speeds, errors,
+                                   mesh=setup.mesh)
+    if errors is None or errors.is_zero:     # as predict_pass_phasing: exactly the ideal
+        d_n = d_1 = np.zeros(np.count_nonzero(ok))
+    gamma[ok] = _gamma_of(setup, gearset, d_n - d_1)
+    jac[ok] = (setup.o * setup.z / TWO_PI) * (j_n - j_1)
+    return gamma, jac
 
 
 def residual_stats(measured, predicted, planets=None) -> dict:
@@ -411,6 +497,9 @@ class Identification:
         Residual standard deviation after the fit [mesh cycles] (scales the covariance).
     n_passes, n_parameters : int
     cost_evaluations : int
+        Model evaluations (with the analytic Jacobian each gives the Jacobian too).
+    jacobian_evaluations : int
+        Jacobians the solver used (``scipy.optimize.OptimizeResult.njev``).
     wall_time : float [s]
     identifiable : bool
         All requested parameters identifiable.
@@ -435,6 +524,7 @@ class Identification:
     notes: list = field(default_factory=list)
     projector: np.ndarray | None = None
     free: np.ndarray | None = None
+    jacobian_evaluations: int = 0
 
     def subspace_error(self, true_errors: ShaftHoleErrors) -> float:
         """Distance [m] between the estimate and ``true_errors`` inside the identifiable
@@ -452,9 +542,14 @@ class Identification:
 PASS_OFFSET_STD = 0.05
 
 
+#: Jacobian options of :func:`identify_errors`: closed form, or scipy's finite differences
+JACOBIANS = ("analytic", "2-point", "3-point")
+
+
 def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet"),
                     rcond: float = 1e-2, max_nfev: int = 200,
-                    pass_offset_std: float = PASS_OFFSET_STD) -> Identification:
+                    pass_offset_std: float = PASS_OFFSET_STD,
+                    jac: str = "analytic") -> Identification:
     """Identify shaft hole errors (e, kappa per gear) from measured phasing time series.
 
     Weighted nonlinear least squares (scipy.optimize.least_squares, trust region) of the
@@ -483,15 +578,25 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
         identified angle a little; its effect on the parameters (their sensitivity to a
         common shift of all passes, by finite differences) enters their covariance as a
         systematic term. 0: the pass times are taken as the engagement instants.
+    jac : {"analytic", "2-point", "3-point"}
+        Jacobian of the residuals: closed form (:func:`pass_phasing_jacobian`; one model
+        evaluation gives residuals and Jacobian together), or scipy's finite differences
+        (``diff_step`` 1e-6; 1 + P or 1 + 2P evaluations per Jacobian), kept as the
+        reference and fallback. Both reach the same solution within the solver's
+        tolerances (tests/processing/test_identify_jacobian.py).
 
     Returns
     -------
     Identification
+        ``cost_evaluations`` counts model evaluations of every kind (with
+        ``jac="analytic"`` each yields the Jacobian too); ``jacobian_evaluations`` the
+        Jacobians the solver asked for.
     """
     t_start = time.perf_counter()
     tables, gears = _identify_inputs(tables, gearset, gears)
     rcond = as_positive(rcond, "rcond")
     max_nfev = as_positive_int(max_nfev, "max_nfev")
+    jac = as_choice(jac, "jac", JACOBIANS)
     n_pl = gearset.n_planets
     names = PARAMETER_NAMES(n_pl)
     free = np.array([(n.split("_")[0].rstrip("0123456789") in gears) for n in names])
@@ -501,13 +606,13 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
         return Identification(ShaftHoleErrors(), [], {}, np.empty(0), float("nan"), float("nan"),
                               float("nan"), 0, int(free.sum()), 0, 0.0, False,
                               ["no measured passes"])
-    fit = _PhasingFit(tables, gearset, free)
+    fit = _PhasingFit(tables, gearset, free, analytic=jac == "analytic")
     x0 = np.zeros(int(free.sum()))
     # offsets are small against the carrier radius: bound each component to 5 % of R_c so the
     # flat (unidentifiable) directions cannot wander to geometrically impossible layouts
     bound = 0.05 * gearset.carrier_radius / fit.scale
-    sol = least_squares(fit.resid, x0, method="trf", x_scale=1.0, diff_step=1e-6,
-                        max_nfev=max_nfev, bounds=(-bound, bound))
+    sol = least_squares(fit.resid, x0, jac=fit.jac if jac == "analytic" else jac, method="trf",
+                        x_scale=1.0, diff_step=1e-6, max_nfev=max_nfev, bounds=(-bound, bound))
     U, s, Vt = np.linalg.svd(sol.jac, full_matrices=False)
     keep = s > rcond * (s[0] if s.size and s[0] > 0 else 1.0)
     ident = np.sum(Vt[keep] ** 2, axis=0) > 0.95               # resolution of each parameter
@@ -537,6 +642,7 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
         rms_after=float(np.sqrt(np.mean(r1[ok] ** 2))) if ok.any() else float("nan"),
         sigma=float(np.std(r1[ok])) if ok.any() else float("nan"), n_passes=int(ok.sum()),
         n_parameters=int(free.sum()), cost_evaluations=fit.n_eval,
+        jacobian_evaluations=int(sol.njev) if sol.njev is not None else 0,
         wall_time=time.perf_counter() - t_start,
         identifiable=bool(np.all(ident)), notes=notes, projector=Vk @ Vk.T, free=free)
 
@@ -565,10 +671,14 @@ def _identify_inputs(tables, gearset, gears) -> tuple[list, tuple]:
 class _PhasingFit:
     """The weighted residuals of :func:`identify_errors`: measured phasing of the passes of
     ``tables`` against :func:`predict_pass_phasing` with the ``free`` Cartesian offset
-    parameters (scaled by ``scale`` [m]); counts the model evaluations."""
+    parameters (scaled by ``scale`` [m]); counts the model evaluations. With ``analytic``
+    each evaluation also gives the Jacobian (:func:`pass_phasing_jacobian`), kept for the
+    :meth:`jac` call that follows at the same point."""
 
-    def __init__(self, tables: list, gearset: Gearset, free: np.ndarray):
+    def __init__(self, tables: list, gearset: Gearset, free: np.ndarray, *, analytic: bool = False):
         self.tables, self.gearset, self.free = tables, gearset, free
+        self.analytic = analytic
+        self._last = (None, None)      # (parameter bytes, Jacobian) of the last evaluation
         self.n_pl = gearset.n_planets
         self.speeds = {id(t): _table_speeds(t, gearset) for t in tables}
         self.meas = np.concatenate([t.gamma for t in tables])
@@ -586,19 +696,39 @@ class _PhasingFit:
         self.w = np.where(np.isfinite(w), w, np.nanmedian(w))
         self.scale = 1e-4 * gearset.carrier_radius  # parameter scale ~ a typical offset [m]
         self.n_eval = 0
+        # the error-independent part of every model evaluation, prepared once
+        self.setups = [_pass_setup(t, gearset, None, self.speeds[id(t)], 0.0) for t in tables]
 
     def _predict(self, p_free, pass_offset: float = 0.0) -> np.ndarray:
-        p = np.zeros(self.free.size)
-        p[self.free] = p_free * self.scale
-        err = _errors_from_vector(p, self.n_pl)
+        err = self._errors(p_free)
         return np.concatenate([predict_pass_phasing(t, self.gearset, err, speeds=self.speeds[id(t)],
                                                     pass_offset=pass_offset)
                                for t in self.tables])
 
+    def _errors(self, p_free) -> ShaftHoleErrors:
+        p = np.zeros(self.free.size)
+        p[self.free] = p_free * self.scale
+        return _errors_from_vector(p, self.n_pl)
+
     def model(self, p_free) -> np.ndarray:
         """Predicted phasing of every pass [mesh cycles] (one model evaluation)."""
         self.n_eval += 1
-        return self._predict(p_free)
+        if not self.analytic:
+            return self._predict(p_free)
+        err = self._errors(p_free)
+        parts = [_gamma_and_jacobian(s, self.gearset, err) for s in self.setups]
+        J = np.concatenate([j for _, j in parts])[:, self.free] * self.scale
+        self._last = (np.asarray(p_free, dtype=float).tobytes(), J)
+        return np.concatenate([g for g, _ in parts])
+
+    def jac(self, p_free) -> np.ndarray:
+        """Jacobian of :meth:`resid` in the scaled free parameters (rows 0 where the
+        measurement is not finite); reuses the evaluation at the same point."""
+        key = np.asarray(p_free, dtype=float).tobytes()
+        if self._last[0] != key:
+            self.model(p_free)
+        J = -self.w[:, None] * self._last[1]
+        return np.where(self.ok[:, None], J, 0.0)
 
     def resid(self, p_free) -> np.ndarray:
         """Weighted wrapped residuals (0 where the measurement is not finite)."""

@@ -58,8 +58,8 @@ from ..validate import as_float, as_nonnegative, as_positive
 from .rss import child_env
 
 __all__ = ["PulseShape", "pulse_train", "pulse_scenario", "match_onsets", "run_processing_bench",
-           "process_rss_rows", "ACCURACY_COLUMNS", "THROUGHPUT_COLUMNS", "PROCESS_COLUMNS",
-           "PROCESS_MINUTES"]
+           "process_rss_rows", "identify_rows", "ACCURACY_COLUMNS", "THROUGHPUT_COLUMNS",
+           "PROCESS_COLUMNS", "PROCESS_MINUTES", "IDENTIFY_COLUMNS"]
 
 #: Columns of the accuracy table (processing_bench.json "accuracy", and the Markdown).
 ACCURACY_COLUMNS = ("scenario", "setting", "snr_db", "fwhm_samples", "n_true", "n_matched",
@@ -72,7 +72,8 @@ THROUGHPUT_COLUMNS = ("stage", "scenario", "n_samples", "n_pulses", "runtime_s",
 PROCESS_COLUMNS = ("minutes", "n_channels", "n_samples", "data_mb", "status", "n_onsets",
                    "wall_s", "peak_rss_mb", "streamed_peak_mb", "rss_over_data",
                    "memory_estimate_mb", "load_s",
-                   "condition_s", "onsets_s", "phasing_s", "other_s", "sosfiltfilt_s",
+                   "condition_s", "onsets_s", "phasing_s", "identify_s", "identify_share",
+                   "other_s", "sosfiltfilt_s",
                    "wall_over_sosfiltfilt", "streamed_over_sosfiltfilt")
 #: Recording lengths of ``meshphase bench processing``'s process table [min].
 PROCESS_MINUTES = (2.0, 10.0, 60.0, 180.0)
@@ -401,6 +402,12 @@ def _fmt(v) -> str:
     return str(v)
 
 
+def _md_table(rows, cols) -> list:
+    """Markdown lines of a table: header ``cols``, one line per row (missing keys blank)."""
+    return (["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+            + ["| " + " | ".join(_fmt(r.get(c)) for c in cols) + " |" for r in rows])
+
+
 def _markdown(res: dict) -> str:
     lines = ["# Processing benchmark: onset timing vs the Cramer-Rao bound", "",
              f"Machine: {res['meta']['machine']}; quick={res['meta']['quick']}.", "",
@@ -408,17 +415,9 @@ def _markdown(res: dict) -> str:
              "Errors in samples, bias (a constant feature offset) removed from std; crb = RMS "
              "over pulses of the Cramer-Rao bound (known pulse, white noise, amplitude and "
              "baseline unknown).", "", "## Timing error", ""]
-    cols = ACCURACY_COLUMNS
-    lines.append("| " + " | ".join(cols) + " |")
-    lines.append("|" + "---|" * len(cols))
-    for r in res["accuracy"]:
-        lines.append("| " + " | ".join(_fmt(r[c]) for c in cols) + " |")
+    lines += _md_table(res["accuracy"], ACCURACY_COLUMNS)
     lines += ["", "## Throughput (MSamples per CPU-second; runtime_s is CPU time)", ""]
-    cols = THROUGHPUT_COLUMNS
-    lines.append("| " + " | ".join(cols) + " |")
-    lines.append("|" + "---|" * len(cols))
-    for r in res["throughput"]:
-        lines.append("| " + " | ".join(_fmt(r[c]) for c in cols) + " |")
+    lines += _md_table(res["throughput"], THROUGHPUT_COLUMNS)
     if res.get("process"):
         lines += ["", "## meshphase process: peak memory and time against recording length", "",
                   "8 channels (sun, ring, 5 face-width gauges, tacho) at 5120 Hz, float64 HDF5; "
@@ -431,13 +430,16 @@ def _markdown(res: dict) -> str:
                   "number grows with the length). Before "
                   "streaming, process peaked at ~5x the samples' size (10 min: 0.96 GB, 1 h: "
                   "5.1 GB, measured on this machine; 3 h would need ~15 GB).", ""]
-        cols = PROCESS_COLUMNS
-        lines.append("| " + " | ".join(cols) + " |")
-        lines.append("|" + "---|" * len(cols))
-        for r in res["process"]:
-            lines.append("| " + " | ".join(_fmt(r.get(c)) for c in cols) + " |")
+        lines += _md_table(res["process"], PROCESS_COLUMNS)
         for sk in res.get("process_skipped", []):
             lines.append(f"\nSkipped {sk['minutes']:g} min: {sk['reason']}")
+    if res.get("identify"):
+        lines += ["", "## identify: model evaluations and wall time per Jacobian", "",
+                  "identify_errors on the exact passes of the bench rig (Table 2 case 1 "
+                  "offsets, every offset free); 2-point = scipy finite differences (before), "
+                  "analytic = closed form (meshphase.models.phasing_jacobian). The share of a "
+                  "run is identify_share in the process table.", ""]
+        lines += _md_table(res["identify"], IDENTIFY_COLUMNS)
     if res.get("phasing"):
         from .phasing import TARGET_ABS, TARGET_FLOOR_RATIO, markdown_table, pooled_calibration
 
@@ -497,6 +499,8 @@ def process_rss_rows(work, minutes, *, seed: int = 1) -> tuple[list, list, float
                      "memory_estimate_mb": r.get("memory_estimate_mb"),
                      "load_s": t.get("load"), "condition_s": t.get("condition"),
                      "onsets_s": r.get("onsets_s"), "phasing_s": t.get("phasing"),
+                     "identify_s": t.get("identify"),
+                     "identify_share": (t.get("identify") or 0.0) / r["wall_s"],
                      "other_s": sum(v for k, v in t.items()
                                     if k not in ("load", "condition", "onsets", "phasing")),
                      "sosfiltfilt_s": ref, "wall_over_sosfiltfilt": r["wall_s"] / ref,
@@ -508,6 +512,49 @@ def process_rss_rows(work, minutes, *, seed: int = 1) -> tuple[list, list, float
 
         shutil.rmtree(work / f"process_{m:g}-out", ignore_errors=True)
     return rows, skipped, rate
+
+
+#: Columns of the identification table (processing_bench.json "identify").
+IDENTIFY_COLUMNS = ("minutes", "jac", "n_passes", "evaluations", "jacobians", "wall_s",
+                    "rms_after")
+
+
+def identify_rows(minutes=(10.0,), *, jacs=("2-point", "analytic")) -> list:
+    """Evaluations and wall time of :func:`meshphase.compare.identify_errors` per Jacobian.
+
+    The passes are the exact engagements (:func:`meshphase.synthetic.kinematics.engagement_events`)
+    of the benchmark rig (:data:`meshphase.bench.rss.BENCH_GEARSET`, Z_p 31, sun 18.19 and
+    carrier 1.06 r/min) with seed 000 Table 2 case 1 offsets (0.2 mm, sun and ring gauges),
+    through :func:`meshphase.phasing.measured_phasing`, every offset free: what the identify
+    stage of a run of that length fits. Rows: :data:`IDENTIFY_COLUMNS`.
+    """
+    from ..compare import identify_errors
+    from ..models.gearset import Gearset, Speeds
+    from ..models.mesh_phasing import ShaftHoleErrors
+    from ..phasing import measured_phasing
+    from ..synthetic.kinematics import engagement_events
+
+    g = Gearset.equally_spaced(25, 87, 31, 4, 112.5e-3)
+    sp = Speeds.kinematic(g, sun=18.19 * math.pi / 30.0, carrier=1.06 * math.pi / 30.0)
+    err = ShaftHoleErrors.from_mm_deg(e_sun=0.2, kappa_sun=4.0, e_ring=0.2, kappa_ring=60.0,
+                                      e_planet=0.2, kappa_planet=20.0)
+    rows = []
+    for m in minutes:
+        m = as_positive(m, "minutes")
+        tables = []
+        for gear, z in (("sun", 25), ("ring", 87)):
+            ev = engagement_events(g, sp, gear, -0.02, 0.0, 60.0 * m, errors=err)
+            tables.append(measured_phasing(ev.time, ev.planet - 1, z, 4, gauge=gear, z_planet=31))
+        for jac in jacs:
+            t0 = time.perf_counter()
+            res = identify_errors(tables, g, jac=jac)
+            rows.append({"minutes": m, "jac": jac, "n_passes": res.n_passes,
+                         "evaluations": res.cost_evaluations,
+                         "jacobians": res.jacobian_evaluations,
+                         "wall_s": time.perf_counter() - t0, "rms_after": res.rms_after})
+            logger.info("processing bench: identify %g min, jac %s: %d evaluations, %.2f s", m,
+                        jac, res.cost_evaluations, rows[-1]["wall_s"])
+    return rows
 
 
 _THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
@@ -597,7 +644,8 @@ def _run(out_dir, quick: bool, rng, process_minutes=()) -> dict:
     from .phasing import matrix_cases, phasing_rows
 
     phs = phasing_rows(matrix_cases(quick))
-    res = {"accuracy": acc, "throughput": thr, "phasing": phs, "process": proc,
+    ident = identify_rows((2.0,) if quick else (10.0, 60.0))
+    res = {"accuracy": acc, "throughput": thr, "phasing": phs, "process": proc, "identify": ident,
            "process_skipped": proc_skipped,
            "meta": {"machine": f"{platform.machine()} {platform.processor() or ''} "
                                f"python {platform.python_version()}".strip(),
