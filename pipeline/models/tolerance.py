@@ -44,7 +44,6 @@ from fractions import Fraction
 
 import numpy as np
 from scipy import special
-from scipy.stats import qmc
 
 from ..errors import ModelWarning
 from ..log import logger
@@ -74,6 +73,7 @@ __all__ = [
     "ALL_STATISTICS",
     "WINDOW_KINDS",
     "SAMPLERS",
+    "METHODS",
 ]
 
 #: Statistics relative to planet 1 (planet 1 is 0 by construction).
@@ -83,6 +83,8 @@ ABSOLUTE_STATISTICS = ("ave_s_abs", "dev_s_abs", "ave_r_abs", "dev_r_abs")
 ALL_STATISTICS = STATISTICS + ABSOLUTE_STATISTICS
 WINDOW_KINDS = ("slowest-offset", "fastest-offset", "common-period")
 SAMPLERS = ("random", "sobol")
+#: Estimators of :func:`monte_carlo`.
+METHODS = ("plain", "cv")
 #: Quantile levels reported by default; the first and last are the two-sided 3-sigma levels
 #: Phi(-3) and Phi(3) of a normal distribution.
 DEFAULT_QUANTILES = (float(special.ndtr(-3.0)), 0.025, 0.5, 0.975, float(special.ndtr(3.0)))
@@ -524,13 +526,24 @@ class Tolerances:
 
 def _map_samples(u, tol, n_planets):
     """Unit-cube points u (B, d) -> flat error arrays (es, ks, er, kr, ep, kp)."""
-    bsz = u.shape[0]
+    rand = [band for _, _, band in tol.columns(n_planets) if band.is_random]
+    values = np.empty(u.shape[:1] + (len(rand),))
+    for j, band in enumerate(rand):
+        values[:, j] = band.ppf(u[:, j])
+    return _map_values(values, tol, n_planets)
+
+
+def _map_values(values, tol, n_planets):
+    """Values (B, d) of the random parameters (sampling order, signed radial errors [m],
+    angles [rad]) -> flat error arrays (es, ks, er, kr, ep, kp), fixed parameters at their
+    means, negative radial errors as |e| with the angle turned by pi."""
+    bsz = values.shape[0]
     vals = {}
     j = 0
     pl = {"e_planet": np.empty((bsz, n_planets)), "kappa_planet": np.empty((bsz, n_planets))}
     for name, n, band in tol.columns(n_planets):
         if band.is_random:
-            v = band.ppf(u[:, j])
+            v = np.array(values[:, j], dtype=float)
             j += 1
         else:
             v = np.full(bsz, band.mean)
@@ -637,6 +650,12 @@ class MonteCarloResult:
         (n_samples, N) when kept.
     exact_quantiles : bool
         False when the quantiles and histograms come from the bounded-memory fine histograms.
+    method : str
+        "plain" (every summary from the samples) or "cv" (control variate about the
+        linearised model, :mod:`meshphase.models.tolerance_cv`).
+    n_evaluations : int or None
+        Full-model evaluations of a "cv" run (paired points plus tail directions) [-];
+        None for "plain" (equal to ``n_samples``).
     """
 
     ave_s: StatSummary
@@ -657,6 +676,8 @@ class MonteCarloResult:
     dev_s_abs: StatSummary | None = None
     ave_r_abs: StatSummary | None = None
     dev_r_abs: StatSummary | None = None
+    method: str = "plain"
+    n_evaluations: int | None = None
 
     def stat(self, name: str) -> StatSummary:
         """The summary of ``name`` in :data:`ALL_STATISTICS` ("ave_s" ... "dev_r_abs")."""
@@ -684,7 +705,9 @@ class MonteCarloResult:
             "n_samples": self.n_samples, "sampler": self.sampler, "window": self.window.to_dict(),
             "n_times": self.n_times, "replicates": self.replicates, "engine": self.engine,
             "wall_time": self.wall_time, "tolerances": self.tolerances.to_dict(),
-            "exact_quantiles": self.exact_quantiles,
+            "exact_quantiles": self.exact_quantiles, "method": self.method,
+            "n_evaluations": (self.n_samples if self.n_evaluations is None
+                              else self.n_evaluations),
         }
         for s in ALL_STATISTICS:
             if getattr(self, s) is not None:
@@ -836,7 +859,8 @@ def monte_carlo(gearset: Gearset, speeds: Speeds, tolerances: Tolerances, window
                 batch_size: int = 8192, rng=None, replicates: int = 8,
                 quantile_levels=DEFAULT_QUANTILES, bins: int = 64, engine: str = "auto",
                 points_per_rev: int = 64, max_memory: float = 256 * 2 ** 20,
-                keep_samples: bool | None = None, progress=None) -> MonteCarloResult:
+                keep_samples: bool | None = None, progress=None, method: str = "plain",
+                tail_directions: int = 8) -> MonteCarloResult:
     """Monte Carlo of Ave_jn / Dev_jn over tolerance bands of the shaft hole position errors.
 
     Parameters
@@ -879,6 +903,16 @@ def monte_carlo(gearset: Gearset, speeds: Speeds, tolerances: Tolerances, window
         Force keeping (True) or not keeping (False) the per-sample arrays.
     progress : callable, optional
         Called as ``progress(done, total)`` after each batch.
+    method : {"plain", "cv"}
+        "plain" (default): every summary from the ``n_samples`` samples of ``sampler``.
+        "cv": control variate about the analytic first-order (linearised) distribution,
+        randomised Sobol for the correction and directional sampling for the 3-sigma bounds
+        (:func:`meshphase.models.tolerance_cv.monte_carlo_cv`; needs normal radial bands with
+        zero mean and fixed angles; ``sampler``, ``batch_size``, ``max_memory`` and
+        ``keep_samples`` do not apply, the paired samples are kept). Same accuracy for a
+        fraction of the samples: ``meshphase bench models`` reports error against time.
+    tail_directions : int
+        "cv" only: directions per replicate and per 3-sigma bound [-].
 
     Returns
     -------
@@ -896,6 +930,14 @@ def monte_carlo(gearset: Gearset, speeds: Speeds, tolerances: Tolerances, window
     (``_unit_draws``), the batched evaluation (``_run_batches``) and the summaries here; the
     Sobol balance warning stays here so that it points at the caller.
     """
+    method = as_choice(method, "method", METHODS)
+    if method == "cv":
+        from .tolerance_cv import monte_carlo_cv
+        return monte_carlo_cv(gearset, speeds, tolerances, window, n_samples,
+                              tail_directions=tail_directions, n_times=n_times, rng=rng,
+                              replicates=replicates, quantile_levels=quantile_levels,
+                              bins=bins, engine=engine, points_per_rev=points_per_rev,
+                              progress=progress)
     t_start = time.perf_counter()
     g, sp, win, n, sampler, n_t, bs, reps, bins, levels, max_memory, eng = _mc_inputs(
         gearset, speeds, tolerances, window, n_samples, sampler, n_times, batch_size,
@@ -968,6 +1010,7 @@ def _unit_draws(sampler, gen, d, reps):
     """draw(r, m, first) -> (m, d) unit-cube points of replicate r (its first batch: first)."""
     if sampler == "random":
         return lambda r, m, first: gen.random((m, d))
+    from scipy.stats import qmc   # lazy: the core import does not load scipy.stats
     engines = [qmc.Sobol(max(d, 1), scramble=True, rng=child) for child in gen.spawn(reps)]
 
     def draw(r, m, first):
