@@ -59,7 +59,8 @@ def _sobol_normals(gen, d, reps, m):
     from scipy.stats import qmc   # lazy: the core import does not load scipy.stats
     out = np.empty((reps, m, d))
     for r, child in enumerate(gen.spawn(reps)):
-        u = qmc.Sobol(max(d, 1), scramble=True, rng=child).random(m)[:, :d]
+        m2 = 1 << max(0, int(m - 1).bit_length())          # balanced draw, then the first m
+        u = qmc.Sobol(max(d, 1), scramble=True, rng=child).random(m2)[:m, :d]
         out[r] = special.ndtri(np.clip(u, 2.0 ** -53, 1.0 - 2.0 ** -53))
     return out
 
@@ -290,8 +291,9 @@ def monte_carlo_cv(gearset, speeds, tolerances, window, n_samples: int = 512, *,
     gen = np.random.default_rng(rng)
     g_mom, g_tail = gen.spawn(2)
     z = _sobol_normals(g_mom, d, reps, m)                    # (R, m, d)
-    y = _full(grid, lin, tolerances, z.reshape(-1, d), eng).reshape(8, reps, m, n_p)
-    y_l = lin.statistics(z.reshape(-1, d)).reshape(8, reps, m, n_p)
+    zf = z.reshape(reps * m, d)
+    y = _full(grid, lin, tolerances, zf, eng).reshape(8, reps, m, n_p)
+    y_l = lin.statistics(zf).reshape(8, reps, m, n_p)
     if progress is not None:
         progress(reps * m, reps * m)
     m2_l = surr_std ** 2 + surr_mean ** 2

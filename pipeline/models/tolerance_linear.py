@@ -42,7 +42,8 @@ from scipy import special
 from ..validate import as_finite_array
 from ._geometry import check_gearset, check_speeds
 
-__all__ = ["LinearisedDeviation", "linearised_deviation", "SERIES"]
+__all__ = ["LinearisedDeviation", "linearised_deviation", "SERIES", "chi_sf", "chi_pdf",
+           "chi_mean", "exceedance", "solve_level"]
 
 #: Deviation series, in the order of the statistics pairs of
 #: :data:`meshphase.models.tolerance.ALL_STATISTICS` (series i gives statistics 2i (Ave) and
@@ -104,7 +105,7 @@ class LinearisedDeviation:
             raise ValueError(f"z must have {self.n_random} columns, got shape {z.shape}")
         n_s, (n_g, n_p, n_t) = z.shape[0], self.d0.shape
         out = np.empty((8, n_s, n_p))
-        mat = np.ascontiguousarray(self.scaled.reshape(-1, self.n_random).T)  # (d, 4 N n_t)
+        mat = np.ascontiguousarray(self.scaled.reshape(self.d0.size, self.n_random).T)  # (d, 4Nn_t)
         d0 = self.d0.reshape(-1)
         step = max(1, (1 << 20) // max(1, d0.size))
         for a in range(0, n_s, step):
@@ -240,8 +241,29 @@ def linearised_deviation(gearset, speeds, tolerances, window, n_times: int | Non
     return LinearisedDeviation(grid.t, d0, jac, mean, sigma, tuple(rand))
 
 
+def _check_k(k):
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
+        raise ValueError(f"k (degrees of freedom) must be a positive integer, got {k!r}")
+    return int(k)
+
+
+def _check_rho(alpha, rho, weights):
+    rho = np.asarray(rho, dtype=float)
+    if rho.ndim == 0 or rho.shape[-1] == 0:
+        raise ValueError(f"rho must have at least one direction (last axis), got {rho.shape}")
+    w = np.asarray(weights, dtype=float)
+    if w.shape not in ((), rho.shape[-1:]) or np.any(w < 0) or not np.all(np.isfinite(rho)):
+        raise ValueError("weights must be >= 0 with one per direction and rho finite")
+    if alpha is not None:
+        a = np.asarray(alpha, dtype=float)
+        if np.any(~(a > 0.0)) or np.any(~(a < 1.0)):
+            raise ValueError(f"alpha must lie in (0, 1), got {a.tolist()}")
+    return rho, w
+
+
 def chi_sf(x, k: int):
     """P(chi_k > x) for x >= 0 [-] (k = 1, 2 in closed form)."""
+    k = _check_k(k)
     x = np.asarray(x, dtype=float)
     if k == 2:
         return np.exp(-0.5 * x * x)
@@ -252,6 +274,7 @@ def chi_sf(x, k: int):
 
 def chi_mean(k: int) -> float:
     """E[chi_k] = sqrt(2) Gamma((k + 1) / 2) / Gamma(k / 2) [-]."""
+    k = _check_k(k)
     return math.sqrt(2.0) * math.exp(math.lgamma(0.5 * (k + 1)) - math.lgamma(0.5 * k))
 
 
@@ -260,12 +283,14 @@ def exceedance(q, rho, weights, k: int):
 
     ``q`` has shape (L,) (or broadcasts against rho's leading axes); rho (..., M).
     """
-    return _exceedance_and_slope(np.asarray(q, dtype=float), np.asarray(rho, dtype=float),
-                                 weights, k)[0]
+    k = _check_k(k)
+    rho, w = _check_rho(None, rho, weights)
+    return _exceedance_and_slope(np.asarray(q, dtype=float), rho, w, k)[0]
 
 
 def chi_pdf(x, k: int):
     """Density of chi_k at x >= 0 [-]."""
+    k = _check_k(k)
     x = np.asarray(x, dtype=float)
     c = (1.0 - 0.5 * k) * math.log(2.0) - math.lgamma(0.5 * k)
     with np.errstate(divide="ignore"):
@@ -303,8 +328,9 @@ def solve_level(alpha, rho, weights, k: int, start=None, iters: int = 100,
     (P(chi_k > r_max) < 1e-300). ``alpha`` shape (L,) or broadcasting against rho's
     leading axes; rho (..., M); ``start`` an initial guess of the shape of the result.
     """
+    k = _check_k(k)
+    rho, weights = _check_rho(alpha, rho, weights)
     alpha = np.asarray(alpha, dtype=float)
-    rho = np.asarray(rho, dtype=float)
     flip = alpha > 0.5
     if np.any(flip):
         # P(r rho > q) = alpha  <=>  P(r (-rho) > -q) = 1 - alpha: Newton on the log of the
