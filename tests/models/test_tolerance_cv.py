@@ -258,3 +258,14 @@ def test_monte_carlo_cv_empty_and_bad_inputs(case3):
         monte_carlo_cv(g, sp, Tolerances(e_sun=ToleranceBand(1e-4, 1e-4)), win, 16)
     with pytest.warns(ModelWarning, match="powers of 2"):
         monte_carlo_cv(g, sp, tol, win, 24, replicates=2, tail_directions=2)
+
+
+def test_tolerance_import_does_not_load_scipy_stats():
+    import subprocess
+    import sys
+    code = ("import sys, meshphase.models.tolerance, meshphase.models.tolerance_cv, "
+            "meshphase.models.tolerance_linear; "
+            "print(any(m.startswith('scipy.stats') for m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "False"
