@@ -58,6 +58,8 @@ ESTIMATOR_COLUMNS = ("method", "samples", "evaluations", "wall_s", "err_mean_std
 ESTIMATORS = (("plain", "random", 10000, None), ("plain", "random", 100000, None),
               ("plain", "sobol", 32768, None), ("cv", "sobol", 256, 8), ("cv", "sobol", 512, 8),
               ("cv", "sobol", 2048, 16), ("cv", "sobol", 8192, 32))
+#: Rows of the estimator table in a quick run.
+QUICK_ESTIMATORS = (("plain", "random", 4096, None), ("cv", "sobol", 256, 8))
 CASE3_NAME = "seed000 Table 2 case 3 (angles given)"
 
 
@@ -326,11 +328,10 @@ def _estimator_table(case, out: Path, ref_n: int, quick: bool) -> dict:
     stats = [s for s in ALL_STATISTICS
              if np.max(np.asarray(ref["values"]["std"][s]), initial=0.0) > 1e-12]
     rows = []
-    specs = ESTIMATORS[:1] + ESTIMATORS[3:5] if quick else ESTIMATORS
+    specs = QUICK_ESTIMATORS if quick else ESTIMATORS
     with _Threads(1):
         monte_carlo(g, sp, tol, win, 64, method="cv", rng=0)       # warm-up (JIT, imports)
         for i, (method, sampler, n, n_dir) in enumerate(specs):
-            n = min(n, 4096) if quick else n
             kw = {"method": method, "sampler": sampler, "rng": 1000 + i}
             if n_dir is not None:
                 kw["tail_directions"] = n_dir

@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from ..log import logger
-from ..models.tolerance import ALL_STATISTICS, _P3_HI, _P3_LO, _Grid, _map_samples
+from ..models.tolerance_model import (ALL_STATISTICS, _P3_HI, _P3_LO, _Grid, _map_samples,
+                                      default_n_times)
 from ..validate import as_positive_int
 
 __all__ = ["plain_reference", "REFERENCE_SUMMARIES"]
@@ -106,7 +107,6 @@ def _run(case, n, seed, groups, batch):
 
 
 def _n_times(sp, win):
-    from ..models.tolerance import default_n_times
     return default_n_times(sp, win)
 
 

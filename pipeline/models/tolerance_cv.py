@@ -40,6 +40,8 @@ from ..errors import ModelWarning
 from ..log import logger
 from ..validate import as_positive_int
 from .tolerance_linear import chi_mean, linearised_deviation, solve_level
+from .tolerance_model import (ALL_STATISTICS, DEFAULT_QUANTILES, MonteCarloResult, StatSummary,
+                              _Grid, _map_values, _mc_inputs, _nan_summary)
 
 __all__ = ["monte_carlo_cv"]
 
@@ -91,7 +93,6 @@ def _surrogate(lin, levels):
 
 def _full(grid, lin, tol, z, eng, batch=8192):
     """Full-model statistics at theta = mu + sigma z, z (S, d) -> (8, S, N)."""
-    from .tolerance import _map_values
     n_p = grid.n_planets
     out = np.empty((8, z.shape[0], n_p))
     for a in range(0, z.shape[0], batch):
@@ -216,8 +217,8 @@ def _replicate_summary(vals):
     return vals.mean(axis=0), se
 
 
-def monte_carlo_cv(gearset, speeds, tolerances, window, n_samples: int = 512, *,
-                   tail_directions: int = 8, n_times: int | None = None, rng=None,
+def monte_carlo_cv(gearset, speeds, tolerances, window, n_samples: int = 2048, *,
+                   tail_directions: int = 16, n_times: int | None = None, rng=None,
                    replicates: int = 8, quantile_levels=None, bins: int = 64,
                    engine: str = "auto", points_per_rev: int = 64, progress=None):
     """Control-variate randomised-QMC Monte Carlo of Ave_jn / Dev_jn (module docstring).
@@ -259,8 +260,6 @@ def monte_carlo_cv(gearset, speeds, tolerances, window, n_samples: int = 512, *,
     The stages are separate functions: the exact linear answer (``_surrogate``), the paired
     moment correction (here) and the directional tail correction (``_tail_corrections``).
     """
-    from .tolerance import (ALL_STATISTICS, DEFAULT_QUANTILES, MonteCarloResult, _Grid,
-                            _mc_inputs, _nan_summary)
     t_start = time.perf_counter()
     levels_in = DEFAULT_QUANTILES if quantile_levels is None else quantile_levels
     g, sp, win, n, _, n_t, _, reps, bins, levels, _, eng = _mc_inputs(
@@ -339,7 +338,6 @@ def monte_carlo_cv(gearset, speeds, tolerances, window, n_samples: int = 512, *,
 
 def _summary(x, mean, std, q, se_mean, se_std, se_q, levels, bins):
     """StatSummary from the estimates and the paired samples x (S, N) (histograms)."""
-    from .tolerance import StatSummary
     n_p = x.shape[1]
     counts = np.zeros((n_p, bins), dtype=np.int64)
     edges = np.zeros((n_p, bins + 1))

@@ -41,6 +41,7 @@ from scipy import special
 
 from ..validate import as_finite_array
 from ._geometry import check_gearset, check_speeds
+from .tolerance_model import Tolerances, _as_window, _Grid, _resolve_n_times
 
 __all__ = ["LinearisedDeviation", "linearised_deviation", "SERIES", "chi_sf", "chi_pdf",
            "chi_mean", "exceedance", "solve_level"]
@@ -189,7 +190,6 @@ def linearised_deviation(gearset, speeds, tolerances, window, n_times: int | Non
     TypeError, ValueError
         On bad arguments, a uniform random band, or bands reaching the carrier radius.
     """
-    from .tolerance import Tolerances, _Grid, _as_window, _resolve_n_times
     g = check_gearset(gearset)
     sp = check_speeds(speeds)
     if not isinstance(tolerances, Tolerances):
