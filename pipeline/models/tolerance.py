@@ -32,6 +32,18 @@ with the sample count; the per-sample results are kept only while they fit in
 ``max_memory`` bytes, beyond that the quantiles and histograms come from fixed fine
 histograms (4096 bins over three times the range of the first batch; bounded memory; the
 quantiles land within about two bins of the exact order statistics).
+
+Estimators
+----------
+``monte_carlo(method="plain")`` (default) takes every summary from the samples of the chosen
+``sampler``. ``method="cv"`` (:mod:`.tolerance_cv`) starts from the exact distribution of the
+analytic first-order model (:mod:`.tolerance_linear`) and corrects it with the full model:
+randomised Sobol points for the means, standard deviations and ordinary quantiles,
+directional and line sampling for the 3-sigma bounds, standard errors from the replicates;
+it needs normal radial bands with zero mean and fixed angles (seed 000 case 3). ``meshphase
+bench models`` reports each estimator's error against a large plain reference and its wall
+time. The windows, grid, bands and result types live in :mod:`.tolerance_model` and are
+re-exported here.
 """
 
 from __future__ import annotations
