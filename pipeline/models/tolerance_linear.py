@@ -40,8 +40,7 @@ import numpy as np
 from scipy import special
 
 from ..validate import as_finite_array
-from ._geometry import check_gearset, check_speeds
-from .tolerance_model import Tolerances, _as_window, _Grid, _resolve_n_times
+from .tolerance_model import _case_inputs, _Grid, _resolve_n_times
 
 __all__ = ["LinearisedDeviation", "linearised_deviation", "SERIES", "chi_sf", "chi_pdf",
            "chi_mean", "exceedance", "solve_level"]
@@ -190,12 +189,7 @@ def linearised_deviation(gearset, speeds, tolerances, window, n_times: int | Non
     TypeError, ValueError
         On bad arguments, a uniform random band, or bands reaching the carrier radius.
     """
-    g = check_gearset(gearset)
-    sp = check_speeds(speeds)
-    if not isinstance(tolerances, Tolerances):
-        raise TypeError(f"tolerances must be a Tolerances, got {type(tolerances).__name__}")
-    tolerances.check(g.carrier_radius)
-    win = _as_window(window, sp)
+    g, sp, win = _case_inputs(gearset, speeds, tolerances, window)
     n_t = _resolve_n_times(sp, win, n_times, points_per_rev)
     n_p = g.n_planets
     cols = tolerances.columns(n_p)

@@ -617,15 +617,20 @@ def _nan_summary(n_p, levels, bins):
                        nan.copy(), nan.copy(), q.copy(), two.copy())
 
 
-def _mc_inputs(gearset, speeds, tolerances, window, n_samples, sampler, n_times, batch_size,
-               replicates, bins, quantile_levels, max_memory, engine, progress, points_per_rev):
-    """Validate the arguments of :func:`monte_carlo` (ValueError / TypeError naming them)."""
+def _case_inputs(gearset, speeds, tolerances, window):
+    """Checked (gearset, speeds, window) of a tolerance run; the bands checked against R_c."""
     g = check_gearset(gearset)
     sp = check_speeds(speeds)
     if not isinstance(tolerances, Tolerances):
         raise TypeError(f"tolerances must be a Tolerances, got {type(tolerances).__name__}")
     tolerances.check(g.carrier_radius)
-    win = _as_window(window, sp)
+    return g, sp, _as_window(window, sp)
+
+
+def _mc_inputs(gearset, speeds, tolerances, window, n_samples, sampler, n_times, batch_size,
+               replicates, bins, quantile_levels, max_memory, engine, progress, points_per_rev):
+    """Validate the arguments of :func:`monte_carlo` (ValueError / TypeError naming them)."""
+    g, sp, win = _case_inputs(gearset, speeds, tolerances, window)
     n = as_int(n_samples, "n_samples")
     if n < 0:
         raise ValueError(f"n_samples must be >= 0, got {n}")
