@@ -6,7 +6,19 @@ run's statistics (mean, mean + 3 std and the 99.865 % quantile, i.e. the upper 3
 bounds, of Dev_sn, Dev_rn, Ave_sn, Ave_rn) are held
 against a converged reference (a large Sobol run) and the wall time is measured. Errors are
 RMS over ``n_repeats`` independent runs, in units of the reference standard deviation of the
-statistic, worst planet. Results: ``models_bench.json``, ``models_bench.md`` and a log-log
+statistic, worst planet.
+
+Second table (``estimators``): every estimator of :func:`monte_carlo` (plain random, plain
+Sobol, the control variate ``method="cv"``) against a plain pseudo-random reference of
+``estimator_reference`` samples (1e7 by default; :mod:`.models_reference`, cached in the
+output folder so reruns are quick), on one numba thread: wall time, the largest relative
+error of the means and standard deviations and of the 3-sigma bounds (quantiles at
+Phi(-+3)) over every statistic and planet with a spread, the estimator's own largest
+relative standard error, and the largest |error| / sqrt(SE_est^2 + SE_ref^2). Relative means
+|estimate - reference| / max(|reference|, reference std of that statistic), so that values
+near zero (Ave means, the lower bound of Dev) are judged against the spread. The kernel
+throughput (G realisation x time x planet evaluations per second, one thread and all
+threads) is measured too. Results: ``models_bench.json``, ``models_bench.md`` and a log-log
 figure ``models_bench.png``. Measured, never asserted.
 """
 
@@ -23,11 +35,12 @@ import numpy as np
 
 from ..log import logger
 from ..models import _kernels
-from ..models.tolerance import (STATISTICS, monte_carlo, observation_window, table2_case,
-                                WINDOW_KINDS)
+from ..models.tolerance import (ALL_STATISTICS, STATISTICS, monte_carlo, observation_window,
+                                table2_case, WINDOW_KINDS)
+from .models_reference import plain_reference
 from ..validate import as_choice, as_positive_int
 
-__all__ = ["run_models_bench", "METRICS", "TABLE_COLUMNS"]
+__all__ = ["run_models_bench", "METRICS", "TABLE_COLUMNS", "ESTIMATOR_COLUMNS"]
 
 #: Summaries whose error is measured: "mean"; "m3s" the moment 3-sigma bound mean + 3 std;
 #: "q3s" the quantile 3-sigma bound (upper bound3, the 99.865 % quantile).
@@ -37,6 +50,17 @@ METRICS = tuple((s, k) for s in ("dev_s", "dev_r", "ave_s", "ave_r") for k in KI
 TABLE_COLUMNS = (("sampler", "n_samples", "repeats", "wall_time_s")
                  + tuple(f"err_{k}_{s}" for s, k in METRICS)
                  + ("err_moments", "err_quantile", "err_max"))
+#: Columns of the estimator table (errors relative, see the module docstring).
+ESTIMATOR_COLUMNS = ("method", "samples", "evaluations", "wall_s", "err_mean_std",
+                     "err_bound3", "se_mean_std", "se_bound3", "max_z")
+#: (method, sampler, n_samples, tail_directions) of the estimator table; quick: the first
+#: two rows shrunk.
+ESTIMATORS = (("plain", "random", 10000, None), ("plain", "random", 100000, None),
+              ("plain", "sobol", 32768, None), ("cv", "sobol", 256, 8), ("cv", "sobol", 512, 8),
+              ("cv", "sobol", 2048, 16), ("cv", "sobol", 8192, 32))
+#: Rows of the estimator table in a quick run.
+QUICK_ESTIMATORS = (("plain", "random", 4096, None), ("cv", "sobol", 256, 8))
+CASE3_NAME = "seed000 Table 2 case 3 (angles given)"
 
 
 def _metric_values(res, stat, kind):
@@ -86,7 +110,7 @@ def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 1
                      samplers=("random", "sobol"), reference_samples: int = 2 ** 21,
                      rng=0, quick: bool = False, n_repeats: int = 5, replicates: int = 8,
                      window: str = "slowest-offset", case3_samples: int = 100000,
-                     figure: bool = True) -> dict:
+                     figure: bool = True, estimator_reference: int = 10 ** 7) -> dict:
     """Monte Carlo error against wall time for both samplers; writes table, JSON and figure.
 
     Parameters
@@ -115,12 +139,15 @@ def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 1
         Sample count of the separately timed seed case 3 run (plain random) [-].
     figure : bool
         Write the log-log figure (needs matplotlib).
+    estimator_reference : int
+        Samples of the plain pseudo-random reference of the estimator table [-] (quick:
+        20000); cached as ``models_reference_<n>_<seed>.json`` in ``out_dir``.
 
     Returns
     -------
     dict
         ``{"rows": [...], "reference": {...}, "crossover": {...}, "case3": {...},
-        "meta": {...}, "files": {...}}``.
+        "estimators": {...}, "meta": {...}, "files": {...}}``.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -154,6 +181,9 @@ def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 1
                                    ref, scale, active))
     crossover = _crossover(rows, samplers, active)
     case3 = {} if quick else _case3(case, case3_samples, case_seed, replicates)
+    est_ref = 20000 if quick else as_positive_int(estimator_reference, "estimator_reference")
+    estimators = _estimator_table(case, out, est_ref, quick)
+    throughput = _throughput(case, 2048 if quick else 32768)
     meta = {"case": "seed000 Table 2 case 3 (angles given)", "window": win.to_dict(),
             "n_times": ref.n_times, "engine": engine, "replicates": replicates,
             "jit_warmup_s": warmup, "cpu_count": os.cpu_count(),
@@ -161,8 +191,9 @@ def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 1
             "numpy": np.__version__, "quick": quick,
             "error_unit": "RMS over repeats of |estimate - reference| / reference std, "
                           "worst planet (2..N)"}
+    meta["kernel_throughput"] = throughput
     result = {"rows": rows, "reference": reference, "crossover": crossover, "case3": case3,
-              "meta": meta, "files": {}}
+              "estimators": estimators, "meta": meta, "files": {}}
     _write(result, out, figure)
     return result
 
@@ -229,6 +260,118 @@ def _case3(case, case3_samples: int, case_seed, replicates: int) -> dict:
             "ave_r_bound3": res.ave_r.bound3.tolist()}
 
 
+class _Threads:
+    """Run with ``n`` numba threads (restored after); no-op without numba."""
+
+    def __init__(self, n):
+        self.n = n
+        self.old = None
+
+    def __enter__(self):
+        if _kernels.HAVE_NUMBA:
+            import numba
+            self.old = numba.get_num_threads()
+            numba.set_num_threads(min(self.n, numba.config.NUMBA_NUM_THREADS))
+        return self
+
+    def __exit__(self, *exc):
+        if self.old is not None:
+            import numba
+            numba.set_num_threads(self.old)
+
+
+def _throughput(case, n: int) -> dict:
+    """Kernel throughput [G evaluations/s] of a plain Monte Carlo of n samples."""
+    g, sp, tol, win = case
+    out = {"n_samples": n}
+    for label, threads in (("one_thread", 1), ("all_threads", os.cpu_count() or 1)):
+        with _Threads(threads):
+            res = monte_carlo(g, sp, tol, win, n, sampler="random", rng=0, replicates=2)
+        out[label] = n * res.n_times * g.n_planets / res.wall_time / 1e9
+    out["unit"] = "G (realisation x time x planet) evaluations/s, both meshes, all statistics"
+    return out
+
+
+def _rel_errors(res, ref, stats):
+    """Largest relative errors, relative standard errors and z of one estimator run."""
+    vals, se = ref["values"], ref["stderr"]
+    err = {"mean_std": [], "bound3": []}
+    own = {"mean_std": [], "bound3": []}
+    zs = []
+    for s in stats:
+        st = res.stat(s)
+        scale = np.asarray(vals["std"][s])
+        for key, est, e_se, group in (
+                ("mean", st.mean, st.se_mean, "mean_std"),
+                ("std", st.std, st.se_std, "mean_std"),
+                ("bound3_lo", st.bound3[0], st.se_bound3[0], "bound3"),
+                ("bound3_hi", st.bound3[1], st.se_bound3[1], "bound3")):
+            r = np.asarray(vals[key][s])
+            den = np.maximum(np.abs(r), scale)
+            ok = scale > 1e-12
+            if not np.any(ok):
+                continue
+            d = np.abs(np.asarray(est) - r)[ok]
+            err[group].append(float(np.max(d / den[ok])))
+            own[group].append(float(np.nanmax(np.asarray(e_se)[ok] / den[ok])))
+            tot = np.sqrt(np.asarray(e_se)[ok] ** 2 + np.asarray(se[key][s])[ok] ** 2)
+            zs.append(float(np.max(d / np.where(tot > 0, tot, np.inf))))
+    return ({k: max(v) if v else float("nan") for k, v in err.items()},
+            {k: max(v) if v else float("nan") for k, v in own.items()},
+            max(zs) if zs else float("nan"))
+
+
+def _estimator_table(case, out: Path, ref_n: int, quick: bool) -> dict:
+    """Error of each estimator against the cached plain reference, on one thread."""
+    g, sp, tol, win = case
+    ref = plain_reference(case, out, n_samples=ref_n, case_name=CASE3_NAME)
+    stats = [s for s in ALL_STATISTICS
+             if np.max(np.asarray(ref["values"]["std"][s]), initial=0.0) > 1e-12]
+    rows = []
+    specs = QUICK_ESTIMATORS if quick else ESTIMATORS
+    with _Threads(1):
+        monte_carlo(g, sp, tol, win, 64, method="cv", rng=0)       # warm-up (JIT, imports)
+        for i, (method, sampler, n, n_dir) in enumerate(specs):
+            kw = {"method": method, "sampler": sampler, "rng": 1000 + i}
+            if n_dir is not None:
+                kw["tail_directions"] = n_dir
+            t = time.perf_counter()
+            res = monte_carlo(g, sp, tol, win, n, **kw)
+            wall = time.perf_counter() - t
+            err, own, z = _rel_errors(res, ref, stats)
+            label = method if method == "cv" else f"plain-{sampler}"
+            rows.append({"method": label, "samples": res.n_samples,
+                         "evaluations": res.n_evaluations or res.n_samples, "wall_s": wall,
+                         "err_mean_std": err["mean_std"], "err_bound3": err["bound3"],
+                         "se_mean_std": own["mean_std"], "se_bound3": own["bound3"],
+                         "max_z": z})
+            logger.info("bench models: %s n=%d %.3f s err %.3g / %.3g", label, n, wall,
+                        err["mean_std"], err["bound3"])
+    ref_se = _rel_errors_ref(ref, stats)
+    return {"rows": rows, "reference": {"n_samples": ref["n_samples"], "seed": ref["seed"],
+                                        "wall_time_s": ref["wall_time_s"],
+                                        "cached": ref["cached"], "se_mean_std": ref_se[0],
+                                        "se_bound3": ref_se[1]},
+            "statistics": stats, "threads": 1}
+
+
+def _rel_errors_ref(ref, stats):
+    """The reference's own largest relative standard errors (means/stds, bounds)."""
+    vals, se = ref["values"], ref["stderr"]
+    out = []
+    for keys in (("mean", "std"), ("bound3_lo", "bound3_hi")):
+        m = 0.0
+        for s in stats:
+            scale = np.asarray(vals["std"][s])
+            ok = scale > 1e-12
+            for k in keys:
+                den = np.maximum(np.abs(np.asarray(vals[k][s])), scale)[ok]
+                if den.size:
+                    m = max(m, float(np.max(np.asarray(se[k][s])[ok] / den)))
+        out.append(m)
+    return out
+
+
 def _write(result: dict, out: Path, figure: bool) -> None:
     """models_bench.json, .md (and .png when ``figure``) into ``out``; sets ``result["files"]``."""
     jpath = out / "models_bench.json"
@@ -292,6 +435,27 @@ def _markdown(result):
         for k, v in cx["metrics"].items():
             lines.append(f"| {k} | {_fmt(v['random_error'])} | {_fmt(v['sobol_n_match'])} | "
                          f"{_fmt(v['ratio'])} |")
+    est = result.get("estimators") or {}
+    if est:
+        er = est["reference"]
+        lines += ["", "## Estimators against a plain Monte Carlo reference", "",
+                  f"Reference: plain pseudo-random, {er['n_samples']} samples (seed "
+                  f"{er['seed']}, {er['wall_time_s']:.0f} s"
+                  f"{', read from the cache' if er['cached'] else ''}); its own largest "
+                  f"relative standard error: means/stds {_fmt(er['se_mean_std'])}, 3-sigma "
+                  f"bounds {_fmt(er['se_bound3'])}. One numba thread. Errors: largest over "
+                  "the statistics with a spread and their planets of |estimate - reference| / "
+                  "max(|reference|, reference std); se_*: the estimator's own standard errors "
+                  "on the same scale; max_z: largest |error| / sqrt(SE_est^2 + SE_ref^2).", ""]
+        lines.append("| " + " | ".join(ESTIMATOR_COLUMNS) + " |")
+        lines.append("|" + "|".join("---" for _ in ESTIMATOR_COLUMNS) + "|")
+        for r in est["rows"]:
+            lines.append("| " + " | ".join(_fmt(r[c]) for c in ESTIMATOR_COLUMNS) + " |")
+    tp = m.get("kernel_throughput") or {}
+    if tp:
+        lines += ["", f"Kernel throughput ({tp['n_samples']} plain samples): "
+                      f"{tp['one_thread']:.3f} G evaluations/s on one thread, "
+                      f"{tp['all_threads']:.3f} on all {m['cpu_count']} ({tp['unit']})."]
     c3 = result.get("case3") or {}
     if c3:
         lines += ["", f"Case 3, {c3['n_samples']} plain random samples: "

@@ -26,11 +26,15 @@ with th = w_pc t + kappa_p and a_s = w_sc t + kappa_s (ring: e_r, a_r = w_rc t +
 the angular deviation of the mesh line from the nominal planet angle is delta = atan2(v_t, v_u).
 The angles enter only through angle addition of precomputed cos/sin, which is what makes the
 inner loop cheap. The numba kernel loops over time innermost with a branch-free atan (Cephes)
-so that loop vectorises: measured ~0.27 G (realisation x time x planet) evaluations/s, both
-meshes, on the 2-core machine (seed case 3, 1e5 x 223 x 4 in ~0.33 s), against ~0.045 with
-libm atan2 and ~0.01 for the chunked numpy path. Since the kernel also reduces the absolute
-(not planet-1-relative) deviations, a Monte Carlo call takes ~1.3x as long (seed case 3, 1e5
-samples: 1.0 -> 1.3 s on the loaded 2-core machine, same relative numbers bit for bit).
+so that loop vectorises (libm's atan2 is not vectorised). The kernel also reduces the absolute
+(not planet-1-relative) deviations.
+
+Throughput is measured by ``meshphase bench models`` ("Kernel throughput" in
+``models_bench.md``: G realisation x time x planet evaluations per second, both meshes, all
+eight statistics, one thread and all threads). Measured there on the shared 2-core machine
+under a load average of ~13 (2026-11-26): 0.0087 G evaluations/s on one thread, 0.0090 on
+both; issue 13 measured 0.065-0.135 on a less loaded machine. An earlier figure of 0.27 G
+evaluations/s written here was not reproduced by any bench and is withdrawn.
 """
 
 from __future__ import annotations
@@ -76,7 +80,7 @@ def resolve_engine(engine: str) -> str:
         raise ValueError(f"engine='numba' requested but numba is not importable ({_NUMBA_ERROR})")
     if not _LOGGED_FALLBACK:
         logger.info("numba is not importable (%s): the phasing statistics use the numpy path "
-                    "(same numbers, ~10x slower)", _NUMBA_ERROR)
+                    "(same numbers, slower)", _NUMBA_ERROR)
         _LOGGED_FALLBACK = True
     return "numpy"
 
@@ -152,7 +156,7 @@ def stats_numpy(cs, ss, cr, sr, cp, sp, cpsi, spsi, R, es, cks, sks, er, ckr, sk
 # Cephes atan (S. L. Moshier), rational approximation on |x| <= 0.66 with two argument
 # reductions, written branch-free (selects) so that the time loop vectorises: <= 1 ulp
 # against libm on 1e7 random arguments over 1e-5 .. 1e4 (measured); libm's atan2 is not
-# vectorised and made the kernel 6x slower.
+# vectorised.
 _T3P8 = 2.41421356237309504880      # tan(3 pi / 8)
 _MOREBITS = 6.123233995736765886130e-17
 _PIO2 = np.pi / 2

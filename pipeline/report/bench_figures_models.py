@@ -16,6 +16,8 @@ def models_bench_figure(result: dict):
 
     Solid: worst error of the moment statistics (mean, mean + 3 std); dashed: worst error of
     the 99.865 % quantile bounds; grey lines: plain random's error at its largest count.
+    With an estimator table (``result["estimators"]``) a third panel shows each estimator's
+    largest relative error against its one-thread wall time, with the 1e-3 goal dotted.
 
     Parameters
     ----------
@@ -27,7 +29,8 @@ def models_bench_figure(result: dict):
     matplotlib.figure.Figure
     """
     rows = result["rows"]
-    fig, axes = plt.subplots(1, 2, figsize=(9.5, 3.8))
+    est = (result.get("estimators") or {}).get("rows") or []
+    fig, axes = plt.subplots(1, 3 if est else 2, figsize=(14.0 if est else 9.5, 3.8))
     samplers = sorted({r["sampler"] for r in rows})
     curves = (("err_moments", "-", "moments"), ("err_quantile", "--", "99.865 % quantile"))
     for i, s in enumerate(samplers):
@@ -43,11 +46,13 @@ def models_bench_figure(result: dict):
     for key, ls, label in curves:
         lvl = cx.get("metrics", {}).get(key, {}).get("random_error")
         if lvl is not None and np.isfinite(lvl) and lvl > 0:
-            for ax in axes:
+            for ax in axes[:2]:
                 ax.axhline(lvl, color="0.5", ls=ls, lw=0.7)
     axes[0].set_xlabel("wall time [s]")
     axes[1].set_xlabel("samples [-]")
-    for ax in axes:
+    if est:
+        _estimator_panel(axes[2], est)
+    for ax in axes[:2]:
         ax.set_ylabel("error [reference std]")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
@@ -56,6 +61,26 @@ def models_bench_figure(result: dict):
                  fontsize=10)
     fig.tight_layout()
     return fig
+
+
+def _estimator_panel(ax, rows):
+    """Largest relative error against wall time per estimator (solid: means and stds,
+    dashed: 3-sigma bounds) with the 1e-3 goal."""
+    methods = sorted({r["method"] for r in rows})
+    for i, mth in enumerate(methods):
+        rr = sorted((r for r in rows if r["method"] == mth), key=lambda r: r["wall_s"])
+        tm = np.array([r["wall_s"] for r in rr], float)
+        for key, ls, label in (("err_mean_std", "-", "mean/std"), ("err_bound3", "--",
+                                                                    "3-sigma bounds")):
+            err = np.array([r[key] for r in rr], float)
+            ok = (tm > 0) & (err > 0) & np.isfinite(err)
+            ax.loglog(tm[ok], err[ok], "o" + ls, color=f"C{i + 2}", ms=4,
+                      label=f"{mth}, {label}")
+    ax.axhline(1e-3, color="0.3", lw=0.8, ls=":")
+    ax.set_xlabel("wall time, one thread [s]")
+    ax.set_ylabel("largest relative error vs plain reference [-]")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
 
 
 def save_models_bench_figure(result: dict, path) -> None:
