@@ -250,8 +250,8 @@ LIMITS = {
     # fastest member speed [r/min]: beyond any gear test rig (1e5 r/min = 10 472 rad/s)
     "speed_rpm": 1e5,
     # Monte Carlo realisations: above "samples_warn" a run-time warning, above "samples_max"
-    # refused; "mc_evals_max": realisations x time points x planets (about 40 min with numba
-    # at 0.45 G evals/s, 7 h on the numpy path at 0.04, DESIGN.md)
+    # refused; "mc_evals_max": realisations x time points x planets (hours with numba at the
+    # kernel throughput below)
     "samples_warn": 10**6,
     "samples_max": 10**8,
     "mc_evals_max": 1e12,
@@ -268,8 +268,11 @@ LIMITS = {
     "block_s_min": 0.01,
 }
 
-#: Monte Carlo kernel throughput for the run-time estimate [evaluations/s] (DESIGN.md)
-_MC_RATE = {"numba": 0.45e9, "numpy": 0.04e9}
+#: Monte Carlo kernel throughput for the run-time estimate of a warning [evaluations/s]: the
+#: numba kernel on one core of the 2-core machine, 0.065-0.135 G evaluations/s as issue 13
+#: measured it unloaded (``meshphase bench models`` prints "Kernel throughput" of the machine
+#: it runs on); an order of magnitude for a warning, not a promise
+_MC_RATE = {"numba": 0.1e9}
 #: results that need the planet tooth count (planet speed w_pc = -(Z_s / Z_p) w_sc)
 _NEEDS_Z_PLANET = {"phasing": "the angle model's planet-spin terms",
                    "identify": "the identified planet offsets",
@@ -927,9 +930,9 @@ def _check_monte_carlo(scene: Scene, err) -> None:
         line = _line_of(scene.text, ["tolerances", "samples"])
         where = f"{scene.path or '<scene>'}" + (f", line {line}" if line else "")
         warnings.warn(f"{where}: [tolerances.samples] {t['samples']:g} Monte Carlo samples: "
-                      f"{evals:.3g} evaluations, about {evals / _MC_RATE['numba']:.3g} s with numba "
-                      f"or {evals / _MC_RATE['numpy']:.3g} s on the numpy path (the standard errors "
-                      "fall only as 1/sqrt(samples))", SceneWarning, stacklevel=3)
+                      f"{evals:.3g} evaluations, of the order of {evals / _MC_RATE['numba']:.2g} s "
+                      "with numba, longer on the numpy path (the standard errors fall only as "
+                      "1/sqrt(samples))", SceneWarning, stacklevel=3)
 
 
 def _source_checks(scene: Scene, fs: float | None, meta_gearset: dict | None, source: str,
