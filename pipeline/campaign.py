@@ -544,9 +544,12 @@ def campaign_rows(records: list[dict]) -> list[dict]:
 
     Columns: name, recording, format, status, error, duration_s, wall_time_s, worker,
     attempts (1 + the retries), retries (their causes, "; "-separated), resumed (taken from an
-    earlier run by ``--resume``), passes_<gauge>, rms_vs_ideal_<gauge>, rms_vs_model_<gauge>, coverage_<gauge>,
-    gamma_mean_<gauge>_p<k>, gamma_std_<gauge>_p<k> [mesh cycles], load_sharing_p<k>,
-    load_sharing_se_p<k> [-], identify_rms_after, n_messages, out_dir.
+    earlier run by ``--resume``), passes_<gauge>, rms_vs_ideal_<gauge>_cycles,
+    rms_vs_model_<gauge>_cycles, coverage_<gauge> (fraction inside the band),
+    gamma_mean_<gauge>_p<k>_cycles, gamma_std_<gauge>_p<k>_cycles, load_sharing_p<k>,
+    load_sharing_se_p<k> [-], identify_rms_after_cycles, n_messages, out_dir. A column's unit
+    is its name's suffix (``_s`` seconds, ``_cycles`` mesh cycles; none: a count, a fraction
+    or a text), as in every CSV a run writes (data_schemas/outputs.md).
 
     Parameters
     ----------
@@ -573,26 +576,26 @@ def campaign_rows(records: list[dict]) -> list[dict]:
             ph = (r.get("phasing") or {}).get(gear)
             row[f"passes_{gear}"] = None if ph is None else ph.get("n_passes")
             c = (r.get("compare") or {}).get(gear) or {}
-            row[f"rms_vs_ideal_{gear}"] = c.get("rms_vs_ideal")
-            row[f"rms_vs_model_{gear}"] = c.get("rms_vs_model")
+            row[f"rms_vs_ideal_{gear}_cycles"] = c.get("rms_vs_ideal")
+            row[f"rms_vs_model_{gear}_cycles"] = c.get("rms_vs_model")
             row[f"coverage_{gear}"] = c.get("coverage")
             for k, v in sorted(((ph or {}).get("per_planet") or {}).items(), key=lambda kv: int(kv[0])):
-                row[f"gamma_mean_{gear}_p{k}"] = v.get("mean")
-                row[f"gamma_std_{gear}_p{k}"] = v.get("std")
+                row[f"gamma_mean_{gear}_p{k}_cycles"] = v.get("mean")
+                row[f"gamma_std_{gear}_p{k}_cycles"] = v.get("std")
         for ls in r.get("load_sharing") or []:
             row[f"load_sharing_p{ls['planet']}"] = ls.get("load_sharing")
             row[f"load_sharing_se_p{ls['planet']}"] = ls.get("std_error")
-        row["identify_rms_after"] = (r.get("identify") or {}).get("rms_after")
+        row["identify_rms_after_cycles"] = (r.get("identify") or {}).get("rms_after")
         row["n_messages"] = len(r.get("messages") or [])
         row["out_dir"] = r.get("out_dir")
         rows.append(row)
     # one column set and order for every row: fixed columns, then per planet, then the tail
-    tail = ["identify_rms_after", "n_messages", "out_dir"]
+    tail = ["identify_rms_after_cycles", "n_messages", "out_dir"]
     keys = list(dict.fromkeys(k for row in rows for k in row))
     fixed = [k for k in keys if not k.startswith(("gamma_", "load_sharing_")) and k not in tail]
 
     def planet_key(k):
-        kind, _, p = k.rpartition("_p")
+        kind, _, p = k.removesuffix("_cycles").rpartition("_p")
         return (k.startswith("load_sharing"), kind.split("_")[-1] if k.startswith("gamma") else "",
                 int(p), kind)
 

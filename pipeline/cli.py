@@ -419,7 +419,7 @@ def build_parser() -> argparse.ArgumentParser:
 def _add_info(sub) -> None:
     """The ``meshphase info`` subcommand."""
     s = sub.add_parser("info", help="channels, kinds, fs, duration, start and a quality summary of a recording")
-    s.add_argument("file")
+    s.add_argument("file", help="recording file (hdf5, mcap, csv, tdms; format recognised by content)")
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.add_argument("--no-quality", action="store_true", help="header only (do not scan the samples)")
     s.add_argument("--scene", metavar="SCENE",

@@ -396,8 +396,11 @@ def test_campaign_rows_empty_bad_and_columns():
             "2": {"n": 3, "mean": 0.25, "std": 0.01}}}},
          "load_sharing": [{"planet": 1, "load_sharing": 1.01, "std_error": 0.002}]}])
     assert list(rows[0]) == list(rows[1])  # one column set for the CSV
-    assert rows[1]["gamma_mean_sun_p2"] == 0.25 and rows[0]["gamma_mean_sun_p2"] is None
+    assert rows[1]["gamma_mean_sun_p2_cycles"] == 0.25 and rows[0]["gamma_mean_sun_p2_cycles"] is None
     assert rows[1]["load_sharing_p1"] == 1.01 and rows[0]["error"] == "boom"
+    # units in the names, as in every CSV of a run; the per-planet columns sort by planet
+    assert {"duration_s", "wall_time_s", "rms_vs_ideal_sun_cycles", "rms_vs_model_ring_cycles"} <= set(rows[0])
+    assert list(rows[0])[-3:] == ["identify_rms_after_cycles", "n_messages", "out_dir"]
 
 
 # ---------------------------------------------------------------------------- report
