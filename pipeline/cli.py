@@ -201,6 +201,14 @@ def cmd_synth(args) -> int:
 def cmd_bench(args) -> int:
     # bench drives the CLI's own commands (bench.rss runs `convert` through main), so it is
     # imported here, not at the top: cli -> bench only when benchmarking, no import loop
+    if args.warmup:
+        from .models._kernels import warmup
+
+        w = warmup()
+        print(f"numba kernel ready in {w['seconds']:.2f} s, cache {w['cache_dir']}"
+              if w["engine"] == "numba" else "numba is not importable: the numpy path needs no "
+              "compilation")
+        return 0
     from .bench import rss_summary, run_bench
 
     out = Path(args.out)
@@ -529,6 +537,9 @@ def _add_bench(sub) -> None:
     s.add_argument("--out", default="bench-results", help="output folder (default ./bench-results)")
     s.add_argument("--minutes", type=float, default=60.0, help="io: recording length [min] (default 60)")
     s.add_argument("--quick", action="store_true", help="small sizes, for a smoke run")
+    s.add_argument("--warmup", action="store_true",
+                   help="only compile the numba Monte Carlo kernel into the per-user cache "
+                        "(~/.cache/meshphase/numba or NUMBA_CACHE_DIR) and say how long it took")
     s.add_argument("--rss-minutes", type=_minutes_list, default=None, metavar="M[,M...]",
                    help="lengths [min] of the 8-channel recordings whose peak memory of convert "
                         "and process is measured (default io: 10,60,180, a few minutes for the "

@@ -39,3 +39,17 @@ def test_core_import_is_light(module):
     res = subprocess.run([sys.executable, "-c", code, *HEAVY], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == "", f"{module} loaded {res.stdout.strip()}"
+
+
+@pytest.mark.parametrize("module", ["meshphase.stages", "meshphase.cli"])
+def test_processing_import_leaves_the_optional_heavy_parts_out(module):
+    # what `meshphase process FILE` imports: numba/LLVM (the Monte Carlo kernel), dask (the
+    # campaign), matplotlib (the report), pandas (the notebook API) and the synthetic
+    # generator load only where they are used
+    code = (f"import sys, {module}; "
+            "print(','.join(sorted(m for m in {x.split('.')[0] for x in sys.modules} "
+            "if m in sys.argv[1:]) + [m for m in sys.modules if m.startswith('meshphase.synthetic')]))")
+    res = subprocess.run([sys.executable, "-c", code, "numba", "llvmlite", "dask", "distributed",
+                          "matplotlib", "pandas"], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "", f"{module} loaded {res.stdout.strip()}"

@@ -39,23 +39,49 @@ evaluations/s written here was not reproduced by any bench and is withdrawn.
 
 from __future__ import annotations
 
+import importlib.util
 import math
+import os
+import sys
+import time
 
 import numpy as np
 
 from ..log import logger
 
 __all__ = ["HAVE_NUMBA", "deltas_numpy", "stats_numpy", "stats_numba", "resolve_engine",
-           "atan_cephes"]
+           "atan_cephes", "numba_cache_dir", "warmup"]
 
-try:  # numba is optional (extras "fast" and "test")
-    import numba as _numba
+#: numba is optional (extras "fast" and "test"); it is looked for here, imported (with LLVM,
+#: ~0.2-0.5 s) only when a Monte Carlo first runs on it (:func:`_numba_kernels`)
+HAVE_NUMBA = importlib.util.find_spec("numba") is not None
+_NUMBA_ERROR = "numba is not installed"
 
-    HAVE_NUMBA = True
-except Exception as _exc:  # pragma: no cover - exercised only without numba
-    _numba = None
-    HAVE_NUMBA = False
-    _NUMBA_ERROR = repr(_exc)
+
+def numba_cache_dir() -> str:
+    """Where numba caches the compiled kernel: ``NUMBA_CACHE_DIR`` when set, else
+    ``$XDG_CACHE_HOME/meshphase/numba`` (``~/.cache/meshphase/numba``): per user, writable,
+    not beside the installed source (an empty or read-only cache there cost 4-5 s of
+    compilation at every first use)."""
+    env = os.environ.get("NUMBA_CACHE_DIR")
+    if env:
+        return env
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(base, "meshphase", "numba")
+
+
+def _numba_kernels():
+    """The numba module of the kernel, imported on first use with the per-user cache set
+    (ImportError when numba cannot be imported after all)."""
+    global HAVE_NUMBA, _NUMBA_ERROR
+    if "meshphase.models._kernels_numba" not in sys.modules:
+        os.environ.setdefault("NUMBA_CACHE_DIR", numba_cache_dir())
+    try:
+        from . import _kernels_numba
+    except Exception as exc:  # pragma: no cover - a broken numba install
+        HAVE_NUMBA, _NUMBA_ERROR = False, repr(exc)
+        raise ImportError(f"numba is installed but does not import ({exc!r})") from exc
+    return _kernels_numba
 
 ENGINES = ("auto", "numba", "numpy")
 _LOGGED_FALLBACK = False
@@ -75,7 +101,11 @@ def resolve_engine(engine: str) -> str:
     if engine == "numpy":
         return "numpy"
     if HAVE_NUMBA:
-        return "numba"
+        try:
+            _numba_kernels()
+            return "numba"
+        except ImportError:  # pragma: no cover - a broken numba install: as without numba
+            pass
     if engine == "numba":
         raise ValueError(f"engine='numba' requested but numba is not importable ({_NUMBA_ERROR})")
     if not _LOGGED_FALLBACK:
@@ -201,71 +231,6 @@ def mean_range(v):
     return sm / v.shape[0], mx - mn
 
 
-if HAVE_NUMBA:
-    _atan = _numba.njit(inline="always", cache=True)(atan_cephes)
-    _mean_range = _numba.njit(inline="always", cache=True)(mean_range)
-
-    @_numba.njit(parallel=True, cache=True, fastmath=False, nogil=True)
-    def _stats_numba_kernel(cs, ss, cr, sr, cp, sp, cpsi, spsi, R, es, cks, sks, er, ckr, skr,
-                            ep, ckp, skp, g_s, g_r, out_ave_s, out_dev_s, out_ave_r,
-                            out_dev_r, abs_ave_s, abs_dev_s, abs_ave_r,
-                            abs_dev_r):  # pragma: no cover - compiled
-        n_s = es.shape[0]
-        n_t = cs.shape[0]
-        n_p = cpsi.shape[0]
-        for i in _numba.prange(n_s):
-            cas = np.empty(n_t)
-            sas = np.empty(n_t)
-            car = np.empty(n_t)
-            sar = np.empty(n_t)
-            d1s = np.empty(n_t)
-            d1r = np.empty(n_t)
-            vs = np.empty(n_t)
-            vr = np.empty(n_t)
-            ws = np.empty(n_t)
-            wr = np.empty(n_t)
-            a1 = cks[i]
-            b1 = sks[i]
-            a2 = ckr[i]
-            b2 = skr[i]
-            for k in range(n_t):
-                cas[k] = cs[k] * a1 - ss[k] * b1
-                sas[k] = ss[k] * a1 + cs[k] * b1
-                car[k] = cr[k] * a2 - sr[k] * b2
-                sar[k] = sr[k] * a2 + cr[k] * b2
-            esi = es[i]
-            eri = er[i]
-            for n in range(n_p):
-                c_k = ckp[i, n]
-                s_k = skp[i, n]
-                e = ep[i, n]
-                cps = cpsi[n]
-                sps = spsi[n]
-                for k in range(n_t):
-                    ct = cp[k] * c_k - sp[k] * s_k
-                    st = sp[k] * c_k + cp[k] * s_k
-                    px = R - e * ct
-                    py = -(e * st)
-                    crel = cas[k] * cps + sas[k] * sps
-                    srel = sas[k] * cps - cas[k] * sps
-                    # x > 0 (e_s + e_p < R_c), so atan2(y, x) = atan(y / x)
-                    d_s = _atan((py - esi * srel) / (px - esi * crel))
-                    crel = car[k] * cps + sar[k] * sps
-                    srel = sar[k] * cps - car[k] * sps
-                    d_r = _atan((py - eri * srel) / (px - eri * crel))
-                    if n == 0:
-                        d1s[k] = d_s
-                        d1r[k] = d_r
-                    vs[k] = g_s * (d_s - d1s[k])
-                    vr[k] = g_r * (d_r - d1r[k])
-                    ws[k] = g_s * d_s
-                    wr[k] = g_r * d_r
-                out_ave_s[i, n], out_dev_s[i, n] = _mean_range(vs)
-                out_ave_r[i, n], out_dev_r[i, n] = _mean_range(vr)
-                abs_ave_s[i, n], abs_dev_s[i, n] = _mean_range(ws)
-                abs_ave_r[i, n], abs_dev_r[i, n] = _mean_range(wr)
-
-
 def stats_numba(cs, ss, cr, sr, cp, sp, cpsi, spsi, R, es, cks, sks, er, ckr, skr, ep, ckp, skp,
                 g_s, g_r, out_ave_s, out_dev_s, out_ave_r, out_dev_r, out_abs=None):
     """Same as :func:`stats_numpy`, compiled with numba (parallel over realisations)."""
@@ -283,5 +248,31 @@ def stats_numba(cs, ss, cr, sr, cp, sp, cpsi, spsi, R, es, cks, sks, er, ckr, sk
     pl = [req(a) for a in (ep, ckp, skp)]
     if out_abs is None:   # the kernel always writes both; discard the absolute ones
         out_abs = [np.empty_like(out_ave_s) for _ in range(4)]
-    _stats_numba_kernel(*args, float(R), *per, *pl, float(g_s), float(g_r),
+    _numba_kernels()._stats_numba_kernel(*args, float(R), *per, *pl, float(g_s), float(g_r),
                         out_ave_s, out_dev_s, out_ave_r, out_dev_r, *out_abs)
+
+
+def warmup() -> dict:
+    """Compile the numba kernel once (or load it from the per-user cache) so that the first
+    Monte Carlo of a run does not pay for it (``meshphase bench --warmup``).
+
+    Returns
+    -------
+    dict
+        ``engine`` ("numba", or "numpy" when numba is not importable: nothing to compile),
+        ``seconds`` [s] the import and compilation took, ``cache_dir`` (None on numpy).
+    """
+    t = time.perf_counter()
+    if resolve_engine("auto") != "numba":
+        return {"engine": "numpy", "seconds": 0.0, "cache_dir": None}
+    n_t, n_p = 2, 2
+    ang = np.linspace(0.0, 1.0, n_t)
+    per = [np.full(1, v) for v in (1e-5, 1.0, 0.0, 1e-5, 1.0, 0.0)]
+    pl = [np.full((1, n_p), v) for v in (1e-5, 1.0, 0.0)]
+    out = [np.empty((1, n_p)) for _ in range(4)]
+    stats_numba(np.cos(ang), np.sin(ang), np.cos(ang), np.sin(ang), np.cos(ang), np.sin(ang),
+                np.cos([0.0, np.pi]), np.sin([0.0, np.pi]), 0.1, *per, *pl, 1.0, 1.0, *out)
+    if not np.all(np.isfinite(out)):   # pragma: no cover - a miscompiled kernel
+        raise RuntimeError("the numba kernel gave non-finite statistics on the warm-up case")
+    return {"engine": "numba", "seconds": time.perf_counter() - t,
+            "cache_dir": os.environ.get("NUMBA_CACHE_DIR", numba_cache_dir())}

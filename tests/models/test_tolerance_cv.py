@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy import special
 
@@ -153,6 +153,7 @@ def test_zero_tolerances_give_zero_spread(case3):
 @settings(max_examples=25, deadline=None)
 @given(c=st.floats(0.05, 20.0), es=st.floats(0.0, 0.5e-3), er=st.floats(0.0, 0.5e-3),
        ep=st.floats(0.0, 0.5e-3), ks=st.floats(-3.0, 3.0), kp=st.floats(-3.0, 3.0))
+@example(c=3.0, es=0.0, er=0.000247884223959883, ep=0.000247884223959883, ks=0.0, kp=0.0)
 def test_scaling_tolerances_scales_the_linear_spread(c, es, er, ep, ks, kp):
     from meshphase.models.tolerance_cv import _surrogate
     g, sp, _ = table2_case(3)
@@ -169,9 +170,18 @@ def test_scaling_tolerances_scales_the_linear_spread(c, es, er, ep, ks, kp):
     m1, s1, q1, _ = _surrogate(lin1, levels)
     m2, s2, q2, _ = _surrogate(lin2, levels)
     scale = max(np.max(s1), 1e-300)
-    np.testing.assert_allclose(s2, c * s1, rtol=1e-9, atol=1e-12 * c * scale)
-    np.testing.assert_allclose(m2, c * m1, rtol=1e-9, atol=1e-12 * c * scale)
-    np.testing.assert_allclose(q2, c * q1, rtol=1e-7, atol=1e-9 * c * scale)
+    # Ave rows (even) are exact Gaussians: they scale to rounding. Dev rows (odd) are a
+    # direction-set quadrature in the SVD basis of J sigma; c J can come back in a rotated
+    # basis where singular values nearly coincide, which moves the result by the
+    # quadrature's own error (1024 circle nodes: O(1e-6); 8192 Sobol directions: O(1e-4)),
+    # not by the scaling: they are held to 1e-3
+    ave, dev = slice(0, None, 2), slice(1, None, 2)
+    np.testing.assert_allclose(s2[ave], c * s1[ave], rtol=1e-9, atol=1e-12 * c * scale)
+    np.testing.assert_allclose(m2[ave], c * m1[ave], rtol=1e-9, atol=1e-12 * c * scale)
+    np.testing.assert_allclose(q2[ave], c * q1[ave], rtol=1e-7, atol=1e-9 * c * scale)
+    np.testing.assert_allclose(s2[dev], c * s1[dev], rtol=1e-3, atol=1e-9 * c * scale)
+    np.testing.assert_allclose(m2[dev], c * m1[dev], rtol=1e-3, atol=1e-9 * c * scale)
+    np.testing.assert_allclose(q2[dev], c * q1[dev], rtol=1e-3, atol=1e-9 * c * scale)
     assert np.all(s1 >= 0) and np.all(np.isfinite(q1))
 
 
