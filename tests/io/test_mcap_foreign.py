@@ -52,6 +52,21 @@ def _json_file(path, n=200, fs=1000.0, *, stamps=None, body=None, topic="/rig/st
     return path
 
 
+def test_decoded_samples_are_shared_read_only(tmp_path):
+    # one decode serves the header and every pass: the cached recording is read-only, and
+    # what the registry hands out is the caller's own copy
+    from meshphase.io.mcap import read_foreign
+
+    p = _json_file(tmp_path / "j.mcap")
+    topics = {"sun_T3": "/rig/strain:gauges.sun_T3"}
+    shared = read_foreign(p, topics=topics)
+    with pytest.raises(ValueError, match="read-only"):
+        shared.data[:] = 0.0
+    a = pio.read(p, topics=topics)
+    a.data[:] = 0.0                                  # the caller's copy
+    np.testing.assert_array_equal(pio.read(p, topics=topics).data[:, 0], 0.5 * np.arange(200))
+
+
 # -- mapping forms -------------------------------------------------------------------------
 
 def test_json_scalar_per_message_values_fs_and_time(tmp_path):

@@ -481,7 +481,8 @@ def read_foreign(path, *, topics=None, fs=None, max_jitter=None, stamp=None,
         Samples x scale (SI), ``t0 = 0`` at the first common sample, ``start_datetime`` from
         the stamps when they are Unix time, ``meta["mcap_origin_ns"]`` (stamp of sample 0
         [ns]) and ``meta["mcap_mapping"]``; a ``foxglove`` layout file gives back the
-        recording that was written (fs, t0, specs, meta, history).
+        recording that was written (fs, t0, specs, meta, history). Its samples are
+        read-only (shared with the next read of the same file: copy them to change them).
 
     Raises
     ------
@@ -501,6 +502,10 @@ def read_foreign(path, *, topics=None, fs=None, max_jitter=None, stamp=None,
         rec = _CACHE.get(key)
     if rec is None:
         rec = _decode_file(path, entries, fs, max_jitter, verify)
+        # the cached samples are shared by every read of this file (the registry reads the
+        # header, then the samples, once per pass): read-only, so an in-place change by a
+        # caller is an error instead of a change to the next read
+        rec.data.flags.writeable = False
         with _LOCK:
             _CACHE[key] = rec
             while len(_CACHE) > _CACHE_MAX:
