@@ -1,7 +1,9 @@
 """The ``meshphase`` command.
 
-Dask, matplotlib and the synthetic generator are imported only by the subcommands that use
-them, so ``meshphase info`` never pays for them.
+The stages (and with them scipy.signal, scipy.optimize and the scipy.stats that
+scipy.signal imports), dask, matplotlib and the synthetic generator are imported only by the
+subcommands that use them, so ``meshphase --help``, ``info`` and ``convert`` start without
+them (a test holds the modules they load; ``meshphase bench`` times the start-up).
 
 Exit status (every subcommand; README.md "Exit status"; constants in :mod:`meshphase.exits`):
 
@@ -58,7 +60,6 @@ from .io import convert, detect_format, iter_blocks, read_info
 from .log import MessageFormatter, logger, message_line
 from .quality import channel_quality
 from .scene import SceneError, load_scene
-from .stages import process_recording, run_scene, summary_dict, write_outputs
 from .validate import as_regular_file
 
 __all__ = ["main", "build_parser", "describe_error"]
@@ -259,6 +260,7 @@ _MAX_MESSAGES = 10
 
 def _print_run(ctx, files, command: str) -> None:
     """The results of a run on stdout; its warnings on stderr (:func:`message_line`)."""
+    from .stages import summary_dict  # heavy (scipy.signal): see the module docstring
     s = summary_dict(ctx)
     print(f"scene     {ctx.scene.name}")
     print(f"stages    {', '.join(ctx.ran)}" + (f"  (failed: {', '.join(ctx.failed)})" if ctx.failed else ""))
@@ -317,6 +319,7 @@ def _run_and_write(args, scene, base, *, report: bool = True):
     ``scene`` is a Scene or a function of the reserved folder returning one (the demo writes
     its scene file there first). The folder is removed again when the run fails or is
     interrupted (:class:`meshphase.exits.OutputDir`)."""
+    from .stages import run_scene, write_outputs  # heavy (scipy.signal): see the module docstring
     with OutputDir(base, overwrite=args.overwrite, staged=True) as out:
         if callable(scene):
             scene = scene(out.path)
@@ -344,6 +347,7 @@ def cmd_run(args) -> int:
 
 def cmd_process(args) -> int:
     as_regular_file(args.gearset, "the gearset scene (--gearset)")
+    from .stages import process_recording  # heavy (scipy.signal): see the module docstring
     # process_recording returns the paths as published (the output folder's final name)
     ctx, files = process_recording(args.file, args.gearset, out_dir=args.out, overwrite=args.overwrite,
                                    progress=_stage_progress(not args.quiet), tolerance=args.tolerance)

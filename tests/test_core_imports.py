@@ -53,3 +53,35 @@ def test_processing_import_leaves_the_optional_heavy_parts_out(module):
                           "matplotlib", "pandas"], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == "", f"{module} loaded {res.stdout.strip()}"
+
+
+STARTUP_HEAVY = ("scipy", "pandas", "matplotlib", "dask", "distributed", "numba", "llvmlite")
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["info", "{h5}"], ["info", "{h5}", "--no-quality"],
+                                  ["convert", "{h5}", "{out}"]])
+def test_cli_start_up_loads_no_solver(tmp_path, argv):
+    # `meshphase --help`, `info` and `convert` need no stage: the CLI imports the stages (and
+    # with them scipy, which scipy.signal pulls scipy.stats into) only for a command that
+    # runs one. The start-up this buys is timed by `meshphase bench io`'s start-up rows.
+    import numpy as np
+
+    from meshphase.io import write
+    from meshphase.recording import Recording
+
+    h5 = tmp_path / "r.h5"
+    write(Recording(np.zeros((64, 2)), 5120.0, ["sun_g1", "ring_g1"]), h5)
+    args = [a.format(h5=h5, out=tmp_path / "copy.h5") for a in argv]
+    code = ("import sys, contextlib, io\n"
+            "from meshphase.cli import main\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            "    try:\n"
+            "        rc = main(sys.argv[1].split('|'))\n"
+            "    except SystemExit as e:\n"
+            "        rc = e.code\n"
+            "assert rc == 0, rc\n"
+            "print(','.join(sorted({m.split('.')[0] for m in sys.modules} & set(sys.argv[2:]))))")
+    res = subprocess.run([sys.executable, "-c", code, "|".join(args), *STARTUP_HEAVY],
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "", f"meshphase {' '.join(argv)} loaded {res.stdout.strip()}"

@@ -5,7 +5,8 @@
                       10 min to 3 h of 8 channels
 - :mod:`.models`      Monte Carlo error against run time (plain vs Sobol sampling)
 - :mod:`.processing`  onset timing error vs the Cramer-Rao bound, detection throughput; peak
-                      RSS and wall time of ``meshphase process`` from 2 min to 3 h of 8 channels
+                      RSS and wall time of ``meshphase process`` from 2 min to 3 h of 8 channels;
+                      start-up time of the command (:mod:`.startup`)
 - :mod:`.rss`         the child-process peak-memory measurement both use
 - :mod:`.campaign`    the same campaign timed with 1, 2, ... local workers
                       (:func:`.campaign.measure_speedup`; not one of :func:`run_bench`'s kinds)

@@ -433,6 +433,14 @@ def _markdown(res: dict) -> str:
         lines += _md_table(res["process"], PROCESS_COLUMNS)
         for sk in res.get("process_skipped", []):
             lines.append(f"\nSkipped {sk['minutes']:g} min: {sk['reason']}")
+    if res.get("startup"):
+        from .startup import STARTUP_COLUMNS
+
+        lines += ["", "## Start-up: fresh interpreters, median wall time [s]", "",
+                  "over_python_s = median minus that of `python -c pass`; modules = sys.modules "
+                  "at exit. `meshphase process` pays the stages' import (scipy.signal, which "
+                  "imports scipy.stats, and scipy.optimize) on top of `--version`.", ""]
+        lines += _md_table(res["startup"], STARTUP_COLUMNS)
     if res.get("identify"):
         lines += ["", "## identify: model evaluations and wall time per Jacobian", "",
                   "identify_errors on the exact passes of the bench rig (Table 2 case 1 "
@@ -645,7 +653,11 @@ def _run(out_dir, quick: bool, rng, process_minutes=()) -> dict:
 
     phs = phasing_rows(matrix_cases(quick))
     ident = identify_rows((2.0,) if quick else (10.0, 60.0))
+    from .startup import startup_rows
+
+    start = startup_rows(2 if quick else 7)
     res = {"accuracy": acc, "throughput": thr, "phasing": phs, "process": proc, "identify": ident,
+           "startup": start,
            "process_skipped": proc_skipped,
            "meta": {"machine": f"{platform.machine()} {platform.processor() or ''} "
                                f"python {platform.python_version()}".strip(),

@@ -30,6 +30,10 @@ def test_quick_bench_writes_tables(tmp_path):
     text = md.read_text()
     assert "| " + " | ".join(ACCURACY_COLUMNS) + " |" in text
     assert "| " + " | ".join(THROUGHPUT_COLUMNS) + " |" in text
+    from meshphase.bench.startup import STARTUP_COLUMNS
+
+    assert [r["what"] for r in data["startup"]][:2] == ["python -c pass", "import meshphase"]
+    assert "| " + " | ".join(STARTUP_COLUMNS) + " |" in text
     assert res["files"]["json"] == str(j)
 
 

@@ -1,0 +1,24 @@
+"""meshphase.bench.startup: the start-up rows are measured, their shape and ordering held."""
+
+import pytest
+
+from meshphase.bench.startup import STARTUP_COLUMNS, startup_rows
+
+
+def test_startup_rows_measure_each_case():
+    rows = startup_rows(1)
+    assert [r["what"] for r in rows][0] == "python -c pass"
+    for r in rows:
+        assert set(r) == set(STARTUP_COLUMNS)
+        assert 0.0 < r["min_s"] <= r["median_s"] <= r["max_s"]
+    mods = {r["what"]: r["modules"] for r in rows}
+    # the module counts are what the rows claim: the interpreter loads least, the stages most
+    assert mods["python -c pass"] < mods["import meshphase"] < mods["meshphase --version"]
+    assert mods["meshphase --version"] < mods["import meshphase.stages (what process loads)"]
+
+
+@pytest.mark.parametrize("bad, exc", [(0, ValueError), (-2, ValueError), ("3", TypeError),
+                                      (None, TypeError), (2.5, ValueError)])
+def test_startup_rows_reject_bad_repeats(bad, exc):
+    with pytest.raises(exc):
+        startup_rows(bad)
