@@ -31,11 +31,11 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from .angles import AngleModel, Kinematics, PassTrain, TrainFit, fit_angle_model
+from .angles import AngleModel, Kinematics, PassTrain, TrainFit, fit_angle_model, slice_train
 
 __all__ = ["fit_angle_windows", "WindowedAngleModel", "WINDOW_OBS"]
 
@@ -189,13 +189,6 @@ def _revolution(tr: PassTrain, n_planets: int) -> float:
     return span
 
 
-def _slice(tr: PassTrain, lo: float, hi: float) -> tuple[PassTrain, int]:
-    i0, i1 = np.searchsorted(tr.times, [lo, hi], side="left")
-    s = slice(int(i0), int(i1))
-    return replace(tr, times=tr.times[s], sigma=tr.sigma[s], target=tr.target[s],
-                   planet=tr.planet[s], position=tr.position[s]), int(i0)
-
-
 def _plan(trains: list, n_planets: int, max_obs: int) -> tuple[np.ndarray, float]:
     """Core boundaries [s] and margin h [s]; no boundaries when one window suffices."""
     n_obs = sum(len(tr) for tr in trains)
@@ -267,7 +260,7 @@ def _fit_windows(trains, kin, n, bounds, h, progress, kwargs) -> WindowedAngleMo
         lo, hi = edges[j] - 2.0 * h, edges[j + 1] + 2.0 * h
         subs, sl = [], {}
         for tr in trains:
-            s, i0 = _slice(tr, lo, hi)
+            s, i0 = slice_train(tr, lo, hi)
             if len(s) >= 2:
                 subs.append(s)
                 sl[tr.name] = (i0, s.times)

@@ -60,19 +60,19 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import linalg
 from scipy.interpolate import BSpline
 
 from .errors import ProcessingWarning
-from .validate import as_finite_array
+from .validate import as_finite_array, as_positive_int
 
 __all__ = ["PassTrain", "Kinematics", "AngleModel", "gauge_train", "tacho_train",
            "kinematics", "fit_angle_model", "revolution_numbers", "held_member",
-           "typed_resolution", "relabel_train", "label_shift_costs",
-           "mesh_cycles_per_carrier_turn"]
+           "typed_resolution", "relabel_train", "label_shift_costs", "slice_train",
+           "mesh_cycles_per_carrier_turn", "SHIFT_OBS"]
 
 TWO_PI = 2.0 * math.pi
 #: spline interval counts tried, in order
@@ -131,6 +131,23 @@ class PassTrain:
 
     def __len__(self) -> int:
         return int(self.times.size)
+
+
+def slice_train(train: PassTrain, lo: float, hi: float) -> tuple[PassTrain, int]:
+    """The observations of ``train`` with ``lo <= time < hi`` [s], and the index of the first.
+
+    Labels, positions and targets are kept as they are (a slice of the train, not a new
+    train counted from its own first pass).
+    """
+    if not isinstance(train, PassTrain):
+        raise TypeError(f"train must be a PassTrain, got {type(train).__name__}")
+    lo, hi = float(lo), float(hi)
+    if math.isnan(lo) or math.isnan(hi):
+        raise ValueError(f"lo and hi must be numbers, got {lo!r}, {hi!r}")
+    i0, i1 = np.searchsorted(train.times, [lo, hi], side="left")
+    s = slice(int(i0), int(max(i0, i1)))
+    return replace(train, times=train.times[s], sigma=train.sigma[s], target=train.target[s],
+                   planet=train.planet[s], position=train.position[s]), int(i0)
 
 
 def _check_times(times, name: str) -> np.ndarray:
@@ -1450,8 +1467,26 @@ def relabel_train(train: PassTrain, shift: int, fractions, n_planets: int) -> Pa
                      pl.astype(int), pos.astype(int), train.sigma_given, train.z, train.order)
 
 
+#: Observations above which :func:`label_shift_costs` fits only the central time window of
+#: the record holding this many [-]: hundreds of passes per train decide a relabelling, and
+#: the cost of the N fits then stays bounded in the record's length (a 1-h seed-rig record
+#: holds ~13 000 gauge passes).
+SHIFT_OBS = 6000
+
+
+def _central_window(trains: list, max_obs: int) -> list:
+    """``trains`` cut to the central time window holding at most ``max_obs`` observations."""
+    n_obs = sum(len(tr) for tr in trains)
+    if n_obs <= max_obs:
+        return trains
+    t = np.sort(np.concatenate([tr.times for tr in trains]))
+    i0 = (t.size - max_obs) // 2
+    lo, hi = t[i0], t[i0 + max_obs - 1]
+    return [slice_train(tr, lo, np.nextafter(hi, np.inf))[0] for tr in trains]
+
+
 def label_shift_costs(reference, train: PassTrain, fractions, kin: Kinematics,
-                      n_planets: int) -> np.ndarray:
+                      n_planets: int, *, max_obs: int = SHIFT_OBS) -> np.ndarray:
     """Misfit of each cyclic relabelling of ``train`` against ``reference`` trains whose
     labels are taken as they are.
 
@@ -1459,17 +1494,24 @@ def label_shift_costs(reference, train: PassTrain, fractions, kin: Kinematics,
     of the model are shared by the gauges), so when the planets' offsets differ, only the
     relabelling that names the same physical planet alike on both gauges fits. Each shift is
     fitted with a fixed small model (cubic spline, first ripple harmonic of every shaft that
-    turns, first planet term) and scored by its weighted chi-square.
+    turns, first planet term) and scored by its weighted chi-square. A record of more than
+    ``max_obs`` observations is fitted on its central time window of ``max_obs`` (every
+    train cut alike), so that the cost stays bounded in the record's length.
 
     Returns
     -------
     ndarray, shape (N,)
         chi-square per pass-order shift 0..N-1 [-] (inf where the fit failed).
     """
+    max_obs = as_positive_int(max_obs, "max_obs")
     refs = [r for r in reference if len(r) >= 2]
     n = int(n_planets)
     out = np.full(n, np.inf)
     if not refs or len(train) < 2 or not kin.planet_period:
+        return out
+    *refs, train = _central_window(refs + [train], max_obs)
+    refs = [r for r in refs if len(r) >= 2]
+    if not refs or len(train) < 2:
         return out
     for s in range(n):
         trs = refs + [relabel_train(train, s, fractions, n)]

@@ -228,6 +228,54 @@ def test_label_shift_costs_find_the_planets_by_their_own_offsets():
     assert np.ptp(costs) <= 1e-6 * np.max(costs)
 
 
+
+def test_label_shift_costs_on_a_central_window_decide_alike():
+    # a cap below the record's observations fits the central window only: the same shift
+    # stands out (the decision needs hundreds of passes, not the whole record), and a cap
+    # above them changes nothing at all
+    from meshphase.synthetic.generate import draw_errors
+
+    g, sp = rig(zp=31)
+    err = draw_errors(table2_case(3)[2], 4, 5)
+    trains, _ = trains_from_truth(g, sp, SpeedProfile(), 120.0, errors=err, sigma=2e-5)
+    frac = planet_fractions(g.angles, pass_order("cw", "ring"))
+    shifted = relabel_train(trains[1], 1, frac, 4)
+    kin = kinematics(25, 87, 31, fixed="ring")
+    n_obs = len(trains[0]) + len(shifted)
+    whole = label_shift_costs([trains[0]], shifted, frac, kin, 4)
+    same = label_shift_costs([trains[0]], shifted, frac, kin, 4, max_obs=n_obs)
+    np.testing.assert_array_equal(same, whole)
+    cut = label_shift_costs([trains[0]], shifted, frac, kin, 4, max_obs=n_obs // 2)
+    assert int(np.argmin(cut)) == int(np.argmin(whole)) == 3
+    assert np.sort(cut)[1] > 25 * np.min(cut)
+    assert np.min(cut) < np.min(whole)        # fewer passes, smaller chi-square
+    with pytest.raises(ValueError):
+        label_shift_costs([trains[0]], shifted, frac, kin, 4, max_obs=0)
+    with pytest.raises(TypeError):
+        label_shift_costs([trains[0]], shifted, frac, kin, 4, max_obs="many")
+
+
+def test_slice_train_keeps_labels_and_positions():
+    from meshphase.angles import slice_train
+
+    g, sp = rig(zp=31)
+    trains, _ = trains_from_truth(g, sp, SpeedProfile(), 30.0, sigma=2e-5)
+    tr = trains[0]
+    lo, hi = tr.times[3], tr.times[10]
+    part, i0 = slice_train(tr, lo, hi)
+    assert i0 == 3 and len(part) == 7
+    for name in ("times", "sigma", "target", "planet", "position"):
+        np.testing.assert_array_equal(getattr(part, name), getattr(tr, name)[3:10])
+    assert part.name == tr.name and part.z == tr.z and part.order == tr.order
+    empty, i0 = slice_train(tr, hi, lo)            # an empty window: an empty train
+    assert len(empty) == 0 and empty.planet.size == 0
+    assert len(slice_train(tr, -np.inf, np.inf)[0]) == len(tr)
+    with pytest.raises(TypeError):
+        slice_train(tr.times, lo, hi)
+    with pytest.raises(ValueError):
+        slice_train(tr, float("nan"), hi)
+
+
 # ----------------------------------------------------------------------------- held member
 def test_typed_speeds_hold_the_ring_within_their_precision():
     g = Gearset.equally_spaced(25, 87, 29, 4, 0.1125)
