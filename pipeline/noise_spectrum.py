@@ -130,30 +130,34 @@ def pulse_residual_psd(x, fs: float, t0: float, times, *, skip: float = 0.0) -> 
     w = w[np.all(np.isfinite(w), axis=1)]
     if len(w) < MIN_PULSES:
         return None
-    h = _pulse_shape(w)
-    if h is None:
+    basis = _pulse_basis(w)
+    if basis is None:
         return None
-    r = (w - np.outer(w @ h, h)).ravel()               # per-window least-squares amplitude
+    r = (w - (w @ basis.T) @ basis).ravel()             # per-window least-squares fit
     nperseg = 1 << int(math.floor(math.log2(2 * half)))
     n_seg = (r.size - nperseg) // (nperseg // 2) + 1
     if n_seg < MIN_SEGMENTS:
         return None
     f, p = welch(r, fs=fs, window="hann", nperseg=nperseg, noverlap=nperseg // 2,
                  detrend="constant", scaling="density")
-    g = np.abs(np.fft.rfft(h)) ** 2 / h.size            # share of the noise the fit took
-    fg = np.fft.rfftfreq(h.size, 1.0 / fs)
+    g = np.sum(np.abs(np.fft.rfft(basis, axis=1)) ** 2, axis=0) / basis.shape[1]
+    fg = np.fft.rfftfreq(basis.shape[1], 1.0 / fs)      # share of the noise the fit took
     p = p / (1.0 - np.clip(np.interp(f, fg, g), 0.0, 0.5))
     return NoiseSpectrum(f, p, welch_dof(int(n_seg)), int(r.size), int(len(w)), int(nperseg))
 
 
-def _pulse_shape(w: np.ndarray) -> np.ndarray | None:
-    """The unit-norm pulse shape of windows ``w`` (rows): their average with each row
-    weighted by its projection on the plain average (one refinement), None when zero."""
+def _pulse_basis(w: np.ndarray) -> np.ndarray | None:
+    """Orthonormal rows spanning what a window's pulse may do: the pulse shape (the
+    windows' average, each weighted by its projection on the plain average), its shift
+    (time derivative) and its stretch (time times derivative, about the window's centre);
+    None when the average is zero."""
     m = w.mean(axis=0)
     nm = float(np.linalg.norm(m))
     if not nm > 0:
         return None
-    a = w @ (m / nm)
-    h = a @ w
-    nh = float(np.linalg.norm(h))
-    return h / nh if nh > 0 else None
+    h = (w @ (m / nm)) @ w
+    dh = np.gradient(h)
+    u = np.arange(h.size) - 0.5 * (h.size - 1)
+    q, r = np.linalg.qr(np.stack([h, dh, u * dh], axis=1))
+    keep = np.abs(np.diag(r)) > 1e-12 * max(float(np.abs(r[0, 0])), 1e-300)
+    return q[:, keep].T if keep[0] else None

@@ -4,10 +4,12 @@ how well it is timed.
 The onset detector (:mod:`meshphase.onsets`) times every pulse of a gauge channel; the phasing
 (:mod:`meshphase.phasing`) wants passes: the usable pulses (:func:`usable_onsets`: clean, or
 flagged only for a gap that conditioning bridged), each at its template's timing centre (a
-fixed angle of the gauged gear, :func:`pass_times`), with a timing bound (:func:`onset_sigma`:
-the Cramer-Rao bound in the channel's noise spectrum, :func:`meshphase._crb.crb_delay_std_psd`
-with :func:`meshphase.noise_spectrum.pulse_residual_psd`, else in white noise of its RMS,
-:func:`meshphase._crb.crb_delay_std`; with a resolution floor).
+fixed angle of the gauged gear, :func:`pass_times`), with a timing bound (:func:`onset_sigma`,
+the Cramer-Rao bound of :func:`meshphase._crb.crb_delay_std` in white noise of the channel's
+RMS, with a resolution floor) that weights the pass in the angle model, and the factor by
+which the bound in the channel's noise spectrum exceeds it (:func:`channel_noise_spectrum`,
+:func:`meshphase._crb.crb_delay_std_psd`): the timing floor the phasing's reliability is
+judged against.
 :func:`gauge_passes` does that for every gauge of a recording; :func:`gap_intervals_of`
 gives the gaps the phasing must not bridge.
 """
@@ -28,10 +30,17 @@ from .validate import as_positive
 
 __all__ = ["ONSET_RESOLUTION", "timing_centre", "pass_times", "usable_onsets",
            "conditioned_gap_runs", "gap_intervals_of", "onset_sigma", "channel_noise_spectrum",
-           "gauge_passes"]
+           "NOISE_LIKE_RATIO", "gauge_passes"]
 
 #: finest onset timing claimed on noise-free data, as a fraction of the pulse's FWHM [-]
 ONSET_RESOLUTION = 1e-4
+
+#: a residual (what the pulses leave, :func:`channel_noise_spectrum`) whose RMS exceeds this
+#: many times the channel's per-sample noise RMS is taken for pulse misfit, not noise [-]: a
+#: noise-free synthetic speed ramp leaves 150x (sun) to 7e4x (ring), while 30 dB of noise
+#: with 30 % of it 1/f leaves 0.4x and white noise 0.1x (both low-passed by conditioning);
+#: noise 99 % 1/f would stay below it
+NOISE_LIKE_RATIO = 10.0
 
 #: channel kinds whose onsets make passes
 _GAUGE_KINDS = ("sun", "ring", "facewidth")
@@ -175,14 +184,14 @@ def onset_sigma(onsets: Onsets, noise_rms: float, *, noise: NoiseSpectrum | None
     """Per-onset timing uncertainty [s]: the Cramer-Rao bound for the learnt template at the
     fitted amplitude, in the conditioned channel's noise.
 
-    With its noise spectrum (``noise``, :func:`channel_noise_spectrum`) it is the bound in
-    coloured Gaussian noise (:func:`meshphase._crb.crb_delay_std_psd`, Kay 1993 sec. 3.11):
-    1/f noise under slow pulses (the seed rig's 650-sample pulses, 30 % of the noise power
-    1/f from 0.05 Hz) makes it ~4.5x the white bound, and the passes scatter by that much.
-    Without one, or where it gives no finite bound, it is the bound in white noise of the
-    channel's per-sample RMS (:func:`meshphase._crb.crb_delay_std`, Kay 1993 eq. 3.14); the
-    two agree for white noise (within the spectrum estimate's error). The onset tests hold
-    the detector within ~1.1x of the white bound in white noise.
+    In white noise of the channel's per-sample RMS (:func:`meshphase._crb.crb_delay_std`,
+    Kay 1993 eq. 3.14); the onset tests hold the detector within ~1.1x of it. With its noise
+    spectrum (``noise``, :func:`channel_noise_spectrum`) it is the bound in coloured Gaussian
+    noise instead (:func:`meshphase._crb.crb_delay_std_psd`, Kay 1993 sec. 3.11): 1/f noise
+    under slow pulses (the seed rig's 650-sample pulses, 30 % of the noise power 1/f from
+    0.05 Hz) makes it ~4.5x the white bound, and the passes scatter by that much; where it
+    gives no finite bound the white one stands. The two agree for white noise (within the
+    spectrum estimate's error).
 
     It never claims better than the detector resolves a noise-free pulse: its sub-sample
     interpolation leaves an error that repeats with the pulse's position on the sample grid,
@@ -247,7 +256,8 @@ def channel_noise_spectrum(excerpt, name: str, onsets: Onsets, quality=None) -> 
     """The noise spectrum of a conditioned gauge channel for :func:`onset_sigma`
     (:func:`meshphase.noise_spectrum.pulse_residual_psd`): one Welch estimate per channel,
     from the conditioned samples a run keeps (the condition stage's excerpt, its first
-    minute), after the filters settled.
+    minute), after the filters settled. A residual above :data:`NOISE_LIKE_RATIO` times the
+    channel's per-sample noise RMS is pulse misfit, not noise: no spectrum then.
 
     Parameters
     ----------
@@ -258,12 +268,13 @@ def channel_noise_spectrum(excerpt, name: str, onsets: Onsets, quality=None) -> 
     onsets : meshphase.onsets.Onsets
         Its onsets.
     quality : ChannelQuality, optional
-        Its quality report (``settle`` [s]).
+        Its quality report (``settle`` [s], ``noise_rms`` [data units]).
 
     Returns
     -------
     NoiseSpectrum or None
-        None without an excerpt, without the channel in it, or too few pulses or samples.
+        None without an excerpt, without the channel in it, with too few pulses or
+        samples, or with a residual that is not noise-like.
     """
     on = _as_onsets(onsets)
     if not isinstance(name, str):
@@ -271,7 +282,11 @@ def channel_noise_spectrum(excerpt, name: str, onsets: Onsets, quality=None) -> 
     if excerpt is None or name not in excerpt.names or excerpt.n_samples == 0:
         return None
     skip = float(getattr(quality, "settle", 0.0) or 0.0)
-    return pulse_residual_psd(excerpt.channel(name), excerpt.fs, excerpt.t0, on.times, skip=skip)
+    spec = pulse_residual_psd(excerpt.channel(name), excerpt.fs, excerpt.t0, on.times, skip=skip)
+    rms = float(getattr(quality, "noise_rms", float("nan")))
+    if spec is not None and math.isfinite(rms) and spec.rms > NOISE_LIKE_RATIO * rms:
+        return None
+    return spec
 
 
 def gauge_passes(channels, onsets: dict, quality: dict, fs: float, t0: float, *,
@@ -292,14 +307,15 @@ def gauge_passes(channels, onsets: dict, quality: dict, fs: float, t0: float, *,
         Time of sample 0 [s].
     excerpt : Recording, optional
         Conditioned samples of the gauges (the condition stage's excerpt): each gauge's
-        timing bounds are then taken in its noise spectrum (:func:`channel_noise_spectrum`),
-        else in white noise of its RMS.
+        ``floor_factor`` is then the ratio of its timing bounds in its noise spectrum
+        (:func:`channel_noise_spectrum`) to those in white noise of its RMS, else 1.
 
     Returns
     -------
     passes : list of GaugePasses
         Each gauge with a usable pulse: pass times [s], amplitudes, timing bounds [s] (None
-        when no pass has one); ``main`` for the first sun and the first ring gauge.
+        when no pass has one), the floor factor; ``main`` for the first sun and the first
+        ring gauge.
     mains : dict of str to str
         Gear -> its main gauge channel (also when it has no usable pulse: then a
         ProcessingWarning says so).
@@ -319,8 +335,9 @@ def gauge_passes(channels, onsets: dict, quality: dict, fs: float, t0: float, *,
         # finite (its quality report: the conditioned samples are streamed, not kept)
         ok = usable_onsets(on, conditioned_gap_runs(q), fs, t0)
         times, amp = pass_times(on)[ok], on.amplitude[ok]
-        spec = channel_noise_spectrum(excerpt, c.name, on, q)
-        sig = onset_sigma(on, getattr(q, "noise_rms", float("nan")), noise=spec)[ok]
+        rms = getattr(q, "noise_rms", float("nan"))
+        sig = onset_sigma(on, rms)[ok]
+        factor = _floor_factor(sig, on, ok, rms, channel_noise_spectrum(excerpt, c.name, on, q))
         main = c.kind in ("sun", "ring") and gear not in mains
         if main:
             mains[gear] = c.name
@@ -330,5 +347,16 @@ def gauge_passes(channels, onsets: dict, quality: dict, fs: float, t0: float, *,
                               "phasing from it", ProcessingWarning, stacklevel=3)
         if times.size:
             passes.append(GaugePasses(c.name, gear, times, amp,
-                                      sig if np.any(np.isfinite(sig)) else None, main))
+                                      sig if np.any(np.isfinite(sig)) else None, main, factor))
     return passes, mains
+
+
+def _floor_factor(sig: np.ndarray, on: Onsets, ok: np.ndarray, rms, spec) -> float:
+    """Median over the usable passes of their timing bound in the noise spectrum ``spec``
+    over their white bound ``sig`` [-]; 1 without a spectrum or a finite ratio."""
+    if spec is None or not np.any(np.isfinite(sig)):
+        return 1.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = onset_sigma(on, rms, noise=spec)[ok] / sig
+    r = r[np.isfinite(r) & (r > 0)]
+    return float(np.median(r)) if r.size else 1.0

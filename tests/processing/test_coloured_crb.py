@@ -9,6 +9,7 @@ come from the Welch estimate's degrees of freedom, not from a machine's results.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -288,3 +289,58 @@ def test_channel_noise_spectrum():
         channel_noise_spectrum(rec, 3, on)
     with pytest.raises(TypeError):
         channel_noise_spectrum(rec, "g", times)
+
+
+# ---- gauge_passes: the floor factor --------------------------------------------------------
+
+def _gauge_case(coloured, sigma=0.05, n=1 << 18, seed=6):
+    from meshphase.condition import ChannelQuality
+
+    x, times = _train(n, sigma, np.random.default_rng(seed), coloured=coloured)
+    rec = Recording(x[:, None], FS, [ChannelSpec("g", kind="sun")])
+    e = np.empty((0, 2), dtype=np.int64)
+    q = dataclasses.replace(ChannelQuality("g", FS, 0.0, n, e, e.copy(), e.copy()), noise_rms=sigma)
+    return rec, {"g": _ons(times, _tpl())}, {"g": q}
+
+
+def test_gauge_passes_floor_factor_white_coloured_and_weights_unchanged():
+    from meshphase.passes import gauge_passes
+
+    for coloured in (False, True):
+        rec, ons, quality = _gauge_case(coloured)
+        plain, _ = gauge_passes(rec.channels, ons, quality, FS, 0.0)
+        (p,), _ = gauge_passes(rec.channels, ons, quality, FS, 0.0, excerpt=rec)
+        assert plain[0].floor_factor == 1.0
+        # the angle model's weights stay the white bound's
+        np.testing.assert_array_equal(p.sigma, plain[0].sigma)
+        spec = channel_noise_spectrum(rec, "g", ons["g"], quality["g"])
+        f = np.linspace(0.0, FS / 2, 20001)
+        gain = _pink_gain(f) if coloured else np.ones(f.size)
+        d = np.gradient(_tpl().samples) * FS
+        exact = crb_delay_std_psd(d, FS, f, 2 * 0.05 ** 2 / FS * gain) / crb_delay_std(d, 0.05)
+        assert abs(p.floor_factor / exact - 1.0) < _dof_tolerance(spec) + (0.05 if coloured else 0.0)
+
+
+def test_gauge_passes_pulse_misfit_is_not_noise():
+    """Noise-free pulses whose shape drifts (a speed ramp stretches them) leave a residual
+    far above the per-sample noise: that is misfit, and the floor stays the white bound's."""
+    from meshphase.passes import NOISE_LIKE_RATIO, gauge_passes
+
+    rng = np.random.default_rng(7)
+    n = 1 << 18
+    t = np.arange(n) / FS
+    times = np.arange(SPACING, n / FS - SPACING, SPACING)
+    x = rng.normal(0.0, 1e-6, n)
+    for k, tk in enumerate(times):
+        width = TAU * (1.0 + 0.3 * k / times.size)
+        x += np.exp(-0.5 * ((t - tk) / width) ** 2)
+    rec = Recording(x[:, None], FS, [ChannelSpec("g", kind="sun")])
+    from meshphase.condition import ChannelQuality
+
+    e = np.empty((0, 2), dtype=np.int64)
+    q = dataclasses.replace(ChannelQuality("g", FS, 0.0, n, e, e.copy(), e.copy()), noise_rms=1e-6)
+    spec = pulse_residual_psd(x, FS, 0.0, times)
+    assert spec.rms > NOISE_LIKE_RATIO * 1e-6
+    assert channel_noise_spectrum(rec, "g", _ons(times, _tpl()), q) is None
+    (p,), _ = gauge_passes(rec.channels, {"g": _ons(times, _tpl())}, {"g": q}, FS, 0.0, excerpt=rec)
+    assert p.floor_factor == 1.0
