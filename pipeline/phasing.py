@@ -110,8 +110,10 @@ class PassTable:
         Time at which model offset phases (kappa) are referred [s]; the pipeline sets the
         recording's first-sample time (default 0).
     timing_floor : ndarray, shape (n,)
-        The part of ``uncertainty`` the two onsets' timing bounds alone set [-]:
-        A'(t_n) sigma_n and A'(t_1) sigma_1 combined (NaN without timing bounds).
+        What the two onsets' timing bounds alone allow [-]: A'(t_n) sigma_n and A'(t_1)
+        sigma_1 combined (NaN without timing bounds); from :func:`measure_phasing` with
+        the bounds in the gauge's noise spectrum (``sigma`` times
+        :attr:`GaugePasses.floor_factor`), the floor the reliability is judged against.
     model_sigma : ndarray, shape (n,)
         The angle model's own one-sigma uncertainty of A(t_n) - A(t_1) [-].
     """
