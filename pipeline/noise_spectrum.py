@@ -14,13 +14,17 @@ laid end to end.
 The pulse shape is the synchronous average of the windows at full rate (amplitude-weighted,
 aligned on the onsets to the nearest sample), so it carries the pulse's tails and the
 neighbouring pulses' flanks that the detector's shorter, tapered template leaves out; each
-window gets its own least-squares amplitude (the detector's amplitudes, fitted over the
-template's span only, leave tens of times the white noise level in the pulses' band).
-Fitting that amplitude takes the noise component along the pulse out of each window, a
-fraction ``g(f) = |U(f)|^2 / W`` of the noise at frequency ``f`` (``U`` the DFT of the
-unit-norm pulse over the ``W``-sample window): the estimate is divided by ``1 - g``. The
-average itself takes out another ``1 / M`` of ``M`` windows, left in (under 2 % of the
-power for the 60 pulses of a seed-rig minute).
+window gets its own least-squares fit of that shape, its shift and its stretch (the detector's
+amplitudes alone, fitted over the template's span, leave tens of times the white noise level
+in the pulses' band; a speed change stretches the pulses). The fit takes the noise component
+along those three shapes out of each window, a fraction ``g(f) = sum_j |U_j(f)|^2 / W`` of the
+noise at frequency ``f`` (``U_j`` the DFTs of the orthonormal shapes over the ``W``-sample
+window): the estimate is divided by ``1 - g``. The average itself takes out another ``1 / M``
+of ``M`` windows, left in (under 2 % of the power for the 60 pulses of a seed-rig minute).
+
+What the fit cannot follow stays in the residual as if it were noise: on noise-free or very
+clean data that misfit dominates, and :func:`meshphase.passes.channel_noise_spectrum` refuses
+a residual far above the channel's per-sample noise RMS.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.signal import welch
 
 from ._crb import welch_dof
 from .validate import as_float, as_positive
@@ -105,8 +110,6 @@ def pulse_residual_psd(x, fs: float, t0: float, times, *, skip: float = 0.0) -> 
         None with fewer than :data:`MIN_PULSES` usable windows or :data:`MIN_SEGMENTS`
         Welch segments of at least :data:`MIN_NPERSEG` samples.
     """
-    from scipy.signal import welch
-
     x = np.asarray(x, dtype=np.float64)
     if x.ndim != 1:
         raise ValueError(f"x must be 1-D, got shape {x.shape}")
