@@ -5,7 +5,11 @@ The onset detector (:mod:`meshphase.onsets`) times every pulse of a gauge channe
 (:mod:`meshphase.phasing`) wants passes: the usable pulses (:func:`usable_onsets`: clean, or
 flagged only for a gap that conditioning bridged), each at its template's timing centre (a
 fixed angle of the gauged gear, :func:`pass_times`), with a timing bound (:func:`onset_sigma`,
-the Cramer-Rao bound of :func:`meshphase._crb.crb_delay_std` with a resolution floor).
+the Cramer-Rao bound of :func:`meshphase._crb.crb_delay_std` in white noise of the channel's
+RMS, with a resolution floor) that weights the pass in the angle model, and the factor by
+which the bound in the channel's noise spectrum exceeds it (:func:`channel_noise_spectrum`,
+:func:`meshphase._crb.crb_delay_std_psd`): the timing floor the phasing's reliability is
+judged against.
 :func:`gauge_passes` does that for every gauge of a recording; :func:`gap_intervals_of`
 gives the gaps the phasing must not bridge.
 """
@@ -17,17 +21,26 @@ import warnings
 
 import numpy as np
 
-from ._crb import crb_delay_std
+from ._crb import crb_delay_std, crb_delay_std_psd
 from .errors import ProcessingWarning
+from .noise_spectrum import NoiseSpectrum, pulse_residual_psd
 from .onsets import FLAG_GAP, Onsets, Template
 from .phasing import GaugePasses
 from .validate import as_positive
 
 __all__ = ["ONSET_RESOLUTION", "timing_centre", "pass_times", "usable_onsets",
-           "conditioned_gap_runs", "gap_intervals_of", "onset_sigma", "gauge_passes"]
+           "conditioned_gap_runs", "gap_intervals_of", "onset_sigma", "channel_noise_spectrum",
+           "NOISE_LIKE_RATIO", "gauge_passes"]
 
 #: finest onset timing claimed on noise-free data, as a fraction of the pulse's FWHM [-]
 ONSET_RESOLUTION = 1e-4
+
+#: a residual (what the pulses leave, :func:`channel_noise_spectrum`) whose RMS exceeds this
+#: many times the channel's per-sample noise RMS is taken for pulse misfit, not noise [-]: a
+#: noise-free synthetic speed ramp leaves 150x (sun) to 7e4x (ring), while 30 dB of noise
+#: with 30 % of it 1/f leaves 0.4x and white noise 0.1x (both low-passed by conditioning);
+#: noise 99 % 1/f would stay below it
+NOISE_LIKE_RATIO = 10.0
 
 #: channel kinds whose onsets make passes
 _GAUGE_KINDS = ("sun", "ring", "facewidth")
@@ -167,11 +180,18 @@ def gap_intervals_of(quality: dict) -> np.ndarray:
     return np.concatenate(out) if out else np.empty((0, 2))
 
 
-def onset_sigma(onsets: Onsets, noise_rms: float) -> np.ndarray:
+def onset_sigma(onsets: Onsets, noise_rms: float, *, noise: NoiseSpectrum | None = None) -> np.ndarray:
     """Per-onset timing uncertainty [s]: the Cramer-Rao bound for the learnt template at the
-    fitted amplitude in white noise of the conditioned channel's RMS
-    (:func:`meshphase._crb.crb_delay_std`, Kay 1993 eq. 3.14); the onset tests hold the
-    detector within ~1.1x of it.
+    fitted amplitude, in the conditioned channel's noise.
+
+    In white noise of the channel's per-sample RMS (:func:`meshphase._crb.crb_delay_std`,
+    Kay 1993 eq. 3.14); the onset tests hold the detector within ~1.1x of it. With its noise
+    spectrum (``noise``, :func:`channel_noise_spectrum`) it is the bound in coloured Gaussian
+    noise instead (:func:`meshphase._crb.crb_delay_std_psd`, Kay 1993 sec. 3.11): 1/f noise
+    under slow pulses (the seed rig's 650-sample pulses, 30 % of the noise power 1/f from
+    0.05 Hz) makes it ~4.5x the white bound, and the passes scatter by that much; where it
+    gives no finite bound the white one stands. The two agree for white noise (within the
+    spectrum estimate's error).
 
     It never claims better than the detector resolves a noise-free pulse: its sub-sample
     interpolation leaves an error that repeats with the pulse's position on the sample grid,
@@ -183,8 +203,10 @@ def onset_sigma(onsets: Onsets, noise_rms: float) -> np.ndarray:
     ----------
     onsets : meshphase.onsets.Onsets
     noise_rms : float
-        RMS of the conditioned channel's noise [data units]; not a positive finite float:
-        the floor alone.
+        RMS of the conditioned channel's noise per sample [data units]; not a positive
+        finite float (and no ``noise``): the floor alone.
+    noise : NoiseSpectrum, optional
+        The channel's noise spectrum [data units^2/Hz].
 
     Returns
     -------
@@ -192,6 +214,8 @@ def onset_sigma(onsets: Onsets, noise_rms: float) -> np.ndarray:
         [s]; NaN for an onset without a template (and where the bound is not finite).
     """
     on = _as_onsets(onsets)
+    if noise is not None and not isinstance(noise, NoiseSpectrum):
+        raise TypeError(f"noise must be a NoiseSpectrum or None, got {type(noise).__name__}")
     out = np.full(len(on), np.nan)
     if not len(on) or not on.templates:
         return out
@@ -199,27 +223,74 @@ def onset_sigma(onsets: Onsets, noise_rms: float) -> np.ndarray:
     has = on.template_id >= 0
     floor = np.array([ONSET_RESOLUTION * tp.fwhm for tp in on.templates])[tid]
     floor = np.where(has, floor, np.nan)
-    if not (isinstance(noise_rms, float) and math.isfinite(noise_rms)) or noise_rms <= 0:
+    white = isinstance(noise_rms, float) and math.isfinite(noise_rms) and noise_rms > 0
+    if not white and noise is None:
         return floor
-    # the bound of each template at unit amplitude [s], per original sample: the template
-    # is sampled at fs / decimation, so its information sums decimation times over
-    unit = np.array([_unit_bound(tp, noise_rms) for tp in on.templates])
+    # the bound of each template at unit amplitude [s]
+    unit = np.array([_unit_bound(tp, noise_rms if white else float("nan"), noise)
+                     for tp in on.templates])
     with np.errstate(divide="ignore", invalid="ignore"):
         out = np.where(has, unit[tid], np.nan) / np.abs(on.amplitude)
     out = np.fmax(out, floor)
     return np.where(np.isfinite(out), out, np.nan)
 
 
-def _unit_bound(tp: Template, noise_rms: float) -> float:
-    """Cramer-Rao bound [s] of a unit-amplitude pulse of template ``tp`` in white noise of
-    RMS ``noise_rms`` per original sample (NaN for a template that is not finite)."""
+def _unit_bound(tp: Template, noise_rms: float, noise: NoiseSpectrum | None = None) -> float:
+    """Cramer-Rao bound [s] of a unit-amplitude pulse of template ``tp``: in the noise
+    spectrum ``noise`` when given and finite there, else in white noise of RMS
+    ``noise_rms`` per original sample (NaN for a template that is not finite)."""
     d = np.gradient(np.asarray(tp.samples, dtype=float)) * tp.rate   # [1/s], peak 1
     if not np.all(np.isfinite(d)):
         return float("nan")
+    if noise is not None:
+        b = crb_delay_std_psd(d, tp.rate, noise.freqs, noise.psd, dof=noise.dof)
+        if math.isfinite(b):
+            return b
+    if not (math.isfinite(noise_rms) and noise_rms > 0):
+        return float("nan")
+    # the template is sampled at fs / decimation: its information sums decimation times over
     return float(crb_delay_std(d, noise_rms)) / math.sqrt(tp.decimation)
 
 
-def gauge_passes(channels, onsets: dict, quality: dict, fs: float, t0: float) -> tuple[list, dict]:
+def channel_noise_spectrum(excerpt, name: str, onsets: Onsets, quality=None) -> NoiseSpectrum | None:
+    """The noise spectrum of a conditioned gauge channel for :func:`onset_sigma`
+    (:func:`meshphase.noise_spectrum.pulse_residual_psd`): one Welch estimate per channel,
+    from the conditioned samples a run keeps (the condition stage's excerpt, its first
+    minute), after the filters settled. A residual above :data:`NOISE_LIKE_RATIO` times the
+    channel's per-sample noise RMS is pulse misfit, not noise: no spectrum then.
+
+    Parameters
+    ----------
+    excerpt : Recording or None
+        Conditioned channels.
+    name : str
+        The channel.
+    onsets : meshphase.onsets.Onsets
+        Its onsets.
+    quality : ChannelQuality, optional
+        Its quality report (``settle`` [s], ``noise_rms`` [data units]).
+
+    Returns
+    -------
+    NoiseSpectrum or None
+        None without an excerpt, without the channel in it, with too few pulses or
+        samples, or with a residual that is not noise-like.
+    """
+    on = _as_onsets(onsets)
+    if not isinstance(name, str):
+        raise TypeError(f"name must be a channel name (str), got {type(name).__name__}")
+    if excerpt is None or name not in excerpt.names or excerpt.n_samples == 0:
+        return None
+    skip = float(getattr(quality, "settle", 0.0) or 0.0)
+    spec = pulse_residual_psd(excerpt.channel(name), excerpt.fs, excerpt.t0, on.times, skip=skip)
+    rms = float(getattr(quality, "noise_rms", float("nan")))
+    if spec is not None and math.isfinite(rms) and spec.rms > NOISE_LIKE_RATIO * rms:
+        return None
+    return spec
+
+
+def gauge_passes(channels, onsets: dict, quality: dict, fs: float, t0: float, *,
+                 excerpt=None) -> tuple[list, dict]:
     """The passes of every gauge channel, as the phasing needs them.
 
     Parameters
@@ -234,12 +305,17 @@ def gauge_passes(channels, onsets: dict, quality: dict, fs: float, t0: float) ->
         Sample rate [Hz].
     t0 : float
         Time of sample 0 [s].
+    excerpt : Recording, optional
+        Conditioned samples of the gauges (the condition stage's excerpt): each gauge's
+        ``floor_factor`` is then the ratio of its timing bounds in its noise spectrum
+        (:func:`channel_noise_spectrum`) to those in white noise of its RMS, else 1.
 
     Returns
     -------
     passes : list of GaugePasses
         Each gauge with a usable pulse: pass times [s], amplitudes, timing bounds [s] (None
-        when no pass has one); ``main`` for the first sun and the first ring gauge.
+        when no pass has one), the floor factor; ``main`` for the first sun and the first
+        ring gauge.
     mains : dict of str to str
         Gear -> its main gauge channel (also when it has no usable pulse: then a
         ProcessingWarning says so).
@@ -259,7 +335,9 @@ def gauge_passes(channels, onsets: dict, quality: dict, fs: float, t0: float) ->
         # finite (its quality report: the conditioned samples are streamed, not kept)
         ok = usable_onsets(on, conditioned_gap_runs(q), fs, t0)
         times, amp = pass_times(on)[ok], on.amplitude[ok]
-        sig = onset_sigma(on, getattr(q, "noise_rms", float("nan")))[ok]
+        rms = getattr(q, "noise_rms", float("nan"))
+        sig = onset_sigma(on, rms)[ok]
+        factor = _floor_factor(sig, on, ok, rms, channel_noise_spectrum(excerpt, c.name, on, q))
         main = c.kind in ("sun", "ring") and gear not in mains
         if main:
             mains[gear] = c.name
@@ -269,5 +347,16 @@ def gauge_passes(channels, onsets: dict, quality: dict, fs: float, t0: float) ->
                               "phasing from it", ProcessingWarning, stacklevel=3)
         if times.size:
             passes.append(GaugePasses(c.name, gear, times, amp,
-                                      sig if np.any(np.isfinite(sig)) else None, main))
+                                      sig if np.any(np.isfinite(sig)) else None, main, factor))
     return passes, mains
+
+
+def _floor_factor(sig: np.ndarray, on: Onsets, ok: np.ndarray, rms, spec) -> float:
+    """Median over the usable passes of their timing bound in the noise spectrum ``spec``
+    over their white bound ``sig`` [-]; 1 without a spectrum or a finite ratio."""
+    if spec is None or not np.any(np.isfinite(sig)):
+        return 1.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = onset_sigma(on, rms, noise=spec)[ok] / sig
+    r = r[np.isfinite(r) & (r > 0)]
+    return float(np.median(r)) if r.size else 1.0

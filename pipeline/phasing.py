@@ -110,8 +110,10 @@ class PassTable:
         Time at which model offset phases (kappa) are referred [s]; the pipeline sets the
         recording's first-sample time (default 0).
     timing_floor : ndarray, shape (n,)
-        The part of ``uncertainty`` the two onsets' timing bounds alone set [-]:
-        A'(t_n) sigma_n and A'(t_1) sigma_1 combined (NaN without timing bounds).
+        What the two onsets' timing bounds alone allow [-]: A'(t_n) sigma_n and A'(t_1)
+        sigma_1 combined (NaN without timing bounds); from :func:`measure_phasing` with
+        the bounds in the gauge's noise spectrum (``sigma`` times
+        :attr:`GaugePasses.floor_factor`), the floor the reliability is judged against.
     model_sigma : ndarray, shape (n,)
         The angle model's own one-sigma uncertainty of A(t_n) - A(t_1) [-].
     """
@@ -886,6 +888,11 @@ class GaugePasses:
         Timing bound of each pass [s].
     main : bool
         The gauge whose passes make the gear's phasing table (others only inform the angle).
+    floor_factor : float
+        How much the timing bound in the channel's noise spectrum exceeds ``sigma`` (the
+        white-noise bound) [-] (:func:`meshphase.passes.gauge_passes`): the phasing table's
+        ``timing_floor`` and the reliability judgement use ``sigma`` times it, the angle
+        model weights the passes by ``sigma`` alone (1: white noise, or no spectrum).
     """
 
     name: str
@@ -894,6 +901,7 @@ class GaugePasses:
     amplitude: np.ndarray
     sigma: np.ndarray | None = None
     main: bool = True
+    floor_factor: float = 1.0
 
 
 @dataclass
@@ -941,7 +949,9 @@ class PhasingResult:
         The held member used; ``fixed_reason`` says how it was decided.
     reliability : dict of str to dict
         Per gear: ``reliable`` (bool), ``reasons`` (list of str), ``error_estimate`` (RMS of
-        the per-pass uncertainty [-]) and ``floor`` (RMS of the timing floor [-]).
+        the per-pass uncertainty [-]), ``floor`` (RMS of the timing floor [-]: the
+        Cramer-Rao bound in the gauge's noise spectrum where it has one) and
+        ``floor_factor`` (that floor over the white-noise bound's [-]).
     labels_relative : list of str
         Gears whose planet 1 is only the first pulse seen (no absolute reference).
     notes : list of str
@@ -1088,7 +1098,8 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
     if any(tr.kind in ("sun", "ring") and len(tr) >= 2 for tr in trains):
         model = fit_angle_windows(trains, kin, n)
         notes.extend(model.notes)
-        tables, reliability = _gear_tables(model, labels, train_of, gearset, gaps)
+        factors = {p.name: float(getattr(p, "floor_factor", 1.0)) for p in passes}
+        tables, reliability = _gear_tables(model, labels, train_of, gearset, gaps, factors)
     return PhasingResult(tables, labels, model, fixed, fixed_reason, reliability, relative, notes,
                          dict(train_of), {nm: v[1] for nm, v in all_labels.items()},
                          None if gaps is None else np.asarray(gaps, dtype=float))
@@ -1197,9 +1208,12 @@ def _gauge_trains(all_labels: dict, gearset) -> tuple[list, dict]:
     return trains, train_of
 
 
-def _gear_tables(model: AngleModel, labels: dict, train_of: dict, gearset, gaps) -> tuple[dict, dict]:
+def _gear_tables(model: AngleModel, labels: dict, train_of: dict, gearset, gaps,
+                 factors=None) -> tuple[dict, dict]:
     """Per gear with a main-gauge train: its phasing table from the angle model
-    (:func:`phasing_from_model`) and its reliability (:func:`_reliability`)."""
+    (:func:`phasing_from_model`), its timing floor times the gauge's floor factor (``factors``
+    by channel, :attr:`GaugePasses.floor_factor`: both passes of a row are the gauge's), and
+    its reliability (:func:`_reliability`)."""
     n = gearset.n_planets
     tables: dict = {}
     reliability: dict = {}
@@ -1211,8 +1225,11 @@ def _gear_tables(model: AngleModel, labels: dict, train_of: dict, gearset, gaps)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ProcessingWarning)
             tab = phasing_from_model(model, tr, z, n, gauge=gear, gaps=gaps)
+        factor = (factors or {}).get(lab.channel, 1.0)
+        if tab.timing_floor is not None and factor != 1.0:
+            tab.timing_floor = tab.timing_floor * factor
         tables[gear] = tab
-        reliability[gear] = _reliability(model, tr, tab)
+        reliability[gear] = {**_reliability(model, tr, tab), "floor_factor": float(factor)}
     return tables, reliability
 
 

@@ -353,7 +353,8 @@ def stage_phasing(ctx: RunContext) -> PhasingStage:
     cond, ons = _inputs(ctx, "condition", "onsets")
     g = ctx.gearset
     rec = cond.recording
-    passes, mains = gauge_passes(rec.channels, ons.by_channel, cond.quality, rec.fs, rec.t0)
+    passes, mains = gauge_passes(rec.channels, ons.by_channel, cond.quality, rec.fs, rec.t0,
+                                 excerpt=cond.excerpt)
     sp = _nominal_speeds(ctx)
     # which member is held: the scene's word, else the typed speeds within their precision,
     # and the tacho's count of mesh cycles per carrier turn when there is a tacho
