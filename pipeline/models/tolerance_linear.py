@@ -357,7 +357,7 @@ def _solve_upper(alpha, rho, weights, k, start, iters, rtol):
         above = g > alpha
         lo = np.where(above, x, lo)
         hi = np.where(above, hi, x)
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # -> bisection below
             xn = x - (np.log(g) - la) * g / dg
         bad = ~np.isfinite(xn) | (xn < lo) | (xn > hi) | (g <= 0.0)
         xn = np.where(bad, 0.5 * (lo + hi), xn)
