@@ -33,7 +33,11 @@ on 127.0.0.1 only, no dashboard unless asked) with one single-threaded worker *p
 core by default (processes, because the stages are numpy/Python code that holds the GIL for
 long stretches, and because ``warnings.catch_warnings`` inside :func:`run_scene` is not
 thread-safe); ``scheduler="tcp://host:8786"`` uses an existing cluster instead, whose
-workers must have meshphase installed and see the same paths (a shared file system).
+workers must have meshphase installed and see the same paths (a shared file system). The
+cluster starts in a background thread (worker processes, their imports) while the client
+runs the scene-level results and imports what the report needs, and closes in the
+background while the report is written: ``timing_s`` gives its ``cluster_start`` and the
+part of it the campaign still waited for (``cluster_wait``).
 
 Per-recording HTML reports are off by default (``recording_reports=False``): building one
 with its figures took about twice as long as processing a 1-min seed rig recording on the

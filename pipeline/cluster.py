@@ -302,23 +302,9 @@ class ClusterStart:
 def open_client(scheduler: str | None, workers: int | None, dashboard, warm_up: Callable[[], int],
                 info: dict) -> Iterator:
     """A Dask client on the campaign's own local cluster or on the one at ``scheduler``, its
-    workers warmed up; closes the client, and the local cluster it started, on exit
-    (:class:`ClusterStart`, waited for at once).
+    workers warmed up; closes the client, and the local cluster it started, on exit.
 
-    Parameters
-    ----------
-    scheduler : str or None
-        Address of an existing scheduler; None: a :func:`local_cluster`.
-    workers : int or None
-        Local worker processes (default :func:`cores`).
-    dashboard : None, bool, int or str
-        The local cluster's dashboard (:func:`local_cluster`).
-    warm_up : callable
-        Run once on every worker (``client.run``): imports what the tasks need; returns the
-        worker's pid.
-    info : dict
-        Filled in: ``dashboard`` (its link, when asked), ``n_workers``, ``scheduler`` (the
-        address).
+    :class:`ClusterStart` (whose parameters these are), waited for at once.
 
     Yields
     ------
@@ -328,6 +314,8 @@ def open_client(scheduler: str | None, workers: int | None, dashboard, warm_up: 
     ------
     ValueError
         The scheduler cannot be reached, or its workers cannot import meshphase.
+    TypeError
+        ``warm_up`` not callable or ``info`` not a dict.
     """
     start = ClusterStart(scheduler, workers, dashboard, warm_up, info)
     try:
