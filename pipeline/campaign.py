@@ -33,7 +33,11 @@ on 127.0.0.1 only, no dashboard unless asked) with one single-threaded worker *p
 core by default (processes, because the stages are numpy/Python code that holds the GIL for
 long stretches, and because ``warnings.catch_warnings`` inside :func:`run_scene` is not
 thread-safe); ``scheduler="tcp://host:8786"`` uses an existing cluster instead, whose
-workers must have meshphase installed and see the same paths (a shared file system).
+workers must have meshphase installed and see the same paths (a shared file system). The
+cluster starts in a background thread (worker processes, their imports) while the client
+runs the scene-level results and imports what the report needs, and closes in the
+background while the report is written: ``timing_s`` gives its ``cluster_start`` and the
+part of it the campaign still waited for (``cluster_wait``).
 
 Per-recording HTML reports are off by default (``recording_reports=False``): building one
 with its figures took about twice as long as processing a 1-min seed rig recording on the
@@ -59,7 +63,7 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 from .campaign_job import (TIMEOUT_BASE_S, TIMEOUT_RATE_BPS, Job, default_task_timeout,
-                           run_job, task_limits)
+                           run_job, start_cluster, task_limits)
 from .campaign_resume import (DONE_NAME, RECORDINGS_DIR_NAME, completed_recordings,
                               recording_key, recording_keys, resume_sources, reuse_completed,
                               sha256_file)
@@ -699,7 +703,9 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
     dict
         ``scene``, ``scene_path``, ``out_dir``, ``cluster`` (``scheduler``, ``n_workers``,
         ``local``, ``dashboard``), ``timing_s`` (``total``, ``scene_level``,
-        ``cluster_start``, ``processing``, ``report``), ``counts`` (ok / unreliable / partial
+        ``cluster_start`` (in the background, meanwhile the scene-level results run),
+        ``cluster_wait`` (what the campaign then still waited for it), ``processing``,
+        ``report``) [s], ``counts`` (ok / unreliable / partial
         / failed), ``skipped_inputs``, ``scene_level`` (summary of the client-side results or
         None), ``scene_status`` (their :func:`meshphase.exits.run_status`, or None),
         ``task_timeout`` (``mode`` "size" / "fixed" / "off", ``seconds``), ``resume``
@@ -816,14 +822,15 @@ def _final_path(out: Path, final: Path, p) -> str:
 
 def _campaign_body(scene, scene_path, inputs, files, skipped, names, out, opts: _Options) -> dict:
     """The campaign after its output folder is reserved (see :func:`run_campaign`); ``out``
-    is the staging folder, ``opts.guard.final`` the folder it will be."""
+    is the staging folder, ``opts.guard.final`` the folder it will be.
+
+    The cluster starts in the background (:func:`meshphase.campaign_job.start_cluster`: worker
+    processes, their imports) while this process runs the scene-level results and imports
+    what the report needs; it closes in the background while the report is written."""
     guard = opts.guard
     final = Path(guard.final).resolve()
     final_of = functools.partial(_final_path, out, final)
-    timing: dict[str, float] = {}
-    t = time.perf_counter()
-    scene_level, scene_status, bands = _scene_level(scene, out, opts)
-    timing["scene_level"] = time.perf_counter() - t
+    timing: dict[str, float] = {"cluster_start": 0.0, "cluster_wait": 0.0, "processing": 0.0}
     rec_root = out / RECORDINGS_DIR_NAME
     rec_root.mkdir(exist_ok=True)
     rec_dirs = [rec_root / n for n in names]
@@ -836,16 +843,41 @@ def _campaign_body(scene, scene_path, inputs, files, skipped, names, out, opts: 
         logger.info("campaign: %d of %d recordings complete already (--resume)", len(records), len(files))
     todo = [i for i in range(len(files)) if i not in records]
     cluster_info = {"scheduler": None, "n_workers": 0, "local": opts.scheduler is None, "dashboard": None}
-    timing["cluster_start"] = 0.0
-    timing["processing"] = 0.0
-    if todo:
-        job = Job(task=opts.task, scene_path=opts.scene_path, files=files, names=names, rec_dirs=rec_dirs,
-                  keys=keys, limits=task_limits(keys, opts.task_timeout), todo=todo, bands=bands,
-                  recording_report=opts.recording_reports, progress=opts.progress, final_of=final_of,
-                  on_usable=guard.mark_partial)
-        run_job(job, records, scheduler=opts.scheduler, workers=opts.workers, dashboard=opts.dashboard,
-                cluster_info=cluster_info, timing=timing)
-    recs = [records[i] for i in range(len(files))]
+    start = start_cluster(opts.scheduler, opts.workers, opts.dashboard, cluster_info) if todo else None
+    try:
+        t = time.perf_counter()
+        scene_level, scene_status, bands = _scene_level(scene, out, opts)
+        timing["scene_level"] = time.perf_counter() - t
+        _import_report_modules()  # while the workers start
+        if todo:
+            job = Job(task=opts.task, scene_path=opts.scene_path, files=files, names=names, rec_dirs=rec_dirs,
+                      keys=keys, limits=task_limits(keys, opts.task_timeout), todo=todo, bands=bands,
+                      recording_report=opts.recording_reports, progress=opts.progress, final_of=final_of,
+                      on_usable=guard.mark_partial)
+            run_job(job, records, scheduler=opts.scheduler, workers=opts.workers, dashboard=opts.dashboard,
+                    cluster_info=cluster_info, timing=timing, start=start)
+            start.close(wait=False)  # the cluster closes while the report is written
+        result = _result_dict(scene, scene_path, inputs, skipped, final, cluster_info, timing,
+                              scene_level, scene_status, sources, [records[i] for i in range(len(files))],
+                              opts)
+        _write_campaign_files(result, out, final_of, opts.t_all,
+                              closed=start.close if start is not None else None)
+    finally:
+        if start is not None:
+            start.close()
+    return result
+
+
+def _import_report_modules() -> None:
+    """Import what :func:`_write_campaign_files` needs (pandas, matplotlib), ahead of time."""
+    import pandas  # noqa: F401
+
+    from .report import campaign_report  # noqa: F401
+
+
+def _result_dict(scene, scene_path, inputs, skipped, final, cluster_info, timing, scene_level,
+                 scene_status, sources, recs, opts: _Options) -> dict:
+    """:func:`run_campaign`'s result, but its ``files``."""
     for r in recs:
         r.setdefault("attempts", 1)
         r.setdefault("retries", [])
@@ -863,7 +895,6 @@ def _campaign_body(scene, scene_path, inputs, files, skipped, names, out, opts: 
                          "sources": sources},
               "recordings": recs}
     result["exit_code"] = campaign_exit_code(result)
-    _write_campaign_files(result, out, final_of, opts.t_all)
     return result
 
 
@@ -891,9 +922,11 @@ def _scene_level(scene, out: Path, opts: _Options):
     return scene_level, scene_status, bands
 
 
-def _write_campaign_files(result: dict, out: Path, final_of, t_all: float) -> None:
+def _write_campaign_files(result: dict, out: Path, final_of, t_all: float,
+                          closed: Callable[[], None] | None = None) -> None:
     """campaign.csv, campaign_report.html and campaign.json into ``out``, each atomically;
-    sets ``result["files"]`` and the ``report`` and ``total`` times."""
+    sets ``result["files"]`` and the ``report`` and ``total`` times. ``closed()`` (if given)
+    is waited for before the total is taken: the cluster closing in the background."""
     import pandas as pd
 
     from .report.campaign_report import build_campaign_report
@@ -905,6 +938,8 @@ def _write_campaign_files(result: dict, out: Path, final_of, t_all: float) -> No
     _write_atomic(csv_path, lambda tmp: rows.to_csv(tmp, index=False))
     report_path = build_campaign_report(result, out)
     timing["report"] = time.perf_counter() - t
+    if closed is not None:
+        closed()
     timing["total"] = time.perf_counter() - t_all
     json_path = out / "campaign.json"
     result["files"] = {"campaign.json": final_of(json_path), "campaign.csv": final_of(csv_path),

@@ -1,8 +1,8 @@
 """The Dask job of a campaign: one task per recording, watched, one record per recording.
 
-:func:`run_job` opens the cluster (:func:`meshphase.cluster.open_client`), submits every
-recording still to do as one task (:func:`campaign_task`: paths only, never open handles)
-and collects one record per recording: the task's own, or a failure when the task was lost
+:func:`run_job` takes the cluster :func:`start_cluster` started in the background (or starts
+one), submits every recording still to do as one task (:func:`campaign_task`: paths only,
+never open handles) and collects one record per recording: the task's own, or a failure when the task was lost
 (the worker died more often than Dask retries, the task raised) or ran past its timeout.
 
 A task's timeout (:func:`default_task_timeout`, ``--task-timeout``) counts from the moment
@@ -28,10 +28,10 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from .campaign_resume import relocate, write_marker
-from .cluster import end_worker, open_client
+from .cluster import ClusterStart, end_worker
 from .log import logger
 
-__all__ = ["Job", "run_job", "campaign_task", "failed_record", "default_task_timeout",
+__all__ = ["Job", "run_job", "start_cluster", "campaign_task", "failed_record", "default_task_timeout",
            "task_limits", "warm_up", "TIMEOUT_BASE_S", "TIMEOUT_RATE_BPS"]
 
 #: default ``--task-timeout`` of a recording of ``size`` bytes: TIMEOUT_BASE_S +
@@ -251,7 +251,7 @@ def _dask_key(token: str, i: int, name: str) -> str:
 
 
 def run_job(job: Job, records: dict, *, scheduler: str | None, workers: int | None, dashboard,
-            cluster_info: dict, timing: dict) -> None:
+            cluster_info: dict, timing: dict, start=None) -> None:
     """Run the recordings ``job.todo`` on the cluster and put one record per recording into
     ``records``: results, failures, timeouts (worker ended) and retries (worker lost).
 
@@ -261,18 +261,29 @@ def run_job(job: Job, records: dict, *, scheduler: str | None, workers: int | No
     records : dict
         Index -> record; the records already there (resumed) count as done on the bar.
     scheduler, workers, dashboard
-        The cluster (:func:`meshphase.cluster.open_client`).
+        The cluster (:class:`meshphase.cluster.ClusterStart`), when ``start`` is None.
     cluster_info : dict
         Filled in: ``dashboard``, ``n_workers``, ``scheduler``.
     timing : dict
-        Filled in: ``cluster_start`` and ``processing`` [s].
+        Filled in: ``cluster_start`` (the start's own time, also where it overlapped other
+        work), ``cluster_wait`` (the part of it this call waited for) and ``processing``
+        (first submit to last result) [s].
+    start : meshphase.cluster.ClusterStart, optional
+        A cluster start already under way (:func:`start_cluster`); the caller closes it
+        (it may do so in the background while it writes the report). None: started and
+        closed here.
     """
     if not isinstance(job, Job) or not isinstance(records, dict):
         raise TypeError(f"job must be a Job and records a dict, got {type(job).__name__} and "
                         f"{type(records).__name__}")
-    t = time.perf_counter()
-    with open_client(scheduler, workers, dashboard, warm_up, cluster_info) as client:
-        timing["cluster_start"] = time.perf_counter() - t
+    own = start is None
+    if own:
+        start = start_cluster(scheduler, workers, dashboard, cluster_info)
+    try:
+        t = time.perf_counter()
+        client = start.client()
+        timing["cluster_wait"] = time.perf_counter() - t
+        timing["cluster_start"] = start.elapsed_s
         t = time.perf_counter()
         token = uuid.uuid4().hex[:10]  # task keys unique on a shared scheduler
         dkeys = {i: _dask_key(token, i, job.names[i]) for i in job.todo}
@@ -280,6 +291,30 @@ def run_job(job: Job, records: dict, *, scheduler: str | None, workers: int | No
         with watch.subscribed(client):
             _Collection(client, job, records, watch, dkeys).run()
         timing["processing"] = time.perf_counter() - t
+    finally:
+        if own:
+            start.close()
+
+
+def start_cluster(scheduler: str | None, workers: int | None, dashboard, cluster_info: dict):
+    """Start a campaign's cluster in the background, its workers warmed up (:func:`warm_up`).
+
+    Parameters
+    ----------
+    scheduler : str or None
+        Address of an existing scheduler; None: a local cluster.
+    workers : int or None
+        Local worker processes.
+    dashboard : None, bool, int or str
+    cluster_info : dict
+        Filled in when the start ends: ``dashboard``, ``n_workers``, ``scheduler``.
+
+    Returns
+    -------
+    meshphase.cluster.ClusterStart
+        ``client()`` waits for it; ``close()`` ends it.
+    """
+    return ClusterStart(scheduler, workers, dashboard, warm_up, cluster_info)
 
 
 def _event_message(event):

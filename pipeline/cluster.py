@@ -23,7 +23,7 @@ from typing import Callable, Iterator
 from .log import logger
 from .validate import as_positive_int
 
-__all__ = ["local_cluster", "open_client", "check_cluster_options", "cores", "own_child",
+__all__ = ["local_cluster", "open_client", "ClusterStart", "check_cluster_options", "cores", "own_child",
            "end_worker"]
 
 
@@ -180,11 +180,11 @@ def _connect(scheduler, workers, dashboard, info: dict):
     return client, cluster
 
 
-@contextlib.contextmanager
-def open_client(scheduler: str | None, workers: int | None, dashboard, warm_up: Callable[[], int],
-                info: dict) -> Iterator:
-    """A Dask client on the campaign's own local cluster or on the one at ``scheduler``, its
-    workers warmed up; closes the client, and the local cluster it started, on exit.
+class ClusterStart:
+    """A Dask client on the campaign's own local cluster or on the one at ``scheduler``,
+    started in a background thread, its workers warmed up, so that the client can do other
+    work (the scene-level results) meanwhile; :meth:`client` waits for it, :meth:`close`
+    closes the client and the local cluster it started.
 
     Parameters
     ----------
@@ -201,6 +201,111 @@ def open_client(scheduler: str | None, workers: int | None, dashboard, warm_up: 
         Filled in: ``dashboard`` (its link, when asked), ``n_workers``, ``scheduler`` (the
         address).
 
+    Attributes
+    ----------
+    elapsed_s : float or None
+        Time the start took [s] (connect, cluster start, warm-up); None until it ended.
+
+    Raises
+    ------
+    TypeError
+        ``warm_up`` not callable or ``info`` not a dict.
+    """
+
+    def __init__(self, scheduler: str | None, workers: int | None, dashboard, warm_up: Callable[[], int],
+                 info: dict):
+        import threading
+        import time
+
+        if not callable(warm_up) or not isinstance(info, dict):
+            raise TypeError(f"warm_up must be callable and info a dict, got {type(warm_up).__name__} and "
+                            f"{type(info).__name__}")
+        self._args = (scheduler, workers, dashboard, warm_up, info)
+        self._client = self._cluster = self._error = None
+        self._closer = None
+        self.elapsed_s: float | None = None
+        self._quiet = contextlib.ExitStack()
+        self._quiet.enter_context(_quiet_distributed())
+        self._t0 = time.perf_counter()
+        self._thread = threading.Thread(target=self._start, name="meshphase-cluster-start", daemon=True)
+        self._thread.start()
+
+    def _start(self) -> None:
+        import time
+
+        scheduler, workers, dashboard, warm_up, info = self._args
+        try:
+            self._client, self._cluster = _connect(scheduler, workers, dashboard, info)
+            try:
+                pids = self._client.run(warm_up)
+            except ImportError as exc:
+                raise ValueError(f"the workers of {self._client.scheduler.address} cannot import "
+                                 f"meshphase ({exc}); install it where the workers run") from None
+            info["n_workers"] = len(pids)
+            if not pids:
+                logger.warning("campaign: the cluster at %s has no workers yet; the tasks wait "
+                               "for workers to join", self._client.scheduler.address)
+            info["scheduler"] = self._client.scheduler.address
+        except BaseException as exc:  # noqa: BLE001 - handed to the thread that waits for it
+            self._error = exc
+        finally:
+            self.elapsed_s = time.perf_counter() - self._t0
+
+    def client(self):
+        """Wait for the start and return the client.
+
+        Returns
+        -------
+        distributed.Client
+
+        Raises
+        ------
+        ValueError
+            The scheduler cannot be reached, or its workers cannot import meshphase.
+        Exception
+            Whatever else the start raised.
+        """
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+        return self._client
+
+    def close(self, wait: bool = True) -> None:
+        """Close the client and the local cluster (after the start has ended).
+
+        Parameters
+        ----------
+        wait : bool
+            False: close in a background thread (the caller goes on, e.g. writes the
+            report) and call ``close()`` again later to wait for it.
+        """
+        import threading
+
+        if self._closer is None:
+            self._closer = threading.Thread(target=self._close, name="meshphase-cluster-close", daemon=True)
+            self._closer.start()
+        if wait:
+            self._closer.join()
+            self._quiet.close()
+
+    def _close(self) -> None:
+        self._thread.join()
+        try:
+            if self._client is not None:
+                self._client.close()
+        finally:
+            if self._cluster is not None:
+                self._cluster.close()
+
+
+@contextlib.contextmanager
+def open_client(scheduler: str | None, workers: int | None, dashboard, warm_up: Callable[[], int],
+                info: dict) -> Iterator:
+    """A Dask client on the campaign's own local cluster or on the one at ``scheduler``, its
+    workers warmed up; closes the client, and the local cluster it started, on exit.
+
+    :class:`ClusterStart` (whose parameters these are), waited for at once.
+
     Yields
     ------
     distributed.Client
@@ -209,28 +314,14 @@ def open_client(scheduler: str | None, workers: int | None, dashboard, warm_up: 
     ------
     ValueError
         The scheduler cannot be reached, or its workers cannot import meshphase.
+    TypeError
+        ``warm_up`` not callable or ``info`` not a dict.
     """
-    if not callable(warm_up) or not isinstance(info, dict):
-        raise TypeError(f"warm_up must be callable and info a dict, got {type(warm_up).__name__} and "
-                        f"{type(info).__name__}")
-    with _quiet_distributed():
-        client, cluster = _connect(scheduler, workers, dashboard, info)
-        try:
-            with client:
-                try:
-                    pids = client.run(warm_up)
-                except ImportError as exc:
-                    raise ValueError(f"the workers of {client.scheduler.address} cannot import "
-                                     f"meshphase ({exc}); install it where the workers run") from None
-                info["n_workers"] = len(pids)
-                if not pids:
-                    logger.warning("campaign: the cluster at %s has no workers yet; the tasks wait "
-                                   "for workers to join", client.scheduler.address)
-                info["scheduler"] = client.scheduler.address
-                yield client
-        finally:
-            if cluster is not None:
-                cluster.close()
+    start = ClusterStart(scheduler, workers, dashboard, warm_up, info)
+    try:
+        yield start.client()
+    finally:
+        start.close()
 
 
 def own_child(pid) -> bool:

@@ -152,6 +152,40 @@ def test_campaign_default_local_cluster(data, tmp_path, capsys):
     assert "truncated" in html and "Phasing per planet" in html
 
 
+# columns that tell where and how fast a recording ran, not what it gave
+_RUN_COLUMNS = ("wall_time_s", "worker", "out_dir")
+
+
+def test_one_and_two_workers_give_the_same_results(data, tmp_path):
+    """The cluster starting in the background (meanwhile the scene-level Monte Carlo runs)
+    and closing while the report is written changes no result: campaign.csv, each
+    recording's tables and the scene-level outputs are the same with 1 and 2 workers."""
+    import pandas as pd
+
+    outs, res = {}, {}
+    for w in (1, 2):
+        outs[w] = tmp_path / f"camp-{w}w"
+        res[w] = cp.run_campaign(data["scene"], [data["recordings"]], outs[w], workers=w, progress=False)
+        assert res[w]["cluster"]["n_workers"] == w
+        tm = res[w]["timing_s"]
+        assert {"cluster_start", "cluster_wait", "scene_level", "processing", "report", "total"} <= set(tm)
+        assert 0.0 <= tm["cluster_wait"] <= tm["cluster_start"] + 1e-6 and tm["total"] >= tm["processing"]
+    csv1, csv2 = (pd.read_csv(outs[w] / "campaign.csv").drop(columns=list(_RUN_COLUMNS)) for w in (1, 2))
+    pd.testing.assert_frame_equal(csv1, csv2)
+    assert csv1["status"].tolist().count("ok") == len(GOOD)
+    for r in res[1]["recordings"]:
+        tables = sorted(p.name for p in (outs[1] / "recordings" / r["name"]).glob("*.csv"))
+        assert tables == sorted(p.name for p in (outs[2] / "recordings" / r["name"]).glob("*.csv"))
+        for name in set(tables) - {"stages.csv"}:  # stages.csv: the stages' wall times
+            assert ((outs[1] / "recordings" / r["name"] / name).read_bytes()
+                    == (outs[2] / "recordings" / r["name"] / name).read_bytes()), (r["name"], name)
+    s1, s2 = (json.loads((outs[w] / "scene" / "summary.json").read_text()) for w in (1, 2))
+    s1["tolerance"].pop("wall_time"), s2["tolerance"].pop("wall_time")
+    assert s1["tolerance"] == s2["tolerance"]
+    assert sorted(p.name for p in (outs[1] / "figures").iterdir()) == sorted(
+        p.name for p in (outs[2] / "figures").iterdir())
+
+
 def _die_on_rig_b(scene_path, recording_path, out_dir, **kw):
     """A task whose worker process dies on one recording (as a segfault or the OOM killer would)."""
     if Path(recording_path).name == "rig_b.csv":

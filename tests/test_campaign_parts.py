@@ -235,3 +235,34 @@ def test_end_worker_kills_our_child_and_restarts_another():
             == "not restarted (?): it may stay busy")
     assert (cluster.end_worker(_Client(RuntimeError("no nanny")), "tcp://w:1", os.getpid())
             == "not restarted (RuntimeError: no nanny): it may stay busy")
+
+
+def test_cluster_start_bad_input():
+    with pytest.raises(TypeError, match="warm_up"):
+        cluster.ClusterStart(None, 1, None, "not callable", {})
+    with pytest.raises(TypeError, match="info"):
+        cluster.ClusterStart(None, 1, None, os.getpid, None)
+
+
+def test_cluster_start_error_reaches_the_waiting_thread(monkeypatch):
+    """A start that fails in its thread raises where the client is asked for, and closes
+    cleanly (nothing was started); the distributed log level is restored."""
+    import logging
+
+    def no_cluster(scheduler, workers, dashboard, info):
+        raise ValueError(f"scheduler {scheduler!r}: cannot connect: refused")
+
+    monkeypatch.setattr(cluster, "_connect", no_cluster)
+    level = logging.getLogger("distributed").level
+    start = cluster.ClusterStart("tcp://127.0.0.1:1", None, None, os.getpid, {})
+    with pytest.raises(ValueError, match="cannot connect"):
+        start.client()
+    start.close(wait=False)
+    start.close()
+    assert start.elapsed_s is not None and start.elapsed_s >= 0.0
+    assert logging.getLogger("distributed").level == level
+
+
+def test_start_cluster_bad_input():
+    with pytest.raises(TypeError, match="info"):
+        cj.start_cluster(None, 1, None, None)

@@ -75,7 +75,7 @@ def _timed_run(scene_path, rec_dir: Path, out: Path, w: int, rep: int, progress:
     res = run_campaign(scene_path, [rec_dir], out, workers=w, progress=progress)
     tm = res["timing_s"]
     row = {"workers": w, "repeat": rep, "wall_s": tm["total"],
-           "cluster_start_s": tm["cluster_start"],
+           "cluster_start_s": tm["cluster_start"], "cluster_wait_s": tm.get("cluster_wait", 0.0),
            "processing_s": tm["processing"], "scene_level_s": tm["scene_level"],
            "report_s": tm["report"],
            "task_sum_s": _finite_sum(r.get("wall_time_s") for r in res["recordings"]),
@@ -121,7 +121,9 @@ def measure_speedup(n_recordings: int = 8, minutes: float = 2.0, workers=(1, 2),
     -------
     dict
         ``n_recordings``, ``minutes``, ``cores``, ``runs`` (per worker count: ``workers``,
-        ``wall_s`` total incl. cluster start, ``cluster_start_s``, ``processing_s``
+        ``wall_s`` total incl. cluster start, ``cluster_start_s`` (in the background, while the
+        scene-level results run), ``cluster_wait_s`` (what the campaign still waited for it),
+        ``processing_s``
         (first submit to last result), ``scene_level_s``, ``report_s``, ``task_sum_s`` and
         ``task_cpu_sum_s`` (sums of the tasks' own wall and CPU times: their ratio shows
         contention for the cores), ``n_ok``, ``n_failed``), ``loadavg`` (the machine's load

@@ -36,5 +36,8 @@ def test_measure_speedup_smoke(tmp_path):
     res = measure_speedup(n_recordings=2, minutes=0.25, workers=(1, 2), work_dir=tmp_path)
     assert [r["workers"] for r in res["runs"]] == [1, 2]
     assert res["best_wall_s"][1] == res["runs"][0]["wall_s"]
-    assert all(r["n_ok"] == 2 for r in res["runs"])
+    # (the noisy scenario's phasing may be flagged unreliable: not ok, but not failed)
+    assert all(r["n_failed"] == 0 for r in res["runs"])
+    phases = {"cluster_start_s", "cluster_wait_s", "scene_level_s", "processing_s", "report_s"}
+    assert all(phases <= set(r) and r["cluster_wait_s"] <= r["cluster_start_s"] + 1e-6 for r in res["runs"])
     assert res["speedup"][1] == pytest.approx(1.0) and res["speedup"][2] > 0
