@@ -210,15 +210,38 @@ def cmd_bench(args) -> int:
               if w["engine"] == "numba" else "numba is not importable: the numpy path needs no "
               "compilation")
         return 0
+    out = Path(args.out)
+    if args.what == "campaign":
+        return _bench_campaign(out, args.quick)
     from .bench import rss_summary, run_bench
 
-    out = Path(args.out)
     res = run_bench(args.what, out, minutes=args.minutes, quick=args.quick,
                     rss_minutes=args.rss_minutes)
     for name, path in res.get("files", {}).items():
         print(f"{name:<24} {path}")
     for line in rss_summary(res.get("results", {})):
         print(line)
+    return 0
+
+
+def _bench_campaign(out: Path, quick: bool) -> int:
+    """``meshphase bench campaign``: :func:`meshphase.bench.campaign.measure_speedup` into
+    ``out/campaign_bench.json``, one line per timed run and the speed-ups on stdout."""
+    from .bench.campaign import measure_speedup
+
+    n, minutes, repeats = (2, 0.5, 1) if quick else (8, 2.0, 3)
+    res = measure_speedup(n, minutes, (1, 2), repeats=repeats)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "campaign_bench.json"
+    path.write_text(json.dumps(res, indent=2, default=str))
+    print(f"campaign bench: {n} x {minutes:g} min, load before {res['loadavg'][0]:.1f}")
+    for r in res["runs"]:
+        print(f"  {r['workers']} worker(s): {r['wall_s']:6.1f} s total, processing "
+              f"{r['processing_s']:6.1f} s, scene-level {r['scene_level_s']:5.1f} s, report "
+              f"{r['report_s']:5.1f} s, cluster wait {r.get('cluster_wait_s', float('nan')):5.1f} s")
+    print(f"speed-up 2 vs 1 worker: {res['speedup'][2]:.2f}x total, "
+          f"{res['processing_speedup'][2]:.2f}x processing (best of {repeats})")
+    print(f"{path.name:<24} {path}")
     return 0
 
 
@@ -536,8 +559,11 @@ def _add_campaign(sub) -> None:
 def _add_bench(sub) -> None:
     """The ``meshphase bench`` subcommand."""
     s = sub.add_parser("bench", help="benchmarks: io, models, processing or all (tables + figures)")
-    s.add_argument("what", nargs="?", default="all", choices=["io", "models", "processing", "all"],
-                   help="which benchmarks (default all)")
+    s.add_argument("what", nargs="?", default="all",
+                   choices=["io", "models", "processing", "all", "campaign"],
+                   help="which benchmarks (default all: io, models, processing); campaign: the "
+                        "same 8 x 2 min campaign on 1 and 2 local workers (--quick: 2 x 0.5 min), "
+                        "its speed-up and phase timings")
     s.add_argument("--out", default="bench-results", help="output folder (default ./bench-results)")
     s.add_argument("--minutes", type=float, default=60.0, help="io: recording length [min] (default 60)")
     s.add_argument("--quick", action="store_true", help="small sizes, for a smoke run")

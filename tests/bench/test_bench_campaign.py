@@ -41,3 +41,18 @@ def test_measure_speedup_smoke(tmp_path):
     phases = {"cluster_start_s", "cluster_wait_s", "scene_level_s", "processing_s", "report_s"}
     assert all(phases <= set(r) and r["cluster_wait_s"] <= r["cluster_start_s"] + 1e-6 for r in res["runs"])
     assert res["speedup"][1] == pytest.approx(1.0) and res["speedup"][2] > 0
+
+
+@pytest.mark.bench
+def test_cli_bench_campaign_quick(tmp_path, capsys):
+    # `meshphase bench campaign --quick`: both worker counts timed, the JSON written
+    import json
+
+    from meshphase.cli import main
+
+    assert main(["bench", "campaign", "--quick", "--out", str(tmp_path)]) == 0
+    text = capsys.readouterr().out
+    assert "1 worker(s)" in text and "2 worker(s)" in text and "speed-up 2 vs 1 worker" in text
+    res = json.loads((tmp_path / "campaign_bench.json").read_text())
+    assert {r["workers"] for r in res["runs"]} == {1, 2}
+    assert all(r["n_failed"] == 0 for r in res["runs"])
