@@ -478,18 +478,18 @@ def _agrees(path, chans: dict, raw: bool, n_samples: int) -> tuple[bool, str]:
 
 
 # ---------------------------------------------------------------------------- reading
-def _read_window(mm, plan: _Plan, names, i0: int, i1: int, path) -> np.ndarray:
-    """Samples [i0, i1) of ``names`` as a Fortran-ordered (n, n_channels) array (``mm``: the
-    file's memory map on the computed-offset path, else None)."""
+def _read_window(mm, plan: _Plan, names, i0: int, i1: int, path) -> tuple[np.ndarray, bool]:
+    """(samples [i0, i1) of ``names`` as a Fortran-ordered (n, n_channels) array, whether the
+    read showed them all finite) (``mm``: the file's memory map on the computed-offset path,
+    else None)."""
     n = i1 - i0
     buf = np.empty((len(names), n), dtype=plan.dtype)   # channel-major; data = buf.T
     if n == 0:
-        return buf.T
+        return buf.T, True
     if plan.fast:
-        _read_fast(mm, plan, names, i0, i1, buf, path)
-    else:
-        _read_general(plan, names, i0, i1, buf, path)
-    return buf.T
+        return buf.T, _read_fast(mm, plan, names, i0, i1, buf, path)
+    _read_general(plan, names, i0, i1, buf, path)
+    return buf.T, False
 
 
 def _read_channel(mm, c: _Chan, i0: int, i1: int, dest: np.ndarray) -> None:
@@ -508,14 +508,16 @@ def _read_channel(mm, c: _Chan, i0: int, i1: int, dest: np.ndarray) -> None:
 _INTERLEAVED_BLOCK = 1 << 15
 
 
-def _read_fast(mm, plan: _Plan, names, i0, i1, buf, path):
+def _read_fast(mm, plan: _Plan, names, i0, i1, buf, path) -> bool:
+    """Samples [i0, i1) of ``names`` by computed offsets into ``buf`` (channel-major); True
+    when the read showed them all finite (interleaved rows read together sum each block
+    while it is in the cache), False when the caller must look for NaN/inf itself."""
     chans = [plan.chans[name] for name in names]
     if all(c.scaling is None for c in chans) and tdms_index.shared_rows([c.runs for c in chans]):
         try:   # interleaved channels side by side: all at once, through a cache-sized buffer
-            tdms_index.read_rows(mm, [c.runs for c in chans], chans[0].starts, i0, i1, buf)
+            return tdms_index.read_rows(mm, [c.runs for c in chans], chans[0].starts, i0, i1, buf)
         except (TypeError, ValueError) as exc:   # a strided view past the end of the file
             raise CorruptFileError(path, f"samples [{i0}, {i1})", f"truncated or corrupt: {exc}") from exc
-        return
     interleaved = any(r.value_stride != r.dtype.itemsize for c in chans for r in c.runs)
     step = _INTERLEAVED_BLOCK if interleaved and len(chans) > 1 else max(1, i1 - i0)
     for a in range(i0, i1, step):
@@ -526,6 +528,7 @@ def _read_fast(mm, plan: _Plan, names, i0, i1, buf, path):
             except (TypeError, ValueError) as exc:   # a strided view past the end of the file
                 raise CorruptFileError(path, f"channel {c.name!r}, samples [{a}, {b})",
                                        f"truncated or corrupt: {exc}") from exc
+    return False
 
 
 def _read_general(plan: _Plan, names, i0, i1, buf, path):
@@ -703,8 +706,9 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *, fs: float |
         if not 0 <= i0 <= i1 <= n:
             raise ValueError(f"{path}: sample range [{i0}, {i1}) outside the recording's [0, {n})")
         mm = _map(stack, path, plan)
-        data = _read_window(mm, plan, names, i0, i1, path)
-    warn_nonfinite(path, data, names, i0)
+        data, finite = _read_window(mm, plan, names, i0, i1, path)
+    if not finite:
+        warn_nonfinite(path, data, names, i0)
     return _recording(plan, data, names, i0)
 
 
@@ -733,6 +737,7 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *, fs: float 
 
 
 def _read_block(mm, plan: _Plan, names, i0: int, i1: int, path) -> Recording:
-    data = _read_window(mm, plan, names, i0, i1, path)
-    warn_nonfinite(path, data, names, i0)
+    data, finite = _read_window(mm, plan, names, i0, i1, path)
+    if not finite:
+        warn_nonfinite(path, data, names, i0)
     return _recording(plan, data, names, i0)
