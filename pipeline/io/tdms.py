@@ -43,7 +43,10 @@ lead-in and metadata are taken together), through a memory map, NI-scaled by
 :mod:`meshphase.io.tdms_scaling` (linear and polynomial scales): each channel's length
 must equal npTDMS's and its first and last samples must equal what ``read_data`` returns,
 else, and for DAQmx raw data or scales only npTDMS computes, ``read_data`` reads every
-sample (``read_info(...).extra["read_path"]`` says which path and why). The read plan is
+sample (``read_info(...).extra["read_path"]`` says which path and why). Channels interleaved
+in the same rows are read together by :mod:`meshphase.io.tdms_rows` (whole segments per
+block, one ``os.preadv`` and one transposing assignment each, the block summed while in the
+cache, so a finite read skips the separate NaN/inf scan). The read plan is
 cached under a digest of the lead-ins and metadata. :func:`iter_blocks` keeps the file open
 and reads block after block, so memory stays flat.
 """
@@ -70,7 +73,7 @@ from ..errors import FormatWarning
 from ..jsonable import to_jsonable
 from ..recording import CHANNEL_KINDS, ChannelSpec, Recording
 from ..validate import as_int, as_positive, as_positive_int
-from . import tdms_index, tdms_scaling
+from . import tdms_index, tdms_rows, tdms_scaling
 from .base import CorruptFileError, RecordingFileError, RecordingInfo, check_verify, spec_from_dict, warn_nonfinite
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "sniff", "read_info", "read", "iter_blocks", "kind_from_name",
@@ -513,9 +516,9 @@ def _read_fast(mm, plan: _Plan, names, i0, i1, buf, path) -> bool:
     when the read showed them all finite (interleaved rows read together sum each block
     while it is in the cache), False when the caller must look for NaN/inf itself."""
     chans = [plan.chans[name] for name in names]
-    if all(c.scaling is None for c in chans) and tdms_index.shared_rows([c.runs for c in chans]):
+    if all(c.scaling is None for c in chans) and tdms_rows.shared_rows([c.runs for c in chans]):
         try:   # interleaved channels side by side: all at once, through a cache-sized buffer
-            return tdms_index.read_rows(mm, [c.runs for c in chans], chans[0].starts, i0, i1, buf)
+            return tdms_rows.read_rows(mm, [c.runs for c in chans], chans[0].starts, i0, i1, buf)
         except (TypeError, ValueError) as exc:   # a strided view past the end of the file
             raise CorruptFileError(path, f"samples [{i0}, {i1})", f"truncated or corrupt: {exc}") from exc
     interleaved = any(r.value_stride != r.dtype.itemsize for c in chans for r in c.runs)

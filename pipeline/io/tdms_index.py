@@ -31,8 +31,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .base import CorruptFileError, RecordingFileError
+from .tdms_rows import read_rows, row_columns, shared_rows  # the interleaved rows reader (names kept here)
 
-__all__ = ["Index", "Run", "FileMap", "scan", "read_runs", "shared_rows", "read_rows", "open_map", "count_index_segments"]
+__all__ = ["Index", "Run", "FileMap", "scan", "read_runs", "shared_rows", "row_columns", "read_rows", "open_map",
+           "count_index_segments"]
 
 LEAD_IN = 28
 TOC_META = 1 << 1
@@ -488,124 +490,3 @@ def read_runs(buf, runs: list, starts: np.ndarray, i0: int, i1: int, dest: np.nd
             pos += n
         if e1:                                        # the head of the last one
             out[pos:] = view[e0].reshape(-1)[:e1]
-
-
-
-
-def shared_rows(runs_per_channel: list) -> bool:
-    """True when the channels' runs are the same interleaved rows (equal boundaries, strides
-    and type) and the channels are consecutive columns of them, in order: :func:`read_rows`
-    can then read them together."""
-    first = runs_per_channel[0] if runs_per_channel else None
-    if not first or len(runs_per_channel) < 2:
-        return False
-    item = first[0].dtype.itemsize
-    shape = [(r.start, r.n_seg, r.n_chunks, r.n_values, r.seg_stride, r.value_stride, r.dtype) for r in first]
-    if any(r.n_chunks != 1 or r.value_stride == item or r.value_stride % item
-           or len(runs_per_channel) * item > r.value_stride for r in first):
-        return False
-    for j, runs in enumerate(runs_per_channel):
-        if [(r.start, r.n_seg, r.n_chunks, r.n_values, r.seg_stride, r.value_stride, r.dtype) for r in runs] != shape:
-            return False
-        if any(r.offset - f.offset != j * item for r, f in zip(runs, first)):
-            return False
-    return True
-
-
-#: bytes of interleaved rows taken at a time (about the CPU's L2 cache)
-_ROW_BLOCK = 1 << 19
-#: segments read by one ``os.preadv`` at most (two buffers each; IOV_MAX is 1024 on Linux)
-_PREADV_SEGMENTS = 500
-
-
-def read_rows(buf, runs_per_channel: list, starts: np.ndarray, i0: int, i1: int, out: np.ndarray) -> bool:
-    """Samples [i0, i1) of channels that are consecutive columns of shared interleaved rows
-    (:func:`shared_rows`) into ``out`` (n_channels, i1 - i0).
-
-    A block of whole segments at a time (about ``_ROW_BLOCK`` bytes), the bytes from the
-    first channel's value to the last one's in the last row of each segment land side by
-    side in an aligned buffer, and one numpy assignment transposes the block into ``out``;
-    no Python loop runs per segment. When ``buf`` is a :class:`FileMap` and ``os.preadv``
-    exists, one ``os.preadv`` per block reads the segments' rows into the buffer and their
-    lead-ins into a scratch buffer (the kernel copies from the page cache: no page faults
-    on the map, which cost most where segments are about a page apart); else the rows are
-    copied from ``buf``. The samples just written are summed while they are in the cache.
-
-    Returns
-    -------
-    bool
-        True when every sample copied is shown finite (``out`` is floating point and the sum
-        of every block is finite: a NaN or inf propagates into its sum), so the caller can
-        skip its own scan for NaN/inf; False when not shown (a non-finite sample, or a sum
-        that overflowed).
-
-    Raises
-    ------
-    ValueError
-        The file ends before the rows (a strided view or ``os.preadv`` past its end).
-    """
-    first = runs_per_channel[0]
-    nch = len(runs_per_channel)
-    finite = out.dtype.kind == "f"
-    fd = getattr(buf, "fd", -1) if hasattr(os, "preadv") else -1
-    k = max(0, int(np.searchsorted(starts, i0, side="right")) - 1)
-    with np.errstate(over="ignore", invalid="ignore"):
-        while k < len(first) and first[k].start < i1:
-            q = first[k]
-            k += 1
-            a, b = max(i0, q.start), min(i1, q.stop)
-            if b > a:
-                finite = _RowBlocks(buf, fd, q, nch, a, b).copy(out[:, a - i0:b - i0], finite)
-    return bool(finite)
-
-
-class _RowBlocks:
-    """Samples [a, b) of run ``q`` (the first channel's; the other ``nch - 1`` channels
-    follow it in each row), block after block of whole segments through an aligned buffer."""
-
-    def __init__(self, buf, fd: int, q: Run, nch: int, a: int, b: int):
-        self.buf, self.fd, self.q, self.nch, self.a, self.b = buf, fd, q, nch, a, b
-        item, p, row = q.dtype.itemsize, q.n_values, q.value_stride
-        self.full = p * row                                  # a segment's rows in the buffer
-        self.used = (p - 1) * row + nch * item               # ... of which the file holds these
-        self.s0, self.s_end = (a - q.start) // p, (b - q.start - 1) // p + 1
-        per = max(1, _ROW_BLOCK // self.full)
-        if fd >= 0:
-            per = min(per, _PREADV_SEGMENTS)
-        self.per = min(per, self.s_end - self.s0)
-        self.tmp = np.empty(self.per * self.full, dtype=np.uint8)
-        self.iov = None
-        if fd >= 0:
-            mv = memoryview(self.tmp)
-            gap = bytearray(max(0, q.seg_stride - self.used))   # the next lead-in (and metadata)
-            self.iov = [x for s in range(self.per) for x in (mv[s * self.full:s * self.full + self.used], gap)]
-
-    def _fill(self, g: int, nk: int) -> None:
-        """Segments [g, g + nk) of the run into the buffer."""
-        q = self.q
-        if self.iov is not None:
-            want = (nk - 1) * q.seg_stride + self.used
-            got = os.preadv(self.fd, self.iov[:2 * nk - 1], q.offset + g * q.seg_stride)
-            if got != want:
-                raise ValueError(f"the file ends inside segment rows at byte {q.offset + g * q.seg_stride + got}")
-            return
-        src = np.ndarray((nk, self.used), dtype=np.uint8, buffer=self.buf, offset=q.offset + g * q.seg_stride,
-                         strides=(q.seg_stride, 1))
-        self.tmp[:nk * self.full].reshape(nk, self.full)[:, :self.used] = src
-
-    def copy(self, out: np.ndarray, finite: bool) -> bool:
-        """Transpose the samples into ``out`` (nch, b - a); ``finite`` and-ed with every
-        block's sums being finite."""
-        q, a, b, p = self.q, self.a, self.b, self.q.n_values
-        for g in range(self.s0, self.s_end, self.per):
-            nk = min(self.per, self.s_end - g)
-            self._fill(g, nk)
-            rows = np.ndarray((nk * p, self.nch), dtype=q.dtype, buffer=self.tmp,
-                              strides=(q.value_stride, q.dtype.itemsize))
-            lo = q.start + g * p                             # first sample in the buffer
-            c0, c1 = max(a, lo), min(b, lo + nk * p)
-            dst = out[:, c0 - a:c1 - a]
-            dst[...] = rows[c0 - lo:c1 - lo].T
-            if finite:
-                finite = bool(np.isfinite(np.add.reduce(dst, axis=1)).all())
-        return finite

@@ -1,4 +1,4 @@
-"""Interleaved TDMS rows read together (meshphase.io.tdms_index.read_rows): through
+"""Interleaved TDMS rows read together (meshphase.io.tdms_rows.read_rows): through
 ``os.preadv`` on a FileMap and through a plain memory map, equal to npTDMS's public
 read_data bit for bit, with the NaN/inf scan folded into the copy."""
 
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from meshphase.errors import DataQualityWarning
-from meshphase.io import tdms, tdms_index
+from meshphase.io import tdms, tdms_index, tdms_rows
 from meshphase.recording import ChannelSpec, Recording
 from meshphase.synthetic.tdms_export import write_ni_log
 
@@ -33,13 +33,13 @@ def _runs(path):
 def _rows(path, i0, i1, nch, plain_map=False, dtype=np.float64):
     """read_rows over a FileMap (os.preadv) or a plain mmap (copies through the map)."""
     _, runs, starts = _runs(path)
-    assert tdms_index.shared_rows(runs)
+    assert tdms_rows.shared_rows(runs)
     out = np.full((nch, i1 - i0), -1.0, dtype=dtype)
     with open(path, "rb") as fh:
         mm = (mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) if plain_map
               else tdms_index.open_map(fh))
         with mm:
-            finite = tdms_index.read_rows(mm, runs, starts, i0, i1, out)
+            finite = tdms_rows.read_rows(mm, runs, starts, i0, i1, out)
     return out, finite
 
 
@@ -126,11 +126,33 @@ def test_read_rows_bad_input(tmp_path):
     cut.write_bytes(path.read_bytes()[:-3000])   # the rows end inside the last segment
     for opener in (tdms_index.open_map, lambda fh: mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)):
         with open(cut, "rb") as fh, opener(fh) as mm, pytest.raises((ValueError, TypeError)):
-            tdms_index.read_rows(mm, runs, starts, 0, 2048, np.empty((2, 2048)))
+            tdms_rows.read_rows(mm, runs, starts, 0, 2048, np.empty((2, 2048)))
     with open(path, "rb") as fh, tdms_index.open_map(fh) as mm, pytest.raises(ValueError):
-        tdms_index.read_rows(mm, runs, starts, 0, 2048, np.empty((2, 100)))   # out too short
-    assert tdms_index.shared_rows([]) is False
-    assert tdms_index.shared_rows(runs[:1]) is False
+        tdms_rows.read_rows(mm, runs, starts, 0, 2048, np.empty((2, 100)))   # out too short
+    with open(path, "rb") as fh, tdms_index.open_map(fh) as mm, pytest.raises(ValueError, match="not shared"):
+        tdms_rows.read_rows(mm, [], starts, 0, 10, np.empty((0, 10)))
+    assert tdms_rows.shared_rows([]) is False and tdms_rows.row_columns([]) is None
+
+
+def test_row_columns_of_subsets_in_any_order(tmp_path):
+    rec = _rec(1500, 4)
+    path = write_ni_log(rec, tmp_path / "x.tdms", samples_per_segment=512, interleaved=True)
+    _, runs, starts = _runs(path)
+    assert tdms_rows.row_columns(runs) == (0, 8, 16, 24)
+    assert tdms_rows.row_columns([runs[2], runs[0]]) == (16, 0)
+    assert tdms_rows.row_columns([runs[3]]) == (0,)
+    for chans in ([2, 0], [3], [1, 3], [3, 2, 1, 0]):
+        for plain in (False, True):
+            out = np.empty((len(chans), 1100))
+            with open(path, "rb") as fh:
+                mm = (mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) if plain else tdms_index.open_map(fh))
+                with mm:
+                    assert tdms_rows.read_rows(mm, [runs[c] for c in chans], starts, 300, 1400, out) is True
+            np.testing.assert_array_equal(out, rec.data[300:1400, chans].T)
+    flat = write_ni_log(rec, tmp_path / "c.tdms", samples_per_segment=512, interleaved=False)
+    _, cruns, _ = _runs(flat)
+    assert tdms_rows.row_columns(cruns) is None and tdms_rows.row_columns([cruns[0]]) is None
+    assert tdms_rows.row_columns([runs[0], cruns[1]]) is None
 
 
 @pytest.mark.parametrize("endian", ["<", ">"])
@@ -160,7 +182,7 @@ def test_hand_built_interleaved_rows_in_both_byte_orders(tmp_path, monkeypatch, 
     path = tmp_path / "hand.tdms"
     path.write_bytes(blob)
     idx, runs, starts = _runs(path)
-    assert tdms_index.shared_rows(runs) and len(runs[0]) >= 3
+    assert tdms_rows.shared_rows(runs) and len(runs[0]) >= 3
     for plain in (False, True):
         for a, b in ((0, x.shape[1]), (500, 1600), (1535, 1537), (3000, x.shape[1])):
             out, finite = _rows(path, a, b, 2, plain_map=plain)
