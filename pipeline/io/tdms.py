@@ -516,8 +516,10 @@ def _read_fast(mm, plan: _Plan, names, i0, i1, buf, path) -> bool:
     when the read showed them all finite (interleaved rows read together sum each block
     while it is in the cache), False when the caller must look for NaN/inf itself."""
     chans = [plan.chans[name] for name in names]
-    if all(c.scaling is None for c in chans) and tdms_rows.shared_rows([c.runs for c in chans]):
-        try:   # interleaved channels side by side: all at once, through a cache-sized buffer
+    # two or more channels of the same interleaved rows: together, whole rows per block; one
+    # channel alone is read faster by its strided walk over the map (read_runs below)
+    if len(chans) > 1 and all(c.scaling is None for c in chans) and tdms_rows.shared_rows([c.runs for c in chans]):
+        try:
             return tdms_rows.read_rows(mm, [c.runs for c in chans], chans[0].starts, i0, i1, buf)
         except (TypeError, ValueError) as exc:   # a strided view past the end of the file
             raise CorruptFileError(path, f"samples [{i0}, {i1})", f"truncated or corrupt: {exc}") from exc
