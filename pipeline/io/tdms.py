@@ -43,7 +43,10 @@ lead-in and metadata are taken together), through a memory map, NI-scaled by
 :mod:`meshphase.io.tdms_scaling` (linear and polynomial scales): each channel's length
 must equal npTDMS's and its first and last samples must equal what ``read_data`` returns,
 else, and for DAQmx raw data or scales only npTDMS computes, ``read_data`` reads every
-sample (``read_info(...).extra["read_path"]`` says which path and why). The read plan is
+sample (``read_info(...).extra["read_path"]`` says which path and why). Channels interleaved
+in the same rows are read together by :mod:`meshphase.io.tdms_rows` (whole segments per
+block, one ``os.preadv`` and one transposing assignment each, the block summed while in the
+cache, so a finite read skips the separate NaN/inf scan). The read plan is
 cached under a digest of the lead-ins and metadata. :func:`iter_blocks` keeps the file open
 and reads block after block, so memory stays flat.
 """
@@ -70,7 +73,7 @@ from ..errors import FormatWarning
 from ..jsonable import to_jsonable
 from ..recording import CHANNEL_KINDS, ChannelSpec, Recording
 from ..validate import as_int, as_positive, as_positive_int
-from . import tdms_index, tdms_scaling
+from . import tdms_index, tdms_rows, tdms_scaling
 from .base import CorruptFileError, RecordingFileError, RecordingInfo, check_verify, spec_from_dict, warn_nonfinite
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "sniff", "read_info", "read", "iter_blocks", "kind_from_name",
@@ -478,18 +481,18 @@ def _agrees(path, chans: dict, raw: bool, n_samples: int) -> tuple[bool, str]:
 
 
 # ---------------------------------------------------------------------------- reading
-def _read_window(mm, plan: _Plan, names, i0: int, i1: int, path) -> np.ndarray:
-    """Samples [i0, i1) of ``names`` as a Fortran-ordered (n, n_channels) array (``mm``: the
-    file's memory map on the computed-offset path, else None)."""
+def _read_window(mm, plan: _Plan, names, i0: int, i1: int, path) -> tuple[np.ndarray, bool]:
+    """(samples [i0, i1) of ``names`` as a Fortran-ordered (n, n_channels) array, whether the
+    read showed them all finite) (``mm``: the file's memory map on the computed-offset path,
+    else None)."""
     n = i1 - i0
     buf = np.empty((len(names), n), dtype=plan.dtype)   # channel-major; data = buf.T
     if n == 0:
-        return buf.T
+        return buf.T, True
     if plan.fast:
-        _read_fast(mm, plan, names, i0, i1, buf, path)
-    else:
-        _read_general(plan, names, i0, i1, buf, path)
-    return buf.T
+        return buf.T, _read_fast(mm, plan, names, i0, i1, buf, path)
+    _read_general(plan, names, i0, i1, buf, path)
+    return buf.T, False
 
 
 def _read_channel(mm, c: _Chan, i0: int, i1: int, dest: np.ndarray) -> None:
@@ -508,14 +511,18 @@ def _read_channel(mm, c: _Chan, i0: int, i1: int, dest: np.ndarray) -> None:
 _INTERLEAVED_BLOCK = 1 << 15
 
 
-def _read_fast(mm, plan: _Plan, names, i0, i1, buf, path):
+def _read_fast(mm, plan: _Plan, names, i0, i1, buf, path) -> bool:
+    """Samples [i0, i1) of ``names`` by computed offsets into ``buf`` (channel-major); True
+    when the read showed them all finite (interleaved rows read together sum each block
+    while it is in the cache), False when the caller must look for NaN/inf itself."""
     chans = [plan.chans[name] for name in names]
-    if all(c.scaling is None for c in chans) and tdms_index.shared_rows([c.runs for c in chans]):
-        try:   # interleaved channels side by side: all at once, through a cache-sized buffer
-            tdms_index.read_rows(mm, [c.runs for c in chans], chans[0].starts, i0, i1, buf)
+    # two or more channels of the same interleaved rows: together, whole rows per block; one
+    # channel alone is read faster by its strided walk over the map (read_runs below)
+    if len(chans) > 1 and all(c.scaling is None for c in chans) and tdms_rows.shared_rows([c.runs for c in chans]):
+        try:
+            return tdms_rows.read_rows(mm, [c.runs for c in chans], chans[0].starts, i0, i1, buf)
         except (TypeError, ValueError) as exc:   # a strided view past the end of the file
             raise CorruptFileError(path, f"samples [{i0}, {i1})", f"truncated or corrupt: {exc}") from exc
-        return
     interleaved = any(r.value_stride != r.dtype.itemsize for c in chans for r in c.runs)
     step = _INTERLEAVED_BLOCK if interleaved and len(chans) > 1 else max(1, i1 - i0)
     for a in range(i0, i1, step):
@@ -526,6 +533,7 @@ def _read_fast(mm, plan: _Plan, names, i0, i1, buf, path):
             except (TypeError, ValueError) as exc:   # a strided view past the end of the file
                 raise CorruptFileError(path, f"channel {c.name!r}, samples [{a}, {b})",
                                        f"truncated or corrupt: {exc}") from exc
+    return False
 
 
 def _read_general(plan: _Plan, names, i0, i1, buf, path):
@@ -703,8 +711,9 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *, fs: float |
         if not 0 <= i0 <= i1 <= n:
             raise ValueError(f"{path}: sample range [{i0}, {i1}) outside the recording's [0, {n})")
         mm = _map(stack, path, plan)
-        data = _read_window(mm, plan, names, i0, i1, path)
-    warn_nonfinite(path, data, names, i0)
+        data, finite = _read_window(mm, plan, names, i0, i1, path)
+    if not finite:
+        warn_nonfinite(path, data, names, i0)
     return _recording(plan, data, names, i0)
 
 
@@ -733,6 +742,7 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *, fs: float 
 
 
 def _read_block(mm, plan: _Plan, names, i0: int, i1: int, path) -> Recording:
-    data = _read_window(mm, plan, names, i0, i1, path)
-    warn_nonfinite(path, data, names, i0)
+    data, finite = _read_window(mm, plan, names, i0, i1, path)
+    if not finite:
+        warn_nonfinite(path, data, names, i0)
     return _recording(plan, data, names, i0)

@@ -31,8 +31,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .base import CorruptFileError, RecordingFileError
+from .tdms_rows import read_rows, row_columns, shared_rows  # the interleaved rows reader (names kept here)
 
-__all__ = ["Index", "Run", "scan", "read_runs", "open_map", "count_index_segments"]
+__all__ = ["Index", "Run", "FileMap", "scan", "read_runs", "shared_rows", "row_columns", "read_rows", "open_map",
+           "count_index_segments"]
 
 LEAD_IN = 28
 TOC_META = 1 << 1
@@ -259,9 +261,19 @@ def count_index_segments(path) -> int:
     return n if pos == len(data) else -1
 
 
-def open_map(fh) -> mmap.mmap:
-    """Read-only memory map of an open file (non-empty)."""
-    return mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+class FileMap(mmap.mmap):
+    """A read-only memory map that knows the descriptor of its open file (``fd``), so that
+    :func:`read_rows` can read rows with ``os.preadv`` instead of through the map."""
+
+    fd: int = -1
+
+
+def open_map(fh) -> FileMap:
+    """Read-only memory map of an open file (non-empty), with the file's descriptor as
+    ``.fd`` (valid while ``fh`` is open)."""
+    mm = FileMap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+    mm.fd = fh.fileno()
+    return mm
 
 
 class _Scan:
@@ -478,61 +490,3 @@ def read_runs(buf, runs: list, starts: np.ndarray, i0: int, i1: int, dest: np.nd
             pos += n
         if e1:                                        # the head of the last one
             out[pos:] = view[e0].reshape(-1)[:e1]
-
-
-
-
-def shared_rows(runs_per_channel: list) -> bool:
-    """True when the channels' runs are the same interleaved rows (equal boundaries, strides
-    and type) and the channels are consecutive columns of them, in order: :func:`read_rows`
-    can then read them together."""
-    first = runs_per_channel[0] if runs_per_channel else None
-    if not first or len(runs_per_channel) < 2:
-        return False
-    item = first[0].dtype.itemsize
-    shape = [(r.start, r.n_seg, r.n_chunks, r.n_values, r.seg_stride, r.value_stride, r.dtype) for r in first]
-    if any(r.n_chunks != 1 or r.value_stride == item or r.value_stride % item
-           or len(runs_per_channel) * item > r.value_stride for r in first):
-        return False
-    for j, runs in enumerate(runs_per_channel):
-        if [(r.start, r.n_seg, r.n_chunks, r.n_values, r.seg_stride, r.value_stride, r.dtype) for r in runs] != shape:
-            return False
-        if any(r.offset - f.offset != j * item for r, f in zip(runs, first)):
-            return False
-    return True
-
-
-#: bytes of interleaved rows copied at a time into an aligned buffer (fits the CPU cache)
-_ROW_BLOCK = 1 << 19
-
-
-def read_rows(buf, runs_per_channel: list, starts: np.ndarray, i0: int, i1: int, out: np.ndarray) -> None:
-    """Samples [i0, i1) of channels that are consecutive columns of shared interleaved rows
-    (:func:`shared_rows`) into ``out`` (n_channels, i1 - i0): a block of segments at a time,
-    the bytes from the first channel's value to the last one's in the last row are copied
-    from ``buf`` into an aligned, cache-sized buffer, then transposed into ``out`` in one
-    numpy assignment."""
-    first = runs_per_channel[0]
-    nch = len(runs_per_channel)
-    k = max(0, int(np.searchsorted(starts, i0, side="right")) - 1)
-    while k < len(first) and first[k].start < i1:
-        q = first[k]
-        k += 1
-        a, b = max(i0, q.start), min(i1, q.stop)
-        if b <= a:
-            continue
-        item, p, row = q.dtype.itemsize, q.n_values, q.value_stride
-        full = p * row                                   # a segment's rows in the buffer
-        used = (p - 1) * row + nch * item                # ... of which the file holds these
-        per_block = max(1, _ROW_BLOCK // full)
-        s0, s_end = (a - q.start) // p, (b - q.start - 1) // p + 1
-        tmp = np.empty(per_block * full, dtype=np.uint8)
-        for g in range(s0, s_end, per_block):
-            nk = min(per_block, s_end - g)
-            src = np.ndarray((nk, used), dtype=np.uint8, buffer=buf, offset=q.offset + g * q.seg_stride,
-                             strides=(q.seg_stride, 1))
-            tmp[:nk * full].reshape(nk, full)[:, :used] = src
-            rows = np.ndarray((nk * p, nch), dtype=q.dtype, buffer=tmp, strides=(row, item))
-            lo = q.start + g * p                         # first sample in tmp
-            c0, c1 = max(a, lo), min(b, lo + nk * p)
-            out[:, c0 - i0:c1 - i0] = rows[c0 - lo:c1 - lo].T

@@ -348,7 +348,7 @@ def test_reader_uses_only_public_nptdms_names():
     import meshphase.io.tdms as mod
 
     root = Path(mod.__file__).parent
-    for name in ("tdms.py", "tdms_index.py", "tdms_scaling.py"):
+    for name in ("tdms.py", "tdms_index.py", "tdms_rows.py", "tdms_scaling.py"):
         tree = ast.parse((root / name).read_text(encoding="utf-8"))
         for node in ast.walk(tree):
             if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("nptdms"):
@@ -357,7 +357,7 @@ def test_reader_uses_only_public_nptdms_names():
                 assert all(a.name == "nptdms" or not a.name.startswith("nptdms") for a in node.names), name
             if isinstance(node, ast.Attribute) and node.attr.startswith("_") and not node.attr.startswith("__"):
                 owner = ast.unparse(node.value)
-                assert owner in {"self", "tdms", "tdms_index", "tdms_scaling"} or owner.startswith("self."), \
+                assert owner in {"self", "tdms", "tdms_index", "tdms_rows", "tdms_scaling"} or owner.startswith("self."), \
                     f"{name}: {owner}.{node.attr}"
 
 
@@ -418,7 +418,7 @@ def test_tdms_scaling_empty_and_bad():
 
 @pytest.mark.parametrize("chans", [["sun_0", "sun_1"], ["sun_1", "sun_2"], ["sun_2", "sun_0"], ["sun_0", "sun_2"]])
 def test_interleaved_channel_subsets(tmp_path, chans):
-    """Consecutive columns in order are read together (shared rows), others one by one."""
+    """Any columns of the shared rows, in any order, are read together (read_rows)."""
     rec = _rec(3000, 3)
     path = write_ni_log(rec, tmp_path / "x.tdms", samples_per_segment=512, interleaved=True)
     cols = [rec.names.index(c) for c in chans]

@@ -1,0 +1,160 @@
+"""Interleaved TDMS rows read together: the channels read from segments whose raw data are
+interleaved (one row of every object per value, ``kTocInterleavedData``) are taken block
+after block of whole segments, the rows through an aligned buffer (``os.preadv`` into it, or
+a copy from the memory map), and transposed into channel-major output in one numpy
+assignment per block, summed while in the cache so a finite read needs no second pass.
+The runs come from :func:`meshphase.io.tdms_index.scan`.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+__all__ = ["shared_rows", "row_columns", "read_rows"]
+
+
+def shared_rows(runs_per_channel: list) -> bool:
+    """True when :func:`read_rows` can read these channels together: their runs are the same
+    interleaved rows (equal boundaries, strides and type, one chunk per segment) and every
+    channel lies at a fixed column of them (see :func:`row_columns`)."""
+    return row_columns(runs_per_channel) is not None
+
+
+def row_columns(runs_per_channel: list) -> tuple | None:
+    """Byte offset of each channel's column in the shared interleaved rows, counted from the
+    leftmost channel read (any order, gaps allowed, each a multiple of the item size), or
+    None when the channels' runs are not such rows (:func:`shared_rows`)."""
+    first = runs_per_channel[0] if runs_per_channel else None
+    if not first:
+        return None
+    item = first[0].dtype.itemsize
+    shape = [(r.start, r.n_seg, r.n_chunks, r.n_values, r.seg_stride, r.value_stride, r.dtype) for r in first]
+    if any(r.n_chunks != 1 or r.value_stride <= item or r.value_stride % item for r in first):
+        return None
+    for runs in runs_per_channel:
+        if [(r.start, r.n_seg, r.n_chunks, r.n_values, r.seg_stride, r.value_stride, r.dtype)
+                for r in runs] != shape:
+            return None
+    base = [min(runs[k].offset for runs in runs_per_channel) for k in range(len(first))]
+    cols = []
+    for runs in runs_per_channel:
+        col = runs[0].offset - base[0]
+        if any(r.offset - b != col for r, b in zip(runs, base)):
+            return None
+        cols.append(col)
+    if max(cols) + item > first[0].value_stride or any(c % item for c in cols):
+        return None
+    return tuple(cols)
+
+
+#: bytes of interleaved rows taken at a time (about the CPU's L2 cache)
+_ROW_BLOCK = 1 << 19
+#: segments read by one ``os.preadv`` at most (two buffers each; IOV_MAX is 1024 on Linux)
+_PREADV_SEGMENTS = 500
+
+
+def read_rows(buf, runs_per_channel: list, starts: np.ndarray, i0: int, i1: int, out: np.ndarray) -> bool:
+    """Samples [i0, i1) of channels that are columns of shared interleaved rows
+    (:func:`shared_rows`) into ``out`` (n_channels, i1 - i0).
+
+    A block of whole segments at a time (about ``_ROW_BLOCK`` bytes), the bytes from the
+    leftmost channel's value to the rightmost one's in the last row of each segment land
+    side by side in an aligned buffer, and one numpy assignment transposes the block into
+    ``out`` (one strided copy per channel when the columns are not side by side in order);
+    no Python loop runs per segment. When ``buf`` is a :class:`~meshphase.io.tdms_index.FileMap` and ``os.preadv``
+    exists, one ``os.preadv`` per block reads the segments' rows into the buffer and their
+    lead-ins into a scratch buffer (the kernel copies from the page cache: no page faults
+    on the map, which cost most where segments are about a page apart); else the rows are
+    copied from ``buf``. The samples just written are summed while they are in the cache.
+
+    Returns
+    -------
+    bool
+        True when every sample copied is shown finite (``out`` is floating point and the sum
+        of every block is finite: a NaN or inf propagates into its sum), so the caller can
+        skip its own scan for NaN/inf; False when not shown (a non-finite sample, or a sum
+        that overflowed).
+
+    Raises
+    ------
+    ValueError
+        The runs are not shared rows, ``out`` has the wrong shape, or the file ends before
+        the rows (a strided view or ``os.preadv`` past its end).
+    """
+    cols = row_columns(runs_per_channel)
+    if cols is None:
+        raise ValueError("the channels' runs are not shared interleaved rows (see shared_rows)")
+    if out.shape != (len(cols), i1 - i0):
+        raise ValueError(f"out has shape {out.shape}, expected {(len(cols), i1 - i0)}")
+    left = runs_per_channel[cols.index(0)]            # the leftmost column's runs
+    finite = out.dtype.kind == "f"
+    fd = getattr(buf, "fd", -1) if hasattr(os, "preadv") else -1
+    k = max(0, int(np.searchsorted(starts, i0, side="right")) - 1)
+    with np.errstate(over="ignore", invalid="ignore"):
+        while k < len(left) and left[k].start < i1:
+            q = left[k]
+            k += 1
+            a, b = max(i0, q.start), min(i1, q.stop)
+            if b > a:
+                finite = _RowBlocks(buf, fd, q, cols, a, b).copy(out[:, a - i0:b - i0], finite)
+    return bool(finite)
+
+
+class _RowBlocks:
+    """Samples [a, b) of the channels at byte columns ``cols`` of the rows of run ``q`` (the
+    leftmost channel's), block after block of whole segments through an aligned buffer."""
+
+    def __init__(self, buf, fd: int, q, cols: tuple, a: int, b: int):
+        self.buf, self.fd, self.q, self.cols, self.a, self.b = buf, fd, q, cols, a, b
+        item, p, row = q.dtype.itemsize, q.n_values, q.value_stride
+        self.together = cols == tuple(range(0, len(cols) * item, item))   # side by side, in order
+        self.full = p * row                                  # a segment's rows in the buffer
+        self.used = (p - 1) * row + max(cols) + item         # ... of which the file holds these
+        self.s0, self.s_end = (a - q.start) // p, (b - q.start - 1) // p + 1
+        per = max(1, _ROW_BLOCK // self.full)
+        if fd >= 0:
+            per = min(per, _PREADV_SEGMENTS)
+        self.per = min(per, self.s_end - self.s0)
+        self.tmp = np.empty(self.per * self.full, dtype=np.uint8)
+        self.iov = None
+        if fd >= 0:
+            mv = memoryview(self.tmp)
+            gap = bytearray(max(0, q.seg_stride - self.used))   # the next lead-in (and metadata)
+            self.iov = [x for s in range(self.per) for x in (mv[s * self.full:s * self.full + self.used], gap)]
+
+    def _fill(self, g: int, nk: int) -> None:
+        """Segments [g, g + nk) of the run into the buffer."""
+        q = self.q
+        if self.iov is not None:
+            want = (nk - 1) * q.seg_stride + self.used
+            got = os.preadv(self.fd, self.iov[:2 * nk - 1], q.offset + g * q.seg_stride)
+            if got != want:
+                raise ValueError(f"the file ends inside segment rows at byte {q.offset + g * q.seg_stride + got}")
+            return
+        src = np.ndarray((nk, self.used), dtype=np.uint8, buffer=self.buf, offset=q.offset + g * q.seg_stride,
+                         strides=(q.seg_stride, 1))
+        self.tmp[:nk * self.full].reshape(nk, self.full)[:, :self.used] = src
+
+    def copy(self, out: np.ndarray, finite: bool) -> bool:
+        """Transpose the samples into ``out`` (nch, b - a); ``finite`` and-ed with every
+        block's sums being finite."""
+        q, a, b, p = self.q, self.a, self.b, self.q.n_values
+        for g in range(self.s0, self.s_end, self.per):
+            nk = min(self.per, self.s_end - g)
+            self._fill(g, nk)
+            lo = q.start + g * p                             # first sample in the buffer
+            c0, c1 = max(a, lo), min(b, lo + nk * p)
+            dst = out[:, c0 - a:c1 - a]
+            if self.together:                                # one transposing assignment
+                rows = np.ndarray((nk * p, len(self.cols)), dtype=q.dtype, buffer=self.tmp,
+                                  strides=(q.value_stride, q.dtype.itemsize))
+                dst[...] = rows[c0 - lo:c1 - lo].T
+            else:                                            # one strided column per channel
+                for j, col in enumerate(self.cols):
+                    dst[j] = np.ndarray((nk * p,), dtype=q.dtype, buffer=self.tmp, offset=col,
+                                        strides=(q.value_stride,))[c0 - lo:c1 - lo]
+            if finite:
+                finite = bool(np.isfinite(np.add.reduce(dst, axis=1)).all())
+        return finite
