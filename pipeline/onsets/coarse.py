@@ -27,20 +27,22 @@ def _decimation(w: float) -> int:
     return max(1, int(w // _SAMPLES_PER_WIDTH))
 
 
-def _decimate(seg: np.ndarray, d: int) -> np.ndarray:
-    """Block means of ``d`` samples (trailing partial block dropped).
+def _decimate(seg: np.ndarray, d: int, sign: int = 1) -> np.ndarray:
+    """Block means of ``d`` samples (trailing partial block dropped), times ``sign`` (+-1).
 
-    One BLAS matrix-vector product of the ``(n / d, d)`` view with ``ones(d) / d``: a
-    single pass over contiguous samples for any ``d`` (a strided column sum per pass, or
+    One BLAS matrix-vector product of the ``(n / d, d)`` view with ``sign * ones(d) / d``:
+    a single pass over contiguous samples for any ``d`` (a strided column sum per pass, or
     ``reshape(-1, d).sum(1)`` with its per-row reduction overhead, cost 5-100x more for
     ``d`` of 2 to 35); a strided input is made contiguous first. Equal to the plain block
-    mean to ~4e-16 relative (the summation order differs).
+    mean to ~4e-16 relative (the summation order differs); ``sign=-1`` equals the block
+    means of ``-seg`` bit for bit (rounding is symmetric in the sign) without negating a
+    copy first.
     """
     if d == 1:
-        return seg
+        return seg if sign > 0 else -seg
     m = (seg.size // d) * d
     v = np.ascontiguousarray(seg[:m]).reshape(-1, d)
-    return v @ np.full(d, 1.0 / d)
+    return v @ np.full(d, (1.0 if sign > 0 else -1.0) / d)
 
 
 def _median(a: np.ndarray) -> float:
