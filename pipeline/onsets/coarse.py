@@ -46,10 +46,10 @@ def _decimate(seg: np.ndarray, d: int, sign: int = 1) -> np.ndarray:
 
 
 def _median(a: np.ndarray) -> float:
-    """``float(np.median(a))`` of a finite, non-empty 1-d array, bit for bit, at a third to a
-    sixth of its cost on 8192 samples: one single-pivot ``np.partition`` (np.median of an
-    even count partitions around two pivots, which is slower), the lower middle value being
-    the maximum of the part below the pivot."""
+    """``float(np.median(a))`` of a finite, non-empty 1-d array, bit for bit, for less: one
+    single-pivot ``np.partition`` (np.median of an even count partitions around two
+    pivots, which is slower) and no generic reduction machinery, the lower middle value
+    being the maximum of the part below the pivot."""
     n = a.size
     k = n >> 1
     p = np.partition(a, k)

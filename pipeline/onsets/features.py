@@ -42,8 +42,8 @@ def _savgol_cubic(window: int) -> np.ndarray:
 def _savgol_interior(h: np.ndarray, window: int) -> np.ndarray:
     """``signal.savgol_filter(h, window, 3)`` inside, NaN in the ``window // 2`` samples at
     each end: the same convolution with the same coefficients (bit for bit) without the
-    polynomial fits of the ends, which cost ten times the rest and which no level crossing
-    of a template reaches (a crossing that would is recomputed on the full filter)."""
+    polynomial fits of the ends, which cost most of the filter's time and which a level
+    crossing of a template seldom reaches (one that does is recomputed on the full filter)."""
     hs = ndimage.convolve1d(h, _savgol_cubic(window), mode="constant")
     e = window // 2
     if e:
