@@ -27,20 +27,35 @@ def _decimation(w: float) -> int:
     return max(1, int(w // _SAMPLES_PER_WIDTH))
 
 
-def _decimate(seg: np.ndarray, d: int) -> np.ndarray:
-    """Block means of ``d`` samples (trailing partial block dropped).
+def _decimate(seg: np.ndarray, d: int, sign: int = 1) -> np.ndarray:
+    """Block means of ``d`` samples (trailing partial block dropped), times ``sign`` (+-1).
 
-    One BLAS matrix-vector product of the ``(n / d, d)`` view with ``ones(d) / d``: a
-    single pass over contiguous samples for any ``d`` (a strided column sum per pass, or
+    One BLAS matrix-vector product of the ``(n / d, d)`` view with ``sign * ones(d) / d``:
+    a single pass over contiguous samples for any ``d`` (a strided column sum per pass, or
     ``reshape(-1, d).sum(1)`` with its per-row reduction overhead, cost 5-100x more for
     ``d`` of 2 to 35); a strided input is made contiguous first. Equal to the plain block
-    mean to ~4e-16 relative (the summation order differs).
+    mean to ~4e-16 relative (the summation order differs); ``sign=-1`` equals the block
+    means of ``-seg`` bit for bit (rounding is symmetric in the sign) without negating a
+    copy first.
     """
     if d == 1:
-        return seg
+        return seg if sign > 0 else -seg
     m = (seg.size // d) * d
     v = np.ascontiguousarray(seg[:m]).reshape(-1, d)
-    return v @ np.full(d, 1.0 / d)
+    return v @ np.full(d, (1.0 if sign > 0 else -1.0) / d)
+
+
+def _median(a: np.ndarray) -> float:
+    """``float(np.median(a))`` of a finite, non-empty 1-d array, bit for bit, for less: one
+    single-pivot ``np.partition`` (np.median of an even count partitions around two
+    pivots, which is slower) and no generic reduction machinery, the lower middle value
+    being the maximum of the part below the pivot."""
+    n = a.size
+    k = n >> 1
+    p = np.partition(a, k)
+    if n & 1:
+        return float(p[k])
+    return float((p[:k].max() + p[k]) / 2)
 
 
 def _fill_nan(seg: np.ndarray) -> np.ndarray:
@@ -48,7 +63,7 @@ def _fill_nan(seg: np.ndarray) -> np.ndarray:
         return seg
     bad = ~np.isfinite(seg)
     fin = seg[~bad]
-    fill = float(np.median(fin[:: max(1, fin.size >> 16)])) if fin.size else 0.0
+    fill = _median(fin[:: max(1, fin.size >> 16)]) if fin.size else 0.0
     out = seg.copy()
     out[bad] = fill
     return out
@@ -89,9 +104,9 @@ def _noise_level(y: np.ndarray, w: float) -> tuple[float, float, float]:
         live = _live(y)
         pieces = [live if live.size >= 3 else y]
     for p in pieces:                                  # <= 4 pieces
-        med = float(np.median(p))
-        sig = float(_MAD_TO_SIGMA * np.median(np.abs(p - med)))
-        keep = np.ones(p.size, dtype=bool)
+        med = _median(p)
+        sig = _MAD_TO_SIGMA * _median(np.abs(p - med))
+        keep = None
         for _ in range(2):
             if p.size < 3 or not sig > 0:
                 break
@@ -105,15 +120,19 @@ def _noise_level(y: np.ndarray, w: float) -> tuple[float, float, float]:
                     break
             if new_keep.sum() < 0.05 * p.size:
                 break
+            if keep is not None and np.array_equal(new_keep, keep):
+                break                                  # same mask: same median and sigma
             keep = new_keep
             r = p[keep]
-            med = float(np.median(r))
-            sig = float(_MAD_TO_SIGMA * np.median(np.abs(r - med)))
-        rest.append(p[keep])
+            med = _median(r)
+            sig = _MAD_TO_SIGMA * _median(np.abs(r - med))
+        rest.append(p if keep is None else p[keep])
     r = np.concatenate(rest) if len(rest) > 1 else rest[0]
-    med = float(np.median(r))
+    if len(rest) == 1:                                # the piece's own last estimate
+        return med, float(sig), float(pieces[0].max())
+    med = _median(r)
     top = max(float(p.max()) for p in pieces)
-    return med, float(_MAD_TO_SIGMA * np.median(np.abs(r - med))), top
+    return med, float(_MAD_TO_SIGMA * _median(np.abs(r - med))), top
 
 
 def _coarse_dec(yd: np.ndarray, w_d: float, spacing_d: float, k_sigma: float):

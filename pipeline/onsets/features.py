@@ -3,10 +3,11 @@ sample (least-squares fits on the template, not its noisy extremes)."""
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
-from scipy import signal
+from scipy import ndimage, signal
 
 __all__: list[str] = []
 
@@ -28,6 +29,27 @@ def _crossing_right(y: np.ndarray, start: int, level: float) -> float:
         return float("nan")
     k = start + int(below[0])
     return k - 1 + (y[k - 1] - level) / (y[k - 1] - y[k])
+
+
+@functools.lru_cache(maxsize=64)
+def _savgol_cubic(window: int) -> np.ndarray:
+    """The cubic Savitzky-Golay smoothing coefficients of ``window`` samples (read-only)."""
+    c = signal.savgol_coeffs(window, 3)
+    c.flags.writeable = False
+    return c
+
+
+def _savgol_interior(h: np.ndarray, window: int) -> np.ndarray:
+    """``signal.savgol_filter(h, window, 3)`` inside, NaN in the ``window // 2`` samples at
+    each end: the same convolution with the same coefficients (bit for bit) without the
+    polynomial fits of the ends, which cost most of the filter's time and which a level
+    crossing of a template seldom reaches (one that does is recomputed on the full filter)."""
+    hs = ndimage.convolve1d(h, _savgol_cubic(window), mode="constant")
+    e = window // 2
+    if e:
+        hs[:e] = np.nan
+        hs[hs.size - e:] = np.nan
+    return hs
 
 
 def _template_features(h: np.ndarray, reference: str, level: float):
@@ -90,12 +112,20 @@ def _features_fit(h: np.ndarray, i0: int, w0: float, reference: str, level: floa
         c, top = c + v, float(a0 - a1 * a1 / (4 * a2))
         if abs(v) < 0.05:
             break
-    hs = signal.savgol_filter(h, min(n - (1 - n % 2), 2 * m + 1), 3)
+    window = min(n - (1 - n % 2), 2 * m + 1)
+    hs = _savgol_interior(h, window)
+    full = None
     k = int(round(c))
     m2 = max(2, int(round(w0 / 8)))
 
     def cross(lvl, side):
+        nonlocal full
         g = _crossing_left(hs, k, lvl) if side < 0 else _crossing_right(hs, k, lvl)
+        if not np.isfinite(g) or not np.isfinite(hs[min(max(k, 0), n - 1)]):
+            # not found inside, or searched from an end: on the full filter, ends fitted
+            if full is None:
+                full = signal.savgol_filter(h, window, 3)
+            g = _crossing_left(full, k, lvl) if side < 0 else _crossing_right(full, k, lvl)
         if not np.isfinite(g):
             return float("nan")
         lo, hi = max(0, int(round(g)) - m2), min(n, int(round(g)) + m2 + 1)

@@ -121,7 +121,8 @@ class _Matcher:
         rows = np.arange(n)
         flat = c.ravel()
         b = rows * ncol + jc
-        y0, y1, y2 = flat[b - 1], flat[b], flat[b + 1]
+        # np.take: a 1-d gather faster than fancy indexing, the same values
+        y0, y1, y2 = np.take(flat, b - 1), np.take(flat, b), np.take(flat, b + 1)
         den = y0 - 2.0 * y1 + y2
         with np.errstate(divide="ignore", invalid="ignore"):
             d = np.where(den < 0, 0.5 * (y0 - y2) / den, 0.0)
