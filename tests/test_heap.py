@@ -36,3 +36,20 @@ def test_environment_setting_is_left_alone():
     env = dict(os.environ, MALLOC_MMAP_THRESHOLD_="262144")
     out = _child("from meshphase.heap import limit_heap_growth as f; print(f())", env=env)
     assert out == "True"
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc only")
+def test_trimming_thread_runs_after_the_first_call():
+    # the heap's free pages go back to the system from a daemon thread (pipeline/heap.py):
+    # none before the call, one after it, and a second call starts no other
+    code = ("import threading, time\n"
+            "from meshphase.heap import heap_trimming, limit_heap_growth\n"
+            "before = heap_trimming()\n"
+            "a = limit_heap_growth(); b = limit_heap_growth(); time.sleep(0.6)\n"
+            "n = sum(t.name == 'meshphase-heap-trim' for t in threading.enumerate())\n"
+            "print(before, a, heap_trimming(), n)")
+    import platform
+    before, a, trimming, n = _child(code).split()
+    assert before == "False"
+    if platform.libc_ver()[0] == "glibc":
+        assert (a, trimming, n) == ("True", "True", "1")
