@@ -421,6 +421,9 @@ class _Design:
         self.half = max(0.5 * (self.t_hi - self.t_lo), 1e-12)
         self.x = (self.t - self.t_mid) / self.half
         self.active = np.ones(self.t.size, bool)      # False: left out as an outlier
+        # spline bases at every observation, per (intervals, derivative): the iterations of a
+        # fit evaluate the same rows again and again (a few recent entries are kept)
+        self._bases: dict = {}
         # reference planet of each gauge train: planet 1 when present, else the lowest
         self.ref = []
         for tr in trains:
@@ -432,6 +435,28 @@ class _Design:
 
     def x_of(self, t: np.ndarray) -> np.ndarray:
         return (np.asarray(t, dtype=float) - self.t_mid) / self.half
+
+    #: spline bases kept by :meth:`basis_rows` (a window of 6000 observations and 64
+    #: intervals: 3 MB each)
+    _BASES_KEPT = 4
+
+    def basis_rows(self, K: int, nu: int, rows: np.ndarray) -> np.ndarray:
+        """The spline basis (``nu``: 0 value, 1 derivative per second) at observations
+        ``rows``: evaluated once at every observation and kept, then gathered."""
+        key = (int(K), int(nu))
+        full = self._bases.pop(key, None)
+        if full is None:
+            full = _basis(self.x, K, nu)
+            if nu:
+                full /= self.half ** nu
+        self._bases[key] = full                      # most recently used last
+        while len(self._bases) > self._BASES_KEPT:
+            del self._bases[next(iter(self._bases))]
+        return full[rows]
+
+    def release(self) -> None:
+        """Drop the kept spline bases (a fitted model keeps its design)."""
+        self._bases.clear()
 
     def layout(self, spec: _Spec) -> dict:
         """Parameter blocks of ``spec``: name -> slice, column names, priorities, and the
@@ -531,14 +556,19 @@ class _Design:
                 cols.append(trig * x[:, None])
         return R, RA, Rx, cols
 
-    def _common(self, theta, lay, spec, x, A_fixed=None):
+    def _common(self, theta, lay, spec, x, A_fixed=None, rows=None):
         """Solve A = S(t) + R(A, x) (Newton from A = S) at scaled times x.
 
         Returns A, dA/dt, the columns dA/dtheta restricted to spline and ripple blocks (as a
         dense (n, p) array with zeros elsewhere) and dR/dA. With ``A_fixed`` the columns are
-        evaluated at those angles instead of the solved ones."""
-        B = _basis(x, spec.knots)
-        dB = _basis(x, spec.knots, 1) / self.half
+        evaluated at those angles instead of the solved ones. ``rows``: x are the scaled
+        times of these observations (their spline bases are kept between calls)."""
+        if rows is None:
+            B = _basis(x, spec.knots)
+            dB = _basis(x, spec.knots, 1) / self.half
+        else:
+            B = self.basis_rows(spec.knots, 0, rows)
+            dB = self.basis_rows(spec.knots, 1, rows)
         beta = theta[lay["blocks"]["spline"]]
         S = B @ beta
         dS = dB @ beta
@@ -594,9 +624,9 @@ class _Design:
             # offset, exactly periodic wherever the geometry is (the planet terms, a few
             # 1e-3 cycles, and the residuals are left out on purpose)
             A, rate, G, _ = self._common(theta, lay, spec, x,
-                                         A_fixed=self.y[idx] - train_terms)
+                                         A_fixed=self.y[idx] - train_terms, rows=idx)
         else:
-            A, rate, G, _ = self._common(theta, lay, spec, x)
+            A, rate, G, _ = self._common(theta, lay, spec, x, rows=idx)
         f = A + train_terms
         # planet terms, periodic in the planet's spin: functions of the mesh angle A
         sb = lay["blocks"]["sig"]
@@ -757,13 +787,13 @@ class _Fit:
         return n * math.log(max(self.chi2 / n, self.floor)) + self.rank * math.log(n)
 
 
-def _conv_tol(d: _Design, spec: _Spec, lay: dict, theta: np.ndarray, rows: np.ndarray) -> float:
+def _conv_tol(d: _Design, rows: np.ndarray, rate: np.ndarray) -> float:
     """With timing bounds, a step that moves no prediction by 1e-3 of its own bound changes
-    nothing that matters: that move is the convergence tolerance [mesh cycles] (0 without)."""
+    nothing that matters: that move is the convergence tolerance [mesh cycles] (0 without);
+    ``rate``: the angle rates at ``rows`` at the start [cycles/s]."""
     if not all(tr.sigma_given for tr in d.trains):
         return 0.0
-    _, _, r0 = d.evaluate(theta, lay, spec, rows, jac=False)
-    r0 = _fix_rate(r0)
+    r0 = _fix_rate(rate)
     if np.all(np.isfinite(r0)) and np.any(r0 != 1.0):
         return 1e-3 * float(np.min(d.sig[rows] * r0))
     return 0.0
@@ -779,13 +809,14 @@ def _solve(d: _Design, spec: _Spec, theta0: np.ndarray | None, scale: np.ndarray
     rows = np.flatnonzero(d.active)
     keep = None
     conv = False
-    conv_tol = _conv_tol(d, spec, lay, theta, rows)
     it = 0
     budget = max_iter
     rechecked = not recheck
+    last = {}     # the latest evaluation: _finish reuses it when every row is active
 
     def weighted(theta_):
         f_, J_, rate_ = d.evaluate(theta_, lay, spec, rows)
+        last.update(theta=theta_, f=f_, J=J_, rate=rate_)
         w_ = 1.0 / (d.sig[rows] * _fix_rate(rate_) * scale[d.q[rows]])
         r_ = d.y[rows] - f_
         # a trial step can throw the implicit angle equation near its singular point (rates
@@ -797,6 +828,7 @@ def _solve(d: _Design, spec: _Spec, theta0: np.ndarray | None, scale: np.ndarray
         return f_, J_, w_, r_, chi_
 
     f, J, w, r, chi = weighted(theta)
+    conv_tol = _conv_tol(d, rows, last["rate"])
     while it < budget:
         it += 1
         if keep is None:
@@ -845,14 +877,21 @@ def _solve(d: _Design, spec: _Spec, theta0: np.ndarray | None, scale: np.ndarray
             return _solve(d, spec, theta, scale, max_iter=max_iter, tol=tol, full=full,
                           recheck=False) if max_iter > 1 else _solve(d, spec, theta, scale,
                                                                        max_iter=2, full=full)
-    return _finish(d, spec, lay, theta, keep, scale, rows, it, conv, full)
+    same = rows.size == d.t.size and last.get("theta") is theta
+    return _finish(d, spec, lay, theta, keep, scale, rows, it, conv, full,
+                   (last["f"], last["J"], last["rate"]) if same else None)
 
 
 def _finish(d: _Design, spec: _Spec, lay: dict, theta: np.ndarray, keep: np.ndarray,
-            scale: np.ndarray, rows: np.ndarray, it: int, conv: bool, full: bool) -> _Fit:
+            scale: np.ndarray, rows: np.ndarray, it: int, conv: bool, full: bool,
+            at_theta=None) -> _Fit:
     """The :class:`_Fit` of converged parameters: residuals and rates at every observation,
-    the weighted misfit and, with ``full``, the covariance and the leverages."""
-    f, J, rate = d.evaluate(theta, lay, spec, np.arange(d.t.size), jac=full)
+    the weighted misfit and, with ``full``, the covariance and the leverages. ``at_theta``:
+    (f, J, rate) already evaluated at ``theta`` on every observation, or None."""
+    if at_theta is None:
+        f, J, rate = d.evaluate(theta, lay, spec, np.arange(d.t.size), jac=full)
+    else:
+        f, J, rate = at_theta
     resid = d.y - f
     rate = _fix_rate(rate)
     w_all = 1.0 / (d.sig * rate * scale[d.q])
@@ -1110,6 +1149,7 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
     notes.extend(dnotes)
     tfits = _train_fits(d, use, fit, scale, notes)
     act = d.active
+    d.release()
     wall = time.perf_counter() - t_start
     if not fit.converged:
         warnings.warn(f"angle model: Gauss-Newton did not converge in {fit.iterations} iterations "
