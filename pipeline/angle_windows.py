@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .angles import AngleModel, Kinematics, PassTrain, TrainFit, fit_angle_model, slice_train
+from .threads import thread_map
 
 __all__ = ["fit_angle_windows", "WindowedAngleModel", "WINDOW_OBS"]
 
@@ -255,7 +256,7 @@ def fit_angle_windows(trains, kin: Kinematics, n_planets: int, *, max_obs: int =
 def _fit_windows(trains, kin, n, bounds, h, progress, kwargs) -> WindowedAngleModel:
     t0 = time.perf_counter()
     edges = np.concatenate([[-np.inf], bounds, [np.inf]])
-    windows, slices = [], []
+    jobs, slices = [], []
     for j in range(edges.size - 1):
         lo, hi = edges[j] - 2.0 * h, edges[j + 1] + 2.0 * h
         subs, sl = [], {}
@@ -264,14 +265,19 @@ def _fit_windows(trains, kin, n, bounds, h, progress, kwargs) -> WindowedAngleMo
             if len(s) >= 2:
                 subs.append(s)
                 sl[tr.name] = (i0, s.times)
+        jobs.append((j, lo, hi, subs))
+        slices.append(sl)
+
+    def fit(job):
+        j, lo, hi, subs = job
         try:
-            windows.append(fit_angle_model(subs, kin, n, **kwargs))
+            return fit_angle_model(subs, kin, n, **kwargs)
         except ValueError as exc:
             raise ValueError(f"angle model window {j + 1} of {edges.size - 1} "
                              f"([{max(lo, trains[0].times[0]):.1f}, {hi:.1f}] s): {exc}") from exc
-        slices.append(sl)
-        if progress is not None:
-            progress(j + 1, edges.size - 1)
+
+    # the windows share nothing: fitted side by side, each whole on one thread (meshphase.threads)
+    windows = thread_map(fit, jobs, progress=progress)
     consts = np.zeros(len(windows))
     stitch = np.empty(bounds.size)
     for j, b in enumerate(bounds):
