@@ -53,6 +53,7 @@ from .results import (BearingStage, CentroidsStage, CompareStage, ConditionStage
 from .scene import STAGES, Scene, SceneError, load_scene, plan
 from .stream import (BLOCK_SAMPLES, ChannelPlan, FileSource, GeneratorSource, MemorySource,
                      condition_stream, scan_source)
+from .threads import blas_single_thread
 from .truth import phasing_vs_truth, tacho_geometry, true_errors
 from .validate import as_regular_file
 
@@ -643,6 +644,15 @@ def run_scene(scene: Scene, *, progress: Callable[[str, int, int], None] | None 
         raise TypeError(f"scene must be a Scene (meshphase.scene.load_scene), got {type(scene).__name__}")
     ctx = RunContext(scene)
     stages = plan(scene)
+    with blas_single_thread():          # meshphase.threads: tall, narrow least squares
+        _run_stages(ctx, stages, progress)
+    if progress:
+        progress("done", len(stages), len(stages))
+    return ctx
+
+
+def _run_stages(ctx: RunContext, stages: list, progress) -> None:
+    """:func:`run_scene`'s loop over the planned stages."""
     for i, name in enumerate(stages):
         blocked = [d for d in STAGES[name] if d in ctx.failed or (d not in ctx.ran)]
         if blocked:
@@ -669,9 +679,6 @@ def run_scene(scene: Scene, *, progress: Callable[[str, int, int], None] | None 
                 logger.debug("stage %s traceback", name, exc_info=True)
         ctx.timings[name] = time.perf_counter() - t
         _collect_warnings(ctx, name, caught)
-    if progress:
-        progress("done", len(stages), len(stages))
-    return ctx
 
 
 def _collect_warnings(ctx: RunContext, stage: str, caught) -> None:

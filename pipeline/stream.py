@@ -71,6 +71,7 @@ from .condition import (_apply_finite, _block_means, _block_medians, _check_freq
 from .errors import DataQualityWarning
 from .quality import ChannelQuality, ChannelScan, _RunTracker, merge_runs, quality_from_scan
 from .recording import ChannelSpec, Recording
+from .threads import thread_pool
 from .validate import as_choice, as_positive
 
 __all__ = ["StreamedRecording", "BlockSource", "FileSource", "MemorySource", "GeneratorSource",
@@ -1416,20 +1417,26 @@ class _Pass3:
     def read(self, source: BlockSource, block: int, on_samples, progress) -> None:
         h = source.header
         idx = {c.name: j for j, c in enumerate(h.channels)}
-        for a, data in _rechunk(source, block):
-            self.n_blocks += 1
-            for p in self.plans:
+        # the channels' chains share nothing: filtered side by side on worker threads
+        # (meshphase.threads; the filters release the GIL), each chain whole on one thread
+        # per block, so the samples are those of the serial run; the onset detectors and
+        # everything after them run here, in channel order, as before
+        with thread_pool(max_items=len(self.plans)) as tmap:
+            for a, data in _rechunk(source, block):
+                self.n_blocks += 1
                 t = time.perf_counter()
                 # a fresh float64 copy: the stages hold on to what they are given
-                y = self.chains[p.name].push(np.array(data[:, idx[p.name]], dtype=np.float64))
+                ys = tmap(lambda p: self.chains[p.name].push(
+                    np.array(data[:, idx[p.name]], dtype=np.float64)), self.plans)
                 self.t_cond += time.perf_counter() - t
-                if on_samples is not None and y.size:
-                    on_samples(p.name, self.done[p.name], y)
-                _deliver(p, y, self.done, self.gaps, self.excerpts, self.n_ex)
-                if p.name in self.onsets and y.size:
-                    self._timed_onsets(lambda: self.onsets[p.name].feed(y))
-            if progress:
-                progress("condition + onsets", a + data.shape[0], self.n)
+                for p, y in zip(self.plans, ys):
+                    if on_samples is not None and y.size:
+                        on_samples(p.name, self.done[p.name], y)
+                    _deliver(p, y, self.done, self.gaps, self.excerpts, self.n_ex)
+                    if p.name in self.onsets and y.size:
+                        self._timed_onsets(lambda: self.onsets[p.name].feed(y))
+                if progress:
+                    progress("condition + onsets", a + data.shape[0], self.n)
 
     def _timed_onsets(self, call):
         t = time.perf_counter()

@@ -7,8 +7,13 @@ array arithmetic and LAPACK least squares, which release the GIL, so threads run
 separate cores. Each fit is deterministic and runs whole on one thread, so the results are
 bit-identical to the serial ones whatever the thread count.
 
-While threads run, the BLAS library's own thread pool is held to one thread
-(threadpoolctl): two fits each asking OpenBLAS for every core would oversubscribe them.
+A run holds the BLAS library's own thread pool to one thread (:func:`blas_single_thread`,
+threadpoolctl). The least squares here are tall and narrow (thousands of rows, tens of
+columns), where OpenBLAS's threads gain little on an idle machine and lose badly on a busy
+one: with the cores taken (a campaign's other worker, a second job), a 10-min run's phasing
+took 48 s with OpenBLAS's two threads against 6.3 s with one (measured on the 2-core
+machine at load average 6). Two fits side by side each asking OpenBLAS for every core would
+oversubscribe them the same way.
 
 Thread count: :func:`run_threads` (``MESHPHASE_THREADS`` in the environment, else the cores
 this process may use, at most :data:`MAX_THREADS`). A campaign already runs one recording
@@ -21,7 +26,7 @@ import os
 from contextlib import contextmanager
 from typing import Callable, Iterable, TypeVar
 
-__all__ = ["run_threads", "threads_limited", "thread_map", "MAX_THREADS", "ENV_THREADS"]
+__all__ = ["run_threads", "threads_limited", "thread_map", "thread_pool", "blas_single_thread", "MAX_THREADS", "ENV_THREADS"]
 
 #: Default ceiling on worker threads [-]: a window fit holds about 40 MB (angle_windows).
 MAX_THREADS = 4
@@ -110,25 +115,69 @@ def thread_map(fn: Callable[[T], R], items: Iterable[T], *, threads: int | None 
         item order) is raised here.
     """
     items = list(items)
+    with thread_pool(threads, max_items=len(items)) as tmap:
+        return tmap(fn, items, progress=progress)
+
+
+@contextmanager
+def blas_single_thread():
+    """Hold every loaded BLAS library (OpenBLAS, MKL, BLIS) to one thread inside the block
+    (module notes); process-wide, restored on exit."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield
+
+
+@contextmanager
+def thread_pool(threads: int | None = None, *, max_items: int | None = None):
+    """A pool of worker threads for many :func:`thread_map`-like calls (one block of a
+    stream after another): yields ``tmap(fn, items, progress=None) -> list``.
+
+    Parameters
+    ----------
+    threads : int, optional
+        Thread count [-] (default :func:`run_threads`); 1 runs every call in the caller.
+    max_items : int, optional
+        The most items one call will get: no more threads than that are started.
+
+    Raises
+    ------
+    ValueError
+        ``threads`` not a positive integer.
+    """
     n = run_threads() if threads is None else threads
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise ValueError(f"threads must be a positive integer, got {n!r}")
-    total = len(items)
-    out = []
-    if n == 1 or total <= 1:
+    if max_items is not None:
+        n = max(1, min(n, int(max_items)))
+
+    def serial(fn, items, progress=None):
+        items = list(items)
+        out = []
         for x in items:
             out.append(fn(x))
             if progress is not None:
-                progress(len(out), total)
+                progress(len(out), len(items))
         return out
+
+    if n == 1:
+        with blas_single_thread():
+            yield serial
+        return
     from concurrent.futures import ThreadPoolExecutor
 
-    from threadpoolctl import threadpool_limits
+    with blas_single_thread(), ThreadPoolExecutor(max_workers=n, thread_name_prefix="meshphase") as ex:
 
-    with threadpool_limits(limits=1, user_api="blas"), \
-            ThreadPoolExecutor(max_workers=min(n, total), thread_name_prefix="meshphase") as ex:
-        for r in ex.map(fn, items):
-            out.append(r)
-            if progress is not None:
-                progress(len(out), total)
-    return out
+        def tmap(fn, items, progress=None):
+            items = list(items)
+            if len(items) <= 1:
+                return serial(fn, items, progress)
+            out = []
+            for r in ex.map(fn, items):
+                out.append(r)
+                if progress is not None:
+                    progress(len(out), len(items))
+            return out
+
+        yield tmap

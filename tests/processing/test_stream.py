@@ -138,6 +138,24 @@ def test_streamed_conditioning_and_onsets_equal_the_whole_array(faulty, drift, s
     assert len(res.quality["ring"].gap_runs) == 2
 
 
+@pytest.mark.parametrize("drift", ["median", "highpass"])
+def test_streamed_conditioning_on_threads_equals_the_serial_stream(faulty, drift):
+    """The channels' chains run side by side on worker threads (meshphase.threads), each
+    whole on one thread per block: the samples, quality and onsets are the serial run's to
+    the last bit, and the detectors' warnings are the same."""
+    from meshphase.threads import threads_limited
+
+    with threads_limited(1):
+        _, res1, got1 = _streamed(faulty, drift)
+    with threads_limited(3):
+        _, res3, got3 = _streamed(faulty, drift)
+    for ch in ("sun", "ring"):
+        assert np.array_equal(got1[ch], got3[ch], equal_nan=True)
+        assert np.array_equal(res1.onsets[ch].times, res3.onsets[ch].times)
+        assert res1.quality[ch].snr_db == res3.quality[ch].snr_db
+    assert sorted(m for _, m in res1.warnings) == sorted(m for _, m in res3.warnings)
+
+
 @pytest.mark.parametrize("n_keep", [
     20 * 5120,          # the ring's train is 12.2 s: under two periods, block medians instead
     2 * 62408,          # exactly two ring periods: no partial block
