@@ -74,7 +74,8 @@ PROCESS_COLUMNS = ("minutes", "n_channels", "n_samples", "data_mb", "status", "n
                    "memory_estimate_mb", "load_s",
                    "condition_s", "onsets_s", "phasing_s", "identify_s", "identify_share",
                    "other_s", "sosfiltfilt_s",
-                   "wall_over_sosfiltfilt", "streamed_over_sosfiltfilt")
+                   "wall_over_sosfiltfilt", "streamed_over_sosfiltfilt", "threads", "cpu_s",
+                   "cpu_over_sosfiltfilt")
 #: Recording lengths of ``meshphase bench processing``'s process table [min].
 PROCESS_MINUTES = (2.0, 10.0, 60.0, 180.0)
 
@@ -517,7 +518,11 @@ def process_rss_rows(work, minutes, *, seed: int = 1) -> tuple[list, list, float
                      "other_s": sum(v for k, v in t.items()
                                     if k not in ("load", "condition", "onsets", "phasing")),
                      "sosfiltfilt_s": ref, "wall_over_sosfiltfilt": r["wall_s"] / ref,
-                     "streamed_over_sosfiltfilt": streamed / ref})
+                     "streamed_over_sosfiltfilt": streamed / ref,
+                     # worker threads (meshphase.threads): the CPU time of all of them beside
+                     # the wall time, against the single-threaded sosfiltfilt pass
+                     "threads": r.get("threads"), "cpu_s": r.get("cpu_s"),
+                     "cpu_over_sosfiltfilt": (r["cpu_s"] / ref) if r.get("cpu_s") else None})
         logger.info("processing bench: process %g min: %.1f s, peak RSS %.0f MB", m, r["wall_s"],
                     r["peak_rss_mb"])
         path.unlink(missing_ok=True)

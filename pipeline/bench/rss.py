@@ -214,16 +214,21 @@ def process_job(path: str, gearset: str, out_dir: str) -> dict:
             fn(ctx)
             hwm[name] = _vmhwm()
         stages.STAGE_FUNCTIONS[name] = wrapped
+    from ..threads import run_threads
+
+    c0 = time.process_time()                 # every thread of this process
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         ctx, files = process_recording(path, gearset, out_dir=out_dir, overwrite=True)
+    cpu = time.process_time() - c0
     ons = ctx.onsets.by_channel if ctx.onsets is not None else {}
     timings = ctx.condition.timings if ctx.condition is not None else {}
     memory = ctx.condition.memory if ctx.condition is not None else {}
     return {"status": run_status(ctx)["status"], "timings": dict(ctx.timings), "hwm_mb": hwm,
             "failed": dict(ctx.failed), "n_onsets": int(sum(len(o) for o in ons.values())),
             "onsets_s": float(timings.get("onsets_s", float("nan"))),
-            "memory_estimate_mb": (memory.get("total", 0) / 2**20) or None}
+            "memory_estimate_mb": (memory.get("total", 0) / 2**20) or None,
+            "threads": run_threads(), "cpu_s": cpu}
 
 
 def sosfiltfilt_job(n: int = 1 << 22, repeats: int = 3) -> dict:
