@@ -425,6 +425,7 @@ class _Design:
         # spline bases at every observation, per (intervals, derivative): the iterations of a
         # fit evaluate the same rows again and again (a few recent entries are kept)
         self._bases: dict = {}
+        self._layouts: dict = {}
         # reference planet of each gauge train: planet 1 when present, else the lowest
         self.ref = []
         for tr in trains:
@@ -461,7 +462,16 @@ class _Design:
 
     def layout(self, spec: _Spec) -> dict:
         """Parameter blocks of ``spec``: name -> slice, column names, priorities, and the
-        (train, planet) -> column tables of the offsets and planet terms."""
+        (train, planet) -> column tables of the offsets and planet terms (made once per spec
+        and design; read-only)."""
+        key = (spec.knots, tuple(sorted(spec.harm.items())), tuple(sorted(spec.mod.items())),
+               spec.sig)
+        lay = self._layouts.get(key)
+        if lay is None:
+            lay = self._layouts[key] = self._layout(spec)
+        return lay
+
+    def _layout(self, spec: _Spec) -> dict:
         names, prio = [], []
         blocks = {}
         i = 0
