@@ -36,8 +36,8 @@ thread-safe); ``scheduler="tcp://host:8786"`` uses an existing cluster instead, 
 workers must have meshphase installed and see the same paths (a shared file system). The
 cluster starts in a background thread while the client runs the scene-level results and
 imports what the report needs; the local workers fork from a server that imported the
-processing stack once (:func:`meshphase.cluster.worker_server`), so they start warm in a
-fraction of a second. ``timing_s`` gives the start's ``cluster_start`` and the part of it
+processing stack once (:func:`meshphase.cluster.worker_server`), so they start warm.
+``timing_s`` gives the start's ``cluster_start`` and the part of it
 the campaign still waited for (``cluster_wait``). After the last recording the workers draw
 the combined report's figures side by side (:func:`meshphase.campaign_job.draw_figures`), then
 the cluster closes.

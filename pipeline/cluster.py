@@ -10,12 +10,13 @@ with the workers warmed up, and closes what it started. :func:`end_worker` ends 
 whose task ran past its timeout (the only way to stop a thread blocked in a read).
 
 Worker start-up: a spawned worker is a fresh interpreter that imports distributed, then the
-processing stack (scipy.signal and with it scipy.stats and scipy.optimize, the readers): about
-2 s of CPU per worker, paid by every worker at every campaign, all at the same time. Where the
-platform has one, :func:`worker_server` starts Python's fork server
-(:mod:`multiprocessing`, start method "forkserver") once per process with those modules
-imported, and the local cluster forks its workers from it: a worker then starts in about 0.2 s
-already warm, and one import replaces one per worker. The fork server is a single-threaded
+processing stack (scipy.signal and with it scipy.stats and scipy.optimize, the readers),
+every worker at every campaign, all at the same time and while the client computes the
+scene-level results. Where the platform has one, :func:`worker_server` starts Python's fork
+server (:mod:`multiprocessing`, start method "forkserver") once per process with those
+modules imported, and the local cluster forks its workers from it: they start already warm,
+and one import replaces one per worker (``meshphase bench campaign`` reports the server's
+start, ``worker_server_s``, and each campaign's ``cluster_start_s``). The fork server is a single-threaded
 process of its own, so the workers inherit neither this process's threads and locks nor its
 signal handlers, warning filters or heap settings (what plain "fork" would bring along). It
 lives until this process ends; a campaign started later in the same process (the benchmark's

@@ -8,8 +8,7 @@ recordings are listed with their error message. Input: the dict that
 :func:`meshphase.campaign.run_campaign` builds (per-recording dicts from
 :func:`meshphase.campaign.run_recording`).
 
-Drawing the figures is most of the report's time (about 0.2 s each for 8 recordings). The
-page is laid out first, each figure as a call to draw (:func:`figure_png`: a figure function
+Drawing the figures is most of the report's time. The page is laid out first, each figure as a call to draw (:func:`figure_png`: a figure function
 of this module and its arguments); then they are drawn, one after another here, or by
 ``draw`` (:func:`build_campaign_report`): the campaign hands them to its workers, which draw
 them side by side while the cluster is still up.
