@@ -34,10 +34,13 @@ core by default (processes, because the stages are numpy/Python code that holds 
 long stretches, and because ``warnings.catch_warnings`` inside :func:`run_scene` is not
 thread-safe); ``scheduler="tcp://host:8786"`` uses an existing cluster instead, whose
 workers must have meshphase installed and see the same paths (a shared file system). The
-cluster starts in a background thread (worker processes, their imports) while the client
-runs the scene-level results and imports what the report needs, and closes in the
-background while the report is written: ``timing_s`` gives its ``cluster_start`` and the
-part of it the campaign still waited for (``cluster_wait``).
+cluster starts in a background thread while the client runs the scene-level results and
+imports what the report needs; the local workers fork from a server that imported the
+processing stack once (:func:`meshphase.cluster.worker_server`), so they start warm.
+``timing_s`` gives the start's ``cluster_start`` and the part of it
+the campaign still waited for (``cluster_wait``). After the last recording the workers draw
+the combined report's figures side by side (:func:`meshphase.campaign_job.draw_figures`), then
+the cluster closes.
 
 Per-recording HTML reports are off by default (``recording_reports=False``): building one
 with its figures took about twice as long as processing a 1-min seed rig recording on the
@@ -62,7 +65,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterable
 
-from .campaign_job import (TIMEOUT_BASE_S, TIMEOUT_RATE_BPS, Job, default_task_timeout,
+from .campaign_job import (TIMEOUT_BASE_S, TIMEOUT_RATE_BPS, Job, default_task_timeout, draw_figures,
                            run_job, start_cluster, task_limits)
 from .campaign_resume import (DONE_NAME, RECORDINGS_DIR_NAME, completed_recordings,
                               recording_key, recording_keys, resume_sources, reuse_completed,
@@ -826,7 +829,7 @@ def _campaign_body(scene, scene_path, inputs, files, skipped, names, out, opts: 
 
     The cluster starts in the background (:func:`meshphase.campaign_job.start_cluster`: worker
     processes, their imports) while this process runs the scene-level results and imports
-    what the report needs; it closes in the background while the report is written."""
+    what the report needs; its workers draw the report's figures, then it closes."""
     guard = opts.guard
     final = Path(guard.final).resolve()
     final_of = functools.partial(_final_path, out, final)
@@ -856,12 +859,13 @@ def _campaign_body(scene, scene_path, inputs, files, skipped, names, out, opts: 
                       on_usable=guard.mark_partial)
             run_job(job, records, scheduler=opts.scheduler, workers=opts.workers, dashboard=opts.dashboard,
                     cluster_info=cluster_info, timing=timing, start=start)
-            start.close(wait=False)  # the cluster closes while the report is written
         result = _result_dict(scene, scene_path, inputs, skipped, final, cluster_info, timing,
                               scene_level, scene_status, sources, [records[i] for i in range(len(files))],
                               opts)
+        # the workers draw the report's figures, then the cluster closes
         _write_campaign_files(result, out, final_of, opts.t_all,
-                              closed=start.close if start is not None else None)
+                              closed=start.close if start is not None else None,
+                              draw=functools.partial(draw_figures, start.client()) if start is not None else None)
     finally:
         if start is not None:
             start.close()
@@ -923,10 +927,12 @@ def _scene_level(scene, out: Path, opts: _Options):
 
 
 def _write_campaign_files(result: dict, out: Path, final_of, t_all: float,
-                          closed: Callable[[], None] | None = None) -> None:
+                          closed: Callable[[], None] | None = None,
+                          draw: Callable[[list], list] | None = None) -> None:
     """campaign.csv, campaign_report.html and campaign.json into ``out``, each atomically;
-    sets ``result["files"]`` and the ``report`` and ``total`` times. ``closed()`` (if given)
-    is waited for before the total is taken: the cluster closing in the background."""
+    sets ``result["files"]`` and the ``report`` and ``total`` times. ``draw`` draws the
+    report's figures (:func:`meshphase.campaign_job.draw_figures`; None: here); ``closed()``
+    (if given) closes the cluster after the report, before the total is taken."""
     import pandas as pd
 
     from .report.campaign_report import build_campaign_report
@@ -936,7 +942,7 @@ def _write_campaign_files(result: dict, out: Path, final_of, t_all: float,
     csv_path = out / "campaign.csv"
     rows = pd.DataFrame(campaign_rows(result["recordings"]))
     _write_atomic(csv_path, lambda tmp: rows.to_csv(tmp, index=False))
-    report_path = build_campaign_report(result, out)
+    report_path = build_campaign_report(result, out, draw=draw)
     timing["report"] = time.perf_counter() - t
     if closed is not None:
         closed()

@@ -32,7 +32,8 @@ from .cluster import ClusterStart, end_worker
 from .log import logger
 
 __all__ = ["Job", "run_job", "start_cluster", "campaign_task", "failed_record", "default_task_timeout",
-           "task_limits", "warm_up", "TIMEOUT_BASE_S", "TIMEOUT_RATE_BPS"]
+           "task_limits", "warm_up", "worker_modules", "draw_figures", "FIGURES_TIMEOUT_S", "TIMEOUT_BASE_S",
+           "TIMEOUT_RATE_BPS"]
 
 #: default ``--task-timeout`` of a recording of ``size`` bytes: TIMEOUT_BASE_S +
 #: size / TIMEOUT_RATE_BPS seconds (see :func:`default_task_timeout`)
@@ -95,27 +96,96 @@ def task_limits(keys: Sequence, task_timeout: float | None) -> dict[int, float |
 
 
 # ---------------------------------------------------------------------------- the task
+_STACK = ("distributed", "meshphase.campaign", "meshphase.compare", "meshphase.condition", "meshphase.loads",
+          "meshphase.models.mesh_phasing", "meshphase.onsets", "meshphase.phasing", "meshphase.stages",
+          "meshphase.report.campaign_report")
+#: how long the report's figures may take on the cluster before they are drawn here instead [s]
+FIGURES_TIMEOUT_S = 300.0
+
+
+def worker_modules() -> tuple[str, ...]:
+    """What a worker's tasks import: the processing stack, the task functions, the reader of
+    every format (h5py, mcap, pandas, npTDMS) and the report's figures (matplotlib, for
+    :func:`draw_figures`); imported once in the fork server the local
+    workers start from (:func:`meshphase.cluster.worker_server`), and by :func:`warm_up`.
+
+    Returns
+    -------
+    tuple of str
+        Module names.
+    """
+    from .io import FORMATS
+
+    return _STACK + tuple(f"meshphase.io.{name}" for name in FORMATS)
+
+
 def warm_up() -> int:
-    """Import the processing stack in a worker (so task wall times measure processing).
+    """Import the processing stack in a worker (:func:`worker_modules`; so that task wall
+    times measure processing): at once in a worker forked from the warm fork server.
 
     Returns
     -------
     int
         The worker's pid.
     """
-    import meshphase.compare  # noqa: F401
-    import meshphase.condition  # noqa: F401
-    import meshphase.io  # noqa: F401
-    import meshphase.loads  # noqa: F401
-    import meshphase.models.mesh_phasing  # noqa: F401
-    import meshphase.onsets  # noqa: F401
-    import meshphase.phasing  # noqa: F401
-    import meshphase.stages  # noqa: F401
-    from meshphase.io import FORMATS, get_format
+    import importlib
 
-    for name in FORMATS:  # the readers import h5py, mcap, pandas, npTDMS
-        get_format(name)
+    for name in worker_modules():
+        importlib.import_module(name)
     return os.getpid()
+
+
+def _draw(call) -> bytes:
+    from .report.campaign_report import figure_png
+
+    make, args, kwargs = call
+    return figure_png(make, *args, **kwargs)
+
+
+def draw_figures(client, calls: list, timeout: float = FIGURES_TIMEOUT_S) -> list[bytes]:
+    """The combined report's figures drawn on the cluster's workers, side by side.
+
+    ``draw`` of :func:`meshphase.report.campaign_report.build_campaign_report`: one task per
+    figure. When the cluster does not draw them (a worker lost, no worker left, past
+    ``timeout``) they are drawn here instead, one after another.
+
+    Parameters
+    ----------
+    client : distributed.Client
+    calls : list of (callable, tuple, dict)
+        The figures: a figure function, its arguments and keyword arguments.
+    timeout : float
+        [s]
+
+    Returns
+    -------
+    list of bytes
+        One PNG per call, in order.
+
+    Raises
+    ------
+    TypeError
+        ``calls`` is not a list of (callable, args, kwargs).
+    """
+    from distributed import wait
+
+    if not isinstance(calls, (list, tuple)) or not all(
+            isinstance(c, tuple) and len(c) == 3 and callable(c[0]) for c in calls):
+        raise TypeError(f"calls must be a list of (figure function, args, kwargs), got {calls!r}")
+    if not calls:
+        return []
+    futs: list = []
+    try:
+        futs = [client.submit(_draw, c, pure=False) for c in calls]
+        wait(futs, timeout=timeout)
+        return list(client.gather(futs))
+    except Exception as exc:  # noqa: BLE001 - the report is drawn here instead
+        logger.info("campaign: report figures not drawn on the cluster (%s: %s); drawing them here",
+                    type(exc).__name__, exc)
+        if futs:
+            with contextlib.suppress(Exception):
+                client.cancel(futs)
+        return [_draw(c) for c in calls]
 
 
 def failed_record(path, name: str, out_dir, error: str) -> dict:
@@ -297,7 +367,8 @@ def run_job(job: Job, records: dict, *, scheduler: str | None, workers: int | No
 
 
 def start_cluster(scheduler: str | None, workers: int | None, dashboard, cluster_info: dict):
-    """Start a campaign's cluster in the background, its workers warmed up (:func:`warm_up`).
+    """Start a campaign's cluster in the background, its workers warmed up (:func:`warm_up`;
+    a local cluster's workers fork from a server that imported :func:`worker_modules`).
 
     Parameters
     ----------
@@ -314,7 +385,7 @@ def start_cluster(scheduler: str | None, workers: int | None, dashboard, cluster
     meshphase.cluster.ClusterStart
         ``client()`` waits for it; ``close()`` ends it.
     """
-    return ClusterStart(scheduler, workers, dashboard, warm_up, cluster_info)
+    return ClusterStart(scheduler, workers, dashboard, warm_up, cluster_info, worker_modules())
 
 
 def _event_message(event):

@@ -9,6 +9,20 @@ default: the stages are numpy/Python code that holds the GIL for long stretches,
 with the workers warmed up, and closes what it started. :func:`end_worker` ends a worker
 whose task ran past its timeout (the only way to stop a thread blocked in a read).
 
+Worker start-up: a spawned worker is a fresh interpreter that imports distributed, then the
+processing stack (scipy.signal and with it scipy.stats and scipy.optimize, the readers),
+every worker at every campaign, all at the same time and while the client computes the
+scene-level results. Where the platform has one, :func:`worker_server` starts Python's fork
+server (:mod:`multiprocessing`, start method "forkserver") once per process with those
+modules imported, and the local cluster forks its workers from it: they start already warm,
+and one import replaces one per worker (``meshphase bench campaign`` reports the server's
+start, ``worker_server_s``, and each campaign's ``cluster_start_s``). The fork server is a single-threaded
+process of its own, so the workers inherit neither this process's threads and locks nor its
+signal handlers, warning filters or heap settings (what plain "fork" would bring along). It
+lives until this process ends; a campaign started later in the same process (the benchmark's
+repeats, a notebook) finds it running. A worker the Nanny restarts (after a timeout) is
+spawned as before.
+
 ``distributed`` is imported inside the functions: it is a heavy dependency that only a
 campaign needs.
 """
@@ -18,13 +32,18 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
-from typing import Callable, Iterator
+import threading
+import time
+from typing import Callable, Iterator, Sequence
 
 from .log import logger
 from .validate import as_positive_int
 
 __all__ = ["local_cluster", "open_client", "ClusterStart", "check_cluster_options", "cores", "own_child",
-           "end_worker"]
+           "end_worker", "worker_server"]
+
+_server_lock = threading.Lock()
+_server_modules: tuple | None = None  # what the fork server this module started imported
 
 
 def cores() -> int:
@@ -99,7 +118,62 @@ def _dashboard_address(dashboard) -> str:
     return text
 
 
-def local_cluster(n_workers: int, *, dashboard=None):
+def _check_modules(modules) -> tuple:
+    if isinstance(modules, str) or not hasattr(modules, "__iter__"):
+        raise TypeError(f"modules must be a sequence of module names, got {type(modules).__name__} {modules!r}")
+    modules = tuple(modules)
+    for m in modules:
+        if not isinstance(m, str) or not m.strip():
+            raise TypeError(f"modules must hold module names (non-empty str), got {m!r}")
+    return modules
+
+
+def worker_server(modules: Sequence[str]) -> float | None:
+    """Start this process's fork server with ``modules`` imported, once (see the module notes).
+
+    Processes started with the "forkserver" method (:mod:`multiprocessing`) are forked from
+    it, so they start with ``modules`` imported. The first call starts the server and waits
+    for it (its imports); later calls return at once. A module that fails to import there is
+    skipped (multiprocessing's rule): the workers then import it themselves.
+
+    Parameters
+    ----------
+    modules : sequence of str
+        Module names to import in the server (``()``: none).
+
+    Returns
+    -------
+    float or None
+        Seconds this call waited for the server to start [s] (0.0 when it was running
+        already); None where the platform has no fork server (Windows): the workers spawn.
+
+    Raises
+    ------
+    TypeError
+        ``modules`` is not a sequence of non-empty strings.
+    """
+    import multiprocessing
+
+    global _server_modules
+    modules = _check_modules(modules)
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return None
+    with _server_lock:
+        if _server_modules is not None:
+            return 0.0
+        t = time.perf_counter()
+        ctx = multiprocessing.get_context("forkserver")
+        ctx.set_forkserver_preload(list(modules))
+        # starting any process starts the server (with the preload above); os.getpid is
+        # a harmless target the child can unpickle without importing anything of ours
+        p = ctx.Process(target=os.getpid, name="meshphase-fork-server-start", daemon=True)
+        p.start()
+        p.join()
+        _server_modules = modules
+        return time.perf_counter() - t
+
+
+def local_cluster(n_workers: int, *, dashboard=None, worker_modules: Sequence[str] | None = None):
     """The campaign's own Dask cluster: ``n_workers`` single-threaded worker processes.
 
     Everything listens on the loopback interface only: the scheduler and the workers
@@ -117,6 +191,10 @@ def local_cluster(n_workers: int, *, dashboard=None):
         dashboard on 127.0.0.1, a free port. A port (8787, ":8787"): on 127.0.0.1 at that
         port. ``host:port``: there, as given (another interface only when named: it has no
         authentication; a warning is logged).
+    worker_modules : sequence of str, optional
+        The modules the workers' tasks need: imported once in the fork server
+        (:func:`worker_server`), from which the workers are then forked, warm. None: the
+        workers are spawned (fresh interpreters), as where there is no fork server.
 
     Returns
     -------
@@ -127,6 +205,7 @@ def local_cluster(n_workers: int, *, dashboard=None):
     from distributed import LocalCluster
 
     n_workers = as_positive_int(n_workers, "n_workers")
+    server = None if worker_modules is None else worker_server(worker_modules)
     if dashboard is not None:
         _check_dashboard(dashboard)
     on = dashboard is not None and dashboard is not False
@@ -137,7 +216,12 @@ def local_cluster(n_workers: int, *, dashboard=None):
     # the workers' own distributed logs (a cancelled task, a restart) reach stderr only when
     # our logger is verbose (meshphase -v): the campaign reports those events itself
     quiet = logging.WARNING if logger.isEnabledFor(logging.INFO) else logging.ERROR
-    with dask.config.set({"distributed.scheduler.worker-saturation": 1.0}):
+    config = {"distributed.scheduler.worker-saturation": 1.0}
+    if server is not None:
+        # read when a Nanny starts its worker: the initial workers fork from the server; a
+        # worker restarted later (after a timeout) is spawned, as by default
+        config["distributed.worker.multiprocessing-method"] = "forkserver"
+    with dask.config.set(config):
         return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
                             host="127.0.0.1", dashboard_address=address, silence_logs=quiet,
                             scheduler_kwargs={"dashboard": on})
@@ -158,9 +242,9 @@ def _quiet_distributed() -> Iterator[None]:
         dlog.setLevel(old_level)
 
 
-def _connect(scheduler, workers, dashboard, info: dict):
-    """(client, cluster): a new local cluster (``scheduler`` None) or the one at ``scheduler``
-    (cluster None)."""
+def _connect(scheduler, workers, dashboard, info: dict, worker_modules=None):
+    """(client, cluster): a new local cluster (``scheduler`` None, its workers forked warm
+    when ``worker_modules`` are given) or the one at ``scheduler`` (cluster None)."""
     from distributed import Client
 
     if scheduler is not None:
@@ -168,7 +252,7 @@ def _connect(scheduler, workers, dashboard, info: dict):
             return Client(scheduler), None
         except OSError as exc:
             raise ValueError(f"scheduler {scheduler!r}: cannot connect: {exc}") from None
-    cluster = local_cluster(workers or cores(), dashboard=dashboard)
+    cluster = local_cluster(workers or cores(), dashboard=dashboard, worker_modules=worker_modules)
     try:
         client = Client(cluster)
     except BaseException:
@@ -200,6 +284,9 @@ class ClusterStart:
     info : dict
         Filled in: ``dashboard`` (its link, when asked), ``n_workers``, ``scheduler`` (the
         address).
+    worker_modules : sequence of str, optional
+        What the tasks need, imported once in the fork server the local cluster's workers
+        are forked from (:func:`local_cluster`); None: they are spawned.
 
     Attributes
     ----------
@@ -213,14 +300,13 @@ class ClusterStart:
     """
 
     def __init__(self, scheduler: str | None, workers: int | None, dashboard, warm_up: Callable[[], int],
-                 info: dict):
-        import threading
-        import time
-
+                 info: dict, worker_modules: Sequence[str] | None = None):
         if not callable(warm_up) or not isinstance(info, dict):
             raise TypeError(f"warm_up must be callable and info a dict, got {type(warm_up).__name__} and "
                             f"{type(info).__name__}")
-        self._args = (scheduler, workers, dashboard, warm_up, info)
+        if worker_modules is not None:
+            worker_modules = _check_modules(worker_modules)
+        self._args = (scheduler, workers, dashboard, warm_up, info, worker_modules)
         self._client = self._cluster = self._error = None
         self._closer = None
         self.elapsed_s: float | None = None
@@ -231,11 +317,9 @@ class ClusterStart:
         self._thread.start()
 
     def _start(self) -> None:
-        import time
-
-        scheduler, workers, dashboard, warm_up, info = self._args
+        scheduler, workers, dashboard, warm_up, info, worker_modules = self._args
         try:
-            self._client, self._cluster = _connect(scheduler, workers, dashboard, info)
+            self._client, self._cluster = _connect(scheduler, workers, dashboard, info, worker_modules)
             try:
                 pids = self._client.run(warm_up)
             except ImportError as exc:
@@ -279,8 +363,6 @@ class ClusterStart:
             False: close in a background thread (the caller goes on, e.g. writes the
             report) and call ``close()`` again later to wait for it.
         """
-        import threading
-
         if self._closer is None:
             self._closer = threading.Thread(target=self._close, name="meshphase-cluster-close", daemon=True)
             self._closer.start()
@@ -300,7 +382,7 @@ class ClusterStart:
 
 @contextlib.contextmanager
 def open_client(scheduler: str | None, workers: int | None, dashboard, warm_up: Callable[[], int],
-                info: dict) -> Iterator:
+                info: dict, worker_modules: Sequence[str] | None = None) -> Iterator:
     """A Dask client on the campaign's own local cluster or on the one at ``scheduler``, its
     workers warmed up; closes the client, and the local cluster it started, on exit.
 
@@ -317,7 +399,7 @@ def open_client(scheduler: str | None, workers: int | None, dashboard, warm_up: 
     TypeError
         ``warm_up`` not callable or ``info`` not a dict.
     """
-    start = ClusterStart(scheduler, workers, dashboard, warm_up, info)
+    start = ClusterStart(scheduler, workers, dashboard, warm_up, info, worker_modules)
     try:
         yield start.client()
     finally:

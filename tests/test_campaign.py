@@ -495,3 +495,55 @@ def test_figures_bad_input(fn, args, exc):
     with pytest.raises(exc):
         fn(*args)
     plt.close("all")
+
+
+def test_figure_png_empty_and_bad():
+    png = crep.figure_png(crep.wall_times_across_recordings, [], [])
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    with pytest.raises(TypeError, match="figure function"):
+        crep.figure_png("wall_times")
+    with pytest.raises(TypeError, match="not a figure"):
+        crep.figure_png(lambda: 3)
+
+
+def test_campaign_report_drawn_elsewhere_is_the_same_page(tmp_path):
+    """``draw`` gets one call per figure, in page order, and its PNGs take their places: the
+    page equals the one drawn here (but for its time stamp); a wrong answer is refused."""
+    import re
+
+    recs = [{"name": f"r{k}", "status": "ok", "wall_time_s": 1.0 + k,
+             "load_sharing": [{"planet": 1, "load_sharing": 1.0, "std_error": 0.01}]} for k in range(3)]
+    camp = {"scene": "s", "recordings": recs}
+    seen = []
+
+    def draw(calls):
+        seen.extend(m.__name__ for m, _, _ in calls)
+        return [crep.figure_png(m, *a, **k) for m, a, k in calls]
+
+    here, there = tmp_path / "here", tmp_path / "there"
+    here.mkdir(), there.mkdir()
+    stamp = re.compile(r"generated [0-9: -]+UTC")
+    page = stamp.sub("", crep.build_campaign_report(camp, here).read_text())
+    assert stamp.sub("", crep.build_campaign_report(camp, there, draw=draw).read_text()) == page
+    assert seen == ["wall_times_across_recordings", "load_sharing_across_recordings"]
+    assert sorted(p.name for p in (there / "figures").iterdir()) == sorted(
+        p.name for p in (here / "figures").iterdir())
+    with pytest.raises(TypeError, match="one PNG"):
+        crep.build_campaign_report(camp, there, draw=lambda calls: [b"x"])
+
+
+def test_local_workers_start_warm_from_the_fork_server():
+    """The campaign's local workers are forked from the fork server (their parent is not
+    this process) with the processing stack imported before any warm-up ran."""
+    from distributed import Client
+
+    from meshphase import cluster as cluster_mod
+    from meshphase.campaign_job import worker_modules
+
+    if cluster_mod.worker_server(worker_modules()) is None:
+        pytest.skip("no fork server on this platform: the workers spawn")
+    with cluster_mod.local_cluster(1, worker_modules=worker_modules()) as cl, Client(cl) as client:
+        # a lambda travels by value (the workers cannot import this test module)
+        warm = client.run(lambda: "meshphase.stages" in sys.modules and "scipy.signal" in sys.modules)
+        assert list(warm.values()) == [True]
+        assert os.getpid() not in client.run(os.getppid).values()

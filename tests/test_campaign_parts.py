@@ -249,7 +249,7 @@ def test_cluster_start_error_reaches_the_waiting_thread(monkeypatch):
     cleanly (nothing was started); the distributed log level is restored."""
     import logging
 
-    def no_cluster(scheduler, workers, dashboard, info):
+    def no_cluster(scheduler, workers, dashboard, info, worker_modules=None):
         raise ValueError(f"scheduler {scheduler!r}: cannot connect: refused")
 
     monkeypatch.setattr(cluster, "_connect", no_cluster)
@@ -266,3 +266,48 @@ def test_cluster_start_error_reaches_the_waiting_thread(monkeypatch):
 def test_start_cluster_bad_input():
     with pytest.raises(TypeError, match="info"):
         cj.start_cluster(None, 1, None, None)
+
+
+# ---------------------------------------------------------------------------- warm workers
+def test_worker_server_empty_and_bad():
+    """In a fresh interpreter (the server is started once per process): the first call
+    starts it, the next finds it running; bad module lists are refused before anything."""
+    code = ("from meshphase.cluster import worker_server\n"
+            "if __name__ == '__main__':\n"
+            "    first = worker_server(())\n"
+            "    print(first is None or first >= 0.0, worker_server(['json']) in (None, 0.0))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["True", "True"]
+    for bad in ("meshphase.stages", [1], [""], None):
+        with pytest.raises(TypeError, match="modules"):
+            cluster.worker_server(bad)
+    with pytest.raises(TypeError, match="modules"):
+        cluster.ClusterStart(None, 1, None, os.getpid, {}, worker_modules="meshphase")
+
+
+def test_worker_modules_are_importable_and_name_every_reader():
+    from meshphase.io import FORMATS
+
+    mods = cj.worker_modules()
+    assert {f"meshphase.io.{f}" for f in FORMATS} <= set(mods) and "meshphase.stages" in mods
+    assert cj.warm_up() == os.getpid() and all(m in sys.modules for m in mods)
+
+
+class _GoneClient:
+    """A client whose cluster is gone: every submit fails."""
+
+    def submit(self, *a, **k):
+        raise OSError("no workers")
+
+
+def test_draw_figures_empty_bad_and_drawn_here_without_a_cluster():
+    from meshphase.report import campaign_report as crep
+
+    assert cj.draw_figures(None, []) == []
+    with pytest.raises(TypeError, match="calls"):
+        cj.draw_figures(None, "wall_times")
+    with pytest.raises(TypeError, match="calls"):
+        cj.draw_figures(None, [("not callable", (), {})])
+    pngs = cj.draw_figures(_GoneClient(), [(crep.wall_times_across_recordings, (["a"], [1.0]), {})])
+    assert len(pngs) == 1 and pngs[0][:4] == b"\x89PNG"

@@ -13,7 +13,8 @@ import tempfile
 from pathlib import Path
 
 from ..campaign import client_scene, run_campaign
-from ..cluster import cores
+from ..campaign_job import worker_modules
+from ..cluster import cores, worker_server
 from ..log import logger
 from ..validate import as_positive, as_positive_int
 
@@ -42,7 +43,7 @@ def _check_args(n_recordings, minutes, repeats, workers, scenario):
 
 def _prepare(work: Path, n_recordings: int, minutes: float, scenario: str, seed: int, scene_path):
     """Generate the recordings (those missing) and the scene; warm the client up. Returns
-    (recordings folder, scene path)."""
+    (recordings folder, scene path, seconds the workers' fork server took to start or None)."""
     from meshphase.synthetic import cli_synth
 
     rec_dir = work / "recordings"
@@ -67,7 +68,10 @@ def _prepare(work: Path, n_recordings: int, minutes: float, scenario: str, seed:
     warm = client_scene(load_scene(scene_path))
     if warm.results:
         run_scene(warm)
-    return rec_dir, scene_path
+    # the workers' fork server is started once per process (meshphase.cluster.worker_server):
+    # started here, every timed run finds it running, the first one as much as the others
+    server_s = worker_server(worker_modules())
+    return rec_dir, scene_path, server_s
 
 
 def _timed_run(scene_path, rec_dir: Path, out: Path, w: int, rep: int, progress: bool) -> dict:
@@ -80,7 +84,8 @@ def _timed_run(scene_path, rec_dir: Path, out: Path, w: int, rep: int, progress:
            "report_s": tm["report"],
            "task_sum_s": _finite_sum(r.get("wall_time_s") for r in res["recordings"]),
            "task_cpu_sum_s": _finite_sum(r.get("cpu_time_s") for r in res["recordings"]),
-           "n_ok": res["counts"]["ok"], "n_failed": res["counts"]["failed"]}
+           "n_ok": res["counts"]["ok"], "n_failed": res["counts"]["failed"],
+           "loadavg_after": list(os.getloadavg()) if hasattr(os, "getloadavg") else None}
     logger.info("speed-up: %d worker(s): %.1f s total, %.1f s processing", w,
                 tm["total"], tm["processing"])
     return row
@@ -126,8 +131,12 @@ def measure_speedup(n_recordings: int = 8, minutes: float = 2.0, workers=(1, 2),
         ``processing_s``
         (first submit to last result), ``scene_level_s``, ``report_s``, ``task_sum_s`` and
         ``task_cpu_sum_s`` (sums of the tasks' own wall and CPU times: their ratio shows
-        contention for the cores), ``n_ok``, ``n_failed``), ``loadavg`` (the machine's load
-        before the first run: other work on the cores distorts the numbers), and
+        contention for the cores), ``n_ok``, ``n_failed``, ``loadavg_after`` (the machine's
+        load averages after the run)), ``loadavg`` (the machine's load
+        before the first run: other work on the cores distorts the numbers),
+        ``worker_server_s`` (the start of the workers' fork server, once, before the timed
+        runs: a ``meshphase campaign`` command pays it in the background while its scene-level
+        results run; None where there is none), and
         ``speedup`` / ``processing_speedup`` per worker count relative to the first.
     """
     n_recordings, minutes, repeats, workers = _check_args(n_recordings, minutes, repeats, workers,
@@ -140,7 +149,7 @@ def measure_speedup(n_recordings: int = 8, minutes: float = 2.0, workers=(1, 2),
         work = Path(work_dir)
         work.mkdir(parents=True, exist_ok=True)
     try:
-        rec_dir, scene_path = _prepare(work, n_recordings, minutes, scenario, seed, scene_path)
+        rec_dir, scene_path, server_s = _prepare(work, n_recordings, minutes, scenario, seed, scene_path)
         load0 = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
         runs = [_timed_run(scene_path, rec_dir, work / f"campaign-{w}w", w, rep, progress)
                 for rep in range(repeats) for w in workers]
@@ -149,6 +158,7 @@ def measure_speedup(n_recordings: int = 8, minutes: float = 2.0, workers=(1, 2),
         ref = workers[0]
         return {"n_recordings": n_recordings, "minutes": minutes, "scenario": scenario,
                 "repeats": repeats, "cores": cores(), "loadavg": list(load0), "runs": runs,
+                "worker_server_s": server_s,
                 "best_wall_s": best, "best_processing_s": best_p,
                 "speedup": {w: best[ref] / best[w] for w in workers},
                 "processing_speedup": {w: best_p[ref] / best_p[w] for w in workers}}

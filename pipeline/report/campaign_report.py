@@ -7,6 +7,11 @@ spread), the load sharing, the residual RMS and the wall time per recording. Fai
 recordings are listed with their error message. Input: the dict that
 :func:`meshphase.campaign.run_campaign` builds (per-recording dicts from
 :func:`meshphase.campaign.run_recording`).
+
+Drawing the figures is most of the report's time. The page is laid out first, each figure as a call to draw (:func:`figure_png`: a figure function
+of this module and its arguments); then they are drawn, one after another here, or by
+``draw`` (:func:`build_campaign_report`): the campaign hands them to its workers, which draw
+them side by side while the cluster is still up.
 """
 
 from __future__ import annotations
@@ -14,6 +19,7 @@ from __future__ import annotations
 import math
 import urllib.parse
 from pathlib import Path
+from typing import Callable
 
 import matplotlib
 
@@ -24,7 +30,7 @@ import numpy as np  # noqa: E402
 from ..io import atomic_path  # noqa: E402
 from .html import Report, escape, figure_to_png  # noqa: E402
 
-__all__ = ["build_campaign_report", "phasing_across_recordings", "load_sharing_across_recordings",
+__all__ = ["build_campaign_report", "figure_png", "phasing_across_recordings", "load_sharing_across_recordings",
            "residual_rms_across_recordings", "wall_times_across_recordings"]
 
 _COLORS = plt.rcParams["axes.prop_cycle"].by_key()["color"]
@@ -226,6 +232,37 @@ def wall_times_across_recordings(names, seconds, statuses=None):
     return fig
 
 
+def figure_png(make, *args, **kwargs) -> bytes:
+    """One figure of the report, drawn: ``make(*args, **kwargs)`` rendered to PNG bytes.
+
+    What :func:`build_campaign_report` hands to its ``draw`` (a campaign's workers run it).
+
+    Parameters
+    ----------
+    make : callable
+        A figure function of this module (e.g. :func:`load_sharing_across_recordings`),
+        returning a matplotlib figure.
+    *args, **kwargs
+        Its arguments.
+
+    Returns
+    -------
+    bytes
+        The PNG (:func:`meshphase.report.html.figure_to_png`; the figure is closed).
+
+    Raises
+    ------
+    TypeError
+        ``make`` is not callable or does not return a figure.
+    """
+    if not callable(make):
+        raise TypeError(f"make must be a figure function, got {type(make).__name__} {make!r}")
+    fig = make(*args, **kwargs)
+    if not hasattr(fig, "savefig"):
+        raise TypeError(f"{getattr(make, '__name__', make)!r} returned {type(fig).__name__}, not a figure")
+    return figure_to_png(fig)
+
+
 # ---------------------------------------------------------------------------- collection
 def _planets(recs, gear) -> list[str]:
     ps = set()
@@ -284,7 +321,8 @@ def _records_table(recs, base=None) -> str:
     return "\n".join(out)
 
 
-def build_campaign_report(campaign: dict, out_dir, *, filename: str = "campaign_report.html") -> Path:
+def build_campaign_report(campaign: dict, out_dir, *, filename: str = "campaign_report.html",
+                          draw: Callable[[list], list] | None = None) -> Path:
     """Write the combined HTML report of a campaign (figures embedded, PNGs in ``figures/``).
 
     Parameters
@@ -298,6 +336,10 @@ def build_campaign_report(campaign: dict, out_dir, *, filename: str = "campaign_
     out_dir : str or Path
         Existing folder; the page (and its PNGs) are written there, each atomically.
     filename : str
+    draw : callable, optional
+        ``draw(calls) -> list of PNG bytes``, one per call ``(make, args, kwargs)``, in order,
+        each as :func:`figure_png` gives it (the campaign draws them on its workers). None:
+        drawn here, one after another.
 
     Returns
     -------
@@ -332,6 +374,7 @@ def build_campaign_report(campaign: dict, out_dir, *, filename: str = "campaign_
     if msg_rows:
         s = rep.section("Warnings per recording")
         s.table(msg_rows, max_rows=300)
+    figs.draw(draw)
     path = out_dir / filename
     with atomic_path(path, overwrite=True) as tmp:  # never a half-written page
         rep.write(tmp)
@@ -339,17 +382,31 @@ def build_campaign_report(campaign: dict, out_dir, *, filename: str = "campaign_
 
 
 class _Figures:
-    """Adds a figure to a report section and keeps its PNG in ``fig_dir``, atomically."""
+    """The report's figures: each keeps its place in its section (:meth:`add`) until all are
+    drawn (:meth:`draw`); their PNGs go to ``fig_dir``, each atomically."""
 
     def __init__(self, fig_dir: Path):
         self.fig_dir = fig_dir
+        self.pending: list[tuple] = []  # (section, index in its parts, name, caption, call)
 
-    def add(self, section, fig, name: str, caption: str) -> None:
-        png = figure_to_png(fig)
-        self.fig_dir.mkdir(exist_ok=True)
-        with atomic_path(self.fig_dir / f"{name}.png", overwrite=True) as tmp:
-            tmp.write_bytes(png)
-        section.figure(png, caption)
+    def add(self, section, name: str, caption: str, make, *args, **kwargs) -> None:
+        section.parts.append("")  # the figure's place; filled by draw()
+        self.pending.append((section, len(section.parts) - 1, name, caption, (make, args, kwargs)))
+
+    def draw(self, draw: Callable[[list], list] | None) -> None:
+        calls = [p[4] for p in self.pending]
+        pngs = list(draw(calls)) if draw is not None and calls else [figure_png(m, *a, **k) for m, a, k in calls]
+        if len(pngs) != len(calls) or not all(isinstance(p, (bytes, bytearray)) for p in pngs):
+            raise TypeError(f"draw must return one PNG (bytes) per figure ({len(calls)}), got "
+                            f"{[type(p).__name__ for p in pngs]}")
+        if pngs:
+            self.fig_dir.mkdir(exist_ok=True)
+        for (section, idx, name, caption, _), png in zip(self.pending, pngs):
+            with atomic_path(self.fig_dir / f"{name}.png", overwrite=True) as tmp:
+                tmp.write_bytes(png)
+            section.figure(png, caption)
+            section.parts[idx] = section.parts.pop()
+        self.pending.clear()
 
 
 def _overview_section(rep, campaign: dict, recs: list) -> None:
@@ -389,9 +446,8 @@ def _recordings_sections(rep, recs: list, names: list, base, figs: _Figures) -> 
     s.text("RMS residuals are of the measured phasing [mesh cycles] against the ideal phasing "
            "and against the shaft-hole-error model identified from the recording itself; band "
            "coverage is the fraction of passes inside the tolerance Monte Carlo 3-sigma band.")
-    figs.add(s, wall_times_across_recordings(names, [_num(r.get("wall_time_s")) for r in recs],
-                                             [r.get("status", "failed") for r in recs]),
-             "wall_times", "Task wall time per recording")
+    figs.add(s, "wall_times", "Task wall time per recording", wall_times_across_recordings, names,
+             [_num(r.get("wall_time_s")) for r in recs], [r.get("status", "failed") for r in recs])
     bad = [r for r in recs if r.get("status") in ("failed", "partial", "unreliable")]
     if bad:
         s = rep.section("Failures")
@@ -447,17 +503,17 @@ def _phasing_section(rep, recs: list, names: list, figs: _Figures) -> None:
         rows, data[g] = _phasing_rows(recs, names, g, _planets(recs, g), ideal)
         s.heading(f"{g} gauge: measured gamma [mesh cycles], mean ± pass-to-pass std (passes)")
         s.table(rows)
-    figs.add(s, phasing_across_recordings(names, data, {g: ideal[g] for g in gauges if g in ideal} or None),
-             "phasing_across_recordings", "Mean measured phasing per planet and recording (deviation from "
-             "the ideal), error bars the pass-to-pass standard deviation")
+    figs.add(s, "phasing_across_recordings", "Mean measured phasing per planet and recording (deviation "
+             "from the ideal), error bars the pass-to-pass standard deviation", phasing_across_recordings,
+             names, data, {g: ideal[g] for g in gauges if g in ideal} or None)
     rms = {f"{g} vs {ref}": np.array([_num(((r.get("compare") or {}).get(g) or {}).get(f"rms_vs_{ref}"))
                                       for r in recs])
            for g in gauges for ref in ("ideal", "model")}
     rms = {k: v for k, v in rms.items() if np.isfinite(v).any()}
     if rms:
-        figs.add(s, residual_rms_across_recordings(names, rms, label="RMS residual of the measured phasing"),
-                 "residual_rms", "RMS of the measured phasing against the ideal and against the "
-                 "error model identified from each recording")
+        figs.add(s, "residual_rms", "RMS of the measured phasing against the ideal and against the "
+                 "error model identified from each recording", residual_rms_across_recordings, names, rms,
+                 label="RMS residual of the measured phasing")
 
 
 def _load_sharing_section(rep, recs: list, names: list, figs: _Figures) -> None:
@@ -479,8 +535,8 @@ def _load_sharing_section(rep, recs: list, names: list, figs: _Figures) -> None:
         rows.append(row)
     s.table(rows, columns=["recording"] + [f"planet {k + 1}" for k in range(n_pl)],
             caption="load-sharing factor [-] ± standard error (1 = equal share)")
-    figs.add(s, load_sharing_across_recordings(names, ls, se), "load_sharing_across_recordings",
-             "Load-sharing factor per planet and recording")
+    figs.add(s, "load_sharing_across_recordings", "Load-sharing factor per planet and recording",
+             load_sharing_across_recordings, names, ls, se)
 
 
 def _scene_level_section(rep, sl: dict) -> None:
