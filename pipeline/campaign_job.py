@@ -214,7 +214,8 @@ def failed_record(path, name: str, out_dir, error: str) -> dict:
 
 
 def campaign_task(task: Callable[..., dict], scene_path: str, recording_path: str, out_dir: str,
-                  dask_key: str | None = None, done_key: dict | None = None, **kw) -> dict:
+                  dask_key: str | None = None, done_key: dict | None = None, *,
+                  threads: int | None = None, **kw) -> dict:
     """What a campaign worker runs for one recording.
 
     Tells the client the task started (its timeout counts from here), runs ``task``, and when
@@ -231,6 +232,9 @@ def campaign_task(task: Callable[..., dict], scene_path: str, recording_path: st
         The task's key, sent with its start; None: not in a Dask job.
     done_key : dict, optional
         The recording's key for its marker; None: no marker.
+    threads : int, optional
+        Worker threads of the run (:func:`meshphase.threads.threads_limited`); None: the
+        worker process's own default.
     **kw
         Passed to ``task``.
 
@@ -257,7 +261,13 @@ def campaign_task(task: Callable[..., dict], scene_path: str, recording_path: st
             w.log_event(_START_TOPIC, {"key": dask_key, "worker": w.address, "pid": os.getpid()})
         except ValueError:  # not in a worker (called directly)
             pass
-    rec = task(scene_path, recording_path, out_dir, **kw)
+    if threads is None:
+        rec = task(scene_path, recording_path, out_dir, **kw)
+    else:
+        from .threads import threads_limited
+
+        with threads_limited(threads):
+            rec = task(scene_path, recording_path, out_dir, **kw)
     if done_key is not None and isinstance(rec, dict) and rec.get("status") in ("ok", "unreliable", "partial"):
         try:
             write_marker(out_dir, done_key, rec)
@@ -299,6 +309,8 @@ class Job:
         A staging path -> the path it will have in the finished campaign.
     on_usable : callable
         Called after each recording that did not fail (the campaign folder is worth keeping).
+    task_threads : int or None
+        Worker threads per recording (:mod:`meshphase.threads`); set by :func:`run_job`.
     """
 
     task: Callable[..., dict]
@@ -314,6 +326,9 @@ class Job:
     progress: bool
     final_of: Callable[[Path], str]
     on_usable: Callable[[], None]
+    #: worker threads per recording (None: each worker's own default); a local cluster
+    #: shares this machine's cores among its workers (run_job sets it)
+    task_threads: int | None = None
 
 
 def _dask_key(token: str, i: int, name: str) -> str:
@@ -354,6 +369,12 @@ def run_job(job: Job, records: dict, *, scheduler: str | None, workers: int | No
         client = start.client()
         timing["cluster_wait"] = time.perf_counter() - t
         timing["cluster_start"] = start.elapsed_s
+        if cluster_info.get("local"):
+            # the recordings already run side by side, one per worker: each gets its share
+            # of this machine's cores for its own threads (meshphase.threads)
+            from .threads import run_threads
+
+            job.task_threads = max(1, run_threads() // max(1, int(cluster_info.get("n_workers") or 1)))
         t = time.perf_counter()
         token = uuid.uuid4().hex[:10]  # task keys unique on a shared scheduler
         dkeys = {i: _dask_key(token, i, job.names[i]) for i in job.todo}
@@ -454,7 +475,8 @@ class _Collection:
 
     def submit(self) -> dict:
         job, todo = self.job, self.job.todo
-        kw = {"bands": job.bands, "recording_report": job.recording_report}
+        kw = {"bands": job.bands, "recording_report": job.recording_report,
+              "threads": job.task_threads}
         fn = functools.partial(campaign_task, job.task)
         # one map call = one graph: the tasks form one group, which the scheduler queues
         # (root-ish tasks) when there are more than twice as many as worker threads

@@ -389,3 +389,22 @@ def test_task_takes_paths_only_and_writes_no_marker_for_a_failure(tmp_path):
                            str(tmp_path / "o"), None, {"recording": "r.h5"})
     marker = json.loads((tmp_path / "o" / cp.DONE_NAME).read_text())
     assert marker["key"] == {"recording": "r.h5"} and marker["record"] == ok
+
+
+def test_task_runs_with_its_share_of_the_threads_and_refuses_a_bad_count(tmp_path, monkeypatch):
+    # a local cluster's workers share this machine's cores: each recording's run is held to
+    # the share run_job hands it (meshphase.threads), and only inside the task
+    from meshphase.threads import ENV_THREADS, run_threads
+
+    monkeypatch.setenv(ENV_THREADS, "4")
+    seen = []
+
+    def task(*a, **k):
+        seen.append(run_threads())
+        return {"status": "failed", "error": "x"}
+
+    campaign_task(task, "s.toml", "r.h5", str(tmp_path / "o"), threads=2)
+    campaign_task(task, "s.toml", "r.h5", str(tmp_path / "o"))
+    assert seen == [2, 4] and run_threads() == 4
+    with pytest.raises(ValueError, match="positive integer"):
+        campaign_task(task, "s.toml", "r.h5", str(tmp_path / "o"), threads=0)
