@@ -90,11 +90,16 @@ def chi_moments(d: int, m: int) -> np.ndarray:
 
 def _poly(coef, r):
     """Horner: value and derivative of coef (K+1, ...) (increasing powers) at r."""
-    val = coef[-1] * np.ones_like(r)
-    der = np.zeros_like(val)
-    for c in coef[-2::-1]:
-        der = der * r + val
-        val = val * r + c
+    if coef.shape[0] == 1:
+        return coef[0] + np.zeros_like(r), np.zeros_like(r)
+    der = coef[-1] + np.zeros_like(r)
+    val = coef[-1] * r
+    val += coef[-2]
+    for c in coef[-3::-1]:
+        der *= r
+        der += val
+        val *= r
+        val += c
     return val, der
 
 
@@ -110,6 +115,8 @@ def _newton_crossing(c, tt, ok, r_start, r_max, iters):
         with np.errstate(divide="ignore", invalid="ignore"):
             step = np.where(ok & (fp != 0.0), f / fp, 0.0)
         r = np.clip(r - step, 1e-12, 2.0 * r_max)
+        if np.all((np.abs(step) <= 1e-13 * r) | (r >= 2.0 * r_max)):
+            break
     return r
 
 
@@ -143,23 +150,36 @@ def _fit(model, lin_rho, u, nodes, vinv):
     """(coef (K+1, B, C), rho_L (B, C)) of the rays u (B, d)."""
     rho_l = np.asarray(lin_rho(u), dtype=float)
     vals = [rho_l] + [np.asarray(model(r * u), dtype=float) / r for r in nodes]
+    if rho_l.ndim != 2 or rho_l.shape[1] == 0 or any(v.shape != rho_l.shape for v in vals):
+        raise ValueError("model and lin_rho must give the same (S, C) columns, C >= 1; got "
+                         f"{[v.shape for v in vals]}")
     return np.einsum("jk,kbc->jbc", vinv, np.stack(vals)), rho_l
 
 
-def _solve(q_grid, p_grid, alpha):
-    """Root of log P(q) = log alpha on the grid (cubic spline) and dP/dq there, per target."""
+def _solve(q_grid, d_grid, lin_tail, alpha, iters=56):
+    """Root of P(q) = alpha per target, P(q) = P_L(q) (exact) + D(q) (cubic spline of the
+    estimated correction through the grid), by bisection inside the grid; and dP/dq there.
+    NaN where P - alpha does not change sign on the grid."""
     n_t = q_grid.shape[0]
-    q = np.full(n_t, np.nan)
-    dp = np.full(n_t, np.nan)
-    for t in range(n_t):
-        p = p_grid[t]
-        if not np.all(p > 0):
-            continue
-        sp = CubicSpline(q_grid[t], np.log(p))
-        roots = sp.solve(math.log(alpha), extrapolate=False)
-        if roots.size == 1:
-            q[t] = roots[0]
-            dp[t] = alpha * sp(roots[0], 1)
+    splines = [CubicSpline(q_grid[t], d_grid[t]) for t in range(n_t)]
+
+    def f(q):
+        p_l = np.asarray(lin_tail(q[:, None]), dtype=float)[:, 0]
+        return p_l + np.array([splines[t](q[t]) for t in range(n_t)]) - alpha
+
+    lo, hi = q_grid[:, 0].copy(), q_grid[:, -1].copy()
+    f_lo, f_hi = f(lo), f(hi)
+    ok = np.sign(f_lo) * np.sign(f_hi) < 0
+    for _ in range(iters):
+        mid = 0.5 * (lo + hi)
+        f_mid = f(mid)
+        left = np.sign(f_mid) == np.sign(f_lo)
+        lo, f_lo = np.where(left, mid, lo), np.where(left, f_mid, f_lo)
+        hi = np.where(left, hi, mid)
+    q = np.where(ok, 0.5 * (lo + hi), np.nan)
+    h = 1e-4 * (q_grid[:, -1] - q_grid[:, 0])
+    qq = np.where(ok, q, q_grid[:, 0])
+    dp = np.where(ok, (f(qq + h) - f(qq - h)) / (2 * h), np.nan)
     return q, dp
 
 
@@ -319,26 +339,26 @@ def directional_bounds(model, lin_rho, lin_tail, d: int, targets, q_lin, n_direc
             done += b
             if progress is not None:
                 progress(done, m_dir)
-    out = _finish_bounds(sums, np.asarray(lin_tail(q_grid), dtype=float), q_grid, alpha, span)
+    out = _finish_bounds(sums, lin_tail, q_grid, alpha, span)
     out.update({"n_directions": m_dir, "n_evaluations": m_dir * nd.size, "unconverged": bad})
     if lin_moments is not None:
         out.update(_finish_moments(sums, lin_moments))
     return out
 
 
-def _finish_bounds(sums, p_l, q_grid, alpha, span):
+def _finish_bounds(sums, lin_tail, q_grid, alpha, span):
     """Bounds, delta-method and batch-means standard errors from the sums."""
     m_dir = int(sums.count.sum())
     mean = sums.p1.sum(axis=0) / m_dir
     var = np.maximum(sums.p2 / m_dir - mean * mean, 0.0) / (m_dir - 1)
-    p_grid = p_l + mean
-    q, dp = _solve(q_grid, p_grid, alpha)
+    q, dp = _solve(q_grid, mean, lin_tail, alpha)
     if np.any(~np.isfinite(q)):
         raise ValueError("directional_bounds: a bound lies outside the threshold grid "
                          f"(span {span:g} around the linear bound); widen span")
     se_p = np.array([np.sqrt(np.interp(q[t], q_grid[t], var[t])) for t in range(q.size)])
-    qb = np.stack([_solve(q_grid, p_l + sums.p1[g] / sums.count[g], alpha)[0]
+    qb = np.stack([_solve(q_grid, sums.p1[g] / sums.count[g], lin_tail, alpha)[0]
                    for g in range(sums.count.size)])
+    p_grid = np.asarray(lin_tail(q_grid), dtype=float) + mean
     return {"bound": q, "se": se_p / np.abs(dp),
             "se_batch": np.std(qb, axis=0, ddof=1) / math.sqrt(sums.count.size),
             "q_grid": q_grid, "p_grid": p_grid}
@@ -401,7 +421,9 @@ def interpolation_check(model, lin_rho, d: int, targets, q, n_directions: int = 
     srl = sgn * rho_l
     ok = (tau * srl > 0) & (tau / np.where(srl == 0, 1, srl) < r_max)
     r0 = np.where(ok, tau / np.where(srl == 0, 1, srl), 1.0)
-    r = _newton_crossing(coef * sgn[None, None, :], tau[None], ok, r0, r_max, iters)
+    c = coef * sgn[None, None, :]
+    r = _newton_crossing(c, tau[None], ok, r0, r_max, iters)
+    ok &= (np.abs(r * _poly(c, np.minimum(r, r_max))[0] - tau) <= 1e-9 * np.abs(tau)) & (r < r_max)
     r_int = r
     # exact: secant on the full model, from the interpolated radius
     rr = [r_int * (1 - 1e-3), r_int]
