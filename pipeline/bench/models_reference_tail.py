@@ -156,31 +156,46 @@ def _fit(model, lin_rho, u, nodes, vinv):
     return np.einsum("jk,kbc->jbc", vinv, np.stack(vals)), rho_l
 
 
-def _solve(q_grid, d_grid, lin_tail, alpha, iters=56):
-    """Root of P(q) = alpha per target, P(q) = P_L(q) (exact) + D(q) (cubic spline of the
-    estimated correction through the grid), by bisection inside the grid; and dP/dq there.
-    NaN where P - alpha does not change sign on the grid."""
-    n_t = q_grid.shape[0]
-    splines = [CubicSpline(q_grid[t], d_grid[t]) for t in range(n_t)]
+def _solve(q_grid, d_grids, lin_tail, alpha, iters=40):
+    """Roots of P(q) = alpha, P(q) = P_L(q) (exact) + D(q) (cubic spline of an estimated
+    correction through the grid), for several corrections at once, and dP/dq there.
 
-    def f(q):
-        p_l = np.asarray(lin_tail(q[:, None]), dtype=float)[:, 0]
-        return p_l + np.array([splines[t](q[t]) for t in range(n_t)]) - alpha
+    q_grid (T, J); d_grids (G, T, J). The root is bracketed by the grid cell where P - alpha
+    changes sign and refined by the Illinois variant of regula falsi. Returns q, dp (G, T);
+    NaN where P - alpha does not change sign on the grid.
+    """
+    n_g, n_t, _ = d_grids.shape
+    splines = [CubicSpline(q_grid[t], d_grids[:, t].T) for t in range(n_t)]
+    cols = np.arange(n_g)
 
-    lo, hi = q_grid[:, 0].copy(), q_grid[:, -1].copy()
-    f_lo, f_hi = f(lo), f(hi)
-    ok = np.sign(f_lo) * np.sign(f_hi) < 0
+    def f(q):                                                    # q (G, T) -> (G, T)
+        d = np.stack([splines[t](q[:, t])[cols, cols] for t in range(n_t)], axis=1)
+        return np.asarray(lin_tail(q.T), dtype=float).T + d - alpha
+
+    fg = np.asarray(lin_tail(q_grid), dtype=float)[None] + d_grids - alpha     # (G, T, J)
+    change = np.sign(fg[..., :-1]) * np.sign(fg[..., 1:]) <= 0
+    ok = change.any(axis=-1)
+    j = np.argmax(change, axis=-1)                                               # (G, T)
+    a = np.take_along_axis(np.broadcast_to(q_grid, fg.shape), j[..., None], -1)[..., 0]
+    b = np.take_along_axis(np.broadcast_to(q_grid, fg.shape), j[..., None] + 1, -1)[..., 0]
+    fa = np.take_along_axis(fg, j[..., None], -1)[..., 0]
+    fb = np.take_along_axis(fg, j[..., None] + 1, -1)[..., 0]
     for _ in range(iters):
-        mid = 0.5 * (lo + hi)
-        f_mid = f(mid)
-        left = np.sign(f_mid) == np.sign(f_lo)
-        lo, f_lo = np.where(left, mid, lo), np.where(left, f_mid, f_lo)
-        hi = np.where(left, hi, mid)
-    q = np.where(ok, 0.5 * (lo + hi), np.nan)
-    h = 1e-4 * (q_grid[:, -1] - q_grid[:, 0])
-    qq = np.where(ok, q, q_grid[:, 0])
-    dp = np.where(ok, (f(qq + h) - f(qq - h)) / (2 * h), np.nan)
-    return q, dp
+        with np.errstate(divide="ignore", invalid="ignore"):
+            c = np.where(fb != fa, b - fb * (b - a) / (fb - fa), 0.5 * (a + b))
+        c = np.where(np.isfinite(c), c, 0.5 * (a + b))
+        fc = f(c)
+        same = np.sign(fc) == np.sign(fb)
+        # Illinois: the end a kept while the new point lands on b's side has its value
+        # halved, so the retained end moves too
+        a, fa = np.where(same, a, b), np.where(same, 0.5 * fa, fb)
+        b, fb = c, fc
+        if np.all((np.abs(b - a) <= 1e-14 * np.abs(b)) | (fb == 0) | ~ok):
+            break
+    q = np.where(ok, b, np.nan)
+    h = 1e-5 * (q_grid[:, -1] - q_grid[:, 0])[None]
+    qq = np.where(ok, q, q_grid[None, :, 0])
+    return q, np.where(ok, (f(qq + h) - f(qq - h)) / (2 * h), np.nan)
 
 
 class _Sums:
@@ -351,17 +366,18 @@ def _finish_bounds(sums, lin_tail, q_grid, alpha, span):
     m_dir = int(sums.count.sum())
     mean = sums.p1.sum(axis=0) / m_dir
     var = np.maximum(sums.p2 / m_dir - mean * mean, 0.0) / (m_dir - 1)
-    q, dp = _solve(q_grid, mean, lin_tail, alpha)
+    groups = sums.count.size
+    d_all = np.concatenate([mean[None], sums.p1 / sums.count[:, None, None]])
+    q_all, dp_all = _solve(q_grid, d_all, lin_tail, alpha)
+    q, dp, qb = q_all[0], dp_all[0], q_all[1:]
     if np.any(~np.isfinite(q)):
         raise ValueError("directional_bounds: a bound lies outside the threshold grid "
                          f"(span {span:g} around the linear bound); widen span")
     se_p = np.array([np.sqrt(np.interp(q[t], q_grid[t], var[t])) for t in range(q.size)])
-    qb = np.stack([_solve(q_grid, sums.p1[g] / sums.count[g], lin_tail, alpha)[0]
-                   for g in range(sums.count.size)])
+    se_batch = np.std(qb, axis=0, ddof=1) / math.sqrt(groups)
     p_grid = np.asarray(lin_tail(q_grid), dtype=float) + mean
-    return {"bound": q, "se": se_p / np.abs(dp),
-            "se_batch": np.std(qb, axis=0, ddof=1) / math.sqrt(sums.count.size),
-            "q_grid": q_grid, "p_grid": p_grid}
+    return {"bound": q, "se": se_p / np.abs(dp), "se_batch": se_batch, "q_grid": q_grid,
+            "p_grid": p_grid}
 
 
 def _finish_moments(sums, lin_moments):
