@@ -418,18 +418,19 @@ def _load_average():
 
 
 def _rel_errors_ref(ref, stats):
-    """The reference's own largest relative standard errors (means/stds, bounds)."""
+    """The reference's own largest relative standard errors (means/stds, bounds); an SE
+    that could not be formed (null in the cache) makes the result NaN."""
     vals, se = ref["values"], ref["stderr"]
     out = []
     for keys in (("mean", "std"), ("bound3_lo", "bound3_hi")):
         m = 0.0
         for s in stats:
-            scale = np.asarray(vals["std"][s])
+            scale = np.asarray(vals["std"][s], dtype=float)
             ok = scale > 1e-12
             for k in keys:
-                den = np.maximum(np.abs(np.asarray(vals[k][s])), scale)[ok]
+                den = np.maximum(np.abs(np.asarray(vals[k][s], dtype=float)), scale)[ok]
                 if den.size:
-                    m = max(m, float(np.max(np.asarray(se[k][s])[ok] / den)))
+                    m = max(m, float(np.max(np.asarray(se[k][s], dtype=float)[ok] / den)))
         out.append(m)
     return out
 

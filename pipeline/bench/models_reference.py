@@ -27,6 +27,7 @@ import numpy as np
 
 from scipy import special
 
+from ..jsonable import to_jsonable
 from ..log import logger
 from ..models import _kernels
 from ..models.tolerance_model import (ALL_STATISTICS, _P3_HI, _P3_LO, _Grid, _map_samples,
@@ -196,8 +197,9 @@ def _read_cache(path, key):
 
 
 def _write_cache(path, out):
+    """Strict JSON (NaN, e.g. a batch-means SE that could not be formed, becomes null)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(out, indent=1))
+    path.write_text(json.dumps(to_jsonable(out), indent=1))
 
 
 #: Version of the directional estimator's settings (r_max, threshold grid, iterations) in the

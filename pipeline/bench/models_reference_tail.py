@@ -1,4 +1,5 @@
-"""Directional control-variate reference of the 3-sigma bounds for ``meshphase bench models``.
+"""Directional control-variate reference of tail quantiles (the 3-sigma bounds), means and
+standard deviations for ``meshphase bench models``.
 
 Why: a plain Monte Carlo of n samples resolves a quantile at tail mass alpha = Phi(-3) only
 to a relative standard error of about sqrt(alpha / n) / (f(q) q) (1e-3 for seed 000 case 3 at
@@ -14,21 +15,26 @@ P_L(q) (the caller supplies it). For a threshold q, conditioning on the directio
     P(Y > q) = P_L(q) + E_u[ P(r rho(r, u) > q | u) - P(r rho_L(u) > q | u) ],
 
 with rho(r, u) = Y(r u) / r. Both conditional probabilities are chi_d tail masses beyond a
-crossing radius (``chi_sf``), so every direction contributes a number in (-1, 1) that is
+crossing radius (chi_d survival function), so every direction contributes a number in
+(-1, 1) that is
 the difference of two nearly equal probabilities: the variance is that of the small
 nonlinear part, not of an indicator. The full model is evaluated at ``nodes`` fixed radii
 per direction (all statistics at once); rho(., u) is the polynomial through rho_L(u) at
-r = 0 (its exact limit) and those values, and each crossing radius solves
-r rho(r, u) = q by fixed-point iteration r <- q / rho(r, u) (rho is nearly constant in r,
-so it contracts fast; unconverged crossings are counted in the diagnostics). Lower bounds
-are the upper bounds of -Y. Beyond ``r_max`` rho is held at its ``r_max`` value
+r = 0 (its exact limit) and those values, and each crossing radius solves r rho(r, u) = q
+by Newton's method from the linear crossing q / rho_L(u) (rho is nearly constant in r;
+crossings inside ``r_max`` that do not converge are counted in the diagnostics). Lower
+bounds are the upper bounds of -Y. Beyond ``r_max`` rho is held at its ``r_max`` value
 (P(chi_6 > 8) = 7e-12).
 
-The probability is estimated on a grid of ``n_grid`` thresholds around the linear bound
-(+- ``span`` relative); the bound is the root of the cubic spline of log P through them.
-Standard errors: the delta method, SE(q) = SE(P(q)) / |dP/dq|, with SE(P) from the sample
-variance of the independent per-direction terms (pseudo-random directions); and, as a
-check, batch means over ``groups`` groups of directions (both are reported).
+The correction E_u[...] is estimated on a grid of ``n_grid`` thresholds around the linear
+bound (+- ``span`` relative); the bound is the root of P_L(q) (exact, at any q) plus the
+cubic spline of the correction through the grid (Illinois regula falsi inside the grid cell
+where the sign changes). Standard errors: the delta method, SE(q) = SE(P(q)) / |dP/dq|, with
+SE(P) from the sample variance of the independent per-direction terms (pseudo-random
+directions); and, as a check, batch means over ``groups`` groups of directions (both are
+reported). With the exact first two moments of the linear model the same rays give the means
+and standard deviations: E_r[Y(r u)] and E_r[Y(r u)^2] of the polynomial are sums of chi_d
+moments (:func:`chi_moments`), corrected the same way.
 
 The polynomial in r is exact for smooth rho; a Dev on a finite time grid is only piecewise
 smooth in r (its argmax jumps between grid points), and the interpolation error of that is
@@ -47,7 +53,7 @@ from scipy.interpolate import CubicSpline
 
 from ..validate import as_positive, as_positive_int
 
-__all__ = ["directional_bounds", "radial_nodes", "interpolation_check"]
+__all__ = ["directional_bounds", "radial_nodes", "interpolation_check", "chi_moments"]
 
 
 def radial_nodes(n_nodes: int, r_max: float) -> np.ndarray:
@@ -314,6 +320,7 @@ def directional_bounds(model, lin_rho, lin_tail, d: int, targets, q_lin, n_direc
     -------
     dict
         ``"bound"``, ``"se"`` (delta method), ``"se_batch"`` (batch means), each (T,);
+        (over the groups whose bound lies on the grid; NaN when fewer than 2 do),
         ``"n_directions"``, ``"n_evaluations"``, ``"unconverged"`` (crossings inside r_max
         whose residual stayed above 1e-9 relative), ``"q_grid"``, ``"p_grid"`` (T, J); with
         ``lin_moments`` also ``"mean"``, ``"std"``, ``"se_mean"``, ``"se_std"``,
@@ -366,7 +373,6 @@ def _finish_bounds(sums, lin_tail, q_grid, alpha, span):
     m_dir = int(sums.count.sum())
     mean = sums.p1.sum(axis=0) / m_dir
     var = np.maximum(sums.p2 / m_dir - mean * mean, 0.0) / (m_dir - 1)
-    groups = sums.count.size
     d_all = np.concatenate([mean[None], sums.p1 / sums.count[:, None, None]])
     q_all, dp_all = _solve(q_grid, d_all, lin_tail, alpha)
     q, dp, qb = q_all[0], dp_all[0], q_all[1:]
@@ -374,7 +380,10 @@ def _finish_bounds(sums, lin_tail, q_grid, alpha, span):
         raise ValueError("directional_bounds: a bound lies outside the threshold grid "
                          f"(span {span:g} around the linear bound); widen span")
     se_p = np.array([np.sqrt(np.interp(q[t], q_grid[t], var[t])) for t in range(q.size)])
-    se_batch = np.std(qb, axis=0, ddof=1) / math.sqrt(groups)
+    n_ok = np.sum(np.isfinite(qb), axis=0)                  # groups whose root is on the grid
+    with np.errstate(invalid="ignore", divide="ignore"):
+        se_batch = np.where(n_ok >= 2, np.nanstd(np.where(n_ok >= 2, qb, 0.0), axis=0, ddof=1)
+                            / np.sqrt(np.maximum(n_ok, 1)), np.nan)
     p_grid = np.asarray(lin_tail(q_grid), dtype=float) + mean
     return {"bound": q, "se": se_p / np.abs(dp), "se_batch": se_batch, "q_grid": q_grid,
             "p_grid": p_grid}
