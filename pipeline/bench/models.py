@@ -33,6 +33,7 @@ import json
 import math
 import os
 import platform
+import sys
 import time
 from pathlib import Path
 
@@ -120,7 +121,7 @@ def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 1
                      window: str = "slowest-offset", case3_samples: int = 100000,
                      figure: bool = True, estimator_reference: int = 10 ** 7,
                      reference_method: str = "directional",
-                     reference_progress: bool = False) -> dict:
+                     reference_progress: bool | None = None) -> dict:
     """Monte Carlo error against wall time for both samplers; writes table, JSON and figure.
 
     Parameters
@@ -157,8 +158,10 @@ def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 1
     reference_method : {"directional", "plain"}
         Reference of the estimator table: the directional control-variate one (falls back to
         plain, with the reason recorded, when the case does not allow it) or plain.
-    reference_progress : bool
-        Show a progress bar while the reference is computed (not when read from the cache).
+    reference_progress : bool, optional
+        Show a progress bar (stderr) while the reference is computed (not when read from the
+        cache); default: when stderr is a terminal. ``python -m
+        meshphase.bench.models_reference OUT_DIR`` builds it as a separate step.
 
     Returns
     -------
@@ -199,6 +202,8 @@ def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 1
     crossover = _crossover(rows, samplers, active)
     case3 = {} if quick else _case3(case, case3_samples, case_seed, replicates)
     reference_method = as_choice(reference_method, "reference_method", REFERENCE_METHODS)
+    if reference_progress is None:
+        reference_progress = sys.stderr.isatty()
     est_ref = 20000 if quick else as_positive_int(estimator_reference, "estimator_reference")
     estimators = _estimator_table(case, out, est_ref, quick, reference_method,
                                   reference_progress)

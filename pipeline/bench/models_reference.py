@@ -415,3 +415,37 @@ class _bar:
     def __exit__(self, *exc):
         if self.tq is not None:
             self.tq.close()
+
+
+def main(argv=None) -> int:
+    """Build (or read) the estimator table's reference of ``meshphase bench models`` as a
+    separate step, with a progress bar: ``python -m meshphase.bench.models_reference OUT_DIR
+    [--evaluations N] [--plain]``. Prints the cache file and the reference's build time."""
+    import argparse
+
+    from ..models.tolerance import observation_window, table2_case
+    from .models import CASE3_NAME
+
+    ap = argparse.ArgumentParser(prog="python -m meshphase.bench.models_reference",
+                                 description=main.__doc__.split("\n\n")[0])
+    ap.add_argument("out_dir", help="the bench output folder (the cache goes there)")
+    ap.add_argument("--evaluations", type=int, default=10 ** 7,
+                    help="full-model evaluations (default 1e7)")
+    ap.add_argument("--plain", action="store_true", help="the plain reference instead")
+    args = ap.parse_args(argv)
+    g, sp, tol = table2_case(3)
+    case = (g, sp, tol, observation_window(sp, "slowest-offset"))
+    if args.plain:
+        ref = plain_reference(case, args.out_dir, n_samples=args.evaluations,
+                              case_name=CASE3_NAME)
+    else:
+        ref = directional_reference(case, args.out_dir, n_evaluations=args.evaluations,
+                                    case_name=CASE3_NAME, progress=True)
+    state = "read from the cache" if ref["cached"] else "built"
+    print(f"{ref['method']} reference, {ref['n_samples']} evaluations, {state} "
+          f"(build time {ref['wall_time_s']:.0f} s): {ref['file']}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

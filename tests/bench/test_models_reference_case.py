@@ -124,3 +124,18 @@ def test_bad_inputs(case, tmp_path):
         directional_reference((g, sp, uniform, win), tmp_path, n_evaluations=2000)
     with pytest.raises(ValueError):
         plain_reference(case, tmp_path, n_samples=3)
+
+
+def test_main_builds_then_reads(tmp_path, capsys):
+    from meshphase.bench.models_reference import main
+    assert main([str(tmp_path), "--evaluations", "2000"]) == 0
+    assert "built" in capsys.readouterr().out
+    assert main([str(tmp_path), "--evaluations", "2000"]) == 0
+    out = capsys.readouterr().out
+    assert "read from the cache" in out and "models_reference_directional_2000_" in out
+    assert main([str(tmp_path), "--evaluations", "400", "--plain"]) == 0
+    assert "plain reference, 400 evaluations" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main([])                                   # the output folder is required
+    with pytest.raises(ValueError):
+        main([str(tmp_path), "--evaluations", "0"])
