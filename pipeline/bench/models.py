@@ -43,7 +43,7 @@ from ..log import logger
 from ..models import _kernels
 from ..models.tolerance import (ALL_STATISTICS, STATISTICS, monte_carlo, observation_window,
                                 table2_case, WINDOW_KINDS)
-from .models_reference import directional_reference, plain_reference
+from .models_reference import CASE3_NAME, directional_reference, plain_reference
 from ..validate import as_choice, as_positive_int
 
 __all__ = ["run_models_bench", "METRICS", "TABLE_COLUMNS", "ESTIMATOR_COLUMNS"]
@@ -69,7 +69,6 @@ ESTIMATORS = (("plain", "random", 10000, None), ("plain", "random", 100000, None
               ("cv", "sobol", 2048, 16), ("cv", "sobol", 8192, 32))
 #: Rows of the estimator table in a quick run.
 QUICK_ESTIMATORS = (("plain", "random", 4096, None), ("cv", "sobol", 256, 8))
-CASE3_NAME = "seed000 Table 2 case 3 (angles given)"
 
 
 def _metric_values(res, stat, kind):
