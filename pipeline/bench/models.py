@@ -57,16 +57,17 @@ TABLE_COLUMNS = (("sampler", "n_samples", "repeats", "wall_time_s")
                  + tuple(f"err_{k}_{s}" for s, k in METRICS)
                  + ("err_moments", "err_quantile", "err_max"))
 #: Columns of the estimator table (errors relative, see the module docstring).
-ESTIMATOR_COLUMNS = ("method", "samples", "evaluations", "wall_s", "err_mean_std",
-                     "ref_se_mean_std", "err_bound3", "ref_se_bound3", "se_mean_std",
-                     "se_bound3", "max_z")
+ESTIMATOR_COLUMNS = ("method", "samples", "tail_directions", "evaluations", "repeats",
+                     "wall_s", "err_mean_std", "ref_se_mean_std", "err_bound3",
+                     "err_bound3_worst", "ref_se_bound3", "se_mean_std", "se_bound3", "max_z")
 #: Kinds of the estimator table's reference (:func:`run_models_bench`).
 REFERENCE_METHODS = ("directional", "plain")
 #: (method, sampler, n_samples, tail_directions) of the estimator table; quick: the first
 #: two rows shrunk.
 ESTIMATORS = (("plain", "random", 10000, None), ("plain", "random", 100000, None),
               ("plain", "sobol", 32768, None), ("cv", "sobol", 256, 8), ("cv", "sobol", 512, 8),
-              ("cv", "sobol", 2048, 16), ("cv", "sobol", 8192, 32))
+              ("cv", "sobol", 2048, 16), ("cv", "sobol", 2048, 32), ("cv", "sobol", 2048, 64),
+              ("cv", "sobol", 4096, 32), ("cv", "sobol", 8192, 32))
 #: Rows of the estimator table in a quick run.
 QUICK_ESTIMATORS = (("plain", "random", 4096, None), ("cv", "sobol", 256, 8))
 
@@ -120,7 +121,8 @@ def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 1
                      window: str = "slowest-offset", case3_samples: int = 100000,
                      figure: bool = True, estimator_reference: int = 10 ** 7,
                      reference_method: str = "directional",
-                     reference_progress: bool | None = None) -> dict:
+                     reference_progress: bool | None = None,
+                     estimator_repeats: int = 5) -> dict:
     """Monte Carlo error against wall time for both samplers; writes table, JSON and figure.
 
     Parameters
@@ -157,6 +159,9 @@ def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 1
     reference_method : {"directional", "plain"}
         Reference of the estimator table: the directional control-variate one (falls back to
         plain, with the reason recorded, when the case does not allow it) or plain.
+    estimator_repeats : int
+        Independent runs per row of the estimator table [-] (quick: 1): errors RMS over
+        them, the worst bound error beside.
     reference_progress : bool, optional
         Show a progress bar (stderr) while the reference is computed (not when read from the
         cache); default: when stderr is a terminal. ``python -m
@@ -205,7 +210,8 @@ def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 1
         reference_progress = sys.stderr.isatty()
     est_ref = 20000 if quick else as_positive_int(estimator_reference, "estimator_reference")
     estimators = _estimator_table(case, out, est_ref, quick, reference_method,
-                                  reference_progress)
+                                  reference_progress, 1 if quick else
+                                  as_positive_int(estimator_repeats, "estimator_repeats"))
     throughput = _throughput(case, 2048 if quick else 32768)
     meta = {"case": "seed000 Table 2 case 3 (angles given)", "window": win.to_dict(),
             "n_times": ref.n_times, "engine": engine, "replicates": replicates,
@@ -368,36 +374,58 @@ def _bench_reference(case, out: Path, ref_n: int, quick: bool, method: str, prog
     return ref
 
 
+def _estimator_row(case, spec, seeds, ref, stats) -> dict:
+    """One row of the estimator table: ``len(seeds)`` runs of one (method, sampler, samples,
+    tail directions); wall time the median, errors RMS over the runs (``err_bound3_worst``
+    the largest), the reference's SE at the largest error of the worst run, the estimator's
+    SEs the median, max_z the largest."""
+    g, sp, tol, win = case
+    mth, sampler, n, n_dir = spec
+    runs = []
+    for seed in seeds:
+        kw = {"method": mth, "sampler": sampler, "rng": seed}
+        if n_dir is not None:
+            kw["tail_directions"] = n_dir
+        t = time.perf_counter()
+        res = monte_carlo(g, sp, tol, win, n, **kw)
+        runs.append((time.perf_counter() - t, res, *_rel_errors(res, ref, stats)))
+    label = mth if mth == "cv" else f"plain-{sampler}"
+    res = runs[0][1]
+
+    def rms(group):
+        return float(np.sqrt(np.mean([r[2][group] ** 2 for r in runs])))
+
+    def worst(group):
+        return max(runs, key=lambda r: r[2][group])
+
+    row = {"method": label, "samples": res.n_samples, "tail_directions": n_dir,
+           "evaluations": res.n_evaluations or res.n_samples, "repeats": len(runs),
+           "wall_s": float(np.median([r[0] for r in runs])),
+           "err_mean_std": rms("mean_std"), "ref_se_mean_std": worst("mean_std")[3]["mean_std"],
+           "err_bound3": rms("bound3"), "err_bound3_worst": worst("bound3")[2]["bound3"],
+           "ref_se_bound3": worst("bound3")[3]["bound3"],
+           "se_mean_std": float(np.median([r[4]["mean_std"] for r in runs])),
+           "se_bound3": float(np.median([r[4]["bound3"] for r in runs])),
+           "max_z": max(r[5] for r in runs)}
+    logger.info("bench models: %s n=%d %.3f s err %.3g / %.3g", label, n, row["wall_s"],
+                row["err_mean_std"], row["err_bound3"])
+    return row
+
+
 def _estimator_table(case, out: Path, ref_n: int, quick: bool, method: str = "directional",
-                     progress: bool = False) -> dict:
-    """Error of each estimator against the cached reference, on one thread."""
+                     progress: bool = False, repeats: int = 5) -> dict:
+    """Error of each estimator against the cached reference, on one thread, ``repeats``
+    independent runs per row."""
     g, sp, tol, win = case
     ref = _bench_reference(case, out, ref_n, quick, method, progress)
     stats = [s for s in ALL_STATISTICS
              if np.max(np.asarray(ref["values"]["std"][s]), initial=0.0) > 1e-12]
-    rows = []
     specs = QUICK_ESTIMATORS if quick else ESTIMATORS
     load = [_load_average()]
     with _Threads(1):
         monte_carlo(g, sp, tol, win, 64, method="cv", rng=0)       # warm-up (JIT, imports)
-        for i, (mth, sampler, n, n_dir) in enumerate(specs):
-            kw = {"method": mth, "sampler": sampler, "rng": 1000 + i}
-            if n_dir is not None:
-                kw["tail_directions"] = n_dir
-            t = time.perf_counter()
-            res = monte_carlo(g, sp, tol, win, n, **kw)
-            wall = time.perf_counter() - t
-            err, ref_se, own, z = _rel_errors(res, ref, stats)
-            label = mth if mth == "cv" else f"plain-{sampler}"
-            rows.append({"method": label, "samples": res.n_samples,
-                         "tail_directions": n_dir,
-                         "evaluations": res.n_evaluations or res.n_samples, "wall_s": wall,
-                         "err_mean_std": err["mean_std"], "ref_se_mean_std": ref_se["mean_std"],
-                         "err_bound3": err["bound3"], "ref_se_bound3": ref_se["bound3"],
-                         "se_mean_std": own["mean_std"], "se_bound3": own["bound3"],
-                         "max_z": z})
-            logger.info("bench models: %s n=%d %.3f s err %.3g / %.3g", label, n, wall,
-                        err["mean_std"], err["bound3"])
+        rows = [_estimator_row(case, spec, [1000 + 100 * j + i for j in range(repeats)], ref,
+                               stats) for i, spec in enumerate(specs)]
     ref_se = _rel_errors_ref(ref, stats)
     info = {"method": ref.get("method", "plain"), "n_samples": ref["n_samples"],
             "seed": ref["seed"], "wall_time_s": ref["wall_time_s"], "cached": ref["cached"],
@@ -472,6 +500,8 @@ def _crossover(rows, samplers, active):
 
 
 def _fmt(v):
+    if v is None:
+        return "-"
     if isinstance(v, float):
         if v != v:
             return "-"
@@ -527,8 +557,10 @@ def _markdown(result):
     if est:
         lines += ["", "## Estimators against a Monte Carlo reference", ""]
         lines += _reference_lines(est["reference"])
-        lines += ["One numba thread. Errors: largest over the statistics with a spread and "
-                  "their planets of |estimate - reference| / max(|reference|, reference std); "
+        lines += ["One numba thread; each row RMS over `repeats` independent runs (wall time: "
+                  "median; err_bound3_worst: the worst run). Errors: largest over the "
+                  "statistics with a spread and their planets of |estimate - reference| / "
+                  "max(|reference|, reference std); "
                   "ref_se_*: the reference's own standard error at that largest error, on the "
                   "same scale (an error is resolved when well above it); se_*: the estimator's "
                   "own largest standard errors; max_z: largest |error| / sqrt(SE_est^2 + "
