@@ -381,6 +381,8 @@ def _estimator_row(case, spec, seeds, ref, stats) -> dict:
     SEs the median, max_z the largest."""
     g, sp, tol, win = case
     mth, sampler, n, n_dir = spec
+    if not seeds:
+        raise ValueError("_estimator_row needs at least one seed")
     runs = []
     for seed in seeds:
         kw = {"method": mth, "sampler": sampler, "rng": seed}

@@ -139,3 +139,19 @@ def test_main_builds_then_reads(tmp_path, capsys):
         main([])                                   # the output folder is required
     with pytest.raises(ValueError):
         main([str(tmp_path), "--evaluations", "0"])
+
+
+def test_estimator_row_over_repeats(case, small_ref):
+    from meshphase.bench.models import _estimator_row
+    _, ref = small_ref
+    stats = [s for s in ALL_STATISTICS if max(ref["values"]["std"][s]) > 1e-12]
+    row = _estimator_row(case, ("cv", "sobol", 64, 4), [1, 2], ref, stats)
+    assert set(ESTIMATOR_COLUMNS) <= set(row)
+    assert row["repeats"] == 2 and row["tail_directions"] == 4 and row["samples"] == 64
+    # RMS over the runs lies between the best and the worst run
+    assert 0 < row["err_bound3"] <= row["err_bound3_worst"]
+    assert row["wall_s"] > 0 and row["evaluations"] > row["samples"]
+    plain = _estimator_row(case, ("plain", "random", 32, None), [3], ref, stats)
+    assert plain["method"] == "plain-random" and plain["tail_directions"] is None
+    with pytest.raises(ValueError):
+        _estimator_row(case, ("cv", "sobol", 64, 4), [], ref, stats)
