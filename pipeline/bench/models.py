@@ -519,7 +519,8 @@ def _reference_lines(er):
            f"3-sigma bounds {_fmt(er['se_bound3'])}")
     if er.get("method") == "directional-cv":
         it = er["interpolation"]
-        return [f"Reference: directional control variate (`meshphase.bench.models_reference_tail`), "
+        return ["Reference: directional control variate "
+                f"(`meshphase.bench.models_reference_tail`), "
                 f"{er['n_samples']} full-model evaluations ({er['n_directions']} rays x "
                 f"{er['nodes']} radii, seed {er['seed']}, built in {er['wall_time_s']:.0f} s"
                 f"{cached}); {own} (delta method; batch means over 10 groups: "

@@ -85,7 +85,8 @@ class ChiRadius:
     @property
     def q_lin(self):
         a = ALPHA
-        return [self.sigma * math.sqrt(-2 * math.log1p(-a)), self.sigma * math.sqrt(-2 * math.log(a))]
+        return [self.sigma * math.sqrt(-2 * math.log1p(-a)),
+                self.sigma * math.sqrt(-2 * math.log(a))]
 
     def exact(self):
         a = _mp_alpha()
