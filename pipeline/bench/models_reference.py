@@ -11,9 +11,10 @@ zero mean, fixed angles) and raises ValueError otherwise.
 of seed 000 Table 2 case 3, reduced in bounded memory to exactly what the error table
 needs: per statistic and planet the mean, the standard deviation and the two 3-sigma bounds
 (the sample quantiles at Phi(-3) and Phi(3), ``numpy.quantile``'s linear interpolation,
-computed exactly from the kept extreme order statistics), each with a standard error from ``groups`` equal groups of the samples. The
-result is cached as JSON in the bench output folder, keyed by everything that defines it, so
-reruns of the bench read it back instead of recomputing it.
+computed exactly from the kept extreme order statistics), each with a standard error from
+``groups`` equal groups of the samples. Both are cached as JSON in the bench output folder,
+keyed by everything that defines them, so reruns of the bench read them back instead of
+recomputing them.
 """
 
 from __future__ import annotations
