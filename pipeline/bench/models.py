@@ -9,12 +9,17 @@ RMS over ``n_repeats`` independent runs, in units of the reference standard devi
 statistic, worst planet.
 
 Second table (``estimators``): every estimator of :func:`monte_carlo` (plain random, plain
-Sobol, the control variate ``method="cv"``) against a plain pseudo-random reference of
-``estimator_reference`` samples (1e7 by default; :mod:`.models_reference`, cached in the
-output folder so reruns are quick), on one numba thread: wall time, the largest relative
-error of the means and standard deviations and of the 3-sigma bounds (quantiles at
-Phi(-+3)) over every statistic and planet with a spread, the estimator's own largest
-relative standard error, and the largest |error| / sqrt(SE_est^2 + SE_ref^2). Relative means
+Sobol, the control variate ``method="cv"``) against a reference of ``estimator_reference``
+full-model evaluations (1e7 by default; :mod:`.models_reference`, cached in the output folder
+so reruns are quick): by default the directional control-variate reference
+(:func:`.models_reference.directional_reference`, relative standard errors of the 3-sigma
+bounds ~1e-4 and below), with the plain pseudo-random reference as the fallback when the
+case does not allow it (the table says which was used). On one numba thread: wall time, the
+largest relative error of the means and standard deviations and of the 3-sigma bounds
+(quantiles at Phi(-+3)) over every statistic and planet with a spread, beside each the
+reference's own relative standard error at that entry (``ref_se_*``: the error is resolved
+when it is well above it), the estimator's own largest relative standard error, and the
+largest |error| / sqrt(SE_est^2 + SE_ref^2). Relative means
 |estimate - reference| / max(|reference|, reference std of that statistic), so that values
 near zero (Ave means, the lower bound of Dev) are judged against the spread. The kernel
 throughput (G realisation x time x planet evaluations per second, one thread and all
@@ -28,6 +33,7 @@ import json
 import math
 import os
 import platform
+import sys
 import time
 from pathlib import Path
 
@@ -37,7 +43,7 @@ from ..log import logger
 from ..models import _kernels
 from ..models.tolerance import (ALL_STATISTICS, STATISTICS, monte_carlo, observation_window,
                                 table2_case, WINDOW_KINDS)
-from .models_reference import plain_reference
+from .models_reference import CASE3_NAME, directional_reference, plain_reference
 from ..validate import as_choice, as_positive_int
 
 __all__ = ["run_models_bench", "METRICS", "TABLE_COLUMNS", "ESTIMATOR_COLUMNS"]
@@ -51,16 +57,19 @@ TABLE_COLUMNS = (("sampler", "n_samples", "repeats", "wall_time_s")
                  + tuple(f"err_{k}_{s}" for s, k in METRICS)
                  + ("err_moments", "err_quantile", "err_max"))
 #: Columns of the estimator table (errors relative, see the module docstring).
-ESTIMATOR_COLUMNS = ("method", "samples", "evaluations", "wall_s", "err_mean_std",
-                     "err_bound3", "se_mean_std", "se_bound3", "max_z")
+ESTIMATOR_COLUMNS = ("method", "samples", "tail_directions", "evaluations", "repeats",
+                     "wall_s", "err_mean_std", "ref_se_mean_std", "err_bound3",
+                     "err_bound3_worst", "ref_se_bound3", "se_mean_std", "se_bound3", "max_z")
+#: Kinds of the estimator table's reference (:func:`run_models_bench`).
+REFERENCE_METHODS = ("directional", "plain")
 #: (method, sampler, n_samples, tail_directions) of the estimator table; quick: the first
 #: two rows shrunk.
 ESTIMATORS = (("plain", "random", 10000, None), ("plain", "random", 100000, None),
               ("plain", "sobol", 32768, None), ("cv", "sobol", 256, 8), ("cv", "sobol", 512, 8),
-              ("cv", "sobol", 2048, 16), ("cv", "sobol", 8192, 32))
+              ("cv", "sobol", 2048, 16), ("cv", "sobol", 2048, 32), ("cv", "sobol", 2048, 64),
+              ("cv", "sobol", 4096, 32), ("cv", "sobol", 8192, 32))
 #: Rows of the estimator table in a quick run.
 QUICK_ESTIMATORS = (("plain", "random", 4096, None), ("cv", "sobol", 256, 8))
-CASE3_NAME = "seed000 Table 2 case 3 (angles given)"
 
 
 def _metric_values(res, stat, kind):
@@ -110,7 +119,10 @@ def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 1
                      samplers=("random", "sobol"), reference_samples: int = 2 ** 21,
                      rng=0, quick: bool = False, n_repeats: int = 5, replicates: int = 8,
                      window: str = "slowest-offset", case3_samples: int = 100000,
-                     figure: bool = True, estimator_reference: int = 10 ** 7) -> dict:
+                     figure: bool = True, estimator_reference: int = 10 ** 7,
+                     reference_method: str = "directional",
+                     reference_progress: bool | None = None,
+                     estimator_repeats: int = 5) -> dict:
     """Monte Carlo error against wall time for both samplers; writes table, JSON and figure.
 
     Parameters
@@ -140,8 +152,20 @@ def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 1
     figure : bool
         Write the log-log figure (needs matplotlib).
     estimator_reference : int
-        Samples of the plain pseudo-random reference of the estimator table [-] (quick:
-        20000); cached as ``models_reference_<n>_<seed>.json`` in ``out_dir``.
+        Full-model evaluations of the estimator table's reference [-] (quick: 20000); cached
+        in ``out_dir`` as ``models_reference_directional_<n>_<seed>.json`` (directional) or
+        ``models_reference_<n>_<seed>.json`` (plain). Building the 1e7 directional reference
+        takes minutes (its wall time is in the table's header and the cache file).
+    reference_method : {"directional", "plain"}
+        Reference of the estimator table: the directional control-variate one (falls back to
+        plain, with the reason recorded, when the case does not allow it) or plain.
+    estimator_repeats : int
+        Independent runs per row of the estimator table [-] (quick: 1): errors RMS over
+        them, the worst bound error beside.
+    reference_progress : bool, optional
+        Show a progress bar (stderr) while the reference is computed (not when read from the
+        cache); default: when stderr is a terminal. ``python -m
+        meshphase.bench.models_reference OUT_DIR`` builds it as a separate step.
 
     Returns
     -------
@@ -181,8 +205,13 @@ def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 1
                                    ref, scale, active))
     crossover = _crossover(rows, samplers, active)
     case3 = {} if quick else _case3(case, case3_samples, case_seed, replicates)
+    reference_method = as_choice(reference_method, "reference_method", REFERENCE_METHODS)
+    if reference_progress is None:
+        reference_progress = sys.stderr.isatty()
     est_ref = 20000 if quick else as_positive_int(estimator_reference, "estimator_reference")
-    estimators = _estimator_table(case, out, est_ref, quick)
+    estimators = _estimator_table(case, out, est_ref, quick, reference_method,
+                                  reference_progress, 1 if quick else
+                                  as_positive_int(estimator_repeats, "estimator_repeats"))
     throughput = _throughput(case, 2048 if quick else 32768)
     meta = {"case": "seed000 Table 2 case 3 (angles given)", "window": win.to_dict(),
             "n_times": ref.n_times, "engine": engine, "replicates": replicates,
@@ -293,9 +322,10 @@ def _throughput(case, n: int) -> dict:
 
 
 def _rel_errors(res, ref, stats):
-    """Largest relative errors, relative standard errors and z of one estimator run."""
+    """Largest relative errors, the reference's relative standard error at the entry of each
+    largest error, the estimator's largest relative standard errors and the largest z."""
     vals, se = ref["values"], ref["stderr"]
-    err = {"mean_std": [], "bound3": []}
+    err = {"mean_std": (-1.0, float("nan")), "bound3": (-1.0, float("nan"))}
     own = {"mean_std": [], "bound3": []}
     zs = []
     for s in stats:
@@ -312,62 +342,129 @@ def _rel_errors(res, ref, stats):
             if not np.any(ok):
                 continue
             d = np.abs(np.asarray(est) - r)[ok]
-            err[group].append(float(np.max(d / den[ok])))
+            rel = d / den[ok]
+            i = int(np.argmax(rel))
+            if rel[i] > err[group][0]:
+                err[group] = (float(rel[i]), float(np.asarray(se[key][s])[ok][i] / den[ok][i]))
             own[group].append(float(np.nanmax(np.asarray(e_se)[ok] / den[ok])))
             tot = np.sqrt(np.asarray(e_se)[ok] ** 2 + np.asarray(se[key][s])[ok] ** 2)
             zs.append(float(np.max(d / np.where(tot > 0, tot, np.inf))))
-    return ({k: max(v) if v else float("nan") for k, v in err.items()},
+    return ({k: (v[0] if v[0] >= 0 else float("nan")) for k, v in err.items()},
+            {k: v[1] for k, v in err.items()},
             {k: max(v) if v else float("nan") for k, v in own.items()},
             max(zs) if zs else float("nan"))
 
 
-def _estimator_table(case, out: Path, ref_n: int, quick: bool) -> dict:
-    """Error of each estimator against the cached plain reference, on one thread."""
-    g, sp, tol, win = case
+def _bench_reference(case, out: Path, ref_n: int, quick: bool, method: str, progress: bool):
+    """The estimator table's reference: directional, or plain (asked for, or the fallback
+    when the case does not allow the directional one; the reason is recorded)."""
+    if method == "directional":
+        try:
+            return directional_reference(case, out, n_evaluations=ref_n, case_name=CASE3_NAME,
+                                         check_directions=32 if quick else 256,
+                                         progress=progress)
+        except ValueError as exc:
+            reason = str(exc)
+            logger.warning("bench models: directional reference not possible (%s); using the "
+                           "plain reference", reason)
+    else:
+        reason = "asked for"
     ref = plain_reference(case, out, n_samples=ref_n, case_name=CASE3_NAME)
+    ref["fallback_reason"] = reason
+    return ref
+
+
+def _estimator_row(case, spec, seeds, ref, stats) -> dict:
+    """One row of the estimator table: ``len(seeds)`` runs of one (method, sampler, samples,
+    tail directions); wall time the median, errors RMS over the runs (``err_bound3_worst``
+    the largest), the reference's SE at the largest error of the worst run, the estimator's
+    SEs the median, max_z the largest."""
+    g, sp, tol, win = case
+    mth, sampler, n, n_dir = spec
+    if not seeds:
+        raise ValueError("_estimator_row needs at least one seed")
+    runs = []
+    for seed in seeds:
+        kw = {"method": mth, "sampler": sampler, "rng": seed}
+        if n_dir is not None:
+            kw["tail_directions"] = n_dir
+        t = time.perf_counter()
+        res = monte_carlo(g, sp, tol, win, n, **kw)
+        runs.append((time.perf_counter() - t, res, *_rel_errors(res, ref, stats)))
+    label = mth if mth == "cv" else f"plain-{sampler}"
+    res = runs[0][1]
+
+    def rms(group):
+        return float(np.sqrt(np.mean([r[2][group] ** 2 for r in runs])))
+
+    def worst(group):
+        return max(runs, key=lambda r: r[2][group])
+
+    row = {"method": label, "samples": res.n_samples, "tail_directions": n_dir,
+           "evaluations": res.n_evaluations or res.n_samples, "repeats": len(runs),
+           "wall_s": float(np.median([r[0] for r in runs])),
+           "err_mean_std": rms("mean_std"), "ref_se_mean_std": worst("mean_std")[3]["mean_std"],
+           "err_bound3": rms("bound3"), "err_bound3_worst": worst("bound3")[2]["bound3"],
+           "ref_se_bound3": worst("bound3")[3]["bound3"],
+           "se_mean_std": float(np.median([r[4]["mean_std"] for r in runs])),
+           "se_bound3": float(np.median([r[4]["bound3"] for r in runs])),
+           "max_z": max(r[5] for r in runs)}
+    logger.info("bench models: %s n=%d %.3f s err %.3g / %.3g", label, n, row["wall_s"],
+                row["err_mean_std"], row["err_bound3"])
+    return row
+
+
+def _estimator_table(case, out: Path, ref_n: int, quick: bool, method: str = "directional",
+                     progress: bool = False, repeats: int = 5) -> dict:
+    """Error of each estimator against the cached reference, on one thread, ``repeats``
+    independent runs per row."""
+    g, sp, tol, win = case
+    ref = _bench_reference(case, out, ref_n, quick, method, progress)
     stats = [s for s in ALL_STATISTICS
              if np.max(np.asarray(ref["values"]["std"][s]), initial=0.0) > 1e-12]
-    rows = []
     specs = QUICK_ESTIMATORS if quick else ESTIMATORS
+    load = [_load_average()]
     with _Threads(1):
         monte_carlo(g, sp, tol, win, 64, method="cv", rng=0)       # warm-up (JIT, imports)
-        for i, (method, sampler, n, n_dir) in enumerate(specs):
-            kw = {"method": method, "sampler": sampler, "rng": 1000 + i}
-            if n_dir is not None:
-                kw["tail_directions"] = n_dir
-            t = time.perf_counter()
-            res = monte_carlo(g, sp, tol, win, n, **kw)
-            wall = time.perf_counter() - t
-            err, own, z = _rel_errors(res, ref, stats)
-            label = method if method == "cv" else f"plain-{sampler}"
-            rows.append({"method": label, "samples": res.n_samples,
-                         "evaluations": res.n_evaluations or res.n_samples, "wall_s": wall,
-                         "err_mean_std": err["mean_std"], "err_bound3": err["bound3"],
-                         "se_mean_std": own["mean_std"], "se_bound3": own["bound3"],
-                         "max_z": z})
-            logger.info("bench models: %s n=%d %.3f s err %.3g / %.3g", label, n, wall,
-                        err["mean_std"], err["bound3"])
+        rows = [_estimator_row(case, spec, [1000 + 100 * j + i for j in range(repeats)], ref,
+                               stats) for i, spec in enumerate(specs)]
     ref_se = _rel_errors_ref(ref, stats)
-    return {"rows": rows, "reference": {"n_samples": ref["n_samples"], "seed": ref["seed"],
-                                        "wall_time_s": ref["wall_time_s"],
-                                        "cached": ref["cached"], "se_mean_std": ref_se[0],
-                                        "se_bound3": ref_se[1]},
-            "statistics": stats, "threads": 1}
+    info = {"method": ref.get("method", "plain"), "n_samples": ref["n_samples"],
+            "seed": ref["seed"], "wall_time_s": ref["wall_time_s"], "cached": ref["cached"],
+            "file": ref.get("file"), "se_mean_std": ref_se[0], "se_bound3": ref_se[1],
+            "fallback_reason": ref.get("fallback_reason")}
+    if info["method"] == "directional-cv":
+        info["se_batch_mean_std"], info["se_batch_bound3"] = _rel_errors_ref(
+            {"values": ref["values"], "stderr": ref["stderr_batch"]}, stats)
+        info.update({"n_directions": ref["n_directions"], "nodes": ref["nodes"],
+                     "interpolation": ref["interpolation"], "unconverged": ref["unconverged"]})
+    load.append(_load_average())
+    return {"rows": rows, "reference": info, "statistics": stats, "threads": 1,
+            "load_average": load}
+
+
+def _load_average():
+    """(1, 5, 15 min) load average of the machine, or None where the OS has none."""
+    try:
+        return list(os.getloadavg())
+    except (AttributeError, OSError):
+        return None
 
 
 def _rel_errors_ref(ref, stats):
-    """The reference's own largest relative standard errors (means/stds, bounds)."""
+    """The reference's own largest relative standard errors (means/stds, bounds); an SE
+    that could not be formed (null in the cache) makes the result NaN."""
     vals, se = ref["values"], ref["stderr"]
     out = []
     for keys in (("mean", "std"), ("bound3_lo", "bound3_hi")):
         m = 0.0
         for s in stats:
-            scale = np.asarray(vals["std"][s])
+            scale = np.asarray(vals["std"][s], dtype=float)
             ok = scale > 1e-12
             for k in keys:
-                den = np.maximum(np.abs(np.asarray(vals[k][s])), scale)[ok]
+                den = np.maximum(np.abs(np.asarray(vals[k][s], dtype=float)), scale)[ok]
                 if den.size:
-                    m = max(m, float(np.max(np.asarray(se[k][s])[ok] / den)))
+                    m = max(m, float(np.max(np.asarray(se[k][s], dtype=float)[ok] / den)))
         out.append(m)
     return out
 
@@ -405,11 +502,35 @@ def _crossover(rows, samplers, active):
 
 
 def _fmt(v):
+    if v is None:
+        return "-"
     if isinstance(v, float):
         if v != v:
             return "-"
         return f"{v:.3g}"
     return str(v)
+
+
+def _reference_lines(er):
+    """Markdown lines describing the estimator table's reference."""
+    cached = ", read from the cache" if er["cached"] else ""
+    where = f" File: `{er['file']}`." if er.get("file") else ""
+    own = (f"its own largest relative standard error: means/stds {_fmt(er['se_mean_std'])}, "
+           f"3-sigma bounds {_fmt(er['se_bound3'])}")
+    if er.get("method") == "directional-cv":
+        it = er["interpolation"]
+        return ["Reference: directional control variate "
+                f"(`meshphase.bench.models_reference_tail`), "
+                f"{er['n_samples']} full-model evaluations ({er['n_directions']} rays x "
+                f"{er['nodes']} radii, seed {er['seed']}, built in {er['wall_time_s']:.0f} s"
+                f"{cached}); {own} (delta method; batch means over 10 groups: "
+                f"{_fmt(er['se_batch_mean_std'])}, {_fmt(er['se_batch_bound3'])}). "
+                f"Interpolation check on {it['n_directions']} rays: largest tail-probability "
+                f"bias {_fmt(it['max_rel_tail_bias'])} of the tail mass; unconverged crossings "
+                f"{er['unconverged']}.{where}", ""]
+    why = f" (fallback: {er['fallback_reason']})" if er.get("fallback_reason") else ""
+    return [f"Reference: plain pseudo-random{why}, {er['n_samples']} samples (seed "
+            f"{er['seed']}, {er['wall_time_s']:.0f} s{cached}); {own}.{where}", ""]
 
 
 def _markdown(result):
@@ -437,16 +558,18 @@ def _markdown(result):
                          f"{_fmt(v['ratio'])} |")
     est = result.get("estimators") or {}
     if est:
-        er = est["reference"]
-        lines += ["", "## Estimators against a plain Monte Carlo reference", "",
-                  f"Reference: plain pseudo-random, {er['n_samples']} samples (seed "
-                  f"{er['seed']}, {er['wall_time_s']:.0f} s"
-                  f"{', read from the cache' if er['cached'] else ''}); its own largest "
-                  f"relative standard error: means/stds {_fmt(er['se_mean_std'])}, 3-sigma "
-                  f"bounds {_fmt(er['se_bound3'])}. One numba thread. Errors: largest over "
-                  "the statistics with a spread and their planets of |estimate - reference| / "
-                  "max(|reference|, reference std); se_*: the estimator's own standard errors "
-                  "on the same scale; max_z: largest |error| / sqrt(SE_est^2 + SE_ref^2).", ""]
+        lines += ["", "## Estimators against a Monte Carlo reference", ""]
+        lines += _reference_lines(est["reference"])
+        lines += ["One numba thread; each row RMS over `repeats` independent runs (wall time: "
+                  "median; err_bound3_worst: the worst run). Errors: largest over the "
+                  "statistics with a spread and their planets of |estimate - reference| / "
+                  "max(|reference|, reference std); "
+                  "ref_se_*: the reference's own standard error at that largest error, on the "
+                  "same scale (an error is resolved when well above it); se_*: the estimator's "
+                  "own largest standard errors; max_z: largest |error| / sqrt(SE_est^2 + "
+                  "SE_ref^2). Load average (1, 5, 15 min) before and after the rows: "
+                  + " / ".join(", ".join(f"{x:.2f}" for x in la) if la else "-"
+                               for la in est.get("load_average") or [None]) + ".", ""]
         lines.append("| " + " | ".join(ESTIMATOR_COLUMNS) + " |")
         lines.append("|" + "|".join("---" for _ in ESTIMATOR_COLUMNS) + "|")
         for r in est["rows"]:

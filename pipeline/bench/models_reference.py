@@ -1,12 +1,20 @@
-"""Plain Monte Carlo reference of the tolerance statistics for ``meshphase bench models``.
+"""Monte Carlo references of the tolerance statistics for ``meshphase bench models``.
 
-A large pseudo-random run (1e7 samples by default) of seed 000 Table 2 case 3, reduced in
-bounded memory to exactly what the error table needs: per statistic and planet the mean, the
-standard deviation and the two 3-sigma bounds (the sample quantiles at Phi(-3) and Phi(3),
-``numpy.quantile``'s linear interpolation, computed exactly from the kept extreme order
-statistics), each with a standard error from ``groups`` equal groups of the samples. The
-result is cached as JSON in the bench output folder, keyed by everything that defines it, so
-reruns of the bench read it back instead of recomputing it.
+:func:`directional_reference` (the default of the bench): 1e7 full-model evaluations of seed
+000 Table 2 case 3 spent on the directional control-variate estimator of
+:mod:`.models_reference_tail` (2.5e6 rays x 4 radii), which resolves the means, standard
+deviations and 3-sigma bounds to relative standard errors of about 1e-4 and below (the plain
+run below: 1e-3 on the bounds); it needs what the linear model needs (normal radial bands with
+zero mean, fixed angles) and raises ValueError otherwise.
+
+:func:`plain_reference` (the fallback): a large pseudo-random run (1e7 samples by default)
+of seed 000 Table 2 case 3, reduced in bounded memory to exactly what the error table
+needs: per statistic and planet the mean, the standard deviation and the two 3-sigma bounds
+(the sample quantiles at Phi(-3) and Phi(3), ``numpy.quantile``'s linear interpolation,
+computed exactly from the kept extreme order statistics), each with a standard error from
+``groups`` equal groups of the samples. Both are cached as JSON in the bench output folder,
+keyed by everything that defines them, so reruns of the bench read them back instead of
+recomputing them.
 """
 
 from __future__ import annotations
@@ -18,13 +26,20 @@ from pathlib import Path
 
 import numpy as np
 
+from scipy import special
+
+from ..jsonable import to_jsonable
 from ..log import logger
+from ..models import _kernels
 from ..models.tolerance_model import (ALL_STATISTICS, _P3_HI, _P3_LO, _Grid, _map_samples,
-                                      default_n_times)
+                                      _map_values, default_n_times)
 from ..validate import as_positive_int
+from .models_reference_tail import directional_bounds, interpolation_check
 
-__all__ = ["plain_reference", "REFERENCE_SUMMARIES"]
+__all__ = ["plain_reference", "directional_reference", "REFERENCE_SUMMARIES"]
 
+#: Label of the bench's case (part of the cache keys).
+CASE3_NAME = "seed000 Table 2 case 3 (angles given)"
 #: Summaries held in the reference (and compared by the bench).
 REFERENCE_SUMMARIES = ("mean", "std", "bound3_lo", "bound3_hi")
 
@@ -147,14 +162,9 @@ def plain_reference(case, cache_dir, *, n_samples: int = 10 ** 7, seed: int = 20
            "window": win.to_dict(), "n_times": _n_times(sp, win),
            "tolerances": tol.to_dict(), "n_planets": g.n_planets}
     path = Path(cache_dir) / f"models_reference_{n}_{int(seed)}.json"
-    if path.is_file():
-        try:
-            cached = json.loads(path.read_text())
-            if cached.get("key") == json.loads(json.dumps(key)):
-                cached["cached"] = True
-                return cached
-        except (OSError, ValueError):
-            pass
+    cached = _read_cache(path, key)
+    if cached is not None:
+        return cached
     t = time.perf_counter()
     total, per_group, grid = _run(case, n, int(seed), groups, as_positive_int(batch, "batch"))
     wall = time.perf_counter() - t
@@ -167,8 +177,277 @@ def plain_reference(case, cache_dir, *, n_samples: int = 10 ** 7, seed: int = 20
     values = {k: split(total[k]) for k in REFERENCE_SUMMARIES}
     stderr = {k: split(np.std(np.stack([pg[k] for pg in per_group]), axis=0, ddof=1)
                        / math.sqrt(groups)) for k in REFERENCE_SUMMARIES}
-    out = {"key": key, "n_samples": n, "seed": int(seed), "sampler": "random",
-           "wall_time_s": wall, "values": values, "stderr": stderr, "cached": False}
-    Path(cache_dir).mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(out, indent=1))
+    out = {"key": key, "method": "plain", "n_samples": n, "seed": int(seed),
+           "sampler": "random", "wall_time_s": wall, "values": values, "stderr": stderr,
+           "cached": False, "file": str(path)}
+    _write_cache(path, out)
     return out
+
+
+def _read_cache(path, key):
+    """The cached reference at ``path`` when its key equals ``key`` (else None)."""
+    if not path.is_file():
+        return None
+    try:
+        cached = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    if cached.get("key") != json.loads(json.dumps(key)):
+        return None
+    cached["cached"] = True
+    cached["file"] = str(path)
+    return cached
+
+
+def _write_cache(path, out):
+    """Strict JSON (NaN, e.g. a batch-means SE that could not be formed, becomes null)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(to_jsonable(out), indent=1))
+
+
+#: Version of the directional estimator's settings (r_max, threshold grid, iterations) in the
+#: cache key: a change of them invalidates cached references.
+_DIRECTIONAL_VERSION = 1
+
+
+class _CaseModel:
+    """The full model of a tolerance case in standard normal coordinates, its first-order
+    model (slopes, exact tails and moments) and the 3-sigma targets, for
+    :func:`.models_reference_tail.directional_bounds`. Columns: statistic-major, then planet
+    (as :func:`plain_reference`)."""
+
+    def __init__(self, case):
+        from ..models.tolerance_cv import _check_cv_bands, _surrogate
+        from ..models.tolerance_linear import exceedance, linearised_deviation
+        g, sp, tol, win = case
+        self.n_p = g.n_planets
+        self.n_t = _n_times(sp, win)
+        _check_cv_bands(tol, self.n_p)                 # zero-mean normal radii, fixed angles
+        self.lin = linearised_deviation(g, sp, tol, win, self.n_t)
+        if self.lin.n_random == 0 or not self.lin.homogeneous():
+            raise ValueError("directional reference: needs random radial errors and a "
+                             "deviation that vanishes at the mean errors")
+        self.tol = tol
+        self.grid = _Grid(g, sp, win, self.n_t)
+        self.engine = _kernels.resolve_engine("auto")
+        self._exceedance = exceedance
+        self.mean, self.std, q, _ = _surrogate(self.lin, np.zeros(0))   # q: (8, 2, N)
+        scale = np.max(self.std, initial=0.0)
+        self.targets, self.q_lin, self.info, self._dirs = [], [], [], {}
+        for i in range(len(ALL_STATISTICS)):
+            for n in range(self.n_p):
+                if not scale > 0 or not self.std[i, n] > 1e-9 * scale:
+                    continue
+                for j, side in enumerate((-1, 1)):
+                    self.targets.append((i * self.n_p + n, side))
+                    self.q_lin.append(float(q[i, j, n]))
+                    self.info.append((i, n, side))
+                if i % 2:
+                    self._dirs[(i, n)] = self.lin.dev_directions(i // 2, n)
+        self._mat = self.lin.scaled.reshape(-1, self.lin.n_random).T      # (d, 4 N n_t)
+
+    @property
+    def d(self):
+        return self.lin.n_random
+
+    def model(self, z):
+        """Full-model statistics (S, 8 N) at standard normal points z (S, d)."""
+        vals = self.lin.mean + self.lin.sigma * z
+        es, ks, er, kr, ep, kp = _map_values(vals, self.tol, self.n_p)
+        out = np.stack(self.grid.run(es, ks, er, kr, ep, kp, self.engine))
+        return out.transpose(1, 0, 2).reshape(z.shape[0], -1)
+
+    def lin_rho(self, u):
+        """First-order slopes (S, 8 N) at unit directions u (S, d)."""
+        s = (u @ self._mat).reshape(u.shape[0], 4, self.n_p, self.n_t)
+        out = np.empty((u.shape[0], 8, self.n_p))
+        out[:, 0::2] = s.mean(axis=-1)
+        out[:, 1::2] = s.max(axis=-1) - s.min(axis=-1)
+        return out.reshape(u.shape[0], -1)
+
+    def lin_tail(self, qg):
+        """Exact tail probabilities (T, J) of the linear model at thresholds qg (T, J):
+        Ave_L Gaussian, Dev_L by its direction integral (:func:`exceedance`)."""
+        out = np.empty_like(qg)
+        for t, (i, n, side) in enumerate(self.info):
+            if i % 2 == 0:
+                z = (qg[t] - self.mean[i, n]) / self.std[i, n]
+                out[t] = special.ndtr(-z) if side > 0 else special.ndtr(z)
+            else:
+                k, rho, w = self._dirs[(i, n)]
+                e = self._exceedance(qg[t], rho, w, k)
+                out[t] = e if side > 0 else 1.0 - e
+        return out
+
+    def lin_moments(self):
+        """Exact E[Y_L] and E[Y_L^2] per column, (8 N,) each."""
+        return self.mean.reshape(-1), (self.std ** 2 + self.mean ** 2).reshape(-1)
+
+
+def _tail_split(res, cm, key_bound, key_se):
+    """{summary: {statistic: [N]}} of the bounds (and their SEs); columns without a spread
+    keep the linear model's bound with SE 0."""
+    n_p = cm.n_p
+    lo = np.zeros((len(ALL_STATISTICS), n_p))
+    hi = np.zeros_like(lo)
+    lo_se, hi_se = np.zeros_like(lo), np.zeros_like(lo)
+    for t, (i, n, side) in enumerate(cm.info):
+        (hi if side > 0 else lo)[i, n] = res[key_bound][t]
+        (hi_se if side > 0 else lo_se)[i, n] = res[key_se][t]
+    return ({"bound3_lo": lo, "bound3_hi": hi}, {"bound3_lo": lo_se, "bound3_hi": hi_se})
+
+
+def directional_reference(case, cache_dir, *, n_evaluations: int = 10 ** 7, nodes: int = 4,
+                          seed: int = 20261126, groups: int = 10, batch: int = 4096,
+                          case_name: str = "", progress: bool = False,
+                          check_directions: int = 256) -> dict:
+    """The directional control-variate reference, read from the cache or computed and cached.
+
+    Parameters
+    ----------
+    case : tuple
+        (gearset, speeds, tolerances, window); normal radial bands with zero mean and fixed
+        angles (ValueError otherwise: use :func:`plain_reference`).
+    cache_dir : path-like
+        Folder of the cache file ``models_reference_directional_<n>_<seed>.json``.
+    n_evaluations : int
+        Full-model evaluations [-]: ``n_evaluations // nodes`` rays of ``nodes`` radii.
+    nodes : int
+        Radii per ray [-].
+    seed : int
+        Seed of the directions (``numpy.random.default_rng``).
+    groups : int
+        Groups of rays for the batch-means check of the standard errors [-], >= 2.
+    batch : int
+        Rays per kernel call [-] (bounds the memory).
+    case_name : str
+        Label stored with the reference (part of the cache key).
+    progress : bool
+        Show a progress bar (tqdm, on stderr) while computing.
+    check_directions : int
+        Rays of the interpolation check [-] (:func:`interpolation_check`, ~8 evaluations per
+        ray and bound).
+
+    Returns
+    -------
+    dict
+        As :func:`plain_reference` (``"values"``, ``"stderr"``: delta method), plus
+        ``"stderr_batch"`` (batch means over ``groups``), ``"method": "directional-cv"``,
+        ``"n_directions"``, ``"interpolation"`` (:func:`interpolation_check` at the bounds:
+        largest mean tail-probability bias relative to the tail mass), ``"unconverged"``,
+        ``"file"``.
+    """
+    n = as_positive_int(n_evaluations, "n_evaluations")
+    nodes = as_positive_int(nodes, "nodes")
+    groups = as_positive_int(groups, "groups")
+    m_dir = n // nodes
+    if groups < 2 or m_dir < 2 * groups:
+        raise ValueError(f"need groups >= 2 and n_evaluations >= 2 groups x nodes, got "
+                         f"{groups}, {n}")
+    g, sp, tol, win = case
+    cm = _CaseModel(case)
+    key = {"case": case_name, "method": "directional-cv", "version": _DIRECTIONAL_VERSION,
+           "n_evaluations": n, "nodes": nodes, "seed": int(seed), "groups": groups,
+           "window": win.to_dict(), "n_times": cm.n_t, "tolerances": tol.to_dict(),
+           "n_planets": g.n_planets}
+    path = Path(cache_dir) / f"models_reference_directional_{n}_{int(seed)}.json"
+    cached = _read_cache(path, key)
+    if cached is not None:
+        return cached
+    t = time.perf_counter()
+    with _bar(m_dir, progress) as bar:
+        res = directional_bounds(
+            cm.model, cm.lin_rho, cm.lin_tail, cm.d, cm.targets, cm.q_lin, m_dir,
+            lin_moments=cm.lin_moments(), nodes=nodes, groups=groups, batch=batch,
+            rng=np.random.default_rng(int(seed)), progress=bar)
+    chk = interpolation_check(cm.model, cm.lin_rho, cm.d, cm.targets, res["bound"],
+                              as_positive_int(check_directions, "check_directions"),
+                              nodes=nodes, rng=np.random.default_rng(int(seed) + 1))
+    wall = time.perf_counter() - t
+    n_p = g.n_planets
+
+    def split(v):
+        v = np.asarray(v).reshape(len(ALL_STATISTICS), n_p)
+        return {s: v[i].tolist() for i, s in enumerate(ALL_STATISTICS)}
+
+    b_val, b_se = _tail_split(res, cm, "bound", "se")
+    b_batch = _tail_split(res, cm, "bound", "se_batch")[1]
+    values = {"mean": split(res["mean"]), "std": split(res["std"])}
+    values.update({k: split(v) for k, v in b_val.items()})
+    stderr = {"mean": split(res["se_mean"]), "std": split(res["se_std"])}
+    stderr.update({k: split(v) for k, v in b_se.items()})
+    stderr_batch = {"mean": split(res["se_batch_mean"]), "std": split(res["se_batch_std"])}
+    stderr_batch.update({k: split(v) for k, v in b_batch.items()})
+    out = {"key": key, "method": "directional-cv", "n_samples": n,
+           "n_directions": res["n_directions"], "nodes": nodes, "seed": int(seed),
+           "sampler": "random directions", "wall_time_s": wall, "values": values,
+           "stderr": stderr, "stderr_batch": stderr_batch,
+           "unconverged": res["unconverged"],
+           "interpolation": {"n_directions": chk["n_directions"],
+                             "max_rel_radius": float(np.max(chk["max_rel_radius"])),
+                             "max_rel_tail_bias": float(np.max(np.abs(chk["mean_dp"]))
+                                                        / special.ndtr(-3.0))},
+           "cached": False, "file": str(path)}
+    _write_cache(path, out)
+    logger.info("bench models: directional reference (%d evaluations) in %.0f s -> %s", n,
+                wall, path)
+    return out
+
+
+class _bar:
+    """A tqdm progress bar over rays as a ``progress(done, total)`` callable (or None)."""
+
+    def __init__(self, total, enabled):
+        self.total = total
+        self.enabled = bool(enabled)
+        self.tq = None
+
+    def __enter__(self):
+        if not self.enabled:
+            return None
+        import sys
+
+        from tqdm import tqdm
+        self.tq = tqdm(total=self.total, desc="directional reference", unit="ray",
+                       unit_scale=True, file=sys.stderr)
+        return self
+
+    def __call__(self, done, total):
+        self.tq.update(done - self.tq.n)
+
+    def __exit__(self, *exc):
+        if self.tq is not None:
+            self.tq.close()
+
+
+def main(argv=None) -> int:
+    """Build (or read) the estimator table's reference of ``meshphase bench models`` as a
+    separate step, with a progress bar: ``python -m meshphase.bench.models_reference OUT_DIR
+    [--evaluations N] [--plain]``. Prints the cache file and the reference's build time."""
+    import argparse
+
+    from ..models.tolerance import observation_window, table2_case
+
+    ap = argparse.ArgumentParser(prog="python -m meshphase.bench.models_reference",
+                                 description=main.__doc__.split("\n\n")[0])
+    ap.add_argument("out_dir", help="the bench output folder (the cache goes there)")
+    ap.add_argument("--evaluations", type=int, default=10 ** 7,
+                    help="full-model evaluations (default 1e7)")
+    ap.add_argument("--plain", action="store_true", help="the plain reference instead")
+    args = ap.parse_args(argv)
+    g, sp, tol = table2_case(3)
+    case = (g, sp, tol, observation_window(sp, "slowest-offset"))
+    if args.plain:
+        ref = plain_reference(case, args.out_dir, n_samples=args.evaluations,
+                              case_name=CASE3_NAME)
+    else:
+        ref = directional_reference(case, args.out_dir, n_evaluations=args.evaluations,
+                                    case_name=CASE3_NAME, progress=True)
+    state = "read from the cache" if ref["cached"] else "built"
+    print(f"{ref['method']} reference, {ref['n_samples']} evaluations, {state} "
+          f"(build time {ref['wall_time_s']:.0f} s): {ref['file']}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

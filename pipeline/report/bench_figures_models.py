@@ -17,7 +17,9 @@ def models_bench_figure(result: dict):
     Solid: worst error of the moment statistics (mean, mean + 3 std); dashed: worst error of
     the 99.865 % quantile bounds; grey lines: plain random's error at its largest count.
     With an estimator table (``result["estimators"]``) a third panel shows each estimator's
-    largest relative error against its one-thread wall time, with the 1e-3 goal dotted.
+    largest relative error against its one-thread wall time, with the 1e-3 goal dotted and
+    the reference's own largest relative standard errors (thin grey, solid: means/stds,
+    dashed: bounds), below which an error is not resolved.
 
     Parameters
     ----------
@@ -51,7 +53,7 @@ def models_bench_figure(result: dict):
     axes[0].set_xlabel("wall time [s]")
     axes[1].set_xlabel("samples [-]")
     if est:
-        _estimator_panel(axes[2], est)
+        _estimator_panel(axes[2], est, result["estimators"].get("reference") or {})
     for ax in axes[:2]:
         ax.set_ylabel("error [reference std]")
         ax.grid(True, which="both", alpha=0.3)
@@ -63,9 +65,9 @@ def models_bench_figure(result: dict):
     return fig
 
 
-def _estimator_panel(ax, rows):
+def _estimator_panel(ax, rows, ref):
     """Largest relative error against wall time per estimator (solid: means and stds,
-    dashed: 3-sigma bounds) with the 1e-3 goal."""
+    dashed: 3-sigma bounds) with the 1e-3 goal and the reference's own standard errors."""
     methods = sorted({r["method"] for r in rows})
     for i, mth in enumerate(methods):
         rr = sorted((r for r in rows if r["method"] == mth), key=lambda r: r["wall_s"])
@@ -77,8 +79,14 @@ def _estimator_panel(ax, rows):
             ax.loglog(tm[ok], err[ok], "o" + ls, color=f"C{i + 2}", ms=4,
                       label=f"{mth}, {label}")
     ax.axhline(1e-3, color="0.3", lw=0.8, ls=":")
+    for key, ls, label in (("se_mean_std", "-", "reference SE, mean/std"),
+                           ("se_bound3", "--", "reference SE, bounds")):
+        v = ref.get(key)
+        if v is not None and np.isfinite(v) and v > 0:
+            ax.axhline(v, color="0.6", lw=0.7, ls=ls, label=label)
     ax.set_xlabel("wall time, one thread [s]")
-    ax.set_ylabel("largest relative error vs plain reference [-]")
+    kind = "directional" if ref.get("method") == "directional-cv" else "plain"
+    ax.set_ylabel(f"largest relative error vs {kind} reference [-]")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
 
