@@ -41,8 +41,10 @@ analytic first-order model (:mod:`.tolerance_linear`) and corrects it with the f
 randomised Sobol points for the means, standard deviations and ordinary quantiles,
 directional and line sampling for the 3-sigma bounds, standard errors from the replicates;
 it needs normal radial bands with zero mean and fixed angles (seed 000 case 3). ``meshphase
-bench models`` reports each estimator's error against a large plain reference and its wall
-time. The windows, grid, bands and result types live in :mod:`.tolerance_model` and are
+bench models`` reports each estimator's error and wall time against a 1e7-evaluation
+reference: directional sampling with the first-order model as control variate
+(:mod:`meshphase.bench.models_reference_tail`, its own SE on the 3-sigma bounds ~1e-4),
+the plain reference where the case does not allow it. The windows, grid, bands and result types live in :mod:`.tolerance_model` and are
 re-exported here.
 """
 
