@@ -10,13 +10,11 @@ into contiguous halves read by two threads, each with its own buffer (``os.pread
 numpy copies release the GIL); the samples are the same. ``meshphase bench io`` reports the
 one-thread rows and a two-thread row beside them.
 
-Kept out after measuring (load average 5-7, the other helpers' runs on both cores; A/B in
-one process, CPU time of the read, medians of 8-15 rounds): a cache-blocked transpose (256
+Tried for the one-thread read and kept out, because the whole read measured no faster
+(A/B in one process, the machine shared with other runs): a cache-blocked transpose (256
 rows at a time to a block-major scratch in one numpy assignment over a 3-d view, then runs
-of 256 samples into the output) is 25 % faster than ``out[...] = rows.T`` with the rows in
-L2 alone, but the whole read was not faster (-3 % to +10 % either way, within the noise; in
-windows of 2^18 rows slower); transposing straight from the memory map after
-``MADV_POPULATE_READ`` (no ``os.preadv`` copy) was likewise not faster.
+of 256 samples into the output), larger or smaller row blocks, and transposing straight
+from the memory map after ``MADV_POPULATE_READ`` instead of the ``os.preadv`` copy.
 """
 
 from __future__ import annotations
