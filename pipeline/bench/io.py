@@ -83,9 +83,6 @@ _TDMS_SMALL_SEGMENTS = (512, 1000)  # NI-DAQmx logging, contiguous and interleav
 #: TDMS variants read another way than the default (meshphase.io.tdms.reading_path)
 _TDMS_PUBLIC = ", npTDMS read_data"
 _TDMS_COLD = ", plan not cached"
-#: TDMS variant read with two threads (an explicit option: reading_path(threads=2)); the rows
-#: without it are the one-thread figures that the targets are held against
-_TDMS_THREADS = ", 2 threads"
 
 
 # ---------------------------------------------------------------------------------- data
@@ -157,16 +154,14 @@ def _write_tdms(rec: Recording, path: Path, segment: int) -> None:
 
 def _tdms_reading(fmt: str, variant: str):
     """How a TDMS variant is read: computed offsets with the read plan cached (default),
-    the plan built anew on every read (``_TDMS_COLD``), interleaved rows read by two
-    threads (``_TDMS_THREADS``), or every sample through npTDMS's public ``read_data``
-    (``_TDMS_PUBLIC``)."""
+    the plan built anew on every read (``_TDMS_COLD``), or every sample through npTDMS's
+    public ``read_data`` (``_TDMS_PUBLIC``)."""
     if fmt != "tdms":
         return contextlib.nullcontext()
     from ..io.tdms import reading_path
 
     return reading_path(computed_offsets=not variant.endswith(_TDMS_PUBLIC),
-                        cache_plans=not variant.endswith(_TDMS_COLD),
-                        threads=2 if variant.endswith(_TDMS_THREADS) else 1)
+                        cache_plans=not variant.endswith(_TDMS_COLD))
 
 
 def _variants(fmt: str) -> list[tuple[str, str, Callable[[Recording, Path], None]]]:
@@ -191,8 +186,6 @@ def _variants(fmt: str) -> list[tuple[str, str, Callable[[Recording, Path], None
                   lambda r, p: _write_tdms(r, p, _TDMS_LARGE_SEGMENT))]
                 + [(f"{spc} samples/segment{', interleaved' if il else ''}", ".tdms", ni_log(spc, il))
                    for spc in _TDMS_SMALL_SEGMENTS for il in (False, True)]
-                + [(f"{spc} samples/segment, interleaved{_TDMS_THREADS}", ".tdms", ni_log(spc, True))
-                   for spc in _TDMS_SMALL_SEGMENTS]
                 + [(f"{small} samples/segment{how}", ".tdms", ni_log(small, False))
                    for how in (_TDMS_COLD, _TDMS_PUBLIC)])
     raise ValueError(f"unknown format {fmt!r}")
@@ -529,8 +522,6 @@ def _notes(repeats: int) -> list[str]:
         "(meshphase.synthetic.tdms_export.write_ni_log). Read by computed offsets from the "
         "segment index, the read plan (npTDMS's metadata parse) cached by the first read; "
         "'plan not cached': every read parses the metadata through npTDMS again; "
-        "'2 threads': the interleaved rows read by two threads (reading_path(threads=2), "
-        "an explicit option; the one-thread rows are the ones held against the target); "
         "'npTDMS read_data': every sample through npTDMS's public read_data.",
         "CSV is held against pandas.read_csv(engine='c') alone on the same file: "
         "csv_over_pandas = pandas time / our time (>= 1 meets the target).",

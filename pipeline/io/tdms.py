@@ -86,9 +86,6 @@ CAN_WRITE = False
 #: Read through the segment index and computed offsets (tests switch it off to compare with
 #: npTDMS's public ``read_data``, the path every file can take).
 _USE_FAST_PATH = True
-#: threads reading interleaved rows together (meshphase.io.tdms_rows.read_rows); 1 unless a
-#: ``reading_path(threads=...)`` block says otherwise
-_ROW_THREADS = 1
 #: Samples at each end of every channel compared with npTDMS's ``read_data`` before the
 #: computed-offset path is trusted for a file.
 _CHECK_SAMPLES = 64
@@ -523,8 +520,7 @@ def _read_fast(mm, plan: _Plan, names, i0, i1, buf, path) -> bool:
     # channel alone is read faster by its strided walk over the map (read_runs below)
     if len(chans) > 1 and all(c.scaling is None for c in chans) and tdms_rows.shared_rows([c.runs for c in chans]):
         try:
-            return tdms_rows.read_rows(mm, [c.runs for c in chans], chans[0].starts, i0, i1, buf,
-                                       threads=_ROW_THREADS)
+            return tdms_rows.read_rows(mm, [c.runs for c in chans], chans[0].starts, i0, i1, buf)
         except (TypeError, ValueError) as exc:   # a strided view past the end of the file
             raise CorruptFileError(path, f"samples [{i0}, {i1})", f"truncated or corrupt: {exc}") from exc
     interleaved = any(r.value_stride != r.dtype.itemsize for c in chans for r in c.runs)
@@ -616,7 +612,7 @@ def _map(stack: contextlib.ExitStack, path, plan: _Plan):
 
 
 @contextlib.contextmanager
-def reading_path(*, computed_offsets: bool = True, cache_plans: bool = True, threads: int = 1):
+def reading_path(*, computed_offsets: bool = True, cache_plans: bool = True):
     """Choose how TDMS files are read inside the ``with`` block (``meshphase bench io``
     measures both ways; results are the same).
 
@@ -628,17 +624,12 @@ def reading_path(*, computed_offsets: bool = True, cache_plans: bool = True, thr
     cache_plans : bool
         True (default): a file's read plan (npTDMS's metadata parse, channel specs, offsets)
         is kept for the next read of the unchanged file; False: every read builds it anew.
-    threads : int
-        Threads that read the channels of interleaved rows together [-], >= 1 (default 1;
-        see :func:`meshphase.io.tdms_rows.read_rows`); the samples are the same.
     """
-    global _USE_FAST_PATH, _PLAN_CACHE_SIZE, _ROW_THREADS
+    global _USE_FAST_PATH, _PLAN_CACHE_SIZE
     for name, v in (("computed_offsets", computed_offsets), ("cache_plans", cache_plans)):
         if not isinstance(v, (bool, np.bool_)):
             raise TypeError(f"{name} must be a bool, got {v!r}")
-    threads = as_positive_int(threads, "threads")
-    saved = _USE_FAST_PATH, _PLAN_CACHE_SIZE, list(_PLAN_CACHE.items()), _ROW_THREADS
-    _ROW_THREADS = threads
+    saved = _USE_FAST_PATH, _PLAN_CACHE_SIZE, list(_PLAN_CACHE.items())
     _USE_FAST_PATH = bool(computed_offsets)
     if not cache_plans:
         _PLAN_CACHE_SIZE = 0
@@ -646,7 +637,7 @@ def reading_path(*, computed_offsets: bool = True, cache_plans: bool = True, thr
     try:
         yield
     finally:
-        _USE_FAST_PATH, _PLAN_CACHE_SIZE, items, _ROW_THREADS = saved
+        _USE_FAST_PATH, _PLAN_CACHE_SIZE, items = saved
         if not cache_plans:
             _PLAN_CACHE.clear()
             _PLAN_CACHE.update(items)

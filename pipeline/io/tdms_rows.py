@@ -4,23 +4,11 @@ after block of whole segments, the rows through an aligned buffer (``os.preadv``
 a copy from the memory map), and transposed into channel-major output in one numpy
 assignment per block, summed while in the cache so a finite read needs no second pass.
 The runs come from :func:`meshphase.io.tdms_index.scan`.
-
-``threads=2`` (an explicit option, :func:`meshphase.io.tdms.reading_path`) splits the window
-into contiguous halves read by two threads, each with its own buffer (``os.preadv`` and the
-numpy copies release the GIL); the samples are the same. ``meshphase bench io`` reports the
-one-thread rows and a two-thread row beside them.
-
-Tried for the one-thread read and kept out, because the whole read measured no faster
-(A/B in one process, the machine shared with other runs): a cache-blocked transpose (256
-rows at a time to a block-major scratch in one numpy assignment over a 3-d view, then runs
-of 256 samples into the output), larger or smaller row blocks, and transposing straight
-from the memory map after ``MADV_POPULATE_READ`` instead of the ``os.preadv`` copy.
 """
 
 from __future__ import annotations
 
 import os
-import threading
 
 import numpy as np
 
@@ -67,12 +55,7 @@ _ROW_BLOCK = 1 << 19
 _PREADV_SEGMENTS = 500
 
 
-#: samples per channel a thread reads at least when ``threads`` > 1
-_MIN_THREAD_SAMPLES = 1 << 16
-
-
-def read_rows(buf, runs_per_channel: list, starts: np.ndarray, i0: int, i1: int, out: np.ndarray, *,
-              threads: int = 1) -> bool:
+def read_rows(buf, runs_per_channel: list, starts: np.ndarray, i0: int, i1: int, out: np.ndarray) -> bool:
     """Samples [i0, i1) of channels that are columns of shared interleaved rows
     (:func:`shared_rows`) into ``out`` (n_channels, i1 - i0).
 
@@ -86,12 +69,6 @@ def read_rows(buf, runs_per_channel: list, starts: np.ndarray, i0: int, i1: int,
     on the map, which cost most where segments are about a page apart); else the rows are
     copied from ``buf``. The samples just written are summed while they are in the cache.
 
-    Parameters
-    ----------
-    threads : int
-        Threads reading contiguous parts of the window [-], >= 1 (default 1); each reads at
-        least ``_MIN_THREAD_SAMPLES`` samples per channel, so short windows use fewer.
-
     Returns
     -------
     bool
@@ -103,53 +80,14 @@ def read_rows(buf, runs_per_channel: list, starts: np.ndarray, i0: int, i1: int,
     Raises
     ------
     ValueError
-        The runs are not shared rows, ``out`` has the wrong shape, ``threads`` is below 1,
-        or the file ends before the rows (a strided view or ``os.preadv`` past its end).
-    TypeError
-        ``threads`` is not an int.
+        The runs are not shared rows, ``out`` has the wrong shape, or the file ends before
+        the rows (a strided view or ``os.preadv`` past its end).
     """
     cols = row_columns(runs_per_channel)
     if cols is None:
         raise ValueError("the channels' runs are not shared interleaved rows (see shared_rows)")
     if out.shape != (len(cols), i1 - i0):
         raise ValueError(f"out has shape {out.shape}, expected {(len(cols), i1 - i0)}")
-    if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)):
-        raise TypeError(f"threads must be an int, got {threads!r}")
-    if threads < 1:
-        raise ValueError(f"threads must be >= 1, got {threads}")
-    k = int(min(threads, max(1, (i1 - i0) // _MIN_THREAD_SAMPLES)))
-    if k > 1:
-        return _read_threaded(buf, runs_per_channel, cols, starts, i0, i1, out, k)
-    return _read_part(buf, runs_per_channel, cols, starts, i0, i1, out)
-
-
-def _read_threaded(buf, runs_per_channel, cols, starts, i0, i1, out, k: int) -> bool:
-    """:func:`_read_part` of ``k`` contiguous parts of [i0, i1), one thread each; the first
-    error of any part is raised."""
-    edges = [i0 + (i1 - i0) * j // k for j in range(k + 1)]
-    finite: list = [False] * k
-    errors: list = []
-
-    def part(j: int) -> None:
-        a, b = edges[j], edges[j + 1]
-        try:
-            finite[j] = _read_part(buf, runs_per_channel, cols, starts, a, b, out[:, a - i0:b - i0])
-        except BaseException as exc:  # handed to the calling thread
-            errors.append(exc)
-
-    workers = [threading.Thread(target=part, args=(j,), name=f"tdms-rows-{j}") for j in range(1, k)]
-    for w in workers:
-        w.start()
-    part(0)
-    for w in workers:
-        w.join()
-    if errors:
-        raise errors[0]
-    return all(finite)
-
-
-def _read_part(buf, runs_per_channel, cols, starts, i0: int, i1: int, out: np.ndarray) -> bool:
-    """:func:`read_rows` in the calling thread (arguments checked there)."""
     left = runs_per_channel[cols.index(0)]            # the leftmost column's runs
     finite = out.dtype.kind == "f"
     fd = getattr(buf, "fd", -1) if hasattr(os, "preadv") else -1

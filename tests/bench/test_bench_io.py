@@ -42,10 +42,9 @@ def test_tiny_run_writes_json_and_markdown(tiny):
     if "mcap" in present:
         assert sorted(r["variant"] for r in rows if r["format"] == "mcap") == ["lz4", "none", "zstd"]
     if "tdms" in present:
-        # large segments; 512 and 1000 per segment, contiguous and interleaved, interleaved
-        # with 2 threads; 512 with the plan not cached and through npTDMS's read_data
-        assert len([r for r in rows if r["format"] == "tdms"]) == 9
-        assert sum(r["variant"].endswith(", interleaved, 2 threads") for r in rows) == 2
+        # large segments; 512 and 1000 per segment, contiguous and interleaved; 512 with the
+        # plan not cached and through npTDMS's read_data
+        assert len([r for r in rows if r["format"] == "tdms"]) == 7
     for r in rows:
         for key in ("file_mb", "write_s", "read_s", "read_msps", "ratio_to_raw", "one_channel_msps",
                     "window_msps", "stream_peak_mb_1x", "stream_peak_mb_4x"):
