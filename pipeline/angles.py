@@ -67,7 +67,6 @@ from scipy import linalg
 from scipy.interpolate import BSpline
 
 from .errors import ProcessingWarning
-from .threads import thread_map
 from .validate import as_finite_array, as_positive_int
 
 __all__ = ["PassTrain", "Kinematics", "AngleModel", "gauge_train", "tacho_train",
@@ -457,8 +456,10 @@ class _Design:
         return full[rows]
 
     def release(self) -> None:
-        """Drop the kept spline bases (a fitted model keeps its design)."""
+        """Drop the kept spline bases and layouts (a fitted model keeps its design; a
+        layout holds three index arrays of the observations' length)."""
         self._bases.clear()
+        self._layouts.clear()
 
     def layout(self, spec: _Spec) -> dict:
         """Parameter blocks of ``spec``: name -> slice, column names, priorities, and the
@@ -1578,8 +1579,7 @@ def label_shift_costs(reference, train: PassTrain, fractions, kin: Kinematics,
         fit = _solve(d, spec, _extend(base, spec, d), np.ones(len(trs)))
         return fit.chi2 if np.isfinite(fit.chi2) else np.inf
 
-    # the shifts share nothing: fitted side by side (meshphase.threads), each on one thread
-    out[:] = thread_map(cost, range(n))
+    out[:] = [cost(s) for s in range(n)]
     return out
 
 

@@ -1,23 +1,27 @@
-"""Worker threads of one run: independent fits of the phasing stage side by side.
+"""Worker threads of one run: the channels' conditioning chains side by side.
 
-The angle model of a long recording is fitted in windows (:mod:`meshphase.angle_windows`) and
-the planet labels of each gauge are aligned by fitting every cyclic relabelling
-(:func:`meshphase.angles.label_shift_costs`): fits that share nothing. Their work is numpy
-array arithmetic and LAPACK least squares, which release the GIL, so threads run them on
-separate cores. Each fit is deterministic and runs whole on one thread, so the results are
-bit-identical to the serial ones whatever the thread count.
+The streamed conditioning (:func:`meshphase.stream.condition_stream`) filters each block of
+every channel through that channel's own chain (notch, drift, band-pass): chains that share
+nothing, whose work is scipy's zero-phase filters and numpy array arithmetic, which release
+the GIL, so threads run them on separate cores. Each chain runs whole on one thread per
+block, so the samples are bit-identical to the serial ones whatever the thread count.
+``meshphase bench processing`` (its process rows carry the thread count and the CPU time)
+against ``MESHPHASE_THREADS=1 meshphase bench processing``, 1 h x 8 channels on the idle
+2-core machine: conditioning 12.3 s on two threads, 16.7 s on one.
+
+The angle-model fits of the phasing stage were tried on threads too and ran no faster (the
+same pair of runs: phasing 12.6 s on two threads, 11.7 s on one): their LAPACK calls and
+small array steps hold the GIL, so they stay serial.
 
 A run holds the BLAS library's own thread pool to one thread (:func:`blas_single_thread`,
 threadpoolctl). The least squares here are tall and narrow (thousands of rows, tens of
 columns), where OpenBLAS's threads gain little on an idle machine and lose badly on a busy
-one: with the cores taken (a campaign's other worker, a second job), a 10-min run's phasing
-took 48 s with OpenBLAS's two threads against 6.3 s with one (measured on the 2-core
-machine at load average 6). Two fits side by side each asking OpenBLAS for every core would
-oversubscribe them the same way.
+one: with the other core taken (a campaign's other worker, a second job) they spin against
+it, and a 10-min run's phasing took several times as long in our runs.
 
 Thread count: :func:`run_threads` (``MESHPHASE_THREADS`` in the environment, else the cores
-this process may use, at most :data:`MAX_THREADS`). A campaign already runs one recording
-per worker process and sets 1 there (:func:`threads_limited`).
+this process may use, at most :data:`MAX_THREADS`). A campaign on a local cluster gives each
+recording its share, cores // workers (:func:`threads_limited`).
 """
 
 from __future__ import annotations
@@ -26,9 +30,10 @@ import os
 from contextlib import contextmanager
 from typing import Callable, Iterable, TypeVar
 
-__all__ = ["run_threads", "threads_limited", "thread_map", "thread_pool", "blas_single_thread", "MAX_THREADS", "ENV_THREADS"]
+__all__ = ["run_threads", "threads_limited", "thread_map", "thread_pool", "blas_single_thread",
+           "MAX_THREADS", "ENV_THREADS"]
 
-#: Default ceiling on worker threads [-]: a window fit holds about 40 MB (angle_windows).
+#: Default ceiling on worker threads [-] (one channel's chain each, a few MB per block).
 MAX_THREADS = 4
 #: Environment variable that sets the thread count (a positive integer).
 ENV_THREADS = "MESHPHASE_THREADS"

@@ -137,24 +137,3 @@ def test_empty_and_bad_input():
     with pytest.raises(ValueError, match="n_planets"):
         fit_angle_windows(trains, KIN, 0)
 
-
-def test_windows_and_label_shifts_on_threads_equal_the_serial_fit(long_record, windowed):
-    """The windows (and the relabelling fits) share nothing and each runs whole on one thread
-    (meshphase.threads): the model on 1 and on 3 threads is the same to the last bit."""
-    from meshphase.angles import label_shift_costs
-    from meshphase.threads import threads_limited
-
-    trains, _ = long_record
-    with threads_limited(1):
-        serial = fit_angle_windows(trains, KIN, 4, max_obs=1500)
-        cost1 = label_shift_costs([trains[0]], trains[1], [0.0, 0.25, 0.5, 0.75], KIN, 4,
-                                  max_obs=800)
-    with threads_limited(3):
-        threaded = fit_angle_windows(trains, KIN, 4, max_obs=1500)
-        cost3 = label_shift_costs([trains[0]], trains[1], [0.0, 0.25, 0.5, 0.75], KIN, 4,
-                                  max_obs=800)
-    assert len(serial.windows) == len(threaded.windows) >= 2
-    t = np.linspace(*serial.t_span, 401)
-    assert np.array_equal(serial.mesh_angle(t), threaded.mesh_angle(t))
-    assert np.array_equal(serial.mesh_angle(t), windowed.mesh_angle(t))
-    assert np.array_equal(cost1, cost3) and np.all(np.isfinite(cost1))
