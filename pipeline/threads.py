@@ -7,10 +7,10 @@ the GIL, so threads run them on separate cores. Each chain runs whole on one thr
 block, so the samples are bit-identical to the serial ones whatever the thread count.
 ``meshphase bench processing`` (its process rows carry the thread count and the CPU time)
 against ``MESHPHASE_THREADS=1 meshphase bench processing``, 1 h x 8 channels on the idle
-2-core machine: conditioning 12.3 s on two threads, 16.7 s on one.
+2-core machine: conditioning 10.2 s on two threads, 16.6 s on one.
 
-The angle-model fits of the phasing stage were tried on threads too and ran no faster (the
-same pair of runs: phasing 12.6 s on two threads, 11.7 s on one): their LAPACK calls and
+The angle-model fits of the phasing stage were tried on threads too and ran no faster (one
+such pair of runs: phasing 12.6 s on two threads, 11.7 s on one): their LAPACK calls and
 small array steps hold the GIL, so they stay serial.
 
 A run holds the BLAS library's own thread pool to one thread (:func:`blas_single_thread`,
@@ -28,9 +28,8 @@ from __future__ import annotations
 
 import os
 from contextlib import contextmanager
-from typing import Callable, Iterable, TypeVar
 
-__all__ = ["run_threads", "threads_limited", "thread_map", "thread_pool", "blas_single_thread",
+__all__ = ["run_threads", "threads_limited", "thread_pool", "blas_single_thread",
            "MAX_THREADS", "ENV_THREADS"]
 
 #: Default ceiling on worker threads [-] (one channel's chain each, a few MB per block).
@@ -39,10 +38,6 @@ MAX_THREADS = 4
 ENV_THREADS = "MESHPHASE_THREADS"
 
 _limit: int | None = None
-
-T = TypeVar("T")
-R = TypeVar("R")
-
 
 def _available_cores() -> int:
     try:
@@ -99,31 +94,6 @@ def threads_limited(n: int):
         _limit = before
 
 
-def thread_map(fn: Callable[[T], R], items: Iterable[T], *, threads: int | None = None,
-               progress: Callable[[int, int], None] | None = None) -> list[R]:
-    """``[fn(x) for x in items]``, on up to ``threads`` threads (default :func:`run_threads`).
-
-    Parameters
-    ----------
-    fn : callable
-        Applied to each item; must not depend on the order the items run in.
-    items : iterable
-    threads : int, optional
-        Thread count [-]; 1 runs in the calling thread.
-    progress : callable, optional
-        ``progress(done, total)`` in the calling thread, as results arrive in order.
-
-    Returns
-    -------
-    list
-        The results in the order of ``items``. The first exception raised by ``fn`` (in
-        item order) is raised here.
-    """
-    items = list(items)
-    with thread_pool(threads, max_items=len(items)) as tmap:
-        return tmap(fn, items, progress=progress)
-
-
 @contextmanager
 def blas_single_thread():
     """Hold every loaded BLAS library (OpenBLAS, MKL, BLIS) to one thread inside the block
@@ -136,8 +106,11 @@ def blas_single_thread():
 
 @contextmanager
 def thread_pool(threads: int | None = None, *, max_items: int | None = None):
-    """A pool of worker threads for many :func:`thread_map`-like calls (one block of a
-    stream after another): yields ``tmap(fn, items, progress=None) -> list``.
+    """A pool of worker threads for many calls (one block of a stream after another):
+    yields ``tmap(fn, items, progress=None) -> list``, ``[fn(x) for x in items]`` on the
+    pool's threads, in the order of ``items``; ``progress(done, total)`` is called in the
+    calling thread as results arrive, and the first exception raised by ``fn`` (in item
+    order) is raised in the caller.
 
     Parameters
     ----------

@@ -1,4 +1,7 @@
-"""meshphase.threads: worker threads of one run (thread count, order, errors, progress)."""
+"""meshphase.threads: worker threads of one run (thread count, order, errors, progress).
+
+``thread_map`` below is one call of a :func:`thread_pool`, as the streamed conditioning makes
+per block."""
 
 from __future__ import annotations
 
@@ -8,7 +11,13 @@ import numpy as np
 import pytest
 
 from meshphase import threads
-from meshphase.threads import ENV_THREADS, MAX_THREADS, run_threads, thread_map, threads_limited
+from meshphase.threads import ENV_THREADS, MAX_THREADS, run_threads, thread_pool, threads_limited
+
+
+def thread_map(fn, items, *, threads, progress=None):
+    items = list(items)
+    with thread_pool(threads, max_items=len(items)) as tmap:
+        return tmap(fn, items, progress=progress)
 
 
 def test_default_is_the_cores_up_to_the_ceiling(monkeypatch):
