@@ -309,8 +309,6 @@ class Job:
         A staging path -> the path it will have in the finished campaign.
     on_usable : callable
         Called after each recording that did not fail (the campaign folder is worth keeping).
-    task_threads : int or None
-        Worker threads per recording (:mod:`meshphase.threads`); set by :func:`run_job`.
     """
 
     task: Callable[..., dict]
@@ -326,13 +324,21 @@ class Job:
     progress: bool
     final_of: Callable[[Path], str]
     on_usable: Callable[[], None]
-    #: worker threads per recording (None: each worker's own default); a local cluster
-    #: shares this machine's cores among its workers (run_job sets it)
-    task_threads: int | None = None
 
 
 def _dask_key(token: str, i: int, name: str) -> str:
     return f"meshphase-{token}-{i}-{re.sub(r'[^A-Za-z0-9_.-]', '_', name)[:40]}"
+
+
+def _task_threads(cluster_info: dict) -> int | None:
+    """Worker threads per recording (:mod:`meshphase.threads`): on a local cluster the
+    recordings already run side by side, one per worker, so each gets its share of this
+    machine's cores; None on a remote cluster (each worker's own default)."""
+    if not cluster_info.get("local"):
+        return None
+    from .threads import run_threads
+
+    return max(1, run_threads() // max(1, int(cluster_info.get("n_workers") or 1)))
 
 
 def run_job(job: Job, records: dict, *, scheduler: str | None, workers: int | None, dashboard,
@@ -369,18 +375,12 @@ def run_job(job: Job, records: dict, *, scheduler: str | None, workers: int | No
         client = start.client()
         timing["cluster_wait"] = time.perf_counter() - t
         timing["cluster_start"] = start.elapsed_s
-        if cluster_info.get("local"):
-            # the recordings already run side by side, one per worker: each gets its share
-            # of this machine's cores for its own threads (meshphase.threads)
-            from .threads import run_threads
-
-            job.task_threads = max(1, run_threads() // max(1, int(cluster_info.get("n_workers") or 1)))
         t = time.perf_counter()
         token = uuid.uuid4().hex[:10]  # task keys unique on a shared scheduler
         dkeys = {i: _dask_key(token, i, job.names[i]) for i in job.todo}
         watch = _Watch({k: i for i, k in dkeys.items()})
         with watch.subscribed(client):
-            _Collection(client, job, records, watch, dkeys).run()
+            _Collection(client, job, records, watch, dkeys, _task_threads(cluster_info)).run()
         timing["processing"] = time.perf_counter() - t
     finally:
         if own:
@@ -466,8 +466,10 @@ class _Collection:
     """Submit the job's tasks, then collect a record for each: from its future, or a
     failure when it was lost or timed out."""
 
-    def __init__(self, client, job: Job, records: dict, watch: _Watch, dkeys: dict):
+    def __init__(self, client, job: Job, records: dict, watch: _Watch, dkeys: dict,
+                 threads: int | None = None):
         self.client, self.job, self.records, self.watch, self.dkeys = client, job, records, watch, dkeys
+        self.threads = threads          # worker threads per recording (None: the worker's)
         self.pending = set(job.todo)
         self.n_failed = 0
         self.bar = None
@@ -476,7 +478,7 @@ class _Collection:
     def submit(self) -> dict:
         job, todo = self.job, self.job.todo
         kw = {"bands": job.bands, "recording_report": job.recording_report,
-              "threads": job.task_threads}
+              "threads": self.threads}
         fn = functools.partial(campaign_task, job.task)
         # one map call = one graph: the tasks form one group, which the scheduler queues
         # (root-ish tasks) when there are more than twice as many as worker threads
