@@ -1253,9 +1253,18 @@ def _drop_gross_outliers(d: _Design, use: list, spec: _Spec, outlier_k: float) -
 
 
 def _select_terms(d: _Design, spec: _Spec, fit: _Fit, ladder: list, rates: list,
-                  kin: Kinematics, max_harmonics: int, max_planet_harmonics: int):
+                  kin: Kinematics, max_harmonics: int, max_planet_harmonics: int, *,
+                  screen: bool = True):
     """Forward selection of the model terms on BIC, weights from the timing bounds alone:
-    (spec, fit, selection steps)."""
+    (spec, fit, selection steps).
+
+    ``screen``: a finer spline is solved only when its optimistic BIC
+    (:func:`_spline_bounds`) could beat the bar set by the candidates solved before it (the
+    fit's BIC less the gain needed, or the best candidate's), with ``BIC_GAIN`` to spare.
+    The candidates a finer spline competes with are solved first. Most of a selection's
+    time went into finer splines that do not pay for their columns (a 64-interval spline
+    costs as much as ten ripple terms); screening leaves the chosen model unchanged (a test
+    runs the selection both ways)."""
     ones = np.ones(len(d.trains))
     selection = [(0, spec.describe(), fit.bic())]
     step = 0
@@ -1288,16 +1297,28 @@ def _select_terms(d: _Design, spec: _Spec, fit: _Fit, ladder: list, rates: list,
             s2 = spec.copy()
             s2.sig += 1
             cands.append(s2)
-        best = None
-        for c in cands:
+        finer = [c.knots for c in cands if c.knots != spec.knots]
+        bound = _spline_bounds(d, fit, finer) if screen and finer else {}
+        # the other candidates first, then the finer splines from the most promising: each
+        # BIC solved lowers the bar a finer spline's optimistic BIC must pass
+        order = sorted(range(len(cands)), key=lambda i: bound.get(cands[i].knots, -math.inf)
+                       if cands[i].knots != spec.knots else -math.inf)
+        best, best_i = None, -1
+        for i in order:
+            c = cands[i]
             lay = d.layout(c)
             n_act = np.count_nonzero(d.active)
             if lay["p"] > n_act - max(4, 0.2 * n_act):
                 continue
+            if c.knots in bound:
+                bar = fit.bic() - BIC_GAIN if best is None else min(fit.bic() - BIC_GAIN, best.bic())
+                if bound[c.knots] > bar + BIC_GAIN:
+                    continue
             th0 = _extend(fit, c, d)
             f2 = _solve(d, c, th0, ones, max_iter=4, recheck=False)
-            if best is None or f2.bic() < best.bic():
-                best = f2
+            # lowest BIC; a tie goes to the earlier candidate, as in the order of ``cands``
+            if best is None or f2.bic() < best.bic() or (f2.bic() == best.bic() and i < best_i):
+                best, best_i = f2, i
         if best is None or best.bic() > fit.bic() - BIC_GAIN:
             break
         full = _solve(d, best.spec, best.theta, ones)
@@ -1305,6 +1326,60 @@ def _select_terms(d: _Design, spec: _Spec, fit: _Fit, ladder: list, rates: list,
         spec = best.spec
         selection.append((step, spec.describe(), fit.bic()))
     return spec, fit, selection
+
+
+#: A finer spline is assumed able to lower the misfit by this factor more than its
+#: linearised gain (the ripple arguments move with the spline: the gain of the
+#: Gauss-Newton iterations is not quite the first step's) [-]
+SCREEN_SLACK = 1.5
+
+
+def _spline_bounds(d: _Design, fit: _Fit, knots) -> dict:
+    """Optimistic BIC of each finer spline in ``knots`` [-], from one evaluation at ``fit``.
+
+    The spline with K' intervals can lower the misfit by no more than the union of the
+    fitted model's columns and the K' spline's columns could in a linearised step: the
+    weighted residual's part outside the span of both. Its rank is at least the union's
+    less the spline columns it drops. The bound takes ``SCREEN_SLACK`` times that gain and
+    that rank: n ln(max(chi2 / n, floor)) + rank ln n. A spline whose bound is not finite
+    gets -inf (it is always solved)."""
+    rows = np.flatnonzero(d.active)
+    n = rows.size
+    out = {int(k): -math.inf for k in knots}
+    if n == 0 or not knots:
+        return out
+    f, J, rate = d.evaluate(fit.theta, fit.lay, fit.spec, rows)
+    w = 1.0 / (d.sig[rows] * _fix_rate(rate))
+    with np.errstate(over="ignore", invalid="ignore"):
+        r = (d.y[rows] - f) * w
+        chi = float(r @ r)
+    if not math.isfinite(chi):
+        return out
+    sb = fit.lay["blocks"]["spline"]
+    # the spline columns are B(x) (1 + h') / (1 - R'): B-splines sum to 1, so the row sums
+    # of the fitted spline's columns are the factor every spline's columns share
+    fac = J[:, sb].sum(axis=1) * w
+    Ac = (J * w[:, None])[:, fit.keep]
+    cn = _column_norms(Ac)
+    cn[~(cn > 0)] = 1.0
+    Q = linalg.qr(Ac / cn, mode="economic", check_finite=False)[0]
+    r_out = r - Q @ (Q.T @ r)
+    chi_out = float(r_out @ r_out)
+    kept_spline = int(np.count_nonzero(fit.keep[sb]))
+    for k in out:
+        N = _basis(d.x[rows], k) * fac[:, None]
+        nn = _column_norms(N)
+        N = N[:, nn > 0] / nn[nn > 0]
+        for _ in range(2):                         # projected twice: orthogonal to rounding
+            N -= Q @ (Q.T @ N)
+        Q2, R2, _ = linalg.qr(N, mode="economic", pivoting=True, check_finite=False)
+        k2 = int(np.count_nonzero(np.abs(np.diag(R2)) > RANK_TOL))
+        g = Q2[:, :k2].T @ r_out
+        chi_u = max(chi_out - float(g @ g), 0.0)
+        chi_opt = max(chi - SCREEN_SLACK * (chi - chi_u), 0.0)
+        rank = fit.rank + k2 - kept_spline
+        out[k] = n * math.log(max(chi_opt / n, fit.floor)) + rank * math.log(n)
+    return out
 
 
 def _variance_factors(d: _Design, use: list, spec: _Spec, fit: _Fit, outlier_k: float):

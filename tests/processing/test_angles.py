@@ -368,3 +368,46 @@ def test_model_diagnostics_are_json_friendly():
     with pytest.raises(KeyError, match="trains"):
         m.train("nope")
     assert isinstance(kinematics(25, 87), Kinematics)
+
+
+@pytest.mark.parametrize("profile", ["drift", "ramp_ripple", "steady_noisy"])
+def test_spline_screening_leaves_the_selection_unchanged(monkeypatch, profile):
+    # the finer-spline screen (angles._spline_bounds) skips only candidates that could not
+    # have been chosen: the same model, bit for bit, with and without it, on a record whose
+    # slow speed wander needs a fine spline, a ramp under carrier ripple, and a steady
+    # noisy one where no finer spline pays; and it must skip something (fewer solves)
+    import functools
+
+    import meshphase.angles as angles
+    from meshphase.synthetic.kinematics import ShaftRipple
+
+    g, sp = rig()
+    prof = {"drift": SpeedProfile(ripple=((0.005, 0.02, 0.0),)),
+            "ramp_ripple": SpeedProfile(ramp_rate=0.08 / 120.0,
+                                        shaft=(ShaftRipple("carrier", 0.01, 1, 0.3),)),
+            "steady_noisy": SpeedProfile()}[profile]
+    trains, _ = trains_from_truth(g, sp, prof, 120.0, errors=table2_case(1)[2],
+                                  jitter=2e-5 if profile == "steady_noisy" else 0.0,
+                                  sigma=2e-5 if profile == "steady_noisy" else None)
+    kin = kinematics(25, 87, 29, fixed="ring")
+    solves = []
+    orig_solve = angles._solve
+
+    def counted(*a, **k):
+        solves.append(a[1].knots)
+        return orig_solve(*a, **k)
+
+    monkeypatch.setattr(angles, "_solve", counted)
+    screened = fit_angle_model(trains, kin, 4)
+    n_screened = len(solves)
+    monkeypatch.setattr(angles, "_select_terms",
+                        functools.partial(angles._select_terms, screen=False))
+    solves.clear()
+    plain = fit_angle_model(trains, kin, 4)
+    assert screened.terms == plain.terms
+    assert screened.selection == plain.selection
+    t = np.linspace(*plain.t_span, 501)
+    np.testing.assert_array_equal(screened.mesh_angle(t), plain.mesh_angle(t))
+    assert n_screened < len(solves), (n_screened, len(solves))
+    if profile == "drift":
+        assert "spline 1 " not in plain.terms        # the wander needed a finer spline
