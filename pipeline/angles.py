@@ -1641,6 +1641,8 @@ def label_shift_costs(reference, train: PassTrain, fractions, kin: Kinematics,
     if not refs or len(train) < 2:
         return out
 
+    first = []      # shift 0's fit: the start of the others
+
     def cost(s: int) -> float:
         trs = refs + [relabel_train(train, s, fractions, n)]
         d = _Design(trs, kin, n)
@@ -1649,13 +1651,49 @@ def label_shift_costs(reference, train: PassTrain, fractions, kin: Kinematics,
         harm = {r: (1 if mean_rate * span / P >= 1.0 else 0) for r, P in kin.periods.items()}
         harm["planet"] = 0
         spec = _Spec(knots=1, harm=harm, mod={r: False for r in kin.periods}, sig=1)
-        base = _solve(d, _Spec(knots=1, harm={r: 0 for r in kin.periods},
-                               mod={r: False for r in kin.periods}), None, np.ones(len(trs)))
-        fit = _solve(d, spec, _extend(base, spec, d), np.ones(len(trs)))
+        ones = np.ones(len(trs))
+        if first:
+            th0 = _relabelled_start(d, spec, first[0].theta, len(trs) - 1)
+        else:
+            base = _solve(d, _Spec(knots=1, harm={r: 0 for r in kin.periods},
+                                   mod={r: False for r in kin.periods}), None, ones)
+            th0 = _extend(base, spec, d)
+        fit = _solve(d, spec, th0, ones)
+        if not first and np.isfinite(fit.chi2):
+            first.append(fit)
         return fit.chi2 if np.isfinite(fit.chi2) else np.inf
 
     out[:] = [cost(s) for s in range(n)]
     return out
+
+
+def _relabelled_start(d: _Design, spec: _Spec, theta: np.ndarray, q: int) -> np.ndarray:
+    """Start parameters for train ``q`` relabelled: another shift's fitted ``theta`` with
+    that train's constant and offsets moved by its per-planet mean residual.
+
+    A cyclic relabelling moves each planet's targets by a constant (a planet spacing and
+    whole revolutions), so the shared terms (spline, ripple, the other trains' planet terms)
+    of a neighbouring shift's fit are a start a few iterations from this shift's optimum,
+    once the train's own constants take up the move."""
+    lay = d.layout(spec)
+    th = np.array(theta, dtype=float)
+    f, _, _ = d.evaluate(th, lay, spec, jac=False)
+    r = d.y - f
+    m = d.q == q
+    if not np.any(m):
+        return th
+    pl = d.pl[m]
+    mean = {int(k): float(np.mean(r[m][pl == k])) for k in np.unique(pl)}
+    ref = d.ref[q]
+    c0 = mean.get(ref, 0.0)
+    if q > 0:
+        th[lay["blocks"]["const"].start + q - 1] += c0
+    ob = lay["blocks"]["off"].start
+    for k, v in mean.items():
+        col = int(lay["off_table"][q, k])
+        if col >= 0:
+            th[ob + col] += v - c0
+    return th
 
 
 def mesh_cycles_per_carrier_turn(train: PassTrain, tacho_times) -> float:
