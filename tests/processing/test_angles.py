@@ -141,7 +141,7 @@ def test_noisy_passes_have_calibrated_uncertainty():
     # allow (0.7-1.5, the calibration band), and the 95 % interval holds ~95 %
     g, sp = rig()
     prof = SpeedProfile(ripple=((0.01, abs(sp.carrier) / TWO_PI, 0.4),))
-    zs, cover = [], []
+    zs = []
     for seed in range(4):
         sig = 3e-4
         trains, ev = trains_from_truth(g, sp, prof, 120.0, errors=table2_case(1)[2], sigma=sig,
