@@ -48,8 +48,10 @@ equations). Weights 1 / (sigma_t A'(t)) from each onset's timing bound, with one
 factor per train estimated from its residuals (leverage-corrected; never below 1 when the
 timing bound was given). The model order (spline intervals, ripple harmonics per shaft,
 amplitude modulation, planet-term harmonics) is chosen from the data by greedy forward
-selection on the Bayesian information criterion; a pass whose residual is far outside its
-train's scatter (a mislabelled pulse) is left out, with a count. Nothing depends on rounding:
+selection on the Bayesian information criterion (a finer spline is solved only when an
+optimistic bound on its criterion, from one linearised step, could win: the same model for
+less work); a pass whose residual is far outside its train's scatter (a mislabelled pulse)
+is left out, with a count. Nothing depends on rounding:
 selection needs a BIC gain of at least 2 and the residual variance in the criterion has a
 floor (the timing bound: residuals inside it are no evidence for another term), so the same
 onsets moved by 1e-9 s give the same model.
