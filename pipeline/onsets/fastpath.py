@@ -122,14 +122,12 @@ def refine_pulses(yd: np.ndarray, peaks: np.ndarray, anchor: int, k: int, u: int
         raise ValueError(f"t_all must be (L + 2k, ncol) with L >= 1 and yd 1-D, got t_all "
                          f"{t_all.shape}, k={k}, yd {np.shape(yd)}")
     n = peaks.size
-    ncol = t_all.shape[1]
-    tf = np.ascontiguousarray(t_all, dtype=np.float64).ravel()
     out = (np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n, dtype=np.uint8),
            np.empty(n, dtype=np.int64))
     if n:
         _kernels()._refine_pulses(
             np.ascontiguousarray(yd, dtype=np.float64), np.ascontiguousarray(peaks, dtype=np.int64),
-            int(anchor), int(k), int(u), tf, int(ncol), float(e0),
+            int(anchor), int(k), int(u), np.ascontiguousarray(t_all, dtype=np.float64), float(e0),
             np.ascontiguousarray(tensile, dtype=np.int64), int(n_base), int(lo), int(d), float(ref),
             float(width_unit), float(min_corr), np.uint8(base_flags), np.uint8(flag_edge),
             np.uint8(flag_low), *out)
