@@ -36,12 +36,7 @@ def _run_maxima(ys, thr, gap, long_len):  # pragma: no cover - compiled
         if not v > thr:
             continue
         if in_run and i - prev > gap:              # the run ended at prev
-            if prev - first > long_len:
-                out[ms] = sb_i
-                m = ms + 1
-            else:
-                out[m] = best_i
-                m += 1
+            m = _end_run(out, m, ms, prev - first > long_len, best_i, sb_i)
             in_run = False
         if not in_run:
             in_run = True
@@ -65,13 +60,19 @@ def _run_maxima(ys, thr, gap, long_len):  # pragma: no cover - compiled
                 sb_i = i
         prev = i
     if in_run:
-        if prev - first > long_len:
-            out[ms] = sb_i
-            m = ms + 1
-        else:
-            out[m] = best_i
-            m += 1
+        m = _end_run(out, m, ms, prev - first > long_len, best_i, sb_i)
     return out[:m].copy()
+
+
+@_numba.njit(cache=True, nogil=True, inline="always")
+def _end_run(out, m, ms, split, best_i, sb_i):  # pragma: no cover - compiled
+    """Close a run: a split (long) run keeps its sub-run maxima ``out[m:ms]`` and adds the
+    last one, else its single maximum goes to ``out[m]``; returns the new count."""
+    if split:
+        out[ms] = sb_i
+        return ms + 1
+    out[m] = best_i
+    return m + 1
 
 
 @_numba.njit(cache=True, nogil=True)
@@ -85,15 +86,14 @@ def _round_half_even(x):  # pragma: no cover - compiled
     return i
 
 
-_CHUNK = 32        # pulses correlated together (measured: 32 fastest of 32 to 256)
+_CHUNK = 32        # pulses correlated together (windows and sums stay in L1)
 
 
 @_numba.njit(cache=True, nogil=True, fastmath={"contract"})
 def _correlate(wt, t_all, c, m):  # pragma: no cover - compiled
     """``c[j, p] = sum_t wt[t, p] t_all[t, j]`` for the first ``m`` pulses (columns) of the
     transposed windows ``wt``: the inner loop runs over pulses, contiguous, and vectorises
-    (~4x faster than a loop per pulse, whose 13-29 short columns do not), each sum in
-    sample order."""
+    (a loop per pulse over its 13-29 short columns does not), each sum in sample order."""
     lw, ncol = t_all.shape
     for j in range(ncol):
         cj = c[j]
