@@ -110,94 +110,114 @@ def _correlate(wt, t_all, c, m):  # pragma: no cover - compiled
 def _refine_pulses(yd, peaks, anchor, k, u, t_all, e0, tensile, n_base, lo, d, ref, width_unit,
                    min_corr, base_flags, flag_edge, flag_low,
                    index, amp, ncc, width, flags, a_out):  # pragma: no cover - compiled
-    """Matched-filter refinement of every pulse in one pass (see ``_Matcher.match`` and
-    ``_Engine._refine``, whose arithmetic this repeats pulse by pulse): correlation at
-    the (sub-)lags, first maximum, parabolic peak, NCC and width on the window at the
-    nearest integer lag, onset index, amplitude and flags; ``a_out`` the first full-rate
-    sample of each pulse window (for the gap and clipping flags)."""
+    """Matched-filter refinement of every pulse, 32 at a time (see ``_Matcher.match`` and
+    ``_Engine._refine``, whose arithmetic this repeats pulse by pulse): windows gathered
+    and correlated at the (sub-)lags, then each step done for the whole chunk before the
+    next (independent pulses interleave instead of one long dependency chain per pulse):
+    first maximum, parabolic peak, NCC and width on the window at the nearest integer
+    lag, onset index, amplitude and flags; ``a_out`` the first full-rate sample of each
+    pulse window (for the gap and clipping flags)."""
     n = yd.shape[0]
     lw, ncol = t_all.shape
     L = lw - 2 * k
     wt = np.empty((lw, _CHUNK))
     cc = np.empty((ncol, _CHUNK))
+    jm = np.empty(_CHUNK, dtype=np.int64)
+    lag = np.empty(_CHUNK)
+    cmax = np.empty(_CHUNK)
+    mi = np.empty(_CHUNK, dtype=np.int64)
+    s1 = np.empty(_CHUNK)
+    s2 = np.empty(_CHUNK)
+    bs = np.empty(_CHUNK)
+    cnt = np.empty(_CHUNK, dtype=np.int64)
     for i0 in range(0, peaks.shape[0], _CHUNK):
         m = min(_CHUNK, peaks.shape[0] - i0)
-        for p in range(m):
-            start = peaks[i0 + p] - anchor - k
-            if start < 0 or start + lw > n:
-                for t in range(lw):
-                    q = min(max(start + t, 0), n - 1)
-                    wt[t, p] = yd[q]
-            else:
-                for t in range(lw):
-                    wt[t, p] = yd[start + t]
+        _gather_t(yd, peaks, i0, m, anchor + k, wt)
         _correlate(wt, t_all, cc, m)
+        _first_max(cc, m, jm)
         for p in range(m):
-            _pulse(yd, peaks, i0 + p, cc, p, wt, anchor, k, u, L, e0, tensile, n_base, lo,
-                   d, ref, width_unit, min_corr, base_flags, flag_edge, flag_low,
-                   index, amp, ncc, width, flags, a_out)
+            lag[p], cmax[p] = _parabola(cc, p, jm[p], k, u)
+            mi[p] = min(max(_round_half_even(lag[p]) + k, 0), 2 * k)
+            s1[p] = 0.0
+            s2[p] = 0.0
+            bs[p] = 0.0
+            cnt[p] = 0
+        for t in range(L):                       # NCC sums, sample order per pulse
+            for p in range(m):
+                v = wt[mi[p] + t, p]
+                s1[p] += v
+                s2[p] += v * v
+        for t in range(n_base):                  # baseline: first and last n_base samples
+            for p in range(m):
+                bs[p] += wt[mi[p] + t, p]
+        for t in range(L - n_base, L):
+            for p in range(m):
+                bs[p] += wt[mi[p] + t, p]
+        for p in range(m):
+            a = cmax[p] / e0
+            half = bs[p] / (2 * n_base) + 0.5 * a
+            c = 0
+            for q in range(tensile.shape[0]):
+                c += wt[mi[p] + tensile[q], p] > half
+            var = max(s2[p] - s1[p] * s1[p] / L, 0.0)
+            norm = np.sqrt(var * e0)
+            r = cmax[p] / norm if norm > 0 else 0.0
+            r = min(max(r, -1.0), 1.0)
+            i = i0 + p
+            start = peaks[i] - anchor - k
+            pos = float(start + k) + lag[p]
+            index[i] = lo + (pos + ref) * d + (d - 1) / 2.0
+            amp[i] = a
+            ncc[i] = r
+            width[i] = c * width_unit
+            f = base_flags
+            if start < 0 or start + lw > n or jm[p] == 0 or jm[p] == ncol - 1:
+                f |= flag_edge
+            if r < min_corr:
+                f |= flag_low
+            flags[i] = f
+            a_out[i] = lo + np.int64(np.floor(pos)) * d
 
 
 @_numba.njit(cache=True, nogil=True, inline="always")
-def _pulse(yd, peaks, i, cc, p, wt, anchor, k, u, L, e0, tensile, n_base, lo, d, ref,
-           width_unit, min_corr, base_flags, flag_edge, flag_low,
-           index, amp, ncc, width, flags, a_out):  # pragma: no cover - compiled
-    """The rest of :func:`_refine_pulses` for pulse ``i``, whose window and correlations
-    are column ``p`` of ``wt`` and ``cc``: first maximum, parabolic peak, NCC and width at
-    the nearest integer lag, index, amplitude and flags. Inlined (numba IR): as a call,
-    its ~100 exploded array arguments cost more than its arithmetic."""
+def _gather_t(yd, peaks, i0, m, shift, wt):  # pragma: no cover - compiled
+    """Windows of pulses ``i0 .. i0 + m - 1`` as the columns of ``wt`` (samples past the
+    ends of ``yd`` repeat the edge sample)."""
     n = yd.shape[0]
-    ncol = cc.shape[0]
-    lw = L + 2 * k
-    start = peaks[i] - anchor - k
-    edge0 = start < 0 or start + lw > n
-    jm = 0
-    cm = cc[0, p]
-    for j in range(1, ncol):
-        if cc[j, p] > cm:
-            cm = cc[j, p]
-            jm = j
-    edge = edge0 or jm == 0 or jm == ncol - 1
-    jc = min(max(jm, 1), ncol - 2)
+    lw = wt.shape[0]
+    for p in range(m):
+        start = peaks[i0 + p] - shift
+        if start < 0 or start + lw > n:
+            for t in range(lw):
+                wt[t, p] = yd[min(max(start + t, 0), n - 1)]
+        else:
+            for t in range(lw):
+                wt[t, p] = yd[start + t]
+
+
+@_numba.njit(cache=True, nogil=True, inline="always")
+def _first_max(cc, m, jm):  # pragma: no cover - compiled
+    """``jm[p]``: the first row of the maximum of column ``p`` of ``cc`` (np.argmax)."""
+    for p in range(m):
+        best = cc[0, p]
+        j_best = 0
+        for j in range(1, cc.shape[0]):
+            v = cc[j, p]
+            if v > best:
+                best = v
+                j_best = j
+        jm[p] = j_best
+
+
+@_numba.njit(cache=True, nogil=True, inline="always")
+def _parabola(cc, p, jm, k, u):  # pragma: no cover - compiled
+    """Lag [samples, relative to K] and height of the parabola through the maximum of
+    column ``p`` and its neighbours (the ends: through the next-inner three)."""
+    jc = min(max(jm, 1), cc.shape[0] - 2)
     y0 = cc[jc - 1, p]
     y1 = cc[jc, p]
     y2 = cc[jc + 1, p]
     den = y0 - 2.0 * y1 + y2
     dd = 0.5 * (y0 - y2) / den if den < 0 else 0.0
     dd = min(max(dd, -1.0), 1.0)
-    lag = (jc - k * u + dd) / u
-    cmax = y1 - 0.25 * (y0 - y2) * dd
-    mi = min(max(_round_half_even(lag) + k, 0), 2 * k)
-    s1 = 0.0
-    s2 = 0.0
-    for t in range(mi, mi + L):
-        v = wt[t, p]
-        s1 += v
-        s2 += v * v
-    var = max(s2 - s1 * s1 / L, 0.0)
-    norm = np.sqrt(var * e0)
-    r = cmax / norm if norm > 0 else 0.0
-    r = min(max(r, -1.0), 1.0)
-    a = cmax / e0
-    base = 0.0
-    for t in range(n_base):
-        base += wt[mi + t, p]
-    for t in range(L - n_base, L):
-        base += wt[mi + t, p]
-    half = base / (2 * n_base) + 0.5 * a
-    cnt = 0
-    for q in range(tensile.shape[0]):
-        if wt[mi + tensile[q], p] > half:
-            cnt += 1
-    pos = float(start + k) + lag
-    index[i] = lo + (pos + ref) * d + (d - 1) / 2.0
-    amp[i] = a
-    ncc[i] = r
-    width[i] = cnt * width_unit
-    f = base_flags
-    if edge:
-        f |= flag_edge
-    if r < min_corr:
-        f |= flag_low
-    flags[i] = f
-    a_out[i] = lo + np.int64(np.floor(pos)) * d
+    return (jc - k * u + dd) / u, y1 - 0.25 * (y0 - y2) * dd
