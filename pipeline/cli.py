@@ -204,11 +204,15 @@ def cmd_bench(args) -> int:
     # imported here, not at the top: cli -> bench only when benchmarking, no import loop
     if args.warmup:
         from .models._kernels import warmup
+        from .onsets.fastpath import warmup as warmup_onsets
 
         w = warmup()
         print(f"numba kernel ready in {w['seconds']:.2f} s, cache {w['cache_dir']}"
               if w["engine"] == "numba" else "numba is not importable: the numpy path needs no "
               "compilation")
+        wo = warmup_onsets()              # the onset stage's kernels, into the same cache
+        if wo["engine"] == "numba":
+            print(f"onset kernels ready in {wo['seconds']:.2f} s")
         return 0
     out = Path(args.out)
     if args.what == "campaign":

@@ -365,18 +365,23 @@ def _accuracy_rows(name, x, truth, fs, shape, snr_db, settings):
 def _throughput_rows(fs, scen, n, rng):
     from ..condition import filter_signal, notch_hum, remove_drift
     from ..onsets import detect_onsets
+    from ..onsets.fastpath import warmup as warmup_onsets
 
     rows = []
     load = getattr(os, "getloadavg", lambda: (float("nan"),))   # 1-minute load average [-]
     for name, sc in scen.items():
         x, truth = pulse_scenario(n, fs, sc["shape"], sc["spacing"], snr_db=20.0, rng=rng)
         detect_onsets(x[: min(n, 1 << 18)], fs)          # warm-up (imports, FFT plans)
+        warmup_onsets()                                  # the numba kernels (when importable)
         # onsets end to end per core (width estimate, coarse, template, sub-sample
-        # refinement): the default (template learnt once per operating point) and the
-        # template re-learnt in every analysis block; no numba kernel is used. Medians of
-        # three runs (CPU and wall time apart); load_avg: the 1-minute load average after
-        # them (the machine may be shared: CPU seconds are the per-core figure)
+        # refinement): the default (template learnt once per operating point, numba
+        # kernels for dense blocks, see meshphase.onsets.fastpath), the same on the numpy
+        # path alone (engine=numpy: the ratio shows what the kernels buy) and the template
+        # re-learnt in every analysis block. Medians of three runs (CPU and wall time
+        # apart); load_avg: the 1-minute load average after them (the machine may be
+        # shared: CPU seconds are the per-core figure)
         for stage, kw in (("onsets.detect_onsets", {}),
+                          ("onsets.detect_onsets engine=numpy", {"engine": "numpy"}),
                           ("onsets.detect_onsets relearn=block", {"relearn": "block"})):
             cpu, wall = [], []
             for _ in range(3):

@@ -61,6 +61,8 @@ Modules
                (:func:`estimate_pulse_width`); ``features`` measures a template
 ``relearn``    when a learnt template is kept for the next block (speed and shape checks)
 ``matched``    step 4: matched-filter refinement at (sub-)sample lags
+``fastpath``   the numba kernels of steps 2 and 4 for dense pulse trains (``engine``), and
+               the rule that chooses them
 ``engine``     the block engine and :func:`detect_onsets`, :func:`detect_onsets_recording`;
                ``options`` checks their keywords, ``runs`` handles gap and flag runs
 ``streaming``  :class:`OnsetStream`, :func:`detect_onsets_stream`

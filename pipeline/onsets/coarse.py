@@ -135,13 +135,21 @@ def _noise_level(y: np.ndarray, w: float) -> tuple[float, float, float]:
     return med, float(_MAD_TO_SIGMA * _median(np.abs(r - med))), top
 
 
-def _coarse_dec(yd: np.ndarray, w_d: float, spacing_d: float, k_sigma: float):
-    """Coarse maxima on decimated data: (peaks, heights, threshold, noise, median)."""
+def _coarse_dec(yd: np.ndarray, w_d: float, spacing_d: float, k_sigma: float, fast: bool = False):
+    """Coarse maxima on decimated data: (peaks, heights, threshold, noise, median).
+
+    ``fast``: the run maxima from the numba kernel (:func:`meshphase.onsets.fastpath.run_maxima`,
+    the same maxima bit for bit) instead of the numpy run bookkeeping below."""
     m = max(1, int(round(0.5 * w_d)))
     ys = ndimage.uniform_filter1d(yd, m, mode="nearest") if m > 1 else yd
     med, sig, top = _noise_level(ys, w_d)
     sig = max(sig, 1e-6 * (top - med), 1e-300)       # noise-free data: a tiny floor
     thr = med + k_sigma * sig
+    if fast:
+        from .fastpath import run_maxima
+
+        peaks = run_maxima(ys, thr, max(1, int(math.ceil(spacing_d))), 3.0 * spacing_d)
+        return _resolve_close(peaks, ys[peaks] - med, spacing_d) + (thr - med, sig, med)
     cand = np.flatnonzero(ys > thr)
     if cand.size == 0:
         e = np.empty(0, dtype=np.int64)
@@ -168,8 +176,12 @@ def _coarse_dec(yd: np.ndarray, w_d: float, spacing_d: float, k_sigma: float):
     first = np.ones(at.size, dtype=bool)
     first[1:] = cid[at[1:]] != cid[at[:-1]]
     peaks = cand[at[first]]
-    heights = ys[peaks] - med
-    # maxima of runs closer than the spacing: keep the strongest (loop over peaks)
+    return _resolve_close(peaks, ys[peaks] - med, spacing_d) + (thr - med, sig, med)
+
+
+def _resolve_close(peaks: np.ndarray, heights: np.ndarray, spacing_d: float):
+    """Maxima of runs closer than the spacing: keep the strongest (loop over peaks);
+    (peaks as int64, heights)."""
     if peaks.size > 1 and np.any(np.diff(peaks) < spacing_d):
         keep = np.ones(peaks.size, dtype=bool)
         for i in np.argsort(-heights, kind="stable"):
@@ -180,7 +192,7 @@ def _coarse_dec(yd: np.ndarray, w_d: float, spacing_d: float, k_sigma: float):
             keep[lo:hi] = False
             keep[i] = True
         peaks, heights = peaks[keep], heights[keep]
-    return peaks.astype(np.int64), heights, thr - med, sig, med
+    return peaks.astype(np.int64), heights
 
 
 def coarse_peaks(x, fs: float, *, width: float, min_spacing: float | None = None,

@@ -20,6 +20,7 @@ from ..recording import Recording
 from ..validate import as_signal
 from .coarse import _coarse_dec, _decimate, _decimation, _fill_nan
 from .learning import _half_length, _learn_dec, _refine_width, _width_autocorr
+from .fastpath import dense, refine_pulses
 from .matched import _gather, _Matcher, _sublags, _window_baseline
 from .options import _options, _Options
 from .relearn import _Fit, _good_median, _period
@@ -89,8 +90,8 @@ class _Engine:
             return _empty_onsets(o.fs, o.t0, o.channel, o.reference, o.level, self.templates)
         cols = [np.concatenate(c) for c in zip(*self.out)]
         index, corr, amp, width, flags, tid = cols
-        return Onsets(o.t0 + index / o.fs, index, corr, amp, width, flags.astype(np.uint8),
-                      tid.astype(np.int32), tuple(self.templates), o.fs, o.t0, o.channel,
+        return Onsets(o.t0 + index / o.fs, index, corr, amp, width, flags.astype(np.uint8, copy=False),
+                      tid.astype(np.int32, copy=False), tuple(self.templates), o.fs, o.t0, o.channel,
                       o.reference, o.level)
 
     def _who(self) -> str:
@@ -217,7 +218,9 @@ class _Engine:
         w_d, h_half, kk, margin = self._geom()
         lo, hi, gaps, yd = self._segment(k, final, w_d, min(margin, self.B))
         spacing = (o.min_spacing if o.min_spacing is not None else 2.0 * self.w)
-        peaks, *_ = _coarse_dec(yd, w_d, spacing / self.d, o.k_sigma)
+        # a block that can hold DENSE_PULSES pulses at the minimum spacing: numba run maxima
+        fast = dense(o.engine, yd.size * self.d / spacing)
+        peaks, *_ = _coarse_dec(yd, w_d, spacing / self.d, o.k_sigma, fast)
         if peaks.size == 0:
             return
         bad_runs = merge_runs(np.concatenate([gaps, o.flag_runs]))
@@ -321,6 +324,13 @@ class _Engine:
         k_ref = max(kk, 2)
         mt = _Matcher(tpl, k_ref, _sublags(tpl.fwhm * o.fs / d))
         L = mt.L
+        if dense(o.engine, peaks.size):
+            *res, a = refine_pulses(yd, peaks, mt.anchor, k_ref, mt.u, mt.t_all, mt.e0,
+                                    np.flatnonzero(mt.tensile), max(1, L // 10), lo, d, tpl.ref,
+                                    d / o.fs, o.min_corr, FLAG_TEMPLATE if fallback else 0,
+                                    FLAG_EDGE, FLAG_LOW_CORR)
+            self._run_flags(res[4], a, a + (L + 1) * d, gaps)
+            return tuple(res)
         start = peaks - mt.anchor - k_ref
         w, edge0 = _gather(yd, start, L + 2 * k_ref)
         lag, cmax, ncc, edge, wa, wmean = mt.match(w)
@@ -340,12 +350,17 @@ class _Engine:
         if fallback:
             flags |= FLAG_TEMPLATE
         a = lo + np.floor(pos_d).astype(np.int64) * d
-        b = a + (L + 1) * d
+        self._run_flags(flags, a, a + (L + 1) * d, gaps)
+        return index, amp, ncc, width, flags
+
+    def _run_flags(self, flags, a, b, gaps) -> None:
+        """Flag (in place) the pulse windows ``[a, b)`` [full-rate samples] that touch a
+        gap (within the gap guard) or a clipped run."""
+        o = self.o
         if len(gaps):
             flags[_runs_overlap(a - o.gap_guard, b + o.gap_guard, gaps)] |= FLAG_GAP
         if len(o.flag_runs):
             flags[_runs_overlap(a, b, o.flag_runs)] |= FLAG_CLIPPED
-        return index, amp, ncc, width, flags
 
     def _keep(self, index, amp, ncc, width, flags, hi: int, gaps, tpl: Template, spacing: float) -> None:
         """Append the onsets inside the data, outside the gaps and after those of the
@@ -356,18 +371,22 @@ class _Engine:
             inside = _inside_runs(index, gaps)
             self.n_dropped_gap += int(inside.sum())
             keep &= ~inside
-        order = np.argsort(index, kind="stable")
-        order = order[keep[order]]
-        index, amp, ncc, width, flags = (v[order] for v in (index, amp, ncc, width, flags))
-        # ---- de-duplicate against the previous blocks (overlapping ownership)
-        fresh = index >= self.last_index + 0.5 * spacing
-        if not fresh.all():
-            index, amp, ncc, width, flags = (v[fresh] for v in (index, amp, ncc, width, flags))
+        cols = (index, amp, ncc, width, flags)
+        if index.size > 1 and not np.all(index[1:] >= index[:-1]):
+            order = np.argsort(index, kind="stable")
+            order = order[keep[order]]
+            cols = tuple(v[order] for v in cols)
+        elif not keep.all():                        # in order already: the stable sort's order
+            cols = tuple(v[keep] for v in cols)
+        # ---- de-duplicate against the previous blocks (overlapping ownership): the onsets
+        # are in time order, so the fresh ones are a tail
+        i0 = int(np.searchsorted(cols[0], self.last_index + 0.5 * spacing, side="left"))
+        index, amp, ncc, width, flags = (v[i0:] for v in cols) if i0 else cols
         if index.size:
             if not self.templates or self.templates[-1] is not tpl:
                 self.templates.append(tpl)
             self.last_index = float(index[-1])
-            self.out.append((index, ncc, amp * self.pol, width, flags,
+            self.out.append((index, ncc, amp if self.pol > 0 else -amp, width, flags,
                              np.full(index.size, len(self.templates) - 1, dtype=np.int32)))
 
 
@@ -387,7 +406,8 @@ def detect_onsets(x, fs: float, *, t0: float = 0.0, width: float | None = None,
                   k_sigma: float = 5.0, min_corr: float = 0.5, block: float | None = None,
                   decimation: int | None = None, max_template_pulses: int = 256,
                   min_template_pulses: int = 8, n_align: int = 2, flag_runs=None,
-                  gap_guard: float = 0.0, channel: str | None = None, gap_runs=None) -> Onsets:
+                  gap_guard: float = 0.0, channel: str | None = None, gap_runs=None,
+                  engine: str = "auto") -> Onsets:
     """Engagement onsets of the pulses in one conditioned strain channel.
 
     Parameters
@@ -450,6 +470,11 @@ def detect_onsets(x, fs: float, *, t0: float = 0.0, width: float | None = None,
         their samples are finite (e.g. ``ChannelQuality.dropout_runs``: a DAQ writing zeros
         or holding its last value). Treated exactly as NaN samples: no onset inside, left
         out of template learning, touching pulses flagged ``FLAG_GAP``.
+    engine : {"auto", "numba", "numpy"}
+        Compiled per-pulse kernels (:mod:`meshphase.onsets.fastpath`): ``"auto"`` uses them
+        for dense analysis blocks (``DENSE_PULSES`` pulses or more) when numba is
+        importable, ``"numba"`` for every block, ``"numpy"`` never. The onsets agree to
+        rounding (~1e-16 relative); ``meshphase bench processing`` measures both.
 
     Returns
     -------
@@ -471,7 +496,8 @@ def detect_onsets(x, fs: float, *, t0: float = 0.0, width: float | None = None,
                    level=level, k_sigma=k_sigma, min_corr=min_corr, block=block,
                    decimation=decimation, max_template_pulses=max_template_pulses,
                    min_template_pulses=min_template_pulses, n_align=n_align,
-                   flag_runs=flag_runs, gap_guard=gap_guard, channel=channel, gap_runs=gap_runs)
+                   flag_runs=flag_runs, gap_guard=gap_guard, channel=channel, gap_runs=gap_runs,
+                   engine=engine)
     eng = _Engine(opt)
     eng.feed(arr)
     return eng.finish()

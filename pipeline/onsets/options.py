@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..validate import as_choice, as_float, as_nonnegative, as_positive, as_positive_int
+from .fastpath import check_engine
 from .results import Template
 from .runs import _check_runs
 
@@ -40,13 +41,14 @@ class _Options:
     gap_guard: int                 # samples
     channel: str | None
     gap_runs: np.ndarray           # absolute samples, merged: finite samples that are gaps
+    engine: str = "auto"           # numba kernels for dense blocks (see .fastpath)
 
 
 def _options(fs, *, t0=0.0, width=None, mesh_freq=None, min_spacing=None, template=None,
              relearn="auto", polarity=None, reference="rise", level=0.5, k_sigma=5.0,
              min_corr=0.5, block=None, decimation=None, max_template_pulses=256,
              min_template_pulses=8, n_align=2, flag_runs=None, gap_guard=0.0,
-             channel=None, gap_runs=None) -> _Options:
+             channel=None, gap_runs=None, engine="auto") -> _Options:
     fs = as_positive(fs, "fs")
     t0 = as_float(t0, "t0")
     w = None if width is None else as_positive(width, "width") * fs
@@ -88,6 +90,7 @@ def _options(fs, *, t0=0.0, width=None, mesh_freq=None, min_spacing=None, templa
     guard = int(math.ceil(as_nonnegative(gap_guard, "gap_guard") * fs))
     if channel is not None and not isinstance(channel, str):
         raise TypeError(f"channel must be a string, got {channel!r}")
+    engine = check_engine(engine)
     return _Options(fs, t0, w, mw, sp, template, relearn, polarity, reference, level, k_sigma,
-                    min_corr, blk, dec, mtp, mnp, n_align, fr, guard, channel, gr)
+                    min_corr, blk, dec, mtp, mnp, n_align, fr, guard, channel, gr, engine)
 

@@ -1,0 +1,223 @@
+"""The numba build of the onset stage's per-pulse loops (:mod:`meshphase.onsets.fastpath`).
+
+Imported only when a dense block is processed on the numba engine, so that importing the
+onsets (and processing a recording of wide pulses) does not load numba and LLVM. Compiled
+functions are cached (``cache=True``) in the per-user directory
+:func:`meshphase.models._kernels.numba_cache_dir` names unless ``NUMBA_CACHE_DIR`` is set
+(``meshphase bench --warmup`` fills it). ``fastmath`` stays off: the arithmetic is the numpy
+path's, in its order, except the correlation sums (BLAS sums in its own order; here each
+column is summed in sample order, with fused multiply-adds).
+"""
+
+from __future__ import annotations
+
+import numba as _numba
+import numpy as np
+
+
+@_numba.njit(cache=True, nogil=True)
+def _run_maxima(ys, thr, gap, long_len):  # pragma: no cover - compiled
+    """Index of the first maximum of every run of samples above ``thr`` (samples closer than
+    ``gap`` + 1 join a run; a run spanning more than ``long_len`` samples is split at every
+    break), as :func:`meshphase.onsets.coarse._coarse_dec` finds them with numpy."""
+    n = ys.shape[0]
+    out = np.empty(max(n, 1), dtype=np.int64)
+    m = 0                      # maxima written so far (of finished runs)
+    ms = 0                     # sub-run maxima of the current run written from m on
+    in_run = False
+    first = 0
+    prev = 0
+    best_v = 0.0
+    best_i = 0
+    sb_v = 0.0
+    sb_i = 0
+    for i in range(n):
+        v = ys[i]
+        if not v > thr:
+            continue
+        if in_run and i - prev > gap:              # the run ended at prev
+            m = _end_run(out, m, ms, prev - first > long_len, best_i, sb_i)
+            in_run = False
+        if not in_run:
+            in_run = True
+            first = i
+            best_v = v
+            best_i = i
+            sb_v = v
+            sb_i = i
+            ms = m
+        else:
+            if v > best_v:
+                best_v = v
+                best_i = i
+            if i - prev > 1:                        # a break: a new sub-run
+                out[ms] = sb_i
+                ms += 1
+                sb_v = v
+                sb_i = i
+            elif v > sb_v:
+                sb_v = v
+                sb_i = i
+        prev = i
+    if in_run:
+        m = _end_run(out, m, ms, prev - first > long_len, best_i, sb_i)
+    return out[:m].copy()
+
+
+@_numba.njit(cache=True, nogil=True, inline="always")
+def _end_run(out, m, ms, split, best_i, sb_i):  # pragma: no cover - compiled
+    """Close a run: a split (long) run keeps its sub-run maxima ``out[m:ms]`` and adds the
+    last one, else its single maximum goes to ``out[m]``; returns the new count."""
+    if split:
+        out[ms] = sb_i
+        return ms + 1
+    out[m] = best_i
+    return m + 1
+
+
+@_numba.njit(cache=True, nogil=True)
+def _round_half_even(x):  # pragma: no cover - compiled
+    """``int(np.rint(x))`` for a finite ``x`` (ties to even)."""
+    r = np.floor(x)
+    f = x - r
+    i = np.int64(r)
+    if f > 0.5 or (f == 0.5 and (i & 1) != 0):
+        i += 1
+    return i
+
+
+_CHUNK = 32        # pulses correlated together (windows and sums stay in L1)
+
+
+@_numba.njit(cache=True, nogil=True, fastmath={"contract"})
+def _correlate(wt, t_all, c, m):  # pragma: no cover - compiled
+    """``c[j, p] = sum_t wt[t, p] t_all[t, j]`` for the first ``m`` pulses (columns) of the
+    transposed windows ``wt``: the inner loop runs over pulses, contiguous, and vectorises
+    (a loop per pulse over its 13-29 short columns does not), each sum in sample order."""
+    lw, ncol = t_all.shape
+    for j in range(ncol):
+        cj = c[j]
+        for p in range(m):
+            cj[p] = 0.0
+        for t in range(lw):
+            tv = t_all[t, j]
+            wr = wt[t]
+            for p in range(m):
+                cj[p] += wr[p] * tv
+
+
+@_numba.njit(cache=True, nogil=True)
+def _refine_pulses(yd, peaks, anchor, k, u, t_all, e0, tensile, n_base, lo, d, ref, width_unit,
+                   min_corr, base_flags, flag_edge, flag_low,
+                   index, amp, ncc, width, flags, a_out):  # pragma: no cover - compiled
+    """Matched-filter refinement of every pulse, 32 at a time (see ``_Matcher.match`` and
+    ``_Engine._refine``, whose arithmetic this repeats pulse by pulse): windows gathered
+    and correlated at the (sub-)lags, then each step done for the whole chunk before the
+    next (independent pulses interleave instead of one long dependency chain per pulse):
+    first maximum, parabolic peak, NCC and width on the window at the nearest integer
+    lag, onset index, amplitude and flags; ``a_out`` the first full-rate sample of each
+    pulse window (for the gap and clipping flags)."""
+    n = yd.shape[0]
+    lw, ncol = t_all.shape
+    L = lw - 2 * k
+    wt = np.empty((lw, _CHUNK))
+    cc = np.empty((ncol, _CHUNK))
+    jm = np.empty(_CHUNK, dtype=np.int64)
+    lag = np.empty(_CHUNK)
+    cmax = np.empty(_CHUNK)
+    mi = np.empty(_CHUNK, dtype=np.int64)
+    s1 = np.empty(_CHUNK)
+    s2 = np.empty(_CHUNK)
+    bs = np.empty(_CHUNK)
+    cnt = np.empty(_CHUNK, dtype=np.int64)
+    for i0 in range(0, peaks.shape[0], _CHUNK):
+        m = min(_CHUNK, peaks.shape[0] - i0)
+        _gather_t(yd, peaks, i0, m, anchor + k, wt)
+        _correlate(wt, t_all, cc, m)
+        _first_max(cc, m, jm)
+        for p in range(m):
+            lag[p], cmax[p] = _parabola(cc, p, jm[p], k, u)
+            mi[p] = min(max(_round_half_even(lag[p]) + k, 0), 2 * k)
+            s1[p] = 0.0
+            s2[p] = 0.0
+            bs[p] = 0.0
+            cnt[p] = 0
+        for t in range(L):                       # NCC sums, sample order per pulse
+            for p in range(m):
+                v = wt[mi[p] + t, p]
+                s1[p] += v
+                s2[p] += v * v
+        for t in range(n_base):                  # baseline: first and last n_base samples
+            for p in range(m):
+                bs[p] += wt[mi[p] + t, p]
+        for t in range(L - n_base, L):
+            for p in range(m):
+                bs[p] += wt[mi[p] + t, p]
+        for p in range(m):
+            a = cmax[p] / e0
+            half = bs[p] / (2 * n_base) + 0.5 * a
+            c = 0
+            for q in range(tensile.shape[0]):
+                c += wt[mi[p] + tensile[q], p] > half
+            var = max(s2[p] - s1[p] * s1[p] / L, 0.0)
+            norm = np.sqrt(var * e0)
+            r = cmax[p] / norm if norm > 0 else 0.0
+            r = min(max(r, -1.0), 1.0)
+            i = i0 + p
+            start = peaks[i] - anchor - k
+            pos = float(start + k) + lag[p]
+            index[i] = lo + (pos + ref) * d + (d - 1) / 2.0
+            amp[i] = a
+            ncc[i] = r
+            width[i] = c * width_unit
+            f = base_flags
+            if start < 0 or start + lw > n or jm[p] == 0 or jm[p] == ncol - 1:
+                f |= flag_edge
+            if r < min_corr:
+                f |= flag_low
+            flags[i] = f
+            a_out[i] = lo + np.int64(np.floor(pos)) * d
+
+
+@_numba.njit(cache=True, nogil=True, inline="always")
+def _gather_t(yd, peaks, i0, m, shift, wt):  # pragma: no cover - compiled
+    """Windows of pulses ``i0 .. i0 + m - 1`` as the columns of ``wt`` (samples past the
+    ends of ``yd`` repeat the edge sample)."""
+    n = yd.shape[0]
+    lw = wt.shape[0]
+    for p in range(m):
+        start = peaks[i0 + p] - shift
+        if start < 0 or start + lw > n:
+            for t in range(lw):
+                wt[t, p] = yd[min(max(start + t, 0), n - 1)]
+        else:
+            for t in range(lw):
+                wt[t, p] = yd[start + t]
+
+
+@_numba.njit(cache=True, nogil=True, inline="always")
+def _first_max(cc, m, jm):  # pragma: no cover - compiled
+    """``jm[p]``: the first row of the maximum of column ``p`` of ``cc`` (np.argmax)."""
+    for p in range(m):
+        best = cc[0, p]
+        j_best = 0
+        for j in range(1, cc.shape[0]):
+            v = cc[j, p]
+            if v > best:
+                best = v
+                j_best = j
+        jm[p] = j_best
+
+
+@_numba.njit(cache=True, nogil=True, inline="always")
+def _parabola(cc, p, jm, k, u):  # pragma: no cover - compiled
+    """Lag [samples, relative to K] and height of the parabola through the maximum of
+    column ``p`` and its neighbours (the ends: through the next-inner three)."""
+    jc = min(max(jm, 1), cc.shape[0] - 2)
+    y0 = cc[jc - 1, p]
+    y1 = cc[jc, p]
+    y2 = cc[jc + 1, p]
+    den = y0 - 2.0 * y1 + y2
+    dd = 0.5 * (y0 - y2) / den if den < 0 else 0.0
+    dd = min(max(dd, -1.0), 1.0)
+    return (jc - k * u + dd) / u, y1 - 0.25 * (y0 - y2) * dd
