@@ -41,13 +41,13 @@ from __future__ import annotations
 
 import importlib.util
 import os
-import sys
 import time
 
 import numpy as np
 
 from ..log import logger
 from ._kernel_math import atan_cephes  # noqa: F401  (the scalar reference, re-exported)
+from ..numba_cache import import_kernels, numba_cache_dir  # noqa: F401  (numba_cache_dir re-exported)
 
 __all__ = ["HAVE_NUMBA", "deltas_numpy", "stats_numpy", "stats_numba", "resolve_engine",
            "atan_cephes", "numba_cache_dir", "warmup"]
@@ -58,30 +58,15 @@ HAVE_NUMBA = importlib.util.find_spec("numba") is not None
 _NUMBA_ERROR = "numba is not installed"
 
 
-def numba_cache_dir() -> str:
-    """Where numba caches the compiled kernel: ``NUMBA_CACHE_DIR`` when set, else
-    ``$XDG_CACHE_HOME/meshphase/numba`` (``~/.cache/meshphase/numba``): per user, writable,
-    not beside the installed source (an empty or read-only cache there cost 4-5 s of
-    compilation at every first use)."""
-    env = os.environ.get("NUMBA_CACHE_DIR")
-    if env:
-        return env
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return os.path.join(base, "meshphase", "numba")
-
-
 def _numba_kernels():
     """The numba module of the kernel, imported on first use with the per-user cache set
     (ImportError when numba cannot be imported after all)."""
     global HAVE_NUMBA, _NUMBA_ERROR
-    if "meshphase.models._kernels_numba" not in sys.modules:
-        os.environ.setdefault("NUMBA_CACHE_DIR", numba_cache_dir())
     try:
-        from . import _kernels_numba
-    except Exception as exc:  # pragma: no cover - a broken numba install
-        HAVE_NUMBA, _NUMBA_ERROR = False, repr(exc)
-        raise ImportError(f"numba is installed but does not import ({exc!r})") from exc
-    return _kernels_numba
+        return import_kernels("meshphase.models._kernels_numba")
+    except ImportError as exc:  # pragma: no cover - a broken numba install
+        HAVE_NUMBA, _NUMBA_ERROR = False, repr(exc.__cause__ or exc)
+        raise
 
 ENGINES = ("auto", "numba", "numpy")
 _LOGGED_FALLBACK = False

@@ -2,7 +2,7 @@
 
 Imported only when a Monte Carlo runs on the numba engine, so that importing the models (and
 processing a recording) does not load numba and LLVM. Compiled functions are cached
-(``cache=True``) in the per-user directory :func:`meshphase.models._kernels.numba_cache_dir`
+(``cache=True``) in the per-user directory :func:`meshphase.numba_cache.numba_cache_dir`
 names unless ``NUMBA_CACHE_DIR`` is set (``meshphase bench --warmup`` fills it).
 """
 

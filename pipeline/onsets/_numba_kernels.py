@@ -3,7 +3,7 @@
 Imported only when a dense block is processed on the numba engine, so that importing the
 onsets (and processing a recording of wide pulses) does not load numba and LLVM. Compiled
 functions are cached (``cache=True``) in the per-user directory
-:func:`meshphase.models._kernels.numba_cache_dir` names unless ``NUMBA_CACHE_DIR`` is set
+:func:`meshphase.numba_cache.numba_cache_dir` names unless ``NUMBA_CACHE_DIR`` is set
 (``meshphase bench --warmup`` fills it). ``fastmath`` stays off: the arithmetic is the numpy
 path's, in its order, except the correlation sums (BLAS sums in its own order; here each
 column is summed in sample order, with fused multiply-adds).

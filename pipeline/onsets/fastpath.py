@@ -24,11 +24,11 @@ measures both engines per scenario.
 from __future__ import annotations
 
 import importlib.util
-import os
-import sys
 import time
 
 import numpy as np
+
+from ..numba_cache import import_kernels
 
 __all__ = ["ENGINES", "HAVE_NUMBA", "DENSE_PULSES", "check_engine", "dense", "run_maxima",
            "refine_pulses", "warmup"]
@@ -45,16 +45,11 @@ def _kernels():
     """The numba kernel module, imported on first use with the per-user cache set
     (ImportError when numba cannot be imported after all)."""
     global HAVE_NUMBA, _NUMBA_ERROR
-    if "meshphase.onsets._numba_kernels" not in sys.modules:
-        from ..models._kernels import numba_cache_dir
-
-        os.environ.setdefault("NUMBA_CACHE_DIR", numba_cache_dir())
     try:
-        from . import _numba_kernels
-    except Exception as exc:  # pragma: no cover - a broken numba install
-        HAVE_NUMBA, _NUMBA_ERROR = False, repr(exc)
-        raise ImportError(f"numba is installed but does not import ({exc!r})") from exc
-    return _numba_kernels
+        return import_kernels("meshphase.onsets._numba_kernels")
+    except ImportError as exc:  # pragma: no cover - a broken numba install
+        HAVE_NUMBA, _NUMBA_ERROR = False, repr(exc.__cause__ or exc)
+        raise
 
 
 def check_engine(engine) -> str:

@@ -36,3 +36,17 @@ def test_warmup_compiles_into_the_cache(tmp_path):
 def test_warmup_without_numba_needs_nothing(monkeypatch):
     monkeypatch.setattr(_kernels, "HAVE_NUMBA", False)
     assert _kernels.warmup() == {"engine": "numpy", "seconds": 0.0, "cache_dir": None}
+
+
+def test_import_kernels_bad_input_and_the_shared_cache(monkeypatch, tmp_path):
+    # one home for the cache directory and the first-use import of every numba kernel
+    # module (the Monte Carlo's and the onsets'): a module that does not import is an
+    # ImportError naming the cause, and an empty name is refused alike
+    from meshphase import numba_cache
+    from meshphase.models import _kernels
+
+    assert _kernels.numba_cache_dir is numba_cache.numba_cache_dir
+    with pytest.raises(ImportError, match="does not import"):
+        numba_cache.import_kernels("meshphase.no_such_kernels")
+    with pytest.raises(ImportError, match="does not import"):
+        numba_cache.import_kernels("")
