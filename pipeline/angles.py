@@ -1654,7 +1654,9 @@ def label_shift_costs(reference, train: PassTrain, fractions, kin: Kinematics,
         harm["planet"] = 0
         spec = _Spec(knots=1, harm=harm, mod={r: False for r in kin.periods}, sig=1)
         ones = np.ones(len(trs))
-        if first:
+        if first and d.layout(spec)["names"] == first[0].lay["names"]:
+            # the same columns (a relabelling can change which planets a short train
+            # holds, and with them its offsets and planet terms: then it starts afresh)
             th0 = _relabelled_start(d, spec, first[0].theta, len(trs) - 1)
         else:
             base = _solve(d, _Spec(knots=1, harm={r: 0 for r in kin.periods},
