@@ -309,7 +309,9 @@ def _exceedance_and_slope(q, rho, weights, k):
     p = np.where(pos, np.where(qq <= 0.0, 1.0, sf), np.where(qq >= 0.0, 0.0, 1.0 - sf))
     p = np.where((rho == 0.0) & (qq < 0.0), 1.0, p)
     p = np.where((rho == 0.0) & (qq >= 0.0), 0.0, p)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    # a subnormal rho (a spread of 1e-322) overflows the density to inf: the Newton step of
+    # _solve_upper is then not finite and falls back to bisection
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         dens = np.where(ok, pdf / np.abs(rho), 0.0)
     return np.sum(p * weights, axis=-1), -np.sum(dens * weights, axis=-1)
 
