@@ -217,6 +217,13 @@ def cmd_bench(args) -> int:
     out = Path(args.out)
     if args.what == "campaign":
         return _bench_campaign(out, args.quick)
+    if args.what == "reference":
+        from .bench.models_reference import build_reference, reference_line
+
+        ref = build_reference(out, evaluations=args.evaluations, plain=args.plain,
+                              progress=not args.quiet)
+        print(reference_line(ref))
+        return 0
     from .bench import rss_summary, run_bench
 
     res = run_bench(args.what, out, minutes=args.minutes, quick=args.quick,
@@ -564,15 +571,20 @@ def _add_bench(sub) -> None:
     """The ``meshphase bench`` subcommand."""
     s = sub.add_parser("bench", help="benchmarks: io, models, processing or all (tables + figures)")
     s.add_argument("what", nargs="?", default="all",
-                   choices=["io", "models", "processing", "all", "campaign"],
+                   choices=["io", "models", "processing", "all", "campaign", "reference"],
                    help="which benchmarks (default all: io, models, processing); campaign: the "
                         "same 8 x 2 min campaign on 1 and 2 local workers (--quick: 2 x 0.5 min), "
-                        "its speed-up and phase timings")
+                        "its speed-up and phase timings; reference: build (or read) the "
+                        "models bench's 1e7-evaluation reference in --out as its own step")
     s.add_argument("--out", default="bench-results", help="output folder (default ./bench-results)")
     s.add_argument("--minutes", type=float, default=60.0, help="io: recording length [min] (default 60)")
     s.add_argument("--quick", action="store_true", help="small sizes, for a smoke run")
+    s.add_argument("--evaluations", type=int, default=10 ** 7,
+                   help="reference: full-model evaluations (default 1e7)")
+    s.add_argument("--plain", action="store_true",
+                   help="reference: the plain pseudo-random reference instead of the directional one")
     s.add_argument("--warmup", action="store_true",
-                   help="only compile the numba Monte Carlo kernel into the per-user cache "
+                   help="only compile the numba kernels (Monte Carlo, dense onsets) into the per-user cache "
                         "(~/.cache/meshphase/numba or NUMBA_CACHE_DIR) and say how long it took")
     s.add_argument("--rss-minutes", type=_minutes_list, default=None, metavar="M[,M...]",
                    help="lengths [min] of the 8-channel recordings whose peak memory of convert "

@@ -164,8 +164,8 @@ def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 1
         them, the worst bound error beside.
     reference_progress : bool, optional
         Show a progress bar (stderr) while the reference is computed (not when read from the
-        cache); default: when stderr is a terminal. ``python -m
-        meshphase.bench.models_reference OUT_DIR`` builds it as a separate step.
+        cache); default: when stderr is a terminal. ``meshphase bench reference --out
+        OUT_DIR`` builds it as a separate step.
 
     Returns
     -------

@@ -420,34 +420,40 @@ class _bar:
             self.tq.close()
 
 
-def main(argv=None) -> int:
-    """Build (or read) the estimator table's reference of ``meshphase bench models`` as a
-    separate step, with a progress bar: ``python -m meshphase.bench.models_reference OUT_DIR
-    [--evaluations N] [--plain]``. Prints the cache file and the reference's build time."""
-    import argparse
+def build_reference(out_dir, *, evaluations: int = 10 ** 7, plain: bool = False,
+                    progress: bool = True) -> dict:
+    """Build (or read from the cache in ``out_dir``) the reference of ``meshphase bench
+    models``' estimator table, seed 000 Table 2 case 3, as a separate step
+    (``meshphase bench reference``).
 
+    Parameters
+    ----------
+    out_dir : str or Path
+        The bench output folder (the cache goes there).
+    evaluations : int
+        Full-model evaluations [-] (default 1e7).
+    plain : bool
+        The plain pseudo-random reference instead of the directional one.
+    progress : bool
+        A progress bar while the directional reference is built.
+
+    Returns
+    -------
+    dict
+        The reference (:func:`directional_reference` / :func:`plain_reference`).
+    """
     from ..models.tolerance import observation_window, table2_case
 
-    ap = argparse.ArgumentParser(prog="python -m meshphase.bench.models_reference",
-                                 description=main.__doc__.split("\n\n")[0])
-    ap.add_argument("out_dir", help="the bench output folder (the cache goes there)")
-    ap.add_argument("--evaluations", type=int, default=10 ** 7,
-                    help="full-model evaluations (default 1e7)")
-    ap.add_argument("--plain", action="store_true", help="the plain reference instead")
-    args = ap.parse_args(argv)
     g, sp, tol = table2_case(3)
     case = (g, sp, tol, observation_window(sp, "slowest-offset"))
-    if args.plain:
-        ref = plain_reference(case, args.out_dir, n_samples=args.evaluations,
-                              case_name=CASE3_NAME)
-    else:
-        ref = directional_reference(case, args.out_dir, n_evaluations=args.evaluations,
-                                    case_name=CASE3_NAME, progress=True)
+    if plain:
+        return plain_reference(case, out_dir, n_samples=evaluations, case_name=CASE3_NAME)
+    return directional_reference(case, out_dir, n_evaluations=evaluations,
+                                 case_name=CASE3_NAME, progress=progress)
+
+
+def reference_line(ref: dict) -> str:
+    """One line naming a reference, whether it was built or read, and its cache file."""
     state = "read from the cache" if ref["cached"] else "built"
-    print(f"{ref['method']} reference, {ref['n_samples']} evaluations, {state} "
-          f"(build time {ref['wall_time_s']:.0f} s): {ref['file']}")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
+    return (f"{ref['method']} reference, {ref['n_samples']} evaluations, {state} "
+            f"(build time {ref['wall_time_s']:.0f} s): {ref['file']}")

@@ -126,19 +126,26 @@ def test_bad_inputs(case, tmp_path):
         plain_reference(case, tmp_path, n_samples=3)
 
 
-def test_main_builds_then_reads(tmp_path, capsys):
-    from meshphase.bench.models_reference import main
-    assert main([str(tmp_path), "--evaluations", "2000"]) == 0
+def test_bench_reference_builds_then_reads(tmp_path, capsys):
+    # `meshphase bench reference` builds the reference as its own step, then reads it
+    from meshphase.cli import main
+    args = ["-q", "bench", "reference", "--out", str(tmp_path), "--evaluations", "2000"]
+    assert main(args) == 0
     assert "built" in capsys.readouterr().out
-    assert main([str(tmp_path), "--evaluations", "2000"]) == 0
+    assert main(args) == 0
     out = capsys.readouterr().out
     assert "read from the cache" in out and "models_reference_directional_2000_" in out
-    assert main([str(tmp_path), "--evaluations", "400", "--plain"]) == 0
+    assert main(["-q", "bench", "reference", "--out", str(tmp_path), "--evaluations", "400",
+                 "--plain"]) == 0
     assert "plain reference, 400 evaluations" in capsys.readouterr().out
-    with pytest.raises(SystemExit):
-        main([])                                   # the output folder is required
-    with pytest.raises(ValueError):
-        main([str(tmp_path), "--evaluations", "0"])
+
+
+def test_build_reference_bad_input(tmp_path):
+    from meshphase.bench.models_reference import build_reference
+    with pytest.raises((ValueError, TypeError)):
+        build_reference(tmp_path, evaluations=0)
+    with pytest.raises((ValueError, TypeError)):
+        build_reference(tmp_path, evaluations="many", plain=True)
 
 
 def test_estimator_row_over_repeats(case, small_ref):
