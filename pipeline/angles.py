@@ -1643,9 +1643,8 @@ def label_shift_costs(reference, train: PassTrain, fractions, kin: Kinematics,
     if not refs or len(train) < 2:
         return out
 
-    first = []      # shift 0's fit: the start of the others
-
-    def cost(s: int) -> float:
+    first = None      # the first finite shift's fit: the start of the later ones
+    for s in range(n):
         trs = refs + [relabel_train(train, s, fractions, n)]
         d = _Design(trs, kin, n)
         span = d.t_hi - d.t_lo
@@ -1654,20 +1653,19 @@ def label_shift_costs(reference, train: PassTrain, fractions, kin: Kinematics,
         harm["planet"] = 0
         spec = _Spec(knots=1, harm=harm, mod={r: False for r in kin.periods}, sig=1)
         ones = np.ones(len(trs))
-        if first and d.layout(spec)["names"] == first[0].lay["names"]:
+        if first is not None and d.layout(spec)["names"] == first.lay["names"]:
             # the same columns (a relabelling can change which planets a short train
             # holds, and with them its offsets and planet terms: then it starts afresh)
-            th0 = _relabelled_start(d, spec, first[0].theta, len(trs) - 1)
+            th0 = _relabelled_start(d, spec, first.theta, len(trs) - 1)
         else:
             base = _solve(d, _Spec(knots=1, harm={r: 0 for r in kin.periods},
                                    mod={r: False for r in kin.periods}), None, ones)
             th0 = _extend(base, spec, d)
         fit = _solve(d, spec, th0, ones)
-        if not first and np.isfinite(fit.chi2):
-            first.append(fit)
-        return fit.chi2 if np.isfinite(fit.chi2) else np.inf
-
-    out[:] = [cost(s) for s in range(n)]
+        if np.isfinite(fit.chi2):
+            out[s] = fit.chi2
+            if first is None:
+                first = fit
     return out
 
 

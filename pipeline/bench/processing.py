@@ -369,10 +369,10 @@ def _throughput_rows(fs, scen, n, rng):
 
     rows = []
     load = getattr(os, "getloadavg", lambda: (float("nan"),))   # 1-minute load average [-]
+    warmup_onsets()                                      # the numba kernels (when importable)
     for name, sc in scen.items():
         x, truth = pulse_scenario(n, fs, sc["shape"], sc["spacing"], snr_db=20.0, rng=rng)
         detect_onsets(x[: min(n, 1 << 18)], fs)          # warm-up (imports, FFT plans)
-        warmup_onsets()                                  # the numba kernels (when importable)
         # onsets end to end per core (width estimate, coarse, template, sub-sample
         # refinement): the default (template learnt once per operating point, numba
         # kernels for dense blocks, see meshphase.onsets.fastpath), the same on the numpy

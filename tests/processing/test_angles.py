@@ -202,18 +202,24 @@ def test_mislabelled_pass_is_left_out():
     assert any("left out" in n for n in model.notes)
 
 
-def test_label_shift_costs_find_the_planets_by_their_own_offsets():
-    # unequal planet errors (Table 2 case 3 drawn) tell the planets apart when the ring gauge
-    # sees them turn (Z_r / Z_p = 87 / 31 not an integer): a ring train relabelled by one
-    # place is recognised and the misfit of the right shift stands out
+def offset_trains():
+    """Sun and ring trains of Table 2 case 3 errors (drawn, seed 5) on Z_p = 31, the ring's
+    pass-order fractions, the ring train relabelled one place, and the drawn errors."""
     from meshphase.synthetic.generate import draw_errors
 
     g, sp = rig(zp=31)
     err = draw_errors(table2_case(3)[2], 4, 5)
     trains, _ = trains_from_truth(g, sp, SpeedProfile(), 120.0, errors=err, sigma=2e-5)
-    ring = trains[1]
     frac = planet_fractions(g.angles, pass_order("cw", "ring"))
-    shifted = relabel_train(ring, 1, frac, 4)
+    return trains, frac, relabel_train(trains[1], 1, frac, 4), err
+
+
+def test_label_shift_costs_find_the_planets_by_their_own_offsets():
+    # unequal planet errors (Table 2 case 3 drawn) tell the planets apart when the ring gauge
+    # sees them turn (Z_r / Z_p = 87 / 31 not an integer): a ring train relabelled by one
+    # place is recognised and the misfit of the right shift stands out
+    trains, frac, shifted, err = offset_trains()
+    ring = trains[1]
     assert not np.array_equal(shifted.planet, ring.planet)
     kin = kinematics(25, 87, 31, fixed="ring")
     costs = label_shift_costs([trains[0]], shifted, frac, kin, 4)
@@ -228,7 +234,6 @@ def test_label_shift_costs_find_the_planets_by_their_own_offsets():
     assert np.ptp(costs) <= 1e-6 * np.max(costs)
 
 
-
 def test_label_shift_costs_with_a_planet_missing_from_the_train():
     # the shifts after the first start from its fit only when their columns are the same:
     # gauges that never saw planet 2 hold other planets after each relabelling (other
@@ -236,13 +241,7 @@ def test_label_shift_costs_with_a_planet_missing_from_the_train():
     # and the right shift still stands out (a steep ramp's short trains met this in a run)
     from dataclasses import replace
 
-    from meshphase.synthetic.generate import draw_errors
-
-    g, sp = rig(zp=31)
-    err = draw_errors(table2_case(3)[2], 4, 5)
-    trains, _ = trains_from_truth(g, sp, SpeedProfile(), 120.0, errors=err, sigma=2e-5)
-    frac = planet_fractions(g.angles, pass_order("cw", "ring"))
-    shifted = relabel_train(trains[1], 1, frac, 4)
+    trains, frac, shifted, _ = offset_trains()
 
     def without_planet_2(tr):
         m = tr.planet != 1
@@ -261,13 +260,7 @@ def test_label_shift_costs_on_a_central_window_decide_alike():
     # a cap below the record's observations fits the central window only: the same shift
     # stands out (the decision needs hundreds of passes, not the whole record), and a cap
     # above them changes nothing at all
-    from meshphase.synthetic.generate import draw_errors
-
-    g, sp = rig(zp=31)
-    err = draw_errors(table2_case(3)[2], 4, 5)
-    trains, _ = trains_from_truth(g, sp, SpeedProfile(), 120.0, errors=err, sigma=2e-5)
-    frac = planet_fractions(g.angles, pass_order("cw", "ring"))
-    shifted = relabel_train(trains[1], 1, frac, 4)
+    trains, frac, shifted, _ = offset_trains()
     kin = kinematics(25, 87, 31, fixed="ring")
     n_obs = len(trains[0]) + len(shifted)
     whole = label_shift_costs([trains[0]], shifted, frac, kin, 4)
