@@ -403,9 +403,15 @@ def _block_means(x: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
     tot = np.zeros(nb)
     if nf:
         rows = x[:nf * b].reshape(nf, b)
-        fin = np.isfinite(rows)
-        cnt[:nf] = fin.sum(axis=1)
-        tot[:nf] = np.where(fin, rows, 0.0).sum(axis=1)
+        with np.errstate(over="ignore", invalid="ignore"):
+            total = float(np.sum(rows))              # finite: every sample is (an overflow:
+        if math.isfinite(total):                     # the full path below), the same sums
+            cnt[:nf] = b
+            tot[:nf] = rows.sum(axis=1)
+        else:
+            fin = np.isfinite(rows)
+            cnt[:nf] = fin.sum(axis=1)
+            tot[:nf] = np.where(fin, rows, 0.0).sum(axis=1)
     if nb > nf:
         part = x[nf * b:]
         fin = np.isfinite(part)

@@ -728,7 +728,7 @@ class _Pending:
     def add(self, x: np.ndarray) -> None:
         if x.size == 0:
             return
-        if x.size > 64 and np.isnan(x).all():
+        if x.size > 64 and math.isnan(x[0]) and math.isnan(x[-1]) and np.isnan(x).all():
             self.parts.append(int(x.size))
         else:
             self.parts.append(x)
@@ -872,7 +872,11 @@ class _Drift:
             return
         x = self.acc[0] if len(self.acc) == 1 else np.concatenate(self.acc)
         m = min(x.size, k * self.b)
-        seg = np.where(np.isfinite(x[:m]), x[:m], np.nan)
+        seg = x[:m]
+        with np.errstate(over="ignore", invalid="ignore"):
+            total = float(np.sum(seg))
+        if not math.isfinite(total):                   # inf to NaN (a finite sum: none)
+            seg = np.where(np.isfinite(seg), seg, np.nan)
         vals, cents = (_block_means if self.means else _block_medians)(seg, self.b)
         cents = cents + self.j_next * self.b
         rest = x[m:]
@@ -1093,13 +1097,22 @@ class _SnrTap:
     def add(self, x: np.ndarray) -> None:
         if x.size == 0:
             return
-        xx = x if self.last is None else np.concatenate([self.last, x])
-        with np.errstate(invalid="ignore"):            # inf - inf: dropped below
-            d = np.diff(xx)
-        d = d[np.isfinite(d)]
         first = (-self.rank) % self.step
-        self.parts.append(d[first::self.step].copy())
-        self.rank += d.size
+        lo, hi = float(np.min(x)), float(np.max(x))     # NaN when x holds a NaN
+        if self.last is not None:
+            v = float(self.last[0])
+            lo, hi = (min(lo, v), max(hi, v)) if math.isfinite(v) else (math.nan, math.nan)
+        if math.isfinite(hi - lo):
+            # every difference finite (none exceeds hi - lo): only the kept ones computed
+            self.parts.append(self._strided(x, first))
+            self.rank += x.size - (self.last is None)
+        else:
+            xx = x if self.last is None else np.concatenate([self.last, x])
+            with np.errstate(invalid="ignore", over="ignore"):   # inf - inf: dropped below
+                d = np.diff(xx)
+            d = d[np.isfinite(d)]
+            self.parts.append(d[first::self.step].copy())
+            self.rank += d.size
         if self.pos < self.n_pre:
             k = min(self.n_pre - self.pos, x.size)
             self.pre[self.pos:self.pos + k] = x[:k]
@@ -1110,6 +1123,20 @@ class _SnrTap:
                 self.peak_done = True
         self.last = x[-1:].copy()
         self.pos += x.size
+
+    def _strided(self, x: np.ndarray, first: int) -> np.ndarray:
+        """``np.diff([last] + x)[first::step]`` (``last`` when there is one), computed for
+        the kept differences only."""
+        s = self.step
+        if self.last is None:
+            a, b = x[first + 1::s], x[first::s]
+            return a - b[:a.size]
+        if first == 0:                                   # the one across the block edge
+            head = x[:1] - self.last
+            a, b = x[s::s], x[s - 1::s]
+            return np.concatenate([head, a - b[:a.size]])
+        a, b = x[first::s], x[first - 1::s]
+        return a - b[:a.size]
 
     def result(self) -> tuple[float, float, float]:
         if self.rank != self.expect:
