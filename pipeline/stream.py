@@ -375,10 +375,10 @@ class FileSource(BlockSource):
 
     def _hdf5_blocks(self, n_block: int):
         """An HDF5 file's blocks. The first whole pass checks the fletcher32 checksums (HDF5
-        does, at ~2 GB/s in our runs); a later pass of the same source over the file,
+        does, on every read of a chunk); a later pass of the same source over the file,
         unchanged since (device, inode, size and modification time as before and after
         the checked pass), reads the chunks again unchecked (``verify=False``: at their
-        byte offsets, several times faster), and CorruptFileError if the file changed
+        byte offsets, without HDF5's check), and CorruptFileError if the file changed
         while it was read so. ``verify`` given in the options is obeyed in every pass."""
         from .io.base import CorruptFileError
 

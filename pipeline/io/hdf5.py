@@ -35,7 +35,7 @@ naming the file, the dataset, the sample range of the chunk and its byte offset.
 ``read(..., verify=False)`` reads chunks stored with fletcher32 as the only filter without
 checking the checksum (to salvage the undamaged samples of a damaged file, or to read again
 what a checked pass of the same run has read: :class:`meshphase.stream.FileSource`), with
-``os.preadv`` at the chunks' byte offsets (HDF5's own reads verify at ~2 GB/s); chunks with
+``os.preadv`` at the chunks' byte offsets; chunks with
 compression are always checked (h5py exposes no switch to skip it). Files are written with
 no chunk cache (``rdcc_nbytes=0``), so a failed write (ENOSPC) leaves no dirty chunk for
 HDF5 to flush while closing: the write raises a clean OSError.
@@ -343,9 +343,8 @@ def _read_raw_chunks(ds, out: np.ndarray, i0: int, i1: int, chunks: "_ChunkReade
 
 class _ChunkReader:
     """Stored chunks of fletcher32-only datasets read at their byte offsets with one
-    ``os.preadv`` each, straight into the output (an unchecked read at memory speed: h5py's
-    ``read_direct_chunk`` returns a new bytes object per chunk, copied again, and ran at
-    about the speed of the checked read in our runs). The offsets come from h5py's public
+    ``os.preadv`` each, straight into the output (h5py's ``read_direct_chunk``, the library
+    path, returns a new bytes object per chunk, copied again). The offsets come from h5py's public
     ``get_chunk_info_by_coord`` (HDF5 >= 1.10.5), once per chunk; the samples of a stored
     chunk are its first bytes, the checksum follows them.
 
