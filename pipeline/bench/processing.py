@@ -75,7 +75,7 @@ PROCESS_COLUMNS = ("minutes", "n_channels", "n_samples", "data_mb", "status", "n
                    "condition_s", "onsets_s", "phasing_s", "identify_s", "identify_share",
                    "other_s", "sosfiltfilt_s",
                    "wall_over_sosfiltfilt", "streamed_over_sosfiltfilt", "threads", "cpu_s",
-                   "cpu_over_sosfiltfilt")
+                   "cpu_over_sosfiltfilt", "read_checked_s", "read_unchecked_s", "read_library_s")
 #: Recording lengths of ``meshphase bench processing``'s process table [min].
 PROCESS_MINUTES = (2.0, 10.0, 60.0, 180.0)
 
@@ -438,7 +438,10 @@ def _markdown(res: dict) -> str:
                   "load + condition + onsets (the three passes over the samples); "
                   "streamed_peak_mb: the peak RSS (VmHWM) when they are done, peak_rss_mb: of "
                   "the whole run (phasing and the later stages work on the passes, whose "
-                  "number grows with the length). Before "
+                  "number grows with the length). read_*_s: one pass over the file's "
+                  "8 channels, checked (HDF5's fletcher32 check: process's first pass), "
+                  "unchecked at the chunks' byte offsets (its later passes) and unchecked "
+                  "through h5py's read_direct_chunk (the library path). Before "
                   "streaming, process peaked at ~5x the samples' size (10 min: 0.96 GB, 1 h: "
                   "5.1 GB, measured on this machine; 3 h would need ~15 GB).", ""]
         lines += _md_table(res["process"], PROCESS_COLUMNS)
@@ -505,6 +508,10 @@ def process_rss_rows(work, minutes, *, seed: int = 1) -> tuple[list, list, float
         path = work / f"process_{m:g}.h5"
         logger.info("processing bench: writing the %g min x %d channel recording", m, N_CHANNELS)
         run_child("write_job", path=str(path), minutes=m, seed=seed)
+        # one pass over the file three ways: checked (process's first pass), unchecked at
+        # the chunks' byte offsets (its later passes), unchecked through h5py's
+        # read_direct_chunk (the library path beside that)
+        rd = run_child("hdf5_pass_job", path=str(path))
         r = run_child("process_job", path=str(path), gearset=str(gearset),
                       out_dir=str(work / f"process_{m:g}-out"))
         t = r["timings"]
@@ -527,7 +534,9 @@ def process_rss_rows(work, minutes, *, seed: int = 1) -> tuple[list, list, float
                      # worker threads (meshphase.threads): the CPU time of all of them beside
                      # the wall time, against the single-threaded sosfiltfilt pass
                      "threads": r.get("threads"), "cpu_s": r.get("cpu_s"),
-                     "cpu_over_sosfiltfilt": (r["cpu_s"] / ref) if r.get("cpu_s") else None})
+                     "cpu_over_sosfiltfilt": (r["cpu_s"] / ref) if r.get("cpu_s") else None,
+                     "read_checked_s": rd["checked_s"], "read_unchecked_s": rd["unchecked_s"],
+                     "read_library_s": rd["library_s"]})
         logger.info("processing bench: process %g min: %.1f s, peak RSS %.0f MB", m, r["wall_s"],
                     r["peak_rss_mb"])
         path.unlink(missing_ok=True)

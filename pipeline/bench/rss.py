@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["run_child", "bench_config", "write_job", "convert_job", "process_job",
-           "sosfiltfilt_job", "free_bytes", "BENCH_GEARSET", "N_CHANNELS"]
+           "hdf5_pass_job", "sosfiltfilt_job", "free_bytes", "BENCH_GEARSET", "N_CHANNELS"]
 
 #: Channels of the benchmark recordings: sun and ring gauges, 3 + 2 face-width gauges, tacho.
 N_CHANNELS = 8
@@ -239,6 +239,39 @@ def process_job(path: str, gearset: str, out_dir: str) -> dict:
             "onsets_s": float(timings.get("onsets_s", float("nan"))),
             "memory_estimate_mb": (memory.get("total", 0) / 2**20) or None,
             "threads": run_threads(), "cpu_s": cpu}
+
+
+def hdf5_pass_job(path: str, block: int = 1 << 18) -> dict:
+    """Seconds of one pass over every channel of an HDF5 recording, block by block as
+    ``meshphase process`` reads it: ``checked_s`` (HDF5 checks the fletcher32 checksums,
+    the first pass), ``unchecked_s`` (``verify=False``: the chunks at their byte offsets,
+    the later passes) and ``library_s`` (unchecked through h5py's ``read_direct_chunk``,
+    the library path kept beside it); best of two each."""
+    import h5py
+
+    from ..io import hdf5
+
+    def one(verify: bool) -> float:
+        t = time.perf_counter()
+        for _ in hdf5.iter_blocks(path, block, 0, verify=verify):
+            pass
+        return time.perf_counter() - t
+
+    def library() -> float:
+        t = time.perf_counter()
+        with h5py.File(path, "r", rdcc_nbytes=0) as f:
+            dsets = list(f["channels"].values())
+            n = dsets[0].shape[0]
+            for a in range(0, n, block):
+                b = min(n, a + block)
+                buf = np.empty((len(dsets), b - a), dtype=dsets[0].dtype)
+                for j, ds in enumerate(dsets):
+                    hdf5._read_raw_chunks(ds, buf[j], a, b, None)
+        return time.perf_counter() - t
+
+    return {"checked_s": min(one(True) for _ in range(2)),
+            "unchecked_s": min(one(False) for _ in range(2)),
+            "library_s": min(library() for _ in range(2)), "bytes": os.path.getsize(path)}
 
 
 def sosfiltfilt_job(n: int = 1 << 22, repeats: int = 3) -> dict:

@@ -125,6 +125,7 @@ def test_cli_bench_io_prints_the_peak_rss_of_convert_and_process(tmp_path, capsy
     assert all("0.05 min x 8 ch" in ln and "peak RSS" in ln for ln in conv + proc)
     js = json.loads((tmp_path / "b" / "io_bench.json").read_text())
     assert js["process"][0]["peak_rss_mb"] > 0 and js["process"][0]["n_onsets"] > 0
+    assert all(js["process"][0][k] > 0 for k in ("read_checked_s", "read_unchecked_s", "read_library_s"))
     md = (tmp_path / "b" / "io_bench.md").read_text()
     assert "meshphase process: peak memory" in md and "meshphase convert: peak memory" in md
     assert bench.rss_summary({}) == []                         # nothing measured: no line
