@@ -2,9 +2,9 @@
 
 The stages ``load``, ``condition`` and ``onsets`` (:mod:`meshphase.stages`) run through this
 module, for recording files and for recordings already in memory alike. A recording is read
-three times, block by block, channel-major, in the dtype it is stored in (an HDF5 file's
-checksums are checked in the first pass; the later ones read the same, unchanged file's
-chunks unchecked, see :class:`FileSource`):
+three times, block by block, channel-major, in the dtype it is stored in (an HDF5 or MCAP
+file's checksums are checked in the first pass; the later ones read the same, unchanged
+file unchecked, see :meth:`FileSource._pass_options`):
 
 1. **Statistics** (pass 1, :class:`meshphase.quality.ChannelScan`): per channel the extremes,
    the strided subsamples and run-length counts that the dropout / plateau thresholds come
@@ -332,75 +332,78 @@ class FileSource(BlockSource):
     def blocks(self, n_block: int):
         from .exits import recording_read_errors
 
-        i0, i1 = self.i0, self.i1
         with recording_read_errors(self.path):
-            if self.fmt == "hdf5":
-                yield from self._hdf5_blocks(n_block)
-                return
-            if i0 == 0 and i1 == self.info.n_samples and hasattr(self.mod, "iter_blocks"):
-                for blk in self._quiet(self.mod.iter_blocks(self.path, n_block, 0, self.names, **self.options)):
-                    a = int(round((blk.t0 - self.info.t0) * self.info.fs))
-                    self._note_dtype(blk.data)
-                    yield a, _apply_gains(blk.data, self.gains, copy=False)
-                return
-            if not hasattr(self.mod, "iter_blocks"):
-                yield from self._windowed(n_block, self.options)
-                return
-            # other formats stream from the start: skip to the window, stop after it
-            pos = 0
-            for blk in self._quiet(self.mod.iter_blocks(self.path, n_block, 0, self.names, **self.options)):
-                a, b = pos, pos + blk.n_samples
-                pos = b
-                if b <= i0:
-                    continue
-                if a >= i1:
-                    break
-                data = blk.data[max(a, i0) - a:min(b, i1) - a]
-                self._note_dtype(data)
-                yield max(a, i0) - i0, _apply_gains(data, self.gains, copy=True)
+            opts, unchecked, sig = self._pass_options()
+            yield from self._read(n_block, opts)
+            self._pass_done(unchecked, sig)
 
-    def _windowed(self, n_block: int, options: dict):
-        """The window's blocks, one ``read`` of the format each."""
+    def _read(self, n_block: int, opts: dict):
         i0, i1 = self.i0, self.i1
-        reads = (self.mod.read(self.path, self.names, a, min(i1, a + n_block), **options)
-                 for a in range(i0, i1, n_block))
-        for blk in self._quiet(reads):
-            self._note_dtype(blk.data)
-            a = int(round((blk.t0 - self.info.t0) * self.info.fs))
-            yield a - i0, _apply_gains(blk.data, self.gains, copy=False)
+        if i0 == 0 and i1 == self.info.n_samples and hasattr(self.mod, "iter_blocks"):
+            for blk in self._quiet(self.mod.iter_blocks(self.path, n_block, 0, self.names, **opts)):
+                a = int(round((blk.t0 - self.info.t0) * self.info.fs))
+                self._note_dtype(blk.data)
+                yield a, _apply_gains(blk.data, self.gains, copy=False)
+            return
+        if self.fmt == "hdf5" or not hasattr(self.mod, "iter_blocks"):
+            reads = (self.mod.read(self.path, self.names, a, min(i1, a + n_block), **opts)
+                     for a in range(i0, i1, n_block))
+            for blk in self._quiet(reads):
+                self._note_dtype(blk.data)
+                a = int(round((blk.t0 - self.info.t0) * self.info.fs))
+                yield a - i0, _apply_gains(blk.data, self.gains, copy=False)
+            return
+        # other formats stream from the start: skip to the window, stop after it
+        pos = 0
+        for blk in self._quiet(self.mod.iter_blocks(self.path, n_block, 0, self.names, **opts)):
+            a, b = pos, pos + blk.n_samples
+            pos = b
+            if b <= i0:
+                continue
+            if a >= i1:
+                break
+            data = blk.data[max(a, i0) - a:min(b, i1) - a]
+            self._note_dtype(data)
+            yield max(a, i0) - i0, _apply_gains(data, self.gains, copy=True)
+
+    #: formats whose stored checksums a first pass checks and later passes may skip
+    CHECKSUM_FORMATS = ("hdf5", "mcap")
 
     def _signature(self) -> tuple:
         st = os.stat(self.path)
         return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
 
-    def _hdf5_blocks(self, n_block: int):
-        """An HDF5 file's blocks. The first whole pass checks the fletcher32 checksums (HDF5
-        does, on every read of a chunk); a later pass of the same source over the file,
-        unchanged since (device, inode, size and modification time as before and after
-        the checked pass), reads the chunks again unchecked (``verify=False``: at their
-        byte offsets, without HDF5's check), and CorruptFileError if the file changed
-        while it was read so. ``verify`` given in the options is obeyed in every pass."""
-        from .io.base import CorruptFileError
+    def _pass_options(self) -> tuple[dict, bool, tuple | None]:
+        """Format options of the next pass over the file, whether it skips the checksums,
+        and the file's signature now.
 
-        opts, unchecked = self.options, False
-        if "verify" not in self.options and self._verified is not None:
-            if self._signature() == self._verified:
-                opts, unchecked = dict(self.options, verify=False), True
-            else:
-                self._verified = None
+        A file with checksums (HDF5 fletcher32, MCAP CRC32: :data:`CHECKSUM_FORMATS`) has
+        them checked in the first whole pass (they cost about as much as the rest of the
+        read). A later pass of the same source over the file, unchanged since (device,
+        inode, size and modification time as before and after the checked pass), reads it
+        again unchecked (``verify=False``); ``verify`` given in the options is obeyed in
+        every pass."""
+        if self.fmt not in self.CHECKSUM_FORMATS or "verify" in self.options:
+            return self.options, False, None
         sig = self._signature()
-        if self.i0 == 0 and self.i1 == self.info.n_samples:
-            for blk in self._quiet(self.mod.iter_blocks(self.path, n_block, 0, self.names, **opts)):
-                a = int(round((blk.t0 - self.info.t0) * self.info.fs))
-                self._note_dtype(blk.data)
-                yield a, _apply_gains(blk.data, self.gains, copy=False)
-        else:
-            yield from self._windowed(n_block, opts)
+        if self._verified is not None and sig == self._verified:
+            return dict(self.options, verify=False), True, sig
+        self._verified = None
+        return self.options, False, sig
+
+    def _pass_done(self, unchecked: bool, sig: tuple | None) -> None:
+        """After a whole pass: an unchecked one must have read the file as checked
+        (CorruptFileError if it changed meanwhile); a checked one over an unchanged file
+        lets the next passes skip the checksums."""
+        if sig is None:
+            return
         end = self._signature()
         if unchecked and end != self._verified:
+            from .io.base import CorruptFileError
+
             raise CorruptFileError(self.path, "the whole file", "it changed while it was being read "
                                    "again (size or modification time): read it anew")
-        if not unchecked and "verify" not in self.options and end == sig:
+        if not unchecked and end == sig:
             self._verified = sig
 
     def _quiet(self, it):

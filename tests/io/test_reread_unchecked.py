@@ -1,6 +1,6 @@
 """HDF5 read again unchecked: ``verify=False`` reads fletcher32 chunks at their byte offsets
 (``os.preadv``, :class:`meshphase.io.hdf5._ChunkReader`), and a :class:`FileSource` checks the
-checksums in its first whole pass only, while the file stays unchanged."""
+checksums (HDF5's and MCAP's) in its first whole pass only, while the file stays unchanged."""
 
 from __future__ import annotations
 
@@ -159,3 +159,31 @@ def test_a_damaged_chunk_is_caught_in_the_checked_pass(tmp_path):
         _passes(src, 1)
     with pytest.raises(CorruptFileError, match="checksum"):     # not trusted after a failure
         _passes(src, 1)
+
+
+def test_file_source_checks_an_mcap_file_once_too(tmp_path, monkeypatch):
+    from meshphase.io import mcap
+
+    rec = _rec(5000, 2)
+    p = pio.write(rec, tmp_path / "r.mcap")
+    seen = []
+    real = mcap.iter_blocks
+    monkeypatch.setattr(mcap, "iter_blocks", lambda *a, **kw: (seen.append(kw.get("verify", True)),
+                                                                real(*a, **kw))[1])
+    src = FileSource(p)
+    for g in _passes(src, 3):
+        np.testing.assert_array_equal(g, rec.data)
+    assert seen == [True, False, False]
+
+
+def test_file_source_of_a_format_without_checksums_passes_no_verify(tmp_path, monkeypatch):
+    from meshphase.io import csv
+
+    rec = _rec(500, 2)
+    p = pio.write(rec, tmp_path / "r.csv")
+    seen = []
+    real = csv.iter_blocks
+    monkeypatch.setattr(csv, "iter_blocks", lambda *a, **kw: (seen.append(kw.get("verify")),
+                                                               real(*a, **kw))[1])
+    _passes(FileSource(p), 2, block=100)
+    assert seen == [None, None]
