@@ -86,6 +86,8 @@ CAN_WRITE = False
 #: Read through the segment index and computed offsets (tests switch it off to compare with
 #: npTDMS's public ``read_data``, the path every file can take).
 _USE_FAST_PATH = True
+#: engine of interleaved rows read together (:func:`meshphase.io.tdms_rows.rows_engine`)
+_ROWS_ENGINE = "auto"
 #: Samples at each end of every channel compared with npTDMS's ``read_data`` before the
 #: computed-offset path is trusted for a file.
 _CHECK_SAMPLES = 64
@@ -520,7 +522,8 @@ def _read_fast(mm, plan: _Plan, names, i0, i1, buf, path) -> bool:
     # channel alone is read faster by its strided walk over the map (read_runs below)
     if len(chans) > 1 and all(c.scaling is None for c in chans) and tdms_rows.shared_rows([c.runs for c in chans]):
         try:
-            return tdms_rows.read_rows(mm, [c.runs for c in chans], chans[0].starts, i0, i1, buf)
+            return tdms_rows.read_rows(mm, [c.runs for c in chans], chans[0].starts, i0, i1, buf,
+                                       engine=_ROWS_ENGINE)
         except (TypeError, ValueError) as exc:   # a strided view past the end of the file
             raise CorruptFileError(path, f"samples [{i0}, {i1})", f"truncated or corrupt: {exc}") from exc
     interleaved = any(r.value_stride != r.dtype.itemsize for c in chans for r in c.runs)
@@ -612,7 +615,7 @@ def _map(stack: contextlib.ExitStack, path, plan: _Plan):
 
 
 @contextlib.contextmanager
-def reading_path(*, computed_offsets: bool = True, cache_plans: bool = True):
+def reading_path(*, computed_offsets: bool = True, cache_plans: bool = True, rows_engine: str = "auto"):
     """Choose how TDMS files are read inside the ``with`` block (``meshphase bench io``
     measures both ways; results are the same).
 
@@ -624,20 +627,25 @@ def reading_path(*, computed_offsets: bool = True, cache_plans: bool = True):
     cache_plans : bool
         True (default): a file's read plan (npTDMS's metadata parse, channel specs, offsets)
         is kept for the next read of the unchanged file; False: every read builds it anew.
+    rows_engine : {"auto", "numba", "numpy"}
+        Engine of the interleaved rows read together
+        (:func:`meshphase.io.tdms_rows.rows_engine`; "auto": numba when already loaded).
     """
-    global _USE_FAST_PATH, _PLAN_CACHE_SIZE
+    global _USE_FAST_PATH, _PLAN_CACHE_SIZE, _ROWS_ENGINE
     for name, v in (("computed_offsets", computed_offsets), ("cache_plans", cache_plans)):
         if not isinstance(v, (bool, np.bool_)):
             raise TypeError(f"{name} must be a bool, got {v!r}")
-    saved = _USE_FAST_PATH, _PLAN_CACHE_SIZE, list(_PLAN_CACHE.items())
+    tdms_rows.rows_engine(rows_engine)            # checked: a ValueError names the engines
+    saved = _USE_FAST_PATH, _PLAN_CACHE_SIZE, list(_PLAN_CACHE.items()), _ROWS_ENGINE
     _USE_FAST_PATH = bool(computed_offsets)
+    _ROWS_ENGINE = rows_engine
     if not cache_plans:
         _PLAN_CACHE_SIZE = 0
         _PLAN_CACHE.clear()
     try:
         yield
     finally:
-        _USE_FAST_PATH, _PLAN_CACHE_SIZE, items = saved
+        _USE_FAST_PATH, _PLAN_CACHE_SIZE, items, _ROWS_ENGINE = saved
         if not cache_plans:
             _PLAN_CACHE.clear()
             _PLAN_CACHE.update(items)
