@@ -4,10 +4,13 @@ Imported only when :func:`meshphase.io.tdms_rows.read_rows` takes its numba engi
 already loaded in the process, or asked for), so reading a TDMS file does not load numba and
 LLVM by itself. Compiled functions are cached (``cache=True``) in the per-user directory
 :func:`meshphase.numba_cache.numba_cache_dir` names unless ``NUMBA_CACHE_DIR`` is set.
-``fastmath`` stays off: the finiteness test ``v - v`` must stay a subtraction.
+``fastmath`` stays off: it would let the compiler assume no NaN or inf, and the finiteness
+test must see them.
 """
 
 from __future__ import annotations
+
+import math
 
 import numba as _numba
 
@@ -23,8 +26,9 @@ def rows_to_channels(src, cols, dst, j0):  # pragma: no cover - compiled
         The rows of whole segments (any strides, native byte order): ``src[s, i, c]`` is
         item ``c`` of row ``i`` of segment ``s``.
     cols : ndarray of int64, shape (n_channels,)
-        Item column of each output channel in a row (any order, gaps allowed).
-    dst : ndarray, shape (n_channels, n)
+        Item column of each output channel in a row (any order, gaps allowed, each below
+        ``width``).
+    dst : ndarray of float, shape (n_channels, n)
         Output; row ``j`` receives column ``cols[j]`` of the rows from row ``j0`` of the
         first segment on, ``n`` rows in all (cast to ``dst``'s type as numpy casts).
     j0 : int
@@ -35,20 +39,51 @@ def rows_to_channels(src, cols, dst, j0):  # pragma: no cover - compiled
     bool
         True when every value written (as ``dst`` holds it) is finite.
     """
+    in_order = True
+    for j in range(cols.size):
+        in_order = in_order and cols[j] == j
+    if in_order:             # the columns side by side in order: no look-up (about 10 % faster)
+        return _in_order(src, dst, j0)
+    return _by_columns(src, cols, dst, j0)
+
+
+@_numba.njit(cache=True, nogil=True)
+def _in_order(src, dst, j0):  # pragma: no cover - compiled
+    """:func:`rows_to_channels` for ``cols == arange(n_channels)``."""
     n_seg, p = src.shape[0], src.shape[1]
     nc, n = dst.shape[0], dst.shape[1]
-    zero = dst.dtype.type(0)
-    acc = zero
+    ok = True
     k = 0
     for s in range(n_seg):
         i0 = j0 if s == 0 else 0
         i1 = min(p, i0 + n - k)
         for i in range(i0, i1):
             for j in range(nc):
-                dst[j, k] = src[s, i, cols[j]]
-                w = dst[j, k]
-                acc += w - w          # 0 for a finite value, NaN for NaN or +-inf
+                w = dst.dtype.type(src[s, i, j])
+                dst[j, k] = w
+                ok &= math.isfinite(w)
             k += 1
         if k >= n:
             break
-    return acc == zero
+    return ok
+
+
+@_numba.njit(cache=True, nogil=True)
+def _by_columns(src, cols, dst, j0):  # pragma: no cover - compiled
+    """:func:`rows_to_channels` for any columns."""
+    n_seg, p = src.shape[0], src.shape[1]
+    nc, n = dst.shape[0], dst.shape[1]
+    ok = True
+    k = 0
+    for s in range(n_seg):
+        i0 = j0 if s == 0 else 0
+        i1 = min(p, i0 + n - k)
+        for i in range(i0, i1):
+            for j in range(nc):
+                w = dst.dtype.type(src[s, i, cols[j]])
+                dst[j, k] = w
+                ok &= math.isfinite(w)
+            k += 1
+        if k >= n:
+            break
+    return ok
