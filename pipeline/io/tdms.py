@@ -563,10 +563,15 @@ _PLAN_CACHE: "OrderedDict[tuple, _Plan]" = OrderedDict()
 _PLAN_CACHE_SIZE = 32
 
 
-def _prepare(path, fs, raw):
-    """(path, open TdmsFile or None, plan). Plans read by computed offsets are cached under a
+def _prepare(path, fs, raw, stack: contextlib.ExitStack | None = None):
+    """(path, open TdmsFile or None, plan, None). Plans read by computed offsets are cached under a
     digest of the file's lead-ins and metadata, so the registry's read_info + read parse the
-    TDMS metadata once; the read_data path keeps the TdmsFile open for npTDMS's reader."""
+    TDMS metadata once; the read_data path keeps the TdmsFile open for npTDMS's reader.
+
+    With ``stack``, the file is opened and memory-mapped first (both closed with ``stack``)
+    and scanned through that map, which is returned for the read (the pages the scan maps
+    in are not faulted in again): (path, TdmsFile or None, plan, map or None).
+    """
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such file")
@@ -574,7 +579,8 @@ def _prepare(path, fs, raw):
         raise TypeError(f"raw must be a bool, got {raw!r}")
     if fs is not None:
         fs = as_positive(fs, "fs")
-    index = tdms_index.scan(path)
+    mm = _open_map(stack, path) if stack is not None else None
+    index = tdms_index.scan(path, mm)
     key = None
     index_file = Path(str(path) + "_index")
     if index_file.exists():
@@ -587,7 +593,7 @@ def _prepare(path, fs, raw):
         plan = _PLAN_CACHE.get(key)
         if plan is not None:
             _PLAN_CACHE.move_to_end(key)
-            return path, None, plan
+            return path, None, plan, mm
     with _nptdms_logs_as_warnings(path):     # shown only when the file passes the checks
         tdms = _open(path)
         try:
@@ -602,15 +608,15 @@ def _prepare(path, fs, raw):
             _PLAN_CACHE[key] = plan
             while len(_PLAN_CACHE) > _PLAN_CACHE_SIZE:
                 _PLAN_CACHE.popitem(last=False)
-    return path, tdms, plan
+    return path, tdms, plan, (mm if plan.fast else None)
 
 
-def _map(stack: contextlib.ExitStack, path, plan: _Plan):
-    """The file's read-only memory map on the computed-offset path (closed with ``stack``),
-    else None."""
-    if not plan.fast:
-        return None
+def _open_map(stack: contextlib.ExitStack, path):
+    """The file's read-only memory map, kept open (with the file) until ``stack`` closes;
+    None for an empty file (the scan then says it is empty)."""
     fh = stack.enter_context(open(path, "rb"))
+    if os.fstat(fh.fileno()).st_size == 0:
+        return None
     return stack.enter_context(tdms_index.open_map(fh))
 
 
@@ -666,7 +672,7 @@ def read_info(path, *, fs: float | None = None, raw: bool = False, verify: bool 
         structure is always checked.
     """
     check_verify(verify)
-    path, tdms, plan = _prepare(path, fs, raw)
+    path, tdms, plan, _ = _prepare(path, fs, raw)
     if tdms is not None:
         tdms.close()
     return copy.deepcopy(plan.info)
@@ -708,8 +714,8 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *, fs: float |
         Truncated or damaged segment structure (segment and byte offset named).
     """
     check_verify(verify)
-    path, tdms, plan = _prepare(path, fs, raw)
     with contextlib.ExitStack() as stack:
+        path, tdms, plan, mm = _prepare(path, fs, raw, stack)
         if tdms is not None:
             stack.enter_context(tdms)
         names = plan.info.check_channels(channels)
@@ -718,7 +724,6 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *, fs: float |
         i1 = n if i1 is None else as_int(i1, "i1")
         if not 0 <= i0 <= i1 <= n:
             raise ValueError(f"{path}: sample range [{i0}, {i1}) outside the recording's [0, {n})")
-        mm = _map(stack, path, plan)
         data, finite = _read_window(mm, plan, names, i0, i1, path)
     if not finite:
         warn_nonfinite(path, data, names, i0)
@@ -736,11 +741,10 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *, fs: float 
     n_overlap = as_int(n_overlap, "n_overlap")
     if n_overlap < 0:
         raise ValueError(f"n_overlap must be >= 0, got {n_overlap}")
-    path, tdms, plan = _prepare(path, fs, raw)
     with contextlib.ExitStack() as stack:
+        path, tdms, plan, mm = _prepare(path, fs, raw, stack)
         if tdms is not None:
             stack.enter_context(tdms)
-        mm = _map(stack, path, plan)
         names = plan.info.check_channels(channels)
         n = plan.info.n_samples
         for i0 in range(0, n, n_block):

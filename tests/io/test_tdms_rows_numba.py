@@ -17,6 +17,7 @@ import pytest
 
 from meshphase.errors import DataQualityWarning
 from meshphase.io import tdms, tdms_index, tdms_rows
+from meshphase.io.base import RecordingFileError
 from meshphase.recording import ChannelSpec, Recording
 from meshphase.synthetic.tdms_export import write_ni_log
 
@@ -198,3 +199,17 @@ def test_reading_a_tdms_file_does_not_load_numba(tmp_path):
     res = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == "False"
+
+
+def test_scan_through_the_callers_map_equals_its_own(tmp_path):
+    rec = _rec(3000, 3)
+    path = write_ni_log(rec, tmp_path / "x.tdms", samples_per_segment=512, interleaved=True)
+    own = tdms_index.scan(path)
+    with open(path, "rb") as fh, tdms_index.open_map(fh) as mm:
+        given = tdms_index.scan(path, mm)
+    assert given.digest == own.digest and given.runs == own.runs and given.n_segments == own.n_segments
+    empty = tmp_path / "empty.tdms"
+    empty.write_bytes(b"")
+    for reader in (tdms.read, lambda p: list(tdms.iter_blocks(p, 100, 0)), tdms.read_info):
+        with pytest.raises(RecordingFileError, match="file is empty"):
+            reader(empty)
