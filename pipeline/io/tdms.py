@@ -44,9 +44,11 @@ lead-in and metadata are taken together), through a memory map, NI-scaled by
 must equal npTDMS's and its first and last samples must equal what ``read_data`` returns,
 else, and for DAQmx raw data or scales only npTDMS computes, ``read_data`` reads every
 sample (``read_info(...).extra["read_path"]`` says which path and why). Channels interleaved
-in the same rows are read together by :mod:`meshphase.io.tdms_rows` (whole segments per
-block, one ``os.preadv`` and one transposing assignment each, the block summed while in the
-cache, so a finite read skips the separate NaN/inf scan). The read plan is
+in the same rows are read together by :mod:`meshphase.io.tdms_rows` (one compiled pass
+per run of segments when numba is already loaded, else whole segments per block, one
+``os.preadv`` and one transposing assignment each; every sample shown finite on the way,
+so a finite read skips the separate NaN/inf scan). The segments are scanned through the
+memory map the samples are then read from. The read plan is
 cached under a digest of the lead-ins and metadata. :func:`iter_blocks` keeps the file open
 and reads block after block, so memory stays flat.
 """

@@ -38,7 +38,6 @@ __all__ = ["ENGINES", "HAVE_NUMBA", "shared_rows", "row_columns", "read_rows", "
 ENGINES = ("auto", "numba", "numpy")
 #: numba is optional (extras "fast" and "test"); looked for here, imported on first use
 HAVE_NUMBA = importlib.util.find_spec("numba") is not None
-_NUMBA_ERROR = "numba is not installed"
 
 
 def rows_engine(engine: str = "auto") -> str:
@@ -50,7 +49,7 @@ def rows_engine(engine: str = "auto") -> str:
     if not isinstance(engine, str) or engine not in ENGINES:
         raise ValueError(f"engine must be one of {list(ENGINES)}, got {engine!r}")
     if engine == "numba" and not HAVE_NUMBA:
-        raise ValueError(f"engine='numba' requested but numba is not importable ({_NUMBA_ERROR})")
+        raise ValueError("engine='numba' requested but numba is not importable (not installed)")
     if engine == "auto":
         return "numba" if HAVE_NUMBA and "numba" in sys.modules else "numpy"
     return engine
@@ -58,13 +57,8 @@ def rows_engine(engine: str = "auto") -> str:
 
 def _kernels():
     """The numba kernel module, imported on first use with the per-user cache set
-    (ImportError when numba cannot be imported after all)."""
-    global HAVE_NUMBA, _NUMBA_ERROR
-    try:
-        return import_kernels("meshphase.io._tdms_rows_numba")
-    except ImportError as exc:  # pragma: no cover - a broken numba install
-        HAVE_NUMBA, _NUMBA_ERROR = False, repr(exc.__cause__ or exc)
-        raise
+    (ImportError, naming the cause, when numba cannot be imported after all)."""
+    return import_kernels("meshphase.io._tdms_rows_numba")
 
 
 def warmup() -> dict:
