@@ -45,10 +45,11 @@ must equal npTDMS's and its first and last samples must equal what ``read_data``
 else, and for DAQmx raw data or scales only npTDMS computes, ``read_data`` reads every
 sample (``read_info(...).extra["read_path"]`` says which path and why). Channels interleaved
 in the same rows are read together by :mod:`meshphase.io.tdms_rows` (one compiled pass
-per run of segments when numba is already loaded, else whole segments per block, one
-``os.preadv`` and one transposing assignment each; every sample shown finite on the way,
-so a finite read skips the separate NaN/inf scan). The segments are scanned through the
-memory map the samples are then read from. The read plan is
+per run of segments when numba is already loaded, else whole segments per block copied
+through the map and transposed in one numpy assignment each; every sample shown finite on
+the way, so a finite read skips the separate NaN/inf scan). The segments are scanned
+through the memory map the samples are then read from, so its pages are mapped in once.
+The read plan is
 cached under a digest of the lead-ins and metadata. :func:`iter_blocks` keeps the file open
 and reads block after block, so memory stays flat.
 """
@@ -60,6 +61,7 @@ import copy
 import json
 import logging
 import math
+import mmap
 import os
 import sys
 from collections import OrderedDict
@@ -615,11 +617,13 @@ def _prepare(path, fs, raw, stack: contextlib.ExitStack | None = None):
 
 def _open_map(stack: contextlib.ExitStack, path):
     """The file's read-only memory map, kept open (with the file) until ``stack`` closes;
-    None for an empty file (the scan then says it is empty)."""
+    None for an empty file (the scan then says it is empty). It carries no descriptor
+    (``fd`` -1): the numpy engine of :mod:`meshphase.io.tdms_rows` copies the rows through
+    the map, whose pages the scan has mapped in, instead of ``os.preadv`` (slower then)."""
     fh = stack.enter_context(open(path, "rb"))
     if os.fstat(fh.fileno()).st_size == 0:
         return None
-    return stack.enter_context(tdms_index.open_map(fh))
+    return stack.enter_context(tdms_index.FileMap(fh.fileno(), 0, access=mmap.ACCESS_READ))
 
 
 @contextlib.contextmanager
