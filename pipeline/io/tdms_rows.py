@@ -6,19 +6,19 @@ no second pass. The runs come from :func:`meshphase.io.tdms_index.scan`.
 Two engines (:data:`ENGINES`, :func:`rows_engine`):
 
 * ``numpy``: block after block of whole segments, the rows through an aligned buffer
-  (``os.preadv`` into it, or a copy from the memory map), transposed in one numpy
-  assignment per block and summed while in the cache;
+  (``os.preadv`` into it when ``buf`` carries a descriptor, else a copy from the memory
+  map), transposed in one numpy assignment per block and summed while in the cache;
 * ``numba``: one compiled pass per run of segments straight from the memory map
   (:mod:`meshphase.io._tdms_rows_numba`), the finiteness test folded into the copy. numpy's
   transposing copy costs about four times a contiguous one, and the buffer copy and the sum
   are passes of their own: on the shared 2-core machine the numba engine read 512- and
-  1000-sample interleaved segments at 0.36-0.51x the raw read (medians 0.42 and 0.40 of
-  five runs), the numpy engine at 0.22-0.30x (``meshphase bench io``, the TDMS rows and
-  their ``numpy rows`` twins, 10 and 60 min).
+  1000-sample interleaved segments at 0.32-0.51x the raw read (medians 0.38 and 0.39 of
+  ten runs), the numpy engine at 0.18-0.32x (medians 0.27 and 0.28) (``meshphase bench
+  io``, the TDMS rows and their ``numpy rows`` twins, 10 and 60 min).
 
 ``auto`` (the default) takes numba only when numba is already loaded in the process (a
 Monte Carlo, a dense onset block, a warm-up): loading numba and the kernel took 0.4-1.4 s
-(the bench's warm-up), the numba engine saved 0.12-0.18 s per GB read, so loading it for
+(the bench's warm-up), the numba engine saved 0.06-0.2 s per GB read, so loading it for
 a read alone would not pay. Non-native byte order, bool data and non-float output take
 the numpy engine.
 """
