@@ -1,7 +1,8 @@
 """I/O benchmark (``meshphase bench io``): read throughput per format against a raw read.
 
 For each format (HDF5, MCAP with no / lz4 / zstd compression, CSV, NI TDMS with large
-segments written by ``nptdms.TdmsWriter`` and with the small segments of NI-DAQmx logging)
+segments written by ``nptdms.TdmsWriter`` and with the small segments of NI-DAQmx logging,
+the interleaved ones on both engines of :mod:`meshphase.io.tdms_rows`)
 a generated strain-like recording (1 h x 8 channels at 5120 Hz by default) is written and
 read back through :mod:`meshphase.io`, and measured:
 
@@ -83,6 +84,8 @@ _TDMS_SMALL_SEGMENTS = (512, 1000)  # NI-DAQmx logging, contiguous and interleav
 #: TDMS variants read another way than the default (meshphase.io.tdms.reading_path)
 _TDMS_PUBLIC = ", npTDMS read_data"
 _TDMS_COLD = ", plan not cached"
+#: interleaved TDMS rows read by the numpy engine (the default rows: numba, loaded beforehand)
+_TDMS_NUMPY_ROWS = ", numpy rows"
 
 
 # ---------------------------------------------------------------------------------- data
@@ -155,13 +158,24 @@ def _write_tdms(rec: Recording, path: Path, segment: int) -> None:
 def _tdms_reading(fmt: str, variant: str):
     """How a TDMS variant is read: computed offsets with the read plan cached (default),
     the plan built anew on every read (``_TDMS_COLD``), or every sample through npTDMS's
-    public ``read_data`` (``_TDMS_PUBLIC``)."""
+    public ``read_data`` (``_TDMS_PUBLIC``); interleaved rows on the engine ``auto`` picks
+    (numba once :func:`_warm_tdms_rows` loaded it) or on numpy (``_TDMS_NUMPY_ROWS``)."""
     if fmt != "tdms":
         return contextlib.nullcontext()
     from ..io.tdms import reading_path
 
     return reading_path(computed_offsets=not variant.endswith(_TDMS_PUBLIC),
-                        cache_plans=not variant.endswith(_TDMS_COLD))
+                        cache_plans=not variant.endswith(_TDMS_COLD),
+                        rows_engine="numpy" if variant.endswith(_TDMS_NUMPY_ROWS) else "auto")
+
+
+def _warm_tdms_rows() -> dict:
+    """Load numba and the interleaved rows' kernel before the TDMS rows are timed
+    (:func:`meshphase.io.tdms_rows.warmup`): ``{"engine", "seconds"}``, the once-per-process
+    start-up that the read times leave out."""
+    from ..io.tdms_rows import warmup
+
+    return warmup()
 
 
 def _variants(fmt: str) -> list[tuple[str, str, Callable[[Recording, Path], None]]]:
@@ -186,6 +200,8 @@ def _variants(fmt: str) -> list[tuple[str, str, Callable[[Recording, Path], None
                   lambda r, p: _write_tdms(r, p, _TDMS_LARGE_SEGMENT))]
                 + [(f"{spc} samples/segment{', interleaved' if il else ''}", ".tdms", ni_log(spc, il))
                    for spc in _TDMS_SMALL_SEGMENTS for il in (False, True)]
+                + [(f"{spc} samples/segment, interleaved{_TDMS_NUMPY_ROWS}", ".tdms", ni_log(spc, True))
+                   for spc in _TDMS_SMALL_SEGMENTS]
                 + [(f"{small} samples/segment{how}", ".tdms", ni_log(small, False))
                    for how in (_TDMS_COLD, _TDMS_PUBLIC)])
     raise ValueError(f"unknown format {fmt!r}")
@@ -366,8 +382,10 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
         if bar:
             bar.update(1)
         bench = _ReadBench(rec, raw, work, repeats, budget_samples, gen)
-        rows, caught = [], []
+        rows, caught, rows_warm = [], [], None
         for fmt, variant, suffix, writer in plan:
+            if fmt == "tdms" and rows_warm is None:
+                rows_warm = _warm_tdms_rows()
             rows.append(bench.row(fmt, variant, suffix, writer, len(rows), caught, bar))
         convert, process = _rss_tables(work, convert_minutes, process_minutes, skipped)
         mcap_paths = (mcap_path_rows(rec, work, lambda fn: _best(fn, repeats))  # own vs generic
@@ -379,8 +397,10 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
             shutil.rmtree(work, ignore_errors=True)
     config = _config(minutes, n_channels, fs, n, rec, formats, repeats, block_budget_mb, budget_samples,
                      bench)
+    config["tdms_rows_engine"] = rows_warm
     result = {"config": config, "raw": raw, "rows": rows, "convert": convert, "process": process,
-              "mcap_paths": mcap_paths, "skipped": skipped, "warnings": caught, "notes": _notes(repeats)}
+              "mcap_paths": mcap_paths, "skipped": skipped, "warnings": caught,
+              "notes": _notes(repeats, rows_warm)}
     files = {"json": str(out / "io_bench.json"), "md": str(out / "io_bench.md")}
     result["files"] = files
     Path(files["json"]).write_text(json.dumps(result, indent=2, default=json_default) + "\n",
@@ -507,7 +527,7 @@ def _config(minutes, n_channels, fs, n, rec, formats, repeats, block_budget_mb, 
     }
 
 
-def _notes(repeats: int) -> list[str]:
+def _notes(repeats: int, rows_warm: dict | None = None) -> list[str]:
     return [
         "Throughput in MSamples/s (1 sample = one value of one channel), best of "
         f"{repeats} reads of a file just written (page cache warm).",
@@ -523,6 +543,13 @@ def _notes(repeats: int) -> list[str]:
         "segment index, the read plan (npTDMS's metadata parse) cached by the first read; "
         "'plan not cached': every read parses the metadata through npTDMS again; "
         "'npTDMS read_data': every sample through npTDMS's public read_data.",
+        "TDMS interleaved rows: read on the engine 'auto' picks (meshphase.io.tdms_rows."
+        "rows_engine: numba when numba is already loaded in the process); the bench loads "
+        "numba and the rows kernel once before the TDMS rows"
+        + (f" ({rows_warm['engine']}: {rows_warm['seconds']:.2f} s, left out of the read "
+           "times)" if rows_warm else "")
+        + "; 'numpy rows': the numpy engine beside it (a read in a process without numba "
+        "loaded).",
         "CSV is held against pandas.read_csv(engine='c') alone on the same file: "
         "csv_over_pandas = pandas time / our time (>= 1 meets the target).",
         "stream_peak_mb_*: tracemalloc peak (Python + numpy allocations; HDF5/TDMS C "

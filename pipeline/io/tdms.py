@@ -44,9 +44,12 @@ lead-in and metadata are taken together), through a memory map, NI-scaled by
 must equal npTDMS's and its first and last samples must equal what ``read_data`` returns,
 else, and for DAQmx raw data or scales only npTDMS computes, ``read_data`` reads every
 sample (``read_info(...).extra["read_path"]`` says which path and why). Channels interleaved
-in the same rows are read together by :mod:`meshphase.io.tdms_rows` (whole segments per
-block, one ``os.preadv`` and one transposing assignment each, the block summed while in the
-cache, so a finite read skips the separate NaN/inf scan). The read plan is
+in the same rows are read together by :mod:`meshphase.io.tdms_rows` (one compiled pass
+per run of segments when numba is already loaded, else whole segments per block copied
+through the map and transposed in one numpy assignment each; every sample shown finite on
+the way, so a finite read skips the separate NaN/inf scan). The segments are scanned
+through the memory map the samples are then read from, so its pages are mapped in once.
+The read plan is
 cached under a digest of the lead-ins and metadata. :func:`iter_blocks` keeps the file open
 and reads block after block, so memory stays flat.
 """
@@ -58,6 +61,7 @@ import copy
 import json
 import logging
 import math
+import mmap
 import os
 import sys
 from collections import OrderedDict
@@ -86,6 +90,8 @@ CAN_WRITE = False
 #: Read through the segment index and computed offsets (tests switch it off to compare with
 #: npTDMS's public ``read_data``, the path every file can take).
 _USE_FAST_PATH = True
+#: engine of interleaved rows read together (:func:`meshphase.io.tdms_rows.rows_engine`)
+_ROWS_ENGINE = "auto"
 #: Samples at each end of every channel compared with npTDMS's ``read_data`` before the
 #: computed-offset path is trusted for a file.
 _CHECK_SAMPLES = 64
@@ -520,7 +526,8 @@ def _read_fast(mm, plan: _Plan, names, i0, i1, buf, path) -> bool:
     # channel alone is read faster by its strided walk over the map (read_runs below)
     if len(chans) > 1 and all(c.scaling is None for c in chans) and tdms_rows.shared_rows([c.runs for c in chans]):
         try:
-            return tdms_rows.read_rows(mm, [c.runs for c in chans], chans[0].starts, i0, i1, buf)
+            return tdms_rows.read_rows(mm, [c.runs for c in chans], chans[0].starts, i0, i1, buf,
+                                       engine=_ROWS_ENGINE)
         except (TypeError, ValueError) as exc:   # a strided view past the end of the file
             raise CorruptFileError(path, f"samples [{i0}, {i1})", f"truncated or corrupt: {exc}") from exc
     interleaved = any(r.value_stride != r.dtype.itemsize for c in chans for r in c.runs)
@@ -560,10 +567,15 @@ _PLAN_CACHE: "OrderedDict[tuple, _Plan]" = OrderedDict()
 _PLAN_CACHE_SIZE = 32
 
 
-def _prepare(path, fs, raw):
-    """(path, open TdmsFile or None, plan). Plans read by computed offsets are cached under a
+def _prepare(path, fs, raw, stack: contextlib.ExitStack | None = None):
+    """(path, open TdmsFile or None, plan, None). Plans read by computed offsets are cached under a
     digest of the file's lead-ins and metadata, so the registry's read_info + read parse the
-    TDMS metadata once; the read_data path keeps the TdmsFile open for npTDMS's reader."""
+    TDMS metadata once; the read_data path keeps the TdmsFile open for npTDMS's reader.
+
+    With ``stack``, the file is opened and memory-mapped first (both closed with ``stack``)
+    and scanned through that map, which is returned for the read (the pages the scan maps
+    in are not faulted in again): (path, TdmsFile or None, plan, map or None).
+    """
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such file")
@@ -571,7 +583,8 @@ def _prepare(path, fs, raw):
         raise TypeError(f"raw must be a bool, got {raw!r}")
     if fs is not None:
         fs = as_positive(fs, "fs")
-    index = tdms_index.scan(path)
+    mm = _open_map(stack, path) if stack is not None else None
+    index = tdms_index.scan(path, mm)
     key = None
     index_file = Path(str(path) + "_index")
     if index_file.exists():
@@ -584,7 +597,7 @@ def _prepare(path, fs, raw):
         plan = _PLAN_CACHE.get(key)
         if plan is not None:
             _PLAN_CACHE.move_to_end(key)
-            return path, None, plan
+            return path, None, plan, mm
     with _nptdms_logs_as_warnings(path):     # shown only when the file passes the checks
         tdms = _open(path)
         try:
@@ -599,20 +612,22 @@ def _prepare(path, fs, raw):
             _PLAN_CACHE[key] = plan
             while len(_PLAN_CACHE) > _PLAN_CACHE_SIZE:
                 _PLAN_CACHE.popitem(last=False)
-    return path, tdms, plan
+    return path, tdms, plan, (mm if plan.fast else None)
 
 
-def _map(stack: contextlib.ExitStack, path, plan: _Plan):
-    """The file's read-only memory map on the computed-offset path (closed with ``stack``),
-    else None."""
-    if not plan.fast:
-        return None
+def _open_map(stack: contextlib.ExitStack, path):
+    """The file's read-only memory map, kept open (with the file) until ``stack`` closes;
+    None for an empty file (the scan then says it is empty). It carries no descriptor
+    (``fd`` -1): the numpy engine of :mod:`meshphase.io.tdms_rows` copies the rows through
+    the map, whose pages the scan has mapped in, instead of ``os.preadv`` (slower then)."""
     fh = stack.enter_context(open(path, "rb"))
-    return stack.enter_context(tdms_index.open_map(fh))
+    if os.fstat(fh.fileno()).st_size == 0:
+        return None
+    return stack.enter_context(tdms_index.FileMap(fh.fileno(), 0, access=mmap.ACCESS_READ))
 
 
 @contextlib.contextmanager
-def reading_path(*, computed_offsets: bool = True, cache_plans: bool = True):
+def reading_path(*, computed_offsets: bool = True, cache_plans: bool = True, rows_engine: str = "auto"):
     """Choose how TDMS files are read inside the ``with`` block (``meshphase bench io``
     measures both ways; results are the same).
 
@@ -624,20 +639,25 @@ def reading_path(*, computed_offsets: bool = True, cache_plans: bool = True):
     cache_plans : bool
         True (default): a file's read plan (npTDMS's metadata parse, channel specs, offsets)
         is kept for the next read of the unchanged file; False: every read builds it anew.
+    rows_engine : {"auto", "numba", "numpy"}
+        Engine of the interleaved rows read together
+        (:func:`meshphase.io.tdms_rows.rows_engine`; "auto": numba when already loaded).
     """
-    global _USE_FAST_PATH, _PLAN_CACHE_SIZE
+    global _USE_FAST_PATH, _PLAN_CACHE_SIZE, _ROWS_ENGINE
     for name, v in (("computed_offsets", computed_offsets), ("cache_plans", cache_plans)):
         if not isinstance(v, (bool, np.bool_)):
             raise TypeError(f"{name} must be a bool, got {v!r}")
-    saved = _USE_FAST_PATH, _PLAN_CACHE_SIZE, list(_PLAN_CACHE.items())
+    tdms_rows.rows_engine(rows_engine)            # checked: a ValueError names the engines
+    saved = _USE_FAST_PATH, _PLAN_CACHE_SIZE, list(_PLAN_CACHE.items()), _ROWS_ENGINE
     _USE_FAST_PATH = bool(computed_offsets)
+    _ROWS_ENGINE = rows_engine
     if not cache_plans:
         _PLAN_CACHE_SIZE = 0
         _PLAN_CACHE.clear()
     try:
         yield
     finally:
-        _USE_FAST_PATH, _PLAN_CACHE_SIZE, items = saved
+        _USE_FAST_PATH, _PLAN_CACHE_SIZE, items, _ROWS_ENGINE = saved
         if not cache_plans:
             _PLAN_CACHE.clear()
             _PLAN_CACHE.update(items)
@@ -658,7 +678,7 @@ def read_info(path, *, fs: float | None = None, raw: bool = False, verify: bool 
         structure is always checked.
     """
     check_verify(verify)
-    path, tdms, plan = _prepare(path, fs, raw)
+    path, tdms, plan, _ = _prepare(path, fs, raw)
     if tdms is not None:
         tdms.close()
     return copy.deepcopy(plan.info)
@@ -700,8 +720,8 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *, fs: float |
         Truncated or damaged segment structure (segment and byte offset named).
     """
     check_verify(verify)
-    path, tdms, plan = _prepare(path, fs, raw)
     with contextlib.ExitStack() as stack:
+        path, tdms, plan, mm = _prepare(path, fs, raw, stack)
         if tdms is not None:
             stack.enter_context(tdms)
         names = plan.info.check_channels(channels)
@@ -710,7 +730,6 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *, fs: float |
         i1 = n if i1 is None else as_int(i1, "i1")
         if not 0 <= i0 <= i1 <= n:
             raise ValueError(f"{path}: sample range [{i0}, {i1}) outside the recording's [0, {n})")
-        mm = _map(stack, path, plan)
         data, finite = _read_window(mm, plan, names, i0, i1, path)
     if not finite:
         warn_nonfinite(path, data, names, i0)
@@ -728,11 +747,10 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *, fs: float 
     n_overlap = as_int(n_overlap, "n_overlap")
     if n_overlap < 0:
         raise ValueError(f"n_overlap must be >= 0, got {n_overlap}")
-    path, tdms, plan = _prepare(path, fs, raw)
     with contextlib.ExitStack() as stack:
+        path, tdms, plan, mm = _prepare(path, fs, raw, stack)
         if tdms is not None:
             stack.enter_context(tdms)
-        mm = _map(stack, path, plan)
         names = plan.info.check_channels(channels)
         n = plan.info.n_samples
         for i0 in range(0, n, n_block):

@@ -226,8 +226,16 @@ def _layout(state: tuple, toc: int) -> _Layout:
     return _Layout(tuple(objs), chunk, interleaved, why)
 
 
-def scan(path) -> Index:
+def scan(path, mm=None) -> Index:
     """Walk the segments of a TDMS data file once.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file (named in errors; opened and mapped here unless ``mm`` is given).
+    mm : mmap, optional
+        The file's memory map, when the caller keeps one open to read the samples through it
+        next: the pages the walk maps in are then not faulted in a second time.
 
     Raises
     ------
@@ -237,11 +245,13 @@ def scan(path) -> Index:
         A lead-in cut short or without the tag, a next-segment offset never written or past
         the end of the file, a raw-data offset beyond its segment.
     """
+    if mm is not None and len(mm):
+        return _Scan(path, mm, len(mm)).run()
     size = os.path.getsize(path)
     if size == 0:
         raise RecordingFileError(path, "file is empty (0 bytes)")
-    with open(path, "rb") as fh, open_map(fh) as mm:
-        return _Scan(path, mm, size).run()
+    with open(path, "rb") as fh, open_map(fh) as own:
+        return _Scan(path, own, size).run()
 
 
 def count_index_segments(path) -> int:

@@ -1,18 +1,87 @@
 """Interleaved TDMS rows read together: the channels read from segments whose raw data are
-interleaved (one row of every object per value, ``kTocInterleavedData``) are taken block
-after block of whole segments, the rows through an aligned buffer (``os.preadv`` into it, or
-a copy from the memory map), and transposed into channel-major output in one numpy
-assignment per block, summed while in the cache so a finite read needs no second pass.
-The runs come from :func:`meshphase.io.tdms_index.scan`.
+interleaved (one row of every object per value, ``kTocInterleavedData``) are transposed
+into channel-major output, every sample tested for NaN/inf on the way so a finite read needs
+no second pass. The runs come from :func:`meshphase.io.tdms_index.scan`.
+
+Two engines (:data:`ENGINES`, :func:`rows_engine`):
+
+* ``numpy``: block after block of whole segments, the rows through an aligned buffer
+  (``os.preadv`` into it when ``buf`` carries a descriptor, else a copy from the memory
+  map), transposed in one numpy assignment per block and summed while in the cache;
+* ``numba``: one compiled pass per run of segments straight from the memory map
+  (:mod:`meshphase.io._tdms_rows_numba`), the finiteness test folded into the copy. numpy's
+  transposing copy costs about four times a contiguous one, and the buffer copy and the sum
+  are passes of their own: on the shared 2-core machine the numba engine read 512- and
+  1000-sample interleaved segments at 0.32-0.51x the raw read (medians 0.38 and 0.39 of
+  ten runs), the numpy engine at 0.18-0.32x (medians 0.27 and 0.28) (``meshphase bench
+  io``, the TDMS rows and their ``numpy rows`` twins, 10 and 60 min).
+
+``auto`` (the default) takes numba only when numba is already loaded in the process (a
+Monte Carlo, a dense onset block, a warm-up): loading numba and the kernel took 0.4-1.4 s
+(the bench's warm-up), the numba engine saved 0.06-0.2 s per GB read, so loading it for
+a read alone would not pay. Non-native byte order, bool data and non-float output take
+the numpy engine.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import os
+import sys
+import time
 
 import numpy as np
 
-__all__ = ["shared_rows", "row_columns", "read_rows"]
+from ..numba_cache import import_kernels
+
+__all__ = ["ENGINES", "HAVE_NUMBA", "shared_rows", "row_columns", "read_rows", "rows_engine", "warmup"]
+
+#: engines of :func:`read_rows`'s transposing copy
+ENGINES = ("auto", "numba", "numpy")
+#: numba is optional (extras "fast" and "test"); looked for here, imported on first use
+HAVE_NUMBA = importlib.util.find_spec("numba") is not None
+
+
+def rows_engine(engine: str = "auto") -> str:
+    """The engine :func:`read_rows` takes for ``engine``: ``"numba"`` or ``"numpy"``.
+
+    ``"auto"`` is numba when numba is installed and already loaded in this process (its
+    start-up paid by someone else), else numpy; ``"numba"`` without numba is a ValueError.
+    """
+    if not isinstance(engine, str) or engine not in ENGINES:
+        raise ValueError(f"engine must be one of {list(ENGINES)}, got {engine!r}")
+    if engine == "numba" and not HAVE_NUMBA:
+        raise ValueError("engine='numba' requested but numba is not importable (not installed)")
+    if engine == "auto":
+        return "numba" if HAVE_NUMBA and "numba" in sys.modules else "numpy"
+    return engine
+
+
+def _kernels():
+    """The numba kernel module, imported on first use with the per-user cache set
+    (ImportError, naming the cause, when numba cannot be imported after all)."""
+    return import_kernels("meshphase.io._tdms_rows_numba")
+
+
+def warmup() -> dict:
+    """Load numba and the rows kernel (compiled once into the per-user cache) for float64
+    rows into float64 output, so that the next :func:`read_rows` on ``"auto"`` takes it.
+
+    Returns
+    -------
+    dict
+        ``engine`` ("numba", or "numpy" when numba is not importable: nothing to load) and
+        ``seconds`` [s] the import and compilation (or cache load) took.
+    """
+    t = time.perf_counter()
+    if not HAVE_NUMBA:
+        return {"engine": "numpy", "seconds": 0.0}
+    rows = np.arange(6.0).reshape(1, 3, 2)
+    out = np.empty((2, 3))
+    _kernels().rows_to_channels(rows, np.array([1, 0], dtype=np.int64), out, 0)
+    if not np.array_equal(out, rows[0].T[::-1]):
+        raise RuntimeError("the numba rows kernel gave wrong samples")
+    return {"engine": "numba", "seconds": time.perf_counter() - t}
 
 
 def shared_rows(runs_per_channel: list) -> bool:
@@ -55,11 +124,15 @@ _ROW_BLOCK = 1 << 19
 _PREADV_SEGMENTS = 500
 
 
-def read_rows(buf, runs_per_channel: list, starts: np.ndarray, i0: int, i1: int, out: np.ndarray) -> bool:
+def read_rows(buf, runs_per_channel: list, starts: np.ndarray, i0: int, i1: int, out: np.ndarray,
+              engine: str = "auto") -> bool:
     """Samples [i0, i1) of channels that are columns of shared interleaved rows
     (:func:`shared_rows`) into ``out`` (n_channels, i1 - i0).
 
-    A block of whole segments at a time (about ``_ROW_BLOCK`` bytes), the bytes from the
+    On the numba engine (:func:`rows_engine`; native byte order, numeric rows, floating-point
+    ``out``), one compiled pass per run of segments copies the samples from ``buf`` (the
+    memory map) into ``out`` and tests each for finiteness. On the numpy engine, a block of
+    whole segments at a time (about ``_ROW_BLOCK`` bytes), the bytes from the
     leftmost channel's value to the rightmost one's in the last row of each segment land
     side by side in an aligned buffer, and one numpy assignment transposes the block into
     ``out`` (one strided copy per channel when the columns are not side by side in order);
@@ -68,21 +141,41 @@ def read_rows(buf, runs_per_channel: list, starts: np.ndarray, i0: int, i1: int,
     lead-ins into a scratch buffer (the kernel copies from the page cache: no page faults
     on the map, which cost most where segments are about a page apart); else the rows are
     copied from ``buf``. The samples just written are summed while they are in the cache.
+    Both engines give the same samples bit for bit.
+
+    Parameters
+    ----------
+    buf : FileMap, mmap or bytes
+        The file's bytes.
+    runs_per_channel : list of list of Run
+        Each channel's runs (:attr:`meshphase.io.tdms_index.Index.runs`).
+    starts : ndarray of int64
+        First sample of each run [-].
+    i0, i1 : int
+        Samples read [-].
+    out : ndarray, shape (n_channels, i1 - i0)
+        Channel-major output (its dtype: the samples are cast as numpy casts).
+    engine : {"auto", "numba", "numpy"}
+        See :func:`rows_engine`.
 
     Returns
     -------
     bool
-        True when every sample copied is shown finite (``out`` is floating point and the sum
-        of every block is finite: a NaN or inf propagates into its sum), so the caller can
-        skip its own scan for NaN/inf; False when not shown (a non-finite sample, or a sum
-        that overflowed).
+        True when every sample copied is shown finite (``out`` is floating point and, on
+        the numpy engine, the sum of every block is finite: a NaN or inf propagates into
+        its sum; on the numba engine, every sample tested), so the caller can skip its own
+        scan for NaN/inf; False when not shown (a non-finite sample, or a sum that
+        overflowed).
 
     Raises
     ------
     ValueError
-        The runs are not shared rows, ``out`` has the wrong shape, or the file ends before
-        the rows (a strided view or ``os.preadv`` past its end).
+        The runs are not shared rows, ``out`` has the wrong shape, ``engine`` is unknown
+        (or numba and numba is missing), or the file ends before the rows (a strided view
+        or ``os.preadv`` past its end; a TypeError from numpy on the numpy engine's map
+        path).
     """
+    compiled = rows_engine(engine) == "numba"
     cols = row_columns(runs_per_channel)
     if cols is None:
         raise ValueError("the channels' runs are not shared interleaved rows (see shared_rows)")
@@ -91,15 +184,40 @@ def read_rows(buf, runs_per_channel: list, starts: np.ndarray, i0: int, i1: int,
     left = runs_per_channel[cols.index(0)]            # the leftmost column's runs
     finite = out.dtype.kind == "f"
     fd = getattr(buf, "fd", -1) if hasattr(os, "preadv") else -1
+    kern = None
+    if compiled and finite and left[0].dtype.isnative and left[0].dtype.kind in "iuf":
+        kern = _kernels().rows_to_channels
     k = max(0, int(np.searchsorted(starts, i0, side="right")) - 1)
     with np.errstate(over="ignore", invalid="ignore"):
         while k < len(left) and left[k].start < i1:
             q = left[k]
             k += 1
             a, b = max(i0, q.start), min(i1, q.stop)
-            if b > a:
+            if b <= a:
+                continue
+            if kern is not None:
+                shown = _compiled_run(kern, buf, q, cols, a, b, out[:, a - i0:b - i0])
+                finite = finite and shown
+            else:
                 finite = _RowBlocks(buf, fd, q, cols, a, b).copy(out[:, a - i0:b - i0], finite)
     return bool(finite)
+
+
+def _compiled_run(kern, buf, q, cols: tuple, a: int, b: int, dst: np.ndarray) -> bool:
+    """Samples [a, b) of the channels at byte columns ``cols`` of the rows of run ``q`` (the
+    leftmost channel's) into ``dst`` by the numba kernel, straight from ``buf``; True when
+    every sample written is finite."""
+    item, p = q.dtype.itemsize, q.n_values
+    s0, s_end = (a - q.start) // p, (b - q.start - 1) // p + 1
+    width = max(cols) // item + 1
+    offset = q.offset + s0 * q.seg_stride
+    end = offset + (s_end - s0 - 1) * q.seg_stride + (p - 1) * q.value_stride + width * item
+    if end > len(buf):
+        raise ValueError(f"the file ends inside segment rows (they need {end} bytes, it has {len(buf)})")
+    src = np.ndarray((s_end - s0, p, width), dtype=q.dtype, buffer=buf, offset=offset,
+                     strides=(q.seg_stride, q.value_stride, item))
+    idx = np.array(cols, dtype=np.int64) // item
+    return bool(kern(src, idx, dst, a - q.start - s0 * p))
 
 
 class _RowBlocks:

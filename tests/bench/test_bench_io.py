@@ -43,8 +43,14 @@ def test_tiny_run_writes_json_and_markdown(tiny):
         assert sorted(r["variant"] for r in rows if r["format"] == "mcap") == ["lz4", "none", "zstd"]
     if "tdms" in present:
         # large segments; 512 and 1000 per segment, contiguous and interleaved; 512 with the
-        # plan not cached and through npTDMS's read_data
-        assert len([r for r in rows if r["format"] == "tdms"]) == 7
+        # plan not cached and through npTDMS's read_data; the interleaved ones on numpy rows
+        tdms_variants = [r["variant"] for r in rows if r["format"] == "tdms"]
+        assert len(tdms_variants) == 9
+        assert [v for v in tdms_variants if v.endswith("numpy rows")] == [
+            "512 samples/segment, interleaved, numpy rows", "1000 samples/segment, interleaved, numpy rows"]
+        warm = js["config"]["tdms_rows_engine"]
+        assert warm["engine"] in ("numba", "numpy") and warm["seconds"] >= 0
+        assert any("TDMS interleaved rows" in n for n in js["notes"])
     for r in rows:
         for key in ("file_mb", "write_s", "read_s", "read_msps", "ratio_to_raw", "one_channel_msps",
                     "window_msps", "stream_peak_mb_1x", "stream_peak_mb_4x"):

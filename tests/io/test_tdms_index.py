@@ -263,8 +263,8 @@ def test_fallback_when_the_computed_offsets_disagree_with_nptdms(tmp_path, monke
     path = write_ni_log(rec, tmp_path / "x.tdms", samples_per_segment=512)
     real_scan = tdms_index.scan
 
-    def shifted(p):
-        idx = real_scan(p)
+    def shifted(p, mm=None):
+        idx = real_scan(p, mm)
         for q, runs in idx.runs.items():
             idx.runs[q] = [tdms_index.Run(**{**r.__dict__, "offset": r.offset + 8}) for r in runs]
         return idx
