@@ -213,6 +213,11 @@ def cmd_bench(args) -> int:
         wo = warmup_onsets()              # the onset stage's kernels, into the same cache
         if wo["engine"] == "numba":
             print(f"onset kernels ready in {wo['seconds']:.2f} s")
+        from .io.tdms_rows import warmup as warmup_rows
+
+        wr = warmup_rows()                # the interleaved TDMS rows' kernel
+        if wr["engine"] == "numba":
+            print(f"TDMS rows kernel ready in {wr['seconds']:.2f} s")
         return 0
     out = Path(args.out)
     if args.what == "campaign":
@@ -584,7 +589,8 @@ def _add_bench(sub) -> None:
     s.add_argument("--plain", action="store_true",
                    help="reference: the plain pseudo-random reference instead of the directional one")
     s.add_argument("--warmup", action="store_true",
-                   help="only compile the numba kernels (Monte Carlo, dense onsets) into the per-user cache "
+                   help="only compile the numba kernels (Monte Carlo, dense onsets, interleaved TDMS rows) "
+                        "into the per-user cache "
                         "(~/.cache/meshphase/numba or NUMBA_CACHE_DIR) and say how long it took")
     s.add_argument("--rss-minutes", type=_minutes_list, default=None, metavar="M[,M...]",
                    help="lengths [min] of the 8-channel recordings whose peak memory of convert "
