@@ -18,11 +18,25 @@ Two ways out were measured (``meshphase process``, 8 channels, 5120 Hz, idle 2-c
   free pages back to the system every :data:`TRIM_PERIOD` (``malloc_trim(0)``, which since
   glibc 2.8 also releases free pages inside the heap): 417 / 424 / 449 MB, 1 h in 39 s and
   3 h in 86 s (the bench; 89 s in-process). A period of 0.5 s was faster still (3 h: 82 s)
-  but let the peak creep (454 MB at 1 h, 512 MB at 3 h). This is what
-  :func:`limit_heap_growth` does now.
+  but let the peak creep (454 MB at 1 h, 512 MB at 3 h).
 
-A value the user set in the documented environment variable ``MALLOC_MMAP_THRESHOLD_`` is
-left alone (the trimming still runs). Elsewhere than glibc this does nothing.
+The second is what :func:`limit_heap_growth` does, with two changes found later (issue 13,
+fifth session). Fixing the mmap threshold also stops glibc from raising the trim threshold
+with it, which stayed at 128 KiB: every free at the top of the heap handed pages back that
+the next allocation faulted in again (the phasing stage of a 1-h run: 8.5-9.9 s against
+6.1-6.5 s). The trim threshold is now fixed at twice the mmap threshold, as glibc's own
+adaptation sets it. And a hand-back at every tick returned the pages of the block arrays
+just freed, which the next block faulted in anew: the heap is now trimmed when the resident
+set has grown by :data:`TRIM_SLACK` (256 MiB) since the last trim. ``meshphase bench
+processing`` (process rows, one run on the idle machine): 10 min 6.8 s / 510 MB, 1 h 18.3 s
+/ 561 MB, 3 h 44.8 s / 591 MB (the same day with the old policy: 1 h 22.9-25.1 s, 474 MB).
+In-process runs of 1 h, old policy with the trim threshold fixed / 64 MiB slack / 256 MiB
+slack: 21.6-25.5 s, 473-480 MB / 20.2-21.6 s, 472-488 MB / 17.0-18.3 s, 545-569 MB; no
+trimming at all: 16.8-19.8 s, 529-696 MB.
+
+Values the user set in the documented environment variables ``MALLOC_MMAP_THRESHOLD_`` and
+``MALLOC_TRIM_THRESHOLD_`` are left alone (the trimming still runs). Elsewhere than glibc
+this does nothing.
 """
 
 from __future__ import annotations
@@ -33,14 +47,18 @@ import os
 import sys
 import threading
 
-__all__ = ["limit_heap_growth", "heap_trimming", "MMAP_THRESHOLD", "TRIM_PERIOD"]
+__all__ = ["limit_heap_growth", "heap_trimming", "MMAP_THRESHOLD", "TRIM_PERIOD", "TRIM_SLACK"]
 
 #: Allocations at or above this size get their own mmap [bytes]: the ceiling glibc's own
 #: adaptation would reach, fixed so that it does not move during a run.
 MMAP_THRESHOLD = 32 * 2**20
-#: Seconds between two hand-backs of the heap's free pages (``malloc_trim(0)``) [s].
+#: Seconds between two looks at the resident set [s]; the heap's free pages are handed back
+#: (``malloc_trim(0)``) when it has grown by :data:`TRIM_SLACK` since the last hand-back.
 TRIM_PERIOD = 0.1
+#: Growth of the resident set since the last hand-back that triggers the next [bytes].
+TRIM_SLACK = 256 * 2**20
 _M_MMAP_THRESHOLD = -3          # <malloc.h>
+_M_TRIM_THRESHOLD = -1
 _done: bool | None = None
 _trimmer: threading.Thread | None = None
 
@@ -60,11 +78,35 @@ def _libc():
     return libc
 
 
-def _trim_forever(trim, period: float) -> None:
-    # a daemon thread: it ends with the process; malloc_trim takes the arenas' own locks
+def _rss_bytes() -> int | None:
+    """This process's resident set [bytes] (/proc/self/statm), None where unreadable."""
+    try:
+        with open("/proc/self/statm", "rb") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def _trim_forever(trim, period: float, slack: int) -> None:
+    # a daemon thread: it ends with the process; malloc_trim takes the arenas' own locks.
+    # The heap is trimmed when the resident set has grown by ``slack`` since the last trim
+    # (or fell below it: the new floor), not at every tick: a trim hands back the pages of
+    # the block arrays just freed, which the next block then faults in anew
     event = threading.Event()
+    floor = None
     while not event.wait(period):
+        floor = _trim_step(trim, floor, slack)
+
+
+def _trim_step(trim, floor: int | None, slack: int) -> int | None:
+    """One look at the resident set: ``trim(0)`` when it is unknown, or more than ``slack``
+    [bytes] above ``floor`` (the resident set after the last trim, None before the first);
+    returns the new floor."""
+    rss = _rss_bytes()
+    if rss is None or floor is None or rss > floor + slack:
         trim(0)
+        return _rss_bytes()
+    return min(floor, rss)
 
 
 def heap_trimming() -> bool:
@@ -73,8 +115,10 @@ def heap_trimming() -> bool:
 
 
 def limit_heap_growth(threshold: int = MMAP_THRESHOLD) -> bool:
-    """Fix glibc's mmap threshold at ``threshold`` bytes for this process and start the
-    thread that returns the heap's free pages every :data:`TRIM_PERIOD` s (once).
+    """Fix glibc's mmap threshold at ``threshold`` bytes (and its trim threshold at twice
+    that) for this process and start the thread that returns the heap's free pages when the
+    resident set has grown by :data:`TRIM_SLACK` (looked at every :data:`TRIM_PERIOD` s)
+    (once).
 
     Parameters
     ----------
@@ -105,8 +149,13 @@ def limit_heap_growth(threshold: int = MMAP_THRESHOLD) -> bool:
     ok = True
     if "MALLOC_MMAP_THRESHOLD_" not in os.environ:
         ok = bool(libc.mallopt(_M_MMAP_THRESHOLD, int(threshold)))
+    if "MALLOC_TRIM_THRESHOLD_" not in os.environ:
+        # fixing the mmap threshold also stops glibc from raising the trim threshold with
+        # it (to twice the mmap threshold): left at 128 KiB, every free at the heap's top
+        # handed pages back that the next allocation faulted in again
+        ok = bool(libc.mallopt(_M_TRIM_THRESHOLD, 2 * int(threshold))) and ok
     global _trimmer
-    _trimmer = threading.Thread(target=_trim_forever, args=(libc.malloc_trim, TRIM_PERIOD),
+    _trimmer = threading.Thread(target=_trim_forever, args=(libc.malloc_trim, TRIM_PERIOD, TRIM_SLACK),
                                 name="meshphase-heap-trim", daemon=True)
     _trimmer.start()
     _done = ok

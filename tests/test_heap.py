@@ -53,3 +53,23 @@ def test_trimming_thread_runs_after_the_first_call():
     assert before == "False"
     if platform.libc_ver()[0] == "glibc":
         assert (a, trimming, n) == ("True", "True", "1")
+
+
+def test_trim_step_hands_back_only_after_the_slack(monkeypatch):
+    from meshphase import heap
+
+    seq = iter([100, 100, 150, 90, 400, 120, None, 130])   # resident set per look [bytes]
+    monkeypatch.setattr(heap, "_rss_bytes", lambda: next(seq))
+    calls = []
+    trim = calls.append
+    floor = heap._trim_step(trim, None, 200)          # first look: trim, floor after it
+    assert calls == [0] and floor == 100
+    floor = heap._trim_step(trim, floor, 200)         # 150: within the slack
+    assert calls == [0] and floor == 100
+    floor = heap._trim_step(trim, floor, 200)         # 90: a lower floor
+    assert calls == [0] and floor == 90
+    floor = heap._trim_step(trim, floor, 200)         # 400 > 90 + 200: trim
+    assert calls == [0, 0] and floor == 120
+    floor = heap._trim_step(trim, floor, 200)         # unreadable: trim anyway
+    assert calls == [0, 0, 0] and floor == 130
+    assert heap.TRIM_SLACK > 0 and heap.TRIM_PERIOD > 0
