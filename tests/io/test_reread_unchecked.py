@@ -81,6 +81,20 @@ def test_chunk_reader_leaves_unallocated_chunks_to_the_library(tmp_path):
         np.testing.assert_array_equal(out, np.r_[np.full(2000, 2.5), np.arange(1000.0)])
 
 
+def _spy_verify(monkeypatch, module, name: str, default=True) -> list:
+    """Replace ``module.name`` by a wrapper that notes the ``verify`` option of every call
+    (``default`` when not given); the notes come back as a list."""
+    seen = []
+    real = getattr(module, name)
+
+    def spy(*a, **kw):
+        seen.append(kw.get("verify", default))
+        return real(*a, **kw)
+
+    monkeypatch.setattr(module, name, spy)
+    return seen
+
+
 def _passes(src: FileSource, n: int, block: int = 700) -> list:
     return [np.concatenate([d for _, d in src.blocks(block)]) for _ in range(n)]
 
@@ -88,14 +102,7 @@ def _passes(src: FileSource, n: int, block: int = 700) -> list:
 def test_file_source_checks_the_first_pass_only(tmp_path, monkeypatch):
     rec = _rec(5000, 2)
     p = pio.write(rec, tmp_path / "r.h5", chunk_samples=1000)
-    seen = []
-    real = hdf5.iter_blocks
-
-    def spy(*a, **kw):
-        seen.append(kw.get("verify", True))
-        return real(*a, **kw)
-
-    monkeypatch.setattr(hdf5, "iter_blocks", spy)
+    seen = _spy_verify(monkeypatch, hdf5, "iter_blocks")
     src = FileSource(p)
     got = _passes(src, 3)
     assert seen == [True, False, False]
@@ -106,10 +113,7 @@ def test_file_source_checks_the_first_pass_only(tmp_path, monkeypatch):
 def test_file_source_checks_again_after_the_file_changed(tmp_path, monkeypatch):
     rec = _rec(5000, 2)
     p = pio.write(rec, tmp_path / "r.h5", chunk_samples=1000)
-    seen = []
-    real = hdf5.iter_blocks
-    monkeypatch.setattr(hdf5, "iter_blocks", lambda *a, **kw: (seen.append(kw.get("verify", True)),
-                                                               real(*a, **kw))[1])
+    seen = _spy_verify(monkeypatch, hdf5, "iter_blocks")
     src = FileSource(p)
     _passes(src, 1)
     st = p.stat()
@@ -134,10 +138,7 @@ def test_file_source_names_a_file_changed_during_an_unchecked_pass(tmp_path):
 def test_file_source_obeys_an_explicit_verify(tmp_path, monkeypatch):
     rec = _rec(3000, 1)
     p = pio.write(rec, tmp_path / "r.h5", chunk_samples=1000)
-    seen = []
-    real = hdf5.read
-    monkeypatch.setattr(hdf5, "read", lambda *a, **kw: (seen.append(kw.get("verify", True)),
-                                                        real(*a, **kw))[1])
+    seen = _spy_verify(monkeypatch, hdf5, "read")
     src = FileSource(p, start=0.0, stop=2000 / 5120.0, options={"verify": True})
     got = _passes(src, 2, block=1000)
     assert seen and all(seen)                         # a window: one read per block, all checked
@@ -166,10 +167,7 @@ def test_file_source_checks_an_mcap_file_once_too(tmp_path, monkeypatch):
 
     rec = _rec(5000, 2)
     p = pio.write(rec, tmp_path / "r.mcap")
-    seen = []
-    real = mcap.iter_blocks
-    monkeypatch.setattr(mcap, "iter_blocks", lambda *a, **kw: (seen.append(kw.get("verify", True)),
-                                                                real(*a, **kw))[1])
+    seen = _spy_verify(monkeypatch, mcap, "iter_blocks")
     src = FileSource(p)
     for g in _passes(src, 3):
         np.testing.assert_array_equal(g, rec.data)
@@ -181,9 +179,6 @@ def test_file_source_of_a_format_without_checksums_passes_no_verify(tmp_path, mo
 
     rec = _rec(500, 2)
     p = pio.write(rec, tmp_path / "r.csv")
-    seen = []
-    real = csv.iter_blocks
-    monkeypatch.setattr(csv, "iter_blocks", lambda *a, **kw: (seen.append(kw.get("verify")),
-                                                               real(*a, **kw))[1])
+    seen = _spy_verify(monkeypatch, csv, "iter_blocks", default=None)
     _passes(FileSource(p), 2, block=100)
     assert seen == [None, None]
