@@ -29,8 +29,9 @@ adaptation sets it. And a hand-back at every tick returned the pages of the bloc
 just freed, which the next block faulted in anew: the heap is now trimmed when the resident
 set has grown by :data:`TRIM_SLACK` (256 MiB) since the last trim. ``meshphase bench
 processing`` (process rows, two runs on the idle machine): 10 min 6.8-7.8 s / 510-543 MB,
-1 h 16.7-18.3 s / 561-575 MB, 3 h 43.8-44.8 s / 591-625 MB (the same day with the old
-policy: 1 h 22.9-25.1 s, 474 MB): faster, at a peak that grows a little with length.
+1 h 16.7-18.3 s / 561-575 MB, 3 h 43.8-44.8 s / 591-625 MB, 12 h (one run) 158.5 s / 688
+MB (the same day with the old policy: 1 h 22.9-25.1 s, 474 MB): faster, at a peak that
+grows with length, under the 1 GB budget.
 In-process runs of 1 h, old policy with the trim threshold fixed / 64 MiB slack / 256 MiB
 slack: 21.6-25.5 s, 473-480 MB / 20.2-21.6 s, 472-488 MB / 17.0-18.3 s, 545-569 MB; no
 trimming at all: 16.8-19.8 s, 529-696 MB.
