@@ -404,10 +404,10 @@ def _block_means(x: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
     if nf:
         rows = x[:nf * b].reshape(nf, b)
         with np.errstate(over="ignore", invalid="ignore"):
-            total = float(np.sum(rows))              # finite: every sample is (an overflow:
-        if math.isfinite(total):                     # the full path below), the same sums
+            sums = rows.sum(axis=1)                  # all finite: every sample is (NaN/inf
+        if np.isfinite(sums).all():                  # or an overflow: the masked path below)
             cnt[:nf] = b
-            tot[:nf] = rows.sum(axis=1)
+            tot[:nf] = sums
         else:
             fin = np.isfinite(rows)
             cnt[:nf] = fin.sum(axis=1)
