@@ -813,6 +813,34 @@ def _conv_tol(d: _Design, rows: np.ndarray, rate: np.ndarray) -> float:
     return 0.0
 
 
+#: a Gauss-Newton step is solved by unpivoted QR while every |R_jj| of the unit-norm columns
+#: is above this [-]; below it (a column the converged point made dependent) by gelsy,
+#: rank-revealing
+STEP_QR_TOL = 1e-10
+
+
+def _gn_step(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Least-squares solution of A x ~ b for the unit-norm columns of a Gauss-Newton design.
+
+    Householder QR of [A | b] (LAPACK geqrf through :func:`scipy.linalg.qr`): its last
+    column holds Q^T b, so x solves R x = (Q^T b)[:p]. geqrf releases the GIL (gelsy does
+    not), so fits on several threads overlap. The columns were screened for independence
+    (:func:`_independent_columns`); where one has become dependent at this point (an |R_jj|
+    below ``STEP_QR_TOL``) the step falls back to gelsy's rank-revealing solution."""
+    n, p = A.shape
+    if p == 0:
+        return np.zeros(0)
+    if n > p:
+        Ab = np.empty((n, p + 1), order="F")
+        Ab[:, :p] = A
+        Ab[:, p] = b
+        qr, _ = linalg.qr(Ab, mode="raw", overwrite_a=True, check_finite=False)[0]
+        d = np.abs(np.diag(qr[:p, :p]))
+        if np.all(np.isfinite(qr[:p, :p + 1])) and np.min(d) > STEP_QR_TOL * np.max(d):
+            return linalg.solve_triangular(qr[:p, :p], qr[:p, p], check_finite=False)
+    return linalg.lstsq(A, b, lapack_driver="gelsy", check_finite=False)[0]
+
+
 def _solve(d: _Design, spec: _Spec, theta0: np.ndarray | None, scale: np.ndarray, *,
            max_iter: int = 12, tol: float = 1e-10, full: bool = False,
            recheck: bool = True) -> _Fit:
@@ -854,20 +882,32 @@ def _solve(d: _Design, spec: _Spec, theta0: np.ndarray | None, scale: np.ndarray
         A = (J * w[:, None])[:, keep]
         cn = _column_norms(A)
         cn[~(cn > 0)] = 1.0
-        step, *_ = linalg.lstsq(A / cn, r * w, lapack_driver="gelsy", check_finite=False)
-        step = step / cn
+        step = _gn_step(A / cn, r * w) / cn
+        # the largest move of a prediction the full step makes, to first order [mesh cycles]
+        pred = float(np.max(np.abs(J[:, keep] @ step))) if step.size else 0.0
+        tol_it = max(tol, conv_tol, 64 * np.finfo(float).eps * float(np.max(np.abs(d.y))))
         # Gauss-Newton with step halving: never accept a step that raises the misfit
         lam = 1.0
+        at_theta = dict(last)
         for _ in range(12):
             trial = theta.copy()
             trial[keep] += lam * step
             ft, Jt, wt, rt, chit = weighted(trial)
             if chit <= chi * (1.0 + 1e-12) or not np.isfinite(chi):
                 break
+            if pred <= tol_it:
+                # a step that moves no prediction by the tolerance is rounding: where it
+                # raises the misfit, halving it only repeats the evaluation (up to 12 times
+                # per converged solve); the iteration stands where it is, converged
+                lam = 0.0
+                trial, ft, Jt, wt, rt, chit = theta, f, J, w, r, chi
+                last.clear()
+                last.update(at_theta)
+                break
             lam *= 0.5
-        change = float(np.max(np.abs(J[:, keep] @ (lam * step)))) if step.size else 0.0
+        change = lam * pred
         theta, f, J, w, r, chi = trial, ft, Jt, wt, rt, chit
-        if change <= max(tol, conv_tol, 64 * np.finfo(float).eps * float(np.max(np.abs(d.y)))):
+        if change <= tol_it:
             if rechecked:
                 conv = True
                 break
