@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .threads import thread_pool
 from .angles import AngleModel, Kinematics, PassTrain, TrainFit, fit_angle_model, slice_train
 
 __all__ = ["fit_angle_windows", "WindowedAngleModel", "WINDOW_OBS"]
@@ -267,18 +268,18 @@ def _fit_windows(trains, kin, n, bounds, h, progress, kwargs) -> WindowedAngleMo
         jobs.append((j, lo, hi, subs))
         slices.append(sl)
 
-    # one after another: on threads (meshphase.threads) the windows ran no faster (1 h of the
-    # bench record, idle 2-core machine: phasing 12.6 s on 2 threads, 11.7 s on one), as the
-    # fits' LAPACK calls and small array steps hold the GIL
-    windows = []
-    for j, lo, hi, subs in jobs:
+    # side by side on the run's threads (meshphase.threads): the fits' heavy steps (QR,
+    # matrix products, array arithmetic on thousands of rows) release the GIL
+    def fit(job):
+        j, lo, hi, subs = job
         try:
-            windows.append(fit_angle_model(subs, kin, n, **kwargs))
+            return fit_angle_model(subs, kin, n, **kwargs)
         except ValueError as exc:
             raise ValueError(f"angle model window {j + 1} of {edges.size - 1} "
                              f"([{max(lo, trains[0].times[0]):.1f}, {hi:.1f}] s): {exc}") from exc
-        if progress is not None:
-            progress(j + 1, edges.size - 1)
+
+    with thread_pool(max_items=len(jobs)) as tmap:
+        windows = tmap(fit, jobs, progress=progress)
     consts = np.zeros(len(windows))
     stitch = np.empty(bounds.size)
     for j, b in enumerate(bounds):

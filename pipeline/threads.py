@@ -9,9 +9,11 @@ block, so the samples are bit-identical to the serial ones whatever the thread c
 against ``MESHPHASE_THREADS=1 meshphase bench processing``, 1 h x 8 channels on the idle
 2-core machine: conditioning 10.2 s on two threads, 16.6 s on one.
 
-The angle-model fits of the phasing stage were tried on threads too and ran no faster (one
-such pair of runs: phasing 12.6 s on two threads, 11.7 s on one): their LAPACK calls and
-small array steps hold the GIL, so they stay serial.
+The angle model of a long record is fitted in windows (:mod:`meshphase.angle_windows`), and
+the windows go side by side on these threads too. Each fit's Gauss-Newton steps are solved by
+Householder QR (LAPACK geqrf, which releases the GIL; gelsy, used before, held it, as do the
+SVD and the small array steps that remain), so two threads gain less than two cores: on the
+1-h bench record's four windows, 3.2-3.9 s on one thread, 2.0-2.6 s on two.
 
 A run holds the BLAS library's own thread pool to one thread (:func:`blas_single_thread`,
 threadpoolctl). The least squares here are tall and narrow (thousands of rows, tens of

@@ -137,3 +137,49 @@ def test_empty_and_bad_input():
     with pytest.raises(ValueError, match="n_planets"):
         fit_angle_windows(trains, KIN, 0)
 
+
+
+def test_windows_on_threads_equal_the_serial_fit(long_record, windowed):
+    """The windows are fitted side by side on the run's threads; each window is fitted
+    whole on one thread, so the model is the serial one bit for bit, and progress still
+    counts every window once, in order."""
+    from meshphase.threads import threads_limited
+
+    trains, _ = long_record
+    seen = []
+    with threads_limited(1):
+        serial = fit_angle_windows(trains, KIN, 4, max_obs=1500,
+                                   progress=lambda k, n: seen.append((k, n)))
+    assert isinstance(serial, WindowedAngleModel)
+    k = len(serial.windows)
+    assert seen == [(j + 1, k) for j in range(k)]
+    t = np.linspace(*serial.t_span, 2001)
+    for threaded in (windowed,):             # fitted with the default (2+ threads here)
+        np.testing.assert_array_equal(threaded.mesh_angle(t), serial.mesh_angle(t))
+        np.testing.assert_array_equal(threaded.mesh_rate(t), serial.mesh_rate(t))
+        assert threaded.terms == serial.terms and threaded.selection == serial.selection
+    with threads_limited(2):
+        again = fit_angle_windows(trains, KIN, 4, max_obs=1500)
+    np.testing.assert_array_equal(again.mesh_angle(t), serial.mesh_angle(t))
+
+
+def test_a_failing_window_names_itself_on_threads(long_record, monkeypatch):
+    """A window whose fit raises is named in the error (the first such window, in time
+    order), whether the windows ran on one thread or two."""
+    import meshphase.angle_windows as aw
+    from meshphase.threads import threads_limited
+
+    trains, _ = long_record
+    calls = []
+    orig = aw.fit_angle_model
+
+    def failing(subs, *a, **k):
+        calls.append(1)
+        if subs[0].times[0] > 300.0:
+            raise ValueError("too few passes")
+        return orig(subs, *a, **k)
+
+    monkeypatch.setattr(aw, "fit_angle_model", failing)
+    for n in (1, 2):
+        with threads_limited(n), pytest.raises(ValueError, match=r"angle model window \d+ of \d+"):
+            fit_angle_windows(trains, KIN, 4, max_obs=1500)
