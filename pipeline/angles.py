@@ -455,6 +455,9 @@ class _Design:
         self._bases[key] = full                      # most recently used last
         while len(self._bases) > self._BASES_KEPT:
             del self._bases[next(iter(self._bases))]
+        rows = np.asarray(rows)
+        if rows.size == full.shape[0] and np.array_equal(rows, np.arange(rows.size)):
+            return full                              # every row, in order: no gather
         return full[rows]
 
     def release(self) -> None:
@@ -598,11 +601,11 @@ class _Design:
         R, RA, Rx, cols = self._ripple(theta, lay, spec, A, x)
         den = 1.0 - RA if A_fixed is None else np.ones(A.size)
         G = np.zeros((x.size, lay["p"]))
-        G[:, lay["blocks"]["spline"]] = B / den[:, None]
+        np.divide(B, den[:, None], out=G[:, lay["blocks"]["spline"]])
         c = 0
         for key, sl in lay["blocks"].items():
             if key.startswith("rip:") or key.startswith("mod:"):
-                G[:, sl] = cols[c] / den[:, None]
+                np.divide(cols[c], den[:, None], out=G[:, sl])
                 c += 1
         rate = (dS + Rx / self.half) / den
         return A, rate, G, RA
@@ -678,7 +681,8 @@ class _Design:
         obs_rate = rate * (1.0 + hA)
         if not jac:
             return f, None, obs_rate
-        J = G * (1.0 + hA)[:, None]
+        J = G                              # _common's own array: scaled in place
+        J *= (1.0 + hA)[:, None]
         if cb.stop > cb.start:
             J[np.flatnonzero(has_c), cb.start + q[has_c] - 1] = 1.0
         if ob.stop > ob.start:
@@ -741,7 +745,7 @@ def _column_norms(A: np.ndarray) -> np.ndarray:
     A = np.asarray(A, dtype=np.float64)
     if A.size == 0:
         return np.zeros(A.shape[1] if A.ndim == 2 else 0)
-    amax = np.max(np.abs(A), axis=0)
+    amax = np.maximum(np.max(A, axis=0), -np.min(A, axis=0))     # max |A|, no |A| copy
     safe = np.where(amax > 0, amax, 1.0)
     return np.where(amax > 0, amax * np.linalg.norm(A / safe, axis=0), 0.0)
 
@@ -760,8 +764,9 @@ def _independent_columns(Jw: np.ndarray, priority: np.ndarray, tol: float = RANK
     cand = [j for j in order if norms[j] > 0]
     while cand:
         A = Jw[:, cand] / norms[cand]
-        R = linalg.qr(A, mode="r", check_finite=False)[0]
-        d = np.abs(np.diag(R))
+        # geqrf's packed result: R is its upper triangle (mode "r" would copy it out whole)
+        qr = linalg.qr(A, mode="raw", overwrite_a=True, check_finite=False)[0][0]
+        d = np.abs(np.diag(qr))
         small = np.flatnonzero(d < tol)
         if small.size == 0:
             break
@@ -879,7 +884,7 @@ def _solve(d: _Design, spec: _Spec, theta0: np.ndarray | None, scale: np.ndarray
                 # unidentifiable parameters sit at zero (minimum norm), not at stale values
                 theta[~keep] = 0.0
                 f, J, w, r, chi = weighted(theta)
-        A = (J * w[:, None])[:, keep]
+        A = J[:, keep] * w[:, None]
         cn = _column_norms(A)
         cn[~(cn > 0)] = 1.0
         step = _gn_step(A / cn, r * w) / cn
