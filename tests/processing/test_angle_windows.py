@@ -183,3 +183,28 @@ def test_a_failing_window_names_itself_on_threads(long_record, monkeypatch):
     for n in (1, 2):
         with threads_limited(n), pytest.raises(ValueError, match=r"angle model window \d+ of \d+"):
             fit_angle_windows(trains, KIN, 4, max_obs=1500)
+
+
+def test_a_window_warning_reaches_the_caller_from_a_worker_thread(long_record, monkeypatch):
+    """A window fit's ProcessingWarning (a fit that did not converge) is raised on a worker
+    thread; the run collects warnings with catch_warnings in the calling thread, so it must
+    arrive there (once per window that warns)."""
+    import warnings
+
+    import meshphase.angle_windows as aw
+    from meshphase.errors import ProcessingWarning
+    from meshphase.threads import threads_limited
+
+    trains, _ = long_record
+    orig = aw.fit_angle_model
+
+    def warning(subs, *a, **k):
+        warnings.warn(f"window at {subs[0].times[0]:.0f} s did not converge", ProcessingWarning)
+        return orig(subs, *a, **k)
+
+    monkeypatch.setattr(aw, "fit_angle_model", warning)
+    with threads_limited(2), warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ProcessingWarning)
+        model = fit_angle_windows(trains, KIN, 4, max_obs=1500)
+    mine = [w for w in caught if issubclass(w.category, ProcessingWarning)]
+    assert len(mine) == len(model.windows) >= 2
