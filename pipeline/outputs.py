@@ -27,6 +27,7 @@ import numpy as np
 from .exits import new_output_dir, run_status
 from .jsonable import to_jsonable
 from .results import PhasingStage, RunContext, phasing_verdict
+from .table_csv import write_csv
 
 __all__ = ["new_output_dir", "summary_dict", "write_outputs"]
 
@@ -121,8 +122,6 @@ def write_outputs(ctx: RunContext, out_dir: Path, *, report: bool = True) -> dic
 
     Returns a dict name -> path of what was written.
     """
-    import pandas as pd  # heavy: only when writing
-
     if not isinstance(ctx, RunContext):
         raise TypeError(f"ctx must be a RunContext (from run_scene), got {type(ctx).__name__}")
     out_dir = Path(out_dir)
@@ -133,12 +132,12 @@ def write_outputs(ctx: RunContext, out_dir: Path, *, report: bool = True) -> dic
     p.write_text(json.dumps(summary_dict(ctx), indent=2))
     files["summary"] = p
     files.update(_write_tables(ctx, out_dir))
-    files["stages"] = _csv(pd.DataFrame(
+    files["stages"] = _csv(
         [{"stage": s, "wall_time_s": ctx.timings.get(s, float("nan")),
           "error_estimate": ctx.error_estimates.get(s, ""),
           "status": "ran" if s in ctx.ran else ctx.failed.get(s, "")}
          for s in list(ctx.timings) + [k for k in ctx.failed if k not in ctx.timings]],
-        columns=["stage", "wall_time_s", "error_estimate", "status"]), out_dir / "stages.csv")
+        out_dir / "stages.csv", columns=["stage", "wall_time_s", "error_estimate", "status"])
     files["arrays"] = _write_arrays(ctx, out_dir / "arrays.h5")
     if report:
         from .report.validation import build_report  # matplotlib: only for the report
@@ -164,12 +163,12 @@ def _write_tables(ctx: RunContext, out_dir: Path) -> dict:
     if ctx.phasing is not None:
         cmp = ctx.compare.by_gear if ctx.compare is not None else {}
         for gear, t in ctx.phasing.tables.items():
-            df = t.to_dataframe().rename(columns=PASS_COLUMNS)
+            cols = {PASS_COLUMNS[k]: v for k, v in t.columns().items()}
             if gear in cmp:
-                df["gamma_ideal_cycles"] = cmp[gear].ideal
+                cols["gamma_ideal_cycles"] = np.asarray(cmp[gear].ideal)
                 if cmp[gear].model is not None:
-                    df["gamma_model_cycles"] = cmp[gear].model
-            files[f"passes_{gear}"] = _csv(df, out_dir / f"passes_{gear}.csv")
+                    cols["gamma_model_cycles"] = np.asarray(cmp[gear].model)
+            files[f"passes_{gear}"] = _csv(cols, out_dir / f"passes_{gear}.csv")
     if ctx.load_sharing is not None and ctx.load_sharing.sharing is not None:
         rows = [{"planet": r["planet"], "load_sharing": r["load_sharing"], "std_error": r["std_error"],
                  "n_passes": r["n_passes"], "mean_amplitude_strain": r["mean_amplitude"]}
@@ -194,13 +193,11 @@ def _write_tables(ctx: RunContext, out_dir: Path) -> dict:
     return files
 
 
-def _csv(rows, path: Path) -> Path:
-    """Rows (list of dicts or a DataFrame) as CSV: NaN and None as an empty field."""
-    import pandas as pd  # heavy: only when writing
-
-    df = rows if isinstance(rows, pd.DataFrame) else pd.DataFrame(rows)
-    df.to_csv(path, index=False, na_rep="")
-    return path
+def _csv(rows, path: Path, columns=None) -> Path:
+    """Rows (list of dicts) or columns (dict) as CSV: NaN and None as an empty field
+    (:func:`meshphase.table_csv.write_csv`, the bytes pandas' ``to_csv`` wrote, without
+    importing pandas)."""
+    return write_csv(rows, path, columns)
 
 
 def _mesh_key(name: str) -> str:

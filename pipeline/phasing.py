@@ -149,18 +149,21 @@ class PassTable:
         return cls(gauge, z, np.empty(0, int), np.empty(0, int), z.copy(), z.copy(), z.copy(),
                    z.copy(), z.copy(), list(notes or []))
 
+    def columns(self) -> dict:
+        """The table's columns, name -> array (``gauge``: the gauge's name, one for all rows):
+        gauge, time_s, planet, revolution, gamma, uncertainty, mesh_period_s, ref_time_s,
+        angle_rad, timing_floor, model_sigma (units as the attributes')."""
+        return {"gauge": self.gauge, "time_s": self.time, "planet": self.planet,
+                "revolution": self.revolution, "gamma": self.gamma,
+                "uncertainty": self.uncertainty, "mesh_period_s": self.mesh_period,
+                "ref_time_s": self.ref_time, "angle_rad": self.angle,
+                "timing_floor": self.timing_floor, "model_sigma": self.model_sigma}
+
     def to_dataframe(self):
-        """pandas DataFrame: gauge, time_s, planet, revolution, gamma, uncertainty,
-        mesh_period_s, ref_time_s, angle_rad, timing_floor, model_sigma."""
+        """pandas DataFrame of :meth:`columns`."""
         import pandas as pd
 
-        return pd.DataFrame({
-            "gauge": self.gauge, "time_s": self.time, "planet": self.planet,
-            "revolution": self.revolution, "gamma": self.gamma,
-            "uncertainty": self.uncertainty, "mesh_period_s": self.mesh_period,
-            "ref_time_s": self.ref_time, "angle_rad": self.angle,
-            "timing_floor": self.timing_floor, "model_sigma": self.model_sigma,
-        })
+        return pd.DataFrame(self.columns())
 
     def for_planet(self, n: int) -> "PassTable":
         """Rows of planet ``n`` (1-based)."""
