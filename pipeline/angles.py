@@ -43,8 +43,10 @@ gauge when Z_r / Z_p is an integer: the planet shows the same tooth at every rin
 dropped with a note; the effective rank is reported.
 
 Estimation: weighted Gauss-Newton on (2) (the ripple arguments depend on S), each step a
-least-squares solve of the column-scaled weighted Jacobian by QR (never the normal
-equations). Weights 1 / (sigma_t A'(t)) from each onset's timing bound, with one variance
+least-squares solve of the column-scaled weighted Jacobian by Householder QR (never the
+normal equations; rank-revealing QR where a column has become dependent), halved while it
+raises the misfit, and an iteration whose full step moves no prediction by the convergence
+tolerance ends there (such a step is rounding). Weights 1 / (sigma_t A'(t)) from each onset's timing bound, with one variance
 factor per train estimated from its residuals (leverage-corrected; never below 1 when the
 timing bound was given). The model order (spline intervals, ripple harmonics per shaft,
 amplitude modulation, planet-term harmonics) is chosen from the data by greedy forward

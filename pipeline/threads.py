@@ -12,8 +12,10 @@ against ``MESHPHASE_THREADS=1 meshphase bench processing``, 1 h x 8 channels on 
 The angle model of a long record is fitted in windows (:mod:`meshphase.angle_windows`), and
 the windows go side by side on these threads too. Each fit's Gauss-Newton steps are solved by
 Householder QR (LAPACK geqrf, which releases the GIL; gelsy, used before, held it, as do the
-SVD and the small array steps that remain), so two threads gain less than two cores: on the
-1-h bench record's four windows, 3.2-3.9 s on one thread, 2.0-2.6 s on two.
+SVD and the small array steps that remain), so two threads gain less than two cores, and the
+label alignment before the windows stays serial: the phasing stage of the 1-h row of
+``meshphase bench processing`` (four windows) took 3.7-4.6 s on two threads in four runs,
+4.7-5.5 s with ``MESHPHASE_THREADS=1`` in two (the shared 2-core machine).
 
 A run holds the BLAS library's own thread pool to one thread (:func:`blas_single_thread`,
 threadpoolctl). The least squares here are tall and narrow (thousands of rows, tens of
