@@ -35,8 +35,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .threads import thread_pool
 from .angles import AngleModel, Kinematics, PassTrain, TrainFit, fit_angle_model, slice_train
+from .threads import thread_pool
 
 __all__ = ["fit_angle_windows", "WindowedAngleModel", "WINDOW_OBS"]
 

@@ -46,9 +46,9 @@ Estimation: weighted Gauss-Newton on (2) (the ripple arguments depend on S), eac
 least-squares solve of the column-scaled weighted Jacobian by Householder QR (never the
 normal equations; rank-revealing QR where a column has become dependent), halved while it
 raises the misfit, and an iteration whose full step moves no prediction by the convergence
-tolerance ends there (such a step is rounding). Weights 1 / (sigma_t A'(t)) from each onset's timing bound, with one variance
-factor per train estimated from its residuals (leverage-corrected; never below 1 when the
-timing bound was given). The model order (spline intervals, ripple harmonics per shaft,
+tolerance ends there (such a step is rounding). Weights 1 / (sigma_t A'(t)) from each
+onset's timing bound, with one variance factor per train estimated from its residuals
+(leverage-corrected; never below 1 when the timing bound was given). The model order (spline intervals, ripple harmonics per shaft,
 amplitude modulation, planet-term harmonics) is chosen from the data by greedy forward
 selection on the Bayesian information criterion (a finer spline is solved only when an
 optimistic bound on its criterion, from one linearised step, could win: the same model for

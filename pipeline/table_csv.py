@@ -53,7 +53,7 @@ def write_csv(table, path, columns=None) -> Path:
     """
     path = Path(path)
     names, cols, n = _columns(table, columns)
-    text = [_format(c, n) for c in cols]
+    text = [_format(c) for c in cols]
     with open(path, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh, lineterminator=os.linesep)
         w.writerow(names)
@@ -87,7 +87,7 @@ def _missing(v) -> bool:
     return v is None or (isinstance(v, (float, np.floating)) and math.isnan(v))
 
 
-def _format(col, n: int) -> list:
+def _format(col) -> list:
     """One column as strings (pandas' inference, see the module notes)."""
     if isinstance(col, np.ndarray):
         if col.dtype.kind == "f":
