@@ -56,6 +56,7 @@ through its format module), :class:`MemorySource` (a Recording in memory) and
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import time
@@ -74,7 +75,7 @@ from .condition import (_apply_finite, _block_means, _block_medians, _check_freq
 from .errors import DataQualityWarning
 from .quality import ChannelQuality, ChannelScan, _RunTracker, merge_runs, quality_from_scan
 from .recording import ChannelSpec, Recording
-from .threads import thread_pool
+from .threads import read_ahead, thread_pool
 from .validate import as_choice, as_positive
 
 __all__ = ["StreamedRecording", "BlockSource", "FileSource", "MemorySource", "GeneratorSource",
@@ -501,6 +502,13 @@ def _rechunk(source: BlockSource, n_block: int) -> Iterator[tuple[int, np.ndarra
         raise ValueError(f"{source.label}: the blocks hold {pos} samples, the header says {n}")
 
 
+def _blocks_ahead(source: BlockSource, n_block: int):
+    """:func:`_rechunk`'s blocks, the next one read on a thread of its own while the caller
+    works on this one (:func:`meshphase.threads.read_ahead`), as a context manager: leaving
+    it, whatever way, stops the reader and closes its file."""
+    return contextlib.closing(read_ahead(lambda: _rechunk(source, n_block)))
+
+
 def _column(data: np.ndarray, j: int) -> np.ndarray:
     """Channel ``j`` of a block as contiguous float64 (a view when it already is)."""
     return np.ascontiguousarray(data[:, j], dtype=np.float64)
@@ -724,12 +732,13 @@ def scan_source(source: BlockSource, *, conditioned: Sequence[str] = (), tacho: 
                   memory_budget, h.fs, "quality scan")
     scans = {c.name: ChannelScan(n, flat=c.kind != "tacho") for c in specs}
     nblk = 0
-    for a, data in _rechunk(source, block):
-        for j, c in enumerate(specs):
-            scans[c.name].feed1(_column(data, j))
-        nblk += 1
-        if progress:
-            progress("scan 1/2", a + data.shape[0], n)
+    with _blocks_ahead(source, block) as blocks:
+        for a, data in blocks:
+            for j, c in enumerate(specs):
+                scans[c.name].feed1(_column(data, j))
+            nblk += 1
+            if progress:
+                progress("scan 1/2", a + data.shape[0], n)
     for s in scans.values():
         s.end1()
     n_hum = min(n, int(hum_seconds * h.fs))
@@ -741,17 +750,18 @@ def scan_source(source: BlockSource, *, conditioned: Sequence[str] = (), tacho: 
             dt = h.dtype if h.dtype in (np.float32, np.float64) else np.dtype(np.float64)
             edges = _TachoEdges(dt.type(st.lo), dt.type(st.hi), h.fs, h.t0)
     idx = {c.name: j for j, c in enumerate(specs)}
-    for a, data in _rechunk(source, block):
-        for j, c in enumerate(specs):
-            x = _column(data, j)
-            scans[c.name].feed2(x)
-            if c.name in hum and a < n_hum:
-                hum[c.name][a:min(n_hum, a + x.size)] = x[:n_hum - a]
-        if edges is not None:
-            col = data[:, idx[tacho]]
-            edges.add(col if col.dtype in (np.float32, np.float64) else col.astype(np.float64))
-        if progress:
-            progress("scan 2/2", a + data.shape[0], n)
+    with _blocks_ahead(source, block) as blocks:
+        for a, data in blocks:
+            for j, c in enumerate(specs):
+                x = _column(data, j)
+                scans[c.name].feed2(x)
+                if c.name in hum and a < n_hum:
+                    hum[c.name][a:min(n_hum, a + x.size)] = x[:n_hum - a]
+            if edges is not None:
+                col = data[:, idx[tacho]]
+                edges.add(col if col.dtype in (np.float32, np.float64) else col.astype(np.float64))
+            if progress:
+                progress("scan 2/2", a + data.shape[0], n)
     results = {nm: s.result() for nm, s in scans.items()}
     for nm, x in hum.items():                      # dropouts are gaps for the hum search too
         fr = results[nm].flat
@@ -1497,8 +1507,8 @@ class _Pass3:
         # (meshphase.threads; the filters release the GIL), each chain whole on one thread
         # per block, so the samples are those of the serial run; the onset detectors and
         # everything after them run here, in channel order, as before
-        with thread_pool(max_items=len(self.plans)) as tmap:
-            for a, data in _rechunk(source, block):
+        with thread_pool(max_items=len(self.plans)) as tmap, _blocks_ahead(source, block) as blocks:
+            for a, data in blocks:
                 self.n_blocks += 1
                 t = time.perf_counter()
                 # a fresh float64 copy: the stages hold on to what they are given

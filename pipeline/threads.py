@@ -33,7 +33,7 @@ from __future__ import annotations
 import os
 from contextlib import contextmanager
 
-__all__ = ["run_threads", "threads_limited", "thread_pool", "blas_single_thread",
+__all__ = ["run_threads", "threads_limited", "thread_pool", "blas_single_thread", "read_ahead",
            "MAX_THREADS", "ENV_THREADS"]
 
 #: Default ceiling on worker threads [-] (one channel's chain each, a few MB per block).
@@ -163,3 +163,75 @@ def thread_pool(threads: int | None = None, *, max_items: int | None = None):
             return out
 
         yield tmap
+
+
+def read_ahead(make_items, *, depth: int = 1):
+    """The items of the iterator ``make_items()`` returns, produced on a thread of their own
+    up to ``depth`` ahead of the caller: a file's next block is read while the caller works
+    on this one (h5py's reads and ``os.preadv`` release the GIL). The iterator is created,
+    run and closed on that thread; its exceptions are raised here, in order, and leaving the
+    loop early (a break, an exception) stops it and waits for it to close (its file with it).
+    With :func:`run_threads` at 1 the items are produced here, one by one.
+
+    Parameters
+    ----------
+    make_items : callable
+        Returns the iterator (called on the reading thread).
+    depth : int
+        Items read ahead at most [-] (each a block in memory).
+
+    Raises
+    ------
+    ValueError
+        ``depth`` not a positive integer.
+    """
+    if isinstance(depth, bool) or not isinstance(depth, int) or depth < 1:
+        raise ValueError(f"depth must be a positive integer, got {depth!r}")
+    if run_threads() == 1:
+        yield from make_items()
+        return
+    import queue
+    import threading
+
+    q: queue.Queue = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+
+    def put(msg) -> bool:
+        while not stop.is_set():
+            try:
+                q.put(msg, timeout=0.05)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def produce():
+        try:
+            it = make_items()
+            try:
+                for item in it:
+                    if not put(("item", item)):
+                        return
+            finally:
+                close = getattr(it, "close", None)
+                if close is not None:
+                    close()
+        except BaseException as exc:          # handed to the caller, raised there
+            put(("error", exc))
+            return
+        put(("done", None))
+
+    t = threading.Thread(target=produce, name="meshphase-read", daemon=True)
+    t.start()
+    try:
+        while True:
+            kind, value = q.get()
+            if kind == "item":
+                yield value
+            elif kind == "error":
+                raise value
+            else:
+                return
+    finally:
+        stop.set()
+        t.join()

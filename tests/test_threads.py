@@ -93,3 +93,66 @@ def test_the_first_failing_item_raises():
         thread_map(fn, range(8), threads=2)
     with pytest.raises(KeyError, match="2"):
         thread_map(fn, range(8), threads=1)
+
+
+# --------------------------------------------------------------------------- read_ahead
+def _blocks(n, log, *, fail_at=None):
+    """A reader's block iterator: logs its thread, each block, and its close."""
+    log.append(("thread", threading.current_thread().name))
+    try:
+        for k in range(n):
+            if k == fail_at:
+                raise OSError(f"read failed at block {k}")
+            log.append(("read", k))
+            yield k, np.full(4, float(k))
+    finally:
+        log.append(("closed", None))
+
+
+@pytest.mark.parametrize("n_threads", [1, 2])
+def test_read_ahead_gives_every_item_in_order(n_threads):
+    log = []
+    with threads_limited(n_threads):
+        got = [(k, x.copy()) for k, x in threads.read_ahead(lambda: _blocks(7, log), depth=2)]
+    assert [k for k, _ in got] == list(range(7))
+    assert all(np.array_equal(x, np.full(4, float(k))) for k, x in got)
+    assert log[-1] == ("closed", None)
+    reader = log[0][1]
+    if n_threads == 1:
+        assert reader == threading.current_thread().name        # no thread started
+    else:
+        assert reader == "meshphase-read"
+
+
+def test_read_ahead_raises_the_readers_error_after_the_blocks_before_it():
+    log = []
+    got = []
+    with threads_limited(2), pytest.raises(OSError, match="block 3"):
+        for k, _ in threads.read_ahead(lambda: _blocks(7, log, fail_at=3)):
+            got.append(k)
+    assert got == [0, 1, 2]
+    assert log[-1] == ("closed", None)
+
+
+def test_read_ahead_stops_the_reader_when_the_caller_leaves_early():
+    log = []
+    before = threading.active_count()
+    with threads_limited(2):
+        for k, _ in threads.read_ahead(lambda: _blocks(1000, log), depth=1):
+            if k == 2:
+                break
+    # the reader is stopped and joined when the loop is left: its iterator closed, at most
+    # depth + 1 blocks read beyond the last one taken
+    assert log[-1] == ("closed", None)
+    assert max(k for what, k in log if what == "read") <= 2 + 2
+    assert threading.active_count() == before
+
+
+def test_read_ahead_empty_and_bad_input():
+    with threads_limited(2):
+        assert list(threads.read_ahead(lambda: iter(()))) == []
+    for bad in (0, -1, 1.5, True, "2"):
+        with pytest.raises(ValueError, match="depth"):
+            list(threads.read_ahead(lambda: iter(()), depth=bad))
+    with threads_limited(2), pytest.raises(TypeError):
+        list(threads.read_ahead(lambda: 5))           # not an iterator: raised here

@@ -589,3 +589,38 @@ def test_convert_and_process_never_read_the_recording_whole(tmp_path, monkeypatc
     assert rc in (0, 3), err            # 3: 30 s may leave the phasing flagged unreliable
     assert (tmp_path / "out" / "passes_sun.csv").is_file()
     assert (tmp_path / "out" / "summary.json").is_file()
+
+
+@pytest.mark.parametrize("n_threads", [1, 2])
+def test_a_read_failing_mid_pass_is_raised_and_its_reader_stopped(faulty, n_threads):
+    """The blocks are read one ahead on a thread of their own (meshphase.threads.read_ahead):
+    a read that fails in the middle of a pass raises its own error from the pass, and the
+    reading thread is gone (its file closed) when the pass has ended."""
+    import threading
+
+    from meshphase.threads import threads_limited
+
+    class Failing(MemorySource):
+        closed = 0
+
+        def blocks(self, n_block):
+            try:
+                for k, (a, data) in enumerate(super().blocks(n_block)):
+                    if k == 3:
+                        raise OSError("disk read error at block 3")
+                    yield a, data
+            finally:
+                Failing.closed += 1
+
+    with threads_limited(n_threads):
+        with pytest.raises(OSError, match="block 3"):
+            scan_source(Failing(faulty), conditioned=["sun", "ring"], tacho="tacho", block=BLOCK)
+        good = scan_source(MemorySource(faulty), conditioned=["sun", "ring"], tacho="tacho",
+                           block=BLOCK)
+        plans = [ChannelPlan("sun", mesh_freq=_mesh()["sun"][0], pulse_period=_mesh()["sun"][1],
+                             group="sun", onsets=False)]
+        with pytest.raises(OSError, match="block 3"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", DataQualityWarning)
+            condition_stream(Failing(faulty), good, plans, block=BLOCK)
+    assert Failing.closed == 2
+    assert not [t for t in threading.enumerate() if t.name == "meshphase-read"]
