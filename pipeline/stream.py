@@ -4,7 +4,8 @@ The stages ``load``, ``condition`` and ``onsets`` (:mod:`meshphase.stages`) run 
 module, for recording files and for recordings already in memory alike. A recording is read
 three times, block by block, channel-major, in the dtype it is stored in (an HDF5 or MCAP
 file's checksums are checked in the first pass; the later ones read the same, unchanged
-file unchecked, see :meth:`FileSource._pass_options`):
+file unchecked, see :meth:`FileSource._pass_options`), each pass reading the next block on a
+thread of its own while it works on this one (:func:`meshphase.threads.read_ahead`):
 
 1. **Statistics** (pass 1, :class:`meshphase.quality.ChannelScan`): per channel the extremes,
    the strided subsamples and run-length counts that the dropout / plateau thresholds come
@@ -41,8 +42,8 @@ Memory
 Per conditioned channel a fixed budget independent of the recording's length: the filter
 overlaps (tens of thousands of samples), the drift look-ahead (~10 drift blocks), the onset
 detector's two analysis blocks (2 x 2**20 samples), the SNR estimate's subsamples (2 x 2**20
-values), the hum window (``HUM_SECONDS`` x fs) and the excerpt, plus one read block of every
-channel; and in proportion to what is found (gap, dropout and clip runs, ~20 KB per
+values), the hum window (``HUM_SECONDS`` x fs) and the excerpt, plus up to three read blocks
+of every channel (the one worked on, one read ahead, one being read); and in proportion to what is found (gap, dropout and clip runs, ~20 KB per
 candidate flat run, the onsets). :func:`scan_memory` (passes 1 and 2) and
 :func:`stream_memory` (pass 3) estimate it before the pass reads anything and refuse
 (ValueError naming fs, the largest item and ``memory_budget``) when it exceeds the budget;
@@ -104,6 +105,8 @@ PROCESS_RSS_BUDGET = 1024 ** 3
 _DECAY = 1e-15
 _FILL_MAX = 8          # gap bridging of the conditioning filters (filter_signal's default)
 _SNR_SAMPLES = 1 << 20  # condition._SUBSAMPLE
+#: the memory estimates' item for the blocks read (all channels; the passes read ahead)
+_READ_BLOCKS = "read blocks (all channels: this one, one queued, one being read; float64 copies)"
 
 
 # ============================================================================ the header
@@ -586,7 +589,7 @@ def stream_memory(fs: float, n_samples: int, n_channels: int, n_conditioned: int
     cap = lambda k: min(int(k), n)  # noqa: E731 - nothing holds more than the recording
     blk = cap(block)
     per = {
-        "read block (all channels, stored + float64 copies)": blk * n_channels * (itemsize + 8),
+        _READ_BLOCKS: blk * n_channels * (3 * itemsize + 8),
         "filter windows (per channel)": 8 * 6 * cap(blk + 2 * overlap),
         "drift look-ahead": 8 * cap(12 * drift_block + blk),
         "onset detector": 8 * cap(3 * onset_block) + 8 * cap(blk),
@@ -594,8 +597,7 @@ def stream_memory(fs: float, n_samples: int, n_channels: int, n_conditioned: int
         "hum window": 8 * cap(HUM_SECONDS * fs),
         "excerpt": 8 * cap(min(EXCERPT_SECONDS * fs, _EXCERPT_MAX)),
     }
-    out = {"read block (all channels, stored + float64 copies)":
-           per.pop("read block (all channels, stored + float64 copies)")}
+    out = {_READ_BLOCKS: per.pop(_READ_BLOCKS)}
     for k, v in per.items():
         out[k] = v * n_conditioned if k != "filter windows (per channel)" else v
     out["total"] = int(sum(out.values()))
@@ -612,7 +614,7 @@ def scan_memory(fs: float, n_samples: int, n_channels: int, n_conditioned: int, 
     """
     n = max(int(n_samples), 0)
     blk = min(int(block), n)
-    out = {"read block (all channels, stored + float64 copies)": blk * n_channels * (itemsize + 8),
+    out = {_READ_BLOCKS: blk * n_channels * (3 * itemsize + 8),
            "hum windows": 8 * min(int(hum_seconds * fs), n) * n_conditioned,
            # strided subsamples of the flat-run statistics: 2**16 + 2**16 + 2**18 per channel
            "quality subsamples": 8 * min(3 * 2**16 + 2**18, 2 * n) * n_channels}

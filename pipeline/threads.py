@@ -17,6 +17,11 @@ label alignment before the windows stays serial: the phasing stage of the 1-h ro
 ``meshphase bench processing`` (four windows) took 3.7-4.6 s on two threads in four runs,
 4.7-5.5 s with ``MESHPHASE_THREADS=1`` in two (the shared 2-core machine).
 
+Each streamed pass reads the recording's next block on a thread of its own while it works on
+this one (:func:`read_ahead`: h5py's reads and ``os.preadv`` release the GIL): the 1-h bench
+record's quality scans took 1.4-2.1 s instead of 2.2-2.6 s (``meshphase bench processing``,
+the 1-h row's ``load_s``, this stop's runs and the stop before's).
+
 A run holds the BLAS library's own thread pool to one thread (:func:`blas_single_thread`,
 threadpoolctl). The least squares here are tall and narrow (thousands of rows, tens of
 columns), where OpenBLAS's threads gain little on an idle machine and lose badly on a busy
