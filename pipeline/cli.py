@@ -316,10 +316,14 @@ def _print_run(ctx, files, command: str) -> None:
         ls, se = row["load_sharing"], row["std_error"]
         print(f"load sharing planet {row['planet']}: " + ("–" if ls is None else f"{ls:.4f}")
               + ("" if se is None else f" ± {se:.4f}"))
+    relative = set(ctx.phasing.labels_relative or []) if ctx.phasing is not None else set()
     for gear, c in s.get("compare", {}).items():
         vm = c.get("vs_model") or c.get("vs_ideal")
         rms = vm.get("rms") if vm else None
-        extra = (f", vs truth {c['vs_truth']['rms']:.2e} (labels as truth: "
+        # relative labels (planet 1 = the first pulse seen) need not be the truth's numbers;
+        # the phasing values do not depend on them
+        how = "labels relative, as truth" if gear in relative else "labels as truth"
+        extra = (f", vs truth {c['vs_truth']['rms']:.2e} ({how}: "
                  f"{c['vs_truth']['label_match']:.0%})") if c.get("vs_truth") else ""
         print(f"{gear}: RMS residual vs model " + ("–" if rms is None else f"{rms:.2e}") + f" cycles{extra}")
     for stage, t in ctx.timings.items():

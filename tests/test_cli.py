@@ -308,6 +308,17 @@ def test_demo_runs_quickly_and_writes_the_report(tmp_path, capsys):
     d = tmp_path / "demo"
     assert (d / "report.html").is_file() and (d / "demo_scene.toml").is_file()
     assert "demo finished in" in out
+    # a gauge whose planet labels are only relative says so beside its label match with
+    # the truth (the demo's sun gauge: planet 1 is the first pulse seen)
+    summary = json.loads((d / "summary.json").read_text(encoding="utf-8"))
+    said = summary.get("phasing_labels") or ""
+    relative = set(re.findall(r"\b(sun|ring)\b", said.split(" are relative")[0])) \
+        if " are relative" in said else set()
+    lines = [ln for ln in out.splitlines() if ": RMS residual vs model" in ln and "vs truth" in ln]
+    assert lines
+    for line in lines:
+        gear = line.split(":")[0]
+        assert ("labels relative, as truth" in line) == (gear in relative), (line, said)
     sec = _sections((d / "report.html").read_text(encoding="utf-8"))
     assert "Measured phasing against the models" in sec and "Error against run time" in sec
     # the scene written next to the outputs reproduces the run with `meshphase run`
