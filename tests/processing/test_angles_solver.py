@@ -89,7 +89,7 @@ def test_a_converged_start_is_not_halved_over_rounding(converged, monkeypatch):
     """At a converged point the Gauss-Newton step is rounding; where it raises the misfit
     (here forced: every prediction away from the start is moved 1e-10 cycles away from its
     observation, far below the convergence tolerance of about 3e-7) the iteration stops where it is instead of halving the
-    step up to 12 times, one full evaluation each. The old loop took 14 evaluations here."""
+    step up to 12 times, one full evaluation each. The old loop took 15 evaluations here."""
     d, fit = converged
     start = fit.theta.copy()
     calls = []
