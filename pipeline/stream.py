@@ -43,10 +43,11 @@ Per conditioned channel a fixed budget independent of the recording's length: th
 overlaps (tens of thousands of samples), the drift look-ahead (~10 drift blocks), the onset
 detector's two analysis blocks (2 x 2**20 samples), the SNR estimate's subsamples (2 x 2**20
 values), the hum window (``HUM_SECONDS`` x fs) and the excerpt, plus up to three read blocks
-of every channel (the one worked on, one read ahead, one being read); and in proportion to what is found (gap, dropout and clip runs, ~20 KB per
-candidate flat run, the onsets). :func:`scan_memory` (passes 1 and 2) and
-:func:`stream_memory` (pass 3) estimate it before the pass reads anything and refuse
-(ValueError naming fs, the largest item and ``memory_budget``) when it exceeds the budget;
+of every channel (the one worked on, one read ahead, one being read); and in proportion to
+what is found (gap, dropout and clip runs, ~20 KB per candidate flat run, the onsets).
+:func:`scan_memory` (passes 1 and 2) and :func:`stream_memory` (pass 3) estimate it before
+the pass reads anything and refuse (ValueError naming fs, the largest item and
+``memory_budget``) when it exceeds the budget;
 every buffer that grows with fs is capped at the recording's own length, so a high fs costs
 at most the recording's size.
 
@@ -934,10 +935,13 @@ class _Drift:
         x = self.acc[0] if len(self.acc) == 1 else np.concatenate(self.acc)
         m = min(x.size, k * self.b)
         seg = x[:m]
-        with np.errstate(over="ignore", invalid="ignore"):
-            total = float(np.sum(seg))
-        if not math.isfinite(total):                   # inf to NaN (a finite sum: none)
-            seg = np.where(np.isfinite(seg), seg, np.nan)
+        if not self.means:
+            # a median would take an inf as a value: inf to NaN first (a finite sum: none);
+            # _block_means leaves every non-finite sample out itself
+            with np.errstate(over="ignore", invalid="ignore"):
+                total = float(np.sum(seg))
+            if not math.isfinite(total):
+                seg = np.where(np.isfinite(seg), seg, np.nan)
         vals, cents = (_block_means if self.means else _block_medians)(seg, self.b)
         cents = cents + self.j_next * self.b
         rest = x[m:]

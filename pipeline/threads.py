@@ -185,6 +185,11 @@ def read_ahead(make_items, *, depth: int = 1):
     depth : int
         Items read ahead at most [-] (each a block in memory).
 
+    Returns
+    -------
+    generator
+        The items; closing it (``contextlib.closing``) stops the reader at once.
+
     Raises
     ------
     ValueError
@@ -193,8 +198,17 @@ def read_ahead(make_items, *, depth: int = 1):
     if isinstance(depth, bool) or not isinstance(depth, int) or depth < 1:
         raise ValueError(f"depth must be a positive integer, got {depth!r}")
     if run_threads() == 1:
-        yield from make_items()
-        return
+        return _read_here(make_items)
+    return _read_ahead(make_items, depth)
+
+
+def _read_here(make_items):
+    """:func:`read_ahead` on one thread: the items made here, one by one."""
+    yield from make_items()
+
+
+def _read_ahead(make_items, depth: int):
+    """:func:`read_ahead`'s generator on the reading thread (``depth`` checked)."""
     import queue
     import threading
 
