@@ -1410,9 +1410,12 @@ def _hum_notches(plans, scan: RawScan, quality: dict, settle: dict, fs: float,
     notch_sos = {}
     if not hum:
         return notch_sos
-    for p in plans:
-        x = scan.hum_window.get(p.name, np.empty(0))
-        rep = detect_hum(x, fs, mains="auto", exclude=())
+    # the channels' spectra side by side on the run's threads (FFTs and products release
+    # the GIL); the reports are taken in the plans' order
+    with thread_pool(max_items=len(plans)) as tmap:
+        reps = tmap(lambda p: detect_hum(scan.hum_window.get(p.name, np.empty(0)), fs,
+                                         mains="auto", exclude=()), plans)
+    for p, rep in zip(plans, reps):
         quality[p.name] = replace(quality[p.name], hum=rep)
         if rep.present:
             settle[p.group] = max(settle[p.group], 2.0 * 30.0 / (math.pi * float(np.min(rep.freqs))))

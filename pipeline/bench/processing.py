@@ -402,6 +402,38 @@ def _throughput_rows(fs, scen, n, rng):
         dt, wall = time.process_time() - t, time.perf_counter() - tw
         rows.append({"stage": stage, "scenario": "wide", "n_samples": n, "n_pulses": 0,
                      "runtime_s": dt, "msamples_per_s": n / dt / 1e6, "wall_s": wall})
+    rows += _hum_rows(x[: int(min(n, 120.0 * fs))], fs)
+    return rows
+
+
+def _hum_rows(x, fs):
+    """The hum search (what ``process`` runs on each channel's first 120 s) and its Welch
+    PSD two ways: segments detrended by the library (``scipy.signal.detrend``, linear) and
+    by :func:`meshphase.condition._detrend_linear`, which ``detect_hum`` uses. Medians of
+    three, CPU seconds of one core."""
+    from scipy import signal
+
+    from ..condition import _detrend_linear, detect_hum
+
+    t = np.arange(x.size) / fs
+    y = x + 0.1 * np.sin(2 * np.pi * 50.0 * t)
+    nper = int(min(y.size, 2 ** math.ceil(math.log2(4.0 * fs))))
+    rows = []
+    for stage, fn in (("condition.detect_hum", lambda: detect_hum(y, fs)),
+                      ("welch detrend=linear (scipy)",
+                       lambda: signal.welch(y, fs, nperseg=nper, detrend="linear")),
+                      ("welch detrend=_detrend_linear",
+                       lambda: signal.welch(y, fs, nperseg=nper, detrend=_detrend_linear))):
+        cpu, wall = [], []
+        for _ in range(3):
+            t0, tw = time.process_time(), time.perf_counter()
+            fn()
+            cpu.append(time.process_time() - t0)
+            wall.append(time.perf_counter() - tw)
+        dt = float(np.median(cpu))
+        rows.append({"stage": stage, "scenario": "wide + 50 Hz", "n_samples": int(y.size),
+                     "n_pulses": 0, "runtime_s": dt, "msamples_per_s": y.size / dt / 1e6,
+                     "wall_s": float(np.median(wall))})
     return rows
 
 

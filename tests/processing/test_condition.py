@@ -203,6 +203,56 @@ def test_no_hum_no_notch_and_60hz(train):
     assert detect_hum(x + 0.1 * np.sin(2 * np.pi * 60 * t), FS, mains=50).mains is None
 
 
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(2, 300), rows=st.integers(1, 4), seed=st.integers(0, 2**32 - 1),
+       offset=st.floats(-1e3, 1e3), slope=st.floats(-10.0, 10.0))
+def test_hum_search_detrend_is_scipys_linear_detrend(n, rows, seed, offset, slope):
+    """The hum search's segment detrend (two projections on an orthonormal pair) against
+    scipy.signal.detrend(type="linear") (a least-squares solve per segment). Both remove
+    the same least-squares line; they differ by rounding only, so the tolerance is a few
+    hundred ulps of the segments' magnitude (offset and ramp up to ~3e3)."""
+    from scipy.signal import detrend
+
+    from meshphase.condition import _detrend_linear
+
+    rng = np.random.default_rng(seed)
+    seg = rng.normal(size=(rows, n)) + offset + slope * np.arange(n)
+    ref = detrend(seg, type="linear", axis=-1)
+    got = _detrend_linear(seg)
+    assert got.shape == seg.shape
+    scale = max(1.0, float(np.max(np.abs(seg))))
+    assert np.max(np.abs(got - ref)) <= 1e-12 * scale
+    # a straight line is removed whole
+    line = offset + slope * np.arange(n, dtype=float)
+    assert np.max(np.abs(_detrend_linear(line))) <= 1e-12 * max(1.0, float(np.max(np.abs(line))))
+
+
+def test_hum_search_psd_equals_welch_with_scipys_detrend():
+    """detect_hum's Welch PSD (segments detrended by _detrend_linear) is the one scipy's own
+    linear detrend gives, to rounding, on a hum-and-drift signal as the hum search sees it
+    (120 s at 5120 Hz, 32768-sample segments)."""
+    from scipy.signal import welch
+
+    from meshphase.condition import _detrend_linear
+
+    rng = np.random.default_rng(3)
+    n = int(120 * FS)
+    t = np.arange(n) / FS
+    x = rng.normal(size=n) + 0.2 * np.sin(2 * np.pi * 50 * t) + 0.05 * t + 3.0
+    f1, p1 = welch(x, FS, nperseg=32768, detrend="linear")
+    f2, p2 = welch(x, FS, nperseg=32768, detrend=_detrend_linear)
+    np.testing.assert_array_equal(f1, f2)
+    np.testing.assert_allclose(p2, p1, rtol=1e-9, atol=1e-12 * float(np.max(p1)))
+
+
+def test_hum_search_detrend_edges():
+    from meshphase.condition import _detrend_linear
+
+    assert _detrend_linear(np.empty((3, 0))).shape == (3, 0)
+    np.testing.assert_array_equal(_detrend_linear(np.array([[2.0], [5.0]])), np.zeros((2, 1)))
+    np.testing.assert_allclose(_detrend_linear(np.array([1.0, 4.0])), [0.0, 0.0], atol=1e-15)
+
+
 def test_hum_short_data_and_bad_input():
     short = np.random.default_rng(0).normal(size=2000)
     rep = detect_hum(short, FS)

@@ -153,6 +153,11 @@ def test_streamed_conditioning_on_threads_equals_the_serial_stream(faulty, drift
         assert np.array_equal(got1[ch], got3[ch], equal_nan=True)
         assert np.array_equal(res1.onsets[ch].times, res3.onsets[ch].times)
         assert res1.quality[ch].snr_db == res3.quality[ch].snr_db
+        # the hum search runs its channels side by side too: the same reports bit for bit
+        h1, h3 = res1.quality[ch].hum, res3.quality[ch].hum
+        assert np.array_equal(h1.freqs, h3.freqs) and h1.mains == h3.mains
+        assert np.array_equal(h1.excess_db, h3.excess_db, equal_nan=True)
+    assert res1.quality["sun"].hum.present                  # the rig's hum was searched for
     assert sorted(m for _, m in res1.warnings) == sorted(m for _, m in res3.warnings)
 
 
