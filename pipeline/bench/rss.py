@@ -25,7 +25,8 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["run_child", "bench_config", "write_job", "convert_job", "process_job",
-           "hdf5_pass_job", "sosfiltfilt_job", "free_bytes", "BENCH_GEARSET", "N_CHANNELS"]
+           "hdf5_pass_job", "sosfiltfilt_job", "import_job", "free_bytes", "BENCH_GEARSET",
+           "N_CHANNELS"]
 
 #: Channels of the benchmark recordings: sun and ring gauges, 3 + 2 face-width gauges, tacho.
 N_CHANNELS = 8
@@ -293,7 +294,20 @@ def sosfiltfilt_job(n: int = 1 << 22, repeats: int = 3) -> dict:
 def child_env(**extra: str) -> dict:
     """The environment of a bench child process: this one's, plus ``extra``, with
     PYTHONPATH set to this interpreter's ``sys.path`` so the child imports the very same
-    meshphase (editable checkout, wheel or source tree alike)."""
+    meshphase (editable checkout, wheel or source tree alike), and without
+    ``PYTHONDONTWRITEBYTECODE``: the child writes and reuses ``.pyc`` files as a user's
+    interpreter does after its first run. Where that variable is set (the development
+    machine's environment sets it), every start compiled meshphase's sources again, which
+    the start-up table's ``import meshphase.stages`` row times beside the others."""
     env = dict(os.environ, **extra)
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
     env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)
     return env
+
+
+def import_job() -> dict:
+    """Import what ``process`` imports (the children after it find its bytecode written)."""
+    t = time.perf_counter()
+    import meshphase.stages  # noqa: F401
+
+    return {"import_s": time.perf_counter() - t}

@@ -19,6 +19,7 @@ Tolerances (claims about the method, see pipeline/stream.py):
 """
 
 import math
+import os
 import tracemalloc
 import warnings
 
@@ -457,6 +458,21 @@ def test_run_child_measures_a_child_and_refuses_other_jobs():
     assert r["peak_rss_mb"] > 10 and r["wall_s"] >= r["job_s"] > 0
     with pytest.raises(ValueError, match="job"):
         run_child("os_system")
+
+
+def test_bench_children_write_and_reuse_bytecode(monkeypatch):
+    """A bench child compiles meshphase once and reuses the bytecode as a user's interpreter
+    does, whatever the calling environment says: PYTHONDONTWRITEBYTECODE is cleared (the
+    development machine sets it, and every timed start then compiled ~60 modules again);
+    the other variables and the extras are passed on."""
+    from meshphase.bench.rss import child_env, run_child
+
+    monkeypatch.setenv("PYTHONDONTWRITEBYTECODE", "1")
+    env = child_env(OPENBLAS_NUM_THREADS="1")
+    assert "PYTHONDONTWRITEBYTECODE" not in env and env["OPENBLAS_NUM_THREADS"] == "1"
+    assert env["HOME"] == os.environ["HOME"] and env["PYTHONPATH"]
+    r = run_child("import_job")
+    assert r["returncode"] == 0 and r["import_s"] > 0
 
 
 def test_run_child_peak_is_the_childs_own_not_the_parents():
