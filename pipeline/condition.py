@@ -559,8 +559,9 @@ def _detrend_linear(seg: np.ndarray) -> np.ndarray:
 
     The line is the projection on the orthonormal pair ``1 / sqrt(n)`` and the centred,
     normalised sample index, two matrix-vector products for every segment at once: the
-    same as ``scipy.signal.detrend(seg, type="linear")`` to rounding (~1e-15 relative in
-    the hum search's PSD, tested), which fits each segment by a least-squares solve: the
+    same as ``scipy.signal.detrend(seg, type="linear")`` to rounding (4e-15 relative in a
+    120-s PSD of the hum search; the tests allow 1e-9 and 1e-12 of the segments' scale),
+    which fits each segment by a least-squares solve: the
     whole ``welch`` of 120 s took 1.6-2.1x as long with it (``meshphase bench
     processing``, throughput table, the two ``welch detrend=`` rows).
     """

@@ -297,8 +297,7 @@ def child_env(**extra: str) -> dict:
     meshphase (editable checkout, wheel or source tree alike), and without
     ``PYTHONDONTWRITEBYTECODE``: the child writes and reuses ``.pyc`` files as a user's
     interpreter does after its first run. Where that variable is set (the development
-    machine's environment sets it), every start compiled meshphase's sources again, which
-    the start-up table's ``import meshphase.stages`` row times beside the others."""
+    machine's environment sets it), every timed start compiled meshphase's sources again."""
     env = dict(os.environ, **extra)
     env.pop("PYTHONDONTWRITEBYTECODE", None)
     env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)
