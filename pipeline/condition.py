@@ -554,16 +554,21 @@ def remove_drift(x, fs: float, *, method: str = "median", window: float | None =
 
 
 # ====================================================================== mains hum
+def _hum_nperseg(n: int, fs: float) -> int:
+    """Welch segment length of the hum search: about 4 s (a power of two), at most ``n``."""
+    return int(min(n, 2 ** math.ceil(math.log2(4.0 * fs))))
+
+
 def _detrend_linear(seg: np.ndarray) -> np.ndarray:
     """Each row of ``seg`` (segments along the last axis) less its least-squares line.
 
     The line is the projection on the orthonormal pair ``1 / sqrt(n)`` and the centred,
-    normalised sample index, two matrix-vector products for every segment at once: the
-    same as ``scipy.signal.detrend(seg, type="linear")`` to rounding (4e-15 relative in a
-    120-s PSD of the hum search; the tests allow 1e-9 and 1e-12 of the segments' scale),
-    which fits each segment by a least-squares solve: the
-    whole ``welch`` of 120 s took 1.6-2.1x as long with it (``meshphase bench
-    processing``, throughput table, the two ``welch detrend=`` rows).
+    normalised sample index: two matrix-vector products for every segment at once.
+    ``scipy.signal.detrend(seg, type="linear")`` gives the same to rounding (4e-15
+    relative in a 120-s PSD of the hum search; the tests allow 1e-9 and 1e-12 of the
+    segments' scale) by a least-squares solve per segment, with which the whole ``welch``
+    of 120 s took 1.6-2.1x as long (``meshphase bench processing``, throughput table, the
+    two ``welch detrend=`` rows).
     """
     n = seg.shape[-1]
     if n == 0:
@@ -649,7 +654,7 @@ def detect_hum(x, fs: float, *, mains: str | float = "auto", n_harmonics: int = 
         return HumReport(None, np.empty(0), all_c, np.full(all_c.size, np.nan), threshold_db,
                          checked=False)
     xs = _fill_nonfinite(xs)
-    nper = int(min(xs.size, 2 ** math.ceil(math.log2(4.0 * fs))))
+    nper = _hum_nperseg(xs.size, fs)
     f, p = signal.welch(xs, fs, nperseg=nper, detrend=_detrend_linear)
     df = f[1] - f[0]
 

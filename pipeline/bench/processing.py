@@ -413,11 +413,11 @@ def _hum_rows(x, fs):
     three, CPU seconds of one core."""
     from scipy import signal
 
-    from ..condition import _detrend_linear, detect_hum
+    from ..condition import _detrend_linear, _hum_nperseg, detect_hum
 
     t = np.arange(x.size) / fs
     y = x + 0.1 * np.sin(2 * np.pi * 50.0 * t)
-    nper = int(min(y.size, 2 ** math.ceil(math.log2(4.0 * fs))))
+    nper = _hum_nperseg(y.size, fs)
     rows = []
     for stage, fn in (("condition.detect_hum", lambda: detect_hum(y, fs)),
                       ("welch detrend=linear (scipy)",
