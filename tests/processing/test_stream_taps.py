@@ -10,7 +10,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from meshphase.condition import _block_means
-from meshphase.stream import _Pending, _SnrTap
+from meshphase.stream import _Pending, _SnrTap, _minus_interp
 
 
 def _finite_diffs(x: np.ndarray) -> np.ndarray:
@@ -103,3 +103,42 @@ def test_pending_holds_all_nan_stretches_as_lengths_only():
     assert isinstance(p.parts[0], int) and isinstance(p.parts[1], np.ndarray)
     out = p.take(200)
     assert np.isnan(out[:150]).all() and out[150] == 1.0 and np.isnan(out[151:]).all()
+
+
+@settings(max_examples=150, deadline=None)
+@given(n=st.integers(0, 6000), a=st.integers(0, 2**40), n_knots=st.integers(1, 12),
+       spacing=st.integers(1, 3000), shift=st.floats(-4000.0, 4000.0), half=st.booleans(),
+       seed=st.integers(0, 2**32 - 1))
+@example(n=5000, a=0, n_knots=4, spacing=1000, shift=0.0, half=False, seed=0)   # knots on samples
+def test_minus_interp_equals_numpy_interp_bit_for_bit(n, a, n_knots, spacing, shift, half,
+                                                      seed):
+    # the drift's baseline subtracted interval by interval: numpy's own arithmetic, so the
+    # same bits as x - np.interp on the sample indices, for knots on samples, on halves and
+    # at arbitrary positions, before, inside and beyond the block, sparse and dense
+    rng = np.random.default_rng(seed)
+    x = rng.normal(size=n) * 10.0 ** rng.integers(-6, 4)
+    steps = rng.uniform(0.5, 1.5, n_knots) * spacing
+    xp = a + shift + np.cumsum(steps)
+    if half:
+        xp = np.round(2.0 * xp) / 2.0
+        xp = np.unique(xp)
+    fp = rng.normal(size=xp.size) * 10.0 ** rng.integers(-6, 4)
+    want = x - np.interp(np.arange(a, a + n, dtype=np.float64), xp, fp)
+    got = _minus_interp(x, a, xp, fp)
+    np.testing.assert_array_equal(got, want)
+
+
+def test_minus_interp_empty_non_finite_and_dense_knots():
+    assert _minus_interp(np.empty(0), 5, np.array([0.0, 1e4]), np.array([1.0, 2.0])).size == 0
+    x = np.arange(3000.0)
+    xp = np.array([100.0, 1200.0, 2500.0])
+    for fp in (np.array([1.0, np.nan, 3.0]), np.array([1.0, np.inf, 3.0])):   # numpy's rules
+        with np.errstate(invalid="ignore"):
+            want = x - np.interp(np.arange(7, 3007.0), xp, fp)
+        np.testing.assert_array_equal(_minus_interp(x, 7, xp, fp), want)
+    dense = np.arange(0.0, 3000.0, 10.0)                 # knots 10 samples apart: np.interp
+    fp = np.sin(dense)
+    np.testing.assert_array_equal(_minus_interp(x, 0, dense, fp),
+                                  x - np.interp(np.arange(3000.0), dense, fp))
+    one = _minus_interp(x, 0, np.array([50.0]), np.array([2.0]))  # a single knot: constant
+    np.testing.assert_array_equal(one, x - 2.0)
