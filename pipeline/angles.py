@@ -71,6 +71,7 @@ from scipy import linalg
 from scipy.interpolate import BSpline
 
 from .errors import ProcessingWarning
+from .threads import thread_pool
 from .validate import as_finite_array, as_positive_int
 
 __all__ = ["PassTrain", "Kinematics", "AngleModel", "gauge_train", "tacho_train",
@@ -1690,8 +1691,7 @@ def label_shift_costs(reference, train: PassTrain, fractions, kin: Kinematics,
     if not refs or len(train) < 2:
         return out
 
-    first = None      # the first finite shift's fit: the start of the later ones
-    for s in range(n):
+    def shift_fit(s, first):
         trs = refs + [relabel_train(train, s, fractions, n)]
         d = _Design(trs, kin, n)
         span = d.t_hi - d.t_lo
@@ -1708,11 +1708,26 @@ def label_shift_costs(reference, train: PassTrain, fractions, kin: Kinematics,
             base = _solve(d, _Spec(knots=1, harm={r: 0 for r in kin.periods},
                                    mod={r: False for r in kin.periods}), None, ones)
             th0 = _extend(base, spec, d)
-        fit = _solve(d, spec, th0, ones)
+        return _solve(d, spec, th0, ones)
+
+    # the shifts in order until one fits; that fit is the start of every later shift, whose
+    # fits then share nothing and go side by side on the run's threads (QR and the large
+    # array steps release the GIL): the same fits, in any order, as one after another
+    first = None
+    s = 0
+    while s < n and first is None:
+        fit = shift_fit(s, None)
         if np.isfinite(fit.chi2):
             out[s] = fit.chi2
-            if first is None:
-                first = fit
+            first = fit
+        s += 1
+    rest = list(range(s, n))
+    if first is not None and rest:
+        with thread_pool(max_items=len(rest)) as tmap:
+            fits = tmap(lambda k: shift_fit(k, first), rest)
+        for k, fit in zip(rest, fits):
+            if np.isfinite(fit.chi2):
+                out[k] = fit.chi2
     return out
 
 

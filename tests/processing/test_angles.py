@@ -256,6 +256,33 @@ def test_label_shift_costs_with_a_planet_missing_from_the_train():
     assert np.sort(costs)[1] > 25 * np.min(costs)
 
 
+@pytest.mark.parametrize("drop_planet_2", [False, True])
+def test_label_shift_costs_on_threads_equal_one_after_another(drop_planet_2):
+    # the shifts after the first fitted one go side by side on the run's threads, each from
+    # that fit: the costs are the very ones of fitting them one after another (with a planet
+    # missing, the later shifts start afresh, also on the threads)
+    from dataclasses import replace
+
+    from meshphase.threads import threads_limited
+
+    trains, frac, shifted, _ = offset_trains()
+
+    def cut(tr):
+        if not drop_planet_2:
+            return tr
+        m = tr.planet != 1
+        return replace(tr, times=tr.times[m], sigma=tr.sigma[m], target=tr.target[m],
+                       planet=tr.planet[m], position=tr.position[m])
+
+    kin = kinematics(25, 87, 31, fixed="ring")
+    with threads_limited(1):
+        serial = label_shift_costs([cut(trains[0])], cut(shifted), frac, kin, 4)
+    with threads_limited(3):
+        threaded = label_shift_costs([cut(trains[0])], cut(shifted), frac, kin, 4)
+    np.testing.assert_array_equal(threaded, serial)
+    assert int(np.argmin(threaded)) == 3
+
+
 def test_label_shift_costs_on_a_central_window_decide_alike():
     # a cap below the record's observations fits the central window only: the same shift
     # stands out (the decision needs hundreds of passes, not the whole record), and a cap
