@@ -107,7 +107,8 @@ _DECAY = 1e-15
 _FILL_MAX = 8          # gap bridging of the conditioning filters (filter_signal's default)
 _SNR_SAMPLES = 1 << 20  # condition._SUBSAMPLE
 #: the memory estimates' item for the blocks read (all channels; the passes read ahead)
-_READ_BLOCKS = "read blocks (all channels: this one, one queued, one being read; float64 copies)"
+_READ_BLOCKS = ("read blocks (all channels: this one, one queued, one being read; float64 copies of "
+                "two: the onsets' and the chains')")
 
 
 # ============================================================================ the header
@@ -590,7 +591,7 @@ def stream_memory(fs: float, n_samples: int, n_channels: int, n_conditioned: int
     cap = lambda k: min(int(k), n)  # noqa: E731 - nothing holds more than the recording
     blk = cap(block)
     per = {
-        _READ_BLOCKS: blk * n_channels * (3 * itemsize + 8),
+        _READ_BLOCKS: blk * n_channels * (3 * itemsize + 16),
         "filter windows (per channel)": 8 * 6 * cap(blk + 2 * overlap),
         "drift look-ahead": 8 * cap(12 * drift_block + blk),
         "onset detector": 8 * cap(3 * onset_block) + 8 * cap(blk),
@@ -1303,7 +1304,9 @@ class StreamResult:
     warnings : list of (category, message)
         Warnings of the onset detector, to be issued by the onsets stage.
     timings : dict
-        Seconds spent in conditioning and in onset detection.
+        Seconds [s]: ``condition_s``, the conditioning the onset detection did not overlap
+        (the chains of a block run while the onsets take the block before), and
+        ``onsets_s``, the onset detection.
     memory : dict
         :func:`stream_memory` estimate [B].
     """
@@ -1562,24 +1565,45 @@ class _Pass3:
         idx = {c.name: j for j, c in enumerate(h.channels)}
         # the channels' chains share nothing: filtered side by side on worker threads
         # (meshphase.threads; the filters release the GIL), each chain whole on one thread
-        # per block, so the samples are those of the serial run; the onset detectors and
-        # everything after them run here, in channel order, as before
+        # per block, so the samples are those of the serial run. The onset detectors and
+        # everything after them run here, in channel order, as before, on the block before
+        # while the workers filter this one: a block's chains start only once the block
+        # before's have all returned (a chain's state goes from block to block), and the
+        # onsets take the blocks in order. (Warnings a chain raised meanwhile would be kept
+        # with the onsets' own; the chains report through notes and raise none.)
+        def chains(data):
+            # a fresh float64 copy: the stages hold on to what they are given
+            return lambda p: self.chains[p.name].push(
+                np.array(data[:, idx[p.name]], dtype=np.float64))
+
         with thread_pool(max_items=len(self.plans)) as tmap, _blocks_ahead(source, block) as blocks:
+            prev = None
             for a, data in blocks:
                 self.n_blocks += 1
                 t = time.perf_counter()
-                # a fresh float64 copy: the stages hold on to what they are given
-                ys = tmap(lambda p: self.chains[p.name].push(
-                    np.array(data[:, idx[p.name]], dtype=np.float64)), self.plans)
+                wait = tmap.start(chains(data), self.plans)
+                end = a + data.shape[0]
+                del data
                 self.t_cond += time.perf_counter() - t
-                for p, y in zip(self.plans, ys):
-                    if on_samples is not None and y.size:
-                        on_samples(p.name, self.done[p.name], y)
-                    _deliver(p, y, self.done, self.gaps, self.excerpts, self.n_ex)
-                    if p.name in self.onsets and y.size:
-                        self._timed_onsets(lambda: self.onsets[p.name].feed(y))
-                if progress:
-                    progress("condition + onsets", a + data.shape[0], self.n)
+                if prev is not None:
+                    self._after(*prev, on_samples, progress)
+                t = time.perf_counter()
+                prev = (wait(), end)
+                self.t_cond += time.perf_counter() - t
+            if prev is not None:
+                self._after(*prev, on_samples, progress)
+
+    def _after(self, ys: list, end: int, on_samples, progress) -> None:
+        """A block's conditioned samples (``ys``, in the plans' order) delivered and fed to
+        the onset detectors; ``end``: the sample after the block."""
+        for p, y in zip(self.plans, ys):
+            if on_samples is not None and y.size:
+                on_samples(p.name, self.done[p.name], y)
+            _deliver(p, y, self.done, self.gaps, self.excerpts, self.n_ex)
+            if p.name in self.onsets and y.size:
+                self._timed_onsets(lambda: self.onsets[p.name].feed(y))
+        if progress:
+            progress("condition + onsets", end, self.n)
 
     def _timed_onsets(self, call):
         t = time.perf_counter()

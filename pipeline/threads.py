@@ -119,7 +119,9 @@ def thread_pool(threads: int | None = None, *, max_items: int | None = None):
     yields ``tmap(fn, items, progress=None) -> list``, ``[fn(x) for x in items]`` on the
     pool's threads, in the order of ``items``; ``progress(done, total)`` is called in the
     calling thread as results arrive, and the first exception raised by ``fn`` (in item
-    order) is raised in the caller.
+    order) is raised in the caller. ``tmap.start(fn, items)`` starts the same calls and
+    returns at once a ``wait() -> list`` that waits for them (the caller works meanwhile);
+    with one thread the calls are made by ``start`` itself.
 
     Parameters
     ----------
@@ -148,7 +150,12 @@ def thread_pool(threads: int | None = None, *, max_items: int | None = None):
                 progress(len(out), len(items))
         return out
 
+    def serial_start(fn, items):
+        out = serial(fn, items)
+        return lambda: out
+
     if n == 1:
+        serial.start = serial_start
         with blas_single_thread():
             yield serial
         return
@@ -167,6 +174,12 @@ def thread_pool(threads: int | None = None, *, max_items: int | None = None):
                     progress(len(out), len(items))
             return out
 
+        def start(fn, items):
+            items = list(items)
+            futures = [ex.submit(fn, x) for x in items]
+            return lambda: [f.result() for f in futures]
+
+        tmap.start = start
         yield tmap
 
 

@@ -95,6 +95,38 @@ def test_the_first_failing_item_raises():
         thread_map(fn, range(8), threads=1)
 
 
+@pytest.mark.parametrize("threads", [1, 3])
+def test_start_returns_at_once_and_wait_gives_the_results_in_order(threads):
+    # tmap.start: the calls go on while the caller works; wait() gives them in item order,
+    # raises the first failing item's exception, and an empty list starts nothing
+    gate = threading.Event()
+    names = set()
+
+    def fn(x):
+        names.add(threading.current_thread().name)
+        if threads > 1:
+            assert gate.wait(10.0)           # held until the caller has gone on
+        return x * x
+
+    with thread_pool(threads) as tmap:
+        wait = tmap.start(fn, range(6))
+        gate.set()                           # only reached if start did not block
+        assert wait() == [x * x for x in range(6)]
+        assert tmap.start(fn, [])() == []
+
+        def bad(x):
+            if x in (2, 4):
+                raise KeyError(x)
+            return x
+
+        with pytest.raises(KeyError, match="2"):
+            tmap.start(bad, range(6))()
+    if threads > 1:
+        assert all(nm.startswith("meshphase") for nm in names)
+    else:
+        assert names == {threading.current_thread().name}
+
+
 # --------------------------------------------------------------------------- read_ahead
 def _blocks(n, log, *, fail_at=None):
     """A reader's block iterator: logs its thread, each block, and its close."""
