@@ -1673,7 +1673,9 @@ def label_shift_costs(reference, train: PassTrain, fractions, kin: Kinematics,
     fitted with a fixed small model (cubic spline, first ripple harmonic of every shaft that
     turns, first planet term) and scored by its weighted chi-square. A record of more than
     ``max_obs`` observations is fitted on its central time window of ``max_obs`` (every
-    train cut alike), so that the cost stays bounded in the record's length.
+    train cut alike), so that the cost stays bounded in the record's length. The shifts
+    after the first that fits start from its parameters and go side by side on the run's
+    threads (:func:`meshphase.threads.thread_pool`): the same costs as one after another.
 
     Returns
     -------

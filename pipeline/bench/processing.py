@@ -36,7 +36,8 @@ processing`` measures 2 min, 10 min, 1 h and 3 h): the 8-channel benchmark recor
 the seed rig's gearset in a child process (peak RSS: its VmHWM), with each stage's
 time, and the whole run and the streamed stages (load, condition, onsets: the three passes
 over the samples) as multiples of one :func:`scipy.signal.sosfiltfilt` pass over the same
-samples (the conditioning's 4th-order low-pass, rate measured in the same run).
+samples (the conditioning's 4th-order low-pass, timed just before and just after each run:
+the mean of the two times).
 """
 
 from __future__ import annotations
@@ -73,7 +74,7 @@ PROCESS_COLUMNS = ("minutes", "n_channels", "n_samples", "data_mb", "status", "n
                    "wall_s", "peak_rss_mb", "streamed_peak_mb", "rss_over_data",
                    "memory_estimate_mb", "load_s",
                    "condition_s", "onsets_s", "phasing_s", "identify_s", "identify_share",
-                   "other_s", "sosfiltfilt_s",
+                   "other_s", "sosfiltfilt_s", "sosfiltfilt_msps",
                    "wall_over_sosfiltfilt", "streamed_over_sosfiltfilt", "threads", "cpu_s",
                    "cpu_over_sosfiltfilt", "read_checked_s", "read_unchecked_s", "read_library_s")
 #: Recording lengths of ``meshphase bench processing``'s process table [min].
@@ -438,6 +439,8 @@ def _hum_rows(x, fs):
 
 
 def _fmt(v) -> str:
+    if isinstance(v, (tuple, list)):
+        return " / ".join(_fmt(x) for x in v)
     if isinstance(v, float):
         if not math.isfinite(v):
             return "-"
@@ -465,7 +468,9 @@ def _markdown(res: dict) -> str:
         lines += ["", "## meshphase process: peak memory and time against recording length", "",
                   "8 channels (sun, ring, 5 face-width gauges, tacho) at 5120 Hz, float64 HDF5; "
                   "child process, BLAS on one thread; times in s. sosfiltfilt_s: one zero-phase "
-                  "pass of the conditioning low-pass over the same samples (rate "
+                  "pass of the conditioning low-pass over the same samples, at the mean time of "
+                  "the pass timed just before and just after the run (sosfiltfilt_msps: those "
+                  "two rates; median of all "
                   f"{res['meta'].get('sosfiltfilt_msps', float('nan')):.1f} MS/s here); streamed = "
                   "load + condition + onsets (the three passes over the samples); "
                   "streamed_peak_mb: the peak RSS (VmHWM) when they are done, peak_rss_mb: of "
@@ -519,14 +524,16 @@ def process_rss_rows(work, minutes, *, seed: int = 1) -> tuple[list, list, float
     -------
     (rows, skipped, rate) : (list of dict, list of dict, float)
         Rows with the keys :data:`PROCESS_COLUMNS`; lengths skipped for want of disk space;
-        the sosfiltfilt rate [samples/s] the ratios use.
+        the median sosfiltfilt rate [samples/s]. Each row's ratios take the mean time of
+        the reference pass timed just before and just after its run (``sosfiltfilt_msps``:
+        the two rates [MS/s]).
     """
     from .rss import BENCH_GEARSET, N_CHANNELS, free_bytes, run_child
 
     work = Path(work)
     work.mkdir(parents=True, exist_ok=True)
-    rate = run_child("sosfiltfilt_job")["samples_per_s"]
     run_child("import_job")              # the bytecode written once, as a user's first run does
+    rates = []
     gearset = work / "gearset.toml"
     gearset.write_text(BENCH_GEARSET, encoding="utf-8")
     rows, skipped = [], []
@@ -545,11 +552,16 @@ def process_rss_rows(work, minutes, *, seed: int = 1) -> tuple[list, list, float
         # the chunks' byte offsets (its later passes), unchecked through h5py's
         # read_direct_chunk (the library path beside that)
         rd = run_child("hdf5_pass_job", path=str(path))
+        # the reference pass timed just before and just after the run (a shared machine's
+        # speed drifts over minutes): the mean of the two times is the run's yardstick
+        before = run_child("sosfiltfilt_job")["samples_per_s"]
         r = run_child("process_job", path=str(path), gearset=str(gearset),
                       out_dir=str(work / f"process_{m:g}-out"))
+        after = run_child("sosfiltfilt_job")["samples_per_s"]
+        rates += [before, after]
         t = r["timings"]
         streamed = sum(t.get(k, 0.0) for k in ("load", "condition", "onsets"))
-        ref = n * N_CHANNELS / rate
+        ref = n * N_CHANNELS * 0.5 * (1.0 / before + 1.0 / after)
         rows.append({"minutes": m, "n_channels": N_CHANNELS, "n_samples": n, "data_mb": data / 2**20,
                      "status": r["status"], "n_onsets": r["n_onsets"], "wall_s": r["wall_s"],
                      "peak_rss_mb": r["peak_rss_mb"],
@@ -562,7 +574,8 @@ def process_rss_rows(work, minutes, *, seed: int = 1) -> tuple[list, list, float
                      "identify_share": (t.get("identify") or 0.0) / r["wall_s"],
                      "other_s": sum(v for k, v in t.items()
                                     if k not in ("load", "condition", "onsets", "phasing")),
-                     "sosfiltfilt_s": ref, "wall_over_sosfiltfilt": r["wall_s"] / ref,
+                     "sosfiltfilt_s": ref, "sosfiltfilt_msps": (before / 1e6, after / 1e6),
+                     "wall_over_sosfiltfilt": r["wall_s"] / ref,
                      "streamed_over_sosfiltfilt": streamed / ref,
                      # worker threads (meshphase.threads): the CPU time of all of them beside
                      # the wall time, against the single-threaded sosfiltfilt pass
@@ -576,6 +589,7 @@ def process_rss_rows(work, minutes, *, seed: int = 1) -> tuple[list, list, float
         import shutil
 
         shutil.rmtree(work / f"process_{m:g}-out", ignore_errors=True)
+    rate = float(np.median(rates)) if rates else run_child("sosfiltfilt_job")["samples_per_s"]
     return rows, skipped, rate
 
 
