@@ -4,18 +4,19 @@ The streamed conditioning (:func:`meshphase.stream.condition_stream`) filters ea
 every channel through that channel's own chain (notch, drift, band-pass): chains that share
 nothing, whose work is scipy's zero-phase filters and numpy array arithmetic, which release
 the GIL, so threads run them on separate cores. Each chain runs whole on one thread per
-block, so the samples are bit-identical to the serial ones whatever the thread count.
-``meshphase bench processing`` (its process rows carry the thread count and the CPU time)
-against ``MESHPHASE_THREADS=1 meshphase bench processing``, 1 h x 8 channels on the idle
-2-core machine: conditioning 10.2 s on two threads, 16.6 s on one.
+block, so the samples are bit-identical to the serial ones whatever the thread count. While
+the workers filter a block, the calling thread takes the block before through the onset
+detectors (``tmap.start``, :func:`thread_pool`), which before left the second core idle
+through the onsets. ``meshphase bench processing`` (its process rows carry the thread count
+and the CPU time beside the wall time) against ``MESHPHASE_THREADS=1 meshphase bench
+processing`` compares the two.
 
 The angle model of a long record is fitted in windows (:mod:`meshphase.angle_windows`), and
-the windows go side by side on these threads too. Each fit's Gauss-Newton steps are solved by
-Householder QR (LAPACK geqrf, which releases the GIL; gelsy, used before, held it, as do the
-SVD and the small array steps that remain), so two threads gain less than two cores, and the
-label alignment before the windows stays serial: the phasing stage of the 1-h row of
-``meshphase bench processing`` (four windows) took 3.7-4.6 s on two threads in four runs,
-4.7-5.5 s with ``MESHPHASE_THREADS=1`` in two (the shared 2-core machine).
+the windows go side by side on these threads too, as do the planet-label alignment's
+relabellings after the first (:func:`meshphase.angles.label_shift_costs`). Each fit's
+Gauss-Newton steps are solved by Householder QR (LAPACK geqrf, which releases the GIL;
+gelsy, used before, held it, as do the SVD and the small array steps that remain), so two
+threads gain less than two cores.
 
 Each streamed pass reads the recording's next block on a thread of its own while it works on
 this one (:func:`read_ahead`: h5py's reads and ``os.preadv`` release the GIL): the 1-h bench
