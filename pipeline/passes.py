@@ -347,7 +347,8 @@ def gauge_passes(channels, onsets: dict, quality: dict, fs: float, t0: float, *,
                               "phasing from it", ProcessingWarning, stacklevel=3)
         if times.size:
             passes.append(GaugePasses(c.name, gear, times, amp,
-                                      sig if np.any(np.isfinite(sig)) else None, main, factor))
+                                      sig if np.any(np.isfinite(sig)) else None, main, factor,
+                                      tooth=c.tooth))
     return passes, mains
 
 

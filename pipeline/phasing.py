@@ -896,6 +896,10 @@ class GaugePasses:
         white-noise bound) [-] (:func:`meshphase.passes.gauge_passes`): the phasing table's
         ``timing_floor`` and the reliability judgement use ``sigma`` times it, the angle
         model weights the passes by ``sigma`` alone (1: white noise, or no spectrum).
+    tooth : int or None
+        Index of the gauged tooth on its gear [-] (the channel's ``tooth``), None when not
+        known: gauges on one tooth (across its face width) see each planet at the same
+        instant, which names their planets alike (:func:`coincident_shift`).
     """
 
     name: str
@@ -905,6 +909,7 @@ class GaugePasses:
     sigma: np.ndarray | None = None
     main: bool = True
     floor_factor: float = 1.0
+    tooth: int | None = None
 
 
 @dataclass
@@ -1236,12 +1241,71 @@ def _gear_tables(model: AngleModel, labels: dict, train_of: dict, gearset, gaps,
     return tables, reliability
 
 
+#: a gauge's passes are matched to a gauge on the same tooth when they fall within this
+#: fraction of the median pass interval of each other [-]
+COINCIDENT_TOL = 0.25
+#: coincident passes needed, and the share of them that must name the same shift [-]
+COINCIDENT_MIN = 8
+COINCIDENT_AGREE = 0.9
+
+
+def coincident_shift(train, reference, n_planets: int) -> tuple[int | None, int, int]:
+    """The cyclic relabelling of ``train`` (:func:`meshphase.angles.relabel_train`) that
+    gives its passes the planets of the ``reference`` train's passes at the same instants.
+
+    Two gauges on one tooth (across its face width) meet each planet at the same time, so a
+    pass of one within ``COINCIDENT_TOL`` of the median pass interval of a pass of the other
+    is the same planet's, and their pass-order positions differ by the relabelling sought
+    (mod ``n_planets``). Gauges on different teeth must not be compared so: a tooth one
+    planet spacing further on is passed at the same instants by the next planet.
+
+    Returns
+    -------
+    (shift, agree, compared) : (int or None, int, int)
+        The shift 0..N-1 named by at least ``COINCIDENT_AGREE`` of the ``compared``
+        coincident passes (``agree`` of them), or None (fewer than ``COINCIDENT_MIN``
+        coincident passes, or no clear majority).
+    """
+    n = as_positive_int(n_planets, "n_planets")
+    t = np.asarray(train.times, dtype=np.float64)
+    u = np.asarray(reference.times, dtype=np.float64)
+    if t.size == 0 or u.size < 2:
+        return None, 0, 0
+    k = np.clip(np.searchsorted(u, t), 1, u.size - 1)
+    k = np.where(np.abs(u[k - 1] - t) <= np.abs(u[k] - t), k - 1, k)     # the nearest pass
+    tol = COINCIDENT_TOL * float(np.median(np.diff(u)))
+    ok = np.abs(u[k] - t) <= tol
+    compared = int(np.count_nonzero(ok))
+    if compared < COINCIDENT_MIN:
+        return None, 0, compared
+    d = np.mod(np.asarray(reference.position)[k[ok]] - np.asarray(train.position)[ok], n)
+    votes = np.bincount(d.astype(np.int64), minlength=n)
+    shift = int(np.argmax(votes))
+    agree = int(votes[shift])
+    if agree < COINCIDENT_AGREE * compared:
+        return None, agree, compared
+    return shift, agree, compared
+
+
+def _same_tooth_ref(p, refs, all_labels):
+    """The first reference gauge on the same gear and tooth as passes ``p``, or None."""
+    if p.tooth is None:
+        return None
+    for r in refs:
+        q = all_labels[r][2]
+        if q.gear == p.gear and q.tooth is not None and q.tooth == p.tooth:
+            return r
+    return None
+
+
 def _align_labels(trains, train_of, all_labels, labels, kin, n, notes):
     """Relabel relatively labelled gauge trains cyclically so that their planet numbers name
-    the same planets as the reference trains' (see :func:`meshphase.angles.label_shift_costs`).
-    A shift is taken only when its misfit stands clearly apart (the next best is worse by more
-    than 25 times the fit's variance per observation); otherwise the planets' offsets look
-    alike, nothing is changed and a note says so."""
+    the same planets as the reference trains'. A gauge on the same tooth as a reference
+    gauge takes the shift its coincident passes name (:func:`coincident_shift`). Otherwise
+    the shifts are fitted (:func:`meshphase.angles.label_shift_costs`), and one is taken
+    only when its misfit stands clearly apart (the next best is worse by more than 25 times
+    the fit's variance per observation); else the planets' offsets look alike, nothing is
+    changed and a note says so."""
     absolute = [nm for nm in train_of if all_labels[nm][0].decided_by in ("tacho", "pattern")]
     rel = [nm for nm in train_of if nm not in absolute]
     if not rel:
@@ -1252,19 +1316,34 @@ def _align_labels(trains, train_of, all_labels, labels, kin, n, notes):
     for nm in sorted(todo, key=lambda nm: -len(train_of[nm])):
         lab, frac, p = all_labels[nm]
         tr = train_of[nm]
-        costs = label_shift_costs([train_of[r] for r in refs], tr, frac, kin, n)
-        if not np.all(np.isfinite(costs)):
-            continue
-        order = np.argsort(costs)
-        best, second = float(costs[order[0]]), float(costs[order[1]])
-        n_obs = sum(len(train_of[r]) for r in refs) + len(tr)
-        var = max(best / max(n_obs, 1), 1e-300)
-        if second - best <= 25.0 * var:
-            notes.append(f"{nm}: the planets' own offsets look too alike to tell which of its "
-                         f"pulses is which planet from the {', '.join(refs)} gauge(s)")
-            refs.append(nm)
-            continue
-        shift = int(order[0])
+        twin = _same_tooth_ref(p, refs, all_labels)
+        shift = None
+        if twin is not None:
+            shift, agree, compared = coincident_shift(tr, train_of[twin], n)
+            if shift is None:
+                notes.append(f"{nm}: its passes and those of {twin} (the same tooth) do not "
+                             f"coincide clearly ({agree} of {compared} name one planet); the "
+                             "planets' offsets decide instead")
+        same_tooth = shift is not None
+        if same_tooth:
+            by = [twin]
+            why = f"the same tooth: {agree} of {compared} passes coincide"
+        else:
+            costs = label_shift_costs([train_of[r] for r in refs], tr, frac, kin, n)
+            if not np.all(np.isfinite(costs)):
+                continue
+            order = np.argsort(costs)
+            best, second = float(costs[order[0]]), float(costs[order[1]])
+            n_obs = sum(len(train_of[r]) for r in refs) + len(tr)
+            var = max(best / max(n_obs, 1), 1e-300)
+            if second - best <= 25.0 * var:
+                notes.append(f"{nm}: the planets' own offsets look too alike to tell which of "
+                             f"its pulses is which planet from the {', '.join(refs)} gauge(s)")
+                refs.append(nm)
+                continue
+            shift = int(order[0])
+            by = list(refs)
+            why = f"the planets' own offsets: misfit {best:.3g} vs {second:.3g} next"
         if shift:
             new = relabel_train(tr, shift, frac, n)
             train_of[nm] = new
@@ -1272,10 +1351,14 @@ def _align_labels(trains, train_of, all_labels, labels, kin, n, notes):
             seq = np.argsort(frac, kind="stable")
             pl, pos = _shift_labels(lab.planet, lab.position, seq, shift)
             lab.planet, lab.position = pl, pos
-        if ref_kind == "absolute":
+        if same_tooth:
+            # as absolute as the twin's own labels
+            if all_labels[twin][0].decided_by != "first pulse":
+                lab.decided_by = f"same tooth (as {twin})"
+        elif ref_kind == "absolute":
             lab.decided_by = f"planet offsets (as {', '.join(refs)})"
-        notes.append(f"{nm}: planet labels aligned with the {', '.join(refs)} gauge(s) by the "
-                     f"planets' own offsets (shift {shift}, misfit {best:.3g} vs {second:.3g} next)")
+        notes.append(f"{nm}: planet labels aligned with the {', '.join(by)} gauge(s) by "
+                     f"shift {shift} ({why})")
         refs.append(nm)
     return trains, train_of
 

@@ -283,6 +283,109 @@ def test_label_shift_costs_on_threads_equal_one_after_another(drop_planet_2):
     assert int(np.argmin(threaded)) == 3
 
 
+def _same_tooth_passes(drop_first: int, *, angle_b=None):
+    """Sun gauges on the seed rig (Z_p = 31, 120 s, equal loads: labels relative): one on
+    tooth 0 and two on tooth 5 (across its face width), the second of those missing its
+    first ``drop_first`` passes, so the first pulse it sees is another planet's; with
+    ``angle_b`` [rad] the second's passes are those of a gauge at that angle instead."""
+    from meshphase.phasing import GaugePasses
+    from meshphase.synthetic.kinematics import engagement_events
+
+    g, sp = rig(zp=31)
+
+    def times(angle):
+        return np.sort(engagement_events(g, sp, "sun", angle, 0.0, 120.0,
+                                         profile=SpeedProfile()).time)
+
+    rng = np.random.default_rng(1)
+    sig = 2e-5
+    t0 = times(0.3)
+    t5 = times(0.3 + 5 * TWO_PI / 25)
+    tb = t5 if angle_b is None else times(angle_b)
+
+    def gp(name, t, tooth, main=False):
+        return GaugePasses(name, "sun", t + rng.normal(0.0, sig, t.size), np.ones(t.size),
+                           np.full(t.size, sig), main, tooth=tooth)
+
+    return g, [gp("sun", t0, 0, main=True), gp("sun_fw1", t5, 5),
+               gp("sun_fw2", tb[drop_first:], 5)]
+
+
+@pytest.mark.parametrize("drop_first", [0, 1, 3])
+def test_gauges_on_one_tooth_take_the_labels_of_their_coincident_passes(drop_first):
+    # equal loads and equal spacing: every gauge's planet 1 is the first pulse it sees, and
+    # the planets' offsets (none here) cannot tell the labellings apart; two gauges on one
+    # tooth see each planet at the same instant, which names the shift outright (before,
+    # a gauge that missed its first pulse stayed labelled one planet off, with a note that
+    # the offsets look too alike)
+    import warnings
+
+    from meshphase.phasing import measure_phasing
+
+    g, passes = _same_tooth_passes(drop_first)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ph = measure_phasing(passes, g)
+    note = [n for n in ph.notes if n.startswith("sun_fw2:")]
+    assert len(note) == 1 and "the same tooth" in note[0], ph.notes
+    assert f"by shift {drop_first % 4} (" in note[0]
+    trains = {t.name: t for t in ph.model._design.trains}      # the labels the model fitted
+    a, b = trains["sun_fw1"], trains["sun_fw2"]
+    k = np.searchsorted(a.times, b.times - 1e-3)
+    np.testing.assert_array_equal(a.planet[k], b.planet)
+    # a gauge on another tooth is aligned by the fitted offsets as before, not by time
+    assert not any(n.startswith("sun:") and "same tooth" in n for n in ph.notes)
+
+
+def test_gauges_on_one_tooth_whose_passes_do_not_coincide_fall_back_to_the_offsets():
+    # the channel says tooth 5, the passes are another tooth's (a wiring slip): they do not
+    # coincide, a note says so and the fitted offsets decide as for any other gauge
+    import warnings
+
+    from meshphase.phasing import measure_phasing
+
+    g, passes = _same_tooth_passes(1, angle_b=0.3 + 7 * TWO_PI / 25 + 0.05)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ph = measure_phasing(passes, g)
+    assert any(n.startswith("sun_fw2:") and "do not coincide" in n for n in ph.notes), ph.notes
+    assert not any(n.startswith("sun_fw2:") and "by shift" in n and "same tooth" in n
+                   for n in ph.notes)
+
+
+def test_coincident_shift_names_the_relabelling_and_refuses_unclear_cases():
+    from meshphase.phasing import COINCIDENT_MIN, coincident_shift
+
+    trains, frac, _, _ = offset_trains()
+    ring = trains[1]
+    for s in range(4):
+        moved = relabel_train(ring, s, frac, 4)
+        shift, agree, compared = coincident_shift(moved, ring, 4)
+        assert shift == (-s) % 4 and agree == compared == len(ring)
+        # and that shift restores the reference's labels
+        np.testing.assert_array_equal(relabel_train(moved, shift, frac, 4).planet, ring.planet)
+    # passes half an interval away from the reference's: none coincides
+    from dataclasses import replace
+
+    half = 0.5 * float(np.median(np.diff(ring.times)))
+    assert coincident_shift(replace(ring, times=ring.times + half), ring, 4)[0] is None
+    # a third of the labels scrambled: no clear majority
+    rng = np.random.default_rng(3)
+    pos = ring.position.copy()
+    bad = rng.random(pos.size) < 0.34
+    pos[bad] += rng.integers(1, 4, int(bad.sum()))
+    shift, agree, compared = coincident_shift(replace(ring, position=pos), ring, 4)
+    assert shift is None and agree < 0.9 * compared
+    # too few coincident passes; empty trains; bad planet count
+    few = replace(ring, times=ring.times[:COINCIDENT_MIN - 1], position=ring.position[:COINCIDENT_MIN - 1])
+    assert coincident_shift(few, ring, 4) == (None, 0, COINCIDENT_MIN - 1)
+    empty = replace(ring, times=ring.times[:0], position=ring.position[:0])
+    assert coincident_shift(empty, ring, 4) == (None, 0, 0)
+    assert coincident_shift(ring, empty, 4) == (None, 0, 0)
+    with pytest.raises(ValueError):
+        coincident_shift(ring, ring, 0)
+
+
 def test_label_shift_costs_on_a_central_window_decide_alike():
     # a cap below the record's observations fits the central window only: the same shift
     # stands out (the decision needs hundreds of passes, not the whole record), and a cap
