@@ -891,8 +891,8 @@ def _minus_interp(x: np.ndarray, a: int, xp: np.ndarray, fp: np.ndarray) -> np.n
     computed at once, with numpy's own steps (``slope * (t - xp[k]) + fp[k]``, the slope
     ``(fp[k+1] - fp[k]) / (xp[k+1] - xp[k])``; ``fp[0]`` before the first knot, ``fp[-1]``
     from the last) on an interval-long scratch array that stays in cache. Knots closer than
-    ``_INTERP_RUN`` samples on average, or values not all finite (numpy's NaN rules), go
-    through ``np.interp``. ``xp``: increasing; ``a + x.size`` below 2**53.
+    ``_INTERP_RUN`` samples on average, values not all finite (numpy's NaN rules) or knots
+    not strictly increasing go through ``np.interp``. ``a + x.size`` below 2**53.
     """
     n = x.size
     xp = np.asarray(xp, dtype=np.float64)
@@ -900,7 +900,7 @@ def _minus_interp(x: np.ndarray, a: int, xp: np.ndarray, fp: np.ndarray) -> np.n
     if n == 0:
         return np.empty(0)
     if (xp.size < 2 or not xp[-1] - xp[0] >= _INTERP_RUN * (xp.size - 1)
-            or not np.all(np.isfinite(fp))):
+            or not np.all(np.isfinite(fp)) or not np.all(xp[1:] > xp[:-1])):
         return x - np.interp(np.arange(a, a + n, dtype=np.float64), xp, fp)
     # sample i (t = a + i) lies in interval k when xp[k] <= t < xp[k + 1]
     cut = np.clip(np.ceil(xp - a), 0, n).astype(np.int64)

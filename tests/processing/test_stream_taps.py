@@ -140,5 +140,9 @@ def test_minus_interp_empty_non_finite_and_dense_knots():
     fp = np.sin(dense)
     np.testing.assert_array_equal(_minus_interp(x, 0, dense, fp),
                                   x - np.interp(np.arange(3000.0), dense, fp))
+    twice = np.array([100.0, 1200.0, 1200.0, 2500.0])    # a repeated knot: numpy's rule
+    fp = np.array([1.0, 2.0, 5.0, 3.0])
+    np.testing.assert_array_equal(_minus_interp(x, 0, twice, fp),
+                                  x - np.interp(np.arange(3000.0), twice, fp))
     one = _minus_interp(x, 0, np.array([50.0]), np.array([2.0]))  # a single knot: constant
     np.testing.assert_array_equal(one, x - 2.0)
