@@ -139,6 +139,40 @@ def test_streamed_conditioning_and_onsets_equal_the_whole_array(faulty, drift, s
     assert len(res.quality["ring"].gap_runs) == 2
 
 
+@pytest.mark.parametrize("n_threads", [1, 3])
+@pytest.mark.parametrize("where", ["chain", "onsets"])
+def test_a_failure_in_a_chain_or_an_onset_detector_ends_the_pass_with_its_error(
+        faulty, monkeypatch, where, n_threads):
+    """The onsets take a block while the workers filter the next one: a chain that fails
+    (on a worker) or an onset detector that fails (here) ends the pass with that error,
+    the other block's work finished first and no reading thread left behind."""
+    import threading
+
+    from meshphase import stream
+    from meshphase.threads import threads_limited
+
+    calls = {"n": 0}
+    target = stream._Chain.push if where == "chain" else OnsetStream.feed
+    # a chain is pushed every block; the onsets get the chains' output in larger pieces
+    # (the filters' look-ahead): four over this record
+    at = 5 if where == "chain" else 2
+
+    def failing(self, x):
+        calls["n"] += 1
+        if calls["n"] == at:
+            raise RuntimeError(f"{where} failed at call {at}")
+        return target(self, x)
+
+    if where == "chain":
+        monkeypatch.setattr(stream._Chain, "push", failing)
+    else:
+        monkeypatch.setattr(OnsetStream, "feed", failing)
+    with threads_limited(n_threads), pytest.raises(RuntimeError, match=f"{where} failed"):
+        _streamed(faulty)
+    assert calls["n"] >= at
+    assert not [t for t in threading.enumerate() if t.name == "meshphase-read"]
+
+
 @pytest.mark.parametrize("drift", ["median", "highpass"])
 def test_streamed_conditioning_on_threads_equals_the_serial_stream(faulty, drift):
     """The channels' chains run side by side on worker threads (meshphase.threads), each
