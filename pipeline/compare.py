@@ -37,7 +37,7 @@ from .errors import ProcessingWarning
 from .models.gearset import Gearset, Speeds
 from .models.mesh_phasing import ShaftHoleErrors, ideal_phasing, mesh_angle_deviations
 from .models.phasing_jacobian import mesh_angle_gradient, n_offset_parameters
-from .phasing import PassTable, pass_order
+from .phasing import PassTable, nearest_index, pass_order
 from .validate import as_choice, as_positive, as_positive_int
 
 __all__ = [
@@ -831,16 +831,12 @@ def truth_comparison(table: PassTable, truth, channel: str, *, times=None, plane
     if et.size < 2:
         return None
 
-    def nearest(x):
-        j = np.clip(np.searchsorted(et, x), 1, et.size - 1)
-        return np.where(np.abs(et[j - 1] - x) < np.abs(et[j] - x), j - 1, j)
-
     ref_times = table.time if times is None else np.asarray(times, dtype=float)
-    off = float(np.median(ref_times - et[nearest(ref_times)]))
+    off = float(np.median(ref_times - et[nearest_index(et, ref_times)]))
     match = float("nan")
     if times is not None and planets is not None:
         pl = np.asarray(planets)
-        true_lab = np.asarray(ev.planet)[nearest(ref_times - off)] - 1
+        true_lab = np.asarray(ev.planet)[nearest_index(et, ref_times - off)] - 1
         ok = pl >= 0
         match = float(np.mean(true_lab[ok] == pl[ok])) if np.any(ok) else float("nan")
     g = truth.config["gearset"]
@@ -848,8 +844,8 @@ def truth_comparison(table: PassTable, truth, channel: str, *, times=None, plane
     z = g["z_sun"] if table.gauge == "sun" else g["z_ring"]
     w = abs(sp.w_sc if table.gauge == "sun" else sp.w_rc)
     tau = np.asarray(ev.tau, dtype=float)
-    i_n = nearest(table.time - off)
-    i_1 = nearest(table.ref_time - off)
+    i_n = nearest_index(et, table.time - off)
+    i_1 = nearest_index(et, table.ref_time - off)
     true = np.mod(z * w * (tau[i_n] - tau[i_1]) / TWO_PI, 1.0)
     err = wrap(table.gamma - true)
     sig = np.asarray(table.uncertainty, dtype=float)

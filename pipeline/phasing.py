@@ -1249,6 +1249,15 @@ COINCIDENT_MIN = 8
 COINCIDENT_AGREE = 0.9
 
 
+def nearest_index(sorted_times: np.ndarray, t) -> np.ndarray:
+    """Index of the entry of ``sorted_times`` (increasing, at least two) nearest each of
+    ``t`` (a tie goes to the later one)."""
+    u = np.asarray(sorted_times, dtype=np.float64)
+    t = np.asarray(t, dtype=np.float64)
+    k = np.clip(np.searchsorted(u, t), 1, u.size - 1)
+    return np.where(np.abs(u[k - 1] - t) < np.abs(u[k] - t), k - 1, k)
+
+
 def coincident_shift(train, reference, n_planets: int) -> tuple[int | None, int, int]:
     """The cyclic relabelling of ``train`` (:func:`meshphase.angles.relabel_train`) that
     gives its passes the planets of the ``reference`` train's passes at the same instants.
@@ -1271,8 +1280,7 @@ def coincident_shift(train, reference, n_planets: int) -> tuple[int | None, int,
     u = np.asarray(reference.times, dtype=np.float64)
     if t.size == 0 or u.size < 2:
         return None, 0, 0
-    k = np.clip(np.searchsorted(u, t), 1, u.size - 1)
-    k = np.where(np.abs(u[k - 1] - t) <= np.abs(u[k] - t), k - 1, k)     # the nearest pass
+    k = nearest_index(u, t)
     tol = COINCIDENT_TOL * float(np.median(np.diff(u)))
     ok = np.abs(u[k] - t) <= tol
     compared = int(np.count_nonzero(ok))
