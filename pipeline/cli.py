@@ -218,6 +218,11 @@ def cmd_bench(args) -> int:
         wr = warmup_rows()                # the interleaved TDMS rows' kernel
         if wr["engine"] == "numba":
             print(f"TDMS rows kernel ready in {wr['seconds']:.2f} s")
+        from .iir import warmup as warmup_iir
+
+        wf = warmup_iir()                 # the conditioning filters' kernel
+        if wf["engine"] == "numba":
+            print(f"filter kernel ready in {wf['seconds']:.2f} s")
         return 0
     out = Path(args.out)
     if args.what == "campaign":

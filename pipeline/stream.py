@@ -70,6 +70,7 @@ from typing import Callable, Iterator, Sequence
 import numpy as np
 from scipy import ndimage, signal
 
+from . import iir
 from .condition import (_apply_finite, _block_means, _block_medians, _check_freq, _drift_window,
                         _noise_from_diffs, _resolve_band, _settle_time, _short_segments_message,
                         _short_signal_message, _snr_combine, _snr_peak, _warn_quality, default_band,
@@ -828,9 +829,10 @@ class _ZeroPhase:
     """A gap-aware zero-phase filter (condition._apply_finite + sosfiltfilt) on a stream."""
 
     def __init__(self, sos: np.ndarray, n_total: int, *, what: str, chunk: int = BLOCK_SAMPLES,
-                 fill_max: int = _FILL_MAX):
+                 fill_max: int = _FILL_MAX, engine: str = "scipy"):
         self._apply = _apply_finite
         self.sos = sos
+        self.engine = engine
         self.padlen = 3 * (2 * len(sos) + 1)
         self.min_len = self.padlen + 1
         self.fill_max = fill_max
@@ -846,7 +848,7 @@ class _ZeroPhase:
         self.out_pos = 0
 
     def _func(self, s: np.ndarray) -> np.ndarray:
-        return signal.sosfiltfilt(self.sos, s, padlen=self.padlen)
+        return iir.sosfiltfilt(self.sos, s, padlen=self.padlen, engine=self.engine)
 
     def push(self, x: np.ndarray) -> np.ndarray:
         if x.size:
@@ -1359,7 +1361,8 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
                      highpass: float | None = None, order: int = 4, warn: bool = True,
                      block: int = BLOCK_SAMPLES, memory_budget: float = MEMORY_BUDGET,
                      on_samples: Callable[[str, int, np.ndarray], None] | None = None,
-                     progress: Callable[[str, int, int], None] | None = None) -> StreamResult:
+                     progress: Callable[[str, int, int], None] | None = None,
+                     filter_engine: str = "auto") -> StreamResult:
     """Pass 3: condition the planned channels and detect onsets on the gauges, streamed.
 
     The chain per channel is that of :func:`meshphase.condition.condition_recording`
@@ -1384,6 +1387,9 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
         Called with every piece of conditioned samples as it is final (e.g. to write the
         conditioned recording out, block by block); the array is the callee's to keep.
     progress : callable(name, done, total), optional
+    filter_engine : {"auto", "numba", "scipy"}
+        Engine of the zero-phase filters (:func:`meshphase.iir.pick_engine`; ``"auto"``
+        weighs the samples of all planned channels). The engines give the same numbers.
 
     Returns
     -------
@@ -1392,6 +1398,7 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
     plans = _check_plans(source, scan, plans, drift)
     h = source.header
     n, fs = h.n_samples, h.fs
+    engine = iir.pick_engine(filter_engine, n * len(plans))
     quality = {p.name: quality_from_scan(scan.results[p.name], p.name, fs, h.t0) for p in plans}
     settle = {p.group: 0.0 for p in plans}
     notch_sos = _hum_notches(plans, scan, quality, settle, fs, hum)
@@ -1402,7 +1409,7 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
         chains[p.name], chain_l, drift_b = _channel_chain(
             p, quality[p.name], notch_sos.get(p.name), settle, notes, n=n, fs=fs, block=block,
             dtype=h.dtype, drift=drift, drift_window=drift_window, lowpass=lowpass,
-            highpass=highpass, order=order)
+            highpass=highpass, order=order, engine=engine)
         est_overlap = max(est_overlap, chain_l)        # the longest chain's overlaps
         est_drift = max(est_drift, drift_b)
     for p in plans:
@@ -1488,21 +1495,21 @@ def _through_gaps(bad: np.ndarray, n: int, st: _ZeroPhase, notes: list) -> np.nd
 
 def _channel_chain(p: ChannelPlan, q: ChannelQuality, notch_sos, settle: dict, notes: list, *,
                    n: int, fs: float, block: int, dtype, drift, drift_window, lowpass,
-                   highpass, order) -> tuple:
+                   highpass, order, engine: str = "scipy") -> tuple:
     """One channel's conditioning chain (:class:`_Chain`), the overlap it needs [samples]
     and its drift block [samples]; its filters' settling goes into its group's ``settle``."""
     bad = q.all_gap_runs()                                 # masked input: gaps + dropouts
     notch = None
     chain_l = drift_b = 0
     if notch_sos is not None:
-        notch = _ZeroPhase(notch_sos, n, what="notch_hum", chunk=block)
+        notch = _ZeroPhase(notch_sos, n, what="notch_hum", chunk=block, engine=engine)
         bad = _through_gaps(bad, n, notch, notes)
     dr = None
     if drift is not None:
         w = _drift_window(drift_window, p.mesh_freq)
         if drift == "highpass":
             sos = design_filter(fs, kind="highpass", low=min(1.0 / w, 0.25 * fs), order=2)
-            dr = _ZeroPhase(sos, n, what="filter_signal(highpass)", chunk=block)
+            dr = _ZeroPhase(sos, n, what="filter_signal(highpass)", chunk=block, engine=engine)
             bad = _through_gaps(bad, n, dr, notes)
             settle[p.group] = max(settle[p.group], 2.0 * w)
             chain_l = dr.L
@@ -1514,7 +1521,7 @@ def _channel_chain(p: ChannelPlan, q: ChannelQuality, notch_sos, settle: dict, n
     bd = _band(fs, p.mesh_freq, lowpass, highpass, order)
     if bd is not None:
         kind, low, high, sos = bd
-        band = _ZeroPhase(sos, n, what=f"filter_signal({kind})", chunk=block)
+        band = _ZeroPhase(sos, n, what=f"filter_signal({kind})", chunk=block, engine=engine)
         _through_gaps(bad, n, band, notes)
         settle[p.group] = max(settle[p.group], _settle_time(low, high))
     chain_l += sum(st.L for st in (notch, band) if st is not None)

@@ -404,6 +404,44 @@ def _throughput_rows(fs, scen, n, rng):
         rows.append({"stage": stage, "scenario": "wide", "n_samples": n, "n_pulses": 0,
                      "runtime_s": dt, "msamples_per_s": n / dt / 1e6, "wall_s": wall})
     rows += _hum_rows(x[: int(min(n, 120.0 * fs))], fs)
+    rows += _filter_rows(x, fs)
+    return rows
+
+
+def _filter_rows(x, fs):
+    """The conditioning's zero-phase filters on both engines of :mod:`meshphase.iir`: the
+    low-pass (4th-order Butterworth at 28.6 Hz, the reference pass of the process table) and
+    a hum notch pair (50 and 100 Hz, Q 30), each two sections. Medians of three, CPU
+    seconds of one core; ``max_diff`` is the largest difference of the numba result from
+    scipy's over the largest |x| (0: equal bit for bit)."""
+    from scipy import signal
+
+    from .. import iir
+
+    filters = {"lowpass 28.6 Hz": signal.butter(4, 28.6, fs=fs, output="sos"),
+               "notch 50 + 100 Hz": np.concatenate(
+                   [signal.tf2sos(*signal.iirnotch(f, 30.0, fs=fs)) for f in (50.0, 100.0)])}
+    engines = ["scipy"] + (["numba"] if iir.HAVE_NUMBA else [])
+    if iir.HAVE_NUMBA:
+        iir.warmup()                       # the kernel loaded (or compiled) before timing
+    rows = []
+    for fname, sos in filters.items():
+        padlen = 3 * (2 * len(sos) + 1)
+        ref = None
+        for eng in engines:
+            cpu, wall = [], []
+            for _ in range(3):
+                t0, tw = time.process_time(), time.perf_counter()
+                y = iir.sosfiltfilt(sos, x, padlen=padlen, engine=eng)
+                cpu.append(time.process_time() - t0)
+                wall.append(time.perf_counter() - tw)
+            if ref is None:
+                ref = y
+            dt = float(np.median(cpu))
+            rows.append({"stage": f"iir.sosfiltfilt engine={eng}", "scenario": fname,
+                         "n_samples": int(x.size), "n_pulses": 0, "runtime_s": dt,
+                         "msamples_per_s": x.size / dt / 1e6, "wall_s": float(np.median(wall)),
+                         "max_diff": float(np.max(np.abs(y - ref)) / np.max(np.abs(x)))})
     return rows
 
 
@@ -464,6 +502,11 @@ def _markdown(res: dict) -> str:
     lines += _md_table(res["accuracy"], ACCURACY_COLUMNS)
     lines += ["", "## Throughput (MSamples per CPU-second; runtime_s is CPU time)", ""]
     lines += _md_table(res["throughput"], THROUGHPUT_COLUMNS)
+    diffs = [f"{r['scenario']} {r['max_diff']:.2g}" for r in res["throughput"]
+             if r["stage"] == "iir.sosfiltfilt engine=numba"]
+    if diffs:
+        lines += ["", "iir.sosfiltfilt engine=numba against engine=scipy, largest difference "
+                  "over the largest |x| (0: bit for bit): " + ", ".join(diffs) + "."]
     if res.get("process"):
         lines += ["", "## meshphase process: peak memory and time against recording length", "",
                   "8 channels (sun, ring, 5 face-width gauges, tacho) at 5120 Hz, float64 HDF5; "

@@ -27,7 +27,11 @@ def test_quick_bench_writes_tables(tmp_path):
     assert all(r["crb_samples"] > 0 for r in data["accuracy"])
     assert {r["stage"] for r in data["throughput"]} >= {
         "onsets.detect_onsets", "onsets.detect_onsets relearn=block", "condition.detect_hum",
-        "welch detrend=linear (scipy)", "welch detrend=_detrend_linear"}
+        "welch detrend=linear (scipy)", "welch detrend=_detrend_linear",
+        "iir.sosfiltfilt engine=scipy"}
+    for r in data["throughput"]:
+        if r["stage"] == "iir.sosfiltfilt engine=numba":    # the same arithmetic as scipy's
+            assert r["max_diff"] <= 1e-12
     text = md.read_text()
     assert "| " + " | ".join(ACCURACY_COLUMNS) + " |" in text
     assert "| " + " | ".join(THROUGHPUT_COLUMNS) + " |" in text

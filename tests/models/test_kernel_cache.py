@@ -30,6 +30,7 @@ def test_warmup_compiles_into_the_cache(tmp_path):
     assert res.returncode == 0, res.stderr
     assert "numba kernel ready" in res.stdout and str(tmp_path / "cache") in res.stdout
     assert "onset kernels ready" in res.stdout and "TDMS rows kernel ready" in res.stdout
+    assert "filter kernel ready" in res.stdout
     cached = [f for _, _, fs in os.walk(tmp_path / "cache") for f in fs]
     assert any(f.endswith(".nbi") for f in cached) and any(f.endswith(".nbc") for f in cached)
 

@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from meshphase import io
+from meshphase import iir, io
 from meshphase.condition import (condition_recording, drift_baseline, finite_apply_gaps,
                                 quality_from_scan)
 from meshphase.errors import DataQualityWarning, ProcessingWarning
@@ -89,7 +89,7 @@ def _whole(rec, drift="median"):
     return out
 
 
-def _streamed(rec, drift="median", block=BLOCK):
+def _streamed(rec, drift="median", block=BLOCK, filter_engine="auto"):
     src = MemorySource(rec)
     scan = scan_source(src, conditioned=["sun", "ring"], tacho="tacho", block=block)
     plans = [ChannelPlan(ch, mesh_freq=fm, pulse_period=per, group=ch, onsets=True,
@@ -101,7 +101,8 @@ def _streamed(rec, drift="median", block=BLOCK):
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DataQualityWarning)
-        res = condition_stream(src, scan, plans, drift=drift, block=block, on_samples=keep)
+        res = condition_stream(src, scan, plans, drift=drift, block=block, on_samples=keep,
+                               filter_engine=filter_engine)
     return scan, res, got
 
 
@@ -194,6 +195,24 @@ def test_streamed_conditioning_on_threads_equals_the_serial_stream(faulty, drift
         assert np.array_equal(h1.excess_db, h3.excess_db, equal_nan=True)
     assert res1.quality["sun"].hum.present                  # the rig's hum was searched for
     assert sorted(m for _, m in res1.warnings) == sorted(m for _, m in res3.warnings)
+
+
+@pytest.mark.skipif(not iir.HAVE_NUMBA, reason="numba is not installed")
+@pytest.mark.parametrize("drift", ["median", "highpass"])
+def test_streamed_conditioning_with_numba_filters_equals_scipy(faulty, drift):
+    """The filters on either engine (meshphase.iir): the same operations in the same order,
+    so the conditioned samples agree to 1e-12 of the amplitude (bit for bit on x86-64; see
+    tests/processing/test_iir.py) and the onsets to 1e-6 of a sample, as above."""
+    _, res_s, got_s = _streamed(faulty, drift, filter_engine="scipy")
+    _, res_n, got_n = _streamed(faulty, drift, filter_engine="numba")
+    for ch in ("sun", "ring"):
+        a, b = got_s[ch], got_n[ch]
+        assert np.array_equal(np.isnan(a), np.isnan(b))
+        ok = np.isfinite(a)
+        np.testing.assert_allclose(b[ok], a[ok], rtol=0.0, atol=1e-12 * np.max(np.abs(a[ok])))
+        ta, tb = res_s.onsets[ch].times, res_n.onsets[ch].times
+        assert ta.size == tb.size and ta.size > 0
+        np.testing.assert_allclose(tb, ta, rtol=0.0, atol=1e-6 / faulty.fs)
 
 
 @pytest.mark.parametrize("n_keep", [
@@ -585,6 +604,8 @@ def test_scan_and_condition_stream_bad_input():
         condition_stream(src, scan, ["sun"])
     with pytest.raises(ValueError, match="drift"):
         condition_stream(src, scan, [ChannelPlan("sun")], drift="mean")
+    with pytest.raises(ValueError, match="engine must be one of"):
+        condition_stream(src, scan, [ChannelPlan("sun")], filter_engine="fortran")
     res = condition_stream(src, scan, [])              # nothing planned: nothing conditioned
     assert res.quality == {} and res.onsets == {} and res.excerpt.n_channels == 0
 

@@ -1,0 +1,176 @@
+"""Zero-phase filtering by second-order sections: :func:`scipy.signal.sosfiltfilt`, or the
+same arithmetic compiled by numba, two sections per sweep.
+
+The conditioning's filters (hum notches, band limit, high-pass drift removal) are cascades
+of one or two biquads run forwards and backwards over every sample of every conditioned
+channel: the largest single cost of ``meshphase process``. scipy's loop runs all sections
+for one sample before the next, its section states in memory; one section's recursion is
+a chain of dependent multiplies and adds, so the loop is bound by that chain's latency
+(~5 ns per section and sample here). :mod:`meshphase._iir_numba` runs two sections together
+through the samples, their states in registers: two independent chains the processor
+overlaps, about twice scipy's rate, with the same operations in the same order for every
+section, so the same numbers (``meshphase bench processing`` measures both and checks
+that they agree).
+
+Engines (``engine``): ``"scipy"``; ``"numba"`` (ValueError when numba is not importable);
+``"auto"`` (the default) takes numba when it is importable and either already loaded in
+this process or the job is at least ``NUMBA_SAMPLES`` samples, all channels together
+(``work``): below that, loading numba (~0.5 s) costs more than it saves.
+
+Padding, initial conditions and the result are those of ``scipy.signal.sosfiltfilt(sos, x,
+padlen=padlen)`` (odd extension, steady-state initial conditions scaled by the first and
+last values).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+import threading
+import time
+
+import numpy as np
+
+from .numba_cache import import_kernels
+
+__all__ = ["ENGINES", "HAVE_NUMBA", "NUMBA_SAMPLES", "pick_engine", "sosfiltfilt", "warmup"]
+
+#: engines of :func:`sosfiltfilt`
+ENGINES = ("auto", "numba", "scipy")
+#: numba is optional (extras "fast" and "test"); looked for here, imported on first use
+HAVE_NUMBA = importlib.util.find_spec("numba") is not None
+#: samples of a job (all its channels) from which ``engine="auto"`` loads numba [-]: about
+#: where the filters' time saved (the two engines' rates in ``meshphase bench processing``'s
+#: iir rows, two filters per conditioned channel, on the run's threads) pays for loading
+#: numba and the kernel (``meshphase bench --warmup`` prints that time): ~23 min of 7
+#: conditioned channels at 5120 Hz, from paired runs of ``process`` with either engine
+NUMBA_SAMPLES = 50_000_000
+
+_ZI: dict = {}
+_ZI_LOCK = threading.Lock()
+
+
+def pick_engine(engine: str = "auto", work: int = 0) -> str:
+    """The engine :func:`sosfiltfilt` takes: ``"numba"`` or ``"scipy"``.
+
+    Parameters
+    ----------
+    engine : {"auto", "numba", "scipy"}
+    work : int
+        Samples of the whole job, all channels together [-] (``"auto"`` only).
+
+    Raises
+    ------
+    ValueError
+        An unknown engine, or ``"numba"`` when numba is not importable.
+    """
+    if not isinstance(engine, str) or engine not in ENGINES:
+        raise ValueError(f"engine must be one of {list(ENGINES)}, got {engine!r}")
+    if engine == "numba" and not HAVE_NUMBA:
+        raise ValueError("engine='numba' requested but numba is not importable (not installed)")
+    if engine == "auto":
+        if not HAVE_NUMBA:
+            return "scipy"
+        return "numba" if ("numba" in sys.modules or work >= NUMBA_SAMPLES) else "scipy"
+    return engine
+
+
+def _zi(sos: np.ndarray) -> np.ndarray:
+    """``scipy.signal.sosfilt_zi(sos)``, computed once per filter."""
+    key = sos.tobytes()
+    zi = _ZI.get(key)
+    if zi is None:
+        from scipy import signal
+
+        zi = signal.sosfilt_zi(sos)
+        with _ZI_LOCK:
+            if len(_ZI) > 64:
+                _ZI.clear()
+            _ZI[key] = zi
+    return zi
+
+
+def _check_sos(sos) -> np.ndarray:
+    sos = np.ascontiguousarray(sos, dtype=np.float64)
+    if sos.ndim != 2 or sos.shape[1] != 6 or sos.shape[0] == 0:
+        raise ValueError(f"sos must have shape (n_sections, 6), got {sos.shape}")
+    if not np.all(sos[:, 3] == 1.0):
+        raise ValueError("sos[:, 3] (a0 of every section) must be 1")
+    if not np.all(np.isfinite(sos)):
+        raise ValueError("sos must be finite")
+    return sos
+
+
+def sosfiltfilt(sos, x, *, padlen: int, engine: str = "auto") -> np.ndarray:
+    """Zero-phase filtering of one channel: ``scipy.signal.sosfiltfilt(sos, x,
+    padlen=padlen)``.
+
+    Parameters
+    ----------
+    sos : array_like, shape (n_sections, 6)
+        Second-order sections (a0 = 1 in column 3).
+    x : array_like, shape (n,)
+        Samples [any unit]; n > ``padlen``.
+    padlen : int
+        Samples of odd extension at each end [-].
+    engine : {"auto", "numba", "scipy"}
+        See the module notes; ``"auto"`` here weighs this call's samples alone.
+
+    Returns
+    -------
+    y : ndarray of float64, shape (n,)
+
+    Raises
+    ------
+    ValueError
+        ``sos`` not of shape (n_sections, 6) with a0 = 1, ``x`` not 1-D or not longer than
+        ``padlen``, ``padlen`` negative, an unknown engine.
+    """
+    sos = _check_sos(sos)
+    x = np.asarray(x, dtype=np.float64)
+    if x.ndim != 1:
+        raise ValueError(f"x must be 1-D, got shape {x.shape}")
+    padlen = int(padlen)
+    if padlen < 0:
+        raise ValueError(f"padlen must be >= 0, got {padlen}")
+    n = x.size
+    if n <= padlen:
+        raise ValueError(f"x must be longer than padlen ({padlen}), got {n} samples")
+    if pick_engine(engine, n) == "scipy":
+        from scipy import signal
+
+        return signal.sosfiltfilt(sos, x, padlen=padlen)
+    k = import_kernels("meshphase._iir_numba")
+    # scipy's odd extension, written once into the buffer both sweeps work in
+    ext = np.empty(n + 2 * padlen)
+    ext[padlen:padlen + n] = x
+    if padlen:
+        ext[:padlen] = 2 * x[0] - x[padlen:0:-1]
+        ext[padlen + n:] = 2 * x[-1] - x[-2:-(padlen + 2):-1]
+    zi = _zi(sos)
+    k.cascade(sos, ext, zi * ext[0], False)
+    k.cascade(sos, ext, zi * ext[-1], True)
+    return ext[padlen:padlen + n]
+
+
+def warmup() -> dict:
+    """Load numba and the filter kernel (compiled once into the per-user cache), and check
+    it against scipy (``meshphase bench --warmup``).
+
+    Returns
+    -------
+    dict
+        ``engine`` ("numba", or "scipy" when numba is not importable: nothing to load) and
+        ``seconds`` [s] the import and compilation (or cache load) took.
+    """
+    t = time.perf_counter()
+    if not HAVE_NUMBA:
+        return {"engine": "scipy", "seconds": 0.0}
+    from scipy import signal
+
+    x = np.sin(np.arange(64.0))
+    sos = signal.butter(3, 0.2, output="sos")         # two sections and a single one
+    y = sosfiltfilt(sos, x, padlen=9, engine="numba")
+    if not np.allclose(y, signal.sosfiltfilt(sos, x, padlen=9), rtol=0.0, atol=1e-12):
+        raise RuntimeError("the numba filter kernel disagrees with scipy.signal.sosfiltfilt")
+    return {"engine": "numba", "seconds": time.perf_counter() - t}
