@@ -71,3 +71,50 @@ def cascade(sos, x, z, reverse):  # pragma: no cover - compiled
         s += 2
     if s < n_sec:
         _single(sos, s, x, z, reverse)
+
+
+@_numba.njit(cache=True, nogil=True)
+def _pair2(sa, sb, s, xa, xb, za, zb, reverse):  # pragma: no cover - compiled
+    """Sections ``s`` and ``s + 1`` of ``sa`` over ``xa`` and of ``sb`` over ``xb`` (of
+    equal length) in one sweep, as :func:`_pair` does each: four independent recursions."""
+    a10, a11, a12, a14, a15 = sa[s, 0], sa[s, 1], sa[s, 2], sa[s, 4], sa[s, 5]
+    a20, a21, a22, a24, a25 = sa[s + 1, 0], sa[s + 1, 1], sa[s + 1, 2], sa[s + 1, 4], sa[s + 1, 5]
+    b10, b11, b12, b14, b15 = sb[s, 0], sb[s, 1], sb[s, 2], sb[s, 4], sb[s, 5]
+    b20, b21, b22, b24, b25 = sb[s + 1, 0], sb[s + 1, 1], sb[s + 1, 2], sb[s + 1, 4], sb[s + 1, 5]
+    p10, p11, p20, p21 = za[s, 0], za[s, 1], za[s + 1, 0], za[s + 1, 1]
+    q10, q11, q20, q21 = zb[s, 0], zb[s, 1], zb[s + 1, 0], zb[s + 1, 1]
+    n = xa.shape[0]
+    for k in range(n):
+        i = n - 1 - k if reverse else k
+        u = xa[i]
+        v = xb[i]
+        y1 = a10 * u + p10
+        p10 = a11 * u - a14 * y1 + p11
+        p11 = a12 * u - a15 * y1
+        w1 = b10 * v + q10
+        q10 = b11 * v - b14 * w1 + q11
+        q11 = b12 * v - b15 * w1
+        y2 = a20 * y1 + p20
+        p20 = a21 * y1 - a24 * y2 + p21
+        p21 = a22 * y1 - a25 * y2
+        w2 = b20 * w1 + q20
+        q20 = b21 * w1 - b24 * w2 + q21
+        q21 = b22 * w1 - b25 * w2
+        xa[i] = y2
+        xb[i] = w2
+    za[s, 0], za[s, 1], za[s + 1, 0], za[s + 1, 1] = p10, p11, p20, p21
+    zb[s, 0], zb[s, 1], zb[s + 1, 0], zb[s + 1, 1] = q10, q11, q20, q21
+
+
+@_numba.njit(cache=True, nogil=True)
+def cascade2(sa, sb, xa, xb, za, zb, reverse):  # pragma: no cover - compiled
+    """:func:`cascade` of two channels at once: ``sa`` over ``xa`` and ``sb`` over ``xb``,
+    of equal length and equal section count, two sections of each per sweep."""
+    n_sec = sa.shape[0]
+    s = 0
+    while s + 1 < n_sec:
+        _pair2(sa, sb, s, xa, xb, za, zb, reverse)
+        s += 2
+    if s < n_sec:
+        _single(sa, s, xa, za, reverse)
+        _single(sb, s, xb, zb, reverse)

@@ -33,7 +33,8 @@ import numpy as np
 
 from .numba_cache import import_kernels
 
-__all__ = ["ENGINES", "HAVE_NUMBA", "NUMBA_SAMPLES", "pick_engine", "sosfiltfilt", "warmup"]
+__all__ = ["ENGINES", "HAVE_NUMBA", "NUMBA_SAMPLES", "pick_engine", "sosfiltfilt",
+           "sosfiltfilt_pair", "warmup"]
 
 #: engines of :func:`sosfiltfilt`
 ENGINES = ("auto", "numba", "scipy")
@@ -141,16 +142,71 @@ def sosfiltfilt(sos, x, *, padlen: int, engine: str = "auto") -> np.ndarray:
 
         return signal.sosfiltfilt(sos, x, padlen=padlen)
     k = import_kernels("meshphase._iir_numba")
-    # scipy's odd extension, written once into the buffer both sweeps work in
+    ext = _extended(x, padlen)
+    zi = _zi(sos)
+    k.cascade(sos, ext, zi * ext[0], False)
+    k.cascade(sos, ext, zi * ext[-1], True)
+    return ext[padlen:padlen + n]
+
+
+def _extended(x: np.ndarray, padlen: int) -> np.ndarray:
+    """scipy's odd extension of ``x`` by ``padlen`` at each end, in a new buffer (the one
+    both sweeps then work in)."""
+    n = x.size
     ext = np.empty(n + 2 * padlen)
     ext[padlen:padlen + n] = x
     if padlen:
         ext[:padlen] = 2 * x[0] - x[padlen:0:-1]
         ext[padlen + n:] = 2 * x[-1] - x[-2:-(padlen + 2):-1]
-    zi = _zi(sos)
-    k.cascade(sos, ext, zi * ext[0], False)
-    k.cascade(sos, ext, zi * ext[-1], True)
-    return ext[padlen:padlen + n]
+    return ext
+
+
+def sosfiltfilt_pair(sos_a, xa, sos_b, xb, *, padlen: int) -> tuple[np.ndarray, np.ndarray]:
+    """Two channels filtered in one sweep on the numba engine: ``(sosfiltfilt(sos_a, xa),
+    sosfiltfilt(sos_b, xb))``, the same numbers as two calls.
+
+    One channel's two-section recursion leaves the core waiting on its latency about half
+    the time; two channels side by side fill it (four independent recursions per sample).
+
+    Parameters
+    ----------
+    sos_a, sos_b : array_like, shape (n_sections, 6)
+        The two filters (equal section counts).
+    xa, xb : array_like, shape (n,)
+        The two channels' samples (equal lengths, n > ``padlen``).
+    padlen : int
+        As :func:`sosfiltfilt`, for both.
+
+    Returns
+    -------
+    ya, yb : ndarray of float64, shape (n,)
+
+    Raises
+    ------
+    ValueError
+        As :func:`sosfiltfilt`; unequal lengths or section counts; numba not importable.
+    """
+    sos_a, sos_b = _check_sos(sos_a), _check_sos(sos_b)
+    if sos_a.shape != sos_b.shape:
+        raise ValueError(f"sos_a and sos_b must have equal shapes, got {sos_a.shape} and "
+                         f"{sos_b.shape}")
+    xa, xb = np.asarray(xa, dtype=np.float64), np.asarray(xb, dtype=np.float64)
+    if xa.ndim != 1 or xb.ndim != 1 or xa.size != xb.size:
+        raise ValueError(f"xa and xb must be 1-D of equal length, got shapes {xa.shape} and "
+                         f"{xb.shape}")
+    padlen = int(padlen)
+    if padlen < 0:
+        raise ValueError(f"padlen must be >= 0, got {padlen}")
+    n = xa.size
+    if n <= padlen:
+        raise ValueError(f"x must be longer than padlen ({padlen}), got {n} samples")
+    pick_engine("numba")
+    k = import_kernels("meshphase._iir_numba")
+    ea, eb = _extended(xa, padlen), _extended(xb, padlen)
+    za, zb = _zi(sos_a), _zi(sos_b)
+    k.cascade2(sos_a, sos_b, ea, eb, za * ea[0], zb * eb[0], False)
+    k.cascade2(sos_a, sos_b, ea, eb, za * ea[-1], zb * eb[-1], True)
+    return ea[padlen:padlen + n], eb[padlen:padlen + n]
 
 
 def warmup() -> dict:
@@ -171,6 +227,9 @@ def warmup() -> dict:
     x = np.sin(np.arange(64.0))
     sos = signal.butter(3, 0.2, output="sos")         # two sections and a single one
     y = sosfiltfilt(sos, x, padlen=9, engine="numba")
-    if not np.allclose(y, signal.sosfiltfilt(sos, x, padlen=9), rtol=0.0, atol=1e-12):
+    ref = signal.sosfiltfilt(sos, x, padlen=9)
+    ya, yb = sosfiltfilt_pair(sos, x, sos, -x, padlen=9)
+    if not (np.allclose(y, ref, rtol=0.0, atol=1e-12) and np.array_equal(ya, y)
+            and np.array_equal(yb, -y)):
         raise RuntimeError("the numba filter kernel disagrees with scipy.signal.sosfiltfilt")
     return {"engine": "numba", "seconds": time.perf_counter() - t}

@@ -851,25 +851,38 @@ class _ZeroPhase:
         return iir.sosfiltfilt(self.sos, s, padlen=self.padlen, engine=self.engine)
 
     def push(self, x: np.ndarray) -> np.ndarray:
+        if not self._add(x):
+            return np.empty(0)
+        return self._run(self.buf_start + self.buf_n >= self.n)
+
+    def _add(self, x: np.ndarray) -> bool:
+        """``x`` appended; whether a window is due (the look-ahead is there, or the end)."""
         if x.size:
             self.buf.append(x)
             self.buf_n += x.size
         end = self.buf_start + self.buf_n
-        if end < self.n and end - self.out_pos < self.L + self.chunk:
-            return np.empty(0)
-        return self._run(end >= self.n)
+        return not (end < self.n and end - self.out_pos < self.L + self.chunk)
 
     def flush(self) -> np.ndarray:
         if self.out_pos >= self.buf_start + self.buf_n:
             return np.empty(0)
         return self._run(True)
 
+    def _window(self) -> np.ndarray:
+        return self.buf[0] if len(self.buf) == 1 else np.concatenate(self.buf)
+
+    def _filtered(self, w: np.ndarray) -> np.ndarray:
+        return self._apply(w, self._func, min_len=self.min_len, fill_max=self.fill_max,
+                           what=self.what, warn=False)
+
     def _run(self, final: bool) -> np.ndarray:
-        w = self.buf[0] if len(self.buf) == 1 else np.concatenate(self.buf)
+        w = self._window()
+        return self._emit(w, self._filtered(w), final)
+
+    def _emit(self, w: np.ndarray, y: np.ndarray, final: bool) -> np.ndarray:
+        """The final samples of window ``w`` filtered (``y``); the overlap kept."""
         w0 = self.buf_start
         end = w0 + w.size
-        y = self._apply(w, self._func, min_len=self.min_len, fill_max=self.fill_max,
-                        what=self.what, warn=False)
         stop = end if final else end - self.L
         out = y[self.out_pos - w0:stop - w0].copy()
         self.out_pos = stop
@@ -878,6 +891,28 @@ class _ZeroPhase:
         self.buf_start = keep
         self.buf_n = end - keep
         return out
+
+
+def _push_pair(a: _ZeroPhase, xa: np.ndarray, b: _ZeroPhase, xb: np.ndarray):
+    """``(a.push(xa), b.push(xb))``, the two windows filtered in one sweep
+    (:func:`meshphase.iir.sosfiltfilt_pair`) when both are due together, of one length,
+    free of gaps and on the numba engine, with filters of one section count: the same
+    numbers either way (the chains of two channels read in the same blocks are due
+    together unless their gaps or drift blocks differ)."""
+    ra, rb = a._add(xa), b._add(xb)
+    if not (ra and rb):
+        return (a._run(a.buf_start + a.buf_n >= a.n) if ra else np.empty(0),
+                b._run(b.buf_start + b.buf_n >= b.n) if rb else np.empty(0))
+    wa, wb = a._window(), b._window()
+    if (a.engine == b.engine == "numba" and wa.size == wb.size and wa.size >= a.min_len
+            and a.sos.shape == b.sos.shape and a.padlen == b.padlen
+            and math.isfinite(float(np.sum(wa))) and math.isfinite(float(np.sum(wb)))):
+        # _apply_finite's own path for a window without gaps: the filter on it whole
+        ya, yb = iir.sosfiltfilt_pair(a.sos, wa, b.sos, wb, padlen=a.padlen)
+    else:
+        ya, yb = a._filtered(wa), b._filtered(wb)
+    return (a._emit(wa, ya, a.buf_start + a.buf_n >= a.n),
+            b._emit(wb, yb, b.buf_start + b.buf_n >= b.n))
 
 
 #: mean samples per interval of the knots below which :func:`_minus_interp` calls
@@ -1158,29 +1193,49 @@ class _Chain:
                 x[max(s0, a) - a:min(s1, b) - a] = np.nan
         return x
 
-    def _through(self, x: np.ndarray, final: bool) -> np.ndarray:
-        for st in (self.notch, self.drift):
-            if st is None or isinstance(st, _Identity):
-                continue
-            x = st.push(x) if x.size else np.empty(0)
-            if final:
-                tail = st.flush()
-                x = np.concatenate([x, tail]) if tail.size else x
-            x = self._rounded(x)
-        if x.size:
-            self.snr.add(x)
-        if self.band is not None:
-            y = self.band.push(x) if x.size else np.empty(0)
-            if final:
-                tail = self.band.flush()
-                y = np.concatenate([y, tail]) if tail.size else y
-            x = self._rounded(y)
-        return x
-
     def push(self, x: np.ndarray) -> np.ndarray:
-        x = self._mask(x)
-        self.pos += x.size
-        return self._through(x, self.pos >= self.n)
+        return _push_chains((self,), (x,))[0]
+
+
+def _live(st) -> bool:
+    return not (st is None or isinstance(st, _Identity))
+
+
+def _stage(sts, xs: list, finals: list) -> list:
+    """One stage of one or two chains (``sts``: that stage of each, None where a chain has
+    none) pushed their samples ``xs``, flushed where the chain is final; the outputs (the
+    input where a chain has no such stage). Two filters go through :func:`_push_pair`."""
+    out = list(xs)
+    live = [i for i, st in enumerate(sts) if _live(st)]
+    if (len(live) == 2 and all(isinstance(sts[i], _ZeroPhase) and xs[i].size for i in live)):
+        out[0], out[1] = _push_pair(sts[0], xs[0], sts[1], xs[1])
+    else:
+        for i in live:
+            out[i] = sts[i].push(xs[i]) if xs[i].size else np.empty(0)
+    for i in live:
+        if finals[i]:
+            tail = sts[i].flush()
+            out[i] = np.concatenate([out[i], tail]) if tail.size else out[i]
+    return out
+
+
+def _push_chains(chains, xs) -> list:
+    """Each of ``chains`` (one, or two filtered side by side: :func:`_push_pair`) pushed
+    its next samples ``xs``; the newly final conditioned samples of each."""
+    xs = [c._mask(x) for c, x in zip(chains, xs)]
+    for c, x in zip(chains, xs):
+        c.pos += x.size
+    finals = [c.pos >= c.n for c in chains]
+    for attr in ("notch", "drift"):
+        sts = [getattr(c, attr) for c in chains]
+        ys = _stage(sts, xs, finals)
+        xs = [c._rounded(y) if _live(st) else y for c, st, y in zip(chains, sts, ys)]
+    for c, x in zip(chains, xs):
+        if x.size:
+            c.snr.add(x)
+    sts = [c.band for c in chains]
+    ys = _stage(sts, xs, finals)
+    return [c._rounded(y) if _live(st) else y for c, st, y in zip(chains, sts, ys)]
 
 
 class _Identity:
@@ -1553,6 +1608,21 @@ def _onset_streams(plans, quality: dict, fs: float, t0: float) -> tuple[dict, in
     return onsets, est_onset
 
 
+def _chain_pairs(plans) -> list:
+    """The plans in pairs (and one alone when odd), channels of one group together: two
+    chains on one thread filter side by side (:func:`_push_pair`), and a group's channels
+    (one gear, one pulse period) reach their drift-removed filter windows together."""
+    order = sorted(range(len(plans)), key=lambda i: (str(plans[i].group), i))
+    return [tuple(plans[i] for i in order[k:k + 2]) for k in range(0, len(order), 2)]
+
+
+def _in_plan_order(plans, groups, outs) -> list:
+    """The outputs of the groups' chains (``outs``, per group in its order) in the plans'
+    order."""
+    by = {p.name: y for g, ys in zip(groups, outs) for p, y in zip(g, ys)}
+    return [by[p.name] for p in plans]
+
+
 class _Pass3:
     """The read of pass 3: every block through the chains, the conditioned samples to the
     onset detectors, the excerpt and the conditioned gap runs; timings and the onset
@@ -1572,7 +1642,8 @@ class _Pass3:
         idx = {c.name: j for j, c in enumerate(h.channels)}
         # the channels' chains share nothing: filtered side by side on worker threads
         # (meshphase.threads; the filters release the GIL), each chain whole on one thread
-        # per block, so the samples are those of the serial run. The onset detectors and
+        # per block, two chains per thread item (_chain_pairs: their filters sweep together
+        # where their windows coincide), so the samples are those of the serial run. The onset detectors and
         # everything after them run here, in channel order, as before, on the block before
         # while the workers filter this one: a block's chains start only once the block
         # before's have all returned (a chain's state goes from block to block), and the
@@ -1580,22 +1651,24 @@ class _Pass3:
         # with the onsets' own; the chains report through notes and raise none.)
         def chains(data):
             # a fresh float64 copy: the stages hold on to what they are given
-            return lambda p: self.chains[p.name].push(
-                np.array(data[:, idx[p.name]], dtype=np.float64))
+            return lambda group: _push_chains(
+                [self.chains[p.name] for p in group],
+                [np.array(data[:, idx[p.name]], dtype=np.float64) for p in group])
 
-        with thread_pool(max_items=len(self.plans)) as tmap, _blocks_ahead(source, block) as blocks:
+        groups = _chain_pairs(self.plans)
+        with thread_pool(max_items=len(groups)) as tmap, _blocks_ahead(source, block) as blocks:
             prev = None
             for a, data in blocks:
                 self.n_blocks += 1
                 t = time.perf_counter()
-                wait = tmap.start(chains(data), self.plans)
+                wait = tmap.start(chains(data), groups)
                 end = a + data.shape[0]
                 del data
                 self.t_cond += time.perf_counter() - t
                 if prev is not None:
                     self._after(*prev, on_samples, progress)
                 t = time.perf_counter()
-                prev = (wait(), end)
+                prev = (_in_plan_order(self.plans, groups, wait()), end)
                 self.t_cond += time.perf_counter() - t
             if prev is not None:
                 self._after(*prev, on_samples, progress)

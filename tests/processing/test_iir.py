@@ -161,3 +161,48 @@ def test_warmup_loads_and_checks_the_kernel():
     w = iir.warmup()
     assert w["engine"] == ("numba" if iir.HAVE_NUMBA else "scipy")
     assert w["seconds"] >= 0.0
+
+
+@numba_only
+@pytest.mark.parametrize("pair", [("lowpass4", "notch3"), ("bandpass4", "bandpass4"),
+                                  ("lowpass5", "lowpass5"), ("lowpass1", "lowpass1")])
+@pytest.mark.parametrize("n", [2, 777, 300_000])
+def test_pair_equals_two_single_calls(pair, n):
+    """Two channels in one sweep: each channel's operations are those of its own call, so
+    the numbers are the same bit for bit (on every machine: one kernel, one compiler)."""
+    fs = _filters()
+    sa, sb = fs[pair[0]], fs[pair[1]]
+    if sa.shape != sb.shape:
+        sb = np.concatenate([sb, sb])[:len(sa)]          # equal section counts
+    rng = np.random.default_rng(n)
+    xa, xb = rng.standard_normal(n) + 2.0, 1e3 * rng.standard_normal(n)
+    padlen = min(3 * (2 * len(sa) + 1), n - 1)
+    ya, yb = iir.sosfiltfilt_pair(sa, xa, sb, xb, padlen=padlen)
+    assert np.array_equal(ya, iir.sosfiltfilt(sa, xa, padlen=padlen, engine="numba"))
+    assert np.array_equal(yb, iir.sosfiltfilt(sb, xb, padlen=padlen, engine="numba"))
+    _close(ya, signal.sosfiltfilt(sa, xa, padlen=padlen), xa)
+
+
+@numba_only
+def test_pair_empty_and_bad_input():
+    sos = _filters()["lowpass4"]
+    x = np.arange(100.0)
+    with pytest.raises(ValueError, match="longer than padlen"):
+        iir.sosfiltfilt_pair(sos, np.empty(0), sos, np.empty(0), padlen=0)
+    with pytest.raises(ValueError, match="equal length"):
+        iir.sosfiltfilt_pair(sos, x, sos, x[:-1], padlen=3)
+    with pytest.raises(ValueError, match="equal length"):
+        iir.sosfiltfilt_pair(sos, x, sos, np.ones((100, 1)), padlen=3)
+    with pytest.raises(ValueError, match="equal shapes"):
+        iir.sosfiltfilt_pair(sos, x, sos[:1], x, padlen=3)
+    with pytest.raises(ValueError, match="padlen must be >= 0"):
+        iir.sosfiltfilt_pair(sos, x, sos, x, padlen=-2)
+    with pytest.raises(ValueError, match="a0"):
+        iir.sosfiltfilt_pair(sos, x, sos * 2.0, x, padlen=3)
+
+
+def test_pair_needs_numba(monkeypatch):
+    monkeypatch.setattr(iir, "HAVE_NUMBA", False)
+    sos = _filters()["lowpass4"]
+    with pytest.raises(ValueError, match="not importable"):
+        iir.sosfiltfilt_pair(sos, np.arange(50.0), sos, np.arange(50.0), padlen=3)

@@ -153,9 +153,9 @@ def test_a_failure_in_a_chain_or_an_onset_detector_ends_the_pass_with_its_error(
     from meshphase.threads import threads_limited
 
     calls = {"n": 0}
-    target = stream._Chain.push if where == "chain" else OnsetStream.feed
-    # a chain is pushed every block; the onsets get the chains' output in larger pieces
-    # (the filters' look-ahead): four over this record
+    target = stream._push_chains if where == "chain" else OnsetStream.feed
+    # the chains are pushed every block (two side by side per call); the onsets get the
+    # chains' output in larger pieces (the filters' look-ahead): four over this record
     at = 5 if where == "chain" else 2
 
     def failing(self, x):
@@ -165,7 +165,7 @@ def test_a_failure_in_a_chain_or_an_onset_detector_ends_the_pass_with_its_error(
         return target(self, x)
 
     if where == "chain":
-        monkeypatch.setattr(stream._Chain, "push", failing)
+        monkeypatch.setattr(stream, "_push_chains", failing)
     else:
         monkeypatch.setattr(OnsetStream, "feed", failing)
     with threads_limited(n_threads), pytest.raises(RuntimeError, match=f"{where} failed"):
@@ -213,6 +213,71 @@ def test_streamed_conditioning_with_numba_filters_equals_scipy(faulty, drift):
         ta, tb = res_s.onsets[ch].times, res_n.onsets[ch].times
         assert ta.size == tb.size and ta.size > 0
         np.testing.assert_allclose(tb, ta, rtol=0.0, atol=1e-6 / faulty.fs)
+
+
+@pytest.mark.skipif(not iir.HAVE_NUMBA, reason="numba is not installed")
+@pytest.mark.parametrize("n_threads", [1, 3])
+def test_two_chains_of_one_group_filter_side_by_side(n_threads):
+    """Two gauges of one gear (one group, one pulse period: their drift-removed windows
+    coincide) are filtered in one sweep where their windows hold no gap
+    (iir.sosfiltfilt_pair), each alone where one does: the samples and onsets are those of
+    each chain alone, bit for bit (the same operations on each channel), and agree with the
+    scipy engine to 1e-12 of the amplitude."""
+    from dataclasses import replace as dc_replace
+
+    from meshphase.threads import threads_limited
+
+    base, _ = generate("rig_realistic", seed=5, duration=30.0)     # no gaps: windows pair
+    s = base.index("sun")
+    twin = base.data[:, s] * 0.8 + 1e-7
+    twin[110000:110400] = np.nan                   # a gap of its own: those windows go alone
+    data = np.column_stack([base.data, twin])
+    specs = list(base.channels) + [dc_replace(base.channels[s], name="sun2", tooth=3)]
+    rec = Recording(data, base.fs, specs, base.t0)
+    fm, per = _mesh()["sun"]
+    plans = [ChannelPlan(ch, mesh_freq=fm, pulse_period=per, group="sun", onsets=True,
+                         onset_kwargs={"mesh_freq": fm}) for ch in ("sun", "sun2")]
+    src = MemorySource(rec)
+
+    def run(engine, one_by_one=False):
+        # (condition_stream lets go of the scan's hum windows: a fresh scan every run)
+        scan = scan_source(src, conditioned=["sun", "sun2"], tacho="tacho", block=BLOCK)
+        got = {ch: np.full(rec.n_samples, -1.0) for ch in ("sun", "sun2")}
+
+        def keep(name, a, y):
+            got[name][a:a + y.size] = y
+
+        with pytest.MonkeyPatch.context() as mp, warnings.catch_warnings():
+            warnings.simplefilter("ignore", DataQualityWarning)
+            if one_by_one:
+                from meshphase import stream
+
+                mp.setattr(stream, "_chain_pairs", lambda ps: [(p,) for p in ps])
+            mp.setattr(iir, "sosfiltfilt_pair", counted)
+            with threads_limited(n_threads):
+                res = condition_stream(src, scan, plans, block=BLOCK, on_samples=keep,
+                                       filter_engine=engine)
+        return res, got
+
+    pairs = {"n": 0}
+    pair = iir.sosfiltfilt_pair
+
+    def counted(*a, **k):
+        pairs["n"] += 1
+        return pair(*a, **k)
+
+    res_p, got_p = run("numba")
+    n_joint = pairs["n"]
+    res_1, got_1 = run("numba", one_by_one=True)
+    assert n_joint > 0 and pairs["n"] == n_joint       # alone: never swept together
+    res_s, got_s = run("scipy")
+    for ch in ("sun", "sun2"):
+        assert np.array_equal(got_p[ch], got_1[ch], equal_nan=True)
+        assert np.array_equal(res_p.onsets[ch].times, res_1.onsets[ch].times)
+        ok = np.isfinite(got_s[ch])
+        assert np.array_equal(ok, np.isfinite(got_p[ch]))
+        np.testing.assert_allclose(got_p[ch][ok], got_s[ch][ok], rtol=0.0,
+                                   atol=1e-12 * np.max(np.abs(got_s[ch][ok])))
 
 
 @pytest.mark.parametrize("n_keep", [
