@@ -1609,11 +1609,20 @@ def _onset_streams(plans, quality: dict, fs: float, t0: float) -> tuple[dict, in
 
 
 def _chain_pairs(plans) -> list:
-    """The plans in pairs (and one alone when odd), channels of one group together: two
-    chains on one thread filter side by side (:func:`_push_pair`), and a group's channels
-    (one gear, one pulse period) reach their drift-removed filter windows together."""
-    order = sorted(range(len(plans)), key=lambda i: (str(plans[i].group), i))
-    return [tuple(plans[i] for i in order[k:k + 2]) for k in range(0, len(order), 2)]
+    """The plans in pairs for the worker threads: two chains on one thread filter side by
+    side where their windows fall due together (:func:`_push_pair`). Channels of one group
+    (one gear, one pulse period: their drift-removed windows coincide) are paired first;
+    the groups' odd ones out are paired with each other (their notches still coincide),
+    the last alone."""
+    groups: dict = {}
+    for p in plans:
+        groups.setdefault(str(p.group), []).append(p)
+    pairs, left = [], []
+    for members in groups.values():
+        k = len(members) - len(members) % 2
+        pairs += [tuple(members[i:i + 2]) for i in range(0, k, 2)]
+        left += members[k:]
+    return pairs + [tuple(left[i:i + 2]) for i in range(0, len(left), 2)]
 
 
 def _in_plan_order(plans, groups, outs) -> list:
