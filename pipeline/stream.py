@@ -884,7 +884,9 @@ class _ZeroPhase:
         w0 = self.buf_start
         end = w0 + w.size
         stop = end if final else end - self.L
-        out = y[self.out_pos - w0:stop - w0].copy()
+        # a view: y is this window's own result, which nothing else holds or changes (the
+        # overlap kept below is of the input w); a copy cost a fresh allocation per window
+        out = y[self.out_pos - w0:stop - w0]
         self.out_pos = stop
         keep = max(0, stop - self.L)
         self.buf = [w[keep - w0:]]
