@@ -34,7 +34,7 @@ import numpy as np
 from .numba_cache import import_kernels
 
 __all__ = ["ENGINES", "HAVE_NUMBA", "NUMBA_SAMPLES", "pick_engine", "sosfiltfilt",
-           "sosfiltfilt_pair", "warmup"]
+           "sosfiltfilt_pair", "extended", "filter_extended", "filter_extended_pair", "warmup"]
 
 #: engines of :func:`sosfiltfilt`
 ENGINES = ("auto", "numba", "scipy")
@@ -141,24 +141,46 @@ def sosfiltfilt(sos, x, *, padlen: int, engine: str = "auto") -> np.ndarray:
         from scipy import signal
 
         return signal.sosfiltfilt(sos, x, padlen=padlen)
-    k = import_kernels("meshphase._iir_numba")
-    ext = _extended(x, padlen)
-    zi = _zi(sos)
-    k.cascade(sos, ext, zi * ext[0], False)
-    k.cascade(sos, ext, zi * ext[-1], True)
-    return ext[padlen:padlen + n]
+    return filter_extended(sos, extended([x], padlen), padlen)
 
 
-def _extended(x: np.ndarray, padlen: int) -> np.ndarray:
-    """scipy's odd extension of ``x`` by ``padlen`` at each end, in a new buffer (the one
-    both sweeps then work in)."""
-    n = x.size
+def extended(pieces, padlen: int) -> np.ndarray:
+    """The samples of ``pieces`` (1-D arrays, in order) with scipy's odd extension by
+    ``padlen`` at each end, in one new float64 buffer: what :func:`filter_extended` filters
+    in place (joining a stream's pieces here saves a copy of the window)."""
+    n = sum(p.size for p in pieces)
     ext = np.empty(n + 2 * padlen)
-    ext[padlen:padlen + n] = x
+    pos = padlen
+    for p in pieces:
+        ext[pos:pos + p.size] = p
+        pos += p.size
+    x = ext[padlen:padlen + n]
     if padlen:
         ext[:padlen] = 2 * x[0] - x[padlen:0:-1]
         ext[padlen + n:] = 2 * x[-1] - x[-2:-(padlen + 2):-1]
     return ext
+
+
+def filter_extended(sos: np.ndarray, ext: np.ndarray, padlen: int) -> np.ndarray:
+    """The numba engine's two sweeps over ``ext`` (from :func:`extended`, overwritten):
+    the filtered samples, a view of ``ext`` without its extensions. ``sos`` as checked by
+    :func:`sosfiltfilt`."""
+    k = import_kernels("meshphase._iir_numba")
+    zi = _zi(sos)
+    k.cascade(sos, ext, zi * ext[0], False)
+    k.cascade(sos, ext, zi * ext[-1], True)
+    return ext[padlen:ext.size - padlen]
+
+
+def filter_extended_pair(sos_a: np.ndarray, ea: np.ndarray, sos_b: np.ndarray, eb: np.ndarray,
+                         padlen: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`filter_extended` of two channels in one sweep (equal lengths and section
+    counts, see :func:`sosfiltfilt_pair`)."""
+    k = import_kernels("meshphase._iir_numba")
+    za, zb = _zi(sos_a), _zi(sos_b)
+    k.cascade2(sos_a, sos_b, ea, eb, za * ea[0], zb * eb[0], False)
+    k.cascade2(sos_a, sos_b, ea, eb, za * ea[-1], zb * eb[-1], True)
+    return ea[padlen:ea.size - padlen], eb[padlen:eb.size - padlen]
 
 
 def sosfiltfilt_pair(sos_a, xa, sos_b, xb, *, padlen: int) -> tuple[np.ndarray, np.ndarray]:
@@ -201,12 +223,8 @@ def sosfiltfilt_pair(sos_a, xa, sos_b, xb, *, padlen: int) -> tuple[np.ndarray, 
     if n <= padlen:
         raise ValueError(f"x must be longer than padlen ({padlen}), got {n} samples")
     pick_engine("numba")
-    k = import_kernels("meshphase._iir_numba")
-    ea, eb = _extended(xa, padlen), _extended(xb, padlen)
-    za, zb = _zi(sos_a), _zi(sos_b)
-    k.cascade2(sos_a, sos_b, ea, eb, za * ea[0], zb * eb[0], False)
-    k.cascade2(sos_a, sos_b, ea, eb, za * ea[-1], zb * eb[-1], True)
-    return ea[padlen:padlen + n], eb[padlen:padlen + n]
+    return filter_extended_pair(sos_a, extended([xa], padlen), sos_b, extended([xb], padlen),
+                                padlen)
 
 
 def warmup() -> dict:

@@ -23,7 +23,9 @@ thread of its own while it works on this one (:func:`meshphase.threads.read_ahea
 Equality with the whole-array functions
 ---------------------------------------
 Passes 1 and 2 give exactly the whole-array quality report (same code, see ChannelScan). The
-zero-phase IIR filters (:func:`scipy.signal.sosfiltfilt`) are run on windows that overlap
+zero-phase IIR filters (:func:`scipy.signal.sosfiltfilt`, or its arithmetic compiled by numba
+for a long recording, two channels of a gear side by side: :mod:`meshphase.iir`, the same
+numbers) are run on windows that overlap
 each kept stretch by ``L`` samples on both sides, ``L`` chosen so that the slowest pole
 of the filter decays by 1e-15 over it (:func:`filter_overlap`): a transient started at an
 artificial window edge has decayed below ~1e-13 of the signal at the samples kept; at the
@@ -875,21 +877,42 @@ class _ZeroPhase:
         return self._apply(w, self._func, min_len=self.min_len, fill_max=self.fill_max,
                            what=self.what, warn=False)
 
-    def _run(self, final: bool) -> np.ndarray:
-        w = self._window()
-        return self._emit(w, self._filtered(w), final)
+    def _whole(self) -> bool:
+        """Whether the due window goes to the numba kernel whole: long enough and without a
+        gap (a finite sum of every piece: _apply_finite's own test, piece by piece), so
+        that its pieces are joined straight into the kernel's buffer."""
+        if self.engine != "numba" or self.buf_n < self.min_len:
+            return False
+        with np.errstate(over="ignore", invalid="ignore"):
+            return all(math.isfinite(float(np.sum(p))) for p in self.buf)
 
-    def _emit(self, w: np.ndarray, y: np.ndarray, final: bool) -> np.ndarray:
-        """The final samples of window ``w`` filtered (``y``); the overlap kept."""
+    def _result(self) -> np.ndarray:
+        """The due window filtered (what _apply_finite gives on it)."""
+        if self._whole():
+            return iir.filter_extended(self.sos, iir.extended(self.buf, self.padlen),
+                                       self.padlen)
+        return self._filtered(self._window())
+
+    def _run(self, final: bool) -> np.ndarray:
+        return self._emit(self._result(), final)
+
+    def _emit(self, y: np.ndarray, final: bool) -> np.ndarray:
+        """The final samples of the due window's result ``y``; the overlap kept (a copy:
+        the window's pieces go)."""
         w0 = self.buf_start
-        end = w0 + w.size
+        end = w0 + self.buf_n
         stop = end if final else end - self.L
-        # a view: y is this window's own result, which nothing else holds or changes (the
-        # overlap kept below is of the input w); a copy cost a fresh allocation per window
+        # a view: y is this window's own result, which nothing else holds or changes; a
+        # copy cost a fresh allocation per window
         out = y[self.out_pos - w0:stop - w0]
         self.out_pos = stop
         keep = max(0, stop - self.L)
-        self.buf = [w[keep - w0:]]
+        tail, pos = [], w0
+        for p in self.buf:
+            if pos + p.size > keep:
+                tail.append(p[max(keep - pos, 0):])
+            pos += p.size
+        self.buf = [np.concatenate(tail) if len(tail) != 1 else tail[0].copy()]
         self.buf_start = keep
         self.buf_n = end - keep
         return out
@@ -897,7 +920,7 @@ class _ZeroPhase:
 
 def _push_pair(a: _ZeroPhase, xa: np.ndarray, b: _ZeroPhase, xb: np.ndarray):
     """``(a.push(xa), b.push(xb))``, the two windows filtered in one sweep
-    (:func:`meshphase.iir.sosfiltfilt_pair`) when both are due together, of one length,
+    (:func:`meshphase.iir.filter_extended_pair`) when both are due together, of one length,
     free of gaps and on the numba engine, with filters of one section count: the same
     numbers either way (the chains of two channels read in the same blocks are due
     together unless their gaps or drift blocks differ)."""
@@ -905,16 +928,14 @@ def _push_pair(a: _ZeroPhase, xa: np.ndarray, b: _ZeroPhase, xb: np.ndarray):
     if not (ra and rb):
         return (a._run(a.buf_start + a.buf_n >= a.n) if ra else np.empty(0),
                 b._run(b.buf_start + b.buf_n >= b.n) if rb else np.empty(0))
-    wa, wb = a._window(), b._window()
-    if (a.engine == b.engine == "numba" and wa.size == wb.size and wa.size >= a.min_len
-            and a.sos.shape == b.sos.shape and a.padlen == b.padlen
-            and math.isfinite(float(np.sum(wa))) and math.isfinite(float(np.sum(wb)))):
-        # _apply_finite's own path for a window without gaps: the filter on it whole
-        ya, yb = iir.sosfiltfilt_pair(a.sos, wa, b.sos, wb, padlen=a.padlen)
+    if (a.buf_n == b.buf_n and a.sos.shape == b.sos.shape and a.padlen == b.padlen
+            and a._whole() and b._whole()):
+        ya, yb = iir.filter_extended_pair(a.sos, iir.extended(a.buf, a.padlen), b.sos,
+                                          iir.extended(b.buf, b.padlen), a.padlen)
     else:
-        ya, yb = a._filtered(wa), b._filtered(wb)
-    return (a._emit(wa, ya, a.buf_start + a.buf_n >= a.n),
-            b._emit(wb, yb, b.buf_start + b.buf_n >= b.n))
+        ya, yb = a._result(), b._result()
+    return (a._emit(ya, a.buf_start + a.buf_n >= a.n),
+            b._emit(yb, b.buf_start + b.buf_n >= b.n))
 
 
 #: mean samples per interval of the knots below which :func:`_minus_interp` calls

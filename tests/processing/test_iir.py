@@ -206,3 +206,19 @@ def test_pair_needs_numba(monkeypatch):
     sos = _filters()["lowpass4"]
     with pytest.raises(ValueError, match="not importable"):
         iir.sosfiltfilt_pair(sos, np.arange(50.0), sos, np.arange(50.0), padlen=3)
+
+
+@pytest.mark.parametrize("cuts", [[], [1], [5, 6, 90], [0, 0, 50]])
+def test_extended_joins_pieces_as_one_array(cuts):
+    """A stream's pieces joined straight into the kernel's buffer: the same buffer as the
+    joined array's, with scipy's odd extension at both ends (2 x[0] - x[k], numpy's odd
+    reflection)."""
+    x = np.random.default_rng(3).standard_normal(120)
+    pieces = np.split(x, cuts)
+    for padlen in (0, 1, 15, 119):
+        got = iir.extended(pieces, padlen)
+        assert np.array_equal(got, np.pad(x, padlen, mode="reflect", reflect_type="odd"))
+
+
+def test_extended_empty():
+    assert iir.extended([], 0).size == 0
