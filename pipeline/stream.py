@@ -878,19 +878,16 @@ class _ZeroPhase:
                            what=self.what, warn=False)
 
     def _whole(self) -> bool:
-        """Whether the due window goes to the numba kernel whole: long enough and without a
-        gap (a finite sum of every piece: _apply_finite's own test, piece by piece), so
-        that its pieces are joined straight into the kernel's buffer."""
-        if self.engine != "numba" or self.buf_n < self.min_len:
-            return False
-        with np.errstate(over="ignore", invalid="ignore"):
-            return all(math.isfinite(float(np.sum(p))) for p in self.buf)
+        """Whether the due window may go to the numba kernel whole (then joined straight
+        into the kernel's buffer): on that engine and long enough."""
+        return self.engine == "numba" and self.buf_n >= self.min_len
 
     def _result(self) -> np.ndarray:
         """The due window filtered (what _apply_finite gives on it)."""
         if self._whole():
-            return iir.filter_extended(self.sos, iir.extended(self.buf, self.padlen),
-                                       self.padlen)
+            y = iir.filter_extended(self.sos, iir.extended(self.buf, self.padlen), self.padlen)
+            if _no_gap(y):
+                return y
         return self._filtered(self._window())
 
     def _run(self, final: bool) -> np.ndarray:
@@ -918,6 +915,14 @@ class _ZeroPhase:
         return out
 
 
+def _no_gap(y: np.ndarray) -> bool:
+    """Whether a window filtered whole held no gap: a NaN or inf sample anywhere makes the
+    forward sweep's last state, and with it every sample of the backward sweep, NaN, so
+    its first and last samples tell (finite samples so large the filter overflows fail it
+    too, and take the gap handling's path, which gives them the same result)."""
+    return y.size > 0 and math.isfinite(float(y[0])) and math.isfinite(float(y[-1]))
+
+
 def _push_pair(a: _ZeroPhase, xa: np.ndarray, b: _ZeroPhase, xb: np.ndarray):
     """``(a.push(xa), b.push(xb))``, the two windows filtered in one sweep
     (:func:`meshphase.iir.filter_extended_pair`) when both are due together, of one length,
@@ -932,6 +937,9 @@ def _push_pair(a: _ZeroPhase, xa: np.ndarray, b: _ZeroPhase, xb: np.ndarray):
             and a._whole() and b._whole()):
         ya, yb = iir.filter_extended_pair(a.sos, iir.extended(a.buf, a.padlen), b.sos,
                                           iir.extended(b.buf, b.padlen), a.padlen)
+        # a window with a gap: its result again through the gap handling
+        ya = ya if _no_gap(ya) else a._filtered(a._window())
+        yb = yb if _no_gap(yb) else b._filtered(b._window())
     else:
         ya, yb = a._result(), b._result()
     return (a._emit(ya, a.buf_start + a.buf_n >= a.n),
