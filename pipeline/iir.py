@@ -43,9 +43,10 @@ HAVE_NUMBA = importlib.util.find_spec("numba") is not None
 #: samples of a job (all its channels) from which ``engine="auto"`` loads numba [-]: about
 #: where the filters' time saved (the two engines' rates in ``meshphase bench processing``'s
 #: iir rows, two filters per conditioned channel, on the run's threads) pays for loading
-#: numba and the kernel (``meshphase bench --warmup`` prints that time): ~23 min of 7
-#: conditioned channels at 5120 Hz, from paired runs of ``process`` with either engine
-NUMBA_SAMPLES = 50_000_000
+#: numba and the kernel (``meshphase bench --warmup`` prints that time): ~19 min of 7
+#: conditioned channels at 5120 Hz, set from paired runs of ``process`` with either engine
+#: (the commit that set it gives them)
+NUMBA_SAMPLES = 40_000_000
 
 _ZI: dict = {}
 _ZI_LOCK = threading.Lock()
