@@ -6,11 +6,12 @@ of one or two biquads run forwards and backwards over every sample of every cond
 channel: the largest single cost of ``meshphase process``. scipy's loop runs all sections
 for one sample before the next, its section states in memory; one section's recursion is
 a chain of dependent multiplies and adds, so the loop is bound by that chain's latency
-(~5 ns per section and sample here). :mod:`meshphase._iir_numba` runs two sections together
+(~6 ns per section and sample here). :mod:`meshphase._iir_numba` runs two sections together
 through the samples, their states in registers: two independent chains the processor
-overlaps, about twice scipy's rate, with the same operations in the same order for every
-section, so the same numbers (``meshphase bench processing`` measures both and checks
-that they agree).
+overlaps, with the same operations in the same order for every section, so the same
+numbers; :func:`sosfiltfilt_pair` runs two channels so in one sweep (four chains). In
+``meshphase bench processing``'s iir rows (which also check that they agree with scipy):
+one channel ~1.6x scipy's rate, two channels side by side ~2.4x.
 
 Engines (``engine``): ``"scipy"``; ``"numba"`` (ValueError when numba is not importable);
 ``"auto"`` (the default) takes numba when it is importable and either already loaded in
