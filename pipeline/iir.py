@@ -104,6 +104,16 @@ def _check_sos(sos) -> np.ndarray:
     return sos
 
 
+def _check_padlen(padlen, n: int) -> int:
+    """``padlen`` as an int, checked against ``n`` samples (scipy's rule: n > padlen)."""
+    padlen = int(padlen)
+    if padlen < 0:
+        raise ValueError(f"padlen must be >= 0, got {padlen}")
+    if n <= padlen:
+        raise ValueError(f"x must be longer than padlen ({padlen}), got {n} samples")
+    return padlen
+
+
 def sosfiltfilt(sos, x, *, padlen: int, engine: str = "auto") -> np.ndarray:
     """Zero-phase filtering of one channel: ``scipy.signal.sosfiltfilt(sos, x,
     padlen=padlen)``.
@@ -133,13 +143,8 @@ def sosfiltfilt(sos, x, *, padlen: int, engine: str = "auto") -> np.ndarray:
     x = np.asarray(x, dtype=np.float64)
     if x.ndim != 1:
         raise ValueError(f"x must be 1-D, got shape {x.shape}")
-    padlen = int(padlen)
-    if padlen < 0:
-        raise ValueError(f"padlen must be >= 0, got {padlen}")
-    n = x.size
-    if n <= padlen:
-        raise ValueError(f"x must be longer than padlen ({padlen}), got {n} samples")
-    if pick_engine(engine, n) == "scipy":
+    padlen = _check_padlen(padlen, x.size)
+    if pick_engine(engine, x.size) == "scipy":
         from scipy import signal
 
         return signal.sosfiltfilt(sos, x, padlen=padlen)
@@ -218,12 +223,7 @@ def sosfiltfilt_pair(sos_a, xa, sos_b, xb, *, padlen: int) -> tuple[np.ndarray, 
     if xa.ndim != 1 or xb.ndim != 1 or xa.size != xb.size:
         raise ValueError(f"xa and xb must be 1-D of equal length, got shapes {xa.shape} and "
                          f"{xb.shape}")
-    padlen = int(padlen)
-    if padlen < 0:
-        raise ValueError(f"padlen must be >= 0, got {padlen}")
-    n = xa.size
-    if n <= padlen:
-        raise ValueError(f"x must be longer than padlen ({padlen}), got {n} samples")
+    padlen = _check_padlen(padlen, xa.size)
     pick_engine("numba")
     return filter_extended_pair(sos_a, extended([xa], padlen), sos_b, extended([xb], padlen),
                                 padlen)
