@@ -32,6 +32,7 @@ import time
 
 import numpy as np
 
+from .log import logger
 from .numba_cache import import_kernels
 
 __all__ = ["ENGINES", "HAVE_NUMBA", "NUMBA_SAMPLES", "pick_engine", "sosfiltfilt",
@@ -41,6 +42,7 @@ __all__ = ["ENGINES", "HAVE_NUMBA", "NUMBA_SAMPLES", "pick_engine", "sosfiltfilt
 ENGINES = ("auto", "numba", "scipy")
 #: numba is optional (extras "fast" and "test"); looked for here, imported on first use
 HAVE_NUMBA = importlib.util.find_spec("numba") is not None
+_NUMBA_ERROR = "numba is not installed"
 #: samples of a job (all its channels) from which ``engine="auto"`` loads numba [-]: about
 #: where the filters' time saved (the two engines' rates in ``meshphase bench processing``'s
 #: iir rows, two filters per conditioned channel, on the run's threads) pays for loading
@@ -65,17 +67,34 @@ def pick_engine(engine: str = "auto", work: int = 0) -> str:
     Raises
     ------
     ValueError
-        An unknown engine, or ``"numba"`` when numba is not importable.
+        An unknown engine, or ``"numba"`` when numba is not importable (``"auto"`` then
+        takes scipy).
     """
     if not isinstance(engine, str) or engine not in ENGINES:
         raise ValueError(f"engine must be one of {list(ENGINES)}, got {engine!r}")
-    if engine == "numba" and not HAVE_NUMBA:
-        raise ValueError("engine='numba' requested but numba is not importable (not installed)")
+    if engine == "scipy":
+        return "scipy"
+    if engine == "auto" and not (HAVE_NUMBA and ("numba" in sys.modules
+                                                 or work >= NUMBA_SAMPLES)):
+        return "scipy"
+    if HAVE_NUMBA and _kernels() is not None:
+        return "numba"
     if engine == "auto":
-        if not HAVE_NUMBA:
-            return "scipy"
-        return "numba" if ("numba" in sys.modules or work >= NUMBA_SAMPLES) else "scipy"
-    return engine
+        return "scipy"                   # numba installed but broken: logged by _kernels
+    raise ValueError(f"engine='numba' requested but numba is not importable ({_NUMBA_ERROR})")
+
+
+def _kernels():
+    """The numba kernel module, imported on first use with the per-user cache set; None
+    (logged once, and numba taken for absent from then on) when numba is installed but
+    does not import."""
+    global HAVE_NUMBA, _NUMBA_ERROR
+    try:
+        return import_kernels("meshphase._iir_numba")
+    except ImportError as exc:
+        HAVE_NUMBA, _NUMBA_ERROR = False, repr(exc.__cause__ or exc)
+        logger.warning("numba does not import (%s): the filters run on scipy", _NUMBA_ERROR)
+        return None
 
 
 def _zi(sos: np.ndarray) -> np.ndarray:
@@ -172,7 +191,7 @@ def filter_extended(sos: np.ndarray, ext: np.ndarray, padlen: int) -> np.ndarray
     """The numba engine's two sweeps over ``ext`` (from :func:`extended`, overwritten):
     the filtered samples, a view of ``ext`` without its extensions. ``sos`` as checked by
     :func:`sosfiltfilt`."""
-    k = import_kernels("meshphase._iir_numba")
+    k = _kernels()
     zi = _zi(sos)
     k.cascade(sos, ext, zi * ext[0], False)
     k.cascade(sos, ext, zi * ext[-1], True)
@@ -183,7 +202,7 @@ def filter_extended_pair(sos_a: np.ndarray, ea: np.ndarray, sos_b: np.ndarray, e
                          padlen: int) -> tuple[np.ndarray, np.ndarray]:
     """:func:`filter_extended` of two channels in one sweep (equal lengths and section
     counts, see :func:`sosfiltfilt_pair`)."""
-    k = import_kernels("meshphase._iir_numba")
+    k = _kernels()
     za, zb = _zi(sos_a), _zi(sos_b)
     k.cascade2(sos_a, sos_b, ea, eb, za * ea[0], zb * eb[0], False)
     k.cascade2(sos_a, sos_b, ea, eb, za * ea[-1], zb * eb[-1], True)

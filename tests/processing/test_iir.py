@@ -222,3 +222,23 @@ def test_extended_joins_pieces_as_one_array(cuts):
 
 def test_extended_empty():
     assert iir.extended([], 0).size == 0
+
+
+def test_numba_installed_but_broken_falls_back_to_scipy(monkeypatch, caplog):
+    """numba found but its import fails (a broken install): "auto" filters on scipy and
+    says so once; "numba" is refused with the cause."""
+    def broken(name):
+        raise ImportError(f"{name} does not import (boom)")
+
+    monkeypatch.setattr(iir, "HAVE_NUMBA", True)
+    monkeypatch.setattr(iir, "_NUMBA_ERROR", iir._NUMBA_ERROR)
+    monkeypatch.setattr(iir, "import_kernels", broken)
+    with caplog.at_level("WARNING", logger="meshphase"):
+        assert iir.pick_engine("auto", 10 ** 12) == "scipy"
+    assert "numba does not import" in caplog.text and not iir.HAVE_NUMBA
+    with pytest.raises(ValueError, match="boom"):
+        iir.pick_engine("numba")
+    sos = _filters()["lowpass4"]
+    x = np.random.default_rng(5).standard_normal(500)
+    assert np.array_equal(iir.sosfiltfilt(sos, x, padlen=15),
+                          signal.sosfiltfilt(sos, x, padlen=15))
