@@ -69,6 +69,25 @@ def _fill_nan(seg: np.ndarray) -> np.ndarray:
     return out
 
 
+#: maxima up to which :func:`_unmasked` clears their spans one slice each [-]
+_SLICE_MAXIMA = 64
+
+
+def _unmasked(n: int, mx: np.ndarray, hh: int) -> np.ndarray:
+    """Samples of ``n`` farther than ``hh`` from every index in ``mx``: True outside the
+    spans [m - hh, m + hh] (clipped to the piece). A few maxima (a sparse train) clear
+    their spans slice by slice; many, by counting span starts and ends (bincount and
+    cumsum): the same mask."""
+    if mx.size <= _SLICE_MAXIMA:
+        keep = np.ones(n, dtype=bool)
+        for m in mx.tolist():
+            keep[max(m - hh, 0):m + hh + 1] = False
+        return keep
+    marks = (np.bincount(np.clip(mx - hh, 0, n), minlength=n + 1)
+             - np.bincount(np.clip(mx + hh + 1, 0, n), minlength=n + 1))
+    return np.cumsum(marks[:-1]) == 0
+
+
 def _noise_level(y: np.ndarray, w: float) -> tuple[float, float, float]:
     """Baseline and noise standard deviation of a pulse train ``y`` (pulse FWHM ``w``
     samples), robust to pulses covering most of the samples.
@@ -96,9 +115,12 @@ def _noise_level(y: np.ndarray, w: float) -> tuple[float, float, float]:
     def _live(p):
         if p.size < 3:
             return p
-        flat = np.concatenate([[False], np.diff(p) == 0])
+        eq = np.diff(p) == 0
+        if not eq.any():                              # the usual piece: nothing flat
+            return p
+        flat = np.concatenate([[False], eq])
         flat[:-1] |= flat[1:]
-        return p if not flat.any() else p[~flat]
+        return p[~flat]
     pieces = [q for q in (_live(p) for p in pieces) if q.size >= 16]
     if not pieces:
         live = _live(y)
@@ -113,12 +135,11 @@ def _noise_level(y: np.ndarray, w: float) -> tuple[float, float, float]:
             q = p[1:-1]
             mx = np.flatnonzero((q > med + 3.0 * sig) & (q >= p[:-2]) & (q > p[2:])) + 1
             for hh in (h, max(1, h // 2)):         # narrower mask for very dense trains
-                marks = (np.bincount(np.clip(mx - hh, 0, p.size), minlength=p.size + 1)
-                         - np.bincount(np.clip(mx + hh + 1, 0, p.size), minlength=p.size + 1))
-                new_keep = np.cumsum(marks[:-1]) == 0
-                if new_keep.sum() >= 0.05 * p.size:
+                new_keep = _unmasked(p.size, mx, hh)
+                n_keep = np.count_nonzero(new_keep)
+                if n_keep >= 0.05 * p.size:
                     break
-            if new_keep.sum() < 0.05 * p.size:
+            if n_keep < 0.05 * p.size:
                 break
             if keep is not None and np.array_equal(new_keep, keep):
                 break                                  # same mask: same median and sigma

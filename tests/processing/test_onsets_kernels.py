@@ -4,6 +4,8 @@ the decimated finiteness check of a block."""
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import signal
 
 from meshphase.onsets import detect_onsets
@@ -67,3 +69,26 @@ def test_gap_in_block_found_by_decimated_check():
     assert len(on) > 1000
     assert np.all(np.isfinite(on.times))
     assert not np.any(np.abs(on.index - 100_003) < 1)
+
+
+@settings(max_examples=80, deadline=None)
+@given(n=st.integers(1, 3000), hh=st.integers(1, 400), seed=st.integers(0, 2 ** 32 - 1),
+       k=st.integers(0, 200))
+def test_unmasked_equals_span_counting(n, hh, seed, k):
+    """The noise estimate's mask of the samples away from every maximum: slice by slice
+    (up to _SLICE_MAXIMA maxima) or by counting span starts and ends, the same mask."""
+    from meshphase.onsets.coarse import _unmasked
+
+    mx = np.unique(np.random.default_rng(seed).integers(0, n, size=k))
+    marks = (np.bincount(np.clip(mx - hh, 0, n), minlength=n + 1)
+             - np.bincount(np.clip(mx + hh + 1, 0, n), minlength=n + 1))
+    ref = np.cumsum(marks[:-1]) == 0
+    got = _unmasked(n, mx, hh)
+    assert got.dtype == bool and np.array_equal(got, ref)
+
+
+def test_unmasked_empty():
+    from meshphase.onsets.coarse import _unmasked
+
+    assert _unmasked(0, np.empty(0, dtype=np.int64), 3).size == 0
+    assert _unmasked(5, np.empty(0, dtype=np.int64), 3).all()
