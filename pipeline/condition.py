@@ -77,7 +77,7 @@ from .validate import as_signal, as_choice, as_float, as_nonnegative, as_positiv
 
 __all__ = [
     "ChannelQuality", "HumReport", "Conditioned",
-    "default_band", "design_filter", "filter_signal", "remove_drift", "drift_baseline",
+    "default_band", "design_filter", "design_notch", "filter_signal", "remove_drift", "drift_baseline",
     "detect_hum", "notch_hum", "assess_quality", "estimate_noise", "estimate_snr",
     "filter_recording", "remove_drift_recording", "notch_hum_recording",
     "assess_quality_recording", "condition_recording", "merge_runs", "gap_intervals",
@@ -736,11 +736,18 @@ def notch_hum(x, fs: float, *, freqs: Sequence[float] | None = None, mains: str 
         fl = np.asarray([_check_freq(f, "freqs", fs) for f in freqs], dtype=np.float64)
     if fl.size == 0 or x.size == 0:
         return x.copy()
-    sos = np.concatenate([signal.tf2sos(*signal.iirnotch(f, q, fs=fs)) for f in fl])
+    sos = design_notch(fl, fs, q)
     padlen = 3 * (2 * len(sos) + 1)
     fill_max = int(as_nonnegative(fill_max, "fill_max"))
     return _apply_finite(x, lambda s: iir.sosfiltfilt(sos, s, padlen=padlen),
                          min_len=padlen + 1, fill_max=fill_max, what="notch_hum")
+
+
+def design_notch(freqs, fs: float, q: float = 30.0) -> np.ndarray:
+    """Second-order sections of :func:`notch_hum`'s filter: one :func:`scipy.signal.iirnotch`
+    biquad per line in ``freqs`` [Hz] (quality factor ``q`` [-]) at sample rate ``fs`` [Hz],
+    cascaded; shape (len(freqs), 6)."""
+    return np.concatenate([signal.tf2sos(*signal.iirnotch(f, q, fs=fs)) for f in freqs])
 
 
 # ====================================================================== quality

@@ -76,7 +76,7 @@ from . import iir
 from .condition import (_apply_finite, _block_means, _block_medians, _check_freq, _drift_window,
                         _noise_from_diffs, _resolve_band, _settle_time, _short_segments_message,
                         _short_signal_message, _snr_combine, _snr_peak, _warn_quality, default_band,
-                        design_filter, detect_hum, finite_apply_gaps)
+                        design_filter, design_notch, detect_hum, finite_apply_gaps)
 from .errors import DataQualityWarning
 from .quality import ChannelQuality, ChannelScan, _RunTracker, merge_runs, quality_from_scan
 from .recording import ChannelSpec, Recording
@@ -855,7 +855,12 @@ class _ZeroPhase:
     def push(self, x: np.ndarray) -> np.ndarray:
         if not self._add(x):
             return np.empty(0)
-        return self._run(self.buf_start + self.buf_n >= self.n)
+        return self._run(self._at_end)
+
+    @property
+    def _at_end(self) -> bool:
+        """Whether the samples held reach the recording's end (the due window is the last)."""
+        return self.buf_start + self.buf_n >= self.n
 
     def _add(self, x: np.ndarray) -> bool:
         """``x`` appended; whether a window is due (the look-ahead is there, or the end)."""
@@ -931,10 +936,10 @@ def _push_pair(a: _ZeroPhase, xa: np.ndarray, b: _ZeroPhase, xb: np.ndarray):
     together unless their gaps or drift blocks differ)."""
     ra, rb = a._add(xa), b._add(xb)
     if not (ra and rb):
-        return (a._run(a.buf_start + a.buf_n >= a.n) if ra else np.empty(0),
-                b._run(b.buf_start + b.buf_n >= b.n) if rb else np.empty(0))
-    if (a.buf_n == b.buf_n and a.sos.shape == b.sos.shape and a.padlen == b.padlen
-            and a._whole() and b._whole()):
+        return (a._run(a._at_end) if ra else np.empty(0),
+                b._run(b._at_end) if rb else np.empty(0))
+    # (equal section counts make equal padlens)
+    if a.buf_n == b.buf_n and a.sos.shape == b.sos.shape and a._whole() and b._whole():
         ya, yb = iir.filter_extended_pair(a.sos, iir.extended(a.buf, a.padlen), b.sos,
                                           iir.extended(b.buf, b.padlen), a.padlen)
         # a window with a gap: its result again through the gap handling
@@ -942,8 +947,7 @@ def _push_pair(a: _ZeroPhase, xa: np.ndarray, b: _ZeroPhase, xb: np.ndarray):
         yb = yb if _no_gap(yb) else b._filtered(b._window())
     else:
         ya, yb = a._result(), b._result()
-    return (a._emit(ya, a.buf_start + a.buf_n >= a.n),
-            b._emit(yb, b.buf_start + b.buf_n >= b.n))
+    return a._emit(ya, a._at_end), b._emit(yb, b._at_end)
 
 
 #: mean samples per interval of the knots below which :func:`_minus_interp` calls
@@ -1196,7 +1200,8 @@ class _Drift:
 
 class _Chain:
     """A channel's conditioning: dropouts to NaN -> notch -> drift -> (SNR tap) -> band
-    limit, each stage streaming; ``push`` returns the newly final conditioned samples."""
+    limit, each stage streaming; :func:`_push_chains` pushes one or two chains and returns
+    the newly final conditioned samples."""
 
     def __init__(self, n: int, *, dropouts: np.ndarray | None, notch: _ZeroPhase | None,
                  drift, snr: "_SnrTap", band: _ZeroPhase | None, dtype=np.float64):
@@ -1223,9 +1228,6 @@ class _Chain:
             for s0, s1 in r[i:j]:
                 x[max(s0, a) - a:min(s1, b) - a] = np.nan
         return x
-
-    def push(self, x: np.ndarray) -> np.ndarray:
-        return _push_chains((self,), (x,))[0]
 
 
 def _live(st) -> bool:
@@ -1563,8 +1565,7 @@ def _hum_notches(plans, scan: RawScan, quality: dict, settle: dict, fs: float,
         quality[p.name] = replace(quality[p.name], hum=rep)
         if rep.present:
             settle[p.group] = max(settle[p.group], 2.0 * 30.0 / (math.pi * float(np.min(rep.freqs))))
-            notch_sos[p.name] = np.concatenate([signal.tf2sos(*signal.iirnotch(f, 30.0, fs=fs))
-                                                for f in rep.freqs])
+            notch_sos[p.name] = design_notch(rep.freqs, fs, 30.0)
     return notch_sos
 
 

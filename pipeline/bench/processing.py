@@ -414,13 +414,12 @@ def _filter_rows(x, fs):
     a hum notch pair (50 and 100 Hz, Q 30), each two sections. Medians of three, CPU
     seconds of one core; ``max_diff`` is the largest difference of the numba result from
     scipy's over the largest |x| (0: equal bit for bit)."""
-    from scipy import signal
-
     from .. import iir
+    from ..condition import design_notch
+    from .rss import reference_sos
 
-    filters = {"lowpass 28.6 Hz": signal.butter(4, 28.6, fs=fs, output="sos"),
-               "notch 50 + 100 Hz": np.concatenate(
-                   [signal.tf2sos(*signal.iirnotch(f, 30.0, fs=fs)) for f in (50.0, 100.0)])}
+    filters = {"lowpass 28.6 Hz": reference_sos(fs),
+               "notch 50 + 100 Hz": design_notch((50.0, 100.0), fs, 30.0)}
     engines = ["scipy"] + (["numba"] if iir.HAVE_NUMBA else [])
     if iir.HAVE_NUMBA:
         iir.warmup()                       # the kernel loaded (or compiled) before timing

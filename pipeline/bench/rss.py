@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["run_child", "bench_config", "write_job", "convert_job", "process_job",
-           "hdf5_pass_job", "sosfiltfilt_job", "import_job", "free_bytes", "BENCH_GEARSET",
+           "hdf5_pass_job", "sosfiltfilt_job", "reference_sos", "import_job", "free_bytes", "BENCH_GEARSET",
            "N_CHANNELS"]
 
 #: Channels of the benchmark recordings: sun and ring gauges, 3 + 2 face-width gauges, tacho.
@@ -275,6 +275,14 @@ def hdf5_pass_job(path: str, block: int = 1 << 18) -> dict:
             "library_s": min(library() for _ in range(2)), "bytes": os.path.getsize(path)}
 
 
+def reference_sos(fs: float = 5120.0) -> np.ndarray:
+    """The reference pass's filter: the conditioning's low-pass, a 4th-order Butterworth at
+    4 f_m = 28.6 Hz of the bench rig (second-order sections at ``fs`` [Hz])."""
+    from scipy import signal
+
+    return signal.butter(4, 28.6, btype="lowpass", fs=fs, output="sos")
+
+
 def sosfiltfilt_job(n: int = 1 << 22, repeats: int = 3) -> dict:
     """Rate of one :func:`scipy.signal.sosfiltfilt` pass [samples/s]: the conditioning's
     low-pass (4th-order Butterworth at 4 f_m = 28.6 Hz, 5120 Hz) over ``n`` float64 samples,
@@ -282,7 +290,7 @@ def sosfiltfilt_job(n: int = 1 << 22, repeats: int = 3) -> dict:
     from scipy import signal
 
     x = np.random.default_rng(0).normal(size=int(n))
-    sos = signal.butter(4, 28.6, btype="lowpass", fs=5120.0, output="sos")
+    sos = reference_sos()
     best = math.inf
     for _ in range(repeats):
         t = time.perf_counter()
