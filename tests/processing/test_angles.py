@@ -522,11 +522,12 @@ def test_model_diagnostics_are_json_friendly():
 
 
 @pytest.mark.parametrize("profile", ["drift", "ramp_ripple", "steady_noisy"])
-def test_spline_screening_leaves_the_selection_unchanged(monkeypatch, profile):
-    # the finer-spline screen (angles._spline_bounds) skips only candidates that could not
-    # have been chosen: the same model, bit for bit, with and without it, on a record whose
-    # slow speed wander needs a fine spline, a ramp under carrier ripple, and a steady
-    # noisy one where no finer spline pays; and it must skip something (fewer solves)
+def test_candidate_screening_leaves_the_selection_unchanged(monkeypatch, profile):
+    # the screen (angles._spline_bounds for finer splines, angles._linear_bound for every
+    # candidate) skips only candidates that could not have been chosen: the same model, bit
+    # for bit, with and without it, on a record whose slow speed wander needs a fine spline,
+    # a ramp under carrier ripple, and a steady noisy one where no finer spline pays; and it
+    # must skip something (fewer solves), ripple and planet candidates as well as splines
     import functools
 
     import meshphase.angles as angles
@@ -544,13 +545,24 @@ def test_spline_screening_leaves_the_selection_unchanged(monkeypatch, profile):
     solves = []
     orig_solve = angles._solve
 
+    orig_extend = angles._extend
+    same_knots = {}       # candidate spec -> whether it keeps the fit's spline (not a finer one)
+
     def counted(*a, **k):
-        solves.append(a[1].knots)
+        # a candidate's solve (4 iterations, no recheck) comes right after its _extend
+        cand = k.get("max_iter") == 4 and k.get("recheck") is False
+        solves.append(same_knots.get(id(a[1])) if cand else None)
         return orig_solve(*a, **k)
 
+    def extend(fit, spec, d):
+        same_knots[id(spec)] = spec.knots == fit.spec.knots
+        return orig_extend(fit, spec, d)
+
     monkeypatch.setattr(angles, "_solve", counted)
+    monkeypatch.setattr(angles, "_extend", extend)
     screened = fit_angle_model(trains, kin, 4)
     n_screened = len(solves)
+    screened_solves = list(solves)
     monkeypatch.setattr(angles, "_select_terms",
                         functools.partial(angles._select_terms, screen=False))
     solves.clear()
@@ -560,5 +572,7 @@ def test_spline_screening_leaves_the_selection_unchanged(monkeypatch, profile):
     t = np.linspace(*plain.t_span, 501)
     np.testing.assert_array_equal(screened.mesh_angle(t), plain.mesh_angle(t))
     assert n_screened < len(solves), (n_screened, len(solves))
+    # ripple, modulation and planet-harmonic candidates (the fit's spline) are screened too
+    assert screened_solves.count(True) < solves.count(True), (screened_solves, solves)
     if profile == "drift":
         assert "spline 1 " not in plain.terms        # the wander needed a finer spline
