@@ -279,3 +279,53 @@ def test_relabel_by_tacho_empty_and_bad_input():
     with pytest.raises(ValueError, match="tacho"):
         relabel_by_tacho(t, truth, np.arange(t.size), tacho[:1], psi, 3.0, pass_order=-1,
                          carrier_sense=1)
+
+
+def _walk_loop(gaps, fs, q0, tol):
+    # the pass-order walk as one loop over the gaps (the definition _walk vectorises)
+    n = fs.size
+    fs_closed = np.concatenate([fs, [1.0]])
+    pos = np.empty(gaps.size + 1, dtype=np.int64)
+    ok = np.ones(gaps.size + 1, dtype=bool)
+    p = pos[0] = q0
+    total = 0.0
+    for i, g in enumerate(gaps, start=1):
+        target = fs[p % n] + g
+        whole = math.floor(target)
+        rest = target - whole
+        q = int(np.argmin(np.abs(fs_closed - rest)))
+        miss = abs(fs_closed[q] - rest)
+        total += miss
+        adv = whole * n + q - (p % n)
+        if adv <= 0 or miss > tol:
+            ok[i] = False
+            adv = max(1, adv)
+        p += adv
+        pos[i] = p
+    return pos, ok, total
+
+
+@given(st.integers(1, 7), st.booleans(), st.integers(0, 300), st.integers(0, 2**32 - 1))
+def test_walk_equals_the_loop_over_gaps(n, equal, m, seed):
+    # positions, flags and the summed mismatch to the bit, on trains with missing pulses
+    # (double gaps), extra ones (half gaps), slow drift and unequal spacing
+    from meshphase.phasing import _walk
+
+    rng = np.random.default_rng(seed)
+    fs = np.arange(n) / n if equal else np.concatenate([[0.0], np.sort(rng.uniform(0, 1, n - 1))])
+    gaps = np.abs(rng.normal(1.0 / n, 0.2 / n, m)) * rng.choice([1, 1, 1, 2, 0.5, 3], m)
+    q0 = int(rng.integers(0, n))
+    tol = 0.3 * float(np.diff(np.concatenate([fs, [1.0]])).min())
+    got, want = _walk(gaps, fs, q0, tol), _walk_loop(gaps, fs, q0, tol)
+    np.testing.assert_array_equal(got[0], want[0])
+    np.testing.assert_array_equal(got[1], want[1])
+    assert got[2] == want[2]
+
+
+def test_walk_empty_and_bad_gaps():
+    from meshphase.phasing import _walk
+
+    pos, ok, total = _walk(np.empty(0), np.array([0.0, 0.5]), 1, 0.1)
+    assert pos.tolist() == [1] and ok.tolist() == [True] and total == 0.0
+    with pytest.raises(ValueError, match="finite"):
+        _walk(np.array([0.5, np.inf]), np.array([0.0, 0.5]), 0, 0.1)
