@@ -750,8 +750,8 @@ def _column_norms(A: np.ndarray) -> np.ndarray:
         return np.zeros(A.shape[1] if A.ndim == 2 else 0)
     amax = np.maximum(np.max(A, axis=0), -np.min(A, axis=0))     # max |A|, no |A| copy
     safe = np.where(amax > 0, amax, 1.0)
-    # np.linalg.norm(A / safe, axis=0) to the bit, squared in place (its own temporaries and
-    # dispatch took 2.6x as long on the fits' (5000, 50) designs)
+    # np.linalg.norm(A / safe, axis=0) to the bit, squared in place (without its temporaries
+    # and dispatch, which cost more than the sum itself on the fits' tall designs)
     T = A / safe
     np.multiply(T, T, out=T)
     return np.where(amax > 0, amax * np.sqrt(np.add.reduce(T, axis=0)), 0.0)
@@ -1460,8 +1460,8 @@ def _linear_bound(d: _Design, fit: _Fit, spec: _Spec, theta0: np.ndarray):
     weighted residual by its weighted columns (the fit's and the new ones, evaluated at
     theta0, where the new terms are zero and the model is the fit's). The misfit after that
     step, chi_lin, is one QR away: R_pp^2 of the QR of [A | r]. The bound takes
-    ``SCREEN_SLACK`` times that gain (the iterations after the first step gained within 1 %
-    of it on the bench records) and the candidate's own rank (the columns :func:`_solve`
+    ``SCREEN_SLACK`` times that gain (the iterations after the first step add little to it:
+    the model is nearly linear in the new terms near zero) and the candidate's own rank (the columns :func:`_solve`
     keeps at theta0, returned so the solve need not find them again; None where it drops a
     parameter that is not zero there):
     n ln(max(chi_opt / n, floor)) + rank ln n, as :meth:`_Fit.bic`. A candidate whose check
