@@ -101,8 +101,9 @@ _EXCERPT_MAX = 1 << 19
 #: :func:`stream_memory` must stay below it.
 MEMORY_BUDGET = 2 * 1024 ** 3
 #: Peak resident memory of ``meshphase process`` on a recording of up to 8 channels at
-#: 5120 Hz, whatever its length [B]: what ``meshphase bench processing`` measures (~0.5 GB
-#: from 10 min to 3 h, Python and its libraries included) with a factor 2 of headroom;
+#: 5120 Hz, whatever its length [B]: what ``meshphase bench processing`` measures (0.5-0.75
+#: GB from 10 min to 1 h, Python and its libraries included, numba too for a long
+#: recording) with headroom;
 #: tests/processing/test_stream.py holds a 30-minute run to it (slow).
 PROCESS_RSS_BUDGET = 1024 ** 3
 #: Decay of the slowest filter pole over the overlap of two filter windows [-].
