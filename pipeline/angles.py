@@ -1398,9 +1398,10 @@ def _select_terms(d: _Design, spec: _Spec, fit: _Fit, ladder: list, rates: list,
     return spec, fit, selection
 
 
-#: A finer spline is assumed able to lower the misfit by this factor more than its
-#: linearised gain (the ripple arguments move with the spline: the gain of the
-#: Gauss-Newton iterations is not quite the first step's) [-]
+#: A candidate (a finer spline, a ripple, modulation or planet harmonic) is assumed able to
+#: lower the misfit by this factor more than its linearised gain (the ripple arguments move
+#: with the spline: the gain of the Gauss-Newton iterations is not quite the first step's;
+#: tests/processing/test_angles.py checks the bound on every candidate of three records) [-]
 SCREEN_SLACK = 1.5
 
 

@@ -576,3 +576,63 @@ def test_candidate_screening_leaves_the_selection_unchanged(monkeypatch, profile
     assert screened_solves.count(True) < solves.count(True), (screened_solves, solves)
     if profile == "drift":
         assert "spline 1 " not in plain.terms        # the wander needed a finer spline
+
+
+@pytest.mark.parametrize("profile", ["drift", "ramp_ripple", "steady_noisy"])
+def test_linear_bound_is_optimistic_for_every_candidate(monkeypatch, profile):
+    # the screen is safe only if a candidate's bound (angles._linear_bound) never exceeds the
+    # BIC its solve reaches: checked for every candidate of an unscreened selection (each one
+    # solved), on the three records of the screening test
+    import functools
+    from types import SimpleNamespace
+
+    import meshphase.angles as angles
+    from meshphase.synthetic.kinematics import ShaftRipple
+
+    g, sp = rig()
+    prof = {"drift": SpeedProfile(ripple=((0.005, 0.02, 0.0),)),
+            "ramp_ripple": SpeedProfile(ramp_rate=0.08 / 120.0,
+                                        shaft=(ShaftRipple("carrier", 0.01, 1, 0.3),)),
+            "steady_noisy": SpeedProfile()}[profile]
+    trains, _ = trains_from_truth(g, sp, prof, 120.0, errors=table2_case(1)[2],
+                                  jitter=2e-5 if profile == "steady_noisy" else 0.0,
+                                  sigma=2e-5 if profile == "steady_noisy" else None)
+    orig_solve = angles._solve
+    pairs = []
+
+    def solve(d, spec, theta0, scale, **k):
+        fit = orig_solve(d, spec, theta0, scale, **k)
+        if k.get("max_iter") == 4 and k.get("recheck") is False:      # a candidate's solve
+            bound, _ = angles._linear_bound(d, SimpleNamespace(floor=fit.floor), spec, theta0)
+            pairs.append((bound, fit.bic()))
+        return fit
+
+    monkeypatch.setattr(angles, "_solve", solve)
+    monkeypatch.setattr(angles, "_select_terms",
+                        functools.partial(angles._select_terms, screen=False))
+    fit_angle_model(trains, kinematics(25, 87, 29, fixed="ring"), 4)
+    bounded = [(b, bic) for b, bic in pairs if math.isfinite(b)]
+    assert len(bounded) >= 0.5 * len(pairs) > 0
+    for b, bic in bounded:
+        assert b <= bic + 1e-9 * abs(bic), (b, bic)
+
+
+def test_linear_bound_of_a_candidate_without_rows_is_minus_infinity():
+    # nothing to judge on (every observation left out): always solved, never screened away
+    import copy
+
+    import meshphase.angles as angles
+
+    g, sp = rig()
+    trains, _ = trains_from_truth(g, sp, SpeedProfile(), 30.0)
+    kin = kinematics(25, 87, 29, fixed="ring")
+    d = angles._Design(trains, kin, 4)
+    spec = angles._Spec(knots=1, harm={r: 0 for r in kin.periods},
+                        mod={r: False for r in kin.periods})
+    fit = angles._solve(d, spec, None, np.ones(len(trains)))
+    cand = spec.copy()
+    cand.sig = 1
+    d2 = copy.copy(d)
+    d2.active = np.zeros_like(d.active)
+    bound, keep = angles._linear_bound(d2, fit, cand, angles._extend(fit, cand, d2))
+    assert bound == -math.inf
