@@ -521,6 +521,23 @@ def test_model_diagnostics_are_json_friendly():
     assert isinstance(kinematics(25, 87), Kinematics)
 
 
+def _screening_record(profile: str) -> list:
+    """Pass trains of 2 min on the rig: slow speed wander that needs a fine spline
+    ("drift"), a ramp under carrier ripple ("ramp_ripple"), or a steady speed with timing
+    noise and its bound given ("steady_noisy"), where no finer spline pays."""
+    from meshphase.synthetic.kinematics import ShaftRipple
+
+    g, sp = rig()
+    prof = {"drift": SpeedProfile(ripple=((0.005, 0.02, 0.0),)),
+            "ramp_ripple": SpeedProfile(ramp_rate=0.08 / 120.0,
+                                        shaft=(ShaftRipple("carrier", 0.01, 1, 0.3),)),
+            "steady_noisy": SpeedProfile()}[profile]
+    noisy = profile == "steady_noisy"
+    trains, _ = trains_from_truth(g, sp, prof, 120.0, errors=table2_case(1)[2],
+                                  jitter=2e-5 if noisy else 0.0, sigma=2e-5 if noisy else None)
+    return trains
+
+
 @pytest.mark.parametrize("profile", ["drift", "ramp_ripple", "steady_noisy"])
 def test_candidate_screening_leaves_the_selection_unchanged(monkeypatch, profile):
     # the screen (angles._spline_bounds for finer splines, angles._linear_bound for every
@@ -531,16 +548,8 @@ def test_candidate_screening_leaves_the_selection_unchanged(monkeypatch, profile
     import functools
 
     import meshphase.angles as angles
-    from meshphase.synthetic.kinematics import ShaftRipple
 
-    g, sp = rig()
-    prof = {"drift": SpeedProfile(ripple=((0.005, 0.02, 0.0),)),
-            "ramp_ripple": SpeedProfile(ramp_rate=0.08 / 120.0,
-                                        shaft=(ShaftRipple("carrier", 0.01, 1, 0.3),)),
-            "steady_noisy": SpeedProfile()}[profile]
-    trains, _ = trains_from_truth(g, sp, prof, 120.0, errors=table2_case(1)[2],
-                                  jitter=2e-5 if profile == "steady_noisy" else 0.0,
-                                  sigma=2e-5 if profile == "steady_noisy" else None)
+    trains = _screening_record(profile)
     kin = kinematics(25, 87, 29, fixed="ring")
     solves = []
     orig_solve = angles._solve
@@ -587,16 +596,8 @@ def test_linear_bound_is_optimistic_for_every_candidate(monkeypatch, profile):
     from types import SimpleNamespace
 
     import meshphase.angles as angles
-    from meshphase.synthetic.kinematics import ShaftRipple
 
-    g, sp = rig()
-    prof = {"drift": SpeedProfile(ripple=((0.005, 0.02, 0.0),)),
-            "ramp_ripple": SpeedProfile(ramp_rate=0.08 / 120.0,
-                                        shaft=(ShaftRipple("carrier", 0.01, 1, 0.3),)),
-            "steady_noisy": SpeedProfile()}[profile]
-    trains, _ = trains_from_truth(g, sp, prof, 120.0, errors=table2_case(1)[2],
-                                  jitter=2e-5 if profile == "steady_noisy" else 0.0,
-                                  sigma=2e-5 if profile == "steady_noisy" else None)
+    trains = _screening_record(profile)
     orig_solve = angles._solve
     pairs = []
 
