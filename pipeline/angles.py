@@ -1461,10 +1461,10 @@ def _linear_bound(d: _Design, fit: _Fit, spec: _Spec, theta0: np.ndarray):
     weighted residual by its weighted columns (the fit's and the new ones, evaluated at
     theta0, where the new terms are zero and the model is the fit's). The misfit after that
     step, chi_lin, is one QR away: R_pp^2 of the QR of [A | r]. The bound takes
-    ``SCREEN_SLACK`` times that gain (the iterations after the first step add little to it:
-    the model is nearly linear in the new terms near zero) and the candidate's own rank (the columns :func:`_solve`
-    keeps at theta0, returned so the solve need not find them again; None where it drops a
-    parameter that is not zero there):
+    ``SCREEN_SLACK`` times that gain (the iterations after the first step add little to
+    it: the model is nearly linear in the new terms near zero) and the candidate's own rank
+    (the columns :func:`_solve` keeps at theta0, returned so the solve need not find them
+    again; None where it drops a parameter that is not zero there):
     n ln(max(chi_opt / n, floor)) + rank ln n, as :meth:`_Fit.bic`. A candidate whose check
     drops a parameter that is not zero at theta0 (its solve starts elsewhere), whose misfit
     is not finite, or with no more rows than columns gets -inf: it is always solved."""

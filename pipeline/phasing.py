@@ -397,18 +397,24 @@ def _amplitude_shift(amplitudes, reference_amplitudes, pos, ok, seq, m: int):
                        for s in range(n)])
     best = int(np.argmax(scores))
     return best, bool(scores[best] - np.sort(scores)[-2] < 0.2)
+#: gaps whose moves :func:`_walk` works out at once (its tables hold this many x N x (N + 1)
+#: values: memory bounded whatever the recording's length) [-]
+_WALK_CHUNK = 4096
+
+
 def _walk(gaps: np.ndarray, fs: np.ndarray, q0: int, tol: float):
     """Positions in pass order of a pulse train whose first pulse is at position ``q0``.
 
     Each gap [relative revolutions] advances the position by the number of planet steps
     whose fractions fit it best; a gap that fits no step within ``tol`` marks the pulse
-    unassigned. Returns (positions mod N, ok mask, summed mismatch).
+    unassigned. Returns (positions, ok mask, summed mismatch); a position's place in the
+    pass order is position mod N.
 
     The walk is sequential only through the place p mod N the previous gap left it at, so
-    every gap's move is worked out for each of the N places at once, and the place before
-    each gap follows by composing those moves (pointer doubling: log2 m gathers). The
-    mismatch is summed in gap order (a cumulative sum), as a loop over the gaps would (the
-    same result to the bit, tested against that loop).
+    the moves of ``_WALK_CHUNK`` gaps at a time are worked out for each of the N places at
+    once, and the place before each gap follows by composing those moves (pointer doubling:
+    log2 of the chunk gathers). The mismatch is summed in gap order, as a loop over the
+    gaps would (the same result to the bit, tested against that loop).
     """
     n = fs.size
     gaps = np.asarray(gaps, dtype=np.float64)
@@ -422,30 +428,35 @@ def _walk(gaps: np.ndarray, fs: np.ndarray, q0: int, tol: float):
         raise ValueError("gaps must be finite")
     fs_closed = np.concatenate([fs, [1.0]])
     place = np.arange(n)
-    target = fs[None, :] + gaps[:, None]                       # (m, N): gap i from place s
-    whole = np.floor(target)
-    rest = target - whole
-    dist = np.abs(fs_closed[None, None, :] - rest[:, :, None])  # (m, N, N + 1)
-    q = np.argmin(dist, axis=2)                                # first of equals, as a loop
-    miss = np.take_along_axis(dist, q[:, :, None], axis=2)[:, :, 0]
-    adv = whole.astype(np.int64) * n + q - place[None, :]
-    bad = (adv <= 0) | (miss > tol)
-    adv = np.where(bad, np.maximum(adv, 1), adv)
-    after = (place[None, :] + adv) % n                         # place after gap i
-    # after[i] composed with every move before it: the place after gap i from the start
-    comp = after.copy()
-    d = 1
-    while d < m:
-        comp[d:] = np.take_along_axis(comp[d:], comp[:-d], axis=1)
-        d *= 2
-    s0 = q0 % n
-    before = np.empty(m, dtype=np.int64)
-    before[0] = s0
-    before[1:] = comp[:-1, s0]
-    i = np.arange(m)
-    pos[1:] = q0 + np.cumsum(adv[i, before])
-    ok[1:] = ~bad[i, before]
-    return pos, ok, float(np.cumsum(miss[i, before])[-1])
+    p, s, total = int(q0), int(q0) % n, 0.0
+    for c0 in range(0, m, _WALK_CHUNK):
+        g = gaps[c0:c0 + _WALK_CHUNK]
+        k = g.size
+        target = fs[None, :] + g[:, None]                     # (k, N): gap i from place s
+        whole = np.floor(target)
+        rest = target - whole
+        dist = np.abs(fs_closed[None, None, :] - rest[:, :, None])   # (k, N, N + 1)
+        q = np.argmin(dist, axis=2)                           # first of equals, as a loop
+        miss = np.take_along_axis(dist, q[:, :, None], axis=2)[:, :, 0]
+        adv = whole.astype(np.int64) * n + q - place[None, :]
+        bad = (adv <= 0) | (miss > tol)
+        adv = np.where(bad, np.maximum(adv, 1), adv)
+        # the place after gap i from each place, composed with every move before it in the
+        # chunk: the place after gap i from the chunk's first place
+        comp = (place[None, :] + adv) % n
+        d = 1
+        while d < k:
+            comp[d:] = np.take_along_axis(comp[d:], comp[:-d], axis=1)
+            d *= 2
+        before = np.empty(k, dtype=np.int64)
+        before[0] = s
+        before[1:] = comp[:-1, s]
+        i = np.arange(k)
+        pos[c0 + 1:c0 + k + 1] = p + np.cumsum(adv[i, before])
+        ok[c0 + 1:c0 + k + 1] = ~bad[i, before]
+        total = float(np.cumsum(np.concatenate([[total], miss[i, before]]))[-1])
+        p, s = int(pos[c0 + k]), int(comp[-1, s])
+    return pos, ok, total
 
 
 class GaugeEncoder:

@@ -305,12 +305,24 @@ def _walk_loop(gaps, fs, q0, tol):
     return pos, ok, total
 
 
-@given(st.integers(1, 7), st.booleans(), st.integers(0, 300), st.integers(0, 2**32 - 1))
-def test_walk_equals_the_loop_over_gaps(n, equal, m, seed):
+@given(st.integers(1, 7), st.booleans(), st.integers(0, 300), st.integers(0, 2**32 - 1),
+       st.sampled_from([1, 2, 7, 64, 4096]))
+def test_walk_equals_the_loop_over_gaps(n, equal, m, seed, chunk):
     # positions, flags and the summed mismatch to the bit, on trains with missing pulses
-    # (double gaps), extra ones (half gaps), slow drift and unequal spacing
+    # (double gaps), extra ones (half gaps), slow drift and unequal spacing, the gaps worked
+    # out in chunks of every size (the walk carries its place and sum across them)
+    from meshphase import phasing
     from meshphase.phasing import _walk
 
+    before = phasing._WALK_CHUNK
+    phasing._WALK_CHUNK = chunk
+    try:
+        _check_walk(n, equal, m, seed, _walk)
+    finally:
+        phasing._WALK_CHUNK = before
+
+
+def _check_walk(n, equal, m, seed, _walk):
     rng = np.random.default_rng(seed)
     fs = np.arange(n) / n if equal else np.concatenate([[0.0], np.sort(rng.uniform(0, 1, n - 1))])
     gaps = np.abs(rng.normal(1.0 / n, 0.2 / n, m)) * rng.choice([1, 1, 1, 2, 0.5, 3], m)
