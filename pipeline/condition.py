@@ -359,7 +359,7 @@ def filter_signal(x, fs: float, *, kind: str = "bandpass", low: float | None = N
     kind = as_choice(kind, "kind", ("bandpass", "highpass", "lowpass"))
     kind, low, high = _resolve_band(fs, kind, low, high, mesh_freq)
     sos = design_filter(fs, kind=kind, low=low, high=high, order=order)
-    padlen = 3 * (2 * len(sos) + 1)
+    padlen = iir.padlen_for(sos)
     return _apply_finite(x, lambda s: iir.sosfiltfilt(sos, s, padlen=padlen),
                          min_len=padlen + 1, fill_max=fill_max, what=f"filter_signal({kind})")
 
@@ -737,7 +737,7 @@ def notch_hum(x, fs: float, *, freqs: Sequence[float] | None = None, mains: str 
     if fl.size == 0 or x.size == 0:
         return x.copy()
     sos = design_notch(fl, fs, q)
-    padlen = 3 * (2 * len(sos) + 1)
+    padlen = iir.padlen_for(sos)
     fill_max = int(as_nonnegative(fill_max, "fill_max"))
     return _apply_finite(x, lambda s: iir.sosfiltfilt(sos, s, padlen=padlen),
                          min_len=padlen + 1, fill_max=fill_max, what="notch_hum")

@@ -35,8 +35,9 @@ import numpy as np
 from .log import logger
 from .numba_cache import import_kernels
 
-__all__ = ["ENGINES", "HAVE_NUMBA", "NUMBA_SAMPLES", "pick_engine", "sosfiltfilt",
-           "sosfiltfilt_pair", "extended", "filter_extended", "filter_extended_pair", "warmup"]
+__all__ = ["ENGINES", "HAVE_NUMBA", "NUMBA_SAMPLES", "pick_engine", "padlen_for",
+           "sosfiltfilt", "sosfiltfilt_pair", "extended", "filter_extended",
+           "filter_extended_pair", "warmup"]
 
 #: engines of :func:`sosfiltfilt`
 ENGINES = ("auto", "numba", "scipy")
@@ -121,6 +122,12 @@ def _check_sos(sos) -> np.ndarray:
     if not np.all(np.isfinite(sos)):
         raise ValueError("sos must be finite")
     return sos
+
+
+def padlen_for(sos) -> int:
+    """The odd extension the conditioning's zero-phase filters use at each end [-]:
+    ``3 * (2 * n_sections + 1)``, scipy's default for sections without zero coefficients."""
+    return 3 * (2 * len(sos) + 1)
 
 
 def _check_padlen(padlen, n: int) -> int:

@@ -836,7 +836,7 @@ class _ZeroPhase:
         self._apply = _apply_finite
         self.sos = sos
         self.engine = engine
-        self.padlen = 3 * (2 * len(sos) + 1)
+        self.padlen = iir.padlen_for(sos)
         self.min_len = self.padlen + 1
         self.fill_max = fill_max
         self.what = what
@@ -891,10 +891,14 @@ class _ZeroPhase:
     def _result(self) -> np.ndarray:
         """The due window filtered (what _apply_finite gives on it)."""
         if self._whole():
-            y = iir.filter_extended(self.sos, iir.extended(self.buf, self.padlen), self.padlen)
-            if _no_gap(y):
-                return y
+            ext = iir.extended(self.buf, self.padlen)
+            return self._or_gaps(iir.filter_extended(self.sos, ext, self.padlen))
         return self._filtered(self._window())
+
+    def _or_gaps(self, y: np.ndarray) -> np.ndarray:
+        """``y``, the due window filtered whole, where it held no gap (:func:`_no_gap`); else
+        the window again through the gap handling."""
+        return y if _no_gap(y) else self._filtered(self._window())
 
     def _run(self, final: bool) -> np.ndarray:
         return self._emit(self._result(), final)
@@ -943,9 +947,7 @@ def _push_pair(a: _ZeroPhase, xa: np.ndarray, b: _ZeroPhase, xb: np.ndarray):
     if a.buf_n == b.buf_n and a.sos.shape == b.sos.shape and a._whole() and b._whole():
         ya, yb = iir.filter_extended_pair(a.sos, iir.extended(a.buf, a.padlen), b.sos,
                                           iir.extended(b.buf, b.padlen), a.padlen)
-        # a window with a gap: its result again through the gap handling
-        ya = ya if _no_gap(ya) else a._filtered(a._window())
-        yb = yb if _no_gap(yb) else b._filtered(b._window())
+        ya, yb = a._or_gaps(ya), b._or_gaps(yb)
     else:
         ya, yb = a._result(), b._result()
     return a._emit(ya, a._at_end), b._emit(yb, b._at_end)
@@ -1685,11 +1687,11 @@ class _Pass3:
         # the channels' chains share nothing: filtered side by side on worker threads
         # (meshphase.threads; the filters release the GIL), each chain whole on one thread
         # per block, two chains per thread item (_chain_pairs: their filters sweep together
-        # where their windows coincide), so the samples are those of the serial run. The onset detectors and
-        # everything after them run here, in channel order, as before, on the block before
-        # while the workers filter this one: a block's chains start only once the block
-        # before's have all returned (a chain's state goes from block to block), and the
-        # onsets take the blocks in order. (Warnings a chain raised meanwhile would be kept
+        # where their windows coincide), so the samples are those of the serial run. The
+        # onset detectors and everything after them run here, in channel order, as before,
+        # on the block before while the workers filter this one: a block's chains start
+        # only once the block before's have all returned (a chain's state goes from block
+        # to block), and the onsets take the blocks in order. (Warnings a chain raised meanwhile would be kept
         # with the onsets' own; the chains report through notes and raise none.)
         def chains(data):
             # a fresh float64 copy: the stages hold on to what they are given

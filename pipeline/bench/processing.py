@@ -363,6 +363,18 @@ def _accuracy_rows(name, x, truth, fs, shape, snr_db, settings):
     return rows
 
 
+def _median_of_3(fn):
+    """``fn()`` three times: (median CPU seconds of this process, median wall seconds, the
+    last result)."""
+    cpu, wall = [], []
+    for _ in range(3):
+        t, tw = time.process_time(), time.perf_counter()
+        out = fn()
+        cpu.append(time.process_time() - t)
+        wall.append(time.perf_counter() - tw)
+    return float(np.median(cpu)), float(np.median(wall)), out
+
+
 def _throughput_rows(fs, scen, n, rng):
     from ..condition import filter_signal, notch_hum, remove_drift
     from ..onsets import detect_onsets
@@ -384,16 +396,10 @@ def _throughput_rows(fs, scen, n, rng):
         for stage, kw in (("onsets.detect_onsets", {}),
                           ("onsets.detect_onsets engine=numpy", {"engine": "numpy"}),
                           ("onsets.detect_onsets relearn=block", {"relearn": "block"})):
-            cpu, wall = [], []
-            for _ in range(3):
-                t, tw = time.process_time(), time.perf_counter()
-                on = detect_onsets(x, fs, **kw)
-                cpu.append(time.process_time() - t)
-                wall.append(time.perf_counter() - tw)
-            dt = float(np.median(cpu))
+            dt, wall, on = _median_of_3(lambda: detect_onsets(x, fs, **kw))
             rows.append({"stage": stage, "scenario": name, "n_samples": n, "n_pulses": len(on),
                          "runtime_s": dt, "msamples_per_s": n / dt / 1e6,
-                         "wall_s": float(np.median(wall)), "load_avg": float(load()[0])})
+                         "wall_s": wall, "load_avg": float(load()[0])})
     x, _ = pulse_scenario(n, fs, scen["wide"]["shape"], scen["wide"]["spacing"], snr_db=20.0, rng=rng)
     for stage, fn in (("condition.remove_drift", lambda: remove_drift(x, fs)),
                       ("condition.filter_signal", lambda: filter_signal(x, fs, mesh_freq=51.2)),
@@ -425,37 +431,25 @@ def _filter_rows(x, fs):
         iir.warmup()                       # the kernel loaded (or compiled) before timing
     rows = []
     for fname, sos in filters.items():
-        padlen = 3 * (2 * len(sos) + 1)
+        padlen = iir.padlen_for(sos)
         ref = None
         for eng in engines:
-            cpu, wall = [], []
-            for _ in range(3):
-                t0, tw = time.process_time(), time.perf_counter()
-                y = iir.sosfiltfilt(sos, x, padlen=padlen, engine=eng)
-                cpu.append(time.process_time() - t0)
-                wall.append(time.perf_counter() - tw)
+            dt, wall, y = _median_of_3(lambda: iir.sosfiltfilt(sos, x, padlen=padlen, engine=eng))
             if ref is None:
                 ref = y
-            dt = float(np.median(cpu))
             rows.append({"stage": f"iir.sosfiltfilt engine={eng}", "scenario": fname,
                          "n_samples": int(x.size), "n_pulses": 0, "runtime_s": dt,
-                         "msamples_per_s": x.size / dt / 1e6, "wall_s": float(np.median(wall)),
+                         "msamples_per_s": x.size / dt / 1e6, "wall_s": wall,
                          "max_diff": float(np.max(np.abs(y - ref)) / np.max(np.abs(x)))})
         if iir.HAVE_NUMBA:
             # two channels in one sweep (what the streamed conditioning does with two gauges
             # of a gear): samples of both channels per CPU second
             xb = x[::-1].copy()
-            cpu, wall = [], []
-            for _ in range(3):
-                t0, tw = time.process_time(), time.perf_counter()
-                ya, yb = iir.sosfiltfilt_pair(sos, x, sos, xb, padlen=padlen)
-                cpu.append(time.process_time() - t0)
-                wall.append(time.perf_counter() - tw)
-            dt = float(np.median(cpu))
+            dt, wall, (ya, _) = _median_of_3(
+                lambda: iir.sosfiltfilt_pair(sos, x, sos, xb, padlen=padlen))
             rows.append({"stage": "iir.sosfiltfilt_pair (two channels)", "scenario": fname,
                          "n_samples": int(2 * x.size), "n_pulses": 0, "runtime_s": dt,
-                         "msamples_per_s": 2 * x.size / dt / 1e6,
-                         "wall_s": float(np.median(wall)),
+                         "msamples_per_s": 2 * x.size / dt / 1e6, "wall_s": wall,
                          "max_diff": float(np.max(np.abs(ya - ref)) / np.max(np.abs(x)))})
     return rows
 
