@@ -10,7 +10,7 @@ with the workers warmed up, and closes what it started. :func:`end_worker` ends 
 whose task ran past its timeout (the only way to stop a thread blocked in a read).
 
 Worker start-up: a spawned worker is a fresh interpreter that imports distributed, then the
-processing stack (scipy.signal and with it scipy.stats and scipy.optimize, the readers),
+processing stack (scipy.linalg, .interpolate and .optimize, the readers),
 every worker at every campaign, all at the same time and while the client computes the
 scene-level results. Where the platform has one, :func:`worker_server` starts Python's fork
 server (:mod:`multiprocessing`, start method "forkserver") once per process with those

@@ -65,7 +65,7 @@ from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
 import numpy as np
-from scipy import ndimage, signal
+from scipy import ndimage
 
 from . import iir
 from .errors import DataQualityWarning, ProcessingWarning
@@ -73,6 +73,9 @@ from .log import logger
 from .quality import (DROPOUT_MIN_RUN, FALSE_ALARM, ChannelQuality, ChannelScan, HumReport,
                       find_runs, merge_runs, quality_from_scan)
 from .recording import Recording
+from .savgol import savgol_filter
+from .sos_design import butter_sos, notch_sos
+from .spectral import welch
 from .validate import as_signal, as_choice, as_float, as_nonnegative, as_positive, as_positive_int
 
 __all__ = [
@@ -286,10 +289,10 @@ def design_filter(fs: float, *, kind: str = "bandpass", low: float | None = None
     if kind == "bandpass":
         if not low < high:
             raise ValueError(f"low ({low!r} Hz) must be below high ({high!r} Hz)")
-        return signal.butter(order, [low, high], btype="bandpass", fs=fs, output="sos")
+        return butter_sos(order, [low, high], "bandpass", fs)
     if kind == "highpass":
-        return signal.butter(order, low, btype="highpass", fs=fs, output="sos")
-    return signal.butter(order, high, btype="lowpass", fs=fs, output="sos")
+        return butter_sos(order, low, "highpass", fs)
+    return butter_sos(order, high, "lowpass", fs)
 
 
 def _resolve_band(fs, kind, low, high, mesh_freq):
@@ -493,7 +496,7 @@ def drift_baseline(x, fs: float, *, method: str = "median", window: float | None
         base = ndimage.median_filter(means, size=min(k, means.size) | 1, mode="nearest")
     else:
         if means.size >= k:
-            base = signal.savgol_filter(means, k, 2, mode="interp")
+            base = savgol_filter(means, k, 2)
         else:
             base = np.full(means.size, np.mean(means))
     if base.size == 1:
@@ -658,7 +661,7 @@ def detect_hum(x, fs: float, *, mains: str | float = "auto", n_harmonics: int = 
                          checked=False)
     xs = _fill_nonfinite(xs)
     nper = _hum_nperseg(xs.size, fs)
-    f, p = signal.welch(xs, fs, nperseg=nper, detrend=_detrend_linear)
+    f, p = welch(xs, fs, nper, detrend=_detrend_linear)
     df = f[1] - f[0]
 
     def excess(fc: float) -> float:
@@ -747,7 +750,7 @@ def design_notch(freqs, fs: float, q: float = 30.0) -> np.ndarray:
     """Second-order sections of :func:`notch_hum`'s filter: one :func:`scipy.signal.iirnotch`
     biquad per line in ``freqs`` [Hz] (quality factor ``q`` [-]) at sample rate ``fs`` [Hz],
     cascaded; shape (len(freqs), 6)."""
-    return np.concatenate([signal.tf2sos(*signal.iirnotch(f, q, fs=fs)) for f in freqs])
+    return notch_sos(freqs, q, fs)
 
 
 # ====================================================================== quality

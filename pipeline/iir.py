@@ -14,9 +14,13 @@ numbers; :func:`sosfiltfilt_pair` runs two channels so in one sweep (four chains
 one channel ~1.6x scipy's rate, two channels side by side ~2.4x.
 
 Engines (``engine``): ``"scipy"``; ``"numba"`` (ValueError when numba is not importable);
-``"auto"`` (the default) takes numba when it is importable and either already loaded in
-this process or the job is at least ``NUMBA_SAMPLES`` samples, all channels together
-(``work``): below that, loading numba (~0.5 s) costs more than it saves.
+``"auto"`` (the default) takes numba when it is importable and it is already loaded in
+this process, or ``scipy.signal`` is not (the filter designs are :mod:`meshphase.sos_design`'s,
+so one of the two must be loaded for the filters: their loads cost about the same, the
+``--warmup`` time against the start-up table's ``scipy.signal`` row of ``meshphase bench
+processing``, and numba's kernel is the faster), or the job is at least ``NUMBA_SAMPLES``
+samples, all channels together (``work``): below that, with ``scipy.signal`` loaded
+already, loading numba costs more than it saves.
 
 Padding, initial conditions and the result are those of ``scipy.signal.sosfiltfilt(sos, x,
 padlen=padlen)`` (odd extension, steady-state initial conditions scaled by the first and
@@ -34,6 +38,7 @@ import numpy as np
 
 from .log import logger
 from .numba_cache import import_kernels
+from .sos_design import sosfilt_zi
 
 __all__ = ["ENGINES", "HAVE_NUMBA", "NUMBA_SAMPLES", "pick_engine", "padlen_for",
            "sosfiltfilt", "sosfiltfilt_pair", "extended", "filter_extended",
@@ -76,6 +81,7 @@ def pick_engine(engine: str = "auto", work: int = 0) -> str:
     if engine == "scipy":
         return "scipy"
     if engine == "auto" and not (HAVE_NUMBA and ("numba" in sys.modules
+                                                 or "scipy.signal" not in sys.modules
                                                  or work >= NUMBA_SAMPLES)):
         return "scipy"
     if HAVE_NUMBA and _kernels() is not None:
@@ -103,9 +109,7 @@ def _zi(sos: np.ndarray) -> np.ndarray:
     key = sos.tobytes()
     zi = _ZI.get(key)
     if zi is None:
-        from scipy import signal
-
-        zi = signal.sosfilt_zi(sos)
+        zi = sosfilt_zi(sos)
         with _ZI_LOCK:
             if len(_ZI) > 64:
                 _ZI.clear()

@@ -33,9 +33,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import welch
 
 from ._crb import welch_dof
+from .spectral import welch
 from .validate import as_float, as_positive
 
 __all__ = ["NoiseSpectrum", "pulse_residual_psd"]
@@ -141,8 +141,7 @@ def pulse_residual_psd(x, fs: float, t0: float, times, *, skip: float = 0.0) -> 
     n_seg = (r.size - nperseg) // (nperseg // 2) + 1
     if n_seg < MIN_SEGMENTS:
         return None
-    f, p = welch(r, fs=fs, window="hann", nperseg=nperseg, noverlap=nperseg // 2,
-                 detrend="constant", scaling="density")
+    f, p = welch(r, fs, nperseg, noverlap=nperseg // 2, detrend="constant")
     g = np.sum(np.abs(np.fft.rfft(basis, axis=1)) ** 2, axis=0) / basis.shape[1]
     fg = np.fft.rfftfreq(basis.shape[1], 1.0 / fs)      # share of the noise the fit took
     p = p / (1.0 - np.clip(np.interp(f, fg, g), 0.0, 0.5))

@@ -70,7 +70,7 @@ from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
 import numpy as np
-from scipy import ndimage, signal
+from scipy import ndimage
 
 from . import iir
 from .condition import (_apply_finite, _block_means, _block_medians, _check_freq, _drift_window,
@@ -80,6 +80,7 @@ from .condition import (_apply_finite, _block_means, _block_medians, _check_freq
 from .errors import DataQualityWarning
 from .quality import ChannelQuality, ChannelScan, _RunTracker, merge_runs, quality_from_scan
 from .recording import ChannelSpec, Recording
+from .savgol import savgol_filter
 from .threads import read_ahead, thread_pool
 from .validate import as_choice, as_positive
 
@@ -1147,7 +1148,7 @@ class _Drift:
         if self.method == "median":
             base = ndimage.median_filter(win, size=2 * h + 1, mode="nearest")
         else:
-            base = signal.savgol_filter(win, 17, 2, mode="interp")
+            base = savgol_filter(win, 17, 2)
         new = base[j_start - lo:j_stop - lo]
         self.bv = np.concatenate([self.bv, new])
         self.bc = np.concatenate([self.bc, self.fc[j_start - self.f0:j_stop - self.f0]])

@@ -85,3 +85,60 @@ def test_cli_start_up_loads_no_solver(tmp_path, argv):
                          capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == "", f"meshphase {' '.join(argv)} loaded {res.stdout.strip()}"
+
+
+def test_processing_import_leaves_scipy_signal_and_stats_out():
+    # scipy.signal imports scipy.stats (find_peaks_cwt), 0.5-0.8 s of every start; the
+    # processing takes its filter designs, smoother and spectra from meshphase.sos_design,
+    # .savgol and .spectral instead (tests/processing/test_dsp_designs.py holds them to scipy)
+    code = ("import sys, meshphase.stages; "
+            "print(','.join(sorted(m for m in sys.modules if m in ('scipy.signal', 'scipy.stats'))))")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "", f"meshphase.stages loaded {res.stdout.strip()}"
+
+
+def test_process_command_runs_without_scipy_signal_or_stats(tmp_path):
+    # the whole `meshphase process FILE` of a file scene, start to finish: nothing of
+    # scipy.signal, scipy.stats, the synthetic generator, dask, pandas or matplotlib. Its
+    # filters run on numba when installed (meshphase.iir.pick_engine: one of numba and
+    # scipy.signal must load, numba's kernel is the faster); without numba they need scipy.signal
+    pytest.importorskip("numba")
+    from seed_rig_toml import SEED_RIG_GEARSET
+
+    import meshphase.io
+    from meshphase.synthetic import generate
+
+    rec, _ = generate("seed_rig", duration=40.0, seed=5)
+    path = meshphase.io.write(rec, tmp_path / "rig.h5")
+    gs = tmp_path / "gearset.toml"
+    gs.write_text('name = "seed rig gearset"\n' + SEED_RIG_GEARSET, encoding="utf-8")
+    code = ("import sys, contextlib, io\n"
+            "from meshphase.cli import main\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            "    rc = main(['-q', 'process', sys.argv[1], '--gearset', sys.argv[2], '--out', sys.argv[3]])\n"
+            "assert rc == 0, rc\n"
+            "bad = {'scipy.signal', 'scipy.stats', 'dask', 'distributed', 'pandas', 'matplotlib'}\n"
+            "print(','.join(sorted(m for m in sys.modules if m in bad or m.startswith('meshphase.synthetic'))))")
+    res = subprocess.run([sys.executable, "-c", code, str(path), str(gs), str(tmp_path / "out")],
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert res.stdout.strip() == "", f"meshphase process loaded {res.stdout.strip()}"
+    assert (tmp_path / "out" / "summary.json").is_file()
+
+
+def test_process_of_a_missing_file_fails_before_the_stages_load(tmp_path):
+    # a mistyped recording path is reported before the stages (scipy, numba) are imported
+    gs = tmp_path / "gearset.toml"
+    gs.write_text("name = 'x'\n", encoding="utf-8")
+    code = ("import sys, contextlib, io\n"
+            "from meshphase.cli import main\n"
+            "err = io.StringIO()\n"
+            "with contextlib.redirect_stderr(err):\n"
+            "    rc = main(['-q', 'process', sys.argv[1], '--gearset', sys.argv[2]])\n"
+            "assert rc == 1 and 'no such file' in err.getvalue(), (rc, err.getvalue())\n"
+            "print(','.join(sorted({m.split('.')[0] for m in sys.modules} & set(sys.argv[3:]))))")
+    res = subprocess.run([sys.executable, "-c", code, str(tmp_path / "missing.h5"), str(gs),
+                          *STARTUP_HEAVY], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "", f"a failed process loaded {res.stdout.strip()}"

@@ -44,6 +44,9 @@ def _cases(h5: Path) -> list:
             ("meshphase info FILE.h5 --no-quality", cli(["info", str(h5), "--no-quality"])),
             ("meshphase info FILE.h5", cli(["info", str(h5)])),
             ("import meshphase.stages (what process loads)", f"import meshphase.stages; {_COUNT}"),
+            # what the filters' scipy engine adds (process takes numba's kernel instead when
+            # numba is installed: meshphase.iir.pick_engine)
+            ("import meshphase.stages, scipy.signal", f"import meshphase.stages, scipy.signal; {_COUNT}"),
             # what process loaded while pandas wrote its CSV tables (meshphase.table_csv now)
             ("import meshphase.stages, pandas", f"import meshphase.stages, pandas; {_COUNT}")]
 

@@ -7,7 +7,10 @@ import functools
 import math
 
 import numpy as np
-from scipy import ndimage, signal
+from scipy import ndimage
+
+from ..savgol import savgol_coeffs, savgol_filter
+from ..spectral import resample
 
 __all__: list[str] = []
 
@@ -34,7 +37,7 @@ def _crossing_right(y: np.ndarray, start: int, level: float) -> float:
 @functools.lru_cache(maxsize=64)
 def _savgol_cubic(window: int) -> np.ndarray:
     """The cubic Savitzky-Golay smoothing coefficients of ``window`` samples (read-only)."""
-    c = signal.savgol_coeffs(window, 3)
+    c = savgol_coeffs(window, 3)
     c.flags.writeable = False
     return c
 
@@ -73,7 +76,7 @@ def _template_features(h: np.ndarray, reference: str, level: float):
     if u > 1:
         pad = 8
         buf = np.concatenate([np.zeros(pad), h, np.zeros(pad)])
-        hu = signal.resample(buf, buf.size * u)
+        hu = resample(buf, buf.size * u)
         off = pad * u
     else:
         hu, off = h, 0
@@ -124,7 +127,7 @@ def _features_fit(h: np.ndarray, i0: int, w0: float, reference: str, level: floa
         if not np.isfinite(g) or not np.isfinite(hs[min(max(k, 0), n - 1)]):
             # not found inside, or searched from an end: on the full filter, ends fitted
             if full is None:
-                full = signal.savgol_filter(h, window, 3)
+                full = savgol_filter(h, window, 3)
             g = _crossing_left(full, k, lvl) if side < 0 else _crossing_right(full, k, lvl)
         if not np.isfinite(g):
             return float("nan")

@@ -13,8 +13,8 @@ import math
 
 import numpy as np
 from scipy import fft as sfft
-from scipy import signal
 
+from ..spectral import tukey
 from ..validate import as_choice, as_float, as_positive, as_positive_int, as_signal
 from .coarse import _coarse_dec, _decimate, _decimation, _fill_nan
 from .features import _template_features
@@ -41,7 +41,7 @@ def _normalise(h: np.ndarray) -> np.ndarray | None:
     top = h.max()
     if not top > 0:
         return None
-    return (h / top) * signal.windows.tukey(h.size, _TAPER)
+    return (h / top) * tukey(h.size, _TAPER)
 
 
 def _frac_advance(w: np.ndarray, frac: np.ndarray) -> np.ndarray:

@@ -122,9 +122,13 @@ def test_pick_engine_rule(monkeypatch):
     # must not be imported afresh while it is out of sys.modules)
     monkeypatch.setattr(iir, "_kernels", lambda: object())
     monkeypatch.delitem(sys.modules, "numba", raising=False)
+    monkeypatch.setitem(sys.modules, "scipy.signal", sys.modules.get("scipy.signal", object()))
     assert iir.pick_engine("auto", iir.NUMBA_SAMPLES - 1) == "scipy"      # numba's import would not pay
     assert iir.pick_engine("auto", iir.NUMBA_SAMPLES) == "numba"
     assert iir.pick_engine("numba", 0) == "numba"
+    monkeypatch.delitem(sys.modules, "scipy.signal")     # one of the two must load: numba's is faster
+    assert iir.pick_engine("auto", 0) == "numba"
+    monkeypatch.setitem(sys.modules, "scipy.signal", object())
     monkeypatch.setitem(sys.modules, "numba", object())                   # loaded already: free
     assert iir.pick_engine("auto", 0) == "numba"
 
