@@ -542,8 +542,10 @@ def _markdown(res: dict) -> str:
 
         lines += ["", "## Start-up: fresh interpreters, median wall time [s]", "",
                   "over_python_s = median minus that of `python -c pass`; modules = sys.modules "
-                  "at exit. `meshphase process` pays the stages' import (scipy.signal, which "
-                  "imports scipy.stats, and scipy.optimize) on top of `--version`.", ""]
+                  "at exit. `meshphase process` pays the stages' import (scipy.linalg, "
+                  ".interpolate, .optimize, .ndimage; not scipy.signal, which imports "
+                  "scipy.stats: its row shows what that would add) on top of `--version`, "
+                  "and the filters' numba kernel (`meshphase bench --warmup` times its load).", ""]
         lines += _md_table(res["startup"], STARTUP_COLUMNS)
     if res.get("identify"):
         lines += ["", "## identify: model evaluations and wall time per Jacobian", "",
