@@ -388,7 +388,8 @@ def _throughput_rows(fs, scen, n, rng):
         detect_onsets(x[: min(n, 1 << 18)], fs)          # warm-up (imports, FFT plans)
         # onsets end to end per core (width estimate, coarse, template, sub-sample
         # refinement): the default (template learnt once per operating point, numba
-        # kernels for dense blocks, see meshphase.onsets.fastpath), the same on the numpy
+        # kernels for every block: numba is loaded here, as in `process`, whose filters
+        # load it; see meshphase.onsets.fastpath), the same on the numpy
         # path alone (engine=numpy: the ratio shows what the kernels buy) and the template
         # re-learnt in every analysis block. Medians of three runs (CPU and wall time
         # apart); load_avg: the 1-minute load average after them (the machine may be

@@ -13,10 +13,14 @@ pulses per block) and in the coarse stage's run bookkeeping (``flatnonzero``, ``
   correlation sums are added in another order than BLAS adds them: ~1e-16 relative).
 
 Rule (``engine="auto"``, the default): the numba path serves a block when numba is
-importable and the block is dense: it can hold at least ``DENSE_PULSES`` pulses at the
-minimum spacing (coarse stage) or has at least ``DENSE_PULSES`` pulses to refine
-(refinement). Sparse blocks (pulses tens of samples wide or more) keep the numpy path, which
-is as fast there (long rows: BLAS pays) and does not load numba. ``engine="numba"`` uses
+importable and either already loaded in this process (as in ``process``, whose filters run
+on numba's kernel: :func:`meshphase.iir.pick_engine`) or the block is dense: it can hold at
+least ``DENSE_PULSES`` pulses at the minimum spacing (coarse stage) or has at least
+``DENSE_PULSES`` pulses to refine (refinement). With numba loaded, loading the onset
+kernels from the cache costs little (``meshphase bench --warmup`` prints it) and the
+kernels are also the faster on sparse blocks (the throughput table's auto rows against
+the ``engine=numpy`` rows); without it, sparse blocks (pulses tens of samples wide or
+more) keep the numpy path, which does not load numba for them. ``engine="numba"`` uses
 the kernels for every block, ``engine="numpy"`` never. ``meshphase bench processing``
 measures both engines per scenario.
 """
@@ -24,6 +28,7 @@ measures both engines per scenario.
 from __future__ import annotations
 
 import importlib.util
+import sys
 import time
 
 import numpy as np
@@ -68,7 +73,7 @@ def dense(engine: str, n_pulses: float) -> bool:
         return False
     if engine == "numba":
         return True
-    return HAVE_NUMBA and n_pulses >= DENSE_PULSES
+    return HAVE_NUMBA and ("numba" in sys.modules or n_pulses >= DENSE_PULSES)
 
 
 def run_maxima(ys: np.ndarray, thr: float, gap: int, long_len: float) -> np.ndarray:

@@ -2,6 +2,8 @@
 path's onsets: the same pulses, times and amplitudes to rounding, widths and flags equal,
 through gaps, clipped runs, edges, float32 input and streaming."""
 
+import sys
+
 import numpy as np
 import pytest
 
@@ -121,8 +123,13 @@ def test_auto_takes_the_numba_path_for_dense_blocks(monkeypatch, make_train):
         return real(*args, **kw)
 
     monkeypatch.setattr(engine, "refine_pulses", spy)
-    detect_onsets(x, FS)
+    with monkeypatch.context() as m:                # numba not loaded in this process
+        m.delitem(sys.modules, "numba", raising=False)
+        detect_onsets(x, FS)
     assert calls == []                              # 400 pulses: sparse, numpy path
+    detect_onsets(x, FS)
+    assert sum(calls) >= 350                        # numba loaded: its kernels are cheap and faster
+    calls.clear()
     monkeypatch.setattr(fastpath, "DENSE_PULSES", 100)
     a = detect_onsets(x, FS)
     assert calls and sum(calls) >= 350
@@ -131,6 +138,19 @@ def test_auto_takes_the_numba_path_for_dense_blocks(monkeypatch, make_train):
     calls.clear()
     assert_same(detect_onsets(x, FS), a)            # no numba: numpy, same onsets
     assert calls == []
+
+
+def test_dense_rule(monkeypatch):
+    # auto: numba for a dense block, or for any block once numba is loaded; never without it
+    monkeypatch.setattr(fastpath, "HAVE_NUMBA", True)
+    monkeypatch.delitem(sys.modules, "numba", raising=False)
+    assert not fastpath.dense("auto", fastpath.DENSE_PULSES - 1)
+    assert fastpath.dense("auto", fastpath.DENSE_PULSES)
+    assert fastpath.dense("numba", 0) and not fastpath.dense("numpy", 10 ** 9)
+    monkeypatch.setitem(sys.modules, "numba", object())
+    assert fastpath.dense("auto", 0)
+    monkeypatch.setattr(fastpath, "HAVE_NUMBA", False)
+    assert not fastpath.dense("auto", 10 ** 9)
 
 
 def test_coarse_run_maxima_bit_equal():
