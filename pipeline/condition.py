@@ -7,12 +7,13 @@ one entry to the recording's history.
 Steps
 -----
 ``filter_signal``
-    Zero-phase Butterworth band-, high- or low-pass (:func:`scipy.signal.sosfiltfilt`).
+    Zero-phase Butterworth band-, high- or low-pass (:func:`meshphase.sos_design.butter_sos`,
+    scipy.signal.butter's sections, run by :func:`meshphase.iir.sosfiltfilt`).
 ``remove_drift``
     Slow (thermal) drift removal: a robust moving-median baseline computed on block medians
     (default), a Savitzky-Golay baseline on block medians, or a zero-phase high-pass.
 ``notch_hum``
-    Mains hum (50/60 Hz and harmonics) notches (:func:`scipy.signal.iirnotch`, zero-phase),
+    Mains hum (50/60 Hz and harmonics) notches (scipy.signal.iirnotch's biquads, zero-phase),
     applied only to the lines :func:`detect_hum` finds above the local noise floor.
 ``assess_quality``
     Gaps (non-finite runs), NaN runs, DAQ dropout runs (exact zeros or a held value),
@@ -722,8 +723,9 @@ def notch_hum(x, fs: float, *, freqs: Sequence[float] | None = None, mains: str 
 
     Notes
     -----
-    Each line is a :func:`scipy.signal.iirnotch` biquad; all are cascaded as second-order
-    sections and applied forwards and backwards (:func:`scipy.signal.sosfiltfilt`).
+    Each line is a :func:`scipy.signal.iirnotch` biquad (:func:`meshphase.sos_design.notch_sos`);
+    all are cascaded as second-order sections and applied forwards and backwards
+    (:func:`meshphase.iir.sosfiltfilt`, scipy.signal.sosfiltfilt's arithmetic).
     """
     x = _as_signal(x)
     fs = as_positive(fs, "fs")

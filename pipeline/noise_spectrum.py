@@ -8,7 +8,7 @@ that RMS says, and the white bound is then optimistic. :func:`pulse_residual_psd
 the spectrum that bound needs from the conditioned samples the run keeps (the excerpt of the
 condition stage, the first minute): each pulse's window, one inter-pulse spacing long and
 centred on its onset, less the pulse shape fitted to it by least squares, and one Welch
-estimate (:func:`scipy.signal.welch`, Hann window, half overlap) of those residual windows
+estimate (:func:`meshphase.spectral.welch`, scipy.signal.welch's: Hann window, half overlap) of those residual windows
 laid end to end.
 
 The pulse shape is the synchronous average of the windows at full rate (amplitude-weighted,
