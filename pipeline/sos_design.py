@@ -29,14 +29,19 @@ __all__ = ["butter_sos", "notch_sos", "sosfilt_zi"]
 _KINDS = ("lowpass", "highpass", "bandpass")
 
 
-def _check_fs(fs) -> float:
+def _positive(v, what: str) -> float:
+    """``v`` as a positive, finite float; ValueError naming ``what`` otherwise."""
     try:
-        fs = float(fs)
+        f = float(v)
     except (TypeError, ValueError):
-        raise ValueError(f"fs must be a positive sample rate [Hz], got {fs!r}") from None
-    if not (fs > 0 and math.isfinite(fs)):
-        raise ValueError(f"fs must be a positive, finite sample rate [Hz], got {fs!r}")
-    return fs
+        f = float("nan")
+    if not (f > 0 and math.isfinite(f)):
+        raise ValueError(f"{what} must be positive and finite, got {v!r}")
+    return f
+
+
+def _check_fs(fs) -> float:
+    return _positive(fs, "fs (the sample rate [Hz])")
 
 
 def _check_corner(f, fs: float, what: str) -> float:
@@ -255,12 +260,7 @@ def notch_sos(freqs, q: float, fs: float) -> np.ndarray:
         No line, a line outside (0, fs/2), a non-positive ``q`` or ``fs``.
     """
     fs = _check_fs(fs)
-    try:
-        q = float(q)
-    except (TypeError, ValueError):
-        raise ValueError(f"q must be a positive quality factor, got {q!r}") from None
-    if not (q > 0 and math.isfinite(q)):
-        raise ValueError(f"q must be a positive, finite quality factor, got {q!r}")
+    q = _positive(q, "q (the quality factor)")
     freqs = [_check_corner(f, fs, "a notch line") for f in np.atleast_1d(np.asarray(freqs, dtype=object))]
     if not freqs:
         raise ValueError("notch_sos needs at least one line [Hz], got none")

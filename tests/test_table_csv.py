@@ -4,9 +4,6 @@ reference here: the files' format is what users' scripts already read)."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
 import pandas as pd
 import pytest
@@ -85,27 +82,3 @@ def test_empty_and_bad_input(tmp_path):
         write_csv({"a": np.zeros(2), "b": np.zeros(3)}, tmp_path / "x.csv")
     with pytest.raises(FileNotFoundError):
         write_csv([{"a": 1}], tmp_path / "no" / "x.csv")
-
-
-def test_process_writes_its_tables_without_pandas(tmp_path):
-    """A whole ``process`` run, tables written, loads no pandas (it cost ~0.33 s a run)."""
-    from seed_rig_toml import SEED_RIG_GEARSET
-
-    import meshphase.io
-    from meshphase.synthetic import generate
-
-    rec, _ = generate("seed_rig", duration=40.0, seed=5)
-    path = meshphase.io.write(rec, tmp_path / "rig.h5")
-    gs = tmp_path / "gearset.toml"
-    gs.write_text('name = "seed rig gearset"\n' + SEED_RIG_GEARSET, encoding="utf-8")
-    code = ("import sys\n"
-            "from meshphase.cli import main\n"
-            "rc = main(['-q', 'process', sys.argv[1], '--gearset', sys.argv[2], '--out', sys.argv[3]])\n"
-            "print(rc, 'pandas' in sys.modules)")
-    res = subprocess.run([sys.executable, "-c", code, str(path), str(gs), str(tmp_path / "out")],
-                         capture_output=True, text=True)
-    assert res.returncode == 0, res.stderr
-    assert res.stdout.split()[-2:] == ["0", "False"], res.stdout + res.stderr
-    assert (tmp_path / "out" / "passes_sun.csv").is_file()
-    df = pd.read_csv(tmp_path / "out" / "passes_sun.csv")
-    assert len(df) > 10 and df["planet"].dtype.kind == "i" and df["gauge"].eq("sun").all()
