@@ -1,7 +1,8 @@
 """The numba build of the onset stage's per-pulse loops (:mod:`meshphase.onsets.fastpath`).
 
-Imported only when a dense block is processed on the numba engine, so that importing the
-onsets (and processing a recording of wide pulses) does not load numba and LLVM. Compiled
+Imported when a block takes the numba engine (a dense block, or any block once numba is
+loaded in the process), so that importing the onsets, or processing a recording of wide
+pulses where numba is not loaded, does not load numba and LLVM. Compiled
 functions are cached (``cache=True``) in the per-user directory
 :func:`meshphase.numba_cache.numba_cache_dir` names unless ``NUMBA_CACHE_DIR`` is set
 (``meshphase bench --warmup`` fills it). ``fastmath`` stays off: the arithmetic is the numpy
