@@ -57,6 +57,7 @@ class _Engine:
         self.n_fallback = 0
         self.n_dropped_gap = 0
         self.warned_width = False
+        self._matcher: tuple | None = None   # (template, k, u, _Matcher): reused while they hold
 
     # ---------------------------------------------------------------- buffer
     def feed(self, arr: np.ndarray) -> None:
@@ -322,7 +323,7 @@ class _Engine:
         o = self.o
         d = self.d
         k_ref = max(kk, 2)
-        mt = _Matcher(tpl, k_ref, _sublags(tpl.fwhm * o.fs / d))
+        mt = self._matcher_for(tpl, k_ref, _sublags(tpl.fwhm * o.fs / d))
         L = mt.L
         if dense(o.engine, peaks.size):
             *res, a = refine_pulses(yd, peaks, mt.anchor, k_ref, mt.u, mt.t_all, mt.e0,
@@ -352,6 +353,15 @@ class _Engine:
         a = lo + np.floor(pos_d).astype(np.int64) * d
         self._run_flags(flags, a, a + (L + 1) * d, gaps)
         return index, amp, ncc, width, flags
+
+    def _matcher_for(self, tpl: Template, k: int, u: int) -> _Matcher:
+        """The matcher of ``tpl`` at ``k`` lags and ``u`` sub-lags: built once and reused by
+        the blocks that reuse the template (it is read-only; its shifted template columns
+        are the costly part)."""
+        m = self._matcher
+        if m is None or m[0] is not tpl or m[1] != k or m[2] != u:
+            m = self._matcher = (tpl, k, u, _Matcher(tpl, k, u))
+        return m[3]
 
     def _run_flags(self, flags, a, b, gaps) -> None:
         """Flag (in place) the pulse windows ``[a, b)`` [full-rate samples] that touch a

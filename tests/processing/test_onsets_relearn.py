@@ -51,6 +51,37 @@ def test_auto_learns_once_on_a_steady_run_and_keeps_the_accuracy(make_train):
     assert errs[0] < 1.5 * crb
 
 
+def test_a_reused_template_reuses_its_matcher(make_train, monkeypatch):
+    # the matched filter's shifted template columns are built once per template, not per
+    # block: on a steady run (one template, 8 blocks) the refinement builds one matcher
+    # (the learning builds its own), and the onsets equal those of a matcher per block
+    import meshphase.onsets.engine as engine
+
+    x, _, _ = make_train(n_pulses=400, snr_db=20.0, rng=31)
+    built = []
+    real = engine._Matcher
+
+    class Counting(real):
+        def __init__(self, *a):
+            built.append(a[1:])
+            super().__init__(*a)
+
+    monkeypatch.setattr(engine, "_Matcher", Counting)
+    auto = detect_onsets(x, FS, block=2.4, engine="numpy")
+    assert len(auto.templates) == 1 and len(built) == 1
+    fresh = []
+
+    def per_block(self, tpl, k, u):
+        fresh.append(k)
+        return real(tpl, k, u)
+
+    monkeypatch.setattr(engine._Engine, "_matcher_for", per_block)
+    again = detect_onsets(x, FS, block=2.4, engine="numpy")
+    assert len(fresh) >= 7
+    np.testing.assert_array_equal(again.index, auto.index)
+    np.testing.assert_array_equal(again.corr, auto.corr)
+
+
 def test_auto_relearns_on_a_speed_step(make_train):
     # the speed steps by 10 % after two blocks: the template is learnt again there
     a, ta, _ = make_train(mesh_samples=40, spacing_samples=240, n_pulses=120, snr_db=25.0, rng=1)
