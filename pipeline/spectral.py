@@ -53,9 +53,9 @@ def tukey(m: int, alpha: float = 0.5) -> np.ndarray:
         raise ValueError(f"alpha must be finite, got {alpha!r}")
     if m <= 1 or alpha <= 0:
         return np.ones(m)
-    n = np.arange(0, m, dtype=np.float64)
     if alpha >= 1.0:
         return _hann_sym(m)
+    n = np.arange(0, m, dtype=np.float64)
     width = int(math.floor(alpha * (m - 1) / 2.0))
     n1, n2, n3 = n[0:width + 1], n[width + 1:m - width - 1], n[m - width - 1:]
     w1 = 0.5 * (1 + np.cos(np.pi * (-1 + 2.0 * n1 / alpha / (m - 1))))
