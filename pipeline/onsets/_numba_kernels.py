@@ -6,8 +6,9 @@ pulses where numba is not loaded, does not load numba and LLVM. Compiled
 functions are cached (``cache=True``) in the per-user directory
 :func:`meshphase.numba_cache.numba_cache_dir` names unless ``NUMBA_CACHE_DIR`` is set
 (``meshphase bench --warmup`` fills it). ``fastmath`` stays off: the arithmetic is the numpy
-path's, in its order, except the correlation sums (BLAS sums in its own order; here each
-column is summed in sample order, with fused multiply-adds).
+path's, in its order, except the window sums of the NCC and baseline (numpy: BLAS and
+einsum; here each in sample order). The correlations are BLAS's matrix product, as on the
+numpy path, on 32 windows at a time (numba's ``np.dot`` calls the BLAS scipy ships).
 """
 
 from __future__ import annotations
@@ -87,24 +88,7 @@ def _round_half_even(x):  # pragma: no cover - compiled
     return i
 
 
-_CHUNK = 32        # pulses correlated together (windows and sums stay in L1)
-
-
-@_numba.njit(cache=True, nogil=True, fastmath={"contract"})
-def _correlate(wt, t_all, c, m):  # pragma: no cover - compiled
-    """``c[j, p] = sum_t wt[t, p] t_all[t, j]`` for the first ``m`` pulses (columns) of the
-    transposed windows ``wt``: the inner loop runs over pulses, contiguous, and vectorises
-    (a loop per pulse over its 13-29 short columns does not), each sum in sample order."""
-    lw, ncol = t_all.shape
-    for j in range(ncol):
-        cj = c[j]
-        for p in range(m):
-            cj[p] = 0.0
-        for t in range(lw):
-            tv = t_all[t, j]
-            wr = wt[t]
-            for p in range(m):
-                cj[p] += wr[p] * tv
+_CHUNK = 32        # pulses correlated together (one small matrix product; windows in L1)
 
 
 @_numba.njit(cache=True, nogil=True)
@@ -113,28 +97,31 @@ def _refine_pulses(yd, peaks, anchor, k, u, t_all, e0, tensile, n_base, lo, d, r
                    index, amp, ncc, width, flags, a_out):  # pragma: no cover - compiled
     """Matched-filter refinement of every pulse, 32 at a time (see ``_Matcher.match`` and
     ``_Engine._refine``, whose arithmetic this repeats pulse by pulse): windows gathered
-    and correlated at the (sub-)lags, then each step done for the whole chunk before the
-    next (independent pulses interleave instead of one long dependency chain per pulse):
-    first maximum, parabolic peak, NCC and width on the window at the nearest integer
-    lag, onset index, amplitude and flags; ``a_out`` the first full-rate sample of each
-    pulse window (for the gap and clipping flags)."""
+    as the rows of a matrix and correlated at the (sub-)lags by one BLAS product with the
+    template's lagged columns, as the numpy path's ``w @ t_all`` does (a compiled loop
+    over the sums took 3-5x as long: ``meshphase bench processing``, the onset rows of the
+    wide and dense scenarios), then each step done for the whole chunk before the next
+    (independent pulses interleave instead of one long dependency chain per pulse): first
+    maximum, parabolic peak, NCC and width on the window at the nearest integer lag, onset
+    index, amplitude and flags; ``a_out`` the first full-rate sample of each pulse window
+    (for the gap and clipping flags)."""
     n = yd.shape[0]
     lw, ncol = t_all.shape
     L = lw - 2 * k
-    wt = np.empty((lw, _CHUNK))
-    cc = np.empty((ncol, _CHUNK))
-    jm = np.empty(_CHUNK, dtype=np.int64)
-    lag = np.empty(_CHUNK)
-    cmax = np.empty(_CHUNK)
-    mi = np.empty(_CHUNK, dtype=np.int64)
-    s1 = np.empty(_CHUNK)
-    s2 = np.empty(_CHUNK)
-    bs = np.empty(_CHUNK)
-    cnt = np.empty(_CHUNK, dtype=np.int64)
-    for i0 in range(0, peaks.shape[0], _CHUNK):
-        m = min(_CHUNK, peaks.shape[0] - i0)
-        _gather_t(yd, peaks, i0, m, anchor + k, wt)
-        _correlate(wt, t_all, cc, m)
+    ch = _CHUNK
+    wr = np.zeros((ch, lw))
+    cc = np.empty((ch, ncol))
+    jm = np.empty(ch, dtype=np.int64)
+    lag = np.empty(ch)
+    cmax = np.empty(ch)
+    mi = np.empty(ch, dtype=np.int64)
+    s1 = np.empty(ch)
+    s2 = np.empty(ch)
+    bs = np.empty(ch)
+    for i0 in range(0, peaks.shape[0], ch):
+        m = min(ch, peaks.shape[0] - i0)
+        _gather_rows(yd, peaks, i0, m, anchor + k, wr)
+        np.dot(wr, t_all, cc)                    # rows past m: earlier windows, unused
         _first_max(cc, m, jm)
         for p in range(m):
             lag[p], cmax[p] = _parabola(cc, p, jm[p], k, u)
@@ -142,24 +129,23 @@ def _refine_pulses(yd, peaks, anchor, k, u, t_all, e0, tensile, n_base, lo, d, r
             s1[p] = 0.0
             s2[p] = 0.0
             bs[p] = 0.0
-            cnt[p] = 0
         for t in range(L):                       # NCC sums, sample order per pulse
             for p in range(m):
-                v = wt[mi[p] + t, p]
+                v = wr[p, mi[p] + t]
                 s1[p] += v
                 s2[p] += v * v
         for t in range(n_base):                  # baseline: first and last n_base samples
             for p in range(m):
-                bs[p] += wt[mi[p] + t, p]
+                bs[p] += wr[p, mi[p] + t]
         for t in range(L - n_base, L):
             for p in range(m):
-                bs[p] += wt[mi[p] + t, p]
+                bs[p] += wr[p, mi[p] + t]
         for p in range(m):
             a = cmax[p] / e0
             half = bs[p] / (2 * n_base) + 0.5 * a
             c = 0
             for q in range(tensile.shape[0]):
-                c += wt[mi[p] + tensile[q], p] > half
+                c += wr[p, mi[p] + tensile[q]] > half
             var = max(s2[p] - s1[p] * s1[p] / L, 0.0)
             norm = np.sqrt(var * e0)
             r = cmax[p] / norm if norm > 0 else 0.0
@@ -181,29 +167,29 @@ def _refine_pulses(yd, peaks, anchor, k, u, t_all, e0, tensile, n_base, lo, d, r
 
 
 @_numba.njit(cache=True, nogil=True, inline="always")
-def _gather_t(yd, peaks, i0, m, shift, wt):  # pragma: no cover - compiled
-    """Windows of pulses ``i0 .. i0 + m - 1`` as the columns of ``wt`` (samples past the
+def _gather_rows(yd, peaks, i0, m, shift, wr):  # pragma: no cover - compiled
+    """Windows of pulses ``i0 .. i0 + m - 1`` as the rows of ``wr`` (samples past the
     ends of ``yd`` repeat the edge sample)."""
     n = yd.shape[0]
-    lw = wt.shape[0]
+    lw = wr.shape[1]
     for p in range(m):
         start = peaks[i0 + p] - shift
         if start < 0 or start + lw > n:
             for t in range(lw):
-                wt[t, p] = yd[min(max(start + t, 0), n - 1)]
+                wr[p, t] = yd[min(max(start + t, 0), n - 1)]
         else:
             for t in range(lw):
-                wt[t, p] = yd[start + t]
+                wr[p, t] = yd[start + t]
 
 
 @_numba.njit(cache=True, nogil=True, inline="always")
 def _first_max(cc, m, jm):  # pragma: no cover - compiled
-    """``jm[p]``: the first row of the maximum of column ``p`` of ``cc`` (np.argmax)."""
+    """``jm[p]``: the first column of the maximum of row ``p`` of ``cc`` (np.argmax)."""
     for p in range(m):
-        best = cc[0, p]
+        best = cc[p, 0]
         j_best = 0
-        for j in range(1, cc.shape[0]):
-            v = cc[j, p]
+        for j in range(1, cc.shape[1]):
+            v = cc[p, j]
             if v > best:
                 best = v
                 j_best = j
@@ -213,11 +199,11 @@ def _first_max(cc, m, jm):  # pragma: no cover - compiled
 @_numba.njit(cache=True, nogil=True, inline="always")
 def _parabola(cc, p, jm, k, u):  # pragma: no cover - compiled
     """Lag [samples, relative to K] and height of the parabola through the maximum of
-    column ``p`` and its neighbours (the ends: through the next-inner three)."""
-    jc = min(max(jm, 1), cc.shape[0] - 2)
-    y0 = cc[jc - 1, p]
-    y1 = cc[jc, p]
-    y2 = cc[jc + 1, p]
+    row ``p`` and its neighbours (the ends: through the next-inner three)."""
+    jc = min(max(jm, 1), cc.shape[1] - 2)
+    y0 = cc[p, jc - 1]
+    y1 = cc[p, jc]
+    y2 = cc[p, jc + 1]
     den = y0 - 2.0 * y1 + y2
     dd = 0.5 * (y0 - y2) / den if den < 0 else 0.0
     dd = min(max(dd, -1.0), 1.0)
