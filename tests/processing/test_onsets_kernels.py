@@ -76,7 +76,7 @@ def test_gap_in_block_found_by_decimated_check():
        k=st.integers(0, 200))
 def test_unmasked_equals_span_counting(n, hh, seed, k):
     """The noise estimate's mask of the samples away from every maximum: slice by slice
-    (up to _SLICE_MAXIMA maxima) or by counting span starts and ends, the same mask."""
+    (a few maxima per _SLICE_SAMPLES samples) or by counting span starts and ends, the same mask."""
     from meshphase.onsets.coarse import _unmasked
 
     mx = np.unique(np.random.default_rng(seed).integers(0, n, size=k))
