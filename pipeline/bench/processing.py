@@ -202,6 +202,18 @@ class PulseShape:
         return float(t[above[-1]] - t[above[0]])
 
 
+#: samples of pulse rows worked on at a time by :func:`pulse_train` and
+#: :func:`pulse_scenario` (32 MB per float64 array: 2^24 samples of 2-sample pulses hold
+#: 1.1 million rows of 258 samples, 2.3 GB per array at once and ~16 GB of peak memory)
+_PULSE_ROW_SAMPLES = 1 << 22
+
+
+def _pulse_chunks(n_pulses: int, row: int):
+    """(first, stop) pulse ranges of at most ``_PULSE_ROW_SAMPLES // row`` pulses."""
+    step = max(1, _PULSE_ROW_SAMPLES // max(1, row))
+    return [(a, min(a + step, n_pulses)) for a in range(0, n_pulses, step)]
+
+
 def pulse_train(n: int, fs: float, contact_times, amplitudes, shape: PulseShape, *,
                 sigma: float = 0.0, rng=None, dtype=np.float64) -> np.ndarray:
     """Samples of a pulse train plus white Gaussian noise.
@@ -236,10 +248,11 @@ def pulse_train(n: int, fs: float, contact_times, amplitudes, shape: PulseShape,
         lo, hi = shape.support
         s = int(math.ceil((hi - lo) * fs)) + 2
         i0 = np.ceil((tcs + lo) * fs).astype(np.int64)
-        idx = i0[:, None] + np.arange(s)[None, :]
-        vals = amps[:, None] * shape.value(idx / fs - tcs[:, None])
-        m = (idx >= 0) & (idx < n)
-        np.add.at(x, idx[m], vals[m])
+        for a, b in _pulse_chunks(tcs.size, s):    # in pulse order: the same sums as at once
+            idx = i0[a:b, None] + np.arange(s)[None, :]
+            vals = amps[a:b, None] * shape.value(idx / fs - tcs[a:b, None])
+            m = (idx >= 0) & (idx < n)
+            np.add.at(x, idx[m], vals[m])
     if sigma > 0:
         x += rng.normal(0.0, as_nonnegative(sigma, "sigma"), x.size)
     return x.astype(dtype, copy=False)
@@ -270,10 +283,12 @@ def pulse_scenario(n: int, fs: float, shape: PulseShape, spacing: float, *, snr_
     x = pulse_train(n, fs, contact, amp, shape, sigma=sigma, rng=rng, dtype=dtype)
     s = int(math.ceil((hi - lo) * fs)) + 2
     i0 = np.ceil((contact + lo) * fs).astype(np.int64)
-    tt = (i0[:, None] + np.arange(s)[None, :]) / fs - contact[:, None]
-    der = amp[:, None] * shape.derivative(tt)
-    pul = amp[:, None] * shape.value(tt)
-    crb = crb_delay_std(der, sigma, pulse=pul) if n_p else np.empty(0)
+    crb = np.empty(n_p)
+    for a, b in _pulse_chunks(n_p, s):             # each pulse's bound on its own rows
+        tt = (i0[a:b, None] + np.arange(s)[None, :]) / fs - contact[a:b, None]
+        der = amp[a:b, None] * shape.derivative(tt)
+        pul = amp[a:b, None] * shape.value(tt)
+        crb[a:b] = crb_delay_std(der, sigma, pulse=pul)
     truth = {"contact": contact, "onset": contact + shape.rise_time(level), "amplitude": amp,
              "sigma": sigma, "crb": np.atleast_1d(crb)}
     return x, truth
