@@ -98,9 +98,8 @@ def _refine_pulses(yd, peaks, anchor, k, u, t_all, e0, tensile, n_base, lo, d, r
     """Matched-filter refinement of every pulse, 32 at a time (see ``_Matcher.match`` and
     ``_Engine._refine``, whose arithmetic this repeats pulse by pulse): windows gathered
     as the rows of a matrix and correlated at the (sub-)lags by one BLAS product with the
-    template's lagged columns, as the numpy path's ``w @ t_all`` does (a compiled loop
-    over the sums took 3-5x as long: ``meshphase bench processing``, the onset rows of the
-    wide and dense scenarios), then each step done for the whole chunk before the next
+    template's lagged columns, as the numpy path's ``w @ t_all`` does (BLAS's blocked
+    product is faster than a compiled loop over the sums), then each step done for the whole chunk before the next
     (independent pulses interleave instead of one long dependency chain per pulse): first
     maximum, parabolic peak, NCC and width on the window at the nearest integer lag, onset
     index, amplitude and flags; ``a_out`` the first full-rate sample of each pulse window
