@@ -99,26 +99,25 @@ def _refine_pulses(yd, peaks, anchor, k, u, t_all, e0, tensile, n_base, lo, d, r
     ``_Engine._refine``, whose arithmetic this repeats pulse by pulse): windows gathered
     as the rows of a matrix and correlated at the (sub-)lags by one BLAS product with the
     template's lagged columns, as the numpy path's ``w @ t_all`` does (BLAS's blocked
-    product is faster than a compiled loop over the sums), then each step done for the whole chunk before the next
-    (independent pulses interleave instead of one long dependency chain per pulse): first
-    maximum, parabolic peak, NCC and width on the window at the nearest integer lag, onset
-    index, amplitude and flags; ``a_out`` the first full-rate sample of each pulse window
-    (for the gap and clipping flags)."""
+    product is faster than a compiled loop over the sums), then each step done for the
+    whole chunk before the next (independent pulses interleave instead of one long
+    dependency chain per pulse): first maximum, parabolic peak, NCC and width on the window
+    at the nearest integer lag, onset index, amplitude and flags; ``a_out`` the first
+    full-rate sample of each pulse window (for the gap and clipping flags)."""
     n = yd.shape[0]
     lw, ncol = t_all.shape
     L = lw - 2 * k
-    ch = _CHUNK
-    wr = np.zeros((ch, lw))
-    cc = np.empty((ch, ncol))
-    jm = np.empty(ch, dtype=np.int64)
-    lag = np.empty(ch)
-    cmax = np.empty(ch)
-    mi = np.empty(ch, dtype=np.int64)
-    s1 = np.empty(ch)
-    s2 = np.empty(ch)
-    bs = np.empty(ch)
-    for i0 in range(0, peaks.shape[0], ch):
-        m = min(ch, peaks.shape[0] - i0)
+    wr = np.zeros((_CHUNK, lw))
+    cc = np.empty((_CHUNK, ncol))
+    jm = np.empty(_CHUNK, dtype=np.int64)
+    lag = np.empty(_CHUNK)
+    cmax = np.empty(_CHUNK)
+    mi = np.empty(_CHUNK, dtype=np.int64)
+    s1 = np.empty(_CHUNK)
+    s2 = np.empty(_CHUNK)
+    bs = np.empty(_CHUNK)
+    for i0 in range(0, peaks.shape[0], _CHUNK):
+        m = min(_CHUNK, peaks.shape[0] - i0)
         _gather_rows(yd, peaks, i0, m, anchor + k, wr)
         np.dot(wr, t_all, cc)                    # rows past m: earlier windows, unused
         _first_max(cc, m, jm)
