@@ -395,7 +395,7 @@ def cmd_run(args) -> int:
 
 
 def cmd_process(args) -> int:
-    # both files checked before the stages' imports: a mistyped path fails in ~0.2 s
+    # both files checked before the stages' imports: a mistyped path fails before they load
     as_regular_file(args.file, "the recording")
     as_regular_file(args.gearset, "the gearset scene (--gearset)")
     from .stages import process_recording  # heavy (scipy): see the module docstring

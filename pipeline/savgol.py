@@ -11,10 +11,12 @@ scale, as another LAPACK build may order its sums differently).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy import linalg, ndimage
 
-__all__ = ["savgol_coeffs", "savgol_filter"]
+__all__ = ["savgol_coeffs", "savgol_coeffs_cached", "savgol_filter"]
 
 
 def _check(window_length, polyorder) -> tuple[int, int]:
@@ -58,6 +60,22 @@ def savgol_coeffs(window_length: int, polyorder: int) -> np.ndarray:
     y = np.zeros(polyorder + 1)
     y[0] = 1.0
     return linalg.lstsq(a, y, cond=np.finfo(np.float64).eps * max(a.shape))[0]
+
+
+@functools.lru_cache(maxsize=64)
+def savgol_coeffs_cached(window_length: int, polyorder: int) -> np.ndarray:
+    """:func:`savgol_coeffs`, computed once per (``window_length``, ``polyorder``) and
+    returned read-only (the streamed drift baseline and the onsets' template features ask
+    for the same few windows block after block).
+
+    Raises
+    ------
+    ValueError
+        As :func:`savgol_coeffs` (nothing is cached then).
+    """
+    c = savgol_coeffs(window_length, polyorder)
+    c.flags.writeable = False
+    return c
 
 
 def _fit_edge(x: np.ndarray, y: np.ndarray, start: int, stop: int, i0: int, i1: int,
@@ -112,7 +130,7 @@ def savgol_filter(x, window_length: int, polyorder: int) -> np.ndarray:
     n = x.shape[0]
     if window_length > n:
         raise ValueError(f"window_length ({window_length}) must not exceed the samples ({n})")
-    y = ndimage.convolve1d(x, savgol_coeffs(window_length, polyorder), mode="constant")
+    y = ndimage.convolve1d(x, savgol_coeffs_cached(window_length, polyorder), mode="constant")
     half = window_length // 2
     _fit_edge(x, y, 0, window_length, 0, half, polyorder)
     _fit_edge(x, y, n - window_length, n, n - half, n, polyorder)

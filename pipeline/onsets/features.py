@@ -3,13 +3,12 @@ sample (least-squares fits on the template, not its noisy extremes)."""
 
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
 from scipy import ndimage
 
-from ..savgol import savgol_coeffs, savgol_filter
+from ..savgol import savgol_coeffs_cached, savgol_filter
 from ..spectral import resample
 
 __all__: list[str] = []
@@ -34,20 +33,12 @@ def _crossing_right(y: np.ndarray, start: int, level: float) -> float:
     return k - 1 + (y[k - 1] - level) / (y[k - 1] - y[k])
 
 
-@functools.lru_cache(maxsize=64)
-def _savgol_cubic(window: int) -> np.ndarray:
-    """The cubic Savitzky-Golay smoothing coefficients of ``window`` samples (read-only)."""
-    c = savgol_coeffs(window, 3)
-    c.flags.writeable = False
-    return c
-
-
 def _savgol_interior(h: np.ndarray, window: int) -> np.ndarray:
-    """``signal.savgol_filter(h, window, 3)`` inside, NaN in the ``window // 2`` samples at
+    """``savgol_filter(h, window, 3)`` inside, NaN in the ``window // 2`` samples at
     each end: the same convolution with the same coefficients (bit for bit) without the
     polynomial fits of the ends, which cost most of the filter's time and which a level
     crossing of a template seldom reaches (one that does is recomputed on the full filter)."""
-    hs = ndimage.convolve1d(h, _savgol_cubic(window), mode="constant")
+    hs = ndimage.convolve1d(h, savgol_coeffs_cached(window, 3), mode="constant")
     e = window // 2
     if e:
         hs[:e] = np.nan

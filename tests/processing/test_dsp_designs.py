@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import signal
 
-from meshphase.savgol import savgol_coeffs, savgol_filter
+from meshphase.savgol import savgol_coeffs, savgol_coeffs_cached, savgol_filter
 from meshphase.sos_design import butter_sos, notch_sos, sosfilt_zi
 from meshphase.spectral import resample, tukey, welch
 
@@ -158,6 +158,20 @@ def test_savgol_bad_input(args, match):
     if args[1] != 5.0 and isinstance(args[1], int) and not 0 <= args[2] < args[1]:
         with pytest.raises(ValueError):
             savgol_coeffs(args[1], args[2])
+
+
+def test_savgol_cached_coefficients_are_read_only_and_equal():
+    # one cache for the drift baseline and the template features: the same coefficients,
+    # computed once, and no caller can change them for the next
+    c = savgol_coeffs_cached(17, 2)
+    assert c is savgol_coeffs_cached(17, 2)
+    np.testing.assert_array_equal(c, savgol_coeffs(17, 2))
+    with pytest.raises(ValueError):
+        c[0] = 1.0
+    assert savgol_coeffs_cached(1, 0).tolist() == [1.0]              # the shortest window
+    for bad in ((0, 0), (5, 5), (5, -1)):
+        with pytest.raises(ValueError):
+            savgol_coeffs_cached(*bad)
 
 
 # ---------------------------------------------------------------------------- windows, Welch, resample
