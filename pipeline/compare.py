@@ -36,7 +36,7 @@ from scipy.optimize import least_squares
 from .errors import ProcessingWarning
 from .models.gearset import Gearset, Speeds
 from .models.mesh_phasing import ShaftHoleErrors, ideal_phasing, mesh_angle_deviations
-from .models.phasing_jacobian import mesh_angle_gradient, n_offset_parameters
+from .models.phasing_jacobian import MeshGradientPlan, n_offset_parameters
 from .phasing import PassTable, nearest_index, pass_order
 from .validate import as_choice, as_positive, as_positive_int
 
@@ -350,22 +350,33 @@ def _gamma_of(setup: _PassSetup, gearset: Gearset, d_lag: np.ndarray) -> np.ndar
     return np.where(g >= 1.0, 0.0, g)  # x % 1.0 rounds to 1.0 for x = -tiny
 
 
-def _gamma_and_jacobian(setup: _PassSetup, gearset: Gearset, errors) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`pass_phasing_jacobian` on a prepared table."""
+def _gradient_plan(setup: _PassSetup, gearset: Gearset) -> MeshGradientPlan:
+    """The rotations of the rows ``setup.ok``, prepared once
+    (:class:`~meshphase.models.phasing_jacobian.MeshGradientPlan`): the passes' own planets
+    at their times, followed by planet 1 at the reference times."""
+    ok = setup.ok
+    return MeshGradientPlan(np.concatenate([setup.tau_n[ok], setup.tau_1[ok]]),
+                            np.concatenate([setup.index[ok] + 1,
+                                            np.ones(np.count_nonzero(ok), dtype=np.intp)]),
+                            gearset, setup.speeds, mesh=setup.mesh)
+
+
+def _gamma_and_jacobian(setup: _PassSetup, gearset: Gearset, errors,
+                        plan: MeshGradientPlan | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`pass_phasing_jacobian` on a prepared table (``plan``: its
+    :func:`_gradient_plan`, made here when not given)."""
     n = setup.ok.size
     gamma = np.full(n, np.nan)
     jac = np.full((n, n_offset_parameters(gearset.n_planets)), np.nan)
     ok = setup.ok
     if not np.any(ok):
         return gamma, jac
-    d_n, j_n = mesh_angle_gradient(setup.tau_n[ok], setup.index[ok] + 1, gearset, setup.speeds,
-                                   errors, mesh=setup.mesh)
-    d_1, j_1 = mesh_angle_gradient(setup.tau_1[ok], 1, gearset, setup.speeds, errors,
-                                   mesh=setup.mesh)
+    d, j = (_gradient_plan(setup, gearset) if plan is None else plan).evaluate(errors)
+    m = np.count_nonzero(ok)
     if errors is None or errors.is_zero:     # as predict_pass_phasing: exactly the ideal
-        d_n = d_1 = np.zeros(np.count_nonzero(ok))
-    gamma[ok] = _gamma_of(setup, gearset, d_n - d_1)
-    jac[ok] = (setup.o * setup.z / TWO_PI) * (j_n - j_1)
+        d = np.zeros(2 * m)
+    gamma[ok] = _gamma_of(setup, gearset, d[:m] - d[m:])
+    jac[ok] = (setup.o * setup.z / TWO_PI) * (j[:m] - j[m:])
     return gamma, jac
 
 
@@ -698,6 +709,7 @@ class _PhasingFit:
         self.n_eval = 0
         # the error-independent part of every model evaluation, prepared once
         self.setups = [_pass_setup(t, gearset, None, self.speeds[id(t)], 0.0) for t in tables]
+        self.plans = [_gradient_plan(s, gearset) if analytic else None for s in self.setups]
 
     def _predict(self, p_free, pass_offset: float = 0.0) -> np.ndarray:
         err = self._errors(p_free)
@@ -716,7 +728,8 @@ class _PhasingFit:
         if not self.analytic:
             return self._predict(p_free)
         err = self._errors(p_free)
-        parts = [_gamma_and_jacobian(s, self.gearset, err) for s in self.setups]
+        parts = [_gamma_and_jacobian(s, self.gearset, err, pl)
+                 for s, pl in zip(self.setups, self.plans)]
         J = np.concatenate([j for _, j in parts])[:, self.free] * self.scale
         self._last = (np.asarray(p_free, dtype=float).tobytes(), J)
         return np.concatenate([g for g, _ in parts])

@@ -38,11 +38,11 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..validate import as_choice
-from ._geometry import cos_sin, rotation_angle_unchecked
+from ._geometry import broadcast_errors, check_error_size, cos_sin, rotation_angle_unchecked
 from .gearset import Gearset, Speeds
 from .mesh_phasing import ShaftHoleErrors, _prepare
 
-__all__ = ["MESHES", "mesh_angle_gradient", "n_offset_parameters"]
+__all__ = ["MESHES", "MeshGradientPlan", "mesh_angle_gradient", "n_offset_parameters"]
 
 #: The two meshes of a planet: with the sun and with the ring.
 MESHES = ("sun", "ring")
@@ -91,61 +91,152 @@ def mesh_angle_gradient(t: ArrayLike, planet: ArrayLike, gearset: Gearset, speed
     ValueError
         Errors with sample dimensions or beyond the R_c bound, planet numbers out of range,
         ``t`` and ``planet`` of different lengths, an unknown ``mesh``.
+
+    See Also
+    --------
+    MeshGradientPlan : the same evaluation split into its error-independent part (the
+        rotations, computed once) and the part each error vector needs; what an iterative
+        fit over fixed times uses.
     """
     mesh = as_choice(mesh, "mesh", MESHES)
     g, sp, t, shape, b = _prepare(t, gearset, speeds, errors)
     if shape != ():
         raise ValueError(f"errors must be one realisation (no sample dimensions), got sample "
                          f"shape {shape}")
-    n_p = g.n_planets
-    pl = np.asarray(planet)
-    if pl.size and not np.issubdtype(pl.dtype, np.integer):
-        raise ValueError(f"planet must hold integer planet numbers, got dtype {pl.dtype}")
-    pl = np.broadcast_to(pl, t.shape) if pl.ndim == 0 else pl
-    if pl.shape != t.shape:
-        raise ValueError(f"planet {pl.shape} must have the shape of t {t.shape}")
-    if pl.size and (pl.min() < 1 or pl.max() > n_p):
-        raise ValueError(f"planet must lie in [1, {n_p}], got [{pl.min()}, {pl.max()}]")
-    idx = pl.astype(np.intp) - 1
-    grad = np.zeros((t.size, n_offset_parameters(n_p)))
-    if t.size == 0:
-        return np.empty(0), grad
-    if mesh == "sun":
-        w, e, kappa, col = sp.w_sc, float(b.es), float(b.ks), 0
-    else:
-        w, e, kappa, col = sp.w_rc, float(b.er), float(b.kr), 2
-    vu, vt, c, s, cp, spl = _centre_vector(t, idx, g, sp, w, e, kappa, b.ep, b.kp)
-    h2 = np.hypot(vu, vt) ** 2
-    rows = np.arange(t.size)
-    grad[:, col] = (vt * c - vu * s) / h2
-    grad[:, col + 1] = -(vu * c + vt * s) / h2
-    grad[rows, 4 + 2 * idx] = (vt * cp - vu * spl) / h2
-    grad[rows, 5 + 2 * idx] = -(vu * cp + vt * spl) / h2
-    return np.arctan2(vt, vu), grad
+    return MeshGradientPlan._build(t, planet, g, sp, mesh)._evaluate(b)
 
 
-def _centre_vector(t, idx, g, sp, w, e, kappa, ep_all, kp_all):
-    """v = O_pan - O_ga in the frame of each row's planet (same operations, in the same
-    order, as :func:`meshphase.models._kernels.deltas_numpy`, so atan2(v_t, v_u) is the
-    model's delta bit for bit), and the rotation cos/sin the gradient needs: (c, s) of
-    w t - psi_n and (c_p, s_p) of w_pc t."""
+class MeshGradientPlan:
+    """:func:`mesh_angle_gradient` at fixed times and planets, for many error vectors.
+
+    The rotations of a row (cos and sin of w t - psi_n, w t and w_pc t, reduced exactly) do
+    not depend on the errors; the plan computes them once, and :meth:`evaluate` does only the
+    arithmetic that does (a few products per row, no trigonometric function of the times).
+    The operations and their order are those of :func:`mesh_angle_gradient`, so the results
+    are equal bit for bit.
+
+    Parameters
+    ----------
+    t, planet, gearset, speeds, mesh
+        As :func:`mesh_angle_gradient`.
+
+    Raises
+    ------
+    TypeError, ValueError
+        As :func:`mesh_angle_gradient` for the arguments given here.
+    """
+
+    __slots__ = ("mesh", "n_planets", "carrier_radius", "idx", "_rot")
+
+    def __init__(self, t: ArrayLike, planet: ArrayLike, gearset: Gearset, speeds: Speeds, *,
+                 mesh: str = "sun"):
+        mesh = as_choice(mesh, "mesh", MESHES)
+        g, sp, t, _, _ = _prepare(t, gearset, speeds, None)
+        self._fill(t, planet, g, sp, mesh)
+
+    @classmethod
+    def _build(cls, t, planet, g, sp, mesh) -> MeshGradientPlan:
+        """A plan from arguments already checked by :func:`_prepare`."""
+        plan = cls.__new__(cls)
+        plan._fill(t, planet, g, sp, mesh)
+        return plan
+
+    def _fill(self, t, planet, g, sp, mesh) -> None:
+        n_p = g.n_planets
+        pl = np.asarray(planet)
+        if pl.size and not np.issubdtype(pl.dtype, np.integer):
+            raise ValueError(f"planet must hold integer planet numbers, got dtype {pl.dtype}")
+        pl = np.broadcast_to(pl, t.shape) if pl.ndim == 0 else pl
+        if pl.shape != t.shape:
+            raise ValueError(f"planet {pl.shape} must have the shape of t {t.shape}")
+        if pl.size and (pl.min() < 1 or pl.max() > n_p):
+            raise ValueError(f"planet must lie in [1, {n_p}], got [{pl.min()}, {pl.max()}]")
+        self.mesh, self.n_planets, self.carrier_radius = mesh, n_p, g.carrier_radius
+        self.idx = pl.astype(np.intp) - 1
+        w = sp.w_sc if mesh == "sun" else sp.w_rc
+        self._rot = _rotations(t, self.idx, g, sp, w) if t.size else None
+
+    def __len__(self) -> int:
+        return self.idx.size
+
+    def evaluate(self, errors: ShaftHoleErrors | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Deviation and gradient for ``errors``, as :func:`mesh_angle_gradient`.
+
+        Parameters
+        ----------
+        errors : ShaftHoleErrors, optional
+            One realisation; None means no errors.
+
+        Returns
+        -------
+        delta : numpy.ndarray, shape (n,)
+            [rad].
+        grad : numpy.ndarray, shape (n, 4 + 2 N)
+            [rad/m].
+
+        Raises
+        ------
+        TypeError
+            ``errors`` not a ShaftHoleErrors.
+        ValueError
+            Errors with sample dimensions, or beyond the R_c bound.
+        """
+        shape, b = broadcast_errors(errors, self.n_planets)
+        check_error_size(b, self.carrier_radius)
+        if shape != ():
+            raise ValueError(f"errors must be one realisation (no sample dimensions), got "
+                             f"sample shape {shape}")
+        return self._evaluate(b)
+
+    def _evaluate(self, b) -> tuple[np.ndarray, np.ndarray]:
+        n_p, idx = self.n_planets, self.idx
+        grad = np.zeros((idx.size, n_offset_parameters(n_p)))
+        if self._rot is None:
+            return np.empty(0), grad
+        if self.mesh == "sun":
+            e, kappa, col = float(b.es), float(b.ks), 0
+        else:
+            e, kappa, col = float(b.er), float(b.kr), 2
+        vu, vt, c, s, cp, spl = _centre_vector(self._rot, idx, self.carrier_radius, e, kappa,
+                                               b.ep, b.kp)
+        h2 = np.hypot(vu, vt) ** 2
+        rows = np.arange(idx.size)
+        grad[:, col] = (vt * c - vu * s) / h2
+        grad[:, col + 1] = -(vu * c + vt * s) / h2
+        grad[rows, 4 + 2 * idx] = (vt * cp - vu * spl) / h2
+        grad[rows, 5 + 2 * idx] = -(vu * cp + vt * spl) / h2
+        return np.arctan2(vt, vu), grad
+
+
+def _rotations(t, idx, g, sp, w):
+    """The error-independent rotations of each row: (cos, sin) of psi_n, of w t and of w_pc
+    t, and (c, s) = (cos, sin)(w t - psi_n)."""
     psi = g.angles[idx]
     cps, sps = np.cos(psi), np.sin(psi)
     r = rotation_angle_unchecked(w, t)
     cw, sw = np.cos(r), np.sin(r)
+    r = rotation_angle_unchecked(sp.w_pc, t)
+    cp, spl = np.cos(r), np.sin(r)
+    c = cw * cps + sw * sps        # cos(w t - psi_n)
+    s = sw * cps - cw * sps        # sin(w t - psi_n)
+    return cps, sps, cw, sw, cp, spl, c, s
+
+
+def _centre_vector(rot, idx, carrier_radius, e, kappa, ep_all, kp_all):
+    """v = O_pan - O_ga in the frame of each row's planet (same operations, in the same
+    order, as :func:`meshphase.models._kernels.deltas_numpy`, so atan2(v_t, v_u) is the
+    model's delta bit for bit), and the rotation cos/sin the gradient needs: (c, s) of
+    w t - psi_n and (c_p, s_p) of w_pc t (``rot``: :func:`_rotations`)."""
+    cps, sps, cw, sw, cp, spl, c, s = rot
     ck, sk = cos_sin(kappa)
     ca = cw * ck - sw * sk
     sa = sw * ck + cw * sk
-    r = rotation_angle_unchecked(sp.w_pc, t)
-    cp, spl = np.cos(r), np.sin(r)
     ckp, skp = cos_sin(np.asarray(kp_all, dtype=float)[idx])
     ep = np.asarray(ep_all, dtype=float)[idx]
-    px = g.carrier_radius - ep * (cp * ckp - spl * skp)
+    px = carrier_radius - ep * (cp * ckp - spl * skp)
     py = -(ep * (spl * ckp + cp * skp))
     crel = ca * cps + sa * sps
     srel = sa * cps - ca * sps
     vu = px - e * crel
     vt = py - e * srel
-    c = cw * cps + sw * sps        # cos(w t - psi_n)
-    s = sw * cps - cw * sps        # sin(w t - psi_n)
     return vu, vt, c, s, cp, spl

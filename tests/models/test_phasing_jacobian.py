@@ -9,7 +9,8 @@ import pytest
 
 from meshphase.models.gearset import Gearset, Speeds
 from meshphase.models.mesh_phasing import ShaftHoleErrors, mesh_angle_deviations
-from meshphase.models.phasing_jacobian import mesh_angle_gradient, n_offset_parameters
+from meshphase.models.phasing_jacobian import (MeshGradientPlan, mesh_angle_gradient,
+                                               n_offset_parameters)
 
 R_C = 112.5e-3
 
@@ -173,3 +174,65 @@ def test_gradient_bad_inputs(kwargs, exc, match):
     mesh = args.pop("mesh", "sun")
     with pytest.raises(exc, match=match):
         mesh_angle_gradient(**args, mesh=mesh)
+
+
+@pytest.mark.parametrize("mesh", ["sun", "ring"])
+def test_plan_equals_the_direct_gradient_bit_for_bit(mesh):
+    # the plan only moves the error-independent rotations out of the loop; same operations
+    # in the same order, so equality is exact for every error vector it is evaluated at
+    g = gearset()
+    sp = speeds(g)
+    t = np.linspace(-3e4, 1e5, 83)
+    pl = np.arange(83) % 4 + 1
+    plan = MeshGradientPlan(t, pl, g, sp, mesh=mesh)
+    assert len(plan) == 83
+    for p in POINTS.values():
+        err = errors_of(p, 4)
+        d, G = plan.evaluate(err)
+        d0, G0 = mesh_angle_gradient(t, pl, g, sp, err, mesh=mesh)
+        np.testing.assert_array_equal(d, d0)
+        np.testing.assert_array_equal(G, G0)
+    d, G = plan.evaluate(None)
+    np.testing.assert_array_equal(d, 0.0)
+    np.testing.assert_array_equal(G, mesh_angle_gradient(t, pl, g, sp, mesh=mesh)[1])
+
+
+def test_plan_empty_and_scalar_planet():
+    g = gearset()
+    sp = speeds(g)
+    d, G = MeshGradientPlan(np.empty(0), np.empty(0, dtype=int), g, sp).evaluate(
+        errors_of(P_SEED, 4))
+    assert d.shape == (0,) and G.shape == (0, 12)
+    d, G = MeshGradientPlan([0.3, 1.0], 3, g, sp, mesh="ring").evaluate()
+    assert d.shape == (2,) and G.shape == (2, 12)
+    assert np.all(G[:, [8, 9]] != 0.0) and np.all(G[:, [4, 5, 6, 7, 10, 11]] == 0.0)
+
+
+@pytest.mark.parametrize("kwargs, exc, match", [
+    (dict(planet=[1, 5]), ValueError, "planet must lie"),
+    (dict(planet=[1.0, 2.0]), ValueError, "integer"),
+    (dict(planet=[1, 2, 3]), ValueError, "shape"),
+    (dict(mesh="carrier"), ValueError, "mesh"),
+    (dict(gearset=None), TypeError, "Gearset"),
+    (dict(speeds="fast"), TypeError, "Speeds"),
+    (dict(t=[0.0, np.nan]), ValueError, "finite"),
+    (dict(t=[0.0, 1e13]), ValueError, "shift the time origin"),
+])
+def test_plan_bad_inputs(kwargs, exc, match):
+    g = gearset()
+    args = dict(t=[0.0, 1.0], planet=[1, 2], gearset=g, speeds=speeds(g), mesh="sun")
+    args.update(kwargs)
+    with pytest.raises(exc, match=match):
+        MeshGradientPlan(**args)
+
+
+@pytest.mark.parametrize("errors, exc, match", [
+    (ShaftHoleErrors(e_sun=[1e-4, 2e-4]), ValueError, "one realisation"),
+    (ShaftHoleErrors(e_sun=0.06, e_planet=0.06), ValueError, "carrier_radius"),
+    ("none", TypeError, "ShaftHoleErrors"),
+])
+def test_plan_bad_errors(errors, exc, match):
+    g = gearset()
+    plan = MeshGradientPlan([0.0, 1.0], [1, 2], g, speeds(g))
+    with pytest.raises(exc, match=match):
+        plan.evaluate(errors)
