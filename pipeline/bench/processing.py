@@ -244,15 +244,34 @@ def pulse_train(n: int, fs: float, contact_times, amplitudes, shape: PulseShape,
     tcs = np.asarray(contact_times, dtype=np.float64).ravel()
     amps = np.broadcast_to(np.asarray(amplitudes, dtype=np.float64), tcs.shape)
     x = np.zeros(int(n))
-    if tcs.size:
-        lo, hi = shape.support
-        s = int(math.ceil((hi - lo) * fs)) + 2
-        i0 = np.ceil((tcs + lo) * fs).astype(np.int64)
-        for a, b in _pulse_chunks(tcs.size, s):    # in pulse order: the same sums as at once
-            idx = i0[a:b, None] + np.arange(s)[None, :]
-            vals = amps[a:b, None] * shape.value(idx / fs - tcs[a:b, None])
-            m = (idx >= 0) & (idx < n)
-            np.add.at(x, idx[m], vals[m])
+    for _, _, idx, _, vals in _pulse_rows(fs, tcs, amps, shape):
+        _add_rows(x, idx, vals)
+    return _with_noise(x, sigma, rng, dtype)
+
+
+def _pulse_rows(fs: float, contact: np.ndarray, amps: np.ndarray, shape: PulseShape):
+    """The pulses' sample rows, chunk after chunk in pulse order (:func:`_pulse_chunks`):
+    ``(a, b, idx, tt, vals)`` for pulses ``a .. b - 1``, ``idx`` the sample indices of each
+    row, ``tt`` [s] their times from the pulse's contact start, ``vals`` the pulse samples
+    (amplitude times :meth:`PulseShape.value`)."""
+    lo, hi = shape.support
+    s = int(math.ceil((hi - lo) * fs)) + 2
+    i0 = np.ceil((contact + lo) * fs).astype(np.int64)
+    for a, b in _pulse_chunks(contact.size, s):
+        idx = i0[a:b, None] + np.arange(s)[None, :]
+        tt = idx / fs - contact[a:b, None]
+        yield a, b, idx, tt, amps[a:b, None] * shape.value(tt)
+
+
+def _add_rows(x: np.ndarray, idx: np.ndarray, vals: np.ndarray) -> None:
+    """Add the rows' samples into ``x`` (in row order: chunk after chunk gives the same sums
+    as all at once), those past its ends dropped."""
+    m = (idx >= 0) & (idx < x.size)
+    np.add.at(x, idx[m], vals[m])
+
+
+def _with_noise(x: np.ndarray, sigma: float, rng, dtype) -> np.ndarray:
+    """``x`` plus white Gaussian noise of std ``sigma`` (none for 0), as ``dtype``."""
     if sigma > 0:
         x += rng.normal(0.0, as_nonnegative(sigma, "sigma"), x.size)
     return x.astype(dtype, copy=False)
@@ -280,15 +299,13 @@ def pulse_scenario(n: int, fs: float, shape: PulseShape, spacing: float, *, snr_
     amp = pa[np.arange(n_p) % pa.size] * (1.0 + load_swing * np.sin(2 * np.pi * np.arange(n_p) / max(n_p, 1)))
     amp = amp / pa.mean()
     sigma = 10.0 ** (-snr_db / 20.0)
-    x = pulse_train(n, fs, contact, amp, shape, sigma=sigma, rng=rng, dtype=dtype)
-    s = int(math.ceil((hi - lo) * fs)) + 2
-    i0 = np.ceil((contact + lo) * fs).astype(np.int64)
+    # the train (as pulse_train) and each pulse's bound from the same rows, evaluated once
+    x = np.zeros(int(n))
     crb = np.empty(n_p)
-    for a, b in _pulse_chunks(n_p, s):             # each pulse's bound on its own rows
-        tt = (i0[a:b, None] + np.arange(s)[None, :]) / fs - contact[a:b, None]
-        der = amp[a:b, None] * shape.derivative(tt)
-        pul = amp[a:b, None] * shape.value(tt)
-        crb[a:b] = crb_delay_std(der, sigma, pulse=pul)
+    for a, b, idx, tt, pul in _pulse_rows(as_positive(fs, "fs"), contact, amp, shape):
+        _add_rows(x, idx, pul)
+        crb[a:b] = crb_delay_std(amp[a:b, None] * shape.derivative(tt), sigma, pulse=pul)
+    x = _with_noise(x, sigma, rng, dtype)
     truth = {"contact": contact, "onset": contact + shape.rise_time(level), "amplitude": amp,
              "sigma": sigma, "crb": np.atleast_1d(crb)}
     return x, truth

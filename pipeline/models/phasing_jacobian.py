@@ -98,12 +98,7 @@ def mesh_angle_gradient(t: ArrayLike, planet: ArrayLike, gearset: Gearset, speed
         rotations, computed once) and the part each error vector needs; what an iterative
         fit over fixed times uses.
     """
-    mesh = as_choice(mesh, "mesh", MESHES)
-    g, sp, t, shape, b = _prepare(t, gearset, speeds, errors)
-    if shape != ():
-        raise ValueError(f"errors must be one realisation (no sample dimensions), got sample "
-                         f"shape {shape}")
-    return MeshGradientPlan._build(t, planet, g, sp, mesh)._evaluate(b)
+    return MeshGradientPlan(t, planet, gearset, speeds, mesh=mesh).evaluate(errors)
 
 
 class MeshGradientPlan:
@@ -112,8 +107,7 @@ class MeshGradientPlan:
     The rotations of a row (cos and sin of w t - psi_n, w t and w_pc t, reduced exactly) do
     not depend on the errors; the plan computes them once, and :meth:`evaluate` does only the
     arithmetic that does (a few products per row, no trigonometric function of the times).
-    The operations and their order are those of :func:`mesh_angle_gradient`, so the results
-    are equal bit for bit.
+    :func:`mesh_angle_gradient` is a plan evaluated once, so the two agree bit for bit.
 
     Parameters
     ----------
@@ -132,16 +126,6 @@ class MeshGradientPlan:
                  mesh: str = "sun"):
         mesh = as_choice(mesh, "mesh", MESHES)
         g, sp, t, _, _ = _prepare(t, gearset, speeds, None)
-        self._fill(t, planet, g, sp, mesh)
-
-    @classmethod
-    def _build(cls, t, planet, g, sp, mesh) -> MeshGradientPlan:
-        """A plan from arguments already checked by :func:`_prepare`."""
-        plan = cls.__new__(cls)
-        plan._fill(t, planet, g, sp, mesh)
-        return plan
-
-    def _fill(self, t, planet, g, sp, mesh) -> None:
         n_p = g.n_planets
         pl = np.asarray(planet)
         if pl.size and not np.issubdtype(pl.dtype, np.integer):
@@ -186,9 +170,6 @@ class MeshGradientPlan:
         if shape != ():
             raise ValueError(f"errors must be one realisation (no sample dimensions), got "
                              f"sample shape {shape}")
-        return self._evaluate(b)
-
-    def _evaluate(self, b) -> tuple[np.ndarray, np.ndarray]:
         n_p, idx = self.n_planets, self.idx
         grad = np.zeros((idx.size, n_offset_parameters(n_p)))
         if self._rot is None:
