@@ -273,6 +273,24 @@ def test_local_cluster_listens_on_loopback_only(cluster):
     assert _listening(psutil.Process()) == {"127.0.0.1"}
 
 
+def _profiling(dask_worker) -> bool:
+    return "profile" in dask_worker.periodic_callbacks
+
+
+def test_worker_profiler_only_with_a_dashboard(cluster):
+    """Without a dashboard nothing shows the workers' stack samples: their profiler (every
+    10 ms on every task thread) is off, also in a worker its Nanny restarted (after a
+    timeout); with one, the dashboard's profile page has it."""
+    from distributed import Client
+
+    with _tasks_by_value(), Client(cluster.scheduler_address) as client:
+        assert list(client.run(_profiling).values()) == [False]
+        client.restart_workers(list(client.scheduler_info()["workers"]))
+        assert list(client.run(_profiling).values()) == [False]
+    with _tasks_by_value(), cp.local_cluster(1, dashboard=True) as cl, Client(cl) as client:
+        assert list(client.run(_profiling).values()) == [True]
+
+
 def test_open_client_joins_a_cluster_and_warms_its_workers(cluster):
     info = {}
     with cluster_mod.open_client(cluster.scheduler_address, None, None, os.getpid, info) as client:
