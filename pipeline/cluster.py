@@ -183,8 +183,8 @@ def local_cluster(n_workers: int, *, dashboard=None, worker_modules: Sequence[st
     the task it runs (inputs are paths, prefetching buys nothing), so when a worker dies or a
     task hangs only that task is concerned. Without a dashboard the workers' statistical
     profiler is off (``distributed.worker.profile.enabled``): it samples every task thread's
-    stack every 10 ms for the dashboard's profile page, a few percent of a worker's CPU
-    time taken from the campaign's tasks.
+    stack every 10 ms for the dashboard's profile page, CPU time taken from the campaign's
+    tasks.
 
     Parameters
     ----------
