@@ -173,6 +173,14 @@ def worker_server(modules: Sequence[str]) -> float | None:
         return time.perf_counter() - t
 
 
+#: Without a dashboard: the event loops' health tick (distributed's default 20 ms; a loop
+#: blocked past ``distributed.admin.tick.limit``, 3 s, is still reported) and the system
+#: metrics, which only the dashboard plots (default 500 ms), at a coarser pitch. The memory
+#: limits keep their own monitor (``distributed.worker.memory.monitor-interval``, 100 ms).
+_QUIET_MONITORS = {"distributed.admin.tick.interval": "500ms",
+                   "distributed.admin.system-monitor.interval": "2s"}
+
+
 def local_cluster(n_workers: int, *, dashboard=None, worker_modules: Sequence[str] | None = None):
     """The campaign's own Dask cluster: ``n_workers`` single-threaded worker processes.
 
@@ -184,7 +192,9 @@ def local_cluster(n_workers: int, *, dashboard=None, worker_modules: Sequence[st
     task hangs only that task is concerned. Without a dashboard the workers' statistical
     profiler is off (``distributed.worker.profile.enabled``): it samples every task thread's
     stack every 10 ms for the dashboard's profile page, CPU time taken from the campaign's
-    tasks.
+    tasks; and every server's event loop wakes less often (:data:`_QUIET_MONITORS`): each
+    wake-up of a worker's loop takes the GIL from its task thread, and the scheduler's and
+    the Nannies' loops share the cores with the workers.
 
     Parameters
     ----------
@@ -219,15 +229,18 @@ def local_cluster(n_workers: int, *, dashboard=None, worker_modules: Sequence[st
     # the workers' own distributed logs (a cancelled task, a restart) reach stderr only when
     # our logger is verbose (meshphase -v): the campaign reports those events itself
     quiet = logging.WARNING if logger.isEnabledFor(logging.INFO) else logging.ERROR
-    config = {"distributed.scheduler.worker-saturation": 1.0}
+    # what only the dashboard shows (the docstring): the workers' profiler, and the event
+    # loops' tick and system metrics at a finer pitch than a campaign needs. Read when each
+    # server (scheduler, Nannies here; workers in their processes) is created, so the
+    # workers get theirs from their Nanny, which hands them to a worker it restarts too:
+    # the config of the block below is gone by then
+    monitor = {} if on else dict(_QUIET_MONITORS)
+    workers_config = {"distributed.worker.profile.enabled": on, **monitor}
+    config = {"distributed.scheduler.worker-saturation": 1.0, **monitor}
     if server is not None:
         # read when a Nanny starts its worker: the initial workers fork from the server; a
         # worker restarted later (after a timeout) is spawned, as by default
         config["distributed.worker.multiprocessing-method"] = "forkserver"
-    # the profiler feeds the dashboard only (the docstring). Given to each Nanny as its
-    # workers' own config, so that a worker it restarts keeps it: the config of the block
-    # below is gone by then
-    workers_config = {"distributed.worker.profile.enabled": on}
     with dask.config.set(config):
         return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
                             host="127.0.0.1", dashboard_address=address, silence_logs=quiet,

@@ -273,22 +273,30 @@ def test_local_cluster_listens_on_loopback_only(cluster):
     assert _listening(psutil.Process()) == {"127.0.0.1"}
 
 
-def _profiling(dask_worker) -> bool:
-    return "profile" in dask_worker.periodic_callbacks
+def _monitoring(dask_worker) -> tuple:
+    """(profiling?, tick interval [s], system-monitor interval [ms]) of a worker or Nanny."""
+    return ("profile" in dask_worker.periodic_callbacks, dask_worker._tick_interval,
+            dask_worker.periodic_callbacks["monitor"].callback_time)
 
 
-def test_worker_profiler_only_with_a_dashboard(cluster):
-    """Without a dashboard nothing shows the workers' stack samples: their profiler (every
-    10 ms on every task thread) is off, also in a worker its Nanny restarted (after a
-    timeout); with one, the dashboard's profile page has it."""
+def test_monitoring_only_as_fine_as_a_dashboard_needs(cluster):
+    """Without a dashboard nothing shows the workers' stack samples or the fine-grained
+    loop and system metrics: the workers' profiler (every 10 ms on every task thread) is
+    off and every server's loop ticks every 0.5 s and samples the system every 2 s - also
+    a worker its Nanny restarted (after a timeout), and the scheduler and Nannies in this
+    process; with a dashboard, distributed's defaults (20 ms, 500 ms, profiler on)."""
     from distributed import Client
 
+    quiet = (False, 0.5, 2000.0)
     with _tasks_by_value(), Client(cluster.scheduler_address) as client:
-        assert list(client.run(_profiling).values()) == [False]
+        assert list(client.run(_monitoring).values()) == [quiet]
+        assert list(client.run(_monitoring, nanny=True).values()) == [quiet]
         client.restart_workers(list(client.scheduler_info()["workers"]))
-        assert list(client.run(_profiling).values()) == [False]
+        assert list(client.run(_monitoring).values()) == [quiet]
+    assert cluster.scheduler._tick_interval == 0.5
     with _tasks_by_value(), cp.local_cluster(1, dashboard=True) as cl, Client(cl) as client:
-        assert list(client.run(_profiling).values()) == [True]
+        assert list(client.run(_monitoring).values()) == [(True, 0.02, 500.0)]
+        assert cl.scheduler._tick_interval == 0.02
 
 
 def test_open_client_joins_a_cluster_and_warms_its_workers(cluster):
