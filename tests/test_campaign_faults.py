@@ -274,9 +274,16 @@ def test_local_cluster_listens_on_loopback_only(cluster):
 
 
 def _monitoring(dask_worker) -> tuple:
-    """(profiling?, tick interval [s], system-monitor interval [ms]) of a worker or Nanny."""
-    return ("profile" in dask_worker.periodic_callbacks, dask_worker._tick_interval,
-            dask_worker.periodic_callbacks["monitor"].callback_time)
+    """(profiling?, tick interval [ms], system-monitor interval [ms]) of a worker or Nanny."""
+    pcs = dask_worker.periodic_callbacks
+    return "profile" in pcs, pcs["tick"].callback_time, pcs["monitor"].callback_time
+
+
+def _ms(key: str) -> float:
+    import dask
+    from dask.utils import parse_timedelta
+
+    return parse_timedelta(dask.config.get(key), default="ms") * 1000
 
 
 def test_monitoring_only_as_fine_as_a_dashboard_needs(cluster):
@@ -284,19 +291,22 @@ def test_monitoring_only_as_fine_as_a_dashboard_needs(cluster):
     loop and system metrics: the workers' profiler (every 10 ms on every task thread) is
     off and every server's loop ticks every 0.5 s and samples the system every 2 s - also
     a worker its Nanny restarted (after a timeout), and the scheduler and Nannies in this
-    process; with a dashboard, distributed's defaults (20 ms, 500 ms, profiler on)."""
+    process; with a dashboard, the configured values (distributed's 20 ms and 500 ms by
+    default) and the profiler on."""
     from distributed import Client
 
-    quiet = (False, 0.5, 2000.0)
+    quiet = (False, 500.0, 2000.0)
     with _tasks_by_value(), Client(cluster.scheduler_address) as client:
         assert list(client.run(_monitoring).values()) == [quiet]
         assert list(client.run(_monitoring, nanny=True).values()) == [quiet]
         client.restart_workers(list(client.scheduler_info()["workers"]))
         assert list(client.run(_monitoring).values()) == [quiet]
-    assert cluster.scheduler._tick_interval == 0.5
+    assert _monitoring(cluster.scheduler)[1:] == quiet[1:]
+    default = (True, _ms("distributed.admin.tick.interval"), _ms("distributed.admin.system-monitor.interval"))
+    assert default[1:] != quiet[1:]
     with _tasks_by_value(), cp.local_cluster(1, dashboard=True) as cl, Client(cl) as client:
-        assert list(client.run(_monitoring).values()) == [(True, 0.02, 500.0)]
-        assert cl.scheduler._tick_interval == 0.02
+        assert list(client.run(_monitoring).values()) == [default]
+        assert _monitoring(cl.scheduler)[1:] == default[1:]
 
 
 def test_open_client_joins_a_cluster_and_warms_its_workers(cluster):
