@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import itertools
 import os
+import pickle
 import queue
 import re
 import shutil
@@ -32,7 +34,7 @@ from .cluster import ClusterStart, end_worker
 from .log import logger
 
 __all__ = ["Job", "run_job", "start_cluster", "campaign_task", "failed_record", "default_task_timeout",
-           "task_limits", "warm_up", "worker_modules", "draw_figures", "FIGURES_TIMEOUT_S", "TIMEOUT_BASE_S",
+           "task_limits", "warm_up", "worker_modules", "draw_figures", "figure_order", "FIGURES_TIMEOUT_S", "TIMEOUT_BASE_S",
            "TIMEOUT_RATE_BPS"]
 
 #: default ``--task-timeout`` of a recording of ``size`` bytes: TIMEOUT_BASE_S +
@@ -146,12 +148,39 @@ def _draw(call) -> bytes:
     return figure_png(make, *args, **kwargs)
 
 
+def figure_order(calls: list) -> list[int]:
+    """The order :func:`draw_figures` hands figures to the workers: the heaviest first, each
+    weighed by the pickled size of its arguments (what it plots), ties in ``calls`` order.
+
+    Parameters
+    ----------
+    calls : list of (callable, tuple, dict)
+
+    Returns
+    -------
+    list of int
+        Indices into ``calls``.
+    """
+    def weight(i: int) -> int:
+        try:
+            return len(pickle.dumps(calls[i][1:], protocol=pickle.HIGHEST_PROTOCOL))
+        except Exception:  # noqa: BLE001 - an argument that does not pickle weighs nothing here
+            return 0
+
+    return sorted(range(len(calls)), key=lambda i: -weight(i))
+
+
 def draw_figures(client, calls: list, timeout: float = FIGURES_TIMEOUT_S) -> list[bytes]:
     """The combined report's figures drawn on the cluster's workers, side by side.
 
     ``draw`` of :func:`meshphase.report.campaign_report.build_campaign_report`: one task per
-    figure. When the cluster does not draw them (a worker lost, no worker left, past
-    ``timeout``) they are drawn here instead, one after another.
+    figure, the heaviest first (:func:`figure_order`), and only as many at a time as the
+    cluster has threads: the next goes to the first worker that is free. (Submitted all at
+    once, Dask would place them before any ran, two on each of two workers, and the phasing
+    figure, the heaviest, could share a worker with the next heaviest while the other
+    worker drew two light ones.) When the cluster does not draw them (a worker lost, no
+    worker left, a figure failing, past ``timeout``) they are drawn here instead, one after
+    another.
 
     Parameters
     ----------
@@ -178,17 +207,32 @@ def draw_figures(client, calls: list, timeout: float = FIGURES_TIMEOUT_S) -> lis
         raise TypeError(f"calls must be a list of (figure function, args, kwargs), got {calls!r}")
     if not calls:
         return []
-    futs: list = []
+    futs: dict = {}
     try:
-        futs = [client.submit(_draw, c, pure=False) for c in calls]
-        wait(futs, timeout=timeout)
-        return list(client.gather(futs))
+        slots = max(1, sum(client.nthreads().values()))
+        todo = iter(figure_order(calls))
+        out: list = [None] * len(calls)
+        deadline = time.monotonic() + timeout
+        for i in itertools.islice(todo, slots):
+            futs[client.submit(_draw, calls[i], pure=False)] = i
+        running = set(futs)
+        while running:
+            done, running = wait(list(running), timeout=max(0.0, deadline - time.monotonic()),
+                                 return_when="FIRST_COMPLETED")
+            for f in done:
+                out[futs[f]] = f.result()
+                i = next(todo, None)
+                if i is not None:
+                    g = client.submit(_draw, calls[i], pure=False)
+                    futs[g] = i
+                    running.add(g)
+        return out
     except Exception as exc:  # noqa: BLE001 - the report is drawn here instead
         logger.info("campaign: report figures not drawn on the cluster (%s: %s); drawing them here",
                     type(exc).__name__, exc)
         if futs:
             with contextlib.suppress(Exception):
-                client.cancel(futs)
+                client.cancel(list(futs))
         return [_draw(c) for c in calls]
 
 

@@ -309,6 +309,33 @@ def test_monitoring_only_as_fine_as_a_dashboard_needs(cluster):
         assert _monitoring(cl.scheduler)[1:] == default[1:]
 
 
+def test_figures_drawn_on_the_cluster_heaviest_first_come_back_in_order(cluster):
+    """draw_figures hands the workers the heaviest figure first, one at a time per worker
+    thread, and returns each figure's PNG at its own place: the same bytes as drawn here."""
+    from distributed import Client
+
+    from meshphase.campaign_job import draw_figures, figure_order
+    from meshphase.report import campaign_report as crep
+
+    names = [f"rec{i}" for i in range(12)]
+    calls = [(crep.wall_times_across_recordings, (names[:2], [1.0, 2.0]), {}),
+             (crep.wall_times_across_recordings, (names, [float(i) for i in range(12)]), {}),
+             (crep.load_sharing_across_recordings, (names[:3], [[1.0, 0.9, 1.1]] * 3), {})]
+    assert figure_order(calls) == [1, 2, 0]
+    with Client(cluster.scheduler_address) as client:
+        pngs = draw_figures(client, calls)
+    assert pngs == [crep.figure_png(m, *a, **k) for m, a, k in calls]
+
+
+def test_figure_order_empty_ties_and_unpicklable():
+    from meshphase.campaign_job import figure_order
+
+    f = (lambda: None)
+    assert figure_order([]) == []
+    assert figure_order([(f, (1,), {}), (f, (2,), {})]) == [0, 1]          # ties: as given
+    assert figure_order([(f, (lambda: 0,), {}), (f, ([0.0] * 50,), {})]) == [1, 0]
+
+
 def test_open_client_joins_a_cluster_and_warms_its_workers(cluster):
     info = {}
     with cluster_mod.open_client(cluster.scheduler_address, None, None, os.getpid, info) as client:
