@@ -47,7 +47,9 @@ Reproducibility
 Noise is drawn in fixed chunks of :data:`NOISE_CHUNK` samples, each from its own stream
 ``SeedSequence(seed, spawn_key=(stream, channel, chunk))``; the samples therefore do not
 depend on how the recording is cut into blocks, and the 1/f filter carries its state from
-block to block.
+block to block. scipy.signal (the 1/f filter's design and its ``sosfilt``) is imported only
+when a channel has 1/f noise: with scipy.stats under it, it was most of this package's
+import, which the white-noise scenarios (the demo's among them) paid for nothing.
 """
 
 from __future__ import annotations
@@ -56,7 +58,6 @@ import functools
 import math
 
 import numpy as np
-from scipy import signal
 
 from meshphase.validate import as_nonnegative, as_positive, as_positive_int
 
@@ -110,6 +111,8 @@ def pink_filter(fs: float, fmin: float) -> tuple[np.ndarray, float]:
 
 @functools.lru_cache(maxsize=16)
 def _pink_filter(fs: float, fmin: float) -> tuple[np.ndarray, float]:
+    from scipy import signal   # only for 1/f noise (module notes)
+
     n_dec = math.log10(0.5 * fs / fmin)
     n_poles = max(1, int(math.ceil(2.0 * n_dec)))
     fp = fmin * 10.0 ** (0.5 * np.arange(n_poles))
@@ -158,12 +161,15 @@ class NoiseSource:
         self._tmp = np.empty(NOISE_CHUNK)
         self._zi = None
         if self.sigma_pink > 0.0:
+            from scipy.signal import sosfilt   # only for 1/f noise (module notes)
+
+            self._sosfilt = sosfilt
             self.sos, rms = pink_filter(self.fs, pink_fmin)
             self._pink_scale = self.sigma_pink / rms
             n_burn = int(math.ceil(5.0 * self.fs / (2.0 * math.pi * pink_fmin)))
             zi = np.zeros((self.sos.shape[0], 2))
             burn = stream_rng(self.seed, "pink_burn_in", self.channel).standard_normal(n_burn)
-            _, self._zi = signal.sosfilt(self.sos, burn, zi=zi)
+            _, self._zi = sosfilt(self.sos, burn, zi=zi)
 
     def _chunk(self, stream: str, c: int) -> np.ndarray:
         """Normals of chunk ``c`` of ``stream`` (kept in a reused buffer per stream)."""
@@ -199,7 +205,7 @@ class NoiseSource:
                 np.multiply(self._chunk("white", c)[ja:jb], self.sigma_white, out=t)
                 seg += t
             if self.sigma_pink > 0.0:
-                y, self._zi = signal.sosfilt(self.sos, self._chunk("pink", c)[ja:jb], zi=self._zi)
+                y, self._zi = self._sosfilt(self.sos, self._chunk("pink", c)[ja:jb], zi=self._zi)
                 y *= self._pink_scale
                 seg += y
 
