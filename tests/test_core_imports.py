@@ -150,3 +150,31 @@ def test_process_of_a_missing_file_fails_before_the_stages_load(tmp_path):
                           *STARTUP_HEAVY], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == "", f"a failed process loaded {res.stdout.strip()}"
+
+
+def test_white_noise_synthesis_leaves_scipy_signal_out():
+    # the generator's 1/f filter is the only user of scipy.signal (and through it of
+    # scipy.stats): a recording without 1/f noise - the demo's - imports neither; one with
+    # it does, as before
+    code = ("import sys; from meshphase.synthetic import generate; "
+            "generate(sys.argv[1], duration=2.0); "
+            "print(','.join(m for m in ('scipy.signal', 'scipy.stats') if m in sys.modules))")
+    for name, expect in (("rig_ripple1", ""), ("noisy", "scipy.signal,scipy.stats")):
+        res = subprocess.run([sys.executable, "-c", code, name], capture_output=True, text=True)
+        assert res.returncode == 0, res.stderr
+        assert res.stdout.strip() == expect, (name, res.stdout)
+
+
+def test_a_scene_run_and_its_report_leave_pandas_out(tmp_path):
+    # pandas is the Python API's (tables as DataFrames); `run` and the demo write their CSV
+    # tables and the HTML report without it
+    code = ("import sys; from pathlib import Path; from meshphase.demo import DEMO_SCENE; "
+            "from meshphase.scene import parse_scene; from meshphase.stages import run_scene; "
+            "from meshphase.outputs import write_outputs; "
+            "ctx = run_scene(parse_scene(DEMO_SCENE.replace('minutes = 2.0', 'minutes = 0.5'))); "
+            "files = write_outputs(ctx, Path(sys.argv[1]), report=True); "
+            "assert 'report' in files and ctx.phasing is not None; "
+            "print(','.join(m for m in sys.modules if m == 'pandas' or m.startswith('pandas.')))")
+    res = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert res.stdout.strip() == "", res.stdout[:300]

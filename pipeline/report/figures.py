@@ -77,8 +77,10 @@ def phasing_over_time(tables: dict, *, predicted: dict | None = None, bands: dic
 
     Parameters
     ----------
-    tables : dict gauge -> DataFrame
-        Measured passes with columns time_s, planet, gamma, uncertainty.
+    tables : dict gauge -> DataFrame or dict of arrays
+        Measured passes with columns time_s [s], planet, gamma [mesh cycles] and
+        uncertainty [mesh cycles] (NaN: no error bar), e.g.
+        :meth:`meshphase.phasing.PassTable.columns`.
     predicted : dict gauge -> dict planet -> (t [s], gamma [-])
         Model curves (e.g. shaft-hole-error model with identified errors).
     bands : dict gauge -> dict planet -> (lo, hi)
@@ -90,18 +92,19 @@ def phasing_over_time(tables: dict, *, predicted: dict | None = None, bands: dic
     fig, axes = plt.subplots(len(gauges) or 1, 1, figsize=(10, 3.2 * max(1, len(gauges))),
                              squeeze=False)
     for ax, g in zip(axes[:, 0], gauges):
-        df = tables[g]
-        for p in sorted(df["planet"].unique()):
-            d = df[df["planet"] == p]
+        planet = np.asarray(tables[g]["planet"])
+        time_s, gamma, unc = (np.asarray(tables[g][c], dtype=float) for c in ("time_s", "gamma", "uncertainty"))
+        for p in np.unique(planet):
+            m = planet == p
             col = _c(int(p) - 1)
             ref = ideal[g][p] if ideal and g in ideal and p in ideal[g] else None
             if ref is not None:
                 # unwrap around the ideal value so 0.99 and 0.01 sit together
-                y = ref + ((d["gamma"].to_numpy() - ref + 0.5) % 1.0 - 0.5)
+                y = ref + ((gamma[m] - ref + 0.5) % 1.0 - 0.5)
                 ax.axhline(ref, color=col, lw=0.8, ls=":")
             else:
-                y = d["gamma"].to_numpy()
-            ax.errorbar(d["time_s"], y, yerr=d["uncertainty"].fillna(0).to_numpy(), fmt="o", ms=2.5,
+                y = gamma[m]
+            ax.errorbar(time_s[m], y, yerr=np.where(np.isnan(unc[m]), 0.0, unc[m]), fmt="o", ms=2.5,
                         color=col, lw=0.6, label=f"planet {p}")
             if bands and g in bands and p in bands[g]:
                 lo, hi = bands[g][p]

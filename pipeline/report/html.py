@@ -10,6 +10,7 @@ import base64
 import datetime as _dt
 import html
 import io
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -91,14 +92,12 @@ class Section:
     def table(self, rows, columns: list[str] | None = None, caption: str | None = None,
               max_rows: int = 200) -> "Section":
         """A table from a DataFrame or a list of dicts (first column left-aligned)."""
-        try:
-            import pandas as pd
-
-            if isinstance(rows, pd.DataFrame):
-                columns = columns or [str(c) for c in rows.columns]
-                rows = rows.to_dict("records")
-        except ImportError:  # pragma: no cover - pandas is a dependency
-            pass
+        # a DataFrame exists only where pandas is loaded: a report of lists of dicts (the
+        # validation report's) does not import it to find that out
+        pd = sys.modules.get("pandas")
+        if pd is not None and isinstance(rows, pd.DataFrame):
+            columns = columns or [str(c) for c in rows.columns]
+            rows = rows.to_dict("records")
         rows = list(rows)
         if columns is None:
             columns = list(rows[0].keys()) if rows else []

@@ -218,7 +218,7 @@ def _ideal_section(rep: Report, ideal) -> None:
 def _phasing_section(rep: Report, ctx, figs: _Figures) -> None:
     s = rep.section("Measured phasing against the models")
     ph = ctx.phasing
-    tabs = {g: t.to_dataframe() for g, t in ph.tables.items() if len(t)}
+    tabs = {g: t.columns() for g, t in ph.tables.items() if len(t)}
     if ph.fixed_reason:
         s.text(f"Held member: {ph.fixed or 'none (a differential)'} — {ph.fixed_reason}.")
     if ph.model is not None:
@@ -274,10 +274,9 @@ def _phasing_figure(s, ctx, tabs: dict, figs: _Figures) -> None:
     predicted, bands = {}, {}
     for g, c in (ctx.compare.by_gear if ctx.compare is not None else {}).items():
         if c.model is not None and g in tabs:
-            df = tabs[g]
-            predicted[g] = {int(p): (df["time_s"][df["planet"] == p].to_numpy(),
-                                     c.model[df["planet"].to_numpy() == p])
-                            for p in df["planet"].unique()}
+            time_s, planet = tabs[g]["time_s"], tabs[g]["planet"]
+            predicted[g] = {int(p): (time_s[planet == p], c.model[planet == p])
+                            for p in np.unique(planet)}
         if c.band is not None and ideal:
             bands[g] = {n + 1: (ideal[g][n + 1] + c.band["lo"][n], ideal[g][n + 1] + c.band["hi"][n])
                         for n in range(len(c.band["lo"]))}

@@ -58,3 +58,18 @@ def test_phasing_over_time_with_band_and_model():
     fig = figures.phasing_over_time({"sun": df}, predicted={"sun": {2: ([0, 2], [0.25, 0.25])}},
                                     bands={"sun": {2: (0.2, 0.3)}}, ideal={"sun": {2: 0.25, 3: 0.5}})
     assert figure_to_png(fig)[:4] == b"\x89PNG"
+
+
+def test_phasing_over_time_takes_plain_columns_as_a_dataframe():
+    """The validation report hands it a pass table's columns (no pandas): the same figure,
+    pixel for pixel, as from the DataFrame of the same columns; NaN uncertainty draws no
+    bar in either."""
+    from meshphase.report.html import figure_to_png
+
+    cols = {"time_s": np.array([0.0, 1.0, 2.0, 0.5, 1.5, 2.5]), "planet": np.array([3, 2, 2, 3, 2, 3]),
+            "gamma": np.array([0.49, 0.24, 0.99, 0.5, 0.26, 0.51]),
+            "uncertainty": np.array([0.01, np.nan, 0.02, 0.01, 0.01, np.nan])}
+    kw = dict(bands={"sun": {2: (0.2, 0.3)}}, ideal={"sun": {2: 0.25, 3: 0.5}})
+    a = figure_to_png(figures.phasing_over_time({"sun": cols}, **kw))
+    b = figure_to_png(figures.phasing_over_time({"sun": pd.DataFrame(cols)}, **kw))
+    assert a == b
