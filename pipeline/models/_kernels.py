@@ -100,38 +100,46 @@ def resolve_engine(engine: str) -> str:
     return "numpy"
 
 
-def deltas_numpy(cs, ss, cr, sr, cp, sp, cpsi, spsi, R, es, cks, sks, er, ckr, skr, ep, ckp, skp):
-    """Angular deviations delta_s, delta_r [rad] of the mesh lines, shape (S, n_t, N).
+def deltas_numpy(cs, ss, cr, sr, cp, sp, cpsi, spsi, R, es, cks, sks, er, ckr, skr, ep, ckp, skp,
+                 *, time_last: bool = False):
+    """Angular deviations delta_s, delta_r [rad] of the mesh lines, shape (S, n_t, N), or
+    (S, N, n_t) with ``time_last`` (the layout :func:`stats_numpy` reduces along time in).
 
     ``es ... skr`` have shape (S,), ``ep, ckp, skp`` shape (S, N); the time arrays (n_t,).
+    The layout changes only how the arrays broadcast: every element is the same arithmetic.
     """
-    c_t = cs[None, :, None]
-    s_t = ss[None, :, None]
-    # sun offset direction a_s = w_sc t + kappa_s (angle addition), shape (S, n_t, 1)
-    ca_s = c_t * cks[:, None, None] - s_t * sks[:, None, None]
-    sa_s = s_t * cks[:, None, None] + c_t * sks[:, None, None]
-    c_t = cr[None, :, None]
-    s_t = sr[None, :, None]
-    ca_r = c_t * ckr[:, None, None] - s_t * skr[:, None, None]
-    sa_r = s_t * ckr[:, None, None] + c_t * skr[:, None, None]
-    # planet offset angle th = w_pc t + kappa_p, shape (S, n_t, N)
-    c_t = cp[None, :, None]
-    s_t = sp[None, :, None]
-    ct = c_t * ckp[:, None, :] - s_t * skp[:, None, :]
-    st = s_t * ckp[:, None, :] + c_t * skp[:, None, :]
-    epb = ep[:, None, :]
+    all_ = slice(None)
+    t_ix = (None, None, all_) if time_last else (None, all_, None)    # time arrays (n_t,)
+    n_ix = (None, all_, None) if time_last else (None, None, all_)    # planet arrays (N,)
+    sn_ix = (all_, all_, None) if time_last else (all_, None, all_)   # (S, N)
+    s_ix = (all_, None, None)                                         # (S,)
+    c_t = cs[t_ix]
+    s_t = ss[t_ix]
+    # sun offset direction a_s = w_sc t + kappa_s (angle addition), S x time
+    ca_s = c_t * cks[s_ix] - s_t * sks[s_ix]
+    sa_s = s_t * cks[s_ix] + c_t * sks[s_ix]
+    c_t = cr[t_ix]
+    s_t = sr[t_ix]
+    ca_r = c_t * ckr[s_ix] - s_t * skr[s_ix]
+    sa_r = s_t * ckr[s_ix] + c_t * skr[s_ix]
+    # planet offset angle th = w_pc t + kappa_p, S x time x N
+    c_t = cp[t_ix]
+    s_t = sp[t_ix]
+    ct = c_t * ckp[sn_ix] - s_t * skp[sn_ix]
+    st = s_t * ckp[sn_ix] + c_t * skp[sn_ix]
+    epb = ep[sn_ix]
     px = R - epb * ct
     py = -(epb * st)
     del ct, st
-    cps = cpsi[None, None, :]
-    sps = spsi[None, None, :]
+    cps = cpsi[n_ix]
+    sps = spsi[n_ix]
     crel = ca_s * cps + sa_s * sps
     srel = sa_s * cps - ca_s * sps
-    esb = es[:, None, None]
+    esb = es[s_ix]
     d_s = np.arctan2(py - esb * srel, px - esb * crel)
     crel = ca_r * cps + sa_r * sps
     srel = sa_r * cps - ca_r * sps
-    erb = er[:, None, None]
+    erb = er[s_ix]
     d_r = np.arctan2(py - erb * srel, px - erb * crel)
     return d_s, d_r
 
@@ -146,7 +154,10 @@ def stats_numpy(cs, ss, cr, sr, cp, sp, cpsi, spsi, R, es, cks, sks, er, ckr, sk
     (``g (delta_n - delta_1)``) in ``out_*``, and, when ``out_abs`` = (ave_s, dev_s, ave_r,
     dev_r) is given, each mesh's own deviation ``g delta_n`` (absolute, seed 000's
     gamma_jn = Z psi_ejpn / 2 pi less its ideal value). Realisations are processed in chunks
-    of about ``chunk_elems`` (S_chunk x n_t x N) elements to bound memory.
+    of about ``chunk_elems`` (S_chunk x N x n_t) elements to bound memory. Time is the
+    contiguous last axis of the deviations (:func:`deltas_numpy` with ``time_last``), so
+    the time means, maxima and minima reduce contiguous rows; with time in the middle,
+    numpy's reductions ran over rows of N = 3-5 values, several times slower.
     """
     n_s = es.shape[0]
     n_t = cs.shape[0]
@@ -155,17 +166,18 @@ def stats_numpy(cs, ss, cr, sr, cp, sp, cpsi, spsi, R, es, cks, sks, er, ckr, sk
     for a in range(0, n_s, step):
         b = min(n_s, a + step)
         d_s, d_r = deltas_numpy(cs, ss, cr, sr, cp, sp, cpsi, spsi, R, es[a:b], cks[a:b],
-                                sks[a:b], er[a:b], ckr[a:b], skr[a:b], ep[a:b], ckp[a:b], skp[a:b])
+                                sks[a:b], er[a:b], ckr[a:b], skr[a:b], ep[a:b], ckp[a:b], skp[a:b],
+                                time_last=True)
         for d, g, ave, dev in ((d_s, g_s, out_ave_s, out_dev_s), (d_r, g_r, out_ave_r, out_dev_r)):
-            v = g * (d - d[:, :, :1])
-            ave[a:b] = v.mean(axis=1)
-            dev[a:b] = v.max(axis=1) - v.min(axis=1)
+            v = g * (d - d[:, :1, :])
+            ave[a:b] = v.mean(axis=2)
+            dev[a:b] = v.max(axis=2) - v.min(axis=2)
         if out_abs is not None:
             for d, g, ave, dev in ((d_s, g_s, out_abs[0], out_abs[1]),
                                    (d_r, g_r, out_abs[2], out_abs[3])):
                 v = g * d
-                ave[a:b] = v.mean(axis=1)
-                dev[a:b] = v.max(axis=1) - v.min(axis=1)
+                ave[a:b] = v.mean(axis=2)
+                dev[a:b] = v.max(axis=2) - v.min(axis=2)
 
 
 def stats_numba(cs, ss, cr, sr, cp, sp, cpsi, spsi, R, es, cks, sks, er, ckr, skr, ep, ckp, skp,

@@ -99,6 +99,24 @@ def test_statistics_match_direct_deviation(rng):
     assert np.all(st.dev_s[:, 0] == 0) and np.all(st.dev_s[:, 1:] > 0)
 
 
+def test_deviation_layouts_are_the_same_numbers(rng):
+    # stats_numpy reduces along time as the contiguous last axis (time_last); the layout
+    # changes only how the arrays broadcast, never an element's arithmetic
+    n_t, n_p, n_s = 37, 5, 6
+    ang = [rng.uniform(-np.pi, np.pi, n_t) for _ in range(3)]
+    grid = [f(a) for a in ang for f in (np.cos, np.sin)]
+    psi = rng.uniform(0, 2 * np.pi, n_p)
+    ks, kr, kp = rng.uniform(-4, 4, n_s), rng.uniform(-4, 4, n_s), rng.uniform(-4, 4, (n_s, n_p))
+    args = (*grid, np.cos(psi), np.sin(psi), 0.1125, rng.uniform(0, 1e-3, n_s), np.cos(ks),
+            np.sin(ks), rng.uniform(0, 1e-3, n_s), np.cos(kr), np.sin(kr),
+            rng.uniform(0, 1e-3, (n_s, n_p)), np.cos(kp), np.sin(kp))
+    mid = _kernels.deltas_numpy(*args)
+    last = _kernels.deltas_numpy(*args, time_last=True)
+    for a, b in zip(mid, last):
+        assert a.shape == (n_s, n_t, n_p) and b.shape == (n_s, n_p, n_t)
+        np.testing.assert_array_equal(a, np.swapaxes(b, 1, 2))
+
+
 @needs_numba
 @pytest.mark.parametrize("scale", [1e-6, 1e-3, 3e-2])
 def test_numba_and_numpy_paths_agree(rng, scale):
