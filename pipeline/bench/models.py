@@ -310,13 +310,19 @@ class _Threads:
 
 
 def _throughput(case, n: int) -> dict:
-    """Kernel throughput [G evaluations/s] of a plain Monte Carlo of n samples."""
+    """Kernel throughput [G evaluations/s] of a plain Monte Carlo of n samples: the default
+    engine on one thread and on all, and the numpy path (``numpy``: what a Monte Carlo runs
+    on where numba is not installed) on n / 4 samples."""
     g, sp, tol, win = case
     out = {"n_samples": n}
     for label, threads in (("one_thread", 1), ("all_threads", os.cpu_count() or 1)):
         with _Threads(threads):
             res = monte_carlo(g, sp, tol, win, n, sampler="random", rng=0, replicates=2)
         out[label] = n * res.n_times * g.n_planets / res.wall_time / 1e9
+    n_np = max(2, n // 4)
+    res = monte_carlo(g, sp, tol, win, n_np, sampler="random", rng=0, replicates=2, engine="numpy")
+    out["numpy"] = n_np * res.n_times * g.n_planets / res.wall_time / 1e9
+    out["numpy_n_samples"] = n_np
     out["unit"] = "G (realisation x time x planet) evaluations/s, both meshes, all statistics"
     return out
 
@@ -578,7 +584,9 @@ def _markdown(result):
     if tp:
         lines += ["", f"Kernel throughput ({tp['n_samples']} plain samples): "
                       f"{tp['one_thread']:.3f} G evaluations/s on one thread, "
-                      f"{tp['all_threads']:.3f} on all {m['cpu_count']} ({tp['unit']})."]
+                      f"{tp['all_threads']:.3f} on all {m['cpu_count']} ({tp['unit']})"
+                      + (f"; the numpy path (no numba; {tp['numpy_n_samples']} samples) "
+                         f"{tp['numpy']:.4f}" if "numpy" in tp else "") + "."]
     c3 = result.get("case3") or {}
     if c3:
         lines += ["", f"Case 3, {c3['n_samples']} plain random samples: "

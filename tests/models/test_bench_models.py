@@ -35,6 +35,9 @@ def test_quick_bench_writes_table_json_and_figure(tmp_path):
     assert data["meta"]["window"]["name"] == "slowest-offset"
     assert "err_max" in data["crossover"]["metrics"]
     assert res["files"]["figure"].endswith("models_bench.png")
+    tp = data["meta"]["kernel_throughput"]
+    assert tp["one_thread"] > 0 and tp["all_threads"] > 0 and tp["numpy"] > 0
+    assert any("the numpy path (no numba" in line for line in md)
 
 
 def test_bench_helpers():
