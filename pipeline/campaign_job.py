@@ -180,7 +180,7 @@ def draw_figures(client, calls: list, timeout: float = FIGURES_TIMEOUT_S) -> lis
     figure, the heaviest, could share a worker with the next heaviest while the other
     worker drew two light ones.) When the cluster does not draw them (a worker lost, no
     worker left, a figure failing, past ``timeout``) they are drawn here instead, one after
-    another.
+    another; with no worker at all, at once rather than after ``timeout``.
 
     Parameters
     ----------
@@ -209,7 +209,9 @@ def draw_figures(client, calls: list, timeout: float = FIGURES_TIMEOUT_S) -> lis
         return []
     futs: dict = {}
     try:
-        slots = max(1, sum(client.nthreads().values()))
+        slots = sum(client.nthreads().values())
+        if slots < 1:       # no worker left: do not wait out the timeout for one
+            raise RuntimeError("the cluster has no worker")
         todo = iter(figure_order(calls))
         out: list = [None] * len(calls)
         deadline = time.monotonic() + timeout

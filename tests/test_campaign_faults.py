@@ -327,6 +327,20 @@ def test_figures_drawn_on_the_cluster_heaviest_first_come_back_in_order(cluster)
     assert pngs == [crep.figure_png(m, *a, **k) for m, a, k in calls]
 
 
+def test_figures_drawn_here_at_once_when_the_cluster_has_no_worker():
+    from distributed import Client, LocalCluster
+
+    from meshphase.campaign_job import draw_figures
+    from meshphase.report import campaign_report as crep
+
+    calls = [(crep.wall_times_across_recordings, (["a", "b"], [1.0, 2.0]), {})]
+    with LocalCluster(n_workers=0, processes=False, dashboard_address=None) as cl, Client(cl) as client:
+        t = time.perf_counter()
+        pngs = draw_figures(client, calls, timeout=60.0)
+        assert time.perf_counter() - t < 30.0
+    assert pngs == [crep.figure_png(m, *a, **k) for m, a, k in calls]
+
+
 def test_figure_order_empty_ties_and_unpicklable():
     from meshphase.campaign_job import figure_order
 
