@@ -234,7 +234,7 @@ def local_cluster(n_workers: int, *, dashboard=None, worker_modules: Sequence[st
     # server (scheduler, Nannies here; workers in their processes) is created, so the
     # workers get theirs from their Nanny, which hands them to a worker it restarts too:
     # the config of the block below is gone by then
-    monitor = {} if on else dict(_QUIET_MONITORS)
+    monitor = {} if on else _QUIET_MONITORS
     workers_config = {"distributed.worker.profile.enabled": on, **monitor}
     config = {"distributed.scheduler.worker-saturation": 1.0, **monitor}
     if server is not None:
