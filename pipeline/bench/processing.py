@@ -735,7 +735,7 @@ def run_processing_bench(out_dir, *, quick: bool = False, rng=0, process_minutes
     out_dir : path
         Created if missing; receives ``processing_bench.json`` and ``processing_bench.md``.
     quick : bool
-        Tiny sizes (a smoke run, seconds).
+        Tiny sizes and one start-up timing per case (a smoke run, under a minute).
     rng : None, int or Generator
         Noise seed.
     process_minutes : sequence of float, optional
@@ -814,7 +814,8 @@ def _run(out_dir, quick: bool, rng, process_minutes=()) -> dict:
     ident = identify_rows((2.0,) if quick else (10.0, 60.0))
     from .startup import startup_rows
 
-    start = startup_rows(2 if quick else 7)
+    # a quick run times each start-up case once (each case costs its fresh interpreters)
+    start = startup_rows(1 if quick else 7)
     res = {"accuracy": acc, "throughput": thr, "phasing": phs, "process": proc, "identify": ident,
            "startup": start,
            "process_skipped": proc_skipped,
