@@ -227,7 +227,7 @@ def cmd_bench(args) -> int:
         return 0
     out = Path(args.out)
     if args.what == "campaign":
-        return _bench_campaign(out, args.quick)
+        return _bench_campaign(out, args.quick, args.repeats)
     if args.what == "reference":
         from .bench.models_reference import build_reference, reference_line
 
@@ -246,12 +246,14 @@ def cmd_bench(args) -> int:
     return 0
 
 
-def _bench_campaign(out: Path, quick: bool) -> int:
+def _bench_campaign(out: Path, quick: bool, repeats: int | None = None) -> int:
     """``meshphase bench campaign``: :func:`meshphase.bench.campaign.measure_speedup` into
-    ``out/campaign_bench.json``, one line per timed run and the speed-ups on stdout."""
+    ``out/campaign_bench.json``, one line per timed run and the speed-ups on stdout
+    (``repeats`` timed runs per worker count; None: 3, or 1 with ``quick``)."""
     from .bench.campaign import measure_speedup
 
-    n, minutes, repeats = (2, 0.5, 1) if quick else (8, 2.0, 3)
+    n, minutes, default_repeats = (2, 0.5, 1) if quick else (8, 2.0, 3)
+    repeats = default_repeats if repeats is None else repeats
     res = measure_speedup(n, minutes, (1, 2), repeats=repeats)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "campaign_bench.json"
@@ -263,8 +265,24 @@ def _bench_campaign(out: Path, quick: bool) -> int:
               f"{r['report_s']:5.1f} s, cluster wait {r.get('cluster_wait_s', float('nan')):5.1f} s")
     print(f"speed-up 2 vs 1 worker: {res['speedup'][2]:.2f}x total, "
           f"{res['processing_speedup'][2]:.2f}x processing (best of {repeats})")
+    pairs = res["paired_speedup"][2]["pairs"]
+    if len(pairs) > 1:
+        print(f"  each repeat's 1-worker run over its 2-worker run: "
+              f"{', '.join(f'{v:.2f}' for v in pairs)}x (median {res['paired_speedup'][2]['median']:.2f}x; "
+              f"processing median {res['paired_processing_speedup'][2]['median']:.2f}x)")
     print(f"{path.name:<24} {path}")
     return 0
+
+
+def _repeats(text: str) -> int:
+    """``--repeats N``: a whole number >= 1."""
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number of runs, got {text!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"repeats must be at least 1, got {n}")
+    return n
 
 
 def _minutes_list(text: str) -> tuple:
@@ -596,6 +614,9 @@ def _add_bench(sub) -> None:
     s.add_argument("--out", default="bench-results", help="output folder (default ./bench-results)")
     s.add_argument("--minutes", type=float, default=60.0, help="io: recording length [min] (default 60)")
     s.add_argument("--quick", action="store_true", help="small sizes, for a smoke run")
+    s.add_argument("--repeats", type=_repeats, default=None, metavar="N",
+                   help="campaign: timed runs per worker count, interleaved 1, 2, 1, 2, ... "
+                        "(default 3; --quick: 1); more repeats, more pairs on a noisy machine")
     s.add_argument("--evaluations", type=int, default=10 ** 7,
                    help="reference: full-model evaluations (default 1e7)")
     s.add_argument("--plain", action="store_true",

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import os
+import statistics
 import tempfile
 from pathlib import Path
 
@@ -72,6 +73,22 @@ def _prepare(work: Path, n_recordings: int, minutes: float, scenario: str, seed:
     # started here, every timed run finds it running, the first one as much as the others
     server_s = worker_server(worker_modules())
     return rec_dir, scene_path, server_s
+
+
+def _paired(runs: list, workers: list, key: str = "wall_s") -> dict:
+    """Per worker count, the speed-ups of each repeat's own pair: the reference count's run
+    of a repeat against this count's run of the same repeat (the two ran one after the
+    other, so a slow spell of the machine that spans both cancels). ``{w: {"pairs": [...],
+    "median": ...}}``; only counts other than the reference (the first)."""
+    ref = workers[0]
+    by = {(r["repeat"], r["workers"]): r[key] for r in runs}
+    reps = sorted({r["repeat"] for r in runs})
+    out = {}
+    for w in workers[1:]:
+        pairs = [by[(k, ref)] / by[(k, w)] for k in reps
+                 if (k, ref) in by and (k, w) in by and by[(k, w)] > 0]
+        out[w] = {"pairs": pairs, "median": statistics.median(pairs) if pairs else float("nan")}
+    return out
 
 
 def _timed_run(scene_path, rec_dir: Path, out: Path, w: int, rep: int, progress: bool) -> dict:
@@ -142,7 +159,11 @@ def measure_speedup(n_recordings: int = 8, minutes: float = 2.0, workers=(1, 2),
         ``worker_server_s`` (the start of the workers' fork server, once, before the timed
         runs: a ``meshphase campaign`` command pays it in the background while its scene-level
         results run; None where there is none), and
-        ``speedup`` / ``processing_speedup`` per worker count relative to the first.
+        ``speedup`` / ``processing_speedup`` per worker count relative to the first (best
+        times), and ``paired_speedup`` / ``paired_processing_speedup`` (per worker count but
+        the first: ``pairs``, each repeat's reference run over this count's run of the same
+        repeat, and their ``median``; less sensitive than the best times to a slow spell of
+        the machine that hits one worker count's runs more than the other's).
     """
     n_recordings, minutes, repeats, workers = _check_args(n_recordings, minutes, repeats, workers,
                                                           scenario)
@@ -170,7 +191,9 @@ def measure_speedup(n_recordings: int = 8, minutes: float = 2.0, workers=(1, 2),
                 "worker_server_s": server_s,
                 "best_wall_s": best, "best_processing_s": best_p,
                 "speedup": {w: best[ref] / best[w] for w in workers},
-                "processing_speedup": {w: best_p[ref] / best_p[w] for w in workers}}
+                "processing_speedup": {w: best_p[ref] / best_p[w] for w in workers},
+                "paired_speedup": _paired(runs, workers),
+                "paired_processing_speedup": _paired(runs, workers, "processing_s")}
     finally:
         if tmp is not None:
             tmp.cleanup()

@@ -41,6 +41,8 @@ def test_measure_speedup_smoke(tmp_path):
     phases = {"cluster_start_s", "cluster_wait_s", "scene_level_s", "processing_s", "report_s"}
     assert all(phases <= set(r) and r["cluster_wait_s"] <= r["cluster_start_s"] + 1e-6 for r in res["runs"])
     assert res["speedup"][1] == pytest.approx(1.0) and res["speedup"][2] > 0
+    # one repeat: one pair, and it is the ratio of the best times
+    assert res["paired_speedup"][2]["pairs"] == pytest.approx([res["speedup"][2]])
 
 
 @pytest.mark.bench
@@ -50,9 +52,43 @@ def test_cli_bench_campaign_quick(tmp_path, capsys):
 
     from meshphase.cli import main
 
-    assert main(["bench", "campaign", "--quick", "--out", str(tmp_path)]) == 0
+    assert main(["bench", "campaign", "--quick", "--repeats", "2", "--out", str(tmp_path)]) == 0
     text = capsys.readouterr().out
     assert "1 worker(s)" in text and "2 worker(s)" in text and "speed-up 2 vs 1 worker" in text
+    assert "each repeat's 1-worker run over its 2-worker run" in text
     res = json.loads((tmp_path / "campaign_bench.json").read_text())
-    assert {r["workers"] for r in res["runs"]} == {1, 2}
+    assert [r["workers"] for r in res["runs"]] == [1, 2, 1, 2]
+    assert len(res["paired_speedup"]["2"]["pairs"]) == 2
     assert all(r["n_failed"] == 0 for r in res["runs"])
+
+
+def test_paired_speedups_pair_each_repeats_runs():
+    # each repeat's 1-worker wall over its own 2-worker wall; a repeat missing a run is left out
+    from meshphase.bench.campaign import _paired
+
+    runs = [{"repeat": 0, "workers": 1, "wall_s": 12.0, "processing_s": 8.0},
+            {"repeat": 0, "workers": 2, "wall_s": 6.0, "processing_s": 4.0},
+            {"repeat": 1, "workers": 1, "wall_s": 15.0, "processing_s": 9.0},   # a slow spell:
+            {"repeat": 1, "workers": 2, "wall_s": 10.0, "processing_s": 6.0},   # both runs slow
+            {"repeat": 2, "workers": 1, "wall_s": 11.0, "processing_s": 7.0},
+            {"repeat": 2, "workers": 2, "wall_s": 5.5, "processing_s": 3.5},
+            {"repeat": 3, "workers": 1, "wall_s": 9.0, "processing_s": 6.0}]
+    got = _paired(runs, [1, 2])
+    assert list(got) == [2]
+    assert got[2]["pairs"] == pytest.approx([2.0, 1.5, 2.0])
+    assert got[2]["median"] == pytest.approx(2.0)
+    assert _paired(runs, [1, 2], "processing_s")[2]["pairs"] == pytest.approx([2.0, 1.5, 2.0])
+    assert _paired(runs, [1]) == {}
+    empty = _paired([], [1, 2])[2]
+    assert empty["pairs"] == [] and empty["median"] != empty["median"]   # NaN: no pair
+
+
+@pytest.mark.parametrize("arg", ["0", "-1", "two", "1.5"])
+def test_cli_bench_campaign_rejects_bad_repeats(arg, tmp_path, capsys):
+    # argparse refuses before anything is generated or timed
+    from meshphase.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "campaign", "--out", str(tmp_path / "b"), "--repeats", arg])
+    assert exc.value.code == 2 and "--repeats" in capsys.readouterr().err
+    assert not (tmp_path / "b").exists()
