@@ -84,11 +84,6 @@ def test_paired_speedups_pair_each_repeats_runs():
 
 
 @pytest.mark.parametrize("arg", ["0", "-1", "two", "1.5"])
-def test_cli_bench_campaign_rejects_bad_repeats(arg, tmp_path, capsys):
+def test_cli_bench_campaign_rejects_bad_repeats(arg, bench_usage_error):
     # argparse refuses before anything is generated or timed
-    from meshphase.cli import main
-
-    with pytest.raises(SystemExit) as exc:
-        main(["bench", "campaign", "--out", str(tmp_path / "b"), "--repeats", arg])
-    assert exc.value.code == 2 and "--repeats" in capsys.readouterr().err
-    assert not (tmp_path / "b").exists()
+    bench_usage_error(["campaign", "--repeats", arg], "--repeats")

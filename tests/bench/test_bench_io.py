@@ -138,13 +138,8 @@ def test_cli_bench_io_prints_the_peak_rss_of_convert_and_process(tmp_path, capsy
 
 
 @pytest.mark.parametrize("arg", ["ten", "10,-1", "nan", "10,,60"])
-def test_cli_bench_rss_minutes_bad_value_is_a_usage_error(tmp_path, arg, capsys):
-    from meshphase.cli import main
-
-    with pytest.raises(SystemExit) as exc:
-        main(["bench", "io", "--out", str(tmp_path / "b"), "--rss-minutes", arg])
-    assert exc.value.code == 2 and "--rss-minutes" in capsys.readouterr().err
-    assert not (tmp_path / "b").exists()
+def test_cli_bench_rss_minutes_bad_value_is_a_usage_error(arg, bench_usage_error):
+    bench_usage_error(["io", "--rss-minutes", arg], "--rss-minutes")
 
 
 def test_run_bench_rss_minutes_bad_type(tmp_path):
