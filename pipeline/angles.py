@@ -70,6 +70,7 @@ import numpy as np
 from scipy import linalg
 from scipy.interpolate import BSpline
 
+from ._median import median_of_finite
 from .errors import ProcessingWarning
 from .threads import thread_pool
 from .validate import as_finite_array, as_positive_int
@@ -738,7 +739,7 @@ def _plausible_rate(rate: np.ndarray) -> bool:
         return True
     if not (np.all(np.isfinite(rate)) and np.all(rate > 0)):
         return False
-    med = float(np.median(rate))
+    med = float(median_of_finite(rate))             # finite, checked above
     return bool(np.all(rate <= RATE_SPREAD * med) and np.all(rate >= med / RATE_SPREAD))
 
 

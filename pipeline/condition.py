@@ -69,6 +69,7 @@ import numpy as np
 from scipy import ndimage
 
 from . import iir
+from ._median import median_of_finite
 from .errors import DataQualityWarning, ProcessingWarning
 from .log import logger
 from .quality import (DROPOUT_MIN_RUN, FALSE_ALARM, ChannelQuality, ChannelScan, HumReport,
@@ -774,7 +775,7 @@ def _noise_from_diffs(d: np.ndarray) -> float:
     """:func:`estimate_noise` from its (subsampled, finite) first differences."""
     if d.size == 0:
         return float("nan")
-    return float(_MAD_TO_SIGMA * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0))
+    return float(_MAD_TO_SIGMA * median_of_finite(np.abs(d - median_of_finite(d))) / math.sqrt(2.0))
 
 
 def estimate_snr(x, *, quantile: float = 0.999) -> tuple[float, float, float]:
@@ -810,7 +811,7 @@ def _snr_from(sigma: float, xs: np.ndarray, q: float) -> tuple[float, float, flo
 def _snr_peak(xs: np.ndarray, q: float) -> float:
     """The pulse peak amplitude ``A`` of :func:`estimate_snr` from the finite samples ``xs``
     of the first ``_SUBSAMPLE`` samples (at least 2)."""
-    z = xs - np.median(xs)
+    z = xs - median_of_finite(xs)
     top = float(np.quantile(z, q))
     a = top
     runs = find_runs(z > 0.5 * top) if top > 0 else np.empty((0, 2), dtype=np.int64)

@@ -105,6 +105,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._median import median_of_finite
 from .validate import as_choice
 
 __all__ = ["find_runs", "nonfinite_runs", "clipped_runs", "channel_quality", "equal_runs",
@@ -350,10 +351,10 @@ def _level_from(xs: np.ndarray, d: np.ndarray) -> tuple[float, float]:
     """:func:`_robust_level` from its strided finite samples and first differences."""
     if xs.size == 0:
         return 0.0, 0.0
-    med = float(np.median(xs))
+    med = float(median_of_finite(xs))
     if d.size == 0:
         return med, 0.0
-    sig = float(_MAD_TO_SIGMA * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0))
+    sig = float(_MAD_TO_SIGMA * median_of_finite(np.abs(d - median_of_finite(d))) / math.sqrt(2.0))
     return med, sig
 
 

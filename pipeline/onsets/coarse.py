@@ -13,6 +13,7 @@ import math
 import numpy as np
 from scipy import ndimage
 
+from .._median import median_of_finite
 from ..validate import as_choice, as_positive, as_positive_int, as_signal
 from .results import CoarsePeaks
 
@@ -45,25 +46,12 @@ def _decimate(seg: np.ndarray, d: int, sign: int = 1) -> np.ndarray:
     return v @ np.full(d, (1.0 if sign > 0 else -1.0) / d)
 
 
-def _median(a: np.ndarray) -> float:
-    """``float(np.median(a))`` of a finite, non-empty 1-d array, bit for bit, for less: one
-    single-pivot ``np.partition`` (np.median of an even count partitions around two
-    pivots, which is slower) and no generic reduction machinery, the lower middle value
-    being the maximum of the part below the pivot."""
-    n = a.size
-    k = n >> 1
-    p = np.partition(a, k)
-    if n & 1:
-        return float(p[k])
-    return float((p[:k].max() + p[k]) / 2)
-
-
 def _fill_nan(seg: np.ndarray) -> np.ndarray:
     if math.isfinite(float(np.sum(seg))):
         return seg
     bad = ~np.isfinite(seg)
     fin = seg[~bad]
-    fill = _median(fin[:: max(1, fin.size >> 16)]) if fin.size else 0.0
+    fill = float(median_of_finite(fin[:: max(1, fin.size >> 16)])) if fin.size else 0.0
     out = seg.copy()
     out[bad] = fill
     return out
@@ -129,8 +117,8 @@ def _noise_level(y: np.ndarray, w: float) -> tuple[float, float, float]:
         live = _live(y)
         pieces = [live if live.size >= 3 else y]
     for p in pieces:                                  # <= 4 pieces
-        med = _median(p)
-        sig = _MAD_TO_SIGMA * _median(np.abs(p - med))
+        med = float(median_of_finite(p))
+        sig = _MAD_TO_SIGMA * float(median_of_finite(np.abs(p - med)))
         keep = None
         for _ in range(2):
             if p.size < 3 or not sig > 0:
@@ -148,15 +136,15 @@ def _noise_level(y: np.ndarray, w: float) -> tuple[float, float, float]:
                 break                                  # same mask: same median and sigma
             keep = new_keep
             r = p[keep]
-            med = _median(r)
-            sig = _MAD_TO_SIGMA * _median(np.abs(r - med))
+            med = float(median_of_finite(r))
+            sig = _MAD_TO_SIGMA * float(median_of_finite(np.abs(r - med)))
         rest.append(p if keep is None else p[keep])
     r = np.concatenate(rest) if len(rest) > 1 else rest[0]
     if len(rest) == 1:                                # the piece's own last estimate
         return med, float(sig), float(pieces[0].max())
-    med = _median(r)
+    med = float(median_of_finite(r))
     top = max(float(p.max()) for p in pieces)
-    return med, float(_MAD_TO_SIGMA * _median(np.abs(r - med))), top
+    return med, _MAD_TO_SIGMA * float(median_of_finite(np.abs(r - med))), top
 
 
 def _coarse_dec(yd: np.ndarray, w_d: float, spacing_d: float, k_sigma: float, fast: bool = False):

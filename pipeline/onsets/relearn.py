@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .coarse import _median
+from .._median import median_of_finite
 from .results import Template
 
 __all__: list[str] = []
@@ -54,7 +54,7 @@ def _period(peaks: np.ndarray) -> float | None:
     if peaks.size < 8:
         return None
     dif = np.diff(peaks).astype(np.float64)
-    med = _median(dif)
+    med = float(median_of_finite(dif))
     if not med > 0:
         return None
     c = np.concatenate([[0.0], np.cumsum(np.rint(dif / med))])
@@ -67,7 +67,7 @@ def _good_median(ncc: np.ndarray, flags: np.ndarray) -> float:
     """Median NCC of the unflagged pulses (of all when fewer than 3 are unflagged)."""
     good = ncc[flags == 0]
     a = good if good.size >= 3 else ncc
-    return _median(a) if a.size and np.isfinite(a).all() else float(np.median(a))
+    return float(median_of_finite(a)) if a.size and np.isfinite(a).all() else float(np.median(a))
 
 
 def _timing_bound(tpl: Template, ncc: float) -> float:

@@ -1,6 +1,6 @@
-"""The onset stage's fast kernels (issue 13) equal what they replace bit for bit: the
-single-pivot median, the sign folded into the decimation, the Savitzky-Golay interior and
-the decimated finiteness check of a block."""
+"""The onset stage's fast kernels (issue 13) equal what they replace bit for bit: the sign
+folded into the decimation, the Savitzky-Golay interior and the decimated finiteness check
+of a block (the single-pivot median: tests/test_median.py)."""
 
 import numpy as np
 import pytest
@@ -9,22 +9,10 @@ from hypothesis import strategies as st
 from scipy import signal
 
 from meshphase.onsets import detect_onsets
-from meshphase.onsets.coarse import _decimate, _median
+from meshphase.onsets.coarse import _decimate
 from meshphase.onsets.features import _features_fit, _savgol_interior
 
 FS = 5120.0
-
-
-@pytest.mark.parametrize("n", [1, 2, 3, 8, 8191, 8192])
-def test_median_equals_numpy_bitwise(n):
-    rng = np.random.default_rng(n)
-    for a in (rng.standard_normal(n), np.round(rng.standard_normal(n) * 3), np.zeros(n)):
-        assert _median(a) == float(np.median(a))
-
-
-def test_median_rejects_empty():
-    with pytest.raises(ValueError):
-        _median(np.empty(0))
 
 
 @pytest.mark.parametrize("d", [1, 2, 7, 40])

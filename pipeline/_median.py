@@ -1,0 +1,53 @@
+"""The median of finite samples by one single-pivot partition.
+
+``np.median`` partitions around the middle element (two of them for an even count) and the
+last one too, which it checks for NaN, and its generic reduction machinery costs on top.
+Where the samples are known to be finite (first differences filtered by ``np.isfinite``, the
+finite samples of a channel, the onset detector's decimated blocks), one partition around
+the middle suffices, with the value ``np.median`` gives. ``meshphase bench processing``
+times both on 2 min of a pulse train (the ``np.median`` and ``median_of_finite`` rows of its
+throughput table): 1.9, 2.2 and 3.0x faster in three runs of the stop that wrote this.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["median_of_finite"]
+
+
+def median_of_finite(a: np.ndarray):
+    """``np.median(a)`` of a finite, non-empty array, for less.
+
+    Parameters
+    ----------
+    a : numpy.ndarray
+        Finite samples [any unit], of any shape (taken flat, as ``np.median`` without an
+        axis). Not checked for NaN: with a NaN the result is meaningless (``np.median``
+        gives NaN).
+
+    Returns
+    -------
+    numpy.floating
+        The middle value, or the mean of the two middle values of an even count [unit of
+        ``a``], of ``np.median``'s dtype and value (to the sign of a zero, which neither
+        orders). float32 and float64 samples take the single partition (the lower middle
+        value is the maximum of the part below the upper one); other dtypes (integers,
+        float16), whose mean ``np.median`` takes in a wider type, go to ``np.median``.
+
+    Raises
+    ------
+    ValueError
+        When ``a`` is empty.
+    """
+    a = np.ravel(a)
+    n = a.size
+    if n == 0:
+        raise ValueError("median of an empty array")
+    if a.dtype not in (np.float64, np.float32):
+        return np.median(a)
+    k = n >> 1
+    p = np.partition(a, k)
+    if n & 1:
+        return p[k]
+    return (p[:k].max() + p[k]) / 2
