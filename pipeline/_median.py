@@ -13,7 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["median_of_finite"]
+__all__ = ["MAD_TO_SIGMA", "median_of_finite", "median_and_mad"]
+
+#: 1 / Phi^-1(3/4): the median absolute deviation of Gaussian samples over their sigma [-]
+MAD_TO_SIGMA = 1.482602218505602
 
 
 def median_of_finite(a: np.ndarray):
@@ -51,3 +54,11 @@ def median_of_finite(a: np.ndarray):
     if n & 1:
         return p[k]
     return (p[:k].max() + p[k]) / 2
+
+
+def median_and_mad(a: np.ndarray):
+    """(median, median absolute deviation from it) of a finite, non-empty array, both by
+    :func:`median_of_finite` (``np.median``'s values and dtype); ``MAD_TO_SIGMA * mad`` is
+    the robust standard deviation of Gaussian samples [unit of ``a``]."""
+    med = median_of_finite(a)
+    return med, median_of_finite(np.abs(a - med))

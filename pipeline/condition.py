@@ -69,7 +69,7 @@ import numpy as np
 from scipy import ndimage
 
 from . import iir
-from ._median import median_of_finite
+from ._median import MAD_TO_SIGMA, median_and_mad, median_of_finite
 from .errors import DataQualityWarning, ProcessingWarning
 from .log import logger
 from .quality import (DROPOUT_MIN_RUN, FALSE_ALARM, ChannelQuality, ChannelScan, HumReport,
@@ -102,7 +102,6 @@ MAX_CORNER_FRACTION = 0.45
 #: Drift-removal window in mesh periods [-].
 DRIFT_WINDOW_MESH_PERIODS = 20.0
 
-_MAD_TO_SIGMA = 1.482602218505602  # 1 / Phi^-1(3/4): MAD of a Gaussian -> sigma
 _SUBSAMPLE = 1 << 20                 # at most this many samples enter a median / quantile
 
 
@@ -775,7 +774,7 @@ def _noise_from_diffs(d: np.ndarray) -> float:
     """:func:`estimate_noise` from its (subsampled, finite) first differences."""
     if d.size == 0:
         return float("nan")
-    return float(_MAD_TO_SIGMA * median_of_finite(np.abs(d - median_of_finite(d))) / math.sqrt(2.0))
+    return float(MAD_TO_SIGMA * median_and_mad(d)[1] / math.sqrt(2.0))
 
 
 def estimate_snr(x, *, quantile: float = 0.999) -> tuple[float, float, float]:

@@ -105,7 +105,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._median import median_of_finite
+from ._median import MAD_TO_SIGMA, median_and_mad, median_of_finite
 from .validate import as_choice
 
 __all__ = ["find_runs", "nonfinite_runs", "clipped_runs", "channel_quality", "equal_runs",
@@ -121,7 +121,6 @@ DROPOUT_MIN_RUN = 4
 #: Shortest plateau ever reported as clipped [samples].
 CLIP_MIN_RUN = 3
 
-_MAD_TO_SIGMA = 1.482602218505602
 _SUBSAMPLE = 1 << 20          # samples entering the smoothness test
 _ROBUST_SAMPLES = 1 << 16     # samples (and sample pairs) entering the median and the noise
 _SMOOTH_SIGN_CHANGES = 0.25   # below this share of sign changes a channel is noise-free
@@ -354,7 +353,7 @@ def _level_from(xs: np.ndarray, d: np.ndarray) -> tuple[float, float]:
     med = float(median_of_finite(xs))
     if d.size == 0:
         return med, 0.0
-    sig = float(_MAD_TO_SIGMA * median_of_finite(np.abs(d - median_of_finite(d))) / math.sqrt(2.0))
+    sig = float(MAD_TO_SIGMA * median_and_mad(d)[1] / math.sqrt(2.0))
     return med, sig
 
 

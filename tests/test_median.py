@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from meshphase._median import median_of_finite
+from meshphase._median import median_and_mad, median_of_finite
 
 _BIG = float(np.float32(1e30))    # a float32 value: no sum of two overflows
 
@@ -70,3 +70,14 @@ def test_empty_is_an_error():
 def test_not_an_array_is_an_error():
     with pytest.raises((TypeError, AttributeError, ValueError)):
         median_of_finite(None)
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_median_and_mad_are_np_medians(dtype):
+    # the MAD is the median of the absolute deviations from the median, both as np.median
+    a = np.random.default_rng(5).standard_normal(1001).astype(dtype) ** 3
+    med, mad = median_and_mad(a)
+    _same(med, np.median(a))
+    _same(mad, np.median(np.abs(a - np.median(a))))
+    with pytest.raises(ValueError, match="empty"):
+        median_and_mad(np.empty(0, dtype=dtype))

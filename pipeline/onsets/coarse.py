@@ -13,13 +13,12 @@ import math
 import numpy as np
 from scipy import ndimage
 
-from .._median import median_of_finite
+from .._median import MAD_TO_SIGMA, median_and_mad, median_of_finite
 from ..validate import as_choice, as_positive, as_positive_int, as_signal
 from .results import CoarsePeaks
 
 __all__ = ["coarse_peaks"]
 
-_MAD_TO_SIGMA = 1.482602218505602
 _SAMPLES_PER_WIDTH = 16      # decimate so that the pulse FWHM keeps >= 16 samples
 
 
@@ -117,8 +116,8 @@ def _noise_level(y: np.ndarray, w: float) -> tuple[float, float, float]:
         live = _live(y)
         pieces = [live if live.size >= 3 else y]
     for p in pieces:                                  # <= 4 pieces
-        med = float(median_of_finite(p))
-        sig = _MAD_TO_SIGMA * float(median_of_finite(np.abs(p - med)))
+        med, mad = median_and_mad(p)
+        med, sig = float(med), MAD_TO_SIGMA * float(mad)
         keep = None
         for _ in range(2):
             if p.size < 3 or not sig > 0:
@@ -136,15 +135,15 @@ def _noise_level(y: np.ndarray, w: float) -> tuple[float, float, float]:
                 break                                  # same mask: same median and sigma
             keep = new_keep
             r = p[keep]
-            med = float(median_of_finite(r))
-            sig = _MAD_TO_SIGMA * float(median_of_finite(np.abs(r - med)))
+            med, mad = median_and_mad(r)
+            med, sig = float(med), MAD_TO_SIGMA * float(mad)
         rest.append(p if keep is None else p[keep])
     r = np.concatenate(rest) if len(rest) > 1 else rest[0]
     if len(rest) == 1:                                # the piece's own last estimate
         return med, float(sig), float(pieces[0].max())
-    med = float(median_of_finite(r))
+    med, mad = median_and_mad(r)
     top = max(float(p.max()) for p in pieces)
-    return med, _MAD_TO_SIGMA * float(median_of_finite(np.abs(r - med))), top
+    return float(med), MAD_TO_SIGMA * float(mad), top
 
 
 def _coarse_dec(yd: np.ndarray, w_d: float, spacing_d: float, k_sigma: float, fast: bool = False):
