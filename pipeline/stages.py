@@ -20,7 +20,7 @@ import math
 import time
 import warnings
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -35,11 +35,8 @@ from .errors import DataQualityWarning, MeshphaseWarning, ProcessingWarning, Sce
 from .exits import OutputDir, recording_read_errors, run_status
 from .loads import facewidth_centroid, facewidth_readings, load_sharing_from_amplitudes
 from .log import logger
-from .models import bearing
 from .models.gearset import Speeds
 from .models.mesh_phasing import assembly_check, classify_phasing, ideal_phasing
-from .models.tilt import solve_tilt
-from .models.tolerance import ToleranceBand, Tolerances, monte_carlo, observation_window
 from .onsets import detect_onsets_recording
 from .outputs import new_output_dir, summary_dict, write_outputs  # noqa: F401 (public here)
 from .passes import ONSET_RESOLUTION, gap_intervals_of, gauge_passes  # noqa: F401 (was here)
@@ -56,6 +53,10 @@ from .stream import (BLOCK_SAMPLES, ChannelPlan, FileSource, GeneratorSource, Me
 from .threads import blas_single_thread
 from .truth import phasing_vs_truth, tacho_geometry, true_errors
 from .validate import as_regular_file
+
+if TYPE_CHECKING:  # the model modules of bearing, tilt and tolerance load in their stages:
+    # `meshphase process` runs none of them (nor does a scene that does not ask for them)
+    from .models.tolerance import Tolerances
 
 __all__ = ["RunContext", "run_scene", "STAGE_FUNCTIONS", "write_outputs", "process_recording",
            "new_output_dir"]
@@ -471,6 +472,8 @@ def stage_ideal(ctx: RunContext) -> IdealStage:
 
 
 def _tolerances(ctx: RunContext) -> Tolerances:
+    from .models.tolerance import ToleranceBand, Tolerances
+
     t = ctx.scene.tolerances
     kw = {}
     for gear in ("sun", "ring", "planet"):
@@ -484,6 +487,8 @@ def _tolerances(ctx: RunContext) -> Tolerances:
 @_records("tolerance")
 def stage_tolerance(ctx: RunContext) -> ToleranceStage:
     """Monte Carlo phasing statistics under the scene's tolerances."""
+    from .models.tolerance import monte_carlo, observation_window
+
     g = ctx.gearset
     t = ctx.scene.tolerances
     sp = ctx.scene.speeds
@@ -575,6 +580,8 @@ def stage_compare(ctx: RunContext) -> CompareStage:
 
 def _bearing_case(ctx: RunContext) -> tuple:
     """(seed 001 case, input torque [N·m]) of the scene's [bearing] table."""
+    from .models import bearing
+
     b = ctx.scene.bearing
     case = bearing.seed_case(b["case"])
     return case, (b["input_torque"] if b.get("input_torque") is not None else case.input_torque)
@@ -584,6 +591,8 @@ def _bearing_case(ctx: RunContext) -> tuple:
 def stage_bearing_moments(ctx: RunContext) -> BearingStage:
     """Bearing moments of the scene's seed 001 case: concentrated, with the scene's centroid
     offsets and (single pinion) with the measured centroids."""
+    from .models import bearing
+
     b = ctx.scene.bearing
     case, torque = _bearing_case(ctx)
     est = "closed form (seed 001 tables reproduced to print precision)"
@@ -605,6 +614,8 @@ def stage_bearing_moments(ctx: RunContext) -> BearingStage:
 @_records("tilt")
 def stage_tilt(ctx: RunContext) -> TiltStage:
     """The coupled tilt / load-distribution solve at each of the scene's tilt stiffnesses."""
+    from .models.tilt import solve_tilt
+
     b = ctx.scene.bearing
     case, torque = _bearing_case(ctx)
     sols = [(k, solve_tilt(case.geometry, torque, k_tilt_Nm_per_rad=k, c_g=b["c_g"])) for k in b["k_tilt"]]

@@ -104,7 +104,8 @@ def test_process_command_loads_only_what_it_needs(tmp_path):
     # matplotlib or synthetic generator; and with numba installed no scipy.signal or
     # scipy.stats (the filters run on numba's kernel, meshphase.iir.pick_engine: one of
     # numba and scipy.signal must load, numba's kernel is the faster; without numba the
-    # filters need scipy.signal)
+    # filters need scipy.signal); nor the models of the stages it does not run (bearing
+    # moments, tilt, the tolerance Monte Carlo: `meshphase run` a scene for those)
     import importlib.util
 
     import pandas as pd
@@ -117,7 +118,8 @@ def test_process_command_loads_only_what_it_needs(tmp_path):
     path = meshphase.io.write(rec, tmp_path / "rig.h5")
     gs = tmp_path / "gearset.toml"
     gs.write_text('name = "seed rig gearset"\n' + SEED_RIG_GEARSET, encoding="utf-8")
-    bad = ["dask", "distributed", "pandas", "matplotlib"]
+    bad = ["dask", "distributed", "pandas", "matplotlib", "meshphase.models.bearing",
+           "meshphase.models.tilt", "meshphase.models.tolerance", "meshphase.models.tolerance_model"]
     if importlib.util.find_spec("numba") is not None:
         bad += ["scipy.signal", "scipy.stats"]
     code = ("import sys, contextlib, io\n"

@@ -17,6 +17,7 @@ import pandas as pd
 import pytest
 
 import meshphase.io
+import meshphase.models.tolerance
 import meshphase.stages
 from meshphase.scene import STAGES, Scene, load_scene, parse_scene, plan
 from meshphase.phasing import relabel_gauge
@@ -180,7 +181,7 @@ def test_example_tolerance_study_runs_monte_carlo_only(tmp_path):
 
 @pytest.mark.parametrize("name, cases", [("bearing_moments.toml", 3), ("bearing_double_pinion.toml", 2)])
 def test_example_bearing_scenes_run(name, cases, monkeypatch):
-    monkeypatch.setattr(meshphase.stages, "monte_carlo", _fail("monte_carlo"))
+    monkeypatch.setattr(meshphase.models.tolerance, "monte_carlo", _fail("monte_carlo"))
     ctx = run_scene(load_scene(EXAMPLES / name))
     assert ctx.ran == ["bearing_moments", "tilt"] and ctx.failed == {}
     sols = ctx.tilt.solutions
@@ -343,7 +344,7 @@ def seed_rig_file(tmp_path_factory):
 def test_process_recording_writes_next_to_input_without_monte_carlo(seed_rig_file, monkeypatch):
     path, gs = seed_rig_file
     # no [tolerances] in the gearset file: the run must not touch the Monte Carlo
-    monkeypatch.setattr(meshphase.stages, "monte_carlo", _fail("monte_carlo"))
+    monkeypatch.setattr(meshphase.models.tolerance, "monte_carlo", _fail("monte_carlo"))
     before = path.read_bytes()
     ctx, files = process_recording(path, gs)
     assert "tolerance" not in ctx.ran and ctx.tolerance is None
