@@ -2,9 +2,11 @@
 
 The stages (and with them scipy.linalg, scipy.interpolate and scipy.optimize, but not
 scipy.signal, whose import pulls scipy.stats in: the filter designs are meshphase.sos_design's,
-and the filters need scipy.signal only where numba is not installed), dask, matplotlib and the synthetic generator are imported only by the
-subcommands that use them, so ``meshphase --help``, ``info`` and ``convert`` start without
-them (a test holds the modules they load; ``meshphase bench`` times the start-up).
+and the filters need scipy.signal only where numba is not installed), dask, matplotlib and
+the synthetic generator are imported only by the subcommands that use them, so ``meshphase
+--help``, ``info`` and ``convert`` start without them; tqdm (with importlib.metadata), the
+run's result types and the campaign machinery load with the first progress bar, run or
+campaign (tests hold the modules each loads; ``meshphase bench`` times the start-up).
 
 Exit status (every subcommand; README.md "Exit status"; constants in :mod:`meshphase.exits`):
 
@@ -47,10 +49,7 @@ import time
 import warnings
 from pathlib import Path
 
-from tqdm import tqdm
-
 from . import __version__
-from .campaign import cli_campaign
 from .channels import mapping_report
 from .demo import demo_scene_path
 from .errors import DataQualityWarning
@@ -67,6 +66,8 @@ __all__ = ["main", "build_parser", "describe_error"]
 
 
 def _progress(total: int | None, desc: str, enabled: bool):
+    from tqdm import tqdm  # with the first bar: tqdm loads importlib.metadata (~20 ms)
+
     return tqdm(total=total, desc=desc, unit="S", unit_scale=True, disable=not enabled,
                 leave=False, file=sys.stderr)
 
@@ -308,6 +309,8 @@ def _stage_progress(enabled: bool):
 
     def cb(name, i, n):
         if bar["b"] is None:
+            from tqdm import tqdm
+
             bar["b"] = tqdm(total=n, desc="stages", leave=False, file=sys.stderr)
         bar["b"].set_postfix_str(name)
         bar["b"].n = i
@@ -434,6 +437,8 @@ def cmd_demo(args) -> int:
 
 
 def cmd_campaign(args) -> int:
+    from .campaign import cli_campaign
+
     as_regular_file(args.scene, "the scene")
     res = cli_campaign(args.scene, args.inputs, scheduler=args.scheduler, workers=args.workers,
                        out=args.out, overwrite=args.overwrite, progress=not args.quiet,

@@ -55,7 +55,6 @@ from .io import atomic_path
 from .io.base import recording_read_errors  # noqa: F401 (public here too)
 from .io.base import _host_tag, _pid_alive
 from .log import logger
-from .results import phasing_verdict
 
 __all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_USAGE", "EXIT_PARTIAL", "EXIT_INTERRUPTED",
            "EXIT_PIPE", "BENIGN_SKIPS", "RESULT_OF_STAGE", "run_status", "status_line",
@@ -147,6 +146,8 @@ def run_status(ctx) -> dict:
     failed = {k: v for k, v in ctx.failed.items() if str(v) not in BENIGN_SKIPS}
     missing = [{"result": RESULT_OF_STAGE[s], "stage": s, "cause": _cause(failed, s)}
                for s in failed if s in RESULT_OF_STAGE]
+    from .results import phasing_verdict  # a run's results: not loaded for the CLI's start-up
+
     rel = phasing_verdict(ctx.phasing, ctx.messages)
     unreliable = {g: list(v["reasons"]) for g, v in rel.items() if not v["reliable"]}
     error = None

@@ -72,7 +72,7 @@ def test_cli_passes_recursive(monkeypatch, tmp_path, capsys):
                 "timing_s": {"total": 0.0}, "cluster": {"n_workers": 1, "scheduler": "x"},
                 "resume": {"enabled": False}, "recordings": [], "files": {}, "exit_code": 0}
 
-    monkeypatch.setattr(cli, "cli_campaign", fake)
+    monkeypatch.setattr(cp, "cli_campaign", fake)
     scene = tmp_path / "s.toml"
     scene.write_text("")
     assert cli.main(["-q", "campaign", str(scene), str(tmp_path), "--recursive"]) == 0

@@ -87,6 +87,24 @@ def test_cli_start_up_loads_no_solver(tmp_path, argv):
     assert res.stdout.strip() == "", f"meshphase {' '.join(argv)} loaded {res.stdout.strip()}"
 
 
+@pytest.mark.parametrize("argv", [["--version"], ["--help"]])
+def test_cli_start_up_loads_no_progress_bar_results_or_campaign(argv):
+    # tqdm (with importlib.metadata, ~20 ms), the run's result types and the campaign
+    # machinery load with the first progress bar, run or campaign, not for every command
+    code = ("import sys, contextlib, io\n"
+            "from meshphase.cli import main\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            "    try:\n"
+            "        main(sys.argv[1:2])\n"
+            "    except SystemExit as e:\n"
+            "        assert e.code == 0, e.code\n"
+            "print(','.join(m for m in ('tqdm', 'meshphase.results', 'meshphase.campaign', "
+            "'meshphase.campaign_job') if m in sys.modules))")
+    res = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "", f"meshphase {argv[0]} loaded {res.stdout.strip()}"
+
+
 def test_processing_import_leaves_scipy_signal_and_stats_out():
     # scipy.signal imports scipy.stats (find_peaks_cwt), 0.5-0.8 s of every start; the
     # processing takes its filter designs, smoother and spectra from meshphase.sos_design,
