@@ -65,8 +65,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterable
 
-from .campaign_job import (TIMEOUT_BASE_S, TIMEOUT_RATE_BPS, Job, default_task_timeout, draw_figures,
-                           run_job, start_cluster, task_limits)
+from .campaign_job import (TIMEOUT_BASE_S, TIMEOUT_RATE_BPS, Job, campaign_modules, default_task_timeout,
+                           draw_figures, run_job, start_cluster, task_limits)
 from .campaign_resume import (DONE_NAME, RECORDINGS_DIR_NAME, completed_recordings,
                               recording_key, recording_keys, resume_sources, reuse_completed,
                               sha256_file)
@@ -846,7 +846,8 @@ def _campaign_body(scene, scene_path, inputs, files, skipped, names, out, opts: 
         logger.info("campaign: %d of %d recordings complete already (--resume)", len(records), len(files))
     todo = [i for i in range(len(files)) if i not in records]
     cluster_info = {"scheduler": None, "n_workers": 0, "local": opts.scheduler is None, "dashboard": None}
-    start = start_cluster(opts.scheduler, opts.workers, opts.dashboard, cluster_info) if todo else None
+    start = (start_cluster(opts.scheduler, opts.workers, opts.dashboard, cluster_info,
+                           campaign_modules(scene, [files[i] for i in todo])) if todo else None)
     try:
         t = time.perf_counter()
         scene_level, scene_status, bands = _scene_level(scene, out, opts)

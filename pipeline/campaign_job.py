@@ -34,7 +34,7 @@ from .cluster import ClusterStart, end_worker
 from .log import logger
 
 __all__ = ["Job", "run_job", "start_cluster", "campaign_task", "failed_record", "default_task_timeout",
-           "task_limits", "warm_up", "worker_modules", "draw_figures", "figure_order", "FIGURES_TIMEOUT_S", "TIMEOUT_BASE_S",
+           "task_limits", "warm_up", "worker_modules", "campaign_modules", "draw_figures", "figure_order", "FIGURES_TIMEOUT_S", "TIMEOUT_BASE_S",
            "TIMEOUT_RATE_BPS"]
 
 #: default ``--task-timeout`` of a recording of ``size`` bytes: TIMEOUT_BASE_S +
@@ -109,25 +109,70 @@ _STACK = ("distributed", "meshphase.campaign", "meshphase.compare", "meshphase.c
 FIGURES_TIMEOUT_S = 300.0
 
 
-def worker_modules() -> tuple[str, ...]:
-    """What a worker's tasks import: the processing stack, the task functions, the reader of
-    every format (h5py, mcap, pandas, npTDMS) and the report's figures (matplotlib, for
-    :func:`draw_figures`); imported once in the fork server the local
-    workers start from (:func:`meshphase.cluster.worker_server`), and by :func:`warm_up`.
+#: what every task imports besides: the scene's schema check and the BLAS thread limit
+_EVERY_TASK = ("jsonschema", "threadpoolctl")
+
+
+def worker_modules(formats=None, synthetic: bool = False) -> tuple[str, ...]:
+    """What a worker's tasks import: the processing stack, the task functions, the scene's
+    schema check, the reader of each format with the libraries it imports on first use
+    (h5py, mcap, npTDMS, pandas: ``READ_LIBRARIES`` of each format module) and the report's
+    figures (matplotlib, for :func:`draw_figures`); imported once in the fork server the
+    local workers start from (:func:`meshphase.cluster.worker_server`), and by
+    :func:`warm_up`.
+
+    Parameters
+    ----------
+    formats : iterable of str, optional
+        The formats of the campaign's recordings (:data:`meshphase.io.FORMATS`); None: all.
+    synthetic : bool
+        The scene's ``[input]`` names a synthetic scenario: a task parses the scene, and
+        that loads the generator's scenario table (:mod:`meshphase.synthetic`).
 
     Returns
     -------
     tuple of str
         Module names.
+
+    Raises
+    ------
+    ValueError
+        An unknown format.
     """
-    from .io import FORMATS
+    from .io import FORMATS, get_format
 
-    return _STACK + tuple(f"meshphase.io.{name}" for name in FORMATS)
+    formats = FORMATS if formats is None else tuple(dict.fromkeys(formats))
+    libs = tuple(lib for name in formats for lib in getattr(get_format(name), "READ_LIBRARIES", ()))
+    return (_STACK + _EVERY_TASK + tuple(f"meshphase.io.{name}" for name in formats)
+            + tuple(dict.fromkeys(libs)) + (("meshphase.synthetic",) if synthetic else ()))
 
 
-def warm_up() -> int:
-    """Import the processing stack in a worker (:func:`worker_modules`; so that task wall
-    times measure processing): at once in a worker forked from the warm fork server.
+def campaign_modules(scene, files) -> tuple[str, ...]:
+    """:func:`worker_modules` for a campaign: the formats of ``files`` (by suffix; a file
+    whose suffix names no format: every format) and the scene's input.
+
+    Parameters
+    ----------
+    scene : meshphase.scene.Scene
+    files : iterable of path-like
+        The recordings.
+
+    Returns
+    -------
+    tuple of str
+    """
+    from .io import FORMATS, get_format
+
+    by_suffix = {s: name for name in FORMATS for s in get_format(name).SUFFIXES}
+    formats = [by_suffix.get(Path(f).suffix.lower()) for f in files]
+    synthetic = "synthetic" in (getattr(scene, "input", None) or {})
+    return worker_modules(None if None in formats else formats, synthetic)
+
+
+def warm_up(modules=None) -> int:
+    """Import the processing stack in a worker (``modules``, default :func:`worker_modules`;
+    so that task wall times measure processing): at once in a worker forked from the warm
+    fork server.
 
     Returns
     -------
@@ -136,7 +181,7 @@ def warm_up() -> int:
     """
     import importlib
 
-    for name in worker_modules():
+    for name in (worker_modules() if modules is None else modules):
         importlib.import_module(name)
     return os.getpid()
 
@@ -437,9 +482,10 @@ def run_job(job: Job, records: dict, *, scheduler: str | None, workers: int | No
             start.close()
 
 
-def start_cluster(scheduler: str | None, workers: int | None, dashboard, cluster_info: dict):
+def start_cluster(scheduler: str | None, workers: int | None, dashboard, cluster_info: dict,
+                  modules: Sequence[str] | None = None):
     """Start a campaign's cluster in the background, its workers warmed up (:func:`warm_up`;
-    a local cluster's workers fork from a server that imported :func:`worker_modules`).
+    a local cluster's workers fork from a server that imported ``modules``).
 
     Parameters
     ----------
@@ -450,13 +496,18 @@ def start_cluster(scheduler: str | None, workers: int | None, dashboard, cluster
     dashboard : None, bool, int or str
     cluster_info : dict
         Filled in when the start ends: ``dashboard``, ``n_workers``, ``scheduler``.
+    modules : sequence of str, optional
+        What the tasks import (:func:`campaign_modules`); None: :func:`worker_modules` of
+        every format.
 
     Returns
     -------
     meshphase.cluster.ClusterStart
         ``client()`` waits for it; ``close()`` ends it.
     """
-    return ClusterStart(scheduler, workers, dashboard, warm_up, cluster_info, worker_modules())
+    modules = worker_modules() if modules is None else tuple(modules)
+    return ClusterStart(scheduler, workers, dashboard, functools.partial(warm_up, modules), cluster_info,
+                        modules)
 
 
 def _event_message(event):

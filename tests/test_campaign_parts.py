@@ -294,6 +294,58 @@ def test_worker_modules_are_importable_and_name_every_reader():
     assert cj.warm_up() == os.getpid() and all(m in sys.modules for m in mods)
 
 
+def test_worker_modules_follow_the_formats_and_the_input():
+    hdf5 = cj.worker_modules(["hdf5"])
+    assert {"meshphase.io.hdf5", "h5py", "jsonschema", "threadpoolctl", "meshphase.stages"} <= set(hdf5)
+    assert not {"pandas", "nptdms", "meshphase.io.csv", "meshphase.synthetic"} & set(hdf5)
+    assert {"meshphase.io.csv", "pandas", "meshphase.synthetic"} <= set(cj.worker_modules(["csv"], True))
+    assert cj.worker_modules(["tdms", "tdms"]).count("nptdms") == 1
+    assert "meshphase.io.hdf5" not in cj.worker_modules([])           # no recording: no reader
+    with pytest.raises(ValueError, match="unknown format"):
+        cj.worker_modules(["xls"])
+
+
+def test_campaign_modules_read_the_suffixes_and_the_scene(tmp_path):
+    scene = SimpleNamespace(input={})
+    assert cj.campaign_modules(scene, [tmp_path / "a.H5", "b.hdf5"]) == cj.worker_modules(["hdf5"])
+    # a suffix no format claims (a file named on the command line): every reader
+    assert cj.campaign_modules(scene, ["a.h5", "b.dat"]) == cj.worker_modules()
+    synth = SimpleNamespace(input={"synthetic": "noisy"})
+    assert "meshphase.synthetic" in cj.campaign_modules(synth, ["a.tdms"])
+    assert cj.campaign_modules(SimpleNamespace(), []) == cj.worker_modules([])
+
+
+@pytest.mark.parametrize("synthetic_input", [False, True])
+def test_a_campaign_task_imports_nothing_its_fork_server_lacks(tmp_path, synthetic_input):
+    # the local workers fork from a server that imported campaign_modules(): a task that
+    # imported more would pay it in every worker (h5py, jsonschema and threadpoolctl did,
+    # ~0.1 s of each worker's first task)
+    import meshphase.io
+    from meshphase.synthetic import generate
+
+    rec, _ = generate("seed_rig", duration=20.0, seed=3)
+    path = meshphase.io.write(rec, tmp_path / "rig.h5")
+    scene = tmp_path / "scene.toml"
+    scene.write_text('name = "w"\nresults = ["phasing", "compare"]\n'
+                     + ('[input]\nsynthetic = "seed_rig"\nminutes = 0.5\n' if synthetic_input
+                        else '[input]\nrecording = "rig.h5"\n')
+                     + SEED_RIG_GEARSET, encoding="utf-8")
+    code = ("import sys, importlib\n"
+            "from meshphase.campaign_job import campaign_modules\n"
+            "from meshphase.scene import load_scene\n"
+            "for m in campaign_modules(load_scene(sys.argv[1]), [sys.argv[2]]):\n"
+            "    importlib.import_module(m)\n"
+            "before = set(sys.modules)\n"
+            "from meshphase.campaign import run_recording\n"
+            "r = run_recording(sys.argv[1], sys.argv[2], sys.argv[3])\n"
+            "assert r['status'] in ('ok', 'unreliable'), r\n"
+            "print(','.join(sorted(set(sys.modules) - before)))")
+    res = subprocess.run([sys.executable, "-c", code, str(scene), str(path), str(tmp_path / "out")],
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert res.stdout.strip() == "", f"the task imported {res.stdout.strip()}"
+
+
 class _GoneClient:
     """A client whose cluster is gone: every submit fails."""
 

@@ -14,7 +14,7 @@ import tempfile
 from pathlib import Path
 
 from ..campaign import client_scene, run_campaign
-from ..campaign_job import worker_modules
+from ..campaign_job import campaign_modules
 from ..cluster import cores, worker_server
 from ..log import logger
 from ..validate import as_positive, as_positive_int
@@ -66,12 +66,14 @@ def _prepare(work: Path, n_recordings: int, minutes: float, scenario: str, seed:
     from ..scene import load_scene
     from ..stages import run_scene
 
-    warm = client_scene(load_scene(scene_path))
+    scene = load_scene(scene_path)
+    warm = client_scene(scene)
     if warm.results:
         run_scene(warm)
     # the workers' fork server is started once per process (meshphase.cluster.worker_server):
-    # started here, every timed run finds it running, the first one as much as the others
-    server_s = worker_server(worker_modules())
+    # started here, with what the campaign would give it, every timed run finds it running,
+    # the first one as much as the others
+    server_s = worker_server(campaign_modules(scene, sorted(rec_dir.glob("*.h5"))))
     return rec_dir, scene_path, server_s
 
 

@@ -68,6 +68,9 @@ __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "FORMAT_VERSION", "TIME_TOLERANCE", 
 NAME = "csv"
 SUFFIXES = (".csv",)
 CAN_WRITE = True
+#: the libraries the reader imports on its first use (a campaign's workers have them
+#: imported ahead: :func:`meshphase.campaign_job.worker_modules`)
+READ_LIBRARIES = ("pandas",)
 #: Version of the preamble written by :func:`write`.
 FORMAT_VERSION = 1
 #: Largest allowed distance of a time value from the uniform grid t0 + i / fs, in sample

@@ -70,6 +70,9 @@ __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "FORMAT_VERSION", "DEFAULT_CHUNK_SAM
 NAME = "hdf5"
 SUFFIXES = (".h5", ".hdf5", ".hdf", ".he5")
 CAN_WRITE = True
+#: the libraries the reader imports on its first use (a campaign's workers have them
+#: imported ahead: :func:`meshphase.campaign_job.worker_modules`)
+READ_LIBRARIES = ("h5py",)
 #: Layout version written by :func:`write`; readers refuse newer versions.
 FORMAT_VERSION = 1
 #: Samples per chunk (131072 float64 samples = 1 MiB, the HDF5 default chunk-cache size).

@@ -86,6 +86,9 @@ __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "sniff", "read_info", "read", "iter_
 NAME = "tdms"
 SUFFIXES = (".tdms",)
 CAN_WRITE = False
+#: the libraries the reader imports on its first use (a campaign's workers have them
+#: imported ahead: :func:`meshphase.campaign_job.worker_modules`)
+READ_LIBRARIES = ("nptdms",)
 
 #: Read through the segment index and computed offsets (tests switch it off to compare with
 #: npTDMS's public ``read_data``, the path every file can take).

@@ -11,12 +11,14 @@ from pathlib import Path
 from ...jsonable import json_default
 from ...validate import as_int, as_positive
 
-__all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "MAGIC", "SCHEMA_NAME", "MESSAGE_ENCODING",
+__all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "READ_LIBRARIES", "MAGIC", "SCHEMA_NAME", "MESSAGE_ENCODING",
            "RECORDING_METADATA", "COMPRESSIONS", "DEFAULT_BLOCK", "sniff", "log_time_ns"]
 
 NAME = "mcap"
 SUFFIXES = (".mcap",)
 CAN_WRITE = True
+#: the libraries the reader imports on its first use (mcap: at import already)
+READ_LIBRARIES: tuple = ()
 
 #: The 8 magic bytes that open and close every MCAP file.
 MAGIC = b"\x89MCAP0\r\n"
