@@ -497,6 +497,23 @@ def test_figures_bad_input(fn, args, exc):
     plt.close("all")
 
 
+@pytest.mark.parametrize("fn, args", [
+    (crep.phasing_across_recordings, (["a", "b"], {"sun": {"2": ([0.0, 0.01], [0.02, 0.02]),
+                                                          "3": ([0.01, -0.01], [0.02, 0.03])}})),
+    (crep.load_sharing_across_recordings, (["a", "b"], [[1.0, 1.02], [0.98, 1.0]])),
+    (crep.residual_rms_across_recordings, (["a", "b"], {"sun": [1e-3, 2e-3], "ring": [3e-3, 1e-3]})),
+])
+def test_figure_legends_sit_outside_the_axes(fn, args):
+    # right of the axes, as the run report's legends: a legend inside could hide a point
+    fig = fn(*args)
+    fig.canvas.draw()
+    for ax in fig.axes:
+        leg = ax.get_legend()
+        assert leg is not None
+        assert leg.get_window_extent().x0 >= ax.get_window_extent().x1
+    plt.close(fig)
+
+
 def test_figure_png_empty_and_bad():
     png = crep.figure_png(crep.wall_times_across_recordings, [], [])
     assert png[:8] == b"\x89PNG\r\n\x1a\n"

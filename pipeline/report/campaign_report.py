@@ -66,6 +66,13 @@ def _empty_axes(ax, text="no data"):
     ax.set_yticks([])
 
 
+def _legend_outside(ax) -> None:
+    """The legend right of the axes, as the run report places it (meshphase.report.figures):
+    it never hides a point, and matplotlib does not search the axes for a free corner
+    (``loc="best"`` tests every artist, ~0.04 s of a campaign figure)."""
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.005, 1.0), borderaxespad=0.0)
+
+
 def _names_check(names) -> list[str]:
     if isinstance(names, str) or not hasattr(names, "__iter__"):
         raise TypeError(f"names must be a sequence of str, got {type(names).__name__} {names!r}")
@@ -128,7 +135,7 @@ def phasing_across_recordings(names, phasing: dict, ideal: dict | None = None):
             ax.axhline(0.0, color="k", lw=0.8, ls=":")
         ax.set_ylabel(("gamma - ideal" if ideal else "gamma") + " [mesh cycles]", fontsize=9)
         ax.set_title(f"{g} gauge: mean phasing per planet, bars = pass-to-pass std", fontsize=10)
-        ax.legend(fontsize=8, ncol=6, loc="best")
+        _legend_outside(ax)
     fig.tight_layout()
     return fig
 
@@ -171,7 +178,7 @@ def load_sharing_across_recordings(names, load_sharing, std_error=None):
     ax.axhline(1.0, color="k", lw=0.8, ls=":")
     ax.set_ylabel("load sharing factor [-]")
     ax.set_title("load sharing per recording", fontsize=10)
-    ax.legend(fontsize=8, ncol=6, loc="best")
+    _legend_outside(ax)
     fig.tight_layout()
     return fig
 
@@ -204,7 +211,7 @@ def residual_rms_across_recordings(names, rms: dict, *, label: str = "RMS residu
         ax.bar(x - 0.4 + w * (i + 0.5), np.nan_to_num(v), width=w, color=_c(i), label=g)
     ax.set_ylabel("[mesh cycles]")
     ax.set_title(label, fontsize=10)
-    ax.legend(fontsize=8)
+    _legend_outside(ax)
     fig.tight_layout()
     return fig
 
