@@ -36,7 +36,8 @@ thread-safe); ``scheduler="tcp://host:8786"`` uses an existing cluster instead, 
 workers must have meshphase installed and see the same paths (a shared file system). The
 cluster starts in a background thread while the client runs the scene-level results and
 imports what the report needs; the local workers fork from a server that imported the
-processing stack once (:func:`meshphase.cluster.worker_server`), so they start warm.
+processing stack once (:func:`meshphase.cluster.worker_server`), so they start warm. That
+server starts first of all, before the scene's checks (:func:`_start_worker_server_early`).
 ``timing_s`` gives the start's ``cluster_start`` and the part of it
 the campaign still waited for (``cluster_wait``). After the last recording the workers draw
 the combined report's figures side by side (:func:`meshphase.campaign_job.draw_figures`), then
@@ -58,10 +59,13 @@ import json
 import os
 import re
 import socket
+import threading
 import time
+import tomllib
 import traceback
 import warnings
 from dataclasses import dataclass
+from types import SimpleNamespace
 from pathlib import Path
 from typing import Callable, Iterable
 
@@ -735,6 +739,10 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
 
     workers, task_timeout, task = _check_options(scheduler, workers, dashboard, task_timeout, task)
     scene_path = Path(scene_path).resolve()
+    if not isinstance(inputs, (str, bytes, os.PathLike)):
+        inputs = list(inputs)  # read more than once below: a generator would be empty after
+    if scheduler is None:
+        _start_worker_server_early(scene_path, inputs, recursive)
     scene, inputs, files, skipped = _scene_and_recordings(scene_path, inputs, recursive)
     client_results, worker_results, mc_on_client = split_results(scene)
     names = recording_names(files)
@@ -790,6 +798,32 @@ def _check_options(scheduler, workers, dashboard, task_timeout, task):
     if not callable(task):
         raise TypeError(f"task must be callable, got {type(task).__name__}")
     return workers, task_timeout, task
+
+
+def _start_worker_server_early(scene_path: Path, inputs, recursive: bool) -> None:
+    """Start the local workers' fork server (:func:`meshphase.cluster.worker_server`, ~2 s
+    of imports) in the background now, before the scene is loaded and checked (~0.5 s: its
+    gearset check loads scipy) and the output folder reserved, so that the cluster waits
+    less for it. Its modules (:func:`meshphase.campaign_job.campaign_modules`) come from the
+    recordings' suffixes and a plain read of the scene's ``[input]``; anything that fails
+    here is left to the checks that follow, which report it."""
+    from .cluster import worker_server
+
+    try:
+        files, _ = collect_recordings(inputs, recursive=recursive)
+        with open(scene_path, "rb") as f:
+            raw = tomllib.load(f).get("input")
+        modules = campaign_modules(SimpleNamespace(input=raw if isinstance(raw, dict) else {}), files)
+    except Exception:  # noqa: BLE001 - reported by the checks that follow, not here
+        return
+
+    def serve():
+        try:
+            worker_server(modules)
+        except Exception as exc:  # noqa: BLE001 - the cluster's own start tries again and reports
+            logger.debug("campaign: early fork server start failed (%s)", exc)
+
+    threading.Thread(target=serve, name="meshphase-fork-server-start", daemon=True).start()
 
 
 def _scene_and_recordings(scene_path: Path, inputs, recursive: bool = False):

@@ -315,6 +315,36 @@ def test_campaign_modules_read_the_suffixes_and_the_scene(tmp_path):
     assert cj.campaign_modules(SimpleNamespace(), []) == cj.worker_modules([])
 
 
+def test_the_fork_server_starts_before_the_scene_is_checked(tmp_path, monkeypatch):
+    # run_campaign starts the local workers' fork server in the background before the
+    # scene's checks (which import scipy), with the modules the campaign's tasks import
+    import threading
+
+    started, done = [], threading.Event()
+
+    def fake_server(modules):
+        started.append(tuple(modules))
+        done.set()
+        return 0.0
+
+    monkeypatch.setattr(cluster, "worker_server", fake_server)
+    (tmp_path / "a.tdms").write_bytes(b"")
+    scene = tmp_path / "s.toml"
+    scene.write_text('results = ["phasing"]\n[input]\nsynthetic = "noisy"\n', encoding="utf-8")
+    cp._start_worker_server_early(scene, [str(tmp_path)], False)
+    assert done.wait(10.0)
+    assert started == [cj.campaign_modules(SimpleNamespace(input={"synthetic": "noisy"}),
+                                           [tmp_path / "a.tdms"])]
+    # what cannot be read is left to the checks that follow: no start, no error here
+    started.clear()
+    done.clear()
+    cp._start_worker_server_early(tmp_path / "missing.toml", [str(tmp_path)], False)
+    scene.write_text("results = [", encoding="utf-8")
+    cp._start_worker_server_early(scene, [str(tmp_path)], False)
+    cp._start_worker_server_early(tmp_path / "s.toml", [str(tmp_path / "nothing")], False)
+    assert not done.wait(0.5) and started == []
+
+
 @pytest.mark.parametrize("synthetic_input", [False, True])
 def test_a_campaign_task_imports_nothing_its_fork_server_lacks(tmp_path, synthetic_input):
     # the local workers fork from a server that imported campaign_modules(): a task that
