@@ -65,8 +65,8 @@ import tomllib
 import traceback
 import warnings
 from dataclasses import dataclass
-from types import SimpleNamespace
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Callable, Iterable
 
 from .campaign_job import (TIMEOUT_BASE_S, TIMEOUT_RATE_BPS, Job, campaign_modules, default_task_timeout,
@@ -741,9 +741,8 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
     scene_path = Path(scene_path).resolve()
     if not isinstance(inputs, (str, bytes, os.PathLike)):
         inputs = list(inputs)  # read more than once below: a generator would be empty after
-    if scheduler is None:
-        _start_worker_server_early(scene_path, inputs, recursive)
-    scene, inputs, files, skipped = _scene_and_recordings(scene_path, inputs, recursive)
+    found = _start_worker_server_early(scene_path, inputs, recursive) if scheduler is None else None
+    scene, inputs, files, skipped = _scene_and_recordings(scene_path, inputs, recursive, found)
     client_results, worker_results, mc_on_client = split_results(scene)
     names = recording_names(files)
     base = Path(out_dir) if out_dir is not None else scene_path.with_name(scene_path.stem + "-campaign")
@@ -800,22 +799,27 @@ def _check_options(scheduler, workers, dashboard, task_timeout, task):
     return workers, task_timeout, task
 
 
-def _start_worker_server_early(scene_path: Path, inputs, recursive: bool) -> None:
+def _start_worker_server_early(scene_path: Path, inputs, recursive: bool):
     """Start the local workers' fork server (:func:`meshphase.cluster.worker_server`, ~2 s
     of imports) in the background now, before the scene is loaded and checked (~0.5 s: its
     gearset check loads scipy) and the output folder reserved, so that the cluster waits
     less for it. Its modules (:func:`meshphase.campaign_job.campaign_modules`) come from the
     recordings' suffixes and a plain read of the scene's ``[input]``; anything that fails
-    here is left to the checks that follow, which report it."""
+    here is left to the checks that follow, which report it. Returns what
+    :func:`collect_recordings` found (for :func:`_scene_and_recordings`), None when it
+    failed."""
     from .cluster import worker_server
 
     try:
-        files, _ = collect_recordings(inputs, recursive=recursive)
+        found = collect_recordings(inputs, recursive=recursive)
+    except Exception:  # noqa: BLE001 - collected again, and reported, after the scene's checks
+        return None
+    try:
         with open(scene_path, "rb") as f:
             raw = tomllib.load(f).get("input")
-        modules = campaign_modules(SimpleNamespace(input=raw if isinstance(raw, dict) else {}), files)
-    except Exception:  # noqa: BLE001 - reported by the checks that follow, not here
-        return
+        modules = campaign_modules(SimpleNamespace(input=raw if isinstance(raw, dict) else {}), found[0])
+    except Exception:  # noqa: BLE001 - reported by the scene's checks that follow, not here
+        return found
 
     def serve():
         try:
@@ -824,17 +828,19 @@ def _start_worker_server_early(scene_path: Path, inputs, recursive: bool) -> Non
             logger.debug("campaign: early fork server start failed (%s)", exc)
 
     threading.Thread(target=serve, name="meshphase-fork-server-start", daemon=True).start()
+    return found
 
 
-def _scene_and_recordings(scene_path: Path, inputs, recursive: bool = False):
+def _scene_and_recordings(scene_path: Path, inputs, recursive: bool = False, found=None):
     """(scene, inputs as a list, recording files, skipped entries): the scene loaded, the
-    recordings found, and the per-recording scene validated once, up front."""
+    recordings found (``found``: what :func:`collect_recordings` gave already), and the
+    per-recording scene validated once, up front."""
     from .scene import load_scene, plan
 
     scene = load_scene(scene_path)  # FileNotFoundError / SceneError (a ValueError) up front
     if not isinstance(inputs, (str, bytes, os.PathLike)):
         inputs = list(inputs)  # read twice below: a generator would be empty the second time
-    files, skipped = collect_recordings(inputs, recursive=recursive)
+    files, skipped = found if found is not None else collect_recordings(inputs, recursive=recursive)
     if not files:
         left = [Path(s["path"]).name for s in skipped]
         raise ValueError(f"no recording files found in inputs {[str(i) for i in inputs]!r}"

@@ -331,17 +331,18 @@ def test_the_fork_server_starts_before_the_scene_is_checked(tmp_path, monkeypatc
     (tmp_path / "a.tdms").write_bytes(b"")
     scene = tmp_path / "s.toml"
     scene.write_text('results = ["phasing"]\n[input]\nsynthetic = "noisy"\n', encoding="utf-8")
-    cp._start_worker_server_early(scene, [str(tmp_path)], False)
+    found = cp._start_worker_server_early(scene, [str(tmp_path)], False)
+    assert found == cp.collect_recordings([str(tmp_path)])       # handed on: not walked twice
     assert done.wait(10.0)
     assert started == [cj.campaign_modules(SimpleNamespace(input={"synthetic": "noisy"}),
                                            [tmp_path / "a.tdms"])]
     # what cannot be read is left to the checks that follow: no start, no error here
     started.clear()
     done.clear()
-    cp._start_worker_server_early(tmp_path / "missing.toml", [str(tmp_path)], False)
+    assert cp._start_worker_server_early(tmp_path / "missing.toml", [str(tmp_path)], False) is not None
     scene.write_text("results = [", encoding="utf-8")
-    cp._start_worker_server_early(scene, [str(tmp_path)], False)
-    cp._start_worker_server_early(tmp_path / "s.toml", [str(tmp_path / "nothing")], False)
+    assert cp._start_worker_server_early(scene, [str(tmp_path)], False) is not None
+    assert cp._start_worker_server_early(tmp_path / "s.toml", [str(tmp_path / "nothing")], False) is None
     assert not done.wait(0.5) and started == []
 
 

@@ -56,8 +56,8 @@ recording header, per-file cache), ``chunks`` (the chunk reader), ``reader`` (:f
 
 from .crc import crc32_combine
 from .layout import (CAN_WRITE, COMPRESSIONS, DEFAULT_BLOCK, DEFAULT_CHUNK_SIZE, FORMAT_VERSION, HEADER_SIZE,
-                     LAYOUT, MAGIC, READ_LIBRARIES, MESSAGE_ENCODING, NAME, PROFILE, RECORDING_METADATA, SCHEMA_ENCODING,
-                     SCHEMA_NAME, SUFFIXES, log_time_ns, sniff)
+                     LAYOUT, MAGIC, MESSAGE_ENCODING, NAME, PROFILE, READ_LIBRARIES, RECORDING_METADATA,
+                     SCHEMA_ENCODING, SCHEMA_NAME, SUFFIXES, log_time_ns, sniff)
 from .foreign import describe, read_foreign
 from .foxglove import FOXGLOVE_METADATA, FOXGLOVE_SCHEMA_NAME, LAYOUTS, write_foxglove
 from .header import ForeignMcapError
