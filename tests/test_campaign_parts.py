@@ -349,8 +349,8 @@ def test_the_fork_server_starts_before_the_scene_is_checked(tmp_path, monkeypatc
 @pytest.mark.parametrize("synthetic_input", [False, True])
 def test_a_campaign_task_imports_nothing_its_fork_server_lacks(tmp_path, synthetic_input):
     # the local workers fork from a server that imported campaign_modules(): a task that
-    # imported more would pay it in every worker (h5py, jsonschema and threadpoolctl did,
-    # ~0.06 s of each worker's first task)
+    # imported more would pay it in every worker's first task (h5py, jsonschema and
+    # threadpoolctl did)
     import meshphase.io
     from meshphase.synthetic import generate
 
