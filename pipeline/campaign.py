@@ -818,6 +818,10 @@ def _start_worker_server_early(scene_path: Path, inputs, recursive: bool):
         with open(scene_path, "rb") as f:
             raw = tomllib.load(f).get("input")
         modules = campaign_modules(SimpleNamespace(input=raw if isinstance(raw, dict) else {}), found[0])
+        # what starting the server imports, imported here (an ImportError where the platform
+        # has no fork server): the thread then imports nothing while this one goes on
+        # importing (the scene's checks load scipy)
+        import multiprocessing.popen_forkserver  # noqa: F401
     except Exception:  # noqa: BLE001 - reported by the scene's checks that follow, not here
         return found
 
