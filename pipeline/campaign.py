@@ -836,14 +836,13 @@ def _start_worker_server_early(scene_path: Path, inputs, recursive: bool):
 
 
 def _scene_and_recordings(scene_path: Path, inputs, recursive: bool = False, found=None):
-    """(scene, inputs as a list, recording files, skipped entries): the scene loaded, the
-    recordings found (``found``: what :func:`collect_recordings` gave already), and the
-    per-recording scene validated once, up front."""
+    """(scene, inputs, recording files, skipped entries): the scene loaded, the recordings
+    found in ``inputs`` (a path or a list: read more than once; ``found``: what
+    :func:`collect_recordings` gave already), and the per-recording scene validated once, up
+    front."""
     from .scene import load_scene, plan
 
     scene = load_scene(scene_path)  # FileNotFoundError / SceneError (a ValueError) up front
-    if not isinstance(inputs, (str, bytes, os.PathLike)):
-        inputs = list(inputs)  # read twice below: a generator would be empty the second time
     files, skipped = found if found is not None else collect_recordings(inputs, recursive=recursive)
     if not files:
         left = [Path(s["path"]).name for s in skipped]

@@ -142,7 +142,7 @@ def worker_modules(formats=None, synthetic: bool = False) -> tuple[str, ...]:
     from .io import FORMATS, get_format
 
     formats = FORMATS if formats is None else tuple(dict.fromkeys(formats))
-    libs = tuple(lib for name in formats for lib in getattr(get_format(name), "READ_LIBRARIES", ()))
+    libs = tuple(lib for name in formats for lib in get_format(name).READ_LIBRARIES)
     return (_STACK + _EVERY_TASK + tuple(f"meshphase.io.{name}" for name in formats)
             + tuple(dict.fromkeys(libs)) + (("meshphase.synthetic",) if synthetic else ()))
 
@@ -161,10 +161,9 @@ def campaign_modules(scene, files) -> tuple[str, ...]:
     -------
     tuple of str
     """
-    from .io import FORMATS, get_format
+    from .io import _format_of_suffix
 
-    by_suffix = {s: name for name in FORMATS for s in get_format(name).SUFFIXES}
-    formats = [by_suffix.get(Path(f).suffix.lower()) for f in files]
+    formats = [_format_of_suffix(f) for f in files]
     synthetic = "synthetic" in (getattr(scene, "input", None) or {})
     return worker_modules(None if None in formats else formats, synthetic)
 

@@ -69,7 +69,7 @@ import numpy as np
 from scipy import ndimage
 
 from . import iir
-from ._median import MAD_TO_SIGMA, median_and_mad, median_of_finite
+from ._median import median_of_finite, sigma_of_differences
 from .errors import DataQualityWarning, ProcessingWarning
 from .log import logger
 from .quality import (DROPOUT_MIN_RUN, FALSE_ALARM, ChannelQuality, ChannelScan, HumReport,
@@ -774,7 +774,7 @@ def _noise_from_diffs(d: np.ndarray) -> float:
     """:func:`estimate_noise` from its (subsampled, finite) first differences."""
     if d.size == 0:
         return float("nan")
-    return float(MAD_TO_SIGMA * median_and_mad(d)[1] / math.sqrt(2.0))
+    return float(sigma_of_differences(d))
 
 
 def estimate_snr(x, *, quantile: float = 0.999) -> tuple[float, float, float]:

@@ -105,7 +105,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._median import MAD_TO_SIGMA, median_and_mad, median_of_finite
+from ._median import median_of_finite, sigma_of_differences
 from .validate import as_choice
 
 __all__ = ["find_runs", "nonfinite_runs", "clipped_runs", "channel_quality", "equal_runs",
@@ -353,7 +353,7 @@ def _level_from(xs: np.ndarray, d: np.ndarray) -> tuple[float, float]:
     med = float(median_of_finite(xs))
     if d.size == 0:
         return med, 0.0
-    sig = float(MAD_TO_SIGMA * median_and_mad(d)[1] / math.sqrt(2.0))
+    sig = float(sigma_of_differences(d))
     return med, sig
 
 

@@ -2,13 +2,15 @@
 one partition (the robust noise, SNR and quality estimates and the onset detector's noise
 level take it)."""
 
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from meshphase._median import median_and_mad, median_of_finite
+from meshphase._median import MAD_TO_SIGMA, median_and_mad, median_of_finite, sigma_of_differences
 
 _BIG = float(np.float32(1e30))    # a float32 value: no sum of two overflows
 
@@ -81,3 +83,15 @@ def test_median_and_mad_are_np_medians(dtype):
     _same(mad, np.median(np.abs(a - np.median(a))))
     with pytest.raises(ValueError, match="empty"):
         median_and_mad(np.empty(0, dtype=dtype))
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_sigma_of_differences_is_the_mad_of_the_differences(dtype):
+    # the noise estimate of condition and quality: MAD of the first differences -> sigma
+    x = np.random.default_rng(6).standard_normal(20001).astype(dtype)
+    d = np.diff(x)
+    want = MAD_TO_SIGMA * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0)   # as written before
+    assert float(sigma_of_differences(d)) == float(want)
+    assert float(sigma_of_differences(d)) == pytest.approx(1.0, rel=0.05)   # 20000 samples: ~1 %
+    with pytest.raises(ValueError, match="empty"):
+        sigma_of_differences(np.empty(0, dtype=dtype))

@@ -13,7 +13,7 @@ import statistics
 import tempfile
 from pathlib import Path
 
-from ..campaign import client_scene, run_campaign
+from ..campaign import client_scene, collect_recordings, run_campaign
 from ..campaign_job import campaign_modules
 from ..cluster import cores, worker_server
 from ..log import logger
@@ -73,7 +73,7 @@ def _prepare(work: Path, n_recordings: int, minutes: float, scenario: str, seed:
     # the workers' fork server is started once per process (meshphase.cluster.worker_server):
     # started here, with what the campaign would give it, every timed run finds it running,
     # the first one as much as the others
-    server_s = worker_server(campaign_modules(scene, sorted(rec_dir.glob("*.h5"))))
+    server_s = worker_server(campaign_modules(scene, collect_recordings([rec_dir])[0]))
     return rec_dir, scene_path, server_s
 
 

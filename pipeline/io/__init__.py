@@ -81,16 +81,20 @@ def _format_for_write(path: Path, format: str | None) -> str:
             raise ValueError(f"format {format!r} is read-only here; writable formats: "
                              f"{', '.join(f for f in FORMATS if get_format(f).CAN_WRITE)}")
         return format
-    suffix = path.suffix.lower()
-    for name in FORMATS:
-        mod = get_format(name)
-        if suffix in mod.SUFFIXES:
-            if not getattr(mod, "CAN_WRITE", False):
-                raise ValueError(f"{path}: format {name!r} is read-only here; writable formats: "
-                                 f"{', '.join(f for f in FORMATS if get_format(f).CAN_WRITE)}")
-            return name
-    raise ValueError(f"{path}: cannot tell the format from suffix {suffix!r}; pass format= one of "
-                     f"{', '.join(f for f in FORMATS if get_format(f).CAN_WRITE)}")
+    name = _format_of_suffix(path)
+    if name is not None:
+        if not getattr(get_format(name), "CAN_WRITE", False):
+            raise ValueError(f"{path}: format {name!r} is read-only here; writable formats: "
+                             f"{', '.join(f for f in FORMATS if get_format(f).CAN_WRITE)}")
+        return name
+    raise ValueError(f"{path}: cannot tell the format from suffix {path.suffix.lower()!r}; pass format= "
+                     f"one of {', '.join(f for f in FORMATS if get_format(f).CAN_WRITE)}")
+
+
+def _format_of_suffix(path) -> str | None:
+    """The format whose ``SUFFIXES`` hold ``path``'s suffix (any case); None when none does."""
+    suffix = Path(path).suffix.lower()
+    return next((name for name in FORMATS if suffix in get_format(name).SUFFIXES), None)
 
 
 def read_info(path, format: str | None = None, **options) -> RecordingInfo:
