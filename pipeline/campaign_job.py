@@ -111,13 +111,17 @@ FIGURES_TIMEOUT_S = 300.0
 
 #: what every task imports besides: the scene's schema check and the BLAS thread limit
 _EVERY_TASK = ("jsonschema", "threadpoolctl")
+#: imported last: importing it draws one small figure of the report (a fork server can only
+#: import), so that no forked worker pays matplotlib's first-figure costs itself
+_WARM_FIGURES = "meshphase.report.warm_figures"
 
 
 def worker_modules(formats=None, synthetic: bool = False) -> tuple[str, ...]:
     """What a worker's tasks import: the processing stack, the task functions, the scene's
     schema check, the reader of each format with the libraries it imports on first use
     (h5py, mcap, npTDMS, pandas: ``READ_LIBRARIES`` of each format module) and the report's
-    figures (matplotlib, for :func:`draw_figures`); imported once in the fork server the
+    figures (matplotlib, for :func:`draw_figures`, warmed by drawing one small figure:
+    :mod:`meshphase.report.warm_figures`, last); imported once in the fork server the
     local workers start from (:func:`meshphase.cluster.worker_server`), and by
     :func:`warm_up`.
 
@@ -144,7 +148,8 @@ def worker_modules(formats=None, synthetic: bool = False) -> tuple[str, ...]:
     formats = FORMATS if formats is None else tuple(dict.fromkeys(formats))
     libs = tuple(lib for name in formats for lib in get_format(name).READ_LIBRARIES)
     return (_STACK + _EVERY_TASK + tuple(f"meshphase.io.{name}" for name in formats)
-            + tuple(dict.fromkeys(libs)) + (("meshphase.synthetic",) if synthetic else ()))
+            + tuple(dict.fromkeys(libs)) + (("meshphase.synthetic",) if synthetic else ())
+            + (_WARM_FIGURES,))
 
 
 def campaign_modules(scene, files) -> tuple[str, ...]:

@@ -294,6 +294,36 @@ def test_worker_modules_are_importable_and_name_every_reader():
     assert cj.warm_up() == os.getpid() and all(m in sys.modules for m in mods)
 
 
+def test_the_figure_warm_up_is_imported_last_and_leaves_the_figures_nothing_to_load():
+    # the fork server imports worker_modules() in order: the warm-up draws with everything
+    # else loaded; after it, drawing each figure of the combined report imports no module
+    # (what a forked worker's first figure would otherwise load for itself)
+    for mods in (cj.worker_modules(), cj.worker_modules([]), cj.worker_modules(["csv"], True)):
+        assert mods[-1] == "meshphase.report.warm_figures" and mods.count(mods[-1]) == 1
+    code = """
+import sys
+from meshphase.report import campaign_report as cr
+before = set(sys.modules)
+from meshphase.report import warm_figures as wf
+loaded = set(sys.modules) - before
+assert "matplotlib.backends.backend_agg" in loaded, sorted(loaded)
+assert wf.WARM_UP_PNG_BYTES > 1000 and wf.WARM_UP_S > 0
+assert wf.draw_warm_up_figure().startswith(b"\\x89PNG")
+names = ["a", "b", "c"]
+after = set(sys.modules)
+for make, args in [(cr.phasing_across_recordings, (names, {"sun": {"1": ([0.1, 0.2, 0.3], [0.01] * 3)}},
+                                                    {"sun": {"1": 0.0}})),
+                   (cr.load_sharing_across_recordings, (names, [[1.0, 1.0]] * 3, [[0.01, 0.01]] * 3)),
+                   (cr.residual_rms_across_recordings, (names, {"sun": [0.1, 0.2, 0.3]})),
+                   (cr.wall_times_across_recordings, (names, [1.0, 2.0, 3.0], ["ok", "partial", "ok"]))]:
+    assert cr.figure_png(make, *args).startswith(b"\\x89PNG")
+print(sorted(set(sys.modules) - after))
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split("\n")[0] == "[]"
+
+
 def test_worker_modules_follow_the_formats_and_the_input():
     hdf5 = cj.worker_modules(["hdf5"])
     assert {"meshphase.io.hdf5", "h5py", "jsonschema", "threadpoolctl", "meshphase.stages"} <= set(hdf5)
