@@ -256,7 +256,10 @@ def _bench_campaign(out: Path, quick: bool, repeats: int | None = None) -> int:
 
     n, minutes, default_repeats = (2, 0.5, 1) if quick else (8, 2.0, 3)
     repeats = default_repeats if repeats is None else repeats
+    from .bench.first_figure import first_figure_rows
+
     res = measure_speedup(n, minutes, (1, 2), repeats=repeats)
+    res["first_figure"] = first_figure_rows(1 if quick else 6)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "campaign_bench.json"
     path.write_text(json.dumps(res, indent=2, default=str))
@@ -272,6 +275,11 @@ def _bench_campaign(out: Path, quick: bool, repeats: int | None = None) -> int:
         print(f"  each repeat's 1-worker run over its 2-worker run: "
               f"{', '.join(f'{v:.2f}' for v in pairs)}x (median {res['paired_speedup'][2]['median']:.2f}x; "
               f"processing median {res['paired_processing_speedup'][2]['median']:.2f}x)")
+    if res["first_figure"]:
+        print("a forked worker's first report figure over its second [s] (meshphase.frozen_heap):")
+        for case in ("not frozen", "frozen"):
+            rows = [r for r in res["first_figure"] if r["case"] == case]
+            print(f"  {case:>10}: " + ", ".join(f"{r['figure']} {r['first_excess_s']:.3f}" for r in rows))
     print(f"{path.name:<24} {path}")
     return 0
 

@@ -598,6 +598,15 @@ def _markdown(res: dict) -> str:
                   "scipy.stats: its row shows what that would add) on top of `--version`, "
                   "and the filters' numba kernel (`meshphase bench --warmup` times its load).", ""]
         lines += _md_table(res["startup"], STARTUP_COLUMNS)
+    if res.get("exit"):
+        from .startup import EXIT_COLUMNS
+
+        lines += ["", "## Exit: from the last atexit handler to the process reaped [s]", "",
+                  "Fresh interpreters with the campaign workers' stack imported, after "
+                  "`meshphase info FILE`: the interpreter's own finalization (its garbage "
+                  "collections walk every object the imports made), and what is left of it "
+                  "after meshphase.cli.console_main's collection (collect_s) and gc.freeze.", ""]
+        lines += _md_table(res["exit"], EXIT_COLUMNS)
     if res.get("identify"):
         lines += ["", "## identify: model evaluations and wall time per Jacobian", "",
                   "identify_errors on the exact passes of the bench rig (Table 2 case 1 "
@@ -830,12 +839,13 @@ def _run(out_dir, quick: bool, rng, process_minutes=()) -> dict:
 
     phs = phasing_rows(matrix_cases(quick))
     ident = identify_rows((2.0,) if quick else (10.0, 60.0))
-    from .startup import startup_rows
+    from .startup import exit_rows, startup_rows
 
     # a quick run times each start-up case once (each case costs its fresh interpreters)
     start = startup_rows(1 if quick else 7)
+    ends = exit_rows(1 if quick else 7)
     res = {"accuracy": acc, "throughput": thr, "phasing": phs, "process": proc, "identify": ident,
-           "startup": start,
+           "startup": start, "exit": ends,
            "process_skipped": proc_skipped,
            "meta": {"machine": f"{platform.machine()} {platform.processor() or ''} "
                                f"python {platform.python_version()}".strip(),

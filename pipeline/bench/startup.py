@@ -22,10 +22,14 @@ from pathlib import Path
 
 from ..validate import as_positive_int
 
-__all__ = ["STARTUP_COLUMNS", "startup_rows"]
+__all__ = ["STARTUP_COLUMNS", "EXIT_COLUMNS", "startup_rows", "exit_rows"]
 
 #: Columns of the start-up table.
 STARTUP_COLUMNS = ("what", "median_s", "min_s", "max_s", "modules", "over_python_s")
+#: Columns of the exit table: from the last ``atexit`` handler to the process reaped [s], the
+#: objects the collector tracked at the end of the command and the collection
+#: :func:`meshphase.cli.console_main` runs before it freezes them [s].
+EXIT_COLUMNS = ("what", "median_s", "min_s", "max_s", "objects", "collect_s")
 
 _COUNT = "import sys; print(len(sys.modules), file=sys.stderr)"
 
@@ -95,3 +99,75 @@ def startup_rows(repeats: int = 5) -> list:
     return [{"what": label, "median_s": statistics.median(times[label]),
              "min_s": min(times[label]), "max_s": max(times[label]), "modules": modules[label],
              "over_python_s": statistics.median(times[label]) - base} for label, _ in cases]
+
+
+def _exit_code(frozen: bool) -> str:
+    """``python -c`` code: the campaign workers' stack imported, ``meshphase info FILE``
+    (argv[1]), then the interpreter's exit as it is or as :func:`meshphase.cli.console_main`
+    leaves it (one collection, timed, then the heap frozen). Prints the tracked objects and
+    the collection's time; the last ``atexit`` handler prints the wall clock."""
+    tail = ("t = time.perf_counter(); gc.collect(); c = time.perf_counter() - t; gc.freeze()\n" if frozen
+            else "c = float('nan')\n")
+    return ("import atexit, contextlib, gc, importlib, io, sys, time\n"
+            "from meshphase.campaign_job import _FROZEN_HEAP, worker_modules\n"
+            "for m in worker_modules():\n"
+            "    if m != _FROZEN_HEAP:      # the workers' fork server freezes; a command does not\n"
+            "        importlib.import_module(m)\n"
+            "from meshphase.cli import main\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            "    assert main(['info', sys.argv[1]]) == 0\n"
+            "n = len(gc.get_objects())\n" + tail +
+            "print(n, c)\n"
+            "atexit.register(lambda: print(repr(time.time()), flush=True))\n")
+
+
+def exit_rows(repeats: int = 5) -> list:
+    """Median time [s] from a command's last ``atexit`` handler to its process reaped: the
+    interpreter's own finalization, with the campaign workers' stack loaded (dask,
+    matplotlib, pandas, h5py, scipy), as it is and after :func:`meshphase.cli.console_main`'s
+    collection and :func:`gc.freeze`.
+
+    Parameters
+    ----------
+    repeats : int
+        Fresh interpreters per case (>= 1), the cases interleaved, after one untimed round.
+
+    Returns
+    -------
+    list of dict
+        Rows with the keys :data:`EXIT_COLUMNS`.
+    """
+    import math
+
+    repeats = as_positive_int(repeats, "repeats")
+    import numpy as np
+
+    from ..io import write
+    from ..recording import Recording
+    from .rss import child_env
+
+    cases = [("exit as the interpreter does it", False),
+             ("exit after console_main's collection and gc.freeze", True)]
+    with tempfile.TemporaryDirectory(prefix="meshphase-exit-") as tmp:
+        h5 = Path(tmp) / "exit.h5"
+        write(Recording(np.zeros((5120, 2)), 5120.0, ["sun_g1", "ring_g1"]), h5)
+        env = child_env()
+        got = {label: [] for label, _ in cases}
+        objects, collect = {}, {label: [] for label, _ in cases}
+        for k in range(repeats + 1):
+            for label, frozen in cases:
+                res = subprocess.run([sys.executable, "-c", _exit_code(frozen), str(h5)], capture_output=True,
+                                     text=True, cwd=tmp, env=env)
+                reaped = time.time()
+                if res.returncode != 0:
+                    raise RuntimeError(f"exit case {label!r} failed:\n{res.stderr[-2000:]}")
+                first, last = res.stdout.strip().splitlines()[-2:]
+                if k:
+                    got[label].append(reaped - float(last))
+                    n, c = first.split()
+                    objects[label] = int(n)
+                    collect[label].append(float(c))
+    return [{"what": label, "median_s": statistics.median(got[label]), "min_s": min(got[label]),
+             "max_s": max(got[label]), "objects": objects[label],
+             "collect_s": (statistics.median(collect[label]) if all(map(math.isfinite, collect[label]))
+                           else float("nan"))} for label, _ in cases]

@@ -2,7 +2,7 @@
 
 import pytest
 
-from meshphase.bench.startup import STARTUP_COLUMNS, startup_rows
+from meshphase.bench.startup import EXIT_COLUMNS, STARTUP_COLUMNS, exit_rows, startup_rows
 
 
 def test_startup_rows_measure_each_case():
@@ -24,3 +24,16 @@ def test_startup_rows_measure_each_case():
 def test_startup_rows_reject_bad_repeats(bad, exc):
     with pytest.raises(exc):
         startup_rows(bad)
+    with pytest.raises(exc):
+        exit_rows(bad)
+
+
+def test_exit_rows_measure_both_exits():
+    # measured, not asserted: the rows' shape, and that both cases saw the same stack
+    rows = exit_rows(1)
+    assert [r["what"] for r in rows] == ["exit as the interpreter does it",
+                                         "exit after console_main's collection and gc.freeze"]
+    for r in rows:
+        assert set(r) == set(EXIT_COLUMNS) and 0.0 < r["min_s"] <= r["median_s"] <= r["max_s"]
+    assert rows[0]["objects"] > 50_000 and abs(rows[1]["objects"] - rows[0]["objects"]) < 0.05 * rows[0]["objects"]
+    assert rows[1]["collect_s"] > 0.0 and rows[0]["collect_s"] != rows[0]["collect_s"]   # NaN: no collection
