@@ -770,7 +770,7 @@ def console_main(argv=None) -> int:
     campaign workers' stack: dask, matplotlib, pandas, h5py, scipy) and free next to nothing,
     since the process is ending: from the last ``atexit`` handler to the process reaped,
     0.38-0.52 s with that stack loaded, 0.04 s with the heap frozen, after a collection of
-    0.09 s here (which still runs the finalizers of any unreachable cycle, as the exit's
+    0.08-0.09 s here (``meshphase bench processing``, its exit table) (which still runs the finalizers of any unreachable cycle, as the exit's
     own collections would; ``atexit`` handlers and C-level exit handlers such as HDF5's run
     as before). Not in :func:`main`: a process that calls it and goes on (tests, notebooks)
     would never collect the frozen objects.
