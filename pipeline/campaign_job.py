@@ -111,17 +111,19 @@ FIGURES_TIMEOUT_S = 300.0
 
 #: what every task imports besides: the scene's schema check and the BLAS thread limit
 _EVERY_TASK = ("jsonschema", "threadpoolctl")
-#: imported last: importing it collects and freezes the heap (a fork server can only import),
-#: so that no forked worker's collection walks, and copies, what the imports made
-_FROZEN_HEAP = "meshphase.frozen_heap"
+#: imported last: importing it does once what each worker's first recording would (validators,
+#: BLAS controller), then collects and freezes the heap (a fork server can only import), so
+#: that no forked worker's collection walks, and copies, what the imports made
+_FORK_READY = "meshphase.fork_ready"
 
 
 def worker_modules(formats=None, synthetic: bool = False) -> tuple[str, ...]:
     """What a worker's tasks import: the processing stack, the task functions, the scene's
     schema check, the reader of each format with the libraries it imports on first use
     (h5py, mcap, npTDMS, pandas: ``READ_LIBRARIES`` of each format module) and the report's
-    figures (matplotlib, for :func:`draw_figures`), then :mod:`meshphase.frozen_heap` (the
-    heap collected and frozen before the workers fork); imported once in the fork server the
+    figures (matplotlib, for :func:`draw_figures`), then :mod:`meshphase.fork_ready` (first
+    uses paid, the heap collected and frozen before the workers fork); imported once in the
+    fork server the
     local workers start from (:func:`meshphase.cluster.worker_server`), and by
     :func:`warm_up`.
 
@@ -149,7 +151,7 @@ def worker_modules(formats=None, synthetic: bool = False) -> tuple[str, ...]:
     libs = tuple(lib for name in formats for lib in get_format(name).READ_LIBRARIES)
     return (_STACK + _EVERY_TASK + tuple(f"meshphase.io.{name}" for name in formats)
             + tuple(dict.fromkeys(libs)) + (("meshphase.synthetic",) if synthetic else ())
-            + (_FROZEN_HEAP,))
+            + (_FORK_READY,))
 
 
 def campaign_modules(scene, files) -> tuple[str, ...]:

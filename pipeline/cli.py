@@ -276,7 +276,7 @@ def _bench_campaign(out: Path, quick: bool, repeats: int | None = None) -> int:
               f"{', '.join(f'{v:.2f}' for v in pairs)}x (median {res['paired_speedup'][2]['median']:.2f}x; "
               f"processing median {res['paired_processing_speedup'][2]['median']:.2f}x)")
     if res["first_figure"]:
-        print("a forked worker's first report figure over its second [s] (meshphase.frozen_heap):")
+        print("a forked worker's first report figure over its second [s] (meshphase.fork_ready):")
         for case in ("not frozen", "frozen"):
             rows = [r for r in res["first_figure"] if r["case"] == case]
             print(f"  {case:>10}: " + ", ".join(f"{r['figure']} {r['first_excess_s']:.3f}" for r in rows))

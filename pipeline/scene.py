@@ -37,8 +37,8 @@ from .models.assembly import (CLEARANCE_ATOL, assemblable_planet_counts, coaxial
 from .models.gearset import Gearset, Speeds, rpm_to_rad_s
 from .recording import Recording
 
-__all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "plan", "check_recording",
-           "STAGES", "RESULTS", "LIMITS"]
+__all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "scene_schema_errors", "plan",
+           "check_recording", "STAGES", "RESULTS", "LIMITS"]
 
 #: stage -> the stages it needs (a DAG; flows one way, as in DESIGN.md)
 STAGES: dict[str, tuple[str, ...]] = {
@@ -422,6 +422,25 @@ def _error_maker(label, text: str):
     return err
 
 
+def scene_schema_errors(raw: dict) -> list:
+    """Where a scene's TOML, read into a dict, breaks ``data_schemas/scene.schema.json``.
+
+    Parameters
+    ----------
+    raw : dict
+        The scene as :mod:`tomllib` reads it.
+
+    Returns
+    -------
+    list of jsonschema.ValidationError
+        Sorted by the path of the key; empty when the scene matches the schema.
+    """
+    import jsonschema  # ~90 modules (attrs, referencing, importlib.metadata): only for a scene
+
+    validator = jsonschema.Draft202012Validator(load_schema("scene"))
+    return sorted(validator.iter_errors(raw), key=lambda e: [str(k) for k in e.absolute_path])
+
+
 def _check_schema(raw: dict, text: str, label, err) -> None:
     """An empty scene, non-finite numbers, then ``data_schemas/scene.schema.json`` (the first
     problem named, with the number of the others)."""
@@ -431,10 +450,7 @@ def _check_schema(raw: dict, text: str, label, err) -> None:
     for keys, v in _walk(raw):
         if isinstance(v, float) and not math.isfinite(v):
             raise err(keys, f"{v} is not a finite number (TOML reads inf and nan as numbers)")
-    import jsonschema  # ~90 modules (attrs, referencing, importlib.metadata): only for a scene
-
-    validator = jsonschema.Draft202012Validator(load_schema("scene"))
-    errors = sorted(validator.iter_errors(raw), key=lambda e: [str(k) for k in e.absolute_path])
+    errors = scene_schema_errors(raw)
     if errors:
         e = errors[0]
         keys = [k for k in e.absolute_path]

@@ -37,6 +37,7 @@ recording its share, cores // workers (:func:`threads_limited`).
 from __future__ import annotations
 
 import os
+import sys
 from contextlib import contextmanager
 
 __all__ = ["run_threads", "threads_limited", "thread_pool", "blas_single_thread", "read_ahead",
@@ -104,13 +105,29 @@ def threads_limited(n: int):
         _limit = before
 
 
+#: (len(sys.modules) when made, threadpoolctl.ThreadpoolController) of this process, or None
+_blas_controller: tuple | None = None
+
+
+def _controller():
+    """threadpoolctl's view of the loaded thread-pool libraries, kept while no module was
+    imported since it was made (only an import loads a new BLAS). Making one looks through
+    every loaded shared library, which :func:`threadpoolctl.threadpool_limits` does at every
+    call."""
+    global _blas_controller
+    n = len(sys.modules)
+    if _blas_controller is None or _blas_controller[0] != n:
+        from threadpoolctl import ThreadpoolController
+
+        _blas_controller = (n, ThreadpoolController())
+    return _blas_controller[1]
+
+
 @contextmanager
 def blas_single_thread():
     """Hold every loaded BLAS library (OpenBLAS, MKL, BLIS) to one thread inside the block
     (module notes); process-wide, restored on exit."""
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(limits=1, user_api="blas"):
+    with _controller().limit(limits=1, user_api="blas"):
         yield
 
 

@@ -95,7 +95,7 @@ def test_failed_record_has_the_task_record_keys():
 
 
 def test_warm_up_returns_this_process_id():
-    # a list without meshphase.frozen_heap: the default list would freeze this test process
+    # a list without meshphase.fork_ready: the default list would freeze this test process
     assert cj.warm_up(("json", "meshphase.campaign")) == os.getpid()
 
 
@@ -302,18 +302,37 @@ def test_worker_modules_are_importable_and_name_every_reader():
     assert out.stdout.split() == ["True"]
 
 
-def test_the_fork_server_freezes_its_heap_last():
-    # the fork server imports worker_modules() in order: the last one collects and freezes
-    # the heap, so that the workers' collections never walk (and copy) what the imports made
+def test_the_fork_server_readies_and_freezes_its_heap_last():
+    # the fork server imports worker_modules() in order: the last one pays the first uses a
+    # worker's first recording would (validators, the BLAS controller), then collects and
+    # freezes the heap, so that the workers' collections never walk (and copy) what the
+    # imports made
     for mods in (cj.worker_modules(), cj.worker_modules([]), cj.worker_modules(["csv"], True)):
-        assert mods[-1] == "meshphase.frozen_heap" and mods.count(mods[-1]) == 1
+        assert mods[-1] == "meshphase.fork_ready" and mods.count(mods[-1]) == 1
     code = ("import gc\n"
             "before = gc.get_freeze_count()\n"
-            "import meshphase.frozen_heap as fh\n"
-            "print(before, fh.FROZEN_OBJECTS > 10_000, gc.get_freeze_count() > 10_000)")
+            "import meshphase.fork_ready as fh\n"
+            "from meshphase import threads\n"
+            "kept = threads._blas_controller is not None and threads._controller() is threads._blas_controller[1]\n"
+            "print(before, fh.FROZEN_OBJECTS > 10_000, gc.get_freeze_count() > 10_000, fh.FIRST_USE_S > 0, kept)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["0", "True", "True"]
+    assert out.stdout.split() == ["0", "True", "True", "True", "True"]
+
+
+def test_the_fork_server_starts_when_its_first_uses_fail():
+    # a full temporary disk (the recording written there fails): the import goes on, the
+    # heap is frozen, and the workers pay the first uses themselves
+    code = ("import errno, gc\n"
+            "import meshphase.io\n"
+            "def full(*a, **k):\n"
+            "    raise OSError(errno.ENOSPC, 'No space left on device')\n"
+            "meshphase.io.write = full\n"
+            "import meshphase.fork_ready as fh\n"
+            "print(fh.FIRST_USE_S != fh.FIRST_USE_S, gc.get_freeze_count() > 10_000)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["True", "True"]
 
 
 def test_worker_modules_follow_the_formats_and_the_input():

@@ -13,7 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from meshphase.models.gearset import rpm_to_rad_s
-from meshphase.scene import RESULTS, STAGES, Scene, SceneError, load_scene, parse_scene, plan
+from meshphase.scene import (RESULTS, STAGES, Scene, SceneError, load_scene, parse_scene, plan,
+                             scene_schema_errors)
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
@@ -350,3 +351,15 @@ def test_plan_is_the_dependency_closure_in_order(results, tolerances):
     if "compare" in stages:
         assert all(stages.index(s) < stages.index("compare")
                    for s in ("identify", "tolerance") if s in stages)
+
+
+def test_scene_schema_errors_of_the_demo_an_empty_and_a_bad_scene():
+    import tomllib
+
+    from meshphase.demo import DEMO_SCENE
+
+    assert scene_schema_errors(tomllib.loads(DEMO_SCENE)) == []
+    bad = scene_schema_errors({"gearset": 5, "results": ["phasing", "no_such_result"]})
+    assert [list(e.absolute_path) for e in bad] == sorted([list(e.absolute_path) for e in bad], key=str)
+    assert {str(e.absolute_path[0]) for e in bad} >= {"gearset", "results"}
+    assert scene_schema_errors([]) and scene_schema_errors({"name": 3})   # not a table; a bad type

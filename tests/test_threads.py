@@ -188,3 +188,31 @@ def test_read_ahead_empty_and_bad_input():
             list(threads.read_ahead(lambda: iter(()), depth=bad))
     with threads_limited(2), pytest.raises(TypeError):
         list(threads.read_ahead(lambda: 5))           # not an iterator: raised here
+
+
+def test_blas_single_thread_holds_blas_to_one_and_keeps_its_controller():
+    # one thread inside, the library's own count restored after; the controller (a scan of
+    # every loaded library) is kept while no module is imported, made anew after an import
+    import importlib
+    import sys
+
+    from threadpoolctl import threadpool_info
+
+    from meshphase import threads
+
+    def blas_threads():
+        return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+    before = blas_threads()
+    with threads.blas_single_thread():
+        assert all(n == 1 for n in blas_threads())
+        first = threads._controller()
+    assert blas_threads() == before
+    assert threads._controller() is first
+    name = "meshphase.tests_fresh_import_probe"
+    spec = importlib.machinery.ModuleSpec(name, None)
+    sys.modules[name] = importlib.util.module_from_spec(spec)      # the module count moves
+    try:
+        assert threads._controller() is not first
+    finally:
+        del sys.modules[name]

@@ -1,8 +1,8 @@
 """What a campaign worker's first figure of the combined report costs over its second.
 
 A campaign's local workers fork from a server that imported
-:func:`meshphase.campaign_job.worker_modules`; the last of them, :mod:`meshphase.frozen_heap`,
-collects and freezes the heap. Each case here is a fresh interpreter that imports that list
+:func:`meshphase.campaign_job.worker_modules`; the last of them,
+:mod:`meshphase.fork_ready`, collects and freezes the heap. Each case here is a fresh interpreter that imports that list
 without that module (``not frozen``) or with it (``frozen``), then forks one child per draw: the child draws one figure of the combined
 report twice, as a worker does after its recordings, and reports both times. Measured, never
 asserted.
@@ -25,10 +25,10 @@ FIRST_FIGURE_COLUMNS = ("case", "figure", "first_excess_s", "min_excess_s", "max
 
 _CODE = """
 import importlib, json, os, sys, time
-from meshphase.campaign_job import worker_modules, _FROZEN_HEAP
+from meshphase.campaign_job import worker_modules, _FORK_READY
 frozen, repeats = sys.argv[1] == "frozen", int(sys.argv[2])
 for m in worker_modules():          # every reader, as a campaign over mixed formats
-    if frozen or m != _FROZEN_HEAP:
+    if frozen or m != _FORK_READY:
         importlib.import_module(m)
 from meshphase.report import campaign_report as cr
 n, planets = 8, ["1", "2", "3", "4"]

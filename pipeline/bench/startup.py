@@ -109,9 +109,9 @@ def _exit_code(frozen: bool) -> str:
     tail = ("t = time.perf_counter(); gc.collect(); c = time.perf_counter() - t; gc.freeze()\n" if frozen
             else "c = float('nan')\n")
     return ("import atexit, contextlib, gc, importlib, io, sys, time\n"
-            "from meshphase.campaign_job import _FROZEN_HEAP, worker_modules\n"
+            "from meshphase.campaign_job import _FORK_READY, worker_modules\n"
             "for m in worker_modules():\n"
-            "    if m != _FROZEN_HEAP:      # the workers' fork server freezes; a command does not\n"
+            "    if m != _FORK_READY:      # the workers' fork server freezes; a command does not\n"
             "        importlib.import_module(m)\n"
             "from meshphase.cli import main\n"
             "with contextlib.redirect_stdout(io.StringIO()):\n"
