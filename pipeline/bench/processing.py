@@ -592,8 +592,9 @@ def _markdown(res: dict) -> str:
         from .startup import STARTUP_COLUMNS
 
         lines += ["", "## Start-up: fresh interpreters, median wall time [s]", "",
-                  "over_python_s = median minus that of `python -c pass`; modules = sys.modules "
-                  "at exit. `meshphase process` pays the stages' import (scipy.linalg, "
+                  "over_python_s = median minus that of `python -c pass`; ready_s = median "
+                  "from the start to the end of the case's code (the imports done), before "
+                  "the interpreter's exit (the exit table); modules = sys.modules at exit. `meshphase process` pays the stages' import (scipy.linalg, "
                   ".interpolate, .optimize, .ndimage; not scipy.signal, which imports "
                   "scipy.stats: its row shows what that would add) on top of `--version`, "
                   "and the filters' numba kernel (`meshphase bench --warmup` times its load).", ""]

@@ -24,14 +24,19 @@ from ..validate import as_positive_int
 
 __all__ = ["STARTUP_COLUMNS", "EXIT_COLUMNS", "startup_rows", "exit_rows"]
 
-#: Columns of the start-up table.
-STARTUP_COLUMNS = ("what", "median_s", "min_s", "max_s", "modules", "over_python_s")
+#: Columns of the start-up table: the whole process [s] (median, min, max), the modules
+#: loaded, the median over ``python -c pass`` [s], and ``ready_s``: the median from the start
+#: to the end of the case's code, the imports (or the command) done, before the
+#: interpreter's exit (whose cost :func:`exit_rows` measures) [s].
+STARTUP_COLUMNS = ("what", "median_s", "min_s", "max_s", "modules", "over_python_s", "ready_s")
 #: Columns of the exit table: from the last ``atexit`` handler to the process reaped [s], the
 #: objects the collector tracked at the end of the command and the collection
 #: :func:`meshphase.cli.console_main` runs before it freezes them [s].
 EXIT_COLUMNS = ("what", "median_s", "min_s", "max_s", "objects", "collect_s")
 
-_COUNT = "import sys; print(len(sys.modules), file=sys.stderr)"
+# the wall clock when the case's code is done (before the interpreter's exit), then the modules
+_COUNT = ("import sys, time; print(repr(time.time()), file=sys.stderr); "
+          "print(len(sys.modules), file=sys.stderr)")
 
 
 def _cases(h5: Path) -> list:
@@ -51,6 +56,9 @@ def _cases(h5: Path) -> list:
             # what the filters' scipy engine adds (process takes numba's kernel instead when
             # numba is installed: meshphase.iir.pick_engine)
             ("import meshphase.stages, scipy.signal", f"import meshphase.stages, scipy.signal; {_COUNT}"),
+            # what process loads at its first filter where numba is installed (its kernel's
+            # engine, meshphase.iir.pick_engine, for a recording of NUMBA_SAMPLES or more)
+            ("import meshphase.stages, numba", f"import meshphase.stages, numba; {_COUNT}"),
             # what process loaded while pandas wrote its CSV tables (meshphase.table_csv now)
             ("import meshphase.stages, pandas", f"import meshphase.stages, pandas; {_COUNT}")]
 
@@ -83,22 +91,26 @@ def startup_rows(repeats: int = 5) -> list:
         write(Recording(np.zeros((5120, 2)), 5120.0, ["sun_g1", "ring_g1"]), h5)
         cases = _cases(h5)
         times = {label: [] for label, _ in cases}
+        ready = {label: [] for label, _ in cases}
         modules = {}
         env = child_env()
         for k in range(repeats + 1):              # the first round writes the bytecode
             for label, code in cases:
-                t = time.perf_counter()
+                t, t_wall = time.perf_counter(), time.time()
                 res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                                      cwd=tmp, env=env)
-                if k:
-                    times[label].append(time.perf_counter() - t)
                 if res.returncode != 0:
                     raise RuntimeError(f"start-up case {label!r} failed:\n{res.stderr[-2000:]}")
-                modules[label] = int(res.stderr.strip().splitlines()[-1])
+                done, count = res.stderr.strip().splitlines()[-2:]
+                if k:
+                    times[label].append(time.perf_counter() - t)
+                    ready[label].append(float(done) - t_wall)
+                modules[label] = int(count)
     base = statistics.median(times[cases[0][0]])
     return [{"what": label, "median_s": statistics.median(times[label]),
              "min_s": min(times[label]), "max_s": max(times[label]), "modules": modules[label],
-             "over_python_s": statistics.median(times[label]) - base} for label, _ in cases]
+             "over_python_s": statistics.median(times[label]) - base,
+             "ready_s": statistics.median(ready[label])} for label, _ in cases]
 
 
 def _exit_code(frozen: bool) -> str:

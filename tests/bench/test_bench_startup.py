@@ -11,6 +11,7 @@ def test_startup_rows_measure_each_case():
     for r in rows:
         assert set(r) == set(STARTUP_COLUMNS)
         assert 0.0 < r["min_s"] <= r["median_s"] <= r["max_s"]
+        assert 0.0 < r["ready_s"] <= r["max_s"]          # the code ends before the process does
     mods = {r["what"]: r["modules"] for r in rows}
     # the module counts are what the rows claim: the interpreter loads least, the stages most
     assert mods["python -c pass"] < mods["import meshphase"] < mods["meshphase --version"]
