@@ -774,14 +774,15 @@ def console_main(argv=None) -> int:
     one garbage collection and the heap frozen (:func:`gc.freeze`), so that the interpreter's
     exit skips its own collections.
 
-    Those collections walk every object the command's imports made (185 000 with the
+    Those collections walk every object the command's imports made (about 187 000 with the
     campaign workers' stack: dask, matplotlib, pandas, h5py, scipy) and free next to nothing,
-    since the process is ending: from the last ``atexit`` handler to the process reaped,
-    0.38-0.52 s with that stack loaded, 0.04 s with the heap frozen, after a collection of
-    0.08-0.09 s here (``meshphase bench processing``, its exit table) (which still runs the finalizers of any unreachable cycle, as the exit's
-    own collections would; ``atexit`` handlers and C-level exit handlers such as HDF5's run
-    as before). Not in :func:`main`: a process that calls it and goes on (tests, notebooks)
-    would never collect the frozen objects.
+    since the process is ending. From the last ``atexit`` handler to the process reaped:
+    0.38-0.52 s with that stack loaded, 0.04-0.05 s with the heap frozen, after a collection
+    of 0.08-0.09 s here (``meshphase bench processing``, its exit table). That collection
+    still runs the finalizers of any unreachable cycle, as the exit's own would; ``atexit``
+    handlers and C-level exit handlers such as HDF5's run as before. Not in :func:`main`: a
+    process that calls it and goes on (tests, notebooks) would never collect the frozen
+    objects.
 
     Parameters
     ----------

@@ -22,8 +22,8 @@ so this module does its work when it is imported:
 
 Measured (``meshphase bench campaign``, its first-figure rows; a forked child draws one
 figure of the combined report twice; medians of 6 children per figure): without the frozen
-heap the child's first figure took 0.13-0.15 s longer than its second, a full collection
-walking every inherited object; with it, 0.02-0.05 s longer.
+heap the child's first figure took 0.13-0.18 s longer than its second, a full collection
+walking every inherited object; with it, 0.02-0.05 s longer (six runs on 2026-11-28).
 
 A failure of the first uses (a full temporary disk, say) leaves them to the workers: the
 import itself never fails.

@@ -1,11 +1,11 @@
 """What a campaign worker's first figure of the combined report costs over its second.
 
 A campaign's local workers fork from a server that imported
-:func:`meshphase.campaign_job.worker_modules`; the last of them,
-:mod:`meshphase.fork_ready`, collects and freezes the heap. Each case here is a fresh interpreter that imports that list
-without that module (``not frozen``) or with it (``frozen``), then forks one child per draw: the child draws one figure of the combined
-report twice, as a worker does after its recordings, and reports both times. Measured, never
-asserted.
+:func:`meshphase.campaign_job.worker_modules`; the last of them, :mod:`meshphase.fork_ready`,
+collects and freezes the heap. Each case here is a fresh interpreter that imports that list
+without that module (``not frozen``) or with it (``frozen``), then forks one child per draw:
+the child draws one figure of the combined report twice, as a worker does after its
+recordings, and reports both times. Measured, never asserted.
 """
 
 from __future__ import annotations
