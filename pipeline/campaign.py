@@ -917,9 +917,9 @@ def _campaign_body(scene, scene_path, inputs, files, skipped, names, out, opts: 
 
 
 def _import_report_modules() -> None:
-    """Import what :func:`_write_campaign_files` needs (pandas, matplotlib), ahead of time."""
-    import pandas  # noqa: F401
-
+    """Import what :func:`_write_campaign_files` needs, ahead of time: the report's module,
+    without matplotlib (the workers draw the figures) and the CSV writer, without pandas."""
+    from . import table_csv  # noqa: F401
     from .report import campaign_report  # noqa: F401
 
 
@@ -977,15 +977,14 @@ def _write_campaign_files(result: dict, out: Path, final_of, t_all: float,
     sets ``result["files"]`` and the ``report`` and ``total`` times. ``draw`` draws the
     report's figures (:func:`meshphase.campaign_job.draw_figures`; None: here); ``closed()``
     (if given) closes the cluster after the report, before the total is taken."""
-    import pandas as pd
-
     from .report.campaign_report import build_campaign_report
+    from .table_csv import write_csv
 
     timing, counts = result["timing_s"], result["counts"]
     t = time.perf_counter()
     csv_path = out / "campaign.csv"
-    rows = pd.DataFrame(campaign_rows(result["recordings"]))
-    _write_atomic(csv_path, lambda tmp: rows.to_csv(tmp, index=False))
+    rows = campaign_rows(result["recordings"])
+    _write_atomic(csv_path, lambda tmp: write_csv(rows, tmp))
     report_path = build_campaign_report(result, out, draw=draw)
     timing["report"] = time.perf_counter() - t
     if closed is not None:

@@ -112,8 +112,8 @@ FIGURES_TIMEOUT_S = 300.0
 #: what every task imports besides: the scene's schema check and the BLAS thread limit
 _EVERY_TASK = ("jsonschema", "threadpoolctl")
 #: imported last: importing it does once what each worker's first recording would (validators,
-#: BLAS controller), then collects and freezes the heap (a fork server can only import), so
-#: that no forked worker's collection walks, and copies, what the imports made
+#: BLAS controller, matplotlib on Agg), then freezes the heap (a fork server can only import),
+#: so that no forked worker's collection walks, and copies, what the imports made
 _FORK_READY = "meshphase.fork_ready"
 
 
@@ -121,10 +121,9 @@ def worker_modules(formats=None, synthetic: bool = False) -> tuple[str, ...]:
     """What a worker's tasks import: the processing stack, the task functions, the scene's
     schema check, the reader of each format with the libraries it imports on first use
     (h5py, mcap, npTDMS, pandas: ``READ_LIBRARIES`` of each format module) and the report's
-    figures (matplotlib, for :func:`draw_figures`), then :mod:`meshphase.fork_ready` (first
-    uses paid, the heap collected and frozen before the workers fork); imported once in the
-    fork server the
-    local workers start from (:func:`meshphase.cluster.worker_server`), and by
+    figures (:func:`draw_figures`), then :mod:`meshphase.fork_ready` (first uses paid,
+    matplotlib imported, the heap frozen before the workers fork); imported once in the fork
+    server the local workers start from (:func:`meshphase.cluster.worker_server`), and by
     :func:`warm_up`.
 
     Parameters

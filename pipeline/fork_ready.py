@@ -8,6 +8,8 @@ so this module does its work when it is imported:
 1. It pays the costs that every worker's first recording would otherwise pay for itself,
    once:
 
+   - matplotlib's pyplot on Agg (:func:`meshphase.report.campaign_report.pyplot`), which
+     the report's module no longer imports itself;
    - jsonschema builds each validator and resolves the schema's references on its first
      use. Here that is the scene schema, on the packaged demo scene, and the HDF5 layout and
      channel schemas, through :func:`meshphase.io.read_info` of a two-channel recording
@@ -15,8 +17,8 @@ so this module does its work when it is imported:
    - threadpoolctl finds the loaded BLAS libraries (:func:`meshphase.threads.blas_single_thread`
      keeps the controller).
 
-2. It collects the garbage and freezes the heap (:func:`gc.freeze`), as the docs of
-   ``gc.freeze`` advise before a ``fork()`` without ``exec()``. The objects the imports made
+2. It freezes the heap (:func:`gc.freeze`), as the docs of ``gc.freeze`` advise before a
+   ``fork()`` without ``exec()``. The objects the imports made
    (about 190 000) move to the collector's permanent generation. A worker's collections then
    never walk them, and so never write to, and copy, the pages they share with the server.
 
@@ -41,8 +43,9 @@ __all__ = ["FROZEN_OBJECTS", "FIRST_USE_S", "pay_first_use"]
 
 
 def pay_first_use() -> None:
-    """Validate the demo scene, read the header of a small recording and hold BLAS to one
-    thread once, in this process (what a worker's first recording does first)."""
+    """Import matplotlib on Agg, validate the demo scene, read the header of a small
+    recording and hold BLAS to one thread once, in this process (what a worker's first
+    recording and first figure do first)."""
     import tempfile
     import tomllib
     from pathlib import Path
@@ -52,9 +55,11 @@ def pay_first_use() -> None:
     from .demo import DEMO_SCENE
     from .io import read_info, write
     from .recording import Recording
+    from .report.campaign_report import pyplot
     from .scene import scene_schema_errors
     from .threads import blas_single_thread
 
+    pyplot()                              # matplotlib on Agg, for the report's figures
     raw = tomllib.loads(DEMO_SCENE)
     scene_schema_errors(raw)
     with tempfile.TemporaryDirectory(prefix="meshphase-fork-ready-") as tmp:
@@ -73,7 +78,8 @@ try:
 except Exception:  # noqa: BLE001 - a full temporary disk, say: the workers pay it, and start
     FIRST_USE_S = float("nan")
 del _t
-gc.collect()
+# no collection first: the server's garbage is a few import-time leftovers, and a collection
+# would walk every object once more (0.09 s) on the way to the campaign's first task
 gc.freeze()
 #: Objects in the permanent generation once this module was imported [-].
 FROZEN_OBJECTS = gc.get_freeze_count()

@@ -2,7 +2,7 @@
 
 A campaign's local workers fork from a server that imported
 :func:`meshphase.campaign_job.worker_modules`; the last of them, :mod:`meshphase.fork_ready`,
-collects and freezes the heap. Each case here is a fresh interpreter that imports that list
+freezes the heap. Each case here is a fresh interpreter that imports that list
 without that module (``not frozen``) or with it (``frozen``), then forks one child per draw:
 the child draws one figure of the combined report twice, as a worker does after its
 recordings, and reports both times. Measured, never asserted.
@@ -31,6 +31,7 @@ for m in worker_modules():          # every reader, as a campaign over mixed for
     if frozen or m != _FORK_READY:
         importlib.import_module(m)
 from meshphase.report import campaign_report as cr
+cr.pyplot()                         # matplotlib on Agg in both cases (fork_ready imports it too)
 n, planets = 8, ["1", "2", "3", "4"]
 names = [f"rec_{i:03d}" for i in range(n)]
 ph = {g: {p: ([0.01 * i for i in range(n)], [0.002] * n) for p in planets} for g in ("sun", "ring")}

@@ -16,29 +16,45 @@ them side by side while the cluster is still up.
 
 from __future__ import annotations
 
+import functools
 import math
 import urllib.parse
 from pathlib import Path
 from typing import Callable
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from ..io import atomic_path  # noqa: E402
-from .html import Report, escape, figure_to_png  # noqa: E402
+from ..io import atomic_path
+from .html import Report, escape, figure_to_png
 
 __all__ = ["build_campaign_report", "figure_png", "phasing_across_recordings", "load_sharing_across_recordings",
-           "residual_rms_across_recordings", "wall_times_across_recordings"]
+           "residual_rms_across_recordings", "wall_times_across_recordings", "pyplot"]
 
-_COLORS = plt.rcParams["axes.prop_cycle"].by_key()["color"]
 _STATUS_COLOR = {"ok": "#1b6b2f", "unreliable": "#7a5195", "partial": "#c77800", "failed": "#a4161a"}
 
 
+@functools.cache
+def pyplot():
+    """matplotlib's pyplot on the Agg backend, imported by the first figure drawn (or by
+    :mod:`meshphase.fork_ready` in the workers' fork server): a campaign's client assembles
+    the report without matplotlib, its workers draw the figures.
+
+    Returns
+    -------
+    module
+        ``matplotlib.pyplot``.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
 def _c(i: int) -> str:
-    return _COLORS[i % len(_COLORS)]
+    colors = pyplot().rcParams["axes.prop_cycle"].by_key()["color"]
+    return colors[i % len(colors)]
 
 
 def _num(v) -> float:
@@ -113,7 +129,7 @@ def phasing_across_recordings(names, phasing: dict, ideal: dict | None = None):
         raise TypeError(f"phasing must be a dict gauge -> planet -> (mean, std), got {type(phasing).__name__}")
     gauges = [g for g in ("sun", "ring") if g in phasing] + [g for g in phasing if g not in ("sun", "ring")]
     n_panels = max(1, len(gauges))
-    fig, axes = plt.subplots(n_panels, 1, figsize=(max(6.0, 0.7 * len(names) + 3), 3.0 * n_panels),
+    fig, axes = pyplot().subplots(n_panels, 1, figsize=(max(6.0, 0.7 * len(names) + 3), 3.0 * n_panels),
                              squeeze=False)
     if not gauges or not names:
         _empty_axes(axes[0, 0], "no phasing measured")
@@ -165,7 +181,7 @@ def load_sharing_across_recordings(names, load_sharing, std_error=None):
     se = None if std_error is None else np.asarray(std_error, dtype=float)
     if se is not None and se.shape != ls.shape:
         raise ValueError(f"std_error must have the shape of load_sharing {ls.shape}, got {se.shape}")
-    fig, ax = plt.subplots(figsize=(max(6.0, 0.7 * len(names) + 3), 3.2))
+    fig, ax = pyplot().subplots(figsize=(max(6.0, 0.7 * len(names) + 3), 3.2))
     if not names or ls.shape[1] == 0 or not np.isfinite(ls).any():
         _empty_axes(ax, "no load sharing measured")
         return fig
@@ -197,7 +213,7 @@ def residual_rms_across_recordings(names, rms: dict, *, label: str = "RMS residu
     names = _names_check(names)
     if not isinstance(rms, dict):
         raise TypeError(f"rms must be a dict gauge -> values, got {type(rms).__name__}")
-    fig, ax = plt.subplots(figsize=(max(6.0, 0.7 * len(names) + 3), 3.0))
+    fig, ax = pyplot().subplots(figsize=(max(6.0, 0.7 * len(names) + 3), 3.0))
     vals = {g: np.asarray(v, dtype=float) for g, v in rms.items()}
     for g, v in vals.items():
         if v.shape != (len(names),):
@@ -225,7 +241,7 @@ def wall_times_across_recordings(names, seconds, statuses=None):
     st = list(statuses) if statuses is not None else ["ok"] * len(names)
     if len(st) != len(names):
         raise ValueError(f"statuses must have one entry per recording ({len(names)}), got {len(st)}")
-    fig, ax = plt.subplots(figsize=(7, 0.32 * len(names) + 1.3))
+    fig, ax = pyplot().subplots(figsize=(7, 0.32 * len(names) + 1.3))
     if not names:
         _empty_axes(ax, "no recordings")
         return fig
