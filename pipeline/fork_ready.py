@@ -18,9 +18,9 @@ so this module does its work when it is imported:
      keeps the controller).
 
 2. It freezes the heap (:func:`gc.freeze`), as the docs of ``gc.freeze`` advise before a
-   ``fork()`` without ``exec()``. The objects the imports made
-   (about 190 000) move to the collector's permanent generation. A worker's collections then
-   never walk them, and so never write to, and copy, the pages they share with the server.
+   ``fork()`` without ``exec()``. The objects the imports made (about 190 000) move to the
+   collector's permanent generation. A worker's collections then never walk them, and so
+   never write to, and copy, the pages they share with the server.
 
 Measured (``meshphase bench campaign``, its first-figure rows; a forked child draws one
 figure of the combined report twice; medians of 6 children per figure): without the frozen

@@ -130,7 +130,7 @@ def phasing_across_recordings(names, phasing: dict, ideal: dict | None = None):
     gauges = [g for g in ("sun", "ring") if g in phasing] + [g for g in phasing if g not in ("sun", "ring")]
     n_panels = max(1, len(gauges))
     fig, axes = pyplot().subplots(n_panels, 1, figsize=(max(6.0, 0.7 * len(names) + 3), 3.0 * n_panels),
-                             squeeze=False)
+                                  squeeze=False)
     if not gauges or not names:
         _empty_axes(axes[0, 0], "no phasing measured")
         return fig
