@@ -81,13 +81,17 @@ def _surrogate(lin, levels):
         q[2 * s] = a_mean[s][None] + a_std[s][None] * special.ndtri(lv)[:, None]
         for n in range(n_p):
             k, rho, w = lin.dev_directions(s, n)
-            if k == 0:
+            r = float(np.max(np.abs(rho), initial=0.0))
+            if k == 0 or r == 0.0:
                 continue
+            # in units of the largest |rho|: rho ~ J sigma is as small as the spread, and its
+            # square underflows below ~1e-154 (a spread of 1e-163 m came out 0.3 off)
+            rho = rho / r
             m1 = chi_mean(k) * np.sum(w * rho)
-            mean[2 * s + 1, n] = m1
-            std[2 * s + 1, n] = math.sqrt(max(k * np.sum(w * rho * rho) - m1 * m1, 0.0))
-            start = np.maximum(m1 + std[2 * s + 1, n] * special.ndtri(lv), 1e-3 * m1)
-            q[2 * s + 1, :, n] = solve_level(1.0 - lv, rho, w, k, start=start)
+            sd = math.sqrt(max(k * np.sum(w * rho * rho) - m1 * m1, 0.0))
+            mean[2 * s + 1, n], std[2 * s + 1, n] = m1 * r, sd * r
+            start = np.maximum(m1 + sd * special.ndtri(lv), 1e-3 * m1)
+            q[2 * s + 1, :, n] = solve_level(1.0 - lv, rho, w, k, start=start) * r
     return mean, std, q, lv
 
 

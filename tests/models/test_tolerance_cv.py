@@ -155,6 +155,7 @@ def test_zero_tolerances_give_zero_spread(case3):
        ep=st.floats(0.0, 0.5e-3), ks=st.floats(-3.0, 3.0), kp=st.floats(-3.0, 3.0))
 @example(c=3.0, es=0.0, er=0.000247884223959883, ep=0.000247884223959883, ks=0.0, kp=0.0)
 @example(c=2.0, es=0.0, er=0.0, ep=5e-324, ks=0.0, kp=0.0)   # a subnormal spread: no overflow
+@example(c=2.0, es=1.4879975500833057e-163, er=0.0, ep=0.0, ks=0.0, kp=0.0)  # rho^2 underflows
 def test_scaling_tolerances_scales_the_linear_spread(c, es, er, ep, ks, kp):
     from meshphase.models.tolerance_cv import _surrogate
     g, sp, _ = table2_case(3)
