@@ -35,7 +35,7 @@ from .recording import ChannelSpec
 __all__ = ["ChannelMapError", "ChannelMatch", "ChannelMap", "GAUGE_KINDS", "map_channels",
            "mapped_specs", "apply_channel_overrides", "check_gauges", "channels_present",
            "mapping_rows", "unmapped_message", "entry_label", "is_glob", "overridden",
-           "bridge_configs", "entry_values", "mapping_report"]
+           "bridge_configs", "entry_values", "mapping_report", "MESSAGE_NAMES"]
 
 #: channel kinds the onset detector times (the gauges)
 GAUGE_KINDS = ("sun", "ring", "facewidth")
@@ -132,16 +132,23 @@ def _entry_matches(entry: dict, i: int, names: Sequence[str]) -> list[ChannelMat
     return []
 
 
+#: names a message lists before "... and N more" (a scene can hold any number of entries)
+MESSAGE_NAMES = 10
+
+
 def _missing_exact(missing: list[str], names: Sequence[str], source: str | None,
                    present: str) -> str:
-    """The message for exact names not in the recording, with the nearest names."""
+    """The message for exact names not in the recording, with the nearest names: the first
+    :data:`MESSAGE_NAMES` of them, then how many more."""
     def near(m):  # a name present inside the one asked for ("sun" in "sun_gauge"), or alike
         inside = [n for n in names if n.lower() in m.lower() or m.lower() in n.lower()]
         return (inside or difflib.get_close_matches(m, names, n=1))[:1]
 
-    hints = [f"{m!r} -> {close[0]!r}?" for m in missing if (close := near(m))]
+    shown = missing[:MESSAGE_NAMES]
+    more = f" ... and {len(missing) - len(shown)} more" if len(missing) > len(shown) else ""
+    hints = [f"{m!r} -> {close[0]!r}?" for m in shown if (close := near(m))]
     return (f"{source or 'the recording'}: the scene's [[channels]] name "
-            f"{', '.join(repr(m) for m in missing)} is not in the file; channels "
+            f"{', '.join(repr(m) for m in shown)}{more} is not in the file; channels "
             f"present: {present}" + (f" (did you mean {', '.join(hints)})" if hints else ""))
 
 

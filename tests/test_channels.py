@@ -314,3 +314,20 @@ def test_regex_tooth_beyond_the_gear_is_refused(tmp_path):
     e = info.value
     assert e.key == "channels.0.regex" and "'SG02_sun_T40' reads as tooth 40" in str(e)
     assert "the sun has 25 teeth" in str(e)
+
+
+def test_a_message_lists_the_first_missing_names_and_counts_the_rest():
+    # a scene can name any number of channels the file lacks: the message stays one short
+    # line (the first MESSAGE_NAMES names, their hints, then how many more)
+    from meshphase.channels import MESSAGE_NAMES
+
+    many = [{"name": f"gauge_{i:05d}", "kind": "sun"} for i in range(25)]
+    with pytest.raises(ChannelMapError) as e:
+        map_channels(["sun_g1", "ring_g1"], many, "f.h5")
+    msg = str(e.value)
+    assert msg.count("'gauge_") == MESSAGE_NAMES and f"... and {25 - MESSAGE_NAMES} more is not" in msg
+    assert "'gauge_00009'" in msg and "'gauge_00010'" not in msg
+    few = [{"name": "sun_gauge", "kind": "sun"}]
+    with pytest.raises(ChannelMapError) as e:
+        map_channels(["sun_g1", "ring_g1"], few, "f.h5")
+    assert "more" not in str(e.value) and "'sun_gauge'" in str(e.value)

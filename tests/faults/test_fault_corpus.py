@@ -166,6 +166,8 @@ def _check(case, argv, rc, out, err, values) -> None:
     for text in case.contains:
         text = text.format(**values)
         assert text in errors[0], f"the error line does not say {text!r}; {where}"
+    if case.max_line is not None:
+        assert len(errors[0]) <= case.max_line, f"an error line of {len(errors[0])} characters; {where}"
     _nothing_left(values, where)
 
 
