@@ -26,7 +26,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-__all__ = ["load_schema", "validate", "schema_names", "SCHEMA_DIR", "BASE_URI"]
+__all__ = ["load_schema", "validate", "schema_errors", "schema_names", "SCHEMA_DIR", "BASE_URI"]
 
 #: Directory holding the ``*.schema.json`` files.
 SCHEMA_DIR = Path(__file__).resolve().parent
@@ -124,6 +124,29 @@ def _validator(file_name: str):
 def _pointer(path) -> str:
     parts = [str(p).replace("~", "~0").replace("/", "~1") for p in path]
     return "/" + "/".join(parts) if parts else "(top level)"
+
+
+def schema_errors(instance: Any, name: str) -> list:
+    """Every place where ``instance`` breaks the schema ``name``, from the validator kept for
+    it (built and checked on first use).
+
+    Parameters
+    ----------
+    instance : JSON-like
+    name : str
+        Schema name, with or without ``.schema.json``.
+
+    Returns
+    -------
+    list of jsonschema.ValidationError
+        In the validator's order; empty when ``instance`` matches.
+
+    Raises
+    ------
+    ValueError
+        The schema is missing or invalid.
+    """
+    return list(_validator(_file_name(name)).iter_errors(instance))
 
 
 def validate(instance: Any, name: str, *, where: str | None = None) -> None:

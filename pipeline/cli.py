@@ -256,8 +256,6 @@ def _bench_campaign(out: Path, quick: bool, repeats: int | None = None) -> int:
 
     n, minutes, default_repeats = (2, 0.5, 1) if quick else (8, 2.0, 3)
     repeats = default_repeats if repeats is None else repeats
-    import statistics
-
     from .bench.first_figure import first_figure_rows
 
     res = measure_speedup(n, minutes, (1, 2), repeats=repeats)
@@ -277,12 +275,8 @@ def _bench_campaign(out: Path, quick: bool, repeats: int | None = None) -> int:
         print(f"  each repeat's 1-worker run over its 2-worker run: "
               f"{', '.join(f'{v:.2f}' for v in pairs)}x (median {res['paired_speedup'][2]['median']:.2f}x; "
               f"processing median {res['paired_processing_speedup'][2]['median']:.2f}x)")
-    cpu = {w: statistics.median(r["task_cpu_sum_s"] for r in res["runs"] if r["workers"] == w)
-           for w in (1, 2)}
-    if cpu[1] > 0:
-        # the same eight recordings: more CPU on two workers is the cores slowing each other
-        # (shared caches, memory, a host's other guests), which no scheduling removes
-        print(f"  task CPU, two workers over one: {cpu[2] / cpu[1]:.3f} (medians; 1 = no contention)")
+    if math.isfinite(res["task_cpu_ratio"][2]):
+        print(f"  task CPU, two workers over one: {res['task_cpu_ratio'][2]:.3f} (medians; 1 = no contention)")
     if res["first_figure"]:
         print("a forked worker's first report figure over its second [s] (meshphase.fork_ready):")
         for case in ("not frozen", "frozen"):

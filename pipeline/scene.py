@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from meshphase.data_schemas import load_schema
+from meshphase.data_schemas import schema_errors
 
 from . import io
 from .bridge import BridgeConfig
@@ -435,10 +435,9 @@ def scene_schema_errors(raw: dict) -> list:
     list of jsonschema.ValidationError
         Sorted by the path of the key; empty when the scene matches the schema.
     """
-    import jsonschema  # ~90 modules (attrs, referencing, importlib.metadata): only for a scene
-
-    validator = jsonschema.Draft202012Validator(load_schema("scene"))
-    return sorted(validator.iter_errors(raw), key=lambda e: [str(k) for k in e.absolute_path])
+    # jsonschema (~90 modules: attrs, referencing, importlib.metadata) loads here, only for a
+    # scene; the validator is data_schemas' own, built once per process
+    return sorted(schema_errors(raw, "scene"), key=lambda e: [str(k) for k in e.absolute_path])
 
 
 def _check_schema(raw: dict, text: str, label, err) -> None:

@@ -269,6 +269,13 @@ def test_start_cluster_bad_input():
         cj.start_cluster(None, 1, None, None)
 
 
+def _fresh(code: str, *argv, timeout: float = 120) -> str:
+    """``code`` run by a fresh interpreter (``argv`` after it): its stdout, once it exited 0."""
+    out = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, timeout=timeout)
+    assert out.returncode == 0, out.stderr
+    return out.stdout
+
+
 # ---------------------------------------------------------------------------- warm workers
 def test_worker_server_empty_and_bad():
     """In a fresh interpreter (the server is started once per process): the first call
@@ -277,9 +284,8 @@ def test_worker_server_empty_and_bad():
             "if __name__ == '__main__':\n"
             "    first = worker_server(())\n"
             "    print(first is None or first >= 0.0, worker_server(['json']) in (None, 0.0))\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["True", "True"]
+    stdout = _fresh(code)
+    assert stdout.split() == ["True", "True"]
     for bad in ("meshphase.stages", [1], [""], None):
         with pytest.raises(TypeError, match="modules"):
             cluster.worker_server(bad)
@@ -297,9 +303,8 @@ def test_worker_modules_are_importable_and_name_every_reader():
             "import meshphase.campaign_job as cj\n"
             "assert cj.warm_up() == os.getpid()\n"
             "print(all(m in sys.modules for m in cj.worker_modules()))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["True"]
+    stdout = _fresh(code, timeout=300)
+    assert stdout.split() == ["True"]
 
 
 def test_the_fork_server_readies_and_freezes_its_heap_last():
@@ -315,9 +320,8 @@ def test_the_fork_server_readies_and_freezes_its_heap_last():
             "from meshphase import threads\n"
             "kept = threads._blas_controller is not None and threads._controller() is threads._blas_controller[1]\n"
             "print(before, fh.FROZEN_OBJECTS > 10_000, gc.get_freeze_count() > 10_000, fh.FIRST_USE_S > 0, kept)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["0", "True", "True", "True", "True"]
+    stdout = _fresh(code)
+    assert stdout.split() == ["0", "True", "True", "True", "True"]
 
 
 def test_the_fork_server_starts_when_its_first_uses_fail():
@@ -330,9 +334,8 @@ def test_the_fork_server_starts_when_its_first_uses_fail():
             "meshphase.io.write = full\n"
             "import meshphase.fork_ready as fh\n"
             "print(fh.FIRST_USE_S != fh.FIRST_USE_S, gc.get_freeze_count() > 10_000)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["True", "True"]
+    stdout = _fresh(code)
+    assert stdout.split() == ["True", "True"]
 
 
 def test_worker_modules_follow_the_formats_and_the_input():
@@ -464,8 +467,7 @@ build_campaign_report({"scene": "s", "recordings": recs}, out, draw=draw)
 write_csv(cp.campaign_rows(recs), out / "campaign.csv")
 print(len(drawn), "matplotlib" in sys.modules, "pandas" in sys.modules)
 """
-    out = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True, timeout=120)
-    assert out.returncode == 0, out.stderr
-    n, mpl, pd_ = out.stdout.split()
+    stdout = _fresh(code, str(tmp_path))
+    n, mpl, pd_ = stdout.split()
     assert int(n) >= 3 and (mpl, pd_) == ("False", "False")
     assert (tmp_path / "campaign_report.html").is_file() and (tmp_path / "campaign.csv").is_file()

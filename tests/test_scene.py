@@ -363,3 +363,17 @@ def test_scene_schema_errors_of_the_demo_an_empty_and_a_bad_scene():
     assert [list(e.absolute_path) for e in bad] == sorted([list(e.absolute_path) for e in bad], key=str)
     assert {str(e.absolute_path[0]) for e in bad} >= {"gearset", "results"}
     assert scene_schema_errors([]) and scene_schema_errors({"name": 3})   # not a table; a bad type
+
+
+def test_schema_errors_list_every_break_from_the_kept_validator():
+    # data_schemas.schema_errors: every violation (validate names the most relevant one)
+    import tomllib
+
+    from meshphase.data_schemas import schema_errors
+    from meshphase.demo import DEMO_SCENE
+
+    assert schema_errors(tomllib.loads(DEMO_SCENE), "scene") == []
+    assert len(schema_errors({"gearset": 5, "results": 3}, "scene.schema.json")) >= 2
+    assert schema_errors([], "scene")                              # not even a table
+    with pytest.raises(ValueError):
+        schema_errors({}, "no_such_schema")

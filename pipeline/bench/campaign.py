@@ -165,7 +165,9 @@ def measure_speedup(n_recordings: int = 8, minutes: float = 2.0, workers=(1, 2),
         times), and ``paired_speedup`` / ``paired_processing_speedup`` (per worker count but
         the first: ``pairs``, each repeat's reference run over this count's run of the same
         repeat, and their ``median``; less sensitive than the best times to a slow spell of
-        the machine that hits one worker count's runs more than the other's).
+        the machine that hits one worker count's runs more than the other's), and
+        ``task_cpu_ratio`` per worker count (the median of the runs' task CPU sums over the
+        first count's: 1 when the workers do not slow each other; NaN without CPU times).
     """
     n_recordings, minutes, repeats, workers = _check_args(n_recordings, minutes, repeats, workers,
                                                           scenario)
@@ -185,6 +187,8 @@ def measure_speedup(n_recordings: int = 8, minutes: float = 2.0, workers=(1, 2),
             runs = [_timed_run(scene_path, rec_dir, work / f"campaign-{w}w", w, rep, progress)
                     for rep in range(repeats) for w in workers]
         best = {w: min(r["wall_s"] for r in runs if r["workers"] == w) for w in workers}
+        cpu = {w: statistics.median(r["task_cpu_sum_s"] for r in runs if r["workers"] == w)
+               for w in workers}
         best_p = {w: min(r["processing_s"] for r in runs if r["workers"] == w) for w in workers}
         ref = workers[0]
         return {"n_recordings": n_recordings, "minutes": minutes, "scenario": scenario,
@@ -195,7 +199,12 @@ def measure_speedup(n_recordings: int = 8, minutes: float = 2.0, workers=(1, 2),
                 "speedup": {w: best[ref] / best[w] for w in workers},
                 "processing_speedup": {w: best_p[ref] / best_p[w] for w in workers},
                 "paired_speedup": _paired(runs, workers),
-                "paired_processing_speedup": _paired(runs, workers, "processing_s")}
+                "paired_processing_speedup": _paired(runs, workers, "processing_s"),
+                # the same recordings: more CPU on more workers is the cores slowing each
+                # other (shared caches, memory, a host's other guests), which no scheduling
+                # removes
+                "task_cpu_ratio": {w: cpu[w] / cpu[ref] if cpu[ref] > 0 else float("nan")
+                                   for w in workers}}
     finally:
         if tmp is not None:
             tmp.cleanup()

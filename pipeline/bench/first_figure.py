@@ -5,7 +5,7 @@ A campaign's local workers fork from a server that imported
 freezes the heap. Each case here is a fresh interpreter that imports that list
 without that module (``not frozen``) or with it (``frozen``), then forks one child per draw:
 the child draws one figure of the combined report twice, as a worker does after its
-recordings, and reports both times. Measured, never asserted.
+recordings, and reports both times (a JSON line in a results file). Measured, never asserted.
 """
 
 from __future__ import annotations
@@ -14,6 +14,8 @@ import json
 import statistics
 import subprocess
 import sys
+import tempfile
+from pathlib import Path
 
 from ..validate import as_positive_int
 
@@ -26,7 +28,7 @@ FIRST_FIGURE_COLUMNS = ("case", "figure", "first_excess_s", "min_excess_s", "max
 _CODE = """
 import importlib, json, os, sys, time
 from meshphase.campaign_job import worker_modules, _FORK_READY
-frozen, repeats = sys.argv[1] == "frozen", int(sys.argv[2])
+frozen, repeats, results = sys.argv[1] == "frozen", int(sys.argv[2]), sys.argv[3]
 for m in worker_modules():          # every reader, as a campaign over mixed formats
     if frozen or m != _FORK_READY:
         importlib.import_module(m)
@@ -52,8 +54,8 @@ for _ in range(repeats):
             os.write(w, json.dumps([name, t1, t2]).encode())
             os._exit(0)
         os.close(w)
-        with os.fdopen(r) as f:
-            print(f.read())
+        with os.fdopen(r) as f, open(results, "a", encoding="utf-8") as out:
+            out.write(f.read() + "\\n")
         os.waitpid(pid, 0)
 """
 
@@ -81,12 +83,15 @@ def first_figure_rows(repeats: int = 6) -> list:
 
     rows = []
     for case in ("not frozen", "frozen"):
-        res = subprocess.run([sys.executable, "-c", _CODE, case, str(repeats)], capture_output=True,
-                             text=True, env=child_env())
-        if res.returncode != 0:
-            raise RuntimeError(f"first-figure case {case!r} failed:\n{res.stderr[-2000:]}")
+        with tempfile.TemporaryDirectory(prefix="meshphase-first-figure-") as tmp:
+            results = Path(tmp) / "draws.jsonl"
+            res = subprocess.run([sys.executable, "-c", _CODE, case, str(repeats), str(results)],
+                                 capture_output=True, text=True, env=child_env())
+            if res.returncode != 0:
+                raise RuntimeError(f"first-figure case {case!r} failed:\n{res.stderr[-2000:]}")
+            lines = results.read_text(encoding="utf-8").splitlines()
         got: dict = {}
-        for line in res.stdout.splitlines():
+        for line in lines:
             if not line.strip():
                 continue
             name, t1, t2 = json.loads(line)

@@ -588,33 +588,29 @@ def _markdown(res: dict) -> str:
         lines += _md_table(res["process"], PROCESS_COLUMNS)
         for sk in res.get("process_skipped", []):
             lines.append(f"\nSkipped {sk['minutes']:g} min: {sk['reason']}")
-    if res.get("startup"):
-        from .startup import STARTUP_COLUMNS
+    from .startup import EXIT_COLUMNS, STARTUP_COLUMNS
 
-        lines += ["", "## Start-up: fresh interpreters, median wall time [s]", "",
-                  "over_python_s = median minus that of `python -c pass`; ready_s = median "
-                  "from the start to the end of the case's code (the imports done), before "
-                  "the interpreter's exit (the exit table); modules = sys.modules at exit. `meshphase process` pays the stages' import (scipy.linalg, "
-                  ".interpolate, .optimize, .ndimage; not scipy.signal, which imports "
-                  "scipy.stats: its row shows what that would add) on top of `--version`, "
-                  "and the filters' numba kernel (`meshphase bench --warmup` times its load).", ""]
-        lines += _md_table(res["startup"], STARTUP_COLUMNS)
-    if res.get("exit"):
-        from .startup import EXIT_COLUMNS
-
-        lines += ["", "## Exit: from the last atexit handler to the process reaped [s]", "",
-                  "Fresh interpreters with the campaign workers' stack imported, after "
-                  "`meshphase info FILE`: the interpreter's own finalization (its garbage "
-                  "collections walk every object the imports made), and what is left of it "
-                  "after meshphase.cli.console_main's collection (collect_s) and gc.freeze.", ""]
-        lines += _md_table(res["exit"], EXIT_COLUMNS)
-    if res.get("identify"):
-        lines += ["", "## identify: model evaluations and wall time per Jacobian", "",
-                  "identify_errors on the exact passes of the bench rig (Table 2 case 1 "
-                  "offsets, every offset free); 2-point = scipy finite differences (before), "
-                  "analytic = closed form (meshphase.models.phasing_jacobian). The share of a "
-                  "run is identify_share in the process table.", ""]
-        lines += _md_table(res["identify"], IDENTIFY_COLUMNS)
+    for key, title, note, cols in (
+            ("startup", "Start-up: fresh interpreters, median wall time [s]",
+             "over_python_s = median minus that of `python -c pass`; ready_s = median from the "
+             "start to the end of the case's code (the imports done), before the interpreter's "
+             "exit (the exit table); modules = sys.modules at exit. `meshphase process` pays "
+             "the stages' import (scipy.linalg, .interpolate, .optimize, .ndimage; not "
+             "scipy.signal, which imports scipy.stats: its row shows what that would add) on "
+             "top of `--version`, and the filters' numba kernel (`meshphase bench --warmup` "
+             "times its load).", STARTUP_COLUMNS),
+            ("exit", "Exit: from the last atexit handler to the process reaped [s]",
+             "Fresh interpreters with the campaign workers' stack imported, after `meshphase "
+             "info FILE`: the interpreter's own finalization (its garbage collections walk "
+             "every object the imports made), and what is left of it after "
+             "meshphase.cli.console_main's collection (collect_s) and gc.freeze.", EXIT_COLUMNS),
+            ("identify", "identify: model evaluations and wall time per Jacobian",
+             "identify_errors on the exact passes of the bench rig (Table 2 case 1 offsets, "
+             "every offset free); 2-point = scipy finite differences (before), analytic = "
+             "closed form (meshphase.models.phasing_jacobian). The share of a run is "
+             "identify_share in the process table.", IDENTIFY_COLUMNS)):
+        if res.get(key):
+            lines += ["", f"## {title}", "", note, ""] + _md_table(res[key], cols)
     if res.get("phasing"):
         from .phasing import TARGET_ABS, TARGET_FLOOR_RATIO, markdown_table, pooled_calibration
 

@@ -63,6 +63,43 @@ def _cases(h5: Path) -> list:
             ("import meshphase.stages, pandas", f"import meshphase.stages, pandas; {_COUNT}")]
 
 
+def _timed_runs(make_cases, repeats: int, what: str):
+    """Run each case in fresh interpreters: one untimed round (it writes the bytecode), then
+    ``repeats`` timed rounds, the cases interleaved so that other work on the machine spreads
+    over all of them.
+
+    ``make_cases(h5)`` gives ``(label, argv)`` pairs (argv after ``python``), ``h5`` a
+    one-second recording of two gauges in the runs' working folder (the file's size does
+    not matter, the imports do). Returns the cases and, per label, one ``(started, elapsed,
+    reaped, stdout, stderr)`` per timed run: wall clock at the start [s since the epoch],
+    the run's wall time [s], wall clock once it was reaped [s since the epoch].
+    """
+    repeats = as_positive_int(repeats, "repeats")
+    import numpy as np
+
+    from ..io import write
+    from ..recording import Recording
+    from .rss import child_env
+
+    with tempfile.TemporaryDirectory(prefix=f"meshphase-{what}-") as tmp:
+        h5 = Path(tmp) / f"{what}.h5"
+        write(Recording(np.zeros((5120, 2)), 5120.0, ["sun_g1", "ring_g1"]), h5)
+        cases = make_cases(h5)
+        runs = {label: [] for label, _ in cases}
+        env = child_env()
+        for k in range(repeats + 1):
+            for label, argv in cases:
+                t, started = time.perf_counter(), time.time()
+                res = subprocess.run([sys.executable, *argv], capture_output=True, text=True, cwd=tmp,
+                                     env=env)
+                elapsed, reaped = time.perf_counter() - t, time.time()
+                if res.returncode != 0:
+                    raise RuntimeError(f"{what} case {label!r} failed:\n{res.stderr[-2000:]}")
+                if k:
+                    runs[label].append((started, elapsed, reaped, res.stdout, res.stderr))
+    return cases, runs
+
+
 def startup_rows(repeats: int = 5) -> list:
     """Median wall time [s] of each start-up case over ``repeats`` fresh interpreters.
 
@@ -78,39 +115,20 @@ def startup_rows(repeats: int = 5) -> list:
         Rows with the keys :data:`STARTUP_COLUMNS`; ``over_python_s`` is the median minus the
         ``python -c pass`` median (what meshphase itself costs).
     """
-    repeats = as_positive_int(repeats, "repeats")
-    import numpy as np
-
-    from ..io import write
-    from ..recording import Recording
-    from .rss import child_env
-
-    with tempfile.TemporaryDirectory(prefix="meshphase-startup-") as tmp:
-        h5 = Path(tmp) / "startup.h5"
-        # one second of two gauges: the file's size does not matter, the imports do
-        write(Recording(np.zeros((5120, 2)), 5120.0, ["sun_g1", "ring_g1"]), h5)
-        cases = _cases(h5)
-        times = {label: [] for label, _ in cases}
-        ready = {label: [] for label, _ in cases}
-        modules = {}
-        env = child_env()
-        for k in range(repeats + 1):              # the first round writes the bytecode
-            for label, code in cases:
-                t, t_wall = time.perf_counter(), time.time()
-                res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                                     cwd=tmp, env=env)
-                if res.returncode != 0:
-                    raise RuntimeError(f"start-up case {label!r} failed:\n{res.stderr[-2000:]}")
-                done, count = res.stderr.strip().splitlines()[-2:]
-                if k:
-                    times[label].append(time.perf_counter() - t)
-                    ready[label].append(float(done) - t_wall)
-                modules[label] = int(count)
-    base = statistics.median(times[cases[0][0]])
-    return [{"what": label, "median_s": statistics.median(times[label]),
-             "min_s": min(times[label]), "max_s": max(times[label]), "modules": modules[label],
-             "over_python_s": statistics.median(times[label]) - base,
-             "ready_s": statistics.median(ready[label])} for label, _ in cases]
+    cases, runs = _timed_runs(lambda h5: [(label, ["-c", code]) for label, code in _cases(h5)],
+                              repeats, "start-up")
+    rows = []
+    for label, _ in cases:
+        times = [elapsed for _, elapsed, _, _, _ in runs[label]]
+        # the code's last two stderr lines: the wall clock when it was done, the modules
+        done = [err.strip().splitlines()[-2:] for _, _, _, _, err in runs[label]]
+        rows.append({"what": label, "median_s": statistics.median(times), "min_s": min(times),
+                     "max_s": max(times), "modules": int(done[-1][1]),
+                     "ready_s": statistics.median(float(d[0]) - r[0] for d, r in zip(done, runs[label]))})
+    base = rows[0]["median_s"]
+    for r in rows:
+        r["over_python_s"] = r["median_s"] - base
+    return [{c: r[c] for c in STARTUP_COLUMNS} for r in rows]
 
 
 def _exit_code(frozen: bool) -> str:
@@ -151,35 +169,20 @@ def exit_rows(repeats: int = 5) -> list:
     """
     import math
 
-    repeats = as_positive_int(repeats, "repeats")
-    import numpy as np
-
-    from ..io import write
-    from ..recording import Recording
-    from .rss import child_env
-
-    cases = [("exit as the interpreter does it", False),
-             ("exit after console_main's collection and gc.freeze", True)]
-    with tempfile.TemporaryDirectory(prefix="meshphase-exit-") as tmp:
-        h5 = Path(tmp) / "exit.h5"
-        write(Recording(np.zeros((5120, 2)), 5120.0, ["sun_g1", "ring_g1"]), h5)
-        env = child_env()
-        got = {label: [] for label, _ in cases}
-        objects, collect = {}, {label: [] for label, _ in cases}
-        for k in range(repeats + 1):
-            for label, frozen in cases:
-                res = subprocess.run([sys.executable, "-c", _exit_code(frozen), str(h5)], capture_output=True,
-                                     text=True, cwd=tmp, env=env)
-                reaped = time.time()
-                if res.returncode != 0:
-                    raise RuntimeError(f"exit case {label!r} failed:\n{res.stderr[-2000:]}")
-                first, last = res.stdout.strip().splitlines()[-2:]
-                if k:
-                    got[label].append(reaped - float(last))
-                    n, c = first.split()
-                    objects[label] = int(n)
-                    collect[label].append(float(c))
-    return [{"what": label, "median_s": statistics.median(got[label]), "min_s": min(got[label]),
-             "max_s": max(got[label]), "objects": objects[label],
-             "collect_s": (statistics.median(collect[label]) if all(map(math.isfinite, collect[label]))
-                           else float("nan"))} for label, _ in cases]
+    cases, runs = _timed_runs(
+        lambda h5: [("exit as the interpreter does it", ["-c", _exit_code(False), str(h5)]),
+                    ("exit after console_main's collection and gc.freeze", ["-c", _exit_code(True), str(h5)])],
+        repeats, "exit")
+    rows = []
+    for label, _ in cases:
+        # stdout's last two lines: the objects and the collection's time, then the wall clock
+        # in the last atexit handler
+        got = [(out.strip().splitlines()[-2].split(), reaped - float(out.strip().splitlines()[-1]))
+               for _, _, reaped, out, _ in runs[label]]
+        ends = [e for _, e in got]
+        collect = [float(c) for (_, c), _ in got]
+        rows.append({"what": label, "median_s": statistics.median(ends), "min_s": min(ends),
+                     "max_s": max(ends), "objects": int(got[-1][0][0]),
+                     "collect_s": (statistics.median(collect) if all(map(math.isfinite, collect))
+                                   else float("nan"))})
+    return rows

@@ -60,6 +60,7 @@ def test_cli_bench_campaign_quick(tmp_path, capsys):
     assert "not frozen:" in text and "frozen:" in text           # the first-figure rows
     res = json.loads((tmp_path / "campaign_bench.json").read_text())
     assert {r["case"] for r in res["first_figure"]} == {"not frozen", "frozen"}
+    assert res["task_cpu_ratio"]["1"] == 1.0 and res["task_cpu_ratio"]["2"] > 0
     assert [r["workers"] for r in res["runs"]] == [1, 2, 1, 2]
     assert len(res["paired_speedup"]["2"]["pairs"]) == 2
     assert all(r["n_failed"] == 0 for r in res["runs"])
