@@ -4,11 +4,21 @@ a user would, through a scene file with the speeds typed as a user types them (s
 carrier 4.06 r/min: the held ring's Willis speed is then -3.4e-4 r/min, not 0).
 
 What is checked, against the generator's own truth (integrated angles, brentq engagements):
-the per-pass phasing error of both gauges within the target of the measured-phasing issue
+the per-pass phasing error of both gauges against the target of the measured-phasing issue
 (<= max(2e-3, 1.3 x the timing floor) mesh cycles); the ring gauge's planet 1 named by the
 tacho; the held member found; no "not reliable" warning; the same file read as TDMS and as CSV
 (meshphase convert) gives the same phasing to 1e-7 cycles. The default suite runs the steady,
 1 % and 3 % carrier-ripple presets (2 min each); ``-m slow`` every preset.
+
+The target is a claim about the expected RMS error, and a 2-min recording holds few passes: 21
+on the ring gauge (7 carrier turns, 3 passes each), whose passes of one turn share their
+planet-1 reference pulse. Their sample RMS spreads by about +-25 % around the expected one
+(seed 5 of the ``ccw`` preset: 1.52 x the floor on the ring, 1.17 on 10 minutes of the same
+preset; 8-10 minute records of ``steady`` and ``ccw`` over 20 seeds: ring 0.91-1.28, mean 1.09,
+sun 0.95-1.19). So the target is asserted where a sample can carry it: on the passes of all
+presets of a run pooled (:func:`test_pooled_error_within_target`), and each preset must not
+reject it (its RMS within the target times the 99.9 % chi-square allowance for its passes'
+degrees of freedom, :func:`allowance`): a preset 2x off fails, a preset drawn unlucky does not.
 """
 
 import math
@@ -16,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import stats
 
 from meshphase.scene import parse_scene
 from meshphase.stages import run_scene
@@ -113,19 +124,56 @@ def run(files: Path, preset: str, **kw):
     return run_scene(parse_scene(scene.read_text(encoding="utf-8"), scene)), truth
 
 
-def check(ctx, truth):
+def allowance(n: int, n_planets: int, p: float = 0.999) -> float:
+    """How far the RMS of ``n`` per-pass errors may exceed their expected RMS by chance at
+    level ``p`` [-]: sqrt(chi2_p(nu) / nu). A turn's N - 1 passes share the planet-1 pulse
+    (errors e_n - e_1: covariance 2 on the diagonal, 1 off it, eigenvalues N and 1), so their
+    squares sum to N chi2_1 + (N - 2) chi2_1: nu = 4 (N - 1) / (N + 2) per turn, by
+    Satterthwaite (2 of 3 for four planets)."""
+    nu = max(n * 4.0 / (n_planets + 2), 1.0)
+    return math.sqrt(float(stats.chi2.ppf(p, nu)) / nu)
+
+
+def check(ctx, truth) -> dict:
+    """The checks of one preset; returns its per-gear errors (``per_pass_errors`` plus the
+    squared sums the pooled test adds up)."""
     assert not ctx.failed, ctx.failed
     assert not [m for m in ctx.messages if "not reliable" in m], ctx.messages
+    out = {}
+    n_planets = R.RigConfig.from_dict(truth.config).gearset.n_planets
     for gear in ("sun", "ring"):
         e = per_pass_errors(ctx, truth, gear)
-        target = max(TARGET_ABS, TARGET_RATIO * e["floor"])
         assert e["n"] >= 15
-        assert e["rms"] <= target, (gear, e["rms"], e["floor"])
+        target = max(TARGET_ABS, TARGET_RATIO * e["floor"])
+        assert e["rms"] <= target * allowance(e["n"], n_planets), (gear, e["rms"], e["floor"])
+        out[gear] = e
     ph = ctx.phasing
     assert ph.fixed == "ring"
     if truth.tacho:
         assert ph.assignment["ring"]["shift_decided_by"] == "tacho"
-        assert per_pass_errors(ctx, truth, "ring")["labels"] == 1.0
+        assert out["ring"]["labels"] == 1.0
+    return out
+
+
+_OUTCOMES: dict = {}
+
+
+def outcome(files: Path, preset: str) -> dict:
+    """:func:`check` of a preset, run once per module (the per-preset and pooled tests share it)."""
+    if preset not in _OUTCOMES:
+        _OUTCOMES[preset] = check(*run(files, preset))
+    return _OUTCOMES[preset]
+
+
+def pooled(outs) -> dict:
+    """Per gear: RMS error and RMS floor over every pass of ``outs`` [mesh cycles]."""
+    res = {}
+    for gear in ("sun", "ring"):
+        n = sum(o[gear]["n"] for o in outs)
+        err2 = sum(o[gear]["rms"] ** 2 * o[gear]["n"] for o in outs)
+        fl2 = sum(o[gear]["floor"] ** 2 * o[gear]["n"] for o in outs)
+        res[gear] = {"n": n, "rms": math.sqrt(err2 / n), "floor": math.sqrt(fl2 / n)}
+    return res
 
 
 FAST = ["steady", "ripple1_carrier", "ripple3_carrier"]
@@ -133,15 +181,40 @@ FAST = ["steady", "ripple1_carrier", "ripple3_carrier"]
 
 @pytest.mark.parametrize("preset", FAST)
 def test_independent_rig_recordings_are_measured_right(files, preset):
-    ctx, truth = run(files, preset)
-    check(ctx, truth)
+    outcome(files, preset)
+
+
+SLOW = [p for p in R.PRESETS if p not in FAST]
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("preset", [p for p in R.PRESETS if p not in FAST])
+@pytest.mark.parametrize("preset", SLOW)
 def test_independent_rig_every_preset(files, preset):
-    ctx, truth = run(files, preset)
-    check(ctx, truth)
+    outcome(files, preset)
+
+
+@pytest.mark.parametrize("presets", [pytest.param(FAST, id="default"),
+                                     pytest.param(SLOW, id="every-other", marks=pytest.mark.slow)])
+def test_pooled_error_within_target(files, presets):
+    # the measured-phasing target on every pass of the presets together (module docstring):
+    # 252 sun and 72 ring passes by default, 754 and 213 in the slow set; pooled today:
+    # 1.03 and 1.10 x the floor by default, 1.05 and 1.10 in the slow set
+    for gear, e in pooled([outcome(files, p) for p in presets]).items():
+        assert e["rms"] <= max(TARGET_ABS, TARGET_RATIO * e["floor"]), (gear, e)
+
+
+@pytest.mark.parametrize("n_planets, turns", [(4, 7), (4, 28), (3, 8), (5, 8)])
+def test_allowance_matches_simulated_passes(n_planets, turns):
+    # the allowance's premise, simulated: per turn, N - 1 passes e_n - e_1 of unit-variance
+    # onset errors; the 99.9 % point of their mean square over its expectation (2) is
+    # allowance^2 to the Satterthwaite approximation's accuracy (a few % of the square here)
+    rng = np.random.default_rng(0)
+    e = rng.standard_normal((200_000, turns, n_planets))
+    d = e[:, :, 1:] - e[:, :, :1]
+    ms = np.mean(d.reshape(len(d), -1) ** 2, axis=1) / 2.0
+    q = float(np.quantile(ms, 0.999))
+    a2 = allowance(turns * (n_planets - 1), n_planets) ** 2
+    assert abs(a2 / q - 1.0) < 0.06, (a2, q)
 
 
 def test_tdms_and_csv_of_one_recording_give_the_same_phasing(files, tmp_path):
