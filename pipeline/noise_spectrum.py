@@ -19,8 +19,12 @@ amplitudes alone, fitted over the template's span, leave tens of times the white
 in the pulses' band; a speed change stretches the pulses). The fit takes the noise component
 along those three shapes out of each window, a fraction ``g(f) = sum_j |U_j(f)|^2 / W`` of the
 noise at frequency ``f`` (``U_j`` the DFTs of the orthonormal shapes over the ``W``-sample
-window): the estimate is divided by ``1 - g``. The average itself takes out another ``1 / M``
-of ``M`` windows, left in (under 2 % of the power for the 60 pulses of a seed-rig minute).
+window): the estimate is divided by ``1 - g``. The averaged shape carries ``1 / M`` of every
+window's noise (``M`` windows), and fitting it takes that share out of each window at every
+frequency (with the windows weighted by their amplitudes, exactly ``1 / M`` on average): the
+estimate is divided by ``1 - 1 / M`` too. That is 6 % of the power for the 16 ring pulses of
+a seed-rig minute; left in, it made the ring gauge's timing floor optimistic on the
+independent rig's recordings (tests/independent).
 
 What the fit cannot follow stays in the residual as if it were noise: on noise-free or very
 clean data that misfit dominates, and :func:`meshphase.passes.channel_noise_spectrum` refuses
@@ -145,6 +149,7 @@ def pulse_residual_psd(x, fs: float, t0: float, times, *, skip: float = 0.0) -> 
     g = np.sum(np.abs(np.fft.rfft(basis, axis=1)) ** 2, axis=0) / basis.shape[1]
     fg = np.fft.rfftfreq(basis.shape[1], 1.0 / fs)      # share of the noise the fit took
     p = p / (1.0 - np.clip(np.interp(f, fg, g), 0.0, 0.5))
+    p = p / (1.0 - 1.0 / len(w))                       # the average's share (module notes)
     return NoiseSpectrum(f, p, welch_dof(int(n_seg)), int(r.size), int(len(w)), int(nperseg))
 
 
