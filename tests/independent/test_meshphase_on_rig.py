@@ -14,8 +14,8 @@ The target is a claim about the expected RMS error, and a 2-min recording holds 
 on the ring gauge (7 carrier turns, 3 passes each), whose passes of one turn share their
 planet-1 reference pulse. Their sample RMS spreads by about +-25 % around the expected one
 (seed 5 of the ``ccw`` preset: 1.47 x the floor on the ring, 1.13 on 10 minutes of the same
-preset; 8-10 minute records of ``steady`` and ``ccw`` over 19 more seeds: ring 0.88-1.24,
-mean 1.05, sun 0.94-1.18, mean 1.05). So the target is asserted where a sample can carry it:
+preset; 8-10 minute records of ``steady`` and ``ccw`` over 19 more seeds: ring 0.86-1.24,
+mean 1.04, sun 0.94-1.18, mean 1.05). So the target is asserted where a sample can carry it:
 on the passes of all presets of a run pooled (:func:`test_pooled_error_within_target`), and
 each preset must not reject it (its RMS within the target times the 99.9 % chi-square
 allowance for its passes' degrees of freedom, :func:`allowance`): a preset 2x off fails, a

@@ -15,7 +15,8 @@ from meshphase.condition import ChannelQuality
 from meshphase.errors import ProcessingWarning
 from meshphase.onsets import FLAG_CLIPPED, FLAG_GAP, Onsets, Template
 from meshphase.passes import (ONSET_RESOLUTION, conditioned_gap_runs, gap_intervals_of,
-                             gauge_passes, onset_sigma, pass_times, timing_centre, usable_onsets)
+                             centre_shifts, gauge_passes, onset_sigma, pass_times, timing_centre,
+                             usable_onsets)
 from meshphase.phasing import GaugePasses
 from meshphase.recording import ChannelSpec
 
@@ -83,6 +84,68 @@ def test_pass_times_move_to_the_timing_centre():
     # an onset timed by no template keeps its time
     on = _onsets([0.1, 0.2, 0.3], tid=[0, -1, 0], templates=[tp])
     np.testing.assert_allclose(pass_times(on) - on.times, [8e-3, 0.0, 8e-3], rtol=0, atol=1e-15)
+
+
+def _crossings(h):
+    """Half-maximum crossings of the main lobe, linearly interpolated [samples]."""
+    i = int(np.argmax(h))
+    lo = i - int(np.argmax(h[i::-1] < 0.5))               # last sample below, rising side
+    hi = i + int(np.argmax(h[i:] < 0.5))                  # first sample below, falling side
+    left = lo + (0.5 - h[lo]) / (h[lo + 1] - h[lo])
+    right = hi - 1 + (h[hi - 1] - 0.5) / (h[hi - 1] - h[hi])
+    return left, right
+
+
+def _stretched(s, n_pulses, noise=0.0, rng=None):
+    """The skewed test pulse stretched by s, on a 161-sample grid, with Gaussian noise of SD
+    ``noise`` in every sample (a template learnt from few pulses); onset feature and FWHM
+    from interpolated half-maximum crossings, as the detector reads them."""
+    u = (np.arange(161) - 80.0) / 40.0 / s
+    h = np.exp(-0.5 * ((u - 0.3 * u * u) / 0.3) ** 2) - 0.2 * np.exp(-0.5 * ((u - 0.9) / 0.2) ** 2)
+    if noise:
+        h = h + rng.normal(0.0, noise, h.size)
+    h = h / h.max()
+    left, right = _crossings(h)
+    return Template(h, FS, 1, float(np.argmax(h)), left, (right - left) / FS, n_pulses=n_pulses)
+
+
+def test_centre_shifts_carry_the_best_templates_centre_by_the_fwhm_ratio():
+    a, b = _stretched(1.0, 200), _stretched(1.1, 50)
+    own = [(timing_centre(t) - t.ref) / t.rate for t in (a, b)]
+    got = centre_shifts([b, a])
+    # the template of most pulses keeps its own centre; the other gets it scaled
+    assert got[1] == pytest.approx(own[0], rel=1e-12)
+    assert got[0] == pytest.approx(own[0] * b.fwhm / a.fwhm, rel=1e-12)
+    # noise-free, a stretch moves its own centre by the same ratio (to the linear
+    # interpolation of the half-maximum crossings)
+    assert got[0] == pytest.approx(own[1], rel=0.01)
+    # one template, or none with a usable FWHM: each keeps its own
+    assert centre_shifts([a]) == pytest.approx([own[0]])
+    bad = dataclasses.replace(b, fwhm=float("nan"))
+    assert centre_shifts([a, bad])[1] == pytest.approx(own[1])
+    assert centre_shifts([]).size == 0
+    with pytest.raises(TypeError, match="Template"):
+        centre_shifts([a, "b"])
+
+
+def test_pass_times_do_not_step_when_a_noisy_template_takes_over():
+    # the same pulses timed by two templates of one shape, the second learnt from few
+    # pulses (noise 1 % of the peak per sample): its own centroid moves by up to 2 samples
+    # (SD 0.7), its onset feature (a half-maximum crossing) by a few tenths; the pass times
+    # step by no more than that feature does
+    rng = np.random.default_rng(3)
+    a = _stretched(1.0, 500)
+    steps_own, steps = [], []
+    for _ in range(20):
+        b = _stretched(1.0, 20, noise=0.01, rng=rng)
+        on = _onsets([0.1, 0.2, 0.3, 0.4], tid=[0, 0, 1, 1], templates=[a, b])
+        # the onsets of b's pulses as b would time them: its onset feature against a's
+        on = dataclasses.replace(on, times=on.times + np.array([0, 0, 1, 1]) * (b.ref - a.ref) / FS)
+        pt = pass_times(on)
+        steps.append((pt[2] - pt[1]) - (pt[1] - pt[0]))
+        steps_own.append((timing_centre(b) - timing_centre(a)) / FS)
+    assert np.max(np.abs(steps)) < 0.4 / FS
+    assert np.max(np.abs(steps_own)) > 1.0 / FS
 
 
 def test_pass_times_empty_no_templates_and_bad_input():
