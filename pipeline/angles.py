@@ -1666,18 +1666,23 @@ def held_member(z_sun: int, z_ring: int, speeds=None, *, resolution=None,
         zs, zr = float(z_sun), float(z_ring)
         if resolution is None:
             scale = max(abs(speeds.sun), abs(speeds.carrier), abs(speeds.ring), 1e-300)
-            d_ring = d_sun = 1e-9 * scale
+            d_ring = d_sun = d_carrier = 1e-9 * scale
         else:
             ds = float(resolution.get("sun", 0.0))
             dc = float(resolution.get("carrier", 0.0))
             d_ring = (1.0 + zs / zr) * dc + (zs / zr) * ds
             d_sun = ds
+            d_carrier = dc
         if abs(speeds.ring) <= d_ring:
             from_speeds = "ring"
             why = f"ring speed {speeds.ring:.3g} rad/s is zero within +-{d_ring:.2g} rad/s"
         elif abs(speeds.sun) <= d_sun:
             from_speeds = "sun"
             why = f"sun speed {speeds.sun:.3g} rad/s is zero within +-{d_sun:.2g} rad/s"
+        elif abs(speeds.carrier) <= d_carrier:
+            why = (f"carrier speed {speeds.carrier:.3g} rad/s is zero within +-{d_carrier:.2g} "
+                   "rad/s: a held carrier (star arrangement), measured like a differential "
+                   "(no held ring or sun for a tacho to name planets on)")
         else:
             why = "no member's speed is zero: a differential (both driven)"
     if mesh_rate is not None and carrier_rate is not None and carrier_rate > 0 and mesh_rate > 0:

@@ -449,6 +449,17 @@ def test_seed_rig_is_a_differential_and_the_tacho_decides():
     assert held_member(25, 87, None, mesh_rate=25 * 0.2, carrier_rate=0.2)[0] == "sun"
 
 
+def test_a_held_carrier_is_measured_as_a_differential_and_said_so():
+    # a star arrangement (carrier typed 0 r/min): no held ring or sun, and the reason says
+    # the carrier is held rather than that no member stands still
+    g = Gearset.equally_spaced(25, 87, 29, 4, 0.1125)
+    sp = Speeds.kinematic(g, rpm_to_rad_s(18.19), 0.0)
+    res = {"sun": rpm_to_rad_s(typed_resolution(18.19)), "carrier": rpm_to_rad_s(typed_resolution(0.0))}
+    for kw in ({}, {"resolution": res}):
+        fixed, why = held_member(25, 87, sp, **kw)
+        assert fixed is None and "held carrier" in why and "no member" not in why
+
+
 @pytest.mark.parametrize("value, want", [(4.06, 0.005), (18.19, 0.005), (100.0, 0.05), (4, 0.5),
                                          (1e-3, 5e-4), (3.862, 5e-4), (-4.06, 0.005)])
 def test_typed_resolution(value, want):
