@@ -78,7 +78,7 @@ from .validate import as_finite_array, as_positive_int
 __all__ = ["PassTrain", "Kinematics", "AngleModel", "gauge_train", "tacho_train",
            "kinematics", "fit_angle_model", "revolution_numbers", "held_member",
            "typed_resolution", "relabel_train", "label_shift_costs", "slice_train",
-           "mesh_cycles_per_carrier_turn", "SHIFT_OBS"]
+           "mesh_cycles_per_carrier_turn", "unseen_ripples", "SHIFT_OBS"]
 
 TWO_PI = 2.0 * math.pi
 #: spline interval counts tried, in order
@@ -1262,6 +1262,63 @@ def _knot_ladder(d: _Design, kin: Kinematics, gauges: list, max_knots) -> list:
     if max_knots is not None:
         kmax = max(1, min(kmax, int(max_knots)))
     return [k for k in KNOT_LADDER if k <= kmax]
+
+
+#: a shaft's ripple counts as unseen when the share of its first harmonic that varies within
+#: the passes of one planet on one train (and within the tacho's edges) is below this [-]:
+#: exactly zero in exact arithmetic (the pass targets are whole turns plus fixed fractions),
+#: ~1e-30 in floating point
+UNSEEN_TOL = 1e-12
+
+
+def unseen_ripples(trains, kin: Kinematics) -> list:
+    """Shafts whose speed ripple no train can see: (shaft, mesh cycles per turn) pairs.
+
+    A ripple locked to a shaft's angle is seen only where the trains meet that shaft at
+    varying angles. A gauge on the held ring meets each planet, and a carrier tacho fires,
+    at one carrier angle each: with no other train (the sun gauge dead, clipped or absent)
+    a ripple at the carrier's harmonics only adds a constant to each planet's passes, which
+    the planets' own offsets take up, and the phasing between planets, A(t_n) - A(t_1),
+    carries its difference between their carrier angles unseen (the independent rig's
+    ordinary 1 % carrier ripple, ring gauge and tacho alone: 0.14 mesh cycles, 54 x the
+    floor, with residuals at the floor). The planet spin is not tried here (its common
+    ripple is not fitted by default: :func:`fit_angle_model`); a shaft that turns less
+    than once over the record is left to the drift (as there).
+
+    Parameters
+    ----------
+    trains : sequence of PassTrain
+        The trains the angle model is fitted to (gauges and tacho); trains with fewer than
+        two observations are ignored.
+    kin : Kinematics
+
+    Returns
+    -------
+    list of (str, float)
+    """
+    if not isinstance(kin, Kinematics):
+        raise TypeError(f"kin must be a Kinematics, got {type(kin).__name__}")
+    use = [tr for tr in trains if isinstance(tr, PassTrain) and len(tr) >= 2]
+    gauges = [tr for tr in use if tr.kind in ("sun", "ring")]
+    if not gauges:
+        return []
+    span = max(float(np.ptp(tr.target)) for tr in gauges)
+    out = []
+    for shaft, period in kin.periods.items():
+        if shaft == "planet" or not (period > 0 and span >= period):
+            continue
+        varying = total = 0.0
+        for tr in use:
+            c = np.exp(2j * np.pi * np.mod(np.asarray(tr.target, dtype=float), period) / period)
+            _, grp = np.unique(np.asarray(tr.planet), return_inverse=True)
+            cnt = np.bincount(grp)
+            mean = (np.bincount(grp, c.real) + 1j * np.bincount(grp, c.imag)) / cnt
+            rep = cnt[grp] >= 2                  # a planet passed once tells nothing either way
+            varying += float(np.sum(np.abs(c - mean[grp])[rep] ** 2))
+            total += float(np.count_nonzero(rep))
+        if total > 0 and varying <= UNSEEN_TOL * total:
+            out.append((shaft, float(period)))
+    return out
 
 
 def _ripple_rates(d: _Design, kin: Kinematics, planet_ripple: bool, notes: list) -> list:

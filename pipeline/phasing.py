@@ -50,7 +50,7 @@ from scipy.interpolate import PchipInterpolator
 from .angle_windows import fit_angle_windows
 from .angles import (AngleModel, Kinematics, PassTrain, gauge_train, held_member, kinematics,
                      label_shift_costs, mesh_cycles_per_carrier_turn, relabel_train,
-                     revolution_numbers, tacho_train)
+                     revolution_numbers, tacho_train, unseen_ripples)
 from .errors import ProcessingWarning
 from .validate import as_finite_array, as_positive_int
 
@@ -1138,8 +1138,14 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
     if any(tr.kind in ("sun", "ring") and len(tr) >= 2 for tr in trains):
         model = fit_angle_windows(trains, kin, n)
         notes.extend(model.notes)
+        unseen = unseen_ripples(trains, kin)
+        for shaft, _ in unseen:
+            notes.append(f"a speed ripple locked to the {shaft} angle is not seen by "
+                         f"{' and '.join(tr.name for tr in trains)}: they meet the {shaft} at "
+                         "fixed angles only")
         factors = {p.name: float(getattr(p, "floor_factor", 1.0)) for p in passes}
-        tables, reliability = _gear_tables(model, labels, train_of, gearset, gaps, factors)
+        tables, reliability = _gear_tables(model, labels, train_of, gearset, gaps, factors,
+                                           unseen)
     return PhasingResult(tables, labels, model, fixed, fixed_reason, reliability, relative, notes,
                          dict(train_of), {nm: v[1] for nm, v in all_labels.items()},
                          None if gaps is None else np.asarray(gaps, dtype=float))
@@ -1249,7 +1255,7 @@ def _gauge_trains(all_labels: dict, gearset) -> tuple[list, dict]:
 
 
 def _gear_tables(model: AngleModel, labels: dict, train_of: dict, gearset, gaps,
-                 factors=None) -> tuple[dict, dict]:
+                 factors=None, unseen=()) -> tuple[dict, dict]:
     """Per gear with a main-gauge train: its phasing table from the angle model
     (:func:`phasing_from_model`), its timing floor times the gauge's floor factor (``factors``
     by channel, :attr:`GaugePasses.floor_factor`: both passes of a row are the gauge's), and
@@ -1269,7 +1275,7 @@ def _gear_tables(model: AngleModel, labels: dict, train_of: dict, gearset, gaps,
         if tab.timing_floor is not None and factor != 1.0:
             tab.timing_floor = tab.timing_floor * factor
         tables[gear] = tab
-        reliability[gear] = {**_reliability(model, tr, tab), "floor_factor": float(factor)}
+        reliability[gear] = {**_reliability(model, tr, tab, unseen), "floor_factor": float(factor)}
     return tables, reliability
 
 
@@ -1409,9 +1415,18 @@ UNRELIABLE_RATIO = 3.0
 UNRELIABLE_LAG1 = 0.6
 
 
-def _reliability(model: AngleModel, train: PassTrain, tab: PassTable) -> dict:
-    """Whether a gear's phasing can be trusted, from the model's own residual diagnostics."""
+def _reliability(model: AngleModel, train: PassTrain, tab: PassTable, unseen=()) -> dict:
+    """Whether a gear's phasing can be trusted, from the model's own residual diagnostics and
+    what its trains can see (``unseen``: :func:`meshphase.angles.unseen_ripples`)."""
     reasons = []
+    for shaft, period in unseen:
+        # a relative ripple a moves A by a P / (2 pi) mesh cycles at most, and the phasing
+        # between two planets (A at two carrier angles) by twice that
+        reasons.append(f"a speed ripple locked to the {shaft} angle is not seen by the gauges "
+                       f"and tacho (they meet the {shaft} at fixed angles only): the phasing "
+                       f"assumes the {shaft} turns evenly, and every 1 % of such ripple (an "
+                       f"ordinary drive's) can move it by up to {0.01 * period / math.pi:.2g} "
+                       "mesh cycles")
     fit = model.train(train.name)
     est = float(np.sqrt(np.mean(tab.uncertainty ** 2))) if len(tab) else float("nan")
     floor = float(np.sqrt(np.mean(tab.timing_floor ** 2))) if len(tab) else float("nan")

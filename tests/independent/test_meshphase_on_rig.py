@@ -218,6 +218,28 @@ def test_allowance_matches_simulated_passes(n_planets, turns):
     assert abs(a2 / q - 1.0) < 0.06, (a2, q)
 
 
+def test_ring_gauge_and_tacho_alone_flag_the_carrier_ripple_they_cannot_see(files, tmp_path):
+    # the sun gauge left out (dead, clipped or never fitted): the held ring's gauge and the
+    # carrier tacho meet the carrier at fixed angles only, so the ordinary 1 % carrier ripple
+    # is invisible to them and moves the ring's phasing by ~0.14 mesh cycles (54 x the floor
+    # on this preset) with residuals at the floor; the run must say the phasing is not
+    # reliable, and why
+    p, truth = make(files, "ripple1_carrier")
+    text = scene_text(truth, p)
+    sun = next(c["name"] for c in truth.channels if c["kind"] == "sun")
+    text = text.replace(f'[[channels]]\nname = "{sun}"\nkind = "sun"\n', "")
+    assert sun not in text
+    scene = tmp_path / "ring_only.toml"
+    scene.write_text(text, encoding="utf-8")
+    ctx = run_scene(parse_scene(text, scene))
+    e = per_pass_errors(ctx, truth, "ring")
+    assert e["rms"] > 10 * e["floor"]                   # the error the warning is about
+    rel = ctx.phasing.reliability["ring"]
+    assert not rel["reliable"]
+    assert any("carrier angle is not seen" in r for r in rel["reasons"])
+    assert [m for m in ctx.messages if "ring gauge: phasing not reliable" in m]
+
+
 def test_tdms_and_csv_of_one_recording_give_the_same_phasing(files, tmp_path):
     # the same samples through two formats: the CSV's time column and the TDMS waveform
     # timing differ by rounding (~1e-9 s); nothing in the phasing may depend on it

@@ -14,7 +14,8 @@ from hypothesis import given, settings, strategies as st
 
 from meshphase.angles import (AngleModel, Kinematics, PassTrain, fit_angle_model, gauge_train,
                              held_member, kinematics, label_shift_costs, relabel_train,
-                             revolution_numbers, tacho_train, typed_resolution)
+                             revolution_numbers, slice_train, tacho_train, typed_resolution,
+                             unseen_ripples)
 from meshphase.models.gearset import Gearset, Speeds, rpm_to_rad_s
 from meshphase.models.tolerance import table2_case
 from meshphase.phasing import (assign_planets_by_pattern, pass_order, phasing_from_model,
@@ -447,6 +448,26 @@ def test_seed_rig_is_a_differential_and_the_tacho_decides():
     fixed, why = held_member(25, 87, sp, mesh_rate=87 * 0.05, carrier_rate=0.05)
     assert fixed == "ring" and "the data decide" in why
     assert held_member(25, 87, None, mesh_rate=25 * 0.2, carrier_rate=0.2)[0] == "sun"
+
+
+def test_a_ring_gauge_and_tacho_alone_do_not_see_a_carrier_ripple():
+    # the held ring's gauge meets each planet, and the tacho fires, at one carrier angle
+    # each: a ripple at carrier harmonics is a constant per planet there (the sun's passes
+    # meet the carrier at every angle and see it)
+    g, sp = rig()
+    trains, _ = trains_from_truth(g, sp, SpeedProfile(), 120.0)
+    kin = kinematics(25, 87, 29, fixed="ring")
+    by = {tr.name: tr for tr in trains}
+    assert unseen_ripples([by["ring"], by["tacho"]], kin) == [("carrier", 87.0)]
+    assert unseen_ripples([by["ring"]], kin) == [("carrier", 87.0)]
+    assert unseen_ripples(trains, kin) == []
+    assert unseen_ripples([by["sun"], by["tacho"]], kin) == []
+    # a record shorter than a carrier turn leaves the carrier to the drift: nothing to say
+    short = [slice_train(by["ring"], 0.0, 10.0)[0], slice_train(by["tacho"], 0.0, 10.0)[0]]
+    assert unseen_ripples(short, kin) == []
+    assert unseen_ripples([], kin) == [] and unseen_ripples([by["tacho"]], kin) == []
+    with pytest.raises(TypeError, match="Kinematics"):
+        unseen_ripples(trains, {"carrier": 87.0})
 
 
 def test_a_held_carrier_is_measured_as_a_differential_and_said_so():
