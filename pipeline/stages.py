@@ -330,9 +330,14 @@ def stage_onsets(ctx: RunContext) -> OnsetsStage:
     scan = cond.scan if cond.scan is not None else ctx.load.scan
     n = sum(len(o) for o in out.values())
     jit = [float(np.median(o.corr)) for o in out.values() if len(o) and np.isfinite(o.corr).any()]
+    # a gauge whose pulses were found upside down (the compressive fillet, or a bridge wired
+    # the other way round) is said to be: the amplitudes in its tables are negative
+    neg = [nm for nm, o in out.items() if o.templates and o.templates[0].polarity < 0]
+    note = f"{n} onsets" + (f"; median template correlation {np.median(jit):.4f}" if jit else "")
+    if neg:
+        note += f"; negative (compressive) pulses on {', '.join(neg)}"
     return OnsetsStage(by_channel=out, tacho_times=None if scan is None else scan.tacho_times,
-                       error_estimate=(f"{n} onsets; median template correlation "
-                                       f"{np.median(jit):.4f}" if jit else f"{n} onsets"))
+                       error_estimate=note)
 
 
 def _warn_aliased(ctx: RunContext, fs: float) -> None:

@@ -240,6 +240,34 @@ def test_ring_gauge_and_tacho_alone_flag_the_carrier_ripple_they_cannot_see(file
     assert [m for m in ctx.messages if "ring gauge: phasing not reliable" in m]
 
 
+def test_compressive_gauges_give_the_same_phasing(files, tmp_path):
+    # gauges on the compressive fillet (or bridges wired the other way round) record the
+    # pulses upside down: here both gauges through gain = -1. Timed as positive pulses they
+    # were timed on the side lobes (ring 2.3-2.6 x its floor, no warning); the sign is now
+    # found from the data, and the phasing is that of the upright recording
+    p, truth = make(files, "ripple1_carrier")
+    text = scene_text(truth, p)
+    out = {}
+    for label, t in (("upright", text),
+                     ("inverted", text.replace('kind = "sun"\n', 'kind = "sun"\ngain = -1\n')
+                                      .replace('kind = "ring"\n', 'kind = "ring"\ngain = -1\n'))):
+        scene = tmp_path / f"{label}.toml"
+        scene.write_text(t, encoding="utf-8")
+        out[label] = run_scene(parse_scene(t, scene))
+    assert text.count("gain = -1") == 0
+    for gear in ("sun", "ring"):
+        a, b = out["upright"].phasing.tables[gear], out["inverted"].phasing.tables[gear]
+        assert len(a) == len(b) > 0
+        d = (a.gamma - b.gamma + 0.5) % 1.0 - 0.5
+        assert np.max(np.abs(d)) < 1e-9
+        ons = out["inverted"].onsets.by_channel
+        assert all(np.all(o.amplitude < 0) for o in ons.values() if len(o))
+    assert not [m for m in out["inverted"].messages if "not reliable" in m]
+    note = out["inverted"].onsets.error_estimate
+    assert "negative (compressive) pulses on" in note and all(nm in note for nm in ons)
+    assert "negative" not in out["upright"].onsets.error_estimate
+
+
 def test_tdms_and_csv_of_one_recording_give_the_same_phasing(files, tmp_path):
     # the same samples through two formats: the CSV's time column and the TDMS waveform
     # timing differ by rounding (~1e-9 s); nothing in the phasing may depend on it
