@@ -40,6 +40,7 @@ from .models.mesh_phasing import assembly_check, classify_phasing, ideal_phasing
 from .onsets import detect_onsets_recording
 from .outputs import new_output_dir, summary_dict, write_outputs  # noqa: F401 (public here)
 from .passes import ONSET_RESOLUTION, gap_intervals_of, gauge_passes  # noqa: F401 (was here)
+from .pass_rates import pass_rate_warnings
 from .phasing import (PassTable, assign_planets_by_pattern, measure_phasing, pass_order,
                       relabel_gauge)
 from .recording import Recording
@@ -363,6 +364,9 @@ def stage_phasing(ctx: RunContext) -> PhasingStage:
     passes, mains = gauge_passes(rec.channels, ons.by_channel, cond.quality, rec.fs, rec.t0,
                                  excerpt=cond.excerpt)
     sp = _nominal_speeds(ctx)
+    # channels swapped or mis-kinded, speeds typed far off: the pass rates say so up front
+    for msg in pass_rate_warnings(passes, g, sp):
+        warnings.warn(msg, ProcessingWarning, stacklevel=2)
     # which member is held: the scene's word, else the typed speeds within their precision,
     # and the tacho's count of mesh cycles per carrier turn when there is a tacho
     res_typed = ctx.scene.speeds_resolution if ctx.scene.speeds is not None else None

@@ -268,6 +268,22 @@ def test_compressive_gauges_give_the_same_phasing(files, tmp_path):
     assert "negative" not in out["upright"].onsets.error_estimate
 
 
+def test_swapped_gauge_channels_are_named(files, tmp_path):
+    # the sun's and the ring's channel given each other's kind: both gears' phasing is then
+    # 27-29x its floor, which the reliability check sees only as scatter; the pass rates
+    # (a sun gauge's come Z_r / Z_s = 3.48x as often as a ring gauge's) name the cause
+    p, truth = make(files, "ripple1_carrier")
+    names = {c["kind"]: c["name"] for c in truth.channels}
+    text = (scene_text(truth, p).replace(f'name = "{names["sun"]}"', "name = \"@\"")
+            .replace(f'name = "{names["ring"]}"', f'name = "{names["sun"]}"')
+            .replace("name = \"@\"", f'name = "{names["ring"]}"'))
+    ctx = run_scene(parse_scene(text, tmp_path / "swapped.toml"))
+    swapped = [m for m in ctx.messages if "look swapped" in m]
+    assert len(swapped) == 1 and f"'{names['ring']}' (kind sun)" in swapped[0]
+    ok, _ = run(files, "ripple1_carrier")
+    assert not [m for m in ok.messages if "swapped" in m or "passes come" in m]
+
+
 def test_tdms_and_csv_of_one_recording_give_the_same_phasing(files, tmp_path):
     # the same samples through two formats: the CSV's time column and the TDMS waveform
     # timing differ by rounding (~1e-9 s); nothing in the phasing may depend on it
