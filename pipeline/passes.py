@@ -22,8 +22,8 @@ import warnings
 import numpy as np
 
 from ._crb import crb_delay_std, crb_delay_std_psd
-from .errors import ProcessingWarning
-from .noise_spectrum import NoiseSpectrum, pulse_residual_psd
+from .errors import DataQualityWarning, ProcessingWarning
+from .noise_spectrum import TRANSIENT_RATIO, NoiseSpectrum, pulse_residual_psd
 from .onsets import FLAG_GAP, Onsets, Template
 from .phasing import GaugePasses
 from .validate import as_positive
@@ -297,7 +297,8 @@ def channel_noise_spectrum(excerpt, name: str, onsets: Onsets, quality=None) -> 
     (:func:`meshphase.noise_spectrum.pulse_residual_psd`): one Welch estimate per channel,
     from the conditioned samples a run keeps (the condition stage's excerpt, its first
     minute), after the filters settled. A residual above :data:`NOISE_LIKE_RATIO` times the
-    channel's per-sample noise RMS is pulse misfit, not noise: no spectrum then.
+    channel's per-sample noise RMS is pulse misfit, not noise: no spectrum then. Pulse windows
+    holding a transient are left out of the estimate, with a DataQualityWarning.
 
     Parameters
     ----------
@@ -323,6 +324,12 @@ def channel_noise_spectrum(excerpt, name: str, onsets: Onsets, quality=None) -> 
         return None
     skip = float(getattr(quality, "settle", 0.0) or 0.0)
     spec = pulse_residual_psd(excerpt.channel(name), excerpt.fs, excerpt.t0, on.times, skip=skip)
+    if spec is not None and spec.n_excluded:
+        warnings.warn(f"channel {name!r}: {spec.n_excluded} of {spec.n_excluded + spec.n_pulses} "
+                      "pulse windows in the first minute hold a transient (a level step of the "
+                      "bridge, a knock: residual energy over "
+                      f"{TRANSIENT_RATIO:g}x the others'); left out of its noise spectrum",
+                      DataQualityWarning, stacklevel=3)
     rms = float(getattr(quality, "noise_rms", float("nan")))
     if spec is not None and math.isfinite(rms) and spec.rms > NOISE_LIKE_RATIO * rms:
         return None

@@ -284,6 +284,34 @@ def test_swapped_gauge_channels_are_named(files, tmp_path):
     assert not [m for m in ok.messages if "swapped" in m or "passes come" in m]
 
 
+def test_level_step_in_the_first_minute_does_not_inflate_the_floor(files, tmp_path):
+    # a bridge's level step of twice the pulse height at 20 s on the sun gauge: conditioning
+    # leaves a decaying transient, which the noise spectrum (from the first minute) took for
+    # noise: the sun's timing floor was 13x what its passes scattered (3.8e-2 cycles against
+    # 2.9e-3), with no warning, and the reliability check then measures scatter against a
+    # floor that large. The windows with the transient are now left out, and named
+    import meshphase.io as mio
+    from meshphase.recording import Recording
+
+    p, truth = make(files, "ripple1_carrier")
+    rec = mio.read(p)
+    sun = next(c["name"] for c in truth.channels if c["kind"] == "sun")
+    d = np.array(rec.data, dtype=float)
+    i = rec.names.index(sun)
+    d[int(20.0 * rec.fs):, i] += 2.0 * np.percentile(np.abs(d[:, i]), 99.9)
+    stepped = tmp_path / "step.h5"
+    mio.write(Recording(d, rec.fs, rec.channels, t0=rec.t0, start_datetime=rec.start_datetime,
+                        meta=rec.meta), stepped)
+    text = scene_text(truth, p).replace(str(p), str(stepped))
+    ctx = run_scene(parse_scene(text, tmp_path / "step.toml"))
+    base, _ = run(files, "ripple1_carrier")
+    e, e0 = per_pass_errors(ctx, truth, "sun"), per_pass_errors(base, truth, "sun")
+    assert e["floor"] < 1.3 * e0["floor"]               # 13x before
+    assert e["rms"] < 1.3 * e["floor"]                  # and the passes are as good
+    assert [m for m in ctx.messages if "hold a transient" in m and sun in m]
+    assert not [m for m in base.messages if "hold a transient" in m]
+
+
 def test_tdms_and_csv_of_one_recording_give_the_same_phasing(files, tmp_path):
     # the same samples through two formats: the CSV's time column and the TDMS waveform
     # timing differ by rounding (~1e-9 s); nothing in the phasing may depend on it
