@@ -19,7 +19,12 @@ A plain CSV without the preamble (e.g. from a spreadsheet) reads too: kinds defa
 ``"other"``, units come from the ``[...]`` of each header field (empty, with a FormatWarning,
 when missing), t0 is the first time value and fs is inferred from the first and last time and
 the row count (the shortest decimal fs that fits the time span to 1 % of a sample). The time
-column may be headed ``time``, ``t`` or ``time_s`` with units ``s``, ``ms`` or ``us``.
+column may be headed ``time``, ``t`` or ``time_s`` with units ``s``, ``ms`` or ``us``. Its
+fields may be separated by commas, semicolons or tabs (the one the header line holds most
+of: LabVIEW's spreadsheet files are tab-separated, a spreadsheet in a decimal-comma locale
+writes ``;``), and with ``;`` or tabs the numbers may carry a decimal comma. Times printed to
+fewer digits than the sample interval needs (``%.4f`` at 5120 Hz: up to 0.26 sample off the
+grid) are checked to within half their printed resolution.
 
 Every row read is checked against the uniform grid t0 + i / fs: a time that does not increase
 raises RecordingFileError "non-monotonic time at line L"; a step between rows more than
@@ -79,6 +84,10 @@ FORMAT_VERSION = 1
 TIME_TOLERANCE = 0.1
 
 _TAG = "# meshphase "
+#: field separators a plain CSV may use, in order of preference on a tie
+_SEPARATORS = ("\t", ";", ",")
+#: data rows whose time field's printed digits give the time column's resolution
+_QUANTUM_ROWS = 64
 _TIME_NAMES = ("time", "t", "time_s")
 _TIME_UNITS = {"s": 1.0, "": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6}
 _FIELD_RE = re.compile(r"^(?P<name>.*?)\s*\[(?P<units>[^\[\]]*)\]\s*$", re.S)
@@ -88,7 +97,8 @@ _PREAMBLE_KEYS = {"format", "format_version", "fs", "t0", "n_samples", "dtype", 
 
 # ---------------------------------------------------------------------------- sniff
 def sniff(head: bytes) -> bool:
-    """True when ``head`` is text whose first non-comment, non-blank line holds a comma."""
+    """True when ``head`` is text whose first non-comment, non-blank line holds a comma, a
+    semicolon or a tab."""
     if not head or b"\x00" in head:
         return False
     if head.startswith(codecs.BOM_UTF8):
@@ -105,7 +115,7 @@ def sniff(head: bytes) -> bool:
         s = line.strip()
         if not s or s.startswith("#"):
             continue
-        return "," in s
+        return any(c in s for c in _SEPARATORS)
     return False
 
 
@@ -123,6 +133,55 @@ class _Head:
     size: int
     data_offset: int = 0             # byte offset of the first data row
     specs: list[ChannelSpec] = field(default_factory=list)
+    sep: str = ","                   # field separator
+    decimal: str = "."               # decimal mark of the numbers
+    time_quantum: float = 0.0        # resolution the times are printed to [s] (0: full)
+
+
+def _separator(header: str) -> str:
+    """The field separator of a plain CSV: the one of :data:`_SEPARATORS` its header line
+    holds most of (a comma on a tie with none)."""
+    counts = {c: header.count(c) for c in _SEPARATORS}
+    best = max(_SEPARATORS, key=lambda c: (counts[c], -_SEPARATORS.index(c)))
+    return best if counts[best] else ","
+
+
+def _time_token(line: str, sep: str) -> str:
+    return line.split(sep, 1)[0].strip().strip('"')
+
+
+def _decimals(token: str) -> int | None:
+    """Digits after the decimal mark of a plainly printed number; None for an exponent form
+    (its resolution is not in the digits) or no number."""
+    t = token.strip().lstrip("+-")
+    if not t or "e" in t.lower() or not t.replace(".", "", 1).replace(",", "", 1).isdigit():
+        return None
+    for mark in (".", ","):
+        if mark in t:
+            return len(t) - t.index(mark) - 1
+    return 0
+
+
+def _dialect(path, fh, header: str, preamble) -> tuple[str, str, float]:
+    """(separator, decimal mark, printed time resolution in the time column's units) of the
+    data rows that follow the header (``fh`` at the first data row; left there)."""
+    if preamble is not None:
+        return ",", ".", 0.0
+    sep = _separator(header)
+    at = fh.tell()
+    rows = []
+    for _ in range(_QUANTUM_ROWS):
+        raw = fh.readline()
+        if not raw or not raw.strip():
+            break
+        rows.append(raw.decode("latin-1").rstrip("\r\n"))
+    fh.seek(at)
+    decimal = "," if sep != "," and any("," in r for r in rows) else "."
+    digits = [_decimals(_time_token(r, sep)) for r in rows]
+    quantum = 0.0
+    if rows and all(d is not None for d in digits):
+        quantum = 10.0 ** -max(digits)
+    return sep, decimal, quantum
 
 
 def _split_field(text: str) -> tuple[str, str | None]:
@@ -180,11 +239,12 @@ def _read_head(path) -> _Head:
             header = line
             break
         data_offset = fh.tell()
+        sep, decimal, quantum = _dialect(path, fh, header, preamble)
         fh.seek(max(0, size - 1))
         ends_with_newline = fh.read(1) == b"\n"
     if encoding != "utf-8":
         warnings.warn(FormatWarning(f"{path}: header is not UTF-8; decoded as latin-1"), stacklevel=3)
-    fields = next(_csv.reader([header]))
+    fields = next(_csv.reader([header], delimiter=sep))
     if len(fields) < 2 and not (preamble is not None and preamble.get("channels") == []):
         raise RecordingFileError(path, f"line {n_head}: header {header[:80]!r} has no channel columns "
                                        f"(expected 'time [s],<name> [<units>],...')")
@@ -199,7 +259,8 @@ def _read_head(path) -> _Head:
         units.append(un)
     return _Head(n_head=n_head, preamble=preamble, fields=fields, names=names, units=units,
                  time_scale=_TIME_UNITS[tunits or ""], encoding=encoding,
-                 ends_with_newline=ends_with_newline, size=size, data_offset=data_offset)
+                 ends_with_newline=ends_with_newline, size=size, data_offset=data_offset,
+                 sep=sep, decimal=decimal, time_quantum=quantum * _TIME_UNITS[tunits or ""])
 
 
 def _duplicates(names) -> list[str]:
@@ -287,33 +348,49 @@ def _plain_info(path, head: _Head) -> RecordingInfo:
     if n < 2:
         raise RecordingFileError(path, f"missing or non-positive sample rate: cannot infer it from {n} data row(s) "
                                        f"(need at least 2)")
-    t_first = _parse_time(path, first, head.n_head + 1) * head.time_scale
-    t_last = _parse_time(path, last, head.n_head + n) * head.time_scale
+    t_first = _parse_time(path, first, head.n_head + 1, head) * head.time_scale
+    t_last = _parse_time(path, last, head.n_head + n, head) * head.time_scale
     span = t_last - t_first
     if not span > 0:
         raise RecordingFileError(path, f"missing or non-positive sample rate: time runs from {t_first!r} s to "
                                        f"{t_last!r} s over {n} rows (non-monotonic time)")
-    fs = _nice_fs((n - 1) / span, n, span)
+    fs = _nice_fs((n - 1) / span, n, span, head.time_quantum)
+    if head.time_quantum > 0:
+        k = 1.0 / (fs * head.time_quantum)      # sample interval in printed steps
+        if abs(k - round(k)) <= 1e-6 * max(1.0, k):
+            head.time_quantum = 0.0             # the grid prints exactly in those digits
+    if _time_slack(head, fs) >= 0.5 / fs:
+        warnings.warn(FormatWarning(
+            f"{path}: the time column is printed to {head.time_quantum:.3g} s, too coarse for the "
+            f"sample interval 1/fs = {1.0 / fs:.4g} s: a dropped or repeated sample cannot be seen "
+            f"in it; the rows are taken as the uniform grid t0 + i/fs"), stacklevel=3)
     return RecordingInfo(path=str(path), format=NAME, fs=fs, n_samples=n, channels=specs, t0=float(t_first),
                          extra={"format_version": None, "dtype": "float64", "preamble": False,
                                 "header_lines": head.n_head, "encoding": head.encoding})
 
 
-def _nice_fs(fs_est: float, n: int, span: float) -> float:
+def _nice_fs(fs_est: float, n: int, span: float, quantum: float = 0.0) -> float:
     """The shortest decimal (<= 12 digits) sample rate whose grid spans ``span`` [s] over ``n``
-    rows to within 1 % of a sample interval; ``fs_est`` to 12 digits otherwise."""
+    rows to within 1 % of a sample interval, plus the printed resolution ``quantum`` [s] of
+    the two times the span is taken from; ``fs_est`` to 12 digits otherwise."""
     for digits in range(1, 13):
         cand = float(f"{fs_est:.{digits}g}")
-        if cand > 0 and abs((n - 1) / cand - span) * cand <= 0.01:
+        if cand > 0 and abs((n - 1) / cand - span) <= 0.01 / cand + quantum:
             return cand
     return float(f"{fs_est:.12g}")
 
 
-def _parse_time(path, line: bytes, lineno: int) -> float:
-    text = line.decode("latin-1").strip()
-    first = text.split(",", 1)[0].strip().strip('"')
+def _time_slack(head: _Head, fs: float) -> float:
+    """How far a row's time may sit from the grid t0 + i/fs [s]: :data:`TIME_TOLERANCE`
+    sample intervals, plus half the resolution the times are printed to."""
+    return TIME_TOLERANCE / fs + 0.5 * head.time_quantum
+
+
+def _parse_time(path, line: bytes, lineno: int, head: _Head | None = None) -> float:
+    sep, decimal = (head.sep, head.decimal) if head is not None else (",", ".")
+    first = _time_token(line.decode("latin-1").strip(), sep)
     try:
-        v = float(first)
+        v = float(first.replace(decimal, ".") if decimal != "." else first)
     except ValueError as exc:
         raise RecordingFileError(path, f"line {lineno}: time {first!r} is not a number") from exc
     if not math.isfinite(v):
@@ -381,7 +458,8 @@ class _RowScan:
 
     def __init__(self, path, head: _Head):
         self.path = path
-        self.expected = len(head.fields) - 1   # commas per data line
+        self.expected = len(head.fields) - 1   # separators per data line
+        self.sep = ord(head.sep)
         self.own = head.preamble is not None
         self.pos = head.data_offset            # file offset of the next block
         self.line = head.n_head + 1            # file line number of the next line to end
@@ -400,11 +478,11 @@ class _RowScan:
         k = a.size
         nl = np.flatnonzero(a == 10)
         if not nl.size:
-            self.carry += int(np.count_nonzero(a == 44))
+            self.carry += int(np.count_nonzero(a == self.sep))
             self.prev_byte = int(a[-1])
             self.pos += k
             return
-        cm = np.flatnonzero(a == 44)
+        cm = np.flatnonzero(a == self.sep)
         before = np.searchsorted(cm, nl)
         counts = np.diff(before, prepend=0)
         counts[0] += self.carry
@@ -488,12 +566,14 @@ def _parse(path, head: _Head, cols: list[int], dtype, skip: int, nrows: int | No
     opts["dtype"] = np.float64 if dtype == np.float64 else {0: np.float64, **{c + 1: dtype for c in cols}}
     if nrows is not None:
         opts["nrows"] = nrows
+    if head.decimal != ".":
+        opts["decimal"] = head.decimal
     if head.encoding != "utf-8":
         # only when needed: an explicit encoding routes pandas through a slower decoding reader
         # (UTF-8 is its default; measured 1.6x slower parse with encoding="utf-8" given)
         opts["encoding"] = head.encoding
     try:
-        return pd.read_csv(path, sep=",", header=None, names=list(range(ncols)), skiprows=skip, engine="c",
+        return pd.read_csv(path, sep=head.sep, header=None, names=list(range(ncols)), skiprows=skip, engine="c",
                            skip_blank_lines=False, **opts, **kw)
     except pd.errors.EmptyDataError:
         return None
@@ -502,21 +582,23 @@ def _parse(path, head: _Head, cols: list[int], dtype, skip: int, nrows: int | No
     except UnicodeDecodeError as exc:
         raise RecordingFileError(path, f"not UTF-8 text ({exc})") from exc
     except ValueError as exc:
-        raise RecordingFileError(path, f"non-numeric value in the data rows: {exc}{_locate_bad(path, skip, nrows)}") \
+        raise RecordingFileError(path, f"non-numeric value in the data rows: {exc}{_locate_bad(path, skip, nrows, head)}") \
             from exc
 
 
-def _locate_bad(path, skip: int, nrows: int) -> str:
+def _locate_bad(path, skip: int, nrows: int, head: _Head) -> str:
     """Line number of the first unparseable value (slow path, only after an error)."""
     import pandas as pd
 
     try:
-        df = pd.read_csv(path, header=None, skiprows=skip, nrows=nrows, dtype=str, keep_default_na=False,
-                         skip_blank_lines=False)
+        df = pd.read_csv(path, sep=head.sep, header=None, skiprows=skip, nrows=nrows, dtype=str,
+                         keep_default_na=False, skip_blank_lines=False)
     except (ValueError, pd.errors.ParserError):
         return ""
     for col in df.columns:
         s = df[col]
+        if head.decimal != ".":
+            s = s.str.replace(head.decimal, ".", regex=False)
         num = pd.to_numeric(s.where(~s.isin(["NaN", "nan", ""]), "nan"), errors="coerce")
         bad = num.isna() & ~s.isin(["NaN", "nan", ""])
         if bad.any():
@@ -545,11 +627,13 @@ def _check_time(path, head: _Head, info: RecordingInfo, t: np.ndarray, row0: int
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         raise RecordingFileError(path, f"missing or non-finite time at line {head.n_head + row0 + k + 1}")
-    tol = TIME_TOLERANCE / info.fs
+    tol = _time_slack(head, info.fs)
     if t.size > 1:
         d = np.diff(t)
-        if not (d > 0).all():
-            k = int(np.flatnonzero(~(d > 0))[0]) + 1
+        # times printed coarser than a sample interval repeat: they must not go back
+        rising = d >= 0 if tol >= 0.5 / info.fs else d > 0
+        if not rising.all():
+            k = int(np.flatnonzero(~rising)[0]) + 1
             raise RecordingFileError(path, f"non-monotonic time at line {head.n_head + row0 + k + 1} (data row "
                                            f"{row0 + k}): t = {float(t[k])!r} s after {float(t[k - 1])!r} s")
         # a step far from 1/fs (dropped, repeated or shifted sample) is reported where it happens
@@ -560,7 +644,7 @@ def _check_time(path, head: _Head, info: RecordingInfo, t: np.ndarray, row0: int
             raise RecordingFileError(path, f"non-uniform time at line {head.n_head + row0 + k + 1} (data row "
                                            f"{row0 + k}): step {float(t[k] - t[k - 1])!r} s from the previous row, "
                                            f"expected 1/fs = {1.0 / info.fs!r} s (fs = {info.fs!r} Hz, tolerance "
-                                           f"{2 * TIME_TOLERANCE} sample)")
+                                           f"{2 * tol * info.fs:.3g} sample)")
     expected = np.arange(row0, row0 + t.size, dtype=np.float64)
     expected /= info.fs
     expected += info.t0
@@ -571,7 +655,7 @@ def _check_time(path, head: _Head, info: RecordingInfo, t: np.ndarray, row0: int
         want = info.t0 + (row0 + k) / info.fs
         raise RecordingFileError(path, f"non-uniform time at line {head.n_head + row0 + k + 1} (data row {row0 + k}): "
                                        f"t = {float(t[k])!r} s, expected {want!r} s on the uniform grid "
-                                       f"t0 + i/fs (fs = {info.fs!r} Hz, tolerance {TIME_TOLERANCE} sample)")
+                                       f"t0 + i/fs (fs = {info.fs!r} Hz, tolerance {tol * info.fs:.3g} sample)")
 
 
 def _setup(path, channels):

@@ -38,14 +38,16 @@ def _plain(path, text):
 
 
 # ---------------------------------------------------------------------------- sniff
-def test_sniff_text_with_commas_only():
+def test_sniff_text_with_separators():
     assert mcsv.sniff(b"time [s],a [m/m]\n0,1\n")
     assert mcsv.sniff(b"# comment\n\ntime,a\n0,1\n")
     assert mcsv.sniff(b'# meshphase {"format": "meshphase-csv"}\ntime [s]\n0\n')   # zero channels
     assert mcsv.sniff("\ufefftime [s],\u00b5 [m/m]\n".encode("utf-8"))
     assert mcsv.sniff("time [s],\u00b5 [m/m]\n".encode("latin-1"))
     assert not mcsv.sniff(b"")
-    assert not mcsv.sniff(b"time;a;b\n0;1;2\n")               # semicolon CSV: not ours
+    assert mcsv.sniff(b"time;a;b\n0;1;2\n")                   # decimal-comma locales
+    assert mcsv.sniff(b"time\ta\tb\n0\t1\t2\n")              # LabVIEW spreadsheet files
+    assert not mcsv.sniff(b"time a b\n0 1 2\n")               # spaces only: not a CSV
     assert not mcsv.sniff(b"# only a comment\n")
     assert not mcsv.sniff(b"\x89HDF\r\n\x1a\n,,,,")
     assert not mcsv.sniff(b"TDSm\x0e\x00\x00\x00,,,")
@@ -412,3 +414,92 @@ def test_clean_read_raises_no_warning(tmp_path, recording):
         warnings.simplefilter("error")
         mcsv.read(path)
         list(mcsv.iter_blocks(path, 512, 16))
+
+
+# ---------------------------------------------------------------------------- other writers' dialects
+def _dialect_text(sep, decimal, times_fmt="{:.6f}", n=3000, fs=5120.0, drop=None):
+    """A plain CSV as other loggers write it: ``sep`` between fields, ``decimal`` as the
+    decimal mark, times printed with ``times_fmt``; (text, data)."""
+    t = np.arange(n) / fs
+    data = np.c_[np.sin(2 * np.pi * 30 * t), np.cos(2 * np.pi * 7 * t)] * 1e-5
+    rows = [sep.join([times_fmt.format(a), f"{b:.6e}", f"{c:.6e}"]) for a, b, c in zip(t, *data.T)]
+    if decimal != ".":
+        rows = [r.replace(".", decimal) for r in rows]
+    if drop is not None:
+        del rows[drop]
+        data = np.delete(data, drop, axis=0)
+    return sep.join(["time [s]", "sun [m/m]", "ring [m/m]"]) + "\n" + "\n".join(rows) + "\n", data
+
+
+@pytest.mark.parametrize("sep, decimal", [(",", "."), (";", "."), (";", ","), ("\t", "."), ("\t", ",")])
+def test_semicolon_tab_and_decimal_comma_files_read(tmp_path, sep, decimal):
+    # LabVIEW's spreadsheet files are tab-separated, a spreadsheet in a decimal-comma locale
+    # writes ';' and '1,5e-05'; every number printed with 6 significant digits (the text's
+    # own rounding, 5e-12 here, is all that may differ), blocks equal to the whole read
+    text, data = _dialect_text(sep, decimal)
+    path = _plain(tmp_path / "d.csv", text)
+    assert pio.detect_format(path) == "csv"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rec = pio.read(path)
+    assert rec.fs == 5120.0 and rec.names == ["sun", "ring"] and rec.channels[0].units == "m/m"
+    assert np.max(np.abs(rec.data - data)) <= 5e-12
+    blocks = list(pio.iter_blocks(path, 1000 / 5120, 64 / 5120))
+    np.testing.assert_array_equal(np.concatenate([b.data[:1000] for b in blocks]), rec.data)
+
+
+def test_malformed_row_of_a_semicolon_file_names_the_line(tmp_path):
+    text, _ = _dialect_text(";", ",")
+    lines = text.split("\n")
+    lines[101] = lines[101].rsplit(";", 1)[0]                 # a field lost
+    path = _plain(tmp_path / "m.csv", "\n".join(lines))
+    with pytest.raises(CorruptFileError, match=r"line 102 .*2 field\(s\), the header has 3"):
+        pio.read(path)
+
+
+def test_non_numeric_value_of_a_decimal_comma_file_names_the_line(tmp_path):
+    text, _ = _dialect_text(";", ",")
+    lines = text.split("\n")
+    lines[51] = lines[51].replace("e-0", "x-0", 1)
+    path = _plain(tmp_path / "nn.csv", "\n".join(lines))
+    with pytest.raises(RecordingFileError, match=r"first at line 52, column 2"):
+        pio.read(path)
+
+
+def test_times_printed_to_fewer_digits_than_the_grid_needs(tmp_path):
+    # '%.4f' at 5120 Hz: each time up to 0.26 sample off the grid t0 + i/fs (it was refused
+    # as 'non-uniform time'); checked to half the printed step, so a dropped sample, 1
+    # sample, is still caught where it happens
+    text, data = _dialect_text(",", ".", "{:.4f}")
+    rec = pio.read(_plain(tmp_path / "r4.csv", text))
+    assert rec.fs == 5120.0 and np.max(np.abs(rec.data - data)) <= 5e-12
+    text, _ = _dialect_text(",", ".", "{:.4f}", drop=1500)
+    with pytest.raises(RecordingFileError, match=r"non-uniform time at line 1502"):
+        pio.read(_plain(tmp_path / "r4drop.csv", text))
+
+
+def test_times_coarser_than_a_sample_warn_and_read(tmp_path):
+    # '%.3f' at 5120 Hz: times repeat, nothing in them can show a dropped sample; read as
+    # the uniform grid, with a warning that says so
+    text, data = _dialect_text(",", ".", "{:.3f}")
+    with pytest.warns(FormatWarning, match=r"printed to 0.001 s, too coarse .* cannot be seen"):
+        rec = pio.read(_plain(tmp_path / "r3.csv", text))
+    assert rec.fs == 5120.0 and rec.n_samples == len(data)
+
+
+def test_times_exact_in_few_digits_do_not_warn(tmp_path):
+    # 100 Hz printed to 2 decimals, 1 Hz to none: the grid itself prints exactly
+    for fs, fmt in ((100.0, "{:.2f}"), (1.0, "{:.0f}")):
+        text, _ = _dialect_text(",", ".", fmt, n=300, fs=fs)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            rec = pio.read(_plain(tmp_path / f"x{fs:g}.csv", text))
+        assert rec.fs == fs
+
+
+def test_separator_is_the_one_the_header_holds_most_of():
+    assert mcsv._separator("time [s],sun [m/m]") == ","
+    assert mcsv._separator("time [s];sun, tooth 3 [m/m];ring [m/m]") == ";"
+    assert mcsv._separator("time [s]\tsun; a [V]\tring [V]") == "\t"
+    assert mcsv._separator("time") == ","
+    assert mcsv._separator("") == ","

@@ -40,7 +40,7 @@ def test_tdms_by_content(rig_tdms, tmp_path):
 @pytest.mark.parametrize("blob", [b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 4,
                                   b"TDSh\x0e\x00\x00\x00" + b"\0" * 100,      # a TDMS index file
                                   b"just some words without a separator\n",
-                                  b"time;a\n0;1\n"])
+                                  b"time a\n0 1\n"])
 def test_unknown_format_lists_the_supported_ones(tmp_path, blob):
     path = tmp_path / "mystery.h5"
     path.write_bytes(blob)
