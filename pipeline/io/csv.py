@@ -24,7 +24,10 @@ fields may be separated by commas, semicolons or tabs (the one the header line h
 of: LabVIEW's spreadsheet files are tab-separated, a spreadsheet in a decimal-comma locale
 writes ``;``), and with ``;`` or tabs the numbers may carry a decimal comma. Times printed to
 fewer digits than the sample interval needs (``%.4f`` at 5120 Hz: up to 0.26 sample off the
-grid) are checked to within half their printed resolution.
+grid) are checked to within their printed step (rounded or truncated). The time column may
+also hold ISO 8601 timestamps (``2026-11-28 10:00:00.000195``, headed ``time``, ``timestamp``
+or ``datetime``; an offset such as ``+01:00`` or ``Z`` is allowed): the recording then starts
+at t0 = 0 and ``start_datetime`` is the first row's timestamp.
 
 Every row read is checked against the uniform grid t0 + i / fs: a time that does not increase
 raises RecordingFileError "non-monotonic time at line L"; a step between rows more than
@@ -89,6 +92,11 @@ _SEPARATORS = ("\t", ";", ",")
 #: data rows whose time field's printed digits give the time column's resolution
 _QUANTUM_ROWS = 64
 _TIME_NAMES = ("time", "t", "time_s")
+#: headers of a time column that holds ISO 8601 timestamps, besides :data:`_TIME_NAMES`
+_STAMP_NAMES = ("timestamp", "datetime", "date/time", "date time", "date_time")
+#: units a timestamp column may carry
+_STAMP_UNITS = ("", "utc", "local")
+_CLOCK_RE = re.compile(r"\d{1,2}:\d{2}:\d{2}(?:[.,](\d+))?")
 _TIME_UNITS = {"s": 1.0, "": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6}
 _FIELD_RE = re.compile(r"^(?P<name>.*?)\s*\[(?P<units>[^\[\]]*)\]\s*$", re.S)
 _PREAMBLE_KEYS = {"format", "format_version", "fs", "t0", "n_samples", "dtype", "start_datetime",
@@ -136,6 +144,7 @@ class _Head:
     sep: str = ","                   # field separator
     decimal: str = "."               # decimal mark of the numbers
     time_quantum: float = 0.0        # resolution the times are printed to [s] (0: full)
+    epoch: str | None = None         # first row's ISO 8601 timestamp (a timestamp column)
 
 
 def _separator(header: str) -> str:
@@ -162,11 +171,35 @@ def _decimals(token: str) -> int | None:
     return 0
 
 
-def _dialect(path, fh, header: str, preamble) -> tuple[str, str, float]:
-    """(separator, decimal mark, printed time resolution in the time column's units) of the
-    data rows that follow the header (``fh`` at the first data row; left there)."""
+def _stamp(token: str) -> str | None:
+    """``token`` as a normalised ISO 8601 timestamp when it is one, else None."""
+    import datetime as _dt
+
+    if ":" not in token or "-" not in token:
+        return None
+    try:
+        return _dt.datetime.fromisoformat(token).isoformat()
+    except ValueError:
+        return None
+
+
+def _stamp_seconds(tokens, epoch: str) -> np.ndarray:
+    """Seconds from ``epoch`` of ISO 8601 timestamps (offsets honoured; timestamps without
+    one are taken as in the epoch's zone) [s]; NaN where one does not parse."""
+    import pandas as pd
+
+    t = pd.to_datetime(pd.Series(np.asarray(tokens, dtype=object)), format="ISO8601", utc=True,
+                       errors="coerce")
+    t0 = pd.to_datetime(pd.Series([epoch]), format="ISO8601", utc=True)
+    return ((t - t0.iloc[0]).dt.total_seconds()).to_numpy(dtype=np.float64, na_value=np.nan)
+
+
+def _dialect(path, fh, header: str, preamble) -> tuple[str, str, float, str | None]:
+    """(separator, decimal mark, printed time resolution in the time column's units, first
+    row's timestamp when the time column holds ISO 8601 timestamps) of the data rows that
+    follow the header (``fh`` at the first data row; left there)."""
     if preamble is not None:
-        return ",", ".", 0.0
+        return ",", ".", 0.0, None
     sep = _separator(header)
     at = fh.tell()
     rows = []
@@ -176,12 +209,19 @@ def _dialect(path, fh, header: str, preamble) -> tuple[str, str, float]:
             break
         rows.append(raw.decode("latin-1").rstrip("\r\n"))
     fh.seek(at)
-    decimal = "," if sep != "," and any("," in r for r in rows) else "."
-    digits = [_decimals(_time_token(r, sep)) for r in rows]
+    tokens = [_time_token(r, sep) for r in rows]
+    epoch = _stamp(tokens[0]) if tokens else None
+    rest = [r.split(sep, 1)[1] if sep in r else "" for r in rows] if epoch else rows
+    decimal = "," if sep != "," and any("," in r for r in rest) else "."
+    if epoch:
+        clocks = [_CLOCK_RE.search(tk) for tk in tokens]
+        digits = [len(m.group(1) or "") if m else None for m in clocks]
+    else:
+        digits = [_decimals(tk) for tk in tokens]
     quantum = 0.0
     if rows and all(d is not None for d in digits):
         quantum = 10.0 ** -max(digits)
-    return sep, decimal, quantum
+    return sep, decimal, quantum, epoch
 
 
 def _split_field(text: str) -> tuple[str, str | None]:
@@ -239,7 +279,7 @@ def _read_head(path) -> _Head:
             header = line
             break
         data_offset = fh.tell()
-        sep, decimal, quantum = _dialect(path, fh, header, preamble)
+        sep, decimal, quantum, epoch = _dialect(path, fh, header, preamble)
         fh.seek(max(0, size - 1))
         ends_with_newline = fh.read(1) == b"\n"
     if encoding != "utf-8":
@@ -249,9 +289,16 @@ def _read_head(path) -> _Head:
         raise RecordingFileError(path, f"line {n_head}: header {header[:80]!r} has no channel columns "
                                        f"(expected 'time [s],<name> [<units>],...')")
     tname, tunits = _split_field(fields[0])
-    if tname.lower() not in _TIME_NAMES or (tunits or "") not in _TIME_UNITS:
+    if epoch is not None:
+        if tname.lower() not in _TIME_NAMES + _STAMP_NAMES or (tunits or "").lower() not in _STAMP_UNITS:
+            raise RecordingFileError(path, f"line {n_head}: first column holds timestamps ({epoch}); it must be "
+                                           f"headed 'time', 'timestamp' or 'datetime' (units none, UTC or "
+                                           f"local), got {fields[0]!r}")
+        tunits = ""
+    elif tname.lower() not in _TIME_NAMES or (tunits or "") not in _TIME_UNITS:
         raise RecordingFileError(path, f"line {n_head}: first column must be the time, headed 'time [s]' "
-                                       f"(units s, ms or us), got {fields[0]!r}")
+                                       f"(units s, ms or us) or holding ISO 8601 timestamps, got "
+                                       f"{fields[0]!r}")
     names, units = [], []
     for f in fields[1:]:
         nm, un = _split_field(f)
@@ -260,7 +307,8 @@ def _read_head(path) -> _Head:
     return _Head(n_head=n_head, preamble=preamble, fields=fields, names=names, units=units,
                  time_scale=_TIME_UNITS[tunits or ""], encoding=encoding,
                  ends_with_newline=ends_with_newline, size=size, data_offset=data_offset,
-                 sep=sep, decimal=decimal, time_quantum=quantum * _TIME_UNITS[tunits or ""])
+                 sep=sep, decimal=decimal, time_quantum=quantum * _TIME_UNITS[tunits or ""],
+                 epoch=epoch)
 
 
 def _duplicates(names) -> list[str]:
@@ -355,17 +403,20 @@ def _plain_info(path, head: _Head) -> RecordingInfo:
         raise RecordingFileError(path, f"missing or non-positive sample rate: time runs from {t_first!r} s to "
                                        f"{t_last!r} s over {n} rows (non-monotonic time)")
     fs = _nice_fs((n - 1) / span, n, span, head.time_quantum)
+    start = None
+    if head.epoch is not None:
+        t_first, start = 0.0, head.epoch
     if head.time_quantum > 0:
         k = 1.0 / (fs * head.time_quantum)      # sample interval in printed steps
         if abs(k - round(k)) <= 1e-6 * max(1.0, k):
             head.time_quantum = 0.0             # the grid prints exactly in those digits
-    if _time_slack(head, fs) >= 0.5 / fs:
+    if head.time_quantum >= 1.0 / fs:
         warnings.warn(FormatWarning(
             f"{path}: the time column is printed to {head.time_quantum:.3g} s, too coarse for the "
             f"sample interval 1/fs = {1.0 / fs:.4g} s: a dropped or repeated sample cannot be seen "
             f"in it; the rows are taken as the uniform grid t0 + i/fs"), stacklevel=3)
     return RecordingInfo(path=str(path), format=NAME, fs=fs, n_samples=n, channels=specs, t0=float(t_first),
-                         extra={"format_version": None, "dtype": "float64", "preamble": False,
+                         start_datetime=start, extra={"format_version": None, "dtype": "float64", "preamble": False,
                                 "header_lines": head.n_head, "encoding": head.encoding})
 
 
@@ -382,13 +433,18 @@ def _nice_fs(fs_est: float, n: int, span: float, quantum: float = 0.0) -> float:
 
 def _time_slack(head: _Head, fs: float) -> float:
     """How far a row's time may sit from the grid t0 + i/fs [s]: :data:`TIME_TOLERANCE`
-    sample intervals, plus half the resolution the times are printed to."""
-    return TIME_TOLERANCE / fs + 0.5 * head.time_quantum
+    sample intervals, plus the step the times are printed to (loggers round or truncate)."""
+    return TIME_TOLERANCE / fs + head.time_quantum
 
 
 def _parse_time(path, line: bytes, lineno: int, head: _Head | None = None) -> float:
     sep, decimal = (head.sep, head.decimal) if head is not None else (",", ".")
     first = _time_token(line.decode("latin-1").strip(), sep)
+    if head is not None and head.epoch is not None:
+        v = float(_stamp_seconds([first], head.epoch)[0])
+        if not math.isfinite(v):
+            raise RecordingFileError(path, f"line {lineno}: time {first!r} is not an ISO 8601 timestamp")
+        return v
     try:
         v = float(first.replace(decimal, ".") if decimal != "." else first)
     except ValueError as exc:
@@ -563,7 +619,10 @@ def _parse(path, head: _Head, cols: list[int], dtype, skip: int, nrows: int | No
     opts = {}
     if len(cols) != ncols - 1:
         opts["usecols"] = [0] + [c + 1 for c in cols]
-    opts["dtype"] = np.float64 if dtype == np.float64 else {0: np.float64, **{c + 1: dtype for c in cols}}
+    if head.epoch is not None:
+        opts["dtype"] = {0: str, **{c + 1: dtype for c in cols}}
+    else:
+        opts["dtype"] = np.float64 if dtype == np.float64 else {0: np.float64, **{c + 1: dtype for c in cols}}
     if nrows is not None:
         opts["nrows"] = nrows
     if head.decimal != ".":
@@ -582,8 +641,8 @@ def _parse(path, head: _Head, cols: list[int], dtype, skip: int, nrows: int | No
     except UnicodeDecodeError as exc:
         raise RecordingFileError(path, f"not UTF-8 text ({exc})") from exc
     except ValueError as exc:
-        raise RecordingFileError(path, f"non-numeric value in the data rows: {exc}{_locate_bad(path, skip, nrows, head)}") \
-            from exc
+        where = _locate_bad(path, skip, nrows, head)
+        raise RecordingFileError(path, f"non-numeric value in the data rows: {exc}{where}") from exc
 
 
 def _locate_bad(path, skip: int, nrows: int, head: _Head) -> str:
@@ -595,7 +654,7 @@ def _locate_bad(path, skip: int, nrows: int, head: _Head) -> str:
                          keep_default_na=False, skip_blank_lines=False)
     except (ValueError, pd.errors.ParserError):
         return ""
-    for col in df.columns:
+    for col in df.columns[1:] if head.epoch is not None else df.columns:
         s = df[col]
         if head.decimal != ".":
             s = s.str.replace(head.decimal, ".", regex=False)
@@ -607,8 +666,11 @@ def _locate_bad(path, skip: int, nrows: int, head: _Head) -> str:
     return ""
 
 
-def _frame_arrays(df, dtype) -> tuple[np.ndarray, np.ndarray]:
-    t = np.asarray(df[0].to_numpy(dtype=np.float64))
+def _frame_arrays(df, dtype, head: _Head) -> tuple[np.ndarray, np.ndarray]:
+    if head.epoch is not None:
+        t = _stamp_seconds(df[0].to_numpy(dtype=object), head.epoch)
+    else:
+        t = np.asarray(df[0].to_numpy(dtype=np.float64))
     data = df.iloc[:, 1:].to_numpy(dtype=dtype)
     if not data.flags.writeable:
         # pandas (copy-on-write) hands out a read-only view of its block; the DataFrame is dropped
@@ -631,7 +693,7 @@ def _check_time(path, head: _Head, info: RecordingInfo, t: np.ndarray, row0: int
     if t.size > 1:
         d = np.diff(t)
         # times printed coarser than a sample interval repeat: they must not go back
-        rising = d >= 0 if tol >= 0.5 / info.fs else d > 0
+        rising = d >= 0 if head.time_quantum >= 1.0 / info.fs else d > 0
         if not rising.all():
             k = int(np.flatnonzero(~rising)[0]) + 1
             raise RecordingFileError(path, f"non-monotonic time at line {head.n_head + row0 + k + 1} (data row "
@@ -728,7 +790,7 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *, verify: boo
         if own:
             raise RecordingFileError(path, f"more data rows than the preamble's n_samples = {n}")
         df = df.iloc[:m]  # trailing blank lines of a plain CSV
-    t, data = _frame_arrays(df, dtype)
+    t, data = _frame_arrays(df, dtype, head)
     del df
     _check_time(path, head, info, t, i0)
     if perm != sorted(perm):
@@ -779,7 +841,7 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *,
                     raise RecordingFileError(path, f"malformed rows: {exc}") from exc
                 except ValueError as exc:
                     raise RecordingFileError(path, f"non-numeric value in the data rows: {exc}") from exc
-                t, data = _frame_arrays(df, dtype)
+                t, data = _frame_arrays(df, dtype, head)
                 del df
                 if parsed + len(t) > n:
                     raise RecordingFileError(path, f"more data rows than the preamble's n_samples = {n}")

@@ -503,3 +503,64 @@ def test_separator_is_the_one_the_header_holds_most_of():
     assert mcsv._separator("time [s]\tsun; a [V]\tring [V]") == "\t"
     assert mcsv._separator("time") == ","
     assert mcsv._separator("") == ","
+
+
+def _stamp_text(n=3000, fs=5120.0, fmt=lambda s: s.replace("T", " "), head="Timestamp", drop=None, bad=None):
+    """A plain CSV whose time column holds ISO 8601 timestamps from 2026-11-28 10:00 (to the
+    microsecond, as numpy prints them); (text, data)."""
+    t = np.arange(n) / fs
+    data = np.c_[np.sin(2 * np.pi * 30 * t), np.cos(2 * np.pi * 7 * t)] * 1e-5
+    base = np.datetime64("2026-11-28T10:00:00", "ns")
+    stamps = np.datetime_as_string(base + np.round(t * 1e9).astype("timedelta64[ns]"), unit="us")
+    rows = [f"{fmt(s)},{b:.6e},{c:.6e}" for s, b, c in zip(stamps, *data.T)]
+    if drop is not None:
+        del rows[drop]
+        data = np.delete(data, drop, axis=0)
+    if bad is not None:
+        rows[bad] = "2026-11-28 10:0x:00," + rows[bad].split(",", 1)[1]
+    return f"{head},sun [m/m],ring [m/m]\n" + "\n".join(rows) + "\n", data
+
+
+@pytest.mark.parametrize("fmt, head, start", [
+    (lambda s: s.replace("T", " "), "Timestamp", "2026-11-28T10:00:00"),
+    (lambda s: s + "Z", "time [UTC]", "2026-11-28T10:00:00+00:00"),
+    (lambda s: s + "+01:00", "datetime", "2026-11-28T10:00:00+01:00"),
+])
+def test_iso_timestamp_time_column(tmp_path, fmt, head, start):
+    # loggers that stamp each row with the wall clock: t0 = 0, the first stamp is the
+    # recording's start_datetime, the stamps are checked against the grid like seconds
+    text, data = _stamp_text(fmt=fmt, head=head)
+    path = _plain(tmp_path / "s.csv", text)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rec = pio.read(path)
+    assert rec.fs == 5120.0 and rec.t0 == 0.0 and rec.start_datetime == start
+    assert np.max(np.abs(rec.data - data)) <= 5e-12
+    blocks = list(pio.iter_blocks(path, 1000 / 5120, 64 / 5120))
+    np.testing.assert_array_equal(np.concatenate([b.data[:1000] for b in blocks]), rec.data)
+
+
+def test_iso_timestamps_name_a_dropped_sample_and_a_bad_stamp(tmp_path):
+    text, _ = _stamp_text(drop=700)
+    with pytest.raises(RecordingFileError, match=r"non-uniform time at line 702"):
+        pio.read(_plain(tmp_path / "d.csv", text))
+    text, _ = _stamp_text(bad=900)
+    with pytest.raises(RecordingFileError, match=r"missing or non-finite time at line 902"):
+        pio.read(_plain(tmp_path / "b.csv", text))
+
+
+def test_iso_timestamps_truncated_to_milliseconds_warn_and_read(tmp_path):
+    # many loggers cut the stamp to ms (not rounded): at 5120 Hz five rows share a stamp.
+    # fs comes from the first and last stamp, here 1 ms in 20 s (0.6 s of them leave 5120
+    # and 5130 Hz both possible, and the grid check then refuses the wrong one)
+    text, data = _stamp_text(n=5120 * 20, fmt=lambda s: s[:-3].replace("T", " "))
+    with pytest.warns(FormatWarning, match=r"printed to 0.001 s, too coarse"):
+        rec = pio.read(_plain(tmp_path / "ms.csv", text))
+    assert rec.fs == 5120.0 and rec.n_samples == len(data)
+
+
+def test_iso_timestamps_under_another_header_are_refused_with_the_reason(tmp_path):
+    text, _ = _stamp_text(head="Sensor")
+    with pytest.raises(RecordingFileError, match=r"first column holds timestamps \(2026-11-28T10:00:00\); "
+                                                 r"it must be headed 'time', 'timestamp'"):
+        pio.read(_plain(tmp_path / "h.csv", text))
