@@ -521,6 +521,7 @@ def _parse_speeds(raw: dict, gearset: Gearset | None, err) -> tuple[Speeds | Non
             raise err(["speeds", k], f"{s[k]:g} {'r/min' if k.endswith('rpm') else 'rad/s'} is "
                       f"faster than gear rigs run (limit {LIMITS['speed_rpm']:g} r/min = "
                       f"{rpm_to_rad_s(LIMITS['speed_rpm']):.0f} rad/s); check the value and its unit")
+    _complete_speeds(conv, resolution, s.get("fixed"), gearset)
     if "sun" in conv and "carrier" in conv:
         w_s, w_c = conv["sun"], conv["carrier"]
         if w_s == w_c:
@@ -544,8 +545,30 @@ def _parse_speeds(raw: dict, gearset: Gearset | None, err) -> tuple[Speeds | Non
                       f"ring speed {conv['ring']:.6g} rad/s is not consistent with sun/carrier "
                       f"and the tooth counts (kinematics give {ring:.6g} rad/s)")
     elif any(k != "fixed" for k in s):
-        raise err(["speeds"], "give both the sun and the carrier speed")
+        raise err(["speeds"], "give two of the sun, carrier and ring speeds, or one of them with "
+                  "the held member ([speeds] fixed = \"ring\" or \"sun\")")
     return speeds, resolution
+
+
+def _complete_speeds(conv: dict, resolution: dict, fixed, gearset: Gearset) -> None:
+    """Sun and carrier speeds [rad/s] (and their typed resolution) from any two of sun,
+    carrier and ring, a member stated held (``fixed``) counting as one at zero, by Willis
+    ``w_r - w_c = -(Z_s / Z_r)(w_s - w_c)``; ``conv`` and ``resolution`` completed in place.
+    A rig's user knows the input speed and which member is held: ``sun_rpm = 18.19`` with
+    ``fixed = "ring"`` is the seed rig's carrier at 4.06 r/min."""
+    if "sun" in conv and "carrier" in conv:
+        return
+    if fixed in ("ring", "sun") and fixed not in conv:
+        conv[fixed], resolution[fixed] = 0.0, 0.0
+    zs, zr = float(gearset.z_sun), float(gearset.z_ring)
+    # a speed typed as 0 is a held member: exact, whatever digits it was typed with
+    res = {m: 0.0 if conv.get(m) == 0.0 else resolution.get(m, 0.0) for m in ("sun", "carrier", "ring")}
+    if "carrier" not in conv and "sun" in conv and "ring" in conv:
+        conv["carrier"] = (zr * conv["ring"] + zs * conv["sun"]) / (zs + zr)
+        resolution["carrier"] = (zr * res["ring"] + zs * res["sun"]) / (zs + zr)
+    elif "sun" not in conv and "carrier" in conv and "ring" in conv:
+        conv["sun"] = conv["carrier"] - zr / zs * (conv["ring"] - conv["carrier"])
+        resolution["sun"] = (1.0 + zr / zs) * res["carrier"] + zr / zs * res["ring"]
 
 
 def _parse_channels(raw: dict, gearset: Gearset | None, err) -> tuple[list, dict]:

@@ -519,3 +519,31 @@ def test_limits_are_documented():
     assert "## What is checked before anything runs" in doc
     lo, hi = LIMITS["length_mm"]
     assert f"{lo:g} .. {hi:g} mm" in doc and "1e8" in doc and "profile_shift" in doc
+
+
+@pytest.mark.parametrize("speeds, held", [
+    ('sun_rpm = 18.19\nfixed = "ring"\n', "ring"),       # the input speed and the held member
+    ("sun_rpm = 18.19\nring_rpm = 0\n", None),
+    ("carrier_rpm = 4.0602678571429\nring_rpm = 0\n", None),
+])
+def test_any_two_speeds_or_one_and_the_held_member(speeds, held):
+    # a rig's user knows the input speed and which member is held; two of sun, carrier and
+    # ring give the third by Willis (w_r - w_c = -(Z_s/Z_r)(w_s - w_c)): the seed rig's
+    # carrier turns at 18.19 x 25/112 = 4.0603 r/min with the ring held. Asking for sun and
+    # carrier alone refused these
+    text = 'results = ["ideal_phasing"]\n' + G.replace("sun_rpm = 18.19\ncarrier_rpm = 1.06\n", speeds)
+    scene = parse_scene(text, FILE)
+    rpm = 60.0 / (2.0 * math.pi)
+    assert scene.speeds.sun * rpm == pytest.approx(18.19, rel=1e-9)
+    assert scene.speeds.carrier * rpm == pytest.approx(18.19 * 25 / 112, rel=1e-9)
+    assert abs(scene.speeds.ring) <= 1e-12
+    assert scene.fixed == held
+    from meshphase.angles import held_member
+
+    assert held_member(25, 87, scene.speeds, resolution=scene.speeds_resolution)[0] == "ring"
+
+
+def test_one_speed_alone_says_what_else_to_give():
+    text = 'results = ["ideal_phasing"]\n' + G.replace("carrier_rpm = 1.06\n", "")
+    e = _err(text)
+    assert "give two of the sun, carrier and ring speeds, or one of them with the held member" in str(e)
