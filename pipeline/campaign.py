@@ -339,7 +339,9 @@ def _worker_scene(scene, recording: Path, mc_on_client: bool):
     """A copy of ``scene`` reading ``recording``, with the per-recording results only."""
     _, worker, _ = split_results(scene)
     s = copy.copy(scene)
-    s.input = {"recording": Path(recording)}
+    # the reading options ([input.mcap], [input] fs_Hz) hold for every recording of the logger
+    s.input = {"recording": Path(recording), **{k: scene.input[k] for k in ("mcap", "fs_Hz")
+                                                if k in (scene.input or {})}}
     s.results = worker
     if mc_on_client:
         s.tolerances = None  # the band comes from the client's Monte Carlo

@@ -390,7 +390,7 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
     rec = scene.input.get("recording")
     if "load" in stages and rec and _file_state(rec) == "file":
         try:
-            info = io.read_info(rec, **scene.input.get("mcap", {}))
+            info = io.read_info(rec, **read_options(scene))
         except Exception:  # noqa: BLE001 - unreadable files are the load stage's to report
             info = None
         if info is not None:
@@ -686,6 +686,8 @@ def _parse_input(raw: dict, base: Path, err) -> dict:
         inp["stop"] = inp.pop("stop_s")
     if "mcap" in inp:
         inp["mcap"] = _parse_input_mcap(inp, err)
+    if "fs_Hz" in inp:
+        _check_input_fs(inp, err)
     if "synthetic" in inp:
         from meshphase.synthetic.scenarios import SCENARIOS  # synthetic: imported only when named
 
@@ -694,6 +696,43 @@ def _parse_input(raw: dict, base: Path, err) -> dict:
                       f"{', '.join(sorted(SCENARIOS))}")
         _check_synthetic_size(inp, err)
     return inp
+
+
+def read_options(scene) -> dict:
+    """The format options of every read of the scene's recording file
+    (:func:`meshphase.io.read`): ``[input.mcap]``'s mapping, or ``[input] fs_Hz`` as ``fs``."""
+    inp = scene.input
+    if "mcap" in inp:
+        return dict(inp["mcap"])
+    if "fs_Hz" in inp:
+        return {"fs": float(inp["fs_Hz"])}
+    return {}
+
+
+def _input_format(path: Path) -> str | None:
+    """The format of the scene's recording file by its content; None when it is not (yet)
+    a readable regular file (the load stage reports that)."""
+    if _file_state(path) != "file":
+        return None
+    try:
+        return io.detect_format(path)
+    except (OSError, ValueError):
+        return None
+
+
+def _check_input_fs(inp: dict, err) -> None:
+    """``[input] fs_Hz``: the sample rate of a TDMS file without waveform timing (NI's
+    wf_increment) or clock channel; only there (an HDF5 or MCAP file states its rate, a
+    CSV's time column gives it; ``[input.mcap] fs_Hz`` for MCAP written by other tools)."""
+    if "recording" not in inp:
+        raise err(["input", "fs_Hz"], "fs_Hz is the sample rate of a recording file: give [input] "
+                  "recording = \"FILE.tdms\" too")
+    if "mcap" in inp:
+        raise err(["input", "fs_Hz"], "an MCAP file's rate goes in [input.mcap] fs_Hz")
+    fmt = _input_format(inp["recording"])
+    if fmt not in (None, "tdms"):
+        raise err(["input", "fs_Hz"], f"{inp['recording'].name} is a {fmt} file, which gives its own "
+                  "sample rate; fs_Hz is for a TDMS file without waveform timing")
 
 
 def _parse_input_mcap(inp: dict, err) -> dict:
@@ -708,12 +747,7 @@ def _parse_input_mcap(inp: dict, err) -> dict:
     if "recording" not in inp:
         raise err(["input", "mcap"], "[input.mcap] maps the topics of an MCAP recording file: "
                   "give [input] recording = \"FILE.mcap\" too")
-    fmt = None
-    if _file_state(inp["recording"]) == "file":
-        try:
-            fmt = io.detect_format(inp["recording"])
-        except (OSError, ValueError):
-            pass  # unreadable: the load stage reports it
+    fmt = _input_format(inp["recording"])
     if fmt not in (None, "mcap"):
         raise err(["input", "mcap"], f"{inp['recording'].name} is a {fmt} file; [input.mcap] maps "
                   "the topics of an MCAP file")
@@ -1025,7 +1059,7 @@ def check_recording(scene: Scene, info=None) -> None:
     if not rec_path:
         raise ValueError("scene.input has no recording to check against")
     if info is None:
-        info = io.read_info(rec_path, **scene.input.get("mcap", {}))
+        info = io.read_info(rec_path, **read_options(scene))
     text, label = scene.text, scene.path or "<scene>"
     source = str(rec_path)
     if not (math.isfinite(info.fs) and info.fs > 0):

@@ -48,7 +48,7 @@ from .results import (BearingStage, CentroidsStage, CompareStage, ConditionStage
                       GaugeComparison, IdealStage, IdentifyStage, LoadSharingStage, LoadStage,
                       OnsetsStage, PhasingStage, RunContext, StageResult, TiltStage,
                       ToleranceStage)
-from .scene import STAGES, Scene, SceneError, load_scene, plan
+from .scene import STAGES, Scene, SceneError, load_scene, plan, read_options
 from .stream import (BLOCK_SAMPLES, ChannelPlan, FileSource, GeneratorSource, MemorySource,
                      condition_stream, scan_source)
 from .threads import blas_single_thread
@@ -182,7 +182,7 @@ def _open_file(scene: Scene) -> tuple:
     source = str(inp["recording"])
     start, stop = inp.get("start"), inp.get("stop")
     with recording_read_errors(path):
-        opts = inp.get("mcap")
+        opts = read_options(scene) or None
         src = FileSource(path, start=start, stop=stop, options=opts)
         if scene.channels:
             fmt = src.fmt

@@ -547,3 +547,27 @@ def test_one_speed_alone_says_what_else_to_give():
     text = 'results = ["ideal_phasing"]\n' + G.replace("carrier_rpm = 1.06\n", "")
     e = _err(text)
     assert "give two of the sun, carrier and ring speeds, or one of them with the held member" in str(e)
+
+
+def test_input_fs_hz_reads_a_tdms_file_without_timing_and_nothing_else(rig_files, tmp_path):
+    from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
+
+    rec = meshphase.io.read(rig_files["h5"])
+    plain = tmp_path / "plain.tdms"
+    with TdmsWriter(str(plain)) as w:
+        w.write_segment([RootObject(), GroupObject("Log")]
+                        + [ChannelObject("Log", c.name, rec.data[:, j].copy()) for j, c in enumerate(rec.channels)])
+    body = 'results = ["ideal_phasing"]\n' + G
+    p, text = _with_file(plain, body, tmp_path)
+    text = text.replace("[input]\n", "[input]\nfs_Hz = 5120\n")
+    scene = parse_scene(text, p)
+    assert scene_mod.read_options(scene) == {"fs": 5120.0}
+    got = meshphase.io.read(plain, **scene_mod.read_options(scene))
+    assert got.fs == 5120.0 and np.array_equal(got.data, rec.data)
+    for ext in ("h5", "csv"):                  # a file that states its own rate
+        _, text = _with_file(rig_files[ext], body, tmp_path)
+        text = text.replace("[input]\n", "[input]\nfs_Hz = 5120\n")
+        e = _err(text)
+        assert e.key == "input.fs_Hz" and "gives its own sample rate" in str(e)
+    e = _err(body + "[input]\nfs_Hz = 5120\n")
+    assert e.key == "input.fs_Hz" and "give [input] recording" in str(e)

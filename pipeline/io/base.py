@@ -55,7 +55,7 @@ from ..validate import as_float, as_nonnegative
 
 __all__ = ["RecordingFileError", "CorruptFileError", "RecordingInfo", "atomic_path",
            "clean_stale_partials", "TEMP_PREFIX", "TEMP_SUFFIX", "STALE_AGE", "check_verify",
-           "warn_nonfinite", "dumps_json", "check_start_datetime", "spec_from_dict",
+           "warn_nonfinite", "dumps_json", "check_start_datetime", "spec_from_dict", "nice_fs",
            "regroup_blocks", "recording_read_errors"]
 
 
@@ -238,6 +238,18 @@ def dumps_json(obj: Any, what: str) -> str:
             f"{what} is stored as JSON and will read back changed (tuples become lists, "
             f"non-string keys become strings, numpy values become Python values)"), stacklevel=3)
     return text
+
+
+def nice_fs(fs_est: float, n: int, span: float, quantum: float = 0.0) -> float:
+    """The shortest decimal (<= 12 digits) sample rate whose grid spans ``span`` [s] over ``n``
+    samples to within 1 % of a sample interval, plus the resolution ``quantum`` [s] of the
+    two times the span is taken from; ``fs_est`` [Hz] to 12 digits otherwise (a time column
+    of a CSV or a TDMS file gives its sample rate this way: 5120.0, not 5119.99999)."""
+    for digits in range(1, 13):
+        cand = float(f"{fs_est:.{digits}g}")
+        if cand > 0 and abs((n - 1) / cand - span) <= 0.01 / cand + quantum:
+            return cand
+    return float(f"{fs_est:.12g}")
 
 
 def check_start_datetime(value, path) -> str | None:

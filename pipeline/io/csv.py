@@ -68,7 +68,7 @@ from ..errors import FormatWarning
 from ..recording import ChannelSpec, Recording
 from ..validate import as_int, as_positive_int
 from .base import (CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime, check_verify,
-                   dumps_json, spec_from_dict, warn_nonfinite)
+                   dumps_json, nice_fs, spec_from_dict, warn_nonfinite)
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "FORMAT_VERSION", "TIME_TOLERANCE", "sniff", "read_info",
            "read", "write", "write_blocks", "iter_blocks"]
@@ -402,7 +402,7 @@ def _plain_info(path, head: _Head) -> RecordingInfo:
     if not span > 0:
         raise RecordingFileError(path, f"missing or non-positive sample rate: time runs from {t_first!r} s to "
                                        f"{t_last!r} s over {n} rows (non-monotonic time)")
-    fs = _nice_fs((n - 1) / span, n, span, head.time_quantum)
+    fs = nice_fs((n - 1) / span, n, span, head.time_quantum)
     start = None
     if head.epoch is not None:
         t_first, start = 0.0, head.epoch
@@ -418,17 +418,6 @@ def _plain_info(path, head: _Head) -> RecordingInfo:
     return RecordingInfo(path=str(path), format=NAME, fs=fs, n_samples=n, channels=specs, t0=float(t_first),
                          start_datetime=start, extra={"format_version": None, "dtype": "float64", "preamble": False,
                                 "header_lines": head.n_head, "encoding": head.encoding})
-
-
-def _nice_fs(fs_est: float, n: int, span: float, quantum: float = 0.0) -> float:
-    """The shortest decimal (<= 12 digits) sample rate whose grid spans ``span`` [s] over ``n``
-    rows to within 1 % of a sample interval, plus the printed resolution ``quantum`` [s] of
-    the two times the span is taken from; ``fs_est`` to 12 digits otherwise."""
-    for digits in range(1, 13):
-        cand = float(f"{fs_est:.{digits}g}")
-        if cand > 0 and abs((n - 1) / cand - span) <= 0.01 / cand + quantum:
-            return cand
-    return float(f"{fs_est:.12g}")
 
 
 def _time_slack(head: _Head, fs: float) -> float:

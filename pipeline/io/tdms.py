@@ -12,8 +12,14 @@ Mapping (full description in ``data_schemas/tdms_mapping.md``):
 * units: ``unit_string`` (else ``NI_UnitDescription``, else ""); tooth, face position [m],
   gear, gain and description from ``meshphase_tooth``, ``meshphase_face_position``,
   ``meshphase_gear``, ``meshphase_gain``, ``meshphase_description`` (else ``description``).
-* fs = 1 / ``wf_increment`` (the same on every channel); missing or non-positive ->
-  RecordingFileError "missing or non-positive sample rate" unless ``fs=`` is given.
+* fs = 1 / ``wf_increment`` (the same on every channel). A file without waveform timing
+  (DIAdem, "Write to Measurement File" without waveforms, scripts) may hold a clock
+  channel instead: one named as :data:`CLOCK_NAMES` (``Time``, ``t``, ``Zeit``, ...) or
+  holding timestamps; fs then comes from its first and last time, every time is checked
+  against the grid (0.1 sample plus the clock's resolution: a dropped sample is named),
+  t0 is its first value (timestamps: t0 = 0 and start_datetime the first), and it is not a
+  channel of the recording. Neither -> RecordingFileError "missing or non-positive sample
+  rate" unless ``fs=`` is given (a scene's ``[input] fs_Hz``).
   t0 = ``wf_start_offset`` [s] (0 when absent); start_datetime = ``wf_start_time`` (UTC; the
   LabVIEW zero time 1904-01-01 means "not set").
 * NI scaling (``NI_Scale[...]`` properties) is applied by default: samples are physical,
@@ -78,7 +84,8 @@ from ..jsonable import to_jsonable
 from ..recording import CHANNEL_KINDS, ChannelSpec, Recording
 from ..validate import as_int, as_positive, as_positive_int
 from . import tdms_index, tdms_rows, tdms_scaling
-from .base import CorruptFileError, RecordingFileError, RecordingInfo, check_verify, spec_from_dict, warn_nonfinite
+from .base import (CorruptFileError, RecordingFileError, RecordingInfo, check_verify, nice_fs, spec_from_dict,
+                   warn_nonfinite)
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "sniff", "read_info", "read", "iter_blocks", "kind_from_name",
            "reading_path"]
@@ -243,9 +250,18 @@ def _plan(tdms, path, index, fs_opt, raw: bool) -> _Plan:
     agrees with npTDMS, the computed-offset runs of every channel."""
     path = Path(path)
     n_segments = index.n_segments
-    groups, usable, names, unapplied = _usable_channels(tdms, path)
+    groups, usable, names, unapplied = _usable_channels(tdms, path, keep_stamps=True)
+    clock = _clock_channel(path, names, usable) if fs_opt is None else None
+    if clock is not None:
+        k = names.index(clock)
+        _, clock_ch = usable.pop(k)
+        names.pop(k)
+    usable, names = _drop_stamps(path, usable, names)
     n_samples = _n_samples(path, names, usable)
-    fs, t0, start_datetime = _timing(path, names, usable, fs_opt)
+    if clock is not None:
+        fs, t0, start_datetime = _timing_from_clock(path, clock, clock_ch, n_samples)
+    else:
+        fs, t0, start_datetime = _timing(path, names, usable, fs_opt)
     chans = {}
     specs = []
     scaled_names = []
@@ -273,10 +289,11 @@ def _plan(tdms, path, index, fs_opt, raw: bool) -> _Plan:
     return _Plan(info=info, chans=chans, dtype=dtype, raw=raw, fast=fast)
 
 
-def _usable_channels(tdms, path: Path) -> tuple[list, list, list, set]:
+def _usable_channels(tdms, path: Path, keep_stamps: bool = False) -> tuple[list, list, list, set]:
     """(groups, [(group, channel)] of the numeric channels, their names, the names whose NI
     scaling npTDMS cannot apply): the plain channel names, or ``group/channel`` where plain
-    names repeat."""
+    names repeat. ``keep_stamps``: channels of timestamps are kept too (a clock channel,
+    :func:`_clock_channel`; :func:`_drop_stamps` drops the others)."""
     groups = tdms.groups()
     found = []
     for g in groups:
@@ -292,7 +309,7 @@ def _usable_channels(tdms, path: Path) -> tuple[list, list, list, set]:
             dt = np.dtype("V8")
         if said:
             unapplied.add(ch.path)
-        if ch.data_type is None or dt.kind not in "biuf":
+        if ch.data_type is None or dt.kind not in ("biufM" if keep_stamps else "biuf"):
             warnings.warn(FormatWarning(f"{path}: skipped channel {g.name}/{ch.name}: no numeric data "
                                         f"(type {getattr(ch.data_type, '__name__', ch.data_type)})"), stacklevel=5)
             continue
@@ -348,6 +365,87 @@ def _n_samples(path: Path, names: list, usable: list) -> int:
     return next(iter(lengths.values()))
 
 
+#: names (lower case) of a channel that holds each sample's time, in a file without waveform
+#: timing (DIAdem, LabVIEW's "Write to Measurement File" without waveforms, scripts)
+CLOCK_NAMES = ("time", "t", "time_s", "zeit", "timestamp", "time stamp", "datetime", "relative time")
+
+
+def _stamp_dtype(ch) -> bool:
+    try:
+        return np.dtype(ch.dtype).kind == "M"
+    except TypeError:
+        return False
+
+
+def _drop_stamps(path: Path, usable: list, names: list) -> tuple[list, list]:
+    """``usable`` and ``names`` without channels of timestamps (not samples), each dropped
+    with the warning a non-numeric channel gets."""
+    keep = []
+    for n, (g, ch) in zip(names, usable):
+        if _stamp_dtype(ch):
+            warnings.warn(FormatWarning(f"{path}: skipped channel {g.name}/{ch.name}: no numeric data "
+                                        f"(timestamps; a clock channel only where no channel has "
+                                        f"wf_increment)"), stacklevel=5)
+        else:
+            keep.append((n, (g, ch)))
+    if not keep:
+        raise RecordingFileError(path, "no numeric channels besides the clock")
+    return [u for _, u in keep], [n for n, _ in keep]
+
+
+def _clock_channel(path: Path, names: list, usable: list) -> str | None:
+    """The channel holding each sample's time when no channel carries waveform timing
+    (``wf_increment``): named as :data:`CLOCK_NAMES` or holding timestamps, and not the only
+    channel; None otherwise."""
+    if any(_prop_float(ch.properties, "wf_increment", path, n) for n, (_, ch) in zip(names, usable)):
+        return None
+    found = [n for n, (_, ch) in zip(names, usable)
+             if _stamp_dtype(ch) or ch.name.strip().lower() in CLOCK_NAMES]
+    return found[0] if found and len(usable) > 1 else None
+
+
+def _timing_from_clock(path: Path, name: str, ch, n_samples: int) -> tuple[float, float, str | None]:
+    """(fs [Hz], t0 [s], start_datetime) from a clock channel: fs from its first and last
+    time (:func:`meshphase.io.base.nice_fs`), every time checked against the grid t0 + i/fs
+    to 0.1 sample plus the clock's own resolution (float32 seconds: ~7 digits)."""
+    t = np.asarray(ch[:])
+    if t.size != n_samples:
+        raise RecordingFileError(path, f"clock channel {name!r} has {t.size} values for {n_samples} samples")
+    if t.size < 2:
+        raise RecordingFileError(path, f"missing or non-positive sample rate: clock channel {name!r} has "
+                                       f"{t.size} value(s)")
+    start = None
+    if t.dtype.kind == "M":
+        t64 = t.astype("datetime64[ns]")
+        start = _iso(t64[0].astype("datetime64[us]"))
+        t = (t64 - t64[0]).astype(np.int64) * 1e-9
+        quantum = 1e-6 if ch.dtype != np.dtype("datetime64[ns]") else 1e-9
+    else:
+        t = t.astype(np.float64)
+        quantum = float(np.finfo(ch.dtype).eps) * float(np.max(np.abs(t))) if ch.dtype.kind == "f" else 1.0
+    if not np.all(np.isfinite(t)):
+        k = int(np.flatnonzero(~np.isfinite(t))[0])
+        raise RecordingFileError(path, f"clock channel {name!r}: non-finite time at sample {k}")
+    span = float(t[-1] - t[0])
+    if not span > 0:
+        raise RecordingFileError(path, f"missing or non-positive sample rate: clock channel {name!r} runs from "
+                                       f"{float(t[0])!r} to {float(t[-1])!r} s")
+    fs = nice_fs((t.size - 1) / span, t.size, span, quantum)
+    t0 = 0.0 if start is not None else float(t[0])
+    tol = 0.1 / fs + quantum
+    off = np.abs(t - (t[0] + np.arange(t.size) / fs))
+    if not np.all(off <= tol):
+        k = int(np.flatnonzero(~(off <= tol))[0])
+        raise RecordingFileError(path, f"non-uniform time in clock channel {name!r} at sample {k}: t = "
+                                       f"{float(t[k] - t[0])!r} s after the first, expected {k / fs!r} s on the "
+                                       f"uniform grid (fs = {fs!r} Hz, tolerance {tol * fs:.3g} sample): a dropped, "
+                                       f"repeated or shifted sample")
+    if quantum >= 1.0 / fs:
+        warnings.warn(FormatWarning(f"{path}: clock channel {name!r} resolves {quantum:.3g} s, too coarse for "
+                                    f"1/fs = {1.0 / fs:.4g} s: a dropped sample cannot be seen in it"), stacklevel=5)
+    return fs, t0, start
+
+
 def _timing(path: Path, names: list, usable: list, fs_opt) -> tuple[float, float, str | None]:
     """(fs [Hz], t0 [s], start_datetime) common to the channels, from their waveform
     properties (``fs_opt`` [Hz], when given, overrides wf_increment)."""
@@ -364,7 +462,9 @@ def _timing(path: Path, names: list, usable: list, fs_opt) -> tuple[float, float
         bad = {n: v for n, v in incs.items() if v is None or not (math.isfinite(v) and v > 0)}
         if bad:
             raise RecordingFileError(path, f"missing or non-positive sample rate: wf_increment of {bad} "
-                                           f"(pass fs= to read it anyway)")
+                                           f"and no clock channel (one named {', '.join(CLOCK_NAMES[:3])}, ... "
+                                           f"or of timestamps); give the rate: [input] fs_Hz in a scene, "
+                                           f"fs= to meshphase.io.read")
         vals = list(incs.values())
         if max(vals) - min(vals) > 1e-9 * max(vals):
             raise RecordingFileError(path, f"channels have different sample intervals (wf_increment {incs})")

@@ -125,6 +125,18 @@ def run(files: Path, preset: str, **kw):
     return run_scene(parse_scene(scene.read_text(encoding="utf-8"), scene)), truth
 
 
+def max_phasing_difference(a, b) -> float:
+    """Largest difference [mesh cycles] between two runs' phasing of the same passes, over
+    both gears (wrapped to [-0.5, 0.5)); the runs must have the same, non-empty pass tables."""
+    worst = 0.0
+    for gear in ("sun", "ring"):
+        ta, tb = a.phasing.tables[gear], b.phasing.tables[gear]
+        assert len(ta) == len(tb) > 0, (gear, len(ta), len(tb))
+        d = (ta.gamma - tb.gamma + 0.5) % 1.0 - 0.5
+        worst = max(worst, float(np.max(np.abs(d))))
+    return worst
+
+
 def allowance(n: int, n_planets: int, p: float = 0.999) -> float:
     """How far the RMS of ``n`` per-pass errors may exceed their expected RMS by chance at
     level ``p`` [-]: sqrt(chi2_p(nu) / nu). A turn's N - 1 passes share the planet-1 pulse
@@ -255,13 +267,9 @@ def test_compressive_gauges_give_the_same_phasing(files, tmp_path):
         scene.write_text(t, encoding="utf-8")
         out[label] = run_scene(parse_scene(t, scene))
     assert text.count("gain = -1") == 0
-    for gear in ("sun", "ring"):
-        a, b = out["upright"].phasing.tables[gear], out["inverted"].phasing.tables[gear]
-        assert len(a) == len(b) > 0
-        d = (a.gamma - b.gamma + 0.5) % 1.0 - 0.5
-        assert np.max(np.abs(d)) < 1e-9
-        ons = out["inverted"].onsets.by_channel
-        assert all(np.all(o.amplitude < 0) for o in ons.values() if len(o))
+    assert max_phasing_difference(out["upright"], out["inverted"]) < 1e-9
+    ons = out["inverted"].onsets.by_channel
+    assert all(np.all(o.amplitude < 0) for o in ons.values() if len(o))
     assert not [m for m in out["inverted"].messages if "not reliable" in m]
     note = out["inverted"].onsets.error_estimate
     assert "negative (compressive) pulses on" in note and all(nm in note for nm in ons)
@@ -326,12 +334,7 @@ def test_tdms_and_csv_of_one_recording_give_the_same_phasing(files, tmp_path):
         scene = tmp_path / f"{label}.toml"
         scene.write_text(scene_text(truth, path), encoding="utf-8")
         out[label] = run_scene(parse_scene(scene.read_text(encoding="utf-8"), scene))
-    for gear in ("sun", "ring"):
-        a = out["tdms"].phasing.tables[gear]
-        b = out["csv"].phasing.tables[gear]
-        assert len(a) == len(b)
-        d = (a.gamma - b.gamma + 0.5) % 1.0 - 0.5
-        assert np.max(np.abs(d)) < 1e-7
+    assert max_phasing_difference(out["tdms"], out["csv"]) < 1e-7
 
 
 def test_a_labview_spreadsheet_file_gives_the_same_phasing(files, tmp_path):
@@ -356,8 +359,31 @@ def test_a_labview_spreadsheet_file_gives_the_same_phasing(files, tmp_path):
         scene = tmp_path / f"{label}.toml"
         scene.write_text(scene_text(truth, path), encoding="utf-8")
         out[label] = run_scene(parse_scene(scene.read_text(encoding="utf-8"), scene))
-    for gear in ("sun", "ring"):
-        a, b = out["tdms"].phasing.tables[gear], out["labview"].phasing.tables[gear]
-        assert len(a) == len(b) > 0
-        d = (a.gamma - b.gamma + 0.5) % 1.0 - 0.5
-        assert np.max(np.abs(d)) < 1e-7                  # 5e-9 measured; floor ~2.6e-3
+    assert max_phasing_difference(out["tdms"], out["labview"]) < 1e-7   # 5e-9 measured; floor ~2.6e-3
+
+
+@pytest.mark.parametrize("timing", ["clock channel", "scene fs_Hz"])
+def test_a_tdms_file_without_waveform_timing_gives_the_same_phasing(files, tmp_path, timing):
+    # DIAdem, LabVIEW's 'Write to Measurement File' without waveforms or a script write the
+    # channels with no wf_increment: the file was 'missing or non-positive sample rate'
+    # from the CLI. A Time channel beside them, or [input] fs_Hz in the scene, gives the rate
+    from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
+
+    import meshphase.io as pio
+
+    p, truth = make(files, "ripple1_carrier")
+    rec = pio.read(p)
+    objs = [RootObject(), GroupObject("Log")]
+    if timing == "clock channel":
+        objs.append(ChannelObject("Log", "Time", np.arange(rec.n_samples) / rec.fs))
+    objs += [ChannelObject("Log", c.name, rec.data[:, j].copy(), properties={"unit_string": c.units})
+             for j, c in enumerate(rec.channels)]
+    plain = tmp_path / "plain.tdms"
+    with TdmsWriter(str(plain)) as w:
+        w.write_segment(objs)
+    text = scene_text(truth, plain)
+    if timing == "scene fs_Hz":
+        text = text.replace("[input]\n", f"[input]\nfs_Hz = {rec.fs!r}\n")
+    ctx = run_scene(parse_scene(text, tmp_path / "plain.toml"))
+    base, _ = run(files, "ripple1_carrier")
+    assert max_phasing_difference(base, ctx) < 1e-9

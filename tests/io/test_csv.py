@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 import meshphase.io as pio
 from meshphase.errors import DataQualityWarning, FormatWarning
 from meshphase.io import csv as mcsv
-from meshphase.io.base import CorruptFileError, RecordingFileError
+from meshphase.io.base import CorruptFileError, RecordingFileError, nice_fs
 from meshphase.recording import ChannelSpec, Recording
 
 
@@ -201,9 +201,9 @@ def test_plain_csv_without_units_warns(tmp_path):
 
 
 def test_nice_fs_snaps_only_within_tolerance():
-    assert mcsv._nice_fs(5119.9999999999, 10**6, (10**6 - 1) / 5120.0) == 5120.0
+    assert nice_fs(5119.9999999999, 10**6, (10**6 - 1) / 5120.0) == 5120.0
     odd = 5120.0 * (1 + 1e-6)   # a real rate offset: 0.1 sample off over 1e5 rows -> kept
-    assert mcsv._nice_fs(odd, 10**5, (10**5 - 1) / odd) != 5120.0
+    assert nice_fs(odd, 10**5, (10**5 - 1) / odd) != 5120.0
 
 
 # ---------------------------------------------------------------------------- time checks

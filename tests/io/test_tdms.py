@@ -367,3 +367,79 @@ def test_duplicate_channel_names_after_group_prefixing(tdms_file):
     path = tdms_file([("a", "b/c", x, _wf()), ("a/b", "c", x, _wf()), ("x", "c", x, _wf())])
     with pytest.raises(RecordingFileError, match=r"rec\.tdms: duplicate channel name\(s\) \['a/b/c'\]"):
         tdms.read_info(path)
+
+
+# ---------------------------------------------------------------------------- clock channels
+def _clocked(path, clock, n=10240, extra=()):
+    """A TDMS file without waveform timing, as DIAdem or a script writes one: a clock
+    channel (``clock`` = (name, values) or None) beside two data channels; the data."""
+    from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
+
+    rng = np.random.default_rng(3)
+    x, y = rng.normal(size=n), rng.normal(size=n)
+    objs = [RootObject(), GroupObject("Log")]
+    if clock is not None:
+        objs.append(ChannelObject("Log", clock[0], clock[1]))
+    objs += [ChannelObject("Log", "sun_T3", x), ChannelObject("Log", "ring_T1", y), *extra]
+    with TdmsWriter(str(path)) as w:
+        w.write_segment(objs)
+    return np.c_[x, y]
+
+
+@pytest.mark.parametrize("name, values, t0, start", [
+    ("Time", np.arange(10240) / 5120.0, 0.0, None),
+    ("zeit", (600.0 + np.arange(10240) / 5120.0).astype(np.float32), 600.0, None),   # LabVIEW SGL
+    ("Stamp", (np.datetime64("2026-11-28T10:00:00", "us")
+               + np.round(np.arange(10240) / 5120.0 * 1e6).astype("timedelta64[us]")),
+     0.0, "2026-11-28T10:00:00"),
+])
+def test_clock_channel_gives_the_time_axis(tmp_path, name, values, t0, start):
+    # no wf_increment anywhere: the file was 'missing or non-positive sample rate' however
+    # plainly its Time channel said it; now that channel is the time axis, not a channel
+    path = tmp_path / "clock.tdms"
+    data = _clocked(path, (name, values))
+    rec = pio.read(path)
+    assert rec.fs == 5120.0 and rec.names == ["sun_T3", "ring_T1"]
+    assert rec.t0 == pytest.approx(t0, abs=1e-4)
+    assert (rec.start_datetime or "").startswith(start) if start else rec.start_datetime is None
+    np.testing.assert_array_equal(rec.data, data)
+    blocks = list(pio.iter_blocks(path, 0.5, 0.01))
+    np.testing.assert_array_equal(np.concatenate([b.data[:2560] for b in blocks]), data)
+
+
+def test_clock_channel_names_a_dropped_sample(tmp_path):
+    t = np.delete(np.arange(10241) / 5120.0, 700)
+    path = tmp_path / "drop.tdms"
+    _clocked(path, ("Time", t))
+    with pytest.raises(RecordingFileError, match=r"non-uniform time in clock channel 'Time' at sample 700"):
+        pio.read(path)
+
+
+def test_without_clock_or_waveform_timing_the_error_says_how_to_give_the_rate(tmp_path):
+    path = tmp_path / "none.tdms"
+    data = _clocked(path, None)
+    with pytest.raises(RecordingFileError, match=r"no clock channel .*\[input\] fs_Hz in a scene"):
+        pio.read(path)
+    np.testing.assert_array_equal(pio.read(path, fs=5120.0).data, data)   # the rate given
+
+
+def test_a_channel_named_time_in_a_waveform_file_stays_a_channel(tmp_path):
+    # with wf_increment present the file's timing stands, and 'Time' is just a channel
+    from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
+
+    wf = {"wf_increment": 1 / 5120.0, "wf_start_offset": 0.0}
+    with TdmsWriter(str(tmp_path / "wf.tdms")) as w:
+        w.write_segment([RootObject(), GroupObject("G"),
+                         ChannelObject("G", "Time", np.arange(100.0), properties=wf),
+                         ChannelObject("G", "sun", np.ones(100), properties=wf)])
+    rec = pio.read(tmp_path / "wf.tdms")
+    assert rec.names == ["Time", "sun"] and rec.fs == 5120.0
+
+
+def test_a_lone_time_channel_is_not_a_clock(tmp_path):
+    from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
+
+    with TdmsWriter(str(tmp_path / "lone.tdms")) as w:
+        w.write_segment([RootObject(), GroupObject("G"), ChannelObject("G", "Time", np.arange(100) / 10.0)])
+    with pytest.raises(RecordingFileError, match="missing or non-positive sample rate"):
+        pio.read(tmp_path / "lone.tdms")
