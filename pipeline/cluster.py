@@ -331,7 +331,6 @@ class ClusterStart:
         self._closer = None
         self.elapsed_s: float | None = None
         self._quiet = contextlib.ExitStack()
-        self._quiet.enter_context(_quiet_distributed())
         self._t0 = time.perf_counter()
         self._thread = threading.Thread(target=self._start, name="meshphase-cluster-start", daemon=True)
         self._thread.start()
@@ -339,6 +338,11 @@ class ClusterStart:
     def _start(self) -> None:
         scheduler, workers, dashboard, warm_up, info, worker_modules = self._args
         try:
+            # importing distributed sets its loggers' levels from its config (INFO): quieted
+            # before that, a command's first campaign printed ~30 lines of cluster life
+            import distributed  # noqa: F401
+
+            self._quiet.enter_context(_quiet_distributed())
             self._client, self._cluster = _connect(scheduler, workers, dashboard, info, worker_modules)
             try:
                 pids = self._client.run(warm_up)

@@ -253,6 +253,8 @@ def test_cluster_start_error_reaches_the_waiting_thread(monkeypatch):
     def no_cluster(scheduler, workers, dashboard, info, worker_modules=None):
         raise ValueError(f"scheduler {scheduler!r}: cannot connect: refused")
 
+    import distributed  # noqa: F401 - its import sets its own log levels; the start then quiets them
+
     monkeypatch.setattr(cluster, "_connect", no_cluster)
     level = logging.getLogger("distributed").level
     start = cluster.ClusterStart("tcp://127.0.0.1:1", None, None, os.getpid, {})
@@ -471,3 +473,27 @@ print(len(drawn), "matplotlib" in sys.modules, "pandas" in sys.modules)
     n, mpl, pd_ = stdout.split()
     assert int(n) >= 3 and (mpl, pd_) == ("False", "False")
     assert (tmp_path / "campaign_report.html").is_file() and (tmp_path / "campaign.csv").is_file()
+
+
+def test_campaign_command_keeps_distributed_quiet(tmp_path):
+    """``meshphase campaign`` in a fresh process: distributed is first imported in the
+    cluster's start thread, and its import sets its loggers to INFO from its config; quieted
+    before that, the command printed ~30 lines of cluster life (scheduler at, nanny start,
+    close-stream, ...) on stderr. Only with -v now."""
+    import meshphase.io
+    from meshphase.synthetic import generate
+
+    rec, _ = generate("seed_rig", duration=20.0, seed=4)
+    recs = tmp_path / "recs"
+    recs.mkdir()
+    meshphase.io.write(rec, recs / "a.h5")
+    scene = tmp_path / "scene.toml"
+    scene.write_text('name = "q"\nresults = ["phasing"]\n[input]\nrecording = "recs/a.h5"\n' + SEED_RIG_GEARSET,
+                     encoding="utf-8")
+    argv = [sys.executable, "-m", "meshphase.cli", "-q", "campaign", str(scene), str(recs), "--workers", "1"]
+    res = subprocess.run(argv + ["--out", str(tmp_path / "o1")], capture_output=True, text=True, timeout=300)
+    assert res.returncode in (0, 3), res.stderr[-2000:]
+    assert "distributed." not in res.stderr, res.stderr[:2000]
+    res = subprocess.run(argv[:3] + ["-v"] + argv[3:] + ["--out", str(tmp_path / "o2")], capture_output=True,
+                         text=True, timeout=300)
+    assert "distributed.scheduler" in res.stderr
