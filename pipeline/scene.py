@@ -722,17 +722,18 @@ def _input_format(path: Path) -> str | None:
 
 def _check_input_fs(inp: dict, err) -> None:
     """``[input] fs_Hz``: the sample rate of a TDMS file without waveform timing (NI's
-    wf_increment) or clock channel; only there (an HDF5 or MCAP file states its rate, a
-    CSV's time column gives it; ``[input.mcap] fs_Hz`` for MCAP written by other tools)."""
+    wf_increment) or clock channel, or of an HDF5 file another tool wrote without a rate; only
+    there (a CSV's time column gives it; ``[input.mcap] fs_Hz`` for MCAP written by other
+    tools)."""
     if "recording" not in inp:
         raise err(["input", "fs_Hz"], "fs_Hz is the sample rate of a recording file: give [input] "
                   "recording = \"FILE.tdms\" too")
     if "mcap" in inp:
         raise err(["input", "fs_Hz"], "an MCAP file's rate goes in [input.mcap] fs_Hz")
     fmt = _input_format(inp["recording"])
-    if fmt not in (None, "tdms"):
+    if fmt not in (None, "tdms", "hdf5"):
         raise err(["input", "fs_Hz"], f"{inp['recording'].name} is a {fmt} file, which gives its own "
-                  "sample rate; fs_Hz is for a TDMS file without waveform timing")
+                  "sample rate; fs_Hz is for a TDMS or HDF5 file that states none")
 
 
 def _parse_input_mcap(inp: dict, err) -> dict:

@@ -564,7 +564,7 @@ def test_input_fs_hz_reads_a_tdms_file_without_timing_and_nothing_else(rig_files
     assert scene_mod.read_options(scene) == {"fs": 5120.0}
     got = meshphase.io.read(plain, **scene_mod.read_options(scene))
     assert got.fs == 5120.0 and np.array_equal(got.data, rec.data)
-    for ext in ("h5", "csv"):                  # a file that states its own rate
+    for ext in ("mcap", "csv"):                # a file that states its own rate
         _, text = _with_file(rig_files[ext], body, tmp_path)
         text = text.replace("[input]\n", "[input]\nfs_Hz = 5120\n")
         e = _err(text)

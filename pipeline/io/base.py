@@ -56,6 +56,7 @@ from ..validate import as_float, as_nonnegative
 __all__ = ["RecordingFileError", "CorruptFileError", "RecordingInfo", "atomic_path",
            "clean_stale_partials", "TEMP_PREFIX", "TEMP_SUFFIX", "STALE_AGE", "check_verify",
            "warn_nonfinite", "dumps_json", "check_start_datetime", "spec_from_dict", "nice_fs",
+           "CLOCK_NAMES", "kind_from_name", "clock_timing",
            "regroup_blocks", "recording_read_errors"]
 
 
@@ -250,6 +251,92 @@ def nice_fs(fs_est: float, n: int, span: float, quantum: float = 0.0) -> float:
         if cand > 0 and abs((n - 1) / cand - span) <= 0.01 / cand + quantum:
             return cand
     return float(f"{fs_est:.12g}")
+
+
+#: names (lower case) of a channel or dataset that holds each sample's time, in a file
+#: without a stated sample rate (TDMS without waveform timing: DIAdem, LabVIEW's "Write to
+#: Measurement File" without waveforms, scripts; HDF5 written by other tools)
+CLOCK_NAMES = ("time", "t", "time_s", "zeit", "timestamp", "time stamp", "datetime", "relative time")
+
+_KIND_PATTERNS = (
+    ("sun", re.compile(r"^sun", re.I)),
+    ("ring", re.compile(r"^ring", re.I)),
+    ("facewidth", re.compile(r"^(fw|face)", re.I)),
+    ("tacho", re.compile(r"^(tacho|once)", re.I)),
+)
+
+
+def kind_from_name(*names: str) -> str:
+    """Channel kind from the first name (channel, then group) matching a pattern, else "other"."""
+    for name in names:
+        for kind, pat in _KIND_PATTERNS:
+            if pat.match(name.strip()):
+                return kind
+    return "other"
+
+
+def clock_timing(path, what: str, values: np.ndarray, n_samples: int) -> tuple[float, float, str | None]:
+    """(fs [Hz], t0 [s], start_datetime) from a clock: each sample's time in seconds
+    (float) or as timestamps (datetime64). fs comes from its first and last time
+    (:func:`nice_fs`), and every time is checked against the grid t0 + i/fs to 0.1 sample
+    plus the clock's own resolution (float32 seconds: eps x the largest time; timestamps:
+    their unit); timestamps give t0 = 0 and start_datetime the first.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file (messages).
+    what : str
+        The clock, for messages (``"clock channel 'Time'"``).
+    values : ndarray, shape (n,)
+        [s] or datetime64.
+    n_samples : int
+        Samples of the recording's channels [-].
+
+    Raises
+    ------
+    RecordingFileError
+        Length not ``n_samples``, fewer than two times, a non-finite time, a span that is not
+        positive, or a time off the grid (a dropped, repeated or shifted sample: named).
+    """
+    t = np.asarray(values).reshape(-1)
+    if t.size != n_samples:
+        raise RecordingFileError(path, f"{what} has {t.size} values for {n_samples} samples")
+    if t.size < 2:
+        raise RecordingFileError(path, f"missing or non-positive sample rate: {what} has {t.size} value(s)")
+    start = None
+    if t.dtype.kind == "M":
+        unit = np.datetime_data(t.dtype)[0]
+        quantum = float(np.timedelta64(1, unit) / np.timedelta64(1, "ns")) * 1e-9
+        t64 = t.astype("datetime64[ns]")
+        start = np.datetime_as_string(t64[0].astype("datetime64[us]"), unit="us") + "+00:00"
+        t = (t64 - t64[0]).astype(np.int64) * 1e-9
+    elif t.dtype.kind in "iuf":
+        quantum = float(np.finfo(t.dtype).eps) * float(np.max(np.abs(t))) if t.dtype.kind == "f" else 1.0
+        t = t.astype(np.float64)
+    else:
+        raise RecordingFileError(path, f"{what} holds {t.dtype} values, not times")
+    if not np.all(np.isfinite(t)):
+        k = int(np.flatnonzero(~np.isfinite(t))[0])
+        raise RecordingFileError(path, f"{what}: non-finite time at sample {k}")
+    span = float(t[-1] - t[0])
+    if not span > 0:
+        raise RecordingFileError(path, f"missing or non-positive sample rate: {what} runs from "
+                                       f"{float(t[0])!r} to {float(t[-1])!r} s")
+    fs = nice_fs((t.size - 1) / span, t.size, span, quantum)
+    t0 = 0.0 if start is not None else float(t[0])
+    tol = 0.1 / fs + quantum
+    off = np.abs(t - (t[0] + np.arange(t.size) / fs))
+    if not np.all(off <= tol):
+        k = int(np.flatnonzero(~(off <= tol))[0])
+        raise RecordingFileError(path, f"non-uniform time in {what} at sample {k}: t = {float(t[k] - t[0])!r} s "
+                                       f"after the first, expected {k / fs!r} s on the uniform grid (fs = "
+                                       f"{fs!r} Hz, tolerance {tol * fs:.3g} sample): a dropped, repeated or "
+                                       f"shifted sample")
+    if quantum >= 1.0 / fs:
+        warnings.warn(FormatWarning(f"{path}: {what} resolves {quantum:.3g} s, too coarse for 1/fs = "
+                                    f"{1.0 / fs:.4g} s: a dropped sample cannot be seen in it"), stacklevel=5)
+    return fs, t0, start
 
 
 def check_start_datetime(value, path) -> str | None:

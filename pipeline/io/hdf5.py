@@ -18,6 +18,11 @@ Layout (version 1; full description in ``data_schemas/hdf5_layout.md``, schema i
 Channel names are stored in the ``name`` attribute; the dataset name is the channel name with
 ``%`` and ``/`` percent-encoded (and a name ``.`` written ``%2E``) so any Unicode name works.
 
+A file written by another tool (no ``meshphase_format`` root attribute) is read as it is
+laid out: its 1-D numeric datasets of the longest length are the channels, the rate from
+``fs=``, a clock dataset or a rate / interval attribute (:func:`_foreign_header`;
+``data_schemas/hdf5_layout.md``, "HDF5 files written by other tools").
+
 Reading allocates the output once, as a channel-major (Fortran-ordered) samples x channels
 array, and fills each column with ``Dataset.read_direct``: one channel or one time window is
 read without reading the rest. Samples round-trip bit-exactly (NaN payloads included), as do
@@ -51,6 +56,7 @@ import math
 import os
 import re
 import uuid
+import warnings
 import zlib
 from collections import OrderedDict
 from pathlib import Path
@@ -58,11 +64,13 @@ from typing import Any, Iterator
 
 import numpy as np
 
+from ..errors import FormatWarning
 from ..log import logger
 from ..recording import Recording
 from ..validate import as_choice, as_int, as_positive_int
-from .base import (CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime, check_verify,
-                   dumps_json, regroup_blocks, spec_from_dict, warn_nonfinite)
+from .base import (CLOCK_NAMES, CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime,
+                   check_verify, clock_timing, dumps_json, kind_from_name, regroup_blocks, spec_from_dict,
+                   warn_nonfinite)
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "FORMAT_VERSION", "DEFAULT_CHUNK_SAMPLES", "sniff",
            "read_info", "read", "write", "write_blocks", "iter_blocks"]
@@ -187,14 +195,32 @@ def _cache_key(f, path) -> tuple | None:
     return (os.path.realpath(path), file_id, st.st_size, st.st_mtime_ns)
 
 
-def _header(f, path) -> tuple[dict, list, list]:
+def _header(f, path, fs_opt=None) -> tuple[dict, list, list]:
     """Validated header of an open file: (root attrs, channel specs, datasets in column order).
 
     Parsed headers are cached (see :func:`_cache_key`): the registry reads the header for
-    ``read_info`` and again for ``read``, and each HDF5 attribute costs ~40 us to read.
+    ``read_info`` and again for ``read``, and each HDF5 attribute costs ~40 us to read. A
+    file another tool wrote (no ``meshphase_format``) is read as :func:`_foreign_header`
+    finds it; ``fs_opt`` [Hz] gives or overrides its sample rate.
     """
     with _MetaErrors(path):
-        return _header_checked(f, path)
+        if "meshphase_format" not in f.attrs:
+            st = os.stat(path)
+            key = ("foreign", os.path.realpath(path), st.st_size, st.st_mtime_ns, fs_opt)
+            hit = _HEADER_CACHE.get(key)
+            if hit is None:       # parsed (and warned about) once per file content
+                hit = _foreign_header(f, path, fs_opt)
+                _HEADER_CACHE[key] = hit
+                while len(_HEADER_CACHE) > _HEADER_CACHE_SIZE:
+                    _HEADER_CACHE.popitem(last=False)
+            attrs, specs, paths = hit
+            return copy.deepcopy(attrs), list(specs), [f[p] for p in paths]
+        attrs, specs, dsets = _header_checked(f, path)
+        if fs_opt is not None and abs(float(fs_opt) - attrs["fs"]) > 1e-9 * attrs["fs"]:
+            warnings.warn(FormatWarning(f"{path}: fs={fs_opt!r} Hz given overrides the file's {attrs['fs']!r} Hz"),
+                          stacklevel=4)
+            attrs["fs"] = float(fs_opt)
+        return attrs, specs, dsets
 
 
 def _header_checked(f, path) -> tuple[dict, list, list]:
@@ -212,6 +238,128 @@ def _header_checked(f, path) -> tuple[dict, list, list]:
     attrs = dict(attrs, meta=copy.deepcopy(attrs["meta"]), history=copy.deepcopy(attrs["history"]))
     group = f[_GROUP]
     return attrs, list(specs), [group[k] for k in keys]
+
+
+#: attributes (any case) stating a sample rate [Hz] in HDF5 files of other tools
+_RATE_ATTRS = ("fs", "fs_hz", "sample_rate", "sampling_rate", "samplerate", "sampling_frequency",
+               "sample_rate_hz", "rate")
+#: attributes (any case) stating a sample interval [s]
+_INTERVAL_ATTRS = ("dt", "sample_interval", "wf_increment", "increment", "time_step")
+
+
+def _stated_rate(objs, path, where: str) -> float | None:
+    """The sample rate [Hz] an attribute of the first of ``objs`` (a dataset, then its groups
+    up to the root) states: a rate (:data:`_RATE_ATTRS`) or an interval
+    (:data:`_INTERVAL_ATTRS`); None when none does."""
+    for obj in objs:
+        low = {str(k).lower(): k for k in obj.attrs.keys()}
+        for names, invert in ((_RATE_ATTRS, False), (_INTERVAL_ATTRS, True)):
+            for a in names:
+                if a in low:
+                    v = _plain(obj.attrs[low[a]])
+                    if isinstance(v, list) and len(v) == 1:
+                        v = v[0]
+                    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
+                        raise RecordingFileError(path, f"{where}: attribute {low[a]} = {v!r} of {obj.name} is "
+                                                       f"not a positive {'interval' if invert else 'rate'}")
+                    return 1.0 / float(v) if invert else float(v)
+    return None
+
+
+def _foreign_header(f, path, fs_opt) -> tuple[dict, tuple, tuple]:
+    """Header of an HDF5 file another tool wrote: its 1-D numeric datasets of the longest
+    common length are the channels (others skipped with a FormatWarning), named by their
+    link names (full paths where those repeat), kind from the name as for TDMS, units from
+    a ``units`` / ``unit`` attribute. The rate: ``fs_opt``, else a clock dataset
+    (:data:`CLOCK_NAMES`; not a channel), else a rate or interval attribute on the datasets
+    or their groups (:data:`_RATE_ATTRS`, :data:`_INTERVAL_ATTRS`); all stating one must
+    agree. Returns (attrs, specs, dataset paths)."""
+    import h5py
+
+    from ..recording import ChannelSpec
+
+    found = []
+
+    def visit(name, obj):
+        if isinstance(obj, h5py.Dataset) and obj.ndim == 1 and obj.dtype.kind in "biuf" and obj.shape[0] > 0:
+            found.append(obj)
+
+    f.visititems(visit)
+    if not found:
+        raise RecordingFileError(path, "an HDF5 file but not a meshphase recording (root attribute "
+                                       "meshphase_format='recording' missing), and it holds no 1-D numeric "
+                                       "dataset to read as channels")
+    n = max(ds.shape[0] for ds in found)
+    skipped = sorted(ds.name for ds in found if ds.shape[0] != n)
+    if skipped:
+        warnings.warn(FormatWarning(f"{path}: skipped dataset(s) {skipped}: shorter than the channels "
+                                    f"({n} samples)"), stacklevel=4)
+    chans = [ds for ds in found if ds.shape[0] == n]
+    base = [ds.name.rsplit("/", 1)[-1] for ds in chans]
+    clock = None
+    if fs_opt is None and len(chans) > 1:
+        clock = next((i for i, b in enumerate(base) if b.strip().lower() in CLOCK_NAMES), None)
+    start = None
+    t0 = 0.0
+    if clock is not None:
+        ds = chans.pop(clock)
+        base.pop(clock)
+        fs, t0, start = clock_timing(path, f"clock dataset {ds.name!r}", ds[()], n)
+    elif fs_opt is not None:
+        fs = float(fs_opt)
+    else:
+        rates = {}
+        for ds in chans:
+            parents, g = [ds], ds.parent
+            while True:
+                parents.append(g)
+                if g.name == "/":
+                    break
+                g = g.parent
+            rates[ds.name] = _stated_rate(parents, path, "sample rate")
+        given = {k: v for k, v in rates.items() if v is not None}
+        if not given:
+            raise RecordingFileError(path, "an HDF5 file of another tool with no sample rate: no clock dataset "
+                                           f"(named {', '.join(CLOCK_NAMES[:3])}, ...) and no rate attribute "
+                                           f"({', '.join(_RATE_ATTRS[:3])}, ... or an interval dt, ...); give the "
+                                           "rate: [input] fs_Hz in a scene, fs= to meshphase.io.read")
+        vals = list(given.values())
+        if max(vals) - min(vals) > 1e-9 * max(vals):
+            raise RecordingFileError(path, f"datasets state different sample rates {given}")
+        fs = vals[0]
+    names = base if len(set(base)) == len(base) else [ds.name.lstrip("/") for ds in chans]
+    specs = []
+    for name, ds in zip(names, chans):
+        units = next((_plain(ds.attrs[k]) for k in ds.attrs.keys() if str(k).lower() in ("units", "unit",
+                                                                                          "unit_string")), "")
+        specs.append(ChannelSpec(name=name, kind=kind_from_name(name.rsplit("/", 1)[-1], ds.parent.name.strip("/")),
+                                 units=units if isinstance(units, str) else ""))
+    dtypes = {ds.dtype for ds in chans}
+    dtype = "float32" if dtypes == {np.dtype(np.float32)} else "float64"
+    root = {str(k): _plain(v) for k, v in f.attrs.items()}
+    attrs = {"fs": fs, "t0": t0, "n_samples": n, "dtype": dtype, "start_datetime": start,
+             "format_version": None, "created_by": root.get("created_by"), "file_id": None,
+             "meta": {"hdf5": {"root": _jsonable_attrs(root),
+                               "datasets": {nm: _jsonable_attrs({str(k): _plain(v) for k, v in ds.attrs.items()})
+                                            for nm, ds in zip(names, chans)}}},
+             "history": [{"step": "read_hdf5", "file": Path(path).name, "layout": "other tool",
+                          "datasets": {nm: ds.name for nm, ds in zip(names, chans)},
+                          "fs_from": "given" if fs_opt is not None else "clock" if clock is not None else "attribute"}]}
+    return attrs, tuple(specs), tuple(ds.name for ds in chans)
+
+
+def _jsonable_attrs(d: dict) -> dict:
+    """Attributes as JSON-friendly values (arrays as lists, the rest as text)."""
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, np.ndarray):
+            v = v.tolist()
+        try:
+            json.dumps(v)
+        except (TypeError, ValueError):
+            v = str(v)
+        out[k] = v
+    return out
 
 
 def _parse_header(f, path) -> tuple[dict, tuple, tuple]:
@@ -288,7 +436,7 @@ def _parse_header(f, path) -> tuple[dict, tuple, tuple]:
     return attrs, tuple(specs), tuple(keys)
 
 
-def read_info(path, *, verify: bool = True) -> RecordingInfo:
+def read_info(path, *, fs: float | None = None, verify: bool = True) -> RecordingInfo:
     """Header of an HDF5 recording (root and channel attributes; no samples are read).
 
     ``verify`` is accepted for the registry's uniform options; the metadata checksums of
@@ -305,7 +453,7 @@ def read_info(path, *, verify: bool = True) -> RecordingInfo:
     """
     check_verify(verify)
     with _open(path) as f, _MetaErrors(path):
-        attrs, specs, dsets = _header(f, path)
+        attrs, specs, dsets = _header(f, path, _fs_option(fs))
         extra = {"format_version": attrs["format_version"],
                  "dtype": attrs["dtype"],
                  "chunks": dsets[0].chunks if dsets else None,
@@ -315,6 +463,14 @@ def read_info(path, *, verify: bool = True) -> RecordingInfo:
     return RecordingInfo(path=str(path), format=NAME, fs=float(attrs["fs"]), n_samples=int(attrs["n_samples"]),
                          channels=specs, t0=float(attrs["t0"]), start_datetime=attrs["start_datetime"],
                          meta=attrs["meta"], history=attrs["history"], extra=extra)
+
+
+def _fs_option(fs) -> float | None:
+    if fs is None:
+        return None
+    from ..validate import as_positive
+
+    return as_positive(fs, "fs")
 
 
 def _unverified_ok(ds) -> bool:
@@ -458,7 +614,8 @@ def _names(path, specs, channels) -> list[str]:
     return info.check_channels(channels)
 
 
-def read(path, channels=None, i0: int = 0, i1: int | None = None, *, verify: bool = True) -> Recording:
+def read(path, channels=None, i0: int = 0, i1: int | None = None, *, fs: float | None = None,
+         verify: bool = True) -> Recording:
     """Samples ``i0 <= i < i1`` of the named channels (all when None) of an HDF5 recording.
 
     Parameters
@@ -486,14 +643,14 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *, verify: boo
     """
     verify = check_verify(verify)
     with _open(path) as f:
-        attrs, specs, dsets = _header(f, path)
+        attrs, specs, dsets = _header(f, path, _fs_option(fs))
         names = _names(path, specs, channels)
         i0, i1 = _check_range(path, int(attrs["n_samples"]), i0, i1)
         with _ChunkReader(path) if not verify else contextlib.nullcontext() as chunks:
             return _read_open(f, path, attrs, specs, dsets, names, i0, i1, verify, chunks)
 
 
-def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *,
+def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *, fs: float | None = None,
                 verify: bool = True) -> Iterator[Recording]:
     """Blocks of ``n_block`` samples plus ``n_overlap`` following samples, file kept open.
 
@@ -506,7 +663,7 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *,
     if n_overlap < 0:
         raise ValueError(f"n_overlap must be >= 0, got {n_overlap}")
     with _open(path) as f:
-        attrs, specs, dsets = _header(f, path)
+        attrs, specs, dsets = _header(f, path, _fs_option(fs))
         names = _names(path, specs, channels)
         n = int(attrs["n_samples"])
         with _ChunkReader(path) if not verify else contextlib.nullcontext() as chunks:

@@ -84,8 +84,8 @@ from ..jsonable import to_jsonable
 from ..recording import CHANNEL_KINDS, ChannelSpec, Recording
 from ..validate import as_int, as_positive, as_positive_int
 from . import tdms_index, tdms_rows, tdms_scaling
-from .base import (CorruptFileError, RecordingFileError, RecordingInfo, check_verify, nice_fs, spec_from_dict,
-                   warn_nonfinite)
+from .base import (CLOCK_NAMES, CorruptFileError, RecordingFileError, RecordingInfo, check_verify, clock_timing,
+                   kind_from_name, spec_from_dict, warn_nonfinite)
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "sniff", "read_info", "read", "iter_blocks", "kind_from_name",
            "reading_path"]
@@ -106,23 +106,6 @@ _ROWS_ENGINE = "auto"
 #: computed-offset path is trusted for a file.
 _CHECK_SAMPLES = 64
 _LABVIEW_ZERO = np.datetime64("1904-01-01T00:00:00", "us")
-
-_KIND_PATTERNS = (
-    ("sun", re.compile(r"^sun", re.I)),
-    ("ring", re.compile(r"^ring", re.I)),
-    ("facewidth", re.compile(r"^(fw|face)", re.I)),
-    ("tacho", re.compile(r"^(tacho|once)", re.I)),
-)
-
-
-def kind_from_name(*names: str) -> str:
-    """Channel kind from the first name (channel, then group) matching a pattern, else "other"."""
-    for name in names:
-        for kind, pat in _KIND_PATTERNS:
-            if pat.match(name.strip()):
-                return kind
-    return "other"
-
 
 def sniff(head: bytes) -> bool:
     """True for a TDMS data file (lead-in tag ``TDSm``); ``TDSh`` index files are not recordings."""
@@ -259,7 +242,7 @@ def _plan(tdms, path, index, fs_opt, raw: bool) -> _Plan:
     usable, names = _drop_stamps(path, usable, names)
     n_samples = _n_samples(path, names, usable)
     if clock is not None:
-        fs, t0, start_datetime = _timing_from_clock(path, clock, clock_ch, n_samples)
+        fs, t0, start_datetime = clock_timing(path, f"clock channel {clock!r}", np.asarray(clock_ch[:]), n_samples)
     else:
         fs, t0, start_datetime = _timing(path, names, usable, fs_opt)
     chans = {}
@@ -365,11 +348,6 @@ def _n_samples(path: Path, names: list, usable: list) -> int:
     return next(iter(lengths.values()))
 
 
-#: names (lower case) of a channel that holds each sample's time, in a file without waveform
-#: timing (DIAdem, LabVIEW's "Write to Measurement File" without waveforms, scripts)
-CLOCK_NAMES = ("time", "t", "time_s", "zeit", "timestamp", "time stamp", "datetime", "relative time")
-
-
 def _stamp_dtype(ch) -> bool:
     try:
         return np.dtype(ch.dtype).kind == "M"
@@ -402,48 +380,6 @@ def _clock_channel(path: Path, names: list, usable: list) -> str | None:
     found = [n for n, (_, ch) in zip(names, usable)
              if _stamp_dtype(ch) or ch.name.strip().lower() in CLOCK_NAMES]
     return found[0] if found and len(usable) > 1 else None
-
-
-def _timing_from_clock(path: Path, name: str, ch, n_samples: int) -> tuple[float, float, str | None]:
-    """(fs [Hz], t0 [s], start_datetime) from a clock channel: fs from its first and last
-    time (:func:`meshphase.io.base.nice_fs`), every time checked against the grid t0 + i/fs
-    to 0.1 sample plus the clock's own resolution (float32 seconds: ~7 digits)."""
-    t = np.asarray(ch[:])
-    if t.size != n_samples:
-        raise RecordingFileError(path, f"clock channel {name!r} has {t.size} values for {n_samples} samples")
-    if t.size < 2:
-        raise RecordingFileError(path, f"missing or non-positive sample rate: clock channel {name!r} has "
-                                       f"{t.size} value(s)")
-    start = None
-    if t.dtype.kind == "M":
-        t64 = t.astype("datetime64[ns]")
-        start = _iso(t64[0].astype("datetime64[us]"))
-        t = (t64 - t64[0]).astype(np.int64) * 1e-9
-        quantum = 1e-6 if ch.dtype != np.dtype("datetime64[ns]") else 1e-9
-    else:
-        t = t.astype(np.float64)
-        quantum = float(np.finfo(ch.dtype).eps) * float(np.max(np.abs(t))) if ch.dtype.kind == "f" else 1.0
-    if not np.all(np.isfinite(t)):
-        k = int(np.flatnonzero(~np.isfinite(t))[0])
-        raise RecordingFileError(path, f"clock channel {name!r}: non-finite time at sample {k}")
-    span = float(t[-1] - t[0])
-    if not span > 0:
-        raise RecordingFileError(path, f"missing or non-positive sample rate: clock channel {name!r} runs from "
-                                       f"{float(t[0])!r} to {float(t[-1])!r} s")
-    fs = nice_fs((t.size - 1) / span, t.size, span, quantum)
-    t0 = 0.0 if start is not None else float(t[0])
-    tol = 0.1 / fs + quantum
-    off = np.abs(t - (t[0] + np.arange(t.size) / fs))
-    if not np.all(off <= tol):
-        k = int(np.flatnonzero(~(off <= tol))[0])
-        raise RecordingFileError(path, f"non-uniform time in clock channel {name!r} at sample {k}: t = "
-                                       f"{float(t[k] - t[0])!r} s after the first, expected {k / fs!r} s on the "
-                                       f"uniform grid (fs = {fs!r} Hz, tolerance {tol * fs:.3g} sample): a dropped, "
-                                       f"repeated or shifted sample")
-    if quantum >= 1.0 / fs:
-        warnings.warn(FormatWarning(f"{path}: clock channel {name!r} resolves {quantum:.3g} s, too coarse for "
-                                    f"1/fs = {1.0 / fs:.4g} s: a dropped sample cannot be seen in it"), stacklevel=5)
-    return fs, t0, start
 
 
 def _timing(path: Path, names: list, usable: list, fs_opt) -> tuple[float, float, str | None]:

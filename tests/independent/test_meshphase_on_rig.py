@@ -137,6 +137,18 @@ def max_phasing_difference(a, b) -> float:
     return worst
 
 
+def differs_from_the_tdms(files: Path, truth: R.RigTruth, path: Path, fs_hz: float | None = None) -> float:
+    """:func:`max_phasing_difference` of the ``ripple1_carrier`` recording written again as
+    ``path`` (another format or layout; the scene gives ``[input] fs_Hz`` when ``fs_hz``)
+    from the rig's own TDMS file."""
+    text = scene_text(truth, path)
+    if fs_hz is not None:
+        text = text.replace("[input]\n", f"[input]\nfs_Hz = {fs_hz!r}\n")
+    ctx = run_scene(parse_scene(text, path.with_suffix(".toml")))
+    base, _ = run(files, "ripple1_carrier")
+    return max_phasing_difference(base, ctx)
+
+
 def allowance(n: int, n_planets: int, p: float = 0.999) -> float:
     """How far the RMS of ``n`` per-pass errors may exceed their expected RMS by chance at
     level ``p`` [-]: sqrt(chi2_p(nu) / nu). A turn's N - 1 passes share the planet-1 pulse
@@ -381,9 +393,24 @@ def test_a_tdms_file_without_waveform_timing_gives_the_same_phasing(files, tmp_p
     plain = tmp_path / "plain.tdms"
     with TdmsWriter(str(plain)) as w:
         w.write_segment(objs)
-    text = scene_text(truth, plain)
-    if timing == "scene fs_Hz":
-        text = text.replace("[input]\n", f"[input]\nfs_Hz = {rec.fs!r}\n")
-    ctx = run_scene(parse_scene(text, tmp_path / "plain.toml"))
-    base, _ = run(files, "ripple1_carrier")
-    assert max_phasing_difference(base, ctx) < 1e-9
+    assert differs_from_the_tdms(files, truth, plain, rec.fs if timing == "scene fs_Hz" else None) < 1e-9
+
+
+@pytest.mark.parametrize("rate", ["attribute", "scene fs_Hz"])
+def test_an_hdf5_file_of_another_tool_gives_the_same_phasing(files, tmp_path, rate):
+    # an h5py script's file: one dataset per channel under a group, the rate as an
+    # attribute (or nowhere: the scene gives it); it was 'not a meshphase recording'
+    import h5py
+
+    import meshphase.io as pio
+
+    p, truth = make(files, "ripple1_carrier")
+    rec = pio.read(p)
+    other = tmp_path / "script.h5"
+    with h5py.File(other, "w") as f:
+        g = f.create_group("daq")
+        if rate == "attribute":
+            g.attrs["sample_rate"] = rec.fs
+        for j, c in enumerate(rec.channels):
+            g[c.name] = rec.data[:, j]
+    assert differs_from_the_tdms(files, truth, other, rec.fs if rate == "scene fs_Hz" else None) < 1e-9

@@ -350,12 +350,63 @@ def test_malformed_headers_raise(tmp_path, recording, edit, match):
         hdf5.read(path)
 
 
-def test_foreign_hdf5_file_is_refused_clearly(tmp_path):
+def test_foreign_hdf5_file_without_a_rate_says_how_to_give_it(tmp_path):
     path = tmp_path / "foreign.h5"
     with h5py.File(path, "w") as f:
         f["data"] = np.arange(10.0)
-    with pytest.raises(RecordingFileError, match="foreign.h5: an HDF5 file but not a meshphase recording"):
+    with pytest.raises(RecordingFileError, match=r"foreign.h5: an HDF5 file of another tool with no sample "
+                                                 r"rate: .*\[input\] fs_Hz in a scene"):
         pio.read(path)
+    rec = pio.read(path, fs=100.0)
+    assert rec.fs == 100.0 and rec.names == ["data"] and np.array_equal(rec.data[:, 0], np.arange(10.0))
+    with h5py.File(tmp_path / "empty.h5", "w") as f:
+        f["text"] = "no samples"
+    with pytest.raises(RecordingFileError, match="not a meshphase recording .* no 1-D numeric dataset"):
+        pio.read(tmp_path / "empty.h5")
+
+
+def _foreign(path, layout):
+    """An HDF5 file as other tools write one; the samples of its channels by name."""
+    rng = np.random.default_rng(5)
+    x, y = rng.normal(size=10240), rng.normal(size=10240)
+    with h5py.File(path, "w") as f:
+        if layout == "rate attribute":                  # one dataset per channel, rate on each
+            for n, v in (("sun", x), ("ring", y)):
+                f[n] = v
+                f[n].attrs["sample_rate"] = 5120.0
+                f[n].attrs["units"] = "m/m"
+        elif layout == "interval on the group":         # a group with dt, mixed dtypes, a stray
+            g = f.create_group("Rig")
+            g.attrs["dt"] = 1 / 5120.0
+            g["SG_sun_T3"] = x.astype(np.float32)
+            g["SG_ring_T1"] = (y * 1000).astype(np.int16)
+            f["calibration"] = [1.0, 2.0, 3.0]
+            return {"SG_sun_T3": x.astype(np.float32), "SG_ring_T1": (y * 1000).astype(np.int16)}
+        else:                                           # a clock dataset
+            f["time"] = 100.0 + np.arange(10240) / 5120.0
+            f["sun"], f["ring"] = x, y
+    return {"sun": x, "ring": y}
+
+
+@pytest.mark.parametrize("layout, t0", [("rate attribute", 0.0), ("interval on the group", 0.0),
+                                        ("clock dataset", 100.0)])
+def test_hdf5_files_of_other_tools_read(tmp_path, layout, t0):
+    # it was 'an HDF5 file but not a meshphase recording' whatever it held: now its 1-D
+    # numeric datasets of one length are the channels, the rate from an attribute or a clock
+    path = tmp_path / "other.h5"
+    want = _foreign(path, layout)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        rec = pio.read(path)
+    assert rec.fs == 5120.0 and rec.t0 == pytest.approx(t0) and sorted(rec.names) == sorted(want)
+    for n, v in want.items():
+        np.testing.assert_array_equal(rec.channel(n), v.astype(np.float64))
+    assert [str(w.message) for w in caught if "skipped dataset" in str(w.message)] == (
+        [f"{path}: skipped dataset(s) ['/calibration']: shorter than the channels (10240 samples)"]
+        if layout == "interval on the group" else [])
+    blocks = list(pio.iter_blocks(path, 0.5, 0.01))
+    np.testing.assert_array_equal(np.concatenate([b.data[:2560] for b in blocks]), rec.data)
+    assert rec.history[-1]["layout"] == "other tool"
 
 
 def test_write_bad_input(tmp_path, recording):
