@@ -155,6 +155,36 @@ def _separator(header: str) -> str:
     return best if counts[best] else ","
 
 
+def _units_row(fh, header: str) -> list[str] | None:
+    """The units of a plain CSV whose header line is followed by a line of units (``s,m/m,V``,
+    as DIAdem and catman exports write): the fields of that line when it has the header's
+    field count and none of them is a number or a timestamp (``fh`` then after it), else
+    None (``fh`` where it was)."""
+    at = fh.tell()
+    raw = fh.readline()
+    sep = _separator(header)
+    try:
+        line = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        line = raw.decode("latin-1")
+    line = line.rstrip("\r\n")
+    fields = [f.strip().strip('"').strip("[]").strip() for f in line.split(sep)]
+    n_header = len(next(_csv.reader([header], delimiter=sep)))
+
+    def numeric(f: str) -> bool:
+        try:
+            float(f.replace(",", "."))
+            return True
+        except ValueError:
+            return False
+
+    if (not raw.endswith(b"\n") or len(fields) != n_header or not line.strip()
+            or any(numeric(f) for f in fields if f) or _stamp(fields[0]) is not None):
+        fh.seek(at)
+        return None
+    return fields
+
+
 def _time_token(line: str, sep: str) -> str:
     return line.split(sep, 1)[0].strip().strip('"')
 
@@ -279,6 +309,10 @@ def _read_head(path) -> _Head:
             header = line
             break
         data_offset = fh.tell()
+        units_row = _units_row(fh, header) if preamble is None else None
+        if units_row is not None:
+            n_head += 1
+            data_offset = fh.tell()
         sep, decimal, quantum, epoch = _dialect(path, fh, header, preamble)
         fh.seek(max(0, size - 1))
         ends_with_newline = fh.read(1) == b"\n"
@@ -288,6 +322,9 @@ def _read_head(path) -> _Head:
     if len(fields) < 2 and not (preamble is not None and preamble.get("channels") == []):
         raise RecordingFileError(path, f"line {n_head}: header {header[:80]!r} has no channel columns "
                                        f"(expected 'time [s],<name> [<units>],...')")
+    if units_row is not None:          # 'time,sun,ring' then 's,m/m,m/m'
+        fields = [f if _split_field(f)[1] is not None or not u else _header_field(f.strip(), u)
+                  for f, u in zip(fields, units_row)]
     tname, tunits = _split_field(fields[0])
     if epoch is not None:
         if tname.lower() not in _TIME_NAMES + _STAMP_NAMES or (tunits or "").lower() not in _STAMP_UNITS:

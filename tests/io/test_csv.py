@@ -564,3 +564,24 @@ def test_iso_timestamps_under_another_header_are_refused_with_the_reason(tmp_pat
     with pytest.raises(RecordingFileError, match=r"first column holds timestamps \(2026-11-28T10:00:00\); "
                                                  r"it must be headed 'time', 'timestamp'"):
         pio.read(_plain(tmp_path / "h.csv", text))
+
+
+def test_a_units_line_under_the_header_gives_the_units(tmp_path):
+    # DIAdem and catman exports put the units on a line of their own under the names
+    t = np.arange(3000) / 5120.0
+    x = np.sin(50.0 * t) * 1e-5
+    text = "Time;SG_sun;SG_ring\ns;m/m;m/m\n" + "".join(
+        f"{a:.6f};{b:.6e};{-b:.6e}\n".replace(".", ",") for a, b in zip(t, x))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")               # units given: no 'carry no [units]' warning
+        rec = pio.read(_plain(tmp_path / "u.csv", text))
+    assert rec.fs == 5120.0 and rec.names == ["SG_sun", "SG_ring"]
+    assert [c.units for c in rec.channels] == ["m/m", "m/m"]
+    assert np.max(np.abs(rec.data - np.c_[x, -x])) <= 5e-12
+    # the time in ms by its units line; a [units] in the header stands; an empty one is empty
+    text = "time,sun [V],ring\nms,,mV\n" + "".join(f"{a * 1e3:.4f},{b:.6e},{b:.6e}\n" for a, b in zip(t, x))
+    rec = pio.read(_plain(tmp_path / "u2.csv", text))
+    assert rec.fs == 5120.0 and [c.units for c in rec.channels] == ["V", "mV"]
+    # a second line that holds a number is data, as before
+    rec = pio.read(_plain(tmp_path / "d.csv", "time [s],a [V]\n0,1\n0.5,2\n1.0,3\n"))
+    assert rec.n_samples == 3 and rec.fs == 2.0
