@@ -83,6 +83,7 @@ from .validate import as_signal, as_choice, as_float, as_nonnegative, as_positiv
 __all__ = [
     "ChannelQuality", "HumReport", "Conditioned",
     "default_band", "design_filter", "design_notch", "filter_signal", "remove_drift", "drift_baseline",
+    "level_steps", "STEP_SPREADS",
     "detect_hum", "notch_hum", "assess_quality", "estimate_noise", "estimate_snr",
     "filter_recording", "remove_drift_recording", "notch_hum_recording",
     "assess_quality_recording", "condition_recording", "merge_runs", "gap_intervals",
@@ -503,6 +504,105 @@ def drift_baseline(x, fs: float, *, method: str = "median", window: float | None
     if base.size == 1:
         return np.full(n, base[0])
     return np.interp(np.arange(n, dtype=np.float64), centres, base)
+
+
+#: a block-to-block change of the drift baseline this many robust spreads beyond the local
+#: trend of its neighbours is a level step [-]
+STEP_SPREADS = 10.0
+
+
+def level_steps(values, centres, fs: float, *, t0: float = 0.0, min_size: float = 0.0) -> np.ndarray:
+    """Level steps of a channel's baseline: jumps between consecutive drift-baseline blocks
+    (:func:`drift_baseline`'s block means or medians) that its slow drift does not make.
+
+    A bridge re-zeroed, an amplifier range switched or a cable knocked moves the baseline
+    within a few samples; the drift baseline then ramps across the block holding the jump
+    (its values are interpolated between block centres), and the pulses of that stretch sit
+    on a slope: they are timed off or lost (independent rig, a step of twice the pulse height
+    mid-record: the passes within one relative revolution of it). Thermal drift changes the
+    block values smoothly: a step is a change ``d_k`` between blocks that the trend of the
+    changes 3 to 5 blocks either side (their median) does not explain, beyond
+    :data:`STEP_SPREADS` robust spreads of those residuals and beyond ``min_size``, and that
+    stays (the median level of the 5 blocks after it less that of the 5 before, drift
+    aside, keeps half of it: a block that caught a pulse goes up and down, a spike); a step
+    inside a block splits over two consecutive changes, taken as one.
+
+    Parameters
+    ----------
+    values : array_like, shape (m,)
+        Block values [data units]; NaN where a block had no sample.
+    centres : array_like, shape (m,)
+        Their centres [samples].
+    fs : float
+        Sample rate [Hz].
+    t0 : float
+        Time of sample 0 [s].
+    min_size : float
+        Smallest step reported [data units] (e.g. a few times the per-sample noise RMS).
+
+    Returns
+    -------
+    ndarray, shape (k, 2)
+        Per step its time [s] (between the two blocks, or the centre of the block it fell
+        in) and its size [data units] (the change less its neighbours' trend), in time order;
+        empty with fewer than 7 finite blocks (blocks without a sample are interpolated).
+    """
+    v = np.asarray(values, dtype=np.float64).ravel()
+    c = np.asarray(centres, dtype=np.float64).ravel()
+    if v.shape != c.shape:
+        raise ValueError(f"values and centres must have one shape, got {v.shape} and {c.shape}")
+    fs = as_positive(fs, "fs")
+    ok = np.isfinite(v)
+    if np.count_nonzero(ok) < 7 or not np.all(np.isfinite(c)):
+        return np.empty((0, 2))
+    if not ok.all():                                    # blocks without a sample: interpolated
+        v = np.interp(c, c[ok], v[ok])
+    e = _step_residuals(v)
+    spread = 1.4826 * float(np.median(np.abs(e - np.median(e))))
+    thr = max(STEP_SPREADS * spread, float(min_size), 0.0)
+    out = []
+    v = v.copy()
+    spike = np.zeros(e.size, dtype=bool)
+    for _ in range(v.size):
+        # the largest first, taken out of the values before the next is looked for: the
+        # trend of a change next to a large step would otherwise carry a little of it
+        j = int(np.argmax(np.where(spike, 0.0, np.abs(e))))
+        if not abs(e[j]) > thr or spike[j]:
+            break
+        pair = [k for k in (j - 1, j + 1)
+                if 0 <= k < e.size and abs(e[k]) > thr and np.sign(e[k]) == np.sign(e[j]) and not spike[k]]
+        k = max(pair, key=lambda i: abs(e[i])) if pair else j
+        a, b = min(j, k), max(j, k)                       # a pair: inside block b
+        size = e[a] + (e[b] if b != a else 0.0)
+        # a step stays: the level after it is the level before it plus the step, drift
+        # aside (a block that caught a pulse goes up and down again: a spike, not a step)
+        dv = np.diff(v)
+        lo, hi = max(0, a - 5), min(dv.size, b + 6)
+        local = np.concatenate([dv[lo:a], dv[b + 1:hi]])          # the drift's trend there
+        u = v - (float(np.median(local)) if local.size else 0.0) * np.arange(v.size)
+        kept = float(np.median(u[b + 1:b + 6])) - float(np.median(u[max(0, a - 4):a + 1]))
+        if not (np.sign(kept) == np.sign(size) and abs(kept) > 0.5 * abs(size)):
+            spike[a:b + 1] = True
+            continue
+        t = c[b] if b != a else 0.5 * (c[a] + c[a + 1])
+        v[a + 1:] -= e[a]
+        if b != a:
+            v[b + 1:] -= e[b]
+        if abs(size) > min_size:
+            out.append((t0 + t / fs, size))
+        e = _step_residuals(v)
+    out.sort()
+    return np.array(out, dtype=np.float64).reshape(-1, 2)
+
+
+def _step_residuals(v: np.ndarray) -> np.ndarray:
+    """Each change between consecutive block values less the trend of the changes 3 to 5
+    blocks either side (their median: a step among them, or the two parts of one that fell
+    inside a block, does not move it; a quadratic drift's changes are linear, and the median
+    of a symmetric set is the middle)."""
+    d = np.diff(v)
+    p = np.pad(d, 5, mode="reflect", reflect_type="odd")
+    return d - np.median(np.stack([p[5 + o:5 + o + d.size] for o in (-5, -4, -3, 3, 4, 5)]), axis=0)
 
 
 def _drift_window(window, mesh_freq) -> float:

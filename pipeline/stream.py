@@ -76,7 +76,7 @@ from . import iir
 from .condition import (_apply_finite, _block_means, _block_medians, _check_freq, _drift_window,
                         _noise_from_diffs, _resolve_band, _settle_time, _short_segments_message,
                         _short_signal_message, _snr_combine, _snr_peak, _warn_quality, default_band,
-                        design_filter, design_notch, detect_hum, finite_apply_gaps)
+                        design_filter, design_notch, detect_hum, finite_apply_gaps, level_steps)
 from .errors import DataQualityWarning
 from .quality import ChannelQuality, ChannelScan, _RunTracker, merge_runs, quality_from_scan
 from .recording import ChannelSpec, Recording
@@ -1031,6 +1031,7 @@ class _Drift:
             self.global_mean = self.nb < 17
         self.acc: list[np.ndarray] = []
         self.acc_n = 0
+        self.trace: list[tuple[np.ndarray, np.ndarray]] = []   # every block's (values, centres)
         self.j_next = 0                         # next block whose value is computed
         # filled block values and centres of blocks [f0, f0 + len(fv))
         self.f0 = 0
@@ -1071,6 +1072,7 @@ class _Drift:
                 seg = np.where(np.isfinite(seg), seg, np.nan)
         vals, cents = (_block_means if self.means else _block_medians)(seg, self.b)
         cents = cents + self.j_next * self.b
+        self.trace.append((vals, cents))        # one value per block: level steps afterwards
         rest = x[m:]
         self.acc = [rest] if rest.size else []
         self.acc_n = rest.size
@@ -1159,6 +1161,14 @@ class _Drift:
         drop = max(0, keep - self.f0)
         if drop:
             self.fv, self.fc, self.f0 = self.fv[drop:], self.fc[drop:], self.f0 + drop
+
+    def steps(self, fs: float, t0: float, min_size: float) -> np.ndarray:
+        """:func:`meshphase.condition.level_steps` of the blocks seen: (time [s], size) rows."""
+        if not self.trace:
+            return np.empty((0, 2))
+        v = np.concatenate([a for a, _ in self.trace])
+        c = np.concatenate([b for _, b in self.trace])
+        return level_steps(v, c, fs, t0=t0, min_size=min_size)
 
     # -------------------------------------------------------------- samples
     def push(self, x: np.ndarray) -> np.ndarray:
@@ -1524,6 +1534,7 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
             warnings.warn(msg, DataQualityWarning, stacklevel=2)
         for p in plans:
             _warn_quality(quality[p.name], 6.0)
+            _warn_steps(p.name, chains[p.name].drift, quality[p.name], fs, h.t0, h.spec(p.name).units)
     names = [p.name for p in plans]
     rec = _stream_history(h, quality, names, hum=hum, drift=drift, n_blocks=run.n_blocks)
     specs = [h.spec(nm) for nm in names]
@@ -1749,6 +1760,32 @@ class _Pass3:
             if p.name in self.onsets:
                 out_on[p.name] = self._timed_onsets(self.onsets[p.name].finish)
         return out_on
+
+
+#: a level step smaller than this many per-sample noise RMS, or than this share of the pulse
+#: height, is not reported [-]: whole-period block means wobble by a few per cent of the pulse
+#: height under a speed ramp (the periods no longer whole), which moves no pulse's timing
+STEP_NOISE_RMS = 5.0
+STEP_PULSE_SHARE = 0.25
+
+
+def _warn_steps(name: str, drift, q, fs: float, t0: float, units: str) -> None:
+    """A DataQualityWarning naming the level steps of a channel's baseline
+    (:meth:`_Drift.steps`), with the stretch whose passes they may have moved."""
+    if not isinstance(drift, _Drift) or not math.isfinite(q.noise_rms):
+        return
+    peak = q.signal_peak if math.isfinite(q.signal_peak) and q.signal_peak > 0 else float("nan")
+    floor = STEP_NOISE_RMS * q.noise_rms
+    st = drift.steps(fs, t0, max(floor, STEP_PULSE_SHARE * peak) if peak == peak else floor)
+    if not len(st):
+        return
+    what = ", ".join(f"{s:+.3g} {units}".rstrip() + (f" ({abs(s) / peak:.2g}x the pulse height)" if peak == peak
+                                                   else "") + f" near t = {t:.1f} s" for t, s in st[:5])
+    more = f" and {len(st) - 5} more" if len(st) > 5 else ""
+    warnings.warn(f"channel {name!r}: the baseline steps by {what}{more} (a bridge re-zeroed, a range "
+                  f"switched, a cable knocked): the pulses within {drift.b / fs:.1f} s of a step sit on "
+                  "the drift baseline's ramp across it and may be mis-timed or lost", DataQualityWarning,
+                  stacklevel=3)
 
 
 def _stream_history(h: StreamedRecording, quality: dict, names: list, *, hum: bool,

@@ -304,12 +304,9 @@ def test_swapped_gauge_channels_are_named(files, tmp_path):
     assert not [m for m in ok.messages if "swapped" in m or "passes come" in m]
 
 
-def test_level_step_in_the_first_minute_does_not_inflate_the_floor(files, tmp_path):
-    # a bridge's level step of twice the pulse height at 20 s on the sun gauge: conditioning
-    # leaves a decaying transient, which the noise spectrum (from the first minute) took for
-    # noise: the sun's timing floor was 13x what its passes scattered (3.8e-2 cycles against
-    # 2.9e-3), with no warning, and the reliability check then measures scatter against a
-    # floor that large. The windows with the transient are now left out, and named
+def _sun_stepped(files: Path, tmp_path: Path, at: float):
+    """(run, truth, sun channel) of ``ripple1_carrier`` with the sun gauge's level stepped by
+    twice its pulse height at ``at`` [s]."""
     import meshphase.io as mio
     from meshphase.recording import Recording
 
@@ -318,12 +315,34 @@ def test_level_step_in_the_first_minute_does_not_inflate_the_floor(files, tmp_pa
     sun = next(c["name"] for c in truth.channels if c["kind"] == "sun")
     d = np.array(rec.data, dtype=float)
     i = rec.names.index(sun)
-    d[int(20.0 * rec.fs):, i] += 2.0 * np.percentile(np.abs(d[:, i]), 99.9)
-    stepped = tmp_path / "step.h5"
+    d[int(at * rec.fs):, i] += 2.0 * np.percentile(np.abs(d[:, i]), 99.9)
+    stepped = tmp_path / f"step{at:g}.h5"
     mio.write(Recording(d, rec.fs, rec.channels, t0=rec.t0, start_datetime=rec.start_datetime,
                         meta=rec.meta), stepped)
     text = scene_text(truth, p).replace(str(p), str(stepped))
-    ctx = run_scene(parse_scene(text, tmp_path / "step.toml"))
+    return run_scene(parse_scene(text, stepped.with_suffix(".toml"))), truth, sun
+
+
+def test_level_step_mid_record_is_named(files, tmp_path):
+    # the same step at 90 s, after the noise spectrum's minute: the drift baseline ramps
+    # across the 4.2-s block that holds it, a few pulses there are lost or timed off, and
+    # the sun gauge was flagged 'not reliable' with nothing to say why; the step is named
+    ctx, _, sun = _sun_stepped(files, tmp_path, 90.0)
+    said = [m for m in ctx.messages if "the baseline steps by" in m and sun in m]
+    assert len(said) == 1
+    t = float(said[0].split("near t = ")[1].split(" s")[0])
+    assert abs(t - 90.0) < 4.3                          # within the block that holds it
+    base, _ = run(files, "ripple1_carrier")
+    assert not [m for m in base.messages if "baseline steps" in m]
+
+
+def test_level_step_in_the_first_minute_does_not_inflate_the_floor(files, tmp_path):
+    # a bridge's level step of twice the pulse height at 20 s on the sun gauge: conditioning
+    # leaves a decaying transient, which the noise spectrum (from the first minute) took for
+    # noise: the sun's timing floor was 13x what its passes scattered (3.8e-2 cycles against
+    # 2.9e-3), with no warning, and the reliability check then measures scatter against a
+    # floor that large. The windows with the transient are now left out, and named
+    ctx, truth, sun = _sun_stepped(files, tmp_path, 20.0)
     base, _ = run(files, "ripple1_carrier")
     e, e0 = per_pass_errors(ctx, truth, "sun"), per_pass_errors(base, truth, "sun")
     assert e["floor"] < 1.3 * e0["floor"]               # 13x before

@@ -16,7 +16,7 @@ from scipy.signal import find_peaks
 
 from meshphase.condition import (ChannelQuality, Conditioned, HumReport, assess_quality,
                                 assess_quality_recording, condition_recording, default_band,
-                                design_filter, detect_hum, drift_baseline, estimate_noise,
+                                design_filter, detect_hum, drift_baseline, estimate_noise, level_steps,
                                 estimate_snr, filter_recording, filter_signal, gap_intervals,
                                 merge_runs, notch_hum, notch_hum_recording, remove_drift,
                                 remove_drift_recording)
@@ -780,3 +780,68 @@ def test_quality_from_scan_empty_bare_and_bad():
         quality_from_scan({"n": 0})
     with pytest.raises(ValueError, match="which"):
         ChannelQuality("g", 10.0, 0.0, 0, *(np.empty((0, 2), np.int64),) * 3).runs_time("holes")
+
+
+# ---------------------------------------------------------------------------- level steps
+def _blocks(m=40, step_at=None, size=0.0, frac=1.0, seed=0, sigma=1e-3):
+    """Block values of a drifting baseline (exponential warm-up plus a slow linear trend,
+    noise ``sigma``), a step of ``size`` inside block ``step_at`` (``frac`` of it after the
+    step's sample), centres 1000 samples apart."""
+    rng = np.random.default_rng(seed)
+    c = 500.0 + 1000.0 * np.arange(m)
+    v = 0.5 * (1 - np.exp(-c / 8000.0)) + 2e-6 * c + rng.normal(0.0, sigma, m)
+    if step_at is not None:
+        v[step_at] += size * frac
+        v[step_at + 1:] += size
+    return v, c
+
+
+def test_level_steps_finds_a_step_and_not_the_drift():
+    v, c = _blocks()
+    assert level_steps(v, c, 1000.0, min_size=0.0).shape == (0, 2)      # warm-up, trend, noise
+    v, c = _blocks(step_at=20, size=0.2)                               # between blocks 19 and 20
+    st = level_steps(v, c, 1000.0, t0=10.0)
+    assert st.shape == (1, 2) and st[0, 0] == pytest.approx(10.0 + 0.5 * (c[19] + c[20]) / 1000.0)
+    assert st[0, 1] == pytest.approx(0.2, abs=1e-2)
+    v, c = _blocks(step_at=20, size=-0.2, frac=0.4)                    # inside block 20
+    st = level_steps(v, c, 1000.0)
+    assert st.shape == (1, 2) and st[0, 0] == pytest.approx(c[20] / 1000.0)
+    assert st[0, 1] == pytest.approx(-0.2, abs=1e-2)
+    assert level_steps(v, c, 1000.0, min_size=0.5).shape == (0, 2)      # smaller than asked for
+
+
+def test_level_steps_empty_few_and_bad_input():
+    assert level_steps([], [], 100.0).shape == (0, 2)
+    assert level_steps([1.0, 2.0, 9.0], [0.0, 1.0, 2.0], 100.0).shape == (0, 2)   # < 7 blocks
+    v, c = _blocks(step_at=20, size=0.2)
+    v[[3, 30]] = np.nan                                                # blocks with no sample
+    assert level_steps(v, c, 1000.0).shape == (1, 2)
+    with pytest.raises(ValueError, match="one shape"):
+        level_steps([1.0, 2.0], [1.0], 100.0)
+    with pytest.raises(ValueError):
+        level_steps(v, c, 0.0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(a=st.floats(-1.0, 1.0), b=st.floats(-1e-4, 1e-4), q=st.floats(-1e-9, 1e-9),
+       k=st.integers(5, 34), size=st.floats(0.05, 1.0), sign=st.sampled_from([-1.0, 1.0]),
+       frac=st.floats(0.0, 1.0), seed=st.integers(0, 10_000))
+def test_level_steps_property(a, b, q, k, size, sign, frac, seed):
+    """Any quadratic drift with noise 1e-3 is not a step, nor is one block up and back (a
+    block that caught a pulse); a step 50x the noise or more is found once, at the blocks it
+    fell between or in, with its size to the noise of a few blocks (a split whose smaller
+    part is under the threshold is found by its larger part)."""
+    rng = np.random.default_rng(seed)
+    c = 500.0 + 1000.0 * np.arange(40)
+    v = a + b * c + q * c ** 2 + rng.normal(0.0, 1e-3, c.size)
+    assert level_steps(v, c, 1000.0).shape == (0, 2)
+    w = v.copy()
+    w[k] += sign * size * frac
+    w[k + 1:] += sign * size
+    st_ = level_steps(w, c, 1000.0)
+    assert st_.shape == (1, 2)
+    assert c[k - 1] / 1000.0 <= st_[0, 0] <= c[k + 1] / 1000.0
+    assert np.sign(st_[0, 1]) == sign and abs(st_[0, 1]) <= size + 0.01
+    spike = v.copy()
+    spike[k] += sign * size
+    assert level_steps(spike, c, 1000.0).shape == (0, 2)
