@@ -19,7 +19,8 @@ Channel names are stored in the ``name`` attribute; the dataset name is the chan
 ``%`` and ``/`` percent-encoded (and a name ``.`` written ``%2E``) so any Unicode name works.
 
 A file written by another tool (no ``meshphase_format`` root attribute) is read as it is
-laid out: its 1-D numeric datasets of the longest length are the channels, the rate from
+laid out: its 1-D numeric datasets (and the columns of a 2-D one of a few channels) of the
+longest length are the channels, the rate from
 ``fs=``, a clock dataset or a rate / interval attribute (:func:`_foreign_header`;
 ``data_schemas/hdf5_layout.md``, "HDF5 files written by other tools").
 
@@ -213,8 +214,9 @@ def _header(f, path, fs_opt=None) -> tuple[dict, list, list]:
                 _HEADER_CACHE[key] = hit
                 while len(_HEADER_CACHE) > _HEADER_CACHE_SIZE:
                     _HEADER_CACHE.popitem(last=False)
-            attrs, specs, paths = hit
-            return copy.deepcopy(attrs), list(specs), [f[p] for p in paths]
+            attrs, specs, where = hit
+            return (copy.deepcopy(attrs), list(specs),
+                    [f[p] if col is None else _Column(f[p], col, axis) for p, col, axis in where])
         attrs, specs, dsets = _header_checked(f, path)
         if fs_opt is not None and abs(float(fs_opt) - attrs["fs"]) > 1e-9 * attrs["fs"]:
             warnings.warn(FormatWarning(f"{path}: fs={fs_opt!r} Hz given overrides the file's {attrs['fs']!r} Hz"),
@@ -266,36 +268,89 @@ def _stated_rate(objs, path, where: str) -> float | None:
     return None
 
 
+#: attributes (any case) of a 2-D dataset naming its channels
+_NAMES_ATTRS = ("channels", "channel_names", "names", "columns", "labels")
+#: a 2-D dataset with at most this many rows or columns holds that many channels
+MAX_COLUMNS = 64
+
+
+class _Column:
+    """One channel of a 2-D dataset (samples along ``axis``), read like a 1-D dataset: through
+    h5py's selection, never the raw-chunk path (``chunks`` None)."""
+
+    chunks = None
+    fletcher32 = False
+
+    def __init__(self, ds, col: int, axis: int):
+        self.ds, self.col, self.axis = ds, int(col), int(axis)
+        self.name = f"{ds.name}[{col}]"
+        self.dtype, self.attrs, self.parent = ds.dtype, ds.attrs, ds.parent
+        self.shape = (ds.shape[axis],)
+        self.compression = ds.compression
+
+    def _sel(self, source):
+        return (source, self.col) if self.axis == 0 else (self.col, source)
+
+    def read_direct(self, dest, source=np.s_[:]):
+        self.ds.read_direct(dest, self._sel(source))
+
+    def __getitem__(self, key):
+        return self.ds[self._sel(np.s_[:] if key == () else key)]
+
+
+def _column_names(ds, k: int, base: str) -> list[str]:
+    """Names of a 2-D dataset's ``k`` channels: a names attribute (:data:`_NAMES_ATTRS`) of
+    ``k`` strings, else ``<base>_<i>``."""
+    low = {str(a).lower(): a for a in ds.attrs.keys()}
+    for a in _NAMES_ATTRS:
+        if a in low:
+            v = _plain(ds.attrs[low[a]])
+            if isinstance(v, str):
+                v = [t.strip() for t in v.split(",")]
+            if isinstance(v, list) and len(v) == k and all(isinstance(t, str) and t for t in v):
+                return v
+    return [f"{base}_{i}" for i in range(k)]
+
+
 def _foreign_header(f, path, fs_opt) -> tuple[dict, tuple, tuple]:
-    """Header of an HDF5 file another tool wrote: its 1-D numeric datasets of the longest
-    common length are the channels (others skipped with a FormatWarning), named by their
-    link names (full paths where those repeat), kind from the name as for TDMS, units from
-    a ``units`` / ``unit`` attribute. The rate: ``fs_opt``, else a clock dataset
+    """Header of an HDF5 file another tool wrote: its 1-D numeric datasets, and the columns
+    of 2-D ones with at most :data:`MAX_COLUMNS` of them (samples along the longer axis; named
+    by a names attribute, else ``<dataset>_<i>``), of the longest common length are the
+    channels (others skipped with a FormatWarning), named by their link names (full paths
+    where those repeat), kind from the name as for TDMS, units from a ``units`` / ``unit``
+    attribute (a list: one per column). The rate: ``fs_opt``, else a clock dataset or column
     (:data:`CLOCK_NAMES`; not a channel), else a rate or interval attribute on the datasets
     or their groups (:data:`_RATE_ATTRS`, :data:`_INTERVAL_ATTRS`); all stating one must
-    agree. Returns (attrs, specs, dataset paths)."""
+    agree. Returns (attrs, specs, (dataset path, column or None, samples axis) per channel)."""
     import h5py
 
     from ..recording import ChannelSpec
 
-    found = []
+    found = []                                         # (dataset or column, name)
 
     def visit(name, obj):
-        if isinstance(obj, h5py.Dataset) and obj.ndim == 1 and obj.dtype.kind in "biuf" and obj.shape[0] > 0:
-            found.append(obj)
+        if not isinstance(obj, h5py.Dataset) or obj.dtype.kind not in "biuf" or 0 in obj.shape:
+            return
+        base = obj.name.rsplit("/", 1)[-1]
+        if obj.ndim == 1:
+            found.append((obj, base))
+        elif obj.ndim == 2 and min(obj.shape) <= MAX_COLUMNS and obj.shape[0] != obj.shape[1]:
+            axis = int(np.argmax(obj.shape))
+            k = obj.shape[1 - axis]
+            found.extend((_Column(obj, i, axis), nm) for i, nm in enumerate(_column_names(obj, k, base)))
 
     f.visititems(visit)
     if not found:
         raise RecordingFileError(path, "an HDF5 file but not a meshphase recording (root attribute "
                                        "meshphase_format='recording' missing), and it holds no 1-D numeric "
-                                       "dataset to read as channels")
-    n = max(ds.shape[0] for ds in found)
-    skipped = sorted(ds.name for ds in found if ds.shape[0] != n)
+                                       "dataset (nor a 2-D one of a few channels) to read as channels")
+    n = max(ds.shape[0] for ds, _ in found)
+    skipped = sorted({ds.name for ds, _ in found if ds.shape[0] != n})
     if skipped:
         warnings.warn(FormatWarning(f"{path}: skipped dataset(s) {skipped}: shorter than the channels "
                                     f"({n} samples)"), stacklevel=4)
-    chans = [ds for ds in found if ds.shape[0] == n]
-    base = [ds.name.rsplit("/", 1)[-1] for ds in chans]
+    chans = [ds for ds, _ in found if ds.shape[0] == n]
+    base = [nm for ds, nm in found if ds.shape[0] == n]
     clock = None
     if fs_opt is None and len(chans) > 1:
         clock = next((i for i, b in enumerate(base) if b.strip().lower() in CLOCK_NAMES), None)
@@ -327,11 +382,15 @@ def _foreign_header(f, path, fs_opt) -> tuple[dict, tuple, tuple]:
         if max(vals) - min(vals) > 1e-9 * max(vals):
             raise RecordingFileError(path, f"datasets state different sample rates {given}")
         fs = vals[0]
-    names = base if len(set(base)) == len(base) else [ds.name.lstrip("/") for ds in chans]
+    names = base if len(set(base)) == len(base) else [
+        ds.name.lstrip("/") if isinstance(ds, h5py.Dataset) else f"{ds.ds.name.lstrip('/')}/{b}"
+        for ds, b in zip(chans, base)]
     specs = []
     for name, ds in zip(names, chans):
         units = next((_plain(ds.attrs[k]) for k in ds.attrs.keys() if str(k).lower() in ("units", "unit",
                                                                                           "unit_string")), "")
+        if isinstance(units, list) and isinstance(ds, _Column):
+            units = units[ds.col] if ds.col < len(units) else ""
         specs.append(ChannelSpec(name=name, kind=kind_from_name(name.rsplit("/", 1)[-1], ds.parent.name.strip("/")),
                                  units=units if isinstance(units, str) else ""))
     dtypes = {ds.dtype for ds in chans}
@@ -345,7 +404,8 @@ def _foreign_header(f, path, fs_opt) -> tuple[dict, tuple, tuple]:
              "history": [{"step": "read_hdf5", "file": Path(path).name, "layout": "other tool",
                           "datasets": {nm: ds.name for nm, ds in zip(names, chans)},
                           "fs_from": "given" if fs_opt is not None else "clock" if clock is not None else "attribute"}]}
-    return attrs, tuple(specs), tuple(ds.name for ds in chans)
+    return attrs, tuple(specs), tuple((ds.name, None, 0) if isinstance(ds, h5py.Dataset)
+                                      else (ds.ds.name, ds.col, ds.axis) for ds in chans)
 
 
 def _jsonable_attrs(d: dict) -> dict:

@@ -496,3 +496,47 @@ def test_attributes_edited_with_h5py_defaults_still_read(tmp_path, recording):
     back = pio.read(path)
     assert back.meta == {"operator": "K. Lee"}
     assert back.channels[0].units == "V"
+
+
+@pytest.mark.parametrize("layout", ["samples x channels, names and units lists", "channels x samples, float32",
+                                    "clock column, names as one string"])
+def test_hdf5_matrix_datasets_of_other_tools_read(tmp_path, layout):
+    # an h5py script often stores one 2-D array: each column (or row, whichever axis is the
+    # shorter) a channel; names from a names attribute, else data_0, data_1, ...
+    rng = np.random.default_rng(6)
+    x = rng.normal(size=(10240, 3))
+    path = tmp_path / "matrix.h5"
+    with h5py.File(path, "w") as f:
+        if layout.startswith("samples x channels"):
+            d = f.create_dataset("data", data=x)
+            d.attrs["channels"] = ["sun_T3", "ring_T1", "tacho"]
+            d.attrs["units"] = ["m/m", "m/m", "V"]
+            d.attrs["fs"] = 5120.0
+            names, units, t0, want = ["sun_T3", "ring_T1", "tacho"], ["m/m", "m/m", "V"], 0.0, x
+        elif layout.startswith("channels x samples"):
+            f.create_dataset("rig/data", data=x.T.astype(np.float32), chunks=(3, 1024))
+            f["rig"].attrs["sample_rate"] = 5120
+            names, units, t0, want = ["data_0", "data_1", "data_2"], ["", "", ""], 0.0, x.astype(np.float32)
+        else:
+            d = f.create_dataset("log", data=np.c_[5.0 + np.arange(10240) / 5120.0, x])
+            d.attrs["names"] = "Time, sun, ring, tacho"
+            names, units, t0, want = ["sun", "ring", "tacho"], ["", "", ""], 5.0, x
+    rec = pio.read(path)
+    assert rec.fs == 5120.0 and rec.t0 == pytest.approx(t0) and rec.names == names
+    assert [c.units for c in rec.channels] == units and rec.data.dtype == want.dtype
+    np.testing.assert_array_equal(rec.data, want)
+    part = hdf5.read(path, [names[1]], 100, 300)
+    np.testing.assert_array_equal(part.data[:, 0], want[100:300, 1])
+    np.testing.assert_array_equal(hdf5.read(path, verify=False).data, want)
+    blocks = list(pio.iter_blocks(path, 0.5, 0.01))
+    np.testing.assert_array_equal(np.concatenate([b.data[:2560] for b in blocks]), want)
+
+
+def test_hdf5_square_or_wide_matrices_are_not_channels(tmp_path):
+    # a 2-D dataset with more than MAX_COLUMNS on both axes (an image, a spectrogram) or
+    # square is not read as channels
+    with h5py.File(tmp_path / "img.h5", "w") as f:
+        f["image"] = np.zeros((200, 300))
+        f["square"] = np.zeros((3, 3))
+    with pytest.raises(RecordingFileError, match="no 1-D numeric dataset"):
+        pio.read(tmp_path / "img.h5")
