@@ -1031,7 +1031,8 @@ class _Drift:
             self.global_mean = self.nb < 17
         self.acc: list[np.ndarray] = []
         self.acc_n = 0
-        self.trace: list[tuple[np.ndarray, np.ndarray]] = []   # every block's (values, centres)
+        # every block's (values, centres): the global mean's input, and the level steps'
+        self.trace: list[tuple[np.ndarray, np.ndarray]] = []
         self.j_next = 0                         # next block whose value is computed
         # filled block values and centres of blocks [f0, f0 + len(fv))
         self.f0 = 0
@@ -1039,7 +1040,6 @@ class _Drift:
         self.fc = np.empty(0)
         self.wait_c = np.empty(0)               # centres of NaN blocks awaiting a right value
         self.last = None                        # (centre, value) of the last finite block
-        self.all_c: list | None = [] if self.global_mean else None
         # base values and centres of blocks [b0, b0 + len(bv))
         self.b0 = 0
         self.bv = np.empty(0)
@@ -1072,7 +1072,7 @@ class _Drift:
                 seg = np.where(np.isfinite(seg), seg, np.nan)
         vals, cents = (_block_means if self.means else _block_medians)(seg, self.b)
         cents = cents + self.j_next * self.b
-        self.trace.append((vals, cents))        # one value per block: level steps afterwards
+        self.trace.append((vals, cents))
         rest = x[m:]
         self.acc = [rest] if rest.size else []
         self.acc_n = rest.size
@@ -1083,10 +1083,9 @@ class _Drift:
 
     def _fill(self, vals: np.ndarray, cents: np.ndarray, final: bool) -> None:
         ok = np.isfinite(vals)
-        if self.all_c is not None:
-            self.all_c.append((vals, cents))
+        if self.global_mean:
             if final:
-                self._global(final)
+                self._global()
             return
         wait_c = np.concatenate([self.wait_c, cents])
         if ok.any():
@@ -1111,9 +1110,9 @@ class _Drift:
             self._append_filled(np.full(self.wait_c.size, self.last[1]), self.wait_c)
             self.wait_c = np.empty(0)
 
-    def _global(self, final: bool) -> None:
-        vals = np.concatenate([v for v, _ in self.all_c])
-        cents = np.concatenate([c for _, c in self.all_c])
+    def _global(self) -> None:
+        vals = np.concatenate([v for v, _ in self.trace]) if self.trace else np.empty(0)
+        cents = np.concatenate([c for _, c in self.trace]) if self.trace else np.empty(0)
         ok = np.isfinite(vals)
         if not ok.any():
             self.nan_all = True
@@ -1774,13 +1773,16 @@ def _warn_steps(name: str, drift, q, fs: float, t0: float, units: str) -> None:
     (:meth:`_Drift.steps`), with the stretch whose passes they may have moved."""
     if not isinstance(drift, _Drift) or not math.isfinite(q.noise_rms):
         return
-    peak = q.signal_peak if math.isfinite(q.signal_peak) and q.signal_peak > 0 else float("nan")
-    floor = STEP_NOISE_RMS * q.noise_rms
-    st = drift.steps(fs, t0, max(floor, STEP_PULSE_SHARE * peak) if peak == peak else floor)
+    has_peak = math.isfinite(q.signal_peak) and q.signal_peak > 0
+    min_size = STEP_NOISE_RMS * q.noise_rms
+    if has_peak:
+        min_size = max(min_size, STEP_PULSE_SHARE * q.signal_peak)
+    st = drift.steps(fs, t0, min_size)
     if not len(st):
         return
-    what = ", ".join(f"{s:+.3g} {units}".rstrip() + (f" ({abs(s) / peak:.2g}x the pulse height)" if peak == peak
-                                                   else "") + f" near t = {t:.1f} s" for t, s in st[:5])
+    what = ", ".join(f"{s:+.3g} {units}".rstrip()
+                     + (f" ({abs(s) / q.signal_peak:.2g}x the pulse height)" if has_peak else "")
+                     + f" near t = {t:.1f} s" for t, s in st[:5])
     more = f" and {len(st) - 5} more" if len(st) > 5 else ""
     warnings.warn(f"channel {name!r}: the baseline steps by {what}{more} (a bridge re-zeroed, a range "
                   f"switched, a cable knocked): the pulses within {drift.b / fs:.1f} s of a step sit on "

@@ -155,21 +155,19 @@ def _separator(header: str) -> str:
     return best if counts[best] else ","
 
 
-def _units_row(fh, header: str) -> list[str] | None:
+def _units_row(fh, sep: str, n_header: int) -> list[str] | None:
     """The units of a plain CSV whose header line is followed by a line of units (``s,m/m,V``,
     as DIAdem and catman exports write): the fields of that line when it has the header's
-    field count and none of them is a number or a timestamp (``fh`` then after it), else
-    None (``fh`` where it was)."""
+    ``n_header`` fields and none of them is a number or a timestamp (``fh`` then after it),
+    else None (``fh`` where it was)."""
     at = fh.tell()
     raw = fh.readline()
-    sep = _separator(header)
     try:
         line = raw.decode("utf-8")
     except UnicodeDecodeError:
         line = raw.decode("latin-1")
     line = line.rstrip("\r\n")
     fields = [f.strip().strip('"').strip("[]").strip() for f in line.split(sep)]
-    n_header = len(next(_csv.reader([header], delimiter=sep)))
 
     def numeric(f: str) -> bool:
         try:
@@ -224,13 +222,10 @@ def _stamp_seconds(tokens, epoch: str) -> np.ndarray:
     return ((t - t0.iloc[0]).dt.total_seconds()).to_numpy(dtype=np.float64, na_value=np.nan)
 
 
-def _dialect(path, fh, header: str, preamble) -> tuple[str, str, float, str | None]:
-    """(separator, decimal mark, printed time resolution in the time column's units, first
-    row's timestamp when the time column holds ISO 8601 timestamps) of the data rows that
-    follow the header (``fh`` at the first data row; left there)."""
-    if preamble is not None:
-        return ",", ".", 0.0, None
-    sep = _separator(header)
+def _dialect(fh, sep: str) -> tuple[str, float, str | None]:
+    """(decimal mark, printed time resolution in the time column's units, first row's
+    timestamp when the time column holds ISO 8601 timestamps) of a plain CSV's data rows
+    (``fh`` at the first data row; left there)."""
     at = fh.tell()
     rows = []
     for _ in range(_QUANTUM_ROWS):
@@ -251,7 +246,7 @@ def _dialect(path, fh, header: str, preamble) -> tuple[str, str, float, str | No
     quantum = 0.0
     if rows and all(d is not None for d in digits):
         quantum = 10.0 ** -max(digits)
-    return sep, decimal, quantum, epoch
+    return decimal, quantum, epoch
 
 
 def _split_field(text: str) -> tuple[str, str | None]:
@@ -309,16 +304,19 @@ def _read_head(path) -> _Head:
             header = line
             break
         data_offset = fh.tell()
-        units_row = _units_row(fh, header) if preamble is None else None
-        if units_row is not None:
-            n_head += 1
-            data_offset = fh.tell()
-        sep, decimal, quantum, epoch = _dialect(path, fh, header, preamble)
+        sep = "," if preamble is not None else _separator(header)
+        fields = next(_csv.reader([header], delimiter=sep))
+        units_row, decimal, quantum, epoch = None, ".", 0.0, None
+        if preamble is None:
+            units_row = _units_row(fh, sep, len(fields))
+            if units_row is not None:
+                n_head += 1
+                data_offset = fh.tell()
+            decimal, quantum, epoch = _dialect(fh, sep)
         fh.seek(max(0, size - 1))
         ends_with_newline = fh.read(1) == b"\n"
     if encoding != "utf-8":
         warnings.warn(FormatWarning(f"{path}: header is not UTF-8; decoded as latin-1"), stacklevel=3)
-    fields = next(_csv.reader([header], delimiter=sep))
     if len(fields) < 2 and not (preamble is not None and preamble.get("channels") == []):
         raise RecordingFileError(path, f"line {n_head}: header {header[:80]!r} has no channel columns "
                                        f"(expected 'time [s],<name> [<units>],...')")
@@ -443,11 +441,7 @@ def _plain_info(path, head: _Head) -> RecordingInfo:
     start = None
     if head.epoch is not None:
         t_first, start = 0.0, head.epoch
-    if head.time_quantum > 0:
-        k = 1.0 / (fs * head.time_quantum)      # sample interval in printed steps
-        if abs(k - round(k)) <= 1e-6 * max(1.0, k):
-            head.time_quantum = 0.0             # the grid prints exactly in those digits
-    if head.time_quantum >= 1.0 / fs:
+    if _rounding(head, fs) >= 1.0 / fs:
         warnings.warn(FormatWarning(
             f"{path}: the time column is printed to {head.time_quantum:.3g} s, too coarse for the "
             f"sample interval 1/fs = {1.0 / fs:.4g} s: a dropped or repeated sample cannot be seen "
@@ -457,10 +451,22 @@ def _plain_info(path, head: _Head) -> RecordingInfo:
                                 "header_lines": head.n_head, "encoding": head.encoding})
 
 
+def _rounding(head: _Head, fs: float) -> float:
+    """How far the printing may have moved a time [s]: the step the times are printed to
+    (loggers round or truncate), 0 when the sample interval is a whole number of those steps
+    (the grid then prints exactly)."""
+    q = head.time_quantum
+    if q > 0:
+        k = 1.0 / (fs * q)                     # sample interval in printed steps
+        if abs(k - round(k)) <= 1e-6 * max(1.0, k):
+            return 0.0
+    return q
+
+
 def _time_slack(head: _Head, fs: float) -> float:
     """How far a row's time may sit from the grid t0 + i/fs [s]: :data:`TIME_TOLERANCE`
-    sample intervals, plus the step the times are printed to (loggers round or truncate)."""
-    return TIME_TOLERANCE / fs + head.time_quantum
+    sample intervals, plus what printing the times may have moved them (:func:`_rounding`)."""
+    return TIME_TOLERANCE / fs + _rounding(head, fs)
 
 
 def _parse_time(path, line: bytes, lineno: int, head: _Head | None = None) -> float:
@@ -719,7 +725,7 @@ def _check_time(path, head: _Head, info: RecordingInfo, t: np.ndarray, row0: int
     if t.size > 1:
         d = np.diff(t)
         # times printed coarser than a sample interval repeat: they must not go back
-        rising = d >= 0 if head.time_quantum >= 1.0 / info.fs else d > 0
+        rising = d >= 0 if _rounding(head, info.fs) >= 1.0 / info.fs else d > 0
         if not rising.all():
             k = int(np.flatnonzero(~rising)[0]) + 1
             raise RecordingFileError(path, f"non-monotonic time at line {head.n_head + row0 + k + 1} (data row "

@@ -66,9 +66,10 @@ from typing import Any, Iterator
 import numpy as np
 
 from ..errors import FormatWarning
+from ..jsonable import to_jsonable
 from ..log import logger
 from ..recording import Recording
-from ..validate import as_choice, as_int, as_positive_int
+from ..validate import as_choice, as_int, as_positive, as_positive_int
 from .base import (CLOCK_NAMES, CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime,
                    check_verify, clock_timing, dumps_json, kind_from_name, regroup_blocks, spec_from_dict,
                    warn_nonfinite)
@@ -210,10 +211,7 @@ def _header(f, path, fs_opt=None) -> tuple[dict, list, list]:
             key = ("foreign", os.path.realpath(path), st.st_size, st.st_mtime_ns, fs_opt)
             hit = _HEADER_CACHE.get(key)
             if hit is None:       # parsed (and warned about) once per file content
-                hit = _foreign_header(f, path, fs_opt)
-                _HEADER_CACHE[key] = hit
-                while len(_HEADER_CACHE) > _HEADER_CACHE_SIZE:
-                    _HEADER_CACHE.popitem(last=False)
+                hit = _cache_put(key, _foreign_header(f, path, fs_opt))
             attrs, specs, where = hit
             return (copy.deepcopy(attrs), list(specs),
                     [f[p] if col is None else _Column(f[p], col, axis) for p, col, axis in where])
@@ -225,15 +223,21 @@ def _header(f, path, fs_opt=None) -> tuple[dict, list, list]:
         return attrs, specs, dsets
 
 
+def _cache_put(key: tuple, hit: tuple) -> tuple:
+    """``hit`` into the header cache under ``key``, the oldest entries out past its size."""
+    _HEADER_CACHE[key] = hit
+    while len(_HEADER_CACHE) > _HEADER_CACHE_SIZE:
+        _HEADER_CACHE.popitem(last=False)
+    return hit
+
+
 def _header_checked(f, path) -> tuple[dict, list, list]:
     key = _cache_key(f, path)
     hit = _HEADER_CACHE.get(key) if key is not None else None
     if hit is None:
         hit = _parse_header(f, path)
         if key is not None:
-            _HEADER_CACHE[key] = hit
-            while len(_HEADER_CACHE) > _HEADER_CACHE_SIZE:
-                _HEADER_CACHE.popitem(last=False)
+            _cache_put(key, hit)
     else:
         _HEADER_CACHE.move_to_end(key)
     attrs, specs, keys = hit
@@ -409,17 +413,11 @@ def _foreign_header(f, path, fs_opt) -> tuple[dict, tuple, tuple]:
 
 
 def _jsonable_attrs(d: dict) -> dict:
-    """Attributes as JSON-friendly values (arrays as lists, the rest as text)."""
-    out = {}
-    for k, v in d.items():
-        if isinstance(v, np.ndarray):
-            v = v.tolist()
-        try:
-            json.dumps(v)
-        except (TypeError, ValueError):
-            v = str(v)
-        out[k] = v
-    return out
+    """Attributes as strict JSON values (:func:`meshphase.jsonable.to_jsonable`; non-finite
+    numbers as their text, anything it leaves alone (object references) as text)."""
+    out = to_jsonable(d, nonfinite="repr")
+    return {k: v if v is None or isinstance(v, (str, int, float, bool, list, dict)) else str(v)
+            for k, v in out.items()}
 
 
 def _parse_header(f, path) -> tuple[dict, tuple, tuple]:
@@ -526,11 +524,7 @@ def read_info(path, *, fs: float | None = None, verify: bool = True) -> Recordin
 
 
 def _fs_option(fs) -> float | None:
-    if fs is None:
-        return None
-    from ..validate import as_positive
-
-    return as_positive(fs, "fs")
+    return None if fs is None else as_positive(fs, "fs")
 
 
 def _unverified_ok(ds) -> bool:

@@ -233,7 +233,7 @@ def _plan(tdms, path, index, fs_opt, raw: bool) -> _Plan:
     agrees with npTDMS, the computed-offset runs of every channel."""
     path = Path(path)
     n_segments = index.n_segments
-    groups, usable, names, unapplied = _usable_channels(tdms, path, keep_stamps=True)
+    groups, usable, names, unapplied = _usable_channels(tdms, path)
     clock = _clock_channel(path, names, usable) if fs_opt is None else None
     if clock is not None:
         k = names.index(clock)
@@ -272,11 +272,11 @@ def _plan(tdms, path, index, fs_opt, raw: bool) -> _Plan:
     return _Plan(info=info, chans=chans, dtype=dtype, raw=raw, fast=fast)
 
 
-def _usable_channels(tdms, path: Path, keep_stamps: bool = False) -> tuple[list, list, list, set]:
-    """(groups, [(group, channel)] of the numeric channels, their names, the names whose NI
-    scaling npTDMS cannot apply): the plain channel names, or ``group/channel`` where plain
-    names repeat. ``keep_stamps``: channels of timestamps are kept too (a clock channel,
-    :func:`_clock_channel`; :func:`_drop_stamps` drops the others)."""
+def _usable_channels(tdms, path: Path) -> tuple[list, list, list, set]:
+    """(groups, [(group, channel)] of the numeric and timestamp channels, their names, the
+    names whose NI scaling npTDMS cannot apply): the plain channel names, or
+    ``group/channel`` where plain names repeat. Timestamps are kept for the clock
+    (:func:`_clock_channel`); :func:`_drop_stamps` drops the others."""
     groups = tdms.groups()
     found = []
     for g in groups:
@@ -292,7 +292,7 @@ def _usable_channels(tdms, path: Path, keep_stamps: bool = False) -> tuple[list,
             dt = np.dtype("V8")
         if said:
             unapplied.add(ch.path)
-        if ch.data_type is None or dt.kind not in ("biufM" if keep_stamps else "biuf"):
+        if ch.data_type is None or dt.kind not in "biufM":
             warnings.warn(FormatWarning(f"{path}: skipped channel {g.name}/{ch.name}: no numeric data "
                                         f"(type {getattr(ch.data_type, '__name__', ch.data_type)})"), stacklevel=5)
             continue
