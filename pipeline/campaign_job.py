@@ -98,13 +98,12 @@ def task_limits(keys: Sequence, task_timeout: float | None) -> dict[int, float |
 
 
 # ---------------------------------------------------------------------------- the task
-#: scipy.signal is there for the filters: ``process`` alone no longer imports it (its designs are
-#: meshphase.sos_design's) and takes numba's kernel instead, which each worker would then load
-#: for itself; loaded once in the fork server, scipy's filters cost the workers nothing
-#: (meshphase.iir.pick_engine takes them for a recording shorter than NUMBA_SAMPLES)
+#: No scipy.signal, as in ``process``: the filter designs are meshphase.sos_design's and the
+#: filters and onsets take numba's kernels, which :mod:`meshphase.fork_ready` loads in the fork
+#: server (without numba, a task imports scipy's filters itself)
 _STACK = ("distributed", "meshphase.campaign", "meshphase.compare", "meshphase.condition", "meshphase.loads",
           "meshphase.models.mesh_phasing", "meshphase.onsets", "meshphase.phasing", "meshphase.stages",
-          "meshphase.report.campaign_report", "scipy.signal")
+          "meshphase.report.campaign_report")
 #: how long the report's figures may take on the cluster before they are drawn here instead [s]
 FIGURES_TIMEOUT_S = 300.0
 

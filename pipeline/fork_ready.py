@@ -14,8 +14,16 @@ so this module does its work when it is imported:
      use. Here that is the scene schema, on the packaged demo scene, and the HDF5 layout and
      channel schemas, through :func:`meshphase.io.read_info` of a two-channel recording
      written to a temporary folder;
-   - threadpoolctl finds the loaded BLAS libraries (:func:`meshphase.threads.blas_single_thread`
-     keeps the controller).
+   - threadpoolctl finds the loaded BLAS libraries and holds them to one thread for good
+     (:func:`meshphase.threads.hold_blas_single_thread`; it keeps the controller): a forked
+     OpenBLAS starts its thread pool again on the first call, and each worker's first
+     recording started two BLAS threads that took CPU from the other worker's core;
+   - numba's filter and onset kernels (:func:`load_kernels`), loaded from the per-user cache
+     (compiled into it by the first run ever, or ``meshphase bench --warmup``). With numba
+     loaded, a worker's filters and onsets take its kernels, as ``meshphase process`` does
+     (:func:`meshphase.iir.pick_engine`, :func:`meshphase.onsets.fastpath.dense`); without
+     it they took scipy's filters and numpy's onsets, the slower engines (the iir and onset
+     rows of ``meshphase bench processing``), so that no worker loaded numba for itself.
 
 2. It freezes the heap (:func:`gc.freeze`), as the docs of ``gc.freeze`` advise before a
    ``fork()`` without ``exec()``. The objects the imports made (about 190 000) move to the
@@ -23,9 +31,12 @@ so this module does its work when it is imported:
    never write to, and copy, the pages they share with the server.
 
 Measured (``meshphase bench campaign``, its first-figure rows; a forked child draws one
-figure of the combined report twice; medians of 6 children per figure): without the frozen
-heap the child's first figure took 0.13-0.18 s longer than its second, a full collection
-walking every inherited object; with it, 0.02-0.05 s longer (six runs on 2026-11-28).
+figure of the combined report twice; medians of 6 children per figure): while the server
+also imported scipy.signal (until 2026-11-29), the child's first figure took 0.13-0.18 s
+longer than its second without the frozen heap, a full collection walking every inherited
+object, and 0.02-0.05 s with it (six runs on 2026-11-28). Without scipy.signal the bench
+measures 0.02-0.03 s either way: whether a full collection falls into a worker's first
+figure depends on what the server imported; with the heap frozen, it never walks that.
 
 A failure of the first uses (a full temporary disk, say) leaves them to the workers: the
 import itself never fails.
@@ -39,13 +50,12 @@ from __future__ import annotations
 import gc
 import time
 
-__all__ = ["FROZEN_OBJECTS", "FIRST_USE_S", "pay_first_use"]
+__all__ = ["FROZEN_OBJECTS", "FIRST_USE_S", "KERNELS", "pay_first_use", "load_kernels"]
 
 
 def pay_first_use() -> None:
-    """Import matplotlib on Agg, validate the demo scene, read the header of a small
-    recording and hold BLAS to one thread once, in this process (what a worker's first
-    recording and first figure do first)."""
+    """Import matplotlib on Agg, validate the demo scene and read the header of a small
+    recording, in this process (what a worker's first recording and first figure do first)."""
     import tempfile
     import tomllib
     from pathlib import Path
@@ -57,7 +67,6 @@ def pay_first_use() -> None:
     from .recording import Recording
     from .report.campaign_report import pyplot
     from .scene import scene_schema_errors
-    from .threads import blas_single_thread
 
     pyplot()                              # matplotlib on Agg, for the report's figures
     raw = tomllib.loads(DEMO_SCENE)
@@ -66,8 +75,29 @@ def pay_first_use() -> None:
         path = Path(tmp) / "ready.h5"
         write(Recording(np.zeros((64, 2)), 5120.0, ["sun_g1", "ring_g1"]), path)
         read_info(path)
-    with blas_single_thread():
-        pass
+
+
+def load_kernels() -> dict:
+    """Load numba's filter and onset kernels into this process (from the per-user cache;
+    compiled into it when it has none), when numba is importable.
+
+    Returns
+    -------
+    dict
+        ``filters`` and ``onsets``: the engine each now takes ("numba"; "scipy" / "numpy"
+        without numba), and ``seconds`` [s] the loads took.
+
+    Raises
+    ------
+    ValueError, ImportError
+        numba is installed but does not import.
+    """
+    from . import iir
+    from .onsets import fastpath
+
+    t = time.perf_counter()
+    filters, onsets = iir.warmup(check=False)["engine"], fastpath.warmup()["engine"]
+    return {"filters": filters, "onsets": onsets, "seconds": time.perf_counter() - t}
 
 
 _t = time.perf_counter()
@@ -78,6 +108,20 @@ try:
 except Exception:  # noqa: BLE001 - a full temporary disk, say: the workers pay it, and start
     FIRST_USE_S = float("nan")
 del _t
+try:
+    #: What :func:`load_kernels` gave on import; None when it failed (the workers then load
+    #: numba themselves or run without it, as a ``process`` would).
+    KERNELS: dict | None = load_kernels()
+except Exception:  # noqa: BLE001 - a broken numba install, a read-only cache that fails
+    KERNELS = None
+try:
+    # after every import: the limit reaches the BLAS libraries loaded by then (scipy's comes
+    # with the kernels' modules)
+    from .threads import hold_blas_single_thread
+
+    hold_blas_single_thread()
+except Exception:  # noqa: BLE001 - threadpoolctl failing: each run still holds BLAS itself
+    pass
 # no collection first: the server's garbage is a few import-time leftovers, and a collection
 # would walk every object once more (0.09 s) on the way to the campaign's first task
 gc.freeze()

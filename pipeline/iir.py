@@ -260,9 +260,15 @@ def sosfiltfilt_pair(sos_a, xa, sos_b, xb, *, padlen: int) -> tuple[np.ndarray, 
                                 padlen)
 
 
-def warmup() -> dict:
+def warmup(check: bool = True) -> dict:
     """Load numba and the filter kernel (compiled once into the per-user cache), and check
     it against scipy (``meshphase bench --warmup``).
+
+    Parameters
+    ----------
+    check : bool
+        Compare the kernel with scipy.signal (imports it); False: load only (a campaign's
+        fork server, :mod:`meshphase.fork_ready`, whose workers need no scipy.signal).
 
     Returns
     -------
@@ -280,6 +286,8 @@ def warmup() -> dict:
     y = sosfiltfilt(sos, x, padlen=9, engine="numba")
     ya, yb = sosfiltfilt_pair(sos, x, sos, -x, padlen=9)
     seconds = time.perf_counter() - t
+    if not check:
+        return {"engine": "numba", "seconds": seconds}
     from scipy import signal
 
     ref = signal.sosfiltfilt(sos, x, padlen=9)

@@ -40,7 +40,8 @@ import os
 import sys
 from contextlib import contextmanager
 
-__all__ = ["run_threads", "threads_limited", "thread_pool", "blas_single_thread", "read_ahead",
+__all__ = ["run_threads", "threads_limited", "thread_pool", "blas_single_thread",
+           "hold_blas_single_thread", "read_ahead",
            "MAX_THREADS", "ENV_THREADS"]
 
 #: Default ceiling on worker threads [-] (one channel's chain each, a few MB per block).
@@ -129,6 +130,17 @@ def blas_single_thread():
     (module notes); process-wide, restored on exit."""
     with _controller().limit(limits=1, user_api="blas"):
         yield
+
+
+def hold_blas_single_thread() -> None:
+    """Hold every loaded BLAS library to one thread from now on, process-wide, not restored.
+
+    A campaign's fork server (:mod:`meshphase.fork_ready`): its workers inherit the limit.
+    OpenBLAS ends its thread pool at a fork and starts it again on the child's first call,
+    so each worker's first recording started (and spun) two BLAS threads; with the limit
+    there is no pool to start. Each run holds BLAS to one thread anyway (module notes).
+    """
+    _controller().limit(limits=1, user_api="blas")
 
 
 @contextmanager

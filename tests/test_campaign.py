@@ -10,6 +10,7 @@ regression values of our own pipeline, not paper values.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import sys
@@ -551,7 +552,8 @@ def test_campaign_report_drawn_elsewhere_is_the_same_page(tmp_path):
 
 def test_local_workers_start_warm_from_the_fork_server():
     """The campaign's local workers are forked from the fork server (their parent is not
-    this process) with the processing stack imported before any warm-up ran."""
+    this process) with the processing stack imported before any warm-up ran, numba's
+    kernels loaded: their filters and onsets take numba, as ``process`` does."""
     from distributed import Client
 
     from meshphase import cluster as cluster_mod
@@ -561,6 +563,10 @@ def test_local_workers_start_warm_from_the_fork_server():
         pytest.skip("no fork server on this platform: the workers spawn")
     with cluster_mod.local_cluster(1, worker_modules=worker_modules()) as cl, Client(cl) as client:
         # a lambda travels by value (the workers cannot import this test module)
-        warm = client.run(lambda: "meshphase.stages" in sys.modules and "scipy.signal" in sys.modules)
+        warm = client.run(lambda: "meshphase.stages" in sys.modules)
         assert list(warm.values()) == [True]
+        engines = client.run(lambda: (__import__("meshphase.iir", fromlist=["_"]).pick_engine(),
+                                      __import__("meshphase.onsets.fastpath", fromlist=["_"]).dense("auto", 1)))
+        numba = importlib.util.find_spec("numba") is not None
+        assert list(engines.values()) == [("numba" if numba else "scipy", numba)]
         assert os.getpid() not in client.run(os.getppid).values()

@@ -5,6 +5,7 @@ and ending a stuck worker (with stand-ins for the Dask client)."""
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import json
 import os
 import subprocess
@@ -321,9 +322,17 @@ def test_the_fork_server_readies_and_freezes_its_heap_last():
             "import meshphase.fork_ready as fh\n"
             "from meshphase import threads\n"
             "kept = threads._blas_controller is not None and threads._controller() is threads._blas_controller[1]\n"
-            "print(before, fh.FROZEN_OBJECTS > 10_000, gc.get_freeze_count() > 10_000, fh.FIRST_USE_S > 0, kept)")
+            "import sys, threadpoolctl\n"
+            "k = fh.KERNELS\n"
+            "one = all(i['num_threads'] == 1 for i in threadpoolctl.threadpool_info() if i['user_api'] == 'blas')\n"
+            "print(before, fh.FROZEN_OBJECTS > 10_000, gc.get_freeze_count() > 10_000, fh.FIRST_USE_S > 0, kept and one,"
+            " k['filters'], k['onsets'], k['seconds'] >= 0, 'scipy.signal' in sys.modules)")
     stdout = _fresh(code)
-    assert stdout.split() == ["0", "True", "True", "True", "True"]
+    # BLAS held to one thread for good (no forked worker starts its pool), numba's kernels
+    # loaded (the workers' filters and onsets take them), no scipy.signal
+    numba = importlib.util.find_spec("numba") is not None
+    assert stdout.split() == ["0", "True", "True", "True", "True", "numba" if numba else "scipy",
+                              "numba" if numba else "numpy", "True", "False"]
 
 
 def test_the_fork_server_starts_when_its_first_uses_fail():

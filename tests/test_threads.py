@@ -216,3 +216,25 @@ def test_blas_single_thread_holds_blas_to_one_and_keeps_its_controller():
         assert threads._controller() is not first
     finally:
         del sys.modules[name]
+
+
+def test_hold_blas_single_thread_stays_after_the_call():
+    # process-wide and not restored (a fork server's workers inherit it): in a child
+    # interpreter, so that this test process keeps its BLAS threads
+    import subprocess
+    import sys
+
+    code = ("import numpy, threadpoolctl\n"
+            "from meshphase import threads\n"
+            "def n():\n"
+            "    return [i['num_threads'] for i in threadpoolctl.threadpool_info() if i['user_api'] == 'blas']\n"
+            "assert n(), 'no BLAS found'\n"
+            "assert threads.hold_blas_single_thread() is None\n"
+            "with threads.blas_single_thread():\n"
+            "    pass\n"
+            "print(n())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                         env={**__import__("os").environ, "OPENBLAS_NUM_THREADS": "2"})
+    assert out.returncode == 0, out.stderr
+    counts = eval(out.stdout.strip())                 # a printed list of ints
+    assert counts and all(c == 1 for c in counts)

@@ -170,6 +170,18 @@ def test_warmup_loads_and_checks_the_kernel():
     assert w["seconds"] >= 0.0
 
 
+def test_warmup_without_the_check_loads_no_scipy_signal():
+    # a campaign's fork server loads the kernel alone (meshphase.fork_ready)
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom meshphase import iir\nw = iir.warmup(check=False)\n"
+            "print(w['engine'], w['seconds'] >= 0, 'scipy.signal' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["numba" if iir.HAVE_NUMBA else "scipy", "True", "False"]
+
+
 @numba_only
 @pytest.mark.parametrize("pair", [("lowpass4", "notch3"), ("bandpass4", "bandpass4"),
                                   ("lowpass5", "lowpass5"), ("lowpass1", "lowpass1")])
