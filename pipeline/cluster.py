@@ -181,6 +181,26 @@ _QUIET_MONITORS = {"distributed.admin.tick.interval": "500ms",
                    "distributed.admin.system-monitor.interval": "2s"}
 
 
+def _worker_environ() -> dict:
+    """What a Nanny sets in its worker's environment before the worker starts
+    (``distributed.nanny.pre-spawn-environ``), but ``MALLOC_TRIM_THRESHOLD_``.
+
+    distributed sets it to 64 KiB to hand freed memory back early. In a worker forked from
+    the fork server it reaches ``os.environ`` only, after glibc read its settings, and there
+    :func:`meshphase.heap.limit_heap_growth` took it for the user's own choice and left the
+    trim threshold at glibc's 128 KiB while fixing the mmap threshold: every free at the top
+    of the heap handed pages back that the next block faulted in again, recording after
+    recording (the task CPU of ``meshphase bench campaign`` shows the difference). Left out,
+    the workers keep the heap as ``process`` does (``pipeline/heap.py``); a value the user
+    set in the environment still reaches them and is still left alone.
+    """
+    import dask
+
+    env = dict(dask.config.get("distributed.nanny.pre-spawn-environ", None) or {})
+    env.pop("MALLOC_TRIM_THRESHOLD_", None)
+    return env
+
+
 def local_cluster(n_workers: int, *, dashboard=None, worker_modules: Sequence[str] | None = None):
     """The campaign's own Dask cluster: ``n_workers`` single-threaded worker processes.
 
@@ -236,7 +256,8 @@ def local_cluster(n_workers: int, *, dashboard=None, worker_modules: Sequence[st
     # the config of the block below is gone by then
     monitor = {} if on else _QUIET_MONITORS
     workers_config = {"distributed.worker.profile.enabled": on, **monitor}
-    config = {"distributed.scheduler.worker-saturation": 1.0, **monitor}
+    config = {"distributed.scheduler.worker-saturation": 1.0, **monitor,
+              "distributed.nanny.pre-spawn-environ": _worker_environ()}
     if server is not None:
         # read when a Nanny starts its worker: the initial workers fork from the server; a
         # worker restarted later (after a timeout) is spawned, as by default

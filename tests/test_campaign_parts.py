@@ -506,3 +506,15 @@ def test_campaign_command_keeps_distributed_quiet(tmp_path):
     res = subprocess.run(argv[:3] + ["-v"] + argv[3:] + ["--out", str(tmp_path / "o2")], capture_output=True,
                          text=True, timeout=300)
     assert "distributed.scheduler" in res.stderr
+
+
+def test_worker_environ_leaves_out_the_trim_threshold_alone():
+    import dask
+
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": {"MALLOC_TRIM_THRESHOLD_": 65536,
+                                                                   "OMP_NUM_THREADS": 1}}):
+        assert cluster._worker_environ() == {"OMP_NUM_THREADS": 1}
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": None}):
+        assert cluster._worker_environ() == {}
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": {}}):
+        assert cluster._worker_environ() == {}
