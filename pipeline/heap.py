@@ -37,8 +37,9 @@ slack: 21.6-25.5 s, 473-480 MB / 20.2-21.6 s, 472-488 MB / 17.0-18.3 s, 545-569 
 trimming at all: 16.8-19.8 s, 529-696 MB.
 
 Values the user set in the documented environment variables ``MALLOC_MMAP_THRESHOLD_`` and
-``MALLOC_TRIM_THRESHOLD_`` are left alone (the trimming still runs). Elsewhere than glibc
-this does nothing.
+``MALLOC_TRIM_THRESHOLD_`` are left alone (the trimming still runs). A campaign's local
+workers do not get distributed's own ``MALLOC_TRIM_THRESHOLD_`` (:mod:`meshphase.cluster`),
+which would pass for the user's here. Elsewhere than glibc this does nothing.
 """
 
 from __future__ import annotations
