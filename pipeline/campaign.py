@@ -74,7 +74,7 @@ from .campaign_job import (TIMEOUT_BASE_S, TIMEOUT_RATE_BPS, Job, campaign_modul
 from .campaign_resume import (DONE_NAME, RECORDINGS_DIR_NAME, completed_recordings,
                               recording_key, recording_keys, resume_sources, reuse_completed,
                               sha256_file)
-from .cluster import check_cluster_options, local_cluster
+from .cluster import check_cluster_options, local_cluster, trim_env_is_distributed
 from .heap import limit_heap_growth
 from .jsonable import to_jsonable
 from .log import logger
@@ -475,7 +475,9 @@ def run_recording(scene_path: str, recording_path: str, out_dir: str, *, bands: 
         ``messages``, ``files`` and the compact results (``phasing``, ``load_sharing``,
         ``compare``, ``identify``, ``ideal``, ``recording_info`` ... when computed).
     """
-    limit_heap_growth()          # a worker streams recording after recording (pipeline/heap.py)
+    # a worker streams recording after recording (pipeline/heap.py); a Dask worker's trim
+    # threshold in the environment is distributed's, not the user's
+    limit_heap_growth(trim_env=not trim_env_is_distributed())
     t0, c0 = time.perf_counter(), time.process_time()
     rec_path = Path(recording_path)
     out: dict = {"recording": str(recording_path), "name": Path(out_dir).name, "out_dir": str(out_dir),

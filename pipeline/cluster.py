@@ -40,7 +40,7 @@ from .log import logger
 from .validate import as_positive_int
 
 __all__ = ["local_cluster", "open_client", "ClusterStart", "check_cluster_options", "cores", "own_child",
-           "end_worker", "worker_server"]
+           "end_worker", "worker_server", "trim_env_is_distributed"]
 
 _server_lock = threading.Lock()
 _server_modules: tuple | None = None  # what the fork server this module started imported
@@ -190,7 +190,8 @@ def _worker_environ() -> dict:
     :func:`meshphase.heap.limit_heap_growth` took it for the user's own choice and left the
     trim threshold at glibc's 128 KiB while fixing the mmap threshold: every free at the top
     of the heap handed pages back that the next block faulted in again, recording after
-    recording (the task CPU of ``meshphase bench campaign`` shows the difference). Left out,
+    recording (the task CPU of ``meshphase bench campaign`` shows the difference; a remote
+    worker's tasks see the value from their Nanny, :func:`trim_env_is_distributed`). Left out,
     the workers keep the heap as ``process`` does (``pipeline/heap.py``); a value the user
     set in the environment still reaches them and is still left alone.
     """
@@ -199,6 +200,30 @@ def _worker_environ() -> dict:
     env = dict(dask.config.get("distributed.nanny.pre-spawn-environ", None) or {})
     env.pop("MALLOC_TRIM_THRESHOLD_", None)
     return env
+
+
+def trim_env_is_distributed() -> bool:
+    """True in a Dask worker whose ``MALLOC_TRIM_THRESHOLD_`` is the one its Nanny set from
+    ``distributed.nanny.pre-spawn-environ`` (distributed's 64 KiB unless configured), not a
+    user's: a campaign task then keeps meshphase's heap policy
+    (:func:`meshphase.heap.limit_heap_growth` with ``trim_env=False``). False outside a
+    worker, without the variable, or with another value.
+    """
+    import sys
+
+    value = os.environ.get("MALLOC_TRIM_THRESHOLD_")
+    if value is None or "distributed" not in sys.modules:
+        return False
+    try:
+        from distributed import get_worker
+
+        get_worker()
+    except ValueError:                       # not in a worker's task
+        return False
+    import dask
+
+    env = dask.config.get("distributed.nanny.pre-spawn-environ", None) or {}
+    return "MALLOC_TRIM_THRESHOLD_" in env and str(env["MALLOC_TRIM_THRESHOLD_"]) == value.strip()
 
 
 def local_cluster(n_workers: int, *, dashboard=None, worker_modules: Sequence[str] | None = None):

@@ -39,7 +39,10 @@ trimming at all: 16.8-19.8 s, 529-696 MB.
 Values the user set in the documented environment variables ``MALLOC_MMAP_THRESHOLD_`` and
 ``MALLOC_TRIM_THRESHOLD_`` are left alone (the trimming still runs). A campaign's local
 workers do not get distributed's own ``MALLOC_TRIM_THRESHOLD_`` (:mod:`meshphase.cluster`),
-which would pass for the user's here. Elsewhere than glibc this does nothing.
+which would pass for the user's here, and a task on any Dask worker whose value is
+distributed's own fixes the trim threshold all the same (``trim_env``): left at 64 KiB with
+the mmap threshold fixed, every recording faulted its block arrays in anew. Elsewhere than
+glibc this does nothing.
 """
 
 from __future__ import annotations
@@ -117,7 +120,7 @@ def heap_trimming() -> bool:
     return _trimmer is not None and _trimmer.is_alive()
 
 
-def limit_heap_growth(threshold: int = MMAP_THRESHOLD) -> bool:
+def limit_heap_growth(threshold: int = MMAP_THRESHOLD, *, trim_env: bool = True) -> bool:
     """Fix glibc's mmap threshold at ``threshold`` bytes (and its trim threshold at twice
     that) for this process and start the thread that returns the heap's free pages when the
     resident set has grown by :data:`TRIM_SLACK` (looked at every :data:`TRIM_PERIOD` s)
@@ -127,6 +130,10 @@ def limit_heap_growth(threshold: int = MMAP_THRESHOLD) -> bool:
     ----------
     threshold : int
         [bytes], 4096 to 32 MiB.
+    trim_env : bool
+        Leave the trim threshold alone when ``MALLOC_TRIM_THRESHOLD_`` is in the environment
+        (the user's choice). False: fix it all the same (a Dask worker's environment holds
+        distributed's own value there, :func:`meshphase.cluster.trim_env_is_distributed`).
 
     Returns
     -------
@@ -152,7 +159,7 @@ def limit_heap_growth(threshold: int = MMAP_THRESHOLD) -> bool:
     ok = True
     if "MALLOC_MMAP_THRESHOLD_" not in os.environ:
         ok = bool(libc.mallopt(_M_MMAP_THRESHOLD, int(threshold)))
-    if "MALLOC_TRIM_THRESHOLD_" not in os.environ:
+    if not trim_env or "MALLOC_TRIM_THRESHOLD_" not in os.environ:
         # fixing the mmap threshold also stops glibc from raising the trim threshold with
         # it (to twice the mmap threshold): left at 128 KiB, every free at the heap's top
         # handed pages back that the next allocation faulted in again

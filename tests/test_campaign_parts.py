@@ -518,3 +518,36 @@ def test_worker_environ_leaves_out_the_trim_threshold_alone():
         assert cluster._worker_environ() == {}
     with dask.config.set({"distributed.nanny.pre-spawn-environ": {}}):
         assert cluster._worker_environ() == {}
+
+
+def test_trim_env_is_distributed_only_in_a_worker_with_distributeds_value(monkeypatch):
+    # outside a worker: whatever the environment says, the user's
+    monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")
+    assert cluster.trim_env_is_distributed() is False
+    monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_")
+    assert cluster.trim_env_is_distributed() is False
+
+
+def test_trim_env_is_distributed_in_workers():
+    # a plain LocalCluster's spawned worker has its Nanny's 64 KiB (distributed's default
+    # pre-spawn-environ): a campaign task there keeps meshphase's heap policy; the campaign's
+    # own local cluster leaves the variable out (nothing to tell)
+    import dask
+    from distributed import Client, LocalCluster
+
+    saved = dict(os.environ)          # a Nanny sets its pre-spawn variables here too
+    try:
+        with dask.config.set({"distributed.nanny.pre-spawn-environ": {"MALLOC_TRIM_THRESHOLD_": 65536}}), \
+                LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
+                             host="127.0.0.1") as cl, Client(cl) as client:
+            assert client.submit(cluster.trim_env_is_distributed, pure=False).result() is True
+
+            # another value in the worker's environment is taken for the user's
+            def other():
+                os.environ["MALLOC_TRIM_THRESHOLD_"] = "1048576"
+                return cluster.trim_env_is_distributed()
+
+            assert client.submit(other, pure=False).result() is False
+    finally:
+        os.environ.clear()
+        os.environ.update(saved)

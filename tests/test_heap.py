@@ -73,3 +73,38 @@ def test_trim_step_hands_back_only_after_the_slack(monkeypatch):
     floor = heap._trim_step(trim, floor, 200)         # unreadable: trim anyway
     assert calls == [0, 0, 0] and floor == 130
     assert heap.TRIM_SLACK > 0 and heap.TRIM_PERIOD > 0
+
+
+_FAULTS = ("import resource, sys\n"
+           "import numpy as np\n"
+           "from meshphase.heap import limit_heap_growth\n"
+           "limit_heap_growth(trim_env=sys.argv[1] == '1')\n"
+           "def faults():\n"
+           "    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt\n"
+           "b = np.ones(2**18)\n"
+           "del b\n"
+           "a = faults()\n"
+           "for _ in range(40):\n"
+           "    b = np.ones(2**18)        # 2 MiB from the heap, freed at its top\n"
+           "    del b\n"
+           "print(faults() - a)\n")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc only")
+def test_trim_env_false_fixes_a_trim_threshold_the_environment_set():
+    # distributed's 64 KiB in a Dask worker's environment (meshphase.cluster.trim_env_is_distributed):
+    # left alone, every 2-MiB array freed at the heap's top is handed back and faulted in
+    # again (512 pages each); with trim_env=False the threshold is fixed at 64 MiB and the
+    # heap keeps the pages. The counts are the kernel's, not timings
+    import os
+    import platform
+
+    if platform.libc_ver()[0] != "glibc":
+        pytest.skip("glibc only")
+    env = dict(os.environ, MALLOC_TRIM_THRESHOLD_="65536")
+    left = int(subprocess.run([sys.executable, "-c", _FAULTS, "1"], capture_output=True, text=True,
+                              check=True, env=env).stdout)
+    fixed = int(subprocess.run([sys.executable, "-c", _FAULTS, "0"], capture_output=True, text=True,
+                               check=True, env=env).stdout)
+    assert left > 40 * 256              # at least half the pages of every array, every time
+    assert fixed < 2 * 512              # about one array's pages at most
