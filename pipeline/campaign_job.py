@@ -100,7 +100,7 @@ def task_limits(keys: Sequence, task_timeout: float | None) -> dict[int, float |
 # ---------------------------------------------------------------------------- the task
 #: No scipy.signal, as in ``process``: the filter designs are meshphase.sos_design's and the
 #: filters and onsets take numba's kernels, which :mod:`meshphase.fork_ready` loads in the fork
-#: server (without numba, a task imports scipy's filters itself)
+#: server (without numba, the server imports scipy.signal instead)
 _STACK = ("distributed", "meshphase.campaign", "meshphase.compare", "meshphase.condition", "meshphase.loads",
           "meshphase.models.mesh_phasing", "meshphase.onsets", "meshphase.phasing", "meshphase.stages",
           "meshphase.report.campaign_report")

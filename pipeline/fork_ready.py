@@ -24,6 +24,7 @@ so this module does its work when it is imported:
      (:func:`meshphase.iir.pick_engine`, :func:`meshphase.onsets.fastpath.dense`); without
      it they took scipy's filters and numpy's onsets, the slower engines (the iir and onset
      rows of ``meshphase bench processing``), so that no worker loaded numba for itself.
+     Where numba is not installed (it is optional), scipy.signal, the filters then.
 
 2. It freezes the heap (:func:`gc.freeze`), as the docs of ``gc.freeze`` advise before a
    ``fork()`` without ``exec()``. The objects the imports made (about 190 000) move to the
@@ -79,7 +80,8 @@ def pay_first_use() -> None:
 
 def load_kernels() -> dict:
     """Load numba's filter and onset kernels into this process (from the per-user cache;
-    compiled into it when it has none), when numba is importable.
+    compiled into it when it has none), when numba is importable; else scipy.signal, the
+    filters' engine then.
 
     Returns
     -------
@@ -97,6 +99,10 @@ def load_kernels() -> dict:
 
     t = time.perf_counter()
     filters, onsets = iir.warmup(check=False)["engine"], fastpath.warmup()["engine"]
+    if filters == "scipy":
+        # no numba (it is optional): the filters are scipy's, loaded here once rather than
+        # by every worker's first recording
+        import scipy.signal  # noqa: F401
     return {"filters": filters, "onsets": onsets, "seconds": time.perf_counter() - t}
 
 

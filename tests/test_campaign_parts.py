@@ -329,10 +329,11 @@ def test_the_fork_server_readies_and_freezes_its_heap_last():
             " k['filters'], k['onsets'], k['seconds'] >= 0, 'scipy.signal' in sys.modules)")
     stdout = _fresh(code)
     # BLAS held to one thread for good (no forked worker starts its pool), numba's kernels
-    # loaded (the workers' filters and onsets take them), no scipy.signal
+    # loaded (the workers' filters and onsets take them), no scipy.signal (without numba:
+    # scipy.signal, the filters' engine then)
     numba = importlib.util.find_spec("numba") is not None
     assert stdout.split() == ["0", "True", "True", "True", "True", "numba" if numba else "scipy",
-                              "numba" if numba else "numpy", "True", "False"]
+                              "numba" if numba else "numpy", "True", "False" if numba else "True"]
 
 
 def test_the_fork_server_starts_when_its_first_uses_fail():
@@ -551,3 +552,15 @@ def test_trim_env_is_distributed_in_workers():
     finally:
         os.environ.clear()
         os.environ.update(saved)
+
+
+def test_the_fork_server_without_numba_loads_scipys_filters():
+    # numba is optional: the fork server then loads scipy.signal, the filters' engine, once
+    # for all its workers
+    code = ("import sys\n"
+            "import meshphase.iir as iir, meshphase.onsets.fastpath as fp\n"
+            "iir.HAVE_NUMBA = fp.HAVE_NUMBA = False\n"
+            "import meshphase.fork_ready as fh\n"
+            "k = fh.KERNELS\n"
+            "print(k['filters'], k['onsets'], 'scipy.signal' in sys.modules, 'numba' in sys.modules)")
+    assert _fresh(code).split() == ["scipy", "numpy", "True", "False"]
