@@ -373,6 +373,7 @@ class ClusterStart:
         if worker_modules is not None:
             worker_modules = _check_modules(worker_modules)
         self._args = (scheduler, workers, dashboard, warm_up, info, worker_modules)
+        self._environ: dict = {}
         self._client = self._cluster = self._error = None
         self._closer = None
         self.elapsed_s: float | None = None
@@ -389,6 +390,10 @@ class ClusterStart:
             import distributed  # noqa: F401
 
             self._quiet.enter_context(_quiet_distributed())
+            # a local cluster's Nannies write their pre-spawn variables into this process's
+            # environment (distributed's way to hand them to a spawned worker): put back on close
+            if scheduler is None:
+                self._environ = _spawn_environ_now()
             self._client, self._cluster = _connect(scheduler, workers, dashboard, info, worker_modules)
             try:
                 pids = self._client.run(warm_up)
@@ -446,8 +451,31 @@ class ClusterStart:
             if self._client is not None:
                 self._client.close()
         finally:
-            if self._cluster is not None:
-                self._cluster.close()
+            try:
+                if self._cluster is not None:
+                    self._cluster.close()
+            finally:
+                _restore_environ(self._environ)
+
+
+def _spawn_environ_now() -> dict:
+    """This process's values (None: unset) of the variables a Nanny writes into it before it
+    spawns a worker: ``distributed.nanny.pre-spawn-environ`` (OMP_NUM_THREADS=1 and the like)
+    and PYTHONHASHSEED, which it sets when unset. Left there, a notebook that ran a campaign
+    started its later subprocesses with one BLAS thread."""
+    import dask
+
+    keys = set(dask.config.get("distributed.nanny.pre-spawn-environ", None) or {}) | {"PYTHONHASHSEED"}
+    return {k: os.environ.get(k) for k in keys}
+
+
+def _restore_environ(before: dict) -> None:
+    """Put back the values :func:`_spawn_environ_now` took (None: unset)."""
+    for k, v in before.items():
+        if v is None:
+            os.environ.pop(k, None)
+        else:
+            os.environ[k] = v
 
 
 @contextlib.contextmanager

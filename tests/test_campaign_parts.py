@@ -564,3 +564,29 @@ def test_the_fork_server_without_numba_loads_scipys_filters():
             "k = fh.KERNELS\n"
             "print(k['filters'], k['onsets'], 'scipy.signal' in sys.modules, 'numba' in sys.modules)")
     assert _fresh(code).split() == ["scipy", "numpy", "True", "False"]
+
+
+def test_cluster_start_puts_the_nannies_environment_back(tmp_path):
+    # a Nanny writes its pre-spawn variables (OMP_NUM_THREADS=1, ...) into the process that
+    # starts it; a campaign's cluster puts them back when it closes
+    import dask
+
+    keys = set(dask.config.get("distributed.nanny.pre-spawn-environ", None) or {}) | {"PYTHONHASHSEED"}
+    before = {k: os.environ.get(k) for k in keys}
+    info: dict = {}
+    start = cluster.ClusterStart(None, 1, None, os.getpid, info)
+    try:
+        start.client()
+        assert info["n_workers"] == 1
+    finally:
+        start.close()
+    assert {k: os.environ.get(k) for k in keys} == before
+
+
+def test_restore_environ_sets_and_unsets(monkeypatch):
+    monkeypatch.setenv("MESHPHASE_TEST_A", "changed")
+    monkeypatch.setenv("MESHPHASE_TEST_B", "set by a nanny")
+    cluster._restore_environ({"MESHPHASE_TEST_A": "1", "MESHPHASE_TEST_B": None})
+    assert os.environ["MESHPHASE_TEST_A"] == "1" and "MESHPHASE_TEST_B" not in os.environ
+    cluster._restore_environ({})                      # nothing taken: nothing changed
+    assert os.environ["MESHPHASE_TEST_A"] == "1"
