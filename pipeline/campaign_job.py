@@ -34,7 +34,8 @@ from .cluster import ClusterStart, end_worker
 from .log import logger
 
 __all__ = ["Job", "run_job", "start_cluster", "campaign_task", "failed_record", "default_task_timeout",
-           "task_limits", "warm_up", "worker_modules", "campaign_modules", "draw_figures", "figure_order", "FIGURES_TIMEOUT_S", "TIMEOUT_BASE_S",
+           "task_limits", "warm_up", "worker_modules", "campaign_modules", "draw_figures", "figure_order",
+           "recording_order", "FIGURES_TIMEOUT_S", "TIMEOUT_BASE_S",
            "TIMEOUT_RATE_BPS"]
 
 #: default ``--task-timeout`` of a recording of ``size`` bytes: TIMEOUT_BASE_S +
@@ -195,6 +196,46 @@ def _draw(call) -> bytes:
 
     make, args, kwargs = call
     return figure_png(make, *args, **kwargs)
+
+
+def recording_order(todo, keys) -> list[int]:
+    """The order a campaign submits its recordings in: the largest file first (``size`` of
+    its key, :func:`meshphase.campaign_resume.recording_key`), ties and keyless recordings
+    (a file gone since) in ``todo`` order.
+
+    Dask runs a job's tasks about in the order they were submitted. In file order, a long
+    recording listed last started when the others were done and ran alone while the other
+    workers idled; largest first (the longest-processing-time rule) it starts at once and
+    the short ones fill the other workers meanwhile. Size stands for work within a format;
+    a campaign of one format (the usual) is ordered by length.
+
+    Parameters
+    ----------
+    todo : sequence of int
+        Indices of the recordings to run.
+    keys : sequence of dict or None
+        Every recording's key (indexed by the ``todo`` entries).
+
+    Returns
+    -------
+    list of int
+        ``todo``, reordered.
+
+    Raises
+    ------
+    TypeError
+        ``todo`` or ``keys`` is not a sequence.
+    """
+    if isinstance(todo, (str, bytes)) or not hasattr(todo, "__iter__") \
+            or isinstance(keys, (str, bytes)) or not hasattr(keys, "__getitem__"):
+        raise TypeError(f"todo and keys must be sequences, got {type(todo).__name__} and "
+                        f"{type(keys).__name__}")
+
+    def size(i: int) -> int:
+        key = keys[i]
+        return int(key.get("size") or 0) if isinstance(key, dict) else 0
+
+    return sorted(todo, key=lambda i: -size(i))
 
 
 def figure_order(calls: list) -> list[int]:
@@ -581,7 +622,8 @@ class _Collection:
         self.done_q: queue.SimpleQueue = queue.SimpleQueue()
 
     def submit(self) -> dict:
-        job, todo = self.job, self.job.todo
+        job = self.job
+        todo = recording_order(job.todo, job.keys)       # the largest first
         kw = {"bands": job.bands, "recording_report": job.recording_report,
               "threads": self.threads}
         fn = functools.partial(campaign_task, job.task)

@@ -590,3 +590,14 @@ def test_restore_environ_sets_and_unsets(monkeypatch):
     assert os.environ["MESHPHASE_TEST_A"] == "1" and "MESHPHASE_TEST_B" not in os.environ
     cluster._restore_environ({})                      # nothing taken: nothing changed
     assert os.environ["MESHPHASE_TEST_A"] == "1"
+
+
+def test_recording_order_largest_first_ties_and_gone_files_in_order():
+    keys = [{"size": 10}, None, {"size": 300}, {"size": 10}, {"size": 0}, {"size": 300}]
+    assert cj.recording_order([0, 1, 2, 3, 4, 5], keys) == [2, 5, 0, 3, 1, 4]
+    assert cj.recording_order([3, 0, 1], keys) == [3, 0, 1]           # a resumed campaign's rest
+    assert cj.recording_order([], keys) == []
+    with pytest.raises(TypeError, match="sequences"):
+        cj.recording_order("012", keys)
+    with pytest.raises(TypeError, match="sequences"):
+        cj.recording_order([0], 5)
