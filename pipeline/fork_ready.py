@@ -29,7 +29,7 @@ so this module does its work when it is imported:
 
 2. It freezes the heap (:func:`gc.freeze`), as the docs of ``gc.freeze`` advise before a
    ``fork()`` without ``exec()``. The objects the imports made (:data:`FROZEN_OBJECTS`:
-210 000-240 000 here, an HDF5 campaign to one over every format) move to the
+   210 000-240 000 here, an HDF5 campaign to one over every format) move to the
    collector's permanent generation. A worker's collections then never walk them, and so
    never write to, and copy, the pages they share with the server.
 
