@@ -181,6 +181,15 @@ _QUIET_MONITORS = {"distributed.admin.tick.interval": "500ms",
                    "distributed.admin.system-monitor.interval": "2s"}
 
 
+def _pre_spawn_environ() -> dict:
+    """``distributed.nanny.pre-spawn-environ`` as configured now (a copy; {} when unset):
+    what a Nanny writes into its worker's environment, and into this process's, before it
+    starts the worker."""
+    import dask
+
+    return dict(dask.config.get("distributed.nanny.pre-spawn-environ", None) or {})
+
+
 def _worker_environ() -> dict:
     """What a Nanny sets in its worker's environment before the worker starts
     (``distributed.nanny.pre-spawn-environ``), but ``MALLOC_TRIM_THRESHOLD_``.
@@ -195,9 +204,7 @@ def _worker_environ() -> dict:
     the workers keep the heap as ``process`` does (``pipeline/heap.py``); a value the user
     set in the environment still reaches them and is still left alone.
     """
-    import dask
-
-    env = dict(dask.config.get("distributed.nanny.pre-spawn-environ", None) or {})
+    env = _pre_spawn_environ()
     env.pop("MALLOC_TRIM_THRESHOLD_", None)
     return env
 
@@ -220,9 +227,7 @@ def trim_env_is_distributed() -> bool:
         get_worker()
     except ValueError:                       # not in a worker's task
         return False
-    import dask
-
-    env = dask.config.get("distributed.nanny.pre-spawn-environ", None) or {}
+    env = _pre_spawn_environ()
     return "MALLOC_TRIM_THRESHOLD_" in env and str(env["MALLOC_TRIM_THRESHOLD_"]) == value.strip()
 
 
@@ -463,9 +468,7 @@ def _spawn_environ_now() -> dict:
     spawns a worker: ``distributed.nanny.pre-spawn-environ`` (OMP_NUM_THREADS=1 and the like)
     and PYTHONHASHSEED, which it sets when unset. Left there, a notebook that ran a campaign
     started its later subprocesses with one BLAS thread."""
-    import dask
-
-    keys = set(dask.config.get("distributed.nanny.pre-spawn-environ", None) or {}) | {"PYTHONHASHSEED"}
+    keys = set(_pre_spawn_environ()) | {"PYTHONHASHSEED"}
     return {k: os.environ.get(k) for k in keys}
 
 

@@ -69,7 +69,7 @@ import numpy as np
 from scipy import ndimage
 
 from . import iir
-from ._median import median_of_finite, sigma_of_differences
+from ._median import MAD_TO_SIGMA, median_and_mad, median_of_finite, sigma_of_differences
 from .errors import DataQualityWarning, ProcessingWarning
 from .log import logger
 from .quality import (DROPOUT_MIN_RUN, FALSE_ALARM, ChannelQuality, ChannelScan, HumReport,
@@ -558,7 +558,7 @@ def level_steps(values, centres, fs: float, *, t0: float = 0.0, min_size: float 
     if not ok.all():                                    # blocks without a sample: interpolated
         v = np.interp(c, c[ok], v[ok])
     e = _step_residuals(v)
-    spread = 1.4826 * float(np.median(np.abs(e - np.median(e))))
+    spread = MAD_TO_SIGMA * float(median_and_mad(e)[1])          # e is finite (v filled)
     thr = max(STEP_SPREADS * spread, float(min_size), 0.0)
     out = []
     v = v.copy()

@@ -1110,9 +1110,14 @@ class _Drift:
             self._append_filled(np.full(self.wait_c.size, self.last[1]), self.wait_c)
             self.wait_c = np.empty(0)
 
+    def _traced(self) -> tuple[np.ndarray, np.ndarray]:
+        """(values, centres) of every block seen, in order (empty before the first)."""
+        if not self.trace:
+            return np.empty(0), np.empty(0)
+        return np.concatenate([v for v, _ in self.trace]), np.concatenate([c for _, c in self.trace])
+
     def _global(self) -> None:
-        vals = np.concatenate([v for v, _ in self.trace]) if self.trace else np.empty(0)
-        cents = np.concatenate([c for _, c in self.trace]) if self.trace else np.empty(0)
+        vals, cents = self._traced()
         ok = np.isfinite(vals)
         if not ok.any():
             self.nan_all = True
@@ -1165,9 +1170,7 @@ class _Drift:
         """:func:`meshphase.condition.level_steps` of the blocks seen: (time [s], size) rows."""
         if not self.trace:
             return np.empty((0, 2))
-        v = np.concatenate([a for a, _ in self.trace])
-        c = np.concatenate([b for _, b in self.trace])
-        return level_steps(v, c, fs, t0=t0, min_size=min_size)
+        return level_steps(*self._traced(), fs, t0=t0, min_size=min_size)
 
     # -------------------------------------------------------------- samples
     def push(self, x: np.ndarray) -> np.ndarray:

@@ -463,12 +463,6 @@ def _rounding(head: _Head, fs: float) -> float:
     return q
 
 
-def _time_slack(head: _Head, fs: float) -> float:
-    """How far a row's time may sit from the grid t0 + i/fs [s]: :data:`TIME_TOLERANCE`
-    sample intervals, plus what printing the times may have moved them (:func:`_rounding`)."""
-    return TIME_TOLERANCE / fs + _rounding(head, fs)
-
-
 def _parse_time(path, line: bytes, lineno: int, head: _Head | None = None) -> float:
     sep, decimal = (head.sep, head.decimal) if head is not None else (",", ".")
     first = _time_token(line.decode("latin-1").strip(), sep)
@@ -721,11 +715,14 @@ def _check_time(path, head: _Head, info: RecordingInfo, t: np.ndarray, row0: int
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         raise RecordingFileError(path, f"missing or non-finite time at line {head.n_head + row0 + k + 1}")
-    tol = _time_slack(head, info.fs)
+    # how far a row's time may sit from the grid t0 + i/fs [s]: TIME_TOLERANCE sample
+    # intervals, plus what printing the times may have moved them
+    moved = _rounding(head, info.fs)
+    tol = TIME_TOLERANCE / info.fs + moved
     if t.size > 1:
         d = np.diff(t)
         # times printed coarser than a sample interval repeat: they must not go back
-        rising = d >= 0 if _rounding(head, info.fs) >= 1.0 / info.fs else d > 0
+        rising = d >= 0 if moved >= 1.0 / info.fs else d > 0
         if not rising.all():
             k = int(np.flatnonzero(~rising)[0]) + 1
             raise RecordingFileError(path, f"non-monotonic time at line {head.n_head + row0 + k + 1} (data row "
