@@ -279,9 +279,9 @@ def _bench_campaign(out: Path, quick: bool, repeats: int | None = None) -> int:
         print(f"  task CPU, two workers over one: {res['task_cpu_ratio'][2]:.3f} (medians; 1 = no contention)")
     if res["first_figure"]:
         print("a forked worker's first report figure over its second [s] (meshphase.fork_ready):")
-        for case in ("not frozen", "frozen"):
+        for case in ("without fork_ready", "with fork_ready"):
             rows = [r for r in res["first_figure"] if r["case"] == case]
-            print(f"  {case:>10}: " + ", ".join(f"{r['figure']} {r['first_excess_s']:.3f}" for r in rows))
+            print(f"  {case:>18}: " + ", ".join(f"{r['figure']} {r['first_excess_s']:.3f}" for r in rows))
     print(f"{path.name:<24} {path}")
     return 0
 

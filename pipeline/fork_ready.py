@@ -9,7 +9,9 @@ so this module does its work when it is imported:
    once:
 
    - matplotlib's pyplot on Agg (:func:`meshphase.report.campaign_report.pyplot`), which
-     the report's module no longer imports itself;
+     the report's module no longer imports itself, and one small figure drawn to PNG as the
+     report's are: matplotlib loads its font and fills its text caches on the first text it
+     lays out;
    - jsonschema builds each validator and resolves the schema's references on its first
      use. Here that is the scene schema, on the packaged demo scene, and the HDF5 layout and
      channel schemas, through :func:`meshphase.io.read_info` of a two-channel recording
@@ -39,7 +41,10 @@ also imported scipy.signal (until 2026-11-29), the child's first figure took 0.1
 longer than its second without the frozen heap, a full collection walking every inherited
 object, and 0.02-0.05 s with it (six runs on 2026-11-28). Without scipy.signal the bench
 measures 0.02-0.03 s either way: whether a full collection falls into a worker's first
-figure depends on what the server imported; with the heap frozen, it never walks that.
+figure depends on what the server imported; with the heap frozen, it never walks that. The
+small figure drawn here halves what is left (the bench's cases without and with this
+module, 2026-11-29: 0.022-0.029 s and 0.009-0.016 s per figure; this module's import
+took 0.06 s longer for it).
 
 A failure of the first uses (a full temporary disk, say) leaves them to the workers: the
 import itself never fails.
@@ -57,8 +62,9 @@ __all__ = ["FROZEN_OBJECTS", "FIRST_USE_S", "KERNELS", "pay_first_use", "load_ke
 
 
 def pay_first_use() -> None:
-    """Import matplotlib on Agg, validate the demo scene and read the header of a small
-    recording, in this process (what a worker's first recording and first figure do first)."""
+    """Import matplotlib on Agg and draw a small figure, validate the demo scene and read the
+    header of a small recording, in this process (what a worker's first recording and first
+    figure do first)."""
     import tempfile
     import tomllib
     from pathlib import Path
@@ -71,13 +77,31 @@ def pay_first_use() -> None:
     from .report.campaign_report import pyplot
     from .scene import scene_schema_errors
 
-    pyplot()                              # matplotlib on Agg, for the report's figures
+    _draw_small_figure(pyplot())          # matplotlib on Agg, for the report's figures
     raw = tomllib.loads(DEMO_SCENE)
     scene_schema_errors(raw)
     with tempfile.TemporaryDirectory(prefix="meshphase-fork-ready-") as tmp:
         path = Path(tmp) / "ready.h5"
         write(Recording(np.zeros((64, 2)), 5120.0, ["sun_g1", "ring_g1"]), path)
         read_info(path)
+
+
+def _draw_small_figure(plt) -> None:
+    """One small figure drawn to PNG as the report's are (title, rotated tick labels, a
+    legend right of the axes, tight layout): matplotlib loads its font and fills its font
+    caches on the first text it lays out, which a worker's first figure of the combined
+    report otherwise paid (``meshphase bench campaign``'s first-figure rows)."""
+    from .report.html import figure_to_png
+
+    fig, ax = plt.subplots(figsize=(2.0, 1.5))
+    ax.errorbar([0.0, 1.0], [0.0, 1.0], yerr=[0.1, 0.1], fmt="o", ms=4, capsize=3, label="a")
+    ax.set_xticks([0.0, 1.0])
+    ax.set_xticklabels(["a", "b"], rotation=30, ha="right", fontsize=8)
+    ax.set_ylabel("y [-]", fontsize=9)
+    ax.set_title("t", fontsize=10)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.005, 1.0), borderaxespad=0.0)
+    fig.tight_layout()
+    figure_to_png(fig)
 
 
 def load_kernels() -> dict:

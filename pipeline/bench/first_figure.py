@@ -3,7 +3,8 @@
 A campaign's local workers fork from a server that imported
 :func:`meshphase.campaign_job.worker_modules`; the last of them, :mod:`meshphase.fork_ready`,
 freezes the heap. Each case here is a fresh interpreter that imports that list
-without that module (``not frozen``) or with it (``frozen``), then forks one child per draw:
+without that module (``without fork_ready``: no frozen heap, no figure drawn before the
+fork) or with it (``with fork_ready``), then forks one child per draw:
 the child draws one figure of the combined report twice, as a worker does after its
 recordings, and reports both times (a JSON line in a results file). Measured, never asserted.
 """
@@ -28,7 +29,7 @@ FIRST_FIGURE_COLUMNS = ("case", "figure", "first_excess_s", "min_excess_s", "max
 _CODE = """
 import importlib, json, os, sys, time
 from meshphase.campaign_job import worker_modules, _FORK_READY
-frozen, repeats, results = sys.argv[1] == "frozen", int(sys.argv[2]), sys.argv[3]
+frozen, repeats, results = sys.argv[1] == "with fork_ready", int(sys.argv[2]), sys.argv[3]
 for m in worker_modules():          # every reader, as a campaign over mixed formats
     if frozen or m != _FORK_READY:
         importlib.import_module(m)
@@ -61,7 +62,8 @@ for _ in range(repeats):
 
 
 def first_figure_rows(repeats: int = 6) -> list:
-    """The first figure's excess over the second in a forked worker, without and with the frozen heap.
+    """The first figure's excess over the second in a forked worker, without and with
+    :mod:`meshphase.fork_ready` (its frozen heap and the small figure it draws).
 
     Parameters
     ----------
@@ -71,7 +73,7 @@ def first_figure_rows(repeats: int = 6) -> list:
     Returns
     -------
     list of dict
-        Rows with the keys :data:`FIRST_FIGURE_COLUMNS`, the case not frozen first; empty
+        Rows with the keys :data:`FIRST_FIGURE_COLUMNS`, the case without fork_ready first; empty
         where this platform cannot fork (no ``os.fork``: no fork server either).
     """
     import os
@@ -82,7 +84,7 @@ def first_figure_rows(repeats: int = 6) -> list:
     from .rss import child_env
 
     rows = []
-    for case in ("not frozen", "frozen"):
+    for case in ("without fork_ready", "with fork_ready"):
         with tempfile.TemporaryDirectory(prefix="meshphase-first-figure-") as tmp:
             results = Path(tmp) / "draws.jsonl"
             res = subprocess.run([sys.executable, "-c", _CODE, case, str(repeats), str(results)],

@@ -57,9 +57,9 @@ def test_cli_bench_campaign_quick(tmp_path, capsys):
     assert "1 worker(s)" in text and "2 worker(s)" in text and "speed-up 2 vs 1 worker" in text
     assert "each repeat's 1-worker run over its 2-worker run" in text
     assert "task CPU, two workers over one" in text
-    assert "not frozen:" in text and "frozen:" in text           # the first-figure rows
+    assert "without fork_ready:" in text and "with fork_ready:" in text   # the first-figure rows
     res = json.loads((tmp_path / "campaign_bench.json").read_text())
-    assert {r["case"] for r in res["first_figure"]} == {"not frozen", "frozen"}
+    assert {r["case"] for r in res["first_figure"]} == {"without fork_ready", "with fork_ready"}
     assert res["task_cpu_ratio"]["1"] == 1.0 and res["task_cpu_ratio"]["2"] > 0
     assert [r["workers"] for r in res["runs"]] == [1, 2, 1, 2]
     assert len(res["paired_speedup"]["2"]["pairs"]) == 2

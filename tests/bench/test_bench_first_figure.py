@@ -7,7 +7,7 @@ from meshphase.bench.first_figure import FIRST_FIGURE_COLUMNS, first_figure_rows
 
 def test_first_figure_rows_measure_each_figure_in_both_cases():
     rows = first_figure_rows(1)
-    assert [r["case"] for r in rows] == ["not frozen"] * 4 + ["frozen"] * 4
+    assert [r["case"] for r in rows] == ["without fork_ready"] * 4 + ["with fork_ready"] * 4
     assert [r["figure"] for r in rows[:4]] == ["phasing", "load_sharing", "residual_rms", "wall_times"]
     for r in rows:
         assert set(r) == set(FIRST_FIGURE_COLUMNS) and r["second_s"] > 0.0
