@@ -280,6 +280,19 @@ def test_write_outputs(res, tmp_path):
     assert again["summary"].parent == tmp_path / "out-2"
 
 
+def test_write_outputs_takes_the_callers_summary(res, tmp_path):
+    from meshphase.outputs import summary_dict, write_outputs
+
+    given = summary_dict(res.context)
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    write_outputs(res.context, tmp_path / "a", report=False)
+    write_outputs(res.context, tmp_path / "b", report=False, summary=given)
+    assert (tmp_path / "a" / "summary.json").read_text() == (tmp_path / "b" / "summary.json").read_text()
+    with pytest.raises(TypeError, match="summary must be"):
+        write_outputs(res.context, tmp_path / "b", report=False, summary=[given])
+
+
 def test_write_bad_input(res, tmp_path):
     with pytest.raises(TypeError, match="folder must be a path"):
         res.write(42)
