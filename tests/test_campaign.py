@@ -508,11 +508,41 @@ def test_figure_legends_sit_outside_the_axes(fn, args):
     # right of the axes, as the run report's legends: a legend inside could hide a point
     fig = fn(*args)
     fig.canvas.draw()
-    for ax in fig.axes:
-        leg = ax.get_legend()
-        assert leg is not None
+    legends = [(ax, ax.get_legend()) for ax in fig.axes if ax.get_legend() is not None]
+    assert len(legends) == 1           # the phasing panels share one legend of the planets
+    for ax, leg in legends:
         assert leg.get_window_extent().x0 >= ax.get_window_extent().x1
     plt.close(fig)
+
+
+def test_phasing_figure_one_legend_of_every_planet_and_shared_recordings_axis():
+    names = ["a", "b", "c"]
+    ph = {"sun": {"2": ([0.0, 0.01, 0.0], [0.02] * 3)},
+          "ring": {"3": ([0.01, -0.01, 0.0], [0.02] * 3), "2": ([0.0, 0.0, 0.0], [0.01] * 3)}}
+    fig = crep.phasing_across_recordings(names, ph)
+    top, bottom = fig.axes
+    assert [t.get_text() for t in top.get_legend().get_texts()] == ["planet 2", "planet 3"]
+    assert bottom.get_legend() is None
+    fig.canvas.draw()
+    assert [t.get_text() for t in bottom.get_xticklabels()] == names
+    assert not any(t.get_visible() and t.get_text() for t in top.get_xticklabels())
+    plt.close(fig)
+
+
+def test_figures_keep_long_recording_names_inside_the_png(recwarn):
+    # names of 80 characters: tight_layout gave up on them with a warning; the PNG is
+    # cropped to what the figure draws and the axis shows each name's head and tail
+    long = [f"rec_{i}_" + "x" * 80 + f"_end{i}" for i in range(6)]
+    fig = crep.load_sharing_across_recordings(long, [[1.0, 1.01]] * 6)
+    labels = [t.get_text() for t in fig.axes[0].get_xticklabels()]
+    assert all(len(t) == crep.TICK_NAME_CHARS and "…" in t for t in labels)
+    assert labels[0].startswith("rec_0_x") and labels[0].endswith("_end0")
+    plt.close(fig)
+    for make, args in [(crep.wall_times_across_recordings, (long, [1.0] * 6)),
+                       (crep.residual_rms_across_recordings, (long, {"sun": [1e-3] * 6}))]:
+        png = crep.figure_png(make, *args)
+        assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not [w for w in recwarn if "layout" in str(w.message).lower()]
 
 
 def test_figure_png_empty_and_bad():
