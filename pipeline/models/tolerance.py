@@ -176,9 +176,16 @@ def _summary_exact(x, levels, bins, bounds):
     m, s, q = point(x)
     r = len(bounds) - 1
     if r >= 2:
-        reps = [point(x[bounds[i]:bounds[i + 1]]) for i in range(r)]
-        se = [np.std(np.stack([rp[k] for rp in reps]), axis=0, ddof=1) / math.sqrt(r)
-              for k in range(3)]
+        sizes = np.diff(bounds)
+        if sizes[0] > 1 and np.all(sizes == sizes[0]):
+            # equal replicates (the usual): one reduction over a (R, n/R, N) view rather
+            # than R calls (8 statistics x 9 quantile calls were half of this summary's time)
+            xr = x[bounds[0]:bounds[-1]].reshape(r, int(sizes[0]), n_p)
+            reps = [xr.mean(axis=1), xr.std(axis=1, ddof=1), np.moveaxis(np.quantile(xr, lv, axis=1), 1, 0)]
+        else:
+            each = [point(x[bounds[i]:bounds[i + 1]]) for i in range(r)]
+            reps = [np.stack([rp[k] for rp in each]) for k in range(3)]
+        se = [np.std(reps[k], axis=0, ddof=1) / math.sqrt(r) for k in range(3)]
     else:
         se = [np.full(n_p, np.nan), np.full(n_p, np.nan), np.full((lv.size, n_p), np.nan)]
     counts = np.zeros((n_p, bins), dtype=np.int64)

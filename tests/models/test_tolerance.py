@@ -450,3 +450,26 @@ def test_seed_case3_absolute_dev_s():
     assert out["dev_s_abs"]["bound3"][1] == pytest.approx(up.tolist())
     # Ave_sn stays flat (seed: "negligible variation") in the absolute reading too
     assert np.max(np.abs(res.ave_s_abs.bound3)) < 0.1 * np.max(up)
+
+
+@pytest.mark.parametrize("bounds", [[0, 1024, 2048, 3072, 4096], [0, 1000, 2100, 3000, 4096]])
+def test_replicate_standard_errors_one_reduction_equal_the_loop_over_replicates(bounds):
+    # equal replicates take one reduction over an (R, n/R, N) view; unequal ones the loop:
+    # both the std over replicates of each replicate's own mean, std and quantiles
+    from meshphase.models.tolerance import _P3_HI, _P3_LO, _summary_exact
+
+    x = np.random.default_rng(7).normal(0.3, 0.01, size=(4096, 3))
+    levels = np.array([0.025, 0.5, 0.975])
+    b = np.asarray(bounds)
+    got = _summary_exact(x, levels, 16, b)
+    lv = np.concatenate([levels, [_P3_LO, _P3_HI]])
+    parts = [x[b[i]:b[i + 1]] for i in range(len(b) - 1)]
+    r = len(parts)
+    se_m = np.std([p.mean(axis=0) for p in parts], axis=0, ddof=1) / math.sqrt(r)
+    se_s = np.std([p.std(axis=0, ddof=1) for p in parts], axis=0, ddof=1) / math.sqrt(r)
+    se_q = np.std([np.quantile(p, lv, axis=0) for p in parts], axis=0, ddof=1) / math.sqrt(r)
+    # the same sums in another order at most: a few ulp of values ~1e-4
+    np.testing.assert_allclose(got.se_mean, se_m, rtol=1e-12)
+    np.testing.assert_allclose(got.se_std, se_s, rtol=1e-12)
+    np.testing.assert_allclose(got.se_quantiles, se_q[:3], rtol=1e-12)
+    np.testing.assert_allclose(got.se_bound3, se_q[3:], rtol=1e-12)
