@@ -962,7 +962,7 @@ def _scene_level(scene, out: Path, opts: _Options):
     scene_status = {k: v for k, v in run_status(sctx).items() if k != "exit_code"}
     sdir = out / SCENE_DIR_NAME
     sdir.mkdir(exist_ok=True)
-    scene_level = summary_dict(sctx)   # once: its Monte Carlo summaries are 0.02 s of work
+    scene_level = summary_dict(sctx)   # once: it converts the Monte Carlo summaries
     write_outputs(sctx, sdir, report=False, summary=scene_level)
     bands = None
     if opts.mc_on_client and sctx.tolerance is not None:

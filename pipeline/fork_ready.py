@@ -43,8 +43,7 @@ object, and 0.02-0.05 s with it (six runs on 2026-11-28). Without scipy.signal t
 measures 0.02-0.03 s either way: whether a full collection falls into a worker's first
 figure depends on what the server imported; with the heap frozen, it never walks that. The
 small figure drawn here halves what is left (the bench's cases without and with this
-module, 2026-11-29: 0.022-0.029 s and 0.009-0.016 s per figure; this module's import
-took 0.06 s longer for it).
+module, 2026-11-29: 0.022-0.029 s and 0.009-0.016 s per figure).
 
 A failure of the first uses (a full temporary disk, say) leaves them to the workers: the
 import itself never fails.

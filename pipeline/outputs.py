@@ -121,7 +121,8 @@ def write_outputs(ctx: RunContext, out_dir: Path, *, report: bool = True, summar
     """Write summary.json, CSV tables, arrays.h5 and (optionally) report.html into ``out_dir``.
 
     ``summary``: :func:`summary_dict` of ``ctx`` when the caller has it already (a campaign
-    keeps it; a scene's tolerance Monte Carlo makes it 0.02 s of work); None: made here.
+    keeps it; a scene's tolerance Monte Carlo summaries make it no small work); None: made
+    here.
 
     Returns a dict name -> path of what was written.
     """

@@ -286,7 +286,7 @@ def figure_png(make, *args, **kwargs) -> bytes:
         draws; the figure is closed). The figures of this module are not laid out with
         ``tight_layout``: the crop keeps every label and the legends right of the axes
         however long the recordings' names are (``tight_layout`` warned and gave up at
-        80-character names), and a layout pass fewer is 13-25 % of a figure's time.
+        80-character names), with one layout pass fewer.
 
     Raises
     ------
