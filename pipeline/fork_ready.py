@@ -87,7 +87,7 @@ def pay_first_use() -> None:
 
 def _draw_small_figure(plt) -> None:
     """One small figure drawn to PNG as the report's are (title, rotated tick labels, a
-    legend right of the axes): matplotlib loads its font and fills its font
+    legend right of the axes, tight layout): matplotlib loads its font and fills its font
     caches on the first text it lays out, which a worker's first figure of the combined
     report otherwise paid (``meshphase bench campaign``'s first-figure rows)."""
     from .report.html import figure_to_png
@@ -99,7 +99,8 @@ def _draw_small_figure(plt) -> None:
     ax.set_ylabel("y [-]", fontsize=9)
     ax.set_title("t", fontsize=10)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.005, 1.0), borderaxespad=0.0)
-    figure_to_png(fig)
+    fig.tight_layout()
+    figure_to_png(fig, tight_bbox=False)
 
 
 def load_kernels() -> dict:

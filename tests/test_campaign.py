@@ -529,9 +529,9 @@ def test_phasing_figure_one_legend_of_every_planet_and_shared_recordings_axis():
     plt.close(fig)
 
 
-def test_figures_keep_long_recording_names_inside_the_png(recwarn):
-    # names of 80 characters: tight_layout gave up on them with a warning; the PNG is
-    # cropped to what the figure draws and the axis shows each name's head and tail
+def test_figures_shorten_long_recording_names_and_lay_them_out(recwarn):
+    # names of 80 characters: tight_layout gave up on them with a warning; the axes show
+    # each name's head and tail, which the layout fits
     long = [f"rec_{i}_" + "x" * 80 + f"_end{i}" for i in range(6)]
     fig = crep.load_sharing_across_recordings(long, [[1.0, 1.01]] * 6)
     labels = [t.get_text() for t in fig.axes[0].get_xticklabels()]

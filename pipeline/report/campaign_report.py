@@ -146,7 +146,7 @@ def phasing_across_recordings(names, phasing: dict, ideal: dict | None = None):
         _empty_axes(axes[0, 0], "no phasing measured")
         return fig
     x = _xaxis(axes[-1, 0], names)
-    legend: dict = {}   # label -> handle, over all panels: one legend
+    legend: dict = {}   # planet -> its first handle, over all panels: one legend
     for ax, g in zip(axes[:, 0], gauges):
         planets = sorted(phasing[g], key=lambda k: int(k))
         width = 0.6 / max(1, len(planets))
@@ -167,6 +167,7 @@ def phasing_across_recordings(names, phasing: dict, ideal: dict | None = None):
     if legend:
         axes[0, 0].legend([legend[p] for p in sorted(legend)], [f"planet {p}" for p in sorted(legend)],
                           fontsize=8, loc="upper left", bbox_to_anchor=(1.005, 1.0), borderaxespad=0.0)
+    fig.tight_layout()
     return fig
 
 
@@ -209,6 +210,7 @@ def load_sharing_across_recordings(names, load_sharing, std_error=None):
     ax.set_ylabel("load sharing factor [-]")
     ax.set_title("load sharing per recording", fontsize=10)
     _legend_outside(ax)
+    fig.tight_layout()
     return fig
 
 
@@ -241,6 +243,7 @@ def residual_rms_across_recordings(names, rms: dict, *, label: str = "RMS residu
     ax.set_ylabel("[mesh cycles]")
     ax.set_title(label, fontsize=10)
     _legend_outside(ax)
+    fig.tight_layout()
     return fig
 
 
@@ -263,6 +266,7 @@ def wall_times_across_recordings(names, seconds, statuses=None):
     ax.set_yticklabels(_tick_names(names), fontsize=8)
     ax.invert_yaxis()
     ax.set_xlabel("task wall time [s] (green ok, purple unreliable, orange partial, red failed)")
+    fig.tight_layout()
     return fig
 
 
@@ -282,11 +286,11 @@ def figure_png(make, *args, **kwargs) -> bytes:
     Returns
     -------
     bytes
-        The PNG (:func:`meshphase.report.html.figure_to_png`, cropped to what the figure
-        draws; the figure is closed). The figures of this module are not laid out with
-        ``tight_layout``: the crop keeps every label and the legends right of the axes
-        however long the recordings' names are (``tight_layout`` warned and gave up at
-        80-character names), with one layout pass fewer.
+        The PNG (:func:`meshphase.report.html.figure_to_png`; the figure is closed). The
+        figures of this module lay themselves out (``tight_layout``, their legends right of
+        the axes included; recording names past :data:`TICK_NAME_CHARS` shortened, which
+        ``tight_layout`` could not fit at 80 characters), so the PNG is not cropped to a
+        tight box, which laid each out a second time.
 
     Raises
     ------
@@ -298,7 +302,7 @@ def figure_png(make, *args, **kwargs) -> bytes:
     fig = make(*args, **kwargs)
     if not hasattr(fig, "savefig"):
         raise TypeError(f"{getattr(make, '__name__', make)!r} returned {type(fig).__name__}, not a figure")
-    return figure_to_png(fig)
+    return figure_to_png(fig, tight_bbox=False)
 
 
 # ---------------------------------------------------------------------------- collection

@@ -42,12 +42,15 @@ def escape(text: Any) -> str:
     return html.escape(str(text), quote=True)
 
 
-def figure_to_png(fig, dpi: int = 110) -> bytes:
-    """Render a matplotlib figure to PNG bytes and close it."""
+def figure_to_png(fig, dpi: int = 110, *, tight_bbox: bool = True) -> bytes:
+    """Render a matplotlib figure to PNG bytes and close it.
+
+    ``tight_bbox``: crop to what the figure draws (``bbox_inches="tight"``, one layout pass
+    more); False for a figure laid out already (``tight_layout``, its legends included)."""
     import matplotlib.pyplot as plt
 
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
+    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight" if tight_bbox else None)
     plt.close(fig)
     return buf.getvalue()
 
