@@ -32,6 +32,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import sys
 import threading
 import time
 from typing import Callable, Iterator, Sequence
@@ -216,8 +217,6 @@ def trim_env_is_distributed() -> bool:
     (:func:`meshphase.heap.limit_heap_growth` with ``trim_env=False``). False outside a
     worker, without the variable, or with another value.
     """
-    import sys
-
     value = os.environ.get("MALLOC_TRIM_THRESHOLD_")
     if value is None or "distributed" not in sys.modules:
         return False

@@ -73,34 +73,19 @@ def pay_first_use() -> None:
     from .demo import DEMO_SCENE
     from .io import read_info, write
     from .recording import Recording
-    from .report.campaign_report import pyplot
+    from .report.campaign_report import figure_png, load_sharing_across_recordings
     from .scene import scene_schema_errors
 
-    _draw_small_figure(pyplot())          # matplotlib on Agg, for the report's figures
+    # matplotlib on Agg and one of the report's figures, small: matplotlib loads its font and
+    # fills its text caches on the first text it lays out, which a worker's first figure
+    # otherwise paid (the bench's first-figure rows)
+    figure_png(load_sharing_across_recordings, ["a", "b"], [[1.0, 1.0], [1.0, 1.0]])
     raw = tomllib.loads(DEMO_SCENE)
     scene_schema_errors(raw)
     with tempfile.TemporaryDirectory(prefix="meshphase-fork-ready-") as tmp:
         path = Path(tmp) / "ready.h5"
         write(Recording(np.zeros((64, 2)), 5120.0, ["sun_g1", "ring_g1"]), path)
         read_info(path)
-
-
-def _draw_small_figure(plt) -> None:
-    """One small figure drawn to PNG as the report's are (title, rotated tick labels, a
-    legend right of the axes, tight layout): matplotlib loads its font and fills its font
-    caches on the first text it lays out, which a worker's first figure of the combined
-    report otherwise paid (``meshphase bench campaign``'s first-figure rows)."""
-    from .report.html import figure_to_png
-
-    fig, ax = plt.subplots(figsize=(2.0, 1.5))
-    ax.errorbar([0.0, 1.0], [0.0, 1.0], yerr=[0.1, 0.1], fmt="o", ms=4, capsize=3, label="a")
-    ax.set_xticks([0.0, 1.0])
-    ax.set_xticklabels(["a", "b"], rotation=30, ha="right", fontsize=8)
-    ax.set_ylabel("y [-]", fontsize=9)
-    ax.set_title("t", fontsize=10)
-    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.005, 1.0), borderaxespad=0.0)
-    fig.tight_layout()
-    figure_to_png(fig, tight_bbox=False)
 
 
 def load_kernels() -> dict:

@@ -82,11 +82,13 @@ def _empty_axes(ax, text="no data"):
     ax.set_yticks([])
 
 
-def _legend_outside(ax) -> None:
+def _legend_outside(ax, *handles_labels) -> None:
     """The legend right of the axes, as the run report places it (meshphase.report.figures):
     it never hides a point, and matplotlib does not search the axes for a free corner
-    (``loc="best"`` tests every artist, ~0.04 s of a campaign figure)."""
-    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.005, 1.0), borderaxespad=0.0)
+    (``loc="best"`` tests every artist, ~0.04 s of a campaign figure). ``handles_labels``:
+    ``(handles, labels)`` as :meth:`matplotlib.axes.Axes.legend` takes them (default: the
+    axes' labelled artists)."""
+    ax.legend(*handles_labels, fontsize=8, loc="upper left", bbox_to_anchor=(1.005, 1.0), borderaxespad=0.0)
 
 
 def _names_check(names) -> list[str]:
@@ -165,8 +167,7 @@ def phasing_across_recordings(names, phasing: dict, ideal: dict | None = None):
         ax.set_ylabel(("gamma - ideal" if ideal else "gamma") + " [mesh cycles]", fontsize=9)
         ax.set_title(f"{g} gauge: mean phasing per planet, bars = pass-to-pass std", fontsize=10)
     if legend:
-        axes[0, 0].legend([legend[p] for p in sorted(legend)], [f"planet {p}" for p in sorted(legend)],
-                          fontsize=8, loc="upper left", bbox_to_anchor=(1.005, 1.0), borderaxespad=0.0)
+        _legend_outside(axes[0, 0], [legend[p] for p in sorted(legend)], [f"planet {p}" for p in sorted(legend)])
     fig.tight_layout()
     return fig
 
