@@ -7,7 +7,9 @@ more seeds (:func:`meshphase.bench.phasing.run_case`), optionally with scene cha
 (a wiring condition). Per condition, seed and gauge the row gives the per-pass RMS error of
 the measured phasing against the truth [mesh cycles], the RMS timing floor of the passes, the
 target ``max(TARGET_ABS, TARGET_FLOOR_RATIO x floor)``, the calibration of the per-pass sigma
-(RMS of error / sigma, share of passes with ``|error| <= 1.96 sigma``), the run's verdict
+(RMS of error / sigma, share of passes with ``|error| <= 1.96 sigma``), the share of passes
+whose planet label is the truth's ("relative" where the run names the planets relative to
+the first pulse), the run's verdict
 ("ok", or "unreliable" with its causes), the number of warnings of the run, and whether the
 row meets the goal: within the target, or flagged unreliable with RMS(error / sigma) <=
 :data:`FLAGGED_Z_MAX`. A run that gives no phasing for a gauge has a row saying so (``n`` 0,
@@ -36,8 +38,8 @@ FLAGGED_Z_MAX = 1.5
 
 #: Columns of the accuracy table (conditions.json rows, the CSV and the Markdown).
 CONDITION_COLUMNS = ("condition", "scenario", "seed", "gauge", "n", "rms", "floor", "target",
-                     "within_target", "z_rms", "coverage95", "verdict", "meets", "n_warnings",
-                     "process_s")
+                     "within_target", "z_rms", "coverage95", "label_match", "verdict", "meets",
+                     "n_warnings", "process_s")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -127,7 +129,7 @@ def condition_rows(conditions=None) -> list[dict]:
                     why = next((m for m in ctx.messages if gear in m), None)
                     out.append({**base, "gauge": gear, "n": 0, "rms": math.nan, "floor": math.nan,
                                 "target": math.nan, "within_target": False, "z_rms": math.nan,
-                                "coverage95": math.nan,
+                                "coverage95": math.nan, "label_match": "",
                                 "verdict": f"none: {why or 'no phasing, no message naming the gauge'}",
                                 "meets": why is not None, "z": []})
                     continue
@@ -138,7 +140,7 @@ def condition_rows(conditions=None) -> list[dict]:
                 out.append({**base, "gauge": gear, "n": r["n"], "rms": r["rms"],
                             "floor": r["floor"], "target": r["target"], "within_target": r["ok"],
                             "z_rms": r["z_rms"], "coverage95": r["coverage95"],
-                            "verdict": verdict, "meets": meets, "z": z.tolist()})
+                            "label_match": r["label_match"], "verdict": verdict, "meets": meets, "z": z.tolist()})
             logger.info("accuracy table: %s seed %d done in %.1f s", cond.name, seed,
                         res["process_s"])
     return out
