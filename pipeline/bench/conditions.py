@@ -30,8 +30,8 @@ from ..log import logger
 from ..validate import as_int, as_positive
 from .phasing import PhasingCase, markdown_table, pooled_calibration, run_case
 
-__all__ = ["Condition", "CONDITIONS", "QUICK_CONDITIONS", "CONDITION_COLUMNS", "FLAGGED_Z_MAX", "condition_rows",
-           "conditions_markdown", "run_conditions"]
+__all__ = ["Condition", "CONDITIONS", "QUICK_CONDITIONS", "CONDITION_COLUMNS", "FLAGGED_Z_MAX",
+           "condition_rows", "conditions_markdown", "run_conditions"]
 
 #: largest RMS(error / sigma) of a row flagged unreliable that still meets the goal [-]
 FLAGGED_Z_MAX = 1.5
@@ -74,7 +74,8 @@ class Condition:
             raise ValueError(f"condition {self.name!r}: seeds must be one or more integers >= 0, "
                              f"got {self.seeds!r}")
         object.__setattr__(self, "seeds", seeds)
-        object.__setattr__(self, "minutes", as_positive(self.minutes, f"condition {self.name!r} minutes"))
+        object.__setattr__(self, "minutes",
+                           as_positive(self.minutes, f"condition {self.name!r} minutes"))
 
     @property
     def case(self) -> PhasingCase:
@@ -140,7 +141,8 @@ def condition_rows(conditions=None) -> list[dict]:
                 out.append({**base, "gauge": gear, "n": r["n"], "rms": r["rms"],
                             "floor": r["floor"], "target": r["target"], "within_target": r["ok"],
                             "z_rms": r["z_rms"], "coverage95": r["coverage95"],
-                            "label_match": r["label_match"], "verdict": verdict, "meets": meets, "z": z.tolist()})
+                            "label_match": r["label_match"], "verdict": verdict,
+                            "meets": meets, "z": z.tolist()})
             logger.info("accuracy table: %s seed %d done in %.1f s", cond.name, seed,
                         res["process_s"])
     return out

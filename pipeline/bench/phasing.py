@@ -123,7 +123,8 @@ def run_case(case: PhasingCase, *, seed: int = 0, results=("phasing", "compare")
     from ..stages import run_scene
 
     cfg = case_config(case)
-    scene = Scene(path=None, name=case.name, results=list(results), channels=[dict(c) for c in channels],
+    scene = Scene(path=None, name=case.name, results=list(results),
+                  channels=[dict(c) for c in channels],
                   input={"synthetic": case.scenario, "minutes": case.minutes, "seed": seed,
                          "config": cfg})
     t = time.perf_counter()
@@ -207,6 +208,8 @@ def _fmt(v) -> str:
     if isinstance(v, bool):
         return "yes" if v else "NO"
     if isinstance(v, float):
+        if v == 0.0:
+            return "0"
         return "-" if not math.isfinite(v) else (f"{v:.2e}" if abs(v) < 0.01 or abs(v) >= 1e3 else f"{v:.3g}")
     return str(v)
 

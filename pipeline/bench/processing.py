@@ -4,9 +4,10 @@
 ``processing_bench.md`` (and ``phasing_error_vs_runtime.png``): the measured-phasing
 accuracy matrix of :mod:`meshphase.bench.phasing` (error, timing floor, calibration and run
 time per rig condition), the accuracy table of the conditions where measured phasing was
-once confident and wrong (:mod:`meshphase.bench.conditions`), and, for pulse trains with known truth (generated here, see
-:class:`PulseShape` and :func:`pulse_train`), the timing error of each detector setting at
-several SNRs next to the Cramer-Rao bound (:func:`meshphase._crb.crb_delay_std`), and the
+once confident and wrong (:mod:`meshphase.bench.conditions`), and, for pulse trains with
+known truth (generated here, see :class:`PulseShape` and :func:`pulse_train`), the timing
+error of each detector setting at several SNRs next to the Cramer-Rao bound
+(:func:`meshphase._crb.crb_delay_std`), and the
 throughput of each stage in MSamples per CPU-second (``time.process_time``: all threads of
 the process counted, so a multi-threaded BLAS cannot flatter it; that is the one-core
 figure) next to the wall time. Measured, never asserted.

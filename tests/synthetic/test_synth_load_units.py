@@ -162,7 +162,6 @@ def test_truth_phasing_under_several_shaft_ripples_matches_an_independent_integr
             worst = max(worst, d)
             n_checked += 1
     assert n_checked >= 8
-    print(f"truth phasing vs independent integration: worst {worst:.2e} mesh cycles over {n_checked} passes")
     assert worst <= 1e-8, worst
 
 
