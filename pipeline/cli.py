@@ -228,6 +228,17 @@ def cmd_bench(args) -> int:
             print(f"filter kernel ready in {wf['seconds']:.2f} s")
         return 0
     out = Path(args.out)
+    if args.accuracy:
+        if args.what != "processing":
+            raise ValueError(f"--accuracy belongs to 'meshphase bench processing', got "
+                             f"'meshphase bench {args.what}'")
+        from .bench.conditions import QUICK_CONDITIONS, run_conditions
+
+        res = run_conditions(out, QUICK_CONDITIONS if args.quick else None)
+        print(res["markdown"], end="")
+        for name, path in res["files"].items():
+            print(f"{name:<24} {path}")
+        return 0
     if args.what == "campaign":
         return _bench_campaign(out, args.quick, args.repeats)
     if args.what == "reference":
@@ -637,6 +648,12 @@ def _add_bench(sub) -> None:
                    help="reference: full-model evaluations (default 1e7)")
     s.add_argument("--plain", action="store_true",
                    help="reference: the plain pseudo-random reference instead of the directional one")
+    s.add_argument("--accuracy", action="store_true",
+                   help="processing: only the accuracy table of the conditions where measured "
+                        "phasing was once confident and wrong (error, floor, target, "
+                        "RMS(error/sigma), coverage, verdict per condition and gauge), printed "
+                        "as Markdown and written as conditions.json/.csv/.md into --out "
+                        "(--quick: one short row)")
     s.add_argument("--warmup", action="store_true",
                    help="only compile the numba kernels (Monte Carlo, dense onsets, interleaved TDMS rows) "
                         "into the per-user cache "

@@ -26,10 +26,14 @@ from meshphase.validate import (as_choice, as_finite_array, as_float, as_int, as
 from .kinematics import SpeedProfile
 
 __all__ = ["GaugeConfig", "TachoConfig", "TiltSource", "Artefacts", "SynthConfig",
-           "errors_to_dict", "errors_from_dict"]
+           "LoadModulation", "load_factor", "STRAIN_UNITS", "errors_to_dict", "errors_from_dict"]
 
 GEARS = ("sun", "ring")
 DTYPES = ("float64", "float32")
+#: Strain units a gauge channel can be written in: unit string -> samples per m/m [-]
+#: (micro sign U+00B5 and Greek mu U+03BC both spell microstrain).
+STRAIN_UNITS = {"m/m": 1.0, "mm/m": 1e3, "%": 1e2, "µε": 1e6, "με": 1e6,
+                "µm/m": 1e6, "um/m": 1e6}
 
 
 @dataclass(frozen=True)
@@ -59,6 +63,12 @@ class GaugeConfig:
     skew : float, optional
         Moment-arm asymmetry [-] in (-1, 1). Default: +0.2 on the sun (driving gear, contact
         moves root -> tip), -0.2 on the ring (driven).
+    units : str
+        Unit string of the channel's samples, a key of :data:`STRAIN_UNITS` ("m/m", "mm/m",
+        "%", "µε", ...): the samples are the strain [m/m] times that unit's scale, and the
+        string is the channel's units in the Recording and in every file written from it.
+        Every other strain of the config (amplitude, noise, ADC range, clip level) stays in
+        m/m.
     """
 
     name: str
@@ -69,6 +79,7 @@ class GaugeConfig:
     contact_ratio: float = 1.6
     side_lobe: float = 0.25
     skew: float | None = None
+    units: str = "m/m"
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name.strip():
@@ -93,6 +104,14 @@ class GaugeConfig:
         if abs(sk) >= 1.0:
             raise ValueError(f"gauge {self.name!r}: skew must be in (-1, 1), got {sk!r}")
         object.__setattr__(self, "skew", sk)
+        if not isinstance(self.units, str) or self.units not in STRAIN_UNITS:
+            raise ValueError(f"gauge {self.name!r}: units must be one of {sorted(STRAIN_UNITS)}, "
+                             f"got {self.units!r}")
+
+    @property
+    def unit_scale(self) -> float:
+        """Samples per m/m of strain in this gauge's ``units`` [-]."""
+        return STRAIN_UNITS[self.units]
 
     @property
     def kind(self) -> str:
@@ -102,7 +121,8 @@ class GaugeConfig:
     def to_dict(self) -> dict:
         return {"name": self.name, "gear": self.gear, "tooth": self.tooth,
                 "face_position": self.face_position, "amplitude": self.amplitude,
-                "contact_ratio": self.contact_ratio, "side_lobe": self.side_lobe, "skew": self.skew}
+                "contact_ratio": self.contact_ratio, "side_lobe": self.side_lobe, "skew": self.skew,
+                "units": self.units}
 
 
 @dataclass(frozen=True)
@@ -308,6 +328,74 @@ class Artefacts:
         return cls(**d)
 
 
+@dataclass(frozen=True)
+class LoadModulation:
+    """One term of a load modulation common to every planet, locked to the carrier angle.
+
+    Every pulse amplitude is multiplied by ``1 + sum_k a_k cos(m_k theta_c + phi_k)``, with
+    ``theta_c = w_c tau`` the carrier's absolute rotation angle at the engagement [rad]
+    (carrier frame = ground frame at t = 0): a torque ripple once (m = 1) or m times per
+    carrier turn, the same for every planet's mesh at a given carrier angle.
+
+    Parameters
+    ----------
+    amplitude : float
+        Relative amplitude a [-], >= 0; the amplitudes of all terms must sum below 1 so that
+        every pulse keeps a positive amplitude.
+    order : int
+        Harmonic m of the carrier's rotation [-], >= 1.
+    phase : float
+        Phase phi [rad] at theta_c = 0.
+    """
+
+    amplitude: float
+    order: int = 1
+    phase: float = 0.0
+
+    def __post_init__(self):
+        a = as_nonnegative(self.amplitude, "load modulation amplitude")
+        if a >= 1.0:
+            raise ValueError(f"load modulation amplitude must be in [0, 1) (a relative "
+                             f"amplitude [-]), got {a!r}")
+        object.__setattr__(self, "amplitude", a)
+        m = as_int(self.order, "load modulation order")
+        if m < 1:
+            raise ValueError(f"load modulation order must be an integer >= 1 (harmonic of the "
+                             f"carrier's rotation), got {m!r}")
+        object.__setattr__(self, "order", m)
+        object.__setattr__(self, "phase", as_float(self.phase, "load modulation phase"))
+
+    def to_dict(self) -> dict:
+        return {"amplitude": self.amplitude, "order": self.order, "phase": self.phase}
+
+    @classmethod
+    def from_any(cls, d) -> "LoadModulation":
+        """From a LoadModulation, a dict (keys of :meth:`to_dict`) or a tuple ``(amplitude[,
+        order[, phase]])``."""
+        if isinstance(d, LoadModulation):
+            return d
+        if isinstance(d, dict):
+            unknown = sorted(set(d) - {"amplitude", "order", "phase"})
+            if unknown or "amplitude" not in d:
+                raise ValueError(f"load modulation needs 'amplitude' (and optionally 'order', "
+                                 f"'phase'), got keys {sorted(d)}")
+            return cls(**d)
+        if isinstance(d, (tuple, list)) and 1 <= len(d) <= 3:
+            return cls(*d)
+        raise TypeError("a load modulation term must be a LoadModulation, a dict or (amplitude[, "
+                        f"order[, phase]]), got {d!r}")
+
+
+def load_factor(terms, carrier_angle) -> np.ndarray:
+    """Common load factor ``1 + sum a cos(m theta_c + phi)`` [-] of :class:`LoadModulation`
+    terms at carrier angles ``carrier_angle`` [rad] (1 without terms)."""
+    th = np.asarray(carrier_angle, dtype=np.float64)
+    out = np.ones(th.shape)
+    for t in terms:
+        out += t.amplitude * np.cos(t.order * th + t.phase)
+    return out
+
+
 _ERR_FIELDS = ("e_sun", "kappa_sun", "e_ring", "kappa_ring", "e_planet", "kappa_planet")
 
 
@@ -382,6 +470,10 @@ class SynthConfig:
         exist.
     tilt : TiltSource, optional
         Take Z_S, Z_R from the coupled tilt solve instead (then leave the centroids at 0).
+    load_modulation : tuple of LoadModulation
+        Load modulation common to every planet, locked to the carrier angle (a torque ripple;
+        :class:`LoadModulation`, or dicts / tuples ``(amplitude[, order[, phase]])``): every
+        pulse amplitude times :func:`load_factor` at the engagement's carrier angle.
     speed : SpeedProfile
         Speed fluctuation: ramp, ripple at fixed frequencies and ripple locked to a member's
         rotation angle (:class:`meshphase.synthetic.kinematics.ShaftRipple`).
@@ -415,6 +507,7 @@ class SynthConfig:
     centroid_sun: float | tuple = 0.0
     centroid_ring: float | tuple = 0.0
     tilt: TiltSource | None = None
+    load_modulation: tuple = ()
     speed: SpeedProfile = field(default_factory=SpeedProfile)
     artefacts: Artefacts = field(default_factory=Artefacts)
     tacho: TachoConfig | None = None
@@ -505,7 +598,8 @@ class SynthConfig:
 
     def _check_loads(self) -> None:
         """Load sharing (mean 1) and centroid offsets [m] per planet (stored as tuples), the
-        tilt solve, and the face width [m] that centroids and face-width gauges need."""
+        tilt solve, the load modulation terms (stored as a tuple), and the face width [m] that
+        centroids and face-width gauges need."""
         g, gauges = self.gearset, self.gauges
         n = g.n_planets
         if self.load_sharing is not None:
@@ -526,6 +620,20 @@ class SynthConfig:
                 raise ValueError("give centroid offsets or a tilt solve (tilt=), not both")
             if g.face_width is None:
                 raise ValueError("a tilt solve needs gearset.face_width [m]")
+        if isinstance(self.load_modulation, (LoadModulation, dict)):
+            raise TypeError("load_modulation must be a sequence of terms, got a single "
+                            f"{type(self.load_modulation).__name__}; wrap it in a tuple")
+        try:
+            raw = tuple(self.load_modulation)
+        except TypeError:
+            raise TypeError(f"load_modulation must be a sequence of LoadModulation terms, got "
+                            f"{self.load_modulation!r}") from None
+        terms = tuple(LoadModulation.from_any(t) for t in raw)
+        total = sum(t.amplitude for t in terms)
+        if total >= 1.0:
+            raise ValueError(f"load_modulation amplitudes sum to {total!r}: a pulse amplitude "
+                             f"could reach 0 or below (the sum must stay < 1)")
+        object.__setattr__(self, "load_modulation", terms)
         if (has_face or any(zs) or any(zr)) and g.face_width is None:
             raise ValueError("face-width gauges and centroid offsets need gearset.face_width [m]")
         if g.face_width is not None:
@@ -579,6 +687,7 @@ class SynthConfig:
             "load_sharing": None if self.load_sharing is None else list(self.load_sharing),
             "centroid_sun": list(self.centroid_sun), "centroid_ring": list(self.centroid_ring),
             "tilt": None if self.tilt is None else self.tilt.to_dict(),
+            "load_modulation": [t.to_dict() for t in self.load_modulation],
             "speed": self.speed.to_dict(), "artefacts": self.artefacts.to_dict(),
             "tacho": None if self.tacho is None else self.tacho.to_dict(),
             "sun_angle0": self.sun_angle0, "ring_angle0": self.ring_angle0, "t0": self.t0,
@@ -599,6 +708,7 @@ class SynthConfig:
             centroid_sun=_tuple_or_scalar(d.get("centroid_sun", 0.0)),
             centroid_ring=_tuple_or_scalar(d.get("centroid_ring", 0.0)),
             tilt=None if d.get("tilt") is None else TiltSource(**d["tilt"]),
+            load_modulation=tuple(d.get("load_modulation", ())),
             speed=SpeedProfile.from_dict(d.get("speed", {})),
             artefacts=Artefacts.from_dict(d.get("artefacts", {})),
             tacho=None if d.get("tacho") is None else TachoConfig(**d["tacho"]),

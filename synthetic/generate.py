@@ -25,7 +25,10 @@ constant speed they are rendered linear in time, otherwise through
 follows ``tau(t)`` to 1e-9 mesh periods).
 
 Channels appear in the order of ``config.gauges``, the tacho last. Samples are in physical
-units (strain [m/m], tacho [V]) with ``ChannelSpec.gain = 1``.
+units with ``ChannelSpec.gain = 1``: a gauge's strain in its ``units`` (m/m unless the gauge
+says "µε", "mm/m", "%", ...: every artefact is made in m/m and the channel scaled last), the
+tacho in V. The truth stays in SI (amplitudes, noise RMS [m/m]); its ``extra["gauge_units"]``
+gives each gauge's unit string and scale.
 """
 
 from __future__ import annotations
@@ -44,7 +47,7 @@ from meshphase.recording import ChannelSpec, Recording
 from meshphase.validate import as_int, as_positive
 
 from . import artefacts as art
-from .config import SynthConfig, errors_to_dict
+from .config import SynthConfig, errors_to_dict, load_factor
 from .gauges import (AnglePulses, PulseTable, angle_pulse_map, face_load_factor, pulse_peak_offset, render_angle_pulses,
                      render_box, render_pulses)
 from .kinematics import EngagementEvents, engagement_events, event_times_for_angles, gauge_rates
@@ -135,7 +138,7 @@ def _frac(x):
 
 class _Channel:
     __slots__ = ("spec", "gauge", "pos", "per", "amp", "table", "gain", "sigma", "hum_phases",
-                 "reach", "angle")
+                 "reach", "angle", "scale")
 
 
 def _planet_loads(cfg: SynthConfig) -> tuple:
@@ -158,14 +161,17 @@ def _planet_loads(cfg: SynthConfig) -> tuple:
 
 
 def _pulse_amplitudes(cfg: SynthConfig, gauge, ev: EngagementEvents, loads: tuple) -> np.ndarray:
-    """Pulse amplitude of each event [m/m]: nominal x load sharing x face load factor."""
+    """Pulse amplitude of each event [m/m]: nominal x load sharing x face load factor x the
+    common load modulation at the engagement's carrier angle ``w_c tau``."""
     ls, zs, zr, _ = loads
     fac = np.ones(cfg.gearset.n_planets)
     if gauge.face_position is not None:
         cz = zs if gauge.gear == "sun" else zr
         fac = face_load_factor(gauge.face_position, cz, cfg.gearset.face_width)
     amp_planet = gauge.amplitude * ls * fac
-    return amp_planet[ev.planet - 1] if len(ev) else np.empty(0)
+    if not len(ev):
+        return np.empty(0)
+    return amp_planet[ev.planet - 1] * load_factor(cfg.load_modulation, cfg.speeds.carrier * ev.tau)
 
 
 def _gain_error(gauge, a, draw) -> float:
@@ -236,8 +242,9 @@ class _Plan:
         for gi, gauge in enumerate(cfg.gauges):
             ch = _Channel()
             ch.gauge = gauge
+            ch.scale = gauge.unit_scale                     # samples per m/m, at the end
             ch.spec = ChannelSpec(
-                gauge.name, kind=gauge.kind, units="m/m", gain=1.0, gear=gauge.gear,
+                gauge.name, kind=gauge.kind, units=gauge.units, gain=1.0, gear=gauge.gear,
                 tooth=gauge.tooth, face_position=gauge.face_position,
                 description=f"synthetic {gauge.gear} tooth-root strain gauge, tooth {gauge.tooth}")
             ch.table = PulseTable(gauge.contact_ratio, gauge.side_lobe, gauge.skew)
@@ -329,6 +336,8 @@ class _Plan:
                    "tacho_angle": cfg.tacho_angle() if cfg.tacho else None,
                    "tilt_solution": tilt_info,
                    "tooth_angles": {x.name: cfg.tooth_angle(x) for x in cfg.gauges},
+                   "gauge_units": {x.name: {"units": x.units, "scale": x.unit_scale}
+                                   for x in cfg.gauges},
                    "channels": [c.name for c in self.specs]})
 
     def _passes(self, ev: EngagementEvents, gear: str, w: float, z: int, errors) -> PassTruth:
@@ -418,6 +427,8 @@ class _Plan:
                     art.clip(work, a.clip_level)
                 if a.adc_bits is not None:
                     art.quantise(work, a.adc_bits, a.adc_range)
+                if ch.scale != 1.0:
+                    work *= ch.scale
                 if not f64:
                     buf[c, s:e] = work
             if self.tacho is not None:
@@ -589,7 +600,8 @@ def generate(scenario_or_config, *, duration: float | None = None, seed: int | N
     Returns
     -------
     recording : Recording
-        Samples x channels in physical units (strain [m/m], tacho [V]); NaN over gaps.
+        Samples x channels in physical units (strain in each gauge's units, m/m by default;
+        tacho [V]); NaN over gaps.
     truth : GroundTruth
         Engagement times, planets, true phasing per pass, load sharing, centroids, all
         parameters and the seed.

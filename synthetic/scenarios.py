@@ -68,6 +68,15 @@ phasing; 1 % carrier ripple), ``rig_5planets`` (Z 25/85/30, five equally spaced 
 1 % carrier ripple). Shaft-locked ripple follows the member's angle
 (:class:`meshphase.synthetic.kinematics.ShaftRipple`), so it stays locked to the shaft through a ramp.
 
+Adversarial rig conditions (:data:`ADVERSARIAL_SCENARIOS`, tag "adversarial", tagged "rig" too):
+conditions where measured phasing was confident and wrong. ``rig_ripple_planet`` above,
+``rig_5planets_ripple_planet`` (the same ripple on the five-planet gearset),
+``rig_fast_ripple1`` (sun at 120 r/min, 1 % carrier ripple), ``rig_load_ripple`` (every pulse
+amplitude +-25 % once per carrier revolution: a torque ripple, :class:`LoadModulation`),
+``rig_microstrain`` (gauge channels written in µε) hold processing to ``expect =
+"goal_or_flag"`` (:attr:`Scenario.expect`: within the target or flagged unreliable);
+``rig_clean`` (rig_steady without artefacts) to the plain goal, with no data-quality warning.
+
 Each entry's ``description`` says what it holds; :func:`describe_scenarios` lists them.
 """
 
@@ -80,16 +89,18 @@ from typing import Callable
 from meshphase.models.gearset import Gearset, Speeds, rpm_to_rad_s
 from meshphase.models.tolerance import table2_case
 
-from .config import Artefacts, GaugeConfig, SynthConfig, TachoConfig, TiltSource
+from .config import Artefacts, GaugeConfig, LoadModulation, SynthConfig, TachoConfig, TiltSource
 from .kinematics import ShaftRipple, SpeedProfile
 
 __all__ = ["Scenario", "SCENARIOS", "get_scenario", "list_scenarios", "describe_scenarios",
            "register", "table1_gearset", "seed_rig_gearset", "seed_rig_speeds", "rig_gearset",
-           "rig_speeds", "RIG_SCENARIOS"]
+           "rig_speeds", "RIG_SCENARIOS", "ADVERSARIAL_SCENARIOS", "EXPECTS"]
 
 FACE_WIDTH = 40e-3
 SEED_RIG_SUN_RPM = 18.19
 SEED_RIG_CARRIER_RPM = 1.06
+#: what a scenario's processing must give (:attr:`Scenario.expect`)
+EXPECTS = ("goal", "goal_or_flag")
 
 
 @dataclass(frozen=True)
@@ -103,13 +114,24 @@ class Scenario:
     build : callable() -> SynthConfig
     tags : tuple of str
         e.g. "fast" (cheap at its default duration), "long", "noise", "facewidth", "errors",
-        "speed" (speed variation), "rig" (the accuracy-matrix family).
+        "speed" (speed variation), "rig" (the accuracy-matrix family), "adversarial" (a
+        condition where measured phasing was once confident and wrong).
+    expect : {"goal", "goal_or_flag"}
+        What processing must give: "goal", the measured phasing within its accuracy target;
+        "goal_or_flag", within the target or flagged unreliable by the run (a condition the
+        angle model may not resolve, where a confident wrong answer is the one failure).
     """
 
     name: str
     description: str
     build: Callable[[], SynthConfig]
     tags: tuple = field(default_factory=tuple)
+    expect: str = "goal"
+
+    def __post_init__(self):
+        if self.expect not in EXPECTS:
+            raise ValueError(f"scenario {self.name!r}: expect must be one of {EXPECTS}, got "
+                             f"{self.expect!r}")
 
     def config(self, **changes) -> SynthConfig:
         """A fresh config (with fields replaced, e.g. ``duration=2.0``)."""
@@ -239,13 +261,14 @@ _RIG_ACQ = Artefacts(snr_db=20.0, pink_fraction=0.0, drift_amplitude=8e-6, drift
 RIG_DURATION = 120.0
 
 
-def _rig(name, description, *, speed=None, reverse=False, gearset=None) -> SynthConfig:
+def _rig(name, description, *, speed=None, reverse=False, gearset=None, sun_rpm=SEED_RIG_SUN_RPM,
+         **kw) -> SynthConfig:
     g = rig_gearset(direction="ccw" if reverse else "cw") if gearset is None else gearset
+    kw = {"gauges": _gauges(), "artefacts": _RIG_ACQ, **kw}
     return SynthConfig(name=name, description=description, gearset=g,
-                       speeds=rig_speeds(g, reverse=reverse), fs=5120.0, duration=RIG_DURATION,
-                       gauges=_gauges(), errors=table2_case(1)[2],
-                       speed=SpeedProfile() if speed is None else speed, artefacts=_RIG_ACQ,
-                       tacho=TachoConfig())
+                       speeds=rig_speeds(g, sun_rpm, reverse=reverse), fs=5120.0,
+                       duration=RIG_DURATION, errors=table2_case(1)[2],
+                       speed=SpeedProfile() if speed is None else speed, tacho=TachoConfig(), **kw)
 
 
 #: artefacts of a good real rig: 24-bit DAQ, 30 dB SNR with some 1/f, slight drift and hum
@@ -418,9 +441,10 @@ _RIG = {
                        "(3.3 s at 18.19 r/min).", lambda n, d: _rig(n, d, speed=_ripple("sun")),
                        ("rig", "speed")),
     "rig_ripple_planet": ("rig_steady with 1 % speed ripple once per planet revolution "
-                          "relative to the carrier (4.9 s); generator only, may not be "
-                          "measurable.", lambda n, d: _rig(n, d, speed=_ripple("planet")),
-                          ("rig", "speed")),
+                          "relative to the carrier (4.9 s): processing must meet the target "
+                          "or flag the phasing unreliable.",
+                          lambda n, d: _rig(n, d, speed=_ripple("planet")),
+                          ("rig", "speed", "adversarial")),
     "rig_ramp_up": ("rig_ripple1 plus a +10 % speed change over the 2 min (ramp in time, the "
                     "ripple stays locked to the carrier angle).",
                     lambda n, d: _rig(n, d, speed=_ripple("carrier", ramp=0.10)), ("rig", "speed")),
@@ -448,4 +472,53 @@ _RIG = {
 RIG_SCENARIOS = tuple(_RIG)
 
 for _name, (_desc, _build, _tags) in _RIG.items():
-    register(Scenario(_name, _desc, (lambda n, d, b: lambda: b(n, d))(_name, _desc, _build), _tags))
+    register(Scenario(_name, _desc, (lambda n, d, b: lambda: b(n, d))(_name, _desc, _build), _tags,
+                      "goal_or_flag" if "adversarial" in _tags else "goal"))
+
+
+# ----------------------------------------------------------------------------- adversarial rig cases
+
+def _five_planets() -> Gearset:
+    return rig_gearset(25, 85, 30, tuple(2.0 * math.pi * i / 5 for i in range(5)),
+                       name="rig 25/85/30, 5 planets")
+
+
+def _units_gauges(units: str) -> tuple:
+    return tuple(GaugeConfig(g.name, g.gear, g.tooth, g.face_position, g.amplitude, g.contact_ratio,
+                             g.side_lobe, g.skew, units=units) for g in _gauges())
+
+
+_ADVERSARIAL = {
+    "rig_5planets_ripple_planet": (
+        "rig_ripple_planet on the Z 25/85/30 gearset with five equally spaced planets: 1 % "
+        "speed ripple once per planet revolution relative to the carrier.",
+        lambda n, d: _rig(n, d, speed=_ripple("planet"), gearset=_five_planets()),
+        ("rig", "speed", "adversarial"), "goal_or_flag"),
+    "rig_fast_ripple1": (
+        "rig_ripple1 with the sun at 120 r/min (carrier 26.8 r/min, mesh frequency 38.9 Hz, "
+        "132 samples per mesh period): 1 % speed ripple once per carrier revolution.",
+        lambda n, d: _rig(n, d, speed=_ripple("carrier"), sun_rpm=120.0),
+        ("rig", "speed", "adversarial"), "goal_or_flag"),
+    "rig_load_ripple": (
+        "rig_steady with every pulse amplitude +-25 % once per carrier revolution (a torque "
+        "ripple common to every planet, locked to the carrier angle).",
+        lambda n, d: _rig(n, d, load_modulation=(LoadModulation(0.25, 1, 0.4),)),
+        ("rig", "load", "adversarial"), "goal_or_flag"),
+    "rig_microstrain": (
+        "rig_steady with the gauge channels written in microstrain (unit string µε, "
+        "samples 1e6 x the strain).",
+        lambda n, d: _rig(n, d, gauges=_units_gauges("µε")),
+        ("rig", "units", "adversarial"), "goal_or_flag"),
+    "rig_clean": (
+        "rig_steady without any acquisition artefact (no noise, hum, drift or ADC): a clean "
+        "slow rig, where no data-quality warning is expected.",
+        lambda n, d: _rig(n, d, artefacts=Artefacts()),
+        ("rig", "adversarial"), "goal"),
+}
+
+#: names of the adversarial rig conditions (the accuracy table of ``meshphase bench processing``)
+ADVERSARIAL_SCENARIOS = ("rig_ripple_planet",) + tuple(_ADVERSARIAL)
+
+for _name, (_desc, _build, _tags, _expect) in _ADVERSARIAL.items():
+    register(Scenario(_name, _desc, (lambda n, d, b: lambda: b(n, d))(_name, _desc, _build), _tags,
+                      _expect))

@@ -98,8 +98,9 @@ class EventTable:
     mesh_period : ndarray
         Local mesh period [s].
     amplitude : ndarray
-        True peak strain of the pulse [m/m] (load sharing and face load included; the
-        gauge gain error is not: see ``GroundTruth.gain_errors``).
+        True peak strain of the pulse [m/m] (load sharing, face load and the common load
+        modulation included; the gauge gain error is not: see ``GroundTruth.gain_errors``;
+        a channel written in other units holds it times ``extra["gauge_units"]`` scale).
     """
 
     time: np.ndarray

@@ -50,21 +50,22 @@ class PhasingCase:
         A ``rig_*`` scenario of :mod:`meshphase.synthetic.scenarios`.
     tacho : bool
         Keep the carrier tacho channel.
-    snr_db : float
-        White-noise SNR [dB] (20 log10 peak / noise RMS).
+    snr_db : float or None
+        White-noise SNR [dB] (20 log10 peak / noise RMS); None keeps the scenario's
+        artefacts as they are.
     minutes : float
         Record length [min]; a ramp keeps its total speed change over the record.
     """
 
     scenario: str
     tacho: bool = True
-    snr_db: float = 20.0
+    snr_db: float | None = 20.0
     minutes: float = 2.0
 
     @property
     def name(self) -> str:
-        return (f"{self.scenario}{'' if self.tacho else ' no-tacho'} {self.snr_db:g}dB "
-                f"{self.minutes:g}min")
+        snr = "" if self.snr_db is None else f" {self.snr_db:g}dB"
+        return f"{self.scenario}{'' if self.tacho else ' no-tacho'}{snr} {self.minutes:g}min"
 
 
 _BASE = ("rig_steady", "rig_ripple1", "rig_ripple3", "rig_ripple_sun", "rig_ramp_up",
@@ -92,7 +93,9 @@ def case_config(case: PhasingCase):
 
     cfg = get_scenario(case.scenario)
     dur = 60.0 * case.minutes
-    changes = {"duration": dur, "artefacts": dataclasses.replace(cfg.artefacts, snr_db=case.snr_db)}
+    changes = {"duration": dur}
+    if case.snr_db is not None:
+        changes["artefacts"] = dataclasses.replace(cfg.artefacts, snr_db=case.snr_db)
     if not case.tacho:
         changes["tacho"] = None
     if cfg.speed.ramp_rate:
@@ -102,8 +105,12 @@ def case_config(case: PhasingCase):
     return cfg.with_(**changes)
 
 
-def run_case(case: PhasingCase, *, seed: int = 0, results=("phasing", "compare")) -> dict:
+def run_case(case: PhasingCase, *, seed: int = 0, results=("phasing", "compare"),
+             channels=()) -> dict:
     """Generate the case, run the scene stages on it, compare with the truth.
+
+    ``channels``: the scene's ``[[channels]]`` entries (dicts, :mod:`meshphase.channels`),
+    none by default (the generator's own channel kinds).
 
     Returns
     -------
@@ -117,6 +124,7 @@ def run_case(case: PhasingCase, *, seed: int = 0, results=("phasing", "compare")
 
     cfg = case_config(case)
     scene = Scene(path=None, name=case.name, results=list(results),
+                  channels=[dict(c) for c in channels],
                   input={"synthetic": case.scenario, "minutes": case.minutes, "seed": seed,
                          "config": cfg})
     t = time.perf_counter()
@@ -200,14 +208,18 @@ def _fmt(v) -> str:
     if isinstance(v, bool):
         return "yes" if v else "NO"
     if isinstance(v, float):
+        if v == 0.0:
+            return "0"
         return "-" if not math.isfinite(v) else (f"{v:.2e}" if abs(v) < 0.01 or abs(v) >= 1e3 else f"{v:.3g}")
     return str(v)
 
 
-def markdown_table(rows) -> str:
-    """The rows as a Markdown table, with the pooled calibration underneath."""
-    head = ("case", "gauge", "n", "rms", "floor", "ratio", "target", "ok", "z_rms",
-            "coverage95", "label_match", "reliable", "process_s", "model")
+def markdown_table(rows, columns=None) -> str:
+    """The rows as a Markdown table (``columns``: the keys shown, in order; default the
+    matrix's)."""
+    head = tuple(columns) if columns is not None else (
+        "case", "gauge", "n", "rms", "floor", "ratio", "target", "ok", "z_rms", "coverage95",
+        "label_match", "reliable", "process_s", "model")
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         lines.append("| " + " | ".join(_fmt(r[k]) for k in head) + " |")

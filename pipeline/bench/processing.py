@@ -3,9 +3,11 @@
 ``run_processing_bench(out_dir)`` writes ``processing_bench.json`` and
 ``processing_bench.md`` (and ``phasing_error_vs_runtime.png``): the measured-phasing
 accuracy matrix of :mod:`meshphase.bench.phasing` (error, timing floor, calibration and run
-time per rig condition), and, for pulse trains with known truth (generated here, see
-:class:`PulseShape` and :func:`pulse_train`), the timing error of each detector setting at
-several SNRs next to the Cramer-Rao bound (:func:`meshphase._crb.crb_delay_std`), and the
+time per rig condition), the accuracy table of the conditions where measured phasing was
+once confident and wrong (:mod:`meshphase.bench.conditions`), and, for pulse trains with
+known truth (generated here, see :class:`PulseShape` and :func:`pulse_train`), the timing
+error of each detector setting at several SNRs next to the Cramer-Rao bound
+(:func:`meshphase._crb.crb_delay_std`), and the
 throughput of each stage in MSamples per CPU-second (``time.process_time``: all threads of
 the process counted, so a multi-threaded BLAS cannot flatter it; that is the one-core
 figure) next to the wall time. Measured, never asserted.
@@ -625,6 +627,15 @@ def _markdown(res: dict) -> str:
                   f"Pooled calibration over the table: z_rms {cal['z_rms']:.2f}, coverage95 "
                   f"{cal['coverage95']:.3f} over {cal['n']} passes; {cal['n_ok']} of "
                   f"{cal['n_rows']} rows meet the target.", "", markdown_table(res["phasing"])]
+    if res.get("conditions"):
+        from .conditions import conditions_markdown
+
+        lines += ["", "## Conditions where measured phasing was once confident and wrong", "",
+                  "Per condition, seed and gauge (meshphase.bench.conditions; `meshphase bench "
+                  "processing --accuracy` runs this table alone): error, floor and target as "
+                  "above; verdict = the run's reliability flag and its causes; meets = within "
+                  "target, or flagged unreliable with RMS(error/sigma) <= 1.5.", "",
+                  conditions_markdown(res["conditions"])]
     return "\n".join(lines) + "\n"
 
 
@@ -770,9 +781,10 @@ def run_processing_bench(out_dir, *, quick: bool = False, rng=0, process_minutes
     Returns
     -------
     dict
-        ``{"accuracy": [row...], "throughput": [row...], "process": [row...], "meta": {...},
-        "files": {...}}``; row keys are :data:`ACCURACY_COLUMNS`, :data:`THROUGHPUT_COLUMNS`
-        and :data:`PROCESS_COLUMNS`.
+        ``{"accuracy": [row...], "throughput": [row...], "process": [row...], "conditions":
+        [row...], "meta": {...}, "files": {...}}``; row keys are :data:`ACCURACY_COLUMNS`,
+        :data:`THROUGHPUT_COLUMNS`, :data:`PROCESS_COLUMNS` and
+        :data:`meshphase.bench.conditions.CONDITION_COLUMNS`.
 
     Notes
     -----
@@ -835,13 +847,17 @@ def _run(out_dir, quick: bool, rng, process_minutes=()) -> dict:
     from .phasing import matrix_cases, phasing_rows
 
     phs = phasing_rows(matrix_cases(quick))
+    from .conditions import CONDITIONS, QUICK_CONDITIONS, condition_rows
+
+    conds = condition_rows(QUICK_CONDITIONS if quick else CONDITIONS)
     ident = identify_rows((2.0,) if quick else (10.0, 60.0))
     from .startup import exit_rows, startup_rows
 
     # a quick run times each start-up case once (each case costs its fresh interpreters)
     start = startup_rows(1 if quick else 7)
     ends = exit_rows(1 if quick else 7)
-    res = {"accuracy": acc, "throughput": thr, "phasing": phs, "process": proc, "identify": ident,
+    res = {"accuracy": acc, "throughput": thr, "phasing": phs, "conditions": conds,
+           "process": proc, "identify": ident,
            "startup": start, "exit": ends,
            "process_skipped": proc_skipped,
            "meta": {"machine": f"{platform.machine()} {platform.processor() or ''} "

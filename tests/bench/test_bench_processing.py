@@ -18,6 +18,9 @@ def test_quick_bench_writes_tables(tmp_path):
     assert j.is_file() and md.is_file()
     data = json.loads(j.read_text())
     assert data["accuracy"] and data["throughput"]
+    from meshphase.bench.conditions import CONDITION_COLUMNS
+
+    assert data["conditions"] and all(set(CONDITION_COLUMNS) <= set(r) for r in data["conditions"])
     for row in data["accuracy"]:
         assert set(ACCURACY_COLUMNS) <= set(row)
     for row in data["throughput"]:
@@ -36,6 +39,7 @@ def test_quick_bench_writes_tables(tmp_path):
     text = md.read_text()
     assert "| " + " | ".join(ACCURACY_COLUMNS) + " |" in text
     assert "| " + " | ".join(THROUGHPUT_COLUMNS) + " |" in text
+    assert "| " + " | ".join(CONDITION_COLUMNS) + " |" in text
     from meshphase.bench.startup import STARTUP_COLUMNS
 
     assert [r["what"] for r in data["startup"]][:2] == ["python -c pass", "import meshphase"]
