@@ -35,6 +35,7 @@ from .errors import DataQualityWarning, MeshphaseWarning, ProcessingWarning, Sce
 from .exits import OutputDir, recording_read_errors, run_status
 from .loads import facewidth_centroid, facewidth_readings, load_sharing_from_amplitudes
 from .log import logger
+from .member_speeds import mean_mesh_rate, member_speeds, tacho_rate
 from .models.gearset import Speeds
 from .models.mesh_phasing import assembly_check, classify_phasing, ideal_phasing
 from .onsets import detect_onsets_recording
@@ -389,7 +390,19 @@ def stage_phasing(ctx: RunContext) -> PhasingStage:
     return PhasingStage(tables=res.tables, labels=dict(res.labels), model=res.model,
                         reliability=res.reliability, fixed=res.fixed,
                         fixed_reason=res.fixed_reason, labels_relative=res.labels_relative,
-                        notes=res.notes, result=res, error_estimate=_phasing_estimate(res))
+                        notes=res.notes, result=res, error_estimate=_phasing_estimate(res),
+                        member_speeds=_member_speeds(res, g, sp, ons.tacho_times))
+
+
+def _member_speeds(res, g, sp, tacho_times) -> dict | None:
+    """Every member's measured speed (:func:`meshphase.member_speeds.member_speeds`) from the
+    angle model's mean mesh frequency; None without a model or a mesh frequency."""
+    if res.model is None:
+        return None
+    rate = mean_mesh_rate(res.model)
+    if not (math.isfinite(rate) and rate > 0):
+        return None
+    return member_speeds(g, rate, fixed=res.fixed, speeds=sp, carrier_rate=tacho_rate(tacho_times))
 
 
 def _warn_phasing(res) -> None:
