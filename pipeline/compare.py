@@ -31,7 +31,7 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import OptimizeResult, approx_fprime, least_squares
 
 from .errors import ProcessingWarning
 from .models.gearset import Gearset, Speeds
@@ -586,11 +586,17 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
     Weighted nonlinear least squares (scipy.optimize.least_squares, trust region) of the
     wrapped residuals gamma_measured - :func:`predict_pass_phasing`, over Cartesian offset
     components (x, y) = e (cos kappa, sin kappa) so that e = 0 is a regular point. The
-    weighted Jacobian's SVD decides identifiability: a parameter whose direction lies (to
-    99 %) outside the span of the singular vectors with s > rcond * s_max is reported as
-    not identifiable and held at 0 (e.g. a gear's own offset seen only by a gauge on that
-    gear). Confidence intervals: covariance sigma^2 (J^T J)^+ on the identifiable subspace,
-    e and kappa by the delta method; 95 % intervals are +-1.96 std.
+    weighted Jacobian's SVD decides identifiability: the right singular vectors with
+    s > rcond * s_max span what the data determine (the rank), and a parameter whose
+    direction lies less than 95 % inside that span is reported as not identifiable (e.g. a
+    gear's own offset seen only by a gauge on that gear). A rank-deficient design (at zero
+    offsets) is fitted from 0 inside the determined span only, so the flat directions stay
+    0 instead of wandering with the noise; the rank is decided again at the solution.
+    Confidence intervals: covariance sigma^2 (J^T J)^+ on the identifiable subspace,
+    e and kappa by the delta method; 95 % intervals are +-1.96 std. The determined span is
+    reported as unit-norm combinations with their estimates and intervals
+    (``combinations``), and each offset that is not identifiable gets the first extra gauge
+    or longer record that would identify it (``suggestions``, :func:`_suggestions`).
 
     Parameters
     ----------
@@ -642,17 +648,34 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
     # offsets are small against the carrier radius: bound each component to 5 % of R_c so the
     # flat (unidentifiable) directions cannot wander to geometrically impossible layouts
     bound = 0.05 * gearset.carrier_radius / fit.scale
-    sol = least_squares(fit.resid, x0, jac=fit.jac if jac == "analytic" else jac, method="trf",
-                        x_scale=1.0, diff_step=1e-6, max_nfev=max_nfev, bounds=(-bound, bound))
+    # the design at zero offsets decides which directions the data determine; a fit over all
+    # of them would let noise drive the nearly flat ones to the bounds, and at such offsets
+    # the second-order terms bias the determined combinations. So a rank-deficient design is
+    # fitted from 0 inside the span of its determined directions (the flat ones stay 0)
+    _, s0, Vt0 = np.linalg.svd(_jacobian_at(fit, x0, jac), full_matrices=False)
+    keep0 = _kept(s0, rcond)
+    njev = 1
+    if np.all(keep0):
+        sol = least_squares(fit.resid, x0, jac=fit.jac if jac == "analytic" else jac,
+                            method="trf", x_scale=1.0, diff_step=1e-6, max_nfev=max_nfev,
+                            bounds=(-bound, bound))
+    else:
+        sol = _subspace_fit(fit, Vt0[keep0].T, jac, max_nfev)
+    njev += int(sol.njev or 0)
     U, s, Vt = np.linalg.svd(sol.jac, full_matrices=False)
-    keep = s > rcond * (s[0] if s.size and s[0] > 0 else 1.0)
-    ident = np.sum(Vt[keep] ** 2, axis=0) > 0.95               # resolution of each parameter
+    keep = _kept(s, rcond)
+    if s.size and not np.all(keep) and not np.array_equal(keep, keep0):
+        # the rank fell between 0 and the solution: fit again inside what is determined there
+        sol = _subspace_fit(fit, Vt[keep].T, jac, max_nfev)
+        njev += int(sol.njev or 0)
+        U, s, Vt = np.linalg.svd(sol.jac, full_matrices=False)
+        keep = _kept(s, rcond)
+    ident = np.sum(Vt[keep] ** 2, axis=0) > RESOLUTION         # resolution of each parameter
     Vk = Vt[keep].T
     cov_free = fit.covariance(sol, U, s, Vk, keep, pass_offset_std)
     p_hat = np.zeros(len(names))
-    # the fitted model keeps the whole solution (started at 0, the trust-region steps stay in
-    # the range of J^T, i.e. unidentifiable combinations sit at minimum norm); only the
-    # identifiable parameters are reported as estimates
+    # the fitted model is the solution inside the determined subspace (the combinations the
+    # data cannot see at 0); only the identifiable parameters are reported as estimates
     est = sol.x * fit.scale
     p_hat[free] = est
     cov = np.zeros((len(names), len(names)))
@@ -678,11 +701,47 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
         rms_after=float(np.sqrt(np.mean(r1[ok] ** 2))) if ok.any() else float("nan"),
         sigma=float(np.std(r1[ok])) if ok.any() else float("nan"), n_passes=int(ok.sum()),
         n_parameters=int(free.sum()), cost_evaluations=fit.n_eval,
-        jacobian_evaluations=int(sol.njev) if sol.njev is not None else 0,
+        jacobian_evaluations=njev,
         wall_time=time.perf_counter() - t_start,
         identifiable=bool(np.all(ident)), notes=notes, projector=Vk @ Vk.T, free=free,
         rank=int(keep.sum()), rank_note=_rank_note(s, keep, rcond), combinations=combos,
         suggestions=sugg)
+
+
+def _subspace_fit(fit: "_PhasingFit", basis: np.ndarray, jac: str, max_nfev: int) -> OptimizeResult:
+    """Least squares of :meth:`_PhasingFit.resid` over x = ``basis`` c (orthonormal columns:
+    the determined directions), started at c = 0, so the directions outside the span stay
+    exactly 0. Returns ``x`` (scaled parameters), ``fun``, ``jac`` (the full Jacobian at x,
+    closed form or forward differences of step 1e-6), ``njev``, ``success``, ``message``."""
+    if basis.shape[1] == 0:        # nothing determined: the parameters stay at 0
+        x = np.zeros(basis.shape[0])
+        return OptimizeResult(x=x, fun=fit.resid(x), jac=_jacobian_at(fit, x, jac), njev=1,
+                              success=True, message="no determined direction to fit")
+
+    def resid(c):
+        return fit.resid(basis @ c)
+
+    def jac_c(c):
+        return fit.jac(basis @ c) @ basis
+
+    sol = least_squares(resid, np.zeros(basis.shape[1]), jac=jac_c if fit.analytic else jac,
+                        method="trf", x_scale=1.0, diff_step=1e-6, max_nfev=max_nfev)
+    x = basis @ sol.x
+    return OptimizeResult(x=x, fun=fit.resid(x), jac=_jacobian_at(fit, x, jac),
+                          njev=(sol.njev or 0) + 1, success=sol.success, message=sol.message)
+
+
+def _jacobian_at(fit: "_PhasingFit", x: np.ndarray, jac: str) -> np.ndarray:
+    """Jacobian of :meth:`_PhasingFit.resid` at the scaled parameters ``x``: closed form, or
+    forward differences of step 1e-6 (scipy.optimize.approx_fprime)."""
+    if fit.analytic:
+        return fit.jac(x)
+    return np.atleast_2d(approx_fprime(x, fit.resid, 1e-6)).reshape(fit.meas.size, x.size)
+
+
+def _kept(s: np.ndarray, rcond: float) -> np.ndarray:
+    """Singular values above ``rcond`` times the largest (the rank rule) [bool]."""
+    return s > rcond * (s[0] if s.size and s[0] > 0 else 1.0)
 
 
 #: a singular value within this factor of the rank threshold makes the rank decision marginal
@@ -806,9 +865,9 @@ def _term_words(gear: str, phi: float, psi: np.ndarray) -> tuple[float, str]:
     def near(target):
         return abs(float(wrap((phi - target) / TWO_PI))) * TWO_PI < DESCRIBE_ANGLE
     if gear in ("sun", "ring"):
-        for n, p in enumerate(psi, start=1):
-            for sign, target in ((1.0, p), (-1.0, p + math.pi)):
-                if near(target):
+        for sign, turn in ((1.0, 0.0), (-1.0, math.pi)):
+            for n, p in enumerate(psi, start=1):
+                if near(p + turn):
                     return sign, f"{gear} offset towards planet {n}"
         return 1.0, f"{gear} offset along {math.degrees(phi):.0f} deg"
     num = gear[len("planet"):]
@@ -822,10 +881,12 @@ def _term_words(gear: str, phi: float, psi: np.ndarray) -> tuple[float, str]:
 
 
 def _schedule_rows(fit: "_PhasingFit", gauge: str, tau_start: float, tau_end: float,
-                   weight: float, errors: ShaftHoleErrors) -> np.ndarray:
+                   weight: float, errors: ShaftHoleErrors) -> tuple[np.ndarray, float]:
     """Weighted design rows (as :meth:`_PhasingFit.jac`) of a ``gauge`` that meets planet 1
-    at angle time ``tau_start`` [s] and every planet of each relative revolution up to
-    ``tau_end`` [s], at the fit's speeds, each pass weighted ``weight`` [1/mesh cycles]."""
+    at angle time ``tau_start`` [s] and then every planet of each whole relative revolution
+    that starts before ``tau_end`` [s] and fits in it, at the fit's speeds, each pass
+    weighted ``weight`` [1/mesh cycles]; and the angle time of the next revolution's planet-1
+    pass [s] (where a continuation starts in the same phase)."""
     g = fit.gearset
     sp = next(iter(fit.speeds.values()))
     o = pass_order(g.direction, gauge)
@@ -833,9 +894,10 @@ def _schedule_rows(fit: "_PhasingFit", gauge: str, tau_start: float, tau_end: fl
     w = abs(sp.w_sc if gauge == "sun" else sp.w_rc)
     psi = np.asarray(g.angles, dtype=float)
     lag = np.mod(o * (psi[1:] - psi[0]), TWO_PI)             # angle from planet 1 to planet n
-    n_rev = int(math.floor((tau_end - tau_start) * w / TWO_PI))
+    n_rev = max(0, int(math.floor((tau_end - tau_start) * w / TWO_PI)))
+    nxt = tau_start + TWO_PI * n_rev / w
     if n_rev < 1 or lag.size == 0:
-        return np.empty((0, int(fit.free.sum())))
+        return np.empty((0, int(fit.free.sum()))), nxt
     tau_1 = np.repeat(tau_start + TWO_PI * np.arange(n_rev) / w, lag.size)
     tau_n = tau_1 + np.tile(lag, n_rev) / w
     planet = np.tile(np.arange(2, g.n_planets + 1), n_rev)
@@ -844,7 +906,7 @@ def _schedule_rows(fit: "_PhasingFit", gauge: str, tau_start: float, tau_end: fl
                             np.concatenate([planet, np.ones(m, dtype=int)]), g, sp, mesh=gauge)
     _, j = plan.evaluate(errors)
     jac = (o * z / TWO_PI) * (j[:m] - j[m:])
-    return -weight * jac[:, fit.free] * fit.scale
+    return -weight * jac[:, fit.free] * fit.scale, nxt
 
 
 def _resolved_std(R: np.ndarray, rcond: float, s2: float, scale: float) -> tuple:
@@ -913,20 +975,31 @@ def _suggestions(fit: "_PhasingFit", sol, rcond: float, s2: float, names: list,
     def rows(gauge, a, b):
         return _schedule_rows(fit, gauge, a, b, weight[gauge], errors)
 
+    # each recorded table continues in its own phase: from the revolution after its last
+    # planet-1 pass (a gauge started at another phase is a gauge at another angle)
+    nxt = []
+    for t, st in zip(fit.tables, fit.setups):
+        w = abs(sp.w_sc if t.gauge == "sun" else sp.w_rc)
+        t1 = st.tau_1[st.ok]
+        nxt.append((t.gauge, float(t1.max()) + TWO_PI / w if t1.size else hi))
+
     def options():
         for gauge in ("sun", "ring"):
             if gauge not in gauges:
                 yield (f"add a {gauge} gauge over the same record", 1.0,
-                       _stack_r(base, rows(gauge, lo, hi)))
+                       _stack_r(base, rows(gauge, lo, hi)[0]))
         for gauge in gauges:
             w = abs(sp.w_sc if gauge == "sun" else sp.w_rc)
+            t1 = min(b for gg, b in nxt if gg == gauge) - TWO_PI / w
+            t1 -= TWO_PI / w * math.floor((t1 - lo) * w / TWO_PI)  # its first revolution
             yield (f"add a second {gauge} gauge a quarter turn from the first", 1.0,
-                   _stack_r(base, rows(gauge, lo + 0.25 * TWO_PI / w, hi)))
-        R, end = base, hi       # the record grows segment by segment: each QR adds only the new
+                   _stack_r(base, rows(gauge, t1 + 0.25 * TWO_PI / w, hi)[0]))
+        R = base                # the record grows segment by segment: each QR adds only the new
         for f in RECORD_FACTORS:
-            new_end = lo + f * (hi - lo)
-            R = _stack_r(R, *[rows(gauge, end, new_end) for gauge in gauges])
-            end = new_end
+            end = lo + f * (hi - lo)
+            parts = [rows(gauge, start, end) for gauge, start in nxt]
+            nxt[:] = [(gauge, p[1]) for (gauge, _), p in zip(nxt, parts)]
+            R = _stack_r(R, *[p[0] for p in parts])
             yield f"record {f} times as long ({f * (hi - lo):.0f} s)", float(f), R
 
     free_names = [nm for nm, fr in zip(names, fit.free) if fr]

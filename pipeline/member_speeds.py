@@ -147,6 +147,8 @@ def _speeds_text(sp: dict) -> str:
     held = sp["held"]
     if held is not None:
         head = f"{held} held"
+    elif sp["carrier"] == 0.0 and math.isfinite(sp["ring"]):
+        head = f"carrier held (a star arrangement): the ring turns at {r(sp['ring'])}"
     elif math.isfinite(sp["ring"]):
         head = f"none held: the ring turns at {r(sp['ring'])}"
     else:
