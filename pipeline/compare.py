@@ -566,6 +566,19 @@ class Identification:
         d = (_vector_from_errors(self.errors, n_pl) - _vector_from_errors(true_errors, n_pl))[self.free]
         return float(np.linalg.norm(self.projector @ d))
 
+    def true_combinations(self, true_errors: ShaftHoleErrors) -> np.ndarray:
+        """Value [m] of each of :attr:`combinations` for ``true_errors`` (synthetic truth):
+        what each estimate and its interval should hold."""
+        if not isinstance(true_errors, ShaftHoleErrors):
+            raise TypeError(f"true_errors must be a ShaftHoleErrors, got {type(true_errors).__name__}")
+        if self.free is None or not self.combinations:
+            return np.empty(0)
+        n_pl = (self.free.size - 4) // 2
+        p = _vector_from_errors(true_errors, n_pl)
+        names = PARAMETER_NAMES(n_pl)
+        return np.array([sum(c * p[names.index(nm)] for nm, c in comb["coefficients"].items())
+                         for comb in self.combinations])
+
 
 #: how far the timed pulse feature may sit from the engagement instant [mesh cycles]: the
 #: matched filter's timing centre of a skewed tooth-root pulse lies 0.02-0.06 mesh cycles off

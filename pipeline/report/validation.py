@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..channels import mapping_report
-from ..compare import identification_verdict, wrap
+from ..compare import RECORD_FACTORS, identification_verdict, wrap
 from ..models.bearing import BearingMoments
 from ..models.tilt import TABLE11_THEORY, table10_cases, table11_cases
 from . import figures
@@ -343,10 +343,13 @@ def _identify_section(rep: Report, ctx) -> None:
         s.text("Unit-norm combinations of the offset components (right singular vectors of the "
                "weighted design), best determined first; 95 % intervals are +-1.96 standard "
                "deviations scaled by the fit's residual scale.")
+        true_err = ctx.load.true_errors if ctx.load is not None else None
+        truth = i.true_combinations(true_err) if true_err is not None else None
         s.table([{"#": k + 1, "combination": c["description"],
                   "estimate [mm]": c["estimate"] * 1e3,
                   "95% interval [mm]": f"{c['ci95'][0] * 1e3:.4g} to {c['ci95'][1] * 1e3:.4g}",
                   "std [mm]": c["std"] * 1e3,
+                  **({} if truth is None else {"synthetic truth [mm]": truth[k] * 1e3}),
                   "relative singular value": c["relative_singular_value"]}
                  for k, c in enumerate(i.combinations)])
     if i.suggestions:
@@ -354,7 +357,7 @@ def _identify_section(rep: Report, ctx) -> None:
         s.table([{"gear": sg["gear"], "first option that identifies it": sg["option"] or
                   "none of the options tried",
                   "predicted std [mm]": sg["predicted_std"] * 1e3,
-                  "shortest longer record that does": sg["record_option"] or "none tried",
+                  "shortest longer record that does": sg["record_option"] or f"none up to {RECORD_FACTORS[-1]}x",
                   "its predicted std [mm]": sg["record_predicted_std"] * 1e3,
                   "options tried": "; ".join(sg["tried"])} for sg in i.suggestions])
     true_err = ctx.load.true_errors if ctx.load is not None else None

@@ -71,11 +71,13 @@ def test_combinations_cover_the_true_combinations_over_seeds():
         res = identify_errors(tabs, g, pass_offset_std=0.0)
         assert res.rank == len(res.combinations) == 7
         names = PARAMETER_NAMES(4)
-        for c in res.combinations:
+        true_c = res.true_combinations(ERRORS["all"])
+        for c, t in zip(res.combinations, true_c):
             v = np.array([c["coefficients"][nm] for nm in names])
             assert abs(np.linalg.norm(v) - 1.0) < 1e-12           # unit norm
             assert c["ci95"][0] < c["estimate"] < c["ci95"][1]
-            z.append((c["estimate"] - v @ p_true) / c["std"])
+            assert t == pytest.approx(v @ p_true, rel=1e-12, abs=1e-18)
+            z.append((c["estimate"] - t) / c["std"])
         stds = [c["std"] for c in res.combinations]
         assert stds == sorted(stds)                                # best determined first
     z = np.asarray(z)
@@ -237,3 +239,6 @@ def test_no_tables_has_no_combinations():
     with pytest.warns(Warning, match="no measured passes"):
         res = identify_errors([], gearset("cw"))
     assert res.combinations == [] and res.suggestions == [] and res.rank == 0
+    assert res.true_combinations(ERRORS["all"]).size == 0
+    with pytest.raises(TypeError, match="ShaftHoleErrors"):
+        res.true_combinations({"e_sun": 1e-4})
