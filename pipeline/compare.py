@@ -593,7 +593,7 @@ JACOBIANS = ("analytic", "2-point", "3-point")
 def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet"),
                     rcond: float = 1e-2, max_nfev: int = 200,
                     pass_offset_std: float = PASS_OFFSET_STD,
-                    jac: str = "analytic") -> Identification:
+                    jac: str = "analytic", suggest: bool = True) -> Identification:
     """Identify shaft hole errors (e, kappa per gear) from measured phasing time series.
 
     Weighted nonlinear least squares (scipy.optimize.least_squares, trust region) of the
@@ -634,6 +634,10 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
         (``diff_step`` 1e-6; 1 + P or 1 + 2P evaluations per Jacobian), kept as the
         reference and fallback. Both reach the same solution within the solver's
         tolerances (tests/processing/test_identify_jacobian.py).
+    suggest : bool
+        Work out what would identify each offset that is not identifiable
+        (``suggestions``: the design rows of up to a 64 times longer record, the larger part
+        of the cost on a long record). False leaves ``suggestions`` empty.
 
     Returns
     -------
@@ -705,7 +709,7 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
                            p_hat[free], [nm for nm, f in zip(names, free) if f], gearset)
     s2 = float(np.sum(sol.fun ** 2)) / max(1, int(fit.ok.sum()) - int(keep.sum()))
     sugg = _suggestions(fit, sol, rcond, s2, names, [r["gear"] for r in rows
-                                                     if not r["identifiable"]])
+                                                     if not r["identifiable"]]) if suggest else []
     if not sol.success:
         notes.append(f"least squares stopped: {sol.message}")
     return Identification(

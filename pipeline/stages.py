@@ -545,12 +545,15 @@ def stage_identify(ctx: RunContext) -> IdentifyStage:
         tab, lab = relabel_gauge(res, gear, shift, g)
         if not len(tab):
             continue
-        cand = identify_errors([tab if k == gear else t for k, t in tables.items()], g)
+        cand = identify_errors([tab if k == gear else t for k, t in tables.items()], g,
+                               suggest=False)
         if cand.rms_after < best[0]:
             best = (cand.rms_after, shift, cand, tab, lab)
     if not (best[1] and best[0] <= 0.5 * ident.rms_after):
         return _identified(ident)
     _, shift, ident, tab, lab = best
+    # the kept relabelling, now with what would identify its blind offsets
+    ident = identify_errors([tab if k == gear else t for k, t in tables.items()], g)
     ident.notes.append(f"{gear} gauge relabelled by {shift} place(s): the error model "
                        "fits both gauges only with the planets numbered alike")
     lab = dataclasses.replace(lab, decided_by="identification")

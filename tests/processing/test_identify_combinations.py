@@ -175,6 +175,11 @@ def test_blind_offsets_have_no_option():
         assert sugg[gear]["option"] is None and sugg[gear]["record_option"] is None
         assert math.isnan(sugg[gear]["predicted_std"])
         assert len(sugg[gear]["tried"]) == 8 and "none of the options tried" in sugg[gear]["note"]
+    # suggest=False: the same fit without them
+    quiet = identify_errors([cut(exact_table("cw", gear, "all"), 10.0) for gear in ("sun", "ring")],
+                            gearset("cw"), suggest=False)
+    assert quiet.suggestions == [] and quiet.rank == res.rank
+    np.testing.assert_array_equal(quiet.singular_values, res.singular_values)
 
 
 # ----------------------------------------------------------------------------- describe
