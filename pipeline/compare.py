@@ -681,9 +681,14 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
     njev += int(sol.njev or 0)
     U, s, Vt = np.linalg.svd(sol.jac, full_matrices=False)
     keep = _kept(s, rcond)
-    if s.size and not np.all(keep) and not np.array_equal(keep, keep0):
-        # the rank fell between 0 and the solution: fit again inside what is determined there
-        sol = _subspace_fit(fit, Vt[keep].T, jac, max_nfev)
+    if s.size and keep.sum() != keep0.sum():
+        # the rank changed between 0 and the solution: fit again over what is determined there
+        if np.all(keep):
+            sol = least_squares(fit.resid, sol.x, jac=fit.jac if jac == "analytic" else jac,
+                                method="trf", x_scale=1.0, diff_step=1e-6, max_nfev=max_nfev,
+                                bounds=(-bound, bound))
+        else:
+            sol = _subspace_fit(fit, Vt[keep].T, jac, max_nfev)
         njev += int(sol.njev or 0)
         U, s, Vt = np.linalg.svd(sol.jac, full_matrices=False)
         keep = _kept(s, rcond)
@@ -783,7 +788,8 @@ def _rank_note(s: np.ndarray, keep: np.ndarray, rcond: float) -> str:
     rel = s / s[0]
     kept, dropped = rel[keep], rel[~keep]
     text = (f"rank {int(keep.sum())} of {s.size}: singular values above rcond = {rcond:.3g} "
-            f"of the largest count as determined (smallest kept {kept.min():.3g}")
+            f"of the largest count as determined (")
+    text += f"smallest kept {kept.min():.3g}" if kept.size else "none kept"
     text += f", largest dropped {dropped.max():.3g})" if dropped.size else ", none dropped)"
     near = np.any((rel > rcond / MARGINAL_FACTOR) & (rel < rcond * MARGINAL_FACTOR))
     if near:

@@ -11,11 +11,12 @@ tolerance, identify, compare, bearing_moments, tilt, and verdict (the report's o
 paragraph, :func:`meshphase.compare.identification_verdict`).
 
 CSV tables (columns in ``data_schemas/outputs.md``): passes_<gear>.csv, load_sharing.csv,
-identified_errors.csv, identified_combinations.csv, bearing_moments.csv, tilt.csv and stages.csv, each of what ran. SI
-values, the unit in the header (``time_s``, ``gamma_cycles``, ``e_m``, ``my_Nm``, ...; no
-suffix: a label, count, flag, text or a dimensionless ratio), one number per field (an
-interval is two columns, ``..._ci95_lo_m`` and ``..._ci95_hi_m``), NaN (not computed) as an
-empty field, infinities as ``inf`` / ``-inf``.
+identified_errors.csv, identified_combinations.csv, bearing_moments.csv, tilt.csv and
+stages.csv, each of what ran. SI values, the unit in the header (``time_s``,
+``gamma_cycles``, ``e_m``, ``my_Nm``, ...; no suffix: a label, count, flag, text or a
+dimensionless ratio), one number per field (an interval is two columns, ``..._ci95_lo_m``
+and ``..._ci95_hi_m``), NaN (not computed) as an empty field, infinities as ``inf`` /
+``-inf``.
 """
 
 from __future__ import annotations

@@ -402,7 +402,13 @@ def _member_speeds(res, g, sp, tacho_times) -> dict | None:
     rate = mean_mesh_rate(res.model)
     if not (math.isfinite(rate) and rate > 0):
         return None
-    return member_speeds(g, rate, fixed=res.fixed, speeds=sp, carrier_rate=tacho_rate(tacho_times))
+    carrier = float("nan")
+    if res.fixed is None and tacho_times is not None:   # a differential: the tacho's count
+        try:
+            carrier = tacho_rate(tacho_times)
+        except ValueError:      # edges out of order: the nominal ratio gives the carrier
+            pass
+    return member_speeds(g, rate, fixed=res.fixed, speeds=sp, carrier_rate=carrier)
 
 
 def _warn_phasing(res) -> None:

@@ -357,7 +357,8 @@ def _identify_section(rep: Report, ctx) -> None:
         s.table([{"gear": sg["gear"], "first option that identifies it": sg["option"] or
                   "none of the options tried",
                   "predicted std [mm]": sg["predicted_std"] * 1e3,
-                  "shortest longer record that does": sg["record_option"] or f"none up to {RECORD_FACTORS[-1]}x",
+                  "shortest longer record that does":
+                      sg["record_option"] or f"none up to {RECORD_FACTORS[-1]}x",
                   "its predicted std [mm]": sg["record_predicted_std"] * 1e3,
                   "options tried": "; ".join(sg["tried"])} for sg in i.suggestions])
     true_err = ctx.load.true_errors if ctx.load is not None else None

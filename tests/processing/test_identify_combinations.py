@@ -124,6 +124,9 @@ def test_rank_note_says_when_the_decision_is_marginal():
     assert res.rank == 7 and "marginal" in res.rank_note
     res = identify_errors(tabs, g, gears=("planet",), rcond=2e-2)
     assert res.rank == 7 and "marginal" not in res.rank_note
+    # rcond above 1 keeps nothing: said, not a crash
+    res = identify_errors(tabs, g, gears=("planet",), rcond=2.0)
+    assert res.rank == 0 and res.combinations == [] and "none kept" in res.rank_note
 
 
 def test_longer_record_prediction_matches_a_longer_record():
