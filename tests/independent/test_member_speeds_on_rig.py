@@ -1,7 +1,7 @@
 """Member speeds, the identification's combinations and the report's verdict on recordings of
 the independent rig (tests/independent/rig.py): a held ring (sun 18.19 r/min, the Table 2
-case 1 hole errors) and a held carrier whose ring turns (sun 18.19 r/min, no tacho), each one
-minute, processed through a scene as a user would."""
+case 1 hole errors), a held carrier whose ring turns (sun 18.19 r/min, no tacho) and a held
+sun whose ring turns (carrier 1.06 r/min), processed through a scene as a user would."""
 
 import json
 import math
@@ -23,9 +23,9 @@ from .test_meshphase_on_rig import _errors, scene_text
 REL = 1e-5
 
 
-def _run(tmp: Path, name: str, **config):
+def _run(tmp: Path, name: str, minutes: float = 1.0, **config):
     p = tmp / f"{name}.tdms"
-    truth = R.make_rig_tdms(p, minutes=1.0, seed=3, **config)
+    truth = R.make_rig_tdms(p, minutes=minutes, seed=3, **config)
     scene = tmp / f"{name}.toml"
     scene.write_text(scene_text(truth, p).replace('results = ["phasing", "compare"]',
                                                    'results = ["phasing", "compare", "identify"]'),
@@ -90,6 +90,18 @@ def test_star_ring_turns(tmp_path):
     assert sp["ring"] == pytest.approx(truth.speeds["ring_rpm"], rel=REL)     # -5.227 r/min
     assert sp["sun"] == pytest.approx(truth.speeds["sun_rpm"], rel=REL)
     assert "the ring turns at -5.227 r/min" in sp["text"]
+
+
+def test_held_sun_carrier_1_06_ring_turns(tmp_path):
+    # the sun held, the carrier driven at 1.06 r/min (3 min: 13 sun-gauge passes): the ring
+    # turns at 1.3646 r/min. The slow mesh (0.44 Hz) leaves the ring gauge without usable
+    # pulses; the sun gauge's passes alone give the mesh frequency
+    ctx, truth = _run(tmp_path, "sun_held", fixed="sun", carrier_rpm=1.06, minutes=3.0)
+    sp = ctx.phasing.member_speeds
+    assert sp["held"] == "sun" and sp["sun"] == 0.0
+    assert sp["carrier"] == pytest.approx(truth.speeds["carrier_rpm"], rel=REL)
+    assert sp["ring"] == pytest.approx(truth.speeds["ring_rpm"], rel=REL)
+    assert sp["text"].startswith("sun held; sun 0 r/min, carrier 1.06 r/min, ring 1.365 r/min")
 
 
 def test_report_summary_opens_with_the_verdict(held):
