@@ -1099,7 +1099,10 @@ def identification_verdict(identification: Identification | None,
         parts.append(f"Identification: {status}; the fit lowers the phasing residual RMS from "
                      f"{i.rms_before:.3g} to {i.rms_after:.3g} mesh cycles over {i.n_passes} "
                      f"passes, and the data determine {i.rank} combination(s) of the "
-                     f"{i.n_parameters} offset components.")
+                     f"{i.n_parameters} offset components"
+                     + (" (a marginal rank: a singular value lies within a factor "
+                        f"{MARGINAL_FACTOR:g} of the threshold)." if "marginal" in i.rank_note
+                        else "."))
         if i.combinations:
             c = i.combinations[0]
             parts.append(f"Best determined: {c['description']} = {c['estimate'] * 1e3:.4g} mm "

@@ -112,6 +112,7 @@ def test_rank_decision_is_stable_under_tiny_perturbations():
         np.testing.assert_allclose(res.projector, base.projector, atol=1e-6)
     assert base.rank_note.startswith(f"rank {base.rank} of 12: singular values above rcond = 0.01")
     assert "smallest kept" in base.rank_note and "largest dropped" in base.rank_note
+    assert ("a marginal rank" in identification_verdict(base)) == ("marginal" in base.rank_note)
 
 
 def test_rank_note_says_when_the_decision_is_marginal():
@@ -122,6 +123,8 @@ def test_rank_note_says_when_the_decision_is_marginal():
     tabs = [cut(exact_table("cw", gear, "planets"), 7.5) for gear in ("sun", "ring")]
     res = identify_errors(tabs, g, gears=("planet",), rcond=8e-3)
     assert res.rank == 7 and "marginal" in res.rank_note
+    assert "(a marginal rank: a singular value lies within a factor 2 of the threshold)" in \
+        identification_verdict(res)
     res = identify_errors(tabs, g, gears=("planet",), rcond=2e-2)
     assert res.rank == 7 and "marginal" not in res.rank_note
     # rcond above 1 keeps nothing: said, not a crash
@@ -224,7 +227,7 @@ def test_verdict_carries_the_key_numbers():
     text = identification_verdict(res, speeds)
     assert "no single offset is identified" in text
     assert f"from {res.rms_before:.3g} to {res.rms_after:.3g} mesh cycles" in text
-    assert f"determine {res.rank} combination(s) of the 12" in text
+    assert f"determine {res.rank} combination(s) of the 12 offset components." in text
     best = res.combinations[0]
     assert f"= {best['estimate'] * 1e3:.4g} mm (95 % interval" in text
     assert "No extra gauge or longer record tried identifies sun, ring" in text
