@@ -31,7 +31,7 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import OptimizeResult, approx_fprime, least_squares
 
 from .errors import ProcessingWarning
 from .models.gearset import Gearset, Speeds
@@ -51,6 +51,8 @@ __all__ = [
     "Identification",
     "identify_errors",
     "PARAMETER_NAMES",
+    "describe_combination",
+    "identification_verdict",
 ]
 
 TWO_PI = 2.0 * math.pi
@@ -518,6 +520,20 @@ class Identification:
         Orthogonal projector onto the identifiable subspace of the Cartesian parameters
         (:data:`PARAMETER_NAMES` order); see :meth:`subspace_error`.
     notes : list of str
+    rank : int
+        Singular values above ``rcond`` times the largest: the number of combinations the
+        data determine.
+    rank_note : str
+        The rank decision in words (threshold, smallest kept and largest dropped singular
+        value, whether the decision is marginal).
+    combinations : list of dict
+        The determined combinations (:func:`_combinations`), best determined first:
+        ``description`` (in words), ``coefficients`` (parameter name -> unit-norm
+        coefficient [-]), ``estimate`` [m], ``std`` [m], ``ci95`` [m, m],
+        ``relative_singular_value`` [-].
+    suggestions : list of dict
+        Per gear that is not identifiable: the first extra gauge or longer record that
+        would identify it, with its predicted standard error (:func:`_suggestions`).
     """
 
     errors: ShaftHoleErrors
@@ -536,6 +552,10 @@ class Identification:
     projector: np.ndarray | None = None
     free: np.ndarray | None = None
     jacobian_evaluations: int = 0
+    rank: int = 0
+    rank_note: str = ""
+    combinations: list = field(default_factory=list)
+    suggestions: list = field(default_factory=list)
 
     def subspace_error(self, true_errors: ShaftHoleErrors) -> float:
         """Distance [m] between the estimate and ``true_errors`` inside the identifiable
@@ -545,6 +565,19 @@ class Identification:
         n_pl = (self.free.size - 4) // 2
         d = (_vector_from_errors(self.errors, n_pl) - _vector_from_errors(true_errors, n_pl))[self.free]
         return float(np.linalg.norm(self.projector @ d))
+
+    def true_combinations(self, true_errors: ShaftHoleErrors) -> np.ndarray:
+        """Value [m] of each of :attr:`combinations` for ``true_errors`` (synthetic truth):
+        what each estimate and its interval should hold."""
+        if not isinstance(true_errors, ShaftHoleErrors):
+            raise TypeError(f"true_errors must be a ShaftHoleErrors, got {type(true_errors).__name__}")
+        if self.free is None or not self.combinations:
+            return np.empty(0)
+        n_pl = (self.free.size - 4) // 2
+        p = _vector_from_errors(true_errors, n_pl)
+        names = PARAMETER_NAMES(n_pl)
+        return np.array([sum(c * p[names.index(nm)] for nm, c in comb["coefficients"].items())
+                         for comb in self.combinations])
 
 
 #: how far the timed pulse feature may sit from the engagement instant [mesh cycles]: the
@@ -560,17 +593,23 @@ JACOBIANS = ("analytic", "2-point", "3-point")
 def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet"),
                     rcond: float = 1e-2, max_nfev: int = 200,
                     pass_offset_std: float = PASS_OFFSET_STD,
-                    jac: str = "analytic") -> Identification:
+                    jac: str = "analytic", suggest: bool = True) -> Identification:
     """Identify shaft hole errors (e, kappa per gear) from measured phasing time series.
 
     Weighted nonlinear least squares (scipy.optimize.least_squares, trust region) of the
     wrapped residuals gamma_measured - :func:`predict_pass_phasing`, over Cartesian offset
     components (x, y) = e (cos kappa, sin kappa) so that e = 0 is a regular point. The
-    weighted Jacobian's SVD decides identifiability: a parameter whose direction lies (to
-    99 %) outside the span of the singular vectors with s > rcond * s_max is reported as
-    not identifiable and held at 0 (e.g. a gear's own offset seen only by a gauge on that
-    gear). Confidence intervals: covariance sigma^2 (J^T J)^+ on the identifiable subspace,
-    e and kappa by the delta method; 95 % intervals are +-1.96 std.
+    weighted Jacobian's SVD decides identifiability: the right singular vectors with
+    s > rcond * s_max span what the data determine (the rank), and a parameter whose
+    direction lies less than 95 % inside that span is reported as not identifiable (e.g. a
+    gear's own offset seen only by a gauge on that gear). A rank-deficient design (at zero
+    offsets) is fitted from 0 inside the determined span only, so the flat directions stay
+    0 instead of wandering with the noise; the rank is decided again at the solution.
+    Confidence intervals: covariance sigma^2 (J^T J)^+ on the identifiable subspace,
+    e and kappa by the delta method; 95 % intervals are +-1.96 std. The determined span is
+    reported as unit-norm combinations with their estimates and intervals
+    (``combinations``), and each offset that is not identifiable gets the first extra gauge
+    or longer record that would identify it (``suggestions``, :func:`_suggestions`).
 
     Parameters
     ----------
@@ -595,6 +634,10 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
         (``diff_step`` 1e-6; 1 + P or 1 + 2P evaluations per Jacobian), kept as the
         reference and fallback. Both reach the same solution within the solver's
         tolerances (tests/processing/test_identify_jacobian.py).
+    suggest : bool
+        Work out what would identify each offset that is not identifiable
+        (``suggestions``: the design rows of up to a 64 times longer record, the larger part
+        of the cost on a long record). False leaves ``suggestions`` empty.
 
     Returns
     -------
@@ -622,17 +665,39 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
     # offsets are small against the carrier radius: bound each component to 5 % of R_c so the
     # flat (unidentifiable) directions cannot wander to geometrically impossible layouts
     bound = 0.05 * gearset.carrier_radius / fit.scale
-    sol = least_squares(fit.resid, x0, jac=fit.jac if jac == "analytic" else jac, method="trf",
-                        x_scale=1.0, diff_step=1e-6, max_nfev=max_nfev, bounds=(-bound, bound))
+    # the design at zero offsets decides which directions the data determine; a fit over all
+    # of them would let noise drive the nearly flat ones to the bounds, and at such offsets
+    # the second-order terms bias the determined combinations. So a rank-deficient design is
+    # fitted from 0 inside the span of its determined directions (the flat ones stay 0)
+    _, s0, Vt0 = np.linalg.svd(_jacobian_at(fit, x0, jac), full_matrices=False)
+    keep0 = _kept(s0, rcond)
+    njev = 1
+    if np.all(keep0):
+        sol = least_squares(fit.resid, x0, jac=fit.jac if jac == "analytic" else jac,
+                            method="trf", x_scale=1.0, diff_step=1e-6, max_nfev=max_nfev,
+                            bounds=(-bound, bound))
+    else:
+        sol = _subspace_fit(fit, Vt0[keep0].T, jac, max_nfev)
+    njev += int(sol.njev or 0)
     U, s, Vt = np.linalg.svd(sol.jac, full_matrices=False)
-    keep = s > rcond * (s[0] if s.size and s[0] > 0 else 1.0)
-    ident = np.sum(Vt[keep] ** 2, axis=0) > 0.95               # resolution of each parameter
+    keep = _kept(s, rcond)
+    if s.size and keep.sum() != keep0.sum():
+        # the rank changed between 0 and the solution: fit again over what is determined there
+        if np.all(keep):
+            sol = least_squares(fit.resid, sol.x, jac=fit.jac if jac == "analytic" else jac,
+                                method="trf", x_scale=1.0, diff_step=1e-6, max_nfev=max_nfev,
+                                bounds=(-bound, bound))
+        else:
+            sol = _subspace_fit(fit, Vt[keep].T, jac, max_nfev)
+        njev += int(sol.njev or 0)
+        U, s, Vt = np.linalg.svd(sol.jac, full_matrices=False)
+        keep = _kept(s, rcond)
+    ident = np.sum(Vt[keep] ** 2, axis=0) > RESOLUTION         # resolution of each parameter
     Vk = Vt[keep].T
     cov_free = fit.covariance(sol, U, s, Vk, keep, pass_offset_std)
     p_hat = np.zeros(len(names))
-    # the fitted model keeps the whole solution (started at 0, the trust-region steps stay in
-    # the range of J^T, i.e. unidentifiable combinations sit at minimum norm); only the
-    # identifiable parameters are reported as estimates
+    # the fitted model is the solution inside the determined subspace (the combinations the
+    # data cannot see at 0); only the identifiable parameters are reported as estimates
     est = sol.x * fit.scale
     p_hat[free] = est
     cov = np.zeros((len(names), len(names)))
@@ -645,6 +710,11 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
     params = {nm: (float(p_hat[i]), float(math.sqrt(max(cov[i, i], 0.0))), bool(ident_full[i]))
               for i, nm in enumerate(names) if free[i]}
     rows, notes = _gear_rows(p_hat, cov, free, ident_full, {t.gauge for t in tables}, n_pl)
+    combos = _combinations(Vt[keep], s[keep] / s[0] if s.size else s[keep], cov_free,
+                           p_hat[free], [nm for nm, f in zip(names, free) if f], gearset)
+    s2 = float(np.sum(sol.fun ** 2)) / max(1, int(fit.ok.sum()) - int(keep.sum()))
+    sugg = _suggestions(fit, sol, rcond, s2, names, [r["gear"] for r in rows
+                                                     if not r["identifiable"]]) if suggest else []
     if not sol.success:
         notes.append(f"least squares stopped: {sol.message}")
     return Identification(
@@ -653,9 +723,414 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
         rms_after=float(np.sqrt(np.mean(r1[ok] ** 2))) if ok.any() else float("nan"),
         sigma=float(np.std(r1[ok])) if ok.any() else float("nan"), n_passes=int(ok.sum()),
         n_parameters=int(free.sum()), cost_evaluations=fit.n_eval,
-        jacobian_evaluations=int(sol.njev) if sol.njev is not None else 0,
+        jacobian_evaluations=njev,
         wall_time=time.perf_counter() - t_start,
-        identifiable=bool(np.all(ident)), notes=notes, projector=Vk @ Vk.T, free=free)
+        identifiable=bool(np.all(ident)), notes=notes, projector=Vk @ Vk.T, free=free,
+        rank=int(keep.sum()), rank_note=_rank_note(s, keep, rcond), combinations=combos,
+        suggestions=sugg)
+
+
+def _subspace_fit(fit: "_PhasingFit", basis: np.ndarray, jac: str, max_nfev: int) -> OptimizeResult:
+    """Least squares of :meth:`_PhasingFit.resid` over x = ``basis`` c (orthonormal columns:
+    the determined directions), started at c = 0, so the directions outside the span stay
+    exactly 0. Returns ``x`` (scaled parameters), ``fun``, ``jac`` (the full Jacobian at x,
+    closed form or forward differences of step 1e-6), ``njev``, ``success``, ``message``."""
+    if basis.shape[1] == 0:        # nothing determined: the parameters stay at 0
+        x = np.zeros(basis.shape[0])
+        return OptimizeResult(x=x, fun=fit.resid(x), jac=_jacobian_at(fit, x, jac), njev=1,
+                              success=True, message="no determined direction to fit")
+
+    def resid(c):
+        return fit.resid(basis @ c)
+
+    def jac_c(c):
+        return fit.jac(basis @ c) @ basis
+
+    sol = least_squares(resid, np.zeros(basis.shape[1]), jac=jac_c if fit.analytic else jac,
+                        method="trf", x_scale=1.0, diff_step=1e-6, max_nfev=max_nfev)
+    x = basis @ sol.x
+    return OptimizeResult(x=x, fun=fit.resid(x), jac=_jacobian_at(fit, x, jac),
+                          njev=(sol.njev or 0) + 1, success=sol.success, message=sol.message)
+
+
+def _jacobian_at(fit: "_PhasingFit", x: np.ndarray, jac: str) -> np.ndarray:
+    """Jacobian of :meth:`_PhasingFit.resid` at the scaled parameters ``x``: closed form, or
+    forward differences of step 1e-6 (scipy.optimize.approx_fprime)."""
+    if fit.analytic:
+        return fit.jac(x)
+    return np.atleast_2d(approx_fprime(x, fit.resid, 1e-6)).reshape(fit.meas.size, x.size)
+
+
+def _kept(s: np.ndarray, rcond: float) -> np.ndarray:
+    """Singular values above ``rcond`` times the largest (the rank rule) [bool]."""
+    return s > rcond * (s[0] if s.size and s[0] > 0 else 1.0)
+
+
+#: a singular value within this factor of the rank threshold makes the rank decision marginal
+MARGINAL_FACTOR = 2.0
+#: coefficients of a combination's description below this are left out of the words [-]
+DESCRIBE_MIN = 0.05
+#: angular tolerance for naming a direction after a planet or a gear axis [rad]
+DESCRIBE_ANGLE = math.radians(5.0)
+#: record-length multiples tried by :func:`_suggestions` [-]
+RECORD_FACTORS = (2, 4, 8, 16, 32, 64)
+#: a parameter counts as identifiable when this share of its direction lies in the span of
+#: the kept singular vectors [-] (as in :func:`identify_errors`)
+RESOLUTION = 0.95
+
+
+def _rank_note(s: np.ndarray, keep: np.ndarray, rcond: float) -> str:
+    """The rank decision in words: threshold, smallest kept and largest dropped singular
+    value relative to the largest, and whether one lies within :data:`MARGINAL_FACTOR` of the
+    threshold (then a different rcond, or a little more or less data, changes the rank)."""
+    if not s.size or not s[0] > 0:
+        return "rank 0: the weighted design is zero (the data see none of the parameters)"
+    rel = s / s[0]
+    kept, dropped = rel[keep], rel[~keep]
+    text = (f"rank {int(keep.sum())} of {s.size}: singular values above rcond = {rcond:.3g} "
+            f"of the largest count as determined (")
+    text += f"smallest kept {kept.min():.3g}" if kept.size else "none kept"
+    text += f", largest dropped {dropped.max():.3g})" if dropped.size else ", none dropped)"
+    near = np.any((rel > rcond / MARGINAL_FACTOR) & (rel < rcond * MARGINAL_FACTOR))
+    if near:
+        text += (f"; the decision is marginal: a singular value lies within a factor "
+                 f"{MARGINAL_FACTOR:g} of the threshold")
+    return text
+
+
+def _combinations(vt_keep: np.ndarray, rel_s: np.ndarray, cov_free: np.ndarray,
+                  est_free: np.ndarray, names: list, gearset: Gearset) -> list:
+    """The combinations of the free Cartesian parameters the data determine: the kept right
+    singular vectors of the weighted design (every column scaled alike, so each is a
+    unit-norm combination of offsets in metres).
+
+    Each singular vector v gives the estimate v . p [m] and its standard deviation
+    sqrt(v^T C v) [m] from the parameters' covariance C (the fit's residual scale and the
+    pass-timing systematic term); 95 % interval +-1.96 std. The sign makes the largest
+    coefficient positive. Ordered by standard deviation, smallest first.
+    """
+    out = []
+    for v, r in zip(vt_keep, rel_s):
+        v = v * math.copysign(1.0, v[int(np.argmax(np.abs(v)))])
+        est = float(v @ est_free)
+        std = float(math.sqrt(max(float(v @ cov_free @ v), 0.0)))
+        out.append({"description": describe_combination(v, names, gearset),
+                    "coefficients": {nm: float(c) for nm, c in zip(names, v)},
+                    "estimate": est, "std": std, "ci95": [est - 1.96 * std, est + 1.96 * std],
+                    "relative_singular_value": float(r)})
+    out.sort(key=lambda c: c["std"])
+    return out
+
+
+def describe_combination(coefficients, names, gearset: Gearset) -> str:
+    """A combination of Cartesian offset parameters in a rig engineer's words.
+
+    Each gear's pair (x, y) of coefficients is one term: its length times the gear's offset
+    along the pair's direction. A sun or ring direction within 5 deg of a planet's line of
+    centres at the time origin (psi_n) is named after that planet ("towards planet n"); a
+    planet's x is its inward radial (towards the sun), y its tangential direction
+    (:class:`~meshphase.models.mesh_phasing.ShaftHoleErrors`). Terms shorter than
+    :data:`DESCRIBE_MIN` are left out (and said to be).
+
+    Parameters
+    ----------
+    coefficients : array_like, shape (P,)
+        Coefficients [-] of the parameters ``names``.
+    names : list of str
+        Parameter names (:func:`PARAMETER_NAMES` entries), as many as coefficients.
+    gearset : Gearset
+        Planet angles psi_n [rad].
+
+    Returns
+    -------
+    str
+        e.g. "0.71 sun offset towards planet 1 - 0.70 planet 1 radial offset (towards the
+        sun)"; "0" for a zero combination.
+    """
+    c = np.asarray(coefficients, dtype=float)
+    names = list(names)
+    if c.ndim != 1 or c.size != len(names):
+        raise ValueError(f"coefficients must be 1-D with one entry per name ({len(names)}), "
+                         f"got shape {c.shape}")
+    if not np.all(np.isfinite(c)):
+        raise ValueError(f"coefficients must be finite, got {c.tolist()}")
+    if not isinstance(gearset, Gearset):
+        raise TypeError(f"gearset must be a Gearset, got {type(gearset).__name__}")
+    known = set(PARAMETER_NAMES(gearset.n_planets))
+    bad = [nm for nm in names if nm not in known]
+    if bad:
+        raise ValueError(f"unknown parameter name(s) {bad}; expected {sorted(known)}")
+    pairs: dict = {}
+    for nm, v in zip(names, c):
+        gear, axis = nm.rsplit("_", 1)
+        pairs.setdefault(gear, [0.0, 0.0])[axis == "y"] = float(v)
+    psi = np.asarray(gearset.angles, dtype=float)
+    terms, left_out = [], False
+    for gear, (a, b) in pairs.items():
+        m = math.hypot(a, b)
+        if m < DESCRIBE_MIN:
+            left_out = left_out or m > 0
+            continue
+        sign, what = _term_words(gear, math.atan2(b, a), psi)
+        terms.append((sign * m, what))
+    if not terms:
+        return "0"
+    terms.sort(key=lambda t: -abs(t[0]))
+    text = ""
+    for i, (k, what) in enumerate(terms):
+        op = ("-" if k < 0 else "") if i == 0 else (" - " if k < 0 else " + ")
+        text += f"{op}{abs(k):.2f} {what}"
+    return text + (" (+ smaller terms)" if left_out else "")
+
+
+def _term_words(gear: str, phi: float, psi: np.ndarray) -> tuple[float, str]:
+    """(sign, words) of one gear's offset along direction ``phi`` [rad]."""
+    def near(target):
+        return abs(float(wrap((phi - target) / TWO_PI))) * TWO_PI < DESCRIBE_ANGLE
+    if gear in ("sun", "ring"):
+        for sign, turn in ((1.0, 0.0), (-1.0, math.pi)):
+            for n, p in enumerate(psi, start=1):
+                if near(p + turn):
+                    return sign, f"{gear} offset towards planet {n}"
+        return 1.0, f"{gear} offset along {math.degrees(phi):.0f} deg"
+    num = gear[len("planet"):]
+    for sign, target, what in ((1.0, 0.0, "radial offset (towards the sun)"),
+                               (-1.0, math.pi, "radial offset (towards the sun)"),
+                               (1.0, math.pi / 2, "tangential offset"),
+                               (-1.0, -math.pi / 2, "tangential offset")):
+        if near(target):
+            return sign, f"planet {num} {what}"
+    return 1.0, f"planet {num} offset at {math.degrees(phi):.0f} deg from its inward radial"
+
+
+def _schedule_rows(fit: "_PhasingFit", gauge: str, tau_start: float, tau_end: float,
+                   weight: float, errors: ShaftHoleErrors) -> tuple[np.ndarray, float]:
+    """Weighted design rows (as :meth:`_PhasingFit.jac`) of a ``gauge`` that meets planet 1
+    at angle time ``tau_start`` [s] and then every planet of each whole relative revolution
+    that starts before ``tau_end`` [s] and fits in it, at the fit's speeds, each pass
+    weighted ``weight`` [1/mesh cycles]; and the angle time of the next revolution's planet-1
+    pass [s] (where a continuation starts in the same phase)."""
+    g = fit.gearset
+    sp = next(iter(fit.speeds.values()))
+    o = pass_order(g.direction, gauge)
+    z = g.z_sun if gauge == "sun" else g.z_ring
+    w = abs(sp.w_sc if gauge == "sun" else sp.w_rc)
+    psi = np.asarray(g.angles, dtype=float)
+    lag = np.mod(o * (psi[1:] - psi[0]), TWO_PI)             # angle from planet 1 to planet n
+    n_rev = max(0, int(math.floor((tau_end - tau_start) * w / TWO_PI)))
+    nxt = tau_start + TWO_PI * n_rev / w
+    if n_rev < 1 or lag.size == 0:
+        return np.empty((0, int(fit.free.sum()))), nxt
+    tau_1 = np.repeat(tau_start + TWO_PI * np.arange(n_rev) / w, lag.size)
+    tau_n = tau_1 + np.tile(lag, n_rev) / w
+    planet = np.tile(np.arange(2, g.n_planets + 1), n_rev)
+    m = tau_1.size
+    plan = MeshGradientPlan(np.concatenate([tau_n, tau_1]),
+                            np.concatenate([planet, np.ones(m, dtype=int)]), g, sp, mesh=gauge)
+    _, j = plan.evaluate(errors)
+    jac = (o * z / TWO_PI) * (j[:m] - j[m:])
+    return -weight * jac[:, fit.free] * fit.scale, nxt
+
+
+def _resolved_std(R: np.ndarray, rcond: float, s2: float, scale: float) -> tuple:
+    """(identifiable per column, standard deviation per column [m]) of a weighted design in
+    scaled parameters, given by its triangular QR factor ``R`` (same singular values and
+    right singular vectors): the rank rule of :func:`identify_errors` and the statistical
+    covariance s2 (J^T J)^+ on the kept subspace (NaN where not identifiable)."""
+    _, s, Vt = np.linalg.svd(R, full_matrices=False)
+    keep = s > rcond * (s[0] if s.size and s[0] > 0 else 1.0)
+    ident = np.sum(Vt[keep] ** 2, axis=0) > RESOLUTION
+    var = np.sum((Vt[keep] / s[keep, None]) ** 2, axis=0) * s2 * scale ** 2
+    return ident, np.where(ident, np.sqrt(var), np.nan)
+
+
+def _stack_r(*blocks) -> np.ndarray:
+    """Triangular QR factor of the design rows ``blocks`` stacked (Householder QR: the
+    singular values and right singular vectors of the stack, without its left ones)."""
+    return np.linalg.qr(np.vstack(blocks), mode="r")
+
+
+def _suggestions(fit: "_PhasingFit", sol, rcond: float, s2: float, names: list,
+                 blind: list) -> list:
+    """For each gear of ``blind``: the first of these additions to the data that makes its
+    offset identifiable, with the predicted standard error of its components.
+
+    The options, in order: the main gauge not recorded (sun or ring) over the same record;
+    a second gauge on a recorded gear, a quarter of a relative revolution from the first;
+    the record 2, 4, ... 64 times as long (every recorded gauge continues). Each adds the
+    design rows such passes would give (same model, same speeds, at the fitted errors; an
+    added gauge's passes weighted as the median of the recorded gauge of that gear, else of
+    all) to the weighted design, and the rank rule of :func:`identify_errors` is applied
+    again. The predicted standard error is the statistical one (residual scale ``s2`` of
+    this fit), without the pass-timing systematic term. Face-width gauges measure no
+    phasing and add no rows, so they are not among the options.
+
+    Returns
+    -------
+    list of dict
+        Per gear: ``option`` (the first that identifies it, None: none does),
+        ``predicted_std`` [m] (the larger of its two components'), ``tried`` (the options
+        tried up to it), ``record_option``, ``record_factor`` [-], ``record_s`` [s] and
+        ``record_predicted_std`` [m] of the shortest longer record that does, ``note``.
+    """
+    if not blind:
+        return []
+    ok = fit.ok
+    taus = [np.concatenate([st.tau_n[st.ok], st.tau_1[st.ok]]) for st in fit.setups if st is not None]
+    taus = np.concatenate(taus) if taus else np.empty(0)
+    taus = taus[np.isfinite(taus)]
+    if taus.size < 2:
+        nan = float("nan")
+        return [{"gear": g, "option": None, "predicted_std": nan, "tried": [],
+                 "record_option": None, "record_factor": nan, "record_s": nan,
+                 "record_predicted_std": nan, "note": f"{g}: no pass times to extend"}
+                for g in blind]
+    lo, hi = float(taus.min()), float(taus.max())
+    errors = fit._errors(sol.x)
+    gauges = list(dict.fromkeys(t.gauge for t in fit.tables))
+    rows_of = np.concatenate([np.full(len(t), t.gauge) for t in fit.tables])
+    w_all = float(np.median(fit.w[ok]))
+    weight = {g: float(np.median(fit.w[ok & (rows_of == g)])) if np.any(ok & (rows_of == g))
+              else w_all for g in ("sun", "ring")}
+    sp = next(iter(fit.speeds.values()))
+    base = _stack_r(sol.jac)
+
+    def rows(gauge, a, b):
+        return _schedule_rows(fit, gauge, a, b, weight[gauge], errors)
+
+    # each recorded table continues in its own phase: from the revolution after its last
+    # planet-1 pass (a gauge started at another phase is a gauge at another angle)
+    nxt = []
+    for t, st in zip(fit.tables, fit.setups):
+        w = abs(sp.w_sc if t.gauge == "sun" else sp.w_rc)
+        t1 = st.tau_1[st.ok]
+        nxt.append((t.gauge, float(t1.max()) + TWO_PI / w if t1.size else hi))
+
+    def options():
+        for gauge in ("sun", "ring"):
+            if gauge not in gauges:
+                yield (f"add a {gauge} gauge over the same record", 1.0,
+                       _stack_r(base, rows(gauge, lo, hi)[0]))
+        for gauge in gauges:
+            w = abs(sp.w_sc if gauge == "sun" else sp.w_rc)
+            t1 = min(b for gg, b in nxt if gg == gauge) - TWO_PI / w
+            t1 -= TWO_PI / w * math.floor((t1 - lo) * w / TWO_PI)  # its first revolution
+            yield (f"add a second {gauge} gauge a quarter turn from the first", 1.0,
+                   _stack_r(base, rows(gauge, t1 + 0.25 * TWO_PI / w, hi)[0]))
+        R = base                # the record grows segment by segment: each QR adds only the new
+        for f in RECORD_FACTORS:
+            end = lo + f * (hi - lo)
+            parts = [rows(gauge, start, end) for gauge, start in nxt]
+            nxt[:] = [(gauge, p[1]) for (gauge, _), p in zip(nxt, parts)]
+            R = _stack_r(R, *[p[0] for p in parts])
+            yield f"record {f} times as long ({f * (hi - lo):.0f} s)", float(f), R
+
+    free_names = [nm for nm, fr in zip(names, fit.free) if fr]
+    cols = {g: [i for i, nm in enumerate(free_names) if nm.rsplit("_", 1)[0] == g] for g in blind}
+    first: dict = {}         # gear -> (option, record factor, predicted std [m], options tried)
+    record: dict = {}        # gear -> (option, record factor, predicted std [m]) of the records
+    tried = []
+    for text, factor, R in options():
+        ident, std = _resolved_std(R, rcond, s2, fit.scale)
+        tried.append(text)
+        for g in blind:
+            if np.all(ident[cols[g]]):
+                got = (text, factor, float(np.max(std[cols[g]])))
+                first.setdefault(g, got + (len(tried),))
+                if text.startswith("record"):
+                    record.setdefault(g, got)
+        if len(record) == len(blind):
+            break
+    out = []
+    nan = float("nan")
+    for g in blind:
+        text, factor, std, k = first.get(g, (None, nan, nan, len(tried)))
+        r_text, r_factor, r_std = record.get(g, (None, nan, nan))
+        if text is None:
+            note = f"{g}: none of the options tried identifies it ({'; '.join(tried)})"
+        else:
+            note = f"{g}: {text} identifies it (predicted std {std * 1e3:.3g} mm)"
+            if r_text is not None and r_text != text:
+                note += f"; so does: {r_text} (predicted std {r_std * 1e3:.3g} mm)"
+        out.append({"gear": g, "option": text, "predicted_std": std, "tried": tried[:k],
+                    "record_option": r_text, "record_factor": r_factor,
+                    "record_s": r_factor * (hi - lo), "record_predicted_std": r_std,
+                    "note": note})
+    return out
+
+
+def identification_verdict(identification: Identification | None,
+                           member_speeds: dict | None = None) -> str:
+    """One paragraph for the top of a report: what the identification can tell, with the key
+    numbers, and each member's measured speed.
+
+    Parameters
+    ----------
+    identification : Identification or None
+        None: no identification ran (only the speeds are told).
+    member_speeds : dict, optional
+        :func:`meshphase.member_speeds.member_speeds` (its ``text``).
+
+    Returns
+    -------
+    str
+        Status (every offset identified, some combinations determined, or nothing), the
+        phasing residual RMS before and after the fit [mesh cycles], the number of determined
+        combinations out of the parameters, the best determined one with its 95 % interval
+        [mm], what would identify the rest, and the speeds [r/min].
+    """
+    if identification is not None and not isinstance(identification, Identification):
+        raise TypeError(f"identification must be an Identification or None, got "
+                        f"{type(identification).__name__}")
+    if member_speeds is not None and not isinstance(member_speeds, dict):
+        raise TypeError(f"member_speeds must be a dict (member_speeds()) or None, got "
+                        f"{type(member_speeds).__name__}")
+    parts = []
+    i = identification
+    if i is None:
+        parts.append("No shaft hole errors were identified (the identify stage did not run).")
+    elif i.n_passes == 0:
+        parts.append("No shaft hole error can be identified: there are no measured passes.")
+    else:
+        n_id = sum(bool(r["identifiable"]) for r in i.table)
+        status = ("every requested offset is identified" if i.identifiable else
+                  f"{n_id} of {len(i.table)} offsets are identified one by one" if n_id else
+                  "no single offset is identified")
+        parts.append(f"Identification: {status}; the fit lowers the phasing residual RMS from "
+                     f"{i.rms_before:.3g} to {i.rms_after:.3g} mesh cycles over {i.n_passes} "
+                     f"passes, and the data determine {i.rank} combination(s) of the "
+                     f"{i.n_parameters} offset components"
+                     + (" (a marginal rank: a singular value lies within a factor "
+                        f"{MARGINAL_FACTOR:g} of the threshold)." if "marginal" in i.rank_note
+                        else "."))
+        if i.combinations:
+            c = i.combinations[0]
+            parts.append(f"Best determined: {c['description']} = {c['estimate'] * 1e3:.4g} mm "
+                         f"(95 % interval {c['ci95'][0] * 1e3:.4g} to {c['ci95'][1] * 1e3:.4g} mm).")
+        helped = [sg for sg in i.suggestions if sg["option"] is not None]
+        never = [sg["gear"] for sg in i.suggestions if sg["option"] is None]
+        by_option: dict = {}
+        for sg in helped:
+            by_option.setdefault(sg["option"], []).append(sg)
+        for option, sgs in by_option.items():
+            worst = max(sg["predicted_std"] for sg in sgs)
+            text = (f"To identify {', '.join(sg['gear'] for sg in sgs)}: {option} "
+                    f"(predicted std up to {worst * 1e3:.3g} mm)")
+            rec = {sg["record_option"] for sg in sgs}
+            if len(rec) == 1 and None not in rec and option not in rec:
+                worst = max(sg["record_predicted_std"] for sg in sgs)
+                text += f", or {rec.pop()}"
+                turns = abs(member_speeds["carrier"]) / 60.0 * sgs[0]["record_s"] \
+                    if member_speeds is not None else float("nan")
+                if math.isfinite(turns) and turns > 0:
+                    text += f", {turns:.3g} carrier turns"
+                text += f" (up to {worst * 1e3:.3g} mm)"
+            parts.append(text + ".")
+        if never:
+            parts.append(f"No extra gauge or longer record tried identifies {', '.join(never)}.")
+    if member_speeds is not None:
+        parts.append(f"Member speeds: {member_speeds['text']}.")
+    return " ".join(parts)
 
 
 def _identify_inputs(tables, gearset, gears) -> tuple[list, tuple]:

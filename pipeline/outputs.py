@@ -6,15 +6,17 @@ arrays (arrays.h5) and the HTML report, from the run context's typed stage resul
 ``summary.json`` keys: scene, status, missing_results, phasing_reliability,
 results_requested, stages_ran, stages_failed, timings_s, error_estimates, messages,
 channels_unused and, for what ran, gearset, recording, onsets, ideal, phasing,
-phasing_labels, held_member, angle_model, load_sharing, centroids_m, tolerance, identify,
-compare, bearing_moments, tilt.
+phasing_labels, held_member, member_speeds_rpm, angle_model, load_sharing, centroids_m,
+tolerance, identify, compare, bearing_moments, tilt, and verdict (the report's opening
+paragraph, :func:`meshphase.compare.identification_verdict`).
 
 CSV tables (columns in ``data_schemas/outputs.md``): passes_<gear>.csv, load_sharing.csv,
-identified_errors.csv, bearing_moments.csv, tilt.csv and stages.csv, each of what ran. SI
-values, the unit in the header (``time_s``, ``gamma_cycles``, ``e_m``, ``my_Nm``, ...; no
-suffix: a label, count, flag, text or a dimensionless ratio), one number per field (an
-interval is two columns, ``..._ci95_lo_m`` and ``..._ci95_hi_m``), NaN (not computed) as an
-empty field, infinities as ``inf`` / ``-inf``.
+identified_errors.csv, identified_combinations.csv, bearing_moments.csv, tilt.csv and
+stages.csv, each of what ran. SI values, the unit in the header (``time_s``,
+``gamma_cycles``, ``e_m``, ``my_Nm``, ...; no suffix: a label, count, flag, text or a
+dimensionless ratio), one number per field (an interval is two columns, ``..._ci95_lo_m``
+and ``..._ci95_hi_m``), NaN (not computed) as an empty field, infinities as ``inf`` /
+``-inf``.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .exits import new_output_dir, run_status
+from .compare import identification_verdict
 from .jsonable import to_jsonable
 from .results import PhasingStage, RunContext, phasing_verdict
 from .table_csv import write_csv
@@ -66,7 +69,12 @@ def summary_dict(ctx: RunContext) -> dict:
         i = ctx.identify.identification
         s["identify"] = {"table": i.table, "rms_before": i.rms_before, "rms_after": i.rms_after,
                          "n_passes": i.n_passes, "identifiable": i.identifiable, "notes": i.notes,
-                         "singular_values": i.singular_values}
+                         "singular_values": i.singular_values, "rank": i.rank, "rank_note": i.rank_note,
+                         "combinations": i.combinations, "suggestions": i.suggestions}
+    if ctx.identify is not None or (ctx.phasing is not None and ctx.phasing.member_speeds):
+        s["verdict"] = identification_verdict(
+            ctx.identify.identification if ctx.identify is not None else None,
+            ctx.phasing.member_speeds if ctx.phasing is not None else None)
     if ctx.compare is not None:
         s["compare"] = {k: {kk: vv for kk, vv in v.as_dict().items() if kk not in ("ideal", "model")}
                         for k, v in ctx.compare.by_gear.items()}
@@ -87,6 +95,8 @@ def _phasing_summary(ph: PhasingStage) -> dict:
         "first pulse seen (no tacho geometry, unequal spacing or unequal loads named it)"
         if rel else "planet labels absolute")
     s["held_member"] = {"fixed": ph.fixed, "reason": ph.fixed_reason}
+    if ph.member_speeds is not None:
+        s["member_speeds_rpm"] = ph.member_speeds
     if ph.model is not None:
         s["angle_model"] = ph.model.summary()
     return s
@@ -186,7 +196,25 @@ def _write_tables(ctx: RunContext, out_dir: Path) -> dict:
                  "kappa_rad": r["kappa"], "kappa_std_rad": r["kappa_std"],
                  "identifiable": r["identifiable"], "note": r["note"]}
                 for r in ctx.identify.identification.table]
+        i = ctx.identify.identification
+        sugg = {sg["gear"]: sg for sg in i.suggestions}
+        for r in rows:
+            sg = sugg.get(r["gear"])
+            r["identified_by"] = "" if sg is None else (sg["option"] or "none of the options tried")
+            r["predicted_std_m"] = float("nan") if sg is None else sg["predicted_std"]
+            r["record_factor"] = float("nan") if sg is None else sg["record_factor"]
+            r["record_predicted_std_m"] = (float("nan") if sg is None
+                                           else sg["record_predicted_std"])
         files["identified_errors"] = _csv(rows, out_dir / "identified_errors.csv")
+        rows = [{"combination": k + 1, "description": c["description"], "estimate_m": c["estimate"],
+                 "std_m": c["std"], "ci95_lo_m": c["ci95"][0], "ci95_hi_m": c["ci95"][1],
+                 "relative_singular_value": c["relative_singular_value"],
+                 **{f"coef_{nm}": v for nm, v in c["coefficients"].items()}}
+                for k, c in enumerate(i.combinations)]
+        cols = ["combination", "description", "estimate_m", "std_m", "ci95_lo_m", "ci95_hi_m",
+                "relative_singular_value", *(f"coef_{nm}" for nm in i.parameters)]
+        files["identified_combinations"] = _csv(rows, out_dir / "identified_combinations.csv",
+                                                columns=cols)
     if ctx.bearing_moments is not None:
         b = ctx.bearing_moments
         rows = [{"moments": name, "input_torque_Nm": b.torque, **_moment_columns(m)}

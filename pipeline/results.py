@@ -159,6 +159,9 @@ class PhasingStage(StageResult):
     result : PhasingResult or None
         The whole measurement (trains, fractions) :func:`meshphase.phasing.relabel_gauge`
         recomputes from.
+    member_speeds : dict or None
+        Every member's measured speed [r/min] and which is held
+        (:func:`meshphase.member_speeds.member_speeds`); None without an angle model.
     """
 
     tables: dict
@@ -170,6 +173,7 @@ class PhasingStage(StageResult):
     labels_relative: list = field(default_factory=list)
     notes: list = field(default_factory=list)
     result: Any = None
+    member_speeds: dict | None = None
 
 
     @property

@@ -35,6 +35,7 @@ from .errors import DataQualityWarning, MeshphaseWarning, ProcessingWarning, Sce
 from .exits import OutputDir, recording_read_errors, run_status
 from .loads import facewidth_centroid, facewidth_readings, load_sharing_from_amplitudes
 from .log import logger
+from .member_speeds import mean_mesh_rate, member_speeds, tacho_rate
 from .models.gearset import Speeds
 from .models.mesh_phasing import assembly_check, classify_phasing, ideal_phasing
 from .onsets import detect_onsets_recording
@@ -389,7 +390,25 @@ def stage_phasing(ctx: RunContext) -> PhasingStage:
     return PhasingStage(tables=res.tables, labels=dict(res.labels), model=res.model,
                         reliability=res.reliability, fixed=res.fixed,
                         fixed_reason=res.fixed_reason, labels_relative=res.labels_relative,
-                        notes=res.notes, result=res, error_estimate=_phasing_estimate(res))
+                        notes=res.notes, result=res, error_estimate=_phasing_estimate(res),
+                        member_speeds=_member_speeds(res, g, sp, ons.tacho_times))
+
+
+def _member_speeds(res, g, sp, tacho_times) -> dict | None:
+    """Every member's measured speed (:func:`meshphase.member_speeds.member_speeds`) from the
+    angle model's mean mesh frequency; None without a model or a mesh frequency."""
+    if res.model is None:
+        return None
+    rate = mean_mesh_rate(res.model)
+    if not (math.isfinite(rate) and rate > 0):
+        return None
+    carrier = float("nan")
+    if res.fixed is None and tacho_times is not None:   # a differential: the tacho's count
+        try:
+            carrier = tacho_rate(tacho_times)
+        except ValueError:      # edges out of order: the nominal ratio gives the carrier
+            pass
+    return member_speeds(g, rate, fixed=res.fixed, speeds=sp, carrier_rate=carrier)
 
 
 def _warn_phasing(res) -> None:
@@ -532,12 +551,15 @@ def stage_identify(ctx: RunContext) -> IdentifyStage:
         tab, lab = relabel_gauge(res, gear, shift, g)
         if not len(tab):
             continue
-        cand = identify_errors([tab if k == gear else t for k, t in tables.items()], g)
+        cand = identify_errors([tab if k == gear else t for k, t in tables.items()], g,
+                               suggest=False)
         if cand.rms_after < best[0]:
             best = (cand.rms_after, shift, cand, tab, lab)
     if not (best[1] and best[0] <= 0.5 * ident.rms_after):
         return _identified(ident)
     _, shift, ident, tab, lab = best
+    # the kept relabelling, now with what would identify its blind offsets
+    ident = identify_errors([tab if k == gear else t for k, t in tables.items()], g)
     ident.notes.append(f"{gear} gauge relabelled by {shift} place(s): the error model "
                        "fits both gauges only with the planets numbered alike")
     lab = dataclasses.replace(lab, decided_by="identification")

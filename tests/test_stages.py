@@ -282,8 +282,8 @@ def test_identify_relabelling_supersedes_the_phasing(rig_run, monkeypatch):
     target = relabel_gauge(ph.result, gear, 2, g)[0]
     real = meshphase.stages.identify_errors
 
-    def fits_only_the_target(tables, gearset):
-        ident = real(tables, gearset)
+    def fits_only_the_target(tables, gearset, **kw):
+        ident = real(tables, gearset, **kw)
         hit = any(len(t) == len(target) and np.array_equal(t.planet, target.planet)
                   and t.gauge == gear for t in tables)
         ident.rms_after = 0.1 if hit else 1.0
@@ -300,6 +300,9 @@ def test_identify_relabelling_supersedes_the_phasing(rig_run, monkeypatch):
     assert gear not in c2.phasing.labels_relative and gear in ph.labels_relative
     assert summary_dict(c2)["phasing"][gear]["assignment"]["shift_decided_by"] == "identification"
     assert any("relabelled by 2 place(s)" in n for n in st.identification.notes)
+    # the kept relabelling carries what would identify its blind offsets
+    assert {s["gear"] for s in st.identification.suggestions} == {
+        r["gear"] for r in st.identification.table if not r["identifiable"]}
     # no relabelling helps: the phasing stays the phasing stage's
     monkeypatch.setattr(meshphase.stages, "identify_errors", real)
     c3 = RunContext(ctx.scene)

@@ -33,6 +33,7 @@ th{background:#eef2f7} td.l,th.l{text-align:left}
 img{max-width:100%;height:auto;border:1px solid #eee;margin:6px 0}
 .note{font-size:13px;color:#44506a} .warn{color:#8a4b00;background:#fff4e0;padding:6px 10px;border-radius:4px;font-size:13px}
 .ok{color:#1b6b2f} .bad{color:#a4161a}
+.verdict{font-size:14px;line-height:1.45;background:#eef3fb;padding:8px 12px;border-left:4px solid #3a5ba0}
 code{background:#eef2f7;padding:1px 4px;border-radius:3px}
 """
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..channels import mapping_report
-from ..compare import wrap
+from ..compare import RECORD_FACTORS, identification_verdict, wrap
 from ..models.bearing import BearingMoments
 from ..models.tilt import TABLE11_THEORY, table10_cases, table11_cases
 from . import figures
@@ -92,6 +92,11 @@ def build_report(ctx, out_dir) -> Path:
 
 def _summary_section(rep: Report, ctx) -> None:
     s = rep.section("Summary")
+    speeds = ctx.phasing.member_speeds if ctx.phasing is not None else None
+    if ctx.identify is not None or speeds:
+        s.text(identification_verdict(
+            ctx.identify.identification if ctx.identify is not None else None, speeds),
+            cls="verdict")
     s.text(f"Results requested: {', '.join(ctx.scene.results)}. Stages run: {', '.join(ctx.ran)}.")
     if ctx.failed:
         for k, v in ctx.failed.items():
@@ -331,6 +336,31 @@ def _identify_section(rep: Report, ctx) -> None:
     if sv.size:
         s.text("Singular values of the weighted Jacobian (relative): "
                + ", ".join(f"{v / sv[0]:.1e}" for v in sv))
+    if i.rank_note:
+        s.text(i.rank_note[0].upper() + i.rank_note[1:] + ".")
+    if i.combinations:
+        s.heading("What the data determine")
+        s.text("Unit-norm combinations of the offset components (right singular vectors of the "
+               "weighted design), best determined first; 95 % intervals are +-1.96 standard "
+               "deviations scaled by the fit's residual scale.")
+        true_err = ctx.load.true_errors if ctx.load is not None else None
+        truth = i.true_combinations(true_err) if true_err is not None else None
+        s.table([{"#": k + 1, "combination": c["description"],
+                  "estimate [mm]": c["estimate"] * 1e3,
+                  "95% interval [mm]": f"{c['ci95'][0] * 1e3:.4g} to {c['ci95'][1] * 1e3:.4g}",
+                  "std [mm]": c["std"] * 1e3,
+                  **({} if truth is None else {"synthetic truth [mm]": truth[k] * 1e3}),
+                  "relative singular value": c["relative_singular_value"]}
+                 for k, c in enumerate(i.combinations)])
+    if i.suggestions:
+        s.heading("What would identify each error")
+        s.table([{"gear": sg["gear"], "first option that identifies it": sg["option"] or
+                  "none of the options tried",
+                  "predicted std [mm]": sg["predicted_std"] * 1e3,
+                  "shortest longer record that does":
+                      sg["record_option"] or f"none up to {RECORD_FACTORS[-1]}x",
+                  "its predicted std [mm]": sg["record_predicted_std"] * 1e3,
+                  "options tried": "; ".join(sg["tried"])} for sg in i.suggestions])
     true_err = ctx.load.true_errors if ctx.load is not None else None
     if true_err is not None:
         s.text(f"Against the synthetic truth, the distance inside the identifiable subspace is "
