@@ -1400,8 +1400,7 @@ def _label_gauges(passes, gearset, held: _HeldGauges, notes: list,
         if inf.get("ambiguous"):
             decided = "first pulse"
         caution = ""
-        if (ref is not None or (p.gear == "sun" and p.main and "ring" in labels)) \
-                and "sun" not in (shifts or {}):
+        if ref is not None or (p.gear == "sun" and p.main and "ring" in labels):
             # the loads as the ring gauge sees them against the sun's once the load variation
             # with the carrier's phase is divided out
             pl0, inf0 = assign_planets_by_pattern(p.times, psi, order)
@@ -1447,8 +1446,9 @@ def _pinned(p: GaugePasses, pl, pos, decided: str, shift: int, gearset, notes: l
     if decided != "first pulse" and np.any(ok):
         d = int(np.mod(pos[ok][0] - new_pos[ok][0], n))
         if d:
+            by = {"amplitude": "loads", "pattern": "pass pattern"}.get(decided, decided)
             notes.append(f"{p.name}: the scene's {p.gear}_shift = {shift} puts planet 1 {d} "
-                         f"place(s) from where the {decided} names it; the scene's is used")
+                         f"place(s) from where the {by} name(s) it; the scene's is used")
     return new_pl, new_pos, "scene", ""
 
 
