@@ -35,7 +35,13 @@ Labels. Which pulse is which planet comes from the pass pattern
 (:func:`assign_planets_by_pattern`: the fractions of a revolution between consecutive
 planets); which one is planet 1 from unequal spacing, from a carrier tacho for a gauge on
 the held member (:func:`assign_planets_by_tacho`, geometry in ``data_schemas/scene.md``), or
-from the planets' loads; otherwise the labels are relative to the first pulse.
+from the planets' loads; otherwise the labels are relative to the first pulse. The loads name
+the sun gauge's planet 1 only when the ring gauge's per-planet loads, divided by the load
+variation with the carrier's phase that the sun gauge measures
+(:func:`carrier_load_variation`), match the sun's under one labelling clearly
+(:func:`load_shift_chi2`); where the loads and another kind of evidence disagree, the labels
+are relative and carry a caution saying why. A scene may fix a gauge's planet 1 outright
+(``label_shifts`` of :func:`measure_phasing`).
 """
 
 from __future__ import annotations
@@ -238,7 +244,9 @@ def assign_planets_by_pattern(times, planet_angles, order: int, *, first: int = 
     gap they leave and skipped. Which onset is planet 1 (the cyclic shift) is taken from
     ``first`` when the layout is symmetric, or chosen as the shift whose labels best match
     the fractions (unequal spacing), or the amplitude pattern (``reference_amplitudes``, e.g.
-    the ring-gauge load sharing per planet) when given.
+    the ring-gauge load sharing per planet) when given. That pattern is taken as it is given:
+    a ring gauge's loads carry any load variation with the carrier's phase, which
+    :func:`measure_phasing` removes (:func:`carrier_load_variation`) before it trusts them.
 
     Parameters
     ----------
