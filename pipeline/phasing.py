@@ -1114,7 +1114,8 @@ class LoadVariation:
 
     def _basis(self, phase) -> np.ndarray:
         ph = np.asarray(phase, dtype=np.float64)[..., None] * np.asarray(self.orders)
-        return np.stack([np.cos(ph), np.sin(ph)], axis=-1).reshape(*ph.shape[:-1], -1)
+        return np.stack([np.cos(ph), np.sin(ph)], axis=-1).reshape(*ph.shape[:-1],
+                                                                    2 * len(self.orders))
 
     def log_factor(self, phase) -> tuple[np.ndarray, np.ndarray]:
         """ln of the amplitude factor [-] at carrier phases ``phase`` [rad], and its standard

@@ -70,3 +70,21 @@ def test_the_scene_pins_the_sun_labels(modulated):
                                              "ambiguous": False}
     assert per_pass_errors(ctx, truth, "sun")["labels"] == 1.0
     assert summary_dict(ctx)["phasing_labels"] == "planet labels absolute"
+
+
+def test_the_rig_load_modulation_is_the_pulse_gain_and_checks_its_terms():
+    cfg = R.make_rig_config(minutes=0.2, seed=0, snr_db=None,
+                            load_modulation=((0.25, 1, 0.5), (0.05, 2, 0.0)))
+    rig = R.Rig(cfg)
+    t, _ = rig.engagements("ring")
+    th = rig.motion.angle("carrier", t)
+    want = 1 + 0.25 * np.cos(th + 0.5) + 0.05 * np.cos(2 * th)
+    np.testing.assert_allclose(rig.truth().engagements["SG_ring_T1"]["gain"], want, rtol=1e-12)
+    back = R.RigConfig.from_dict(cfg.to_dict())
+    assert back.load_modulation == ((0.25, 1, 0.5), (0.05, 2, 0.0))
+    assert "gain" not in R.Rig(R.make_rig_config(minutes=0.2, seed=0)).truth().engagements[
+        "SG_ring_T1"]                            # no variation: the truth as it was
+    for bad, words in ((((0.6, 1, 0.0), (0.5, 2, 0.0)), "sum below 1"),
+                       (((0.2, 1),), "terms must be"), ("0.2", "sequence")):
+        with pytest.raises((ValueError, TypeError), match=words):
+            R.make_rig_config(minutes=0.2, load_modulation=bad)

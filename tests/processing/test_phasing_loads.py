@@ -55,6 +55,10 @@ def test_carrier_load_variation_separates_the_variation_from_the_loads():
     assert np.all(se > 0)
     # far beyond chance: a Wald statistic of 4 degrees of freedom
     assert lv.chi2 > 100
+    f, se = lv.log_factor([])
+    assert f.shape == se.shape == (0,)
+    with pytest.raises((TypeError, ValueError)):
+        lv.log_factor("a")
 
 
 def test_carrier_load_variation_finds_none_where_there_is_none():
