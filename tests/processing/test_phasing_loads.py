@@ -218,3 +218,21 @@ def test_a_scene_shift_pins_the_labels():
         assert ph.labels["sun"].decided_by == "scene" and "sun" not in ph.labels_relative
         right.append(_right(ph, truth, "sun"))
     assert sorted(right) == [0.0, 0.0, 0.0, 1.0]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("spread", [0.01, 0.02, 0.04, 0.08])
+@pytest.mark.parametrize("mod", [0.0, 0.25])
+def test_never_a_confident_wrong_planet_over_seeds(spread, mod):
+    # six seeds, each with its own phase of the variation: labels taken as absolute are the
+    # truth's; with loads 2 % apart or more (1 % pulse noise) they are always taken
+    right = []
+    for seed in range(1, 7):
+        ph, truth = _measure(load_sharing=(1 + spread, 1 - spread, 1.0, 1 - spread / 2),
+                             seed=seed, load_modulation=((mod, 1, float(seed)),) if mod else ())
+        sun = ph.labels["sun"]
+        if sun.decided_by != "first pulse" and not sun.caution:
+            assert _right(ph, truth, "sun") == 1.0, seed
+            right.append(seed)
+    if spread >= 0.02:
+        assert len(right) == 6
