@@ -1077,6 +1077,10 @@ LOAD_VARIATION_ORDERS = (1, 2)
 #: chi-square by which every other cyclic shift must match two load patterns worse than the
 #: best for the loads to name planet 1 (a 5-sigma step for one choice among N) [-]
 LOAD_SHIFT_MARGIN = 25.0
+#: a load variation with the carrier's phase gets a note from this half peak-to-peak swing on
+#: (and beyond chance): the 1 %-3 % carrier-rate speed ripples of the rig presets move pulse
+#: amplitudes by up to 1 %, measurably but far below the load differences that name planets [-]
+LOAD_VARIATION_NOTED = 0.02
 #: the best shift's chi-square must lie below this quantile of chi-square with N - 1 degrees
 #: of freedom, else the two gauges' load patterns match under no labelling [-]
 LOAD_MATCH_QUANTILE = 0.999
@@ -1532,6 +1536,12 @@ def _sun_by_loads(p: GaugePasses, pl, pos, raw: tuple, ring: GaugeLabels, gearse
     swing = f"+-{100 * lv.swing:.0f} %"
     fit = f"chi-square {chi2[best]:.1f} vs {next_:.1f} next, {n - 1} degrees of freedom"
     raw_shift = int(np.mod(raw[1][ok][0] - pos[ok][0], n)) if np.any(ok) else 0
+    if lv.swing >= LOAD_VARIATION_NOTED and lv.chi2 > stats.chi2.ppf(LOAD_MATCH_QUANTILE,
+                                                                     lv.coef.size):
+        notes.append(f"{p.name}: a load variation of {swing} with the carrier's phase (Wald "
+                     f"chi-square {lv.chi2:.0f}, {lv.coef.size} degrees of freedom): a ring gauge "
+                     "meets each planet at one carrier phase, so its per-planet amplitudes, and a "
+                     "load sharing from them, carry it")
     if clear:
         new_pl, new_pos = _shift_labels(pl, pos, seq, best)
         if raw[2] == "amplitude" and raw_shift != best:
