@@ -89,11 +89,14 @@ def _phasing_summary(ph: PhasingStage) -> dict:
     s = {"phasing": {k: {"n_passes": len(t), "per_planet": t.summary(), "notes": t.notes,
                          "assignment": assignment.get(k), "reliability": reliability.get(k)}
                      for k, t in ph.tables.items()}}
-    rel = ph.labels_relative or []
-    s["phasing_labels"] = (
-        f"planet labels of the {' and '.join(rel)} gauge(s) are relative: planet 1 is the "
-        "first pulse seen (no tacho geometry, unequal spacing or unequal loads named it)"
-        if rel else "planet labels absolute")
+    cautions = {gear: lab.caution for gear, lab in (ph.labels or {}).items()
+                if getattr(lab, "caution", "")}
+    rel = [gear for gear in ph.labels_relative or [] if gear not in cautions]
+    said = ([f"planet labels of the {' and '.join(rel)} gauge(s) are relative: planet 1 is the "
+             "first pulse seen (no tacho geometry, unequal spacing or unequal loads named it)"]
+            if rel else [])
+    said += [f"planet labels of the {gear} gauge in doubt: {why}" for gear, why in cautions.items()]
+    s["phasing_labels"] = "; ".join(said) if said else "planet labels absolute"
     s["held_member"] = {"fixed": ph.fixed, "reason": ph.fixed_reason}
     if ph.member_speeds is not None:
         s["member_speeds_rpm"] = ph.member_speeds

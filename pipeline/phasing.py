@@ -35,7 +35,13 @@ Labels. Which pulse is which planet comes from the pass pattern
 (:func:`assign_planets_by_pattern`: the fractions of a revolution between consecutive
 planets); which one is planet 1 from unequal spacing, from a carrier tacho for a gauge on
 the held member (:func:`assign_planets_by_tacho`, geometry in ``data_schemas/scene.md``), or
-from the planets' loads; otherwise the labels are relative to the first pulse.
+from the planets' loads; otherwise the labels are relative to the first pulse. The loads name
+the sun gauge's planet 1 only when the ring gauge's per-planet loads, divided by the load
+variation with the carrier's phase that the sun gauge measures
+(:func:`carrier_load_variation`), match the sun's under one labelling clearly
+(:func:`load_shift_chi2`); where the loads and another kind of evidence disagree, the labels
+are relative and carry a caution saying why. A scene may fix a gauge's planet 1 outright
+(``label_shifts`` of :func:`measure_phasing`).
 """
 
 from __future__ import annotations
@@ -45,6 +51,7 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import linalg, stats
 from scipy.interpolate import PchipInterpolator
 
 from .angle_windows import fit_angle_windows
@@ -237,7 +244,9 @@ def assign_planets_by_pattern(times, planet_angles, order: int, *, first: int = 
     gap they leave and skipped. Which onset is planet 1 (the cyclic shift) is taken from
     ``first`` when the layout is symmetric, or chosen as the shift whose labels best match
     the fractions (unequal spacing), or the amplitude pattern (``reference_amplitudes``, e.g.
-    the ring-gauge load sharing per planet) when given.
+    the ring-gauge load sharing per planet) when given. That pattern is taken as it is given:
+    a ring gauge's loads carry any load variation with the carrier's phase, which
+    :func:`measure_phasing` removes (:func:`carrier_load_variation`) before it trusts them.
 
     Parameters
     ----------
@@ -959,8 +968,12 @@ class GaugeLabels:
         Pass-order position per pulse (revolution ``position // N``).
     decided_by : str
         What named planet 1: "tacho", "pattern" (unequal spacing), "amplitude" (planet
-        loads) or "first pulse" (relative labels).
+        loads), "scene" (the scene's ``[labels]``) or "first pulse" (relative labels).
     n_unassigned : int
+    caution : str
+        Why planet 1 of these labels is in doubt (two kinds of evidence disagree, or a load
+        pattern a carrier-rate load variation explains); empty when nothing is in doubt. Labels
+        with a caution count as relative.
     """
 
     channel: str
@@ -971,6 +984,7 @@ class GaugeLabels:
     position: np.ndarray
     decided_by: str
     n_unassigned: int = 0
+    caution: str = ""
 
 
 @dataclass
@@ -1057,6 +1071,182 @@ def _ring_loads(lab: GaugeLabels, n: int):
     return mean if spread > 5.0 * noise else None
 
 
+#: orders of the load variation fitted against the carrier's phase (once and twice per turn
+#: of the carrier relative to the ring gauge) [-]
+LOAD_VARIATION_ORDERS = (1, 2)
+#: chi-square by which every other cyclic shift must match two load patterns worse than the
+#: best for the loads to name planet 1 (a 5-sigma step for one choice among N) [-]
+LOAD_SHIFT_MARGIN = 25.0
+#: a load variation with the carrier's phase gets a note from this half peak-to-peak swing on
+#: (and beyond chance): the 1 %-3 % carrier-rate speed ripples of the rig presets move pulse
+#: amplitudes by up to 1 %, measurably but far below the load differences that name planets [-]
+LOAD_VARIATION_NOTED = 0.02
+#: the best shift's chi-square must lie below this quantile of chi-square with N - 1 degrees
+#: of freedom, else the two gauges' load patterns match under no labelling [-]
+LOAD_MATCH_QUANTILE = 0.999
+
+
+@dataclass(frozen=True)
+class LoadVariation:
+    """A gauge's pulse amplitudes split into per-planet loads and a variation locked to the
+    carrier's phase (:func:`carrier_load_variation`):
+
+        ln|a_i| = c[place_i] + sum_m (alpha_m cos(m phi_i) + beta_m sin(m phi_i))
+
+    Attributes
+    ----------
+    log_loads : ndarray, shape (N,)
+        c per pass-order place [ln of the amplitude unit].
+    log_loads_se : ndarray, shape (N,)
+        Their standard errors [-].
+    coef : ndarray, shape (2 K,)
+        alpha_1, beta_1, alpha_2, beta_2, ... [-].
+    cov : ndarray, shape (2 K, 2 K)
+        Their covariance [-].
+    orders : tuple of int
+        The K orders m [-].
+    n_pulses : int
+        Pulses fitted.
+    """
+
+    log_loads: np.ndarray
+    log_loads_se: np.ndarray
+    coef: np.ndarray
+    cov: np.ndarray
+    orders: tuple
+    n_pulses: int
+
+    def _basis(self, phase) -> np.ndarray:
+        ph = np.asarray(phase, dtype=np.float64)[..., None] * np.asarray(self.orders)
+        return np.stack([np.cos(ph), np.sin(ph)], axis=-1).reshape(*ph.shape[:-1],
+                                                                    2 * len(self.orders))
+
+    def log_factor(self, phase) -> tuple[np.ndarray, np.ndarray]:
+        """ln of the amplitude factor [-] at carrier phases ``phase`` [rad], and its standard
+        error [-]."""
+        b = self._basis(phase)
+        return b @ self.coef, np.sqrt(np.einsum("...i,ij,...j->...", b, self.cov, b))
+
+    @property
+    def swing(self) -> float:
+        """Half the peak-to-peak amplitude factor over one turn [-] (0.25: +-25 %)."""
+        f = np.exp(self.log_factor(np.linspace(0.0, TWO_PI, 361))[0])
+        return float(0.5 * np.ptp(f) / np.mean(f))
+
+    @property
+    def chi2(self) -> float:
+        """Wald statistic of the variation against none [-] (chi-square with 2 K degrees of
+        freedom when there is none)."""
+        return float(self.coef @ linalg.lstsq(self.cov, self.coef, check_finite=False)[0])
+
+
+def carrier_load_variation(phase, amplitudes, place, n_places: int, *,
+                           orders=LOAD_VARIATION_ORDERS) -> LoadVariation | None:
+    """Per-planet loads and the load variation with the carrier's phase, from the pulses of a
+    gauge that meets every planet at every carrier phase (the sun gauge when the ring is
+    held).
+
+    A once-per-carrier-turn torque ripple scales every planet's pulses by one function of the
+    carrier angle. A gauge on the held member meets each planet at one carrier angle only, so
+    its per-planet amplitudes are the loads times that function there; a gauge that meets the
+    planets at every carrier angle measures both apart: ln|a| is fitted (least squares by
+    SVD) as a constant per place plus a Fourier series of ``orders`` in the phase.
+
+    Parameters
+    ----------
+    phase : array_like, shape (m,)
+        Carrier phase at each pulse [rad] (any fixed origin).
+    amplitudes : array_like, shape (m,)
+        Pulse amplitudes [channel units], non-zero.
+    place : array_like of int, shape (m,)
+        Pass-order place 0..N-1 of each pulse (the cyclic labelling does not matter).
+    n_places : int
+        N, the planets [-].
+    orders : sequence of int
+        Orders m of the variation [-].
+
+    Returns
+    -------
+    LoadVariation or None
+        None when the pulses cannot separate the two: fewer than two pulses in a place, fewer
+        than twice as many pulses as parameters, or phases that do not spread over a turn.
+    """
+    ph = as_finite_array(phase, "phase", ndim=1)
+    a = np.abs(as_finite_array(amplitudes, "amplitudes", ndim=1))
+    q = np.asarray(place)
+    n = as_positive_int(n_places, "n_places")
+    ords = tuple(as_positive_int(m, "orders") for m in np.atleast_1d(orders))
+    if a.shape != ph.shape or q.shape != ph.shape:
+        raise ValueError(f"phase, amplitudes and place must have one value per pulse, got shapes "
+                         f"{ph.shape}, {a.shape} and {q.shape}")
+    if not ords:
+        raise ValueError("orders must name at least one order, got none")
+    if q.size and (not np.issubdtype(q.dtype, np.integer) or q.min() < 0 or q.max() >= n):
+        raise ValueError(f"place must hold integers 0..{n - 1}, got {np.unique(q)[:8]!r}")
+    if np.any(a == 0):
+        raise ValueError(f"amplitudes must be non-zero (their log is fitted), got "
+                         f"{np.count_nonzero(a == 0)} zero(s)")
+    k = 2 * len(ords)
+    if ph.size < 2 * (n + k) or np.any(np.bincount(q, minlength=n) < 2):
+        return None
+    X = np.concatenate([np.eye(n)[q], np.zeros((ph.size, k))], axis=1)
+    lv = LoadVariation(np.zeros(n), np.zeros(n), np.zeros(k), np.eye(k), ords, int(ph.size))
+    X[:, n:] = lv._basis(ph)
+    U, sv, Vt = linalg.svd(X, full_matrices=False, check_finite=False)
+    if sv[-1] <= 1e-6 * sv[0]:
+        return None
+    y = np.log(a)
+    beta = Vt.T @ ((U.T @ y) / sv)
+    resid = y - X @ beta
+    s2 = float(resid @ resid) / (ph.size - n - k)
+    cov = s2 * (Vt.T / sv ** 2) @ Vt
+    se = np.sqrt(np.diag(cov))
+    return LoadVariation(beta[:n], se[:n], beta[n:], cov[n:, n:], ords, int(ph.size))
+
+
+def load_shift_chi2(loads, loads_se, reference, reference_se, seq) -> np.ndarray:
+    """How well a gauge's per-place loads match a reference gauge's per-planet loads under
+    each cyclic labelling: chi-square per shift s, place q taken as planet
+    ``seq[(q + s) % N]`` (what :func:`_shift_labels` does).
+
+    Both patterns are logs of loads (any gauge's scale: a common offset is fitted per
+    shift, weighted by the summed variances).
+
+    Parameters
+    ----------
+    loads, loads_se : array_like, shape (N,)
+        ln load per pass-order place and its standard error [-].
+    reference, reference_se : array_like, shape (N,)
+        ln load per planet (0-based) and its standard error [-].
+    seq : array_like of int, shape (N,)
+        Planets in pass order (``argsort`` of :func:`planet_fractions`).
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        chi-square of each shift [-] (N - 1 degrees of freedom).
+    """
+    c = as_finite_array(loads, "loads", ndim=1)
+    cs = as_finite_array(loads_se, "loads_se", ndim=1)
+    r = as_finite_array(reference, "reference", ndim=1)
+    rs = as_finite_array(reference_se, "reference_se", ndim=1)
+    sq = np.asarray(seq)
+    n = c.size
+    if not (cs.size == r.size == rs.size == sq.size == n):
+        raise ValueError(f"loads, loads_se, reference, reference_se and seq must have one value "
+                         f"per planet, got sizes {[c.size, cs.size, r.size, rs.size, sq.size]}")
+    if n and (np.any(cs <= 0) or np.any(rs <= 0)):
+        raise ValueError(f"standard errors must be positive, got loads_se {cs!r}, "
+                         f"reference_se {rs!r}")
+    if n and not np.array_equal(np.sort(sq), np.arange(n)):
+        raise ValueError(f"seq must be a permutation of 0..{n - 1}, got {sq!r}")
+    idx = sq[(np.arange(n)[None, :] + np.arange(n)[:, None]) % n] if n else np.zeros((0, 0), int)
+    d = c[None, :] - r[idx]                          # (shift, place)
+    w = 1.0 / (cs[None, :] ** 2 + rs[idx] ** 2)
+    mean = np.sum(w * d, axis=1, keepdims=True) / np.sum(w, axis=1, keepdims=True) if n else d
+    return np.sum(w * (d - mean) ** 2, axis=1)
+
+
 def _shift_labels(planet, position, seq, shift):
     """Relabel cyclically in pass order by ``shift`` places (planet 1 moves)."""
     n = seq.size
@@ -1067,7 +1257,8 @@ def _shift_labels(planet, position, seq, shift):
 def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
                     tacho_times=None, key_angle: float | None = None, mounts=None,
                     speeds=None, gaps=None, carrier_sense: int | None = None,
-                    check_held: bool = False, speeds_resolution=None) -> PhasingResult:
+                    check_held: bool = False, speeds_resolution=None,
+                    label_shifts=None) -> PhasingResult:
     """Label every gauge's pulses, fit one angle model to all of them and the tacho, and
     measure the phasing of each gear's main gauge.
 
@@ -1096,6 +1287,10 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
         between tacho edges, :func:`meshphase.angles.mesh_cycles_per_carrier_turn`) together
         with ``speeds`` and their typed ``speeds_resolution``
         (:func:`meshphase.angles.held_member`); ``fixed`` is then only the starting guess.
+    label_shifts : dict of str to int, optional
+        Per gear ("sun", "ring"): planet 1 of its main gauge is this many places along the
+        pass order from its first pulse [-] (the scene's ``[labels]``); what the data say
+        otherwise is then only a note.
 
     Returns
     -------
@@ -1115,7 +1310,8 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
         cw = gearset.direction == "cw"
         carrier_sense = (1 if cw else -1) * (1 if fixed != "sun" else -1)
     held = _HeldGauges(fixed, tach, key_angle, mounts, carrier_sense)
-    labels, all_labels, relative = _label_gauges(passes, gearset, held, notes)
+    labels, all_labels, relative = _label_gauges(passes, gearset, held, notes,
+                                                 dict(label_shifts or {}))
     trains, train_of = _gauge_trains(all_labels, gearset)
     # one angle model from every train (and the tacho when a member is held)
     kin = kinematics(gearset.z_sun, gearset.z_ring, gearset.z_planet, fixed=fixed, speeds=speeds)
@@ -1126,7 +1322,8 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
                                  atol=1e-9))
     if symmetric and n > 1 and kin.planet_period and len(train_of) > 1:
         trains, train_of = _align_labels(trains, train_of, all_labels, labels, kin, n, notes)
-        relative = [gear for gear, lab in labels.items() if lab.decided_by == "first pulse"]
+        relative = [gear for gear, lab in labels.items()
+                    if lab.decided_by == "first pulse" or lab.caution]
     if fixed is not None and tach is not None and tach.size >= 2 and kin.tacho_cycles:
         trains.append(tacho_train(tach, kin.tacho_cycles))
     elif tach is not None and tach.size >= 2 and fixed is None:
@@ -1190,9 +1387,11 @@ class _HeldGauges:
                 and self.tacho is not None and self.tacho.size >= 2 and bool(np.any(planet >= 0)))
 
 
-def _label_gauges(passes, gearset, held: _HeldGauges, notes: list) -> tuple[dict, dict, list]:
+def _label_gauges(passes, gearset, held: _HeldGauges, notes: list,
+                  shifts: dict | None = None) -> tuple[dict, dict, list]:
     """Planet labels of every gauge, ring gauges first (their loads may name the sun's
-    planets): by the pass pattern, then by the tacho for a gauge on the held member.
+    planets): by the pass pattern, then by the tacho for a gauge on the held member; a main
+    gauge whose gear has an entry in ``shifts`` takes planet 1 from it (:func:`_pinned`).
 
     Returns (labels of each gear's main gauge, {channel: (labels, fractions, passes)} of
     every gauge, gears whose labels are relative)."""
@@ -1213,27 +1412,153 @@ def _label_gauges(passes, gearset, held: _HeldGauges, notes: list) -> tuple[dict
                                                                          "first pulse")
         if inf.get("ambiguous"):
             decided = "first pulse"
+        caution = ""
+        if ref is not None or (p.gear == "sun" and p.main and "ring" in labels):
+            # the loads as the ring gauge sees them against the sun's once the load variation
+            # with the carrier's phase is divided out
+            pl0, inf0 = assign_planets_by_pattern(p.times, psi, order)
+            pl, pos, decided, caution = _sun_by_loads(p, pl0, inf0["position"],
+                                                      (pl, pos, decided), labels["ring"],
+                                                      gearset, notes)
         if held.applies(p, pl):
             vote = relabel_by_tacho(p.times, pl, pos, held.tacho, psi, held.mounts[p.name],
                                     pass_order=order, carrier_sense=held.carrier_sense,
                                     key_angle=held.key_angle)
             pl, pos = vote.planet, vote.position
             if vote.accepted:
-                decided = "tacho"
+                decided, caution = "tacho", ""
             elif vote.compared:
                 notes.append(f"{p.name}: the tacho and the pass pattern disagree on planet 1 "
                              f"({vote.agree} of {vote.compared} passes agree); labels "
                              "left relative")
+        if p.main and p.gear not in labels and p.gear in (shifts or {}):
+            pl, pos, decided, caution = _pinned(p, pl, pos, decided, shifts[p.gear], gearset,
+                                                notes)
         lab = GaugeLabels(p.name, p.times, p.amplitude, p.sigma, pl, pos, decided,
-                          int(inf.get("n_unassigned", 0)))
+                          int(inf.get("n_unassigned", 0)), caution)
         all_labels[p.name] = (lab, frac, p)
         if p.main and p.gear not in labels:
             labels[p.gear] = lab
-            if decided == "first pulse":
+            if decided == "first pulse" or caution:
                 relative.append(p.gear)
             if p.gear == "ring" and np.any(pl >= 0):
                 ring_load = _ring_loads(lab, n)
     return labels, all_labels, relative
+
+
+def _pinned(p: GaugePasses, pl, pos, decided: str, shift: int, gearset, notes: list) -> tuple:
+    """(planet, position, "scene", "") of a main gauge whose planet 1 the scene fixes
+    ``shift`` places along its pass order from its first pulse; a note when the labels the
+    data gave (``pl``, ``pos``, named by ``decided``) put planet 1 elsewhere."""
+    n = gearset.n_planets
+    order = pass_order(gearset.direction, p.gear)
+    seq = np.argsort(planet_fractions(gearset.angles, order), kind="stable")
+    pl0, inf0 = assign_planets_by_pattern(p.times, gearset.angles, order)
+    new_pl, new_pos = _shift_labels(pl0, inf0["position"], seq, int(shift) % n)
+    ok = (new_pl >= 0) & (pl >= 0)
+    if decided != "first pulse" and np.any(ok):
+        d = int(np.mod(pos[ok][0] - new_pos[ok][0], n))
+        if d:
+            by = {"amplitude": "loads", "pattern": "pass pattern"}.get(decided, decided)
+            notes.append(f"{p.name}: the scene's {p.gear}_shift = {shift} puts planet 1 {d} "
+                         f"place(s) from where the {by} name(s) it; the scene's is used")
+    return new_pl, new_pos, "scene", ""
+
+
+def _ring_clock(lab: GaugeLabels, gearset):
+    """Turns of the carrier relative to the ring gauge [-] as a function of time [s]: the
+    ring gauge's labelled pulses at their pass-order positions (revolution plus the planet's
+    fraction), joined by a shape-preserving cubic (NaN outside them); None with fewer than
+    three labelled pulses."""
+    n = gearset.n_planets
+    ok = lab.planet >= 0
+    if np.count_nonzero(ok) < 3:
+        return None
+    fs = np.sort(planet_fractions(gearset.angles, pass_order(gearset.direction, "ring")))
+    pos = lab.position[ok].astype(np.int64)
+    turns = pos // n + fs[pos % n]
+    t = lab.times[ok]
+    if np.any(np.diff(turns) <= 0):
+        return None
+    return PchipInterpolator(t, turns, extrapolate=False)
+
+
+def _sun_by_loads(p: GaugePasses, pl, pos, raw: tuple, ring: GaugeLabels, gearset,
+                  notes: list) -> tuple:
+    """The sun gauge's planet 1 from the planets' loads, checked against a load variation
+    with the carrier's phase (:func:`carrier_load_variation` on the sun's pulses, the phase
+    from the ring gauge's pulses): the ring gauge's per-planet loads divided by that
+    variation must match the sun's per-place loads under one cyclic shift clearly
+    (:func:`load_shift_chi2`, ``LOAD_SHIFT_MARGIN``, ``LOAD_MATCH_QUANTILE``).
+
+    ``pl``, ``pos`` are the pattern labels with planet 1 the first pulse, ``raw`` the
+    (planet, position, decided_by) of the loads as the ring gauge sees them
+    (:func:`assign_planets_by_pattern` with ``reference_amplitudes``). Returns (planet,
+    position, decided_by, caution): the labels moved to the clear shift ("amplitude"), else
+    ``raw`` when it did not use the loads, else relative ("first pulse") with a caution
+    naming why the ring gauge's loads do not name the sun's planet 1."""
+    n = gearset.n_planets
+    if n < 2 or raw[2] not in ("amplitude", "first pulse"):
+        return (*raw, "")
+    seq = np.argsort(planet_fractions(gearset.angles, pass_order(gearset.direction, "sun")),
+                     kind="stable")
+    ok = pl >= 0
+    clock = _ring_clock(ring, gearset)
+    lv = cnt = None
+    if clock is not None:
+        ph = TWO_PI * clock(p.times[ok])
+        use = np.isfinite(ph) & (np.abs(p.amplitude[ok]) > 0)
+        lv = carrier_load_variation(ph[use], p.amplitude[ok][use], np.mod(pos[ok][use], n), n)
+    if lv is not None:
+        rk = ring.planet >= 0
+        lf, lf_se = lv.log_factor(TWO_PI * clock(ring.times[rk]))
+        ra = np.abs(ring.amplitude[rk])
+        keep = np.isfinite(lf) & (ra > 0)
+        y, lf_se, rpl = np.log(ra[keep]) - lf[keep], lf_se[keep], ring.planet[rk][keep]
+        cnt = np.bincount(rpl, minlength=n)
+    if lv is None or np.any(cnt < 2):
+        if raw[2] != "amplitude":
+            return (*raw, "")
+        cause = ("the ring gauge's per-planet loads name planet 1 of the sun gauge, but the sun "
+                 "gauge's pulses cannot measure the load variation with the carrier's phase "
+                 "those loads may hold; planet 1 is the first pulse seen")
+        notes.append(f"{p.name}: {cause}")
+        return pl, pos, "first pulse", cause
+    mean = np.bincount(rpl, y, n) / cnt
+    var = np.bincount(rpl, (y - mean[rpl]) ** 2, n) / np.maximum(cnt - 1, 1)
+    fse = np.sqrt(np.bincount(rpl, lf_se ** 2, n) / cnt)
+    rse = np.maximum(np.sqrt(var / cnt + fse ** 2), 1e-12)
+    chi2 = load_shift_chi2(lv.log_loads, np.maximum(lv.log_loads_se, 1e-12), mean, rse, seq)
+    order = np.argsort(chi2, kind="stable")
+    best, next_ = int(order[0]), float(chi2[order[1]])
+    limit = float(stats.chi2.ppf(LOAD_MATCH_QUANTILE, n - 1))
+    clear = bool(next_ - chi2[best] > LOAD_SHIFT_MARGIN and chi2[best] < limit)
+    swing = f"+-{100 * lv.swing:.0f} %"
+    fit = f"chi-square {chi2[best]:.1f} vs {next_:.1f} next, {n - 1} degrees of freedom"
+    raw_shift = int(np.mod(raw[1][ok][0] - pos[ok][0], n)) if np.any(ok) else 0
+    if lv.swing >= LOAD_VARIATION_NOTED and lv.chi2 > stats.chi2.ppf(LOAD_MATCH_QUANTILE,
+                                                                     lv.coef.size):
+        notes.append(f"{p.name}: a load variation of {swing} with the carrier's phase (Wald "
+                     f"chi-square {lv.chi2:.0f}, {lv.coef.size} degrees of freedom): a ring gauge "
+                     "meets each planet at one carrier phase, so its per-planet amplitudes, and a "
+                     "load sharing from them, carry it")
+    if clear:
+        new_pl, new_pos = _shift_labels(pl, pos, seq, best)
+        if raw[2] == "amplitude" and raw_shift != best:
+            notes.append(f"{p.name}: planet 1 named by the loads once divided by the load "
+                         f"variation of {swing} with the carrier's phase the sun gauge measures "
+                         f"({fit}); the ring gauge's loads as seen name it "
+                         f"{(raw_shift - best) % n} place(s) on")
+        return new_pl, new_pos, "amplitude", ""
+    if raw[2] != "amplitude":
+        return (*raw, "")
+    how = ("match the sun gauge's under no labelling" if chi2[best] >= limit
+           else "do not tell the planets apart")
+    cause = (f"the ring gauge's per-planet loads name planet 1 of the sun gauge, but divided by "
+             f"the load variation of {swing} with the carrier's phase that the sun gauge "
+             f"measures they {how} ({fit}); planet 1 is the first pulse seen")
+    notes.append(f"{p.name}: {cause}")
+    return pl, pos, "first pulse", cause
 
 
 def _gauge_trains(all_labels: dict, gearset) -> tuple[list, dict]:
@@ -1352,7 +1677,8 @@ def _align_labels(trains, train_of, all_labels, labels, kin, n, notes):
     only when its misfit stands clearly apart (the next best is worse by more than 25 times
     the fit's variance per observation); else the planets' offsets look alike, nothing is
     changed and a note says so."""
-    absolute = [nm for nm in train_of if all_labels[nm][0].decided_by in ("tacho", "pattern")]
+    absolute = [nm for nm in train_of
+                if all_labels[nm][0].decided_by in ("tacho", "pattern", "scene")]
     rel = [nm for nm in train_of if nm not in absolute]
     if not rel:
         return trains, train_of
@@ -1390,6 +1716,9 @@ def _align_labels(trains, train_of, all_labels, labels, kin, n, notes):
             shift = int(order[0])
             by = list(refs)
             why = f"the planets' own offsets: misfit {best:.3g} vs {second:.3g} next"
+            if shift and lab.decided_by == "amplitude" and ref_kind == "absolute":
+                lab.caution = _disagreement(p, lab, [all_labels[r] for r in refs], shift, n, why)
+                notes.append(f"{nm}: {lab.caution}")
         if shift:
             new = relabel_train(tr, shift, frac, n)
             train_of[nm] = new
@@ -1401,12 +1730,24 @@ def _align_labels(trains, train_of, all_labels, labels, kin, n, notes):
             # as absolute as the twin's own labels
             if all_labels[twin][0].decided_by != "first pulse":
                 lab.decided_by = f"same tooth (as {twin})"
-        elif ref_kind == "absolute":
+        elif ref_kind == "absolute" and not lab.caution:
             lab.decided_by = f"planet offsets (as {', '.join(refs)})"
         notes.append(f"{nm}: planet labels aligned with the {', '.join(by)} gauge(s) by "
                      f"shift {shift} ({why})")
         refs.append(nm)
     return trains, train_of
+
+
+def _disagreement(p: GaugePasses, lab: GaugeLabels, refs: list, shift: int, n: int,
+                  why: str) -> str:
+    """The caution of a gauge whose load-pattern labels the planets' own offsets move
+    ``shift`` places from the reference gauges' (``refs``: (labels, fractions, passes))."""
+    places = min(shift, n - shift)
+    count = "one planet" if places == 1 else f"{places} planets"
+    by = " and ".join(f"the {q.gear}'s by {r.decided_by}" for r, _, q in refs)
+    return (f"the {p.gear}'s labels by load pattern and {by} disagree by {count}: {why} name "
+            f"planet 1 {shift} place(s) on along the {p.gear} gauge's pass order; the labels "
+            "follow the offsets")
 
 
 #: the "not reliable" rule: the per-pass error the model's own diagnostics predict, against

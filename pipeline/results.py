@@ -179,9 +179,15 @@ class PhasingStage(StageResult):
     @property
     def assignment(self) -> dict:
         """Per gear: ``shift_decided_by`` (what named planet 1), ``n_unassigned``,
-        ``ambiguous`` (planet 1 is only the first pulse seen)."""
-        return {k: {"shift_decided_by": v.decided_by, "n_unassigned": v.n_unassigned,
-                    "ambiguous": v.decided_by == "first pulse"} for k, v in self.labels.items()}
+        ``ambiguous`` (planet 1 is only the first pulse seen, or in doubt) and, when planet 1
+        is in doubt, ``caution`` (why: :attr:`meshphase.phasing.GaugeLabels.caution`)."""
+        out = {}
+        for k, v in self.labels.items():
+            caution = getattr(v, "caution", "")
+            out[k] = {"shift_decided_by": v.decided_by, "n_unassigned": v.n_unassigned,
+                      "ambiguous": v.decided_by == "first pulse" or bool(caution),
+                      **({"caution": caution} if caution else {})}
+        return out
 
     def relabelled(self, gear: str, table, labels) -> "PhasingStage":
         """This result with ``gear``'s table and labels replaced (a gauge relabelled

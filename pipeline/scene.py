@@ -136,6 +136,10 @@ class Scene:
     mounts : dict of str to float
         Ground angle of each gauge on a held member [rad], from its channel's
         ``mount_angle_deg``.
+    labels : dict of str to int
+        ``[labels]``: per gear ("sun", "ring") the places along its pass order from the
+        first pulse to planet 1 [-] (:func:`meshphase.phasing.measure_phasing`
+        ``label_shifts``).
     profile_shift : bool
         ``[gearset] profile_shift``: the gears are profile shifted, so Z_r = Z_s + 2 Z_p need
         not hold (coaxiality is then not checked).
@@ -160,6 +164,7 @@ class Scene:
     fixed: str | None = None
     tacho: dict = field(default_factory=dict)
     mounts: dict = field(default_factory=dict)
+    labels: dict = field(default_factory=dict)
     profile_shift: bool = False
     text: str = field(default="", repr=False, compare=False)
 
@@ -371,6 +376,7 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
     speeds, resolution = _parse_speeds(raw, gearset, err)
     channels, mounts = _parse_channels(raw, gearset, err)
     tacho = _parse_tacho(raw)
+    labels = _parse_labels(raw, gearset, err)
     inp = _parse_input(raw, base, err)
     tol = _parse_tolerances(raw, gearset, err)
     bearing = _parse_bearing(raw, err, label, text)
@@ -382,7 +388,7 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
         processing=dict(raw.get("processing", {})), tolerances=tol, bearing=bearing,
         output=(base / raw["output"]) if "output" in raw else None, raw=raw,
         speeds_resolution=resolution or None, fixed=raw.get("speeds", {}).get("fixed"), tacho=tacho, mounts=mounts,
-        profile_shift=profile_shift, text=text)
+        labels=labels, profile_shift=profile_shift, text=text)
     _check_consistency(scene, text, label)
     stages = plan(scene, check=False)
     if "tolerance" in stages:
@@ -657,6 +663,21 @@ def _parse_tacho(raw: dict) -> dict:
         if "channel" in raw["tacho"]:
             tacho["channel"] = raw["tacho"]["channel"]
     return tacho
+
+
+def _parse_labels(raw: dict, gearset: Gearset | None, err) -> dict:
+    """``[labels]`` -> {gear: places from the first pulse to planet 1}; each below the number
+    of planets."""
+    out = {}
+    for gear in ("sun", "ring"):
+        k = raw.get("labels", {}).get(f"{gear}_shift")
+        if k is None:
+            continue
+        if gearset is not None and k >= gearset.n_planets:
+            raise err(["labels", f"{gear}_shift"], f"{k} places: a shift counts places along the "
+                      f"pass order, below the number of planets ({gearset.n_planets})")
+        out[gear] = int(k)
+    return out
 
 
 def _parse_input(raw: dict, base: Path, err) -> dict:

@@ -378,7 +378,7 @@ def stage_phasing(ctx: RunContext) -> PhasingStage:
         fixed, why = held_member(g.z_sun, g.z_ring, sp, resolution=res_typed)
     key, mounts = _tacho_geometry(ctx)
     res = measure_phasing(passes, g, fixed=fixed, fixed_reason=why, tacho_times=ons.tacho_times,
-                          key_angle=key, mounts=mounts, speeds=sp,
+                          key_angle=key, mounts=mounts, speeds=sp, label_shifts=ctx.scene.labels,
                           gaps=gap_intervals_of(cond.quality), check_held=stated is None,
                           speeds_resolution=res_typed)
     for gear in mains:
@@ -412,12 +412,16 @@ def _member_speeds(res, g, sp, tacho_times) -> dict | None:
 
 
 def _warn_phasing(res) -> None:
-    """ProcessingWarnings for pulses no planet fits and for phasing that is not reliable."""
+    """ProcessingWarnings for pulses no planet fits, for planet labels in doubt and for
+    phasing that is not reliable."""
     for gear, lab in res.labels.items():
         if lab.n_unassigned:
             warnings.warn(f"{gear} gauge: {lab.n_unassigned} pulse(s) fit no planet in the pass "
                           "pattern (missing pulses, speed change or spurious detections); they "
                           "are left out", ProcessingWarning, stacklevel=3)
+        if lab.caution:
+            warnings.warn(f"{gear} gauge: planet labels in doubt: {lab.caution}",
+                          ProcessingWarning, stacklevel=3)
     for gear, rel in res.reliability.items():
         if not rel["reliable"]:
             warnings.warn(f"{gear} gauge: phasing not reliable: " + "; ".join(rel["reasons"]),

@@ -232,6 +232,8 @@ def _phasing_section(rep: Report, ctx, figs: _Figures) -> None:
         s.text(f"{g} gauge: planet 1 named by {inf.get('shift_decided_by')}"
                f"{' (relative: planet 1 is the first pulse seen)' if inf.get('ambiguous') else ''}, "
                f"{inf.get('n_unassigned', 0)} pulse(s) unassigned.")
+        if inf.get("caution"):
+            s.warning(f"{g} gauge: planet labels in doubt: {inf['caution']}")
     for g, rel in (ph.reliability or {}).items():
         if rel.get("reliable"):
             s.text(f"{g} gauge phasing: reliable — per-pass uncertainty {rel['error_estimate']:.2e} "

@@ -984,6 +984,11 @@ class RigConfig:
     load_sharing : sequence of float or None
         Pulse amplitude factor per planet [-] (None: all 1). The truth reports
         ``LS_n = N f_n / sum f``.
+    load_modulation : sequence of (float, int, float)
+        Terms ``(a, m, phase)`` [-, -, rad] of a load variation locked to the carrier angle
+        (a torque ripple): every pulse's amplitude times ``1 + sum a cos(m theta_c + phase)``,
+        theta_c the absolute carrier angle at its engagement [rad]; the truth gives each
+        engagement's factor (``engagements[channel]["gain"]``). Empty: none.
     fs : float
         Sample rate [Hz].
     sun_gauge, ring_gauge : bool
@@ -1041,6 +1046,7 @@ class RigConfig:
     ramp: float = 0.0
     errors: HoleErrors = field(default_factory=HoleErrors)
     load_sharing: tuple[float, ...] | None = None
+    load_modulation: tuple[tuple[float, int, float], ...] = ()
     fs: float = 5120.0
     sun_gauge: bool = True
     ring_gauge: bool = True
@@ -1088,6 +1094,7 @@ class RigConfig:
             if len(ls) != self.gearset.n_planets or any(x <= 0 for x in ls):
                 raise ValueError(f"load_sharing needs {self.gearset.n_planets} positive factors, got {ls!r}")
             set_("load_sharing", ls)
+        set_("load_modulation", _load_modulation(self.load_modulation))
         set_("fs", _positive("fs", self.fs))
         for k in ("sun_gauge", "ring_gauge", "tacho"):
             if not isinstance(getattr(self, k), (bool, np.bool_)):
@@ -1142,7 +1149,24 @@ class RigConfig:
         d["errors"] = HoleErrors(**d.get("errors", {}))
         if d.get("load_sharing") is not None:
             d["load_sharing"] = tuple(d["load_sharing"])
+        d["load_modulation"] = tuple(tuple(x) for x in d.get("load_modulation", ()))
         return cls(Gearset(**g), **d)
+
+
+def _load_modulation(v: Any) -> tuple[tuple[float, int, float], ...]:
+    """Validated ``load_modulation`` terms (a, m, phase): |a| summed below 1 (amplitudes stay
+    positive), m a positive integer."""
+    if isinstance(v, (str, bytes)) or not isinstance(v, (Sequence, np.ndarray)):
+        raise TypeError(f"load_modulation must be a sequence of (a, m, phase), got {v!r}")
+    terms = []
+    for term in v:
+        if isinstance(term, (str, bytes)) or not isinstance(term, (Sequence, np.ndarray)) or len(term) != 3:
+            raise ValueError(f"load_modulation terms must be (a, m, phase), got {term!r}")
+        terms.append((_real("load_modulation a", term[0]), _int("load_modulation m", term[1], 1),
+                      _real("load_modulation phase", term[2])))
+    if sum(abs(a) for a, _, _ in terms) >= 1.0:
+        raise ValueError(f"load_modulation amplitudes must sum below 1, got {v!r}")
+    return tuple(terms)
 
 
 def _jsonable(v: Any) -> Any:
@@ -1184,7 +1208,8 @@ class RigTruth:
     channels : list of dict
         name, kind (sun/ring/tacho), tooth, angle, unit, peak, noise rms.
     engagements : dict
-        channel -> {"gear", "t" [s], "planet" (1-based)}, instants inside the record.
+        channel -> {"gear", "t" [s], "planet" (1-based)}, instants inside the record, and
+        "gain" (each pulse's amplitude factor [-]) when there is a ``load_modulation``.
     passes : dict
         channel -> list of per-pass dicts (see :func:`pass_truth`).
     parker : dict
@@ -1291,6 +1316,7 @@ class Rig:
         self.load_sharing = g.n_planets * f / f.sum()
         # engagements over the padded span (rendering) and inside the record (truth)
         self._eng: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._gain: dict[str, np.ndarray] = {}
         self.channels: list[_Channel] = []
         gauges = [("sun", c.sun_gauge, c.sun_tooth, c.sun_tooth_angle0, c.sun_peak),
                   ("ring", c.ring_gauge, c.ring_tooth, c.ring_gauge_angle, c.ring_peak)]
@@ -1299,7 +1325,8 @@ class Rig:
                 continue
             t, p = engagement_instants(self.motion, c.errors, gear, a0, self.motion.t_start, self.motion.t_end)
             self._eng[gear] = (t, p, self.motion.mesh_cycles(t))
-            top = peak * f.max()
+            self._gain[gear] = f[p - 1] * self.load_factor(t)
+            top = peak * f.max() * (1.0 + sum(abs(a) for a, _, _ in c.load_modulation))
             noise = 0.0 if c.snr_db is None else top / 10.0 ** (c.snr_db / 20.0)
             self.channels.append(_Channel(f"SG_{gear}_T{tooth}", gear, "Strain", peak, noise, c.adc_range))
         if c.tacho:
@@ -1325,6 +1352,17 @@ class Rig:
         self._hum_phase = r.uniform(0.0, TWO_PI, len(self.channels))
         self._drift_sign = r.choice([-1.0, 1.0], len(self.channels))
 
+    def load_factor(self, t) -> np.ndarray:
+        """The carrier-angle load variation ``1 + sum a cos(m theta_c + phase)`` [-] at times t [s]
+        (ones without ``load_modulation``)."""
+        t = np.asarray(t, dtype=float)
+        out = np.ones(t.shape)
+        if self.config.load_modulation:
+            th = self.motion.angle("carrier", t)
+            for a, m, ph in self.config.load_modulation:
+                out = out + a * np.cos(m * th + ph)
+        return out
+
     # ------------------------------------------------------------------ truth
     def engagements(self, gear: str) -> tuple[np.ndarray, np.ndarray]:
         """Engagement instants [s] and 1-based planets of a gauge, inside the record [0, t_last]."""
@@ -1343,6 +1381,8 @@ class Rig:
                 continue
             t, p = self.engagements(ch.kind)
             eng[ch.name] = {"gear": ch.kind, "t": t.tolist(), "planet": p.tolist()}
+            if c.load_modulation:
+                eng[ch.name]["gain"] = (self.amp_factor[p - 1] * self.load_factor(t)).tolist()
             passes[ch.name] = pass_truth(self.motion, ch.kind, t, p)
         car = kin.rpm("carrier")
         speeds = {
@@ -1408,6 +1448,7 @@ class Rig:
         if M.size == 0:
             return x
         _, p, Me = self._eng[gear]
+        gain = self._gain[gear]
         peak = self.config.sun_peak if gear == "sun" else self.config.ring_peak
         lo_u, hi_u = PULSE_SUPPORT
         k0 = np.searchsorted(Me, M[0] - hi_u, side="left")
@@ -1416,7 +1457,7 @@ class Rig:
             a = np.searchsorted(M, Me[k] + lo_u, side="left")
             b = np.searchsorted(M, Me[k] + hi_u, side="right")
             if b > a:
-                x[a:b] += peak * self.amp_factor[p[k] - 1] * pulse_shape(M[a:b] - Me[k])
+                x[a:b] += peak * gain[k] * pulse_shape(M[a:b] - Me[k])
         return x
 
     def clean_tacho(self, t) -> np.ndarray:
