@@ -21,7 +21,7 @@ The adversarial conditions (planet-rate ripple on four and five planets, the sun
 120 r/min, a +-25 % torque ripple, µε channels, a clean rig) are held to their scenario's
 ``expect``: the target, or (``goal_or_flag``) the target or a flag whose uncertainty covers
 the error; a gauge whose planets the run names must name them right. A condition that still
-gives a confident wrong answer (in the phasing or in the planet labels) is a strict xfail.
+gives a confident wrong answer in the phasing is a strict xfail.
 """
 
 import numpy as np
@@ -130,14 +130,7 @@ def test_clean_slow_rig_gives_no_data_quality_warning():
     assert not [m for m in res["ctx"].messages if "DataQualityWarning" in m], res["ctx"].messages
 
 
-_LABELS_FROM_LOADS = ("the +-25 % torque ripple moves the ring's per-planet amplitudes, and the "
-                      "sun's planets are named from them: all wrong (label match 0)")
-
-
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.xfail(reason=_LABELS_FROM_LOADS,
-                                                                          strict=True))
-                                  if n == "rig_load_ripple" else n
-                                  for n in ADVERSARIAL_SCENARIOS if n not in _XFAIL])
+@pytest.mark.parametrize("name", [n for n in ADVERSARIAL_SCENARIOS if n not in _XFAIL])
 def test_adversarial_condition_names_planets_right_or_says_relative(name):
     # a gauge whose planets the run names (not declared relative) must name them as the truth
     # does: a wrong planet 1 is a confident wrong answer of its own
