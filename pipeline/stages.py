@@ -40,7 +40,7 @@ from .models.mesh_phasing import assembly_check, classify_phasing, ideal_phasing
 from .onsets import detect_onsets_recording
 from .outputs import new_output_dir, summary_dict, write_outputs  # noqa: F401 (public here)
 from .passes import ONSET_RESOLUTION, gap_intervals_of, gauge_passes  # noqa: F401 (was here)
-from .pass_rates import pass_rate_warnings
+from .pass_rates import pass_rate_warnings, wiring_findings
 from .phasing import (PassTable, assign_planets_by_pattern, measure_phasing, pass_order,
                       relabel_gauge)
 from .recording import Recording
@@ -415,11 +415,22 @@ def stage_phasing(ctx: RunContext) -> PhasingStage:
         res.tables.setdefault(gear, PassTable.empty(gear, ["no usable pass"]))
     for t in res.tables.values():
         t.time_origin = float(rec.t0)
+    _wiring_unreliable(res, wiring_findings(passes, g, sp, ons.tacho_times))
     _warn_phasing(res)
     return PhasingStage(tables=res.tables, labels=dict(res.labels), model=res.model,
                         reliability=res.reliability, fixed=res.fixed,
                         fixed_reason=res.fixed_reason, labels_relative=res.labels_relative,
                         notes=res.notes, result=res, error_estimate=_phasing_estimate(res))
+
+
+def _wiring_unreliable(res, findings: dict) -> None:
+    """A gear whose gauge channels look wired or mapped as the wrong kind
+    (:func:`meshphase.pass_rates.wiring_findings`) has its phasing flagged unreliable, the
+    findings first among the reasons (the run's status names the channel and the fix)."""
+    for gear, msgs in findings.items():
+        rel = res.reliability.setdefault(gear, {"reliable": True, "reasons": []})
+        rel["reliable"] = False
+        rel["reasons"] = list(msgs) + [r for r in rel.get("reasons", []) if r not in msgs]
 
 
 def _warn_phasing(res) -> None:
