@@ -29,7 +29,13 @@ import math
 import numpy as np
 
 __all__ = ["RATE_TOLERANCE", "measured_pass_rate", "expected_pass_rates", "pass_rate_warnings",
-           "wiring_findings"]
+           "wiring_findings", "two_level_train", "TWO_LEVEL_SPREAD"]
+
+#: a channel whose samples above and below half its range each spread less than this share of
+#: the gap between the two levels, with fewer samples between the levels than this share of
+#: those at the high one, is a two-level pulse train (a tacho) [-]: a TTL tacho with 5 mV of
+#: noise on 5 V spreads 0.001, a tooth-root pulse train 0.15-0.3 (its tops are round)
+TWO_LEVEL_SPREAD = 0.05
 
 #: a measured pass rate within this factor of the expected one agrees with it [-]; the
 #: sun's and the ring's rates differ by Z_r / Z_s > 2, so this never accepts the other gear
@@ -155,7 +161,41 @@ def _gear_of_rate(rate: float, expected: dict) -> str | None:
     return hits[0] if len(hits) == 1 else None
 
 
-def wiring_findings(passes, gearset, speeds=None, tacho_times=None) -> dict:
+def two_level_train(x) -> tuple[float, float] | None:
+    """The (low, high) levels of a two-level pulse train such as a tacho's, or None.
+
+    Parameters
+    ----------
+    x : array_like, shape (n,)
+        Raw samples of one channel [its units]; non-finite ones are ignored.
+
+    Returns
+    -------
+    (float, float) or None
+        The means of the samples below and above half the range [its units] when each group
+        spreads less than :data:`TWO_LEVEL_SPREAD` of the gap between them and fewer than
+        that share of the high group's samples lie in the middle half of the range; None
+        otherwise, or with fewer than 3 samples in either group.
+    """
+    x = np.asarray(x, dtype=float).ravel()
+    x = x[np.isfinite(x)]
+    if x.size < 6:
+        return None
+    lo, hi = float(x.min()), float(x.max())
+    if not hi > lo:
+        return None
+    high = x >= 0.5 * (lo + hi)
+    a, b = x[~high], x[high]
+    if a.size < 3 or b.size < 3:
+        return None
+    gap = float(b.mean() - a.mean())
+    middle = np.count_nonzero(np.abs(x - 0.5 * (lo + hi)) < 0.25 * (hi - lo))
+    if max(float(a.std()), float(b.std())) < TWO_LEVEL_SPREAD * gap and middle < TWO_LEVEL_SPREAD * b.size:
+        return float(a.mean()), float(b.mean())
+    return None
+
+
+def wiring_findings(passes, gearset, speeds=None, tacho_times=None, pulse_trains=None) -> dict:
     """Gauge channels wired or mapped as the wrong kind, from their own pass rates.
 
     Parameters
@@ -167,6 +207,9 @@ def wiring_findings(passes, gearset, speeds=None, tacho_times=None) -> dict:
         Typed (or recorded nominal) speeds: each gear's expected pass rate.
     tacho_times : array_like, optional
         The tacho's pulse times [s] (one per carrier turn).
+    pulse_trains : dict of str to (str, float, float), optional
+        Gauge channels whose samples are a two-level pulse train (:func:`two_level_train`):
+        channel -> (its gear, low level, high level).
 
     Returns
     -------
@@ -190,6 +233,10 @@ def wiring_findings(passes, gearset, speeds=None, tacho_times=None) -> dict:
             said.add(name)
             out.setdefault(gear, []).append(text)
 
+    for name, (gear, lo, hi) in (pulse_trains or {}).items():
+        add(gear, name, f"channel {name!r} (kind {gear}) is a two-level pulse train (its samples "
+            f"sit at {lo:.4g} and {hi:.4g}), as a tacho's are, not a gauge's pulses: is it the "
+            f'tacho? map it with kind = "tacho" and the {gear} gauge\'s channel with kind = "{gear}"')
     for name, gear, r in chans:       # once per carrier turn: the tacho mapped as a gauge
         if math.isfinite(f_c) and _agrees(r, f_c) and not (gear in expected and _agrees(r, expected[gear])):
             add(gear, name, f"channel {name!r} (kind {gear}): its passes come once per carrier turn "

@@ -40,7 +40,7 @@ from .models.mesh_phasing import assembly_check, classify_phasing, ideal_phasing
 from .onsets import detect_onsets_recording
 from .outputs import new_output_dir, summary_dict, write_outputs  # noqa: F401 (public here)
 from .passes import ONSET_RESOLUTION, gap_intervals_of, gauge_passes  # noqa: F401 (was here)
-from .pass_rates import pass_rate_warnings, wiring_findings
+from .pass_rates import pass_rate_warnings, two_level_train, wiring_findings
 from .phasing import (PassTable, assign_planets_by_pattern, measure_phasing, pass_order,
                       relabel_gauge)
 from .recording import Recording
@@ -170,6 +170,7 @@ def stage_load(ctx: RunContext) -> LoadStage:
     return LoadStage(recording=rec, source=source, quality=scan.quality, truth=truth,
                      true_errors=errors, stream=src, scan=scan,
                      channels_unused=tuple(ctx.channels_unused),
+                     pulse_trains=_pulse_trains(h.channels, scan.hum_window),
                      error_estimate=(f"{h.n_samples * h.n_channels / 1e6:.2f} MSamples read "
                                      f"(twice, {scan.n_blocks} block(s) each)"))
 
@@ -415,12 +416,25 @@ def stage_phasing(ctx: RunContext) -> PhasingStage:
         res.tables.setdefault(gear, PassTable.empty(gear, ["no usable pass"]))
     for t in res.tables.values():
         t.time_origin = float(rec.t0)
-    _wiring_unreliable(res, wiring_findings(passes, g, sp, ons.tacho_times))
+    _wiring_unreliable(res, wiring_findings(passes, g, sp, ons.tacho_times, getattr(ctx.load, "pulse_trains", None)))
     _warn_phasing(res)
     return PhasingStage(tables=res.tables, labels=dict(res.labels), model=res.model,
                         reliability=res.reliability, fixed=res.fixed,
                         fixed_reason=res.fixed_reason, labels_relative=res.labels_relative,
                         notes=res.notes, result=res, error_estimate=_phasing_estimate(res))
+
+
+def _pulse_trains(channels, hum: dict) -> dict:
+    """{gauge channel: (gear, low, high)} of the gauges whose raw samples (``hum``: the scan's
+    first ``HUM_SECONDS`` of each conditioned channel) are a two-level pulse train
+    (:func:`meshphase.pass_rates.two_level_train`)."""
+    out = {}
+    for c in channels:
+        if c.kind in GAUGE_KINDS and c.name in hum:
+            lv = two_level_train(hum[c.name])
+            if lv is not None:
+                out[c.name] = (c.gear if c.gear in ("sun", "ring") else c.kind, *lv)
+    return out
 
 
 def _wiring_unreliable(res, findings: dict) -> None:

@@ -196,7 +196,8 @@ def _strain_factor(name: str, given: str, parsed, source: str) -> float:
         raise UnitError(f"{source}: gauge channel {name!r} is in {given!r}, a bridge's "
                         f"{'output ratio' if parsed[0] == 'ratio' else 'voltage'}: give its bridge in "
                         "the scene's [[channels]] entry (bridge, gauge_factor, excitation_V) so it "
-                        'becomes strain, or its strain unit (units = "µm/m")')
+                        'becomes strain, or its strain unit (units = "µm/m"); a channel that is no '
+                        'gauge (the tacho) needs its own kind (kind = "tacho")')
     raise UnitError(f"{source}: gauge channel {name!r} has the unit {given!r}, which is not a "
                     "strain unit (m/m, µm/m, µε, microstrain, mm/m, %) nor a bridge's V or mV/V; "
                     'say what it is in the scene\'s [[channels]] entry (units = "µm/m")')
