@@ -416,7 +416,9 @@ def stage_phasing(ctx: RunContext) -> PhasingStage:
         res.tables.setdefault(gear, PassTable.empty(gear, ["no usable pass"]))
     for t in res.tables.values():
         t.time_origin = float(rec.t0)
-    _wiring_unreliable(res, wiring_findings(passes, g, sp, ons.tacho_times, getattr(ctx.load, "pulse_trains", None)))
+    # a gauge wired or mapped as the wrong kind: named as its gear's unreliable cause
+    _wiring_unreliable(res, wiring_findings(passes, g, sp, ons.tacho_times,
+                                            getattr(ctx.load, "pulse_trains", None)))
     _warn_phasing(res)
     return PhasingStage(tables=res.tables, labels=dict(res.labels), model=res.model,
                         reliability=res.reliability, fixed=res.fixed,

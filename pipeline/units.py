@@ -19,8 +19,9 @@ a recording in microstrain is streamed in m/m without a copy of the file.
 
 The common spellings are in a table (:data:`STRAIN_UNITS`, :data:`RATIO_UNITS`,
 :data:`VOLT_UNITS`); any other string is parsed with pint (imported and its registry built on
-first use only: 0.6 s import and 0.2 s registry build measured on the project's 2-core
-machine, which ``meshphase info``/``convert`` must not pay).
+first use only: the first pint parse, its import and registry build, took 0.9-2.7 s on a
+shared 2-core machine, a table look-up some microseconds; ``meshphase info``/``convert`` and
+the common spellings never pay it).
 """
 
 from __future__ import annotations
