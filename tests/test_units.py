@@ -1,8 +1,8 @@
 """Gauge units checked when a recording is loaded (meshphase.units): each spelling's factor to
 m/m, bridge ratios and volts with a bridge entry, an unknown unit named with its channel, a
 missing one warned once, the scene's units winning over the file's, and one recording in
-microstrain through every reader (HDF5, MCAP, CSV with and without a units row, TDMS) giving
-the load sharing of the same recording in m/m."""
+microstrain through every reader (HDF5 native and foreign, MCAP, CSV with and without a units
+row, TDMS) giving the load sharing of the same recording in m/m."""
 
 from __future__ import annotations
 
@@ -142,11 +142,12 @@ def _with_units(rec: Recording, units: str, scale: float) -> Recording:
     return Recording(d, rec.fs, specs, meta=rec.meta)
 
 
-def _run(path: Path, tmp_path: Path, extra: str = "", bridge: str = ""):
+def _run(path: Path, tmp_path: Path, extra: str = "", bridge: str = "", tail: str = ""):
     gauges = "".join(f'[[channels]]\nname = "SG0{i}_{g}"\nkind = "{g}"\n{extra}{bridge}'
                      for i, g in ((1, "sun"), (2, "ring")))
     text = ('results = ["phasing", "load_sharing"]\n' + G + gauges
-            + '[[channels]]\nname = "OPR"\nkind = "tacho"\n' + f'[input]\nrecording = "{path}"\n')
+            + '[[channels]]\nname = "OPR"\nkind = "tacho"\n' + f'[input]\nrecording = "{path}"\n'
+            + tail)
     return run_scene(parse_scene(text, tmp_path / "s.toml"))
 
 
@@ -187,11 +188,24 @@ def ref_amplitudes(seed_rec, tmp_path_factory):
     return _amplitudes(_run(meshphase.io.write(_with_units(seed_rec, "m/m", 1.0), d / "ref.h5"), d))
 
 
+def _write_foreign_hdf5(rec: Recording, path: Path) -> Path:
+    """An h5py script's file: one 1-D dataset per channel with a ``units`` attribute and the
+    rate as a root ``fs`` attribute."""
+    import h5py
+
+    with h5py.File(path, "w") as f:
+        f.attrs["fs"] = rec.fs
+        for j, c in enumerate(rec.channels):
+            f.create_dataset(c.name, data=rec.data[:, j]).attrs["units"] = c.units
+    return path
+
+
 WRITERS = {"hdf5": lambda rec, p: meshphase.io.write(rec, p.with_suffix(".h5")),
            "mcap": lambda rec, p: meshphase.io.write(rec, p.with_suffix(".mcap")),
            "csv": lambda rec, p: meshphase.io.write(rec, p.with_suffix(".csv")),
            "csv units row": lambda rec, p: _write_csv_units_row(rec, p.with_suffix(".csv")),
-           "tdms": lambda rec, p: _write_tdms(rec, p.with_suffix(".tdms"))}
+           "tdms": lambda rec, p: _write_tdms(rec, p.with_suffix(".tdms")),
+           "foreign hdf5": lambda rec, p: _write_foreign_hdf5(rec, p.with_suffix(".h5"))}
 
 
 @pytest.mark.parametrize("fmt", list(WRITERS))
@@ -207,6 +221,31 @@ def test_one_recording_in_microstrain_through_every_reader(fmt, seed_rec, ref_am
     assert step["channels"]["SG01_sun"] == {"units": "µε", "factor": 1e-6, "to": "m/m"}
     assert ctx.load.recording.spec("SG01_sun").units == "m/m"
     assert ctx.load.recording.spec("OPR").units == "V"              # the tacho as it was
+
+
+def test_a_foreign_mcap_mapped_in_microstrain(seed_rec, ref_amplitudes, tmp_path):
+    import json
+
+    from mcap.writer import Writer
+
+    ue = _with_units(seed_rec, "µε", 1e6)
+    path, per = tmp_path / "daq.mcap", 512
+    with open(path, "wb") as fh:                 # one JSON topic per channel, 512 samples a message
+        w = Writer(fh)
+        w.start(profile="", library="a DAQ logger")
+        sid = w.register_schema("daq.Block", "jsonschema", b'{"type": "object"}')
+        cids = [w.register_channel(f"/daq/{n}", "json", sid) for n in ue.names]
+        for a in range(0, ue.n_samples, per):
+            t = 1_750_000_000_000_000_000 + (a * 10**9) // int(ue.fs)
+            for j, cid in enumerate(cids):
+                w.add_message(cid, t, json.dumps({"values": ue.data[a:a + per, j].tolist()}).encode(), t)
+        w.finish()
+    mapping = "[input.mcap]\nfs_Hz = 5120.0\n" + "".join(
+        f'[[input.mcap.channels]]\nname = "{c.name}"\ntopic = "/daq/{c.name}"\nfield = "values"\n'
+        f'units = "{c.units}"\n' for c in ue.channels)
+    ctx = _run(path, tmp_path, tail=mapping)
+    # JSON keeps every digit (repr round trip): the m/m amplitudes to float rounding
+    np.testing.assert_allclose(_amplitudes(ctx), ref_amplitudes, rtol=1e-9)
 
 
 def test_the_scene_units_win_over_the_file(seed_rec, ref_amplitudes, tmp_path):
