@@ -12,10 +12,11 @@ a recording in microstrain is streamed in m/m without a copy of the file.
   ``Strain`` as NI writes it, any length/length or strain expression): factor to m/m;
 - a bridge ratio (``mV/V``, ``V/V``) or a voltage (``V``, ``mV``) on a channel with a bridge
   entry: factor to volts (a ratio times the excitation), converted to strain by
-  :mod:`meshphase.bridge`; on a channel without one: a ValueError asking for it;
+  :mod:`meshphase.bridge`; on a channel without one: a :class:`UnitError` asking for it;
 - an empty unit: taken as m/m (volts with a bridge entry), with one
   :class:`meshphase.errors.FormatWarning` naming the channel;
-- any other unit: a ValueError naming the channel and echoing the unit.
+- any other unit: a :class:`UnitError` (a ValueError: the load stage fails) naming the
+  channel and echoing the unit.
 
 The common spellings are in a table (:data:`STRAIN_UNITS`, :data:`RATIO_UNITS`,
 :data:`VOLT_UNITS`); any other string is parsed with pint (imported and its registry built on
