@@ -24,7 +24,7 @@ import numpy as np
 from ._crb import crb_delay_std, crb_delay_std_psd
 from .errors import DataQualityWarning, ProcessingWarning
 from .noise_spectrum import TRANSIENT_RATIO, NoiseSpectrum, pulse_residual_psd
-from .onsets import FLAG_GAP, Onsets, Template
+from .onsets import FLAG_GAP, FLAG_TEMPLATE, Onsets, Template
 from .phasing import GaugePasses
 from .validate import as_positive
 
@@ -323,7 +323,11 @@ def channel_noise_spectrum(excerpt, name: str, onsets: Onsets, quality=None) -> 
     if excerpt is None or name not in excerpt.names or excerpt.n_samples == 0:
         return None
     skip = float(getattr(quality, "settle", 0.0) or 0.0)
-    spec = pulse_residual_psd(excerpt.channel(name), excerpt.fs, excerpt.t0, on.times, skip=skip)
+    # the windows of pulses only: a flagged onset (low correlation, at an edge, a gap or a
+    # clipped run) need not hold one, and its window is then the pulse's misplaced flanks,
+    # which on clean data are thousands of times the noise and were taken for transients
+    clean = on.times[(np.asarray(on.flags) | FLAG_TEMPLATE) == FLAG_TEMPLATE]
+    spec = pulse_residual_psd(excerpt.channel(name), excerpt.fs, excerpt.t0, clean, skip=skip)
     if spec is not None and spec.n_excluded:
         warnings.warn(f"channel {name!r}: {spec.n_excluded} of {spec.n_excluded + spec.n_pulses} "
                       "pulse windows in the first minute hold a transient (a level step of the "

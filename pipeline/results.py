@@ -70,6 +70,9 @@ class LoadStage(StageResult):
         What passes 1 and 2 found (tacho edges, hum windows, quality).
     channels_unused : tuple of str
         Channels no planned stage reads.
+    pulse_trains : dict of str to (str, float, float)
+        Gauge channels whose raw samples are a two-level pulse train, as a tacho's: channel
+        -> (gear, low level, high level) (:func:`meshphase.pass_rates.two_level_train`).
     """
 
     recording: Any
@@ -80,6 +83,7 @@ class LoadStage(StageResult):
     stream: Any = None
     scan: Any = None
     channels_unused: tuple = ()
+    pulse_trains: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True, kw_only=True)

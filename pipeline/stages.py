@@ -41,7 +41,7 @@ from .models.mesh_phasing import assembly_check, classify_phasing, ideal_phasing
 from .onsets import detect_onsets_recording
 from .outputs import new_output_dir, summary_dict, write_outputs  # noqa: F401 (public here)
 from .passes import ONSET_RESOLUTION, gap_intervals_of, gauge_passes  # noqa: F401 (was here)
-from .pass_rates import pass_rate_warnings
+from .pass_rates import pass_rate_warnings, two_level_train, wiring_findings
 from .phasing import (PassTable, assign_planets_by_pattern, measure_phasing, pass_order,
                       relabel_gauge)
 from .recording import Recording
@@ -54,6 +54,7 @@ from .stream import (BLOCK_SAMPLES, ChannelPlan, FileSource, GeneratorSource, Me
                      condition_stream, scan_source)
 from .threads import blas_single_thread
 from .truth import phasing_vs_truth, tacho_geometry, true_errors
+from .units import gauge_unit_gains
 from .validate import as_regular_file
 
 if TYPE_CHECKING:  # the model modules of bearing, tilt and tolerance load in their stages:
@@ -170,6 +171,7 @@ def stage_load(ctx: RunContext) -> LoadStage:
     return LoadStage(recording=rec, source=source, quality=scan.quality, truth=truth,
                      true_errors=errors, stream=src, scan=scan,
                      channels_unused=tuple(ctx.channels_unused),
+                     pulse_trains=_pulse_trains(h.channels, scan.hum_window),
                      error_estimate=(f"{h.n_samples * h.n_channels / 1e6:.2f} MSamples read "
                                      f"(twice, {scan.n_blocks} block(s) each)"))
 
@@ -185,31 +187,51 @@ def _open_file(scene: Scene) -> tuple:
     with recording_read_errors(path):
         opts = read_options(scene) or None
         src = FileSource(path, start=start, stop=stop, options=opts)
-        if scene.channels:
-            fmt = src.fmt
-            src = _mapped_source(
-                src.header, scene.channels, source,
-                lambda specs, gains: FileSource(path, start=start, stop=stop, channels=specs,
-                                                gains=gains, format=fmt, options=opts),
-                lambda specs, gains: FileSource(path, channels=specs, gains=gains, format=fmt,
-                                                options=opts))
+        fmt = src.fmt
+        src = _mapped_source(
+            src.header, scene.channels, source,
+            lambda specs, gains: FileSource(path, start=start, stop=stop, channels=specs,
+                                            gains=gains, format=fmt, options=opts),
+            lambda specs, gains: FileSource(path, channels=specs, gains=gains, format=fmt,
+                                            options=opts)) or src
     return src, src.header, source, None
 
 
 def _mapped_source(header, entries: list, source: str, make: Callable, make_whole: Callable):
-    """The source with the scene's ``[[channels]]`` applied (:mod:`meshphase.channels`):
-    ``make(specs, gains)`` opens it; unmapped channels said as a SceneWarning; bridge
-    channels converted to strain as read (:class:`meshphase.bridge.BridgeSource`, the null
-    windows read from ``make_whole(specs, gains)``, the whole recording)."""
-    cmap = map_channels(header.names, entries, source, channels_present(header))
-    specs, gains = mapped_specs(header.channels, cmap)
+    """The source with the scene's ``[[channels]]`` applied (:mod:`meshphase.channels`) and
+    the gauges' units converted to m/m as read (:func:`meshphase.units.gauge_unit_gains`, a
+    ``units_to_si`` history step): ``make(specs, gains)`` opens it; unmapped channels said as
+    a SceneWarning; bridge channels converted to strain as read
+    (:class:`meshphase.bridge.BridgeSource`, the null windows read from
+    ``make_whole(specs, gains)``, the whole recording). None when there is nothing to apply
+    (no entries, every gauge in m/m)."""
+    cmap = bridges = None
+    if entries:
+        cmap = map_channels(header.names, entries, source, channels_present(header))
+        specs, gains = mapped_specs(header.channels, cmap)
+        bridges = bridge_configs(cmap)
+    else:
+        specs, gains = list(header.channels), []
+    specs, unit_gains, converted = gauge_unit_gains(specs, bridges, source,
+                                                    _bridge_units(header, cmap, bridges))
+    if cmap is None and not converted:
+        return None
+    gains = gains + unit_gains
     src = make(specs, gains)
-    src.header = src.header.with_history("channel_overrides", channels=overridden(cmap))
-    _say_unmapped(cmap, specs, source)
-    bridges = bridge_configs(cmap)
+    if cmap is not None:
+        src.header = src.header.with_history("channel_overrides", channels=overridden(cmap))
+        _say_unmapped(cmap, specs, source)
+    if converted:
+        src.header = src.header.with_history("units_to_si", channels=converted)
     if bridges:
         src = BridgeSource(src, bridges, make_whole(specs, gains))
     return src
+
+
+def _bridge_units(header, cmap, bridges) -> dict:
+    """{bridge channel: its unit as the scene's entry (``units``) or else the file gives it}."""
+    given = {c.name: c.units for c in header.channels}
+    return {n: cmap.entries[cmap.match_of(n).entry].get("units", given[n]) for n in bridges or ()}
 
 
 def _say_unmapped(cmap, specs, source: str) -> None:
@@ -232,19 +254,28 @@ def _open_synthetic(scene: Scene) -> tuple:
     source = f"synthetic:{inp['synthetic']}"
     size = stream.n_samples * len(stream.channels) * stream.dtype.itemsize
     if size <= SYNTHETIC_WHOLE_BYTES:
-        rec = apply_channel_overrides(stream.collect(), entries, source)
-        if entries:
-            cmap = map_channels(stream.names, entries, source)
+        whole = stream.collect()
+        rec = apply_channel_overrides(whole, entries, source)
+        cmap = map_channels(stream.names, entries, source) if entries else None
+        if cmap is not None:
             _say_unmapped(cmap, rec.channels, source)
-            rec = bridge_recording(rec, bridge_configs(cmap))
+        bridges = bridge_configs(cmap) if cmap is not None else {}
+        specs, gains, converted = gauge_unit_gains(rec.channels, bridges, source,
+                                                   _bridge_units(whole, cmap, bridges))
+        if converted:
+            factors = np.ones(rec.n_channels, dtype=rec.data.dtype)
+            for j, g in gains:
+                factors[j] *= g
+            rec = Recording(rec.data * factors, rec.fs, specs, rec.t0, rec.start_datetime,
+                            rec.meta, rec.history).with_history("units_to_si", channels=converted)
+        if bridges:
+            rec = bridge_recording(rec, bridges)
         return MemorySource(rec), rec, source, stream.truth
     stream.block_samples = BLOCK_SAMPLES       # the blocks the file path reads
-    if not entries:
-        src = GeneratorSource(stream)
-    else:
-        src = _mapped_source(stream, entries, source,
-                             lambda specs, gains: GeneratorSource(stream, channels=specs, gains=gains),
-                             lambda specs, gains: GeneratorSource(stream, channels=specs, gains=gains))
+    src = _mapped_source(stream, entries, source,
+                         lambda specs, gains: GeneratorSource(stream, channels=specs, gains=gains),
+                         lambda specs, gains: GeneratorSource(stream, channels=specs, gains=gains)
+                         ) or GeneratorSource(stream)
     return src, src.header, source, stream.truth
 
 
@@ -386,6 +417,9 @@ def stage_phasing(ctx: RunContext) -> PhasingStage:
         res.tables.setdefault(gear, PassTable.empty(gear, ["no usable pass"]))
     for t in res.tables.values():
         t.time_origin = float(rec.t0)
+    # a gauge wired or mapped as the wrong kind: named as its gear's unreliable cause
+    _wiring_unreliable(res, wiring_findings(passes, g, sp, ons.tacho_times,
+                                            getattr(ctx.load, "pulse_trains", None)))
     _warn_phasing(res)
     return PhasingStage(tables=res.tables, labels=dict(res.labels), model=res.model,
                         reliability=res.reliability, fixed=res.fixed,
@@ -409,6 +443,29 @@ def _member_speeds(res, g, sp, tacho_times) -> dict | None:
         except ValueError:      # edges out of order: the nominal ratio gives the carrier
             pass
     return member_speeds(g, rate, fixed=res.fixed, speeds=sp, carrier_rate=carrier)
+
+
+def _pulse_trains(channels, hum: dict) -> dict:
+    """{gauge channel: (gear, low, high)} of the gauges whose raw samples (``hum``: the scan's
+    first ``HUM_SECONDS`` of each conditioned channel) are a two-level pulse train
+    (:func:`meshphase.pass_rates.two_level_train`)."""
+    out = {}
+    for c in channels:
+        if c.kind in GAUGE_KINDS and c.name in hum:
+            lv = two_level_train(hum[c.name])
+            if lv is not None:
+                out[c.name] = (c.gear if c.gear in ("sun", "ring") else c.kind, *lv)
+    return out
+
+
+def _wiring_unreliable(res, findings: dict) -> None:
+    """A gear whose gauge channels look wired or mapped as the wrong kind
+    (:func:`meshphase.pass_rates.wiring_findings`) has its phasing flagged unreliable, the
+    findings first among the reasons (the run's status names the channel and the fix)."""
+    for gear, msgs in findings.items():
+        rel = res.reliability.setdefault(gear, {"reliable": True, "reasons": []})
+        rel["reliable"] = False
+        rel["reasons"] = list(msgs) + [r for r in rel.get("reasons", []) if r not in msgs]
 
 
 def _warn_phasing(res) -> None:

@@ -1544,8 +1544,13 @@ class Rig:
 
 
 # ----------------------------------------------------------------------------- TDMS
+#: gauge unit strings write_rig_tdms writes -> stored value per m/m
+_GAUGE_UNITS = {"Strain": 1.0, "µε": 1e6}
+
+
 def write_rig_tdms(rig: Rig, path: str | Path, *, samples_per_segment: int = 1000, interleaved: bool = False,
-                   storage: str = "float64", write_truth: bool = True) -> RigTruth:
+                   storage: str = "float64", write_truth: bool = True,
+                   gauge_unit: str = "Strain") -> RigTruth:
     """Stream a rig's recording to an NI-style TDMS file, segment by segment, plus its truth.
 
     Parameters
@@ -1562,11 +1567,15 @@ def write_rig_tdms(rig: Rig, path: str | Path, *, samples_per_segment: int = 100
         an NI linear scale (needs ``adc_bits``).
     write_truth : bool
         Also write the JSON sidecar (:func:`truth_path`).
+    gauge_unit : {"Strain", "µε"}
+        ``unit_string`` of the strain gauges: "Strain" (m/m, NI's name) or "µε" (the samples
+        written x 1e6, as a DAQ set to microstrain logs them); float64 storage only.
 
     Returns
     -------
     RigTruth
     """
+    _choice("gauge_unit", gauge_unit, tuple(_GAUGE_UNITS))
     if not isinstance(rig, Rig):
         raise TypeError(f"rig must be a Rig, got {type(rig).__name__}")
     if not isinstance(path, (str, Path)):
@@ -1582,12 +1591,16 @@ def write_rig_tdms(rig: Rig, path: str | Path, *, samples_per_segment: int = 100
     c = rig.config
     if storage == "int" and c.adc_bits is None:
         raise ValueError("storage='int' needs adc_bits (16 or 24)")
+    if storage == "int" and gauge_unit != "Strain":
+        raise ValueError(f"gauge_unit={gauge_unit!r} needs storage='float64'")
+    per_unit = {ch.name: _GAUGE_UNITS[gauge_unit] if ch.unit == "Strain" else 1.0
+                for ch in rig.channels}
     start = np.datetime64(c.start_time, "us")
     props = {}
     for ch in rig.channels:
         p = {
             "NI_ChannelName": ch.name,
-            "unit_string": ch.unit,
+            "unit_string": gauge_unit if ch.unit == "Strain" else ch.unit,
             "NI_UnitDescription": "Strain" if ch.unit == "Strain" else "Volts",
             "wf_increment": 1.0 / c.fs,
             "wf_start_time": start,
@@ -1618,7 +1631,8 @@ def write_rig_tdms(rig: Rig, path: str | Path, *, samples_per_segment: int = 100
             if i0 == 0:
                 objs += [RootObject(root_props), GroupObject(c.group, {"description": "strain gauges and tacho"})]
             for ch in rig.channels:
-                objs.append(ChannelObject(c.group, ch.name, data[ch.name], props[ch.name] if i0 == 0 else None))
+                x = data[ch.name] if per_unit[ch.name] == 1.0 else data[ch.name] * per_unit[ch.name]
+                objs.append(ChannelObject(c.group, ch.name, x, props[ch.name] if i0 == 0 else None))
             w.write_segment(objs)
             n_written += 1
     truth = rig.truth(tdms={"samples_per_segment": nseg, "segments": n_written, "storage": storage,
