@@ -77,6 +77,11 @@ kind = "ring"
         text += f'[[channels]]\nname = "{names["tacho"]}"\nkind = "tacho"\n'
         if geometry:
             text += f"[tacho]\nkey_angle_deg = {truth.tacho['key_carrier_angle'] / DEG!r}\n"
+    if truth.encoder:
+        # a [[channels]] table after [tacho] would belong to it: encoder entries go first
+        enc = (f'[[channels]]\nname = "{truth.encoder["channel"]}"\nkind = "encoder"\n'
+               f'shaft = "{truth.encoder["shaft"]}"\npulses_per_rev = {truth.encoder["pulses_per_rev"]}\n')
+        text = text.replace("[[channels]]\n", enc + "[[channels]]\n", 1)
     return text
 
 
