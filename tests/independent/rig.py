@@ -126,20 +126,21 @@ Presets (:data:`PRESETS`, :func:`make_preset_tdms`)
 Seed rig 25/87/29, 4 equally spaced planets, ring fixed, sun 18.19 r/min, 20 dB, tacho on,
 unless the row says otherwise. "1 % ripple" is ``a = 0.01`` once per carrier revolution.
 
-========================  ====================================================
-``steady``                no ripple, no ramp
-``ripple1_carrier``       1 % carrier-rate ripple
-``ripple3_carrier``       3 % carrier-rate ripple
-``ripple1_ramp10``        1 % ripple + 10 % ramp up over the record
-``five_planets_ripple1``  Z 25/85/30, 5 planets (R_c 110 mm), 1 % ripple
-``ripple1_sun``           1 % ripple once per sun revolution (instead of carrier)
-``ramp_down``             1 % ripple + 10 % ramp down
-``ccw``                   1 % ripple, sun at -18.19 r/min (counter-clockwise planets)
-``unequal3``              1 % ripple, 3 planets at assembly positions p = 0, 37, 75
-``no_tacho``              1 % ripple, no tacho channel
-``snr10``                 1 % ripple, 10 dB
-``hole_errors_case1``     seed 000 Table 2 case 1 errors (0.2 mm; 4, 60, 20 deg), steady
-========================  ====================================================
+============================  ====================================================
+``steady``                    no ripple, no ramp
+``ripple1_carrier``           1 % carrier-rate ripple
+``ripple3_carrier``           3 % carrier-rate ripple
+``ripple1_ramp10``            1 % ripple + 10 % ramp up over the record
+``five_planets_ripple1``      Z 25/85/30, 5 planets (R_c 110 mm), 1 % ripple
+``ripple1_sun``               1 % ripple once per sun revolution (instead of carrier)
+``ramp_down``                 1 % ripple + 10 % ramp down
+``ccw``                       1 % ripple, sun at -18.19 r/min (counter-clockwise planets)
+``unequal3``                  1 % ripple, 3 planets at assembly positions p = 0, 37, 75
+``no_tacho``                  1 % ripple, no tacho channel
+``snr10``                     1 % ripple, 10 dB
+``hole_errors_case1``         seed 000 Table 2 case 1 errors (0.2 mm; 4, 60, 20 deg), steady
+``planet_ripple1_encoder``    1 % ripple at the planet spin rate, 60-pulse sun-shaft encoder
+============================  ====================================================
 
 The first five are the outside tester's table. Without shaft-hole errors the truth phasing
 of every pass is Parker's ideal whatever the ripple or ramp (phasing is geometry; speed
@@ -1772,6 +1773,7 @@ PRESETS: dict[str, dict] = {
     "hole_errors_case1": {"errors": {"e_sun": 0.2e-3, "kappa_sun": 4 * _DEG, "e_ring": 0.2e-3,
                                      "kappa_ring": 60 * _DEG, "e_planet": (0.2e-3,) * 4,
                                      "kappa_planet": (20 * _DEG,) * 4}},
+    "planet_ripple1_encoder": {"ripple": ((0.01, 1.0, "planet", 0.0),), "encoder": ("sun", 60)},
 }
 
 
