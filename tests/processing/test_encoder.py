@@ -218,3 +218,40 @@ def test_encoder_channel_spec_is_validated():
         ChannelSpec("enc", kind="encoder", pulses_per_rev=2.5)
     with pytest.raises(ValueError, match="'sg'.*shaft belong.*not kind 'sun'"):
         ChannelSpec("sg", kind="sun", shaft="sun")
+
+
+# ----------------------------------------------------------------------------- in the fit
+def test_encoders_that_cannot_observe_the_mesh_angle_are_named_not_used():
+    from meshphase.phasing import _encoder_trains
+
+    t = np.arange(200) / 18.2
+    ring = kinematics(25, 87, 29, fixed="ring")
+    notes = []
+    out = _encoder_trains([("E1", "sun", 60, t, 1e-5), ("E2", "ring", 60, t, None)], ring, notes)
+    assert [tr.name for tr in out] == ["E1"]
+    assert out[0].target[-1] == pytest.approx(199 * 25 * 87 / 112 / 60)
+    assert "encoder E1 (sun shaft, 60 pulses per turn, 0.3237 mesh cycles per pulse): " \
+           "200 edges, 0 extra dropped, 0 missing counted" in notes
+    assert any("encoder E2" in n and "the ring is held" in n and "not used" in n for n in notes)
+    notes = []
+    assert _encoder_trains([("E1", "sun", 60, t, None)], kinematics(25, 87, 29, fixed=None),
+                           notes) == []
+    assert "differential rig: encoder E1" in notes[0]
+    with pytest.raises(ValueError, match="'E1' pulses_per_rev must be a positive integer"):
+        _encoder_trains([("E1", "sun", 0, t, None)], ring, [])
+
+
+def test_an_encoder_channel_without_its_shaft_is_left_out_with_a_warning():
+    from meshphase.errors import ProcessingWarning
+    from meshphase.recording import Recording
+    from meshphase.stages import _encoder_inputs
+
+    specs = [ChannelSpec("enc", kind="encoder", units="V", pulses_per_rev=60),
+             ChannelSpec("enc2", kind="encoder", units="V", shaft="sun", pulses_per_rev=60)]
+    rec = Recording(np.zeros((10, 2)), FS, specs)
+    t = np.arange(5) / 18.2
+    with pytest.warns(ProcessingWarning, match="encoder channel 'enc': no shaft"):
+        got = _encoder_inputs(rec, {"enc": t, "enc2": t})
+    assert [g[:3] for g in got] == [("enc2", "sun", 60)]
+    assert got[0][4] == pytest.approx(edge_timing_sigma(FS))
+    assert _encoder_inputs(rec, {}) == []
