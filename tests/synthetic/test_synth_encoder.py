@@ -8,6 +8,7 @@ import meshphase.io as mio
 from meshphase.bench.phasing import PhasingCase, run_case
 from meshphase.encoder import clean_edges, edge_times
 from meshphase.synthetic import EncoderConfig, SynthConfig, generate, get_scenario
+from meshphase.synthetic.tdms_export import write_tdms
 
 
 def _short(encoder: EncoderConfig, seconds: float = 20.0) -> SynthConfig:
@@ -91,12 +92,15 @@ def test_the_encoder_scenario_meets_the_phasing_target():
     assert any("encoder encoder (input shaft, 60 pulses per turn" in n for n in notes), notes
 
 
-@pytest.mark.parametrize("suffix", [".h5", ".mcap", ".csv"])
+@pytest.mark.parametrize("suffix", [".h5", ".mcap", ".csv", ".tdms"])
 def test_encoder_channel_spec_survives_every_format(tmp_path, suffix):
     rec, _ = generate(_short(EncoderConfig(shaft="carrier", pulses_per_rev=36), seconds=1.0),
                       seed=1)
     path = tmp_path / f"rec{suffix}"
-    mio.write(rec, path)
+    if suffix == ".tdms":
+        write_tdms(rec, path)               # the generator's NI TDMS export
+    else:
+        mio.write(rec, path)
     back = mio.read(path)
     spec = back.channels[-1]
     assert (spec.kind, spec.shaft, spec.pulses_per_rev) == ("encoder", "carrier", 36)
