@@ -20,7 +20,9 @@ interest) and ``h_n`` its time-varying part (a planet's own shaft hole offset tu
 planet and moves its passes: terms periodic in the planet's spin, Z_p mesh cycles per turn).
 A ring gauge obeys (1) with Z_r; a carrier once-per-revolution tacho, when a member is held,
 fires at A = P_c k + c_T with P_c = Z_r (ring held) or Z_s (sun held) mesh cycles per carrier
-revolution. Measured phasing is then the mesh angle turned between two passes,
+revolution; a shaft encoder of p pulses per turn fires at A = (P_shaft / p) k + c_E
+(:func:`encoder_train`, P_shaft from :func:`shaft_cycles`). Measured phasing is then the
+mesh angle turned between two passes,
 gamma_n = frac(A(t_n) - A(t_1)) (spec section 3; at constant speed frac((t_n - t_1) / T)).
 
 The model
@@ -103,6 +105,8 @@ class PassTrain:
     name : str
         Channel name (or "tacho").
     kind : {"sun", "ring", "tacho"}
+        "tacho": a shaft pulse train (a carrier tacho or an encoder, :func:`encoder_train`):
+        a constant of its own, no planet terms.
     times : ndarray, shape (m,)
         Observation times [s], strictly increasing.
     sigma : ndarray, shape (m,)
@@ -1186,7 +1190,9 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
         offset is certain to be there, a common planet-rate speed ripple is not), and only
         the two gears together over a long record tell them apart; tried on shorter records
         it takes up what the planets' own terms should (a 30-s seed-rig ramp: 4.7e-3 mesh
-        cycles of error with it, 1e-4 without).
+        cycles of error with it, 1e-4 without). Where a train without planet terms samples
+        the planet spin (an encoder, :func:`encoder_train`) the ripple is seen apart from
+        the planets' terms and, when on, is tried on its own.
 
     Returns
     -------
@@ -1979,7 +1985,8 @@ def encoder_train(edges: EncoderEdges, cycles_per_pulse: float, *, sigma=None,
         Kind ``"tacho"``: a constant of its own, no planet terms.
     """
     if not isinstance(edges, EncoderEdges):
-        raise TypeError(f"edges must be EncoderEdges (meshphase.encoder.clean_edges), got {type(edges).__name__}")
+        raise TypeError(f"edges must be EncoderEdges (meshphase.encoder.clean_edges), got "
+                        f"{type(edges).__name__}")
     p = as_positive(cycles_per_pulse, "cycles_per_pulse")
     if not isinstance(name, str) or not name:
         raise ValueError(f"name must be a non-empty string, got {name!r}")

@@ -5,13 +5,13 @@ revolution of that shaft. Its rising edges sit at equal shaft angles, so edge k 
 
     A = (P_shaft / pulses_per_rev) k + c            [mesh cycles]
 
-with ``P_shaft`` the mesh cycles per revolution of the shaft (:func:`meshphase.angles.shaft_cycles`, from the
-gear kinematics) and ``c`` an unknown constant (which pulse is the index). That is the form of
-a carrier tacho's train (:func:`meshphase.angles.tacho_train`), sampled many times per
-revolution: a sun-shaft encoder of 60 pulses on the seed rig (Z_s 25, Z_r 87, ring held)
-observes the mesh angle every 25 x 87 / (112 x 60) = 0.32 mesh cycles and so sees a speed
-ripple at the planets' spin rate that the gauges and a once-per-turn tacho cannot tell from
-the planets' own terms.
+with ``P_shaft`` the mesh cycles per revolution of the shaft
+(:func:`meshphase.angles.shaft_cycles`, from the gear kinematics) and ``c`` an unknown
+constant (which pulse is the index). That is the form of a carrier tacho's train
+(:func:`meshphase.angles.tacho_train`), sampled many times per revolution: a sun-shaft
+encoder of 60 pulses on the seed rig (Z_s 25, Z_r 87, ring held) observes the mesh angle
+every 25 x 87 / (112 x 60) = 0.32 mesh cycles and so sees a speed ripple at the planets'
+spin rate that the gauges and a once-per-turn tacho cannot tell from the planets' own terms.
 
 Array functions, no Recording:
 

@@ -954,8 +954,8 @@ def channel_quality(x, *, kind: str | None = None) -> dict:
         Raw samples of one channel [any unit].
     kind : str, optional
         Channel kind (:class:`meshphase.recording.ChannelSpec`). A "tacho" or an "encoder"
-        is a pulse train, flat by design: its dropout and plateau analysis is skipped (the rail runs at its
-        two levels are still listed as clipped, as before). Without a kind, a channel whose
+        is a pulse train, flat by design: its dropout and plateau analysis is skipped (the
+        rail runs at its two levels are still listed as clipped, as before). Without a kind, a channel whose
         finite samples take at most 8 distinct values (among 4096 evenly strided ones) is
         taken for a pulse train; an analogue channel shows hundreds.
 

@@ -547,7 +547,8 @@ class SynthConfig:
         if self.tacho is not None and not isinstance(self.tacho, TachoConfig):
             raise TypeError(f"tacho must be a TachoConfig or None, got {type(self.tacho).__name__}")
         if self.encoder is not None and not isinstance(self.encoder, EncoderConfig):
-            raise TypeError(f"encoder must be an EncoderConfig or None, got {type(self.encoder).__name__}")
+            raise TypeError(f"encoder must be an EncoderConfig or None, got "
+                            f"{type(self.encoder).__name__}")
         names = [x.name for x in gauges] + ([self.tacho.name] if self.tacho else []) + (
             [self.encoder.name] if self.encoder else [])
         if not names:

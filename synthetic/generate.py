@@ -24,8 +24,8 @@ constant speed they are rendered linear in time, otherwise through
 :func:`~meshphase.synthetic.gauges.angle_pulse_map` (a per-event polynomial in the sample offset that
 follows ``tau(t)`` to 1e-9 mesh periods).
 
-Channels appear in the order of ``config.gauges``, then the tacho, then the encoder. Samples are in physical
-units (strain [m/m], tacho and encoder [V]) with ``ChannelSpec.gain = 1``.
+Channels appear in the order of ``config.gauges``, then the tacho, then the encoder. Samples
+are in physical units (strain [m/m], tacho and encoder [V]) with ``ChannelSpec.gain = 1``.
 """
 
 from __future__ import annotations
