@@ -255,3 +255,24 @@ def test_an_encoder_channel_without_its_shaft_is_left_out_with_a_warning():
     assert [g[:3] for g in got] == [("enc2", "sun", 60)]
     assert got[0][4] == pytest.approx(edge_timing_sigma(FS))
     assert _encoder_inputs(rec, {}) == []
+
+
+def test_the_streamed_scan_times_encoder_edges_as_the_array_function_does():
+    from meshphase.recording import Recording
+    from meshphase.stream import MemorySource, scan_source
+
+    _, x, te = pulse_train(18.2, 20.0)
+    specs = [ChannelSpec("enc", kind="encoder", units="V", shaft="sun", pulses_per_rev=60),
+             ChannelSpec("dead", kind="encoder", units="V", shaft="sun", pulses_per_rev=60)]
+    rec = Recording(np.column_stack([x, np.zeros_like(x)]), FS, specs, t0=2.0)
+    # blocks much shorter than the record: edges across block boundaries are timed alike
+    scan = scan_source(MemorySource(rec), encoders=["enc", "dead"], block=4096)
+    assert set(scan.encoder_times) == {"enc"}                 # one level only: nothing to time
+    got = scan.encoder_times["enc"]
+    # the scan's levels come from a strided subsample, the array function's from every
+    # sample: their half levels differ by ~1e-5 V, which moves a 5 V-per-sample edge by
+    # ~1e-6 of a sample
+    assert got == pytest.approx(edge_times(x, FS, t0=2.0), abs=1e-5 / FS)
+    assert got.size == te.size
+    with pytest.raises(ValueError, match=r"no channel\(s\) \['nope'\]"):
+        scan_source(MemorySource(rec), encoders=["nope"])
