@@ -1139,7 +1139,7 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
     elif tach is not None and tach.size >= 2 and fixed is None:
         notes.append("differential rig: the carrier tacho does not fix the mesh angle (no held "
                      "member); it is not used")
-    n_enc = len(trains)
+    n_before = len(trains)
     trains += _encoder_trains(encoders, kin, notes)
     model = None
     tables: dict = {}
@@ -1147,7 +1147,7 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
     if any(tr.kind in ("sun", "ring") and len(tr) >= 2 for tr in trains):
         # an encoder samples the mesh angle many times per planet spin: a common speed
         # ripple at the planet rate is then told from the planets' own terms and is tried
-        extra = {"planet_ripple": True} if len(trains) > n_enc else {}
+        extra = {"planet_ripple": True} if len(trains) > n_before else {}
         model = fit_angle_windows(trains, kin, n, **extra)
         notes.extend(model.notes)
         unseen = unseen_ripples(trains, kin)
