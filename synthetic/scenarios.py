@@ -460,4 +460,4 @@ register(Scenario(
     lambda: _rig("rig_ripple_planet_encoder", "planet-rate ripple, 60-pulse sun encoder",
                  speed=_ripple("planet")).with_(encoder=EncoderConfig(shaft="input",
                                                                       pulses_per_rev=60)),
-    ("speed", "encoder")))
+    ("rig", "speed", "encoder")))
