@@ -23,7 +23,8 @@ Array functions, no Recording:
 * :func:`clean_edges`: extra edges (glitches: an edge that puts its intervals off the pulse
   grid) dropped, missing edges (an interval of about k pulse periods) counted, so the pulse
   count k of every kept edge stays right (as MATLAB's ``tachorpm`` with its pulses per
-  revolution), both reported in counts;
+  revolution), both reported in counts; :func:`split_at_gaps` cuts the train where too many
+  pulses are missing in a row to count across (a dropout);
 * :func:`meshphase.angles.encoder_train` then makes the cleaned edges a
   :class:`~meshphase.angles.PassTrain` of kind ``"tacho"`` (an angle train with a constant
   of its own and no planet terms), ``P_shaft`` from :func:`meshphase.angles.shaft_cycles`.
@@ -43,13 +44,16 @@ from .recording import ENCODER_SHAFTS
 from .validate import as_finite_array, as_positive, as_positive_int, as_signal
 
 __all__ = ["ENCODER_SHAFTS", "EncoderEdges", "shaft_of", "pulse_levels", "rising_crossings",
-           "edge_times", "clean_edges", "edge_timing_sigma"]
+           "edge_times", "clean_edges", "split_at_gaps", "edge_timing_sigma"]
 
 #: an interval whose ratio to the local pulse period is further than this from a whole
 #: number is off the pulse grid (an extra edge next to it) [-]
 GRID_TOL = 0.25
 #: intervals in the running median that sets the local pulse period [-]
 PERIOD_WINDOW = 15
+#: a gap of more than this many pulse periods is not counted across: the speed may have
+#: changed by more than one pulse's worth over it (1 % in 8 periods is 0.08 of a pulse)
+MAX_GAP_PULSES = 8
 
 
 def shaft_of(shaft: str) -> str:
@@ -296,3 +300,38 @@ def clean_edges(times, *, tol: float = GRID_TOL) -> EncoderEdges:
     steps = np.maximum(1, np.rint(np.diff(tk) / p_edge[keep][1:])).astype(np.int64)
     count = np.concatenate([[0], np.cumsum(steps)])
     return EncoderEdges(tk, count, n_extra, int(np.sum(steps - 1)), float(np.median(np.diff(t))))
+
+
+def split_at_gaps(edges: EncoderEdges, max_gap: int = MAX_GAP_PULSES) -> list:
+    """The cleaned edges cut where more than ``max_gap`` pulses are missing in a row.
+
+    Across a long gap (a dropout of the channel) the pulse count is a guess: each piece is
+    counted from its own first edge and joins the angle model with a constant of its own.
+
+    Parameters
+    ----------
+    edges : EncoderEdges
+    max_gap : int
+        Largest count step kept within a piece [pulses] (>= 1).
+
+    Returns
+    -------
+    list of EncoderEdges
+        In time order; each piece's ``n_missing`` counts the edges missing inside it, the
+        first piece carries ``n_extra``; no piece for an empty train.
+    """
+    if not isinstance(edges, EncoderEdges):
+        raise TypeError(f"edges must be EncoderEdges (clean_edges), got {type(edges).__name__}")
+    max_gap = as_positive_int(max_gap, "max_gap")
+    if len(edges) == 0:
+        return []
+    step = np.diff(edges.count)
+    cuts = np.flatnonzero(step > max_gap) + 1
+    out = []
+    starts, stops = np.concatenate([[0], cuts]), np.concatenate([cuts, [len(edges)]])
+    for q, (a, b) in enumerate(zip(starts, stops)):
+        c = edges.count[a:b] - edges.count[a]
+        out.append(EncoderEdges(edges.times[a:b], c, edges.n_extra if q == 0 else 0,
+                                int(c[-1] + 1 - c.size), edges.period))
+    return out
+

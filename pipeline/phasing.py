@@ -52,7 +52,7 @@ from .angles import (AngleModel, Kinematics, PassTrain, gauge_train, held_member
                      label_shift_costs, mesh_cycles_per_carrier_turn, relabel_train,
                      revolution_numbers, tacho_train, unseen_ripples)
 from .angles import encoder_train, shaft_cycles
-from .encoder import clean_edges
+from .encoder import MAX_GAP_PULSES, clean_edges, split_at_gaps
 from .errors import ProcessingWarning
 from .validate import as_finite_array, as_positive_int
 
@@ -1180,10 +1180,15 @@ def _encoder_trains(encoders, kin: Kinematics, notes: list) -> list:
             notes.append(f"encoder {name}: {exc}; it is not used")
             continue
         edges = clean_edges(np.asarray(times, dtype=float))
+        pieces = split_at_gaps(edges)
         notes.append(f"encoder {name} ({shaft} shaft, {ppr} pulses per turn, "
-                     f"{per_rev / ppr:.4g} mesh cycles per pulse): {edges.summary()}")
-        if len(edges) >= 2:
-            out.append(encoder_train(edges, per_rev / ppr, sigma=sigma, name=name))
+                     f"{per_rev / ppr:.4g} mesh cycles per pulse): {edges.summary()}"
+                     + (f"; counted anew after {len(pieces) - 1} gap(s) of more than "
+                        f"{MAX_GAP_PULSES} pulses" if len(pieces) > 1 else ""))
+        for q, piece in enumerate(pieces):
+            if len(piece) >= 2:
+                out.append(encoder_train(piece, per_rev / ppr, sigma=sigma,
+                                         name=name if q == 0 else f"{name} [{q + 1}]"))
     return out
 
 

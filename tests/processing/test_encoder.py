@@ -276,3 +276,35 @@ def test_the_streamed_scan_times_encoder_edges_as_the_array_function_does():
     assert got.size == te.size
     with pytest.raises(ValueError, match=r"no channel\(s\) \['nope'\]"):
         scan_source(MemorySource(rec), encoders=["nope"])
+
+
+def test_a_long_gap_splits_the_train_and_each_piece_is_counted_anew():
+    from meshphase.encoder import MAX_GAP_PULSES, split_at_gaps
+    from meshphase.phasing import _encoder_trains
+
+    t = np.arange(100) * 0.05
+    gone = np.r_[10, 40:40 + MAX_GAP_PULSES + 1]          # one missing, then a dropout
+    c = clean_edges(np.delete(t, gone))
+    assert c.n_missing == 1 + MAX_GAP_PULSES + 1
+    pieces = split_at_gaps(c)
+    assert [len(p) for p in pieces] == [39, 100 - 40 - MAX_GAP_PULSES - 1]
+    assert [p.n_missing for p in pieces] == [1, 0]
+    assert pieces[1].count[0] == 0 and pieces[1].times[0] == t[40 + MAX_GAP_PULSES + 1]
+    # a gap of max_gap pulses is counted across: one piece
+    assert len(split_at_gaps(clean_edges(np.delete(t, np.r_[40:40 + MAX_GAP_PULSES - 1])))) == 1
+    notes = []
+    trains = _encoder_trains([("E", "sun", 60, np.delete(t, gone), None)],
+                             kinematics(25, 87, 29, fixed="ring"), notes)
+    assert [tr.name for tr in trains] == ["E", "E [2]"]
+    assert f"counted anew after 1 gap(s) of more than {MAX_GAP_PULSES} pulses" in notes[0]
+
+
+def test_split_at_gaps_empty_and_bad_input():
+    from meshphase.encoder import split_at_gaps
+
+    assert split_at_gaps(clean_edges([])) == []
+    assert len(split_at_gaps(clean_edges([0.0]))) == 1
+    with pytest.raises(TypeError, match="EncoderEdges"):
+        split_at_gaps([0.0, 1.0])
+    with pytest.raises(ValueError, match="max_gap must be a positive integer, got 0"):
+        split_at_gaps(clean_edges([0.0, 1.0]), 0)
