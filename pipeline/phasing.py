@@ -53,7 +53,7 @@ from .angles import (AngleModel, Kinematics, PassTrain, gauge_train, held_member
                      revolution_numbers, tacho_train, unseen_ripples)
 from .angles import encoder_train, shaft_cycles
 from .encoder import MAX_GAP_PULSES, clean_edges, split_at_gaps
-from .errors import ProcessingWarning
+from .errors import DataQualityWarning, ProcessingWarning
 from .validate import as_finite_array, as_positive_int
 
 __all__ = [
@@ -1185,6 +1185,10 @@ def _encoder_trains(encoders, kin: Kinematics, notes: list) -> list:
                      f"{per_rev / ppr:.4g} mesh cycles per pulse): {edges.summary()}"
                      + (f"; counted anew after {len(pieces) - 1} gap(s) of more than "
                         f"{MAX_GAP_PULSES} pulses" if len(pieces) > 1 else ""))
+        if edges.n_extra or edges.n_missing:
+            warnings.warn(f"encoder {name}: {edges.n_extra} extra edge(s) dropped (glitches), "
+                          f"{edges.n_missing} missing edge(s) counted", DataQualityWarning,
+                          stacklevel=3)
         for q, piece in enumerate(pieces):
             if len(piece) >= 2:
                 out.append(encoder_train(piece, per_rev / ppr, sigma=sigma,

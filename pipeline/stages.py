@@ -438,6 +438,8 @@ def _phasing_estimate(res) -> str:
                        f"cycles (timing floor {rel.get('floor', float('nan')):.2e})")
     if res.model is not None:
         est.append(f"angle model: {res.model.terms}, rank {res.model.rank}/{res.model.n_parameters}")
+    est.extend(n.split(" (", 1)[0] + ":" + n.rsplit(":", 1)[-1] for n in res.notes
+               if n.startswith("encoder ") and " edges, " in n)
     return "; ".join(est)
 
 

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from meshphase.angles import encoder_train, kinematics, shaft_cycles
+from meshphase.errors import DataQualityWarning
 from meshphase.encoder import (EncoderEdges, clean_edges, edge_timing_sigma, edge_times,
                                pulse_levels, rising_crossings, shaft_of)
 from meshphase.models.gearset import Speeds
@@ -293,8 +294,10 @@ def test_a_long_gap_splits_the_train_and_each_piece_is_counted_anew():
     # a gap of max_gap pulses is counted across: one piece
     assert len(split_at_gaps(clean_edges(np.delete(t, np.r_[40:40 + MAX_GAP_PULSES - 1])))) == 1
     notes = []
-    trains = _encoder_trains([("E", "sun", 60, np.delete(t, gone), None)],
-                             kinematics(25, 87, 29, fixed="ring"), notes)
+    with pytest.warns(DataQualityWarning, match=r"encoder E: 0 extra edge\(s\) dropped "
+                      rf"\(glitches\), {MAX_GAP_PULSES + 2} missing edge\(s\) counted"):
+        trains = _encoder_trains([("E", "sun", 60, np.delete(t, gone), None)],
+                                 kinematics(25, 87, 29, fixed="ring"), notes)
     assert [tr.name for tr in trains] == ["E", "E [2]"]
     assert f"counted anew after 1 gap(s) of more than {MAX_GAP_PULSES} pulses" in notes[0]
 

@@ -107,6 +107,11 @@ def test_the_encoder_scenario_meets_the_phasing_target_through_missing_pulses_an
     note = next(n for n in ph.notes if n.startswith("encoder encoder (input shaft, 60 pulses"))
     assert (f"{len(enc['glitch_edges'])} extra dropped, {len(enc['missing'])} missing counted"
             in note), note
+    # the counts reach the run's messages (report, summary) and the stage's estimate
+    assert [m for m in ctx.messages if "DataQualityWarning: encoder encoder: "
+            f"{len(enc['glitch_edges'])} extra edge(s) dropped" in m], ctx.messages
+    counts = note.rsplit(": ", 1)[-1]                 # "2167 edges, 19 extra dropped, ..."
+    assert f"encoder encoder: {counts}" in ctx.error_estimates["phasing"]
 
 
 @pytest.mark.parametrize("suffix", [".h5", ".mcap", ".csv", ".tdms"])
