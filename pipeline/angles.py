@@ -20,7 +20,9 @@ interest) and ``h_n`` its time-varying part (a planet's own shaft hole offset tu
 planet and moves its passes: terms periodic in the planet's spin, Z_p mesh cycles per turn).
 A ring gauge obeys (1) with Z_r; a carrier once-per-revolution tacho, when a member is held,
 fires at A = P_c k + c_T with P_c = Z_r (ring held) or Z_s (sun held) mesh cycles per carrier
-revolution. Measured phasing is then the mesh angle turned between two passes,
+revolution; a shaft encoder of p pulses per turn fires at A = (P_shaft / p) k + c_E
+(:func:`encoder_train`, P_shaft from :func:`shaft_cycles`). Measured phasing is then the
+mesh angle turned between two passes,
 gamma_n = frac(A(t_n) - A(t_1)) (spec section 3; at constant speed frac((t_n - t_1) / T)).
 
 The model
@@ -71,9 +73,10 @@ from scipy import linalg
 from scipy.interpolate import BSpline
 
 from ._median import median_of_finite
+from .encoder import EncoderEdges, shaft_of
 from .errors import ProcessingWarning
 from .threads import thread_pool
-from .validate import as_finite_array, as_positive_int
+from .validate import as_finite_array, as_positive, as_positive_int
 
 __all__ = ["PassTrain", "Kinematics", "AngleModel", "gauge_train", "tacho_train",
            "kinematics", "fit_angle_model", "revolution_numbers", "held_member",
@@ -102,6 +105,8 @@ class PassTrain:
     name : str
         Channel name (or "tacho").
     kind : {"sun", "ring", "tacho"}
+        "tacho": a shaft pulse train (a carrier tacho or an encoder, :func:`encoder_train`):
+        a constant of its own, no planet terms.
     times : ndarray, shape (m,)
         Observation times [s], strictly increasing.
     sigma : ndarray, shape (m,)
@@ -1185,7 +1190,9 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
         offset is certain to be there, a common planet-rate speed ripple is not), and only
         the two gears together over a long record tell them apart; tried on shorter records
         it takes up what the planets' own terms should (a 30-s seed-rig ramp: 4.7e-3 mesh
-        cycles of error with it, 1e-4 without).
+        cycles of error with it, 1e-4 without). Where a train without planet terms samples
+        the planet spin (an encoder, :func:`encoder_train`) the ripple is seen apart from
+        the planets' terms and, when on, is tried on its own.
 
     Returns
     -------
@@ -1397,7 +1404,7 @@ def _select_terms(d: _Design, spec: _Spec, fit: _Fit, ladder: list, rates: list,
             # harmonic (and dropped where the data cannot tell the two apart), because every
             # planet's own shaft hole offset is certain to be there and a common planet-rate
             # speed ripple is not
-            if r == "planet" and spec.harm[r] >= spec.sig:
+            if r == "planet" and spec.harm[r] >= spec.sig and not _planet_rate_sampled(d, kin):
                 continue
             if spec.harm[r] < max_harmonics:
                 s2 = spec.copy()
@@ -1916,3 +1923,94 @@ def mesh_cycles_per_carrier_turn(train: PassTrain, tacho_times) -> float:
         return float("nan")
     a = np.interp([ta, tb], train.times, train.target)
     return float((a[1] - a[0]) / (kb - ka))
+
+
+# ----------------------------------------------------------------------------- encoders
+__all__ += ["shaft_cycles", "encoder_train"]
+
+
+def shaft_cycles(kin: Kinematics, shaft: str) -> float:
+    """Mesh cycles per revolution of an encoder's shaft [mesh cycles].
+
+    Parameters
+    ----------
+    kin : Kinematics
+        Tooth counts and the held member (:func:`meshphase.angles.kinematics`).
+    shaft : {"sun", "input", "carrier", "ring"}
+
+    Returns
+    -------
+    float
+        Ring held: carrier Z_r, sun Z_s Z_r / (Z_s + Z_r); sun held: carrier Z_s, ring
+        Z_s Z_r / (Z_s + Z_r); a differential: from its nominal speeds.
+
+    Raises
+    ------
+    ValueError
+        The shaft is the held member (it does not turn), or a differential without speeds.
+    """
+    if not isinstance(kin, Kinematics):
+        raise TypeError(f"kin must be a Kinematics (meshphase.angles.kinematics), got "
+                        f"{type(kin).__name__}")
+    member = shaft_of(shaft)
+    if member == kin.fixed:
+        raise ValueError(f"encoder on the {shaft} shaft: the {member} is held, its encoder "
+                         "does not turn")
+    p = kin.periods.get(member)
+    if p is None:
+        raise ValueError(f"encoder on the {shaft} shaft: mesh cycles per {member} turn are not "
+                         f"known (held member {kin.fixed!r}; a differential needs its speeds)")
+    return float(p)
+
+
+def encoder_train(edges: EncoderEdges, cycles_per_pulse: float, *, sigma=None,
+                  name: str = "encoder") -> PassTrain:
+    """An encoder's cleaned edges as an angle train (A = cycles_per_pulse k + c).
+
+    Parameters
+    ----------
+    edges : EncoderEdges
+        From :func:`meshphase.encoder.clean_edges`.
+    cycles_per_pulse : float
+        Mesh cycles per pulse [mesh cycles]: :func:`shaft_cycles` / pulses per revolution.
+    sigma : float or array_like, optional
+        Edge timing uncertainty [s] (e.g. :func:`meshphase.encoder.edge_timing_sigma`); None: the train's
+        scatter sets it.
+    name : str
+        The channel's name (unique among the trains of a fit).
+
+    Returns
+    -------
+    PassTrain
+        Kind ``"tacho"``: a constant of its own, no planet terms.
+    """
+    if not isinstance(edges, EncoderEdges):
+        raise TypeError(f"edges must be EncoderEdges (meshphase.encoder.clean_edges), got "
+                        f"{type(edges).__name__}")
+    p = as_positive(cycles_per_pulse, "cycles_per_pulse")
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"name must be a non-empty string, got {name!r}")
+    t = _check_times(edges.times, "edges.times")
+    k = np.asarray(edges.count, dtype=np.int64)
+    if k.shape != t.shape:
+        raise ValueError(f"edges.count {k.shape} must have the shape of edges.times {t.shape}")
+    if k.size > 1 and np.any(np.diff(k) < 1):
+        raise ValueError("edges.count must increase by at least 1 from edge to edge")
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    s, given = _sigma(sigma, t.size, 1e-4 * dt)
+    return PassTrain(name, "tacho", t, s, p * k.astype(float), np.full(t.size, -1), k, given)
+
+
+def _planet_rate_sampled(d: _Design, kin: Kinematics) -> bool:
+    """Whether a train without planet terms (an encoder) observes the mesh angle at least
+    four times per planet spin (median step below Z_p / 4 mesh cycles): a common
+    planet-rate speed ripple is then seen apart from the planets' own terms, and is tried
+    on its own."""
+    zp = kin.planet_period
+    if not zp:
+        return False
+    for tr in d.trains:
+        if tr.kind == "tacho" and len(tr) > 2 and float(np.median(np.diff(tr.target))) < zp / 4.0:
+            return True
+    return False
+

@@ -353,6 +353,8 @@ def check_gauges(rec, stages: Sequence[str], results: Sequence[str], source: str
     tacho = [c.name for c in rec.channels if c.kind == "tacho"]
     if "phasing" in stages and tacho:
         used.add(tacho[0])  # the ring pulse that is planet 1, from the first tacho only
+    if "phasing" in stages:
+        used |= {c.name for c in rec.channels if c.kind == "encoder"}  # angle observations
     return [c.name for c in rec.channels if c.name not in used]
 
 

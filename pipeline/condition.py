@@ -1095,7 +1095,7 @@ def _warn_quality(rep: ChannelQuality, snr_warn_db: float) -> None:
 # ====================================================================== Recording level
 def _default_channels(rec: Recording, channels) -> list[int]:
     if channels is None:
-        return [i for i, c in enumerate(rec.channels) if c.kind != "tacho"]
+        return [i for i, c in enumerate(rec.channels) if c.kind not in ("tacho", "encoder")]
     if isinstance(channels, str):
         channels = [channels]
     return [rec.index(c) for c in channels]
@@ -1118,7 +1118,7 @@ def _map_channels(rec: Recording, channels, func) -> tuple[Recording, list[str]]
 def filter_recording(rec: Recording, *, channels: Sequence[str] | str | None = None,
                      kind: str = "bandpass", low: float | None = None, high: float | None = None,
                      order: int = 4, mesh_freq: float | None = None) -> Recording:
-    """:func:`filter_signal` on channels of a recording (default: every non-tacho channel).
+    """:func:`filter_signal` on channels of a recording (default: all but tachos and encoders).
 
     Returns a new Recording (same specs) with one ``"condition.filter"`` history entry
     naming the corners actually used [Hz].
@@ -1136,7 +1136,7 @@ def remove_drift_recording(rec: Recording, *, channels: Sequence[str] | str | No
                            method: str = "median", window: float | None = None,
                            mesh_freq: float | None = None,
                            pulse_period: float | None = None) -> Recording:
-    """:func:`remove_drift` on channels of a recording (default: every non-tacho channel).
+    """:func:`remove_drift` on channels of a recording (default: all but tachos and encoders).
 
     Returns a new Recording with one ``"condition.remove_drift"`` history entry.
     """
@@ -1178,7 +1178,7 @@ def _notch_rec(rec: Recording, channels, freqs, mains, q, exclude):
 def notch_hum_recording(rec: Recording, *, channels: Sequence[str] | str | None = None,
                         freqs: Sequence[float] | None = None, mains: str | float = "auto",
                         q: float = 30.0, exclude: Sequence[float] = ()) -> Recording:
-    """:func:`notch_hum` on channels of a recording (default: every non-tacho channel).
+    """:func:`notch_hum` on channels of a recording (default: all but tachos and encoders).
 
     Hum is detected per channel when ``freqs`` is None; the history entry
     ``"condition.notch_hum"`` lists the lines notched on each channel [Hz].
@@ -1188,7 +1188,7 @@ def notch_hum_recording(rec: Recording, *, channels: Sequence[str] | str | None 
 
 def assess_quality_recording(rec: Recording, *, channels: Sequence[str] | str | None = None,
                              warn: bool = True, **kwargs) -> dict[str, ChannelQuality]:
-    """:func:`assess_quality` per channel (default: every non-tacho channel), keyed by name."""
+    """:func:`assess_quality` per channel (default: all but tachos and encoders), keyed by name."""
     if not isinstance(rec, Recording):
         raise TypeError(f"rec must be a Recording, got {type(rec).__name__}")
     return {rec.channels[i].name: assess_quality(rec.data[:, i], rec.fs, t0=rec.t0,
@@ -1227,7 +1227,7 @@ def condition_recording(rec: Recording, *, channels: Sequence[str] | str | None 
     ----------
     rec : Recording
     channels : names, optional
-        Channels to condition (default: every non-tacho channel); the others pass unchanged.
+        Channels to condition (default: all but tachos and encoders); the others pass unchanged.
     mesh_freq : float, optional
         Mesh frequency of the gauged gears [Hz] (defaults of the filters, see the module
         docstring). Sun and ring gauges mesh at different frequencies (ring ~ Z_r w_c vs

@@ -58,7 +58,9 @@ from .angle_windows import fit_angle_windows
 from .angles import (AngleModel, Kinematics, PassTrain, gauge_train, held_member, kinematics,
                      label_shift_costs, mesh_cycles_per_carrier_turn, relabel_train,
                      revolution_numbers, tacho_train, unseen_ripples)
-from .errors import ProcessingWarning
+from .angles import encoder_train, shaft_cycles
+from .encoder import MAX_GAP_PULSES, clean_edges, split_at_gaps
+from .errors import DataQualityWarning, ProcessingWarning
 from .validate import as_finite_array, as_positive_int
 
 __all__ = [
@@ -1258,7 +1260,7 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
                     tacho_times=None, key_angle: float | None = None, mounts=None,
                     speeds=None, gaps=None, carrier_sense: int | None = None,
                     check_held: bool = False, speeds_resolution=None,
-                    label_shifts=None) -> PhasingResult:
+                    label_shifts=None, encoders=None) -> PhasingResult:
     """Label every gauge's pulses, fit one angle model to all of them and the tacho, and
     measure the phasing of each gear's main gauge.
 
@@ -1291,6 +1293,10 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
         Per gear ("sun", "ring"): planet 1 of its main gauge is this many places along the
         pass order from its first pulse [-] (the scene's ``[labels]``); what the data say
         otherwise is then only a note.
+    encoders : sequence of tuple, optional
+        Shaft encoders as angle trains, each ``(name, shaft, pulses_per_rev, edge times [s],
+        edge sigma [s] or None)`` (shaft "sun", "input", "carrier" or "ring"; edges from
+        :func:`meshphase.encoder.edge_times`); used when a member is held.
 
     Returns
     -------
@@ -1329,11 +1335,16 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
     elif tach is not None and tach.size >= 2 and fixed is None:
         notes.append("differential rig: the carrier tacho does not fix the mesh angle (no held "
                      "member); it is not used")
+    n_before = len(trains)
+    trains += _encoder_trains(encoders, kin, notes)
     model = None
     tables: dict = {}
     reliability: dict = {}
     if any(tr.kind in ("sun", "ring") and len(tr) >= 2 for tr in trains):
-        model = fit_angle_windows(trains, kin, n)
+        # an encoder samples the mesh angle many times per planet spin: a common speed
+        # ripple at the planet rate is then told from the planets' own terms and is tried
+        extra = {"planet_ripple": True} if len(trains) > n_before else {}
+        model = fit_angle_windows(trains, kin, n, **extra)
         notes.extend(model.notes)
         unseen = unseen_ripples(trains, kin)
         for shaft, _ in unseen:
@@ -1346,6 +1357,39 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
     return PhasingResult(tables, labels, model, fixed, fixed_reason, reliability, relative, notes,
                          dict(train_of), {nm: v[1] for nm, v in all_labels.items()},
                          None if gaps is None else np.asarray(gaps, dtype=float))
+
+
+def _encoder_trains(encoders, kin: Kinematics, notes: list) -> list:
+    """Angle trains of the encoders (:func:`meshphase.angles.encoder_train`), their edges
+    cleaned (:func:`meshphase.encoder.clean_edges`, counts in ``notes``); an encoder that
+    cannot observe the mesh angle (a differential, a held shaft) is named in ``notes``."""
+    out = []
+    for name, shaft, ppr, times, sigma in encoders or ():
+        ppr = as_positive_int(ppr, f"encoder {name!r} pulses_per_rev")
+        if kin.fixed is None:
+            notes.append(f"differential rig: encoder {name} on the {shaft} shaft does not fix the "
+                         "mesh angle (no held member); it is not used")
+            continue
+        try:
+            per_rev = shaft_cycles(kin, shaft)
+        except ValueError as exc:
+            notes.append(f"encoder {name}: {exc}; it is not used")
+            continue
+        edges = clean_edges(np.asarray(times, dtype=float))
+        pieces = split_at_gaps(edges)
+        notes.append(f"encoder {name} ({shaft} shaft, {ppr} pulses per turn, "
+                     f"{per_rev / ppr:.4g} mesh cycles per pulse): {edges.summary()}"
+                     + (f"; counted anew after {len(pieces) - 1} gap(s) of more than "
+                        f"{MAX_GAP_PULSES} pulses" if len(pieces) > 1 else ""))
+        if edges.n_extra or edges.n_missing:
+            warnings.warn(f"encoder {name}: {edges.n_extra} extra edge(s) dropped (glitches), "
+                          f"{edges.n_missing} missing edge(s) counted", DataQualityWarning,
+                          stacklevel=3)
+        for q, piece in enumerate(pieces):
+            if len(piece) >= 2:
+                out.append(encoder_train(piece, per_rev / ppr, sigma=sigma,
+                                         name=name if q == 0 else f"{name} [{q + 1}]"))
+    return out
 
 
 def _held_from_data(passes, gearset, tach: np.ndarray, speeds, resolution, given: tuple) -> tuple:

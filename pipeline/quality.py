@@ -953,9 +953,9 @@ def channel_quality(x, *, kind: str | None = None) -> dict:
     x : array_like, shape (n,)
         Raw samples of one channel [any unit].
     kind : str, optional
-        Channel kind (:class:`meshphase.recording.ChannelSpec`). A "tacho" is a pulse train,
-        flat by design: its dropout and plateau analysis is skipped (the rail runs at its
-        two levels are still listed as clipped, as before). Without a kind, a channel whose
+        Channel kind (:class:`meshphase.recording.ChannelSpec`). A "tacho" or an "encoder"
+        is a pulse train, flat by design: its dropout and plateau analysis is skipped (the
+        rail runs at its two levels are still listed as clipped, as before). Without a kind, a channel whose
         finite samples take at most 8 distinct values (among 4096 evenly strided ones) is
         taken for a pulse train; an analogue channel shows hundreds.
 
@@ -977,7 +977,7 @@ def channel_quality(x, *, kind: str | None = None) -> dict:
     if x.ndim != 1:
         raise ValueError(f"x must be 1-D, got shape {x.shape}")
     x = _as_1d(x)
-    scan = ChannelScan(x.size, flat=None if kind is None else kind != "tacho")
+    scan = ChannelScan(x.size, flat=None if kind is None else kind not in ("tacho", "encoder"))
     scan.feed1(x)
     scan.end1()
     scan.feed2(x)

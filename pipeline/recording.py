@@ -19,10 +19,12 @@ import numpy as np
 from .jsonable import to_jsonable
 from .validate import as_float, as_nonnegative, as_positive
 
-__all__ = ["ChannelSpec", "Recording", "CHANNEL_KINDS", "sample_index"]
+__all__ = ["ChannelSpec", "Recording", "CHANNEL_KINDS", "ENCODER_SHAFTS", "sample_index"]
 
 #: Channel kinds a recording may carry.
-CHANNEL_KINDS = ("sun", "ring", "facewidth", "tacho", "other")
+CHANNEL_KINDS = ("sun", "ring", "facewidth", "tacho", "encoder", "other")
+#: Shafts an encoder channel may sit on ("input" is the sun shaft).
+ENCODER_SHAFTS = ("sun", "input", "carrier", "ring")
 
 
 @dataclass(frozen=True)
@@ -33,10 +35,11 @@ class ChannelSpec:
     ----------
     name : str
         Unique channel name.
-    kind : {"sun", "ring", "facewidth", "tacho", "other"}
+    kind : {"sun", "ring", "facewidth", "tacho", "encoder", "other"}
         What the channel measures: a sun tooth-root gauge, a ring tooth-root gauge, a
         face-width gauge (one of several across the face of one tooth root), a carrier
-        once-per-revolution tacho, or anything else.
+        once-per-revolution tacho, a shaft encoder or multi-pulse tacho (a pulse train of
+        ``pulses_per_rev`` pulses per turn of ``shaft``), or anything else.
     units : str
         Physical units of the stored samples after ``gain`` is applied, e.g. ``"m/m"``
         (strain) or ``"V"``.
@@ -52,6 +55,10 @@ class ChannelSpec:
         Axial position of the gauge across the face width, measured from the face centre [m].
     description : str
         Free text.
+    shaft : {"sun", "input", "carrier", "ring"}, optional
+        The shaft an encoder channel sits on ("input" is the sun); encoder channels only.
+    pulses_per_rev : int, optional
+        Pulses per revolution of an encoder's shaft [-]; encoder channels only.
     """
 
     name: str
@@ -62,6 +69,8 @@ class ChannelSpec:
     tooth: int | None = None
     face_position: float | None = None
     description: str = ""
+    shaft: str | None = None
+    pulses_per_rev: int | None = None
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name.strip():
@@ -83,6 +92,27 @@ class ChannelSpec:
                                as_float(self.face_position, f"channel {self.name!r} face_position"))
         if self.gear is None and self.kind in ("sun", "ring"):
             object.__setattr__(self, "gear", self.kind)
+        self._check_encoder()
+
+    def _check_encoder(self) -> None:
+        """``shaft`` and ``pulses_per_rev``: an encoder's, valid when given."""
+        if self.kind != "encoder":
+            given = [k for k in ("shaft", "pulses_per_rev") if getattr(self, k) is not None]
+            if given:
+                raise ValueError(f"channel {self.name!r}: {', '.join(given)} belong(s) to an "
+                                 f"encoder channel (kind 'encoder'), not kind {self.kind!r}")
+            return
+        if self.shaft is not None and self.shaft not in ENCODER_SHAFTS:
+            raise ValueError(f"channel {self.name!r}: encoder shaft must be one of "
+                             f"{ENCODER_SHAFTS}, got {self.shaft!r}")
+        ppr = self.pulses_per_rev
+        if ppr is not None:
+            whole = (isinstance(ppr, (int, np.integer)) and not isinstance(ppr, bool)) or (
+                isinstance(ppr, float) and ppr.is_integer())
+            if not whole or ppr < 1:
+                raise ValueError(f"channel {self.name!r}: pulses_per_rev must be a positive "
+                                 f"integer, got {ppr!r}")
+            object.__setattr__(self, "pulses_per_rev", int(ppr))
 
     def to_dict(self) -> dict:
         """JSON-friendly dict of every field."""

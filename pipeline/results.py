@@ -131,10 +131,13 @@ class OnsetsStage(StageResult):
         Per gauge channel, in the recording's channel order.
     tacho_times : ndarray or None
         Edge times of the first tacho channel [s].
+    encoder_times : dict of str to ndarray
+        Rising edge times of each encoder channel [s].
     """
 
     by_channel: dict
     tacho_times: np.ndarray | None = None
+    encoder_times: dict = field(default_factory=dict)
 
 
 # ----------------------------------------------------------------------------- measured

@@ -950,10 +950,12 @@ def _check_gearset(gearset: Gearset, g: dict, profile_shift: bool, err) -> Gears
 
 
 def _check_channel(c: dict, i: int, gearset: Gearset | None, err) -> None:
-    """One ``[[channels]]`` table against the gearset: tooth numbers, face positions, gain."""
+    """One ``[[channels]]`` table against the gearset: tooth numbers, face positions, gain,
+    an encoder's shaft and pulses per revolution."""
     if "gain" in c and c["gain"] == 0:
         raise err(["channels", i, "gain"], "gain 0 would erase the channel; leave the key out "
                   "for gain 1")
+    _check_encoder_entry(c, i, err)
     if gearset is None:
         return
     gear = c.get("gear") or (c.get("kind") if c.get("kind") in ("sun", "ring") else None)
@@ -966,6 +968,25 @@ def _check_channel(c: dict, i: int, gearset: Gearset | None, err) -> None:
         raise err(["channels", i, "face_position_mm"],
                   f"{c['face_position_mm']:g} mm lies outside the face (face_width_mm = {b * 1e3:g}: "
                   f"positions from the face centre run -{b * 5e2:g} .. +{b * 5e2:g} mm)")
+
+
+def _check_encoder_entry(c: dict, i: int, err) -> None:
+    """An encoder entry names its shaft and pulses per revolution (the schema checks their
+    values); the two keys belong to encoder entries only."""
+    given = [k for k in ("shaft", "pulses_per_rev") if k in c]
+    if c.get("kind") != "encoder":
+        if given:
+            raise err(["channels", i, given[0]], f"{given[0]} belongs to an encoder channel: "
+                      f'give kind = "encoder" (this entry has kind {c.get("kind", "unset")!r})')
+        return
+    for k in ("shaft", "pulses_per_rev"):
+        if k not in c:
+            example = 'shaft = "sun"' if k == "shaft" else "pulses_per_rev = 60"
+            raise err(["channels", i, "kind"], f"an encoder channel needs {k} (e.g. {example})")
+    if isinstance(c["pulses_per_rev"], bool) or not isinstance(c["pulses_per_rev"], int) \
+            or c["pulses_per_rev"] < 1:
+        raise err(["channels", i, "pulses_per_rev"], "pulses_per_rev must be a positive integer, "
+                  f"got {c['pulses_per_rev']!r}")
 
 
 def _synthetic_config(inp: dict):

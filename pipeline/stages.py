@@ -31,6 +31,7 @@ from .channels import (GAUGE_KINDS, apply_channel_overrides, bridge_configs, cha
                        check_gauges, entry_values, map_channels, mapped_specs, overridden,
                        unmapped_message)
 from .compare import band_coverage, identify_errors, predict_pass_phasing, residual_stats
+from .encoder import edge_timing_sigma
 from .errors import DataQualityWarning, MeshphaseWarning, ProcessingWarning, SceneWarning
 from .exits import OutputDir, recording_read_errors, run_status
 from .loads import facewidth_centroid, facewidth_readings, load_sharing_from_amplitudes
@@ -144,6 +145,8 @@ def _tacho_geometry(ctx: RunContext) -> tuple:
 
 
 # ----------------------------------------------------------------------------- stages
+#: channel kinds that are pulse trains (timed in the scan, never conditioned)
+PULSE_KINDS = ("tacho", "encoder")
 #: A synthetic recording up to this size [B] is generated whole, once; a longer one is
 #: generated block by block again for each pass over its samples (bounded memory).
 SYNTHETIC_WHOLE_BYTES = 256 * 2**20
@@ -280,12 +283,13 @@ def _open_synthetic(scene: Scene) -> tuple:
 
 
 def _scan(src):
-    """Passes 1 and 2 over ``src``: every non-tacho channel may be conditioned, the first
-    tacho is timed."""
+    """Passes 1 and 2 over ``src``: every channel but the pulse trains (tacho, encoders) may
+    be conditioned, the first tacho and every encoder are timed."""
     h = src.header
     tacho = [c.name for c in h.channels if c.kind == "tacho"]
-    return scan_source(src, conditioned=[c.name for c in h.channels if c.kind != "tacho"],
-                       tacho=tacho[0] if tacho else None)
+    return scan_source(src, conditioned=[c.name for c in h.channels if c.kind not in PULSE_KINDS],
+                       tacho=tacho[0] if tacho else None,
+                       encoders=[c.name for c in h.channels if c.kind == "encoder"])
 
 
 def _load_stream(ctx: RunContext):
@@ -323,7 +327,7 @@ def _channel_plans(ctx: RunContext, rec) -> list:
     g = ctx.gearset
     plans = []
     for c in rec.channels:
-        if c.kind == "tacho":
+        if c.kind in PULSE_KINDS:
             continue
         gear = c.gear if c.gear in ("sun", "ring") else (c.kind if c.kind in ("sun", "ring") else None)
         fm = _mesh_freq(ctx, gear) if gear else None
@@ -370,6 +374,7 @@ def stage_onsets(ctx: RunContext) -> OnsetsStage:
     if neg:
         note += f"; negative (compressive) pulses on {', '.join(neg)}"
     return OnsetsStage(by_channel=out, tacho_times=None if scan is None else scan.tacho_times,
+                       encoder_times={} if scan is None else dict(scan.encoder_times),
                        error_estimate=note)
 
 
@@ -411,7 +416,8 @@ def stage_phasing(ctx: RunContext) -> PhasingStage:
     res = measure_phasing(passes, g, fixed=fixed, fixed_reason=why, tacho_times=ons.tacho_times,
                           key_angle=key, mounts=mounts, speeds=sp, label_shifts=ctx.scene.labels,
                           gaps=gap_intervals_of(cond.quality), check_held=stated is None,
-                          speeds_resolution=res_typed)
+                          speeds_resolution=res_typed,
+                          encoders=_encoder_inputs(rec, ons.encoder_times))
     for gear in mains:
         # a main gauge without a measurable pass gives an empty table, not a missing one
         res.tables.setdefault(gear, PassTable.empty(gear, ["no usable pass"]))
@@ -468,6 +474,24 @@ def _wiring_unreliable(res, findings: dict) -> None:
         rel["reasons"] = list(msgs) + [r for r in rel.get("reasons", []) if r not in msgs]
 
 
+def _encoder_inputs(rec, times: dict) -> list:
+    """(name, shaft, pulses per revolution, edge times [s], edge sigma [s]) of every timed
+    encoder channel; one without its shaft or pulses per revolution is left out with a
+    ProcessingWarning naming it."""
+    out = []
+    for c in rec.channels:
+        if c.kind != "encoder" or c.name not in times:
+            continue
+        if c.shaft is None or c.pulses_per_rev is None:
+            missing = [k for k in ("shaft", "pulses_per_rev") if getattr(c, k) is None]
+            warnings.warn(f"encoder channel {c.name!r}: no {' and no '.join(missing)} (give them "
+                          "in its [[channels]] entry); it is not used", ProcessingWarning,
+                          stacklevel=3)
+            continue
+        out.append((c.name, c.shaft, c.pulses_per_rev, times[c.name], edge_timing_sigma(rec.fs)))
+    return out
+
+
 def _warn_phasing(res) -> None:
     """ProcessingWarnings for pulses no planet fits, for planet labels in doubt and for
     phasing that is not reliable."""
@@ -494,6 +518,8 @@ def _phasing_estimate(res) -> str:
                        f"cycles (timing floor {rel.get('floor', float('nan')):.2e})")
     if res.model is not None:
         est.append(f"angle model: {res.model.terms}, rank {res.model.rank}/{res.model.n_parameters}")
+    est.extend(n.split(" (", 1)[0] + ":" + n.rsplit(":", 1)[-1] for n in res.notes
+               if n.startswith("encoder ") and " edges, " in n)
     return "; ".join(est)
 
 

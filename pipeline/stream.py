@@ -77,6 +77,7 @@ from .condition import (_apply_finite, _block_means, _block_medians, _check_freq
                         _noise_from_diffs, _resolve_band, _settle_time, _short_segments_message,
                         _short_signal_message, _snr_combine, _snr_peak, _warn_quality, default_band,
                         design_filter, design_notch, detect_hum, finite_apply_gaps, level_steps)
+from .encoder import pulse_levels
 from .errors import DataQualityWarning
 from .quality import ChannelQuality, ChannelScan, _RunTracker, merge_runs, quality_from_scan
 from .recording import ChannelSpec, Recording
@@ -658,6 +659,9 @@ class RawScan:
     tacho_times : ndarray or None
         Rising half-level crossings of the first tacho channel [s] (None: no tacho, or a
         flat one).
+    encoder_times : dict of str -> ndarray
+        Rising edges of each encoder channel [s], crossing half-way between its two levels
+        (:func:`meshphase.encoder.pulse_levels`); an encoder with one level only is absent.
     n_blocks : int
         Blocks read per pass.
     reports : dict of str -> meshphase.quality.ChannelQuality
@@ -671,6 +675,7 @@ class RawScan:
     tacho_times: np.ndarray | None = None
     n_blocks: int = 0
     reports: dict = field(default_factory=dict)
+    encoder_times: dict = field(default_factory=dict)
 
 
 class _TachoEdges:
@@ -703,6 +708,7 @@ class _TachoEdges:
 
 
 def scan_source(source: BlockSource, *, conditioned: Sequence[str] = (), tacho: str | None = None,
+                encoders: Sequence[str] = (),
                 block: int = BLOCK_SAMPLES, hum_seconds: float = HUM_SECONDS,
                 memory_budget: float = MEMORY_BUDGET,
                 progress: Callable[[str, int, int], None] | None = None) -> RawScan:
@@ -715,6 +721,9 @@ def scan_source(source: BlockSource, *, conditioned: Sequence[str] = (), tacho: 
         Channels that will be conditioned (their hum window is kept).
     tacho : str, optional
         The tacho channel whose rising edges are timed.
+    encoders : sequence of str
+        Encoder channels whose rising edges are timed (half-way between the two levels of
+        the channel's strided subsample, :func:`meshphase.encoder.pulse_levels`).
     block : int
         Samples per channel read at a time.
     hum_seconds : float
@@ -733,13 +742,14 @@ def scan_source(source: BlockSource, *, conditioned: Sequence[str] = (), tacho: 
     h = source.header
     n = h.n_samples
     specs = h.channels
-    unknown = [c for c in list(conditioned) + ([tacho] if tacho else []) if c not in h.names]
+    unknown = [c for c in list(conditioned) + ([tacho] if tacho else []) + list(encoders)
+               if c not in h.names]
     if unknown:
         raise ValueError(f"{source.label}: no channel(s) {unknown}; channels: {h.names}")
     _check_budget(scan_memory(h.fs, n, h.n_channels, len(conditioned), itemsize=h.dtype.itemsize,
                               block=block, hum_seconds=hum_seconds),
                   memory_budget, h.fs, "quality scan")
-    scans = {c.name: ChannelScan(n, flat=c.kind != "tacho") for c in specs}
+    scans = {c.name: ChannelScan(n, flat=c.kind not in ("tacho", "encoder")) for c in specs}
     nblk = 0
     with _blocks_ahead(source, block) as blocks:
         for a, data in blocks:
@@ -758,6 +768,7 @@ def scan_source(source: BlockSource, *, conditioned: Sequence[str] = (), tacho: 
         if st.n_fin and st.hi > st.lo:
             dt = h.dtype if h.dtype in (np.float32, np.float64) else np.dtype(np.float64)
             edges = _TachoEdges(dt.type(st.lo), dt.type(st.hi), h.fs, h.t0)
+    enc_edges = _encoder_edges(scans, encoders, h)
     idx = {c.name: j for j, c in enumerate(specs)}
     with _blocks_ahead(source, block) as blocks:
         for a, data in blocks:
@@ -769,6 +780,8 @@ def scan_source(source: BlockSource, *, conditioned: Sequence[str] = (), tacho: 
             if edges is not None:
                 col = data[:, idx[tacho]]
                 edges.add(col if col.dtype in (np.float32, np.float64) else col.astype(np.float64))
+            for nm, ed in enc_edges.items():
+                ed.add(data[:, idx[nm]].astype(np.float64, copy=False))
             if progress:
                 progress("scan 2/2", a + data.shape[0], n)
     results = {nm: s.result() for nm, s in scans.items()}
@@ -781,7 +794,20 @@ def scan_source(source: BlockSource, *, conditioned: Sequence[str] = (), tacho: 
     reports = {c.name: quality_from_scan(results[c.name], c.name, h.fs, h.t0) for c in specs}
     quality = [dict(channel=c.name, **reports[c.name].summary_dict()) for c in specs]
     return RawScan(h, results, quality, hum, None if edges is None else edges.times(), nblk,
-                   reports)
+                   reports, {nm: ed.times() for nm, ed in enc_edges.items()})
+
+
+def _encoder_edges(scans: dict, encoders: Sequence[str], h) -> dict:
+    """An edge timer per encoder channel with two levels (from pass 1's strided subsample:
+    medians of the two clusters, :func:`meshphase.encoder.pulse_levels`)."""
+    out = {}
+    for nm in encoders:
+        try:
+            lo, hi = pulse_levels(scans[nm].fscan.level.values())
+        except ValueError:                     # one level only: no pulses to time
+            continue
+        out[nm] = _TachoEdges(lo, hi, h.fs, h.t0)
+    return out
 
 
 # ============================================================================ filter chains

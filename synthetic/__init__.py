@@ -13,7 +13,7 @@
 - :mod:`.cli`         :func:`cli_synth` behind ``meshphase synth``
 """
 
-from .config import Artefacts, GaugeConfig, LoadModulation, SynthConfig, TachoConfig, TiltSource
+from .config import Artefacts, EncoderConfig, GaugeConfig, LoadModulation, SynthConfig, TachoConfig, TiltSource
 from .generate import SyntheticStream, generate, generate_blocks
 from .kinematics import ShaftRipple, SpeedClock, SpeedProfile
 from .scenarios import SCENARIOS, Scenario, describe_scenarios, get_scenario, list_scenarios
@@ -21,7 +21,7 @@ from .truth import GroundTruth, truth_path_for
 from .cli import cli_synth
 
 __all__ = ["generate", "generate_blocks", "SyntheticStream", "SynthConfig", "GaugeConfig",
-           "TachoConfig", "TiltSource", "Artefacts", "LoadModulation", "SpeedProfile", "ShaftRipple", "SpeedClock",
+           "TachoConfig", "EncoderConfig", "TiltSource", "Artefacts", "LoadModulation", "SpeedProfile", "ShaftRipple", "SpeedClock",
            "SCENARIOS", "Scenario",
            "get_scenario", "list_scenarios", "describe_scenarios", "GroundTruth",
            "truth_path_for", "cli_synth"]

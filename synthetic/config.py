@@ -25,7 +25,7 @@ from meshphase.validate import (as_choice, as_finite_array, as_float, as_int, as
 
 from .kinematics import SpeedProfile
 
-__all__ = ["GaugeConfig", "TachoConfig", "TiltSource", "Artefacts", "SynthConfig",
+__all__ = ["GaugeConfig", "TachoConfig", "EncoderConfig", "TiltSource", "Artefacts", "SynthConfig",
            "LoadModulation", "load_factor", "STRAIN_UNITS", "errors_to_dict", "errors_from_dict"]
 
 GEARS = ("sun", "ring")
@@ -162,6 +162,75 @@ class TachoConfig:
 
     def to_dict(self) -> dict:
         return {"name": self.name, "angle": self.angle, "width": self.width, "level": self.level}
+
+
+@dataclass(frozen=True)
+class EncoderConfig:
+    """A shaft encoder (or multi-pulse tacho): ``pulses_per_rev`` pulses per turn of a shaft.
+
+    Parameters
+    ----------
+    name : str
+        Channel name.
+    shaft : {"sun", "input", "carrier", "ring"}
+        The shaft it sits on ("input" is the sun); it must turn.
+    pulses_per_rev : int
+        Pulses per revolution [-].
+    angle : float
+        Absolute shaft angle at which pulse 0 rises [rad]; pulse k rises
+        ``2 pi k / pulses_per_rev`` further on, in the shaft's sense of rotation.
+    duty : float
+        Fraction of a pulse period at the high level [-], in (0, 1).
+    level : float
+        High level [V].
+    missing : float
+        Probability that a pulse is missing (neither of its edges recorded) [-], in [0, 1).
+    extra : float
+        Probability per pulse of a glitch: a short extra pulse in the low part of the
+        period, ``glitch`` of a period long [-], in [0, 1).
+    glitch : float
+        Length of a glitch [pulse periods], in (0, 0.2].
+    """
+
+    name: str = "encoder"
+    shaft: str = "sun"
+    pulses_per_rev: int = 60
+    angle: float = 0.0
+    duty: float = 0.5
+    level: float = 5.0
+    missing: float = 0.0
+    extra: float = 0.0
+    glitch: float = 0.02
+
+    def __post_init__(self):
+        if not isinstance(self.name, str) or not self.name.strip():
+            raise ValueError(f"encoder name must be a non-empty string, got {self.name!r}")
+        as_choice(self.shaft, "encoder shaft", ("sun", "input", "carrier", "ring"))
+        ppr = as_int(self.pulses_per_rev, "encoder pulses_per_rev")
+        if ppr < 1:
+            raise ValueError(f"encoder pulses_per_rev must be a positive integer, got {ppr!r}")
+        object.__setattr__(self, "pulses_per_rev", ppr)
+        object.__setattr__(self, "angle", as_float(self.angle, "encoder angle"))
+        # (lower bound open?, upper bound, upper bound open?) of each fraction
+        ranges = {"duty": (True, 1.0, True), "missing": (False, 1.0, True),
+                  "extra": (False, 1.0, True), "glitch": (True, 0.2, False)}
+        for k, (lo_open, hi, hi_open) in ranges.items():
+            v = as_nonnegative(getattr(self, k), f"encoder {k}")
+            if (lo_open and v == 0.0) or (v >= hi if hi_open else v > hi):
+                raise ValueError(f"encoder {k} must be in {'(' if lo_open else '['}0, {hi:g}"
+                                 f"{')' if hi_open else ']'}, got {v!r}")
+            object.__setattr__(self, k, v)
+        object.__setattr__(self, "level", as_positive(self.level, "encoder level"))
+
+    @property
+    def member(self) -> str:
+        """The gear member of the shaft ("input" is the sun)."""
+        return "sun" if self.shaft == "input" else self.shaft
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "shaft": self.shaft, "pulses_per_rev": self.pulses_per_rev,
+                "angle": self.angle, "duty": self.duty, "level": self.level,
+                "missing": self.missing, "extra": self.extra, "glitch": self.glitch}
 
 
 @dataclass(frozen=True)
@@ -481,6 +550,8 @@ class SynthConfig:
         Noise, drift, hum, ADC, clipping, gaps, gain error.
     tacho : TachoConfig, optional
         Carrier once-per-revolution channel.
+    encoder : EncoderConfig, optional
+        A shaft encoder channel (after the tacho).
     sun_angle0 : float
         Direction of sun tooth 0 in the carrier frame at t = 0 [rad].
     ring_angle0 : float, optional
@@ -517,6 +588,7 @@ class SynthConfig:
     start_datetime: str | None = None
     dtype: str = "float64"
     description: str = ""
+    encoder: EncoderConfig | None = None
 
     def __post_init__(self):
         self._check_types_and_speeds()
@@ -567,7 +639,11 @@ class SynthConfig:
         object.__setattr__(self, "gauges", gauges)
         if self.tacho is not None and not isinstance(self.tacho, TachoConfig):
             raise TypeError(f"tacho must be a TachoConfig or None, got {type(self.tacho).__name__}")
-        names = [x.name for x in gauges] + ([self.tacho.name] if self.tacho else [])
+        if self.encoder is not None and not isinstance(self.encoder, EncoderConfig):
+            raise TypeError(f"encoder must be an EncoderConfig or None, got "
+                            f"{type(self.encoder).__name__}")
+        names = [x.name for x in gauges] + ([self.tacho.name] if self.tacho else []) + (
+            [self.encoder.name] if self.encoder else [])
         if not names:
             raise ValueError("a synthetic recording needs at least one gauge or a tacho")
         dup = sorted({n for n in names if names.count(n) > 1})
@@ -586,6 +662,9 @@ class SynthConfig:
                                  f"{[x.name for x in gauges]}")
         if self.tacho is not None and sp.carrier == 0.0:
             raise ValueError("a carrier tacho needs a turning carrier (speeds.carrier != 0)")
+        if self.encoder is not None and getattr(sp, self.encoder.member) == 0.0:
+            raise ValueError(f"encoder {self.encoder.name!r}: the {self.encoder.shaft} shaft does "
+                             f"not turn (speeds.{self.encoder.member} = 0)")
 
     def _check_errors(self) -> None:
         """``errors``: None, bands, or one realisation of the shaft hole errors."""
@@ -692,6 +771,7 @@ class SynthConfig:
             "tacho": None if self.tacho is None else self.tacho.to_dict(),
             "sun_angle0": self.sun_angle0, "ring_angle0": self.ring_angle0, "t0": self.t0,
             "start_datetime": self.start_datetime, "dtype": self.dtype,
+            "encoder": None if self.encoder is None else self.encoder.to_dict(),
         }
 
     @classmethod
@@ -715,4 +795,5 @@ class SynthConfig:
             sun_angle0=d.get("sun_angle0", 0.3), ring_angle0=d.get("ring_angle0"),
             t0=d.get("t0", 0.0), start_datetime=d.get("start_datetime"),
             dtype=d.get("dtype", "float64"),
+            encoder=None if d.get("encoder") is None else EncoderConfig(**d["encoder"]),
         )

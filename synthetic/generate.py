@@ -24,11 +24,11 @@ constant speed they are rendered linear in time, otherwise through
 :func:`~meshphase.synthetic.gauges.angle_pulse_map` (a per-event polynomial in the sample offset that
 follows ``tau(t)`` to 1e-9 mesh periods).
 
-Channels appear in the order of ``config.gauges``, the tacho last. Samples are in physical
-units with ``ChannelSpec.gain = 1``: a gauge's strain in its ``units`` (m/m unless the gauge
-says "µε", "mm/m", "%", ...: every artefact is made in m/m and the channel scaled last), the
-tacho in V. The truth stays in SI (amplitudes, noise RMS [m/m]); its ``extra["gauge_units"]``
-gives each gauge's unit string and scale.
+Channels appear in the order of ``config.gauges``, then the tacho, then the encoder. Samples
+are in physical units with ``ChannelSpec.gain = 1``: a gauge's strain in its ``units`` (m/m
+unless the gauge says "µε", "mm/m", "%", ...: every artefact is made in m/m and the channel
+scaled last), the tacho and the encoder in V. The truth stays in SI (amplitudes, noise RMS
+[m/m]); its ``extra["gauge_units"]`` gives each gauge's unit string and scale.
 """
 
 from __future__ import annotations
@@ -210,13 +210,15 @@ class _Plan:
         loads = _planet_loads(cfg)
         gauge_truth = self._gauge_channels(dur, loads)
         tacho_times = self._tacho_channel(dur)
+        enc_truth = self._encoder_channel(dur)
         a = cfg.artefacts
         self.hum = (art.HumSource(self.fs, a.hum_amplitude, a.hum_frequency, a.hum_harmonics)
                     if a.hum_amplitude else None)
         # gaps
         self.gaps = art.draw_gaps(art.stream_rng(seed, "gaps"), self.n_samples, self.fs,
                                   a.gap_rate, a.gap_length, a.dropout_rate)
-        self.specs = tuple([c.spec for c in self.channels] + ([self.tacho_spec] if self.tacho else []))
+        self.specs = tuple([c.spec for c in self.channels] + ([self.tacho_spec] if self.tacho else [])
+                           + ([self.encoder_spec] if self.encoder else []))
         self.meta = {
             "source": "synthetic", "scenario": cfg.name, "seed": seed,
             "generator": f"synthetic/{GENERATOR_VERSION}",
@@ -225,6 +227,8 @@ class _Plan:
         self.history = [{"step": "meshphase.synthetic.generate", "scenario": cfg.name, "seed": seed,
                          "generator": GENERATOR_VERSION}]
         self.truth = self._truth(dur, loads, gauge_truth, tacho_times)
+        if enc_truth is not None:
+            self.truth.extra["encoder"] = enc_truth
 
     def _gauge_channels(self, dur: float, loads: tuple) -> dict:
         """The gauge channels (events, amplitudes, gains, pulse maps, noise and hum draws);
@@ -314,6 +318,46 @@ class _Plan:
                                       description="synthetic carrier once-per-revolution tacho")
         keep = (st >= 0.0) & (st < dur)
         return cfg.t0 + st[keep], cfg.t0 + sp_[keep]
+
+    def _encoder_channel(self, dur: float) -> dict | None:
+        """The encoder's pulses (``self.encoder``: rising and falling edges [samples], level)
+        and spec, missing pulses left out and glitches added; returns its truth: every true
+        rising edge inside the recording [s], which of them are missing, the glitches' rising
+        edges [s] (None without an encoder)."""
+        cfg = self.cfg
+        self.encoder = None
+        ec = cfg.encoder
+        if ec is None:
+            return None
+        ppr = ec.pulses_per_rev
+        w = getattr(cfg.speeds, ec.member)
+        # pulse k rises where the shaft angle passes angle + 2 pi k / ppr: the marks of a
+        # member turning ppr times as fast past ppr * angle; a pulse lasts ``duty`` of a period
+        t_pulse = TWO_PI / (abs(w) * ppr * cfg.speed.bounds(dur)[0])
+        st, sp_ = event_times_for_angles(w * ppr, ec.angle * ppr, -t_pulse - 2.0 / self.fs, dur,
+                                         width=ec.duty, profile=self.clock)
+        rng = art.stream_rng(self.seed, "setup", 90)
+        gone = rng.random(st.size) < ec.missing
+        glitch = rng.random(st.size) < ec.extra
+        # a glitch sits at a random place in the low part of its period (after the fall)
+        period = np.diff(st, append=st[-1] + (st[-1] - st[-2] if st.size > 1 else t_pulse))
+        room = (1.0 - ec.duty - 2.0 * ec.glitch) * period
+        g0 = sp_ + ec.glitch * period + rng.random(st.size) * np.maximum(room, 0.0)
+        g0, g1 = g0[glitch], (g0 + ec.glitch * period)[glitch]
+        a = np.concatenate([st[~gone], g0])
+        b = np.concatenate([sp_[~gone], g1])
+        order = np.argsort(a)
+        self.encoder = (a[order] * self.fs, b[order] * self.fs, ec.level)
+        self.encoder_spec = ChannelSpec(ec.name, kind="encoder", units="V", gain=1.0,
+                                        shaft=ec.shaft, pulses_per_rev=ppr,
+                                        description=f"synthetic {ec.shaft}-shaft encoder, "
+                                                    f"{ppr} pulses per revolution")
+        inside = (st >= 0.0) & (st < dur)
+        g_in = (g0 >= 0.0) & (g0 < dur)
+        return {"channel": ec.name, "shaft": ec.shaft, "pulses_per_rev": ppr,
+                "rising_edges": (cfg.t0 + st[inside]).tolist(),
+                "missing": np.flatnonzero(gone[inside]).tolist(),
+                "glitch_edges": (cfg.t0 + g0[g_in]).tolist()}
 
     def _truth(self, dur: float, loads: tuple, gauge_truth: dict, tacho_times: tuple) -> GroundTruth:
         """The recording's ground truth."""
@@ -431,17 +475,18 @@ class _Plan:
                     work *= ch.scale
                 if not f64:
                     buf[c, s:e] = work
-            if self.tacho is not None:
-                st, sp_, level = self.tacho
+            boxes = [self.tacho, self.encoder]
+            for row, box in zip(range(len(self.channels), n_ch), [b for b in boxes if b is not None]):
+                st, sp_, level = box
                 lo = int(np.searchsorted(sp_, j0 - 1.0, side="left"))
                 hi = int(np.searchsorted(st, j1 + 1.0, side="right"))
                 if hi > lo:
-                    w = buf[-1, s:e] if f64 else scratch[:e - s]
+                    w = buf[row, s:e] if f64 else scratch[:e - s]
                     if not f64:
                         w.fill(0.0)
                     render_box(w, j0, st[lo:hi], sp_[lo:hi], level)
                     if not f64:
-                        buf[-1, s:e] = w
+                        buf[row, s:e] = w
         if self.gaps.size:
             art.apply_gaps(buf.T, i0, self.gaps)
         return buf

@@ -67,6 +67,8 @@ assemblable planets at p_n = 0, 36, 75 of 2 pi / 112, i.e. 0, 115.7, 241.1 deg: 
 phasing; 1 % carrier ripple), ``rig_5planets`` (Z 25/85/30, five equally spaced planets,
 1 % carrier ripple). Shaft-locked ripple follows the member's angle
 (:class:`meshphase.synthetic.kinematics.ShaftRipple`), so it stays locked to the shaft through a ramp.
+``rig_ripple_planet_encoder`` adds a 60-pulse sun-shaft encoder to ``rig_ripple_planet``
+(:class:`meshphase.synthetic.config.EncoderConfig`): the encoder sees that ripple.
 
 Adversarial rig conditions (:data:`ADVERSARIAL_SCENARIOS`, tag "adversarial", tagged "rig" too):
 conditions where measured phasing was confident and wrong. ``rig_ripple_planet`` above,
@@ -89,7 +91,7 @@ from typing import Callable
 from meshphase.models.gearset import Gearset, Speeds, rpm_to_rad_s
 from meshphase.models.tolerance import table2_case
 
-from .config import Artefacts, GaugeConfig, LoadModulation, SynthConfig, TachoConfig, TiltSource
+from .config import Artefacts, EncoderConfig, GaugeConfig, LoadModulation, SynthConfig, TachoConfig, TiltSource
 from .kinematics import ShaftRipple, SpeedProfile
 
 __all__ = ["Scenario", "SCENARIOS", "get_scenario", "list_scenarios", "describe_scenarios",
@@ -522,3 +524,13 @@ ADVERSARIAL_SCENARIOS = ("rig_ripple_planet",) + tuple(_ADVERSARIAL)
 for _name, (_desc, _build, _tags, _expect) in _ADVERSARIAL.items():
     register(Scenario(_name, _desc, (lambda n, d, b: lambda: b(n, d))(_name, _desc, _build), _tags,
                       _expect))
+
+register(Scenario(
+    "rig_ripple_planet_encoder",
+    "rig_ripple_planet with a 60-pulse encoder on the sun (input) shaft: it samples the mesh "
+    "angle every 25 x 87 / (112 x 60) = 0.32 mesh cycles and sees the planet-rate ripple that "
+    "the gauges and the once-per-turn tacho cannot tell from the planets' own terms.",
+    lambda: _rig("rig_ripple_planet_encoder", "planet-rate ripple, 60-pulse sun encoder",
+                 speed=_ripple("planet")).with_(encoder=EncoderConfig(shaft="input",
+                                                                      pulses_per_rev=60)),
+    ("rig", "speed", "encoder")))

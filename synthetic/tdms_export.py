@@ -10,7 +10,8 @@ that they exercise the same reader path (``pipeline/io/tdms.py``,
   ``wf_start_time`` (the recording's ``start_datetime``, UTC; the LabVIEW zero time
   1904-01-01 when it has none, which the reader takes as "not set"), ``wf_samples``,
   ``unit_string``, ``NI_ChannelName``, ``meshphase_kind``, ``meshphase_gear``,
-  ``meshphase_tooth``, ``meshphase_face_position`` [m], ``meshphase_description``;
+  ``meshphase_tooth``, ``meshphase_face_position`` [m], ``meshphase_description``
+  (an encoder's ``meshphase_shaft``, ``meshphase_pulses_per_rev``);
 * file properties: ``name``, ``meshphase_meta`` and ``meshphase_history`` (JSON text);
 * one segment per block (blocks of >= 1e5 samples keep the per-segment overhead of the
   reader negligible), so memory stays flat however long the recording.
@@ -70,6 +71,10 @@ def _channel_props(rec: Recording, n_total: int) -> list[dict]:
             p["meshphase_tooth"] = int(spec.tooth)
         if spec.face_position is not None:
             p["meshphase_face_position"] = float(spec.face_position)
+        if spec.shaft is not None:
+            p["meshphase_shaft"] = spec.shaft
+        if spec.pulses_per_rev is not None:
+            p["meshphase_pulses_per_rev"] = int(spec.pulses_per_rev)
         if spec.gain != 1.0:
             p["meshphase_gain"] = float(spec.gain)
         out.append(p)

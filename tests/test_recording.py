@@ -30,7 +30,7 @@ def test_channel_spec_defaults_and_gear_from_kind():
     assert ChannelSpec("s", "sun").gear == "sun" and ChannelSpec("r", "ring").gear == "ring"
     assert ChannelSpec("f", "facewidth").gear is None
     assert ChannelSpec("t", "ring", gear="planet").gear == "planet"
-    assert set(CHANNEL_KINDS) == {"sun", "ring", "facewidth", "tacho", "other"}
+    assert set(CHANNEL_KINDS) == {"sun", "ring", "facewidth", "tacho", "encoder", "other"}
 
 
 def test_channel_spec_normalises_numbers():

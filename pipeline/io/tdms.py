@@ -11,7 +11,9 @@ Mapping (full description in ``data_schemas/tdms_mapping.md``):
   -> facewidth, ``tacho*``/``once*`` -> tacho; else "other".
 * units: ``unit_string`` (else ``NI_UnitDescription``, else ""); tooth, face position [m],
   gear, gain and description from ``meshphase_tooth``, ``meshphase_face_position``,
-  ``meshphase_gear``, ``meshphase_gain``, ``meshphase_description`` (else ``description``).
+  ``meshphase_gear``, ``meshphase_gain``, ``meshphase_description`` (else ``description``);
+  an encoder's shaft and pulses per revolution from ``meshphase_shaft``,
+  ``meshphase_pulses_per_rev``.
 * fs = 1 / ``wf_increment`` (the same on every channel). A file without waveform timing
   (DIAdem, "Write to Measurement File" without waveforms, scripts) may hold a clock
   channel instead: one named as :data:`CLOCK_NAMES` (``Time``, ``t``, ``Zeit``, ...) or
@@ -456,6 +458,10 @@ def _channel(tdms, path: Path, n: str, g, ch, raw: bool, index, unapplied: bool)
          "tooth": int(tooth) if isinstance(tooth, (int, np.integer)) else tooth,
          "face_position": _prop_float(props, "meshphase_face_position", path, n),
          "description": str(props.get("meshphase_description", props.get("description", "")))}
+    ppr = props.get("meshphase_pulses_per_rev")
+    if "meshphase_shaft" in props or ppr is not None:      # an encoder's (spec_from_dict checks)
+        d.update(shaft=props.get("meshphase_shaft"),
+                 pulses_per_rev=int(ppr) if isinstance(ppr, (int, np.integer)) else ppr)
     spec = spec_from_dict(_jsonable(d), path, f"channel {n!r}")
     raw_dtype = index.dtypes.get(ch.path) if index.unsupported is None else None
     if raw_dtype is None:

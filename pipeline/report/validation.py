@@ -112,9 +112,10 @@ def _recording_section(rep: Report, ctx, figs: _Figures) -> None:
     s.text(f"{rec.n_channels} channels at {rec.fs:g} Hz, {rec.duration:.1f} s "
            f"({rec.n_samples} samples per channel).")
     q = ctx.load.quality
-    # a tacho is a pulse train that sits at its two levels by design: "clipped" runs there
-    # are its pulses, not converter saturation, so they are neither counted nor plotted
-    pulse = {c.name for c in rec.channels if c.kind == "tacho"}
+    # a tacho or an encoder is a pulse train that sits at its two levels by design:
+    # "clipped" runs there are its pulses, not converter saturation, so they are neither
+    # counted nor plotted
+    pulse = {c.name for c in rec.channels if c.kind in ("tacho", "encoder")}
     s.table([{"channel": x["channel"], "kind": rec.spec(x["channel"]).kind,
               "units": rec.spec(x["channel"]).units,
               "NaN/gap samples": x["n_nonfinite"], "NaN runs": len(x["nonfinite_runs"]),
@@ -126,7 +127,7 @@ def _recording_section(rep: Report, ctx, figs: _Figures) -> None:
     qf = [dict(x, n_clipped_runs=0) if x["channel"] in pulse else x for x in q]
     if any(x["n_nonfinite"] or x["n_clipped_runs"] for x in qf):
         figs.add(s, figures.quality_overview(qf), "quality",
-                 "Non-finite samples and clipped runs per channel (tacho pulse trains: no clipping count).")
+                 "Non-finite samples and clipped runs per channel (pulse trains: no clipping count).")
     else:  # an all-zero bar chart says nothing a sentence does not
         s.text("No non-finite samples and no clipped runs in any gauge channel.", cls="note ok")
 

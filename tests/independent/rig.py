@@ -126,20 +126,21 @@ Presets (:data:`PRESETS`, :func:`make_preset_tdms`)
 Seed rig 25/87/29, 4 equally spaced planets, ring fixed, sun 18.19 r/min, 20 dB, tacho on,
 unless the row says otherwise. "1 % ripple" is ``a = 0.01`` once per carrier revolution.
 
-========================  ====================================================
-``steady``                no ripple, no ramp
-``ripple1_carrier``       1 % carrier-rate ripple
-``ripple3_carrier``       3 % carrier-rate ripple
-``ripple1_ramp10``        1 % ripple + 10 % ramp up over the record
-``five_planets_ripple1``  Z 25/85/30, 5 planets (R_c 110 mm), 1 % ripple
-``ripple1_sun``           1 % ripple once per sun revolution (instead of carrier)
-``ramp_down``             1 % ripple + 10 % ramp down
-``ccw``                   1 % ripple, sun at -18.19 r/min (counter-clockwise planets)
-``unequal3``              1 % ripple, 3 planets at assembly positions p = 0, 37, 75
-``no_tacho``              1 % ripple, no tacho channel
-``snr10``                 1 % ripple, 10 dB
-``hole_errors_case1``     seed 000 Table 2 case 1 errors (0.2 mm; 4, 60, 20 deg), steady
-========================  ====================================================
+============================  ====================================================
+``steady``                    no ripple, no ramp
+``ripple1_carrier``           1 % carrier-rate ripple
+``ripple3_carrier``           3 % carrier-rate ripple
+``ripple1_ramp10``            1 % ripple + 10 % ramp up over the record
+``five_planets_ripple1``      Z 25/85/30, 5 planets (R_c 110 mm), 1 % ripple
+``ripple1_sun``               1 % ripple once per sun revolution (instead of carrier)
+``ramp_down``                 1 % ripple + 10 % ramp down
+``ccw``                       1 % ripple, sun at -18.19 r/min (counter-clockwise planets)
+``unequal3``                  1 % ripple, 3 planets at assembly positions p = 0, 37, 75
+``no_tacho``                  1 % ripple, no tacho channel
+``snr10``                     1 % ripple, 10 dB
+``hole_errors_case1``         seed 000 Table 2 case 1 errors (0.2 mm; 4, 60, 20 deg), steady
+``planet_ripple1_encoder``    1 % ripple at the planet spin rate, 60-pulse sun-shaft encoder
+============================  ====================================================
 
 The first five are the outside tester's table. Without shaft-hole errors the truth phasing
 of every pass is Parker's ideal whatever the ripple or ramp (phasing is geometry; speed
@@ -1028,6 +1029,18 @@ class RigConfig:
         Tacho noise rms [V].
     tacho_range : float
         Tacho ADC full scale [V].
+    encoder : (str, int) or None
+        A shaft encoder channel: (shaft, pulses per revolution), shaft "sun", "carrier" or
+        "ring" (a turning one); None: no encoder.
+    encoder_edge_angle : float
+        Absolute shaft angle of the encoder's rising edge 0 [rad]; edge k fires at
+        ``encoder_edge_angle + 2 pi k / pulses`` (in the shaft's sense of rotation).
+    encoder_duty : float
+        Fraction of a pulse period at the high level [-].
+    encoder_high : float
+        Encoder high level [V] (TTL).
+    encoder_noise : float
+        Encoder noise rms [V].
     start_time : str
         ISO 8601 UTC start of the first sample (written as ``wf_start_time``).
     group : str
@@ -1069,6 +1082,11 @@ class RigConfig:
     tacho_high: float = 5.0
     tacho_noise: float = 0.005
     tacho_range: float = 10.0
+    encoder: tuple | None = None
+    encoder_edge_angle: float = 0.0
+    encoder_duty: float = 0.5
+    encoder_high: float = 5.0
+    encoder_noise: float = 0.005
     start_time: str = "2024-03-12T09:41:27.250000"
     group: str = "Rig"
     seed: int | None = 0
@@ -1117,6 +1135,19 @@ class RigConfig:
             raise ValueError(f"adc_bits must be None, 16 or 24, got {self.adc_bits!r}")
         if self.tacho_key_width >= math.pi:
             raise ValueError(f"tacho_key_width must be < pi rad, got {self.tacho_key_width!r}")
+        if self.encoder is not None:
+            if isinstance(self.encoder, (str, bytes)) or len(self.encoder) != 2:
+                raise TypeError(f"encoder must be (shaft, pulses per revolution), got {self.encoder!r}")
+            shaft = _choice("encoder shaft", self.encoder[0], ("sun", "carrier", "ring"))
+            if shaft == self.fixed:
+                raise ValueError(f"encoder on the held {shaft} does not turn (fixed={self.fixed!r})")
+            set_("encoder", (shaft, _int("encoder pulses per revolution", self.encoder[1], 1)))
+        set_("encoder_edge_angle", _real("encoder_edge_angle", self.encoder_edge_angle))
+        set_("encoder_duty", _positive("encoder_duty", self.encoder_duty))
+        if self.encoder_duty >= 1.0:
+            raise ValueError(f"encoder_duty must be in (0, 1), got {self.encoder_duty!r}")
+        set_("encoder_high", _positive("encoder_high", self.encoder_high))
+        set_("encoder_noise", _nonneg("encoder_noise", self.encoder_noise))
         if self.tacho and self.fixed == "carrier":
             raise ValueError("a carrier tacho needs a turning carrier; fixed='carrier' requires tacho=False")
         if not isinstance(self.start_time, str):
@@ -1150,6 +1181,8 @@ class RigConfig:
         if d.get("load_sharing") is not None:
             d["load_sharing"] = tuple(d["load_sharing"])
         d["load_modulation"] = tuple(tuple(x) for x in d.get("load_modulation", ()))
+        if d.get("encoder") is not None:
+            d["encoder"] = tuple(d["encoder"])
         return cls(Gearset(**g), **d)
 
 
@@ -1222,6 +1255,8 @@ class RigTruth:
         Pulse model description.
     tdms : dict or None
         Layout written: samples per segment, segments, storage.
+    encoder : dict or None
+        The encoder channel: name, shaft, pulses per revolution and its rising-edge times [s].
     """
 
     file: str | None
@@ -1240,6 +1275,7 @@ class RigTruth:
     tacho: dict | None
     pulse: dict
     tdms: dict | None = None
+    encoder: dict | None = None
 
     def to_json(self) -> str:
         """JSON text (floats round-trip exactly)."""
@@ -1254,6 +1290,8 @@ class RigTruth:
         if not isinstance(d, dict):
             raise ValueError("truth JSON must hold an object")
         names = {f.name for f in dataclasses.fields(cls)}
+        if "encoder" not in d:                       # written before the encoder field
+            d["encoder"] = None
         if set(d) != names:
             raise ValueError(f"truth JSON keys differ from RigTruth fields: {sorted(set(d) ^ names)}")
         return cls(**d)
@@ -1340,6 +1378,18 @@ class Rig:
             self.tacho_edges = te
         else:
             self.tacho_edges = np.zeros(0)
+        self.encoder_edges = np.zeros(0)
+        if c.encoder is not None:
+            shaft, ppr = c.encoder
+            self.channels.append(_Channel(f"Encoder {shaft} {ppr}", "encoder", "V", c.encoder_high,
+                                          c.encoder_noise, c.tacho_range))
+            s = 1.0 if self.kinematics.speed(shaft) > 0 else -1.0
+            D = lambda t: s * ppr * (self.motion.angle(shaft, t) - c.encoder_edge_angle)  # noqa: E731
+            dt = _bracket_step(self.motion, shaft, 0.0, self.t_last) / ppr
+            te, _ = _level_crossings(D, 0.0, self.t_last, dt)
+            if D(np.array([0.0]))[0] % TWO_PI == 0.0:
+                te = np.concatenate([[0.0], te])
+            self.encoder_edges = te
         # randomness: one child SeedSequence per channel (streams independent of block size)
         if c.seed is None:
             ss = np.random.SeedSequence()
@@ -1377,7 +1427,7 @@ class Rig:
         ps, pr = parker_phasing(g, kin.planet_rotation)
         eng, passes = {}, {}
         for ch in self.channels:
-            if ch.kind == "tacho":
+            if ch.kind in ("tacho", "encoder"):
                 continue
             t, p = self.engagements(ch.kind)
             eng[ch.name] = {"gear": ch.kind, "t": t.tolist(), "planet": p.tolist()}
@@ -1425,11 +1475,18 @@ class Rig:
                        "noise_rms": ch.noise_rms,
                        "tooth": (c.sun_tooth if ch.kind == "sun" else c.ring_tooth if ch.kind == "ring" else None),
                        "angle": (c.sun_tooth_angle0 if ch.kind == "sun" else
-                                 c.ring_gauge_angle if ch.kind == "ring" else c.tacho_edge_angle)}
+                                 c.ring_gauge_angle if ch.kind == "ring" else
+                                 c.encoder_edge_angle if ch.kind == "encoder" else c.tacho_edge_angle)}
                       for ch in self.channels],
             engagements=eng, passes=passes,
             parker={"sun": ps.tolist(), "ring": pr.tolist(), "planet_rotation": kin.planet_rotation},
             load_sharing=self.load_sharing.tolist(), tacho=tacho, pulse=pulse, tdms=tdms,
+            encoder=None if c.encoder is None else {
+                "channel": next(ch.name for ch in self.channels if ch.kind == "encoder"),
+                "shaft": c.encoder[0], "pulses_per_rev": c.encoder[1],
+                "edge_shaft_angle": c.encoder_edge_angle, "rising_edges": self.encoder_edges.tolist(),
+                "geometry": "rising edge k when the absolute shaft angle, in its sense of rotation, equals "
+                            "edge_shaft_angle + 2 pi k / pulses_per_rev"},
         )
 
     # ------------------------------------------------------------------ signals
@@ -1472,6 +1529,13 @@ class Rig:
         ph = np.mod(s * (self.kinematics.ratio("carrier") * th_ref - c.tacho_edge_angle), TWO_PI)
         return np.where(ph < c.tacho_key_width, c.tacho_high, 0.0)
 
+    def _encoder_from_ref(self, th_ref: np.ndarray) -> np.ndarray:
+        c = self.config
+        shaft, ppr = c.encoder
+        s = 1.0 if self.kinematics.speed(shaft) > 0 else -1.0
+        ph = np.mod(s * ppr * (self.kinematics.ratio(shaft) * th_ref - c.encoder_edge_angle) / TWO_PI, 1.0)
+        return np.where(ph < c.encoder_duty, c.encoder_high, 0.0)
+
     def iter_blocks(self, block: int, *, counts: bool = False,
                     render_samples: int = 8192) -> Iterator[tuple[int, int, dict[str, np.ndarray]]]:
         """Render the recording block by block.
@@ -1512,6 +1576,9 @@ class Rig:
             for j, ch in enumerate(self.channels):
                 if ch.kind == "tacho":
                     x = self._tacho_from_ref(th)
+                    x = x + ch.noise_rms * rngs[j].standard_normal(t.size)
+                elif ch.kind == "encoder":
+                    x = self._encoder_from_ref(th)
                     x = x + ch.noise_rms * rngs[j].standard_normal(t.size)
                 else:
                     x = self._gauge_from_cycles(ch.kind, M)
@@ -1609,6 +1676,8 @@ def write_rig_tdms(rig: Rig, path: str | Path, *, samples_per_segment: int = 100
             "wf_xname": "Time",
             "wf_xunit_string": "s",
             "description": ("carrier once-per-revolution tacho (TTL)" if ch.kind == "tacho"
+                            else f"{c.encoder[0]} shaft encoder, {c.encoder[1]} pulses per revolution (TTL)"
+                            if ch.kind == "encoder"
                             else f"tooth-root strain gauge, {ch.kind} tooth "
                                  f"{c.sun_tooth if ch.kind == 'sun' else c.ring_tooth}"),
         }
@@ -1759,6 +1828,7 @@ PRESETS: dict[str, dict] = {
     "hole_errors_case1": {"errors": {"e_sun": 0.2e-3, "kappa_sun": 4 * _DEG, "e_ring": 0.2e-3,
                                      "kappa_ring": 60 * _DEG, "e_planet": (0.2e-3,) * 4,
                                      "kappa_planet": (20 * _DEG,) * 4}},
+    "planet_ripple1_encoder": {"ripple": ((0.01, 1.0, "planet", 0.0),), "encoder": ("sun", 60)},
 }
 
 

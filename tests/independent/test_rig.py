@@ -551,3 +551,38 @@ def test_small_api_bad_inputs():
     with pytest.raises(ValueError, match="no channel"):
         rq.lsb("SG_planet")
     assert rq.lsb("SG_sun_T3") == 2 * 2e-3 / 2 ** 16
+
+
+def test_encoder_edges_sit_at_equal_shaft_angles():
+    # rising edge k where the shaft has turned (a0 + 2 pi k / ppr), in its sense of rotation,
+    # with the planet-rate ripple on: the edges' shaft angles are whole pulses to root tolerance
+    cfg = R.make_rig_config(minutes=0.25, ripple=((0.01, 1.0, "planet", 0.0),),
+                            encoder=("sun", 60), encoder_edge_angle=0.2)
+    rig = R.Rig(cfg)
+    te = rig.encoder_edges
+    pulses = 60 * (rig.motion.angle("sun", te) - 0.2) / (2 * math.pi)
+    assert np.max(np.abs(pulses - np.rint(pulses))) < 1e-9
+    assert np.all(np.diff(np.rint(pulses)) == 1)             # none skipped
+    turns = abs(rig.kinematics.rpm("sun")) * 0.25
+    assert te.size == pytest.approx(60 * turns, abs=2)
+    truth = rig.truth()
+    assert truth.encoder["rising_edges"] == te.tolist() and truth.encoder["pulses_per_rev"] == 60
+    assert [c["kind"] for c in truth.channels][-1] == "encoder"
+    # the rendered channel is high from each edge for half a pulse
+    t = np.arange(rig.n_samples) / cfg.fs
+    x = rig._encoder_from_ref(rig.motion.theta_ref(t))
+    assert set(np.unique(x)) == {0.0, cfg.encoder_high}
+    assert np.mean(x > 0) == pytest.approx(0.5, abs=0.01)
+    assert R.RigTruth.from_json(truth.to_json()).encoder == json.loads(truth.to_json())["encoder"]
+
+
+@pytest.mark.parametrize("kw, err, match", [
+    ({"encoder": ("ring", 60)}, ValueError, "held ring does not turn"),
+    ({"encoder": ("planet", 60)}, ValueError, "encoder shaft"),
+    ({"encoder": ("sun", 0)}, ValueError, "encoder pulses per revolution"),
+    ({"encoder": "sun"}, TypeError, r"encoder must be \(shaft, pulses per revolution\)"),
+    ({"encoder": ("sun", 60), "encoder_duty": 1.0}, ValueError, r"encoder_duty must be in \(0, 1\)"),
+])
+def test_encoder_config_errors(kw, err, match):
+    with pytest.raises(err, match=match):
+        R.make_rig_config(minutes=0.1, **kw)

@@ -39,7 +39,8 @@ def test_every_scenario_generates_consistently(name):
     cfg = get_scenario(name)
     assert isinstance(rec, Recording) and isinstance(truth, GroundTruth)
     assert rec.fs == cfg.fs and rec.n_samples == round(short(name) * cfg.fs)
-    assert rec.names == [g.name for g in cfg.gauges] + (["tacho"] if cfg.tacho else [])
+    assert rec.names == [g.name for g in cfg.gauges] + (["tacho"] if cfg.tacho else []) + (
+        [cfg.encoder.name] if cfg.encoder else [])
     assert [c.kind for c in rec.channels[:len(cfg.gauges)]] == [g.kind for g in cfg.gauges]
     assert rec.meta["scenario"] == name and rec.meta["seed"] == 11
     assert truth.seed == 11 and truth.scenario == name and truth.n_samples == rec.n_samples

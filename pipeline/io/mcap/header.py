@@ -253,7 +253,8 @@ def _channel_specs(summary, schema_id: int, hd: _Header, path: Path) -> tuple[li
                 gear=cm.get("gear"),
                 tooth=int(cm["tooth"]) if "tooth" in cm else None,
                 face_position=float(cm["face_position"]) if "face_position" in cm else None,
-                description=cm["description"])
+                description=cm["description"], shaft=cm.get("shaft"),
+                pulses_per_rev=int(cm["pulses_per_rev"]) if "pulses_per_rev" in cm else None)
         except (TypeError, ValueError) as exc:
             raise RecordingFileError(path, f"channel {ch.topic!r} metadata: {exc}") from exc
         channels[idx] = spec

@@ -31,6 +31,10 @@ def _channel_metadata(spec: ChannelSpec, index: int, fs: float, dtype_name: str)
         md["tooth"] = str(int(spec.tooth))
     if spec.face_position is not None:
         md["face_position"] = repr(float(spec.face_position))
+    if spec.shaft is not None:
+        md["shaft"] = str(spec.shaft)
+    if spec.pulses_per_rev is not None:
+        md["pulses_per_rev"] = str(int(spec.pulses_per_rev))
     return md
 
 
