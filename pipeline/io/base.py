@@ -57,7 +57,7 @@ __all__ = ["RecordingFileError", "CorruptFileError", "RecordingInfo", "atomic_pa
            "clean_stale_partials", "TEMP_PREFIX", "TEMP_SUFFIX", "STALE_AGE", "check_verify",
            "warn_nonfinite", "dumps_json", "check_start_datetime", "spec_from_dict", "nice_fs",
            "CLOCK_NAMES", "kind_from_name", "clock_timing",
-           "regroup_blocks", "recording_read_errors"]
+           "regroup_blocks", "recording_read_errors", "physical_memory", "check_allocation"]
 
 
 class RecordingFileError(ValueError):
@@ -167,6 +167,32 @@ class RecordingInfo:
 
 
 # ---------------------------------------------------------------------------- shared helpers
+def physical_memory() -> int | None:
+    """The machine's physical memory [bytes], or None where the OS does not say."""
+    try:
+        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def check_allocation(path, n_samples: int, n_channels: int, itemsize: int) -> None:
+    """Refuse, before allocating, to read ``n_samples`` x ``n_channels`` samples of
+    ``itemsize`` [bytes] that the machine's physical memory cannot hold.
+
+    Raises
+    ------
+    MemoryError
+        Naming the file, the sizes and the memory [GB], and what to do instead (a time
+        window, the streamed commands).
+    """
+    need = int(n_samples) * int(n_channels) * int(itemsize)
+    ram = physical_memory()
+    if ram is not None and need > ram:
+        raise MemoryError(f"{path}: reading {n_samples} samples x {n_channels} channels needs "
+                          f"{need / 1e9:.4g} GB, more than this machine's {ram / 1e9:.4g} GB of memory; "
+                          "read a time window (start, stop) or fewer channels, or use the streamed commands")
+
+
 def check_verify(verify) -> bool:
     """The ``verify`` option of a format's readers, checked: a bool (TypeError otherwise)."""
     if not isinstance(verify, (bool, np.bool_)):

@@ -254,6 +254,33 @@ def build_originals(directory) -> Originals:
     return Originals(dir=d, recordings=paths, regions=regions, gearset=gearset, scene=scene, rec=rec)
 
 
+# --------------------------------------------------------------------------- files never finished
+def hdf5_without_chunks(src, dst, skip, *, chunk: int | None = None, n_samples: int | None = None) -> Path:
+    """A copy of the HDF5 recording ``src`` (meshphase layout) in chunks of ``chunk`` samples
+    (default: those of ``src``) in which the chunks with an index in ``skip`` (every channel)
+    were never written: the dataset is created at its full length and only the other chunks'
+    slices are written. ``n_samples`` declares a longer recording (every channel and the root
+    attribute) whose extra chunks are never written either."""
+    import h5py
+
+    with h5py.File(src, "r") as a, h5py.File(dst, "w", libver=("v110", "v110")) as b:
+        for k, v in a.attrs.items():
+            b.attrs[k] = v
+        n = int(a.attrs["n_samples"] if n_samples is None else n_samples)
+        b.attrs["n_samples"] = n
+        g = b.create_group("channels")
+        for name, ds in a["channels"].items():
+            c = int(chunk or ds.chunks[0])
+            d = g.create_dataset(name, shape=(n,), dtype=ds.dtype, chunks=(c,), fletcher32=ds.fletcher32)
+            for k, v in ds.attrs.items():
+                d.attrs[k] = v
+            data = ds[()]
+            for i, c0 in enumerate(range(0, data.shape[0], c)):
+                if i not in skip:
+                    d[c0:c0 + c] = data[c0:c0 + c]
+    return Path(dst)
+
+
 # --------------------------------------------------------------------------- byte regions
 def _complement(ranges, size):
     out, pos = [], 0

