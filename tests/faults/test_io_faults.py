@@ -10,6 +10,7 @@ import pytest
 from fault_corpus import hdf5_without_chunks
 
 import meshphase.io as pio
+from meshphase.errors import FormatWarning
 from meshphase.io import base as iobase
 from meshphase.io.base import CorruptFileError
 from meshphase.recording import ChannelSpec, Recording
@@ -92,3 +93,40 @@ def test_check_allocation_empty_and_bad_input():
         iobase.check_allocation("x", "many", 2, 8)
     ram = iobase.physical_memory()
     assert ram is None or ram > 0
+
+
+# --------------------------------------------------------------------------- CSV headers of many columns
+def _wide_csv(path, k, rows=3):
+    with open(path, "w") as f:
+        f.write("time [s]," + ",".join(f"c{i}" for i in range(k)) + "\n")
+        for r in range(rows):
+            f.write(f"{r / FS}," + ",".join(["0.1"] * k) + "\n")
+    return path
+
+
+def test_csv_more_columns_than_the_cap_are_refused(tmp_path):
+    from meshphase.io.csv import MAX_CHANNELS
+
+    p = _wide_csv(tmp_path / "wide.csv", MAX_CHANNELS + 1, rows=1)
+    with pytest.raises(pio.RecordingFileError, match=rf"wide.csv: line 1: header of {MAX_CHANNELS + 1} channel "
+                                                     rf"columns, more than the {MAX_CHANNELS}"):
+        pio.read_info(p)
+
+
+def test_csv_header_line_longer_than_the_limit_is_refused(tmp_path, monkeypatch):
+    from meshphase.io import csv as pcsv
+
+    monkeypatch.setattr(pcsv, "MAX_HEADER_LINE", 1000)        # the same code path as 16 MiB, faster
+    p = _wide_csv(tmp_path / "long.csv", 300, rows=1)
+    with pytest.raises(pio.RecordingFileError, match=r"long.csv: line 1 \(byte 0\) is longer than 1000 bytes"):
+        pio.read_info(p)
+
+
+def test_csv_missing_units_warning_is_one_short_line(tmp_path):
+    p = _wide_csv(tmp_path / "units.csv", 200)
+    with pytest.warns(FormatWarning) as rec:
+        info = pio.read_info(p)
+    assert len(info.channels) == 200
+    msgs = [str(w.message) for w in rec if "carry no" in str(w.message)]
+    assert len(msgs) == 1 and "['c0', 'c1', 'c2', 'c3', 'c4'] and 195 more" in msgs[0]
+    assert len(msgs[0]) < 200 + len(str(p))
