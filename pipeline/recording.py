@@ -11,6 +11,7 @@ from __future__ import annotations
 import copy
 import datetime as _dt
 import math
+import unicodedata
 from dataclasses import asdict, dataclass
 from typing import Any, Iterator, Sequence
 
@@ -19,10 +20,16 @@ import numpy as np
 from .jsonable import to_jsonable
 from .validate import as_float, as_nonnegative, as_positive
 
-__all__ = ["ChannelSpec", "Recording", "CHANNEL_KINDS", "sample_index"]
+__all__ = ["ChannelSpec", "Recording", "CHANNEL_KINDS", "sample_index", "control_character"]
 
 #: Channel kinds a recording may carry.
 CHANNEL_KINDS = ("sun", "ring", "facewidth", "tacho", "other")
+
+
+def control_character(text: str) -> str | None:
+    """The first control character (Unicode category Cc: C0, DEL, C1) or line / paragraph
+    separator (Zl, Zp) in ``text``, or None."""
+    return next((c for c in text if unicodedata.category(c) in ("Cc", "Zl", "Zp")), None)
 
 
 @dataclass(frozen=True)
@@ -32,7 +39,9 @@ class ChannelSpec:
     Parameters
     ----------
     name : str
-        Unique channel name.
+        Unique channel name, with no control character (C0, DEL, C1) or line / paragraph
+        separator: such a name is refused, since every place that writes or prints it (file
+        headers, tables, messages) would carry a line break or escape sequence.
     kind : {"sun", "ring", "facewidth", "tacho", "other"}
         What the channel measures: a sun tooth-root gauge, a ring tooth-root gauge, a
         face-width gauge (one of several across the face of one tooth root), a carrier
@@ -66,6 +75,10 @@ class ChannelSpec:
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name.strip():
             raise ValueError(f"channel name must be a non-empty string, got {self.name!r}")
+        bad = control_character(self.name)
+        if bad is not None:
+            raise ValueError(f"channel name {self.name!r} holds the control character U+{ord(bad):04X}; "
+                             "rename the channel (names are written into files and printed on one line)")
         if self.kind not in CHANNEL_KINDS:
             raise ValueError(f"channel {self.name!r}: kind must be one of {CHANNEL_KINDS}, got {self.kind!r}")
         if not isinstance(self.units, str):

@@ -57,7 +57,8 @@ __all__ = ["RecordingFileError", "CorruptFileError", "RecordingInfo", "atomic_pa
            "clean_stale_partials", "TEMP_PREFIX", "TEMP_SUFFIX", "STALE_AGE", "check_verify",
            "warn_nonfinite", "dumps_json", "check_start_datetime", "spec_from_dict", "nice_fs",
            "CLOCK_NAMES", "kind_from_name", "clock_timing",
-           "regroup_blocks", "recording_read_errors", "physical_memory", "check_allocation"]
+           "regroup_blocks", "recording_read_errors", "physical_memory", "check_allocation",
+           "check_fs_range", "FS_RANGE", "ANY_FS_ENV"]
 
 
 class RecordingFileError(ValueError):
@@ -125,6 +126,9 @@ class RecordingInfo:
     history: list = field(default_factory=list)
     extra: dict = field(default_factory=dict)
 
+    def __post_init__(self):
+        check_fs_range(self.fs, self.path)
+
     @property
     def duration(self) -> float:
         """Duration [s]."""
@@ -167,6 +171,34 @@ class RecordingInfo:
 
 
 # ---------------------------------------------------------------------------- shared helpers
+#: Sample rates [Hz] a recording file may state: from a slow logger to the fastest strain
+#: acquisition, with a wide margin either side. A rate outside is refused as a damaged or
+#: misread header unless the environment variable :data:`ANY_FS_ENV` is ``1`` (the
+#: ``meshphase --any-fs`` option sets it).
+FS_RANGE = (1e-3, 1e8)
+#: The environment variable that lets any finite positive sample rate through.
+ANY_FS_ENV = "MESHPHASE_ANY_FS"
+
+
+def check_fs_range(fs, path) -> None:
+    """Refuse a sample rate ``fs`` [Hz] of the file ``path`` outside :data:`FS_RANGE`
+    (unless :data:`ANY_FS_ENV` is ``1``).
+
+    Raises
+    ------
+    RecordingFileError
+        Naming the file, echoing the rate and the range, and how to force it.
+    """
+    try:
+        ok = FS_RANGE[0] <= float(fs) <= FS_RANGE[1]
+    except (TypeError, ValueError):
+        raise RecordingFileError(path, f"sample rate fs = {fs!r} is not a number") from None
+    if not ok and os.environ.get(ANY_FS_ENV, "").strip() != "1":
+        raise RecordingFileError(path, f"sample rate fs = {fs!r} Hz is outside the physical range "
+                                       f"[{FS_RANGE[0]:g}, {FS_RANGE[1]:g}] Hz (a damaged or misread header?); "
+                                       f"if it is right, run with --any-fs ({ANY_FS_ENV}=1)")
+
+
 def physical_memory() -> int | None:
     """The machine's physical memory [bytes], or None where the OS does not say."""
     try:

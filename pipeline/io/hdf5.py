@@ -395,8 +395,12 @@ def _foreign_header(f, path, fs_opt) -> tuple[dict, tuple, tuple]:
                                                                                           "unit_string")), "")
         if isinstance(units, list) and isinstance(ds, _Column):
             units = units[ds.col] if ds.col < len(units) else ""
-        specs.append(ChannelSpec(name=name, kind=kind_from_name(name.rsplit("/", 1)[-1], ds.parent.name.strip("/")),
-                                 units=units if isinstance(units, str) else ""))
+        try:
+            specs.append(ChannelSpec(name=name, kind=kind_from_name(name.rsplit("/", 1)[-1],
+                                                                    ds.parent.name.strip("/")),
+                                     units=units if isinstance(units, str) else ""))
+        except (ValueError, TypeError) as exc:
+            raise RecordingFileError(path, f"dataset {ds.name!r}: {exc}") from exc
     for nm, ds in zip(names, chans):
         _check_written(path, ds.ds if isinstance(ds, _Column) else ds, nm, fs,
                        ds.axis if isinstance(ds, _Column) else 0)

@@ -130,3 +130,79 @@ def test_csv_missing_units_warning_is_one_short_line(tmp_path):
     msgs = [str(w.message) for w in rec if "carry no" in str(w.message)]
     assert len(msgs) == 1 and "['c0', 'c1', 'c2', 'c3', 'c4'] and 195 more" in msgs[0]
     assert len(msgs[0]) < 200 + len(str(p))
+
+
+# --------------------------------------------------------------------------- sample rates outside a physical range
+@pytest.fixture
+def fs_1e300(tmp_path):
+    p = pio.write(_rec(), tmp_path / "fs.h5")
+    with h5py.File(p, "r+") as f:                 # the header edited, its checksums kept valid
+        f.attrs["fs"] = 1e300
+    return p
+
+
+def test_absurd_fs_is_refused_naming_file_and_value(fs_1e300, monkeypatch):
+    monkeypatch.delenv(iobase.ANY_FS_ENV, raising=False)
+    with pytest.raises(pio.RecordingFileError, match=r"fs.h5: sample rate fs = 1e\+300 Hz is outside the physical "
+                                                     r"range \[0.001, 1e\+08\] Hz.*--any-fs"):
+        pio.read_info(fs_1e300)
+
+
+def test_absurd_fs_passes_when_forced(fs_1e300, monkeypatch):
+    monkeypatch.setenv(iobase.ANY_FS_ENV, "1")
+    assert pio.read_info(fs_1e300).fs == 1e300
+
+
+def test_cli_any_fs_option(fs_1e300, monkeypatch, capsys):
+    from meshphase.cli import main
+
+    monkeypatch.delenv(iobase.ANY_FS_ENV, raising=False)
+    assert main(["-q", "info", "--no-quality", str(fs_1e300)]) == 1
+    assert "outside the physical range" in capsys.readouterr().err
+    assert main(["-q", "--any-fs", "info", "--no-quality", str(fs_1e300)]) == 0
+    assert "1e+300 Hz" in capsys.readouterr().out
+    assert iobase.ANY_FS_ENV not in __import__("os").environ      # the option does not outlive the command
+
+
+@pytest.mark.parametrize("fs", [1e-3, 5120.0, 1e8])
+def test_check_fs_range_accepts_the_range_ends(fs, monkeypatch):
+    monkeypatch.delenv(iobase.ANY_FS_ENV, raising=False)
+    iobase.check_fs_range(fs, "x.h5")
+
+
+@pytest.mark.parametrize("fs", [9e-4, 1.01e8, float("inf"), float("nan"), "", None])
+def test_check_fs_range_refuses(fs, monkeypatch):
+    monkeypatch.delenv(iobase.ANY_FS_ENV, raising=False)
+    with pytest.raises(pio.RecordingFileError, match="x.h5: sample rate fs"):
+        iobase.check_fs_range(fs, "x.h5")
+
+
+# --------------------------------------------------------------------------- control characters in channel names
+@pytest.mark.parametrize("name", ["sun\nmeshphase process: error: fake", "a\rb", "tab\there", "esc\x1b[31m",
+                                  "nel\x85", "ls\u2028x", "del\x7f"])
+def test_channel_names_with_control_characters_are_refused(name):
+    with pytest.raises(ValueError, match=r"holds the control character U\+[0-9A-F]{4}"):
+        ChannelSpec(name)
+
+
+def test_control_character_empty_and_bad_input():
+    from meshphase.recording import control_character
+
+    assert control_character("") is None
+    assert control_character("µε gauge (T3) – sun") is None     # printable Unicode is fine
+    assert control_character("a\x00b") == "\x00"
+    with pytest.raises(TypeError):
+        control_character(None)
+
+
+def test_foreign_file_with_a_newline_in_a_name_is_one_escaped_error(tmp_path, capsys):
+    """The name cannot forge an output line: the command's one error line shows it escaped."""
+    from meshphase.cli import main
+
+    p = tmp_path / "forged.h5"
+    with h5py.File(p, "w") as f:
+        f.create_dataset("sun\nmeshphase process: error: fake", data=np.zeros(100)).attrs["fs"] = FS
+    assert main(["-q", "info", "--no-quality", str(p)]) == 1
+    out, err = capsys.readouterr()
+    assert err.count("\n") == 1 and err.startswith("meshphase info: error: ") and "forged.h5" in err
+    assert "sun\\nmeshphase process: error: fake" in err and "fake" not in out
