@@ -183,7 +183,11 @@ class Recording:
         if len(specs) != arr.shape[1]:
             raise ValueError(f"data has {arr.shape[1]} channel column(s) but {len(specs)} channel spec(s) were given")
         names = [s.name for s in specs]
-        dup = sorted({n for n in names if names.count(n) > 1})
+        seen: set = set()
+        dup: set = set()
+        for n in names:                      # linear in the channels (a CSV may have 1024)
+            (dup if n in seen else seen).add(n)
+        dup = sorted(dup)
         if dup:
             raise ValueError(f"duplicate channel name(s) {dup}")
         self.data = arr

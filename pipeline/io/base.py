@@ -162,7 +162,8 @@ class RecordingInfo:
         channels = list(channels)
         if not channels:
             raise ValueError(f"{self.path}: channel selection is empty")
-        missing = [c for c in channels if c not in self.names]
+        known = set(self.names)
+        missing = [c for c in channels if c not in known]
         if missing:
             raise ValueError(f"{self.path}: no channel(s) {missing}; the file has {self.names}")
         if len(set(channels)) != len(channels):

@@ -782,7 +782,8 @@ def _setup(path, channels):
     index = {n: i for i, n in enumerate(info.names)}
     wanted = [index[n] for n in names]
     cols = sorted(wanted)
-    perm = [cols.index(w) for w in wanted]
+    at = {w: i for i, w in enumerate(cols)}
+    perm = [at[w] for w in wanted]
     dtype = np.dtype(info.extra["dtype"])
     return head, info, names, cols, perm, dtype
 
