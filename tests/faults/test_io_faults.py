@@ -206,3 +206,17 @@ def test_foreign_file_with_a_newline_in_a_name_is_one_escaped_error(tmp_path, ca
     out, err = capsys.readouterr()
     assert err.count("\n") == 1 and err.startswith("meshphase info: error: ") and "forged.h5" in err
     assert "sun\\nmeshphase process: error: fake" in err and "fake" not in out
+
+
+@pytest.mark.parametrize("suffix", [".mcap", ".tdms"])
+def test_check_allocation_guards_every_full_read(monkeypatch, tmp_path, suffix):
+    """MCAP and TDMS full reads are refused before allocating, as HDF5's are."""
+    if suffix == ".tdms":
+        from meshphase.synthetic.tdms_export import write_tdms
+
+        p = write_tdms(_rec(), tmp_path / f"rec{suffix}")
+    else:
+        p = pio.write(_rec(), tmp_path / f"rec{suffix}")
+    monkeypatch.setattr(iobase, "physical_memory", lambda: 10_000)
+    with pytest.raises(MemoryError, match=rf"rec{suffix}: reading 4096 samples x 2 channels"):
+        pio.read(p)
