@@ -48,7 +48,7 @@ class ChannelSpec:
         once-per-revolution tacho, or anything else.
     units : str
         Physical units of the stored samples after ``gain`` is applied, e.g. ``"m/m"``
-        (strain) or ``"V"``.
+        (strain) or ``"V"``; no control character (as ``name``).
     gain : float
         Calibration gain [units per stored unit]; physical value = stored value * gain.
         Readers store samples already scaled to physical units and keep gain = 1 unless the
@@ -83,6 +83,10 @@ class ChannelSpec:
             raise ValueError(f"channel {self.name!r}: kind must be one of {CHANNEL_KINDS}, got {self.kind!r}")
         if not isinstance(self.units, str):
             raise TypeError(f"channel {self.name!r}: units must be a string, got {self.units!r}")
+        bad = control_character(self.units)
+        if bad is not None:
+            raise ValueError(f"channel {self.name!r}: units {self.units!r} hold the control character "
+                             f"U+{ord(bad):04X}")
         g = as_float(self.gain, f"channel {self.name!r} gain")
         if g == 0.0:
             raise ValueError(f"channel {self.name!r}: gain must be non-zero, got 0.0")

@@ -185,6 +185,11 @@ def test_channel_names_with_control_characters_are_refused(name):
         ChannelSpec(name)
 
 
+def test_units_with_control_characters_are_refused():
+    with pytest.raises(ValueError, match=r"channel 'sun': units 'm/m\\n' hold the control character U\+000A"):
+        ChannelSpec("sun", units="m/m\n")
+
+
 def test_control_character_empty_and_bad_input():
     from meshphase.recording import control_character
 
