@@ -23,6 +23,7 @@ Exit status (every subcommand; README.md "Exit status"; constants in :mod:`meshp
       (``"status": "unreliable"``); a campaign with any recording failed, partial or unreliable
 130   interrupted (Ctrl-C); the interrupted run's output folder is removed
 141   standard output closed by the reader (``| head``): no message
+143   terminated (SIGTERM; 129: SIGHUP) while writing: no message, nothing left
 ====  ==========================================================================================
 
 Every message is one line on stderr in one style, ``meshphase COMMAND: LEVEL: TEXT``
