@@ -113,6 +113,12 @@ class RecordingInfo:
     history : list
     extra : dict
         Format-specific details (layout, compression, segment count...).
+
+    Raises
+    ------
+    RecordingFileError
+        ``fs`` is not a finite positive number, or lies outside :data:`FS_RANGE` (see
+        :func:`check_fs_range`).
     """
 
     path: str
@@ -191,10 +197,12 @@ def check_fs_range(fs, path) -> None:
         Naming the file, echoing the rate and the range, and how to force it.
     """
     try:
-        ok = FS_RANGE[0] <= float(fs) <= FS_RANGE[1]
+        rate = float(fs)
     except (TypeError, ValueError):
         raise RecordingFileError(path, f"sample rate fs = {fs!r} is not a number") from None
-    if not ok and os.environ.get(ANY_FS_ENV, "").strip() != "1":
+    if not (math.isfinite(rate) and rate > 0):
+        raise RecordingFileError(path, f"sample rate fs = {fs!r} Hz is not a finite positive number")
+    if not FS_RANGE[0] <= rate <= FS_RANGE[1] and os.environ.get(ANY_FS_ENV, "").strip() != "1":
         raise RecordingFileError(path, f"sample rate fs = {fs!r} Hz is outside the physical range "
                                        f"[{FS_RANGE[0]:g}, {FS_RANGE[1]:g}] Hz (a damaged or misread header?); "
                                        f"if it is right, run with --any-fs ({ANY_FS_ENV}=1)")

@@ -37,7 +37,11 @@ Integrity: files are written in the HDF5 1.10 file format (``libver=("v110", "v1
 superblock, object headers, attributes and the chunk index carry checksums that HDF5 checks
 when it reads them) with a fletcher32 checksum on every sample chunk, which HDF5 checks on
 every read of that chunk. A mismatch raises :class:`~meshphase.io.base.CorruptFileError`
-naming the file, the dataset, the sample range of the chunk and its byte offset.
+naming the file, the dataset, the sample range of the chunk and its byte offset. A chunk
+never written has no checksum to check (HDF5 reads it as zeros): the chunk index is
+compared with the declared length when the header is read (:func:`_check_written`), and a
+missing chunk is a CorruptFileError naming the channel and its time range; so is a declared
+length of 1e12 samples with nothing stored, before anything is allocated.
 ``read(..., verify=False)`` reads chunks stored with fletcher32 as the only filter without
 checking the checksum (to salvage the undamaged samples of a damaged file, or to read again
 what a checked pass of the same run has read: :class:`meshphase.stream.FileSource`), with
@@ -440,7 +444,9 @@ def _check_written(path, ds, name: str, fs: float, axis: int = 0) -> None:
     allocated as a whole, so the check costs a look at the index (``get_num_chunks``: no
     sample is read); only a file with missing chunks pays a pass over the index to name
     their time range. A contiguous dataset must have the storage its shape declares; a
-    virtual or external one is not checked (its samples live in other files).
+    virtual or external one is not checked (its samples live in other files). A chunk that
+    was written in part is stored whole: its unwritten samples (the fill value) are beyond
+    what the index can show.
 
     Raises
     ------

@@ -225,3 +225,10 @@ def test_check_allocation_guards_every_full_read(monkeypatch, tmp_path, suffix):
     monkeypatch.setattr(iobase, "physical_memory", lambda: 10_000)
     with pytest.raises(MemoryError, match=rf"rec{suffix}: reading 4096 samples x 2 channels"):
         pio.read(p)
+
+
+@pytest.mark.parametrize("fs", [float("nan"), float("inf"), 0.0, -5120.0])
+def test_any_fs_still_needs_a_finite_positive_rate(fs, monkeypatch):
+    monkeypatch.setenv(iobase.ANY_FS_ENV, "1")
+    with pytest.raises(pio.RecordingFileError, match="not a finite positive number"):
+        iobase.check_fs_range(fs, "x.h5")
