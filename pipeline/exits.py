@@ -428,7 +428,8 @@ def _rename_to_free(stage: Path, base: Path) -> Path:
             continue
         _fsync_path(dest.parent, directory=True)
         return dest
-    raise FileExistsError(errno.EEXIST, "no free output folder name after 100 tries", str(base))  # pragma: no cover
+    raise FileExistsError(errno.EEXIST, "no free output folder name after 100 tries",  # pragma: no cover
+                          str(base))
 
 
 def _keep_as_partial(stage: Path, dest: Path, token: str) -> None:
@@ -609,8 +610,8 @@ class OutputDir:
     ``staged=True`` and map paths with :meth:`published`). When the body returns, every file
     in it is fsync'ed, a manifest (:data:`MANIFEST_NAME`: the files written) is added, and the
     staging folder replaces the output folder atomically (a rename to the new name, or onto
-    the empty reserved folder, or - ``overwrite`` (:func:`_swap_in`) - rename the old folder aside, rename the new one
-    in, remove the old one; a crash at any point leaves the old or the new complete folder).
+    the empty reserved folder, or - ``overwrite`` (:func:`_swap_in`) - rename the old folder
+    aside, rename the new one in, remove the old one; a crash at any point leaves the old or the new complete folder).
     No stale file of an earlier run survives an overwrite.
 
     While the folder is open, SIGTERM and SIGHUP (at their default action) raise

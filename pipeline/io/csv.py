@@ -170,7 +170,7 @@ def _units_row(fh, sep: str, n_header: int) -> list[str] | None:
     ``n_header`` fields and none of them is a number or a timestamp (``fh`` then after it),
     else None (``fh`` where it was)."""
     at = fh.tell()
-    raw = fh.readline()
+    raw = fh.readline(MAX_HEADER_LINE + 1)
     try:
         line = raw.decode("utf-8")
     except UnicodeDecodeError:
