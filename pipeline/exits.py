@@ -611,8 +611,8 @@ class OutputDir:
     in it is fsync'ed, a manifest (:data:`MANIFEST_NAME`: the files written) is added, and the
     staging folder replaces the output folder atomically (a rename to the new name, or onto
     the empty reserved folder, or - ``overwrite`` (:func:`_swap_in`) - rename the old folder
-    aside, rename the new one in, remove the old one; a crash at any point leaves the old or the new complete folder).
-    No stale file of an earlier run survives an overwrite.
+    aside, rename the new one in, remove the old one; a crash at any point leaves the old or
+    the new complete folder). No stale file of an earlier run survives an overwrite.
 
     While the folder is open, SIGTERM and SIGHUP (at their default action) raise
     ``SystemExit(128 + signum)`` in the main thread, so a terminated run unwinds as an
