@@ -1374,6 +1374,8 @@ def outcome_table(runs) -> str:
     order = ["truncation", "byteflip", "special", "scene", "output", "declared", "signal"]
     counts: dict = {}
     for cat, outcome in runs:
+        if outcome not in OUTCOMES:
+            raise ValueError(f"outcome {outcome!r} of a {cat!r} case is none of {OUTCOMES}")
         if cat not in order:
             order.append(cat)
         counts[cat, outcome] = counts.get((cat, outcome), 0) + 1

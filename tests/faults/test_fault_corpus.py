@@ -39,7 +39,7 @@ import warnings
 from pathlib import Path
 
 import pytest
-from fault_corpus import OUTPUTS, Skip, Workspace, build_originals, corpus
+from fault_corpus import OUTCOMES, OUTPUTS, Skip, Workspace, build_originals, corpus, outcome_table
 
 import meshphase.io as pio
 from meshphase.cli import main
@@ -391,3 +391,15 @@ def test_corpus_shape():
         assert c.runner in ("inprocess", "subprocess"), c.name
         assert c.patch is None or c.runner == "inprocess", c.name
     assert set(SUBPROCESS_SAMPLE) <= {c.name for c in DEFAULT}
+
+
+def test_outcome_table_counts_by_category():
+    table = outcome_table([("declared", "clean"), ("declared", "leak"), ("signal", "hang"), ("x", "clean")])
+    rows = {ln.split()[0]: ln.split()[1:] for ln in table.splitlines()[2:]}
+    assert table.splitlines()[1].split() == ["category", *OUTCOMES, "total"]
+    assert rows == {"declared": ["1", "0", "0", "0", "1", "0", "2"], "signal": ["0", "0", "0", "1", "0", "0", "1"],
+                    "x": ["1", "0", "0", "0", "0", "0", "1"], "all": ["2", "0", "0", "1", "1", "0", "4"]}
+    empty = outcome_table([]).splitlines()
+    assert empty[2].split() == ["all"] + ["0"] * (len(OUTCOMES) + 1)
+    with pytest.raises(ValueError, match="'slow' of a 'scene' case"):
+        outcome_table([("scene", "slow")])
