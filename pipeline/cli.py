@@ -23,6 +23,7 @@ Exit status (every subcommand; README.md "Exit status"; constants in :mod:`meshp
       (``"status": "unreliable"``); a campaign with any recording failed, partial or unreliable
 130   interrupted (Ctrl-C); the interrupted run's output folder is removed
 141   standard output closed by the reader (``| head``): no message
+143   terminated (SIGTERM; 129: SIGHUP) while writing: no message, nothing left
 ====  ==========================================================================================
 
 Every message is one line on stderr in one style, ``meshphase COMMAND: LEVEL: TEXT``
@@ -58,6 +59,7 @@ from .exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_PIPE, OutputDir, recordin
                     run_status, status_line)
 from .heap import limit_heap_growth
 from .io import convert, detect_format, iter_blocks, read_info
+from .io.base import ANY_FS_ENV
 from .log import MessageFormatter, logger, message_line
 from .quality import channel_quality
 from .scene import SceneError, load_scene
@@ -512,6 +514,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="no progress bars (convert: no summary line either)")
     p.add_argument("--debug", action="store_true",
                    help="developers: re-raise errors with their traceback (also MESHPHASE_DEBUG=1)")
+    p.add_argument("--any-fs", action="store_true",
+                   help="accept a recording's sample rate outside 1e-3 to 1e8 Hz (refused by default as "
+                        "a damaged header; also MESHPHASE_ANY_FS=1)")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _add_info(sub)
     _add_convert(sub)
@@ -757,6 +762,9 @@ def main(argv=None) -> int:
     warnings.formatwarning = lambda message, category, *_a, **_k: (
         message_line(args.command, "warning", f"{category.__name__}: {message}") + "\n")
     warnings.showwarning = _once(old_show)
+    old_any_fs = os.environ.get(ANY_FS_ENV)
+    if args.any_fs:               # the environment: campaign workers inherit it
+        os.environ[ANY_FS_ENV] = "1"
     try:
         rc = int(args.func(args) or 0)
         sys.stdout.flush()                 # a closed pipe shows here, not at interpreter exit
@@ -778,6 +786,11 @@ def main(argv=None) -> int:
         return EXIT_ERROR
     finally:
         warnings.formatwarning, warnings.showwarning = old_format, old_show
+        if args.any_fs:
+            if old_any_fs is None:
+                os.environ.pop(ANY_FS_ENV, None)
+            else:
+                os.environ[ANY_FS_ENV] = old_any_fs
 
 
 def console_main(argv=None) -> int:

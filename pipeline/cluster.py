@@ -129,6 +129,22 @@ def _check_modules(modules) -> tuple:
     return modules
 
 
+@contextlib.contextmanager
+def _sigint_blocked() -> Iterator[None]:
+    """SIGINT blocked in this thread while the body runs (processes it starts inherit the
+    mask); a Ctrl-C that came meanwhile is delivered when it ends."""
+    import signal
+
+    if not hasattr(signal, "pthread_sigmask"):    # pragma: no cover - not on POSIX
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 def worker_server(modules: Sequence[str]) -> float | None:
     """Start this process's fork server with ``modules`` imported, once (see the module notes).
 
@@ -165,6 +181,16 @@ def worker_server(modules: Sequence[str]) -> float | None:
         t = time.perf_counter()
         ctx = multiprocessing.get_context("forkserver")
         ctx.set_forkserver_preload(list(modules))
+        # the server, and every worker it forks, starts with SIGINT blocked: a Ctrl-C at the
+        # terminal (sent to the whole process group) is this process's to handle (it closes
+        # the cluster and prints "interrupted"), not a KeyboardInterrupt traceback from the
+        # server's imports or a worker's task. The resource tracker first: starting it
+        # unblocks SIGINT in the calling thread.
+        from multiprocessing import forkserver, resource_tracker
+
+        resource_tracker.ensure_running()
+        with _sigint_blocked():
+            forkserver.ensure_running()
         # starting any process starts the server (with the preload above); os.getpid is
         # a harmless target the child can unpickle without importing anything of ours
         p = ctx.Process(target=os.getpid, name="meshphase-fork-server-start", daemon=True)

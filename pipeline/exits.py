@@ -22,6 +22,8 @@ code  meaning
       recordings in ``OUT.partial`` for ``--resume``)
 141   standard output closed early by the reader (``meshphase info --json | head -1``): quiet,
       the status a process killed by SIGPIPE gets
+143   terminated (SIGTERM; 129: SIGHUP) while writing: the run unwinds as for Ctrl-C and
+      leaves nothing (no output folder, no staging folder, no temporary file)
 ====  ==========================================================================================
 
 :func:`run_status` turns a :class:`meshphase.stages.RunContext` into that status (it goes into
@@ -53,13 +55,14 @@ from pathlib import Path
 from . import __version__
 from .io import atomic_path
 from .io.base import recording_read_errors  # noqa: F401 (public here too)
-from .io.base import _host_tag, _pid_alive
+from .io.base import _host_tag, _pid_alive, _SignalGuard
 from .log import logger
 
 __all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_USAGE", "EXIT_PARTIAL", "EXIT_INTERRUPTED",
            "EXIT_PIPE", "BENIGN_SKIPS", "RESULT_OF_STAGE", "run_status", "status_line",
            "OutputDir", "new_output_dir", "recording_read_errors", "foreign_entries", "recover_output_dirs",
-           "published_path", "remove_partial", "MANIFEST_NAME", "PARTIAL_SUFFIX", "STALE_DIR_AGE"]
+           "published_path", "remove_partial", "MANIFEST_NAME", "PARTIAL_SUFFIX", "STALE_DIR_AGE",
+           "free_output_name"]
 
 EXIT_OK = 0
 EXIT_ERROR = 1
@@ -411,6 +414,24 @@ def _swap_in(stage: Path, dest: Path, token: str, *, reserved: bool = False, sna
     _fsync_path(parent, directory=True)
 
 
+def _rename_to_free(stage: Path, base: Path) -> Path:
+    """Put the finished folder ``stage`` at the first free one of ``base``, ``base-2``, ...
+    (:func:`free_output_name`: another writer may have taken a name while this run ran);
+    returns where."""
+    for _ in range(100):
+        dest = free_output_name(base)
+        try:
+            os.rename(stage, dest)
+        except OSError as exc:
+            if exc.errno not in (errno.ENOTEMPTY, errno.EEXIST):
+                raise
+            continue
+        _fsync_path(dest.parent, directory=True)
+        return dest
+    raise FileExistsError(errno.EEXIST, "no free output folder name after 100 tries",  # pragma: no cover
+                          str(base))
+
+
 def _keep_as_partial(stage: Path, dest: Path, token: str) -> None:
     """Put the unfinished ``stage`` at ``dest`` (``<folder>.partial``), replacing an older one
     only when that holds nothing but meshphase's files (it may be a folder of the user's)."""
@@ -547,6 +568,18 @@ def published_path(path) -> Path:
     return p
 
 
+def free_output_name(base: Path) -> Path:
+    """``base`` if nothing is there (not even a dangling link), else the first free one of
+    ``base-2``, ``base-3``, ...; nothing is created."""
+    base = Path(base)
+    if not os.path.lexists(base):
+        return base
+    i = 2
+    while os.path.lexists(f"{base}-{i}"):
+        i += 1
+    return Path(f"{base}-{i}")
+
+
 def new_output_dir(base: Path, *, overwrite: bool = False) -> Path:
     """``base`` if it does not exist (or ``overwrite``), else ``base-2``, ``base-3``, ...:
     a run never overwrites an earlier one unless asked."""
@@ -554,10 +587,7 @@ def new_output_dir(base: Path, *, overwrite: bool = False) -> Path:
     if overwrite or not base.exists():
         base.mkdir(parents=True, exist_ok=True)
         return base
-    i = 2
-    while Path(f"{base}-{i}").exists():
-        i += 1
-    out = Path(f"{base}-{i}")
+    out = free_output_name(base)
     out.mkdir(parents=True)
     return out
 
@@ -565,22 +595,29 @@ def new_output_dir(base: Path, *, overwrite: bool = False) -> Path:
 class OutputDir:
     """A run's output folder, written whole or not at all.
 
-    ``with OutputDir(base, overwrite=...) as out:`` reserves the output folder up front (as
-    :func:`new_output_dir` does: ``base``, else ``base-2``, ...; with
-    ``overwrite`` an existing ``base``), so an unwritable location fails in a second, not
-    after the processing. The run writes into ``out.path``: a new, empty staging folder beside
-    it with a short name (``.mp-<host>-<pid>-<hex>.new``) - always with ``overwrite`` or
-    ``staged=True``; with ``staged=None`` (the default) and a new folder, ``out.path`` is that
+    ``with OutputDir(base, overwrite=...) as out:`` picks the output folder up front
+    (``base``, else ``base-2``, ...; with ``overwrite`` an existing ``base``) and creates its
+    staging folder beside it, so an unwritable location fails in a second, not after the
+    processing. The run writes into ``out.path``: a new, empty staging folder with a short
+    name (``.mp-<host>-<pid>-<hex>.new``) - always with ``overwrite`` or ``staged=True``. With
+    ``staged=True`` and a new folder nothing is created under the final name until the
+    results are complete (a run killed before leaves no empty folder there, and the next run
+    gets the same name); should another run have taken it meanwhile, the results go to the
+    next free name (:attr:`final` says which). With ``staged=None`` (the default) and a new
+    folder, the folder is created (reserved) at once and ``out.path`` is that
     folder itself (callers that return the paths they wrote keep working; it is removed
     whole if the run fails, but a process killed mid-write leaves it half written: give
     ``staged=True`` and map paths with :meth:`published`). When the body returns, every file
     in it is fsync'ed, a manifest (:data:`MANIFEST_NAME`: the files written) is added, and the
-    staging folder replaces the output folder atomically (:func:`_swap_in`: rename onto the
-    empty reserved folder, or - ``overwrite`` - rename the old folder aside, rename the new one
-    in, remove the old one; a crash at any point leaves the old or the new complete folder).
-    No stale file of an earlier run survives an overwrite.
+    staging folder replaces the output folder atomically (a rename to the new name, or onto
+    the empty reserved folder, or - ``overwrite`` (:func:`_swap_in`) - rename the old folder
+    aside, rename the new one in, remove the old one; a crash at any point leaves the old or
+    the new complete folder). No stale file of an earlier run survives an overwrite.
 
-    If the body raises (an error, ``KeyboardInterrupt``), the staging folder is removed and
+    While the folder is open, SIGTERM and SIGHUP (at their default action) raise
+    ``SystemExit(128 + signum)`` in the main thread, so a terminated run unwinds as an
+    interrupted one does (exit 143 for SIGTERM). If the body raises (an error,
+    ``KeyboardInterrupt``, that ``SystemExit``), the staging folder is removed and
     the output folder is as before (a reserved folder removed again); after
     :meth:`mark_partial` it is kept as ``<output folder>.partial`` instead. :meth:`discard`
     removes it on request (a run with nothing usable writes nothing).
@@ -629,6 +666,8 @@ class OutputDir:
         self._reserved = False
         self._snapshot = None
         self._keep = False
+        self._fresh = False
+        self._signals = None
         self._state = "new"
 
     def __enter__(self) -> "OutputDir":
@@ -656,10 +695,20 @@ class OutputDir:
                     str(base))
             self.final = base
             self._snapshot = _identity(base)
+        elif self.staged:
+            # the final name appears only when the results are complete (publish): a run
+            # killed before leaves no empty folder under it, only its staging folder,
+            # which the next run's recover_output_dirs removes
+            try:
+                os.makedirs(base.parent, exist_ok=True)
+            except (FileExistsError, NotADirectoryError):    # a part of the path is a file
+                raise NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR), str(base)) from None
+            self.final = free_output_name(base)
+            self._fresh = True
         else:
             self.final = Path(new_output_dir(base, overwrite=self.overwrite))
             self._reserved = True
-        if self.staged is False and not self._reserved:
+        if self.staged is False and not (self._reserved or self._fresh):
             raise ValueError(f"{base}: replacing an existing folder needs a staging folder (staged=False "
                              "applies to a new folder only)")
         if self.staged or not self._reserved:
@@ -672,6 +721,7 @@ class OutputDir:
                 raise
         else:  # a new folder, filled in place (see the class notes)
             self.path = self.final
+        self._signals = _SignalGuard().__enter__()
         self._state = "open"
         return self
 
@@ -689,6 +739,8 @@ class OutputDir:
                 os.mkdir(p)
             except FileExistsError:
                 continue
+            except OSError as exc:      # the output folder's name, not the working name, in the message
+                raise OSError(exc.errno, exc.strerror, str(self.final)) from None
             break
         else:  # pragma: no cover - 100 collisions of 32 random bits
             raise FileExistsError(errno.EEXIST, "no free staging folder name after 100 tries", str(parent))
@@ -705,17 +757,22 @@ class OutputDir:
                                                "pid": os.getpid(), "host": socket.gethostname()})
 
     def __exit__(self, exc_type, exc, tb) -> bool:
-        if self._state != "open":
-            return False
-        if exc_type is None:
-            try:
-                self.publish()
-            except BaseException:
+        try:
+            if self._state != "open":
+                return False
+            if exc_type is None:
+                try:
+                    self.publish()
+                except BaseException:
+                    self._fail()
+                    raise
+            else:
                 self._fail()
-                raise
-        else:
-            self._fail()
-        return False
+            return False
+        finally:
+            if self._signals is not None:
+                self._signals.__exit__(None, None, None)
+                self._signals = None
 
     def published(self, path) -> Path:
         """Where ``path`` (inside :attr:`path`) is once the folder is published; other paths
@@ -752,7 +809,10 @@ class OutputDir:
         if not self.is_staged:
             self._state = "published"
             return self.final
-        _swap_in(self.path, self.final, self._token, reserved=self._reserved, snapshot=self._snapshot)
+        if self._fresh:
+            self.final = _rename_to_free(self.path, self.base)
+        else:
+            _swap_in(self.path, self.final, self._token, reserved=self._reserved, snapshot=self._snapshot)
         _PUBLISHED[str(self.path)] = str(self.final)
         while len(_PUBLISHED) > 64:
             _PUBLISHED.popitem(last=False)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import copy
 import datetime as _dt
 import math
+import unicodedata
 from dataclasses import asdict, dataclass
 from typing import Any, Iterator, Sequence
 
@@ -19,12 +20,18 @@ import numpy as np
 from .jsonable import to_jsonable
 from .validate import as_float, as_nonnegative, as_positive
 
-__all__ = ["ChannelSpec", "Recording", "CHANNEL_KINDS", "ENCODER_SHAFTS", "sample_index"]
+__all__ = ["ChannelSpec", "Recording", "CHANNEL_KINDS", "ENCODER_SHAFTS", "sample_index", "control_character"]
 
 #: Channel kinds a recording may carry.
 CHANNEL_KINDS = ("sun", "ring", "facewidth", "tacho", "encoder", "other")
 #: Shafts an encoder channel may sit on ("input" is the sun shaft).
 ENCODER_SHAFTS = ("sun", "input", "carrier", "ring")
+
+
+def control_character(text: str) -> str | None:
+    """The first control character (Unicode category Cc: C0, DEL, C1) or line / paragraph
+    separator (Zl, Zp) in ``text``, or None."""
+    return next((c for c in text if unicodedata.category(c) in ("Cc", "Zl", "Zp")), None)
 
 
 @dataclass(frozen=True)
@@ -34,7 +41,9 @@ class ChannelSpec:
     Parameters
     ----------
     name : str
-        Unique channel name.
+        Unique channel name, with no control character (C0, DEL, C1) or line / paragraph
+        separator: such a name is refused, since every place that writes or prints it (file
+        headers, tables, messages) would carry a line break or escape sequence.
     kind : {"sun", "ring", "facewidth", "tacho", "encoder", "other"}
         What the channel measures: a sun tooth-root gauge, a ring tooth-root gauge, a
         face-width gauge (one of several across the face of one tooth root), a carrier
@@ -42,7 +51,7 @@ class ChannelSpec:
         ``pulses_per_rev`` pulses per turn of ``shaft``), or anything else.
     units : str
         Physical units of the stored samples after ``gain`` is applied, e.g. ``"m/m"``
-        (strain) or ``"V"``.
+        (strain) or ``"V"``; no control character (as ``name``).
     gain : float
         Calibration gain [units per stored unit]; physical value = stored value * gain.
         Readers store samples already scaled to physical units and keep gain = 1 unless the
@@ -75,10 +84,18 @@ class ChannelSpec:
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name.strip():
             raise ValueError(f"channel name must be a non-empty string, got {self.name!r}")
+        bad = control_character(self.name)
+        if bad is not None:
+            raise ValueError(f"channel name {self.name!r} holds the control character U+{ord(bad):04X}; "
+                             "rename the channel (names are written into files and printed on one line)")
         if self.kind not in CHANNEL_KINDS:
             raise ValueError(f"channel {self.name!r}: kind must be one of {CHANNEL_KINDS}, got {self.kind!r}")
         if not isinstance(self.units, str):
             raise TypeError(f"channel {self.name!r}: units must be a string, got {self.units!r}")
+        bad = control_character(self.units)
+        if bad is not None:
+            raise ValueError(f"channel {self.name!r}: units {self.units!r} hold the control character "
+                             f"U+{ord(bad):04X}")
         g = as_float(self.gain, f"channel {self.name!r} gain")
         if g == 0.0:
             raise ValueError(f"channel {self.name!r}: gain must be non-zero, got 0.0")
@@ -200,7 +217,11 @@ class Recording:
         if len(specs) != arr.shape[1]:
             raise ValueError(f"data has {arr.shape[1]} channel column(s) but {len(specs)} channel spec(s) were given")
         names = [s.name for s in specs]
-        dup = sorted({n for n in names if names.count(n) > 1})
+        seen: set = set()
+        dup: set = set()
+        for n in names:                      # linear in the channels (a CSV may have 1024)
+            (dup if n in seen else seen).add(n)
+        dup = sorted(dup)
         if dup:
             raise ValueError(f"duplicate channel name(s) {dup}")
         self.data = arr

@@ -882,5 +882,5 @@ def process_recording(path, gearset_scene_path, *, out_dir=None, overwrite=False
             out.discard()
             return ctx, {}
         written = write_outputs(ctx, out.path, report=False)
-        files = {k: out.published(v) for k, v in written.items()}
-    return ctx, files
+    # after publishing: the folder's name is settled then (another run may have taken it)
+    return ctx, {k: out.published(v) for k, v in written.items()}

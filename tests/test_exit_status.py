@@ -216,11 +216,15 @@ def test_permission_denied_output_folder_exits_1(rig, tmp_path, capsys):
 
 
 def test_permission_denied_output_folder_injected_exits_1(rig, tmp_path, monkeypatch, capsys):
-    """The EACCES path as root too: the folder cannot be created (as mkdir raises it)."""
-    def denied(base, *, overwrite=False):
-        raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(base))
+    """The EACCES path as root too: no folder can be created in ``locked`` (as mkdir raises it)."""
+    real_mkdir = os.mkdir
 
-    monkeypatch.setattr(meshphase.exits, "new_output_dir", denied)
+    def denied(path, *a, **k):
+        if os.path.dirname(os.fspath(path)) == str(tmp_path / "locked"):
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), os.fspath(path))
+        return real_mkdir(path, *a, **k)
+
+    monkeypatch.setattr(os, "mkdir", denied)
     out = tmp_path / "locked" / "out"
     assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
                  "--out", str(out)]) == EXIT_ERROR

@@ -57,7 +57,8 @@ __all__ = ["RecordingFileError", "CorruptFileError", "RecordingInfo", "atomic_pa
            "clean_stale_partials", "TEMP_PREFIX", "TEMP_SUFFIX", "STALE_AGE", "check_verify",
            "warn_nonfinite", "dumps_json", "check_start_datetime", "spec_from_dict", "nice_fs",
            "CLOCK_NAMES", "kind_from_name", "clock_timing",
-           "regroup_blocks", "recording_read_errors"]
+           "regroup_blocks", "recording_read_errors", "physical_memory", "check_allocation",
+           "check_fs_range", "FS_RANGE", "ANY_FS_ENV"]
 
 
 class RecordingFileError(ValueError):
@@ -112,6 +113,12 @@ class RecordingInfo:
     history : list
     extra : dict
         Format-specific details (layout, compression, segment count...).
+
+    Raises
+    ------
+    RecordingFileError
+        ``fs`` is not a finite positive number, or lies outside :data:`FS_RANGE` (see
+        :func:`check_fs_range`).
     """
 
     path: str
@@ -124,6 +131,9 @@ class RecordingInfo:
     meta: dict = field(default_factory=dict)
     history: list = field(default_factory=list)
     extra: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        check_fs_range(self.fs, self.path)
 
     @property
     def duration(self) -> float:
@@ -158,7 +168,8 @@ class RecordingInfo:
         channels = list(channels)
         if not channels:
             raise ValueError(f"{self.path}: channel selection is empty")
-        missing = [c for c in channels if c not in self.names]
+        known = set(self.names)
+        missing = [c for c in channels if c not in known]
         if missing:
             raise ValueError(f"{self.path}: no channel(s) {missing}; the file has {self.names}")
         if len(set(channels)) != len(channels):
@@ -167,6 +178,62 @@ class RecordingInfo:
 
 
 # ---------------------------------------------------------------------------- shared helpers
+#: Sample rates [Hz] a recording file may state: from a slow logger to the fastest strain
+#: acquisition, with a wide margin either side. A rate outside is refused as a damaged or
+#: misread header unless the environment variable :data:`ANY_FS_ENV` is ``1`` (the
+#: ``meshphase --any-fs`` option sets it).
+FS_RANGE = (1e-3, 1e8)
+#: The environment variable that lets any finite positive sample rate through.
+ANY_FS_ENV = "MESHPHASE_ANY_FS"
+
+
+def check_fs_range(fs, path) -> None:
+    """Refuse a sample rate ``fs`` [Hz] of the file ``path`` outside :data:`FS_RANGE`
+    (unless :data:`ANY_FS_ENV` is ``1``).
+
+    Raises
+    ------
+    RecordingFileError
+        Naming the file, echoing the rate and the range, and how to force it.
+    """
+    try:
+        rate = float(fs)
+    except (TypeError, ValueError):
+        raise RecordingFileError(path, f"sample rate fs = {fs!r} is not a number") from None
+    if not (math.isfinite(rate) and rate > 0):
+        raise RecordingFileError(path, f"sample rate fs = {fs!r} Hz is not a finite positive number")
+    if not FS_RANGE[0] <= rate <= FS_RANGE[1] and os.environ.get(ANY_FS_ENV, "").strip() != "1":
+        raise RecordingFileError(path, f"sample rate fs = {fs!r} Hz is outside the physical range "
+                                       f"[{FS_RANGE[0]:g}, {FS_RANGE[1]:g}] Hz (a damaged or misread header?); "
+                                       f"if it is right, run with --any-fs ({ANY_FS_ENV}=1)")
+
+
+def physical_memory() -> int | None:
+    """The machine's physical memory [bytes], or None where the OS does not say."""
+    try:
+        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def check_allocation(path, n_samples: int, n_channels: int, itemsize: int) -> None:
+    """Refuse, before allocating, to read ``n_samples`` x ``n_channels`` samples of
+    ``itemsize`` [bytes] that the machine's physical memory cannot hold.
+
+    Raises
+    ------
+    MemoryError
+        Naming the file, the sizes and the memory [GB], and what to do instead (a time
+        window, the streamed commands).
+    """
+    need = int(n_samples) * int(n_channels) * int(itemsize)
+    ram = physical_memory()
+    if ram is not None and need > ram:
+        raise MemoryError(f"{path}: reading {n_samples} samples x {n_channels} channels needs "
+                          f"{need / 1e9:.4g} GB, more than this machine's {ram / 1e9:.4g} GB of memory; "
+                          "read a time window (start, stop) or fewer channels, or use the streamed commands")
+
+
 def check_verify(verify) -> bool:
     """The ``verify`` option of a format's readers, checked: a bool (TypeError otherwise)."""
     if not isinstance(verify, (bool, np.bool_)):

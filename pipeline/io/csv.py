@@ -71,7 +71,7 @@ from .base import (CorruptFileError, RecordingFileError, RecordingInfo, check_st
                    dumps_json, nice_fs, spec_from_dict, warn_nonfinite)
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "FORMAT_VERSION", "TIME_TOLERANCE", "sniff", "read_info",
-           "read", "write", "write_blocks", "iter_blocks"]
+           "read", "write", "write_blocks", "iter_blocks", "MAX_CHANNELS", "MAX_HEADER_LINE"]
 
 NAME = "csv"
 SUFFIXES = (".csv",)
@@ -85,6 +85,15 @@ FORMAT_VERSION = 1
 #: intervals [-]. 0.1 accepts times rounded to 1 us at 51.2 kHz and still catches any dropped,
 #: repeated or shifted sample.
 TIME_TOLERANCE = 0.1
+
+#: Most channel columns a CSV header may have: a header of more is refused before any
+#: column is parsed further (a bad export or a transposed table, not a recording).
+MAX_CHANNELS = 1024
+#: Longest preamble, comment or header line read [bytes] (a preamble holds the channel specs
+#: and the history; a header of MAX_CHANNELS long names fits many times over).
+MAX_HEADER_LINE = 16 * 1024 ** 2
+#: Column names a FormatWarning lists before summarising the rest as a count.
+_LISTED = 5
 
 _TAG = "# meshphase "
 #: field separators a plain CSV may use, in order of preference on a tie
@@ -161,7 +170,7 @@ def _units_row(fh, sep: str, n_header: int) -> list[str] | None:
     ``n_header`` fields and none of them is a number or a timestamp (``fh`` then after it),
     else None (``fh`` where it was)."""
     at = fh.tell()
-    raw = fh.readline()
+    raw = fh.readline(MAX_HEADER_LINE + 1)
     try:
         line = raw.decode("utf-8")
     except UnicodeDecodeError:
@@ -272,7 +281,10 @@ def _read_head(path) -> _Head:
     with open(path, "rb") as fh:
         while True:
             at = fh.tell()
-            raw = fh.readline()
+            raw = fh.readline(MAX_HEADER_LINE + 1)
+            if len(raw) > MAX_HEADER_LINE:
+                raise RecordingFileError(path, f"line {n_head + 1} (byte {at}) is longer than {MAX_HEADER_LINE} "
+                                               "bytes: not a preamble or header line of a recording")
             if not raw:
                 if preamble is not None:
                     raise CorruptFileError(path, f"byte {size} (end of file)", "truncated: the file ends after "
@@ -306,6 +318,9 @@ def _read_head(path) -> _Head:
         data_offset = fh.tell()
         sep = "," if preamble is not None else _separator(header)
         fields = next(_csv.reader([header], delimiter=sep))
+        if len(fields) - 1 > MAX_CHANNELS:
+            raise RecordingFileError(path, f"line {n_head}: header of {len(fields) - 1} channel columns, more than "
+                                           f"the {MAX_CHANNELS} a recording may have (MAX_CHANNELS)")
         units_row, decimal, quantum, epoch = None, ".", 0.0, None
         if preamble is None:
             units_row = _units_row(fh, sep, len(fields))
@@ -418,8 +433,9 @@ def _plain_info(path, head: _Head) -> RecordingInfo:
         raise RecordingFileError(path, f"line {head.n_head}: header column(s) {empty} have no name")
     no_units = [n for n, u in zip(head.names, head.units) if u is None]
     if no_units:
-        warnings.warn(FormatWarning(f"{path}: header column(s) {no_units} carry no '[units]'; units left empty"),
-                      stacklevel=3)
+        more = f" and {len(no_units) - _LISTED} more" if len(no_units) > _LISTED else ""
+        warnings.warn(FormatWarning(f"{path}: header column(s) {no_units[:_LISTED]}{more} carry no '[units]'; "
+                                    "units left empty"), stacklevel=3)
     specs = []
     for n, u in zip(head.names, head.units):
         try:
@@ -766,7 +782,8 @@ def _setup(path, channels):
     index = {n: i for i, n in enumerate(info.names)}
     wanted = [index[n] for n in names]
     cols = sorted(wanted)
-    perm = [cols.index(w) for w in wanted]
+    at = {w: i for i, w in enumerate(cols)}
+    perm = [at[w] for w in wanted]
     dtype = np.dtype(info.extra["dtype"])
     return head, info, names, cols, perm, dtype
 

@@ -37,7 +37,11 @@ Integrity: files are written in the HDF5 1.10 file format (``libver=("v110", "v1
 superblock, object headers, attributes and the chunk index carry checksums that HDF5 checks
 when it reads them) with a fletcher32 checksum on every sample chunk, which HDF5 checks on
 every read of that chunk. A mismatch raises :class:`~meshphase.io.base.CorruptFileError`
-naming the file, the dataset, the sample range of the chunk and its byte offset.
+naming the file, the dataset, the sample range of the chunk and its byte offset. A chunk
+never written has no checksum to check (HDF5 reads it as zeros): the chunk index is
+compared with the declared length when the header is read (:func:`_check_written`), and a
+missing chunk is a CorruptFileError naming the channel and its time range; so is a declared
+length of 1e12 samples with nothing stored, before anything is allocated.
 ``read(..., verify=False)`` reads chunks stored with fletcher32 as the only filter without
 checking the checksum (to salvage the undamaged samples of a damaged file, or to read again
 what a checked pass of the same run has read: :class:`meshphase.stream.FileSource`), with
@@ -71,8 +75,8 @@ from ..log import logger
 from ..recording import Recording
 from ..validate import as_choice, as_int, as_positive, as_positive_int
 from .base import (CLOCK_NAMES, CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime,
-                   check_verify, clock_timing, dumps_json, kind_from_name, regroup_blocks, spec_from_dict,
-                   warn_nonfinite)
+                   check_allocation, check_verify, clock_timing, dumps_json, kind_from_name,
+                   regroup_blocks, spec_from_dict, warn_nonfinite)
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "FORMAT_VERSION", "DEFAULT_CHUNK_SAMPLES", "sniff",
            "read_info", "read", "write", "write_blocks", "iter_blocks"]
@@ -395,8 +399,15 @@ def _foreign_header(f, path, fs_opt) -> tuple[dict, tuple, tuple]:
                                                                                           "unit_string")), "")
         if isinstance(units, list) and isinstance(ds, _Column):
             units = units[ds.col] if ds.col < len(units) else ""
-        specs.append(ChannelSpec(name=name, kind=kind_from_name(name.rsplit("/", 1)[-1], ds.parent.name.strip("/")),
-                                 units=units if isinstance(units, str) else ""))
+        try:
+            specs.append(ChannelSpec(name=name, kind=kind_from_name(name.rsplit("/", 1)[-1],
+                                                                    ds.parent.name.strip("/")),
+                                     units=units if isinstance(units, str) else ""))
+        except (ValueError, TypeError) as exc:
+            raise RecordingFileError(path, f"dataset {ds.name!r}: {exc}") from exc
+    for nm, ds in zip(names, chans):
+        _check_written(path, ds.ds if isinstance(ds, _Column) else ds, nm, fs,
+                       ds.axis if isinstance(ds, _Column) else 0)
     dtypes = {ds.dtype for ds in chans}
     dtype = "float32" if dtypes == {np.dtype(np.float32)} else "float64"
     root = {str(k): _plain(v) for k, v in f.attrs.items()}
@@ -410,6 +421,67 @@ def _foreign_header(f, path, fs_opt) -> tuple[dict, tuple, tuple]:
                           "fs_from": "given" if fs_opt is not None else "clock" if clock is not None else "attribute"}]}
     return attrs, tuple(specs), tuple((ds.name, None, 0) if isinstance(ds, h5py.Dataset)
                                       else (ds.ds.name, ds.col, ds.axis) for ds in chans)
+
+
+def _stored_chunk_offsets(ds) -> np.ndarray:
+    """Offsets (in elements, one row per dimension) of the chunks of ``ds`` that are stored:
+    read from the chunk index (metadata, no samples), by ``chunk_iter`` where h5py has it
+    (one pass over the index), else chunk by chunk through ``get_chunk_info``."""
+    offs: list = []
+    if hasattr(ds.id, "chunk_iter"):
+        ds.id.chunk_iter(lambda info: offs.append(info.chunk_offset))
+    else:
+        offs = [ds.id.get_chunk_info(i).chunk_offset for i in range(ds.id.get_num_chunks())]
+    return np.array(offs, dtype=np.int64).reshape(-1, ds.ndim).T
+
+
+def _check_written(path, ds, name: str, fs: float, axis: int = 0) -> None:
+    """Raise when samples of the channel ``name`` (dataset ``ds``, samples along ``axis``)
+    were never written.
+
+    HDF5 gives its fill value (zero) for a chunk that is not stored, and no checksum is
+    checked for it: the chunk index is compared with the declared shape. A chunk is
+    allocated as a whole, so the check costs a look at the index (``get_num_chunks``: no
+    sample is read); only a file with missing chunks pays a pass over the index to name
+    their time range. A contiguous dataset must have the storage its shape declares; a
+    virtual or external one is not checked (its samples live in other files). A chunk that
+    was written in part is stored whole: its unwritten samples (the fill value) are beyond
+    what the index can show.
+
+    Raises
+    ------
+    CorruptFileError
+        Naming the channel, the dataset, the first unwritten sample range [samples] and its
+        time range [s], and how many chunks are missing.
+    """
+    n = int(ds.shape[axis]) if ds.ndim else 0
+    if n == 0 or ds.is_virtual or ds.external:
+        return
+    where = f"channel {name!r} (dataset {ds.name})"
+    if ds.chunks is None:
+        want = int(ds.size) * ds.dtype.itemsize
+        got = int(ds.id.get_storage_size())
+        if got < want:
+            raise CorruptFileError(path, where, f"{got} of the {want} bytes its {n} samples need are stored: "
+                                                "the samples were never written (HDF5 reads them as zeros)")
+        return
+    grid = [-(-int(s) // int(c)) for s, c in zip(ds.shape, ds.chunks)]
+    total = math.prod(grid)
+    if ds.id.get_num_chunks() >= total:
+        return
+    c = int(ds.chunks[axis])
+    rows = _stored_chunk_offsets(ds)[axis] // c
+    done, count = np.unique(rows, return_counts=True)
+    done = done[count >= total // grid[axis]]           # rows with every chunk across them stored
+    gap = np.flatnonzero(done != np.arange(done.size))
+    first = int(gap[0]) if gap.size else int(done.size)
+    after = done[done > first]
+    last = int(after[0]) - 1 if after.size else grid[axis] - 1
+    a, b = first * c, min(n, (last + 1) * c)
+    raise CorruptFileError(
+        path, f"{where}, samples [{a}, {b}) ({a / fs:.6g} s to {b / fs:.6g} s)",
+        f"never written: {total - rows.size} of its {total} chunks are missing from the file "
+        f"(HDF5 would read them as zeros); the file is incomplete")
 
 
 def _jsonable_attrs(d: dict) -> dict:
@@ -488,6 +560,7 @@ def _parse_header(f, path) -> tuple[dict, tuple, tuple]:
             raise RecordingFileError(path, f"dataset /{_GROUP}/{k} has name attribute {d.get('name')!r}, "
                                            f"expected {name!r}")
         specs.append(spec_from_dict(d, path, f"/{_GROUP}/{k}", checked=True))
+        _check_written(path, group[k], name, float(fs))
     attrs["meta"] = loads_json(attrs["meta"], path, "root attribute meta", dict)
     attrs["history"] = loads_json(attrs["history"], path, "root attribute history", list)
     attrs["start_datetime"] = check_start_datetime(attrs.get("start_datetime"), path)
@@ -635,6 +708,7 @@ def _read_open(f, path, attrs, specs, dsets, names, i0, i1, verify: bool = True,
     sel = [by_name[nm] for nm in names]
     dtype = np.dtype(attrs["dtype"])
     n = i1 - i0
+    check_allocation(path, n, len(sel), dtype.itemsize)
     buf = np.empty((len(sel), n), dtype=dtype)  # channel-major; data = buf.T (Fortran order)
     if n:
         source = np.s_[i0:i1]

@@ -86,8 +86,8 @@ from ..jsonable import to_jsonable
 from ..recording import CHANNEL_KINDS, ChannelSpec, Recording
 from ..validate import as_int, as_positive, as_positive_int
 from . import tdms_index, tdms_rows, tdms_scaling
-from .base import (CLOCK_NAMES, CorruptFileError, RecordingFileError, RecordingInfo, check_verify, clock_timing,
-                   kind_from_name, spec_from_dict, warn_nonfinite)
+from .base import (CLOCK_NAMES, CorruptFileError, RecordingFileError, RecordingInfo, check_allocation,
+                   check_verify, clock_timing, kind_from_name, spec_from_dict, warn_nonfinite)
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "sniff", "read_info", "read", "iter_blocks", "kind_from_name",
            "reading_path"]
@@ -537,6 +537,7 @@ def _read_window(mm, plan: _Plan, names, i0: int, i1: int, path) -> tuple[np.nda
     read showed them all finite) (``mm``: the file's memory map on the computed-offset path,
     else None)."""
     n = i1 - i0
+    check_allocation(path, n, len(names), np.dtype(plan.dtype).itemsize)
     buf = np.empty((len(names), n), dtype=plan.dtype)   # channel-major; data = buf.T
     if n == 0:
         return buf.T, True

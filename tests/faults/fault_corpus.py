@@ -45,6 +45,23 @@ Categories (:func:`corpus` builds them; cases marked ``slow`` form the ``-m slow
     (EACCES and EROFS injected by monkeypatching ``os``), a full disk (``statvfs``
     monkeypatched).
 
+``declared``
+    Files whose bytes are intact but whose header declares what is not there: HDF5 chunks
+    never written (the dataset created at full length, some chunk slices never written),
+    an HDF5 declaring 1e12-1e13 samples with none stored, a CSV header of thousands to
+    millions of columns, a sample rate of 1e300 Hz, a channel name holding a line break
+    that would forge an output line, a TDMS file of another tool cut at a segment boundary
+    with its ``.tdms_index`` beside it.
+``signal``
+    ``process`` terminated (SIGTERM) or killed (SIGKILL, then run again) while it runs, and
+    ``campaign`` interrupted by Ctrl-C (SIGINT to its process group, workers included).
+
+Every run of a case is classified (:data:`OUTCOMES`): ``clean`` (what the runner requires),
+``silent`` (exit 0, or no error line, for a faulty input), ``traceback``, ``hang`` (no
+answer within the case's timeout), ``leak`` (an output, staging folder or temporary file
+left behind), ``other`` (a wrong exit code or message). ``python -m pytest
+tests/faults/test_fault_corpus.py`` ends with that table by category.
+
 Nothing here imports pytest: the corpus can be listed and run by hand
 (``python tests/faults/fault_corpus.py`` prints it).
 """
@@ -66,7 +83,7 @@ import numpy as np
 
 __all__ = ["FaultCase", "Originals", "build_originals", "corpus", "toml_dumps", "BASE_SCENE",
            "SCENE_RESULTS_CHEAP", "schema_leaf_keys", "INFO", "PROCESS", "CONVERT", "RUN",
-           "CAMPAIGN", "GEARSET_RUN"]
+           "CAMPAIGN", "GEARSET_RUN", "OUTCOMES", "outcome_table", "hdf5_without_chunks"]
 
 EXIT_ERROR = 1  # meshphase.exits.EXIT_ERROR; the corpus is plain data, the runner imports pipeline
 
@@ -82,6 +99,9 @@ CAMPAIGN = ("campaign", "{scene}", "{recording}", "--out", "{out}/camp", "--work
 #: outputs of the commands above; none may exist after a run that exits 1
 OUTPUTS = ("{out}/proc", "{out}/conv.h5", "{out}/run", "{out}/camp")
 
+#: how a run of a case went: what the runner requires, or the first way it fell short
+OUTCOMES = ("clean", "silent", "traceback", "hang", "leak", "other")
+
 
 # --------------------------------------------------------------------------- the case type
 @dataclass(frozen=True)
@@ -93,7 +113,8 @@ class FaultCase:
     name : str
         Unique id (``category/format/what``), the pytest id.
     category : str
-        ``truncation``, ``byteflip``, ``special``, ``scene`` or ``output``.
+        ``truncation``, ``byteflip``, ``special``, ``scene``, ``output``, ``declared`` or
+        ``signal``.
     make : callable
         ``make(ws) -> dict``: builds the fault in ``ws.tmp`` and returns the values of the
         placeholders in ``commands`` (``input``, ``scene``, ``recording``, ``gearset``,
@@ -128,6 +149,11 @@ class FaultCase:
     max_line : int, optional
         The error line's most characters: an input of any size gets a message of bounded
         size.
+    signal : tuple, optional
+        ``(signal name, rerun)``: the first command runs as the real command in a session of
+        its own and gets that signal (SIGINT to the whole process group, as Ctrl-C sends it)
+        once its staging folder exists; with ``rerun`` the same command is then run again to
+        the end and must exit 0 with its output under its own name and nothing else left.
     """
 
     name: str
@@ -145,6 +171,7 @@ class FaultCase:
     xfail: str | None = None
     after: Callable | None = None
     max_line: int | None = None
+    signal: tuple | None = None
 
 
 @dataclass
@@ -252,6 +279,37 @@ def build_originals(directory) -> Originals:
                "tdms": tdms_regions(paths["tdms"]), "csv": csv_regions(paths["csv"], preamble=True),
                "csv_plain": csv_regions(paths["csv_plain"], preamble=False)}
     return Originals(dir=d, recordings=paths, regions=regions, gearset=gearset, scene=scene, rec=rec)
+
+
+# --------------------------------------------------------------------------- files never finished
+def hdf5_without_chunks(src, dst, skip, *, chunk: int | None = None, n_samples: int | None = None) -> Path:
+    """A copy of the HDF5 recording ``src`` (meshphase layout) in chunks of ``chunk`` samples
+    (default: those of ``src``) in which the chunks with an index in ``skip`` (every channel)
+    were never written: the dataset is created at its full length and only the other chunks'
+    slices are written. ``n_samples`` declares a longer recording (every channel and the root
+    attribute) whose extra chunks are never written either."""
+    import h5py
+
+    with h5py.File(src, "r") as a, h5py.File(dst, "w", libver=("v110", "v110")) as b:
+        for k, v in a.attrs.items():
+            b.attrs[k] = v
+        n = int(a.attrs["n_samples"] if n_samples is None else n_samples)
+        b.attrs["n_samples"] = n
+        g = b.create_group("channels")
+        for name, ds in a["channels"].items():
+            c = int(chunk or ds.chunks[0])
+            # a longer declared length: an extensible chunk index (a fixed one would be
+            # allocated for every chunk the length declares)
+            d = g.create_dataset(name, shape=(n,), dtype=ds.dtype, chunks=(c,), fletcher32=ds.fletcher32,
+                                 maxshape=(None,) if n_samples is not None else None)
+            for k, v in ds.attrs.items():
+                d.attrs[k] = v
+            data = ds[()]
+            for i, c0 in enumerate(range(0, data.shape[0], c)):
+                if i not in skip:
+                    piece = data[c0:c0 + c]
+                    d[c0:c0 + piece.shape[0]] = piece
+    return Path(dst)
 
 
 # --------------------------------------------------------------------------- byte regions
@@ -1173,16 +1231,161 @@ def output_cases() -> list[FaultCase]:
     return cases
 
 
+# --------------------------------------------------------------------------- declared, not there
+def _unwritten(skip, n_samples=None):
+    """HDF5 in chunks of 4096 samples (7 for the 25600 samples of the originals) with the
+    chunks ``skip`` never written; ``n_samples`` declares a longer recording."""
+    def make(ws):
+        p = hdf5_without_chunks(ws.orig.recordings["hdf5"], ws.tmp / "unwritten.h5", set(skip),
+                                chunk=4096 if n_samples is None else None, n_samples=n_samples)
+        return {"input": str(p), "recording": str(p)}
+    return make
+
+
+def _wide_csv(k: int):
+    """A plain CSV whose header has ``k`` channel columns (no units), and two rows."""
+    def make(ws):
+        p = ws.tmp / "wide.csv"
+        with open(p, "w") as f:
+            f.write("time [s]," + ",".join(f"c{i}" for i in range(k)) + "\n")
+            for r in range(2):
+                f.write(f"{r / 5120}," + ",".join(["0.1"] * k) + "\n")
+        return {"input": str(p), "recording": str(p)}
+    return make
+
+
+def _absurd_fs(fmt: str, fs: float):
+    """The original with its stated sample rate replaced (the header's checks kept valid)."""
+    def make(ws):
+        src = ws.orig.recordings[fmt]
+        p = ws.tmp / f"fs{SUFFIX[fmt]}"
+        if fmt == "hdf5":
+            import h5py
+
+            p.write_bytes(ws.orig.blob(fmt))
+            with h5py.File(p, "r+") as f:
+                f.attrs["fs"] = fs
+        else:                                   # the CSV preamble's JSON
+            first, rest = src.read_bytes().split(b"\n", 1)
+            pre = json.loads(first[len(b"# meshphase "):])
+            pre["fs"] = fs
+            p.write_bytes(b"# meshphase " + json.dumps(pre).encode() + b"\n" + rest)
+        return {"input": str(p), "recording": str(p)}
+    return make
+
+
+FORGED = "sun\nmeshphase process: error: fake"
+
+
+def _forged_name(fmt: str):
+    """A channel named :data:`FORGED` in a file of another tool (HDF5 dataset, TDMS channel)."""
+    def make(ws):
+        data = np.zeros(25600)
+        if fmt == "hdf5":
+            import h5py
+
+            p = ws.tmp / "forged.h5"
+            with h5py.File(p, "w") as f:
+                f.create_dataset(FORGED, data=data).attrs["fs"] = 5120.0
+        else:
+            from nptdms import ChannelObject, TdmsWriter
+
+            p = ws.tmp / "forged.tdms"
+            with TdmsWriter(str(p)) as w:
+                w.write_segment([ChannelObject("g", FORGED, data, properties={"wf_increment": 1 / 5120})])
+        return {"input": str(p), "recording": str(p)}
+    return make
+
+
+def _tdms_cut_at_segment(ws):
+    """A TDMS file of another tool (npTDMS, five 1-s segments, its ``.tdms_index`` written
+    beside it) cut after its fourth segment: a valid shorter file but for the index."""
+    from nptdms import ChannelObject, TdmsWriter
+
+    p = ws.tmp / "segments.tdms"
+    rec = ws.orig.rec
+    with TdmsWriter(str(p), index_file=True) as w:
+        for k in range(5):
+            w.write_segment([ChannelObject("g", c.name, rec.data[k * 5120:(k + 1) * 5120, j],
+                                           properties={"wf_increment": 1 / rec.fs})
+                             for j, c in enumerate(rec.channels)])
+    ends = [b for _, b in tdms_regions(p)["data"]]
+    with open(p, "r+b") as fh:
+        fh.truncate(ends[3])
+    return {"input": str(p), "recording": str(p)}
+
+
+def declared_cases() -> list[FaultCase]:
+    cmds = (INFO, PROCESS, CONVERT)
+    cases = [FaultCase(f"declared/hdf5/unwritten-{name}", "declared", _unwritten(skip), cmds,
+                       contains=("never written",))
+             for name, skip in (("chunk-1", (1,)), ("chunks-1-2", (1, 2)), ("chunk-0", (0,)),
+                                ("last-chunk", (6,)))]
+    cases += [
+        FaultCase("declared/hdf5/1e12-samples-none-stored", "declared", _unwritten((), 10 ** 12), cmds,
+                  contains=("never written",)),
+        FaultCase("declared/hdf5/1e13-samples-none-stored", "declared", _unwritten((), 10 ** 13), cmds,
+                  contains=("never written",), runner="subprocess", timeout=60.0),
+        FaultCase("declared/csv/2000-columns", "declared", _wide_csv(2000), cmds,
+                  contains=("channel columns",), max_line=400),
+        FaultCase("declared/csv/10-million-columns", "declared", _wide_csv(10_000_000), (INFO, CONVERT),
+                  contains=("longer than",), max_line=400, runner="subprocess", timeout=60.0, slow=True),
+        FaultCase("declared/tdms/cut-at-segment-with-index", "declared", _tdms_cut_at_segment, cmds,
+                  contains=(".tdms_index",)),
+    ]
+    for fmt in ("hdf5", "csv"):
+        cases.append(FaultCase(f"declared/{fmt}/fs-1e300", "declared", _absurd_fs(fmt, 1e300), cmds,
+                               contains=("outside the physical range",)))
+    for fmt in ("hdf5", "tdms"):
+        cases.append(FaultCase(f"declared/{fmt}/newline-in-channel-name", "declared", _forged_name(fmt), cmds,
+                               contains=("control character",)))
+    return cases
+
+
+def signal_cases() -> list[FaultCase]:
+    return [
+        FaultCase("signal/process/sigterm", "signal", _valid_copy, (PROCESS,), expect=frozenset({143}),
+                  names=(), signal=("SIGTERM", False), runner="subprocess", timeout=120.0),
+        FaultCase("signal/process/sigkill-then-rerun", "signal", _valid_copy, (PROCESS,),
+                  expect=frozenset({-9}), names=(), signal=("SIGKILL", True), runner="subprocess",
+                  timeout=120.0, slow=True),
+        FaultCase("signal/campaign/ctrl-c", "signal", _valid_copy, (CAMPAIGN,), expect=frozenset({130}),
+                  names=(), signal=("SIGINT", False), runner="subprocess", timeout=180.0, slow=True),
+    ]
+
+
 # --------------------------------------------------------------------------- the corpus
 def corpus() -> list[FaultCase]:
     """Every case: the default selection (``slow=False``) and the ``-m slow`` sweep (more
     offsets, seeds and keys)."""
-    cases = (truncation_cases() + byteflip_cases() + special_cases() + scene_cases() + output_cases())
+    cases = (truncation_cases() + byteflip_cases() + special_cases() + scene_cases() + output_cases()
+             + declared_cases() + signal_cases())
     names = [c.name for c in cases]
     dup = {n for n in names if names.count(n) > 1}
     if dup:
         raise ValueError(f"duplicate case names: {sorted(dup)}")
     return cases
+
+
+def outcome_table(runs) -> str:
+    """The table of outcomes by category: ``runs`` is an iterable of (category, outcome)
+    pairs (:data:`OUTCOMES`), one per case run; a row per category (in :func:`corpus`'s
+    order), a column per outcome, and the totals."""
+    order = ["truncation", "byteflip", "special", "scene", "output", "declared", "signal"]
+    counts: dict = {}
+    for cat, outcome in runs:
+        if outcome not in OUTCOMES:
+            raise ValueError(f"outcome {outcome!r} of a {cat!r} case is none of {OUTCOMES}")
+        if cat not in order:
+            order.append(cat)
+        counts[cat, outcome] = counts.get((cat, outcome), 0) + 1
+    cats = [c for c in order if any((c, o) in counts for o in OUTCOMES)]
+    head = f"{'category':<12}" + "".join(f"{o:>10}" for o in OUTCOMES) + f"{'total':>8}"
+    lines = ["fault corpus: outcome of every case run, by category", head]
+    for c in cats + ["all"]:
+        row = [sum(counts.get((k, o), 0) for k in (cats if c == "all" else [c])) for o in OUTCOMES]
+        lines.append(f"{c:<12}" + "".join(f"{n:>10}" for n in row) + f"{sum(row):>8}")
+    return "\n".join(lines)
 
 
 def _count(cases) -> dict:

@@ -11,7 +11,13 @@ For every case and every command it names, the command must show (issue 10, item
   log lines);
 * nothing left behind: no output folder or file, no ``.partial`` temporary file;
 * no hang: a per-case pytest-timeout (in-process), or a killed child process (cases that
-  could hang inside compiled code run as a subprocess).
+  could hang inside compiled code run as a subprocess);
+* under a signal (SIGTERM, SIGKILL then a rerun, Ctrl-C of a campaign): the signal's exit
+  code, no traceback, only ``interrupted`` after Ctrl-C, nothing left (the rerun's output
+  under its own name).
+
+Each case run is classified (``fault_corpus.OUTCOMES``: clean, silent, traceback, hang, leak,
+other) and the session ends with the table by category (``conftest.py``).
 
 Most cases run in-process through :func:`meshphase.cli.main` (fast); a sample runs as the
 real command (``python -m meshphase.cli``) to see the real stderr. The default suite runs the
@@ -22,21 +28,24 @@ in the reason (``fault_corpus.py``).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
+import signal
 import subprocess
 import sys
+import time
 import warnings
 from pathlib import Path
 
 import pytest
-from fault_corpus import OUTPUTS, Skip, Workspace, build_originals, corpus
+from fault_corpus import OUTCOMES, OUTPUTS, Skip, Workspace, build_originals, corpus, outcome_table
 
 import meshphase.io as pio
 from meshphase.cli import main
 
 REPO = Path(__file__).resolve().parents[2]
-DOCUMENTED = {0, 1, 2, 3, 130, 141}        # pipeline/exits.py
+DOCUMENTED = {0, 1, 2, 3, 130, 141, 143}   # pipeline/exits.py
 CASES = corpus()
 DEFAULT = [c for c in CASES if not c.slow]
 SLOW = [c for c in CASES if c.slow]
@@ -87,6 +96,19 @@ def _params(cases):
 
 
 # --------------------------------------------------------------------------- running a case
+class CaseFault(AssertionError):
+    """A requirement a case run did not meet; ``outcome`` says which kind (``OUTCOMES``)."""
+
+    def __init__(self, outcome: str, message: str):
+        super().__init__(message)
+        self.outcome = outcome
+
+
+def _require(ok, outcome: str, message: str) -> None:
+    if not ok:
+        raise CaseFault(outcome, message)
+
+
 def _build(case, ws) -> dict:
     values = ws.defaults()
     try:
@@ -122,9 +144,60 @@ def _run_subprocess(argv, timeout) -> tuple[int, str, str]:
         r = subprocess.run([sys.executable, "-m", "meshphase.cli", *argv], capture_output=True,
                            text=True, timeout=timeout, cwd=REPO, stdin=subprocess.DEVNULL)
     except subprocess.TimeoutExpired:
-        pytest.fail(f"meshphase {' '.join(argv)}: no answer after {timeout} s (a hang; the "
-                    "process was killed)")
+        raise CaseFault("hang", f"meshphase {' '.join(argv)}: no answer after {timeout} s (a hang; the "
+                                "process was killed)") from None
     return r.returncode, r.stdout, r.stderr
+
+
+def _staging(folder: Path) -> bool:
+    return folder.is_dir() and any(n.startswith(".mp-") for n in os.listdir(folder))
+
+
+def _run_signal(case, values) -> None:
+    """The first command as the real command, in a session of its own, given ``case.signal``
+    once its staging folder exists (SIGINT after 2 s more, to the whole group, as Ctrl-C)."""
+    name, rerun = case.signal
+    argv = _argv(case.commands[0], values)
+    out_dir = Path(values["out"])
+    where = f"{case.name}: meshphase {' '.join(argv)}"
+    p = subprocess.Popen([sys.executable, "-m", "meshphase.cli", *argv], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True, cwd=REPO,
+                         start_new_session=True)
+    try:
+        deadline = time.monotonic() + case.timeout
+        while p.poll() is None and not _staging(out_dir):
+            _require(time.monotonic() < deadline, "hang", f"{where}: no staging folder after {case.timeout} s")
+            time.sleep(0.02)
+        _require(p.poll() is None, "other", f"{where}: finished (exit {p.returncode}) before the signal")
+        if name == "SIGINT":
+            time.sleep(2.0)                            # the workers under way
+            os.killpg(p.pid, signal.SIGINT)
+        else:
+            p.send_signal(getattr(signal, name))
+        try:
+            _, err = p.communicate(timeout=case.timeout)
+        except subprocess.TimeoutExpired:
+            raise CaseFault("hang", f"{where}: no end {case.timeout} s after {name}") from None
+    finally:
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(p.pid, signal.SIGKILL)          # what is left of the group we started
+        p.wait()
+    where += f" -> {name}, exit {p.returncode}\nstderr: {err.strip()[:2000]}"
+    _require("Traceback" not in err, "traceback", where)
+    _require(p.returncode in case.expect, "other", f"expected exit {sorted(case.expect)}; {where}")
+    prefix = f"meshphase {argv[1]}: "
+    if name == "SIGINT":
+        lines = [ln for ln in err.splitlines() if ln.strip()]
+        _require(lines == [prefix + "interrupted"], "other", f"expected only '{prefix}interrupted'; {where}")
+    if rerun:
+        rc, _, err = _run_subprocess(argv, case.timeout)
+        _require(rc == 0, "other", f"the rerun gives exit {rc}: {err.strip()[:2000]}; {where}")
+        final = Path(case.commands[0][-1].format(**values)).name
+        left = sorted(os.listdir(out_dir))
+        _require(left == [final], "leak", f"after the rerun {left} in the output folder, expected [{final!r}]; {where}")
+    else:
+        left = [n for n in os.listdir(out_dir) if not n.endswith(".partial")]   # a campaign's kept results
+        _require(not left, "leak", f"{left} left in the output folder; {where}")
 
 
 def _reads_identical(values) -> bool:
@@ -143,55 +216,73 @@ def _reads_identical(values) -> bool:
 def _check(case, argv, rc, out, err, values) -> None:
     cmd = argv[1]
     where = f"{case.name}: meshphase {' '.join(argv)} -> exit {rc}\nstderr: {err.strip()[:2000]}"
-    assert "Traceback" not in out and "Traceback" not in err, where
-    assert rc in DOCUMENTED, f"undocumented exit code; {where}"
+    _require("Traceback" not in out and "Traceback" not in err, "traceback", where)
+    _require(rc in DOCUMENTED, "other", f"undocumented exit code; {where}")
     if rc == 0 and case.may_be_harmless:
-        assert _reads_identical(values), f"exit 0, but the flipped file reads differently; {where}"
+        _require(_reads_identical(values), "silent", f"exit 0, but the flipped file reads differently; {where}")
         return
-    assert rc != 0, f"exit 0 for a faulty input; {where}"
-    assert rc in case.expect, f"expected exit {sorted(case.expect)}; {where}"
+    _require(rc != 0, "silent", f"exit 0 for a faulty input; {where}")
+    _require(rc in case.expect, "other", f"expected exit {sorted(case.expect)}; {where}")
     lines = [ln for ln in err.splitlines() if ln.strip()]
     prefix = f"meshphase {cmd}: "
     stray = [ln for ln in lines if not ln.startswith(prefix)]
-    assert not stray, f"stderr lines that are not the command's: {stray[:3]}; {where}"
+    _require(not stray, "other", f"stderr lines that are not the command's: {stray[:3]}; {where}")
     if rc == 130:                                            # Ctrl-C: one quiet line
-        assert lines[-1:] == [prefix + "interrupted"], f"expected '{prefix}interrupted'; {where}"
+        _require(lines[-1:] == [prefix + "interrupted"], "other", f"expected '{prefix}interrupted'; {where}")
         _nothing_left(values, where)
         return
     errors = [ln for ln in lines if ln.startswith(prefix + "error: ")]
-    assert len(errors) == 1, f"expected one error line, got {len(errors)}; {where}"
+    _require(errors, "silent", f"no error line; {where}")
+    _require(len(errors) == 1, "other", f"expected one error line, got {len(errors)}; {where}")
     for key in case.names:
         name = Path(values[key]).name
-        assert name in errors[0], f"the error line does not name {name!r}; {where}"
+        _require(name in errors[0], "other", f"the error line does not name {name!r}; {where}")
     for text in case.contains:
         text = text.format(**values)
-        assert text in errors[0], f"the error line does not say {text!r}; {where}"
+        _require(text in errors[0], "other", f"the error line does not say {text!r}; {where}")
     if case.max_line is not None:
-        assert len(errors[0]) <= case.max_line, f"an error line of {len(errors[0])} characters; {where}"
+        _require(len(errors[0]) <= case.max_line, "other", f"an error line of {len(errors[0])} characters; {where}")
     _nothing_left(values, where)
 
 
 def _nothing_left(values, where) -> None:
     for o in OUTPUTS:
         p = o.format(**values)
-        assert not os.path.lexists(p), f"{p} left behind by a failed command; {where}"
+        _require(not os.path.lexists(p), "leak", f"{p} left behind by a failed command; {where}")
     out_dir = Path(values["out"])
     if out_dir.is_dir():
         left = [p.name for p in out_dir.iterdir()]
-        assert not left, f"{left} left in the output folder; {where}"
+        _require(not left, "leak", f"{left} left in the output folder; {where}")
 
 
-def _run_case(case, originals, tmp_path, capsys, monkeypatch, *, runner=None):
+def _run_case(case, originals, tmp_path, capsys, monkeypatch, *, runner=None, runs=None):
+    """Run ``case``; its outcome goes into ``runs`` (a list of (category, outcome))."""
     ws = Workspace(originals, tmp_path)
+    outcome = "other"
     try:
         _run_commands(case, ws, capsys, monkeypatch, runner or case.runner)
+        outcome = "clean"
+    except pytest.skip.Exception:
+        outcome = None
+        raise
+    except CaseFault as exc:
+        outcome = exc.outcome
+        raise
+    except pytest.fail.Exception as exc:          # pytest-timeout's in-process timeout
+        outcome = "hang" if "Timeout" in str(exc) else "other"
+        raise
     finally:
         for fn in ws.cleanups:
             fn()
+        if runs is not None and outcome is not None:
+            runs.append((case.category, outcome))
 
 
 def _run_commands(case, ws, capsys, monkeypatch, runner):
     values = _build(case, ws)
+    if case.signal is not None:
+        _run_signal(case, values)
+        return
     for cmd in case.commands:
         argv = _argv(cmd, values)
         if runner == "subprocess":
@@ -209,14 +300,20 @@ def _run_commands(case, ws, capsys, monkeypatch, runner):
 
 
 # --------------------------------------------------------------------------- the tests
+@pytest.fixture
+def runs(pytestconfig):
+    """Where the outcomes go for the session's table (``conftest.py``)."""
+    return pytestconfig.__dict__.setdefault("_corpus_outcomes", [])
+
+
 @pytest.mark.parametrize("case", _params(DEFAULT))
-def test_fault_case(case, originals, tmp_path, capsys, monkeypatch):
-    _run_case(case, originals, tmp_path, capsys, monkeypatch)
+def test_fault_case(case, originals, tmp_path, capsys, monkeypatch, runs):
+    _run_case(case, originals, tmp_path, capsys, monkeypatch, runs=runs)
 
 
 @pytest.mark.parametrize("case", _params(SLOW))
-def test_fault_case_sweep(case, originals, tmp_path, capsys, monkeypatch):
-    _run_case(case, originals, tmp_path, capsys, monkeypatch)
+def test_fault_case_sweep(case, originals, tmp_path, capsys, monkeypatch, runs):
+    _run_case(case, originals, tmp_path, capsys, monkeypatch, runs=runs)
 
 
 @pytest.mark.parametrize("name", SUBPROCESS_SAMPLE)
@@ -281,14 +378,28 @@ def test_corpus_shape():
     """Every category is there, names are unique, the default selection is bounded and every
     case accepts only documented, non-zero exit codes."""
     cats = {c.category for c in CASES}
-    assert cats == {"truncation", "byteflip", "special", "scene", "output"}
+    assert cats == {"truncation", "byteflip", "special", "scene", "output", "declared", "signal"}
     assert len({c.name for c in CASES}) == len(CASES)
     assert {c.category for c in DEFAULT} == cats
     assert 100 <= len(DEFAULT) <= 250 and len(SLOW) > 3 * len(DEFAULT)
     for c in CASES:
-        assert c.expect and set(c.expect) <= DOCUMENTED - {0, 2}, c.name
+        # a signal case may expect a death by its signal (SIGKILL: -9 from subprocess)
+        assert c.expect and (set(c.expect) <= DOCUMENTED - {0, 2} or c.signal is not None), c.name
+        assert c.signal is None or (c.runner == "subprocess" and c.patch is None), c.name
         assert c.commands and all(cmd[0] in ("info", "convert", "process", "run", "campaign")
                                   for cmd in c.commands), c.name
         assert c.runner in ("inprocess", "subprocess"), c.name
         assert c.patch is None or c.runner == "inprocess", c.name
     assert set(SUBPROCESS_SAMPLE) <= {c.name for c in DEFAULT}
+
+
+def test_outcome_table_counts_by_category():
+    table = outcome_table([("declared", "clean"), ("declared", "leak"), ("signal", "hang"), ("x", "clean")])
+    rows = {ln.split()[0]: ln.split()[1:] for ln in table.splitlines()[2:]}
+    assert table.splitlines()[1].split() == ["category", *OUTCOMES, "total"]
+    assert rows == {"declared": ["1", "0", "0", "0", "1", "0", "2"], "signal": ["0", "0", "0", "1", "0", "0", "1"],
+                    "x": ["1", "0", "0", "0", "0", "0", "1"], "all": ["2", "0", "0", "1", "1", "0", "4"]}
+    empty = outcome_table([]).splitlines()
+    assert empty[2].split() == ["all"] + ["0"] * (len(OUTCOMES) + 1)
+    with pytest.raises(ValueError, match="'slow' of a 'scene' case"):
+        outcome_table([("scene", "slow")])

@@ -12,7 +12,7 @@ import numpy as np
 
 from ...recording import Recording
 from ...validate import as_positive_int
-from ..base import RecordingFileError, RecordingInfo
+from ..base import RecordingFileError, RecordingInfo, check_allocation
 from .chunks import _ChunkReader, _decode, _payloads
 from .foreign import foreign_info, read_foreign
 from .header import ForeignMcapError, _Layout, _lib_errors, _open
@@ -225,6 +225,7 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *,
         i0 = int(i0)
         if not 0 <= i0 <= i1 <= n_total:
             raise ValueError(f"{path}: sample range [{i0}, {i1}) is outside [0, {n_total}]")
+        check_allocation(path, i1 - i0, len(names), lay.dtype.itemsize)
         out = np.empty((i1 - i0, len(names)), dtype=lay.dtype.newbyteorder("="), order="F")
         if i1 > i0 and names:
             col = {lay.channel_ids[n]: c for c, n in enumerate(names)}
