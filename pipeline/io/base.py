@@ -524,7 +524,7 @@ def _check_space(path: Path, size_hint: int | None) -> None:
         st = os.statvfs(path.parent)
     except (OSError, AttributeError):
         return
-    if st.f_flag & getattr(os, "ST_RDONLY", 0):
+    if getattr(st, "f_flag", 0) & getattr(os, "ST_RDONLY", 0):
         # read-only: no free space to report (statvfs counts blocks all the same)
         raise OSError(errno.EROFS, os.strerror(errno.EROFS), str(path))
     if not size_hint:
