@@ -12,7 +12,8 @@ code  meaning
       the scene names that the file lacks, no gauge channel, every gauge channel all NaN/inf
       or constant while a requested result is empty, a bad scene, a non-regular file given as
       input, an OS error (permission, no space left, name too long, ...), out of memory; a
-      campaign in which every recording failed (nothing written)
+      campaign in which every recording failed (its folder is written all the same:
+      ``campaign.json`` and ``campaign.csv`` give each recording's cause)
 2     usage error (bad command line: argparse's own message)
 3     partial result: outputs written, but some requested result is missing: its stage
       failed, was skipped because a stage it needs failed, or ran and left the result empty
@@ -58,12 +59,12 @@ from pathlib import Path
 from . import __version__
 from .io import atomic_path
 from .io.base import recording_read_errors  # noqa: F401 (public here too)
-from .io.base import _host_tag, _pid_alive
+from .io.base import _WRITE_FULL, _host_tag, _pid_alive
 from .log import logger
 
 __all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_USAGE", "EXIT_PARTIAL", "EXIT_INTERRUPTED",
            "EXIT_PIPE", "BENIGN_SKIPS", "RESULT_OF_STAGE", "run_status", "status_line",
-           "OutputDir", "new_output_dir", "recording_read_errors", "foreign_entries", "recover_output_dirs",
+           "output_write_errors", "OutputDir", "new_output_dir", "recording_read_errors", "foreign_entries", "recover_output_dirs",
            "published_path", "remove_partial", "MANIFEST_NAME", "PARTIAL_SUFFIX", "STALE_DIR_AGE"]
 
 EXIT_OK = 0
@@ -170,11 +171,16 @@ def _empty_results(ctx, failed: dict) -> list[dict]:
     if "phasing" in requested and "phasing" not in failed and ph is not None:
         if not ph.tables:
             missing("phasing", "phasing", "no gauge measured", _stage_reasons(ctx.messages, "phasing"))
+        channels = getattr(ctx.load.recording, "channels", ()) if ctx.load is not None else ()
         for gauge, table in ph.tables.items():
             if len(table) == 0 or _all_nan(table.gamma):
                 notes = [n for n in getattr(table, "notes", None) or () if n != "no usable pass"]
+                names = [c.name for c in channels if (c.gear or c.kind) == gauge]
+                data = [t for st in ("load", "condition", "onsets")
+                        for t in _stage_reasons(ctx.messages, st)
+                        if any(f"channel {n!r}" in t for n in names)]
                 missing("phasing", "phasing", f"{gauge} gauge: no measured pass",
-                        _stage_reasons(ctx.messages, "phasing", gauge) + notes)
+                        _stage_reasons(ctx.messages, "phasing", gauge) + notes + data)
     ls = ctx.load_sharing
     if "load_sharing" in requested and "load_sharing" not in failed and ls is not None:
         if ls.sharing is None or _all_nan(ls.sharing.factors):
@@ -281,6 +287,25 @@ def run_status(ctx) -> dict:
     code = {"ok": EXIT_OK, "failed": EXIT_ERROR}.get(status, EXIT_PARTIAL)
     return {"status": status, "exit_code": code, "error": error, "missing_results": missing + empty,
             "unreliable": unreliable}
+
+
+@contextlib.contextmanager
+def output_write_errors(path):
+    """Name the output ``path`` in an OSError of a full disk (ENOSPC, EDQUOT, EFBIG) that
+    names no file: Python's buffered writers (``Path.write_text``, pandas) raise it when they
+    flush or close, without the file name.
+
+    Parameters
+    ----------
+    path : str or Path
+        The output file or folder the caller writes (as the user named it).
+    """
+    try:
+        yield
+    except OSError as exc:
+        if exc.errno in _WRITE_FULL and exc.filename is None:
+            raise OSError(exc.errno, os.strerror(exc.errno), str(path)) from exc
+        raise
 
 
 def status_line(status: dict) -> str:
