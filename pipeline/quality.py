@@ -282,10 +282,13 @@ def _quant_from_pairs(d: np.ndarray) -> float:
     if d.size < 16:
         return 0.0
     q = float(d.min())
-    r = d[:: max(1, d.size >> 16)] / q
-    if np.median(r) > 2.0 ** 31:
-        return 0.0
-    on_grid = np.abs(r - np.rint(r)) <= 0.01
+    # a difference beyond float64 over the step (a 1e300 sample, a 1e-20 step) gives an
+    # infinite ratio: far above 2**31 steps, and off the grid (inf - inf is NaN, not <= 0.01)
+    with np.errstate(over="ignore", invalid="ignore"):
+        r = d[:: max(1, d.size >> 16)] / q
+        if np.median(r) > 2.0 ** 31:
+            return 0.0
+        on_grid = np.abs(r - np.rint(r)) <= 0.01
     return q if np.mean(on_grid) >= 0.99 else 0.0
 
 

@@ -139,3 +139,38 @@ def test_all_nan_recording_is_nothing_usable(rig, tmp_path, capsys):
     assert not out.exists()                     # exit 1: nothing written
     with pytest.raises(meshphase.ProcessingFailed, match="nothing usable in the recording"):
         meshphase.process(path, rig["gearset"])
+
+
+def test_tdms_bit_flips_that_remove_every_sun_pass_are_partial(tmp_path, capsys):
+    """Four single bit flips in the sun channel's TDMS raw data (the exponent's top bit: four
+    samples of ~1e302) leave no sun pass: exit 3 naming the channel, on the CLI and the API."""
+    from meshphase.synthetic import generate
+    from meshphase.synthetic.tdms_export import write_tdms
+
+    rec, _ = generate("seed_rig", duration=30.0, seed=0)
+    clean = write_tdms(list(rec.blocks(1.0)), tmp_path / "clean.tdms", n_samples=rec.n_samples)
+    raw = bytearray(Path(clean).read_bytes())
+    sun = rec.data[:, rec.names.index("sun")]
+    flipped = 0
+    nonzero = np.flatnonzero(sun)
+    for k in nonzero[:: nonzero.size // 16]:                  # spread over the 30 s
+        at = raw.find(sun[k].tobytes())
+        if at < 0 or raw.find(sun[k].tobytes(), at + 1) >= 0:  # the value's bytes, once only
+            continue
+        raw[at + 7] ^= 0x40
+        flipped += 1
+        if flipped == 4:
+            break
+    assert flipped == 4
+    path = tmp_path / "flipped.tdms"
+    path.write_bytes(bytes(raw))
+    gearset = tmp_path / "gearset.toml"
+    gearset.write_text('name = "seed rig gearset"\n' + SEED_RIG_GEARSET, encoding="utf-8")
+    out = tmp_path / "o"
+    assert main(["-q", "process", str(path), "--gearset", str(gearset), "--out", str(out)]) == EXIT_PARTIAL
+    summ = json.loads((out / "summary.json").read_text())
+    causes = [m["cause"] for m in summ["missing_results"] if m["result"] == "phasing"]
+    assert summ["status"] == "partial" and len(causes) == 1
+    assert causes[0].startswith("sun gauge: no measured pass") and "channel 'sun'" in causes[0]
+    assert "RuntimeWarning" not in capsys.readouterr().err
+    assert meshphase.process(path, gearset).status == "partial"
