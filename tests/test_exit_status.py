@@ -645,3 +645,23 @@ def test_overflowing_samples_give_no_raw_numpy_warning():
         # noise samples (1e-316) keep a few bits only, 1e-4 dB is far above what that moves
         np.testing.assert_allclose(hum.excess_db, ref_hum.excess_db, rtol=0,
                                    atol=1e-9 if scale > 1 else 1e-4)
+
+
+def test_output_write_errors_empty_and_bad_input(tmp_path):
+    with meshphase.exits.output_write_errors(tmp_path / "o"):     # nothing raised: nothing to do
+        pass
+    with pytest.raises(OSError) as exc:                             # names no file: the output
+        with meshphase.exits.output_write_errors(tmp_path / "o"):
+            raise OSError(errno.EDQUOT, os.strerror(errno.EDQUOT))
+    assert exc.value.errno == errno.EDQUOT and exc.value.filename == str(tmp_path / "o")
+    named = OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), "/elsewhere/f.csv")
+    with pytest.raises(OSError) as exc:                             # already named: kept as is
+        with meshphase.exits.output_write_errors(tmp_path / "o"):
+            raise named
+    assert exc.value is named
+    with pytest.raises(PermissionError):                            # not a full disk: untouched
+        with meshphase.exits.output_write_errors(tmp_path / "o"):
+            raise PermissionError(errno.EACCES, "Permission denied")
+    with pytest.raises(ValueError, match="not an OSError"):
+        with meshphase.exits.output_write_errors(tmp_path / "o"):
+            raise ValueError("not an OSError")
