@@ -174,3 +174,16 @@ def test_tdms_bit_flips_that_remove_every_sun_pass_are_partial(tmp_path, capsys)
     assert causes[0].startswith("sun gauge: no measured pass") and "channel 'sun'" in causes[0]
     assert "RuntimeWarning" not in capsys.readouterr().err
     assert meshphase.process(path, gearset).status == "partial"
+
+
+def test_every_gauge_constant_is_nothing_usable(rig, tmp_path, capsys):
+    path = tmp_path / "flat.h5"
+    shutil.copy(rig["files"]["clean"], path)
+    with h5py.File(path, "a") as f:
+        _set("sun", 0.0)(f)
+        _set("ring", 2e-5)(f)
+    assert main(["-q", "process", str(path), "--gearset", str(rig["gearset"]),
+                 "--out", str(tmp_path / "o")]) == EXIT_ERROR
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ": error: " in ln]
+    assert len(err) == 1 and "sun: constant 0; ring: constant 2e-05" in err[0]
+    assert not (tmp_path / "o").exists()
