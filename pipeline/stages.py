@@ -38,7 +38,7 @@ from .log import logger
 from .models.gearset import Speeds
 from .models.mesh_phasing import assembly_check, classify_phasing, ideal_phasing
 from .onsets import detect_onsets_recording
-from .onsets.results import _empty_onsets
+from .onsets.results import Onsets, _empty_onsets
 from .outputs import new_output_dir, summary_dict, write_outputs  # noqa: F401 (public here)
 from .passes import ONSET_RESOLUTION, gap_intervals_of, gauge_passes  # noqa: F401 (was here)
 from .pass_rates import pass_rate_warnings
@@ -304,7 +304,9 @@ def stage_condition(ctx: RunContext) -> ConditionStage:
     res = condition_stream(src, scan, _channel_plans(ctx, src.header))
     if too_big and res.onsets is not None:
         h = src.header
-        found = {**res.onsets, **{n: _empty_onsets(h.fs, h.t0, n, "rise", 0.5) for n in too_big}}
+        # empty onsets with the detector's default reference point (Onsets' defaults)
+        found = {**res.onsets, **{n: _empty_onsets(h.fs, h.t0, n, Onsets.reference, Onsets.level)
+                                  for n in too_big}}
         res = dataclasses.replace(res, onsets={c.name: found[c.name] for c in h.channels
                                                if c.name in found})
     snr = {k: getattr(q, "snr_db", None) for k, q in res.quality.items()}
