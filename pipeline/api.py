@@ -94,10 +94,13 @@ def process(recording, gearset=None, *, scene=None, results=None, start: float |
     ValueError
         An empty recording, no gearset anywhere, unknown results, a scene that does not
         validate (SceneError), a window outside the recording.
-    FileNotFoundError
-        No such recording file.
+    FileNotFoundError, IsADirectoryError, NotRegularFileError, OSError
+        The recording path is no regular file, or the file system refused it (a
+        symbolic-link loop ...): the checks and classes of :func:`read` and of the
+        ``meshphase`` command (:mod:`meshphase.errors`).
     ProcessingFailed
-        The run produced nothing usable (e.g. no gauge channel); the message says why.
+        The run produced nothing usable (the recording could not be loaded, no gauge
+        channel, every gauge channel NaN/inf or constant); the message says why.
     """
     _check_window(start, stop)
     if progress is not None and not callable(progress):

@@ -121,7 +121,7 @@ def gearset_table(g: Gearset) -> dict:
 def _scene_of_gearset(gearset, label: str) -> Scene:
     """The scene of a ``gearset=`` argument (see the module docstring)."""
     if isinstance(gearset, (str, os.PathLike)):
-        return load_scene(gearset)
+        return load_scene(gearset, recording_given=True)  # the recording replaces [input]
     if isinstance(gearset, Gearset):
         table = gearset_table(gearset)
     elif isinstance(gearset, Mapping):
@@ -141,7 +141,7 @@ def _scene_of_gearset(gearset, label: str) -> Scene:
 def _scene_of_dict(d: Mapping, label: str) -> Scene:
     d = dict(d)
     d.setdefault("results", _PLACEHOLDER_RESULTS)
-    return parse_scene(toml_text(d), None)
+    return parse_scene(toml_text(d), None, recording_given=True)
 
 
 def _scene_of_scene(scene, label: str) -> Scene:
@@ -151,7 +151,7 @@ def _scene_of_scene(scene, label: str) -> Scene:
         out.input, out.results = dict(scene.input), list(scene.results)
         return out
     if isinstance(scene, (str, os.PathLike)):
-        return load_scene(scene)
+        return load_scene(scene, recording_given=True)  # the recording replaces [input]
     if isinstance(scene, Mapping):
         return _scene_of_dict(scene, label)
     raise TypeError(f"scene must be a meshphase.scene.Scene, a scene TOML path or a dict, got "

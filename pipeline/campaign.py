@@ -496,7 +496,7 @@ def run_recording(scene_path: str, recording_path: str, out_dir: str, *, bands: 
                 out["format"] = detect_format(rec_path)
             except (ValueError, OSError) as exc:
                 out["error"] = f"{type(exc).__name__}: {exc}"
-            scene = load_scene(scene_path)
+            scene = load_scene(scene_path, recording_given=True)  # the recording replaces [input]
             _, _, mc_on_client = split_results(scene)
             scene = _worker_scene(scene, rec_path, mc_on_client and bands is not None)
             ctx = run_scene(scene)
@@ -846,7 +846,8 @@ def _scene_and_recordings(scene_path: Path, inputs, recursive: bool = False, fou
     front."""
     from .scene import load_scene, plan
 
-    scene = load_scene(scene_path)  # FileNotFoundError / SceneError (a ValueError) up front
+    # FileNotFoundError / SceneError (a ValueError) up front; each recording replaces [input]
+    scene = load_scene(scene_path, recording_given=True)
     files, skipped = found if found is not None else collect_recordings(inputs, recursive=recursive)
     if not files:
         left = [Path(s["path"]).name for s in skipped]

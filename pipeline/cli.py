@@ -11,16 +11,19 @@ campaign (tests hold the modules each loads; ``meshphase bench`` times the start
 Exit status (every subcommand; README.md "Exit status"; constants in :mod:`meshphase.exits`):
 
 ====  ==========================================================================================
-0     ok: every requested result computed
+0     ok: every requested result computed, none of them empty or all NaN
 1     input or scene error, nothing usable: unreadable / corrupt file, a channel the scene
-      names that the file lacks, no gauge channel, a bad scene, a FIFO / device / folder
-      where a file is expected, an OS error (permission, no space left, name too long, ...),
-      out of memory; a campaign in which every recording failed
+      names that the file lacks, no gauge channel, every gauge channel NaN/inf or constant,
+      a bad scene, a FIFO / device / folder where a file is expected, an OS error
+      (permission, no space left, name too long, ...), out of memory; a campaign in which
+      every recording failed (its folder is written all the same: campaign.json and
+      campaign.csv give each recording's cause)
 2     usage error (argparse)
-3     partial result: outputs written, but a requested result could not be computed (its
-      stage failed or was skipped for a failed stage it needs; summary.json ``"status":
-      "partial"`` and ``missing_results`` with each cause), or phasing flagged unreliable
-      (``"status": "unreliable"``); a campaign with any recording failed, partial or unreliable
+3     partial result: outputs written, but a requested result is missing (its stage failed,
+      was skipped for a failed stage it needs, or left it empty or all NaN; summary.json
+      ``"status": "partial"`` and ``missing_results`` with each cause), or phasing flagged
+      unreliable (``"status": "unreliable"``); a campaign with any recording failed, partial
+      or unreliable
 130   interrupted (Ctrl-C); the interrupted run's output folder is removed
 141   standard output closed by the reader (``| head``): no message
 143   terminated (SIGTERM; 129: SIGHUP) while writing: no message, nothing left
@@ -55,8 +58,8 @@ from . import __version__
 from .channels import mapping_report
 from .demo import demo_scene_path
 from .errors import DataQualityWarning
-from .exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_PIPE, OutputDir, recording_read_errors,
-                    run_status, status_line)
+from .exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_PIPE, OutputDir, output_write_errors,
+                    recording_read_errors, run_status, status_line)
 from .heap import limit_heap_growth
 from .io import convert, detect_format, iter_blocks, read_info
 from .io.base import ANY_FS_ENV
@@ -421,7 +424,8 @@ def _run_and_write(args, scene, base, *, report: bool = True):
         if run_status(ctx)["status"] == "failed":
             out.discard()
             return ctx, {}
-        files = write_outputs(ctx, out.path, report=report)
+        with output_write_errors(base):
+            files = write_outputs(ctx, out.path, report=report)
     # written into the staging folder; these are the paths now that it is published
     return ctx, {k: out.published(v) for k, v in files.items()}
 

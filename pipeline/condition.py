@@ -761,6 +761,11 @@ def detect_hum(x, fs: float, *, mains: str | float = "auto", n_harmonics: int = 
         return HumReport(None, np.empty(0), all_c, np.full(all_c.size, np.nan), threshold_db,
                          checked=False)
     xs = _fill_nonfinite(xs)
+    # the test is a ratio of PSD values: scaled to a largest magnitude of 1, samples of any
+    # size (1e300, subnormal) give it without overflow or underflow in the squares
+    peak_abs = float(np.max(np.abs(xs)))
+    if peak_abs > 0.0:
+        xs = xs / peak_abs
     nper = _hum_nperseg(xs.size, fs)
     f, p = welch(xs, fs, nper, detrend=_detrend_linear)
     df = f[1] - f[0]

@@ -6,17 +6,22 @@ One table, used by every subcommand (also in README.md, "Exit status", and in th
 ====  ==========================================================================================
 code  meaning
 ====  ==========================================================================================
-0     ok: every requested result was computed (and no phasing is flagged unreliable)
+0     ok: every requested result was computed, none of them empty or all NaN (and no
+      phasing is flagged unreliable)
 1     input or scene error, nothing usable: unreadable / corrupt / truncated file, a channel
-      the scene names that the file lacks, no gauge channel, a bad scene, a non-regular file
-      given as input, an OS error (permission, no space left, name too long, ...), out of
-      memory; a campaign in which every recording failed
+      the scene names that the file lacks, no gauge channel, every gauge channel all NaN/inf
+      or constant while a requested result is empty, a bad scene, a non-regular file given as
+      input, an OS error (permission, no space left, name too long, ...), out of memory; a
+      campaign in which every recording failed (its folder is written all the same:
+      ``campaign.json`` and ``campaign.csv`` give each recording's cause)
 2     usage error (bad command line: argparse's own message)
-3     partial result: outputs written, but some requested result could not be computed (its
-      stage failed, or was skipped because a stage it needs failed: summary.json has
-      ``"status": "partial"`` and ``missing_results`` with each cause), or a phasing result
-      is flagged unreliable (``"status": "unreliable"``); a campaign with any recording
-      failed, partial or unreliable
+3     partial result: outputs written, but some requested result is missing: its stage
+      failed, was skipped because a stage it needs failed, or ran and left the result empty
+      or all NaN (a gauge without a measured pass, load sharing without a factor, nothing to
+      compare); summary.json has ``"status": "partial"`` and ``missing_results`` with each
+      cause, whatever stage noticed it; or a phasing result is flagged unreliable
+      (``"status": "unreliable"``); a campaign with any recording failed, partial or
+      unreliable
 130   interrupted (Ctrl-C / SIGINT); the output folder of the interrupted run is removed
       (with ``--overwrite`` the previous folder stays as it was; a campaign keeps its finished
       recordings in ``OUT.partial`` for ``--resume``)
@@ -27,7 +32,8 @@ code  meaning
 ====  ==========================================================================================
 
 :func:`run_status` turns a :class:`meshphase.stages.RunContext` into that status (it goes into
-``summary.json`` and decides the exit code); :class:`OutputDir` reserves a run's output folder,
+``summary.json`` and decides the exit code) by inspecting the results themselves, not the
+stages' own verdicts; :class:`OutputDir` reserves a run's output folder,
 lets the run fill a staging folder beside it and swaps that in atomically when the run
 finishes (nothing of a failed or interrupted run is left; ``--overwrite`` leaves no stale file
 and never writes through symbolic links);
@@ -55,14 +61,14 @@ from pathlib import Path
 from . import __version__
 from .io import atomic_path
 from .io.base import recording_read_errors  # noqa: F401 (public here too)
-from .io.base import _host_tag, _pid_alive, _SignalGuard
+from .io.base import _WRITE_FULL, _host_tag, _pid_alive, _SignalGuard
 from .log import logger
 
 __all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_USAGE", "EXIT_PARTIAL", "EXIT_INTERRUPTED",
            "EXIT_PIPE", "BENIGN_SKIPS", "RESULT_OF_STAGE", "run_status", "status_line",
-           "OutputDir", "new_output_dir", "recording_read_errors", "foreign_entries", "recover_output_dirs",
-           "published_path", "remove_partial", "MANIFEST_NAME", "PARTIAL_SUFFIX", "STALE_DIR_AGE",
-           "free_output_name"]
+           "output_write_errors", "OutputDir", "new_output_dir", "recording_read_errors", "foreign_entries",
+           "recover_output_dirs", "published_path", "remove_partial", "MANIFEST_NAME", "PARTIAL_SUFFIX",
+           "STALE_DIR_AGE", "free_output_name"]
 
 EXIT_OK = 0
 EXIT_ERROR = 1
@@ -119,6 +125,109 @@ def _cause(failed: dict, stage: str) -> str:
     return "skipped: " + "; ".join(f"{s} failed ({m})" for s, m in roots)
 
 
+#: gauge channel kinds (``meshphase.channels.GAUGE_KINDS``, not imported: the channel
+#: mapping is not loaded for the CLI's start-up)
+_GAUGE_KINDS = ("sun", "ring", "facewidth")
+#: "stage: Category: text" lines of a run (``RunContext.messages``)
+_MESSAGE = re.compile(r"^(?P<stage>\w+): (?P<category>\w+): (?P<text>.*)$", re.S)
+
+
+def _stage_reasons(messages, stage: str, gauge: str | None = None) -> list[str]:
+    """The texts of ``stage``'s messages (naming ``gauge``'s gauge when given), without a
+    leading ``"<gauge> gauge (<channel>): "``."""
+    out = []
+    for m in messages:
+        hit = _MESSAGE.match(str(m))
+        if hit is None or hit["stage"] != stage:
+            continue
+        text = hit["text"]
+        if gauge is not None:
+            if not text.startswith(f"{gauge} gauge"):
+                continue
+            text = text.split(": ", 1)[1] if ": " in text else text
+        out.append(text)
+    return out
+
+
+def _all_nan(values) -> bool:
+    """No finite number in ``values`` (None and an empty array count as all NaN)."""
+    import numpy as np  # a run's results: numpy is loaded with them
+
+    if values is None:
+        return True
+    a = np.asarray(values, dtype=float)
+    return not np.isfinite(a).any()
+
+
+def _empty_results(ctx, failed: dict) -> list[dict]:
+    """The requested results whose stage ran but left them empty or all NaN, with the cause
+    (the run's own messages about it, else what is empty)."""
+    requested = set(getattr(ctx.scene, "results", None) or ())
+    out = []
+
+    def missing(result: str, stage: str, what: str, reasons) -> None:
+        reasons = list(dict.fromkeys(r for r in reasons if r))
+        out.append({"result": result, "stage": stage,
+                    "cause": what + (f" ({'; '.join(reasons)})" if reasons else "")})
+
+    ph = ctx.phasing
+    if "phasing" in requested and "phasing" not in failed and ph is not None:
+        if not ph.tables:
+            missing("phasing", "phasing", "no gauge measured", _stage_reasons(ctx.messages, "phasing"))
+        channels = getattr(ctx.load.recording, "channels", ()) if ctx.load is not None else ()
+        for gauge, table in ph.tables.items():
+            if len(table) == 0 or _all_nan(table.gamma):
+                notes = [n for n in getattr(table, "notes", None) or () if n != "no usable pass"]
+                names = [c.name for c in channels if (c.gear or c.kind) == gauge]
+                data = [t for st in ("load", "condition", "onsets")
+                        for t in _stage_reasons(ctx.messages, st)
+                        if any(f"channel {n!r}" in t for n in names)]
+                missing("phasing", "phasing", f"{gauge} gauge: no measured pass",
+                        _stage_reasons(ctx.messages, "phasing", gauge) + notes + data)
+    ls = ctx.load_sharing
+    if "load_sharing" in requested and "load_sharing" not in failed and ls is not None:
+        if ls.sharing is None or _all_nan(ls.sharing.factors):
+            what = ("no ring gauge to read" if ls.sharing is None and ls.channel is None
+                    else f"no planet's factor from the {ls.channel or 'ring'} gauge")
+            missing("load_sharing", "load_sharing", what, _stage_reasons(ctx.messages, "load_sharing"))
+    cmp = ctx.compare
+    if "compare" in requested and "compare" not in failed and cmp is not None and not cmp.by_gear:
+        missing("compare", "compare", "no gauge with measured phasing to compare",
+                _stage_reasons(ctx.messages, "compare"))
+    ident = ctx.identify
+    if "identify" in requested and "identify" not in failed and ident is not None:
+        idf = ident.identification
+        if getattr(idf, "n_passes", 0) == 0 or _all_nan(getattr(idf, "rms_after", None)):
+            missing("identify", "identify", "nothing identified",
+                    _stage_reasons(ctx.messages, "identify"))
+    ideal = ctx.ideal
+    if "ideal_phasing" in requested and "ideal" not in failed and ideal is not None \
+            and (_all_nan(ideal.gamma_s) and _all_nan(ideal.gamma_r)):
+        missing("ideal_phasing", "ideal", "no finite ideal phasing", ())
+    return out
+
+
+def _nothing_usable(ctx) -> str | None:
+    """Why nothing usable was read (every gauge channel all NaN/inf or constant in the load
+    stage's raw-sample quality), else None."""
+    if ctx.load is None:
+        return None
+    kinds = {c.name: c.kind for c in getattr(ctx.load.recording, "channels", ())}
+    why = []
+    for q in ctx.load.quality or ():
+        name = q.get("channel")
+        if kinds.get(name) not in _GAUGE_KINDS:
+            continue
+        n, bad = int(q.get("n_samples", 0)), int(q.get("n_nonfinite", 0))
+        if bad >= n:
+            why.append(f"{name}: all {n} samples NaN/inf")
+        elif q.get("min") == q.get("max"):
+            why.append(f"{name}: constant {q.get('min'):g}")
+        else:
+            return None
+    return "; ".join(why) or None
+
+
 def run_status(ctx) -> dict:
     """What a run computed, what it could not and why, and the exit code that says so.
 
@@ -132,10 +241,16 @@ def run_status(ctx) -> dict:
     dict
         ``status``: "ok", "partial" (a requested result is missing), "unreliable" (all
         computed, but a gauge's phasing is flagged unreliable) or "failed" (the recording
-        could not be loaded, or no stage ran at all); ``exit_code`` (0, 3, 3, 1);
-        ``error`` (the cause of "failed", else None); ``missing_results``: one dict per
-        result not computed, ``{"result", "stage", "cause"}`` (the cause of a skipped
-        stage names the stage that failed behind it); ``unreliable``: gauge -> reasons
+        could not be loaded, no stage ran at all, or a requested result is missing and
+        every gauge channel of the recording is all NaN/inf or constant: nothing usable
+        was read); ``exit_code`` (0, 3, 3, 1); ``error`` (the cause of "failed", else
+        None); ``missing_results``: one dict per requested result not computed,
+        ``{"result", "stage", "cause"}``: a stage that failed (the cause of a skipped
+        stage names the stage that failed behind it), then a result its stage left empty
+        or all NaN, decided from the result itself (phasing: one entry per gauge without
+        a measured pass; load sharing without a finite factor; compare without a gauge;
+        identify without a pass; the cause quotes the stage's own messages about it);
+        ``unreliable``: gauge -> reasons
         (:func:`meshphase.results.phasing_verdict`, as
         :func:`meshphase.campaign.phasing_reliability` gives it).
 
@@ -149,26 +264,51 @@ def run_status(ctx) -> dict:
     failed = {k: v for k, v in ctx.failed.items() if str(v) not in BENIGN_SKIPS}
     missing = [{"result": RESULT_OF_STAGE[s], "stage": s, "cause": _cause(failed, s)}
                for s in failed if s in RESULT_OF_STAGE]
+    empty = _empty_results(ctx, failed)
     from .results import phasing_verdict  # a run's results: not loaded for the CLI's start-up
 
     rel = phasing_verdict(ctx.phasing, ctx.messages)
     unreliable = {g: list(v["reasons"]) for g, v in rel.items() if not v["reliable"]}
     error = None
+    unusable = _nothing_usable(ctx) if (missing or empty) else None
     if "load" in failed:
         status = "failed"
         error = "cannot load the recording: " + _load_error(failed["load"])
     elif failed and not ctx.ran:
         status = "failed"
         error = "; ".join(f"{s}: {_cause(failed, s)}" for s in failed)
-    elif failed:
+    elif unusable:
+        status = "failed"
+        error = (f"nothing usable in the recording {ctx.load.source}: every gauge channel is "
+                 f"NaN/inf or constant ({unusable})")
+    elif failed or empty:
         status = "partial"
     elif unreliable:
         status = "unreliable"
     else:
         status = "ok"
     code = {"ok": EXIT_OK, "failed": EXIT_ERROR}.get(status, EXIT_PARTIAL)
-    return {"status": status, "exit_code": code, "error": error, "missing_results": missing,
+    return {"status": status, "exit_code": code, "error": error, "missing_results": missing + empty,
             "unreliable": unreliable}
+
+
+@contextlib.contextmanager
+def output_write_errors(path):
+    """Name the output ``path`` in an OSError of a full disk (ENOSPC, EDQUOT, EFBIG) that
+    names no file: Python's buffered writers (``Path.write_text``, pandas) raise it when they
+    flush or close, without the file name.
+
+    Parameters
+    ----------
+    path : str or Path
+        The output file or folder the caller writes (as the user named it).
+    """
+    try:
+        yield
+    except OSError as exc:
+        if exc.errno in _WRITE_FULL and exc.filename is None:
+            raise OSError(exc.errno, os.strerror(exc.errno), str(path)) from exc
+        raise
 
 
 def status_line(status: dict) -> str:

@@ -282,10 +282,13 @@ def _quant_from_pairs(d: np.ndarray) -> float:
     if d.size < 16:
         return 0.0
     q = float(d.min())
-    r = d[:: max(1, d.size >> 16)] / q
-    if np.median(r) > 2.0 ** 31:
-        return 0.0
-    on_grid = np.abs(r - np.rint(r)) <= 0.01
+    # a difference beyond float64 over the step (a 1e300 sample, a 1e-20 step) gives an
+    # infinite ratio: far above 2**31 steps, and off the grid (inf - inf is NaN, not <= 0.01)
+    with np.errstate(over="ignore", invalid="ignore"):
+        r = d[:: max(1, d.size >> 16)] / q
+        if np.median(r) > 2.0 ** 31:
+            return 0.0
+        on_grid = np.abs(r - np.rint(r)) <= 0.01
     return q if np.mean(on_grid) >= 0.99 else 0.0
 
 
@@ -1502,6 +1505,18 @@ class ScanResult:
         return quality_from_scan(self).summary_dict()
 
 
+def _norm2(x: np.ndarray) -> float:
+    """The Euclidean norm of finite samples ``x``, scaled by their largest magnitude so that
+    neither 1e300 nor subnormal samples overflow or vanish in the squares."""
+    if x.size == 0:
+        return 0.0
+    m = float(np.max(np.abs(x)))
+    if m == 0.0:
+        return 0.0
+    y = x / m
+    return m * math.sqrt(float(np.dot(y, y)))
+
+
 class ChannelScan:
     """The quality of one channel from its raw samples fed in consecutive pieces, twice.
 
@@ -1543,7 +1558,7 @@ class ChannelScan:
         self.fscan = FlatScan(self.n)
         self.pulse: list | None = [] if flat is None else None   # the pulse-train test
         self.pulse_step = max(1, self.n // 4096)
-        self.sumsq = 0.0
+        self.norm = 0.0          # Euclidean norm of the finite samples fed in pass 1
         self.pos1 = self.pos2 = 0
         self.stats: FlatStats | None = None
         self.rails = _RunTracker()
@@ -1562,7 +1577,7 @@ class ChannelScan:
             first = (-self.pos1) % self.pulse_step
             self.pulse.append(x[first::self.pulse_step])
         if x.size:
-            self.sumsq += float(np.sum(np.square(x[fin]))) if bad.any() else float(np.sum(np.square(x)))
+            self.norm = math.hypot(self.norm, _norm2(x[fin] if bad.any() else x))
         self.pos1 += x.size
 
     def end1(self) -> None:
@@ -1608,4 +1623,4 @@ class ChannelScan:
         nf = st.n_fin
         return ScanResult(self.n, self.nonfinite.runs(), self.nan.runs(), rails, fr, nf,
                           st.lo if nf else float("nan"), st.hi if nf else float("nan"),
-                          math.sqrt(self.sumsq / nf) if nf else float("nan"))
+                          self.norm / math.sqrt(nf) if nf else float("nan"))

@@ -292,8 +292,16 @@ _EMPTY_HELP = (
     "scene of each kind")
 
 
-def load_scene(path) -> Scene:
+def load_scene(path, *, recording_given: bool = False) -> Scene:
     """Read and validate a scene TOML file.
+
+    Parameters
+    ----------
+    path : str or Path
+    recording_given : bool
+        The caller supplies the recording that replaces the scene's ``[input]``
+        (``meshphase process FILE --gearset SCENE``, ``meshphase campaign``): results that
+        read a recording need no ``[input]`` then (:func:`parse_scene`).
 
     Raises
     ------
@@ -315,7 +323,7 @@ def load_scene(path) -> Scene:
         line = data.count(b"\n", 0, exc.start) + 1
         raise SceneError(path, "", f"not UTF-8 text (byte 0x{data[exc.start]:02x} at offset "
                          f"{exc.start}): save the scene as UTF-8", line) from None
-    return parse_scene(text, path)
+    return parse_scene(text, path, recording_given=recording_given)
 
 
 def _walk(obj, keys=()):
@@ -344,8 +352,11 @@ def _physical_memory() -> int | None:
         return None
 
 
-def parse_scene(text: str, path: Path | str | None = None) -> Scene:
+def parse_scene(text: str, path: Path | str | None = None, *, recording_given: bool = False) -> Scene:
     """Validate scene TOML ``text`` (``path`` only labels errors and anchors relative paths).
+
+    ``recording_given``: the caller supplies the recording that replaces ``[input]``
+    (``process``, ``campaign``), so results that read one need no ``[input]`` here.
 
     Everything that can be told from the scene alone is checked here, before anything runs
     (``data_schemas/scene.md``, "What is checked before anything runs"): the schema, finite
@@ -389,7 +400,7 @@ def parse_scene(text: str, path: Path | str | None = None) -> Scene:
         output=(base / raw["output"]) if "output" in raw else None, raw=raw,
         speeds_resolution=resolution or None, fixed=raw.get("speeds", {}).get("fixed"), tacho=tacho, mounts=mounts,
         labels=labels, profile_shift=profile_shift, text=text)
-    _check_consistency(scene, text, label)
+    _check_consistency(scene, text, label, recording_given=recording_given)
     stages = plan(scene, check=False)
     if "tolerance" in stages:
         _check_monte_carlo(scene, err)
@@ -1173,11 +1184,13 @@ def _check_null_windows(scene: Scene, t0: float, t_end: float, span: str) -> Non
                              f"recording: {span}", _line_of(scene.text, key))
 
 
-def _check_consistency(scene: Scene, text: str, label, *, check_files: bool = True) -> None:
+def _check_consistency(scene: Scene, text: str, label, *, check_files: bool = True,
+                       recording_given: bool = False) -> None:
     """Results against what the scene provides: each missing piece names its key.
 
     ``check_files``: also require the recording file to exist when a stage will read it (at
     load time; :func:`plan` skips it, so a run reports a file gone since as a failed stage).
+    ``recording_given``: the caller supplies the recording, ``[input]`` may be absent.
     """
     stages = plan(scene, check=False)
     needs_gearset = set(stages) & {"onsets", "phasing", "load_sharing", "ideal", "tolerance",
@@ -1195,7 +1208,7 @@ def _check_consistency(scene: Scene, text: str, label, *, check_files: bool = Tr
                          + ", ".join(_NEEDS_Z_PLANET[s] for s in need_zp)
                          + " turn at the planet speed w_pc = -(Z_s/Z_p) w_sc",
                          _line_of(text, ["gearset", "z_planet"]))
-    if set(stages) & _NEEDS_RECORDING and not scene.has_recording_input:
+    if set(stages) & _NEEDS_RECORDING and not scene.has_recording_input and not recording_given:
         raise SceneError(label, "input", f"results {scene.results} need an [input] recording or "
                          "synthetic scenario", _line_of(text, ["results"]))
     rec = scene.input.get("recording")

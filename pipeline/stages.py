@@ -33,13 +33,14 @@ from .channels import (GAUGE_KINDS, apply_channel_overrides, bridge_configs, cha
 from .compare import band_coverage, identify_errors, predict_pass_phasing, residual_stats
 from .encoder import edge_timing_sigma
 from .errors import DataQualityWarning, MeshphaseWarning, ProcessingWarning, SceneWarning
-from .exits import OutputDir, recording_read_errors, run_status
+from .exits import OutputDir, output_write_errors, recording_read_errors, run_status
 from .loads import facewidth_centroid, facewidth_readings, load_sharing_from_amplitudes
 from .log import logger
 from .member_speeds import mean_mesh_rate, member_speeds, tacho_rate
 from .models.gearset import Speeds
 from .models.mesh_phasing import assembly_check, classify_phasing, ideal_phasing
 from .onsets import detect_onsets_recording
+from .onsets.results import Onsets, _empty_onsets
 from .outputs import new_output_dir, summary_dict, write_outputs  # noqa: F401 (public here)
 from .passes import ONSET_RESOLUTION, gap_intervals_of, gauge_passes  # noqa: F401 (was here)
 from .pass_rates import pass_rate_warnings, two_level_train, wiring_findings
@@ -302,13 +303,48 @@ def _load_stream(ctx: RunContext):
     return load.stream, load.scan
 
 
+#: Largest raw sample magnitude a gauge's onsets are detected from: beyond it the squares of
+#: its samples (pulse energies, template fits) overflow float64 (max 1.8e308). No strain gauge
+#: reads this; a wrong gain or scaling does.
+MAX_GAUGE_ABS = 1e150
+
+
+def _overflowing_gauges(ctx: RunContext) -> dict:
+    """Gauge channel -> its largest finite |sample| (raw quality of the load stage), for the
+    gauges above :data:`MAX_GAUGE_ABS`."""
+    if ctx.load is None:
+        return {}
+    kinds = {c.name: c.kind for c in ctx.load.recording.channels}
+    out = {}
+    for q in ctx.load.quality or ():
+        name = q.get("channel")
+        big = max(abs(float(q.get("min", float("nan")))), abs(float(q.get("max", float("nan")))))
+        if kinds.get(name) in GAUGE_KINDS and big > MAX_GAUGE_ABS:
+            out[name] = big
+    return out
+
+
 @_records("condition")
 def stage_condition(ctx: RunContext) -> ConditionStage:
     """Condition every non-tacho channel and time the gauges' pulses, in one streamed pass
     (pass 3 of :mod:`meshphase.stream`): the conditioned samples are not kept, only the
-    quality reports, the onsets (handed to the onsets stage) and a short excerpt."""
+    quality reports, the onsets (handed to the onsets stage) and a short excerpt. A gauge
+    with samples beyond :data:`MAX_GAUGE_ABS` gives no onsets (a DataQualityWarning says
+    so)."""
     src, scan = _load_stream(ctx)
+    too_big = _overflowing_gauges(ctx)
+    for name, big in too_big.items():
+        warnings.warn(f"channel {name!r}: samples up to {big:.3g}, beyond {MAX_GAUGE_ABS:g}: their "
+                      "squares overflow float64, no onsets are detected from it (a wrong gain or "
+                      "unit scaling?)", DataQualityWarning, stacklevel=3)
     res = condition_stream(src, scan, _channel_plans(ctx, src.header))
+    if too_big and res.onsets is not None:
+        h = src.header
+        # empty onsets with the detector's default reference point (Onsets' defaults)
+        found = {**res.onsets, **{n: _empty_onsets(h.fs, h.t0, n, Onsets.reference, Onsets.level)
+                                  for n in too_big}}
+        res = dataclasses.replace(res, onsets={c.name: found[c.name] for c in h.channels
+                                               if c.name in found})
     snr = {k: getattr(q, "snr_db", None) for k, q in res.quality.items()}
     est = "SNR " + ", ".join(f"{k} {v:.1f} dB" for k, v in snr.items()
                              if isinstance(v, (int, float)) and math.isfinite(v))
@@ -326,6 +362,7 @@ def _channel_plans(ctx: RunContext, rec) -> list:
     gauges."""
     g = ctx.gearset
     plans = []
+    too_big = _overflowing_gauges(ctx)
     for c in rec.channels:
         if c.kind in PULSE_KINDS:
             continue
@@ -334,7 +371,7 @@ def _channel_plans(ctx: RunContext, rec) -> list:
         period = None
         if fm and g is not None:
             period = (g.z_sun if gear == "sun" else g.z_ring) / fm
-        onsets = c.kind in GAUGE_KINDS
+        onsets = c.kind in GAUGE_KINDS and c.name not in too_big
         kw = {}
         if onsets:
             og = c.gear or c.kind
@@ -862,7 +899,7 @@ def process_recording(path, gearset_scene_path, *, out_dir=None, overwrite=False
         The run and the files written (name -> path).
     """
     path = as_regular_file(path, "the recording")  # stat only: a FIFO never blocks here
-    scene = load_scene(gearset_scene_path)
+    scene = load_scene(gearset_scene_path, recording_given=True)  # FILE replaces [input]
     if tolerance and scene.tolerances is None:
         raise SceneError(gearset_scene_path, "tolerances", "--tolerance (tolerance=True) needs a "
                          "[tolerances] table in the gearset file")
@@ -881,6 +918,7 @@ def process_recording(path, gearset_scene_path, *, out_dir=None, overwrite=False
         if run_status(ctx)["status"] == "failed":
             out.discard()
             return ctx, {}
-        written = write_outputs(ctx, out.path, report=False)
+        with output_write_errors(base):
+            written = write_outputs(ctx, out.path, report=False)
     # after publishing: the folder's name is settled then (another run may have taken it)
     return ctx, {k: out.published(v) for k, v in written.items()}

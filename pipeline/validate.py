@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from .errors import NotRegularFileError
+
 __all__ = [
     "as_float",
     "as_positive",
@@ -149,11 +151,16 @@ def as_regular_file(value: Any, name: str) -> Path:
         Nothing exists at the path (or a dangling link).
     IsADirectoryError
         The path is a directory.
+    NotADirectoryError
+        A part of the path is a file.
+    NotRegularFileError
+        The path is a FIFO, a device or a socket (the message says which; a ValueError).
     ValueError
-        The path is empty, or a FIFO, a device or a socket (the message says which).
+        The path is empty.
     OSError
         ``os.stat`` failed otherwise (permission on a parent folder, a symbolic-link loop,
-        a name too long, a parent that is a file ...); its errno and file name are kept.
+        a name too long ...); the same class with its errno and the file name, the message
+        naming ``name``.
     """
     if not isinstance(value, (str, os.PathLike)):
         raise TypeError(f"{name} must be a path (str or Path), got {type(value).__name__} {_short(value)}")
@@ -164,10 +171,15 @@ def as_regular_file(value: Any, name: str) -> Path:
         st = os.stat(path)
     except FileNotFoundError:
         raise FileNotFoundError(f"{path}: no such file ({name})") from None
+    except OSError as exc:
+        if exc.errno is None:
+            raise
+        # ELOOP ("Too many levels of symbolic links"), ENAMETOOLONG, EACCES, ENOTDIR ...
+        raise type(exc)(exc.errno, f"{exc.strerror or os.strerror(exc.errno)} ({name})",
+                        str(path)) from None
     if stat.S_ISREG(st.st_mode):
         return path
     kind = next((k for test, k in _FILE_KINDS if test(st.st_mode)), "not a regular file")
     if kind == "a directory":
         raise IsADirectoryError(f"{path}: is a directory; {name} must be a file")
-    raise ValueError(f"{path}: is {kind}, not a regular file; {name} must be a file "
-                     "(refused before opening it: reading a pipe or device could block)")
+    raise NotRegularFileError(path, kind, name)

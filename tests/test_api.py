@@ -1,8 +1,10 @@
 """meshphase.read / meshphase.process / Result: the tables equal the typed stage results they
 come from, the summary, the output files, and clear errors for empty and bad input."""
 
+import errno
 import json
 import math
+import os
 import subprocess
 import sys
 
@@ -11,7 +13,9 @@ import pytest
 
 import meshphase
 from meshphase.demo import demo_scene_path
-from meshphase.io import RecordingFileError, write
+import meshphase.io
+from meshphase.errors import NotRegularFileError
+from meshphase.io import RecordingFileError, RecordingTooLargeError, write
 from meshphase.process_result import Result
 from meshphase.recording import ChannelSpec, Recording
 from meshphase.results import RunContext
@@ -85,6 +89,60 @@ def test_read_empty_and_bad_input(tmp_path, rig_file):
         meshphase.read(42)
     with pytest.raises(TypeError):
         meshphase.read(rig_file, not_an_option=True)
+
+
+# ------------------------------------------------------------- the same path checks as the CLI
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no os.mkfifo on this platform")
+def test_read_and_process_refuse_a_fifo_without_opening_it(tmp_path, scene_path):
+    fifo = tmp_path / "pipe.h5"
+    os.mkfifo(fifo)
+    # refused by os.stat: opening it would block (no writer), the test would hang
+    for call in (meshphase.read, meshphase.io.read_info, meshphase.io.detect_format,
+                 lambda p: next(meshphase.io.iter_blocks(p, 1.0)),
+                 lambda p: meshphase.io.read(p, format="hdf5"),
+                 lambda p: meshphase.process(p, scene_path)):
+        with pytest.raises(NotRegularFileError, match="pipe.h5: is a FIFO") as exc:
+            call(fifo)
+        assert isinstance(exc.value, ValueError) and exc.value.path == str(fifo)
+
+
+def test_read_and_process_raise_the_same_for_a_folder_and_a_link_loop(tmp_path, scene_path):
+    folder = tmp_path / "folder.h5"
+    folder.mkdir()
+    loop = tmp_path / "loop.h5"
+    loop.symlink_to(loop)
+    for call in (meshphase.read, lambda p: meshphase.process(p, scene_path)):
+        with pytest.raises(IsADirectoryError, match="folder.h5: is a directory"):
+            call(folder)
+        with pytest.raises(OSError, match="symbolic links") as exc:   # not "no such file"
+            call(loop)
+        assert exc.value.errno == errno.ELOOP and exc.value.filename == str(loop)
+        assert not isinstance(exc.value, FileNotFoundError)
+
+
+def test_read_too_large_for_memory_names_the_file_and_size(rig_file, monkeypatch):
+    def no_memory(*args, **kwargs):
+        raise MemoryError()
+
+    monkeypatch.setattr(meshphase.io.get_format("hdf5"), "read", no_memory)
+    with pytest.raises(RecordingTooLargeError, match=r"rig\.h5: 307200 samples x 3 channel\(s\) "
+                                                     r"\(0\.00737 GB in memory\)") as exc:
+        meshphase.read(rig_file)
+    assert isinstance(exc.value, MemoryError) and isinstance(exc.value, RecordingFileError)
+    assert (exc.value.n_samples, exc.value.n_channels) == (307200, 3)
+
+
+def test_recording_too_large_error_empty_and_bad_input():
+    assert "0 samples x 0 channel(s) (0 GB in memory)" in str(RecordingTooLargeError("x.h5", 0, 0))
+    with pytest.raises(ValueError):
+        RecordingTooLargeError("x.h5", "many", 3)
+
+
+def test_not_regular_file_error_keeps_path_and_kind():
+    e = NotRegularFileError("/dev/x", "a character device", "the recording")
+    assert (e.path, e.kind) == ("/dev/x", "a character device") and "/dev/x: is a character device" in str(e)
+    with pytest.raises(TypeError):
+        NotRegularFileError("/dev/x")
 
 
 # ----------------------------------------------------------------------------- process

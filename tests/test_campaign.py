@@ -268,6 +268,10 @@ def test_campaign_cli_exit_codes(data, cluster, tmp_path, capsys):
     rc = main(["-q", "campaign", str(scene), str(rec / "broken.h5"),
                "--scheduler", cluster.scheduler_address, "--out", str(tmp_path / "all_bad")])
     assert rc == 1 and "0 ok, 0 unreliable, 0 partial, 1 failed" in capsys.readouterr().out
+    # exit 1, and the folder is written all the same (the exit table says so): the causes
+    summ = json.loads((tmp_path / "all_bad" / "campaign.json").read_text())
+    assert summ["exit_code"] == 1 and [r["status"] for r in summ["recordings"]] == ["failed"]
+    assert "truncated" in summ["recordings"][0]["error"]
 
 
 def test_run_recording_unreliable_phasing_is_not_ok(data, tmp_path, monkeypatch):

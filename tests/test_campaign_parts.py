@@ -410,7 +410,7 @@ def test_a_campaign_task_imports_nothing_its_fork_server_lacks(tmp_path, synthet
     import meshphase.io
     from meshphase.synthetic import generate
 
-    rec, _ = generate("seed_rig", duration=20.0, seed=3)
+    rec, _ = generate("seed_rig", duration=30.0, seed=3)  # both gauges measured: status ok
     path = meshphase.io.write(rec, tmp_path / "rig.h5")
     scene = tmp_path / "scene.toml"
     scene.write_text('name = "w"\nresults = ["phasing", "compare"]\n'

@@ -33,12 +33,13 @@ c_g_N_per_mm_um = 20.0
 
 @pytest.fixture(scope="module")
 def rig(tmp_path_factory):
-    """20 s of seed_rig as HDF5, a gearset file asking for tolerance, bearing moments and tilt
-    (with their tables), and one without [tolerances]."""
+    """30 s of seed_rig as HDF5 (both gauges measured: a clean run is "ok"), a gearset file
+    asking for tolerance, bearing moments and tilt (with their tables), and one without
+    [tolerances]."""
     from meshphase.synthetic import generate
 
     d = tmp_path_factory.mktemp("plan")
-    rec, _ = generate("seed_rig", duration=20.0, seed=5)
+    rec, _ = generate("seed_rig", duration=30.0, seed=5)
     path = meshphase.io.write(rec, d / "rig.h5")
     full = d / "full.toml"
     full.write_text('name = "rig"\nresults = ["ideal_phasing", "tolerance", "bearing_moments", "tilt"]\n'

@@ -26,11 +26,13 @@ from typing import Iterator
 import numpy as np
 
 from ..recording import Recording
-from ..validate import as_nonnegative, as_positive
-from .base import CorruptFileError, RecordingFileError, RecordingInfo, atomic_path, clean_stale_partials
+from ..validate import as_nonnegative, as_positive, as_regular_file
+from .base import (CorruptFileError, RecordingFileError, RecordingInfo, RecordingTooLargeError,
+                   atomic_path, clean_stale_partials)
 
 __all__ = ["read", "write", "write_blocks", "convert", "read_info", "iter_blocks", "detect_format", "FORMATS",
-           "RecordingFileError", "CorruptFileError", "RecordingInfo", "get_format", "atomic_path",
+           "RecordingFileError", "CorruptFileError", "RecordingTooLargeError", "RecordingInfo",
+           "get_format", "atomic_path",
            "clean_stale_partials"]
 
 #: Supported formats, in sniffing order (binary formats with magic bytes first, CSV last).
@@ -48,15 +50,13 @@ def get_format(name: str):
 def detect_format(path) -> str:
     """Name of the format of the file at ``path``, from its first bytes.
 
-    The file position of an open file object is never touched: the path is opened anew.
-    Raises FileNotFoundError when missing and ValueError (listing the supported formats)
-    when no format recognises the content.
+    The file position of an open file object is never touched: the path is opened anew,
+    after :func:`~meshphase.validate.as_regular_file` checked it (its exceptions:
+    FileNotFoundError, IsADirectoryError, NotRegularFileError for a FIFO, device or socket,
+    OSError for a symbolic-link loop ...). Raises :class:`RecordingFileError` when the file
+    is empty or no format recognises the content (the message lists the supported ones).
     """
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"{path}: no such file")
-    if path.is_dir():
-        raise ValueError(f"{path}: is a directory, not a recording file")
+    path = as_regular_file(path, "the recording")
     try:
         with open(path, "rb") as fh:
             head = fh.read(_SNIFF_BYTES)
@@ -70,8 +70,8 @@ def detect_format(path) -> str:
     for name in FORMATS:
         if get_format(name).sniff(head):
             return name
-    raise ValueError(f"{path}: unknown format (first bytes {head[:8]!r}); supported formats: "
-                     f"{', '.join(FORMATS)}")
+    raise RecordingFileError(path, f"unknown format (first bytes {head[:8]!r}); supported "
+                                   f"formats: {', '.join(FORMATS)}")
 
 
 def _format_for_write(path: Path, format: str | None) -> str:
@@ -101,9 +101,10 @@ def read_info(path, format: str | None = None, **options) -> RecordingInfo:
     """Header of a recording file (channels, fs, n_samples, t0, metadata) without samples.
 
     ``options`` go to the format module (e.g. ``fs=`` and ``raw=`` for TDMS, ``verify=False``
-    to skip checksum checks)."""
+    to skip checksum checks). The path is checked as :func:`read` checks it."""
+    path = as_regular_file(path, "the recording")
     name = format or detect_format(path)
-    return get_format(name).read_info(Path(path), **options)
+    return get_format(name).read_info(path, **options)
 
 
 def read(path, channels=None, start: float | None = None, stop: float | None = None, *,
@@ -131,23 +132,35 @@ def read(path, channels=None, start: float | None = None, stop: float | None = N
 
     Raises
     ------
+    FileNotFoundError, IsADirectoryError, NotRegularFileError, OSError
+        The path is no regular file (checked by ``os.stat`` before anything opens it, as
+        the ``meshphase`` command checks it: a FIFO never blocks), or the file system
+        refused it (a symbolic-link loop, permission ...); see :mod:`meshphase.errors`.
     CorruptFileError
         The file is damaged (checksum mismatch, truncated, malformed row); the message
         names the file, the position and the problem.
+    RecordingTooLargeError
+        The samples asked do not fit in memory (a RecordingFileError and a MemoryError).
     RecordingFileError
-        The file is not a recording of the detected format, or is inconsistent.
+        The file is empty, of no known format, not a recording of the detected format, or
+        inconsistent.
 
     Returns
     -------
     Recording
     """
-    path = Path(path)
+    path = as_regular_file(path, "the recording")
     name = format or detect_format(path)
     mod = get_format(name)
     info = mod.read_info(path, **options)
     names = info.check_channels(channels)
     i0, i1 = (0, info.n_samples) if start is None and stop is None else info.window(start, stop)
-    return mod.read(path, names, i0, i1, **options)
+    try:
+        return mod.read(path, names, i0, i1, **options)
+    except MemoryError as exc:
+        if isinstance(exc, RecordingTooLargeError):
+            raise
+        raise RecordingTooLargeError(path, i1 - i0, len(names)) from exc
 
 
 def iter_blocks(path, block: float, overlap: float = 0.0, channels=None, *,
@@ -156,8 +169,9 @@ def iter_blocks(path, block: float, overlap: float = 0.0, channels=None, *,
 
     Memory stays flat: only one block (plus overlap) is held at a time. Block k covers
     samples [k n, (k + 1) n + n_overlap), the same as :meth:`Recording.blocks` gives in memory.
+    The path is checked as :func:`read` checks it.
     """
-    path = Path(path)
+    path = as_regular_file(path, "the recording")
     name = format or detect_format(path)
     mod = get_format(name)
     info = mod.read_info(path, **options)

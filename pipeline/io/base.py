@@ -53,7 +53,7 @@ from ..quality import nonfinite_runs
 from ..recording import ChannelSpec, sample_index
 from ..validate import as_float, as_nonnegative
 
-__all__ = ["RecordingFileError", "CorruptFileError", "RecordingInfo", "atomic_path",
+__all__ = ["RecordingFileError", "CorruptFileError", "RecordingTooLargeError", "RecordingInfo", "atomic_path",
            "clean_stale_partials", "TEMP_PREFIX", "TEMP_SUFFIX", "STALE_AGE", "check_verify",
            "warn_nonfinite", "dumps_json", "check_start_datetime", "spec_from_dict", "nice_fs",
            "CLOCK_NAMES", "kind_from_name", "clock_timing",
@@ -92,6 +92,27 @@ class CorruptFileError(RecordingFileError):
         self.position = str(position)
         super().__init__(path, f"{position}: {problem}")
         self.problem = problem
+
+
+class RecordingTooLargeError(RecordingFileError, MemoryError):
+    """The samples asked of a recording file do not fit in memory (also a MemoryError).
+
+    The message names the file, the samples x channels asked and their size in memory, and
+    how to read less (a time window, or block by block).
+
+    Attributes
+    ----------
+    path : str
+    n_samples, n_channels : int
+        The samples and channels asked.
+    """
+
+    def __init__(self, path, n_samples: int, n_channels: int, itemsize: int = 8):
+        self.n_samples, self.n_channels = int(n_samples), int(n_channels)
+        size = self.n_samples * self.n_channels * int(itemsize)
+        super().__init__(path, f"{self.n_samples} samples x {self.n_channels} channel(s) "
+                               f"({size / 1e9:.3g} GB in memory) do not fit in memory; read a "
+                               "time window (start=, stop=) or block by block (iter_blocks)")
 
 
 @dataclass
@@ -559,12 +580,21 @@ def _fsync_dir(directory: Path) -> None:
         os.close(fd)
 
 
+#: errno of a write that failed for want of room: disk full, quota, file too large
+_WRITE_FULL = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
+
+
 def _check_space(path: Path, size_hint: int | None) -> None:
-    if not size_hint:
-        return
+    """OSError(EROFS) naming ``path`` on a read-only file system, OSError(ENOSPC) when it has
+    less free space than ``size_hint`` [B]; nothing when statvfs cannot tell."""
     try:
         st = os.statvfs(path.parent)
     except (OSError, AttributeError):
+        return
+    if getattr(st, "f_flag", 0) & getattr(os, "ST_RDONLY", 0):
+        # read-only: no free space to report (statvfs counts blocks all the same)
+        raise OSError(errno.EROFS, os.strerror(errno.EROFS), str(path))
+    if not size_hint:
         return
     free = st.f_bavail * st.f_frsize
     if free < size_hint:
@@ -712,9 +742,10 @@ def atomic_path(path, *, overwrite: bool = False, size_hint: int | None = None):
     IsADirectoryError
         ``path`` is a directory.
     OSError
-        ENAMETOOLONG (the name is longer than the file system allows), ELOOP, EACCES
-        (checked before anything is written); from the filesystem while writing (ENOSPC:
-        disk full), with nothing left behind. Every error carries ``path`` as its file name.
+        ENAMETOOLONG (the name is longer than the file system allows), ELOOP, EACCES, EROFS
+        (a read-only file system; checked before anything is written); from the filesystem
+        while writing (ENOSPC: disk full, EDQUOT, EFBIG), with nothing left behind. Every
+        error carries ``path`` as its file name.
     """
     path = Path(path)
     directory = path.parent
@@ -725,8 +756,15 @@ def atomic_path(path, *, overwrite: bool = False, size_hint: int | None = None):
         tmp, fd = _create_temp(directory)
         try:
             created = os.fstat(fd)
-            yield tmp
-            os.fsync(fd)
+            try:
+                yield tmp
+                os.fsync(fd)
+            except OSError as exc:
+                if exc.errno not in _WRITE_FULL or exc.filename == str(path):
+                    raise
+                # the writer's error names the temporary file, or nothing (h5py, mcap): the
+                # file the caller asked for is the one to name
+                raise OSError(exc.errno, os.strerror(exc.errno), str(path)) from exc
             try:
                 now = os.lstat(tmp)
             except FileNotFoundError:

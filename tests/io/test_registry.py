@@ -55,7 +55,7 @@ def test_empty_missing_and_directory(tmp_path):
         pio.read(empty)
     with pytest.raises(FileNotFoundError, match="no such file"):
         pio.read(tmp_path / "missing.h5")
-    with pytest.raises(ValueError, match="is a directory"):
+    with pytest.raises(IsADirectoryError, match="is a directory"):   # as process() and the CLI
         pio.read(tmp_path)
 
 
