@@ -1055,6 +1055,8 @@ class Competitor:
     inseparable: bool
     ripple_bound: float = float("nan")
     _fit: "_Fit" = field(default=None, repr=False)
+    # an inseparable competitor's move turned a quarter period in phase (:func:`_quarter_turn`)
+    _turned: "_Fit" = field(default=None, repr=False)
 
 
 @dataclass
@@ -1138,7 +1140,9 @@ class AngleModel:
             One-sigma model-choice uncertainty of A(t_a) - A(t_b) [mesh cycles]: the
             posterior-weighted second moment of the competitors' values about the chosen
             model's, plus the whole difference to a counted competitor the data cannot tell
-            from the chosen model at all (its weight is not the data's to give).
+            from the chosen model at all (its weight is not the data's to give), taken over
+            every phase of the common term the two split differently (the move and its
+            quarter turn in quadrature).
         info : list of dict
             Per competitor: ``words``, ``versus``, ``terms``, ``delta_bic`` [-], ``weight``
             [-], ``inseparable``, ``counted``, ``ripple_bound`` [mesh cycles], ``rms`` (RMS
@@ -1169,6 +1173,9 @@ class AngleModel:
         info = []
         for c in self.competitors:
             dl = turned(c._fit) - base
+            if c._turned is not None:
+                # every phase of the common term: the move and its quarter turn together
+                dl = np.hypot(dl, turned(c._turned) - base)
             rms = float(np.sqrt(np.mean(dl ** 2)))
             counted = not c.inseparable or rms > tolerance
             if c.inseparable and counted:
@@ -1747,6 +1754,24 @@ def _order_words(spec: _Spec, base: _Spec) -> str:
     return " and ".join(parts) or spec.describe()
 
 
+def _quarter_turn(th0: np.ndarray, fit: _Fit) -> np.ndarray:
+    """``fit``'s parameters with its move away from ``th0`` (same layout) turned a quarter
+    period in phase in every ripple and planet-term harmonic (each (cos, sin) pair (a, b)
+    becomes (-b, a)), the other parameters at ``th0``.
+
+    Moving a common term from the planet terms into a ripple at the same period is a move
+    along the columns' common direction, for either phase of that term: the quarter-turned
+    move is as invisible to the data as the move itself, and the two together span every
+    phase of a common term of that size."""
+    out = th0.copy()
+    dl = fit.theta - th0
+    for key, sl in fit.lay["blocks"].items():
+        if key.startswith(("rip:", "mod:")) or key == "sig":
+            pairs = dl[sl].reshape(-1, 2)
+            out[sl] = th0[sl] + np.column_stack([-pairs[:, 1], pairs[:, 0]]).ravel()
+    return out
+
+
 def _competitors(d: _Design, spec: _Spec, fit: _Fit, rejected: list,
                  kin: Kinematics) -> tuple[_Fit, list]:
     """The chosen model refitted with the selection's weights (timing bounds alone), and the
@@ -1808,7 +1833,8 @@ def _competitors(d: _Design, spec: _Spec, fit: _Fit, rejected: list,
                 moved = d.a_part(f2.theta, f2.lay, s2, d.t)[0] - d.a_part(ref.theta, ref.lay, spec, d.t)[0]
                 pair.append((float(np.ptp(moved)),
                              Competitor(words, vs, s2.describe(), f2.bic() - ref.bic(),
-                                        float("nan"), True, bound, f2)))
+                                        float("nan"), True, bound, f2,
+                                        replace(f2, theta=_quarter_turn(th, f2)))))
             found.append(max(pair, key=lambda x: x[0])[1])
         elif s_r.harm["planet"] != spec.harm.get("planet", 0):
             cands.append(s_r)

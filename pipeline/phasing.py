@@ -777,19 +777,20 @@ def phasing_from_model(model: AngleModel, train: PassTrain, z_gear: int, n_plane
     timing = scale * np.hypot(fn * sig[rows], f1 * s1)
     model_sd = model.difference_std(tn, t1) if rows.size else np.empty(0)
     # two explanations the data cannot tell apart (a common planet-rate ripple, equal planet
-    # terms) may share the common term in any split: with the split unknown (uniform), the
-    # chosen end is off by the difference D over sqrt(3), RMS; that counts once it passes
-    # what the reliability rule lets an estimated error reach (UNRELIABLE_RATIO x the timing
-    # floor), and then the whole D joins the uncertainty (the far end is not ruled out);
-    # below it the chosen explanation stands and a note names the other
-    tol = (UNRELIABLE_RATIO * math.sqrt(3.0) * float(np.sqrt(np.mean(floor ** 2)))
+    # terms) may share the common term in any split: D, the difference over every phase of
+    # that term, is the size of the whole move; with the split unknown (a share uniform in
+    # [0, 1], a phase uniform), the chosen end is off by D / sqrt(6), RMS. That counts once
+    # it passes what the reliability rule lets an estimated error reach (UNRELIABLE_RATIO x
+    # the timing floor), and then the whole D joins the uncertainty (the far end is not
+    # ruled out); below it the chosen explanation stands and a note names the other
+    tol = (UNRELIABLE_RATIO * INSEPARABLE_SHARE * float(np.sqrt(np.mean(floor ** 2)))
            if rows.size else 0.0)
     choice_sd, competitors = model.choice_spread(tn, t1, tolerance=tol if math.isfinite(tol) else 0.0)
     for c in competitors:
         if c["inseparable"] and not c["counted"] and c["rms"] > 0.0:
             notes.append(f"{c['words']} and {c['versus']} explain the passes equally well; "
                          f"their phasing differs by {c['rms']:.2g} mesh cycles (RMS), under "
-                         f"{UNRELIABLE_RATIO * math.sqrt(3.0):.1f}x the timing floor (where an "
+                         f"{UNRELIABLE_RATIO * INSEPARABLE_SHARE:.1f}x the timing floor (where an "
                          f"unknown split between them would make it unreliable): {c['versus']} kept"
                          + (f" (every 1 % of speed ripple at the planet spin rate can move the "
                             f"phasing by up to {c['ripple_bound']:.2g} mesh cycles)"
@@ -1443,6 +1444,10 @@ def _align_labels(trains, train_of, all_labels, labels, kin, n, notes):
 #: the timing floor; a train's residual autocorrelation above this means systematic misfit
 UNRELIABLE_RATIO = 3.0
 UNRELIABLE_LAG1 = 0.6
+#: the whole move between two explanations the data cannot tell apart over its RMS expected
+#: share, sqrt(6): a split uniform in [0, 1] (1/3 of the square) of a term of uniform phase
+#: (1/2 of it) [-]
+INSEPARABLE_SHARE = math.sqrt(6.0)
 
 
 def _choice_reasons(competitors, floor: float) -> list:
