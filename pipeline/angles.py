@@ -1130,9 +1130,10 @@ class AngleModel:
             Pass times [s].
         tolerance : float
             An inseparable competitor whose difference from the chosen model is at most this
-            (RMS over the pairs) [mesh cycles] is reported but not counted: the chosen model
-            (planet terms, which every planet's own shaft hole offset is certain to give)
-            stands for it.
+            (RMS over the pairs) [mesh cycles], or at most what a common ripple of
+            ``INSEPARABLE_RIPPLE`` at the planet spin rate can do, is reported but not
+            counted: the chosen model (planet terms, which every planet's own shaft hole
+            offset is certain to give) stands for it.
 
         Returns
         -------
@@ -1177,7 +1178,10 @@ class AngleModel:
                 # every phase of the common term: the move and its quarter turn together
                 dl = np.hypot(dl, turned(c._turned) - base)
             rms = float(np.sqrt(np.mean(dl ** 2)))
-            counted = not c.inseparable or rms > tolerance
+            least = tolerance
+            if math.isfinite(c.ripple_bound):
+                least = max(least, INSEPARABLE_RIPPLE / 0.01 * c.ripple_bound)
+            counted = not c.inseparable or rms > least
             if c.inseparable and counted:
                 np.maximum(whole, dl ** 2, out=whole)
             elif not c.inseparable:
@@ -1725,6 +1729,13 @@ def _variance_factors(d: _Design, use: list, spec: _Spec, fit: _Fit, outlier_k: 
 #: 5 % of the chosen model's: below "positive evidence" against it, Kass & Raftery 1995,
 #: counted twice over) joins the phasing's uncertainty [-]
 BIC_CLOSE = 6.0
+
+#: a common term at the planet spin period that the trains cannot place (ripple or planet
+#: terms) stays with the planet terms while it moves the phasing by no more than a common
+#: speed ripple of this relative amplitude at the planet spin rate could [-]: ordinary shaft
+#: hole offsets reach about that (the seed rig's 0.2 mm of Table 2 case 1 on every planet:
+#: 0.005-0.010 mesh cycles, 0.1 % of ripple's worth; a 1 % planet-rate ripple: 0.05-0.08)
+INSEPARABLE_RIPPLE = 0.002
 
 _SHAFT_WORDS = {"carrier": "carrier", "sun": "sun", "ring": "ring", "planet": "planet spin"}
 

@@ -782,16 +782,19 @@ def phasing_from_model(model: AngleModel, train: PassTrain, z_gear: int, n_plane
     # [0, 1], a phase uniform), the chosen end is off by D / sqrt(6), RMS. That counts once
     # it passes what the reliability rule lets an estimated error reach (UNRELIABLE_RATIO x
     # the timing floor), and then the whole D joins the uncertainty (the far end is not
-    # ruled out); below it the chosen explanation stands and a note names the other
+    # ruled out); below it, or below what a small common ripple could do
+    # (:data:`meshphase.angles.INSEPARABLE_RIPPLE`), the chosen explanation stands and a
+    # note names the other
     tol = (UNRELIABLE_RATIO * INSEPARABLE_SHARE * float(np.sqrt(np.mean(floor ** 2)))
            if rows.size else 0.0)
     choice_sd, competitors = model.choice_spread(tn, t1, tolerance=tol if math.isfinite(tol) else 0.0)
     for c in competitors:
         if c["inseparable"] and not c["counted"] and c["rms"] > 0.0:
             notes.append(f"{c['words']} and {c['versus']} explain the passes equally well; "
-                         f"their phasing differs by {c['rms']:.2g} mesh cycles (RMS), under "
-                         f"{UNRELIABLE_RATIO * INSEPARABLE_SHARE:.1f}x the timing floor (where an "
-                         f"unknown split between them would make it unreliable): {c['versus']} kept"
+                         f"their phasing differs by {c['rms']:.2g} mesh cycles (RMS), too little "
+                         f"to matter (under {UNRELIABLE_RATIO * INSEPARABLE_SHARE:.1f}x the timing "
+                         "floor, or within what ordinary shaft-hole errors give): "
+                         f"{c['versus']} kept"
                          + (f" (every 1 % of speed ripple at the planet spin rate can move the "
                             f"phasing by up to {c['ripple_bound']:.2g} mesh cycles)"
                             if math.isfinite(c["ripple_bound"]) else ""))
@@ -1450,16 +1453,19 @@ UNRELIABLE_LAG1 = 0.6
 INSEPARABLE_SHARE = math.sqrt(6.0)
 
 
-def _choice_reasons(competitors, floor: float) -> list:
+def _choice_reasons(competitors, floor: float, est: float) -> list:
     """Reasons of :func:`_reliability` from the competing angle models of a gear's passes
-    (:attr:`PassTable.competitors`): each that moves the phasing by more than the timing
-    ``floor`` [mesh cycles] (RMS over the passes), in words."""
+    (:attr:`PassTable.competitors`), in words: each counted inseparable one, and, when the
+    estimated error ``est`` with the model choice in it passes ``UNRELIABLE_RATIO`` times the
+    timing ``floor`` (the one rule of the verdict), each weighed one that moves the phasing
+    by more than the floor [mesh cycles] (RMS over the passes)."""
     out = []
     if not (math.isfinite(floor) and floor > 0):
         return out
+    weighed = math.isfinite(est) and est > UNRELIABLE_RATIO * floor
     named = set()
     for c in competitors:
-        if not (c["rms"] > floor and c.get("counted", True)):
+        if not (c["rms"] > floor and c.get("counted", True)) or not (c["inseparable"] or weighed):
             continue
         if c["inseparable"]:
             pair = frozenset((c["words"], c["versus"]))
@@ -1502,7 +1508,7 @@ def _reliability(model: AngleModel, train: PassTrain, tab: PassTable, unseen=())
     est = float(np.sqrt(np.mean(tab.uncertainty ** 2))) if len(tab) else float("nan")
     floor = float(np.sqrt(np.mean(tab.timing_floor ** 2))) if len(tab) else float("nan")
     choice = tab.choice_sigma if tab.choice_sigma is not None else np.zeros(len(tab))
-    reasons.extend(_choice_reasons(tab.competitors, floor))
+    reasons.extend(_choice_reasons(tab.competitors, floor, est))
     # the scatter test judges the chosen model's own uncertainty (the model choice is above)
     within = float(np.sqrt(np.mean(np.maximum(tab.uncertainty ** 2 - choice ** 2, 0.0)))) \
         if len(tab) else float("nan")
