@@ -57,6 +57,20 @@ is left out, with a count. Nothing depends on rounding:
 selection needs a BIC gain of at least 2 and the residual variance in the criterion has a
 floor (the timing bound: residuals inside it are no evidence for another term), so the same
 onsets moved by 1e-9 s give the same model.
+
+Model choice
+------------
+The selected order is one choice among models that may explain the passes about as well.
+The neighbours of the chosen model (one step less of each term taken, the best term turned
+down, a common speed ripple at the planet spin rate) are refitted; each within ``BIC_CLOSE``
+of the chosen BIC (or below it) is a :class:`Competitor` with its posterior weight, and the
+weighted spread of the phasing over them joins the uncertainty
+(:meth:`AngleModel.choice_spread`), so nothing rests on a BIC gain of 2 alone. A common
+planet-rate ripple and equal terms on every planet can be the very same columns over the
+trains fitted (a gauge on a gear whose Z / Z_p is an integer, a carrier tacho: every pass
+meets each planet at one spin angle); a rank test in both orders finds that from the data,
+the two explanations are kept as an inseparable pair, and a train that meets the planet spin
+at other angles (a shaft encoder) makes the columns independent, which clears the pair.
 """
 
 from __future__ import annotations
@@ -78,7 +92,7 @@ from .validate import as_finite_array, as_positive_int
 __all__ = ["PassTrain", "Kinematics", "AngleModel", "gauge_train", "tacho_train",
            "kinematics", "fit_angle_model", "revolution_numbers", "held_member",
            "typed_resolution", "relabel_train", "label_shift_costs", "slice_train",
-           "mesh_cycles_per_carrier_turn", "unseen_ripples", "SHIFT_OBS"]
+           "mesh_cycles_per_carrier_turn", "unseen_ripples", "SHIFT_OBS", "Competitor"]
 
 TWO_PI = 2.0 * math.pi
 #: spline interval counts tried, in order
@@ -1085,6 +1099,9 @@ class AngleModel:
         (step, terms, BIC) of the forward selection.
     notes : list of str
     wall_time : float [s]
+    competitors : list of Competitor
+        Models that explain the passes about as well as the chosen one (module notes,
+        "Model choice"); their spread is :meth:`choice_spread`.
     """
 
     t_span: tuple
