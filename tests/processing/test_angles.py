@@ -748,3 +748,20 @@ def test_choice_spread_empty_and_bad_input():
         model.choice_spread(t, t, tolerance=-1.0)
     with pytest.raises(ValueError, match="tolerance"):
         model.choice_spread(t, t, tolerance=float("nan"))
+
+
+def test_model_choice_does_not_depend_on_rounding():
+    # the planet-rate ripple's passes moved by 1e-9 s: the same competitors (rank test and
+    # weights), the same spread to 1e-6 of itself (the move is ~6e-9 cycles)
+    trains, _, kin = _planet_rate_ripple_trains(False, 60.0)
+    rng = np.random.default_rng(11)
+    moved = [PassTrain(tr.name, tr.kind, tr.times + rng.uniform(-1e-9, 1e-9, len(tr)), tr.sigma,
+                       tr.target, tr.planet, tr.position, tr.sigma_given, tr.z, tr.order)
+             for tr in trains]
+    a, b = fit_angle_model(trains, kin, 4), fit_angle_model(moved, kin, 4)
+    assert [(c.words, c.inseparable) for c in a.competitors] == \
+        [(c.words, c.inseparable) for c in b.competitors]
+    ta, tb = phasing_from_model(a, trains[0], 25, 4, gauge="sun"), \
+        phasing_from_model(b, moved[0], 25, 4, gauge="sun")
+    assert np.all(ta.choice_sigma > 0)
+    np.testing.assert_allclose(ta.choice_sigma, tb.choice_sigma, rtol=1e-6)
