@@ -509,7 +509,7 @@ class _Design:
             nonlocal i
             blocks[key] = slice(i, i + len(cols))
             names.extend(cols)
-            prio.extend([p] * len(cols))
+            prio.extend(p if isinstance(p, list) else [p] * len(cols))
             i += len(cols)
 
         add("spline", [f"spline[{j}]" for j in range(spec.knots + 3)], 0)
@@ -519,12 +519,19 @@ class _Design:
                 # a common ripple at the planet spin is what identical planet terms on every
                 # planet would look like: where the data cannot tell them apart, the planet
                 # terms (always present, from the planets' own shaft hole offsets) are kept
-                pr = 6 if r == "planet" else 3
+                # so is a harmonic of another shaft's ripple at a period of the planet spin
+                # (the carrier's third on Z_r / Z_p = 3): the planet terms go first there too
+                Pp = self.kin.planet_period or 0.0
+                spin = [r == "planet" or (Pp > 0 and abs(m * Pp / self.kin.periods[r]
+                                                         - round(m * Pp / self.kin.periods[r])) < 1e-9)
+                        for m in range(1, h + 1)]
+                pr = [6 if sp else 3 for sp in spin for _ in range(2)]
                 if spec.first:
-                    pr = 6 if spec.first == "planet" else 3
+                    pr = [6 if spec.first == "planet" else 3] * (2 * h)
                 add(f"rip:{r}", [f"{r} ripple {c}{m}" for m in range(1, h + 1) for c in ("cos", "sin")], pr)
                 if spec.mod.get(r):
-                    add(f"mod:{r}", [f"{r} ripple x*{c}{m}" for m in range(1, h + 1) for c in ("cos", "sin")], pr + 1)
+                    add(f"mod:{r}", [f"{r} ripple x*{c}{m}" for m in range(1, h + 1) for c in ("cos", "sin")],
+                        [x + 1 for x in pr])
         add("const", [f"{tr.name}: constant" for q, tr in enumerate(self.trains) if q > 0], 1)
         T = len(self.trains)
         off_table = np.full((T, self.N), -1, dtype=np.int64)
