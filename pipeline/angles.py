@@ -1825,7 +1825,7 @@ def _competitors(d: _Design, spec: _Spec, fit: _Fit, rejected: list,
     """
     ones = np.ones(len(d.trains))
     rows = np.flatnonzero(d.active)
-    ref = _solve(d, spec, fit.theta, ones)
+    ref = _solve(d, spec, fit.theta, ones, keep=fit.keep, recheck=False)
     versus = f"the chosen model ({spec.describe()})"
     cands: list = []
     for r, h in spec.harm.items():
@@ -1860,11 +1860,11 @@ def _competitors(d: _Design, spec: _Spec, fit: _Fit, rejected: list,
             # both ends of the split; the one that moves the angle from the chosen model is
             # the competitor (the other is the chosen model itself, the same columns kept)
             pair = []
-            for s2, words, vs in ((s_r, "a common speed ripple at the planet spin rate",
-                                   "equal shaft-hole errors on every planet"),
-                                  (s_p, "equal shaft-hole errors on every planet",
-                                   "a common speed ripple at the planet spin rate")):
-                f2 = _solve(d, s2, th, ones)
+            for s2, k2, words, vs in ((s_r, k_r, "a common speed ripple at the planet spin rate",
+                                       "equal shaft-hole errors on every planet"),
+                                      (s_p, k_p, "equal shaft-hole errors on every planet",
+                                       "a common speed ripple at the planet spin rate")):
+                f2 = _solve(d, s2, np.where(k2, th, 0.0), ones, keep=k2, recheck=False)
                 moved = d.a_part(f2.theta, f2.lay, s2, d.t)[0] - d.a_part(ref.theta, ref.lay, spec, d.t)[0]
                 pair.append((float(np.ptp(moved)),
                              Competitor(words, vs, s2.describe(), f2.bic() - ref.bic(),
