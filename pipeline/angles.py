@@ -521,17 +521,15 @@ class _Design:
                 # terms (always present, from the planets' own shaft hole offsets) are kept
                 # so is a harmonic of another shaft's ripple at a period of the planet spin
                 # (the carrier's third on Z_r / Z_p = 3): the planet terms go first there too
-                Pp = self.kin.planet_period or 0.0
-                spin = [r == "planet" or (Pp > 0 and abs(m * Pp / self.kin.periods[r]
-                                                         - round(m * Pp / self.kin.periods[r])) < 1e-9)
-                        for m in range(1, h + 1)]
+                k = np.arange(1, h + 1) * (self.kin.planet_period or 0.0) / self.kin.periods[r]
+                spin = (r == "planet") | ((k > 0) & (np.abs(k - np.round(k)) < 1e-9))
                 pr = [6 if sp else 3 for sp in spin for _ in range(2)]
                 if spec.first:
                     pr = [6 if spec.first == "planet" else 3] * (2 * h)
                 add(f"rip:{r}", [f"{r} ripple {c}{m}" for m in range(1, h + 1) for c in ("cos", "sin")], pr)
                 if spec.mod.get(r):
-                    add(f"mod:{r}", [f"{r} ripple x*{c}{m}" for m in range(1, h + 1) for c in ("cos", "sin")],
-                        [x + 1 for x in pr])
+                    add(f"mod:{r}", [f"{r} ripple x*{c}{m}" for m in range(1, h + 1)
+                                     for c in ("cos", "sin")], [x + 1 for x in pr])
         add("const", [f"{tr.name}: constant" for q, tr in enumerate(self.trains) if q > 0], 1)
         T = len(self.trains)
         off_table = np.full((T, self.N), -1, dtype=np.int64)
@@ -1865,7 +1863,8 @@ def _competitors(d: _Design, spec: _Spec, fit: _Fit, rejected: list,
                                       (s_p, k_p, "equal shaft-hole errors on every planet",
                                        "a common speed ripple at the planet spin rate")):
                 f2 = _solve(d, s2, np.where(k2, th, 0.0), ones, keep=k2, recheck=False)
-                moved = d.a_part(f2.theta, f2.lay, s2, d.t)[0] - d.a_part(ref.theta, ref.lay, spec, d.t)[0]
+                moved = (d.a_part(f2.theta, f2.lay, s2, d.t)[0]
+                         - d.a_part(ref.theta, ref.lay, spec, d.t)[0])
                 pair.append((float(np.ptp(moved)),
                              Competitor(words, vs, s2.describe(), f2.bic() - ref.bic(),
                                         float("nan"), True, bound, f2,

@@ -787,7 +787,8 @@ def phasing_from_model(model: AngleModel, train: PassTrain, z_gear: int, n_plane
     # note names the other
     tol = (UNRELIABLE_RATIO * INSEPARABLE_SHARE * float(np.sqrt(np.mean(floor ** 2)))
            if rows.size else 0.0)
-    choice_sd, competitors = model.choice_spread(tn, t1, tolerance=tol if math.isfinite(tol) else 0.0)
+    choice_sd, competitors = model.choice_spread(tn, t1,
+                                                 tolerance=tol if math.isfinite(tol) else 0.0)
     for c in competitors:
         if c["inseparable"] and not c["counted"] and c["rms"] > 0.0:
             notes.append(f"{c['words']} and {c['versus']} explain the passes equally well; "
@@ -1474,16 +1475,17 @@ def _choice_reasons(competitors, floor: float, est: float) -> list:
             named.add(pair)
             bound = c.get("ripple_bound", float("nan"))
             out.append(f"{c['words']} and {c['versus']} explain these passes equally well (the "
-                       "gauges, and tacho if any, see them as one and the same term) and their phasing "
-                       f"differs by {c['rms']:.2g} mesh cycles (RMS over the passes, "
+                       "gauges, and tacho if any, see them as one and the same term) and their "
+                       f"phasing differs by {c['rms']:.2g} mesh cycles (RMS over the passes, "
                        f"{c['rms'] / floor:.0f}x the timing floor); the uncertainty includes "
                        "that difference"
                        + (f"; every 1 % of speed ripple at the planet spin rate can move the "
-                          f"phasing by up to {bound:.2g} mesh cycles" if math.isfinite(bound) else "")
+                          f"phasing by up to {bound:.2g} mesh cycles"
+                          if math.isfinite(bound) else "")
                        + "; a shaft encoder on the sun (input) shaft would tell them apart")
         else:
-            how = ("explain these passes about as well as" if c["delta_bic"] >= 0
-                   else "explain these passes better than")
+            how = ("explains these passes about as well as" if c["delta_bic"] >= 0
+                   else "explains these passes better than")
             out.append(f"{c['words']} {how} {c['versus']} (BIC difference "
                        f"{c['delta_bic']:+.1f}, posterior weight {c['weight']:.2f}) and their "
                        f"phasing differs by {c['rms']:.2g} mesh cycles (RMS over the passes, "
@@ -1514,7 +1516,8 @@ def _reliability(model: AngleModel, train: PassTrain, tab: PassTable, unseen=())
         if len(tab) else float("nan")
     if math.isfinite(floor) and floor > 0 and within > UNRELIABLE_RATIO * floor:
         reasons.append(f"the passes scatter {fit.scale:.1f}x beyond their timing bound: "
-                       f"estimated error {within:.2e} cycles is {within / floor:.1f}x the floor {floor:.2e}")
+                       f"estimated error {within:.2e} cycles is {within / floor:.1f}x the floor "
+                       f"{floor:.2e}")
     if math.isfinite(fit.lag1) and fit.lag1 > UNRELIABLE_LAG1 and fit.n >= 20:
         reasons.append(f"residuals follow each other (lag-1 correlation {fit.lag1:.2f}): the "
                        "speed varies in a way the angle model does not follow")

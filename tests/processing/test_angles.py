@@ -778,7 +778,8 @@ def test_a_carrier_harmonic_at_the_planet_spin_period_is_right_or_flagged():
     from meshphase.synthetic.kinematics import ShaftRipple
 
     g, sp = rig()
-    prof = SpeedProfile(shaft=(ShaftRipple("carrier", 0.01, 1, 0.4), ShaftRipple("carrier", 0.005, 3, 1.1)))
+    prof = SpeedProfile(shaft=(ShaftRipple("carrier", 0.01, 1, 0.4),
+                               ShaftRipple("carrier", 0.005, 3, 1.1)))
     sig = 2e-4
     trains, ev = trains_from_truth(g, sp, prof, 120.0, errors=table2_case(1)[2], sigma=sig,
                                    jitter=sig, seed=4)
