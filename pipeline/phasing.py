@@ -1461,12 +1461,16 @@ def _choice_reasons(competitors, floor: float, est: float) -> list:
     timing ``floor`` (the one rule of the verdict), each weighed one that moves the phasing
     by more than the floor [mesh cycles] (RMS over the passes)."""
     out = []
-    if not (math.isfinite(floor) and floor > 0):
-        return out
-    weighed = math.isfinite(est) and est > UNRELIABLE_RATIO * floor
+    known = math.isfinite(floor) and floor > 0
+    weighed = known and math.isfinite(est) and est > UNRELIABLE_RATIO * floor
     named = set()
     for c in competitors:
-        if not (c["rms"] > floor and c.get("counted", True)) or not (c["inseparable"] or weighed):
+        if c["inseparable"]:
+            # counted ones only (above the floor and what hole errors give); without timing
+            # bounds there is no floor to set against, and the count alone decides
+            if not (c.get("counted", True) and (c["rms"] > floor or not known)):
+                continue
+        elif not (weighed and c["rms"] > floor):
             continue
         if c["inseparable"]:
             pair = frozenset((c["words"], c["versus"]))
@@ -1476,9 +1480,9 @@ def _choice_reasons(competitors, floor: float, est: float) -> list:
             bound = c.get("ripple_bound", float("nan"))
             out.append(f"{c['words']} and {c['versus']} explain these passes equally well (the "
                        "gauges, and tacho if any, see them as one and the same term) and their "
-                       f"phasing differs by {c['rms']:.2g} mesh cycles (RMS over the passes, "
-                       f"{c['rms'] / floor:.0f}x the timing floor); the uncertainty includes "
-                       "that difference"
+                       f"phasing differs by {c['rms']:.2g} mesh cycles (RMS over the passes"
+                       + (f", {c['rms'] / floor:.0f}x the timing floor" if known else "")
+                       + "); the uncertainty includes that difference"
                        + (f"; every 1 % of speed ripple at the planet spin rate can move the "
                           f"phasing by up to {bound:.2g} mesh cycles"
                           if math.isfinite(bound) else "")
