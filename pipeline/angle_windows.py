@@ -124,6 +124,40 @@ class WindowedAngleModel(AngleModel):
                 out[m] = w.difference_std(ta[m], tb[m])
         return out
 
+    def choice_spread(self, t_a, t_b, *, tolerance: float = 0.0) -> tuple[np.ndarray, list]:
+        """:meth:`~meshphase.angles.AngleModel.choice_spread` from the window whose core
+        holds each pair's midpoint; a competitor named alike in several windows is reported
+        once, its ``rms`` over all their pairs, its ``delta_bic`` and ``weight`` the most
+        telling (lowest BIC difference, highest weight)."""
+        ta = np.atleast_1d(np.asarray(t_a, dtype=float))
+        tb = np.atleast_1d(np.asarray(t_b, dtype=float))
+        if ta.shape != tb.shape:
+            raise ValueError(f"t_a and t_b must have one shape, got {ta.shape} and {tb.shape}")
+        k = np.searchsorted(self.bounds, 0.5 * (ta + tb), side="right")
+        out = np.zeros(ta.shape)
+        merged: dict = {}
+        for j, w in enumerate(self.windows):
+            m = k == j
+            if not np.any(m):
+                continue
+            out[m], info = w.choice_spread(ta[m], tb[m], tolerance=tolerance)
+            for c in info:
+                key = (c["words"], c["versus"], c["inseparable"])
+                if key not in merged:
+                    merged[key] = dict(c, rms=c["rms"] ** 2 * c["n"])
+                    continue
+                e = merged[key]
+                e["rms"] += c["rms"] ** 2 * c["n"]
+                e["n"] += c["n"]
+                e["delta_bic"] = min(e["delta_bic"], c["delta_bic"])
+                e["weight"] = max(e["weight"], c["weight"])
+                e["counted"] = e["counted"] or c["counted"]
+        info = []
+        for e in merged.values():
+            e["rms"] = math.sqrt(e["rms"] / e["n"]) if e["n"] else float("nan")
+            info.append(e)
+        return out, info
+
     # ------------------------------------------------------------------ per-train views
     def _core(self, j: int, t: np.ndarray) -> np.ndarray:
         lo = self.bounds[j - 1] if j > 0 else -np.inf

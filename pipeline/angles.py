@@ -59,6 +59,20 @@ is left out, with a count. Nothing depends on rounding:
 selection needs a BIC gain of at least 2 and the residual variance in the criterion has a
 floor (the timing bound: residuals inside it are no evidence for another term), so the same
 onsets moved by 1e-9 s give the same model.
+
+Model choice
+------------
+The selected order is one choice among models that may explain the passes about as well.
+The neighbours of the chosen model (one step less of each term taken, the best term turned
+down, a common speed ripple at the planet spin rate) are refitted; each within ``BIC_CLOSE``
+of the chosen BIC (or below it) is a :class:`Competitor` with its posterior weight, and the
+weighted spread of the phasing over them joins the uncertainty
+(:meth:`AngleModel.choice_spread`), so nothing rests on a BIC gain of 2 alone. A common
+planet-rate ripple and equal terms on every planet can be the very same columns over the
+trains fitted (a gauge on a gear whose Z / Z_p is an integer, a carrier tacho: every pass
+meets each planet at one spin angle); a rank test in both orders finds that from the data,
+the two explanations are kept as an inseparable pair, and a train that meets the planet spin
+at other angles (a shaft encoder) makes the columns independent, which clears the pair.
 """
 
 from __future__ import annotations
@@ -81,7 +95,7 @@ from .validate import as_finite_array, as_positive, as_positive_int
 __all__ = ["PassTrain", "Kinematics", "AngleModel", "gauge_train", "tacho_train",
            "kinematics", "fit_angle_model", "revolution_numbers", "held_member",
            "typed_resolution", "relabel_train", "label_shift_costs", "slice_train",
-           "mesh_cycles_per_carrier_turn", "unseen_ripples", "SHIFT_OBS"]
+           "mesh_cycles_per_carrier_turn", "unseen_ripples", "SHIFT_OBS", "Competitor"]
 
 TWO_PI = 2.0 * math.pi
 #: spline interval counts tried, in order
@@ -388,9 +402,14 @@ class _Spec:
     harm: dict = field(default_factory=dict)      # rate -> highest harmonic
     mod: dict = field(default_factory=dict)       # rate -> amplitude modulation on/off
     sig: int = 0                                  # planet-term harmonics
+    # rank order between the planet terms and a ripple at the planet-spin period where the
+    # data cannot tell them apart: "" the default (carrier, sun and ring ripple before the
+    # planet terms, the planet-rate ripple after), "planet" the planet terms before every
+    # ripple, "ripple" every ripple before the planet terms
+    first: str = ""
 
     def copy(self) -> "_Spec":
-        return _Spec(self.knots, dict(self.harm), dict(self.mod), self.sig)
+        return _Spec(self.knots, dict(self.harm), dict(self.mod), self.sig, self.first)
 
     def describe(self) -> str:
         parts = [f"spline {self.knots} interval(s)"]
@@ -480,7 +499,7 @@ class _Design:
         (train, planet) -> column tables of the offsets and planet terms (made once per spec
         and design; read-only)."""
         key = (spec.knots, tuple(sorted(spec.harm.items())), tuple(sorted(spec.mod.items())),
-               spec.sig)
+               spec.sig, spec.first)
         lay = self._layouts.get(key)
         if lay is None:
             lay = self._layouts[key] = self._layout(spec)
@@ -495,7 +514,7 @@ class _Design:
             nonlocal i
             blocks[key] = slice(i, i + len(cols))
             names.extend(cols)
-            prio.extend([p] * len(cols))
+            prio.extend(p if isinstance(p, list) else [p] * len(cols))
             i += len(cols)
 
         add("spline", [f"spline[{j}]" for j in range(spec.knots + 3)], 0)
@@ -505,10 +524,17 @@ class _Design:
                 # a common ripple at the planet spin is what identical planet terms on every
                 # planet would look like: where the data cannot tell them apart, the planet
                 # terms (always present, from the planets' own shaft hole offsets) are kept
-                pr = 6 if r == "planet" else 3
+                # so is a harmonic of another shaft's ripple at a period of the planet spin
+                # (the carrier's third on Z_r / Z_p = 3): the planet terms go first there too
+                k = np.arange(1, h + 1) * (self.kin.planet_period or 0.0) / self.kin.periods[r]
+                spin = (r == "planet") | ((k > 0) & (np.abs(k - np.round(k)) < 1e-9))
+                pr = [6 if sp else 3 for sp in spin for _ in range(2)]
+                if spec.first:
+                    pr = [6 if spec.first == "planet" else 3] * (2 * h)
                 add(f"rip:{r}", [f"{r} ripple {c}{m}" for m in range(1, h + 1) for c in ("cos", "sin")], pr)
                 if spec.mod.get(r):
-                    add(f"mod:{r}", [f"{r} ripple x*{c}{m}" for m in range(1, h + 1) for c in ("cos", "sin")], pr + 1)
+                    add(f"mod:{r}", [f"{r} ripple x*{c}{m}" for m in range(1, h + 1)
+                                     for c in ("cos", "sin")], [x + 1 for x in pr])
         add("const", [f"{tr.name}: constant" for q, tr in enumerate(self.trains) if q > 0], 1)
         T = len(self.trains)
         off_table = np.full((T, self.N), -1, dtype=np.int64)
@@ -1020,6 +1046,44 @@ class TrainFit:
 
 
 @dataclass
+class Competitor:
+    """A model of the same passes that explains them about as well as the chosen one.
+
+    Attributes
+    ----------
+    words : str
+        What it explains the passes by, in a rig engineer's words.
+    versus : str
+        What the chosen model explains them by instead.
+    terms : str
+        Its model order, as :attr:`AngleModel.terms` gives the chosen one's.
+    delta_bic : float
+        Its BIC less the chosen model's [-] (weights from the timing bounds alone, as in the
+        selection; negative: the data prefer it).
+    weight : float
+        Its posterior weight [-] (exp(-BIC / 2), normalised over the chosen model and its
+        competitors); NaN when ``inseparable``.
+    inseparable : bool
+        The trains fitted cannot tell it from the chosen model at all: its extra column lies
+        in the span of the chosen model's columns (the fit is the same, the angle is not).
+    ripple_bound : float
+        For a speed ripple at the planet spin rate: how far every 1 % of it can move a
+        phasing value [mesh cycles] (P / (100 pi), P mesh cycles per planet turn); else NaN.
+    """
+
+    words: str
+    versus: str
+    terms: str
+    delta_bic: float
+    weight: float
+    inseparable: bool
+    ripple_bound: float = float("nan")
+    _fit: "_Fit" = field(default=None, repr=False)
+    # an inseparable competitor's move turned a quarter period in phase (:func:`_quarter_turn`)
+    _turned: "_Fit" = field(default=None, repr=False)
+
+
+@dataclass
 class AngleModel:
     """The fitted mesh angle of a recording (module notes) and its diagnostics.
 
@@ -1045,6 +1109,9 @@ class AngleModel:
         (step, terms, BIC) of the forward selection.
     notes : list of str
     wall_time : float [s]
+    competitors : list of Competitor
+        Models that explain the passes about as well as the chosen one (module notes,
+        "Model choice"); their spread is :meth:`choice_spread`.
     """
 
     t_span: tuple
@@ -1062,6 +1129,8 @@ class AngleModel:
     offsets: dict = field(default_factory=dict)
     _design: _Design = field(default=None, repr=False)
     _fit: _Fit = field(default=None, repr=False)
+    competitors: list = field(default_factory=list)
+    _choice_ref: _Fit = field(default=None, repr=False)
 
     def mesh_angle(self, t) -> np.ndarray:
         """Mesh angle A(t) [mesh cycles] at times ``t`` [s]."""
@@ -1078,6 +1147,77 @@ class AngleModel:
         gb = self._design.a_part(f.theta, f.lay, f.spec, t_b)[2][:, f.keep]
         g = ga - gb
         return np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", g, f.cov, g), 0.0))
+
+    def choice_spread(self, t_a, t_b, *, tolerance: float = 0.0) -> tuple[np.ndarray, list]:
+        """How far the competing models (``competitors``) move A(t_a) - A(t_b).
+
+        Parameters
+        ----------
+        t_a, t_b : array_like, shape (n,)
+            Pass times [s].
+        tolerance : float
+            An inseparable competitor whose difference from the chosen model is at most this
+            (RMS over the pairs) [mesh cycles], or at most what a common ripple of
+            ``INSEPARABLE_RIPPLE`` at the planet spin rate can do, is reported but not
+            counted: the chosen model (planet terms, which every planet's own shaft hole
+            offset is certain to give) stands for it.
+
+        Returns
+        -------
+        spread : ndarray, shape (n,)
+            One-sigma model-choice uncertainty of A(t_a) - A(t_b) [mesh cycles]: the
+            posterior-weighted second moment of the competitors' values about the chosen
+            model's, plus the whole difference to a counted competitor the data cannot tell
+            from the chosen model at all (its weight is not the data's to give), taken over
+            every phase of the common term the two split differently (the move and its
+            quarter turn in quadrature).
+        info : list of dict
+            Per competitor: ``words``, ``versus``, ``terms``, ``delta_bic`` [-], ``weight``
+            [-], ``inseparable``, ``counted``, ``ripple_bound`` [mesh cycles], ``rms`` (RMS
+            over the pairs of its difference from the chosen model [mesh cycles]) and ``n``.
+
+        Raises
+        ------
+        ValueError
+            ``t_a`` and ``t_b`` of different shapes; a negative or NaN ``tolerance``.
+        """
+        ta = np.atleast_1d(np.asarray(t_a, dtype=float))
+        tb = np.atleast_1d(np.asarray(t_b, dtype=float))
+        if ta.shape != tb.shape:
+            raise ValueError(f"t_a and t_b must have one shape, got {ta.shape} and {tb.shape}")
+        tolerance = float(tolerance)
+        if not tolerance >= 0.0:
+            raise ValueError(f"tolerance must be >= 0 [mesh cycles], got {tolerance!r}")
+        if not self.competitors or ta.size == 0:
+            return np.zeros(ta.shape), []
+        d = self._design
+
+        def turned(f):
+            return d.a_part(f.theta, f.lay, f.spec, ta)[0] - d.a_part(f.theta, f.lay, f.spec, tb)[0]
+
+        base = turned(self._choice_ref)
+        var = np.zeros(ta.shape)
+        whole = np.zeros(ta.shape)
+        info = []
+        for c in self.competitors:
+            dl = turned(c._fit) - base
+            if c._turned is not None:
+                # every phase of the common term: the move and its quarter turn together
+                dl = np.hypot(dl, turned(c._turned) - base)
+            rms = float(np.sqrt(np.mean(dl ** 2)))
+            least = tolerance
+            if math.isfinite(c.ripple_bound):
+                least = max(least, INSEPARABLE_RIPPLE / 0.01 * c.ripple_bound)
+            counted = not c.inseparable or rms > least
+            if c.inseparable and counted:
+                np.maximum(whole, dl ** 2, out=whole)
+            elif not c.inseparable:
+                var += c.weight * dl ** 2
+            info.append({"words": c.words, "versus": c.versus, "terms": c.terms,
+                         "delta_bic": c.delta_bic, "weight": c.weight,
+                         "inseparable": c.inseparable, "counted": counted,
+                         "ripple_bound": c.ripple_bound, "rms": rms, "n": int(ta.size)})
+        return np.sqrt(var + whole), info
 
     def train(self, name: str) -> TrainFit:
         """Diagnostics of the train called ``name`` (KeyError naming the trains)."""
@@ -1117,7 +1257,10 @@ class AngleModel:
                 "iterations": self.iterations, "converged": self.converged,
                 "t_span_s": list(self.t_span), "wall_time_s": self.wall_time,
                 "trains": [vars(t) for t in self.trains], "notes": list(self.notes),
-                "selection": [{"step": s, "terms": m, "bic": b} for s, m, b in self.selection]}
+                "selection": [{"step": s, "terms": m, "bic": b} for s, m, b in self.selection],
+                "competitors": [{"explanation": c.words, "versus": c.versus, "terms": c.terms,
+                                 "delta_bic": c.delta_bic, "weight": c.weight,
+                                 "inseparable": c.inseparable} for c in self.competitors]}
 
 
 def _dropped_notes(d: _Design, lay: dict, keep: np.ndarray) -> tuple[list, list]:
@@ -1216,10 +1359,14 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
     # 1. base fit and gross outliers (mislabelled pulses are whole planet spacings off)
     fit = _drop_gross_outliers(d, use, spec, outlier_k)
     # 2. forward selection on BIC (weights from the timing bounds alone)
+    rejected: list = []
     spec, fit, selection = _select_terms(d, spec, fit, ladder, rates, kin, max_harmonics,
-                                         max_planet_harmonics)
+                                         max_planet_harmonics, rejected=rejected)
     # 3. variance factors per train, outliers against the final model, final fit
     scale, fit = _variance_factors(d, use, spec, fit, outlier_k)
+    # 4. the models that explain the passes about as well (their spread joins the phasing's
+    # uncertainty)
+    choice_ref, competitors = _competitors(d, spec, fit, rejected, kin)
     dropped, dnotes = _dropped_notes(d, fit.lay, fit.keep)
     notes.extend(dnotes)
     tfits = _train_fits(d, use, fit, scale, notes)
@@ -1234,7 +1381,8 @@ def fit_angle_model(trains, kin: Kinematics, n_planets: int, *, max_harmonics: i
         n_parameters=fit.lay["p"], dropped=dropped, trains=tfits,
         residual_rms=float(np.sqrt(np.mean(fit.resid[act] ** 2))) if act.any() else float("nan"),
         selection=selection, notes=notes, wall_time=wall, iterations=fit.iterations,
-        converged=fit.converged, offsets=_offsets(use, fit), _design=d, _fit=fit)
+        converged=fit.converged, offsets=_offsets(use, fit), _design=d, _fit=fit,
+        competitors=competitors, _choice_ref=choice_ref)
 
 
 def _usable_trains(trains, kin, n_planets) -> list:
@@ -1374,7 +1522,7 @@ def _drop_gross_outliers(d: _Design, use: list, spec: _Spec, outlier_k: float) -
 
 def _select_terms(d: _Design, spec: _Spec, fit: _Fit, ladder: list, rates: list,
                   kin: Kinematics, max_harmonics: int, max_planet_harmonics: int, *,
-                  screen: bool = True):
+                  screen: bool = True, rejected: list | None = None):
     """Forward selection of the model terms on BIC, weights from the timing bounds alone:
     (spec, fit, selection steps).
 
@@ -1385,7 +1533,10 @@ def _select_terms(d: _Design, spec: _Spec, fit: _Fit, ladder: list, rates: list,
     up, so the bar falls fastest. Most of a selection's time went into candidates that do
     not pay for their columns (a 64-interval spline costs as much as ten ripple terms; a
     step that ends the selection solves every candidate only to reject it); screening
-    leaves the chosen model unchanged (a test runs the selection both ways)."""
+    leaves the chosen model unchanged (a test runs the selection both ways).
+
+    ``rejected``: a list that receives the spec of the best candidate of the last step (the
+    one that did not gain ``BIC_GAIN``), when one was solved."""
     ones = np.ones(len(d.trains))
     selection = [(0, spec.describe(), fit.bic())]
     step = 0
@@ -1455,6 +1606,8 @@ def _select_terms(d: _Design, spec: _Spec, fit: _Fit, ladder: list, rates: list,
             if best is None or f2.bic() < best.bic() or (f2.bic() == best.bic() and i < best_i):
                 best, best_i = f2, i
         if best is None or best.bic() > fit.bic() - BIC_GAIN:
+            if rejected is not None and best is not None:
+                rejected.append(best.spec)
             break
         full = _solve(d, best.spec, best.theta, ones)
         fit = full if full.bic() <= best.bic() + 1e-9 * abs(best.bic()) else best
@@ -1601,6 +1754,157 @@ def _variance_factors(d: _Design, use: list, spec: _Spec, fit: _Fit, outlier_k: 
     return scale, _solve(d, spec, fit.theta, scale, full=True)
 
 
+#: a competing model within this BIC of the chosen one (posterior weight at least exp(-3),
+#: 5 % of the chosen model's: below "positive evidence" against it, Kass & Raftery 1995,
+#: counted twice over) joins the phasing's uncertainty [-]
+BIC_CLOSE = 6.0
+
+#: a common term at the planet spin period that the trains cannot place (ripple or planet
+#: terms) stays with the planet terms while it moves the phasing by no more than a common
+#: speed ripple of this relative amplitude at the planet spin rate could [-]: ordinary shaft
+#: hole offsets reach about that (the seed rig's 0.2 mm of Table 2 case 1 on every planet:
+#: 0.005-0.010 mesh cycles, 0.1 % of ripple's worth; a 1 % planet-rate ripple: 0.05-0.08)
+INSEPARABLE_RIPPLE = 0.002
+
+_SHAFT_WORDS = {"carrier": "carrier", "sun": "sun", "ring": "ring", "planet": "planet spin"}
+
+
+def _order_words(spec: _Spec, base: _Spec) -> str:
+    """What ``spec`` explains the passes by where it differs from ``base``, in words."""
+    parts = []
+    if spec.knots != base.knots:
+        parts.append(f"a speed drift of {spec.knots} spline interval(s) (not {base.knots})")
+    for r in [r for r in _SHAFT_WORDS if r in spec.harm or r in base.harm]:
+        h, h0 = spec.harm.get(r, 0), base.harm.get(r, 0)
+        w = _SHAFT_WORDS[r]
+        if h > h0:
+            parts.append(f"a speed ripple at the {w} rate to harmonic {h}"
+                         + (f" (not {h0})" if h0 else ""))
+        elif h < h0:
+            parts.append(f"the speed ripple at the {w} rate to harmonic {h} only (not {h0})"
+                         if h else f"no speed ripple at the {w} rate")
+        elif h and spec.mod.get(r, False) != base.mod.get(r, False):
+            parts.append(f"a {w}-rate ripple whose size changes over the record"
+                         if spec.mod.get(r) else f"a {w}-rate ripple of constant size")
+    if spec.sig > base.sig:
+        parts.append(f"planet shaft-hole errors to harmonic {spec.sig}")
+    elif spec.sig < base.sig:
+        parts.append(f"planet shaft-hole errors to harmonic {spec.sig} only" if spec.sig
+                     else "no planet shaft-hole errors")
+    return " and ".join(parts) or spec.describe()
+
+
+def _quarter_turn(th0: np.ndarray, fit: _Fit) -> np.ndarray:
+    """``fit``'s parameters with its move away from ``th0`` (same layout) turned a quarter
+    period in phase in every ripple and planet-term harmonic (each (cos, sin) pair (a, b)
+    becomes (-b, a)), the other parameters at ``th0``.
+
+    Moving a common term from the planet terms into a ripple at the same period is a move
+    along the columns' common direction, for either phase of that term: the quarter-turned
+    move is as invisible to the data as the move itself, and the two together span every
+    phase of a common term of that size."""
+    out = th0.copy()
+    dl = fit.theta - th0
+    for key, sl in fit.lay["blocks"].items():
+        if key.startswith(("rip:", "mod:")) or key == "sig":
+            pairs = dl[sl].reshape(-1, 2)
+            out[sl] = th0[sl] + np.column_stack([-pairs[:, 1], pairs[:, 0]]).ravel()
+    return out
+
+
+def _competitors(d: _Design, spec: _Spec, fit: _Fit, rejected: list,
+                 kin: Kinematics) -> tuple[_Fit, list]:
+    """The chosen model refitted with the selection's weights (timing bounds alone), and the
+    models that explain the passes about as well: (reference fit, list of Competitor).
+
+    Tried: one step less of each term the selection took (a ripple harmonic, its amplitude
+    modulation, a planet-term harmonic), the best term it turned down, and a common speed
+    ripple at the planet spin rate next to the planet terms. The last is judged by rank
+    first: where its columns lie in the span of the planet terms over the trains actually
+    fitted (the two rank orders of :attr:`_Spec.first` keep different columns), the data
+    cannot tell a common planet-rate ripple from equal terms on every planet, and both
+    explanations are kept as inseparable competitors; a train that sees the ripple apart
+    from the planets (a shaft encoder) makes the columns independent and the test clears.
+    Every other competitor counts when its BIC is within ``BIC_CLOSE`` of the chosen one's
+    (or below it), with its posterior weight.
+    """
+    ones = np.ones(len(d.trains))
+    rows = np.flatnonzero(d.active)
+    ref = _solve(d, spec, fit.theta, ones, keep=fit.keep, recheck=False)
+    versus = f"the chosen model ({spec.describe()})"
+    cands: list = []
+    for r, h in spec.harm.items():
+        if h:
+            s2 = spec.copy()
+            s2.harm[r] = h - 1
+            s2.mod[r] = s2.mod.get(r, False) and h > 1
+            cands.append(s2)
+            if spec.mod.get(r) and h > 1:
+                s3 = spec.copy()
+                s3.mod[r] = False
+                cands.append(s3)
+    if spec.sig:
+        s2 = spec.copy()
+        s2.sig -= 1
+        cands.append(s2)
+    cands.extend(rejected)
+    found: list = []
+    bound = float("nan")
+    if kin.planet_period and "planet" in _ripple_rates(d, kin, True, []):
+        bound = 0.01 * float(kin.planet_period) / math.pi
+        s_r = spec.copy()
+        s_r.harm["planet"] = max(spec.harm.get("planet", 0), spec.sig, 1)
+        s_r.mod.setdefault("planet", False)
+        s_r.first = "ripple"
+        s_p = s_r.copy()
+        s_p.first = "planet"
+        th = _extend(ref, s_r, d)
+        k_r = _rank_keep(d, th, d.layout(s_r), s_r, rows)
+        k_p = _rank_keep(d, th, d.layout(s_p), s_p, rows)
+        if not np.array_equal(k_r, k_p):
+            # both ends of the split; the one that moves the angle from the chosen model is
+            # the competitor (the other is the chosen model itself, the same columns kept)
+            pair = []
+            for s2, k2, words, vs in ((s_r, k_r, "a common speed ripple at the planet spin rate",
+                                       "equal shaft-hole errors on every planet"),
+                                      (s_p, k_p, "equal shaft-hole errors on every planet",
+                                       "a common speed ripple at the planet spin rate")):
+                f2 = _solve(d, s2, np.where(k2, th, 0.0), ones, keep=k2, recheck=False)
+                moved = (d.a_part(f2.theta, f2.lay, s2, d.t)[0]
+                         - d.a_part(ref.theta, ref.lay, spec, d.t)[0])
+                pair.append((float(np.ptp(moved)),
+                             Competitor(words, vs, s2.describe(), f2.bic() - ref.bic(),
+                                        float("nan"), True, bound, f2,
+                                        replace(f2, theta=_quarter_turn(th, f2)))))
+            found.append(max(pair, key=lambda x: x[0])[1])
+        elif s_r.harm["planet"] != spec.harm.get("planet", 0):
+            cands.append(s_r)
+    seen = set()
+    weighed = []
+    for c in cands:
+        key = (c.knots, tuple(sorted(c.harm.items())), tuple(sorted(c.mod.items())), c.sig)
+        if key in seen:
+            continue
+        seen.add(key)
+        # a ripple column that only duplicates the planet terms (a carrier harmonic at the
+        # planet spin period) is the inseparable pair's business, not a second opinion here
+        c = c.copy()
+        c.first = "planet"
+        f2 = _solve(d, c, _extend(ref, c, d), ones)
+        db = f2.bic() - ref.bic()
+        if db <= BIC_CLOSE:
+            planet = c.harm.get("planet", 0) > spec.harm.get("planet", 0)
+            weighed.append(Competitor(_order_words(c, spec), versus, c.describe(), db,
+                                      float("nan"), False, bound if planet else float("nan"), f2))
+    if weighed:
+        dbs = np.array([0.0] + [c.delta_bic for c in weighed])
+        w = np.exp(-0.5 * (dbs - dbs.min()))
+        w /= w.sum()
+        for c, wi in zip(weighed, w[1:]):
+            c.weight = float(wi)
+    return ref, found + weighed
+
+
 def _train_fits(d: _Design, use: list, fit: _Fit, scale: np.ndarray, notes: list) -> list:
     """One :class:`TrainFit` per train (outliers left out are named in ``notes``)."""
     tfits = []
@@ -1653,9 +1957,10 @@ def _extend(fit: _Fit, spec: _Spec, d: _Design) -> np.ndarray:
                 w_new = 2 * spec.sig
                 if w_old and w_new:
                     g = (sl.stop - sl.start) // w_old
+                    w = min(w_old, w_new)            # fewer harmonics: the lower ones kept
                     for i in range(g):
-                        th[ns.start + i * w_new: ns.start + i * w_new + w_old] = \
-                            fit.theta[sl.start + i * w_old: sl.start + (i + 1) * w_old]
+                        th[ns.start + i * w_new: ns.start + i * w_new + w] = \
+                            fit.theta[sl.start + i * w_old: sl.start + i * w_old + w]
             else:
                 th[ns.start:ns.start + k] = fit.theta[sl.start:sl.start + k]
     sb = new["blocks"]["spline"]

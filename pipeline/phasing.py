@@ -125,6 +125,12 @@ class PassTable:
         :attr:`GaugePasses.floor_factor`), the floor the reliability is judged against.
     model_sigma : ndarray, shape (n,)
         The angle model's own one-sigma uncertainty of A(t_n) - A(t_1) [-].
+    choice_sigma : ndarray, shape (n,)
+        The part of ``uncertainty`` from the choice of angle model [-]
+        (:meth:`meshphase.angles.AngleModel.choice_spread`; zeros where no competing model
+        explains the passes about as well).
+    competitors : list of dict
+        The competing angle models behind ``choice_sigma`` (``choice_spread``'s ``info``).
     """
 
     gauge: str
@@ -142,6 +148,8 @@ class PassTable:
     time_origin: float = 0.0
     timing_floor: np.ndarray = None
     model_sigma: np.ndarray = None
+    choice_sigma: np.ndarray = None
+    competitors: list = field(default_factory=list)
 
     def __post_init__(self):
         n = np.asarray(self.time).size
@@ -689,7 +697,9 @@ def phasing_from_model(model: AngleModel, train: PassTrain, z_gear: int, n_plane
     gamma = frac(A(t_n) - A(t_1)) with t_1 the planet-1 pass opening the same revolution of
     the same gauge (module notes; A in mesh cycles). Each row's ``uncertainty`` is the
     one-sigma combination of the two onsets' timing (their bound times the train's variance
-    factor, which is >= 1) and the angle model's own uncertainty of A(t_n) - A(t_1);
+    factor, which is >= 1), the angle model's own uncertainty of A(t_n) - A(t_1) and the
+    spread of that difference over the competing models that explain the passes about as
+    well (``choice_sigma``, :meth:`meshphase.angles.AngleModel.choice_spread`);
     ``timing_floor`` is the part the two timing bounds alone set.
 
     Parameters
@@ -777,7 +787,30 @@ def phasing_from_model(model: AngleModel, train: PassTrain, z_gear: int, n_plane
     floor = np.hypot(fn * sig[rows], f1 * s1) if train.sigma_given else np.full(rows.size, np.nan)
     timing = scale * np.hypot(fn * sig[rows], f1 * s1)
     model_sd = model.difference_std(tn, t1) if rows.size else np.empty(0)
-    unc = np.hypot(timing, model_sd)
+    # two explanations the data cannot tell apart (a common planet-rate ripple, equal planet
+    # terms) may share the common term in any split: D, the difference over every phase of
+    # that term, is the size of the whole move; with the split unknown (a share uniform in
+    # [0, 1], a phase uniform), the chosen end is off by D / sqrt(6), RMS. That counts once
+    # it passes what the reliability rule lets an estimated error reach (UNRELIABLE_RATIO x
+    # the timing floor), and then the whole D joins the uncertainty (the far end is not
+    # ruled out); below it, or below what a small common ripple could do
+    # (:data:`meshphase.angles.INSEPARABLE_RIPPLE`), the chosen explanation stands and a
+    # note names the other
+    tol = (UNRELIABLE_RATIO * INSEPARABLE_SHARE * float(np.sqrt(np.mean(floor ** 2)))
+           if rows.size else 0.0)
+    choice_sd, competitors = model.choice_spread(tn, t1,
+                                                 tolerance=tol if math.isfinite(tol) else 0.0)
+    for c in competitors:
+        if c["inseparable"] and not c["counted"] and c["rms"] > 0.0:
+            notes.append(f"{c['words']} and {c['versus']} explain the passes equally well; "
+                         f"their phasing differs by {c['rms']:.2g} mesh cycles (RMS), too little "
+                         f"to matter (under {UNRELIABLE_RATIO * INSEPARABLE_SHARE:.1f}x the timing "
+                         "floor, or within what ordinary shaft-hole errors give): "
+                         f"{c['versus']} kept"
+                         + (f" (every 1 % of speed ripple at the planet spin rate can move the "
+                            f"phasing by up to {c['ripple_bound']:.2g} mesh cycles)"
+                            if math.isfinite(c["ripple_bound"]) else ""))
+    unc = np.hypot(np.hypot(timing, model_sd), choice_sd)
     a_ref = float(model.mesh_angle(ref_t[:1])[0])
     enc = GaugeEncoder(model, z, ref_t, r0)
     tab = PassTable(gauge, tn, pl[rows].astype(int) + 1, ri, gamma, unc, 1.0 / fn, t1,
@@ -785,6 +818,8 @@ def phasing_from_model(model: AngleModel, train: PassTrain, z_gear: int, n_plane
     tab.encoder = enc
     tab.timing_floor = floor
     tab.model_sigma = model_sd
+    tab.choice_sigma = choice_sd
+    tab.competitors = competitors
     return tab
 
 
@@ -1798,6 +1833,54 @@ def _disagreement(p: GaugePasses, lab: GaugeLabels, refs: list, shift: int, n: i
 #: the timing floor; a train's residual autocorrelation above this means systematic misfit
 UNRELIABLE_RATIO = 3.0
 UNRELIABLE_LAG1 = 0.6
+#: the whole move between two explanations the data cannot tell apart over its RMS expected
+#: share, sqrt(6): a split uniform in [0, 1] (1/3 of the square) of a term of uniform phase
+#: (1/2 of it) [-]
+INSEPARABLE_SHARE = math.sqrt(6.0)
+
+
+def _choice_reasons(competitors, floor: float, est: float) -> list:
+    """Reasons of :func:`_reliability` from the competing angle models of a gear's passes
+    (:attr:`PassTable.competitors`), in words: each counted inseparable one, and, when the
+    estimated error ``est`` with the model choice in it passes ``UNRELIABLE_RATIO`` times the
+    timing ``floor`` (the one rule of the verdict), each weighed one that moves the phasing
+    by more than the floor [mesh cycles] (RMS over the passes)."""
+    out = []
+    known = math.isfinite(floor) and floor > 0
+    weighed = known and math.isfinite(est) and est > UNRELIABLE_RATIO * floor
+    named = set()
+    for c in competitors:
+        if c["inseparable"]:
+            # counted ones only (above the floor and what hole errors give); without timing
+            # bounds there is no floor to set against, and the count alone decides
+            if not (c.get("counted", True) and (c["rms"] > floor or not known)):
+                continue
+        elif not (weighed and c["rms"] > floor):
+            continue
+        if c["inseparable"]:
+            pair = frozenset((c["words"], c["versus"]))
+            if pair in named:
+                continue
+            named.add(pair)
+            bound = c.get("ripple_bound", float("nan"))
+            out.append(f"{c['words']} and {c['versus']} explain these passes equally well (the "
+                       "gauges, and tacho if any, see them as one and the same term) and their "
+                       f"phasing differs by {c['rms']:.2g} mesh cycles (RMS over the passes"
+                       + (f", {c['rms'] / floor:.0f}x the timing floor" if known else "")
+                       + "); the uncertainty includes that difference"
+                       + (f"; every 1 % of speed ripple at the planet spin rate can move the "
+                          f"phasing by up to {bound:.2g} mesh cycles"
+                          if math.isfinite(bound) else "")
+                       + "; a shaft encoder on the sun (input) shaft would tell them apart")
+        else:
+            how = ("explains these passes about as well as" if c["delta_bic"] >= 0
+                   else "explains these passes better than")
+            out.append(f"{c['words']} {how} {c['versus']} (BIC difference "
+                       f"{c['delta_bic']:+.1f}, posterior weight {c['weight']:.2f}) and their "
+                       f"phasing differs by {c['rms']:.2g} mesh cycles (RMS over the passes, "
+                       f"{c['rms'] / floor:.1f}x the timing floor); the uncertainty includes "
+                       "that spread")
+    return out
 
 
 def _reliability(model: AngleModel, train: PassTrain, tab: PassTable, unseen=()) -> dict:
@@ -1815,9 +1898,15 @@ def _reliability(model: AngleModel, train: PassTrain, tab: PassTable, unseen=())
     fit = model.train(train.name)
     est = float(np.sqrt(np.mean(tab.uncertainty ** 2))) if len(tab) else float("nan")
     floor = float(np.sqrt(np.mean(tab.timing_floor ** 2))) if len(tab) else float("nan")
-    if math.isfinite(floor) and floor > 0 and est > UNRELIABLE_RATIO * floor:
+    choice = tab.choice_sigma if tab.choice_sigma is not None else np.zeros(len(tab))
+    reasons.extend(_choice_reasons(tab.competitors, floor, est))
+    # the scatter test judges the chosen model's own uncertainty (the model choice is above)
+    within = float(np.sqrt(np.mean(np.maximum(tab.uncertainty ** 2 - choice ** 2, 0.0)))) \
+        if len(tab) else float("nan")
+    if math.isfinite(floor) and floor > 0 and within > UNRELIABLE_RATIO * floor:
         reasons.append(f"the passes scatter {fit.scale:.1f}x beyond their timing bound: "
-                       f"estimated error {est:.2e} cycles is {est / floor:.1f}x the floor {floor:.2e}")
+                       f"estimated error {within:.2e} cycles is {within / floor:.1f}x the floor "
+                       f"{floor:.2e}")
     if math.isfinite(fit.lag1) and fit.lag1 > UNRELIABLE_LAG1 and fit.n >= 20:
         reasons.append(f"residuals follow each other (lag-1 correlation {fit.lag1:.2f}): the "
                        "speed varies in a way the angle model does not follow")

@@ -208,3 +208,31 @@ def test_a_window_warning_reaches_the_caller_from_a_worker_thread(long_record, m
         model = fit_angle_windows(trains, KIN, 4, max_obs=1500)
     mine = [w for w in caught if issubclass(w.category, ProcessingWarning)]
     assert len(mine) == len(model.windows) >= 2
+
+
+def test_windowed_model_choice_comes_from_each_pairs_window():
+    # 4 min of the planet-rate ripple passes (test_angles: a common ripple and equal planet
+    # terms the gauges cannot tell apart) in windows of 300 observations: each pair's
+    # spread is its own window's, a competitor named in several windows is reported once,
+    # and the spread still covers the error (RMS(error / sigma) <= 1.5, as for one fit)
+    from test_angles import _planet_rate_ripple_trains
+
+    trains, ev, kin = _planet_rate_ripple_trains(False, 240.0)
+    win = fit_angle_windows(trains, kin, 4, max_obs=300)
+    assert isinstance(win, WindowedAngleModel) and len(win.windows) >= 2
+    err, tab = per_pass_error(win, trains[0], ev, 4)
+    assert float(np.sqrt(np.mean((err / tab.uncertainty) ** 2))) <= 1.5
+    keys = [(c["words"], c["versus"], c["inseparable"]) for c in tab.competitors]
+    assert len(keys) == len(set(keys)) and any(k[2] for k in keys)
+    assert sum(c["n"] for c in tab.competitors if c["inseparable"]) == len(tab)
+    spread, _ = win.choice_spread(tab.time, tab.ref_time)
+    k = np.searchsorted(win.bounds, 0.5 * (tab.time + tab.ref_time), side="right")
+    assert len(set(k.tolist())) >= 2
+    for j, w in enumerate(win.windows):
+        m = k == j
+        if np.any(m):
+            assert np.array_equal(spread[m], w.choice_spread(tab.time[m], tab.ref_time[m])[0])
+    spread, info = win.choice_spread([], [])
+    assert spread.shape == (0,) and info == []
+    with pytest.raises(ValueError, match="one shape"):
+        win.choice_spread(tab.time[:3], tab.ref_time[:2])

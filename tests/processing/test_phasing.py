@@ -341,3 +341,27 @@ def test_walk_empty_and_bad_gaps():
     assert pos.tolist() == [1] and ok.tolist() == [True] and total == 0.0
     with pytest.raises(ValueError, match="finite"):
         _walk(np.array([0.5, np.inf]), np.array([0.0, 0.5]), 0, 0.1)
+
+
+def test_model_choice_reasons_follow_the_verdicts_rule():
+    # an inseparable pair that counts is always named (with no timing floor to compare to);
+    # a weighed competitor only where the estimated error with the model choice passes 3x
+    # the floor; nothing from an empty list
+    from meshphase.phasing import _choice_reasons
+
+    insep = {"words": "a common speed ripple at the planet spin rate",
+             "versus": "equal shaft-hole errors on every planet", "inseparable": True,
+             "counted": True, "rms": 0.05, "delta_bic": 0.0, "weight": float("nan"),
+             "ripple_bound": 0.092}
+    weighed = {"words": "a speed ripple at the carrier rate to harmonic 2",
+               "versus": "the chosen model",
+               "inseparable": False, "counted": True, "rms": 0.004, "delta_bic": 1.0,
+               "weight": 0.3, "ripple_bound": float("nan")}
+    assert _choice_reasons([], 0.002, 0.01) == []
+    for floor in (0.002, float("nan")):
+        why = _choice_reasons([insep], floor, 0.05)
+        assert len(why) == 1 and "shaft encoder" in why[0] and "0.092" in why[0]
+    assert _choice_reasons([dict(insep, counted=False)], 0.002, 0.05) == []
+    assert _choice_reasons([weighed], 0.002, 0.0059) == []          # 2.95x the floor
+    why = _choice_reasons([weighed], 0.002, 0.0061)
+    assert len(why) == 1 and "posterior weight 0.30" in why[0]
