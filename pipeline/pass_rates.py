@@ -181,6 +181,12 @@ def two_level_train(x) -> tuple[float, float] | None:
     x = x[np.isfinite(x)]
     if x.size < 6:
         return None
+    # the test is scale-free: work on samples scaled to at most 1 in magnitude, so no sample
+    # size (1e300 or subnormal) overflows the range or the spreads
+    scale = float(np.max(np.abs(x)))
+    if not 0.0 < scale < math.inf:
+        return None
+    x = x / scale
     lo, hi = float(x.min()), float(x.max())
     if not hi > lo:
         return None
@@ -191,7 +197,7 @@ def two_level_train(x) -> tuple[float, float] | None:
     gap = float(b.mean() - a.mean())
     middle = np.count_nonzero(np.abs(x - 0.5 * (lo + hi)) < 0.25 * (hi - lo))
     if max(float(a.std()), float(b.std())) < TWO_LEVEL_SPREAD * gap and middle < TWO_LEVEL_SPREAD * b.size:
-        return float(a.mean()), float(b.mean())
+        return float(a.mean()) * scale, float(b.mean()) * scale
     return None
 
 

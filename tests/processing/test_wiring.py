@@ -3,6 +3,8 @@ wiring_findings, two_level_train), on pass trains made by hand at the seed rig's
 (sun 0.942 passes/s, ring 0.271, carrier 0.0677 turns/s: tests/processing/test_pass_rates.py
 works them out)."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -97,3 +99,16 @@ def test_two_level_train_empty_and_bad_input():
     assert two_level_train(np.r_[np.zeros(100), 5.0]) is None   # one high sample
     with pytest.raises((TypeError, ValueError)):
         two_level_train(["a", "b"])
+
+
+@pytest.mark.parametrize("scale", [1e-310, 1e-6, 1.0, 1e300])
+def test_two_level_train_is_scale_free(scale):
+    # a tacho-like train at any sample size gives the same verdict and levels in proportion:
+    # no overflow of the range or the spreads at 1e300, no loss at subnormal sizes (the
+    # levels are exact multiples of the train's 0 and 1 up to one rounding of the scaling)
+    x = np.tile(np.r_[np.zeros(20), np.ones(20)], 10) * scale
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        lv = two_level_train(x)
+    assert lv is not None
+    assert lv[0] == 0.0 and lv[1] == pytest.approx(scale, rel=1e-12 if scale > 1e-300 else 1e-6)
