@@ -236,3 +236,13 @@ def test_never_a_confident_wrong_planet_over_seeds(spread, mod):
             right.append(seed)
     if spread >= 0.02:
         assert len(right) == 6
+
+
+@pytest.mark.parametrize("q,dof", [(0.999, 1), (0.999, 3), (0.999, 4), (0.95, 2), (0.5, 10)])
+def test_chi2_quantile_is_scipy_stats(q, dof):
+    # the label check's chi-square quantile without importing scipy.stats: the same function
+    # (inverse regularised gamma); 1e-12 relative, the two paths' rounding
+    from scipy import stats
+
+    from meshphase.phasing import _chi2_quantile
+    assert _chi2_quantile(q, dof) == pytest.approx(float(stats.chi2.ppf(q, dof)), rel=1e-12)
