@@ -97,22 +97,29 @@ class CorruptFileError(RecordingFileError):
 class RecordingTooLargeError(RecordingFileError, MemoryError):
     """The samples asked of a recording file do not fit in memory (also a MemoryError).
 
-    The message names the file, the samples x channels asked and their size in memory, and
-    how to read less (a time window, or block by block).
+    The message names the file, the samples x channels asked and their size in memory, the
+    machine's memory when known, and how to read less (a time window, or block by block).
 
     Attributes
     ----------
     path : str
     n_samples, n_channels : int
         The samples and channels asked.
+    available : int or None
+        The machine's physical memory [bytes], when the check was made against it.
     """
 
-    def __init__(self, path, n_samples: int, n_channels: int, itemsize: int = 8):
+    def __init__(self, path, n_samples: int, n_channels: int, itemsize: int = 8, *,
+                 available: int | None = None):
         self.n_samples, self.n_channels = int(n_samples), int(n_channels)
+        self.available = None if available is None else int(available)
         size = self.n_samples * self.n_channels * int(itemsize)
+        have = ("" if self.available is None
+                else f", more than this machine's {self.available / 1e9:.4g} GB of memory")
         super().__init__(path, f"{self.n_samples} samples x {self.n_channels} channel(s) "
-                               f"({size / 1e9:.3g} GB in memory) do not fit in memory; read a "
-                               "time window (start=, stop=) or block by block (iter_blocks)")
+                               f"({size / 1e9:.3g} GB in memory) do not fit in memory{have}; read "
+                               "a time window (start=, stop=), fewer channels, or block by block "
+                               "(iter_blocks, the streamed commands)")
 
 
 @dataclass
@@ -243,16 +250,14 @@ def check_allocation(path, n_samples: int, n_channels: int, itemsize: int) -> No
 
     Raises
     ------
-    MemoryError
-        Naming the file, the sizes and the memory [GB], and what to do instead (a time
-        window, the streamed commands).
+    RecordingTooLargeError
+        (a MemoryError) Naming the file, the sizes and the memory [GB], and what to do
+        instead (a time window, the streamed commands).
     """
     need = int(n_samples) * int(n_channels) * int(itemsize)
     ram = physical_memory()
     if ram is not None and need > ram:
-        raise MemoryError(f"{path}: reading {n_samples} samples x {n_channels} channels needs "
-                          f"{need / 1e9:.4g} GB, more than this machine's {ram / 1e9:.4g} GB of memory; "
-                          "read a time window (start, stop) or fewer channels, or use the streamed commands")
+        raise RecordingTooLargeError(path, n_samples, n_channels, itemsize, available=ram)
 
 
 def check_verify(verify) -> bool:

@@ -12,7 +12,7 @@ from fault_corpus import hdf5_without_chunks
 import meshphase.io as pio
 from meshphase.errors import FormatWarning
 from meshphase.io import base as iobase
-from meshphase.io.base import CorruptFileError
+from meshphase.io.base import CorruptFileError, RecordingTooLargeError
 from meshphase.recording import ChannelSpec, Recording
 
 FS = 5120.0
@@ -85,7 +85,9 @@ def test_empty_channels_pass_the_check(tmp_path):
 # --------------------------------------------------------------------------- memory budget
 def test_check_allocation_refuses_more_than_memory(monkeypatch, h5):
     monkeypatch.setattr(iobase, "physical_memory", lambda: 10_000)
-    with pytest.raises(MemoryError, match=r"rec.h5: reading 4096 samples x 2 channels needs 6.554e-05 GB"):
+    with pytest.raises(RecordingTooLargeError, match=r"rec.h5: 4096 samples x 2 channel\(s\) \(6.55e-05 GB "
+                                                     r"in memory\) do not fit in memory, more than "
+                                                     r"this machine's 1e-05 GB"):
         pio.read(h5)
     assert pio.read(h5, start=0.0, stop=100 / FS).n_samples == 100     # a window that fits is read
 
@@ -226,7 +228,7 @@ def test_check_allocation_guards_every_full_read(monkeypatch, tmp_path, suffix):
     else:
         p = pio.write(_rec(), tmp_path / f"rec{suffix}")
     monkeypatch.setattr(iobase, "physical_memory", lambda: 10_000)
-    with pytest.raises(MemoryError, match=rf"rec{suffix}: reading 4096 samples x 2 channels"):
+    with pytest.raises(MemoryError, match=rf"rec{suffix}: 4096 samples x 2 channel\(s\)"):
         pio.read(p)
 
 
