@@ -182,8 +182,11 @@ def _empty_results(ctx, failed: dict) -> list[dict]:
                 data = [t for st in ("load", "condition", "onsets")
                         for t in _stage_reasons(ctx.messages, st)
                         if any(f"channel {n!r}" in t for n in names)]
+                # the verdict's own causes first (a wiring finding names the channel and the fix)
+                rel = [r for r in ((getattr(ph, "reliability", None) or {}).get(gauge) or {}).get("reasons", ())
+                       if r != "no pass could be measured"]
                 missing("phasing", "phasing", f"{gauge} gauge: no measured pass",
-                        _stage_reasons(ctx.messages, "phasing", gauge) + notes + data)
+                        rel + _stage_reasons(ctx.messages, "phasing", gauge) + notes + data)
     ls = ctx.load_sharing
     if "load_sharing" in requested and "load_sharing" not in failed and ls is not None:
         if ls.sharing is None or _all_nan(ls.sharing.factors):
