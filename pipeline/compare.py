@@ -677,7 +677,7 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
                             method="trf", x_scale=1.0, diff_step=1e-6, max_nfev=max_nfev,
                             bounds=(-bound, bound))
     else:
-        sol = _subspace_fit(fit, Vt0[keep0].T, jac, max_nfev)
+        sol = _subspace_fit(fit, Vt0[keep0].T, jac, max_nfev, bound)
     njev += int(sol.njev or 0)
     U, s, Vt = np.linalg.svd(sol.jac, full_matrices=False)
     keep = _kept(s, rcond)
@@ -688,7 +688,7 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
                                 method="trf", x_scale=1.0, diff_step=1e-6, max_nfev=max_nfev,
                                 bounds=(-bound, bound))
         else:
-            sol = _subspace_fit(fit, Vt[keep].T, jac, max_nfev)
+            sol = _subspace_fit(fit, Vt[keep].T, jac, max_nfev, bound)
         njev += int(sol.njev or 0)
         U, s, Vt = np.linalg.svd(sol.jac, full_matrices=False)
         keep = _kept(s, rcond)
@@ -730,11 +730,17 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
         suggestions=sugg)
 
 
-def _subspace_fit(fit: "_PhasingFit", basis: np.ndarray, jac: str, max_nfev: int) -> OptimizeResult:
+def _subspace_fit(fit: "_PhasingFit", basis: np.ndarray, jac: str, max_nfev: int,
+                  bound: float = np.inf) -> OptimizeResult:
     """Least squares of :meth:`_PhasingFit.resid` over x = ``basis`` c (orthonormal columns:
     the determined directions), started at c = 0, so the directions outside the span stay
     exactly 0. Returns ``x`` (scaled parameters), ``fun``, ``jac`` (the full Jacobian at x,
-    closed form or forward differences of step 1e-6), ``njev``, ``success``, ``message``."""
+    closed form or forward differences of step 1e-6), ``njev``, ``success``, ``message``.
+
+    ``bound`` [scaled parameter units] keeps every component of x inside +-bound, as the
+    full fit's box does: with orthonormal columns |x_i| <= |x| = |c| <= sqrt(k) max |c_j|,
+    so each of the k coordinates c_j is held to bound / sqrt(k) (a geometrically impossible
+    layout, e.g. on passes that hold no phasing, can then never be reached)."""
     if basis.shape[1] == 0:        # nothing determined: the parameters stay at 0
         x = np.zeros(basis.shape[0])
         return OptimizeResult(x=x, fun=fit.resid(x), jac=_jacobian_at(fit, x, jac), njev=1,
@@ -746,8 +752,10 @@ def _subspace_fit(fit: "_PhasingFit", basis: np.ndarray, jac: str, max_nfev: int
     def jac_c(c):
         return fit.jac(basis @ c) @ basis
 
+    cb = bound / math.sqrt(basis.shape[1])
     sol = least_squares(resid, np.zeros(basis.shape[1]), jac=jac_c if fit.analytic else jac,
-                        method="trf", x_scale=1.0, diff_step=1e-6, max_nfev=max_nfev)
+                        method="trf", x_scale=1.0, diff_step=1e-6, max_nfev=max_nfev,
+                        bounds=(-cb, cb))
     x = basis @ sol.x
     return OptimizeResult(x=x, fun=fit.resid(x), jac=_jacobian_at(fit, x, jac),
                           njev=(sol.njev or 0) + 1, success=sol.success, message=sol.message)
