@@ -86,6 +86,7 @@ class Condition:
 #: The issue's conditions (the encoder row waits for the encoder channel kind).
 CONDITIONS = (
     Condition("1 % ripple at the planet spin rate", "rig_ripple_planet", (0, 1, 2)),
+    Condition("the same with a 60-pulse sun-shaft encoder", "rig_ripple_planet_encoder", (0, 1, 2)),
     Condition("1 % planet-rate ripple, Z 25/85/30, 5 planets", "rig_5planets_ripple_planet"),
     Condition("sun 120 r/min, 1 % carrier ripple", "rig_fast_ripple1", (0, 1, 2)),
     Condition("pulse amplitude +-25 % once per carrier turn", "rig_load_ripple"),
