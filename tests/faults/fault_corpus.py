@@ -865,10 +865,12 @@ def _scene_with(path: tuple, value, results=None, *, drop: bool = False):
     return make
 
 
-#: tables BASE_SCENE leaves out (they need another kind of recording), with a valid content
-#: for the keys under them: ``[input.mcap]`` maps the topics of an MCAP file of another tool
+#: tables BASE_SCENE leaves out (they need another kind of recording, or pin what the data
+#: decide), with a valid content for the keys under them: ``[input.mcap]`` maps the topics of
+#: an MCAP file of another tool, ``[labels]`` pins a gauge's planet labels
 _OPTIONAL_TABLES = {("input", "mcap"): {"channels": [{"name": "sun", "topic": "/rig/strain",
-                                                      "field": "gauges.sun"}]}}
+                                                      "field": "gauges.sun"}]},
+                    ("labels",): {"sun_shift": 0}}
 
 #: keys the scene schema allows only instead of another (``oneOf``)
 _EXCLUSIVE = {("gearset", "planet_angles_deg"): "n_planets"}

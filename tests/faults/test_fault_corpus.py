@@ -194,7 +194,10 @@ def _run_signal(case, values) -> None:
         _require(lines == [prefix + "interrupted"], "other", f"expected only '{prefix}interrupted'; {where}")
     if rerun:
         rc, _, err = _run_subprocess(argv, case.timeout)
-        _require(rc == 0, "other", f"the rerun gives exit {rc}: {err.strip()[:2000]}; {where}")
+        # the rerun ends as the command does on the untouched recording: the corpus's 5-s
+        # recording is too short for every pass (partial, outputs written; see the originals)
+        want = EXIT_PARTIAL if argv[1] == "process" else 0
+        _require(rc == want, "other", f"the rerun gives exit {rc}, expected {want}: {err.strip()[:2000]}; {where}")
         final = Path(case.commands[0][-1].format(**values)).name
         left = sorted(os.listdir(out_dir))
         _require(left == [final], "leak", f"after the rerun {left} in the output folder, expected [{final!r}]; {where}")
