@@ -814,6 +814,18 @@ class OutputDir:
         self._state = "new"
 
     def __enter__(self) -> "OutputDir":
+        # the guard comes first: a SIGTERM between a folder's creation (the reserved name, the
+        # staging folder) and the guard would end the process at the default action and
+        # leave that folder behind
+        self._signals = _SignalGuard().__enter__()
+        try:
+            return self._open()
+        except BaseException:
+            self._signals.__exit__(None, None, None)
+            self._signals = None
+            raise
+
+    def _open(self) -> "OutputDir":
         base = self.base
         if os.path.islink(base):
             raise _link_error(base)
@@ -864,7 +876,6 @@ class OutputDir:
                 raise
         else:  # a new folder, filled in place (see the class notes)
             self.path = self.final
-        self._signals = _SignalGuard().__enter__()
         self._state = "open"
         return self
 
