@@ -324,6 +324,25 @@ def local_cluster(n_workers: int, *, dashboard=None, worker_modules: Sequence[st
 
 
 @contextlib.contextmanager
+def _distributed_config_quiet() -> Iterator[None]:
+    """While distributed is first imported: its logging config at ERROR unless our own logger
+    is verbose (dask reads ``DASK_LOGGING__DISTRIBUTED`` from the environment at import), so
+    the level :func:`_quiet_distributed` later restores is ERROR too: a cluster closed after
+    that restore (a campaign interrupted while its cluster starts) logs nothing at INFO. A
+    user's own setting of the variable, or an earlier import, is left as it is."""
+    key = "DASK_LOGGING__DISTRIBUTED"
+    set_here = ("distributed" not in sys.modules and key not in os.environ
+                and not logger.isEnabledFor(logging.INFO))
+    if set_here:
+        os.environ[key] = "error"
+    try:
+        yield
+    finally:
+        if set_here:
+            os.environ.pop(key, None)
+
+
+@contextlib.contextmanager
 def _quiet_distributed() -> Iterator[None]:
     """distributed logs cluster life (start, connections, close) at INFO and worker restarts
     at WARNING; show them only when our own logger is verbose (meshphase -v): the campaign
@@ -417,7 +436,8 @@ class ClusterStart:
         try:
             # importing distributed sets its loggers' levels from its config (INFO): quieted
             # before that, a command's first campaign printed ~30 lines of cluster life
-            import distributed  # noqa: F401
+            with _distributed_config_quiet():
+                import distributed  # noqa: F401
 
             self._quiet.enter_context(_quiet_distributed())
             # a local cluster's Nannies write their pre-spawn variables into this process's

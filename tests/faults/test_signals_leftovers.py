@@ -4,6 +4,7 @@ the next run removes, and a campaign's fork server and workers leave Ctrl-C to t
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import subprocess
@@ -151,3 +152,22 @@ def test_fork_server_starts_with_sigint_blocked():
         """)
     assert r.returncode == 0, r.stderr
     assert r.stdout.split() == ["server", "True"]
+
+
+@pytest.mark.parametrize("verbose", [False, True])
+def test_distributed_is_quiet_from_its_import_unless_verbose(verbose):
+    """A campaign's first import of distributed takes its logging config at ERROR (INFO with
+    -v), so a cluster closed after the start's quieting ends (an interrupted start) prints no
+    INFO lines; the environment variable that does it is gone after the import."""
+    r = _py(f"""
+        import logging, os, sys
+        from meshphase.cluster import _distributed_config_quiet
+        from meshphase.log import logger
+        logger.setLevel(logging.INFO if {verbose} else logging.WARNING)
+        with _distributed_config_quiet():
+            import distributed
+        print(logging.getLogger("distributed").level, "DASK_LOGGING__DISTRIBUTED" in os.environ)
+    """)
+    assert r.returncode == 0, r.stderr
+    level, env = r.stdout.split()
+    assert int(level) == (logging.INFO if verbose else logging.ERROR) and env == "False"
