@@ -29,13 +29,14 @@ from meshphase.data_schemas import schema_errors
 
 from . import io
 from .bridge import BridgeConfig
-from .channels import (ChannelMapError, apply_channel_overrides, check_gauges, is_glob,
-                       map_channels)
+from .channels import (GAUGE_KINDS, ChannelMapError, apply_channel_overrides, check_gauges,
+                       is_glob, map_channels)
 from .errors import DeprecatedNameWarning, SceneWarning
 from .models.assembly import (CLEARANCE_ATOL, assemblable_planet_counts, coaxiality_error,
                               max_equal_planets, tip_clearance)
 from .models.gearset import Gearset, Speeds, rpm_to_rad_s
 from .recording import Recording
+from .units import parse_unit
 
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "scene_schema_errors", "plan",
            "check_recording", "STAGES", "RESULTS", "LIMITS"]
@@ -962,11 +963,14 @@ def _check_gearset(gearset: Gearset, g: dict, profile_shift: bool, err) -> Gears
 
 def _check_channel(c: dict, i: int, gearset: Gearset | None, err) -> None:
     """One ``[[channels]]`` table against the gearset: tooth numbers, face positions, gain,
-    an encoder's shaft and pulses per revolution."""
+    a known unit, an encoder's shaft and pulses per revolution."""
     if "gain" in c and c["gain"] == 0:
         raise err(["channels", i, "gain"], "gain 0 would erase the channel; leave the key out "
                   "for gain 1")
     _check_encoder_entry(c, i, err)
+    if c.get("kind") in GAUGE_KINDS and isinstance(c.get("units"), str) and parse_unit(c["units"]) is None:
+        raise err(["channels", i, "units"], f"unknown unit {c['units']!r} for a {c['kind']} gauge: "
+                  "a strain (m/m, µm/m, µε, ue, microstrain, mm/m, %) or a bridge's V, mV or mV/V")
     if gearset is None:
         return
     gear = c.get("gear") or (c.get("kind") if c.get("kind") in ("sun", "ring") else None)

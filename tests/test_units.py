@@ -284,3 +284,18 @@ def test_a_bridge_ratio_in_mv_per_v_with_a_bridge_entry(seed_rec, ref_amplitudes
     assert ctx.load.recording.spec("SG01_sun").units == "m/m"
     # without the bridge entry the ratio is refused, naming the channel
     assert "SG01_sun" in _run(path, tmp_path).failed["load"]
+
+
+def test_scene_refuses_an_unknown_gauge_unit_at_parse_time(tmp_path):
+    # the scene's own units key is checked as the scene is read (line and key named), not
+    # when the recording is loaded; a non-gauge channel keeps whatever unit it states
+    from meshphase.scene import SceneError, parse_scene
+
+    base = ('results = ["ideal_phasing"]\n[gearset]\nz_sun = 25\nz_ring = 87\nz_planet = 29\n'
+            'n_planets = 4\ncarrier_radius_mm = 112.5\nprofile_shift = true\n')
+    with pytest.raises(SceneError, match=r"channels.*units.*unknown unit 'furlong'"):
+        parse_scene(base + '[[channels]]\nname = "sun"\nkind = "sun"\nunits = "furlong"\n',
+                    tmp_path / "s.toml")
+    parse_scene(base + '[[channels]]\nname = "speed"\nkind = "other"\nunits = "rpm"\n',
+                tmp_path / "s.toml")
+    parse_scene(base + '[[channels]]\nname = "sun"\nkind = "sun"\nunits = "µε"\n', tmp_path / "s.toml")
