@@ -1,4 +1,4 @@
-"""One kinematic angle model for a whole recording (the "angles" step of DESIGN.md's flow).
+"""One kinematic angle model for a whole recording (the "angles" step of the flow: onsets -> angles -> phasing).
 
 Array code: pass trains (onset times with their planet labels and pass-order positions) in,
 a fitted :class:`AngleModel` out. No Recording, no files.

@@ -10,7 +10,7 @@ and the peak resident memory creeps up with the number of blocks: ``meshphase pr
 
 Two ways out were measured (``meshphase process``, 8 channels, 5120 Hz, idle 2-core machine):
 
-- a low fixed threshold (128 KiB, glibc's starting value; the choice until issue 13): flat
+- a low fixed threshold (128 KiB, glibc's starting value): flat
   peaks (``meshphase bench processing``: 389 / 401 / 403 MB at 10 min / 1 h / 3 h), but every
   block array is a fresh mapping whose pages fault in one by one: 1 h took 43 s in the
   bench, 3 h 130 s in one in-process run;
@@ -20,8 +20,7 @@ Two ways out were measured (``meshphase process``, 8 channels, 5120 Hz, idle 2-c
   3 h in 86 s (the bench; 89 s in-process). A period of 0.5 s was faster still (3 h: 82 s)
   but let the peak creep (454 MB at 1 h, 512 MB at 3 h).
 
-The second is what :func:`limit_heap_growth` does, with two changes found later (issue 13,
-fifth session). Fixing the mmap threshold also stops glibc from raising the trim threshold
+The second is what :func:`limit_heap_growth` does, with two changes. Fixing the mmap threshold also stops glibc from raising the trim threshold
 with it, which stayed at 128 KiB: every free at the top of the heap handed pages back that
 the next allocation faulted in again (the phasing stage of a 1-h run: 8.5-9.9 s against
 6.1-6.5 s). The trim threshold is now fixed at twice the mmap threshold, as glibc's own

@@ -41,7 +41,7 @@ from .units import parse_unit
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "scene_schema_errors", "plan",
            "check_recording", "STAGES", "RESULTS", "LIMITS"]
 
-#: stage -> the stages it needs (a DAG; flows one way, as in DESIGN.md)
+#: stage -> the stages it needs (a DAG; the flow runs one way)
 STAGES: dict[str, tuple[str, ...]] = {
     "load": (),
     "condition": ("load",),
@@ -275,8 +275,8 @@ LIMITS = {
 }
 
 #: Monte Carlo kernel throughput for the run-time estimate of a warning [evaluations/s]: the
-#: numba kernel on one core of the 2-core machine, 0.065-0.135 G evaluations/s as issue 13
-#: measured it unloaded (``meshphase bench models`` prints "Kernel throughput" of the machine
+#: numba kernel on one core of the 2-core machine, 0.065-0.135 G evaluations/s as
+#: ``meshphase bench models`` measures it unloaded (``meshphase bench models`` prints "Kernel throughput" of the machine
 #: it runs on); an order of magnitude for a warning, not a promise
 _MC_RATE = {"numba": 0.1e9}
 #: results that need the planet tooth count (planet speed w_pc = -(Z_s / Z_p) w_sc)

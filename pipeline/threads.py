@@ -21,7 +21,7 @@ threads gain less than two cores.
 Each streamed pass reads the recording's next block on a thread of its own while it works on
 this one (:func:`read_ahead`: h5py's reads and ``os.preadv`` release the GIL): the 1-h bench
 record's quality scans took 1.7-2.0 s instead of 2.2-2.6 s (``meshphase bench processing``,
-the 1-h row's ``load_s``, this stop's runs and the stop before's).
+the 1-h row's ``load_s``, with and without the read-ahead).
 
 A run holds the BLAS library's own thread pool to one thread (:func:`blas_single_thread`,
 threadpoolctl). The least squares here are tall and narrow (thousands of rows, tens of

@@ -66,7 +66,7 @@ __all__ = ["run_io_bench", "strain_recording", "convert_rss_rows", "IO_FORMATS",
 
 #: Formats the benchmark knows, in report order.
 IO_FORMATS = ("hdf5", "mcap", "csv", "tdms")
-#: Target read throughput as a ratio to the raw read (issue 2); CSV is held against pandas.
+#: Target read throughput as a ratio to the raw read; CSV is held against pandas.
 TARGETS = {"hdf5": 0.5, "mcap": 0.3, "tdms": 0.3}
 #: Columns of each result row (JSON keys; the Markdown table shows them in this order).
 COLUMNS = ("format", "variant", "file_mb", "write_s", "read_s", "read_msps", "ratio_to_raw",
@@ -636,7 +636,7 @@ def _markdown(res: dict) -> str:
         f"Raw reference (.npy, readinto a preallocated buffer): **{raw['prealloc_msps']:.1f} MS/s**; "
         f"np.load (allocates): {raw['np_load_msps']:.1f} MS/s.",
         "",
-        "Targets (issue 2): HDF5 >= 0.5 x raw, MCAP and TDMS >= 0.3 x raw, CSV at least as fast "
+        "Targets: HDF5 >= 0.5 x raw, MCAP and TDMS >= 0.3 x raw, CSV at least as fast "
         "as pandas.read_csv(engine='c') alone.",
         "",
     ]

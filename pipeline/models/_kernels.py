@@ -31,11 +31,9 @@ so that loop vectorises (libm's atan2 is not vectorised). The kernel also reduce
 
 Throughput is measured by ``meshphase bench models`` ("Kernel throughput" in
 ``models_bench.md``: G realisation x time x planet evaluations per second, both meshes, all
-eight statistics, one thread and all threads). Measured there on the shared 2-core machine
-under a load average of ~13 (2026-11-26): 0.0087 G evaluations/s on one thread, 0.0090 on
-both; issue 13 measured 0.065-0.135 on a less loaded machine; on the quiet host of the
-night of 2026-11-27: 0.088 on one thread, 0.135 on both (the numpy path 0.033). An earlier figure of 0.27 G
-evaluations/s written here was not reproduced by any bench and is withdrawn.
+eight statistics, one thread and all threads). On the 2-core reference machine it gives
+0.065-0.135 G evaluations/s unloaded (0.088 on one thread, 0.135 on both; the numpy path
+0.033) and about a tenth of that under a load average of ~13.
 """
 
 from __future__ import annotations

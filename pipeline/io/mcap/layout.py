@@ -35,7 +35,7 @@ PROFILE = "meshphase"
 FORMAT_VERSION = 1
 #: Chunk compressions offered by :func:`write`.
 COMPRESSIONS = ("none", "lz4", "zstd")
-#: Samples per message by default (DESIGN.md: >= 5120 keeps the per-message cost small).
+#: Samples per message by default (>= 5120 keeps the reader's per-message cost, ~8-15 µs, small).
 DEFAULT_BLOCK = 5120
 #: Target uncompressed chunk size by default [B].
 DEFAULT_CHUNK_SIZE = 1 << 20
