@@ -43,7 +43,7 @@ import numpy as np
 from .recording import ENCODER_SHAFTS
 from .validate import as_finite_array, as_positive, as_positive_int, as_signal
 
-__all__ = ["ENCODER_SHAFTS", "EncoderEdges", "shaft_of", "pulse_levels", "rising_crossings",
+__all__ = ["ENCODER_SHAFTS", "EncoderEdges", "shaft_of", "pulse_levels", "rising_crossing_parts", "rising_crossings",
            "edge_times", "clean_edges", "split_at_gaps", "edge_timing_sigma"]
 
 #: an interval whose ratio to the local pulse period is further than this from a whole
@@ -123,12 +123,49 @@ def pulse_levels(x, *, iterations: int = 5) -> tuple[float, float]:
     return low, high
 
 
+def rising_crossing_parts(x, level, *, finite_only: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Where ``x`` rises through ``level``: the sample after each crossing and the crossing's
+    fraction of the interval before it.
+
+    The one crossing rule of the pulse trains: :func:`rising_crossings` (whole arrays) and the
+    streamed tacho and encoder edges (:mod:`meshphase.stream`) both use it. A crossing lies
+    between samples i - 1 (at or below the level) and i (above), at ``i - 1 + frac`` with
+    ``frac = (level - x[i-1]) / (x[i] - x[i-1])`` (linear interpolation, clipped to [0, 1]).
+    The arithmetic stays in ``x``'s floating dtype (float32 samples give float32 fractions).
+
+    Parameters
+    ----------
+    x : array_like, shape (n,)
+    level : float
+        Threshold [units of x].
+    finite_only : bool
+        Leave out a crossing whose sample before is non-finite (a NaN or -inf run ending).
+
+    Returns
+    -------
+    (ndarray of int, ndarray)
+        ``i`` [samples] and ``frac`` [-], shape (m,) each.
+    """
+    v = as_signal(x, "x")
+    if v.dtype.kind not in "f":
+        v = v.astype(np.float64)
+    b = v > level
+    up = b[1:] & ~b[:-1]
+    if finite_only:
+        up &= np.isfinite(v[:-1])
+    rise = np.flatnonzero(up) + 1
+    x0, x1 = v[rise - 1], v[rise]
+    with np.errstate(invalid="ignore", divide="ignore"):   # inf edges: frac unused
+        frac = np.where(x1 > x0, (level - x0) / np.where(x1 > x0, x1 - x0, 1.0), 0.0)
+    return rise, np.clip(frac, 0.0, 1.0)
+
+
 def rising_crossings(x, level: float) -> np.ndarray:
     """Fractional sample indices where ``x`` rises through ``level`` [samples].
 
     A crossing lies between samples i - 1 (at or below the level) and i (above); its index is
     ``i - 1 + (level - x[i-1]) / (x[i] - x[i-1])`` (linear interpolation, clipped to the
-    interval). Non-finite samples never cross.
+    interval; :func:`rising_crossing_parts`). Non-finite samples never cross.
 
     Parameters
     ----------
@@ -144,12 +181,8 @@ def rising_crossings(x, level: float) -> np.ndarray:
     lev = float(level)
     if not math.isfinite(lev):
         raise ValueError(f"level must be finite, got {level!r}")
-    b = v > lev
-    rise = np.flatnonzero(b[1:] & ~b[:-1] & np.isfinite(v[:-1])) + 1
-    x0, x1 = v[rise - 1], v[rise]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        frac = np.where(x1 > x0, (lev - x0) / np.where(x1 > x0, x1 - x0, 1.0), 0.0)
-    return rise - 1 + np.clip(frac, 0.0, 1.0)
+    rise, frac = rising_crossing_parts(v, lev)
+    return rise - 1 + frac
 
 
 def edge_times(x, fs: float, *, t0: float = 0.0, levels: tuple | None = None) -> np.ndarray:

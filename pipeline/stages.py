@@ -40,7 +40,7 @@ from .member_speeds import mean_mesh_rate, member_speeds, tacho_rate
 from .models.gearset import Speeds
 from .models.mesh_phasing import assembly_check, classify_phasing, ideal_phasing
 from .onsets import detect_onsets_recording
-from .onsets.results import Onsets, _empty_onsets
+from .onsets.results import Onsets, empty_onsets
 from .outputs import new_output_dir, summary_dict, write_outputs  # noqa: F401 (public here)
 from .passes import ONSET_RESOLUTION, gap_intervals_of, gauge_passes  # noqa: F401 (was here)
 from .pass_rates import pass_rate_warnings, two_level_train, wiring_findings
@@ -341,7 +341,7 @@ def stage_condition(ctx: RunContext) -> ConditionStage:
     if too_big and res.onsets is not None:
         h = src.header
         # empty onsets with the detector's default reference point (Onsets' defaults)
-        found = {**res.onsets, **{n: _empty_onsets(h.fs, h.t0, n, Onsets.reference, Onsets.level)
+        found = {**res.onsets, **{n: empty_onsets(h.fs, h.t0, n, Onsets.reference, Onsets.level)
                                   for n in too_big}}
         res = dataclasses.replace(res, onsets={c.name: found[c.name] for c in h.channels
                                                if c.name in found})

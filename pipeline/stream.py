@@ -77,7 +77,7 @@ from .condition import (_apply_finite, _block_means, _block_medians, _check_freq
                         _noise_from_diffs, _resolve_band, _settle_time, _short_segments_message,
                         _short_signal_message, _snr_combine, _snr_peak, _warn_quality, default_band,
                         design_filter, design_notch, detect_hum, finite_apply_gaps, level_steps)
-from .encoder import pulse_levels
+from .encoder import pulse_levels, rising_crossing_parts
 from .errors import DataQualityWarning
 from .quality import ChannelQuality, ChannelScan, _RunTracker, merge_runs, quality_from_scan
 from .recording import ChannelSpec, Recording
@@ -679,7 +679,8 @@ class RawScan:
 
 
 class _TachoEdges:
-    """The rising half-level crossings of a tacho fed in blocks (stages' rule, exactly)."""
+    """The rising half-level crossings of a tacho or an encoder fed in blocks
+    (:func:`meshphase.encoder.rising_crossing_parts`, every sample before counted)."""
 
     def __init__(self, lo, hi, fs: float, t0: float):
         self.half = 0.5 * (lo + hi)
@@ -693,13 +694,9 @@ class _TachoEdges:
             return
         xx = x if self.last is None else np.concatenate([self.last, x])
         off = self.pos - (0 if self.last is None else 1)
-        b = xx > self.half
-        rise = np.flatnonzero(b[1:] & ~b[:-1]) + 1
+        rise, frac = rising_crossing_parts(xx, self.half, finite_only=False)
         if rise.size:
-            x0, x1 = xx[rise - 1], xx[rise]
-            with np.errstate(invalid="ignore", divide="ignore"):   # inf edges: frac unused
-                frac = np.where(x1 > x0, (self.half - x0) / np.where(x1 > x0, x1 - x0, 1.0), 0.0)
-            self.parts.append(self.t0 + (rise + off - 1 + np.clip(frac, 0.0, 1.0)) / self.fs)
+            self.parts.append(self.t0 + (rise + off - 1 + frac) / self.fs)
         self.last = x[-1:].copy()
         self.pos += x.size
 

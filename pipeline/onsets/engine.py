@@ -25,7 +25,7 @@ from .matched import _gather, _Matcher, _sublags, _window_baseline
 from .options import _options, _Options
 from .relearn import _Fit, _good_median, _period
 from .results import (FLAG_CLIPPED, FLAG_EDGE, FLAG_GAP, FLAG_LOW_CORR, FLAG_TEMPLATE, Onsets, Template,
-                      _empty_onsets)
+                      empty_onsets)
 from .runs import _inside_runs, _runs_overlap
 
 __all__ = ["detect_onsets", "detect_onsets_recording"]
@@ -77,7 +77,7 @@ class _Engine:
     def finish(self) -> Onsets:
         o = self.o
         if self.n == 0:
-            return _empty_onsets(o.fs, o.t0, o.channel, o.reference, o.level)
+            return empty_onsets(o.fs, o.t0, o.channel, o.reference, o.level)
         if not self.ready:
             self._init()
         while self.k * self.B < self.n:
@@ -88,7 +88,7 @@ class _Engine:
                           f"{o.min_template_pulses} clean pulses to learn a template from; their "
                           "onsets carry FLAG_TEMPLATE", ProcessingWarning, stacklevel=3)
         if not self.out:
-            return _empty_onsets(o.fs, o.t0, o.channel, o.reference, o.level, self.templates)
+            return empty_onsets(o.fs, o.t0, o.channel, o.reference, o.level, self.templates)
         cols = [np.concatenate(c) for c in zip(*self.out)]
         index, corr, amp, width, flags, tid = cols
         return Onsets(o.t0 + index / o.fs, index, corr, amp, width, flags.astype(np.uint8, copy=False),

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["Template", "CoarsePeaks", "Onsets", "FLAG_GAP", "FLAG_CLIPPED", "FLAG_LOW_CORR",
-           "FLAG_EDGE", "FLAG_TEMPLATE", "FLAG_NAMES"]
+           "FLAG_EDGE", "FLAG_TEMPLATE", "FLAG_NAMES", "empty_onsets"]
 
 #: The pulse window overlaps (or lies within ``gap_guard`` of) a gap: non-finite samples or
 #: a ``gap_runs`` range (a DAQ dropout from the quality report).
@@ -198,7 +198,10 @@ class Onsets:
                 "level": self.level}
 
 
-def _empty_onsets(fs, t0, channel, reference, level, templates=()) -> Onsets:
+def empty_onsets(fs, t0, channel, reference, level, templates=()) -> Onsets:
+    """:class:`Onsets` with no onset (every array empty) of a channel sampled at ``fs`` [Hz]
+    from ``t0`` [s], with the detector's timing ``reference`` and ``level`` and its
+    ``templates``: the one return type of a detector that found nothing."""
     f = np.empty(0, dtype=np.float64)
     return Onsets(f, f.copy(), f.copy(), f.copy(), f.copy(), np.empty(0, dtype=np.uint8),
                   np.empty(0, dtype=np.int32), tuple(templates), fs, t0, channel, reference, level)

@@ -13,7 +13,7 @@ from ..recording import Recording
 from ..validate import as_signal
 from .engine import _Engine
 from .options import _options
-from .results import Onsets, _empty_onsets
+from .results import Onsets, empty_onsets
 from .runs import _time_runs
 
 __all__ = ["OnsetStream", "detect_onsets_stream"]
@@ -130,7 +130,7 @@ def detect_onsets_stream(blocks: Iterable[Recording], channel: str, *, flag_time
     if eng is None:
         o = _options(1.0, channel=channel, **{k: v for k, v in kwargs.items()
                                                if k in ("reference", "level")})
-        return _empty_onsets(float("nan"), 0.0, channel, o.reference, o.level)
+        return empty_onsets(float("nan"), 0.0, channel, o.reference, o.level)
     if missing:
         warnings.warn(f"channel {channel!r}: {missing} sample(s) missing between stream blocks; "
                       "treated as a gap", DataQualityWarning, stacklevel=2)

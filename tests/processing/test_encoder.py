@@ -311,3 +311,22 @@ def test_split_at_gaps_empty_and_bad_input():
         split_at_gaps([0.0, 1.0])
     with pytest.raises(ValueError, match="max_gap must be a positive integer, got 0"):
         split_at_gaps(clean_edges([0.0, 1.0]), 0)
+
+
+def test_rising_crossing_parts_one_rule_for_whole_arrays_and_streams():
+    # a rise after a NaN counts in the streamed edges (finite_only=False, the tacho's rule)
+    # and not in the whole-array function; float32 samples keep float32 fractions
+    from meshphase.encoder import rising_crossing_parts
+    x = np.array([0.0, 5.0, np.nan, 5.0, 0.0, 2.0, 4.0], dtype=np.float32)
+    i, f = rising_crossing_parts(x, np.float32(2.5), finite_only=False)
+    assert i.tolist() == [1, 3, 6] and f.dtype == np.float32
+    assert f[0] == np.float32(0.5) and f[2] == np.float32(0.25)
+    i, f = rising_crossing_parts(x, 2.5)
+    assert i.tolist() == [1, 6]
+    assert rising_crossings(x, 2.5).tolist() == [0.5, 5.25]
+    i, f = rising_crossing_parts(np.empty(0), 1.0)
+    assert i.size == 0 and f.size == 0
+    with pytest.raises(ValueError, match="1-D"):
+        rising_crossing_parts(np.zeros((2, 2)), 1.0)
+    with pytest.raises(TypeError):
+        rising_crossing_parts(np.array(["a", "b"]), 1.0)
