@@ -673,9 +673,7 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
     keep0 = _kept(s0, rcond)
     njev = 1
     if np.all(keep0):
-        sol = least_squares(fit.resid, x0, jac=fit.jac if jac == "analytic" else jac,
-                            method="trf", x_scale=1.0, diff_step=1e-6, max_nfev=max_nfev,
-                            bounds=(-bound, bound))
+        sol = _box_fit(fit, x0, jac, max_nfev, bound)
     else:
         sol = _subspace_fit(fit, Vt0[keep0].T, jac, max_nfev, bound)
     njev += int(sol.njev or 0)
@@ -684,9 +682,7 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
     if s.size and keep.sum() != keep0.sum():
         # the rank changed between 0 and the solution: fit again over what is determined there
         if np.all(keep):
-            sol = least_squares(fit.resid, sol.x, jac=fit.jac if jac == "analytic" else jac,
-                                method="trf", x_scale=1.0, diff_step=1e-6, max_nfev=max_nfev,
-                                bounds=(-bound, bound))
+            sol = _box_fit(fit, sol.x, jac, max_nfev, bound)
         else:
             sol = _subspace_fit(fit, Vt[keep].T, jac, max_nfev, bound)
         njev += int(sol.njev or 0)
@@ -728,6 +724,15 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
         identifiable=bool(np.all(ident)), notes=notes, projector=Vk @ Vk.T, free=free,
         rank=int(keep.sum()), rank_note=_rank_note(s, keep, rcond), combinations=combos,
         suggestions=sugg)
+
+
+def _box_fit(fit: "_PhasingFit", x0: np.ndarray, jac: str, max_nfev: int, bound: float) -> OptimizeResult:
+    """Least squares of :meth:`_PhasingFit.resid` over every free parameter from ``x0``, each
+    held to +-``bound`` [scaled parameter units] (trust region reflective; the closed-form
+    Jacobian, or forward differences of step 1e-6)."""
+    return least_squares(fit.resid, x0, jac=fit.jac if jac == "analytic" else jac,
+                         method="trf", x_scale=1.0, diff_step=1e-6, max_nfev=max_nfev,
+                         bounds=(-bound, bound))
 
 
 def _subspace_fit(fit: "_PhasingFit", basis: np.ndarray, jac: str, max_nfev: int,
