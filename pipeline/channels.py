@@ -30,15 +30,13 @@ import re
 from dataclasses import dataclass
 from typing import Sequence
 
-from .recording import ChannelSpec
+from .recording import GAUGE_KINDS, ChannelSpec
 
 __all__ = ["ChannelMapError", "ChannelMatch", "ChannelMap", "GAUGE_KINDS", "map_channels",
            "mapped_specs", "apply_channel_overrides", "check_gauges", "channels_present",
            "mapping_rows", "unmapped_message", "entry_label", "is_glob", "overridden",
            "bridge_configs", "entry_values", "mapping_report", "MESSAGE_NAMES"]
 
-#: channel kinds the onset detector times (the gauges)
-GAUGE_KINDS = ("sun", "ring", "facewidth")
 #: keys of a [[channels]] entry (after the scene's parse) that are not ChannelSpec fields
 _NOT_SPEC = ("name", "regex", "bridge", "mount_angle")
 _GLOB_CHARS = re.compile(r"[*?\[]")

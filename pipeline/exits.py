@@ -63,6 +63,7 @@ from .io import atomic_path
 from .io.base import recording_read_errors  # noqa: F401 (public here too)
 from .io.base import _WRITE_FULL, _host_tag, _pid_alive, _SignalGuard
 from .log import logger
+from .recording import GAUGE_KINDS
 
 __all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_USAGE", "EXIT_PARTIAL", "EXIT_INTERRUPTED",
            "EXIT_PIPE", "BENIGN_SKIPS", "RESULT_OF_STAGE", "run_status", "status_line",
@@ -125,9 +126,6 @@ def _cause(failed: dict, stage: str) -> str:
     return "skipped: " + "; ".join(f"{s} failed ({m})" for s, m in roots)
 
 
-#: gauge channel kinds (``meshphase.channels.GAUGE_KINDS``, not imported: the channel
-#: mapping is not loaded for the CLI's start-up)
-_GAUGE_KINDS = ("sun", "ring", "facewidth")
 #: "stage: Category: text" lines of a run (``RunContext.messages``)
 _MESSAGE = re.compile(r"^(?P<stage>\w+): (?P<category>\w+): (?P<text>.*)$", re.S)
 
@@ -219,7 +217,7 @@ def _nothing_usable(ctx) -> str | None:
     why = []
     for q in ctx.load.quality or ():
         name = q.get("channel")
-        if kinds.get(name) not in _GAUGE_KINDS:
+        if kinds.get(name) not in GAUGE_KINDS:
             continue
         n, bad = int(q.get("n_samples", 0)), int(q.get("n_nonfinite", 0))
         if bad >= n:

@@ -26,6 +26,7 @@ from .errors import DataQualityWarning, ProcessingWarning
 from .noise_spectrum import TRANSIENT_RATIO, NoiseSpectrum, pulse_residual_psd
 from .onsets import FLAG_GAP, FLAG_TEMPLATE, Onsets, Template
 from .phasing import GaugePasses
+from .recording import GAUGE_KINDS
 from .validate import as_positive
 
 __all__ = ["ONSET_RESOLUTION", "timing_centre", "centre_shifts", "pass_times", "usable_onsets",
@@ -42,8 +43,6 @@ ONSET_RESOLUTION = 1e-4
 #: noise 99 % 1/f would stay below it
 NOISE_LIKE_RATIO = 10.0
 
-#: channel kinds whose onsets make passes
-_GAUGE_KINDS = ("sun", "ring", "facewidth")
 
 
 def _as_onsets(on) -> Onsets:
@@ -377,7 +376,7 @@ def gauge_passes(channels, onsets: dict, quality: dict, fs: float, t0: float, *,
     passes: list = []
     mains: dict = {}
     for c in channels:
-        if c.kind not in _GAUGE_KINDS or c.name not in onsets:
+        if c.kind not in GAUGE_KINDS or c.name not in onsets:
             continue
         gear = c.gear if c.gear in ("sun", "ring") else (c.kind if c.kind in ("sun", "ring") else "sun")
         on = onsets[c.name]

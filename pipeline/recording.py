@@ -20,10 +20,12 @@ import numpy as np
 from .jsonable import to_jsonable
 from .validate import as_float, as_nonnegative, as_positive
 
-__all__ = ["ChannelSpec", "Recording", "CHANNEL_KINDS", "ENCODER_SHAFTS", "sample_index", "control_character"]
+__all__ = ["ChannelSpec", "Recording", "CHANNEL_KINDS", "GAUGE_KINDS", "ENCODER_SHAFTS", "sample_index", "control_character"]
 
 #: Channel kinds a recording may carry.
 CHANNEL_KINDS = ("sun", "ring", "facewidth", "tacho", "encoder", "other")
+#: The strain gauge kinds among them (the channels whose pulses the onset detector times).
+GAUGE_KINDS = ("sun", "ring", "facewidth")
 #: Shafts an encoder channel may sit on ("input" is the sun shaft).
 ENCODER_SHAFTS = ("sun", "input", "carrier", "ring")
 
