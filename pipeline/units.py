@@ -32,6 +32,7 @@ import warnings
 from typing import Sequence
 
 from .errors import FormatWarning
+from .recording import GAUGE_KINDS, ChannelSpec
 
 __all__ = ["STRAIN_UNITS", "RATIO_UNITS", "VOLT_UNITS", "UnitError", "parse_unit",
            "gauge_unit_gains"]
@@ -154,9 +155,6 @@ def gauge_unit_gains(specs: Sequence, bridges: dict | None = None,
         or a bridge channel's unit is not volts or a ratio; the message names the channel
         and the unit.
     """
-    from .channels import GAUGE_KINDS
-    from .recording import ChannelSpec
-
     bridges = dict(bridges or {})
     raw_units = dict(raw_units or {})
     out, gains, converted, missing = [], [], {}, []
