@@ -1,23 +1,23 @@
 """meshphase: planetary gear test-rig strain recordings -> measured mesh phasing.
 
 The Python API: :func:`read` a recording, :func:`process` it into a :class:`Result`
-(:mod:`meshphase.api`). ``read``, ``process`` and ``Result`` are imported on first use, so
+(:mod:`meshphase.api.process`). ``read``, ``process`` and ``Result`` are imported on first use, so
 ``import meshphase`` stays light. The core (this package without :mod:`meshphase.report`)
 never imports matplotlib.
 """
 
 from __future__ import annotations
 
-from .errors import (ConvergenceWarning, DataQualityWarning, FormatWarning, MeshphaseWarning,
-                     ModelWarning, ProcessingWarning)
-from .log import logger
-from .recording import ChannelSpec, Recording, CHANNEL_KINDS
+from meshphase.errors import (ConvergenceWarning, DataQualityWarning, FormatWarning, MeshphaseWarning,
+                              ModelWarning, ProcessingWarning)
+from meshphase.runtime.log import logger
+from meshphase.recording import ChannelSpec, Recording, CHANNEL_KINDS
 
 __version__ = "0.1.0"
 
 #: names imported on first use: name -> module that holds it
-_LAZY = {"read": "meshphase.io", "process": "meshphase.api", "Result": "meshphase.process_result",
-         "ProcessingFailed": "meshphase.api"}
+_LAZY = {"read": "meshphase.io", "process": "meshphase.api.process", "Result": "meshphase.api.result",
+         "ProcessingFailed": "meshphase.api.process"}
 
 
 def __getattr__(name: str):

@@ -1,14 +1,14 @@
 """The ``meshphase`` command.
 
 The stages (and with them scipy.linalg, scipy.interpolate and scipy.optimize, but not
-scipy.signal, whose import pulls scipy.stats in: the filter designs are meshphase.sos_design's,
+scipy.signal, whose import pulls scipy.stats in: the filter designs are meshphase.signal.sos_design's,
 and the filters need scipy.signal only where numba is not installed), dask, matplotlib and
 the synthetic generator are imported only by the subcommands that use them, so ``meshphase
 --help``, ``info`` and ``convert`` start without them; tqdm (with importlib.metadata), the
 run's result types and the campaign machinery load with the first progress bar, run or
 campaign (tests hold the modules each loads; ``meshphase bench`` times the start-up).
 
-Exit status (every subcommand; README.md "Exit status"; constants in :mod:`meshphase.exits`):
+Exit status (every subcommand; README.md "Exit status"; constants in :mod:`meshphase.run.exits`):
 
 ====  ==========================================================================================
 0     ok: every requested result computed, none of them empty or all NaN
@@ -30,7 +30,7 @@ Exit status (every subcommand; README.md "Exit status"; constants in :mod:`meshp
 ====  ==========================================================================================
 
 Every message is one line on stderr in one style, ``meshphase COMMAND: LEVEL: TEXT``
-(:func:`meshphase.log.message_line`; the log formatter too): errors, one per cause,
+(:func:`meshphase.runtime.log.message_line`; the log formatter too): errors, one per cause,
 ``meshphase COMMAND: error: ...``, never a traceback (``--debug`` or ``MESHPHASE_DEBUG=1``
 re-raises them with the traceback and logs the traceback of each failed stage); a run's
 ``partial`` / ``unreliable`` causes; warnings, each distinct line once, ``meshphase COMMAND:
@@ -54,19 +54,19 @@ import time
 import warnings
 from pathlib import Path
 
-from . import __version__
-from .channels import mapping_report
-from .demo import demo_scene_path
-from .errors import DataQualityWarning
-from .exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_PIPE, OutputDir, output_write_errors,
-                    recording_read_errors, run_status, status_line)
-from .heap import limit_heap_growth
-from .io import convert, detect_format, iter_blocks, read_info
-from .io.base import ANY_FS_ENV
-from .log import MessageFormatter, logger, message_line
-from .quality import channel_quality
-from .scene import SceneError, load_scene
-from .validate import as_regular_file
+from meshphase import __version__
+from meshphase.run.channels import mapping_report
+from meshphase.run.demo import demo_scene_path
+from meshphase.errors import DataQualityWarning
+from meshphase.run.exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_PIPE, OutputDir, output_write_errors,
+                                 recording_read_errors, run_status, status_line)
+from meshphase.runtime.heap import limit_heap_growth
+from meshphase.io import convert, detect_format, iter_blocks, read_info
+from meshphase.io.base import ANY_FS_ENV
+from meshphase.runtime.log import MessageFormatter, logger, message_line
+from meshphase.signal.quality import channel_quality
+from meshphase.run.scene import SceneError, load_scene
+from meshphase.validate import as_regular_file
 
 __all__ = ["main", "build_parser", "describe_error"]
 
@@ -152,7 +152,7 @@ def cmd_info(args) -> int:
 
 def _channel_map(scene_path, channels, source: str) -> dict:
     """``info --scene``: the scene's channel mapping of the recording
-    (:func:`meshphase.channels.mapping_report`)."""
+    (:func:`meshphase.run.channels.mapping_report`)."""
     scene = load_scene(as_regular_file(scene_path, "the scene"))
     return dict(mapping_report(channels, scene.channels, source), scene=str(scene_path))
 
@@ -211,8 +211,8 @@ def cmd_bench(args) -> int:
     # bench drives the CLI's own commands (bench.rss runs `convert` through main), so it is
     # imported here, not at the top: cli -> bench only when benchmarking, no import loop
     if args.warmup:
-        from .models._kernels import warmup
-        from .onsets.fastpath import warmup as warmup_onsets
+        from meshphase.models._kernels import warmup
+        from meshphase.onsets.fastpath import warmup as warmup_onsets
 
         w = warmup()
         print(f"numba kernel ready in {w['seconds']:.2f} s, cache {w['cache_dir']}"
@@ -221,12 +221,12 @@ def cmd_bench(args) -> int:
         wo = warmup_onsets()              # the onset stage's kernels, into the same cache
         if wo["engine"] == "numba":
             print(f"onset kernels ready in {wo['seconds']:.2f} s")
-        from .io.tdms_rows import warmup as warmup_rows
+        from meshphase.io.tdms_rows import warmup as warmup_rows
 
         wr = warmup_rows()                # the interleaved TDMS rows' kernel
         if wr["engine"] == "numba":
             print(f"TDMS rows kernel ready in {wr['seconds']:.2f} s")
-        from .iir import warmup as warmup_iir
+        from meshphase.signal.iir import warmup as warmup_iir
 
         wf = warmup_iir()                 # the conditioning filters' kernel
         if wf["engine"] == "numba":
@@ -237,7 +237,7 @@ def cmd_bench(args) -> int:
         if args.what != "processing":
             raise ValueError(f"--accuracy belongs to 'meshphase bench processing', got "
                              f"'meshphase bench {args.what}'")
-        from .bench.conditions import QUICK_CONDITIONS, run_conditions
+        from meshphase.bench.conditions import QUICK_CONDITIONS, run_conditions
 
         res = run_conditions(out, QUICK_CONDITIONS if args.quick else None)
         print(res["markdown"], end="")
@@ -247,13 +247,13 @@ def cmd_bench(args) -> int:
     if args.what == "campaign":
         return _bench_campaign(out, args.quick, args.repeats)
     if args.what == "reference":
-        from .bench.models_reference import build_reference, reference_line
+        from meshphase.bench.models_reference import build_reference, reference_line
 
         ref = build_reference(out, evaluations=args.evaluations, plain=args.plain,
                               progress=not args.quiet)
         print(reference_line(ref))
         return 0
-    from .bench import rss_summary, run_bench
+    from meshphase.bench import rss_summary, run_bench
 
     res = run_bench(args.what, out, minutes=args.minutes, quick=args.quick,
                     rss_minutes=args.rss_minutes)
@@ -268,11 +268,11 @@ def _bench_campaign(out: Path, quick: bool, repeats: int | None = None) -> int:
     """``meshphase bench campaign``: :func:`meshphase.bench.campaign.measure_speedup` into
     ``out/campaign_bench.json``, one line per timed run and the speed-ups on stdout
     (``repeats`` timed runs per worker count; None: 3, or 1 with ``quick``)."""
-    from .bench.campaign import measure_speedup
+    from meshphase.bench.campaign import measure_speedup
 
     n, minutes, default_repeats = (2, 0.5, 1) if quick else (8, 2.0, 3)
     repeats = default_repeats if repeats is None else repeats
-    from .bench.first_figure import first_figure_rows
+    from meshphase.bench.first_figure import first_figure_rows
 
     res = measure_speedup(n, minutes, (1, 2), repeats=repeats)
     res["first_figure"] = first_figure_rows(1 if quick else 6)
@@ -294,7 +294,7 @@ def _bench_campaign(out: Path, quick: bool, repeats: int | None = None) -> int:
     if math.isfinite(res["task_cpu_ratio"][2]):
         print(f"  task CPU, two workers over one: {res['task_cpu_ratio'][2]:.3f} (medians; 1 = no contention)")
     if res["first_figure"]:
-        print("a forked worker's first report figure over its second [s] (meshphase.fork_ready):")
+        print("a forked worker's first report figure over its second [s] (meshphase.campaign.fork_ready):")
         for case in ("without fork_ready", "with fork_ready"):
             rows = [r for r in res["first_figure"] if r["case"] == case]
             print(f"  {case:>18}: " + ", ".join(f"{r['figure']} {r['first_excess_s']:.3f}" for r in rows))
@@ -353,7 +353,7 @@ _MAX_MESSAGES = 10
 
 def _print_run(ctx, files, command: str) -> None:
     """The results of a run on stdout; its warnings on stderr (:func:`message_line`)."""
-    from .stages import summary_dict  # heavy (scipy): see the module docstring
+    from meshphase.run.stages import summary_dict  # heavy (scipy): see the module docstring
     s = summary_dict(ctx)
     print(f"scene     {ctx.scene.name}")
     print(f"stages    {', '.join(ctx.ran)}" + (f"  (failed: {', '.join(ctx.failed)})" if ctx.failed else ""))
@@ -415,8 +415,8 @@ def _run_and_write(args, scene, base, *, report: bool = True):
 
     ``scene`` is a Scene or a function of the reserved folder returning one (the demo writes
     its scene file there first). The folder is removed again when the run fails or is
-    interrupted (:class:`meshphase.exits.OutputDir`)."""
-    from .stages import run_scene, write_outputs  # heavy (scipy): see the module docstring
+    interrupted (:class:`meshphase.run.exits.OutputDir`)."""
+    from meshphase.run.stages import run_scene, write_outputs  # heavy (scipy): see the module docstring
     with OutputDir(base, overwrite=args.overwrite, staged=True) as out:
         if callable(scene):
             scene = scene(out.path)
@@ -447,7 +447,7 @@ def cmd_process(args) -> int:
     # both files checked before the stages' imports: a mistyped path fails before they load
     as_regular_file(args.file, "the recording")
     as_regular_file(args.gearset, "the gearset scene (--gearset)")
-    from .stages import process_recording  # heavy (scipy): see the module docstring
+    from meshphase.run.stages import process_recording  # heavy (scipy): see the module docstring
     # process_recording returns the paths as published (the output folder's final name)
     ctx, files = process_recording(args.file, args.gearset, out_dir=args.out, overwrite=args.overwrite,
                                    progress=_stage_progress(not args.quiet), tolerance=args.tolerance)
@@ -465,7 +465,7 @@ def cmd_demo(args) -> int:
 
 
 def cmd_campaign(args) -> int:
-    from .campaign import cli_campaign
+    from meshphase.campaign.runner import cli_campaign
 
     as_regular_file(args.scene, "the scene")
     res = cli_campaign(args.scene, args.inputs, scheduler=args.scheduler, workers=args.workers,

@@ -14,7 +14,7 @@ opens the file) and raise the same classes; the command turns each into one line
     ValueError                 a bad value (the message names the parameter)
     +-- NotRegularFileError    an input path that is a FIFO, a device or a socket (refused
     |                          before opening it: reading it could block)
-    +-- SceneError             a scene that does not validate (meshphase.scene)
+    +-- SceneError             a scene that does not validate (meshphase.run.scene)
     +-- RecordingFileError     a recording file that cannot be read as what it claims to be:
     |   |                      empty, unknown format, inconsistent (meshphase.io)
     |   +-- CorruptFileError   damaged bytes: checksum, truncation, malformed row

@@ -17,8 +17,8 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
-from .jsonable import to_jsonable
-from .validate import as_float, as_nonnegative, as_positive
+from meshphase.jsonable import to_jsonable
+from meshphase.validate import as_float, as_nonnegative, as_positive
 
 __all__ = ["ChannelSpec", "Recording", "CHANNEL_KINDS", "GAUGE_KINDS", "ENCODER_SHAFTS", "sample_index", "control_character"]
 
@@ -455,14 +455,14 @@ class Recording:
         part = self.select(channels).slice_time(start, stop)
         if part.n_samples == 0:
             raise ValueError(f"no samples in the window [{start}, {stop}) s")
-        from .report.notebook import plot_channels  # matplotlib: only when plotting
+        from meshphase.report.notebook import plot_channels  # matplotlib: only when plotting
 
         return plot_channels(part.times(), part.data, part.channels, onsets, ax=ax,
                              max_points=max_points)
 
     def _repr_html_(self) -> str:
         """The channels, sample rate, duration and start as an HTML table (notebooks)."""
-        from .html_repr import html_table
+        from meshphase.html_repr import html_table
 
         cap = (f"Recording: {self.n_channels} channel(s) at {self.fs:g} Hz, {self.duration:.6g} s "
                f"({self.n_samples} samples), t0 = {self.t0:g} s"
@@ -481,10 +481,10 @@ class Recording:
         """Per-channel quality summary: NaN/inf runs, longest run, min/max, clipped runs,
         dropout runs.
 
-        Uses :func:`meshphase.quality.channel_quality` on each channel (with its kind: a tacho's
+        Uses :func:`meshphase.signal.quality.channel_quality` on each channel (with its kind: a tacho's
         flat levels are not analysed as dropouts or clipped plateaus).
         """
-        from .quality import channel_quality
+        from meshphase.signal.quality import channel_quality
 
         return [dict(channel=c.name, **channel_quality(self.data[:, i], kind=c.kind))
                 for i, c in enumerate(self.channels)]

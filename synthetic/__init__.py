@@ -13,12 +13,12 @@
 - :mod:`.cli`         :func:`cli_synth` behind ``meshphase synth``
 """
 
-from .config import Artefacts, EncoderConfig, GaugeConfig, LoadModulation, SynthConfig, TachoConfig, TiltSource
-from .generate import SyntheticStream, generate, generate_blocks
-from .kinematics import ShaftRipple, SpeedClock, SpeedProfile
-from .scenarios import SCENARIOS, Scenario, describe_scenarios, get_scenario, list_scenarios
-from .truth import GroundTruth, truth_path_for
-from .cli import cli_synth
+from meshphase.synthetic.config import Artefacts, EncoderConfig, GaugeConfig, LoadModulation, SynthConfig, TachoConfig, TiltSource
+from meshphase.synthetic.generate import SyntheticStream, generate, generate_blocks
+from meshphase.synthetic.kinematics import ShaftRipple, SpeedClock, SpeedProfile
+from meshphase.synthetic.scenarios import SCENARIOS, Scenario, describe_scenarios, get_scenario, list_scenarios
+from meshphase.synthetic.truth import GroundTruth, truth_path_for
+from meshphase.synthetic.cli import cli_synth
 
 __all__ = ["generate", "generate_blocks", "SyntheticStream", "SynthConfig", "GaugeConfig",
            "TachoConfig", "EncoderConfig", "TiltSource", "Artefacts", "LoadModulation", "SpeedProfile", "ShaftRipple", "SpeedClock",

@@ -10,11 +10,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from meshphase.log import logger
+from meshphase.runtime.log import logger
 from meshphase.validate import as_positive
 
-from .generate import generate_blocks
-from .truth import truth_path_for
+from meshphase.synthetic.generate import generate_blocks
+from meshphase.synthetic.truth import truth_path_for
 
 __all__ = ["cli_synth", "FORMATS", "format_for_path"]
 
@@ -77,7 +77,7 @@ def cli_synth(scenario: str, out, minutes: float | None = None, seed: int | None
     # default blocks of 2**20 samples: also the TDMS segment length
     stream = generate_blocks(scenario, duration=duration, seed=seed, progress=bool(progress))
     if fmt == "tdms":
-        from .tdms_export import write_tdms
+        from meshphase.synthetic.tdms_export import write_tdms
 
         write_tdms(iter(stream), out, n_samples=stream.n_samples, overwrite=overwrite)
     else:

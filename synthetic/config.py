@@ -21,9 +21,9 @@ from meshphase.models.mesh_phasing import ShaftHoleErrors
 from meshphase.models.tilt import solve_tilt
 from meshphase.models.tolerance import ToleranceBand, Tolerances
 from meshphase.validate import (as_choice, as_finite_array, as_float, as_int, as_nonnegative,
-                               as_positive, as_positive_int)
+                                as_positive, as_positive_int)
 
-from .kinematics import SpeedProfile
+from meshphase.synthetic.kinematics import SpeedProfile
 
 __all__ = ["GaugeConfig", "TachoConfig", "EncoderConfig", "TiltSource", "Artefacts", "SynthConfig",
            "LoadModulation", "load_factor", "STRAIN_UNITS", "errors_to_dict", "errors_from_dict"]

@@ -40,19 +40,19 @@ from typing import Iterator
 import numpy as np
 from tqdm import tqdm
 
-from meshphase.log import logger
+from meshphase.runtime.log import logger
 from meshphase.models.mesh_phasing import ShaftHoleErrors, ideal_phasing, time_varying_phasing
 from meshphase.models.tolerance import Tolerances
 from meshphase.recording import ChannelSpec, Recording
 from meshphase.validate import as_int, as_positive
 
-from . import artefacts as art
-from .config import SynthConfig, errors_to_dict, load_factor
-from .gauges import (AnglePulses, PulseTable, angle_pulse_map, face_load_factor, pulse_peak_offset, render_angle_pulses,
-                     render_box, render_pulses)
-from .kinematics import EngagementEvents, engagement_events, event_times_for_angles, gauge_rates
-from .scenarios import get_scenario
-from .truth import EventTable, GroundTruth, PassTruth
+from meshphase.synthetic import artefacts as art
+from meshphase.synthetic.config import SynthConfig, errors_to_dict, load_factor
+from meshphase.synthetic.gauges import (AnglePulses, PulseTable, angle_pulse_map, face_load_factor, pulse_peak_offset, render_angle_pulses,
+                                        render_box, render_pulses)
+from meshphase.synthetic.kinematics import EngagementEvents, engagement_events, event_times_for_angles, gauge_rates
+from meshphase.synthetic.scenarios import get_scenario
+from meshphase.synthetic.truth import EventTable, GroundTruth, PassTruth
 
 __all__ = ["generate", "generate_blocks", "SyntheticStream", "resolve_seed", "resolve_config",
            "draw_errors", "GENERATOR_VERSION"]

@@ -24,7 +24,7 @@ Pulse position (angle, not time)
     mesh periods of angle, which is expected.
 Planet numbers
     1-based, planet 1 = ``gearset.planet_angles[0]`` (as in the papers and
-    :class:`meshphase.phasing.PassTable`).
+    :class:`meshphase.kinematics.phasing.PassTable`).
 Pass
     One relative revolution of the gauged gear starting at its engagement with planet 1; the
     pass holds the following engagement of every other planet before planet 1 comes again.
@@ -325,7 +325,7 @@ class GroundTruth:
         """The recording's :class:`~meshphase.synthetic.kinematics.SpeedClock` (speed profile bound to the
         nominal speeds, both from ``config``): ``tau(t)`` and ``t(tau)`` with t from the first
         sample [s]."""
-        from .config import SynthConfig
+        from meshphase.synthetic.config import SynthConfig
 
         cfg = SynthConfig.from_dict(self.config)
         return cfg.speed.clock(cfg.speeds)

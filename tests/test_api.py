@@ -12,14 +12,14 @@ import numpy as np
 import pytest
 
 import meshphase
-from meshphase.demo import demo_scene_path
+from meshphase.run.demo import demo_scene_path
 import meshphase.io
 from meshphase.errors import NotRegularFileError
 from meshphase.io import RecordingFileError, RecordingTooLargeError, write
-from meshphase.process_result import Result
+from meshphase.api.result import Result
 from meshphase.recording import ChannelSpec, Recording
-from meshphase.results import RunContext
-from meshphase.scene import Scene
+from meshphase.run.results import RunContext
+from meshphase.run.scene import Scene
 
 
 @pytest.fixture(scope="module")
@@ -50,14 +50,15 @@ def rig_file(synthetic, tmp_path_factory):
 # ----------------------------------------------------------------------------- import
 def test_import_meshphase_stays_light():
     code = ("import sys, meshphase; "
-            "heavy = [m for m in ('pandas', 'matplotlib', 'scipy', 'meshphase.stages', "
-            "'meshphase.api') if m in sys.modules]; print(heavy); sys.exit(1 if heavy else 0)")
+            "heavy = [m for m in ('pandas', 'matplotlib', 'scipy', 'meshphase.run.stages', "
+            "'meshphase.api.process') if m in sys.modules]; print(heavy); sys.exit(1 if heavy else 0)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stdout + out.stderr
 
 
 def test_public_names():
-    from meshphase import api, io
+    from meshphase import io
+    from meshphase.api import process as api
 
     assert meshphase.read is io.read
     assert meshphase.process is api.process
@@ -339,7 +340,7 @@ def test_write_outputs(res, tmp_path):
 
 
 def test_write_outputs_takes_the_callers_summary(res, tmp_path):
-    from meshphase.outputs import summary_dict, write_outputs
+    from meshphase.run.outputs import summary_dict, write_outputs
 
     given = summary_dict(res.context)
     (tmp_path / "a").mkdir()

@@ -15,10 +15,10 @@ from matplotlib.container import ErrorbarContainer  # noqa: E402
 
 import meshphase  # noqa: E402
 from meshphase.io import write  # noqa: E402
-from meshphase.process_result import Result  # noqa: E402
+from meshphase.api.result import Result  # noqa: E402
 from meshphase.recording import ChannelSpec, Recording  # noqa: E402
-from meshphase.results import RunContext  # noqa: E402
-from meshphase.scene import Scene  # noqa: E402
+from meshphase.run.results import RunContext  # noqa: E402
+from meshphase.run.scene import Scene  # noqa: E402
 
 #: the demo rig's gearset as a scene's [gearset] table (mm); its teeth need profile shift
 GEARSET = {"z_sun": 25, "z_ring": 87, "z_planet": 29, "n_planets": 4, "carrier_radius_mm": 112.5,
@@ -216,7 +216,7 @@ def test_result_repr_html(res):
 
 def test_html_table_bad_input():
     from meshphase.html_repr import html_table
-    from meshphase.process_result import run_html
+    from meshphase.api.result import run_html
 
     assert "<tbody></tbody>" in html_table([], ["a"])
     with pytest.raises(TypeError, match="rows must be"):

@@ -8,18 +8,18 @@ import tomllib
 import numpy as np
 import pytest
 
-from meshphase.api_scene import build_scene, gearset_table, toml_text
-from meshphase.stages import PROCESS_RESULTS
-from meshphase.compare import Identification, wrap
-from meshphase.demo import demo_scene_path
-from meshphase.loads import CentroidResult
+from meshphase.api.scene import build_scene, gearset_table, toml_text
+from meshphase.run.stages import PROCESS_RESULTS
+from meshphase.compare.predict import Identification, wrap
+from meshphase.run.demo import demo_scene_path
+from meshphase.kinematics.loads import CentroidResult
 from meshphase.models.gearset import Gearset
 from meshphase.models.mesh_phasing import ShaftHoleErrors
-from meshphase.result_frames import (COLUMNS, centroid_rows, circular_mean, comparison_rows,
-                                     frame, identification_rows, load_sharing_rows, passes_rows,
-                                     phasing_rows)
-from meshphase.results import CentroidsStage, IdentifyStage, RunContext
-from meshphase.scene import Scene, SceneError
+from meshphase.run.frames import (COLUMNS, centroid_rows, circular_mean, comparison_rows,
+                                  frame, identification_rows, load_sharing_rows, passes_rows,
+                                  phasing_rows)
+from meshphase.run.results import CentroidsStage, IdentifyStage, RunContext
+from meshphase.run.scene import Scene, SceneError
 
 TABLE = {"z_sun": 25, "z_ring": 87, "z_planet": 29, "n_planets": 4, "carrier_radius_mm": 112.5,
          "face_width_mm": 40, "direction": "cw", "profile_shift": True}

@@ -15,7 +15,7 @@ import pytest
 
 import meshphase
 from meshphase.bench.rss import BENCH_GEARSET, bench_config
-from meshphase.truth import phasing_vs_truth
+from meshphase.compare.truth import phasing_vs_truth
 
 pytestmark = pytest.mark.slow         # a 2-min recording generated and processed: ~40 s each
 

@@ -1,5 +1,5 @@
 """Strain from bridge volts (issue 12 item 5): NI's Wheatstone-bridge strain equations
-(meshphase.bridge's docstring names the sources) against values worked out by hand, the
+(meshphase.io.bridge's docstring names the sources) against values worked out by hand, the
 volts <-> strain round trip and the small-strain linear limit with hypothesis, the scene's
 bridge keys and their SceneErrors, and the conversion in a run (history, null window)."""
 
@@ -15,15 +15,15 @@ from hypothesis import strategies as st
 from seed_rig_toml import SEED_RIG_GEARSET as G
 
 import meshphase.io
-from meshphase.bridge import (BRIDGE_TYPES, BridgeConfig, bridge_history, bridge_recording,
-                              convert_block, initial_volts, null_ratio, ratio_from_strain,
-                              strain_from_ratio, strain_from_volts, strain_spec,
-                              volts_from_strain, window_means)
-from meshphase.bridge_source import BridgeSource
+from meshphase.io.bridge import (BRIDGE_TYPES, BridgeConfig, bridge_history, bridge_recording,
+                                 convert_block, initial_volts, null_ratio, ratio_from_strain,
+                                 strain_from_ratio, strain_from_volts, strain_spec,
+                                 volts_from_strain, window_means)
+from meshphase.run.bridge_source import BridgeSource
 from meshphase.recording import ChannelSpec, Recording
 from meshphase.errors import SceneWarning
-from meshphase.scene import SceneError, load_scene, parse_scene
-from meshphase.stream import MemorySource
+from meshphase.run.scene import SceneError, load_scene, parse_scene
+from meshphase.run.stream import MemorySource
 
 NU = {"half_I": 0.3, "full_II": 0.3, "full_III": 0.3}
 
@@ -320,8 +320,8 @@ KEYS = ('bridge = "quarter_I"\ngauge_factor = 2.1\nexcitation_V = 5.0\nlead_ohm 
 
 
 def test_run_on_bridge_volts_matches_the_run_on_strain(volts_files, tmp_path):
-    from meshphase.outputs import summary_dict
-    from meshphase.stages import run_scene
+    from meshphase.run.outputs import summary_dict
+    from meshphase.run.stages import run_scene
 
     vpath, spath, rec = volts_files
     (tmp_path / "v").mkdir()
@@ -346,7 +346,7 @@ def test_run_on_bridge_volts_matches_the_run_on_strain(volts_files, tmp_path):
 
 
 def test_null_window_outside_the_analysis_window_and_outside_the_recording(volts_files, tmp_path):
-    from meshphase.stages import stage_load, RunContext
+    from meshphase.run.stages import stage_load, RunContext
 
     vpath, _, _ = volts_files
     keys = KEYS.replace("[0.0, 10.0]", "[0.0, 2.0]")

@@ -23,9 +23,9 @@ from seed_rig_toml import SEED_RIG_GEARSET
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from meshphase import campaign as cp
+from meshphase.campaign import runner as cp
 from meshphase.report import campaign_report as crep
-from meshphase.scene import load_scene
+from meshphase.run.scene import load_scene
 
 SCENE = """\
 name = "campaign test scene"
@@ -279,7 +279,7 @@ def test_run_recording_unreliable_phasing_is_not_ok(data, tmp_path, monkeypatch)
     import warnings
 
     from meshphase.errors import ProcessingWarning
-    from meshphase.stages import STAGE_FUNCTIONS
+    from meshphase.run.stages import STAGE_FUNCTIONS
 
     original = STAGE_FUNCTIONS["phasing"]
 
@@ -590,21 +590,21 @@ def test_local_workers_start_warm_from_the_fork_server():
     kernels loaded: their filters and onsets take numba, as ``process`` does."""
     from distributed import Client
 
-    from meshphase import cluster as cluster_mod
-    from meshphase.campaign_job import worker_modules
+    from meshphase.campaign import cluster as cluster_mod
+    from meshphase.campaign.job import worker_modules
 
     if cluster_mod.worker_server(worker_modules()) is None:
         pytest.skip("no fork server on this platform: the workers spawn")
     with cluster_mod.local_cluster(1, worker_modules=worker_modules()) as cl, Client(cl) as client:
         # a lambda travels by value (the workers cannot import this test module)
-        warm = client.run(lambda: "meshphase.stages" in sys.modules)
+        warm = client.run(lambda: "meshphase.run.stages" in sys.modules)
         assert list(warm.values()) == [True]
-        engines = client.run(lambda: (__import__("meshphase.iir", fromlist=["_"]).pick_engine(),
+        engines = client.run(lambda: (__import__("meshphase.signal.iir", fromlist=["_"]).pick_engine(),
                                       __import__("meshphase.onsets.fastpath", fromlist=["_"]).dense("auto", 1)))
         numba = importlib.util.find_spec("numba") is not None
         assert list(engines.values()) == [("numba" if numba else "scipy", numba)]
         # distributed's 64-KiB MALLOC_TRIM_THRESHOLD_ for its workers is left out: in a forked
-        # worker it reached os.environ only, and meshphase.heap then left glibc's trim threshold
+        # worker it reached os.environ only, and meshphase.runtime.heap then left glibc's trim threshold
         # at 128 KiB. A worker has the value of the fork server it forked from (the environment
         # of the process that started the server, where a user's own value would be); this
         # process's own may differ, as a Nanny sets its pre-spawn variables here too

@@ -26,11 +26,11 @@ import pytest
 from seed_rig_toml import SEED_RIG_GEARSET
 
 import meshphase.io
-from meshphase import campaign as cp
-from meshphase import cluster as cluster_mod
-from meshphase.campaign_job import campaign_task
+from meshphase.campaign import runner as cp
+from meshphase.campaign import cluster as cluster_mod
+from meshphase.campaign.job import campaign_task
 from meshphase.cli import build_parser
-from meshphase.exits import EXIT_OK, EXIT_PARTIAL, MANIFEST_NAME, PARTIAL_SUFFIX
+from meshphase.run.exits import EXIT_OK, EXIT_PARTIAL, MANIFEST_NAME, PARTIAL_SUFFIX
 
 SCENE = ('name = "campaign fault scene"\nresults = ["phasing"]\n\n' + SEED_RIG_GEARSET
          + '\n[input]\nsynthetic = "seed_rig"\nminutes = 0.1\n')
@@ -60,7 +60,7 @@ def rigs(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def cluster():
-    """The campaign's own kind of cluster (:func:`meshphase.campaign.local_cluster`: 1 worker
+    """The campaign's own kind of cluster (:func:`meshphase.campaign.runner.local_cluster`: 1 worker
     under a Nanny, loopback only, no dashboard), shared through its address (one cluster start
     for the module; the campaign starting its own is tested in test_campaign.py)."""
     with cp.local_cluster(1) as cl:
@@ -316,7 +316,7 @@ def test_figures_drawn_on_the_cluster_heaviest_first_come_back_in_order(cluster)
     thread, and returns each figure's PNG at its own place: the same bytes as drawn here."""
     from distributed import Client
 
-    from meshphase.campaign_job import draw_figures, figure_order
+    from meshphase.campaign.job import draw_figures, figure_order
     from meshphase.report import campaign_report as crep
 
     names = [f"rec{i}" for i in range(12)]
@@ -334,7 +334,7 @@ def test_figures_drawn_on_the_cluster_heaviest_first_come_back_in_order(cluster)
 def test_figures_drawn_here_at_once_when_the_cluster_has_no_worker():
     from distributed import Client, LocalCluster
 
-    from meshphase.campaign_job import draw_figures
+    from meshphase.campaign.job import draw_figures
     from meshphase.report import campaign_report as crep
 
     calls = [(crep.wall_times_across_recordings, (["a", "b"], [1.0, 2.0]), {})]
@@ -346,7 +346,7 @@ def test_figures_drawn_here_at_once_when_the_cluster_has_no_worker():
 
 
 def test_figure_order_empty_ties_and_unpicklable():
-    from meshphase.campaign_job import figure_order
+    from meshphase.campaign.job import figure_order
 
     f = (lambda: None)
     assert figure_order([]) == []
@@ -474,8 +474,8 @@ def test_task_takes_paths_only_and_writes_no_marker_for_a_failure(tmp_path):
 
 def test_task_runs_with_its_share_of_the_threads_and_refuses_a_bad_count(tmp_path, monkeypatch):
     # a local cluster's workers share this machine's cores: each recording's run is held to
-    # the share run_job hands it (meshphase.threads), and only inside the task
-    from meshphase.threads import ENV_THREADS, run_threads
+    # the share run_job hands it (meshphase.runtime.threads), and only inside the task
+    from meshphase.runtime.threads import ENV_THREADS, run_threads
 
     monkeypatch.setenv(ENV_THREADS, "4")
     seen = []

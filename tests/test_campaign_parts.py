@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 from seed_rig_toml import SEED_RIG_GEARSET
 
-from meshphase import campaign as cp
-from meshphase import campaign_job as cj
-from meshphase import campaign_resume as cr
-from meshphase import cluster
-from meshphase.scene import load_scene
+from meshphase.campaign import runner as cp
+from meshphase.campaign import job as cj
+from meshphase.campaign import resume as cr
+from meshphase.campaign import cluster
+from meshphase.run.scene import load_scene
 from meshphase.models.tolerance import MonteCarloResult
 
 
@@ -96,8 +96,8 @@ def test_failed_record_has_the_task_record_keys():
 
 
 def test_warm_up_returns_this_process_id():
-    # a list without meshphase.fork_ready: the default list would freeze this test process
-    assert cj.warm_up(("json", "meshphase.campaign")) == os.getpid()
+    # a list without meshphase.campaign.fork_ready: the default list would freeze this test process
+    assert cj.warm_up(("json", "meshphase.campaign.runner")) == os.getpid()
 
 
 def test_run_job_bad_input():
@@ -283,13 +283,13 @@ def _fresh(code: str, *argv, timeout: float = 120) -> str:
 def test_worker_server_empty_and_bad():
     """In a fresh interpreter (the server is started once per process): the first call
     starts it, the next finds it running; bad module lists are refused before anything."""
-    code = ("from meshphase.cluster import worker_server\n"
+    code = ("from meshphase.campaign.cluster import worker_server\n"
             "if __name__ == '__main__':\n"
             "    first = worker_server(())\n"
             "    print(first is None or first >= 0.0, worker_server(['json']) in (None, 0.0))\n")
     stdout = _fresh(code)
     assert stdout.split() == ["True", "True"]
-    for bad in ("meshphase.stages", [1], [""], None):
+    for bad in ("meshphase.run.stages", [1], [""], None):
         with pytest.raises(TypeError, match="modules"):
             cluster.worker_server(bad)
     with pytest.raises(TypeError, match="modules"):
@@ -300,10 +300,10 @@ def test_worker_modules_are_importable_and_name_every_reader():
     from meshphase.io import FORMATS
 
     mods = cj.worker_modules()
-    assert {f"meshphase.io.{f}" for f in FORMATS} <= set(mods) and "meshphase.stages" in mods
+    assert {f"meshphase.io.{f}" for f in FORMATS} <= set(mods) and "meshphase.run.stages" in mods
     # in a fresh interpreter: warm_up freezes the heap of the process it runs in (a worker)
     code = ("import os, sys\n"
-            "import meshphase.campaign_job as cj\n"
+            "import meshphase.campaign.job as cj\n"
             "assert cj.warm_up() == os.getpid()\n"
             "print(all(m in sys.modules for m in cj.worker_modules()))")
     stdout = _fresh(code, timeout=300)
@@ -316,11 +316,11 @@ def test_the_fork_server_readies_and_freezes_its_heap_last():
     # freezes the heap, so that the workers' collections never walk (and copy) what the
     # imports made
     for mods in (cj.worker_modules(), cj.worker_modules([]), cj.worker_modules(["csv"], True)):
-        assert mods[-1] == "meshphase.fork_ready" and mods.count(mods[-1]) == 1
+        assert mods[-1] == "meshphase.campaign.fork_ready" and mods.count(mods[-1]) == 1
     code = ("import gc\n"
             "before = gc.get_freeze_count()\n"
-            "import meshphase.fork_ready as fh\n"
-            "from meshphase import threads\n"
+            "import meshphase.campaign.fork_ready as fh\n"
+            "from meshphase.runtime import threads\n"
             "kept = threads._blas_controller is not None and threads._controller() is threads._blas_controller[1]\n"
             "import sys, threadpoolctl\n"
             "k = fh.KERNELS\n"
@@ -344,7 +344,7 @@ def test_the_fork_server_starts_when_its_first_uses_fail():
             "def full(*a, **k):\n"
             "    raise OSError(errno.ENOSPC, 'No space left on device')\n"
             "meshphase.io.write = full\n"
-            "import meshphase.fork_ready as fh\n"
+            "import meshphase.campaign.fork_ready as fh\n"
             "print(fh.FIRST_USE_S != fh.FIRST_USE_S, gc.get_freeze_count() > 10_000)")
     stdout = _fresh(code)
     assert stdout.split() == ["True", "True"]
@@ -352,7 +352,7 @@ def test_the_fork_server_starts_when_its_first_uses_fail():
 
 def test_worker_modules_follow_the_formats_and_the_input():
     hdf5 = cj.worker_modules(["hdf5"])
-    assert {"meshphase.io.hdf5", "h5py", "jsonschema", "threadpoolctl", "meshphase.stages"} <= set(hdf5)
+    assert {"meshphase.io.hdf5", "h5py", "jsonschema", "threadpoolctl", "meshphase.run.stages"} <= set(hdf5)
     assert not {"pandas", "nptdms", "meshphase.io.csv", "meshphase.synthetic"} & set(hdf5)
     assert {"meshphase.io.csv", "pandas", "meshphase.synthetic"} <= set(cj.worker_modules(["csv"], True))
     assert cj.worker_modules(["tdms", "tdms"]).count("nptdms") == 1
@@ -418,12 +418,12 @@ def test_a_campaign_task_imports_nothing_its_fork_server_lacks(tmp_path, synthet
                         else '[input]\nrecording = "rig.h5"\n')
                      + SEED_RIG_GEARSET, encoding="utf-8")
     code = ("import sys, importlib\n"
-            "from meshphase.campaign_job import campaign_modules\n"
-            "from meshphase.scene import load_scene\n"
+            "from meshphase.campaign.job import campaign_modules\n"
+            "from meshphase.run.scene import load_scene\n"
             "for m in campaign_modules(load_scene(sys.argv[1]), [sys.argv[2]]):\n"
             "    importlib.import_module(m)\n"
             "before = set(sys.modules)\n"
-            "from meshphase.campaign import run_recording\n"
+            "from meshphase.campaign.runner import run_recording\n"
             "r = run_recording(sys.argv[1], sys.argv[2], sys.argv[3])\n"
             "assert r['status'] in ('ok', 'unreliable'), r\n"
             "print(','.join(sorted(set(sys.modules) - before)))")
@@ -454,14 +454,14 @@ def test_draw_figures_empty_bad_and_drawn_here_without_a_cluster():
 
 def test_the_campaign_client_assembles_its_report_without_matplotlib_or_pandas(tmp_path):
     # the workers draw the figures (their fork server imported matplotlib), campaign.csv is
-    # meshphase.table_csv's: the client's report imports neither library (~0.5 s of CPU
+    # meshphase.run.table_csv's: the client's report imports neither library (~0.5 s of CPU
     # that its start would otherwise spend beside the fork server's imports)
     code = """
 import json, sys
 from pathlib import Path
-from meshphase import campaign as cp
+from meshphase.campaign import runner as cp
 from meshphase.report.campaign_report import build_campaign_report
-from meshphase.table_csv import write_csv
+from meshphase.run.table_csv import write_csv
 cp._import_report_modules()
 recs = [{"name": "r1", "recording": "/x/r1.h5", "out_dir": "o1", "status": "ok", "format": "hdf5",
          "wall_time_s": 1.5, "worker": "w:1", "files": {},
@@ -558,9 +558,9 @@ def test_the_fork_server_without_numba_loads_scipys_filters():
     # numba is optional: the fork server then loads scipy.signal, the filters' engine, once
     # for all its workers
     code = ("import sys\n"
-            "import meshphase.iir as iir, meshphase.onsets.fastpath as fp\n"
+            "import meshphase.signal.iir as iir, meshphase.onsets.fastpath as fp\n"
             "iir.HAVE_NUMBA = fp.HAVE_NUMBA = False\n"
-            "import meshphase.fork_ready as fh\n"
+            "import meshphase.campaign.fork_ready as fh\n"
             "k = fh.KERNELS\n"
             "print(k['filters'], k['onsets'], 'scipy.signal' in sys.modules, 'numba' in sys.modules)")
     assert _fresh(code).split() == ["scipy", "numpy", "True", "False"]

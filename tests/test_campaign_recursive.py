@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-import meshphase.campaign as cp
+import meshphase.campaign.runner as cp
 import meshphase.cli as cli
 
 H5 = b"\x89HDF\r\n\x1a\n" + b"\0" * 64     # an HDF5 file by content

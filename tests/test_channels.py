@@ -12,12 +12,12 @@ import pytest
 from seed_rig_toml import SEED_RIG_GEARSET as G
 
 import meshphase.io
-from meshphase.channels import (ChannelMapError, apply_channel_overrides, check_gauges,
-                                entry_values, is_glob, map_channels, mapped_specs,
-                                mapping_report, mapping_rows, unmapped_message)
+from meshphase.run.channels import (ChannelMapError, apply_channel_overrides, check_gauges,
+                                    entry_values, is_glob, map_channels, mapped_specs,
+                                    mapping_report, mapping_rows, unmapped_message)
 from meshphase.cli import main
 from meshphase.recording import ChannelSpec, Recording
-from meshphase.scene import SceneError, load_scene, parse_scene
+from meshphase.run.scene import SceneError, load_scene, parse_scene
 
 RIG_NAMES = ["SG01_sun_T3", "SG02_sun_T7", "SG03_ring_T5", "Carrier OPR", "Temp [C]"]
 
@@ -202,8 +202,8 @@ PATTERNS = ("[[channels]]\nregex = 'SG\\d+_sun_T(?P<tooth>\\d+)'\nkind = \"sun\"
 
 
 def test_scene_with_patterns_runs_like_exact_names(rig_names_file, tmp_path):
-    from meshphase.outputs import summary_dict
-    from meshphase.stages import run_scene
+    from meshphase.run.outputs import summary_dict
+    from meshphase.run.stages import run_scene
 
     path, _ = rig_names_file
     exact = ('[[channels]]\nname = "SG01_sun_T3"\nkind = "sun"\ntooth = 3\n'
@@ -252,7 +252,7 @@ def test_scene_channel_keys_checked_without_a_recording():
 
 
 def test_mount_angle_on_a_pattern_reaches_the_channel(rig_names_file, tmp_path):
-    from meshphase.stages import _tacho_geometry, run_scene
+    from meshphase.run.stages import _tacho_geometry, run_scene
 
     path, _ = rig_names_file
     p = _scene(tmp_path, path, PATTERNS.replace('name = "SG*_ring*"\nkind = "ring"\n',
@@ -291,7 +291,7 @@ def test_info_with_a_scene_that_does_not_map(rig_names_file, tmp_path, capsys):
 
 
 def test_report_has_a_channel_mapping_section(rig_names_file, tmp_path):
-    from meshphase.stages import run_scene, write_outputs
+    from meshphase.run.stages import run_scene, write_outputs
 
     path, _ = rig_names_file
     ctx = run_scene(load_scene(_scene(tmp_path, path, PATTERNS)))
@@ -319,7 +319,7 @@ def test_regex_tooth_beyond_the_gear_is_refused(tmp_path):
 def test_a_message_lists_the_first_missing_names_and_counts_the_rest():
     # a scene can name any number of channels the file lacks: the message stays one short
     # line (the first MESSAGE_NAMES names, their hints, then how many more)
-    from meshphase.channels import MESSAGE_NAMES
+    from meshphase.run.channels import MESSAGE_NAMES
 
     many = [{"name": f"gauge_{i:05d}", "kind": "sun"} for i in range(25)]
     with pytest.raises(ChannelMapError) as e:

@@ -1,6 +1,6 @@
 """The ``meshphase`` command: run / process / demo write results without overwriting earlier
 ones, the report carries its sections, bad input exits 1 naming the file (exit table in
-pipeline/exits.py; more in test_exit_status.py); info, convert and
+pipeline/run/exits.py; more in test_exit_status.py); info, convert and
 synth on small generated files (issue 6, item 3).
 
 Most tests call :func:`meshphase.cli.main` in-process (no interpreter start-up); one runs the
@@ -322,7 +322,7 @@ def test_demo_runs_quickly_and_writes_the_report(tmp_path, capsys):
     sec = _sections((d / "report.html").read_text(encoding="utf-8"))
     assert "Measured phasing against the models" in sec and "Error against run time" in sec
     # the scene written next to the outputs reproduces the run with `meshphase run`
-    from meshphase.scene import load_scene
+    from meshphase.run.scene import load_scene
 
     assert load_scene(d / "demo_scene.toml").input["synthetic"] == "rig_ripple1"
 

@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 
 from meshphase.cli import build_parser, main
-from meshphase.exits import EXIT_PIPE
-from meshphase.log import MessageFormatter, message_line
+from meshphase.run.exits import EXIT_PIPE
+from meshphase.runtime.log import MessageFormatter, message_line
 from meshphase.synthetic import list_scenarios
 
 REPO = Path(__file__).resolve().parents[1]

@@ -41,7 +41,7 @@ def test_core_import_is_light(module):
     assert res.stdout.strip() == "", f"{module} loaded {res.stdout.strip()}"
 
 
-@pytest.mark.parametrize("module", ["meshphase.stages", "meshphase.cli"])
+@pytest.mark.parametrize("module", ["meshphase.run.stages", "meshphase.cli"])
 def test_processing_import_leaves_the_optional_heavy_parts_out(module):
     # what `meshphase process FILE` imports: numba/LLVM (the Monte Carlo kernel), dask (the
     # campaign), matplotlib (the report), pandas (the notebook API) and the synthetic
@@ -98,8 +98,8 @@ def test_cli_start_up_loads_no_progress_bar_results_or_campaign(argv):
             "        main(sys.argv[1:2])\n"
             "    except SystemExit as e:\n"
             "        assert e.code == 0, e.code\n"
-            "print(','.join(m for m in ('tqdm', 'meshphase.results', 'meshphase.campaign', "
-            "'meshphase.campaign_job') if m in sys.modules))")
+            "print(','.join(m for m in ('tqdm', 'meshphase.run.results', 'meshphase.campaign.runner', "
+            "'meshphase.campaign.job') if m in sys.modules))")
     res = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == "", f"meshphase {argv[0]} loaded {res.stdout.strip()}"
@@ -107,20 +107,20 @@ def test_cli_start_up_loads_no_progress_bar_results_or_campaign(argv):
 
 def test_processing_import_leaves_scipy_signal_and_stats_out():
     # scipy.signal imports scipy.stats (find_peaks_cwt), 0.5-0.8 s of every start; the
-    # processing takes its filter designs, smoother and spectra from meshphase.sos_design,
+    # processing takes its filter designs, smoother and spectra from meshphase.signal.sos_design,
     # .savgol and .spectral instead (tests/processing/test_dsp_designs.py holds them to scipy)
-    code = ("import sys, meshphase.stages; "
+    code = ("import sys, meshphase.run.stages; "
             "print(','.join(sorted(m for m in sys.modules if m in ('scipy.signal', 'scipy.stats'))))")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
-    assert res.stdout.strip() == "", f"meshphase.stages loaded {res.stdout.strip()}"
+    assert res.stdout.strip() == "", f"meshphase.run.stages loaded {res.stdout.strip()}"
 
 
 def test_process_command_loads_only_what_it_needs(tmp_path):
     # the whole `meshphase process FILE` of a file scene, start to finish: no pandas (its
-    # tables are written by meshphase.table_csv, pandas cost ~0.33 s a run), dask,
+    # tables are written by meshphase.run.table_csv, pandas cost ~0.33 s a run), dask,
     # matplotlib or synthetic generator; and with numba installed no scipy.signal or
-    # scipy.stats (the filters run on numba's kernel, meshphase.iir.pick_engine: one of
+    # scipy.stats (the filters run on numba's kernel, meshphase.signal.iir.pick_engine: one of
     # numba and scipy.signal must load, numba's kernel is the faster; without numba the
     # filters need scipy.signal); nor the models of the stages it does not run (bearing
     # moments, tilt, the tolerance Monte Carlo: `meshphase run` a scene for those)
@@ -188,9 +188,9 @@ def test_white_noise_synthesis_leaves_scipy_signal_out():
 def test_a_scene_run_and_its_report_leave_pandas_out(tmp_path):
     # pandas is the Python API's (tables as DataFrames); `run` and the demo write their CSV
     # tables and the HTML report without it
-    code = ("import sys; from pathlib import Path; from meshphase.demo import DEMO_SCENE; "
-            "from meshphase.scene import parse_scene; from meshphase.stages import run_scene; "
-            "from meshphase.outputs import write_outputs; "
+    code = ("import sys; from pathlib import Path; from meshphase.run.demo import DEMO_SCENE; "
+            "from meshphase.run.scene import parse_scene; from meshphase.run.stages import run_scene; "
+            "from meshphase.run.outputs import write_outputs; "
             "ctx = run_scene(parse_scene(DEMO_SCENE.replace('minutes = 2.0', 'minutes = 0.5'))); "
             "files = write_outputs(ctx, Path(sys.argv[1]), report=True); "
             "assert 'report' in files and ctx.phasing is not None; "

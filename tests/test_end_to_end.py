@@ -2,7 +2,7 @@
 item 6), and bad inputs that must give clear warnings and partial results.
 
 Each registry scenario (:data:`meshphase.synthetic.SCENARIOS`) is generated with seed 3 and processed by
-``meshphase.stages.run_scene`` (phasing, load sharing, compare, identify, centroids). The run's
+``meshphase.run.stages.run_scene`` (phasing, load sharing, compare, identify, centroids). The run's
 own truth comparison (``ctx.compare.by_gear[gear].vs_truth``: the measured phasing with the
 onsets labelled as the truth labels them) must lie within the tolerance of the table below;
 load sharing, face-width centroids and identified shaft hole errors are checked against the
@@ -10,7 +10,7 @@ truth the generator wrote. A new scenario without a row here fails
 ``test_every_registry_scenario_has_an_expectation``.
 
 Measured (regression values: this machine, seed 3, 1 min of 5120 Hz unless noted; Table 1
-scenarios at their own 0.5 s of 51.2 kHz; the joint angle model of pipeline/angles.py) and the
+scenarios at their own 0.5 s of 51.2 kHz; the joint angle model of pipeline/kinematics/angles.py) and the
 tolerances set (about 3x, RMS of the measured phasing against the truth [mesh cycles]; "max"
 tolerances are 4x the RMS ones). The rig family (seed 000 teeth on the seed's rig, ripple,
 ramps, 3/5 planets, with and without tacho) has its own matrix in tests/test_phasing_accuracy.py:
@@ -81,11 +81,11 @@ import numpy as np
 import pytest
 
 import meshphase.io
-from meshphase.compare import PARAMETER_NAMES, _vector_from_errors, truth_comparison, wrap
+from meshphase.compare.predict import PARAMETER_NAMES, _vector_from_errors, truth_comparison, wrap
 from meshphase.errors import ProcessingWarning
 from meshphase.models.mesh_phasing import ShaftHoleErrors
-from meshphase.scene import SceneError, load_scene, parse_scene
-from meshphase.stages import RunContext, run_scene, summary_dict
+from meshphase.run.scene import SceneError, load_scene, parse_scene
+from meshphase.run.stages import RunContext, run_scene, summary_dict
 from meshphase.synthetic import SCENARIOS, generate, list_scenarios
 
 SEED = 3
@@ -525,7 +525,7 @@ def run_file(tmp_path: Path, rec, *, z_sun: int = 25, z_ring: int = 87) -> RunCo
 def truth_phasing_error(ctx: RunContext, truth, gear: str, g=None) -> dict:
     """Phasing error against the truth for a run without it (a file): every measured pass
     against the true mesh angle turned between its two pulses
-    (:func:`meshphase.compare.truth_comparison`)."""
+    (:func:`meshphase.compare.predict.truth_comparison`)."""
     lab, table = ctx.phasing.labels[gear], ctx.phasing.tables[gear]
     out = truth_comparison(table, truth, lab.channel, times=lab.times, planets=lab.planet)
     out["table"] = table

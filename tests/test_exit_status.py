@@ -1,4 +1,4 @@
-"""Exit status is the truth: one exit-code table (pipeline/exits.py, README "Exit status") for
+"""Exit status is the truth: one exit-code table (pipeline/run/exits.py, README "Exit status") for
 every subcommand, one line per cause on stderr, never a traceback.
 
 The CLI runs in-process through :func:`meshphase.cli.main` (a few cases as a subprocess, to see
@@ -25,19 +25,19 @@ import numpy as np
 import pytest
 from seed_rig_toml import SEED_RIG_GEARSET
 
-import meshphase.api
+import meshphase.api.process
 import meshphase.io
 import meshphase.io.base
-import meshphase.exits
-import meshphase.stages
+import meshphase.run.exits
+import meshphase.run.stages
 from meshphase import cli
-from meshphase.campaign import phasing_reliability
+from meshphase.campaign.runner import phasing_reliability
 from meshphase.cli import describe_error, main
 from meshphase.errors import ProcessingWarning
-from meshphase.exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK, EXIT_PARTIAL, EXIT_PIPE,
-                            OutputDir, run_status, status_line)
+from meshphase.run.exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK, EXIT_PARTIAL, EXIT_PIPE,
+                                 OutputDir, run_status, status_line)
 from meshphase.recording import ChannelSpec, Recording
-from meshphase.stages import STAGE_FUNCTIONS, RunContext
+from meshphase.run.stages import STAGE_FUNCTIONS, RunContext
 from meshphase.validate import as_regular_file
 
 GEARSET_TOML = 'name = "seed rig gearset"\n' + SEED_RIG_GEARSET
@@ -252,7 +252,7 @@ def test_no_space_left_while_writing_exits_1_and_cleans_up(rig, tmp_path, monkey
         (Path(out_dir) / "summary.json").write_text("{")     # half written when the disk fills
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(Path(out_dir) / "arrays.h5"))
 
-    monkeypatch.setattr(meshphase.stages, "write_outputs", full)
+    monkeypatch.setattr(meshphase.run.stages, "write_outputs", full)
     out = tmp_path / "o"
     assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
                  "--out", str(out)]) == EXIT_ERROR
@@ -390,13 +390,13 @@ def test_keyboard_interrupt_while_writing_leaves_the_previous_folder_intact(rig,
     assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
                  "--out", str(out)]) in (EXIT_OK, EXIT_PARTIAL)
     before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
-    real = meshphase.stages.write_outputs
+    real = meshphase.run.stages.write_outputs
 
     def interrupted(ctx, out_dir, **kw):
         real(ctx, out_dir, **kw)
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(meshphase.stages, "write_outputs", interrupted)
+    monkeypatch.setattr(meshphase.run.stages, "write_outputs", interrupted)
     assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
                  "--out", str(out), "--overwrite"]) == EXIT_INTERRUPTED
     assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
@@ -472,8 +472,8 @@ def test_usage_error_is_2():
 
 # --------------------------------------------------------------------------- helpers
 def _ctx(failed=None, ran=None, messages=None, tables=None):
-    from meshphase.results import PhasingStage
-    from meshphase.scene import parse_scene
+    from meshphase.run.results import PhasingStage
+    from meshphase.run.scene import parse_scene
 
     scene = parse_scene('results = ["tilt"]\n[bearing]\ncase = "1"\nk_tilt_Nm_per_rad = 1e6\n')
     ctx = RunContext(scene)
@@ -581,9 +581,9 @@ def test_process_takes_a_gearset_file_with_results_but_no_input(rig, tmp_path, c
     assert main(["-q", "process", str(rig["path"]), "--gearset", str(gs), "--out", str(out)]) == EXIT_OK
     assert "need an [input]" not in capsys.readouterr().err
     assert json.loads((out / "summary.json").read_text())["status"] == "ok"
-    assert meshphase.api.process(rig["path"], gs).status == "ok"         # the API the same
+    assert meshphase.api.process.process(rig["path"], gs).status == "ok"         # the API the same
     # a campaign's recordings replace [input] too (its up-front scene check, without a cluster)
-    from meshphase.campaign import _scene_and_recordings
+    from meshphase.campaign.runner import _scene_and_recordings
 
     scene, _inputs, files, _skipped = _scene_and_recordings(gs, [str(rig["path"])])
     assert files == [rig["path"].resolve()] and scene.results == ["phasing"]
@@ -596,7 +596,7 @@ def test_disk_full_while_writing_the_outputs_names_the_output_folder(rig, tmp_pa
     def full(ctx, out_dir, **kw):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))  # a buffered writer's close: no name
 
-    monkeypatch.setattr(meshphase.stages, "write_outputs", full)
+    monkeypatch.setattr(meshphase.run.stages, "write_outputs", full)
     out = tmp_path / "results"
     assert main(["-q", "process", str(rig["path"]), "--gearset", str(rig["gearset"]),
                  "--out", str(out)]) == EXIT_ERROR
@@ -631,8 +631,8 @@ def test_read_only_file_system_is_not_reported_as_full(rig, tmp_path, monkeypatc
 
 
 def test_overflowing_samples_give_no_raw_numpy_warning():
-    from meshphase.condition import detect_hum
-    from meshphase.quality import channel_quality
+    from meshphase.signal.condition import detect_hum
+    from meshphase.signal.quality import channel_quality
 
     t = np.arange(10 * 5120) / 5120.0
     x = 1e-4 * np.sin(2 * np.pi * 50.0 * t) + 1e-6 * np.random.default_rng(0).standard_normal(t.size)
@@ -652,20 +652,20 @@ def test_overflowing_samples_give_no_raw_numpy_warning():
 
 
 def test_output_write_errors_empty_and_bad_input(tmp_path):
-    with meshphase.exits.output_write_errors(tmp_path / "o"):     # nothing raised: nothing to do
+    with meshphase.run.exits.output_write_errors(tmp_path / "o"):     # nothing raised: nothing to do
         pass
     with pytest.raises(OSError) as exc:                             # names no file: the output
-        with meshphase.exits.output_write_errors(tmp_path / "o"):
+        with meshphase.run.exits.output_write_errors(tmp_path / "o"):
             raise OSError(errno.EDQUOT, os.strerror(errno.EDQUOT))
     assert exc.value.errno == errno.EDQUOT and exc.value.filename == str(tmp_path / "o")
     named = OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), "/elsewhere/f.csv")
     with pytest.raises(OSError) as exc:                             # already named: kept as is
-        with meshphase.exits.output_write_errors(tmp_path / "o"):
+        with meshphase.run.exits.output_write_errors(tmp_path / "o"):
             raise named
     assert exc.value is named
     with pytest.raises(PermissionError):                            # not a full disk: untouched
-        with meshphase.exits.output_write_errors(tmp_path / "o"):
+        with meshphase.run.exits.output_write_errors(tmp_path / "o"):
             raise PermissionError(errno.EACCES, "Permission denied")
     with pytest.raises(ValueError, match="not an OSError"):
-        with meshphase.exits.output_write_errors(tmp_path / "o"):
+        with meshphase.run.exits.output_write_errors(tmp_path / "o"):
             raise ValueError("not an OSError")

@@ -1,11 +1,11 @@
-"""meshphase.heap: glibc's mmap threshold fixed for streamed runs."""
+"""meshphase.runtime.heap: glibc's mmap threshold fixed for streamed runs."""
 
 import subprocess
 import sys
 
 import pytest
 
-from meshphase.heap import limit_heap_growth
+from meshphase.runtime.heap import limit_heap_growth
 
 
 def test_bad_threshold():
@@ -23,7 +23,7 @@ def _child(code: str, env=None) -> str:
 def test_threshold_fixed_once_in_a_fresh_process():
     # a fresh interpreter: the first call sets it, the second reports the same answer; on a
     # glibc system mallopt accepts the value (returns 1)
-    out = _child("from meshphase.heap import limit_heap_growth as f; print(f(), f())")
+    out = _child("from meshphase.runtime.heap import limit_heap_growth as f; print(f(), f())")
     a, b = out.split()
     assert a == b
     import platform
@@ -34,16 +34,16 @@ def test_threshold_fixed_once_in_a_fresh_process():
 def test_environment_setting_is_left_alone():
     import os
     env = dict(os.environ, MALLOC_MMAP_THRESHOLD_="262144")
-    out = _child("from meshphase.heap import limit_heap_growth as f; print(f())", env=env)
+    out = _child("from meshphase.runtime.heap import limit_heap_growth as f; print(f())", env=env)
     assert out == "True"
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc only")
 def test_trimming_thread_runs_after_the_first_call():
-    # the heap's free pages go back to the system from a daemon thread (pipeline/heap.py):
+    # the heap's free pages go back to the system from a daemon thread (pipeline/runtime/heap.py):
     # none before the call, one after it, and a second call starts no other
     code = ("import threading, time\n"
-            "from meshphase.heap import heap_trimming, limit_heap_growth\n"
+            "from meshphase.runtime.heap import heap_trimming, limit_heap_growth\n"
             "before = heap_trimming()\n"
             "a = limit_heap_growth(); b = limit_heap_growth(); time.sleep(0.6)\n"
             "n = sum(t.name == 'meshphase-heap-trim' for t in threading.enumerate())\n"
@@ -56,7 +56,7 @@ def test_trimming_thread_runs_after_the_first_call():
 
 
 def test_trim_step_hands_back_only_after_the_slack(monkeypatch):
-    from meshphase import heap
+    from meshphase.runtime import heap
 
     seq = iter([100, 100, 150, 90, 400, 120, None, 130])   # resident set per look [bytes]
     monkeypatch.setattr(heap, "_rss_bytes", lambda: next(seq))
@@ -77,7 +77,7 @@ def test_trim_step_hands_back_only_after_the_slack(monkeypatch):
 
 _FAULTS = ("import resource, sys\n"
            "import numpy as np\n"
-           "from meshphase.heap import limit_heap_growth\n"
+           "from meshphase.runtime.heap import limit_heap_growth\n"
            "limit_heap_growth(trim_env=sys.argv[1] == '1')\n"
            "def faults():\n"
            "    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt\n"
@@ -92,7 +92,7 @@ _FAULTS = ("import resource, sys\n"
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc only")
 def test_trim_env_false_fixes_a_trim_threshold_the_environment_set():
-    # distributed's 64 KiB in a Dask worker's environment (meshphase.cluster.trim_env_is_distributed):
+    # distributed's 64 KiB in a Dask worker's environment (meshphase.campaign.cluster.trim_env_is_distributed):
     # left alone, every 2-MiB array freed at the heap's top is handed back and faulted in
     # again (512 pages each); with trim_env=False the threshold is fixed at 64 MiB and the
     # heap keeps the pages. The counts are the kernel's, not timings

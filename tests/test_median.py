@@ -1,4 +1,4 @@
-"""meshphase._median.median_of_finite: np.median's value and dtype for finite samples, by
+"""meshphase.signal.median.median_of_finite: np.median's value and dtype for finite samples, by
 one partition (the robust noise, SNR and quality estimates and the onset detector's noise
 level take it)."""
 
@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from meshphase._median import MAD_TO_SIGMA, median_and_mad, median_of_finite, sigma_of_differences
+from meshphase.signal.median import MAD_TO_SIGMA, median_and_mad, median_of_finite, sigma_of_differences
 
 _BIG = float(np.float32(1e30))    # a float32 value: no sum of two overflows
 

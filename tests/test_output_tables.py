@@ -15,9 +15,9 @@ import pytest
 from seed_rig_toml import SEED_RIG_GEARSET
 
 import meshphase.io
-from meshphase.outputs import PASS_COLUMNS
-from meshphase.scene import load_scene
-from meshphase.stages import process_recording, run_scene, write_outputs
+from meshphase.run.outputs import PASS_COLUMNS
+from meshphase.run.scene import load_scene
+from meshphase.run.stages import process_recording, run_scene, write_outputs
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 SCHEMA_DOC = Path(__file__).resolve().parents[1] / "data_schemas" / "outputs.md"

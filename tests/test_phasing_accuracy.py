@@ -91,7 +91,7 @@ def test_without_a_tacho_labels_are_relative_and_said_once():
     res = run(PhasingCase("rig_ripple1", tacho=False))
     ph = res["ctx"].phasing
     assert ph.assignment["ring"]["shift_decided_by"] != "tacho"
-    from meshphase.stages import summary_dict
+    from meshphase.run.stages import summary_dict
 
     s = summary_dict(res["ctx"])
     assert "relative" in s["phasing_labels"] or ph.labels_relative == []

@@ -9,8 +9,8 @@ from seed_rig_toml import SEED_RIG_GEARSET
 
 import meshphase.io
 from meshphase.cli import main
-from meshphase.scene import SceneError
-from meshphase.stages import PROCESS_RESULTS, process_recording
+from meshphase.run.scene import SceneError
+from meshphase.run.stages import PROCESS_RESULTS, process_recording
 
 TOLERANCES = """
 [tolerances]

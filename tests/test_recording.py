@@ -9,9 +9,9 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from meshphase.quality import (FlatRuns, chance_min_run, channel_quality, clipped_runs,
-                              dropout_runs, equal_runs, find_runs, flat_runs, nonfinite_runs,
-                              outside_runs, plateau_runs, quantisation_step)
+from meshphase.signal.quality import (FlatRuns, chance_min_run, channel_quality, clipped_runs,
+                                      dropout_runs, equal_runs, find_runs, flat_runs, nonfinite_runs,
+                                      outside_runs, plateau_runs, quantisation_step)
 from meshphase.recording import CHANNEL_KINDS, ChannelSpec, Recording, sample_index
 
 

@@ -1,4 +1,4 @@
-"""Typed stage results (meshphase.results) and the run context that holds them: one frozen
+"""Typed stage results (meshphase.run.results) and the run context that holds them: one frozen
 dataclass per stage, the phasing verdict."""
 
 from __future__ import annotations
@@ -9,12 +9,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from meshphase.phasing import GaugeLabels, PassTable, PhasingResult
-from meshphase.results import (RESULT_TYPES, CompareStage, GaugeComparison, IdentifyStage,
-                              LoadSharingStage, PhasingStage,
-                              StageResult, ToleranceStage, phasing_verdict)
-from meshphase.scene import STAGES, parse_scene
-from meshphase.stages import STAGE_FUNCTIONS, RunContext
+from meshphase.kinematics.phasing import GaugeLabels, PassTable, PhasingResult
+from meshphase.run.results import (RESULT_TYPES, CompareStage, GaugeComparison, IdentifyStage,
+                                   LoadSharingStage, PhasingStage,
+                                   StageResult, ToleranceStage, phasing_verdict)
+from meshphase.run.scene import STAGES, parse_scene
+from meshphase.run.stages import STAGE_FUNCTIONS, RunContext
 
 
 def _labels(channel="r", decided="pattern", n_unassigned=0) -> GaugeLabels:

@@ -13,8 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from meshphase.models.gearset import rpm_to_rad_s
-from meshphase.scene import (RESULTS, STAGES, Scene, SceneError, load_scene, parse_scene, plan,
-                             scene_schema_errors)
+from meshphase.run.scene import (RESULTS, STAGES, Scene, SceneError, load_scene, parse_scene, plan,
+                                 scene_schema_errors)
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
@@ -356,7 +356,7 @@ def test_plan_is_the_dependency_closure_in_order(results, tolerances):
 def test_scene_schema_errors_of_the_demo_an_empty_and_a_bad_scene():
     import tomllib
 
-    from meshphase.demo import DEMO_SCENE
+    from meshphase.run.demo import DEMO_SCENE
 
     assert scene_schema_errors(tomllib.loads(DEMO_SCENE)) == []
     bad = scene_schema_errors({"gearset": 5, "results": ["phasing", "no_such_result"]})
@@ -370,7 +370,7 @@ def test_schema_errors_list_every_break_from_the_kept_validator():
     import tomllib
 
     from meshphase.data_schemas import schema_errors
-    from meshphase.demo import DEMO_SCENE
+    from meshphase.run.demo import DEMO_SCENE
 
     assert schema_errors(tomllib.loads(DEMO_SCENE), "scene") == []
     assert len(schema_errors({"gearset": 5, "results": 3}, "scene.schema.json")) >= 2

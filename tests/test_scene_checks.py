@@ -21,10 +21,10 @@ from hypothesis import strategies as st
 from seed_rig_toml import SEED_RIG_GEARSET
 
 import meshphase.io
-import meshphase.scene as scene_mod
+import meshphase.run.scene as scene_mod
 from meshphase.errors import SceneWarning
 from meshphase.recording import ChannelSpec, Recording
-from meshphase.scene import LIMITS, Scene, SceneError, check_recording, load_scene, parse_scene, plan
+from meshphase.run.scene import LIMITS, Scene, SceneError, check_recording, load_scene, parse_scene, plan
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = REPO / "examples"
@@ -346,7 +346,7 @@ def test_window_outside_the_recording(rig_file, tmp_path):
 
 
 def test_mapped_channel_missing_from_the_recording(rig_file, tmp_path):
-    # the load stage's message (meshphase.channels.map_channels), with key and line
+    # the load stage's message (meshphase.run.channels.map_channels), with key and line
     body = ('results = ["phasing"]\n' + G + '[[channels]]\nname = "sun"\nkind = "sun"\n'
             '[[channels]]\nname = "ring_gauge"\nkind = "ring"\n')
     p, text = _with_file(rig_file, body, tmp_path)
@@ -409,7 +409,7 @@ def test_every_example_still_loads(name):
 
 
 def test_seed_rig_toml_and_the_demo_scene_load(tmp_path):
-    from meshphase.demo import demo_scene_path
+    from meshphase.run.demo import demo_scene_path
 
     parse_scene('results = ["ideal_phasing", "tolerance"]\n' + G
                 + "[tolerances]\ne_sun_mm = 0.2\nsamples = 64\n", FILE)
@@ -538,7 +538,7 @@ def test_any_two_speeds_or_one_and_the_held_member(speeds, held):
     assert scene.speeds.carrier * rpm == pytest.approx(18.19 * 25 / 112, rel=1e-9)
     assert abs(scene.speeds.ring) <= 1e-12
     assert scene.fixed == held
-    from meshphase.angles import held_member
+    from meshphase.kinematics.angles import held_member
 
     assert held_member(25, 87, scene.speeds, resolution=scene.speeds_resolution)[0] == "ring"
 

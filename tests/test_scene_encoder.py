@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
-from meshphase.channels import mapped_specs, map_channels
+from meshphase.run.channels import mapped_specs, map_channels
 from meshphase.recording import ChannelSpec
-from meshphase.scene import SceneError, parse_scene
+from meshphase.run.scene import SceneError, parse_scene
 
 HEAD = ('results = ["bearing_moments"]\n[bearing]\ncase = "1"\n'
         '[[channels]]\nname = "sg"\nkind = "sun"\n')

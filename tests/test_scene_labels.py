@@ -4,7 +4,7 @@
 import pytest
 from seed_rig_toml import SEED_RIG_GEARSET
 
-from meshphase.scene import SceneError, parse_scene, scene_schema_errors
+from meshphase.run.scene import SceneError, parse_scene, scene_schema_errors
 
 BASE = 'results = ["ideal_phasing"]\n' + SEED_RIG_GEARSET
 

@@ -122,15 +122,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from meshphase.compare import wrap
+from meshphase.compare.predict import wrap
 from meshphase.models.bearing import seed_case
 from meshphase.models.mesh_phasing import (ShaftHoleErrors, mesh_angle_deviations, mesh_angles,
-                                          time_varying_phasing)
+                                           time_varying_phasing)
 from meshphase.models.tilt import solve_tilt
 from meshphase.models.tolerance import ToleranceBand, Tolerances, monte_carlo, table2_case
-from meshphase.results import LoadStage
-from meshphase.scene import parse_scene
-from meshphase.stages import STAGE_FUNCTIONS, run_scene
+from meshphase.run.results import LoadStage
+from meshphase.run.scene import parse_scene
+from meshphase.run.stages import STAGE_FUNCTIONS, run_scene
 from meshphase.synthetic import generate
 from meshphase.synthetic.config import Artefacts, errors_from_dict
 from meshphase.synthetic.kinematics import SpeedProfile

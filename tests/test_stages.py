@@ -18,13 +18,13 @@ import pytest
 
 import meshphase.io
 import meshphase.models.tolerance
-import meshphase.stages
-from meshphase.scene import STAGES, Scene, load_scene, parse_scene, plan
-from meshphase.phasing import relabel_gauge
-from meshphase.results import IdentifyStage, PhasingStage
-from meshphase.stages import (STAGE_FUNCTIONS, RunContext, new_output_dir,
-                             process_recording, run_scene, stage_identify, summary_dict,
-                             write_outputs)
+import meshphase.run.stages
+from meshphase.run.scene import STAGES, Scene, load_scene, parse_scene, plan
+from meshphase.kinematics.phasing import relabel_gauge
+from meshphase.run.results import IdentifyStage, PhasingStage
+from meshphase.run.stages import (STAGE_FUNCTIONS, RunContext, new_output_dir,
+                                  process_recording, run_scene, stage_identify, summary_dict,
+                                  write_outputs)
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
@@ -139,7 +139,7 @@ def test_bearing_scene_opens_no_recording(tmp_path, monkeypatch):
 
 
 def test_scene_without_face_width_gauges_does_no_centroid_work(tmp_path, monkeypatch):
-    monkeypatch.setattr(meshphase.stages, "facewidth_centroid", _fail("facewidth_centroid"))
+    monkeypatch.setattr(meshphase.run.stages, "facewidth_centroid", _fail("facewidth_centroid"))
     scene = parse_scene('results = ["centroids"]\n[input]\nsynthetic = "seed_rig"\n'
                         'minutes = 0.25\n', tmp_path / "c.toml")
     ctx = run_scene(scene)
@@ -280,7 +280,7 @@ def test_identify_relabelling_supersedes_the_phasing(rig_run, monkeypatch):
     ph, g = ctx.phasing, ctx.gearset
     gear = ph.labels_relative[0]
     target = relabel_gauge(ph.result, gear, 2, g)[0]
-    real = meshphase.stages.identify_errors
+    real = meshphase.run.stages.identify_errors
 
     def fits_only_the_target(tables, gearset, **kw):
         ident = real(tables, gearset, **kw)
@@ -289,7 +289,7 @@ def test_identify_relabelling_supersedes_the_phasing(rig_run, monkeypatch):
         ident.rms_after = 0.1 if hit else 1.0
         return ident
 
-    monkeypatch.setattr(meshphase.stages, "identify_errors", fits_only_the_target)
+    monkeypatch.setattr(meshphase.run.stages, "identify_errors", fits_only_the_target)
     c2 = RunContext(ctx.scene)
     c2.record("phasing", ph)
     st = stage_identify(c2)
@@ -304,7 +304,7 @@ def test_identify_relabelling_supersedes_the_phasing(rig_run, monkeypatch):
     assert {s["gear"] for s in st.identification.suggestions} == {
         r["gear"] for r in st.identification.table if not r["identifiable"]}
     # no relabelling helps: the phasing stays the phasing stage's
-    monkeypatch.setattr(meshphase.stages, "identify_errors", real)
+    monkeypatch.setattr(meshphase.run.stages, "identify_errors", real)
     c3 = RunContext(ctx.scene)
     c3.record("phasing", ph)
     assert stage_identify(c3).phasing is None and c3.phasing is ph

@@ -1,4 +1,4 @@
-"""meshphase.table_csv: result tables as CSV without pandas, byte for byte what pandas'
+"""meshphase.run.table_csv: result tables as CSV without pandas, byte for byte what pandas'
 ``DataFrame(table).to_csv(path, index=False, na_rep="")`` wrote before (pandas is the
 reference here: the files' format is what users' scripts already read)."""
 
@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from meshphase.table_csv import write_csv
+from meshphase.run.table_csv import write_csv
 
 FLOATS = st.one_of(st.floats(allow_nan=True, allow_infinity=True, width=64),
                    st.sampled_from([0.1, 1e-5, 1e16, -0.0, 5e-324, 1.7976931348623157e308]))

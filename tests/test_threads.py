@@ -1,4 +1,4 @@
-"""meshphase.threads: worker threads of one run (thread count, order, errors, progress).
+"""meshphase.runtime.threads: worker threads of one run (thread count, order, errors, progress).
 
 ``thread_map`` below is one call of a :func:`thread_pool`, as the streamed conditioning makes
 per block."""
@@ -10,8 +10,8 @@ import threading
 import numpy as np
 import pytest
 
-from meshphase import threads
-from meshphase.threads import ENV_THREADS, MAX_THREADS, run_threads, thread_pool, threads_limited
+from meshphase.runtime import threads
+from meshphase.runtime.threads import ENV_THREADS, MAX_THREADS, run_threads, thread_pool, threads_limited
 
 
 def thread_map(fn, items, *, threads, progress=None):
@@ -198,7 +198,7 @@ def test_blas_single_thread_holds_blas_to_one_and_keeps_its_controller():
 
     from threadpoolctl import threadpool_info
 
-    from meshphase import threads
+    from meshphase.runtime import threads
 
     def blas_threads():
         return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
@@ -225,7 +225,7 @@ def test_hold_blas_single_thread_stays_after_the_call():
     import sys
 
     code = ("import numpy, threadpoolctl\n"
-            "from meshphase import threads\n"
+            "from meshphase.runtime import threads\n"
             "def n():\n"
             "    return [i['num_threads'] for i in threadpoolctl.threadpool_info() if i['user_api'] == 'blas']\n"
             "assert n(), 'no BLAS found'\n"

@@ -1,4 +1,4 @@
-"""What a synthetic truth tells a run (meshphase.truth): the true errors, the generator's tacho
+"""What a synthetic truth tells a run (meshphase.compare.truth): the true errors, the generator's tacho
 geometry, the measured phasing scored against the true one."""
 
 from __future__ import annotations
@@ -8,12 +8,12 @@ import math
 import numpy as np
 import pytest
 
-from meshphase.compare import truth_comparison
+from meshphase.compare.predict import truth_comparison
 from meshphase.models.mesh_phasing import ShaftHoleErrors
-from meshphase.phasing import GaugeLabels, PassTable
-from meshphase.scene import parse_scene
-from meshphase.stages import run_scene
-from meshphase.truth import phasing_vs_truth, tacho_geometry, true_errors
+from meshphase.kinematics.phasing import GaugeLabels, PassTable
+from meshphase.run.scene import parse_scene
+from meshphase.run.stages import run_scene
+from meshphase.compare.truth import phasing_vs_truth, tacho_geometry, true_errors
 from meshphase.synthetic import generate, get_scenario
 from meshphase.synthetic.config import SynthConfig
 

@@ -1,4 +1,4 @@
-"""Gauge units checked when a recording is loaded (meshphase.units): each spelling's factor to
+"""Gauge units checked when a recording is loaded (meshphase.io.units): each spelling's factor to
 m/m, bridge ratios and volts with a bridge entry, an unknown unit named with its channel, a
 missing one warned once, the scene's units winning over the file's, and one recording in
 microstrain through every reader (HDF5 native and foreign, MCAP, CSV with and without a units
@@ -16,12 +16,12 @@ import pytest
 from seed_rig_toml import SEED_RIG_GEARSET as G
 
 import meshphase.io
-from meshphase.bridge import BridgeConfig, ratio_from_strain
+from meshphase.io.bridge import BridgeConfig, ratio_from_strain
 from meshphase.errors import FormatWarning
 from meshphase.recording import ChannelSpec, Recording
-from meshphase.scene import parse_scene
-from meshphase.stages import run_scene
-from meshphase.units import UnitError, gauge_unit_gains, parse_unit
+from meshphase.run.scene import parse_scene
+from meshphase.run.stages import run_scene
+from meshphase.io.units import UnitError, gauge_unit_gains, parse_unit
 
 
 # ----------------------------------------------------------------------------- parse_unit
@@ -59,7 +59,7 @@ def test_parse_unit_empty_and_bad_input():
 
 def test_the_table_keeps_pint_out_of_the_common_spellings():
     # meshphase info / convert start-up: the common spellings never import pint
-    code = ("import sys; from meshphase.units import parse_unit; "
+    code = ("import sys; from meshphase.io.units import parse_unit; "
             "[parse_unit(u) for u in ('m/m', 'µε', 'ue', 'mm/m', '%', 'mV/V', 'V', 'Strain', '')]; "
             "print('pint' in sys.modules)")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
@@ -289,7 +289,7 @@ def test_a_bridge_ratio_in_mv_per_v_with_a_bridge_entry(seed_rec, ref_amplitudes
 def test_scene_refuses_an_unknown_gauge_unit_at_parse_time(tmp_path):
     # the scene's own units key is checked as the scene is read (line and key named), not
     # when the recording is loaded; a non-gauge channel keeps whatever unit it states
-    from meshphase.scene import SceneError, parse_scene
+    from meshphase.run.scene import SceneError, parse_scene
 
     base = ('results = ["ideal_phasing"]\n[gearset]\nz_sun = 25\nz_ring = 87\nz_planet = 29\n'
             'n_planets = 4\ncarrier_radius_mm = 112.5\nprofile_shift = true\n')

@@ -1,7 +1,7 @@
 """Campaign speed-up: the same campaign timed with different numbers of local workers.
 
 :func:`measure_speedup` generates synthetic recordings once, then runs
-:func:`meshphase.campaign.run_campaign` on them with each worker count on a fresh
+:func:`meshphase.campaign.runner.run_campaign` on them with each worker count on a fresh
 LocalCluster and reports wall times and speed-ups. Measured, never asserted.
 """
 
@@ -13,11 +13,11 @@ import statistics
 import tempfile
 from pathlib import Path
 
-from ..campaign import client_scene, collect_recordings, run_campaign
-from ..campaign_job import campaign_modules
-from ..cluster import cores, worker_server
-from ..log import logger
-from ..validate import as_positive, as_positive_int
+from meshphase.campaign.runner import client_scene, collect_recordings, run_campaign
+from meshphase.campaign.job import campaign_modules
+from meshphase.campaign.cluster import cores, worker_server
+from meshphase.runtime.log import logger
+from meshphase.validate import as_positive, as_positive_int
 
 __all__ = ["measure_speedup"]
 
@@ -54,7 +54,7 @@ def _prepare(work: Path, n_recordings: int, minutes: float, scenario: str, seed:
         if not p.exists():
             cli_synth(scenario, p, minutes=minutes, seed=seed + k, progress=False)
     if scene_path is None:
-        from ..demo import DEMO_SCENE
+        from meshphase.run.demo import DEMO_SCENE
 
         scene_path = work / "speedup_scene.toml"
         scene_path.write_text(DEMO_SCENE, encoding="utf-8")
@@ -62,15 +62,15 @@ def _prepare(work: Path, n_recordings: int, minutes: float, scenario: str, seed:
     # the first timed run does not pay for what the later ones get for free
     import distributed  # noqa: F401
 
-    from ..report import campaign_report  # noqa: F401
-    from ..scene import load_scene
-    from ..stages import run_scene
+    from meshphase.report import campaign_report  # noqa: F401
+    from meshphase.run.scene import load_scene
+    from meshphase.run.stages import run_scene
 
     scene = load_scene(scene_path)
     warm = client_scene(scene)
     if warm.results:
         run_scene(warm)
-    # the workers' fork server is started once per process (meshphase.cluster.worker_server):
+    # the workers' fork server is started once per process (meshphase.campaign.cluster.worker_server):
     # started here, with what the campaign would give it, every timed run finds it running,
     # the first one as much as the others
     server_s = worker_server(campaign_modules(scene, collect_recordings([rec_dir])[0]))
@@ -134,14 +134,14 @@ def measure_speedup(n_recordings: int = 8, minutes: float = 2.0, workers=(1, 2),
     scenario : str
         Synthetic scenario (:data:`meshphase.synthetic.SCENARIOS`).
     scene_path : str or Path, optional
-        Scene to run (default: the demo scene, :data:`meshphase.demo.DEMO_SCENE`).
+        Scene to run (default: the demo scene, :data:`meshphase.run.demo.DEMO_SCENE`).
     work_dir : str or Path, optional
         Where recordings and outputs go (default: a temporary folder, removed afterwards).
     seed : int
         Seed of the first recording.
     progress : bool
     threads : int
-        Worker threads of each recording's run (:mod:`meshphase.threads`) [-]. The default 1
+        Worker threads of each recording's run (:mod:`meshphase.runtime.threads`) [-]. The default 1
         measures the campaign's own scaling over workers; a ``meshphase campaign`` command
         gives each recording its share of the cores instead (all of them with 1 worker),
         which makes the 1-worker run faster and the ratio smaller.
@@ -181,7 +181,7 @@ def measure_speedup(n_recordings: int = 8, minutes: float = 2.0, workers=(1, 2),
     try:
         rec_dir, scene_path, server_s = _prepare(work, n_recordings, minutes, scenario, seed, scene_path)
         load0 = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
-        from ..threads import threads_limited
+        from meshphase.runtime.threads import threads_limited
 
         with threads_limited(as_positive_int(threads, "threads")):
             runs = [_timed_run(scene_path, rec_dir, work / f"campaign-{w}w", w, rep, progress)

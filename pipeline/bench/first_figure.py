@@ -1,7 +1,7 @@
 """What a campaign worker's first figure of the combined report costs over its second.
 
 A campaign's local workers fork from a server that imported
-:func:`meshphase.campaign_job.worker_modules`; the last of them, :mod:`meshphase.fork_ready`,
+:func:`meshphase.campaign.job.worker_modules`; the last of them, :mod:`meshphase.campaign.fork_ready`,
 freezes the heap. Each case here is a fresh interpreter that imports that list
 without that module (``without fork_ready``: no frozen heap, no figure drawn before the
 fork) or with it (``with fork_ready``), then forks one child per draw:
@@ -18,7 +18,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from ..validate import as_positive_int
+from meshphase.validate import as_positive_int
 
 __all__ = ["FIRST_FIGURE_COLUMNS", "first_figure_rows"]
 
@@ -28,7 +28,7 @@ FIRST_FIGURE_COLUMNS = ("case", "figure", "first_excess_s", "min_excess_s", "max
 
 _CODE = """
 import importlib, json, os, sys, time
-from meshphase.campaign_job import worker_modules, _FORK_READY
+from meshphase.campaign.job import worker_modules, _FORK_READY
 frozen, repeats, results = sys.argv[1] == "with fork_ready", int(sys.argv[2]), sys.argv[3]
 for m in worker_modules():          # every reader, as a campaign over mixed formats
     if frozen or m != _FORK_READY:
@@ -63,7 +63,7 @@ for _ in range(repeats):
 
 def first_figure_rows(repeats: int = 6) -> list:
     """The first figure's excess over the second in a forked worker, without and with
-    :mod:`meshphase.fork_ready` (its frozen heap and the small figure it draws).
+    :mod:`meshphase.campaign.fork_ready` (its frozen heap and the small figure it draws).
 
     Parameters
     ----------
@@ -81,7 +81,7 @@ def first_figure_rows(repeats: int = 6) -> list:
     repeats = as_positive_int(repeats, "repeats")
     if not hasattr(os, "fork"):
         return []
-    from .rss import child_env
+    from meshphase.bench.rss import child_env
 
     rows = []
     for case in ("without fork_ready", "with fork_ready"):

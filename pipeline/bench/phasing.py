@@ -9,7 +9,7 @@ over 2 and 10 minutes.
 
 Per case and gauge: the per-pass RMS phasing error against the truth [mesh cycles] (every
 measured pass against the true mesh angle turned between its two pulses,
-:func:`meshphase.compare.truth_comparison`), the floor the two onsets' timing bounds set (RMS
+:func:`meshphase.compare.predict.truth_comparison`), the floor the two onsets' timing bounds set (RMS
 of the per-pass timing floor), their ratio, the target ``max(2e-3, 1.3 x floor)``, the
 calibration of the per-pass uncertainty (RMS of error / sigma, share inside 1.96 sigma), the
 planet-label match, whether the run flagged the phasing unreliable, the angle model chosen,
@@ -26,7 +26,7 @@ import warnings
 
 import numpy as np
 
-from ..log import logger
+from meshphase.runtime.log import logger
 
 __all__ = ["PhasingCase", "matrix_cases", "run_case", "phasing_rows", "markdown_table",
            "pooled_calibration", "error_vs_runtime_figure", "PHASING_COLUMNS", "TARGET_ABS",
@@ -109,7 +109,7 @@ def run_case(case: PhasingCase, *, seed: int = 0, results=("phasing", "compare")
              channels=()) -> dict:
     """Generate the case, run the scene stages on it, compare with the truth.
 
-    ``channels``: the scene's ``[[channels]]`` entries (dicts, :mod:`meshphase.channels`),
+    ``channels``: the scene's ``[[channels]]`` entries (dicts, :mod:`meshphase.run.channels`),
     none by default (the generator's own channel kinds).
 
     Returns
@@ -118,9 +118,9 @@ def run_case(case: PhasingCase, *, seed: int = 0, results=("phasing", "compare")
         ``case``, ``ctx`` (the RunContext), ``process_s`` (wall time of the stages [s]),
         ``gauges``: {gear: row dict with the :data:`PHASING_COLUMNS` values}.
     """
-    from ..compare import truth_comparison
-    from ..scene import Scene
-    from ..stages import run_scene
+    from meshphase.compare.predict import truth_comparison
+    from meshphase.run.scene import Scene
+    from meshphase.run.stages import run_scene
 
     cfg = case_config(case)
     scene = Scene(path=None, name=case.name, results=list(results),
@@ -188,7 +188,7 @@ def pooled_calibration(rows) -> dict:
 def error_vs_runtime_figure(rows, path) -> None:
     """Scatter of error / target against processing time, one point per case and gauge
     (matplotlib through meshphase.report.figures, the one plotting module)."""
-    from ..report.figures import error_vs_runtime
+    from meshphase.report.figures import error_vs_runtime
 
     curves = {}
     for r in rows:

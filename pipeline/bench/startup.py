@@ -20,7 +20,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from ..validate import as_positive_int
+from meshphase.validate import as_positive_int
 
 __all__ = ["STARTUP_COLUMNS", "EXIT_COLUMNS", "startup_rows", "exit_rows"]
 
@@ -52,15 +52,15 @@ def _cases(h5: Path) -> list:
                                     + _COUNT),
             ("meshphase info FILE.h5 --no-quality", cli(["info", str(h5), "--no-quality"])),
             ("meshphase info FILE.h5", cli(["info", str(h5)])),
-            ("import meshphase.stages (what process loads)", f"import meshphase.stages; {_COUNT}"),
+            ("import meshphase.run.stages (what process loads)", f"import meshphase.run.stages; {_COUNT}"),
             # what the filters' scipy engine adds (process takes numba's kernel instead when
-            # numba is installed: meshphase.iir.pick_engine)
-            ("import meshphase.stages, scipy.signal", f"import meshphase.stages, scipy.signal; {_COUNT}"),
+            # numba is installed: meshphase.signal.iir.pick_engine)
+            ("import meshphase.run.stages, scipy.signal", f"import meshphase.run.stages, scipy.signal; {_COUNT}"),
             # what process loads at its first filter where numba is installed (its kernel's
-            # engine, meshphase.iir.pick_engine, for a recording of NUMBA_SAMPLES or more)
-            ("import meshphase.stages, numba", f"import meshphase.stages, numba; {_COUNT}"),
-            # what process loaded while pandas wrote its CSV tables (meshphase.table_csv now)
-            ("import meshphase.stages, pandas", f"import meshphase.stages, pandas; {_COUNT}")]
+            # engine, meshphase.signal.iir.pick_engine, for a recording of NUMBA_SAMPLES or more)
+            ("import meshphase.run.stages, numba", f"import meshphase.run.stages, numba; {_COUNT}"),
+            # what process loaded while pandas wrote its CSV tables (meshphase.run.table_csv now)
+            ("import meshphase.run.stages, pandas", f"import meshphase.run.stages, pandas; {_COUNT}")]
 
 
 def _timed_runs(make_cases, repeats: int, what: str):
@@ -77,9 +77,9 @@ def _timed_runs(make_cases, repeats: int, what: str):
     repeats = as_positive_int(repeats, "repeats")
     import numpy as np
 
-    from ..io import write
-    from ..recording import Recording
-    from .rss import child_env
+    from meshphase.io import write
+    from meshphase.recording import Recording
+    from meshphase.bench.rss import child_env
 
     with tempfile.TemporaryDirectory(prefix=f"meshphase-{what}-") as tmp:
         h5 = Path(tmp) / f"{what}.h5"
@@ -139,7 +139,7 @@ def _exit_code(frozen: bool) -> str:
     tail = ("t = time.perf_counter(); gc.collect(); c = time.perf_counter() - t; gc.freeze()\n" if frozen
             else "c = float('nan')\n")
     return ("import atexit, contextlib, gc, importlib, io, sys, time\n"
-            "from meshphase.campaign_job import _FORK_READY, worker_modules\n"
+            "from meshphase.campaign.job import _FORK_READY, worker_modules\n"
             "for m in worker_modules():\n"
             "    if m != _FORK_READY:      # the workers' fork server freezes; a command does not\n"
             "        importlib.import_module(m)\n"

@@ -25,10 +25,10 @@ from typing import Iterator
 
 import numpy as np
 
-from ..recording import Recording
-from ..validate import as_nonnegative, as_positive, as_regular_file
-from .base import (CorruptFileError, RecordingFileError, RecordingInfo, RecordingTooLargeError,
-                   atomic_path, clean_stale_partials)
+from meshphase.recording import Recording
+from meshphase.validate import as_nonnegative, as_positive, as_regular_file
+from meshphase.io.base import (CorruptFileError, RecordingFileError, RecordingInfo, RecordingTooLargeError,
+                               atomic_path, clean_stale_partials)
 
 __all__ = ["read", "write", "write_blocks", "convert", "read_info", "iter_blocks", "detect_format", "FORMATS",
            "RecordingFileError", "CorruptFileError", "RecordingTooLargeError", "RecordingInfo",
@@ -293,4 +293,4 @@ def _hint(n: int, nc: int, itemsize: int, name: str, options: dict) -> int | Non
     return int(n * nc * itemsize)
 
 
-from .convert import convert  # noqa: E402 (uses the functions above)
+from meshphase.io.convert import convert  # noqa: E402 (uses the functions above)

@@ -3,7 +3,7 @@
 Imported only when :func:`meshphase.io.tdms_rows.read_rows` takes its numba engine (numba
 already loaded in the process, or asked for), so reading a TDMS file does not load numba and
 LLVM by itself. Compiled functions are cached (``cache=True``) in the per-user directory
-:func:`meshphase.numba_cache.numba_cache_dir` names unless ``NUMBA_CACHE_DIR`` is set.
+:func:`meshphase.runtime.numba_cache.numba_cache_dir` names unless ``NUMBA_CACHE_DIR`` is set.
 ``fastmath`` stays off: it would let the compiler assume no NaN or inf, and the finiteness
 test must see them.
 """

@@ -46,12 +46,12 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from ..errors import DataQualityWarning, FormatWarning
-from ..jsonable import json_default
-from ..log import logger
-from ..quality import nonfinite_runs
-from ..recording import ChannelSpec, sample_index
-from ..validate import as_float, as_nonnegative
+from meshphase.errors import DataQualityWarning, FormatWarning
+from meshphase.jsonable import json_default
+from meshphase.runtime.log import logger
+from meshphase.signal.quality import nonfinite_runs
+from meshphase.recording import ChannelSpec, sample_index
+from meshphase.validate import as_float, as_nonnegative
 
 __all__ = ["RecordingFileError", "CorruptFileError", "RecordingTooLargeError", "RecordingInfo", "atomic_path",
            "clean_stale_partials", "TEMP_PREFIX", "TEMP_SUFFIX", "STALE_AGE", "check_verify",

@@ -16,9 +16,9 @@ from typing import Callable, ContextManager
 
 import numpy as np
 
-from ..recording import Recording
-from ..validate import as_positive_int
-from .base import recording_read_errors
+from meshphase.recording import Recording
+from meshphase.validate import as_positive_int
+from meshphase.io.base import recording_read_errors
 
 __all__ = ["convert", "Converted", "CONVERT_BLOCK_SAMPLES"]
 
@@ -75,7 +75,7 @@ def convert(src, dst, *, format: str | None = None, overwrite: bool = False,
         The written path, both formats, samples and channels. The samples keep their stored
         dtype (float32 stays float32); the history gains a ``convert`` step naming the source.
     """
-    from . import _format_for_write, detect_format, iter_blocks, read_info, write_blocks
+    from meshphase.io import _format_for_write, detect_format, iter_blocks, read_info, write_blocks
 
     block_samples = as_positive_int(block_samples, "block_samples")
     src, dst = Path(src), Path(dst)

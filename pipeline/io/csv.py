@@ -64,11 +64,11 @@ from typing import Iterator
 
 import numpy as np
 
-from ..errors import FormatWarning
-from ..recording import ChannelSpec, Recording
-from ..validate import as_int, as_positive_int
-from .base import (CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime, check_verify,
-                   dumps_json, nice_fs, spec_from_dict, warn_nonfinite)
+from meshphase.errors import FormatWarning
+from meshphase.recording import ChannelSpec, Recording
+from meshphase.validate import as_int, as_positive_int
+from meshphase.io.base import (CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime, check_verify,
+                               dumps_json, nice_fs, spec_from_dict, warn_nonfinite)
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "FORMAT_VERSION", "TIME_TOLERANCE", "sniff", "read_info",
            "read", "write", "write_blocks", "iter_blocks", "MAX_CHANNELS", "MAX_HEADER_LINE"]
@@ -77,7 +77,7 @@ NAME = "csv"
 SUFFIXES = (".csv",)
 CAN_WRITE = True
 #: the libraries the reader imports on its first use (a campaign's workers have them
-#: imported ahead: :func:`meshphase.campaign_job.worker_modules`)
+#: imported ahead: :func:`meshphase.campaign.job.worker_modules`)
 READ_LIBRARIES = ("pandas",)
 #: Version of the preamble written by :func:`write`.
 FORMAT_VERSION = 1

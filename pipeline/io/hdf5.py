@@ -44,7 +44,7 @@ missing chunk is a CorruptFileError naming the channel and its time range; so is
 length of 1e12 samples with nothing stored, before anything is allocated.
 ``read(..., verify=False)`` reads chunks stored with fletcher32 as the only filter without
 checking the checksum (to salvage the undamaged samples of a damaged file, or to read again
-what a checked pass of the same run has read: :class:`meshphase.stream.FileSource`), with
+what a checked pass of the same run has read: :class:`meshphase.run.stream.FileSource`), with
 ``os.preadv`` at the chunks' byte offsets; chunks with
 compression are always checked (h5py exposes no switch to skip it). Files are written with
 no chunk cache (``rdcc_nbytes=0``), so a failed write (ENOSPC) leaves no dirty chunk for
@@ -69,14 +69,14 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from ..errors import FormatWarning
-from ..jsonable import to_jsonable
-from ..log import logger
-from ..recording import Recording
-from ..validate import as_choice, as_int, as_positive, as_positive_int
-from .base import (CLOCK_NAMES, CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime,
-                   check_allocation, check_verify, clock_timing, dumps_json, kind_from_name,
-                   regroup_blocks, spec_from_dict, warn_nonfinite)
+from meshphase.errors import FormatWarning
+from meshphase.jsonable import to_jsonable
+from meshphase.runtime.log import logger
+from meshphase.recording import Recording
+from meshphase.validate import as_choice, as_int, as_positive, as_positive_int
+from meshphase.io.base import (CLOCK_NAMES, CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime,
+                               check_allocation, check_verify, clock_timing, dumps_json, kind_from_name,
+                               regroup_blocks, spec_from_dict, warn_nonfinite)
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "FORMAT_VERSION", "DEFAULT_CHUNK_SAMPLES", "sniff",
            "read_info", "read", "write", "write_blocks", "iter_blocks"]
@@ -85,7 +85,7 @@ NAME = "hdf5"
 SUFFIXES = (".h5", ".hdf5", ".hdf", ".he5")
 CAN_WRITE = True
 #: the libraries the reader imports on its first use (a campaign's workers have them
-#: imported ahead: :func:`meshphase.campaign_job.worker_modules`)
+#: imported ahead: :func:`meshphase.campaign.job.worker_modules`)
 READ_LIBRARIES = ("h5py",)
 #: Layout version written by :func:`write`; readers refuse newer versions.
 FORMAT_VERSION = 1
@@ -332,7 +332,7 @@ def _foreign_header(f, path, fs_opt) -> tuple[dict, tuple, tuple]:
     agree. Returns (attrs, specs, (dataset path, column or None, samples axis) per channel)."""
     import h5py
 
-    from ..recording import ChannelSpec
+    from meshphase.recording import ChannelSpec
 
     found = []                                         # (dataset or column, name)
 

@@ -81,13 +81,13 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from ..errors import FormatWarning
-from ..jsonable import to_jsonable
-from ..recording import CHANNEL_KINDS, ChannelSpec, Recording
-from ..validate import as_int, as_positive, as_positive_int
-from . import tdms_index, tdms_rows, tdms_scaling
-from .base import (CLOCK_NAMES, CorruptFileError, RecordingFileError, RecordingInfo, check_allocation,
-                   check_verify, clock_timing, kind_from_name, spec_from_dict, warn_nonfinite)
+from meshphase.errors import FormatWarning
+from meshphase.jsonable import to_jsonable
+from meshphase.recording import CHANNEL_KINDS, ChannelSpec, Recording
+from meshphase.validate import as_int, as_positive, as_positive_int
+from meshphase.io import tdms_index, tdms_rows, tdms_scaling
+from meshphase.io.base import (CLOCK_NAMES, CorruptFileError, RecordingFileError, RecordingInfo, check_allocation,
+                               check_verify, clock_timing, kind_from_name, spec_from_dict, warn_nonfinite)
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "sniff", "read_info", "read", "iter_blocks", "kind_from_name",
            "reading_path"]
@@ -96,7 +96,7 @@ NAME = "tdms"
 SUFFIXES = (".tdms",)
 CAN_WRITE = False
 #: the libraries the reader imports on its first use (a campaign's workers have them
-#: imported ahead: :func:`meshphase.campaign_job.worker_modules`)
+#: imported ahead: :func:`meshphase.campaign.job.worker_modules`)
 READ_LIBRARIES = ("nptdms",)
 
 #: Read through the segment index and computed offsets (tests switch it off to compare with

@@ -2,7 +2,7 @@
 
 Imported only when a Monte Carlo runs on the numba engine, so that importing the models (and
 processing a recording) does not load numba and LLVM. Compiled functions are cached
-(``cache=True``) in the per-user directory :func:`meshphase.numba_cache.numba_cache_dir`
+(``cache=True``) in the per-user directory :func:`meshphase.runtime.numba_cache.numba_cache_dir`
 names unless ``NUMBA_CACHE_DIR`` is set (``meshphase bench --warmup`` fills it).
 """
 
@@ -11,7 +11,7 @@ from __future__ import annotations
 import numba as _numba
 import numpy as np
 
-from ._kernel_math import atan_cephes, mean_range
+from meshphase.models._kernel_math import atan_cephes, mean_range
 
 _atan = _numba.njit(inline="always", cache=True)(atan_cephes)
 _mean_range = _numba.njit(inline="always", cache=True)(mean_range)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import functools
 import warnings
 
-from ..errors import DeprecatedNameWarning
+from meshphase.errors import DeprecatedNameWarning
 
 
 def translate(kwargs: dict, renames: dict, owner: str, stacklevel: int = 3) -> dict:

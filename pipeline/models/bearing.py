@@ -29,8 +29,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..validate import as_choice, as_float, as_positive, as_positive_int
-from ._renamed import accept_old_names, renamed_kwargs
+from meshphase.validate import as_choice, as_float, as_positive, as_positive_int
+from meshphase.models._renamed import accept_old_names, renamed_kwargs
 
 __all__ = [
     "SinglePinion",

@@ -68,12 +68,12 @@ Modules
 ``streaming``  :class:`OnsetStream`, :func:`detect_onsets_stream`
 """
 
-from .coarse import coarse_peaks
-from .engine import detect_onsets, detect_onsets_recording
-from .learning import estimate_pulse_width, learn_template
-from .results import (FLAG_CLIPPED, FLAG_EDGE, FLAG_GAP, FLAG_LOW_CORR, FLAG_NAMES, FLAG_TEMPLATE,
-                      CoarsePeaks, Onsets, Template)
-from .streaming import OnsetStream, detect_onsets_stream
+from meshphase.onsets.coarse import coarse_peaks
+from meshphase.onsets.engine import detect_onsets, detect_onsets_recording
+from meshphase.onsets.learning import estimate_pulse_width, learn_template
+from meshphase.onsets.results import (FLAG_CLIPPED, FLAG_EDGE, FLAG_GAP, FLAG_LOW_CORR, FLAG_NAMES, FLAG_TEMPLATE,
+                                      CoarsePeaks, Onsets, Template)
+from meshphase.onsets.streaming import OnsetStream, detect_onsets_stream
 
 __all__ = [
     "Onsets", "Template", "CoarsePeaks", "detect_onsets", "detect_onsets_recording",

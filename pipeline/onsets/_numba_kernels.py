@@ -4,7 +4,7 @@ Imported when a block takes the numba engine (a dense block, or any block once n
 loaded in the process), so that importing the onsets, or processing a recording of wide
 pulses where numba is not loaded, does not load numba and LLVM. Compiled
 functions are cached (``cache=True``) in the per-user directory
-:func:`meshphase.numba_cache.numba_cache_dir` names unless ``NUMBA_CACHE_DIR`` is set
+:func:`meshphase.runtime.numba_cache.numba_cache_dir` names unless ``NUMBA_CACHE_DIR`` is set
 (``meshphase bench --warmup`` fills it). ``fastmath`` stays off: the arithmetic is the numpy
 path's, in its order, except the window sums of the NCC and baseline (numpy: BLAS and
 einsum; here each in sample order). The correlations are BLAS's matrix product, as on the

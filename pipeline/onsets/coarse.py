@@ -13,9 +13,9 @@ import math
 import numpy as np
 from scipy import ndimage
 
-from .._median import MAD_TO_SIGMA, median_and_mad, median_of_finite
-from ..validate import as_choice, as_positive, as_positive_int, as_signal
-from .results import CoarsePeaks
+from meshphase.signal.median import MAD_TO_SIGMA, median_and_mad, median_of_finite
+from meshphase.validate import as_choice, as_positive, as_positive_int, as_signal
+from meshphase.onsets.results import CoarsePeaks
 
 __all__ = ["coarse_peaks"]
 
@@ -157,7 +157,7 @@ def _coarse_dec(yd: np.ndarray, w_d: float, spacing_d: float, k_sigma: float, fa
     sig = max(sig, 1e-6 * (top - med), 1e-300)       # noise-free data: a tiny floor
     thr = med + k_sigma * sig
     if fast:
-        from .fastpath import run_maxima
+        from meshphase.onsets.fastpath import run_maxima
 
         peaks = run_maxima(ys, thr, max(1, int(math.ceil(spacing_d))), 3.0 * spacing_d)
         return _resolve_close(peaks, ys[peaks] - med, spacing_d) + (thr - med, sig, med)

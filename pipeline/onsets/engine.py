@@ -12,21 +12,21 @@ import warnings
 
 import numpy as np
 
-from ..condition import ChannelQuality, merge_runs
-from ..errors import ProcessingWarning
-from ..log import logger
-from ..quality import find_runs
-from ..recording import Recording
-from ..validate import as_signal
-from .coarse import _coarse_dec, _decimate, _decimation, _fill_nan
-from .learning import _half_length, _learn_dec, _refine_width, _width_autocorr
-from .fastpath import dense, refine_pulses
-from .matched import _gather, _Matcher, _sublags, _window_baseline
-from .options import _options, _Options
-from .relearn import _Fit, _good_median, _period
-from .results import (FLAG_CLIPPED, FLAG_EDGE, FLAG_GAP, FLAG_LOW_CORR, FLAG_TEMPLATE, Onsets, Template,
-                      empty_onsets)
-from .runs import _inside_runs, _runs_overlap
+from meshphase.signal.condition import ChannelQuality, merge_runs
+from meshphase.errors import ProcessingWarning
+from meshphase.runtime.log import logger
+from meshphase.signal.quality import find_runs
+from meshphase.recording import Recording
+from meshphase.validate import as_signal
+from meshphase.onsets.coarse import _coarse_dec, _decimate, _decimation, _fill_nan
+from meshphase.onsets.learning import _half_length, _learn_dec, _refine_width, _width_autocorr
+from meshphase.onsets.fastpath import dense, refine_pulses
+from meshphase.onsets.matched import _gather, _Matcher, _sublags, _window_baseline
+from meshphase.onsets.options import _options, _Options
+from meshphase.onsets.relearn import _Fit, _good_median, _period
+from meshphase.onsets.results import (FLAG_CLIPPED, FLAG_EDGE, FLAG_GAP, FLAG_LOW_CORR, FLAG_TEMPLATE, Onsets, Template,
+                                      empty_onsets)
+from meshphase.onsets.runs import _inside_runs, _runs_overlap
 
 __all__ = ["detect_onsets", "detect_onsets_recording"]
 
@@ -444,7 +444,7 @@ def detect_onsets(x, fs: float, *, t0: float = 0.0, width: float | None = None,
     Parameters
     ----------
     x : array_like, shape (n,)
-        Conditioned samples (drift removed, see :mod:`meshphase.condition`) [data units];
+        Conditioned samples (drift removed, see :mod:`meshphase.signal.condition`) [data units];
         NaN/inf mark gaps. float32 or float64.
     fs : float
         Sample rate [Hz].
@@ -547,7 +547,7 @@ def detect_onsets_recording(rec: Recording, channel: str, *, quality=None, **kwa
     channel : str
         Channel name.
     quality : ChannelQuality, optional
-        The channel's report from :mod:`meshphase.condition`: its clipped runs are flagged
+        The channel's report from :mod:`meshphase.signal.condition`: its clipped runs are flagged
         (``FLAG_CLIPPED``), its dropout runs are gaps (``gap_runs``; already NaN in a
         recording conditioned with ``dropouts="nan"``) and its ``settle`` time is used as
         ``gap_guard``.

@@ -15,7 +15,7 @@ pulses per block) and in the coarse stage's run bookkeeping (``flatnonzero``, ``
 
 Rule (``engine="auto"``, the default): the numba path serves a block when numba is
 importable and either already loaded in this process (as in ``process``, whose filters run
-on numba's kernel: :func:`meshphase.iir.pick_engine`) or the block is dense: it can hold at
+on numba's kernel: :func:`meshphase.signal.iir.pick_engine`) or the block is dense: it can hold at
 least ``DENSE_PULSES`` pulses at the minimum spacing (coarse stage) or has at least
 ``DENSE_PULSES`` pulses to refine (refinement). With numba loaded, loading the onset
 kernels from the cache costs little (``meshphase bench --warmup`` prints it) and the
@@ -34,7 +34,7 @@ import time
 
 import numpy as np
 
-from ..numba_cache import import_kernels
+from meshphase.runtime.numba_cache import import_kernels
 
 __all__ = ["ENGINES", "HAVE_NUMBA", "DENSE_PULSES", "check_engine", "dense", "run_maxima",
            "refine_pulses", "warmup"]

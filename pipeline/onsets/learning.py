@@ -14,12 +14,12 @@ import math
 import numpy as np
 from scipy import fft as sfft
 
-from ..spectral import tukey
-from ..validate import as_choice, as_float, as_positive, as_positive_int, as_signal
-from .coarse import _coarse_dec, _decimate, _decimation, _fill_nan
-from .features import _template_features
-from .matched import _gather, _Matcher, _sublags, _window_baseline
-from .results import Template
+from meshphase.signal.spectral import tukey
+from meshphase.validate import as_choice, as_float, as_positive, as_positive_int, as_signal
+from meshphase.onsets.coarse import _coarse_dec, _decimate, _decimation, _fill_nan
+from meshphase.onsets.features import _template_features
+from meshphase.onsets.matched import _gather, _Matcher, _sublags, _window_baseline
+from meshphase.onsets.results import Template
 
 __all__ = ["learn_template", "estimate_pulse_width"]
 

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from scipy import fft as sfft
 
-from .results import Template
+from meshphase.onsets.results import Template
 
 __all__: list[str] = []
 

@@ -8,10 +8,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..validate import as_choice, as_float, as_nonnegative, as_positive, as_positive_int
-from .fastpath import check_engine
-from .results import Template
-from .runs import _check_runs
+from meshphase.validate import as_choice, as_float, as_nonnegative, as_positive, as_positive_int
+from meshphase.onsets.fastpath import check_engine
+from meshphase.onsets.results import Template
+from meshphase.onsets.runs import _check_runs
 
 __all__: list[str] = []
 

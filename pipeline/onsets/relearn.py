@@ -36,8 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._median import median_of_finite
-from .results import Template
+from meshphase.signal.median import median_of_finite
+from meshphase.onsets.results import Template
 
 __all__: list[str] = []
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..condition import merge_runs
+from meshphase.signal.condition import merge_runs
 
 __all__: list[str] = []
 

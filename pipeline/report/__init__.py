@@ -4,6 +4,6 @@
 - :mod:`.figures`  the report's figures
 """
 
-from .html import Report, Section
+from meshphase.report.html import Report, Section
 
 __all__ = ["Report", "Section"]

@@ -5,8 +5,8 @@ phasing per planet and the load sharing per recording as tables, and figures acr
 recordings: each planet's mean phasing (deviation from the ideal, with its pass-to-pass
 spread), the load sharing, the residual RMS and the wall time per recording. Failed
 recordings are listed with their error message. Input: the dict that
-:func:`meshphase.campaign.run_campaign` builds (per-recording dicts from
-:func:`meshphase.campaign.run_recording`).
+:func:`meshphase.campaign.runner.run_campaign` builds (per-recording dicts from
+:func:`meshphase.campaign.runner.run_recording`).
 
 Drawing the figures is most of the report's time. The page is laid out first, each figure as a call to draw (:func:`figure_png`: a figure function
 of this module and its arguments); then they are drawn, one after another here, or by
@@ -24,8 +24,8 @@ from typing import Callable
 
 import numpy as np
 
-from ..io import atomic_path
-from .html import Report, escape, figure_to_png
+from meshphase.io import atomic_path
+from meshphase.report.html import Report, escape, figure_to_png
 
 __all__ = ["build_campaign_report", "figure_png", "phasing_across_recordings", "load_sharing_across_recordings",
            "residual_rms_across_recordings", "wall_times_across_recordings", "pyplot"]
@@ -36,7 +36,7 @@ _STATUS_COLOR = {"ok": "#1b6b2f", "unreliable": "#7a5195", "partial": "#c77800",
 @functools.cache
 def pyplot():
     """matplotlib's pyplot on the Agg backend, imported by the first figure drawn (or by
-    :mod:`meshphase.fork_ready` in the workers' fork server): a campaign's client assembles
+    :mod:`meshphase.campaign.fork_ready` in the workers' fork server): a campaign's client assembles
     the report without matplotlib, its workers draw the figures.
 
     Returns
@@ -371,8 +371,8 @@ def build_campaign_report(campaign: dict, out_dir, *, filename: str = "campaign_
     Parameters
     ----------
     campaign : dict
-        As built by :func:`meshphase.campaign.run_campaign`: ``recordings`` (list of dicts
-        from :func:`meshphase.campaign.run_recording`) and optionally ``scene``, ``counts``,
+        As built by :func:`meshphase.campaign.runner.run_campaign`: ``recordings`` (list of dicts
+        from :func:`meshphase.campaign.runner.run_recording`) and optionally ``scene``, ``counts``,
         ``timing_s``, ``cluster``, ``scene_level``, ``skipped_inputs`` and ``out_dir`` (the
         folder the page will be read in: links to the recordings' results are relative to it;
         default ``out_dir`` below).

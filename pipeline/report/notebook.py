@@ -13,8 +13,8 @@ import numpy as np
 
 import matplotlib.pyplot as plt
 
-from ..compare import wrap
-from ..results import RunContext
+from meshphase.compare.predict import wrap
+from meshphase.run.results import RunContext
 
 __all__ = ["plot_channels", "plot_result_onsets", "plot_phasing", "plot_load_sharing",
            "plot_residuals", "onset_marks"]
@@ -187,7 +187,7 @@ def plot_phasing(ctx: RunContext, gauge=None, *, ax=None):
     """Measured phasing per pass against time, one colour per planet: error bars of one
     sigma, the ideal (dotted), the identified model (line) and the Monte Carlo band (shaded)
     [mesh cycles]; one panel per gauge."""
-    from ..result_frames import passes_rows, phasing_rows
+    from meshphase.run.frames import passes_rows, phasing_rows
 
     tabs = {g: t for g, t in (ctx.phasing.tables.items() if ctx.phasing is not None else ())
             if len(t)}
@@ -221,7 +221,7 @@ def plot_phasing(ctx: RunContext, gauge=None, *, ax=None):
 def plot_residuals(ctx: RunContext, gauge=None, *, ax=None):
     """Measured - model phasing per pass (measured - ideal where no model was identified)
     [mesh cycles] against time, one colour per planet, one panel per gauge."""
-    from ..result_frames import passes_rows
+    from meshphase.run.frames import passes_rows
 
     rows = passes_rows(ctx)
     want = _gauges(ctx, gauge, {r["gauge"] for r in rows})
@@ -244,7 +244,7 @@ def plot_residuals(ctx: RunContext, gauge=None, *, ax=None):
 
 def plot_load_sharing(ctx: RunContext, *, ax=None):
     """Load-sharing factor per planet [-] with its standard error; 1 is equal sharing."""
-    from ..result_frames import load_sharing_rows
+    from meshphase.run.frames import load_sharing_rows
 
     rows = load_sharing_rows(ctx)
     if not rows:

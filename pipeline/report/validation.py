@@ -5,7 +5,7 @@ shown): recording quality, onsets over the signal, measured vs predicted phasing
 Monte Carlo band, residual histograms, identified errors, load sharing, centroids, bearing
 moments (with seed 001's GSAM table side by side for that gearset), tilt solve, and "error
 against run time" with each stage's wall time and error estimate. Each section is built by
-its own function from the run's typed stage results (:mod:`meshphase.results`).
+its own function from the run's typed stage results (:mod:`meshphase.run.results`).
 """
 
 from __future__ import annotations
@@ -15,12 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..channels import mapping_report
-from ..compare import RECORD_FACTORS, identification_verdict, wrap
-from ..models.bearing import BearingMoments
-from ..models.tilt import TABLE11_THEORY, table10_cases, table11_cases
-from . import figures
-from .html import Report, figure_to_png
+from meshphase.run.channels import mapping_report
+from meshphase.compare.predict import RECORD_FACTORS, identification_verdict, wrap
+from meshphase.models.bearing import BearingMoments
+from meshphase.models.tilt import TABLE11_THEORY, table10_cases, table11_cases
+from meshphase.report import figures
+from meshphase.report.html import Report, figure_to_png
 
 __all__ = ["build_report"]
 
@@ -174,7 +174,7 @@ def _onsets_section(rep: Report, ctx, figs: _Figures) -> None:
     s = rep.section("Engagement onsets")
     by_channel = ctx.onsets.by_channel
     # the conditioned signal is streamed, not kept: the condition stage keeps its first
-    # minute (meshphase.stream.EXCERPT_SECONDS) for this figure
+    # minute (meshphase.run.stream.EXCERPT_SECONDS) for this figure
     rec = ctx.condition.excerpt
     if rec is None:
         rec = ctx.condition.recording

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from meshphase.bench.processing import (ACCURACY_COLUMNS, THROUGHPUT_COLUMNS, PulseShape,
-                                       match_onsets, pulse_scenario, pulse_train,
-                                       run_processing_bench)
+                                        match_onsets, pulse_scenario, pulse_train,
+                                        run_processing_bench)
 
 
 def test_quick_bench_writes_tables(tmp_path):

@@ -15,9 +15,9 @@ def test_startup_rows_measure_each_case():
     mods = {r["what"]: r["modules"] for r in rows}
     # the module counts are what the rows claim: the interpreter loads least, the stages most
     assert mods["python -c pass"] < mods["import meshphase"] < mods["meshphase --version"]
-    assert mods["meshphase --version"] < mods["import meshphase.stages (what process loads)"]
-    # the row beside it adds pandas, which process no longer loads (meshphase.table_csv)
-    assert mods["import meshphase.stages (what process loads)"] < mods["import meshphase.stages, pandas"]
+    assert mods["meshphase --version"] < mods["import meshphase.run.stages (what process loads)"]
+    # the row beside it adds pandas, which process no longer loads (meshphase.run.table_csv)
+    assert mods["import meshphase.run.stages (what process loads)"] < mods["import meshphase.run.stages, pandas"]
 
 
 @pytest.mark.parametrize("bad, exc", [(0, ValueError), (-2, ValueError), ("3", TypeError),

@@ -3,7 +3,7 @@
 Each :class:`FaultCase` says how to make one fault in a fresh folder (from small valid
 recordings written here: 5 s of the seed rig as HDF5, MCAP, CSV with and without the
 meshphase preamble, and NI TDMS written by npTDMS's ``TdmsWriter``), which CLI commands to
-run on it, and which exit codes are acceptable (``pipeline/exits.py``). The runner
+run on it, and which exit codes are acceptable (``pipeline/run/exits.py``). The runner
 (``test_fault_corpus.py``) checks what every case must show: no traceback, no exit 0 on a
 faulty input, a code from the documented table, one error line naming the file (and the key
 and line for scenes), nothing left behind, no hang.
@@ -85,7 +85,7 @@ __all__ = ["FaultCase", "Originals", "build_originals", "corpus", "toml_dumps", 
            "SCENE_RESULTS_CHEAP", "schema_leaf_keys", "INFO", "PROCESS", "CONVERT", "RUN",
            "CAMPAIGN", "GEARSET_RUN", "OUTCOMES", "outcome_table", "hdf5_without_chunks"]
 
-EXIT_ERROR = 1  # meshphase.exits.EXIT_ERROR; the corpus is plain data, the runner imports pipeline
+EXIT_ERROR = 1  # meshphase.run.exits.EXIT_ERROR; the corpus is plain data, the runner imports pipeline
 
 # --------------------------------------------------------------------------- commands
 #: argv templates; ``{name}`` is replaced by the case's value of that name
@@ -686,7 +686,7 @@ def _reading_raises(exc_type):
             boom()
             yield  # pragma: no cover
         # the public functions and the format modules' own (the streamed load reads a file
-        # through its format module, block by block: meshphase.stream.FileSource)
+        # through its format module, block by block: meshphase.run.stream.FileSource)
         mods = [pio]
         for fmt in ("hdf5", "mcap", "csv", "tdms"):
             try:
@@ -951,7 +951,7 @@ def _wrong_type_cases() -> list[FaultCase]:
     return cases
 
 
-_RANGE = ("pipeline/scene.py (item 5: range checks up front with key and line): ")
+_RANGE = ("pipeline/run/scene.py (item 5: range checks up front with key and line): ")
 
 
 def _big_scene(kind: str):

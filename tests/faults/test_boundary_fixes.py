@@ -17,7 +17,7 @@ import pytest
 import meshphase.io as pio
 from meshphase.cli import main
 from meshphase.errors import FormatWarning
-from meshphase.exits import _load_error, recording_read_errors
+from meshphase.run.exits import _load_error, recording_read_errors
 from meshphase.io.base import atomic_path
 from meshphase.recording import ChannelSpec, Recording
 

@@ -1,5 +1,5 @@
 """Recordings whose every requested result comes out empty: the exit status and ``status``
-follow from the results (:func:`meshphase.exits.run_status`), on the command and in the
+follow from the results (:func:`meshphase.run.exits.run_status`), on the command and in the
 Python API alike.
 
 Each case changes a copy of 30 s of the seed rig (the shortest recording whose sun and ring
@@ -23,7 +23,7 @@ from seed_rig_toml import SEED_RIG_GEARSET
 import meshphase
 import meshphase.io
 from meshphase.cli import main
-from meshphase.exits import EXIT_ERROR, EXIT_OK, EXIT_PARTIAL
+from meshphase.run.exits import EXIT_ERROR, EXIT_OK, EXIT_PARTIAL
 
 
 def _scale(channels, factor):

@@ -3,7 +3,7 @@
 For every case and every command it names, the command must show (issue 10, items 1-3):
 
 * no ``Traceback`` on stdout or stderr;
-* an exit code from the documented table (``pipeline/exits.py``), one the case accepts, and
+* an exit code from the documented table (``pipeline/run/exits.py``), one the case accepts, and
   never 0 for a faulty input (a byte flip the reader never sees may exit 0 only when the
   flipped file reads back identical to the original);
 * exactly one error line, ``meshphase COMMAND: error: ...``, naming the file (and the key
@@ -43,10 +43,10 @@ from fault_corpus import OUTCOMES, OUTPUTS, Skip, Workspace, build_originals, co
 
 import meshphase.io as pio
 from meshphase.cli import main
-from meshphase.exits import EXIT_PARTIAL
+from meshphase.run.exits import EXIT_PARTIAL
 
 REPO = Path(__file__).resolve().parents[2]
-DOCUMENTED = {0, 1, 2, 3, 130, 141, 143}   # pipeline/exits.py
+DOCUMENTED = {0, 1, 2, 3, 130, 141, 143}   # pipeline/run/exits.py
 CASES = corpus()
 DEFAULT = [c for c in CASES if not c.slow]
 SLOW = [c for c in CASES if c.slow]

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from meshphase.exits import OutputDir, free_output_name
+from meshphase.run.exits import OutputDir, free_output_name
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -72,7 +72,7 @@ def test_output_under_a_file_is_refused_naming_the_output(tmp_path):
 def test_sigterm_inside_output_dir_exits_143_and_leaves_nothing(tmp_path):
     r = _py(f"""
         import os, signal, time
-        from meshphase.exits import OutputDir
+        from meshphase.run.exits import OutputDir
         with OutputDir({str(tmp_path / 'pout')!r}, staged=True) as out:
             (out.path / "half.csv").write_text("1,2")
             os.kill(os.getpid(), signal.SIGTERM)
@@ -86,7 +86,7 @@ def test_sigterm_inside_output_dir_exits_143_and_leaves_nothing(tmp_path):
 def test_sigkill_leaves_a_staging_folder_the_next_run_removes(tmp_path):
     r = _py(f"""
         import os, signal
-        from meshphase.exits import OutputDir
+        from meshphase.run.exits import OutputDir
         with OutputDir({str(tmp_path / 'pout')!r}, staged=True) as out:
             (out.path / "half.csv").write_text("1,2")
             os.kill(os.getpid(), signal.SIGKILL)
@@ -139,7 +139,7 @@ def test_fork_server_starts_with_sigint_blocked():
     SIGINT blocked; the resource tracker ignores it on its own."""
     r = _py("""
         import glob, os, threading
-        from meshphase.cluster import worker_server
+        from meshphase.campaign.cluster import worker_server
         t = threading.Thread(target=worker_server, args=(("json",),)); t.start(); t.join()
         for d in glob.glob("/proc/[0-9]*"):
             try:
@@ -161,8 +161,8 @@ def test_distributed_is_quiet_from_its_import_unless_verbose(verbose):
     INFO lines; the environment variable that does it is gone after the import."""
     r = _py(f"""
         import logging, os, sys
-        from meshphase.cluster import _distributed_config_quiet
-        from meshphase.log import logger
+        from meshphase.campaign.cluster import _distributed_config_quiet
+        from meshphase.runtime.log import logger
         logger.setLevel(logging.INFO if {verbose} else logging.WARNING)
         with _distributed_config_quiet():
             import distributed

@@ -10,10 +10,10 @@ import re
 import numpy as np
 import pytest
 
-from meshphase.outputs import summary_dict
-from meshphase.phasing import pass_order, planet_fractions
-from meshphase.scene import parse_scene
-from meshphase.stages import run_scene
+from meshphase.run.outputs import summary_dict
+from meshphase.kinematics.phasing import pass_order, planet_fractions
+from meshphase.run.scene import parse_scene
+from meshphase.run.stages import run_scene
 from . import rig as R
 from .test_meshphase_on_rig import _errors, make, per_pass_errors, scene_text
 

@@ -29,8 +29,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from meshphase.scene import parse_scene
-from meshphase.stages import run_scene
+from meshphase.run.scene import parse_scene
+from meshphase.run.stages import run_scene
 from . import rig as R
 
 DEG = math.pi / 180.0
@@ -497,7 +497,7 @@ OUTSIDE = {
 
 @pytest.mark.parametrize("row", list(OUTSIDE))
 def test_outside_the_envelope_the_answer_is_right_or_flagged(files, row):
-    from meshphase.exits import run_status
+    from meshphase.run.exits import run_status
 
     kw, cause = OUTSIDE[row]
     p = files / f"{row}.tdms"

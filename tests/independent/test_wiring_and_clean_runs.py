@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from meshphase.exits import run_status
-from meshphase.scene import parse_scene
-from meshphase.stages import run_scene
+from meshphase.run.exits import run_status
+from meshphase.run.scene import parse_scene
+from meshphase.run.stages import run_scene
 from . import rig as R
 from .test_meshphase_on_rig import scene_text
 

@@ -11,7 +11,7 @@ import pytest
 
 from meshphase.errors import DataQualityWarning, FormatWarning
 from meshphase.io.base import (RecordingFileError, check_start_datetime, check_verify, dumps_json,
-                              spec_from_dict, warn_nonfinite)
+                               spec_from_dict, warn_nonfinite)
 from meshphase.recording import ChannelSpec
 
 

@@ -9,11 +9,11 @@ import pytest
 from mcap.writer import Writer
 
 import meshphase.io as pio
-from meshphase.scene import SceneError
+from meshphase.run.scene import SceneError
 from meshphase.io.mcap import foreign
 from meshphase.recording import Recording
-from meshphase.scene import parse_scene
-from meshphase.stages import run_scene, summary_dict
+from meshphase.run.scene import parse_scene
+from meshphase.run.stages import run_scene, summary_dict
 from meshphase.synthetic import generate
 
 GEARSET = ('[gearset]\nz_sun = 25\nz_ring = 87\nz_planet = 31\nn_planets = 4\n'

@@ -14,7 +14,7 @@ from meshphase.io import hdf5
 from meshphase.errors import DataQualityWarning
 from meshphase.io.base import CorruptFileError
 from meshphase.recording import Recording
-from meshphase.stream import FileSource
+from meshphase.run.stream import FileSource
 
 
 def _rec(n: int, n_ch: int, dtype=np.float64, seed: int = 0) -> Recording:

@@ -16,7 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from meshphase.models.assembly import (CLEARANCE_ATOL, assemblable_planet_counts, coaxiality_error,
-                                      max_equal_planets, tip_clearance)
+                                       max_equal_planets, tip_clearance)
 
 
 def _equal(n):

@@ -15,26 +15,26 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from meshphase.models.bearing import (
-    DoublePinion,
-    MeshForces,
-    SinglePinion,
-    double_pinion_moments,
-    double_pinion_offsets_from_moments,
-    loa_from_moments,
-    moments_from_offsets,
-    offsets_from_moments,
-    operating_mesh,
-    rp_ring_moment,
-    same_as_single_angle,
-    seed_case,
-    single_equivalent_moment,
-    single_pinion_forces,
-    single_pinion_moments,
-    sp_sun_moment,
-    worst_case_angles,
-    worst_case_moment,
-    worst_to_single_ratio,
-)
+                                      DoublePinion,
+                                      MeshForces,
+                                      SinglePinion,
+                                      double_pinion_moments,
+                                      double_pinion_offsets_from_moments,
+                                      loa_from_moments,
+                                      moments_from_offsets,
+                                      offsets_from_moments,
+                                      operating_mesh,
+                                      rp_ring_moment,
+                                      same_as_single_angle,
+                                      seed_case,
+                                      single_equivalent_moment,
+                                      single_pinion_forces,
+                                      single_pinion_moments,
+                                      sp_sun_moment,
+                                      worst_case_angles,
+                                      worst_case_moment,
+                                      worst_to_single_ratio,
+                                      )
 
 MM = 1e-3
 DEG = math.pi / 180.0

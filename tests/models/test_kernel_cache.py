@@ -44,7 +44,7 @@ def test_import_kernels_bad_input_and_the_shared_cache(monkeypatch, tmp_path):
     # one home for the cache directory and the first-use import of every numba kernel
     # module (the Monte Carlo's and the onsets'): a module that does not import is an
     # ImportError naming the cause, and an empty name is refused alike
-    from meshphase import numba_cache
+    from meshphase.runtime import numba_cache
     from meshphase.models import _kernels
 
     assert _kernels.numba_cache_dir is numba_cache.numba_cache_dir

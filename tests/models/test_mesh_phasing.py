@@ -11,23 +11,23 @@ from hypothesis import strategies as st
 from meshphase.errors import ModelWarning
 from meshphase.models.gearset import Gearset, Speeds
 from meshphase.models.mesh_phasing import (
-    MAX_PHASE,
-    ShaftHoleErrors,
-    assembly_check,
-    centre_positions,
-    classify_phasing,
-    harmonic_excitation,
-    ideal_phasing,
-    ideal_phasing_angles,
-    mesh_angle_deviations,
-    mesh_angles,
-    modal_excitation,
-    phasing_deviation,
-    reduce_angle,
-    rotation_angle,
-    rotation_cos_sin,
-    time_varying_phasing,
-)
+                                           MAX_PHASE,
+                                           ShaftHoleErrors,
+                                           assembly_check,
+                                           centre_positions,
+                                           classify_phasing,
+                                           harmonic_excitation,
+                                           ideal_phasing,
+                                           ideal_phasing_angles,
+                                           mesh_angle_deviations,
+                                           mesh_angles,
+                                           modal_excitation,
+                                           phasing_deviation,
+                                           reduce_angle,
+                                           rotation_angle,
+                                           rotation_cos_sin,
+                                           time_varying_phasing,
+                                           )
 
 TWO_PI = 2 * math.pi
 

@@ -13,16 +13,16 @@ from meshphase.errors import ConvergenceWarning, ModelWarning
 from meshphase.models import tilt
 from meshphase.models.bearing import SinglePinion, seed_case, single_pinion_moments
 from meshphase.models.tilt import (
-    C_G_DEFAULT,
-    TABLE11_THEORY,
-    compare_gsam,
-    load_distribution,
-    load_intensity,
-    solve_tilt,
-    table10_cases,
-    table11_cases,
-    tilt_from_centroid,
-)
+                                   C_G_DEFAULT,
+                                   TABLE11_THEORY,
+                                   compare_gsam,
+                                   load_distribution,
+                                   load_intensity,
+                                   solve_tilt,
+                                   table10_cases,
+                                   table11_cases,
+                                   tilt_from_centroid,
+                                   )
 
 MM = 1e-3
 B = 29.00 * MM       # seed Table 1: pinion face width, the narrower member of both meshes

@@ -14,17 +14,17 @@ from meshphase.models import _kernels
 from meshphase.models.gearset import Speeds
 from meshphase.models.mesh_phasing import ShaftHoleErrors, phasing_deviation
 from meshphase.models.tolerance import (
-    MonteCarloResult,
-    ObservationWindow,
-    ToleranceBand,
-    Tolerances,
-    default_n_times,
-    monte_carlo,
-    observation_window,
-    phasing_statistics,
-    table2_case,
-    time_grid,
-)
+                                        MonteCarloResult,
+                                        ObservationWindow,
+                                        ToleranceBand,
+                                        Tolerances,
+                                        default_n_times,
+                                        monte_carlo,
+                                        observation_window,
+                                        phasing_statistics,
+                                        table2_case,
+                                        time_grid,
+                                        )
 
 needs_numba = pytest.mark.skipif(not _kernels.HAVE_NUMBA, reason="numba not importable")
 

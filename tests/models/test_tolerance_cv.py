@@ -12,24 +12,24 @@ from scipy import special
 from meshphase.errors import ModelWarning
 from meshphase.models import _kernels
 from meshphase.models.tolerance import (
-    ALL_STATISTICS,
-    ToleranceBand,
-    Tolerances,
-    _Grid,
-    _map_values,
-    monte_carlo,
-    observation_window,
-    table2_case,
-)
+                                        ALL_STATISTICS,
+                                        ToleranceBand,
+                                        Tolerances,
+                                        _Grid,
+                                        _map_values,
+                                        monte_carlo,
+                                        observation_window,
+                                        table2_case,
+                                        )
 from meshphase.models.tolerance_cv import monte_carlo_cv
 from meshphase.models.tolerance_linear import (
-    chi_mean,
-    chi_pdf,
-    chi_sf,
-    exceedance,
-    linearised_deviation,
-    solve_level,
-)
+                                               chi_mean,
+                                               chi_pdf,
+                                               chi_sf,
+                                               exceedance,
+                                               linearised_deviation,
+                                               solve_level,
+                                               )
 
 needs_numba = pytest.mark.skipif(not _kernels.HAVE_NUMBA, reason="numba not importable")
 

@@ -1,4 +1,4 @@
-"""meshphase.angle_windows: the angle model of long records in bounded memory.
+"""meshphase.kinematics.angle_windows: the angle model of long records in bounded memory.
 
 Truth: exact engagement instants from meshphase.synthetic.kinematics (tests/processing/test_angles.py's
 ``trains_from_truth``), timing jitter 20 us with its sigma given, so the per-pass error
@@ -13,8 +13,8 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from meshphase.angle_windows import WindowedAngleModel, fit_angle_windows
-from meshphase.angles import fit_angle_model, kinematics
+from meshphase.kinematics.angle_windows import WindowedAngleModel, fit_angle_windows
+from meshphase.kinematics.angles import fit_angle_model, kinematics
 from meshphase.jsonable import to_jsonable
 from meshphase.models.tolerance import table2_case
 from meshphase.synthetic.kinematics import ShaftRipple, SpeedProfile
@@ -143,7 +143,7 @@ def test_windows_on_threads_equal_the_serial_fit(long_record, windowed):
     """The windows are fitted side by side on the run's threads; each window is fitted
     whole on one thread, so the model is the serial one bit for bit, and progress still
     counts every window once, in order."""
-    from meshphase.threads import threads_limited
+    from meshphase.runtime.threads import threads_limited
 
     trains, _ = long_record
     seen = []
@@ -166,8 +166,8 @@ def test_windows_on_threads_equal_the_serial_fit(long_record, windowed):
 def test_a_failing_window_names_itself_on_threads(long_record, monkeypatch):
     """A window whose fit raises is named in the error (the first such window, in time
     order), whether the windows ran on one thread or two."""
-    import meshphase.angle_windows as aw
-    from meshphase.threads import threads_limited
+    import meshphase.kinematics.angle_windows as aw
+    from meshphase.runtime.threads import threads_limited
 
     trains, _ = long_record
     calls = []
@@ -191,9 +191,9 @@ def test_a_window_warning_reaches_the_caller_from_a_worker_thread(long_record, m
     arrive there (once per window that warns)."""
     import warnings
 
-    import meshphase.angle_windows as aw
+    import meshphase.kinematics.angle_windows as aw
     from meshphase.errors import ProcessingWarning
-    from meshphase.threads import threads_limited
+    from meshphase.runtime.threads import threads_limited
 
     trains, _ = long_record
     orig = aw.fit_angle_model

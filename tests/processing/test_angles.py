@@ -1,4 +1,4 @@
-"""The angle model of a whole recording (meshphase.angles), on pass trains with known truth.
+"""The angle model of a whole recording (meshphase.kinematics.angles), on pass trains with known truth.
 
 Truth here is the synthetic kinematics' exact engagement instants (meshphase.synthetic.kinematics:
 the geometric condition solved in angle time to ~1e-15 relative) and their true phasing,
@@ -12,14 +12,14 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from meshphase.angles import (AngleModel, Kinematics, PassTrain, fit_angle_model, gauge_train,
-                             held_member, kinematics, label_shift_costs, relabel_train,
-                             revolution_numbers, slice_train, tacho_train, typed_resolution,
-                             unseen_ripples)
+from meshphase.kinematics.angles import (AngleModel, Kinematics, PassTrain, fit_angle_model, gauge_train,
+                                         held_member, kinematics, label_shift_costs, relabel_train,
+                                         revolution_numbers, slice_train, tacho_train, typed_resolution,
+                                         unseen_ripples)
 from meshphase.models.gearset import Gearset, Speeds, rpm_to_rad_s
 from meshphase.models.tolerance import table2_case
-from meshphase.phasing import (assign_planets_by_pattern, pass_order, phasing_from_model,
-                              planet_fractions)
+from meshphase.kinematics.phasing import (assign_planets_by_pattern, pass_order, phasing_from_model,
+                                          planet_fractions)
 from meshphase.synthetic.kinematics import SpeedProfile, engagement_events, event_times_for_angles
 
 TWO_PI = 2 * math.pi
@@ -264,7 +264,7 @@ def test_label_shift_costs_on_threads_equal_one_after_another(drop_planet_2):
     # missing, the later shifts start afresh, also on the threads)
     from dataclasses import replace
 
-    from meshphase.threads import threads_limited
+    from meshphase.runtime.threads import threads_limited
 
     trains, frac, shifted, _ = offset_trains()
 
@@ -289,7 +289,7 @@ def _same_tooth_passes(drop_first: int, *, angle_b=None):
     tooth 0 and two on tooth 5 (across its face width), the second of those missing its
     first ``drop_first`` passes, so the first pulse it sees is another planet's; with
     ``angle_b`` [rad] the second's passes are those of a gauge at that angle instead."""
-    from meshphase.phasing import GaugePasses
+    from meshphase.kinematics.phasing import GaugePasses
     from meshphase.synthetic.kinematics import engagement_events
 
     g, sp = rig(zp=31)
@@ -321,7 +321,7 @@ def test_gauges_on_one_tooth_take_the_labels_of_their_coincident_passes(drop_fir
     # the offsets look too alike)
     import warnings
 
-    from meshphase.phasing import measure_phasing
+    from meshphase.kinematics.phasing import measure_phasing
 
     g, passes = _same_tooth_passes(drop_first)
     with warnings.catch_warnings():
@@ -343,7 +343,7 @@ def test_gauges_on_one_tooth_whose_passes_do_not_coincide_fall_back_to_the_offse
     # coincide, a note says so and the fitted offsets decide as for any other gauge
     import warnings
 
-    from meshphase.phasing import measure_phasing
+    from meshphase.kinematics.phasing import measure_phasing
 
     g, passes = _same_tooth_passes(1, angle_b=0.3 + 7 * TWO_PI / 25 + 0.05)
     with warnings.catch_warnings():
@@ -355,7 +355,7 @@ def test_gauges_on_one_tooth_whose_passes_do_not_coincide_fall_back_to_the_offse
 
 
 def test_coincident_shift_names_the_relabelling_and_refuses_unclear_cases():
-    from meshphase.phasing import COINCIDENT_MIN, coincident_shift
+    from meshphase.kinematics.phasing import COINCIDENT_MIN, coincident_shift
 
     trains, frac, _, _ = offset_trains()
     ring = trains[1]
@@ -408,7 +408,7 @@ def test_label_shift_costs_on_a_central_window_decide_alike():
 
 
 def test_slice_train_keeps_labels_and_positions():
-    from meshphase.angles import slice_train
+    from meshphase.kinematics.angles import slice_train
 
     g, sp = rig(zp=31)
     trains, _ = trains_from_truth(g, sp, SpeedProfile(), 30.0, sigma=2e-5)
@@ -579,7 +579,7 @@ def test_candidate_screening_leaves_the_selection_unchanged(monkeypatch, profile
     # must skip something (fewer solves), ripple and planet candidates as well as splines
     import functools
 
-    import meshphase.angles as angles
+    import meshphase.kinematics.angles as angles
 
     trains = _screening_record(profile)
     kin = kinematics(25, 87, 29, fixed="ring")
@@ -627,7 +627,7 @@ def test_linear_bound_is_optimistic_for_every_candidate(monkeypatch, profile):
     import functools
     from types import SimpleNamespace
 
-    import meshphase.angles as angles
+    import meshphase.kinematics.angles as angles
 
     trains = _screening_record(profile)
     orig_solve = angles._solve
@@ -654,7 +654,7 @@ def test_linear_bound_of_a_candidate_without_rows_is_minus_infinity():
     # nothing to judge on (every observation left out): always solved, never screened away
     import copy
 
-    import meshphase.angles as angles
+    import meshphase.kinematics.angles as angles
 
     g, sp = rig()
     trains, _ = trains_from_truth(g, sp, SpeedProfile(), 30.0)
@@ -698,7 +698,7 @@ def test_planet_rate_ripple_and_equal_planet_terms_are_named_and_counted():
     # is inside it: RMS(error / sigma) <= 1.5, the issue's calibration target for a flagged
     # value) and the reliability names both explanations and the measurement that separates
     # them
-    from meshphase.phasing import _reliability
+    from meshphase.kinematics.phasing import _reliability
 
     trains, ev, kin = _planet_rate_ripple_trains(False)
     model = fit_angle_model(trains, kin, 4)
@@ -721,7 +721,7 @@ def test_a_shaft_encoder_separates_the_planet_rate_ripple():
     # per turn, which meets the planet spin at ever other angles): the ripple's column is no
     # longer in the planet terms' span, the inseparable pair clears by itself, and the ripple
     # is a competitor the data prefer outright (BIC far below the chosen model's)
-    from meshphase.angles import BIC_CLOSE
+    from meshphase.kinematics.angles import BIC_CLOSE
 
     trains, ev, kin = _planet_rate_ripple_trains(True, 60.0)
     model = fit_angle_model(trains, kin, 4)
@@ -774,7 +774,7 @@ def test_a_carrier_harmonic_at_the_planet_spin_period_is_right_or_flagged():
     # ranks it after them), and the phasing (0.028 / 0.019 cycles off, 16x / 11x the floor) is
     # within the target (max(2e-3, 1.3 x floor)) or flagged with the cause named and a sigma
     # that covers its error (RMS(error / sigma) <= 1.5; 1.03 / 0.85 measured)
-    from meshphase.phasing import _reliability
+    from meshphase.kinematics.phasing import _reliability
     from meshphase.synthetic.kinematics import ShaftRipple
 
     g, sp = rig()

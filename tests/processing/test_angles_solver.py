@@ -1,4 +1,4 @@
-"""meshphase.angles' Gauss-Newton iteration: the QR step and the stop at a converged point.
+"""meshphase.kinematics.angles' Gauss-Newton iteration: the QR step and the stop at a converged point.
 
 Truth: exact engagement instants from meshphase.synthetic.kinematics (test_angles.py's
 ``trains_from_truth``); the step solver is checked against scipy's gelsy (rank-revealing
@@ -12,8 +12,8 @@ import pytest
 from hypothesis import given, settings, strategies as st
 from scipy import linalg
 
-import meshphase.angles as angles
-from meshphase.angles import kinematics
+import meshphase.kinematics.angles as angles
+from meshphase.kinematics.angles import kinematics
 from meshphase.models.tolerance import table2_case
 from meshphase.synthetic.kinematics import ShaftRipple, SpeedProfile
 

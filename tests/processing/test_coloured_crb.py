@@ -1,7 +1,7 @@
 """The timing floor in coloured noise: the Cramer-Rao bound from a noise spectrum
-(meshphase._crb.crb_delay_std_psd), the Welch degrees of freedom (welch_dof), the noise
-spectrum a conditioned channel's pulses leave (meshphase.noise_spectrum.pulse_residual_psd)
-and the per-onset bounds built on them (meshphase.passes.onset_sigma, channel_noise_spectrum).
+(meshphase.signal.crb.crb_delay_std_psd), the Welch degrees of freedom (welch_dof), the noise
+spectrum a conditioned channel's pulses leave (meshphase.signal.noise_spectrum.pulse_residual_psd)
+and the per-onset bounds built on them (meshphase.kinematics.passes.onset_sigma, channel_noise_spectrum).
 
 References: a direct evaluation of the Fisher information integral with mpmath for an analytic
 pulse and spectrum; the white-noise bound (Parseval) for white noise. Statistical tolerances
@@ -15,10 +15,10 @@ import math
 import numpy as np
 import pytest
 
-from meshphase._crb import crb_delay_std, crb_delay_std_psd, welch_dof
-from meshphase.noise_spectrum import MIN_PULSES, NoiseSpectrum, pulse_residual_psd
+from meshphase.signal.crb import crb_delay_std, crb_delay_std_psd, welch_dof
+from meshphase.signal.noise_spectrum import MIN_PULSES, NoiseSpectrum, pulse_residual_psd
 from meshphase.onsets import Onsets, Template
-from meshphase.passes import channel_noise_spectrum, onset_sigma
+from meshphase.kinematics.passes import channel_noise_spectrum, onset_sigma
 from meshphase.recording import ChannelSpec, Recording
 
 FS = 1000.0
@@ -205,7 +205,7 @@ def test_residual_psd_leaves_a_transient_out(kind, monkeypatch):
     one step made the sun gauge's timing floor 13x its scatter). The windows above
     TRANSIENT_RATIO times the median residual energy are left out, and the estimate is that
     of the noise alone, within the white test's 2 %."""
-    import meshphase.noise_spectrum as ns
+    import meshphase.signal.noise_spectrum as ns
 
     rng = np.random.default_rng(31)
     sigma = 0.05
@@ -345,7 +345,7 @@ def test_channel_noise_spectrum():
 # ---- gauge_passes: the floor factor --------------------------------------------------------
 
 def _gauge_case(coloured, sigma=0.05, n=1 << 18, seed=6):
-    from meshphase.condition import ChannelQuality
+    from meshphase.signal.condition import ChannelQuality
 
     x, times = _train(n, sigma, np.random.default_rng(seed), coloured=coloured)
     rec = Recording(x[:, None], FS, [ChannelSpec("g", kind="sun")])
@@ -355,7 +355,7 @@ def _gauge_case(coloured, sigma=0.05, n=1 << 18, seed=6):
 
 
 def test_gauge_passes_floor_factor_white_coloured_and_weights_unchanged():
-    from meshphase.passes import gauge_passes
+    from meshphase.kinematics.passes import gauge_passes
 
     for coloured in (False, True):
         rec, ons, quality = _gauge_case(coloured)
@@ -375,7 +375,7 @@ def test_gauge_passes_floor_factor_white_coloured_and_weights_unchanged():
 def test_gauge_passes_pulse_misfit_is_not_noise():
     """Noise-free pulses whose shape drifts (a speed ramp stretches them) leave a residual
     far above the per-sample noise: that is misfit, and the floor stays the white bound's."""
-    from meshphase.passes import NOISE_LIKE_RATIO, gauge_passes
+    from meshphase.kinematics.passes import NOISE_LIKE_RATIO, gauge_passes
 
     rng = np.random.default_rng(7)
     n = 1 << 18
@@ -386,7 +386,7 @@ def test_gauge_passes_pulse_misfit_is_not_noise():
         width = TAU * (1.0 + 0.3 * k / times.size)
         x += np.exp(-0.5 * ((t - tk) / width) ** 2)
     rec = Recording(x[:, None], FS, [ChannelSpec("g", kind="sun")])
-    from meshphase.condition import ChannelQuality
+    from meshphase.signal.condition import ChannelQuality
 
     e = np.empty((0, 2), dtype=np.int64)
     q = dataclasses.replace(ChannelQuality("g", FS, 0.0, n, e, e.copy(), e.copy()), noise_rms=1e-6)

@@ -1,4 +1,4 @@
-"""Measured phasing against the models (meshphase.compare), on passes with known truth.
+"""Measured phasing against the models (meshphase.compare.predict), on passes with known truth.
 
 The truth is :func:`meshphase.synthetic.kinematics.engagement_events`: the exact instants a gauged sun or
 ring tooth meets each planet under given shaft hole errors and speed profile. From them the
@@ -7,7 +7,7 @@ changes are exact too). Two kinds of pass tables are built from the events:
 
 * exact tables: gamma and the encoder angle taken from the truth itself, so the model
   (:func:`predict_pass_phasing`) is checked alone;
-* measured tables: the event times through :func:`meshphase.phasing.measured_phasing`, as the
+* measured tables: the event times through :func:`meshphase.kinematics.phasing.measured_phasing`, as the
   pipeline does, so the check includes the pulse-train encoder; the model then has to match
   the measured phasing to the encoder's own accuracy.
 
@@ -24,12 +24,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from meshphase.compare import (PARAMETER_NAMES, Identification, band_coverage, identify_errors,
-                              predict_pass_phasing, relative_speeds, residual_stats, wrap)
+from meshphase.compare.predict import (PARAMETER_NAMES, Identification, band_coverage, identify_errors,
+                                       predict_pass_phasing, relative_speeds, residual_stats, wrap)
 from meshphase.errors import ProcessingWarning
 from meshphase.models.gearset import Gearset, Speeds
 from meshphase.models.mesh_phasing import ShaftHoleErrors, ideal_phasing, time_varying_phasing
-from meshphase.phasing import PassTable, measured_phasing, pass_order
+from meshphase.kinematics.phasing import PassTable, measured_phasing, pass_order
 from meshphase.synthetic.kinematics import SpeedProfile, engagement_events
 
 TWO_PI = 2 * math.pi
@@ -121,8 +121,8 @@ def measured(direction, err, gauge, profile="constant", tooth=0.3):
     "ring_sun_encoder" the ring's passes from one angle model of both gauges' trains (the
     ring held), as stage_phasing does."""
     if gauge == "ring_sun_encoder":
-        from meshphase.angles import fit_angle_model, gauge_train, kinematics
-        from meshphase.phasing import assign_planets_by_pattern, phasing_from_model, planet_fractions
+        from meshphase.kinematics.angles import fit_angle_model, gauge_train, kinematics
+        from meshphase.kinematics.phasing import assign_planets_by_pattern, phasing_from_model, planet_fractions
 
         g = gearset(direction)
         trains = {}
@@ -521,7 +521,7 @@ def test_relative_speeds_willis(direction, gauge):
     assert sp.carrier == 0.0
     for name in ("w_sc", "w_pc", "w_rc"):
         assert getattr(sp, name) == pytest.approx(getattr(true, name), rel=1e-12)
-    # the gauge's sense of rotation is the pass order of meshphase.phasing
+    # the gauge's sense of rotation is the pass order of meshphase.kinematics.phasing
     assert math.copysign(1, sp.w_sc if gauge == "sun" else sp.w_rc) == pass_order(direction, gauge)
 
 

@@ -1,4 +1,4 @@
-"""Signal conditioning and quality report (meshphase.condition).
+"""Signal conditioning and quality report (meshphase.signal.condition).
 
 Pulse trains from tests/processing/conftest.py; drift, hum, gaps and clipping are added
 here with known values, so every check compares against what was put in.
@@ -14,15 +14,15 @@ from hypothesis import given, settings, strategies as st
 
 from scipy.signal import find_peaks
 
-from meshphase.condition import (ChannelQuality, Conditioned, HumReport, assess_quality,
-                                assess_quality_recording, condition_recording, default_band,
-                                design_filter, detect_hum, drift_baseline, estimate_noise, level_steps,
-                                estimate_snr, filter_recording, filter_signal, gap_intervals,
-                                merge_runs, notch_hum, notch_hum_recording, remove_drift,
-                                remove_drift_recording)
+from meshphase.signal.condition import (ChannelQuality, Conditioned, HumReport, assess_quality,
+                                        assess_quality_recording, condition_recording, default_band,
+                                        design_filter, detect_hum, drift_baseline, estimate_noise, level_steps,
+                                        estimate_snr, filter_recording, filter_signal, gap_intervals,
+                                        merge_runs, notch_hum, notch_hum_recording, remove_drift,
+                                        remove_drift_recording)
 from meshphase.errors import DataQualityWarning, ProcessingWarning
 from meshphase.onsets import FLAG_CLIPPED, FLAG_GAP, detect_onsets_recording
-from meshphase.quality import clipped_runs, find_runs
+from meshphase.signal.quality import clipped_runs, find_runs
 from meshphase.recording import ChannelSpec, Recording
 from meshphase.synthetic import generate
 from meshphase.synthetic.scenarios import list_scenarios, seed_rig_gearset, seed_rig_speeds
@@ -213,7 +213,7 @@ def test_hum_search_detrend_is_scipys_linear_detrend(n, rows, seed, offset, slop
     hundred ulps of the segments' magnitude (offset and ramp up to ~3e3)."""
     from scipy.signal import detrend
 
-    from meshphase.condition import _detrend_linear
+    from meshphase.signal.condition import _detrend_linear
 
     rng = np.random.default_rng(seed)
     seg = rng.normal(size=(rows, n)) + offset + slope * np.arange(n)
@@ -233,7 +233,7 @@ def test_hum_search_psd_equals_welch_with_scipys_detrend():
     (120 s at 5120 Hz, 32768-sample segments)."""
     from scipy.signal import welch
 
-    from meshphase.condition import _detrend_linear
+    from meshphase.signal.condition import _detrend_linear
 
     rng = np.random.default_rng(3)
     n = int(120 * FS)
@@ -246,7 +246,7 @@ def test_hum_search_psd_equals_welch_with_scipys_detrend():
 
 
 def test_hum_search_detrend_edges():
-    from meshphase.condition import _detrend_linear
+    from meshphase.signal.condition import _detrend_linear
 
     assert _detrend_linear(np.empty((3, 0))).shape == (3, 0)
     np.testing.assert_array_equal(_detrend_linear(np.array([[2.0], [5.0]])), np.zeros((2, 1)))
@@ -746,7 +746,7 @@ def test_assess_quality_new_options_and_report_fields(rig_recs):
 def test_channel_quality_is_the_one_frozen_report():
     from dataclasses import FrozenInstanceError
 
-    from meshphase import quality as pq
+    from meshphase.signal import quality as pq
 
     assert ChannelQuality is pq.ChannelQuality and HumReport is pq.HumReport
     x = np.sin(np.arange(4000) / 7.0)
@@ -765,7 +765,7 @@ def test_channel_quality_is_the_one_frozen_report():
 
 
 def test_quality_from_scan_empty_bare_and_bad():
-    from meshphase.quality import ChannelScan, quality_from_scan
+    from meshphase.signal.quality import ChannelScan, quality_from_scan
 
     scan = ChannelScan(0)
     scan.end1()

@@ -1,5 +1,5 @@
 """The filter designs, Savitzky-Golay smoother and spectral tools that stand in for
-scipy.signal on the processing path (meshphase.sos_design, .savgol, .spectral).
+scipy.signal on the processing path (meshphase.signal.sos_design, .savgol, .spectral).
 
 Each is held against scipy.signal itself (the tests may import it; the processing does not)
 and, where a closed form exists, against that: scipy's own arithmetic is restated step for
@@ -17,9 +17,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import signal
 
-from meshphase.savgol import savgol_coeffs, savgol_coeffs_cached, savgol_filter
-from meshphase.sos_design import butter_sos, notch_sos, sosfilt_zi
-from meshphase.spectral import resample, tukey, welch
+from meshphase.signal.savgol import savgol_coeffs, savgol_coeffs_cached, savgol_filter
+from meshphase.signal.sos_design import butter_sos, notch_sos, sosfilt_zi
+from meshphase.signal.spectral import resample, tukey, welch
 
 FS = 5120.0
 
@@ -192,7 +192,7 @@ def test_tukey_bad_input():
 @pytest.mark.parametrize("nperseg, noverlap", [(16, None), (64, 0), (255, 100), (256, None), (1, 0)])
 @pytest.mark.parametrize("detrend", ["constant", False, "linear-callable"])
 def test_welch_equals_scipy(nperseg, noverlap, detrend):
-    from meshphase.condition import _detrend_linear
+    from meshphase.signal.condition import _detrend_linear
 
     det = _detrend_linear if detrend == "linear-callable" else detrend
     rng = np.random.default_rng(1)

@@ -1,15 +1,15 @@
 """Shaft encoders: edge levels and sub-sample timing, extra and missing edges, the encoder's
-angle train and its shaft's mesh cycles (meshphase.encoder, meshphase.angles)."""
+angle train and its shaft's mesh cycles (meshphase.kinematics.encoder, meshphase.kinematics.angles)."""
 
 import math
 
 import numpy as np
 import pytest
 
-from meshphase.angles import encoder_train, kinematics, shaft_cycles
+from meshphase.kinematics.angles import encoder_train, kinematics, shaft_cycles
 from meshphase.errors import DataQualityWarning
-from meshphase.encoder import (EncoderEdges, clean_edges, edge_timing_sigma, edge_times,
-                               pulse_levels, rising_crossings, shaft_of)
+from meshphase.kinematics.encoder import (EncoderEdges, clean_edges, edge_timing_sigma, edge_times,
+                                          pulse_levels, rising_crossings, shaft_of)
 from meshphase.models.gearset import Speeds
 from meshphase.recording import ChannelSpec
 
@@ -223,7 +223,7 @@ def test_encoder_channel_spec_is_validated():
 
 # ----------------------------------------------------------------------------- in the fit
 def test_encoders_that_cannot_observe_the_mesh_angle_are_named_not_used():
-    from meshphase.phasing import _encoder_trains
+    from meshphase.kinematics.phasing import _encoder_trains
 
     t = np.arange(200) / 18.2
     ring = kinematics(25, 87, 29, fixed="ring")
@@ -245,7 +245,7 @@ def test_encoders_that_cannot_observe_the_mesh_angle_are_named_not_used():
 def test_an_encoder_channel_without_its_shaft_is_left_out_with_a_warning():
     from meshphase.errors import ProcessingWarning
     from meshphase.recording import Recording
-    from meshphase.stages import _encoder_inputs
+    from meshphase.run.stages import _encoder_inputs
 
     specs = [ChannelSpec("enc", kind="encoder", units="V", pulses_per_rev=60),
              ChannelSpec("enc2", kind="encoder", units="V", shaft="sun", pulses_per_rev=60)]
@@ -260,7 +260,7 @@ def test_an_encoder_channel_without_its_shaft_is_left_out_with_a_warning():
 
 def test_the_streamed_scan_times_encoder_edges_as_the_array_function_does():
     from meshphase.recording import Recording
-    from meshphase.stream import MemorySource, scan_source
+    from meshphase.run.stream import MemorySource, scan_source
 
     _, x, te = pulse_train(18.2, 20.0)
     specs = [ChannelSpec("enc", kind="encoder", units="V", shaft="sun", pulses_per_rev=60),
@@ -280,8 +280,8 @@ def test_the_streamed_scan_times_encoder_edges_as_the_array_function_does():
 
 
 def test_a_long_gap_splits_the_train_and_each_piece_is_counted_anew():
-    from meshphase.encoder import MAX_GAP_PULSES, split_at_gaps
-    from meshphase.phasing import _encoder_trains
+    from meshphase.kinematics.encoder import MAX_GAP_PULSES, split_at_gaps
+    from meshphase.kinematics.phasing import _encoder_trains
 
     t = np.arange(100) * 0.05
     gone = np.r_[10, 40:40 + MAX_GAP_PULSES + 1]          # one missing, then a dropout
@@ -303,7 +303,7 @@ def test_a_long_gap_splits_the_train_and_each_piece_is_counted_anew():
 
 
 def test_split_at_gaps_empty_and_bad_input():
-    from meshphase.encoder import split_at_gaps
+    from meshphase.kinematics.encoder import split_at_gaps
 
     assert split_at_gaps(clean_edges([])) == []
     assert len(split_at_gaps(clean_edges([0.0]))) == 1
@@ -316,7 +316,7 @@ def test_split_at_gaps_empty_and_bad_input():
 def test_rising_crossing_parts_one_rule_for_whole_arrays_and_streams():
     # a rise after a NaN counts in the streamed edges (finite_only=False, the tacho's rule)
     # and not in the whole-array function; float32 samples keep float32 fractions
-    from meshphase.encoder import rising_crossing_parts
+    from meshphase.kinematics.encoder import rising_crossing_parts
     x = np.array([0.0, 5.0, np.nan, 5.0, 0.0, 2.0, 4.0], dtype=np.float32)
     i, f = rising_crossing_parts(x, np.float32(2.5), finite_only=False)
     assert i.tolist() == [1, 3, 6] and f.dtype == np.float32

@@ -10,10 +10,10 @@ import math
 import numpy as np
 import pytest
 
-from meshphase.compare import (PARAMETER_NAMES, identify_errors, pass_phasing_jacobian,
-                              predict_pass_phasing)
+from meshphase.compare.predict import (PARAMETER_NAMES, identify_errors, pass_phasing_jacobian,
+                                       predict_pass_phasing)
 from meshphase.models.mesh_phasing import ShaftHoleErrors
-from meshphase.phasing import PassTable
+from meshphase.kinematics.phasing import PassTable
 
 from test_compare import ERRORS, exact_table, gearset, measured
 

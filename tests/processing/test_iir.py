@@ -1,4 +1,4 @@
-"""meshphase.iir: zero-phase filtering by second-order sections, scipy's or numba's.
+"""meshphase.signal.iir: zero-phase filtering by second-order sections, scipy's or numba's.
 
 The numba kernel does scipy's operations (scipy.signal.sosfilt's transposed direct form II)
 in scipy's order for every section, two sections per sweep. Asserted: equal to
@@ -18,7 +18,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import signal
 
-from meshphase import iir
+from meshphase.signal import iir
 
 numba_only = pytest.mark.skipif(not iir.HAVE_NUMBA, reason="numba is not installed")
 FS = 5120.0
@@ -171,11 +171,11 @@ def test_warmup_loads_and_checks_the_kernel():
 
 
 def test_warmup_without_the_check_loads_no_scipy_signal():
-    # a campaign's fork server loads the kernel alone (meshphase.fork_ready)
+    # a campaign's fork server loads the kernel alone (meshphase.campaign.fork_ready)
     import subprocess
     import sys
 
-    code = ("import sys\nfrom meshphase import iir\nw = iir.warmup(check=False)\n"
+    code = ("import sys\nfrom meshphase.signal import iir\nw = iir.warmup(check=False)\n"
             "print(w['engine'], w['seconds'] >= 0, 'scipy.signal' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr

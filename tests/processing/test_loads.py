@@ -1,4 +1,4 @@
-"""Load sharing and face-width centroids from pulse amplitudes (meshphase.loads).
+"""Load sharing and face-width centroids from pulse amplitudes (meshphase.kinematics.loads).
 
 Truth here is worked by hand (load-sharing factors of a small table, the centroid of a linear
 or triangular load shape) or integrated numerically with scipy.integrate.quad, so a slip in
@@ -13,9 +13,9 @@ from hypothesis import example, given, settings, strategies as st
 from scipy.integrate import quad
 
 from meshphase.errors import ProcessingWarning
-from meshphase.loads import (CentroidResult, LoadSharingResult, centroid_of_shape,
-                            facewidth_centroid, facewidth_readings,
-                            load_sharing_from_amplitudes)
+from meshphase.kinematics.loads import (CentroidResult, LoadSharingResult, centroid_of_shape,
+                                        facewidth_centroid, facewidth_readings,
+                                        load_sharing_from_amplitudes)
 
 B = 40e-3  # face width [m] of the synthetic scenarios (meshphase.synthetic.scenarios.FACE_WIDTH)
 

@@ -1,4 +1,4 @@
-"""Every member's speed from the measured mesh frequency (meshphase.member_speeds), against
+"""Every member's speed from the measured mesh frequency (meshphase.kinematics.member_speeds), against
 the independent rig's kinematics (tests/independent/rig.py: its own Willis coefficients, no
 meshphase code) and Willis by hand for a differential."""
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from meshphase.member_speeds import mean_mesh_rate, member_speeds, tacho_rate
+from meshphase.kinematics.member_speeds import mean_mesh_rate, member_speeds, tacho_rate
 from meshphase.models.gearset import Gearset, Speeds
 
 from independent import rig as R

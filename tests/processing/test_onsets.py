@@ -3,7 +3,7 @@
 Truth: the pulses of tests/processing/conftest.py (meshphase.bench.processing.PulseShape),
 whose leading-edge half-amplitude point lies T_c / 4 after the contact start (T_c the
 contact duration): the feature detect_onsets reports with reference="rise", level=0.5.
-The physical limit is the Cramer-Rao bound of a known pulse in white noise (meshphase._crb,
+The physical limit is the Cramer-Rao bound of a known pulse in white noise (meshphase.signal.crb,
 Kay 1993 eq. 3.14): the brief's target is a timing error within 2x of it at >= 10 dB.
 """
 
@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from meshphase._crb import crb_delay_std
+from meshphase.signal.crb import crb_delay_std
 from meshphase.bench.processing import match_onsets
-from meshphase.condition import assess_quality
+from meshphase.signal.condition import assess_quality
 from meshphase.errors import DataQualityWarning, ProcessingWarning
 from meshphase.onsets import (FLAG_CLIPPED, FLAG_EDGE, FLAG_GAP, FLAG_LOW_CORR, FLAG_TEMPLATE,
-                             CoarsePeaks, Onsets, Template, coarse_peaks, detect_onsets,
-                             detect_onsets_recording, detect_onsets_stream,
-                             estimate_pulse_width, learn_template)
+                              CoarsePeaks, Onsets, Template, coarse_peaks, detect_onsets,
+                              detect_onsets_recording, detect_onsets_stream,
+                              estimate_pulse_width, learn_template)
 from meshphase.recording import ChannelSpec, Recording
 
 FS = 5120.0               # the pulse trains of conftest.make_train

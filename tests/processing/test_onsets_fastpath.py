@@ -12,7 +12,7 @@ from meshphase.onsets import (FLAG_CLIPPED, FLAG_EDGE, FLAG_GAP, FLAG_TEMPLATE, 
                               detect_onsets)
 from meshphase.onsets import fastpath
 from meshphase.onsets.coarse import _coarse_dec
-from meshphase.condition import assess_quality
+from meshphase.signal.condition import assess_quality
 
 FS = 5120.0
 pytestmark = pytest.mark.skipif(not fastpath.HAVE_NUMBA, reason="numba not installed")

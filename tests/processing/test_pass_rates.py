@@ -1,4 +1,4 @@
-"""Pass rates against the gearset and the typed speeds (meshphase.pass_rates).
+"""Pass rates against the gearset and the typed speeds (meshphase.kinematics.pass_rates).
 
 The expected rates are worked by hand from the seed rig (Z 25/87/29, 4 planets, ring held,
 sun 18.19 r/min): carrier 18.19 x 25 / 112 = 4.0603 r/min, sun relative to the carrier
@@ -13,9 +13,9 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from meshphase.models.gearset import Gearset, Speeds, rpm_to_rad_s
-from meshphase.pass_rates import (RATE_TOLERANCE, expected_pass_rates, measured_pass_rate,
-                                  pass_rate_warnings)
-from meshphase.phasing import GaugePasses
+from meshphase.kinematics.pass_rates import (RATE_TOLERANCE, expected_pass_rates, measured_pass_rate,
+                                             pass_rate_warnings)
+from meshphase.kinematics.phasing import GaugePasses
 
 RIG = Gearset.equally_spaced(25, 87, 29, 4, 0.1125)
 

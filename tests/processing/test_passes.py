@@ -1,4 +1,4 @@
-"""Pass selection (meshphase.passes): usable onsets, pass times at the timing centre, the
+"""Pass selection (meshphase.kinematics.passes): usable onsets, pass times at the timing centre, the
 timing bound from the one Cramer-Rao function, gap intervals, every gauge's passes."""
 
 from __future__ import annotations
@@ -10,14 +10,14 @@ import warnings
 import numpy as np
 import pytest
 
-from meshphase._crb import crb_delay_std
-from meshphase.condition import ChannelQuality
+from meshphase.signal.crb import crb_delay_std
+from meshphase.signal.condition import ChannelQuality
 from meshphase.errors import ProcessingWarning
 from meshphase.onsets import FLAG_CLIPPED, FLAG_GAP, Onsets, Template
-from meshphase.passes import (ONSET_RESOLUTION, conditioned_gap_runs, gap_intervals_of,
-                             centre_shifts, gauge_passes, onset_sigma, pass_times, timing_centre,
-                             usable_onsets)
-from meshphase.phasing import GaugePasses
+from meshphase.kinematics.passes import (ONSET_RESOLUTION, conditioned_gap_runs, gap_intervals_of,
+                                         centre_shifts, gauge_passes, onset_sigma, pass_times, timing_centre,
+                                         usable_onsets)
+from meshphase.kinematics.phasing import GaugePasses
 from meshphase.recording import ChannelSpec
 
 FS = 1000.0
@@ -41,7 +41,7 @@ def _onsets(times, *, amp=None, flags=None, width=None, tid=None, templates=None
 
 
 def _old_onset_sigma(on, noise_rms):
-    """The stages module's own bound before it used meshphase._crb (kept to hold the numbers)."""
+    """The stages module's own bound before it used meshphase.signal.crb (kept to hold the numbers)."""
     out = np.full(len(on), np.nan)
     if not len(on) or not on.templates:
         return out

@@ -1,4 +1,4 @@
-"""Measured phasing from onset times (meshphase.phasing), on pass trains with known truth.
+"""Measured phasing from onset times (meshphase.kinematics.phasing), on pass trains with known truth.
 
 The truth here is spec section 1 (ideal phasing, gamma_sn = frac(+-Z_s psi_n / 2 pi),
 gamma_rn = frac(-+Z_r psi_n / 2 pi)) evaluated by hand, so a sign slip in the measured
@@ -13,9 +13,9 @@ import pytest
 from hypothesis import given, strategies as st
 
 from meshphase.errors import ProcessingWarning
-from meshphase.phasing import (PassTable, TachoRelabel, assign_planets_by_pattern,
-                              assign_planets_by_tacho, measured_phasing, pass_order,
-                              planet_fractions, relabel_by_tacho, revolution_numbers)
+from meshphase.kinematics.phasing import (PassTable, TachoRelabel, assign_planets_by_pattern,
+                                          assign_planets_by_tacho, measured_phasing, pass_order,
+                                          planet_fractions, relabel_by_tacho, revolution_numbers)
 
 TWO_PI = 2 * math.pi
 
@@ -311,8 +311,8 @@ def test_walk_equals_the_loop_over_gaps(n, equal, m, seed, chunk):
     # positions, flags and the summed mismatch to the bit, on trains with missing pulses
     # (double gaps), extra ones (half gaps), slow drift and unequal spacing, the gaps worked
     # out in chunks of every size (the walk carries its place and sum across them)
-    from meshphase import phasing
-    from meshphase.phasing import _walk
+    from meshphase.kinematics import phasing
+    from meshphase.kinematics.phasing import _walk
 
     before = phasing._WALK_CHUNK
     phasing._WALK_CHUNK = chunk
@@ -335,7 +335,7 @@ def _check_walk(n, equal, m, seed, _walk):
 
 
 def test_walk_empty_and_bad_gaps():
-    from meshphase.phasing import _walk
+    from meshphase.kinematics.phasing import _walk
 
     pos, ok, total = _walk(np.empty(0), np.array([0.0, 0.5]), 1, 0.1)
     assert pos.tolist() == [1] and ok.tolist() == [True] and total == 0.0
@@ -347,7 +347,7 @@ def test_model_choice_reasons_follow_the_verdicts_rule():
     # an inseparable pair that counts is always named (with no timing floor to compare to);
     # a weighed competitor only where the estimated error with the model choice passes 3x
     # the floor; nothing from an empty list
-    from meshphase.phasing import _choice_reasons
+    from meshphase.kinematics.phasing import _choice_reasons
 
     insep = {"words": "a common speed ripple at the planet spin rate",
              "versus": "equal shaft-hole errors on every planet", "inseparable": True,

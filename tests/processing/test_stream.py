@@ -1,6 +1,6 @@
-"""The streaming stages (meshphase.stream) against the whole-array functions they replace.
+"""The streaming stages (meshphase.run.stream) against the whole-array functions they replace.
 
-Tolerances (claims about the method, see pipeline/stream.py):
+Tolerances (claims about the method, see pipeline/run/stream.py):
 
 * quality reports (gaps, dropouts, clipping, thresholds): exact -- the same statistics and
   the same classification, only accumulated over blocks;
@@ -27,16 +27,18 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from meshphase import iir, io
-from meshphase.condition import (condition_recording, drift_baseline, finite_apply_gaps,
-                                quality_from_scan)
+from meshphase import io
+
+from meshphase.signal import iir
+from meshphase.signal.condition import (condition_recording, drift_baseline, finite_apply_gaps,
+                                        quality_from_scan)
 from meshphase.errors import DataQualityWarning, ProcessingWarning
 from meshphase.onsets import OnsetStream, detect_onsets, detect_onsets_recording
-from meshphase.quality import ChannelScan, FlatScan, channel_quality, classify_flat_runs
+from meshphase.signal.quality import ChannelScan, FlatScan, channel_quality, classify_flat_runs
 from meshphase.recording import ChannelSpec, Recording
-from meshphase.stream import (ChannelPlan, FileSource, MemorySource, StreamedRecording,
-                             _ZeroPhase, condition_stream, filter_overlap, scan_source,
-                             stream_memory)
+from meshphase.run.stream import (ChannelPlan, FileSource, MemorySource, StreamedRecording,
+                                  _ZeroPhase, condition_stream, filter_overlap, scan_source,
+                                  stream_memory)
 from meshphase.synthetic import generate
 from meshphase.synthetic.scenarios import seed_rig_gearset, seed_rig_speeds
 
@@ -149,8 +151,8 @@ def test_a_failure_in_a_chain_or_an_onset_detector_ends_the_pass_with_its_error(
     the other block's work finished first and no reading thread left behind."""
     import threading
 
-    from meshphase import stream
-    from meshphase.threads import threads_limited
+    from meshphase.run import stream
+    from meshphase.runtime.threads import threads_limited
 
     calls = {"n": 0}
     target = stream._push_chains if where == "chain" else OnsetStream.feed
@@ -176,10 +178,10 @@ def test_a_failure_in_a_chain_or_an_onset_detector_ends_the_pass_with_its_error(
 
 @pytest.mark.parametrize("drift", ["median", "highpass"])
 def test_streamed_conditioning_on_threads_equals_the_serial_stream(faulty, drift):
-    """The channels' chains run side by side on worker threads (meshphase.threads), each
+    """The channels' chains run side by side on worker threads (meshphase.runtime.threads), each
     whole on one thread per block: the samples, quality and onsets are the serial run's to
     the last bit, and the detectors' warnings are the same."""
-    from meshphase.threads import threads_limited
+    from meshphase.runtime.threads import threads_limited
 
     with threads_limited(1):
         _, res1, got1 = _streamed(faulty, drift)
@@ -200,7 +202,7 @@ def test_streamed_conditioning_on_threads_equals_the_serial_stream(faulty, drift
 @pytest.mark.skipif(not iir.HAVE_NUMBA, reason="numba is not installed")
 @pytest.mark.parametrize("drift", ["median", "highpass"])
 def test_streamed_conditioning_with_numba_filters_equals_scipy(faulty, drift):
-    """The filters on either engine (meshphase.iir): the same operations in the same order,
+    """The filters on either engine (meshphase.signal.iir): the same operations in the same order,
     so the conditioned samples agree to 1e-12 of the amplitude (bit for bit on x86-64; see
     tests/processing/test_iir.py) and the onsets to 1e-6 of a sample, as above."""
     _, res_s, got_s = _streamed(faulty, drift, filter_engine="scipy")
@@ -225,7 +227,7 @@ def test_two_chains_of_one_group_filter_side_by_side(n_threads):
     scipy engine to 1e-12 of the amplitude."""
     from dataclasses import replace as dc_replace
 
-    from meshphase.threads import threads_limited
+    from meshphase.runtime.threads import threads_limited
 
     base, _ = generate("rig_realistic", seed=5, duration=30.0)     # no gaps: windows pair
     s = base.index("sun")
@@ -250,7 +252,7 @@ def test_two_chains_of_one_group_filter_side_by_side(n_threads):
         with pytest.MonkeyPatch.context() as mp, warnings.catch_warnings():
             warnings.simplefilter("ignore", DataQualityWarning)
             if one_by_one:
-                from meshphase import stream
+                from meshphase.run import stream
 
                 mp.setattr(stream, "_chain_pairs", lambda ps: [(p,) for p in ps])
             mp.setattr(iir, "filter_extended_pair", counted)
@@ -281,7 +283,7 @@ def test_two_chains_of_one_group_filter_side_by_side(n_threads):
 
 
 def test_chain_pairs_keep_a_gear_together():
-    from meshphase.stream import _chain_pairs, _in_plan_order
+    from meshphase.run.stream import _chain_pairs, _in_plan_order
 
     plans = [ChannelPlan(nm, group=g) for nm, g in (("sun", "sun"), ("ring", "ring"),
                                                    ("s1", "sun"), ("s2", "sun"), ("r1", "ring"),
@@ -389,7 +391,7 @@ def test_filter_overlap_makes_blocks_equal_the_whole_filter(kind):
     x[1000:1004] = np.nan                       # bridged
     x[3 * L:3 * L + 500] = np.nan               # splits the signal
     padlen = 3 * (2 * len(sos) + 1)
-    from meshphase.condition import _apply_finite
+    from meshphase.signal.condition import _apply_finite
 
     ref = _apply_finite(x, lambda s: signal.sosfiltfilt(sos, s, padlen=padlen),
                         min_len=padlen + 1, fill_max=8, what="t")
@@ -633,9 +635,9 @@ def test_run_child_peak_is_the_childs_own_not_the_parents():
 def test_process_peak_rss_on_a_30_minute_file_stays_under_the_budget(tmp_path):
     # meshphase process on 30 min x 8 channels (float64 HDF5: 590 MB of samples): a child
     # process, its peak RSS (VmHWM). Before streaming it peaked at ~5x the samples
-    # (~2.9 GB); the streaming stages hold a fixed budget (meshphase.stream.PROCESS_RSS_BUDGET)
+    # (~2.9 GB); the streaming stages hold a fixed budget (meshphase.run.stream.PROCESS_RSS_BUDGET)
     from meshphase.bench.rss import BENCH_GEARSET, run_child
-    from meshphase.stream import PROCESS_RSS_BUDGET
+    from meshphase.run.stream import PROCESS_RSS_BUDGET
 
     path = tmp_path / "rec30.h5"
     w = run_child("write_job", path=str(path), minutes=30.0)
@@ -649,7 +651,7 @@ def test_process_peak_rss_on_a_30_minute_file_stays_under_the_budget(tmp_path):
     assert r["peak_rss_mb"] * 2**20 < PROCESS_RSS_BUDGET
     # far below the whole-array path's ~5x the samples: about the samples' size at 30 min,
     # most of it fixed (Python, numpy, scipy, h5py, and numba with its compiler, which a
-    # recording of this length loads for the filters: meshphase.iir.NUMBA_SAMPLES)
+    # recording of this length loads for the filters: meshphase.signal.iir.NUMBA_SAMPLES)
     assert r["peak_rss_mb"] < 1.5 * data_mb
 
 
@@ -658,7 +660,7 @@ def test_generator_source_equals_the_generated_recording():
     # the same samples as generated whole
     from meshphase.synthetic import generate_blocks
 
-    from meshphase.stream import GeneratorSource
+    from meshphase.run.stream import GeneratorSource
 
     rec, _ = generate("gaps", seed=4, duration=6.0)
     gen = GeneratorSource(generate_blocks("gaps", seed=4, duration=6.0, block=1.3))
@@ -706,9 +708,9 @@ def test_long_synthetic_scene_streams_from_the_generator(monkeypatch):
     # above SYNTHETIC_WHOLE_BYTES the load stage generates the recording again for every
     # pass instead of holding it; with the same blocks the result is the same to rounding
     # (the conditioning is block-wise either way: only where the samples come from differs)
-    from meshphase import stages
-    from meshphase.scene import parse_scene
-    from meshphase.stream import GeneratorSource
+    from meshphase.run import stages
+    from meshphase.run.scene import parse_scene
+    from meshphase.run.stream import GeneratorSource
 
     text = ('name = "gen"\nresults = ["phasing"]\n[input]\nsynthetic = "gaps"\nminutes = 0.1\n'
             'seed = 3\n[[channels]]\nname = "sun"\ngain = 2.0\n')
@@ -761,12 +763,12 @@ def test_convert_and_process_never_read_the_recording_whole(tmp_path, monkeypatc
 
 @pytest.mark.parametrize("n_threads", [1, 2])
 def test_a_read_failing_mid_pass_is_raised_and_its_reader_stopped(faulty, n_threads):
-    """The blocks are read one ahead on a thread of their own (meshphase.threads.read_ahead):
+    """The blocks are read one ahead on a thread of their own (meshphase.runtime.threads.read_ahead):
     a read that fails in the middle of a pass raises its own error from the pass, and the
     reading thread is gone (its file closed) when the pass has ended."""
     import threading
 
-    from meshphase.threads import threads_limited
+    from meshphase.runtime.threads import threads_limited
 
     class Failing(MemorySource):
         closed = 0

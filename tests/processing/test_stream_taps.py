@@ -9,8 +9,8 @@ import numpy as np
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from meshphase.condition import _block_means
-from meshphase.stream import _Pending, _SnrTap, _minus_interp
+from meshphase.signal.condition import _block_means
+from meshphase.run.stream import _Pending, _SnrTap, _minus_interp
 
 
 def _finite_diffs(x: np.ndarray) -> np.ndarray:

@@ -1,6 +1,6 @@
-"""The noise spectrum's transient screen on clean data (meshphase.noise_spectrum): a window
+"""The noise spectrum's transient screen on clean data (meshphase.signal.noise_spectrum): a window
 left out for the pulse fit's misfit is not called a transient, a step in the recording still
-is; flagged onsets' windows are not pulse windows (meshphase.passes.channel_noise_spectrum)."""
+is; flagged onsets' windows are not pulse windows (meshphase.kinematics.passes.channel_noise_spectrum)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from meshphase.errors import DataQualityWarning
-from meshphase.noise_spectrum import TRANSIENT_PULSE_SHARE, TRANSIENT_RATIO, pulse_residual_psd
+from meshphase.signal.noise_spectrum import TRANSIENT_PULSE_SHARE, TRANSIENT_RATIO, pulse_residual_psd
 from meshphase.onsets import FLAG_EDGE, FLAG_LOW_CORR, FLAG_TEMPLATE, Onsets
-from meshphase.passes import channel_noise_spectrum
+from meshphase.kinematics.passes import channel_noise_spectrum
 from meshphase.recording import Recording
 
 FS = 1000.0

@@ -1,4 +1,4 @@
-"""Wrong wiring named from the gauges' own pass rates and samples (meshphase.pass_rates:
+"""Wrong wiring named from the gauges' own pass rates and samples (meshphase.kinematics.pass_rates:
 wiring_findings, two_level_train), on pass trains made by hand at the seed rig's rates
 (sun 0.942 passes/s, ring 0.271, carrier 0.0677 turns/s: tests/processing/test_pass_rates.py
 works them out)."""
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from meshphase.models.gearset import Gearset, Speeds, rpm_to_rad_s
-from meshphase.pass_rates import TWO_LEVEL_SPREAD, two_level_train, wiring_findings
-from meshphase.phasing import GaugePasses
+from meshphase.kinematics.pass_rates import TWO_LEVEL_SPREAD, two_level_train, wiring_findings
+from meshphase.kinematics.phasing import GaugePasses
 
 RIG = Gearset.equally_spaced(25, 87, 29, 4, 0.1125)
 SUN, RING, CARRIER = 0.94198, 0.27068, 18.19 * 25 / 112 / 60

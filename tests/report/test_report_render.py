@@ -42,8 +42,8 @@ def _screenshot(html: Path, png: Path, tmp: Path, height: int = HEIGHT) -> np.nd
 
 
 def _run(scene_text: str, name: str, d: Path) -> Path:
-    from meshphase.scene import parse_scene
-    from meshphase.stages import new_output_dir, run_scene, write_outputs
+    from meshphase.run.scene import parse_scene
+    from meshphase.run.stages import new_output_dir, run_scene, write_outputs
 
     scene = parse_scene(scene_text, d / f"{name}.toml")
     ctx = run_scene(scene)

@@ -12,9 +12,9 @@ from scipy.optimize import brentq
 from meshphase.models.mesh_phasing import assembly_check, classify_phasing
 from meshphase.models.gearset import rad_s_to_rpm
 from meshphase.synthetic import (SCENARIOS, Artefacts, GaugeConfig, SynthConfig, generate, generate_blocks,
-                       get_scenario)
+                                 get_scenario)
 from meshphase.synthetic.gauges import (AnglePulses, PulseTable, angle_pulse_map, pulse_shape,
-                              render_angle_pulses)
+                                        render_angle_pulses)
 from meshphase.synthetic.kinematics import SpeedProfile, gauge_rates
 from meshphase.synthetic.scenarios import RIG_3PLANETS_P, RIG_SCENARIOS, rig_gearset, rig_speeds
 

@@ -6,10 +6,10 @@ import pytest
 
 import meshphase.io as mio
 from meshphase.bench.phasing import TARGET_ABS, TARGET_FLOOR_RATIO
-from meshphase.compare import truth_comparison
-from meshphase.encoder import clean_edges, edge_times
-from meshphase.scene import Scene
-from meshphase.stages import run_scene
+from meshphase.compare.predict import truth_comparison
+from meshphase.kinematics.encoder import clean_edges, edge_times
+from meshphase.run.scene import Scene
+from meshphase.run.stages import run_scene
 from meshphase.synthetic import EncoderConfig, SynthConfig, generate, get_scenario
 from meshphase.synthetic.tdms_export import write_tdms
 

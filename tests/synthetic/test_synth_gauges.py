@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from meshphase.synthetic.gauges import (PulseTable, face_load_factor, pulse_peak_offset, pulse_shape,
-                              pulse_support, render_box, render_pulses)
+                                        pulse_support, render_box, render_pulses)
 
 
 # ----------------------------------------------------------------------------- pulse shape

@@ -10,7 +10,7 @@ from scipy.optimize import brentq
 from meshphase.models.mesh_phasing import ideal_phasing
 from meshphase.recording import Recording
 from meshphase.synthetic import (SCENARIOS, Artefacts, GroundTruth, generate, generate_blocks,
-                       get_scenario, list_scenarios)
+                                 get_scenario, list_scenarios)
 from meshphase.synthetic.generate import draw_errors, resolve_seed
 from meshphase.synthetic.gauges import face_load_factor
 from meshphase.synthetic.kinematics import gauge_rates

@@ -11,7 +11,7 @@ from meshphase.models.gearset import Gearset, Speeds
 from meshphase.models.mesh_phasing import ShaftHoleErrors, mesh_angles
 from meshphase.models.tolerance import table2_case
 from meshphase.synthetic.kinematics import (EngagementEvents, SpeedProfile, engagement_events,
-                                  event_times_for_angles, gauge_rates)
+                                            event_times_for_angles, gauge_rates)
 
 TWO_PI = 2 * math.pi
 

@@ -13,7 +13,7 @@ from meshphase.models.gearset import Speeds
 from meshphase.models.tolerance import table2_case
 from meshphase.synthetic import SynthConfig, generate, get_scenario
 from meshphase.synthetic.kinematics import (MEMBERS, ShaftRipple, SpeedClock, SpeedProfile, engagement_events,
-                                  event_times_for_angles, gauge_rates, member_rate)
+                                            event_times_for_angles, gauge_rates, member_rate)
 from meshphase.synthetic.scenarios import rig_gearset, rig_speeds
 
 from _synth_reference import ode_tau_ref, residual_tau_ref, tau_ref

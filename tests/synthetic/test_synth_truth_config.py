@@ -8,7 +8,7 @@ import pytest
 from meshphase.models.gearset import Gearset, Speeds
 from meshphase.models.mesh_phasing import ShaftHoleErrors
 from meshphase.synthetic import (Artefacts, GaugeConfig, GroundTruth, SynthConfig, TachoConfig, generate,
-                       get_scenario, list_scenarios, truth_path_for)
+                                 get_scenario, list_scenarios, truth_path_for)
 from meshphase.synthetic.config import TiltSource, errors_from_dict, errors_to_dict
 from meshphase.synthetic.truth import TRUTH_FORMAT
 

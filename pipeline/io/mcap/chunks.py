@@ -6,11 +6,11 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from ..base import CorruptFileError, RecordingFileError
-from .crc import _crc32
-from .header import _LIB_ERRORS, _Layout
-from .layout import (_CHUNK_HEAD, _HEADER, _MAX_RECORD, _MSG_HEAD, _OP_CHUNK, _OP_MESSAGE, _REC, _U64,
-                     FORMAT_VERSION, HEADER_SIZE)
+from meshphase.io.base import CorruptFileError, RecordingFileError
+from meshphase.io.mcap.crc import _crc32
+from meshphase.io.mcap.header import _LIB_ERRORS, _Layout
+from meshphase.io.mcap.layout import (_CHUNK_HEAD, _HEADER, _MAX_RECORD, _MSG_HEAD, _OP_CHUNK, _OP_MESSAGE, _REC, _U64,
+                                      FORMAT_VERSION, HEADER_SIZE)
 
 __all__: list[str] = []
 

@@ -8,9 +8,9 @@ import zlib
 from functools import lru_cache
 from pathlib import Path
 
-from ...validate import as_int
-from ..base import CorruptFileError
-from .layout import _CHUNK_HEAD, _OP_CHUNK, _REC, _U64, MAGIC
+from meshphase.validate import as_int
+from meshphase.io.base import CorruptFileError
+from meshphase.io.mcap.layout import _CHUNK_HEAD, _OP_CHUNK, _REC, _U64, MAGIC
 
 __all__ = ["crc32_combine"]
 

@@ -22,9 +22,9 @@ import numpy as np
 from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, IndexType, Writer
 
-from ...validate import as_choice
-from ..base import regroup_blocks
-from .layout import _DTYPE_CODES, _MAX_LOG_TIME, COMPRESSIONS, _dumps, _log_time, _origin_ns
+from meshphase.validate import as_choice
+from meshphase.io.base import regroup_blocks
+from meshphase.io.mcap.layout import _DTYPE_CODES, _MAX_LOG_TIME, COMPRESSIONS, _dumps, _log_time, _origin_ns
 
 __all__ = ["write_foxglove", "FOXGLOVE_METADATA", "FOXGLOVE_SCHEMA_NAME", "DEFAULT_TOPIC", "LAYOUTS"]
 

@@ -8,8 +8,8 @@ import struct
 from functools import lru_cache
 from pathlib import Path
 
-from ...jsonable import json_default
-from ...validate import as_int, as_positive
+from meshphase.jsonable import json_default
+from meshphase.validate import as_int, as_positive
 
 __all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "READ_LIBRARIES", "MAGIC", "SCHEMA_NAME", "MESSAGE_ENCODING",
            "RECORDING_METADATA", "COMPRESSIONS", "DEFAULT_BLOCK", "sniff", "log_time_ns"]

@@ -10,13 +10,13 @@ from typing import Iterator
 
 import numpy as np
 
-from ...recording import Recording
-from ...validate import as_positive_int
-from ..base import RecordingFileError, RecordingInfo, check_allocation
-from .chunks import _ChunkReader, _decode, _payloads
-from .foreign import foreign_info, read_foreign
-from .header import ForeignMcapError, _Layout, _lib_errors, _open
-from .layout import _MAX_LOG_TIME, _MSG_HEAD, _OP_MESSAGE, _REC, FORMAT_VERSION, HEADER_SIZE
+from meshphase.recording import Recording
+from meshphase.validate import as_positive_int
+from meshphase.io.base import RecordingFileError, RecordingInfo, check_allocation
+from meshphase.io.mcap.chunks import _ChunkReader, _decode, _payloads
+from meshphase.io.mcap.foreign import foreign_info, read_foreign
+from meshphase.io.mcap.header import ForeignMcapError, _Layout, _lib_errors, _open
+from meshphase.io.mcap.layout import _MAX_LOG_TIME, _MSG_HEAD, _OP_MESSAGE, _REC, FORMAT_VERSION, HEADER_SIZE
 
 __all__ = ["read_info", "read", "iter_blocks"]
 

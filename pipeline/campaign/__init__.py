@@ -1,0 +1,7 @@
+"""Campaigns: one scene, many recordings, one Dask job (``meshphase campaign``), on a local
+cluster or an existing scheduler, with completion markers to resume from and one report over all
+recordings.
+
+May import :mod:`meshphase.run` and everything below it; only the command line and the bench
+import it.
+"""

@@ -1,0 +1,8 @@
+"""Conditioning of tooth-root strain channels and their quality: zero-phase filters (second-order
+sections), drift and hum removal, Savitzky-Golay smoothing, spectra, the noise floor of the
+pulses and the Cramér-Rao bound on their timing, and the data-quality flags (NaN runs, clipping,
+gaps, dropouts).
+
+Array code: numpy in, numpy out, samples and SI units. May import :mod:`meshphase.runtime`,
+:mod:`meshphase.recording` and the root helpers; never onsets, kinematics or anything above.
+"""

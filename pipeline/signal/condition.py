@@ -1,0 +1,1329 @@
+"""Signal conditioning of tooth-root strain channels, and the per-channel quality report.
+
+Array functions at the bottom (numpy in, numpy out, sample rate ``fs`` in [Hz]) and thin
+:class:`~meshphase.recording.Recording` wrappers that convert, apply per channel and append
+one entry to the recording's history.
+
+Steps
+-----
+``filter_signal``
+    Zero-phase Butterworth band-, high- or low-pass (:func:`meshphase.signal.sos_design.butter_sos`,
+    scipy.signal.butter's sections, run by :func:`meshphase.signal.iir.sosfiltfilt`).
+``remove_drift``
+    Slow (thermal) drift removal: a robust moving-median baseline computed on block medians
+    (default), a Savitzky-Golay baseline on block medians, or a zero-phase high-pass.
+``notch_hum``
+    Mains hum (50/60 Hz and harmonics) notches (scipy.signal.iirnotch's biquads, zero-phase),
+    applied only to the lines :func:`detect_hum` finds above the local noise floor.
+``assess_quality``
+    Gaps (non-finite runs), NaN runs, DAQ dropout runs (exact zeros or a held value),
+    clipped runs (at the rails, or plateaus at any level) and an SNR estimate, as a
+    :class:`ChannelQuality` that the onset stage respects (pulses overlapping a gap, a
+    dropout or a clipped run are flagged, no onset is placed inside a gap or a dropout).
+    :func:`gap_intervals` lists a channel's gaps and dropouts in seconds.
+
+Dropouts and clipped plateaus
+-----------------------------
+A DAQ that drops samples may write exact zeros or hold its last sample instead of NaN; an
+ADC or amplifier stage may saturate below the nominal full scale, or on one polarity only.
+:func:`meshphase.signal.quality.flat_runs` finds both on the raw data, with a run-length threshold
+from the channel's own statistics (a quantised quiet channel repeats values by chance) and
+tells them apart by where the flat run sits: a clip bounds a pulse extreme and is entered
+steeply, a dropout sits at 0 or at a value the signal passes through (see that module's
+docstring for the rule). :func:`condition_recording` sets dropout samples to NaN before
+filtering (``dropouts="nan"``): the filters then neither ring on the dropout's steps nor
+treat fake samples as data, and every later stage sees an ordinary gap.
+
+Defaults relative to the mesh frequency
+---------------------------------------
+With the mesh frequency ``f_m`` [Hz] known (``mesh_freq``), a tooth-root pulse lasts about
+the contact ratio (1.4-1.8) times the mesh period and carries its energy below ~3 ``f_m``;
+consecutive pulses of one gauge are several mesh periods apart. The defaults are
+
+- high-pass corner ``f_m / 20``: a time constant of ~20 mesh periods, an order of magnitude
+  longer than a pulse, so the pulse shape is kept and only slow drift is removed;
+- low-pass corner ``4 f_m`` when that is below ``0.45 fs``; otherwise no low-pass (pulses a
+  few samples wide, mesh frequency near Nyquist: keep the whole band);
+- drift-removal window 20 mesh periods (> 10 pulse lengths, so the moving median follows the
+  baseline, not the pulses).
+
+Without ``f_m``: high-pass corner 0.05 Hz, no low-pass, drift window 10 s.
+
+NaN handling
+------------
+Filtering never smears NaN: interior non-finite runs of at most ``fill_max`` samples are
+bridged by linear interpolation for the filter, longer runs split the signal into segments
+filtered independently, and every sample that was non-finite on input is NaN on output
+(mask back). Segments too short for the filter's edge padding come out NaN, with a
+:class:`~meshphase.errors.DataQualityWarning`.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field, replace
+from typing import Callable, Sequence
+
+import numpy as np
+from scipy import ndimage
+
+from meshphase.signal import iir
+from meshphase.signal.median import MAD_TO_SIGMA, median_and_mad, median_of_finite, sigma_of_differences
+from meshphase.errors import DataQualityWarning, ProcessingWarning
+from meshphase.runtime.log import logger
+from meshphase.signal.quality import (DROPOUT_MIN_RUN, FALSE_ALARM, ChannelQuality, ChannelScan, HumReport,
+                                      find_runs, merge_runs, quality_from_scan)
+from meshphase.recording import Recording
+from meshphase.signal.savgol import savgol_filter
+from meshphase.signal.sos_design import butter_sos, notch_sos
+from meshphase.signal.spectral import welch
+from meshphase.validate import as_signal, as_choice, as_float, as_nonnegative, as_positive, as_positive_int
+
+__all__ = [
+    "ChannelQuality", "HumReport", "Conditioned",
+    "default_band", "design_filter", "design_notch", "filter_signal", "remove_drift", "drift_baseline",
+    "level_steps", "STEP_SPREADS",
+    "detect_hum", "notch_hum", "assess_quality", "estimate_noise", "estimate_snr",
+    "filter_recording", "remove_drift_recording", "notch_hum_recording",
+    "assess_quality_recording", "condition_recording", "merge_runs", "gap_intervals",
+    "DEFAULT_HIGHPASS_HZ", "DEFAULT_DRIFT_WINDOW_S",
+]
+
+#: High-pass corner used when the mesh frequency is unknown [Hz].
+DEFAULT_HIGHPASS_HZ = 0.05
+#: Drift-removal window used when the mesh frequency is unknown [s].
+DEFAULT_DRIFT_WINDOW_S = 10.0
+#: High-pass corner as a fraction of the mesh frequency [-].
+HIGHPASS_FRACTION = 1.0 / 20.0
+#: Low-pass corner as a multiple of the mesh frequency [-].
+LOWPASS_MULTIPLE = 4.0
+#: Highest corner frequency allowed, as a fraction of fs [-].
+MAX_CORNER_FRACTION = 0.45
+#: Drift-removal window in mesh periods [-].
+DRIFT_WINDOW_MESH_PERIODS = 20.0
+
+_SUBSAMPLE = 1 << 20                 # at most this many samples enter a median / quantile
+
+
+# ====================================================================== small helpers
+def _as_signal(x, name: str = "x") -> np.ndarray:
+    """1-D float64 view/copy of ``x``; NaN/inf allowed (they are data-quality findings)."""
+    return as_signal(x, name, float64=True)
+
+
+def _subsample(x: np.ndarray, n_max: int = _SUBSAMPLE) -> np.ndarray:
+    """Every k-th sample so that at most ``n_max`` remain (deterministic)."""
+    step = max(1, -(-x.size // n_max))
+    return x[::step]
+
+
+def _check_freq(value, name: str, fs: float) -> float:
+    f = as_positive(value, name)
+    if f >= 0.5 * fs:
+        raise ValueError(f"{name} must be below Nyquist fs/2 = {0.5 * fs!r} Hz, got {f!r}")
+    return f
+
+
+def _apply_finite(x: np.ndarray, func: Callable[[np.ndarray], np.ndarray], *, min_len: int,
+                  fill_max: int, what: str, warn: bool = True) -> np.ndarray:
+    """Apply ``func`` to the finite parts of ``x`` without smearing NaN.
+
+    Interior non-finite runs of at most ``fill_max`` samples are bridged by linear
+    interpolation; longer runs split ``x`` into segments processed independently; segments
+    shorter than ``min_len`` become NaN (DataQualityWarning). Every sample non-finite on
+    input is NaN on output.
+    """
+    n = x.size
+    if n == 0:
+        return np.empty(0, dtype=np.float64)
+    if math.isfinite(float(np.sum(x))):
+        if n < min_len:
+            if warn:
+                warnings.warn(_short_signal_message(what, n, min_len), DataQualityWarning,
+                              stacklevel=3)
+            return np.full(n, np.nan)
+        return func(x)
+    bad = ~np.isfinite(x)
+    runs = find_runs(bad)
+    lengths = runs[:, 1] - runs[:, 0]
+    interior = (runs[:, 0] > 0) & (runs[:, 1] < n)
+    short = interior & (lengths <= fill_max)
+    xf = x.copy()
+    if short.any():
+        marks = np.zeros(n + 1, dtype=np.int64)
+        np.add.at(marks, runs[short, 0], 1)
+        np.add.at(marks, runs[short, 1], -1)
+        fill_idx = np.flatnonzero(np.cumsum(marks[:n]) > 0)
+        good = np.flatnonzero(~bad)
+        xf[fill_idx] = np.interp(fill_idx, good, x[good])
+    split = runs[~short]
+    # segments = complement of the long runs
+    edges = np.concatenate([[0], split.ravel(), [n]]).reshape(-1, 2)
+    out = np.full(n, np.nan)
+    n_short = 0
+    for a, b in edges:
+        if b <= a:
+            continue
+        if b - a < min_len:
+            n_short += 1
+            continue
+        out[a:b] = func(xf[a:b])
+    if n_short and warn:
+        warnings.warn(_short_segments_message(what, n_short, min_len), DataQualityWarning,
+                      stacklevel=3)
+    out[bad] = np.nan
+    return out
+
+
+def _short_signal_message(what: str, n: int, min_len: int) -> str:
+    return (f"{what}: signal of {n} sample(s) is shorter than the {min_len} the filter needs; "
+            "returned as NaN")
+
+
+def _short_segments_message(what: str, n_short: int, min_len: int) -> str:
+    return (f"{what}: {n_short} finite segment(s) between gaps are shorter than the {min_len} "
+            "samples the filter needs; they are set to NaN")
+
+
+def finite_apply_gaps(bad_runs, n: int, *, min_len: int, fill_max: int) -> tuple[np.ndarray, int, bool]:
+    """The non-finite runs of the output of a gap-aware filter, from those of its input.
+
+    What :func:`filter_signal` and :func:`notch_hum` (``_apply_finite``) do to the gaps,
+    without the samples: interior runs of at most ``fill_max`` samples are bridged (and
+    non-finite again on output), longer runs split the signal, and finite segments shorter
+    than ``min_len`` become NaN.
+
+    Parameters
+    ----------
+    bad_runs : ndarray of int, shape (k, 2)
+        Sorted, disjoint ``[start, stop)`` runs of non-finite input samples.
+    n : int
+        Samples [-].
+    min_len, fill_max : int
+        As the filter uses them [samples].
+
+    Returns
+    -------
+    (runs, n_short, whole_short) : (ndarray, int, bool)
+        Non-finite output runs (merged); the number of finite segments set to NaN; True when
+        the input was finite throughout and shorter than ``min_len`` (the "signal shorter"
+        case, one NaN run over everything).
+    """
+    r = np.asarray(bad_runs, dtype=np.int64).reshape(-1, 2)
+    if n == 0:
+        return np.empty((0, 2), dtype=np.int64), 0, False
+    if len(r) == 0:
+        if n < min_len:
+            return np.array([[0, n]], dtype=np.int64), 0, True
+        return np.empty((0, 2), dtype=np.int64), 0, False
+    lengths = r[:, 1] - r[:, 0]
+    interior = (r[:, 0] > 0) & (r[:, 1] < n)
+    split = r[~(interior & (lengths <= fill_max))]
+    edges = np.concatenate([[0], split.ravel(), [n]]).reshape(-1, 2)
+    seg = edges[edges[:, 1] > edges[:, 0]]
+    short = seg[(seg[:, 1] - seg[:, 0]) < min_len]
+    return merge_runs(np.concatenate([r, short])), int(len(short)), False
+
+
+# ====================================================================== filtering
+def default_band(fs: float, mesh_freq: float | None = None) -> tuple[float | None, float | None]:
+    """Default (high-pass corner, low-pass corner) [Hz] for a strain channel.
+
+    Parameters
+    ----------
+    fs : float
+        Sample rate [Hz].
+    mesh_freq : float, optional
+        Mesh frequency f_m of the gauged gear [Hz].
+
+    Returns
+    -------
+    (low, high) : tuple
+        ``low = f_m / 20`` (``DEFAULT_HIGHPASS_HZ`` without ``f_m``); ``high = 4 f_m`` when
+        below ``0.45 fs``, else None (no low-pass). See the module docstring for the reasons.
+    """
+    fs = as_positive(fs, "fs")
+    if mesh_freq is None:
+        return (min(DEFAULT_HIGHPASS_HZ, 0.25 * fs), None)
+    fm = as_positive(mesh_freq, "mesh_freq")
+    low = HIGHPASS_FRACTION * fm
+    if low >= MAX_CORNER_FRACTION * fs:
+        raise ValueError(f"mesh_freq {fm!r} Hz is too high for fs {fs!r} Hz: the default "
+                         f"high-pass corner f_m/20 = {low!r} Hz exceeds 0.45 fs")
+    high = LOWPASS_MULTIPLE * fm
+    return (low, high if high < MAX_CORNER_FRACTION * fs else None)
+
+
+def design_filter(fs: float, *, kind: str = "bandpass", low: float | None = None,
+                  high: float | None = None, order: int = 4) -> np.ndarray:
+    """Butterworth second-order sections for :func:`filter_signal`.
+
+    Parameters
+    ----------
+    fs : float
+        Sample rate [Hz].
+    kind : {"bandpass", "highpass", "lowpass"}
+    low : float, optional
+        High-pass corner [Hz] (bandpass, highpass).
+    high : float, optional
+        Low-pass corner [Hz] (bandpass, lowpass).
+    order : int
+        Butterworth order of the one-way filter (zero-phase filtering doubles it).
+
+    Returns
+    -------
+    sos : ndarray, shape (n_sections, 6)
+    """
+    fs = as_positive(fs, "fs")
+    kind = as_choice(kind, "kind", ("bandpass", "highpass", "lowpass"))
+    order = as_positive_int(order, "order")
+    if order > 12:
+        raise ValueError(f"order must be <= 12, got {order!r}")
+    if kind in ("bandpass", "highpass"):
+        if low is None:
+            raise ValueError(f"kind={kind!r} needs the high-pass corner low [Hz], got None")
+        low = _check_freq(low, "low", fs)
+    if kind in ("bandpass", "lowpass"):
+        if high is None:
+            raise ValueError(f"kind={kind!r} needs the low-pass corner high [Hz], got None")
+        high = _check_freq(high, "high", fs)
+    if kind == "bandpass":
+        if not low < high:
+            raise ValueError(f"low ({low!r} Hz) must be below high ({high!r} Hz)")
+        return butter_sos(order, [low, high], "bandpass", fs)
+    if kind == "highpass":
+        return butter_sos(order, low, "highpass", fs)
+    return butter_sos(order, high, "lowpass", fs)
+
+
+def _resolve_band(fs, kind, low, high, mesh_freq):
+    d_low, d_high = default_band(fs, mesh_freq)
+    if kind == "bandpass":
+        low = d_low if low is None else low
+        high = d_high if high is None else high
+        if high is None:
+            logger.info("bandpass: no low-pass corner (mesh frequency unknown or near Nyquist); "
+                        "high-pass only at %.4g Hz", low)
+            return "highpass", low, None
+        return kind, low, high
+    if kind == "highpass":
+        return kind, (d_low if low is None else low), None
+    if high is None:
+        if d_high is None:
+            raise ValueError("kind='lowpass' needs high [Hz] or a mesh_freq whose default corner "
+                             f"4 f_m lies below 0.45 fs; got high=None, mesh_freq={mesh_freq!r}")
+        high = d_high
+    return kind, None, high
+
+
+def _settle_time(low: float | None, high: float | None) -> float:
+    """Heuristic settling time [s] of a zero-phase filter: 2 / (lowest corner)."""
+    corners = [f for f in (low, high) if f is not None]
+    return 2.0 / min(corners) if corners else 0.0
+
+
+def filter_signal(x, fs: float, *, kind: str = "bandpass", low: float | None = None,
+                  high: float | None = None, order: int = 4, mesh_freq: float | None = None,
+                  fill_max: int = 8) -> np.ndarray:
+    """Zero-phase Butterworth filtering that leaves gaps as NaN.
+
+    Parameters
+    ----------
+    x : array_like, shape (n,)
+        Samples of one channel [any unit]; NaN/inf mark gaps.
+    fs : float
+        Sample rate [Hz].
+    kind : {"bandpass", "highpass", "lowpass"}
+        Filter type. "bandpass" without a usable low-pass corner degrades to a high-pass
+        (logged).
+    low, high : float, optional
+        High-pass and low-pass corners [Hz]; default from :func:`default_band`.
+    order : int
+        One-way Butterworth order (the zero-phase result has twice the attenuation slope).
+    mesh_freq : float, optional
+        Mesh frequency of the gauged gear [Hz], for the defaults.
+    fill_max : int
+        Interior gaps up to this many samples are bridged for the filter (and NaN again on
+        output); longer gaps split the signal.
+
+    Returns
+    -------
+    y : ndarray of float64, shape (n,)
+
+    Notes
+    -----
+    :func:`scipy.signal.sosfiltfilt` runs the filter forwards and backwards: no phase shift
+    (the pulse timing is untouched) and squared magnitude response (through
+    :func:`meshphase.signal.iir.sosfiltfilt`, which takes the same arithmetic compiled by numba
+    for a long channel).
+    """
+    x = _as_signal(x)
+    fs = as_positive(fs, "fs")
+    fill_max = int(as_nonnegative(fill_max, "fill_max"))
+    kind = as_choice(kind, "kind", ("bandpass", "highpass", "lowpass"))
+    kind, low, high = _resolve_band(fs, kind, low, high, mesh_freq)
+    sos = design_filter(fs, kind=kind, low=low, high=high, order=order)
+    padlen = iir.padlen_for(sos)
+    return _apply_finite(x, lambda s: iir.sosfiltfilt(sos, s, padlen=padlen),
+                         min_len=padlen + 1, fill_max=fill_max, what=f"filter_signal({kind})")
+
+
+# ====================================================================== drift
+def _block_medians(x: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
+    """Medians of consecutive blocks of ``b`` samples (at most 33 evenly strided samples of
+    each enter its median; NaN ignored) and the block centre indices.
+
+    Only the strided samples are gathered (a partial last block is padded with NaN to the
+    length of the others): the work space is ~34 values per block whatever ``b`` is, so a
+    block longer than the data (a window of seconds at an absurd fs) costs nothing."""
+    n = x.size
+    nb = -(-n // b)
+    nf = n // b
+    step = max(1, b // 33)
+    rows = np.full((nb, -(-b // step)), np.nan)
+    if nf:
+        rows[:nf] = x[:nf * b].reshape(nf, b)[:, ::step]
+    if nb > nf:
+        part = x[nf * b::step]
+        rows[nf, :part.size] = part
+    med = np.median(rows, axis=1)
+    bad = np.isnan(med)
+    if bad.any():
+        fin = np.isfinite(rows[bad]).any(axis=1)
+        sub = np.full(int(bad.sum()), np.nan)
+        if fin.any():
+            sub[fin] = np.nanmedian(rows[bad][fin], axis=1)
+        med[bad] = sub
+    starts = np.arange(nb) * b
+    stops = np.minimum(starts + b, n)
+    n_used = -(-(stops - starts) // step)             # strided samples inside each block
+    return med, starts + 0.5 * step * (n_used - 1)
+
+
+def _block_means(x: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
+    """Means of consecutive blocks of ``b`` samples (NaN ignored; NaN for an all-NaN block)
+    and the block centre indices (no padding: the work space is the data's own size)."""
+    n = x.size
+    nb = -(-n // b)
+    nf = n // b
+    cnt = np.zeros(nb, dtype=np.int64)
+    tot = np.zeros(nb)
+    if nf:
+        rows = x[:nf * b].reshape(nf, b)
+        with np.errstate(over="ignore", invalid="ignore"):
+            sums = rows.sum(axis=1)                  # all finite: every sample is (NaN/inf
+        if np.isfinite(sums).all():                  # or an overflow: the masked path below)
+            cnt[:nf] = b
+            tot[:nf] = sums
+        else:
+            fin = np.isfinite(rows)
+            cnt[:nf] = fin.sum(axis=1)
+            tot[:nf] = np.where(fin, rows, 0.0).sum(axis=1)
+    if nb > nf:
+        part = x[nf * b:]
+        fin = np.isfinite(part)
+        cnt[nf] = int(fin.sum())
+        tot[nf] = float(np.where(fin, part, 0.0).sum())
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(cnt > 0, tot / np.maximum(cnt, 1), np.nan)
+    starts = np.arange(nb) * b
+    stops = np.minimum(starts + b, n)
+    return mean, 0.5 * (starts + stops - 1)
+
+
+def drift_baseline(x, fs: float, *, method: str = "median", window: float | None = None,
+                   mesh_freq: float | None = None, pulse_period: float | None = None) -> np.ndarray:
+    """Slow baseline of a pulse train (what :func:`remove_drift` subtracts).
+
+    Parameters
+    ----------
+    x : array_like, shape (n,)
+        Samples [any unit]; NaN/inf ignored.
+    fs : float
+        Sample rate [Hz].
+    method : {"median", "savgol"}
+        "median": moving median (``window`` long) of block medians, one block being 1/16
+        of the window; robust to the pulses (tensile lobes above, compressive lobes below
+        the baseline) as long as they cover less than about half of each block.
+        "savgol": Savitzky-Golay (quadratic) smoothing of the same block medians; smoother,
+        less robust to outliers.
+    window : float, optional
+        Baseline window [s]; default 20 mesh periods, or ``DEFAULT_DRIFT_WINDOW_S`` without
+        ``mesh_freq``.
+    mesh_freq : float, optional
+        Mesh frequency [Hz].
+    pulse_period : float, optional
+        Period of the pulse train [s]: one relative revolution of the gauged gear, in which
+        every planet passes once. Given, the blocks are whole periods and each enters with
+        its MEAN: every block then holds the same pulses (each planet's, whatever their
+        loads), which add a constant instead of a wobble. Needed when the pulses cover more
+        than about half of the time (five planets on a sun gauge: tensile lobe and side
+        lobes span 3.6 of every 5 mesh periods), where block medians follow the pulses and
+        the baseline they leave shifts each pulse's timing (1.1e-3 mesh cycles RMS
+        noise-free, against 4e-4 without drift removal); blocks of one planet spacing would
+        still wobble with the planets' unequal loads (face-width amplitudes moved by 6 %).
+
+    Returns
+    -------
+    baseline : ndarray of float64, shape (n,)
+        Linearly interpolated between block centres (constant beyond the first and last);
+        NaN everywhere when no sample is finite.
+    """
+    x = _as_signal(x)
+    fs = as_positive(fs, "fs")
+    method = as_choice(method, "method", ("median", "savgol"))
+    window = _drift_window(window, mesh_freq)
+    n = x.size
+    if n == 0:
+        return np.empty(0)
+    b_p = None if pulse_period is None else max(1, int(round(as_positive(pulse_period, "pulse_period") * fs)))
+    if b_p is not None and n >= 2 * b_p:
+        # whole periods only: a partial block at the end holds some planets' pulses and not
+        # the others', which is exactly the wobble whole periods avoid
+        b = b_p
+        means, centres = _block_means(np.where(np.isfinite(x), x, np.nan), b)
+        if n % b:
+            means, centres = means[:-1], centres[:-1]
+    else:
+        b = max(1, int(round(window * fs / 16.0)))
+        means, centres = _block_medians(np.where(np.isfinite(x), x, np.nan), b)
+    ok = np.isfinite(means)
+    if not ok.any():
+        return np.full(n, np.nan)
+    if not ok.all():
+        means = np.interp(centres, centres[ok], means[ok])
+    k = 17  # blocks per window (odd)
+    if method == "median":
+        base = ndimage.median_filter(means, size=min(k, means.size) | 1, mode="nearest")
+    else:
+        if means.size >= k:
+            base = savgol_filter(means, k, 2)
+        else:
+            base = np.full(means.size, np.mean(means))
+    if base.size == 1:
+        return np.full(n, base[0])
+    return np.interp(np.arange(n, dtype=np.float64), centres, base)
+
+
+#: a block-to-block change of the drift baseline this many robust spreads beyond the local
+#: trend of its neighbours is a level step [-]
+STEP_SPREADS = 10.0
+
+
+def level_steps(values, centres, fs: float, *, t0: float = 0.0, min_size: float = 0.0) -> np.ndarray:
+    """Level steps of a channel's baseline: jumps between consecutive drift-baseline blocks
+    (:func:`drift_baseline`'s block means or medians) that its slow drift does not make.
+
+    A bridge re-zeroed, an amplifier range switched or a cable knocked moves the baseline
+    within a few samples; the drift baseline then ramps across the block holding the jump
+    (its values are interpolated between block centres), and the pulses of that stretch sit
+    on a slope: they are timed off or lost (independent rig, a step of twice the pulse height
+    mid-record: the passes within one relative revolution of it). Thermal drift changes the
+    block values smoothly: a step is a change ``d_k`` between blocks that the trend of the
+    changes 3 to 5 blocks either side (their median) does not explain, beyond
+    :data:`STEP_SPREADS` robust spreads of those residuals and beyond ``min_size``, and that
+    stays (the median level of the 5 blocks after it less that of the 5 before, drift
+    aside, keeps half of it: a block that caught a pulse goes up and down, a spike); a step
+    inside a block splits over two consecutive changes, taken as one.
+
+    Parameters
+    ----------
+    values : array_like, shape (m,)
+        Block values [data units]; NaN where a block had no sample.
+    centres : array_like, shape (m,)
+        Their centres [samples].
+    fs : float
+        Sample rate [Hz].
+    t0 : float
+        Time of sample 0 [s].
+    min_size : float
+        Smallest step reported [data units] (e.g. a few times the per-sample noise RMS).
+
+    Returns
+    -------
+    ndarray, shape (k, 2)
+        Per step its time [s] (between the two blocks, or the centre of the block it fell
+        in) and its size [data units] (the change less its neighbours' trend), in time order;
+        empty with fewer than 7 finite blocks (blocks without a sample are interpolated).
+    """
+    v = np.asarray(values, dtype=np.float64).ravel()
+    c = np.asarray(centres, dtype=np.float64).ravel()
+    if v.shape != c.shape:
+        raise ValueError(f"values and centres must have one shape, got {v.shape} and {c.shape}")
+    fs = as_positive(fs, "fs")
+    ok = np.isfinite(v)
+    if np.count_nonzero(ok) < 7 or not np.all(np.isfinite(c)):
+        return np.empty((0, 2))
+    if not ok.all():                                    # blocks without a sample: interpolated
+        v = np.interp(c, c[ok], v[ok])
+    e = _step_residuals(v)
+    spread = MAD_TO_SIGMA * float(median_and_mad(e)[1])          # e is finite (v filled)
+    thr = max(STEP_SPREADS * spread, float(min_size), 0.0)
+    out = []
+    v = v.copy()
+    spike = np.zeros(e.size, dtype=bool)
+    for _ in range(v.size):
+        # the largest first, taken out of the values before the next is looked for: the
+        # trend of a change next to a large step would otherwise carry a little of it
+        j = int(np.argmax(np.where(spike, 0.0, np.abs(e))))
+        if not abs(e[j]) > thr or spike[j]:
+            break
+        pair = [k for k in (j - 1, j + 1)
+                if 0 <= k < e.size and abs(e[k]) > thr and np.sign(e[k]) == np.sign(e[j]) and not spike[k]]
+        k = max(pair, key=lambda i: abs(e[i])) if pair else j
+        a, b = min(j, k), max(j, k)                       # a pair: inside block b
+        size = e[a] + (e[b] if b != a else 0.0)
+        # a step stays: the level after it is the level before it plus the step, drift
+        # aside (a block that caught a pulse goes up and down again: a spike, not a step)
+        dv = np.diff(v)
+        lo, hi = max(0, a - 5), min(dv.size, b + 6)
+        local = np.concatenate([dv[lo:a], dv[b + 1:hi]])          # the drift's trend there
+        u = v - (float(np.median(local)) if local.size else 0.0) * np.arange(v.size)
+        kept = float(np.median(u[b + 1:b + 6])) - float(np.median(u[max(0, a - 4):a + 1]))
+        if not (np.sign(kept) == np.sign(size) and abs(kept) > 0.5 * abs(size)):
+            spike[a:b + 1] = True
+            continue
+        t = c[b] if b != a else 0.5 * (c[a] + c[a + 1])
+        v[a + 1:] -= e[a]
+        if b != a:
+            v[b + 1:] -= e[b]
+        if abs(size) > min_size:
+            out.append((t0 + t / fs, size))
+        e = _step_residuals(v)
+    out.sort()
+    return np.array(out, dtype=np.float64).reshape(-1, 2)
+
+
+def _step_residuals(v: np.ndarray) -> np.ndarray:
+    """Each change between consecutive block values less the trend of the changes 3 to 5
+    blocks either side (their median: a step among them, or the two parts of one that fell
+    inside a block, does not move it; a quadratic drift's changes are linear, and the median
+    of a symmetric set is the middle)."""
+    d = np.diff(v)
+    p = np.pad(d, 5, mode="reflect", reflect_type="odd")
+    return d - np.median(np.stack([p[5 + o:5 + o + d.size] for o in (-5, -4, -3, 3, 4, 5)]), axis=0)
+
+
+def _drift_window(window, mesh_freq) -> float:
+    if window is not None:
+        return as_positive(window, "window")
+    if mesh_freq is not None:
+        return DRIFT_WINDOW_MESH_PERIODS / as_positive(mesh_freq, "mesh_freq")
+    return DEFAULT_DRIFT_WINDOW_S
+
+
+def remove_drift(x, fs: float, *, method: str = "median", window: float | None = None,
+                 mesh_freq: float | None = None, order: int = 2, fill_max: int = 8,
+                 pulse_period: float | None = None) -> np.ndarray:
+    """Remove slow (thermal) drift from a strain channel.
+
+    Parameters
+    ----------
+    x : array_like, shape (n,)
+        Samples [any unit]; NaN/inf stay NaN.
+    fs : float
+        Sample rate [Hz].
+    method : {"median", "savgol", "highpass"}
+        "median" (default) and "savgol" subtract :func:`drift_baseline`; "highpass" is a
+        zero-phase Butterworth high-pass of corner ``1 / window`` and order ``order``.
+    window : float, optional
+        Baseline window [s] (see :func:`drift_baseline`).
+    mesh_freq : float, optional
+        Mesh frequency [Hz] for the default window.
+    order : int
+        High-pass order (method "highpass" only).
+    fill_max : int
+        Gap bridging of the high-pass (see :func:`filter_signal`).
+    pulse_period : float, optional
+        Period of the pulse train [s] (see :func:`drift_baseline`).
+
+    Returns
+    -------
+    y : ndarray of float64, shape (n,)
+
+    Notes
+    -----
+    The block-median + moving-median baseline costs a fraction of a pass over the data
+    (each block median uses at most 33 strided samples), is robust to the sparse tooth pulses and follows a linear
+    trend exactly; it is the default because a high-pass corner low enough to keep long
+    pulses intact (0.05 Hz at the seed rig's ring gauge) needs very long filter settling.
+    """
+    x = _as_signal(x)
+    fs = as_positive(fs, "fs")
+    method = as_choice(method, "method", ("median", "savgol", "highpass"))
+    w = _drift_window(window, mesh_freq)
+    if method == "highpass":
+        return filter_signal(x, fs, kind="highpass", low=min(1.0 / w, 0.25 * fs), order=order,
+                             fill_max=fill_max)
+    base = drift_baseline(x, fs, method=method, window=w, pulse_period=pulse_period)
+    return x - base
+
+
+# ====================================================================== mains hum
+def _hum_nperseg(n: int, fs: float) -> int:
+    """Welch segment length of the hum search: about 4 s (a power of two), at most ``n``."""
+    return int(min(n, 2 ** math.ceil(math.log2(4.0 * fs))))
+
+
+def _detrend_linear(seg: np.ndarray) -> np.ndarray:
+    """Each row of ``seg`` (segments along the last axis) less its least-squares line.
+
+    The line is the projection on the orthonormal pair ``1 / sqrt(n)`` and the centred,
+    normalised sample index: two matrix-vector products for every segment at once.
+    ``scipy.signal.detrend(seg, type="linear")`` gives the same to rounding (4e-15
+    relative in a 120-s PSD of the hum search; the tests allow 1e-9 and 1e-12 of the
+    segments' scale) by a least-squares solve per segment, with which the whole ``welch``
+    of 120 s took 1.6-2.1x as long (``meshphase bench processing``, throughput table, the
+    two ``welch detrend=`` rows).
+    """
+    n = seg.shape[-1]
+    if n == 0:
+        return seg.copy()
+    if n == 1:
+        return np.zeros_like(seg)
+    t = np.arange(n) - 0.5 * (n - 1)
+    t /= np.sqrt(t @ t)
+    return seg - seg.mean(axis=-1, keepdims=True) - (seg @ t)[..., None] * t
+
+
+def _fill_nonfinite(x: np.ndarray) -> np.ndarray:
+    bad = ~np.isfinite(x)
+    if not bad.any():
+        return x
+    good = np.flatnonzero(~bad)
+    if good.size == 0:
+        return np.zeros_like(x)
+    out = x.copy()
+    idx = np.flatnonzero(bad)
+    out[idx] = np.interp(idx, good, x[good])
+    return out
+
+
+def detect_hum(x, fs: float, *, mains: str | float = "auto", n_harmonics: int = 5,
+               threshold_db: float = 10.0, max_seconds: float = 120.0,
+               exclude: Sequence[float] = ()) -> HumReport:
+    """Find mains hum lines (50/60 Hz and harmonics) standing above the noise floor.
+
+    Parameters
+    ----------
+    x : array_like, shape (n,)
+        Samples [any unit]; non-finite samples are bridged by interpolation for the
+        spectrum.
+    fs : float
+        Sample rate [Hz].
+    mains : {"auto", 50, 60}
+        Mains family to look for; "auto" examines both and keeps the stronger.
+    n_harmonics : int
+        Harmonics examined (1 = fundamental only), capped at 0.45 fs.
+    threshold_db : float
+        A line is hum when its Welch PSD peak (within +-0.5 Hz) exceeds the median PSD of
+        its neighbourhood (1.5-6 Hz away) by this much [dB].
+    max_seconds : float
+        Only the first ``max_seconds`` of ``x`` are analysed [s] (hum is stationary; this
+        bounds the cost on long recordings).
+    exclude : sequence of float
+        Frequencies [Hz] not to treat as hum (e.g. known mesh harmonics); candidates within
+        1 Hz of one are skipped.
+
+    Returns
+    -------
+    HumReport
+
+    Notes
+    -----
+    Welch PSD with segments of about 4 s (0.25 Hz resolution) and linear detrending. A mesh
+    harmonic that happens to sit on a mains line is indistinguishable from hum by this test:
+    pass it in ``exclude``.
+    """
+    x = _as_signal(x)
+    fs = as_positive(fs, "fs")
+    if isinstance(mains, str):
+        as_choice(mains, "mains", ("auto",))
+        families = (50.0, 60.0)
+    else:
+        m = as_float(mains, "mains")
+        if m not in (50.0, 60.0):
+            raise ValueError(f"mains must be 'auto', 50 or 60 [Hz], got {mains!r}")
+        families = (m,)
+    n_harmonics = as_positive_int(n_harmonics, "n_harmonics")
+    threshold_db = as_float(threshold_db, "threshold_db")
+    max_seconds = as_positive(max_seconds, "max_seconds")
+    excl = np.asarray([as_float(f, "exclude") for f in exclude], dtype=np.float64)
+
+    cands = {f0: np.array([k * f0 for k in range(1, n_harmonics + 1)
+                           if k * f0 < MAX_CORNER_FRACTION * fs]) for f0 in families}
+    all_c = np.unique(np.concatenate(list(cands.values()))) if cands else np.empty(0)
+    n_use = min(x.size, int(max_seconds * fs))
+    xs = x[:n_use]
+    n_finite = int(np.count_nonzero(np.isfinite(xs)))
+    if n_finite < 2.0 * fs or all_c.size == 0:
+        return HumReport(None, np.empty(0), all_c, np.full(all_c.size, np.nan), threshold_db,
+                         checked=False)
+    xs = _fill_nonfinite(xs)
+    # the test is a ratio of PSD values: scaled to a largest magnitude of 1, samples of any
+    # size (1e300, subnormal) give it without overflow or underflow in the squares
+    peak_abs = float(np.max(np.abs(xs)))
+    if peak_abs > 0.0:
+        xs = xs / peak_abs
+    nper = _hum_nperseg(xs.size, fs)
+    f, p = welch(xs, fs, nper, detrend=_detrend_linear)
+    df = f[1] - f[0]
+
+    def excess(fc: float) -> float:
+        if excl.size and np.min(np.abs(excl - fc)) < 1.0:
+            return float("nan")
+        near = np.abs(f - fc) <= max(0.5, 0.51 * df)
+        ring = (np.abs(f - fc) >= max(1.5, 2 * df)) & (np.abs(f - fc) <= max(6.0, 8 * df))
+        if not near.any() or ring.sum() < 3:
+            return float("nan")
+        floor = np.median(p[ring])
+        peak = np.max(p[near])
+        if floor <= 0:
+            return float("inf") if peak > 0 else float("nan")
+        return float(10.0 * np.log10(peak / floor))
+
+    ex = {fc: excess(fc) for fc in all_c}
+    best, best_key = None, None
+    for f0, c in cands.items():
+        e = np.array([ex[fc] for fc in c])
+        present = np.nan_to_num(e, nan=-np.inf) >= threshold_db
+        if not present.any():
+            continue
+        key = (bool(present[0]), int(present.sum()), float(np.nansum(np.where(present, e, 0.0))))
+        if best_key is None or key > best_key:
+            best, best_key = f0, key
+    freqs = np.empty(0)
+    if best is not None:
+        c = cands[best]
+        e = np.array([ex[fc] for fc in c])
+        freqs = c[np.nan_to_num(e, nan=-np.inf) >= threshold_db]
+    return HumReport(best, freqs, all_c, np.array([ex[fc] for fc in all_c]), threshold_db)
+
+
+def notch_hum(x, fs: float, *, freqs: Sequence[float] | None = None, mains: str | float = "auto",
+              q: float = 30.0, threshold_db: float = 10.0, exclude: Sequence[float] = (),
+              fill_max: int = 8) -> np.ndarray:
+    """Zero-phase notches at mains hum lines.
+
+    Parameters
+    ----------
+    x : array_like, shape (n,)
+        Samples [any unit]; NaN/inf stay NaN.
+    fs : float
+        Sample rate [Hz].
+    freqs : sequence of float, optional
+        Lines to notch [Hz]; default: those :func:`detect_hum` finds (nothing is filtered
+        when no hum is present; an empty sequence also filters nothing).
+    mains, threshold_db, exclude
+        Passed to :func:`detect_hum` when ``freqs`` is None.
+    q : float
+        Quality factor of each notch, f / bandwidth(-3 dB) [-].
+    fill_max : int
+        Gap bridging (see :func:`filter_signal`).
+
+    Returns
+    -------
+    y : ndarray of float64, shape (n,)
+
+    Notes
+    -----
+    Each line is a :func:`scipy.signal.iirnotch` biquad (:func:`meshphase.signal.sos_design.notch_sos`);
+    all are cascaded as second-order sections and applied forwards and backwards
+    (:func:`meshphase.signal.iir.sosfiltfilt`, scipy.signal.sosfiltfilt's arithmetic).
+    """
+    x = _as_signal(x)
+    fs = as_positive(fs, "fs")
+    q = as_positive(q, "q")
+    if freqs is None:
+        rep = detect_hum(x, fs, mains=mains, threshold_db=threshold_db, exclude=exclude)
+        if not rep.checked and x.size:
+            warnings.warn(f"notch_hum: only {x.size / fs:.3g} s of data, too short to detect mains "
+                          "hum; no notch applied (pass freqs to force one)", ProcessingWarning,
+                          stacklevel=2)
+        fl = rep.freqs
+    else:
+        fl = np.asarray([_check_freq(f, "freqs", fs) for f in freqs], dtype=np.float64)
+    if fl.size == 0 or x.size == 0:
+        return x.copy()
+    sos = design_notch(fl, fs, q)
+    padlen = iir.padlen_for(sos)
+    fill_max = int(as_nonnegative(fill_max, "fill_max"))
+    return _apply_finite(x, lambda s: iir.sosfiltfilt(sos, s, padlen=padlen),
+                         min_len=padlen + 1, fill_max=fill_max, what="notch_hum")
+
+
+def design_notch(freqs, fs: float, q: float = 30.0) -> np.ndarray:
+    """Second-order sections of :func:`notch_hum`'s filter: one :func:`scipy.signal.iirnotch`
+    biquad per line in ``freqs`` [Hz] (quality factor ``q`` [-]) at sample rate ``fs`` [Hz],
+    cascaded; shape (len(freqs), 6)."""
+    return notch_sos(freqs, q, fs)
+
+
+# ====================================================================== quality
+def estimate_noise(x) -> float:
+    """Robust white-noise standard deviation of ``x`` [units of x].
+
+    ``1.4826 * MAD(diff(x)) / sqrt(2)``: the first difference removes the slow pulse and
+    drift content, the MAD ignores the sparse large differences at pulse edges. It
+    overestimates the noise when pulses are only a few samples wide (their edges then fill a
+    large share of the differences). NaN when fewer than 2 finite neighbours exist.
+    """
+    x = _as_signal(x)
+    with np.errstate(invalid="ignore"):                # inf - inf: dropped below
+        d = np.diff(x)
+    return _noise_from_diffs(_subsample(d[np.isfinite(d)]))
+
+
+def _noise_from_diffs(d: np.ndarray) -> float:
+    """:func:`estimate_noise` from its (subsampled, finite) first differences."""
+    if d.size == 0:
+        return float("nan")
+    return float(sigma_of_differences(d))
+
+
+def estimate_snr(x, *, quantile: float = 0.999) -> tuple[float, float, float]:
+    """Peak-power SNR estimate of a pulse train.
+
+    SNR = 10 log10(A^2 / sigma^2) [dB], the definition of the onset accuracy tests (peak
+    pulse power over noise variance): ``sigma`` from :func:`estimate_noise`, ``A`` the
+    median pulse peak above the median level. The peaks are the maxima of the runs above
+    half the ``quantile`` level of ``x - median(x)``, taken on a copy smoothed over a
+    quarter of the median run length (so that the noise on top of a peak does not bias
+    it upwards); the median over runs is insensitive to the planets' different loads.
+    Uses the first 2**20 samples; needs drift-free data (condition first).
+
+    Returns
+    -------
+    (snr_db, signal_peak, noise_rms) : tuple of float
+        [dB], [units of x], [units of x]; NaN when not computable.
+    """
+    x = _as_signal(x)
+    q = as_float(quantile, "quantile")
+    if not 0.5 < q < 1.0:
+        raise ValueError(f"quantile must be in (0.5, 1), got {q!r}")
+    return _snr_from(estimate_noise(x), x[:_SUBSAMPLE], q)
+
+
+def _snr_from(sigma: float, xs: np.ndarray, q: float) -> tuple[float, float, float]:
+    """:func:`estimate_snr` from the noise estimate and the first ``_SUBSAMPLE`` samples."""
+    xs = xs[np.isfinite(xs)]
+    a = _snr_peak(xs, q) if xs.size >= 2 else None
+    return _snr_combine(sigma, a)
+
+
+def _snr_peak(xs: np.ndarray, q: float) -> float:
+    """The pulse peak amplitude ``A`` of :func:`estimate_snr` from the finite samples ``xs``
+    of the first ``_SUBSAMPLE`` samples (at least 2)."""
+    z = xs - median_of_finite(xs)
+    top = float(np.quantile(z, q))
+    a = top
+    runs = find_runs(z > 0.5 * top) if top > 0 else np.empty((0, 2), dtype=np.int64)
+    if len(runs):
+        # noise chops a pulse's run at its edges: merge runs closer than half a typical
+        # pulse run, then drop the slivers
+        typ = float(np.quantile(runs[:, 1] - runs[:, 0], 0.9))
+        new = np.ones(len(runs), dtype=bool)
+        new[1:] = (runs[1:, 0] - runs[:-1, 1]) > 0.5 * typ
+        runs = np.stack([runs[new, 0], np.maximum.reduceat(runs[:, 1], np.flatnonzero(new))], 1)
+        runs = runs[(runs[:, 1] - runs[:, 0]) >= max(1.0, 0.25 * typ)]
+    if len(runs):
+        m = max(1, int(np.median(runs[:, 1] - runs[:, 0])) // 4)
+        zs = ndimage.uniform_filter1d(z, m, mode="nearest") if m > 1 else z
+        a = float(np.median(_run_max(zs, runs)))
+    return a
+
+
+def _snr_combine(sigma: float, a: float | None) -> tuple[float, float, float]:
+    """(snr_db, signal_peak, noise_rms) of :func:`estimate_snr` from the noise ``sigma``
+    and the peak ``a`` (None: fewer than 2 finite samples in the first ``_SUBSAMPLE``)."""
+    if a is None or not np.isfinite(sigma):
+        return float("nan"), float("nan"), sigma
+    if sigma == 0.0:
+        return (float("inf") if a > 0 else float("nan")), a, sigma
+    if a <= 0:
+        return float("nan"), a, sigma
+    return float(20.0 * np.log10(a / sigma)), a, sigma
+
+
+def _run_max(z: np.ndarray, runs: np.ndarray) -> np.ndarray:
+    """Maximum of ``z`` over each ``[start, stop)`` run (runs sorted, disjoint)."""
+    edges = runs.ravel()
+    if edges[-1] == z.size:
+        edges = edges[:-1]
+    return np.maximum.reduceat(z, edges)[::2]
+
+
+def gap_intervals(quality_or_mask, fs: float | None = None, t0: float | None = None) -> np.ndarray:
+    """Gap intervals of a channel in seconds: non-finite gaps and dropout runs together.
+
+    Parameters
+    ----------
+    quality_or_mask : ChannelQuality, or array_like of shape (n,)
+        A channel's quality report (its ``gap_runs`` and ``dropout_runs``); or a boolean
+        mask, True for every sample lost; or the samples of a conditioned channel (float),
+        whose non-finite samples are the gaps (dropouts are NaN there after
+        :func:`condition_recording`).
+    fs : float, optional
+        Sample rate [Hz]; required for a mask or samples, taken from a report (and checked
+        against it when given).
+    t0 : float, optional
+        Time of sample 0 [s]; default 0 for a mask or samples, the report's own ``t0`` for a
+        report (checked against it when given).
+
+    Returns
+    -------
+    ndarray of float64, shape (k, 2)
+        ``[t_start, t_stop)`` per gap, sorted, disjoint, merged when touching:
+        ``t_start = t0 + i_start / fs`` is the time of the first lost sample, ``t_stop =
+        t0 + i_stop / fs`` that of the first good sample after it (the end of the
+        recording for a trailing gap). A reference time ``t`` lies in a gap when
+        ``t_start <= t < t_stop``; shape (0, 2) when there is none.
+    """
+    if isinstance(quality_or_mask, ChannelQuality):
+        q = quality_or_mask
+        if fs is not None and as_positive(fs, "fs") != q.fs:
+            raise ValueError(f"fs {fs!r} Hz contradicts the quality report's {q.fs!r} Hz")
+        if t0 is not None and as_float(t0, "t0") != q.t0:
+            raise ValueError(f"t0 {t0!r} s contradicts the quality report's {q.t0!r} s")
+        return q.gap_intervals()
+    if isinstance(quality_or_mask, (str, bytes, dict)) or quality_or_mask is None:
+        raise TypeError("quality_or_mask must be a ChannelQuality, a boolean mask or the "
+                        f"samples of a channel, got {type(quality_or_mask).__name__}")
+    arr = np.asarray(quality_or_mask)
+    if arr.dtype.kind not in "bf":
+        raise TypeError(f"quality_or_mask must be a ChannelQuality, a boolean mask or float "
+                        f"samples, got an array of dtype {arr.dtype}")
+    if arr.ndim != 1:
+        raise ValueError(f"quality_or_mask must be 1-D (one channel), got shape {arr.shape}")
+    if fs is None:
+        raise ValueError("fs [Hz] is required with a mask or samples, got None")
+    fs = as_positive(fs, "fs")
+    t0 = 0.0 if t0 is None else as_float(t0, "t0")
+    runs = find_runs(arr if arr.dtype.kind == "b" else ~np.isfinite(arr))
+    return t0 + runs.astype(np.float64) / fs
+
+
+def assess_quality(x, fs: float, *, t0: float = 0.0, name: str = "", clip_min_run: int = 3,
+                   clip_rtol: float = 0.0, snr: bool = True, warn: bool = True,
+                   snr_warn_db: float = 6.0, detect_flat: bool = True,
+                   dropout_min_run: int = DROPOUT_MIN_RUN,
+                   false_alarm: float = FALSE_ALARM) -> ChannelQuality:
+    """Quality report of one channel: gaps, NaN runs, dropouts, clipped runs, SNR.
+
+    Parameters
+    ----------
+    x : array_like, shape (n,)
+        Samples [any unit]; assess clipping on raw (unfiltered) data.
+    fs : float
+        Sample rate [Hz].
+    t0 : float
+        Time of the first sample [s].
+    name : str
+        Channel name for messages.
+    clip_min_run, clip_rtol
+        See :func:`meshphase.signal.quality.clipped_runs`; ``clip_min_run`` is also the shortest
+        clipped plateau at other levels [samples].
+    snr : bool
+        Estimate the SNR (:func:`estimate_snr`); meaningful on drift-free data.
+    warn : bool
+        Issue a :class:`~meshphase.errors.DataQualityWarning` when gaps, dropouts or clipped
+        runs are found, or the SNR is below ``snr_warn_db``.
+    snr_warn_db : float
+        SNR below which to warn [dB].
+    detect_flat : bool
+        Look for dropout runs and clipped plateaus at any level
+        (:func:`meshphase.signal.quality.flat_runs`); False: non-finite gaps and rail clipping only.
+        Meant for analogue (strain) channels, not pulse trains.
+    dropout_min_run : int
+        Floor of the dropout run-length threshold [samples], >= 2 (the threshold itself
+        comes from the channel's statistics).
+    false_alarm : float
+        Expected number of chance runs over the channel at the threshold [-], in (0, 1).
+
+    Returns
+    -------
+    ChannelQuality
+    """
+    x = _as_signal(x)
+    fs = as_positive(fs, "fs")
+    t0 = as_float(t0, "t0")
+    if not isinstance(name, str):
+        raise TypeError(f"name must be a string, got {name!r}")
+    clip_min_run = as_positive_int(clip_min_run, "clip_min_run")
+    if clip_min_run < 2:
+        raise ValueError(f"clip_min_run must be >= 2, got {clip_min_run!r}")
+    clip_rtol = as_nonnegative(clip_rtol, "clip_rtol")
+    if not isinstance(detect_flat, (bool, np.bool_)):
+        raise TypeError(f"detect_flat must be a bool, got {type(detect_flat).__name__} {detect_flat!r}")
+    dropout_min_run = as_positive_int(dropout_min_run, "dropout_min_run")
+    if dropout_min_run < 2:
+        raise ValueError(f"dropout_min_run must be >= 2, got {dropout_min_run!r}")
+    false_alarm = as_positive(false_alarm, "false_alarm")
+    if not false_alarm < 1.0:
+        raise ValueError(f"false_alarm must be in (0, 1), got {false_alarm!r}")
+    if x.size == 0:
+        e = np.empty((0, 2), dtype=np.int64)
+        return ChannelQuality(name, fs, t0, 0, e, e.copy(), e.copy())
+    scan = ChannelScan(x.size, flat=bool(detect_flat), rail_min_run=clip_min_run,
+                       rail_rtol=clip_rtol, false_alarm=false_alarm, min_run=dropout_min_run,
+                       clip_min_run=clip_min_run)
+    scan.feed1(x)
+    scan.end1()
+    scan.feed2(x)
+    rep = quality_from_scan(scan.result(), name, fs, t0)
+    if snr:
+        snr_db, peak, noise = estimate_snr(x)
+        rep = replace(rep, snr_db=snr_db, signal_peak=peak, noise_rms=noise)
+    if warn:
+        _warn_quality(rep, snr_warn_db)
+    return rep
+
+
+def _warn_quality(rep: ChannelQuality, snr_warn_db: float) -> None:
+    problems = []
+    if len(rep.gap_runs):
+        problems.append(f"{len(rep.gap_runs)} gap run(s) of non-finite samples "
+                        f"({rep.n_gap_samples} samples)")
+    if len(rep.dropout_runs):
+        problems.append(f"{len(rep.dropout_runs)} dropout run(s) of zeros or a held value "
+                        f"({rep.n_dropout_samples} samples, treated as gaps)")
+    if len(rep.clipped_runs):
+        problems.append(f"{len(rep.clipped_runs)} clipped run(s) ({rep.n_clipped_samples} samples)")
+    if np.isfinite(rep.snr_db) and rep.snr_db < snr_warn_db:
+        problems.append(f"low SNR {rep.snr_db:.1f} dB (< {snr_warn_db:g} dB)")
+    if problems:
+        warnings.warn(f"channel {rep.name!r}: " + "; ".join(problems), DataQualityWarning,
+                      stacklevel=3)
+
+
+# ====================================================================== Recording level
+def _default_channels(rec: Recording, channels) -> list[int]:
+    if channels is None:
+        return [i for i, c in enumerate(rec.channels) if c.kind not in ("tacho", "encoder")]
+    if isinstance(channels, str):
+        channels = [channels]
+    return [rec.index(c) for c in channels]
+
+
+def _check_rec(rec) -> None:
+    if not isinstance(rec, Recording):
+        raise TypeError(f"rec must be a Recording, got {type(rec).__name__}")
+
+
+def _map_channels(rec: Recording, channels, func) -> tuple[Recording, list[str]]:
+    _check_rec(rec)
+    idx = _default_channels(rec, channels)
+    out = rec.data.copy()
+    for i in idx:
+        out[:, i] = func(rec.data[:, i])
+    return rec.replace_data(out), [rec.channels[i].name for i in idx]
+
+
+def filter_recording(rec: Recording, *, channels: Sequence[str] | str | None = None,
+                     kind: str = "bandpass", low: float | None = None, high: float | None = None,
+                     order: int = 4, mesh_freq: float | None = None) -> Recording:
+    """:func:`filter_signal` on channels of a recording (default: all but tachos and encoders).
+
+    Returns a new Recording (same specs) with one ``"condition.filter"`` history entry
+    naming the corners actually used [Hz].
+    """
+    _check_rec(rec)
+    kind = as_choice(kind, "kind", ("bandpass", "highpass", "lowpass"))
+    kind, low, high = _resolve_band(rec.fs, kind, low, high, mesh_freq)
+    out, names = _map_channels(rec, channels, lambda c: filter_signal(
+        c, rec.fs, kind=kind, low=low, high=high, order=order))
+    return out.with_history("condition.filter", kind=kind, low_hz=low, high_hz=high,
+                            order=order, zero_phase=True, mesh_freq_hz=mesh_freq, channels=names)
+
+
+def remove_drift_recording(rec: Recording, *, channels: Sequence[str] | str | None = None,
+                           method: str = "median", window: float | None = None,
+                           mesh_freq: float | None = None,
+                           pulse_period: float | None = None) -> Recording:
+    """:func:`remove_drift` on channels of a recording (default: all but tachos and encoders).
+
+    Returns a new Recording with one ``"condition.remove_drift"`` history entry.
+    """
+    _check_rec(rec)
+    method = as_choice(method, "method", ("median", "savgol", "highpass"))
+    w = _drift_window(window, mesh_freq)
+    out, names = _map_channels(rec, channels, lambda c: remove_drift(c, rec.fs, method=method,
+                                                                     window=w,
+                                                                     pulse_period=pulse_period))
+    return out.with_history("condition.remove_drift", method=method, window_s=w, channels=names,
+                            pulse_period_s=pulse_period)
+
+
+def _notch_rec(rec: Recording, channels, freqs, mains, q, exclude):
+    _check_rec(rec)
+    q = as_positive(q, "q")
+    idx = _default_channels(rec, channels)
+    data = rec.data                     # copied once, when the first channel is notched
+    reports: dict[str, HumReport | None] = {}
+    for i in idx:
+        name = rec.channels[i].name
+        if freqs is None:
+            rep = detect_hum(rec.data[:, i], rec.fs, mains=mains, exclude=exclude)
+            fl = rep.freqs
+        else:
+            rep = None
+            fl = np.asarray([_check_freq(f, "freqs", rec.fs) for f in freqs], dtype=np.float64)
+        if fl.size:
+            if data is rec.data:
+                data = rec.data.copy()
+            data[:, i] = notch_hum(rec.data[:, i], rec.fs, freqs=fl, q=q)
+        reports[name] = rep
+    lines = {nm: ([float(f) for f in r.freqs] if r is not None else [float(f) for f in freqs])
+             for nm, r in reports.items()}
+    out = rec.replace_data(data).with_history("condition.notch_hum", q=q, lines_hz=lines)
+    return out, reports
+
+
+def notch_hum_recording(rec: Recording, *, channels: Sequence[str] | str | None = None,
+                        freqs: Sequence[float] | None = None, mains: str | float = "auto",
+                        q: float = 30.0, exclude: Sequence[float] = ()) -> Recording:
+    """:func:`notch_hum` on channels of a recording (default: all but tachos and encoders).
+
+    Hum is detected per channel when ``freqs`` is None; the history entry
+    ``"condition.notch_hum"`` lists the lines notched on each channel [Hz].
+    """
+    return _notch_rec(rec, channels, freqs, mains, q, exclude)[0]
+
+
+def assess_quality_recording(rec: Recording, *, channels: Sequence[str] | str | None = None,
+                             warn: bool = True, **kwargs) -> dict[str, ChannelQuality]:
+    """:func:`assess_quality` per channel (default: all but tachos and encoders), keyed by name."""
+    if not isinstance(rec, Recording):
+        raise TypeError(f"rec must be a Recording, got {type(rec).__name__}")
+    return {rec.channels[i].name: assess_quality(rec.data[:, i], rec.fs, t0=rec.t0,
+                                                 name=rec.channels[i].name, warn=warn, **kwargs)
+            for i in _default_channels(rec, channels)}
+
+
+@dataclass
+class Conditioned:
+    """Result of :func:`condition_recording`.
+
+    Attributes
+    ----------
+    recording : Recording
+        The conditioned recording (history extended by one entry per step).
+    quality : dict of str -> ChannelQuality
+        Per conditioned channel: gaps, dropouts and clipping from the raw data, SNR after
+        hum and drift removal (before any low-pass, which would hide the white noise), hum
+        found, filter settling time.
+    """
+
+    recording: Recording
+    quality: dict = field(default_factory=dict)
+
+
+def condition_recording(rec: Recording, *, channels: Sequence[str] | str | None = None,
+                        mesh_freq: float | None = None, hum: bool = True,
+                        drift: str | None = "median", drift_window: float | None = None,
+                        lowpass: float | str | None = "auto", highpass: float | None = None,
+                        order: int = 4, warn: bool = True, dropouts: str = "nan",
+                        pulse_period: float | None = None) -> Conditioned:
+    """The default conditioning chain: quality -> (dropouts to NaN) -> hum notch -> drift
+    removal -> band limit.
+
+    Parameters
+    ----------
+    rec : Recording
+    channels : names, optional
+        Channels to condition (default: all but tachos and encoders); the others pass unchanged.
+    mesh_freq : float, optional
+        Mesh frequency of the gauged gears [Hz] (defaults of the filters, see the module
+        docstring). Sun and ring gauges mesh at different frequencies (ring ~ Z_r w_c vs
+        sun ~ Z_s |w_s - w_c|): condition each gear's channels with its own ``mesh_freq``
+        (``channels=``) for the best drift window and low-pass.
+    hum : bool
+        Detect mains hum per channel and notch the lines found.
+    drift : {"median", "savgol", "highpass"} or None
+        Drift removal method (None: none).
+    drift_window : float, optional
+        Drift window [s].
+    lowpass : float, "auto" or None
+        Low-pass corner [Hz]; "auto": ``4 f_m`` when ``mesh_freq`` is given and below
+        0.45 fs, else none.
+    highpass : float, optional
+        Additional zero-phase high-pass corner [Hz] (None: none; the drift removal
+        usually suffices).
+    order : int
+        Butterworth order of the band-limiting filters.
+    warn : bool
+        Warn (DataQualityWarning) about gaps, dropouts, clipping and low SNR.
+    dropouts : {"nan", "keep"}
+        "nan": the dropout runs found on the raw data become NaN before any filtering (one
+        ``"condition.mask_dropouts"`` history entry when there are any), so that they are
+        gaps for every later stage; "keep": leave the samples (the report still lists them;
+        pass ``quality=`` to :func:`meshphase.onsets.detect_onsets_recording`).
+    pulse_period : float, optional
+        Period of the channels' pulse train [s] (one relative revolution of the gauged gear):
+        the drift baseline then averages whole periods (:func:`drift_baseline`).
+
+    Returns
+    -------
+    Conditioned
+    """
+    if not isinstance(rec, Recording):
+        raise TypeError(f"rec must be a Recording, got {type(rec).__name__}")
+    if drift is not None:
+        as_choice(drift, "drift", ("median", "savgol", "highpass"))
+    dropouts = as_choice(dropouts, "dropouts", ("nan", "keep"))
+    quality = assess_quality_recording(rec, channels=channels, warn=False, snr=False)
+    names = list(quality)
+    if not names:
+        return Conditioned(rec.with_history("condition", channels=[]), quality)
+    out = rec
+    masked = {nm: quality[nm].n_dropout_samples for nm in names if len(quality[nm].dropout_runs)}
+    if dropouts == "nan" and masked:
+        data = rec.data.copy()
+        for nm in masked:
+            runs = quality[nm].dropout_runs
+            marks = np.zeros(rec.n_samples + 1, dtype=np.int64)
+            np.add.at(marks, runs[:, 0], 1)
+            np.add.at(marks, runs[:, 1], -1)
+            data[np.cumsum(marks[:-1]) > 0, rec.index(nm)] = np.nan
+        out = rec.replace_data(data).with_history("condition.mask_dropouts", samples=masked)
+    settle = 0.0
+    if hum:
+        out, reports = _notch_rec(out, names, None, "auto", 30.0, ())
+        for nm, r in reports.items():
+            quality[nm] = replace(quality[nm], hum=r)
+            if r is not None and r.present:
+                # a notch of quality q rings for ~q / (pi f) seconds
+                settle = max(settle, 2.0 * 30.0 / (math.pi * float(np.min(r.freqs))))
+    if drift is not None:
+        out = remove_drift_recording(out, channels=names, method=drift, window=drift_window,
+                                     pulse_period=pulse_period,
+                                     mesh_freq=mesh_freq)
+        if drift == "highpass":
+            settle = max(settle, 2.0 * _drift_window(drift_window, mesh_freq))
+    # SNR on the drift-free, not yet band-limited data: its noise is still the white
+    # per-sample noise the peak-power SNR is defined with (a low-pass would hide it)
+    for nm in names:
+        snr_db, peak, noise = estimate_snr(out.channel(nm))
+        quality[nm] = replace(quality[nm], snr_db=snr_db, signal_peak=peak, noise_rms=noise)
+    low = None if highpass is None else _check_freq(highpass, "highpass", rec.fs)
+    if isinstance(lowpass, str):
+        as_choice(lowpass, "lowpass", ("auto",))
+        high = default_band(rec.fs, mesh_freq)[1] if mesh_freq is not None else None
+    elif lowpass is None:
+        high = None
+    else:
+        high = _check_freq(lowpass, "lowpass", rec.fs)
+    if low is not None or high is not None:
+        kind = "bandpass" if (low is not None and high is not None) else (
+            "highpass" if low is not None else "lowpass")
+        out = filter_recording(out, channels=names, kind=kind, low=low, high=high, order=order)
+        settle = max(settle, _settle_time(low, high))
+    for nm in names:
+        q = quality[nm] = replace(quality[nm], settle=settle,
+                                  conditioned_gap_runs=find_runs(~np.isfinite(out.channel(nm))))
+        if warn:
+            _warn_quality(q, 6.0)
+    out = out.with_history("condition.quality", settle_s=settle,
+                           quality={nm: quality[nm].history_entry() for nm in names})
+    return Conditioned(out, quality)
