@@ -44,6 +44,16 @@ def test_package_list_names_every_package_folder():
     assert set(st["packages"]) == _folder_packages()
 
 
+def test_py_typed_marker_ships_with_the_package():
+    # PEP 561: an empty marker beside meshphase/__init__.py, listed as package data (the
+    # wheel test below checks the built wheel holds it)
+    import meshphase
+
+    marker = Path(meshphase.__file__).parent / "py.typed"
+    assert marker.is_file() and marker.read_bytes() == b""
+    assert "py.typed" in _pyproject()["tool"]["setuptools"]["package-data"]["meshphase"]
+
+
 def test_installed_import_name_is_meshphase_only(tmp_path):
     # from outside the checkout (pytest puts the repository root on sys.path, where the
     # folders themselves would import): this install gives meshphase, and only meshphase
@@ -83,6 +93,8 @@ def test_wheel_installs_one_top_level_package(tmp_path):
     # data files ship with their package
     assert "meshphase/data_schemas/scene.schema.json" in names
     assert "meshphase/synthetic/generate.py" in names
+    # the PEP 561 marker: type checkers read the package's annotations
+    assert "meshphase/py.typed" in names
 
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=300)
