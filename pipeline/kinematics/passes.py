@@ -3,13 +3,13 @@ how well it is timed.
 
 The onset detector (:mod:`meshphase.onsets`) times every pulse of a gauge channel; the phasing
 (:mod:`meshphase.kinematics.phasing`) wants passes: the usable pulses (:func:`usable_onsets`: clean, or
-flagged only for a gap that conditioning bridged), each at its template's timing centre (a
-fixed angle of the gauged gear, :func:`pass_times`), with a timing bound (:func:`onset_sigma`,
-the Cramer-Rao bound of :func:`meshphase.signal.crb.crb_delay_std` in white noise of the channel's
-RMS, with a resolution floor) that weights the pass in the angle model, and the factor by
-which the bound in the channel's noise spectrum exceeds it (:func:`channel_noise_spectrum`,
-:func:`meshphase.signal.crb.crb_delay_std_psd`): the timing floor the phasing's reliability is
-judged against.
+flagged only for a gap that conditioning bridged), each at its timing centre (a fixed angle
+of the gauged gear, :func:`pass_times`), with a timing bound (:func:`onset_sigma`, in white
+noise of the channel's RMS) that weights the pass in the angle model, and the factor by
+which the bound in the channel's noise spectrum exceeds it (:func:`channel_noise_spectrum`):
+the timing floor the phasing's reliability is judged against. Centres and bounds are the
+detector's (the timing model its onsets carry, :mod:`meshphase.onsets.timing`): this module
+works with any onset detector.
 :func:`gauge_passes` does that for every gauge of a recording; :func:`gap_intervals_of`
 gives the gaps the phasing must not bridge.
 """
@@ -21,20 +21,16 @@ import warnings
 
 import numpy as np
 
-from meshphase.signal.crb import crb_delay_std, crb_delay_std_psd
 from meshphase.errors import DataQualityWarning, ProcessingWarning
 from meshphase.signal.noise_spectrum import TRANSIENT_RATIO, NoiseSpectrum, pulse_residual_psd
-from meshphase.onsets import FLAG_GAP, FLAG_TEMPLATE, Onsets, Template
+from meshphase.onsets import FLAG_GAP, FLAG_TEMPLATE, Onsets
 from meshphase.kinematics.phasing import GaugePasses
 from meshphase.recording import GAUGE_KINDS
 from meshphase.validate import as_positive
 
-__all__ = ["ONSET_RESOLUTION", "timing_centre", "centre_shifts", "pass_times", "usable_onsets",
+__all__ = ["pass_times", "usable_onsets",
            "conditioned_gap_runs", "gap_intervals_of", "onset_sigma", "channel_noise_spectrum",
            "NOISE_LIKE_RATIO", "gauge_passes"]
-
-#: finest onset timing claimed on noise-free data, as a fraction of the pulse's FWHM [-]
-ONSET_RESOLUTION = 1e-4
 
 #: a residual (what the pulses leave, :func:`channel_noise_spectrum`) whose RMS exceeds this
 #: many times the channel's per-sample noise RMS is taken for pulse misfit, not noise [-]: a
@@ -51,96 +47,12 @@ def _as_onsets(on) -> Onsets:
     return on
 
 
-def timing_centre(template: Template) -> float:
-    """The point of a template the matched filter follows when the pulse stretches
-    [template samples]: the centroid of its squared slope, sum(u h'(u)^2) / sum(h'(u)^2).
-
-    A tooth-root pulse lasts a fixed angle, so at another speed it is the template stretched
-    in time by s about the engagement; the correlation peak then moves by (s - 1) times that
-    centroid's distance from the engagement (d lag / d s = int u h'^2 / int h'^2, implicit
-    differentiation of the correlation maximum). The onset the detector reports is that
-    centroid plus a template-fixed (time-fixed) offset, so only the centroid sits at a fixed
-    angle of the gauged gear under speed ripple.
-
-    Parameters
-    ----------
-    template : meshphase.onsets.Template
-        With at least two samples.
-
-    Returns
-    -------
-    float
-        The centre [template samples]; the template's peak when it has no slope.
-    """
-    if not isinstance(template, Template):
-        raise TypeError(f"template must be a Template (meshphase.onsets), got {type(template).__name__}")
-    h = np.asarray(template.samples, dtype=float)
-    if h.ndim != 1 or h.size < 2:
-        raise ValueError(f"template.samples must be 1-D with at least 2 samples, got shape {h.shape}")
-    d = np.gradient(h)
-    e = d * d
-    tot = float(e.sum())
-    if not tot > 0:
-        return float(template.peak)
-    return float(np.sum(np.arange(h.size) * e) / tot)
-
-
 def pass_times(onsets: Onsets) -> np.ndarray:
-    """Onset times moved to their template's timing centre [s] (:func:`timing_centre`): a
-    fixed angle of the gauged gear whatever the local speed, near the middle of the tooth's
-    contact, i.e. the engagement instant, on every gauge alike.
-
-    The move is measured once, on the template learnt from the most pulses, and scaled to
-    every other template by their FWHM ratio (:func:`centre_shifts`). Onsets without
-    templates, and a shift that would break the increasing order, keep their times.
-    """
-    on = _as_onsets(onsets)
-    if not len(on) or not on.templates:
-        return on.times
-    shift = centre_shifts(on.templates)
-    tid = np.clip(on.template_id, 0, shift.size - 1)
-    out = on.times + np.where(on.template_id >= 0, shift[tid], 0.0)
-    # keep the order strictly increasing (templates may differ between blocks)
-    return out if np.all(np.diff(out) > 0) else on.times
-
-
-def centre_shifts(templates) -> np.ndarray:
-    """Per template: from its onset feature to its timing centre [s] (what
-    :func:`pass_times` adds to an onset timed with it).
-
-    The centre is a centroid weighted by the squared slope and by the distance from the
-    centre, so a template's own noise moves it many times more than it moves the onsets
-    timed with it: on the independent rig's ring gauge (tests/independent) two templates
-    learnt from some fifty pulses each put it several times farther apart than their onsets
-    of the same pulses, and every pass after the relearn moved by more than the timing
-    floor (a step the angle model read as scatter). So the centre is taken from one template, the one
-    learnt from the most pulses (its noise is then one constant offset of the gauge's
-    passes, which the angle model's per-gauge constant takes up), and carried to the others
-    by their FWHM ratio: a pulse lasting a fixed angle stretches as a whole with the speed,
-    and a template is re-learnt when the speed changes.
-
-    Parameters
-    ----------
-    templates : sequence of meshphase.onsets.Template
-
-    Returns
-    -------
-    ndarray, shape (len(templates),)
-        [s]; a template whose FWHM is not a positive finite number keeps its own centre.
-    """
-    tps = list(templates)
-    for tp in tps:
-        if not isinstance(tp, Template):
-            raise TypeError(f"templates must hold Template objects, got {type(tp).__name__}")
-    own = np.array([(timing_centre(tp) - tp.ref) / tp.rate for tp in tps], dtype=float)
-    if own.size < 2:
-        return own
-    fw = np.array([tp.fwhm for tp in tps], dtype=float)
-    ok = np.isfinite(fw) & (fw > 0)
-    if not ok.any():
-        return own
-    k = max(np.flatnonzero(ok), key=lambda i: tps[i].n_pulses)
-    return np.where(ok, own[k] * fw / fw[k], own)
+    """Onset times moved to their timing centres [s] (:attr:`meshphase.onsets.Onsets.centres`,
+    from the detector's timing model): a fixed angle of the gauged gear whatever the local
+    speed, on every gauge alike. Shifts that would break the increasing order are not
+    applied."""
+    return _as_onsets(onsets).centres
 
 
 def usable_onsets(onsets: Onsets, gap_runs, fs: float, t0: float) -> np.ndarray:
@@ -220,23 +132,10 @@ def gap_intervals_of(quality: dict) -> np.ndarray:
 
 
 def onset_sigma(onsets: Onsets, noise_rms: float, *, noise: NoiseSpectrum | None = None) -> np.ndarray:
-    """Per-onset timing uncertainty [s]: the Cramer-Rao bound for the learnt template at the
-    fitted amplitude, in the conditioned channel's noise.
-
-    In white noise of the channel's per-sample RMS (:func:`meshphase.signal.crb.crb_delay_std`,
-    Kay 1993 eq. 3.14); the onset tests hold the detector within ~1.1x of it. With its noise
-    spectrum (``noise``, :func:`channel_noise_spectrum`) it is the bound in coloured Gaussian
-    noise instead (:func:`meshphase.signal.crb.crb_delay_std_psd`, Kay 1993 sec. 3.11): 1/f noise
-    under slow pulses (the seed rig's 650-sample pulses, 30 % of the noise power 1/f from
-    0.05 Hz) makes it ~4.5x the white bound, and the passes scatter by that much; where it
-    gives no finite bound the white one stands. The two agree for white noise (within the
-    spectrum estimate's error).
-
-    It never claims better than the detector resolves a noise-free pulse: its sub-sample
-    interpolation leaves an error that repeats with the pulse's position on the sample grid,
-    ~1e-4 of the pulse's FWHM (noise-free seed rig at 5120 Hz, FWHM 650 samples: 6.6 us sun,
-    4.1 us ring RMS; Table 1 at 51.2 kHz, FWHM 34 samples: 0.004 sample), so
-    :data:`ONSET_RESOLUTION` times the template's FWHM is a floor.
+    """Per-onset timing uncertainty [s] in the conditioned channel's noise, from the timing
+    model the detector's onsets carry (:meth:`meshphase.onsets.Onsets.sigma`; the matched
+    filter's: :meth:`meshphase.onsets.timing.TemplateTiming.sigma`, the Cramer-Rao bound at
+    the fitted amplitude with a resolution floor).
 
     Parameters
     ----------
@@ -245,50 +144,18 @@ def onset_sigma(onsets: Onsets, noise_rms: float, *, noise: NoiseSpectrum | None
         RMS of the conditioned channel's noise per sample [data units]; not a positive
         finite float (and no ``noise``): the floor alone.
     noise : NoiseSpectrum, optional
-        The channel's noise spectrum [data units^2/Hz].
+        The channel's noise spectrum [data units^2/Hz] (:func:`channel_noise_spectrum`), for
+        a timing model that uses it.
 
     Returns
     -------
     ndarray, shape (n,)
-        [s]; NaN for an onset without a template (and where the bound is not finite).
+        [s]; NaN where the bound is unknown.
     """
     on = _as_onsets(onsets)
     if noise is not None and not isinstance(noise, NoiseSpectrum):
         raise TypeError(f"noise must be a NoiseSpectrum or None, got {type(noise).__name__}")
-    out = np.full(len(on), np.nan)
-    if not len(on) or not on.templates:
-        return out
-    tid = np.clip(on.template_id, 0, len(on.templates) - 1)
-    has = on.template_id >= 0
-    floor = np.array([ONSET_RESOLUTION * tp.fwhm for tp in on.templates])[tid]
-    floor = np.where(has, floor, np.nan)
-    white = isinstance(noise_rms, float) and math.isfinite(noise_rms) and noise_rms > 0
-    if not white and noise is None:
-        return floor
-    # the bound of each template at unit amplitude [s]
-    unit = np.array([_unit_bound(tp, noise_rms if white else float("nan"), noise)
-                     for tp in on.templates])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        out = np.where(has, unit[tid], np.nan) / np.abs(on.amplitude)
-    out = np.fmax(out, floor)
-    return np.where(np.isfinite(out), out, np.nan)
-
-
-def _unit_bound(tp: Template, noise_rms: float, noise: NoiseSpectrum | None = None) -> float:
-    """Cramer-Rao bound [s] of a unit-amplitude pulse of template ``tp``: in the noise
-    spectrum ``noise`` when given and finite there, else in white noise of RMS
-    ``noise_rms`` per original sample (NaN for a template that is not finite)."""
-    d = np.gradient(np.asarray(tp.samples, dtype=float)) * tp.rate   # [1/s], peak 1
-    if not np.all(np.isfinite(d)):
-        return float("nan")
-    if noise is not None:
-        b = crb_delay_std_psd(d, tp.rate, noise.freqs, noise.psd, dof=noise.dof)
-        if math.isfinite(b):
-            return b
-    if not (math.isfinite(noise_rms) and noise_rms > 0):
-        return float("nan")
-    # the template is sampled at fs / decimation: its information sums decimation times over
-    return float(crb_delay_std(d, noise_rms)) / math.sqrt(tp.decimation)
+    return on.sigma(noise_rms, noise)
 
 
 def channel_noise_spectrum(excerpt, name: str, onsets: Onsets, quality=None) -> NoiseSpectrum | None:

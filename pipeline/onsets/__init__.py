@@ -51,32 +51,56 @@ bit-identical onsets (:func:`detect_onsets_stream`).
 Quality per onset: normalised correlation with the template, amplitude (signed, in data
 units: the fitted tensile peak above baseline), width (FWHM measured on the pulse) and a
 bit mask of flags (``FLAG_*``). No onset is ever placed inside a gap (NaN samples, or the
+``gap_runs`` of a quality report's dropouts).
+
+Detectors
+---------
+The matched filter above is one onset detector, registered as ``"matched"`` (the default);
+others are registered by name (:func:`register_detector`) and chosen by a scene's
+``[onsets] detector``. Every detector is a block filter returning :class:`Onsets` with a
+timing model (timing centres and per-onset uncertainties, :mod:`meshphase.onsets.timing`),
+which is all the passes and the phasing use.
 
 Modules
 -------
-``results``    the result types (:class:`Template`, :class:`CoarsePeaks`, :class:`Onsets`) and
-               the ``FLAG_*`` bits
+``detector``   the detector interface (:class:`OnsetDetector`), the registry by name and
+               :func:`detect_recording`
+``results``    the result types (:class:`CoarsePeaks`, :class:`Onsets`) and the ``FLAG_*`` bits
+``timing``     the timing model of onsets (:class:`OnsetTiming`) and the matched filter's
+               (:class:`TemplateTiming`: timing centres, Cramer-Rao uncertainties)
+``template``   the matched filter's pulse template (:class:`Template`)
 ``coarse``     step 1 and 2: decimation, robust noise level, coarse maxima (:func:`coarse_peaks`)
 ``learning``   step 3: template learning (:func:`learn_template`) and the pulse width
                (:func:`estimate_pulse_width`); ``features`` measures a template
 ``relearn``    when a learnt template is kept for the next block (speed and shape checks)
 ``matched``    step 4: matched-filter refinement at (sub-)sample lags
 ``fastpath``   the numba kernels of steps 2 and 4 for dense pulse trains (``engine``), and
-               the rule that chooses them
+               the rule that chooses them (``_numba_kernels`` holds the kernels)
 ``engine``     the block engine and :func:`detect_onsets`, :func:`detect_onsets_recording`;
                ``options`` checks their keywords, ``runs`` handles gap and flag runs
-``streaming``  :class:`OnsetStream`, :func:`detect_onsets_stream`
+``streaming``  :class:`OnsetStream` (the matched-filter detector), :func:`detect_onsets_stream`
+
+The package imports the root helpers, :mod:`meshphase.runtime` and :mod:`meshphase.signal`
+only.
 """
 
 from meshphase.onsets.coarse import coarse_peaks
+from meshphase.onsets.detector import (DEFAULT_DETECTOR, OnsetDetector, check_detector, detect_recording,
+                                       detector_names, make_detector, register_detector, unregister_detector)
 from meshphase.onsets.engine import detect_onsets, detect_onsets_recording
 from meshphase.onsets.learning import estimate_pulse_width, learn_template
+from meshphase.onsets.options import DEFAULT_BLOCK
 from meshphase.onsets.results import (FLAG_CLIPPED, FLAG_EDGE, FLAG_GAP, FLAG_LOW_CORR, FLAG_NAMES, FLAG_TEMPLATE,
-                                      CoarsePeaks, Onsets, Template)
+                                      CoarsePeaks, Onsets, empty_onsets)
 from meshphase.onsets.streaming import OnsetStream, detect_onsets_stream
+from meshphase.onsets.template import Template
+from meshphase.onsets.timing import ONSET_RESOLUTION, OnsetTiming, TemplateTiming
 
 __all__ = [
     "Onsets", "Template", "CoarsePeaks", "detect_onsets", "detect_onsets_recording",
     "detect_onsets_stream", "OnsetStream", "learn_template", "coarse_peaks", "estimate_pulse_width",
     "FLAG_GAP", "FLAG_CLIPPED", "FLAG_LOW_CORR", "FLAG_EDGE", "FLAG_TEMPLATE", "FLAG_NAMES",
+    "empty_onsets", "OnsetDetector", "DEFAULT_DETECTOR", "register_detector", "unregister_detector",
+    "detector_names", "check_detector", "make_detector", "detect_recording", "OnsetTiming",
+    "TemplateTiming", "ONSET_RESOLUTION", "DEFAULT_BLOCK",
 ]

@@ -21,7 +21,7 @@ import numpy as np
 def _run_maxima(ys, thr, gap, long_len):  # pragma: no cover - compiled
     """Index of the first maximum of every run of samples above ``thr`` (samples closer than
     ``gap`` + 1 join a run; a run spanning more than ``long_len`` samples is split at every
-    break), as :func:`meshphase.onsets.coarse._coarse_dec` finds them with numpy."""
+    break), as :func:`meshphase.onsets.coarse.coarse_decimated` finds them with numpy."""
     n = ys.shape[0]
     out = np.empty(max(n, 1), dtype=np.int64)
     m = 0                      # maxima written so far (of finished runs)
@@ -95,8 +95,8 @@ _CHUNK = 32        # pulses correlated together (one small matrix product; windo
 def _refine_pulses(yd, peaks, anchor, k, u, t_all, e0, tensile, n_base, lo, d, ref, width_unit,
                    min_corr, base_flags, flag_edge, flag_low,
                    index, amp, ncc, width, flags, a_out):  # pragma: no cover - compiled
-    """Matched-filter refinement of every pulse, 32 at a time (see ``_Matcher.match`` and
-    ``_Engine._refine``, whose arithmetic this repeats pulse by pulse): windows gathered
+    """Matched-filter refinement of every pulse, 32 at a time (see ``Matcher.match`` and
+    ``BlockEngine._refine``, whose arithmetic this repeats pulse by pulse): windows gathered
     as the rows of a matrix and correlated at the (sub-)lags by one BLAS product with the
     template's lagged columns, as the numpy path's ``w @ t_all`` does (BLAS's blocked
     product is faster than a compiled loop over the sums), then each step done for the

@@ -15,19 +15,20 @@ from scipy import ndimage
 
 from meshphase.signal.median import MAD_TO_SIGMA, median_and_mad, median_of_finite
 from meshphase.validate import as_choice, as_positive, as_positive_int, as_signal
+from meshphase.onsets.fastpath import run_maxima
 from meshphase.onsets.results import CoarsePeaks
 
-__all__ = ["coarse_peaks"]
+__all__ = ["coarse_peaks", "coarse_decimated", "decimate", "decimation_for", "fill_nan"]
 
 _SAMPLES_PER_WIDTH = 16      # decimate so that the pulse FWHM keeps >= 16 samples
 
 
-def _decimation(w: float) -> int:
+def decimation_for(w: float) -> int:
     """Decimation factor D for pulses ``w`` samples wide (FWHM): ``max(1, floor(w / 16))``."""
     return max(1, int(w // _SAMPLES_PER_WIDTH))
 
 
-def _decimate(seg: np.ndarray, d: int, sign: int = 1) -> np.ndarray:
+def decimate(seg: np.ndarray, d: int, sign: int = 1) -> np.ndarray:
     """Block means of ``d`` samples (trailing partial block dropped), times ``sign`` (+-1).
 
     One BLAS matrix-vector product of the ``(n / d, d)`` view with ``sign * ones(d) / d``:
@@ -45,7 +46,9 @@ def _decimate(seg: np.ndarray, d: int, sign: int = 1) -> np.ndarray:
     return v @ np.full(d, (1.0 if sign > 0 else -1.0) / d)
 
 
-def _fill_nan(seg: np.ndarray) -> np.ndarray:
+def fill_nan(seg: np.ndarray) -> np.ndarray:
+    """``seg`` with its non-finite samples replaced by the median of its finite ones (0 when
+    none is finite); ``seg`` itself when every sample is finite."""
     if math.isfinite(float(np.sum(seg))):
         return seg
     bad = ~np.isfinite(seg)
@@ -100,7 +103,7 @@ def _noise_level(y: np.ndarray, w: float) -> tuple[float, float, float]:
         pieces = [y[a:a + piece] for a in starts]
     h = int(math.ceil(1.5 * w)) + 1
     rest = []
-    # a gap filled with one constant (see _fill_nan) carries no noise: leave constant runs
+    # a gap filled with one constant (see fill_nan) carries no noise: leave constant runs
     # out of the pieces, else a gap at the start or end collapses the MAD (and the threshold)
     def _live(p):
         if p.size < 3:
@@ -146,7 +149,7 @@ def _noise_level(y: np.ndarray, w: float) -> tuple[float, float, float]:
     return float(med), MAD_TO_SIGMA * float(mad), top
 
 
-def _coarse_dec(yd: np.ndarray, w_d: float, spacing_d: float, k_sigma: float, fast: bool = False):
+def coarse_decimated(yd: np.ndarray, w_d: float, spacing_d: float, k_sigma: float, fast: bool = False):
     """Coarse maxima on decimated data: (peaks, heights, threshold, noise, median).
 
     ``fast``: the run maxima from the numba kernel (:func:`meshphase.onsets.fastpath.run_maxima`,
@@ -157,8 +160,6 @@ def _coarse_dec(yd: np.ndarray, w_d: float, spacing_d: float, k_sigma: float, fa
     sig = max(sig, 1e-6 * (top - med), 1e-300)       # noise-free data: a tiny floor
     thr = med + k_sigma * sig
     if fast:
-        from meshphase.onsets.fastpath import run_maxima
-
         peaks = run_maxima(ys, thr, max(1, int(math.ceil(spacing_d))), 3.0 * spacing_d)
         return _resolve_close(peaks, ys[peaks] - med, spacing_d) + (thr - med, sig, med)
     cand = np.flatnonzero(ys > thr)
@@ -238,13 +239,13 @@ def coarse_peaks(x, fs: float, *, width: float, min_spacing: float | None = None
     sp = 2.0 * w if min_spacing is None else as_positive(min_spacing, "min_spacing") * fs
     k_sigma = as_positive(k_sigma, "k_sigma")
     pol = 1 if as_choice(polarity, "polarity", ("positive", "negative")) == "positive" else -1
-    d = _decimation(w) if decimation is None else as_positive_int(decimation, "decimation")
+    d = decimation_for(w) if decimation is None else as_positive_int(decimation, "decimation")
     if arr.size == 0:
         return CoarsePeaks(np.empty(0, dtype=np.int64), np.empty(0), float("nan"), float("nan"), d)
-    seg = _fill_nan(arr.astype(np.float64, copy=False))
+    seg = fill_nan(arr.astype(np.float64, copy=False))
     if pol < 0:
         seg = -seg
-    yd = _decimate(seg, d)
-    peaks, heights, thr, noise, _ = _coarse_dec(yd, w / d, sp / d, k_sigma)
+    yd = decimate(seg, d)
+    peaks, heights, thr, noise, _ = coarse_decimated(yd, w / d, sp / d, k_sigma)
     return CoarsePeaks(peaks * d + (d - 1) // 2, heights, thr, noise, d)
 

@@ -12,91 +12,102 @@ import warnings
 
 import numpy as np
 
-from meshphase.signal.condition import ChannelQuality, merge_runs
+from meshphase.signal.condition import merge_runs
 from meshphase.errors import ProcessingWarning
 from meshphase.runtime.log import logger
 from meshphase.signal.quality import find_runs
 from meshphase.recording import Recording
 from meshphase.validate import as_signal
-from meshphase.onsets.coarse import _coarse_dec, _decimate, _decimation, _fill_nan
-from meshphase.onsets.learning import _half_length, _learn_dec, _refine_width, _width_autocorr
+from meshphase.onsets.coarse import coarse_decimated, decimate, decimation_for, fill_nan
+from meshphase.onsets.learning import half_length, learn_decimated, refine_width, width_autocorr
 from meshphase.onsets.fastpath import dense, refine_pulses
-from meshphase.onsets.matched import _gather, _Matcher, _sublags, _window_baseline
-from meshphase.onsets.options import _options, _Options
-from meshphase.onsets.relearn import _Fit, _good_median, _period
-from meshphase.onsets.results import (FLAG_CLIPPED, FLAG_EDGE, FLAG_GAP, FLAG_LOW_CORR, FLAG_TEMPLATE, Onsets, Template,
+from meshphase.onsets.matched import gather_windows, Matcher, sublags, window_baseline
+from meshphase.onsets.options import check_options, DetectOptions
+from meshphase.onsets.relearn import TemplateFit, good_median, pulse_period
+from meshphase.onsets.results import (FLAG_CLIPPED, FLAG_EDGE, FLAG_GAP, FLAG_LOW_CORR, FLAG_TEMPLATE, Onsets,
                                       empty_onsets)
-from meshphase.onsets.runs import _inside_runs, _runs_overlap
+from meshphase.onsets.template import Template
+from meshphase.onsets.runs import inside_runs, quality_options, runs_overlap
 
-__all__ = ["detect_onsets", "detect_onsets_recording"]
+__all__ = ["BlockEngine", "detect_onsets", "detect_onsets_recording"]
 
 
-class _Engine:
-    """Block processor shared by the whole-array and the streaming entry points.
+class BlockEngine:
+    """Block processor of the matched filter, shared by the whole-array and the streaming
+    entry points: :meth:`feed` samples, :meth:`finish` for the onsets.
 
     Samples are fed in chunks of any size; analysis block ``k`` covers the samples
-    ``[k B, (k+1) B)`` and is processed, with margins, as soon as its look-ahead is there,
-    so the segments (and therefore the results) do not depend on the chunking.
+    ``[k B, (k+1) B)`` (``B`` = ``block_len``) and is processed, with margins, as soon as its
+    look-ahead is there, so the segments (and therefore the results) do not depend on the
+    chunking.
+
+    Parameters
+    ----------
+    opt : DetectOptions
+        The checked options (:func:`meshphase.onsets.options.check_options`).
     """
 
-    def __init__(self, opt: _Options):
-        self.o = opt
-        self.chunks: list[tuple[int, np.ndarray]] = []
-        self.n = 0
-        self.k = 0
-        self.ready = False
-        self.pol = 1
-        self.w = None            # current FWHM [samples]
-        self.d = 1
-        self.B = opt.block
+    def __init__(self, opt: DetectOptions):
+        self.opt = opt
+        self.chunks: list[tuple[int, np.ndarray]] = []   # (first sample, samples) still needed
+        self.n_fed = 0               # samples fed so far
+        self.next_block = 0          # index k of the next analysis block to process
+        self.ready = False           # width, decimation and block length are known
+        self.polarity = 1            # sign of the pulses' main lobe in the data (+1, -1)
+        self.width = None            # current FWHM [samples]
+        self.decimation = 1          # block-mean decimation factor D [-]
+        self.block_len = opt.block   # analysis block length B [samples]
         self.template: Template | None = opt.template
-        self.fit: _Fit | None = None  # how the learnt template fitted its block (relearn="auto")
+        self.fit: TemplateFit | None = None  # how the learnt template fitted its block (relearn="auto")
         self.templates: list[Template] = []
         self.out: list[tuple] = []
         self.last_index = -np.inf
         self.n_fallback = 0
         self.n_dropped_gap = 0
         self.warned_width = False
-        self._matcher: tuple | None = None   # (template, k, u, _Matcher): reused while they hold
+        self._matcher: tuple | None = None   # (template, k, u, Matcher): reused while they hold
 
     # ---------------------------------------------------------------- buffer
     def feed(self, arr: np.ndarray) -> None:
+        """Take the next chunk of samples (1-D, contiguous or not; kept by reference) and
+        process every analysis block whose look-ahead is now there."""
         if arr.size == 0:
             return
-        self.chunks.append((self.n, arr))
-        self.n += arr.size
+        self.chunks.append((self.n_fed, arr))
+        self.n_fed += arr.size
         if not self.ready:
-            if self.n < self.o.block:
+            if self.n_fed < self.opt.block:
                 return
             self._init()
-        while self.n >= self._block_hi(self.k, final=False):
-            self._process(self.k, final=False)
-            self.k += 1
+        while self.n_fed >= self._block_hi(self.next_block, final=False):
+            self._process(self.next_block, final=False)
+            self.next_block += 1
             self._trim()
 
     def finish(self) -> Onsets:
-        o = self.o
-        if self.n == 0:
-            return empty_onsets(o.fs, o.t0, o.channel, o.reference, o.level)
+        """Process the remaining blocks; the onsets of everything fed."""
+        opt = self.opt
+        if self.n_fed == 0:
+            return empty_onsets(opt.fs, opt.t0, opt.channel, opt.reference, opt.level)
         if not self.ready:
             self._init()
-        while self.k * self.B < self.n:
-            self._process(self.k, final=True)
-            self.k += 1
+        while self.next_block * self.block_len < self.n_fed:
+            self._process(self.next_block, final=True)
+            self.next_block += 1
         if self.n_fallback:
             warnings.warn(f"{self._who()}{self.n_fallback} analysis block(s) had fewer than "
-                          f"{o.min_template_pulses} clean pulses to learn a template from; their "
+                          f"{opt.min_template_pulses} clean pulses to learn a template from; their "
                           "onsets carry FLAG_TEMPLATE", ProcessingWarning, stacklevel=3)
         if not self.out:
-            return empty_onsets(o.fs, o.t0, o.channel, o.reference, o.level, self.templates)
+            return empty_onsets(opt.fs, opt.t0, opt.channel, opt.reference, opt.level, self.templates)
         cols = [np.concatenate(c) for c in zip(*self.out)]
         index, corr, amp, width, flags, tid = cols
-        return Onsets(o.t0 + index / o.fs, index, corr, amp, width, flags.astype(np.uint8, copy=False),
-                      tid.astype(np.int32, copy=False), tuple(self.templates), o.fs, o.t0, o.channel,
-                      o.reference, o.level)
+        return Onsets(opt.t0 + index / opt.fs, index, corr, amp, width, flags.astype(np.uint8, copy=False),
+                      tid.astype(np.int32, copy=False), tuple(self.templates), opt.fs, opt.t0, opt.channel,
+                      opt.reference, opt.level, self.polarity)
 
     def _who(self) -> str:
-        return f"channel {self.o.channel!r}: " if self.o.channel else ""
+        return f"channel {self.opt.channel!r}: " if self.opt.channel else ""
 
     def _get(self, lo: int, hi: int) -> np.ndarray:
         parts = []
@@ -108,7 +119,7 @@ class _Engine:
         seg = parts[0] if len(parts) == 1 else np.concatenate(parts)
         # contiguous float64 (one copy of a strided column or of float32 samples, else none)
         seg = np.ascontiguousarray(seg, dtype=np.float64)
-        gr = self.o.gap_runs
+        gr = self.opt.gap_runs
         if len(gr):
             # finite samples that are gaps (dropouts) read as NaN, like any other gap
             i = np.searchsorted(gr[:, 1], lo, side="right")
@@ -124,8 +135,8 @@ class _Engine:
     def _trim(self) -> None:
         # the next block reads from k B - its margin, rounded down to the decimation grid
         # (as _process computes it; the geometry does not change before it runs)
-        keep_from = max(0, self.k * self.B - min(self._geom()[3], self.B))
-        keep_from -= keep_from % self.d
+        keep_from = max(0, self.next_block * self.block_len - min(self._geom()[3], self.block_len))
+        keep_from -= keep_from % self.decimation
         while self.chunks and self.chunks[0][0] + self.chunks[0][1].size <= keep_from:
             self.chunks.pop(0)
 
@@ -133,9 +144,9 @@ class _Engine:
     def _geom(self):
         """Sizes for the next block from the current width: (w_d, h_half, k, margin), the
         last in full-rate samples (uncapped)."""
-        d = self.d
-        w_d = self.w / d
-        h_half = _half_length(w_d)
+        d = self.decimation
+        w_d = self.width / d
+        h_half = half_length(w_d)
         if self.template is not None:
             h_half = max(h_half, self.template.samples.size // 2 + 1)
         # search radius: half a width plus half the coarse smoothing length, plus slack
@@ -144,70 +155,70 @@ class _Engine:
         return w_d, h_half, k, margin
 
     def _block_hi(self, k: int, final: bool) -> int:
-        hi = (k + 1) * self.B + min(self._geom()[3], self.B)
-        return min(hi, self.n) if final else hi
+        hi = (k + 1) * self.block_len + min(self._geom()[3], self.block_len)
+        return min(hi, self.n_fed) if final else hi
 
     # ---------------------------------------------------------------- initialisation
     def _init(self) -> None:
-        o = self.o
-        seg = _fill_nan(self._get(0, min(self.n, o.block)))
-        if o.template is not None:
-            self.pol = o.template.polarity
-        elif o.polarity == "positive":
-            self.pol = 1
-        elif o.polarity == "negative":
-            self.pol = -1
+        opt = self.opt
+        seg = fill_nan(self._get(0, min(self.n_fed, opt.block)))
+        if opt.template is not None:
+            self.polarity = opt.template.polarity
+        elif opt.polarity == "positive":
+            self.polarity = 1
+        elif opt.polarity == "negative":
+            self.polarity = -1
         w0 = None
-        if o.template is None and o.width is None:
+        if opt.template is None and opt.width is None:
             # the autocorrelation width does not depend on the sign
-            w0 = o.mesh_width if o.mesh_width is not None else _width_autocorr(seg)
-        if o.template is None and o.polarity in (None, "auto"):
-            self.pol = _auto_polarity(seg, o.width if o.width is not None else w0)
-        if self.pol < 0:
+            w0 = opt.mesh_width if opt.mesh_width is not None else width_autocorr(seg)
+        if opt.template is None and opt.polarity in (None, "auto"):
+            self.polarity = _auto_polarity(seg, opt.width if opt.width is not None else w0)
+        if self.polarity < 0:
             seg = -seg
-        if o.template is not None:
-            self.w = o.template.fwhm * o.fs
-        elif o.width is not None:
-            self.w = o.width
+        if opt.template is not None:
+            self.width = opt.template.fwhm * opt.fs
+        elif opt.width is not None:
+            self.width = opt.width
         else:
-            self.w, _ = _refine_width(seg, o.fs, w0, o.k_sigma, self.pol, o.decimation)
-        self.d = o.decimation or _decimation(self.w)
+            self.width, _ = refine_width(seg, opt.fs, w0, opt.k_sigma, self.polarity, opt.decimation)
+        self.decimation = opt.decimation or decimation_for(self.width)
         # blocks at least 4 margins long: the overlap costs at most ~50 % extra work
-        self.B = int(max(o.block, 4 * self._geom()[3]))
+        self.block_len = int(max(opt.block, 4 * self._geom()[3]))
         self.ready = True
         logger.debug("onsets: fs=%g, width=%.3g samples, decimation=%d, block=%d, polarity=%+d",
-                     o.fs, self.w, self.d, self.B, self.pol)
+                     opt.fs, self.width, self.decimation, self.block_len, self.polarity)
 
     # ---------------------------------------------------------------- one block
     def _learn_block(self, yd, peaks, lo, d, w_d, h_half, kk, bad_runs):
         """The template for this block and whether it is a fallback (None: no template)."""
-        o = self.o
+        opt = self.opt
         tpl = self.template
-        if o.template is not None or (tpl is not None and o.relearn == "never"):
+        if opt.template is not None or (tpl is not None and opt.relearn == "never"):
             return tpl, False
         clean = peaks
         if len(bad_runs):
             a = lo + (peaks - h_half - kk) * d
             b = lo + (peaks + h_half + kk + 1) * d
-            clean = peaks[~_runs_overlap(a - o.gap_guard, b + o.gap_guard, bad_runs)]
+            clean = peaks[~runs_overlap(a - opt.gap_guard, b + opt.gap_guard, bad_runs)]
         new = None
-        # half the usual distance between pulses bounds the template (see _learn_dec)
+        # half the usual distance between pulses bounds the template (see learn_decimated)
         cap = int(0.5 * np.quantile(np.diff(peaks), 0.25)) if peaks.size >= 4 else None
         if clean.size >= 3:
-            new = _learn_dec(yd, clean, fs=o.fs, d=d, w_d=w_d, reference=o.reference,
-                             level=o.level, polarity=self.pol, max_pulses=o.max_template_pulses,
-                             n_align=o.n_align, min_corr=o.min_corr, max_half=cap)
-        if new is not None and new.n_pulses >= o.min_template_pulses:
+            new = learn_decimated(yd, clean, fs=opt.fs, d=d, w_d=w_d, reference=opt.reference,
+                                  level=opt.level, polarity=self.polarity, max_pulses=opt.max_template_pulses,
+                                  n_align=opt.n_align, min_corr=opt.min_corr, max_half=cap)
+        if new is not None and new.n_pulses >= opt.min_template_pulses:
             return new, False
         if tpl is not None:
             return tpl, True
-        if clean.size < peaks.size and (new is None or new.n_pulses < o.min_template_pulses):
+        if clean.size < peaks.size and (new is None or new.n_pulses < opt.min_template_pulses):
             # too few clean pulses (e.g. every peak clipped): learn from all of them; the
             # leading edge below the rail still times them, and their flags say so
-            every = _learn_dec(yd, peaks, fs=o.fs, d=d, w_d=w_d, reference=o.reference,
-                               level=o.level, polarity=self.pol,
-                               max_pulses=o.max_template_pulses, n_align=o.n_align,
-                               min_corr=o.min_corr, max_half=cap) if peaks.size >= 3 else None
+            every = learn_decimated(yd, peaks, fs=opt.fs, d=d, w_d=w_d, reference=opt.reference,
+                                    level=opt.level, polarity=self.polarity,
+                                    max_pulses=opt.max_template_pulses, n_align=opt.n_align,
+                                    min_corr=opt.min_corr, max_half=cap) if peaks.size >= 3 else None
             if every is not None and (new is None or every.n_pulses > new.n_pulses):
                 new = every
         if new is not None and new.n_pulses >= 3:
@@ -218,22 +229,22 @@ class _Engine:
         """Analyse block ``k``: read its segment, detect, learn the template (or reuse it, see
         :meth:`_reuse`), refine the pulses the block owns and keep the onsets not already
         found."""
-        o = self.o
+        opt = self.opt
         w_d, h_half, kk, margin = self._geom()
-        lo, hi, gaps, yd = self._segment(k, final, w_d, min(margin, self.B))
-        spacing = (o.min_spacing if o.min_spacing is not None else 2.0 * self.w)
+        lo, hi, gaps, yd = self._segment(k, final, w_d, min(margin, self.block_len))
+        spacing = (opt.min_spacing if opt.min_spacing is not None else 2.0 * self.width)
         # a block that can hold DENSE_PULSES pulses at the minimum spacing: numba run maxima
-        fast = dense(o.engine, yd.size * self.d / spacing)
-        peaks, *_ = _coarse_dec(yd, w_d, spacing / self.d, o.k_sigma, fast)
+        fast = dense(opt.engine, yd.size * self.decimation / spacing)
+        peaks, *_ = coarse_decimated(yd, w_d, spacing / self.decimation, opt.k_sigma, fast)
         if peaks.size == 0:
             return
-        bad_runs = merge_runs(np.concatenate([gaps, o.flag_runs]))
-        period = _period(peaks)
+        bad_runs = merge_runs(np.concatenate([gaps, opt.flag_runs]))
+        period = pulse_period(peaks)
         reused = self._reuse(period)
         if reused:
             tpl, fallback = self.template, False
         else:
-            tpl, fallback = self._learn_block(yd, peaks, lo, self.d, w_d, h_half, kk, bad_runs)
+            tpl, fallback = self._learn_block(yd, peaks, lo, self.decimation, w_d, h_half, kk, bad_runs)
         if tpl is None:
             logger.info("%sblock %d: %d coarse detection(s) but no template could be learnt; "
                         "skipped", self._who(), k, peaks.size)
@@ -248,8 +259,8 @@ class _Engine:
         if reused and not self.fit.holds(res[2], res[4]):
             logger.debug("%sblock %d: pulses no longer fit the template (median NCC %.3f, "
                          "learnt at %.3f): re-learnt", self._who(), k,
-                         _good_median(res[2], res[4]), self.fit.ncc)
-            tpl, fallback = self._learn_block(yd, peaks, lo, self.d, w_d, h_half, kk, bad_runs)
+                         good_median(res[2], res[4]), self.fit.ncc)
+            tpl, fallback = self._learn_block(yd, peaks, lo, self.decimation, w_d, h_half, kk, bad_runs)
             if tpl is None:
                 return
             res = self._refine(yd, own, lo, tpl, kk, gaps, fallback)
@@ -261,8 +272,8 @@ class _Engine:
     def _reuse(self, period: float | None) -> bool:
         """``relearn="auto"``: keep the template learnt in an earlier block when the speed
         (pulse period of this block) moved it by less than ``_SHIFT_TOL`` of the timing bound;
-        the shape check follows the refinement (:meth:`_Fit.holds`)."""
-        if self.o.relearn != "auto" or self.fit is None or self.template is None:
+        the shape check follows the refinement (:meth:`TemplateFit.holds`)."""
+        if self.opt.relearn != "auto" or self.fit is None or self.template is None:
             return False
         return self.fit.speed_holds(period)
 
@@ -273,22 +284,22 @@ class _Engine:
         if fallback:
             self.n_fallback += 1
             return
-        if self.o.template is None:
-            self.w = tpl.fwhm * self.o.fs
-            if self.o.relearn == "auto" and res is not None:
-                self.fit = _Fit.measure(tpl, res[2], res[4], period)
+        if self.opt.template is None:
+            self.width = tpl.fwhm * self.opt.fs
+            if self.opt.relearn == "auto" and res is not None:
+                self.fit = TemplateFit.measure(tpl, res[2], res[4], period)
 
     def _segment(self, k: int, final: bool, w_d: float, margin: int):
         """Block ``k`` with ``margin`` samples before it, polarity-corrected and decimated:
         (lo, hi, gaps, yd), ``[lo, hi)`` the full-rate samples read, ``gaps`` their
         non-finite runs."""
-        d = self.d
+        d = self.decimation
         if w_d < 4 and d > 1 and not self.warned_width:
             self.warned_width = True
             warnings.warn(f"{self._who()}pulse width fell to {w_d:.2g} decimated samples "
                           f"(decimation {d}); timing degrades: pass a smaller decimation or "
                           "split the recording by operating point", ProcessingWarning, stacklevel=5)
-        lo = max(0, k * self.B - margin)
+        lo = max(0, k * self.block_len - margin)
         lo -= lo % d
         hi = self._block_hi(k, final)
         seg = self._get(lo, hi)
@@ -296,84 +307,84 @@ class _Engine:
         if d > 1:
             # a non-finite sample makes its block mean non-finite: one check on the
             # decimated samples (and the dropped tail) instead of one over all of them
-            yd = _decimate(seg, d, self.pol)
+            yd = decimate(seg, d, self.polarity)
             if math.isfinite(float(np.sum(yd))) and math.isfinite(float(np.sum(seg[yd.size * d:]))):
                 return lo, hi, gaps, yd
         if not math.isfinite(float(np.sum(seg))):
             gaps = find_runs(~np.isfinite(seg)) + lo
-            seg = _fill_nan(seg)
-        if self.pol < 0:
+            seg = fill_nan(seg)
+        if self.polarity < 0:
             seg = -seg
-        return lo, hi, gaps, _decimate(seg, d)
+        return lo, hi, gaps, decimate(seg, d)
 
     def _owned(self, k: int, final: bool, peaks: np.ndarray, lo: int, h_half: int) -> np.ndarray:
         """The coarse maxima block ``k`` owns: in ``[kB - g, (k+1)B + g)`` (``g`` half a
         template); the overlap's duplicates are removed by :meth:`_keep`."""
-        d = self.d
-        is_last = (k + 1) * self.B >= self.n if final else False
+        d = self.decimation
+        is_last = (k + 1) * self.block_len >= self.n_fed if final else False
         g = h_half * d
         full = lo + peaks * d + (d - 1) // 2
         own = np.ones(peaks.size, dtype=bool)
         if k > 0:
-            own &= full >= k * self.B - g
+            own &= full >= k * self.block_len - g
         if not is_last:
-            own &= full < (k + 1) * self.B + g
+            own &= full < (k + 1) * self.block_len + g
         return peaks[own]
 
     def _refine(self, yd, peaks, lo, tpl: Template, kk: int, gaps, fallback: bool):
         """Matched-filter refinement of the pulses at ``peaks`` (decimated samples of ``yd``):
         (index [full-rate samples], amplitude, NCC, width [s], flags)."""
-        o = self.o
-        d = self.d
+        opt = self.opt
+        d = self.decimation
         k_ref = max(kk, 2)
-        mt = self._matcher_for(tpl, k_ref, _sublags(tpl.fwhm * o.fs / d))
+        mt = self._matcher_for(tpl, k_ref, sublags(tpl.fwhm * opt.fs / d))
         L = mt.L
-        if dense(o.engine, peaks.size):
+        if dense(opt.engine, peaks.size):
             *res, a = refine_pulses(yd, peaks, mt.anchor, k_ref, mt.u, mt.t_all, mt.e0,
                                     np.flatnonzero(mt.tensile), max(1, L // 10), lo, d, tpl.ref,
-                                    d / o.fs, o.min_corr, FLAG_TEMPLATE if fallback else 0,
+                                    d / opt.fs, opt.min_corr, FLAG_TEMPLATE if fallback else 0,
                                     FLAG_EDGE, FLAG_LOW_CORR)
             self._run_flags(res[4], a, a + (L + 1) * d, gaps)
             return tuple(res)
         start = peaks - mt.anchor - k_ref
-        w, edge0 = _gather(yd, start, L + 2 * k_ref)
+        w, edge0 = gather_windows(yd, start, L + 2 * k_ref)
         lag, cmax, ncc, edge, wa, wmean = mt.match(w)
         pos_d = start + k_ref + lag                      # decimated position of template sample 0
         index = lo + (pos_d + tpl.ref) * d + (d - 1) / 2.0
         amp = cmax / mt.e0
         # pulse FWHM: samples above half the fitted amplitude inside the tensile lobe
-        base = _window_baseline(wa)
+        base = window_baseline(wa)
         half = base + 0.5 * amp
         count = np.zeros(peaks.size)
         for j in np.flatnonzero(mt.tensile):          # columns of the tensile lobe
             count += wa[:, j] > half
-        width = count * (d / o.fs)
+        width = count * (d / opt.fs)
         flags = np.zeros(peaks.size, dtype=np.uint8)
         flags[edge | edge0] |= FLAG_EDGE
-        flags[ncc < o.min_corr] |= FLAG_LOW_CORR
+        flags[ncc < opt.min_corr] |= FLAG_LOW_CORR
         if fallback:
             flags |= FLAG_TEMPLATE
         a = lo + np.floor(pos_d).astype(np.int64) * d
         self._run_flags(flags, a, a + (L + 1) * d, gaps)
         return index, amp, ncc, width, flags
 
-    def _matcher_for(self, tpl: Template, k: int, u: int) -> _Matcher:
+    def _matcher_for(self, tpl: Template, k: int, u: int) -> Matcher:
         """The matcher of ``tpl`` at ``k`` lags and ``u`` sub-lags: built once and reused by
         the blocks that reuse the template (it is read-only; its shifted template columns
         are the costly part)."""
         m = self._matcher
         if m is None or m[0] is not tpl or m[1] != k or m[2] != u:
-            m = self._matcher = (tpl, k, u, _Matcher(tpl, k, u))
+            m = self._matcher = (tpl, k, u, Matcher(tpl, k, u))
         return m[3]
 
     def _run_flags(self, flags, a, b, gaps) -> None:
         """Flag (in place) the pulse windows ``[a, b)`` [full-rate samples] that touch a
         gap (within the gap guard) or a clipped run."""
-        o = self.o
+        opt = self.opt
         if len(gaps):
-            flags[_runs_overlap(a - o.gap_guard, b + o.gap_guard, gaps)] |= FLAG_GAP
-        if len(o.flag_runs):
-            flags[_runs_overlap(a, b, o.flag_runs)] |= FLAG_CLIPPED
+            flags[runs_overlap(a - opt.gap_guard, b + opt.gap_guard, gaps)] |= FLAG_GAP
+        if len(opt.flag_runs):
+            flags[runs_overlap(a, b, opt.flag_runs)] |= FLAG_CLIPPED
 
     def _keep(self, index, amp, ncc, width, flags, hi: int, gaps, tpl: Template, spacing: float) -> None:
         """Append the onsets inside the data, outside the gaps and after those of the
@@ -381,7 +392,7 @@ class _Engine:
         # ---- no onset inside a gap or outside the data
         keep = (index >= 0) & (index <= hi - 1)
         if len(gaps):
-            inside = _inside_runs(index, gaps)
+            inside = inside_runs(index, gaps)
             self.n_dropped_gap += int(inside.sum())
             keep &= ~inside
         cols = (index, amp, ncc, width, flags)
@@ -399,7 +410,7 @@ class _Engine:
             if not self.templates or self.templates[-1] is not tpl:
                 self.templates.append(tpl)
             self.last_index = float(index[-1])
-            self.out.append((index, ncc, amp if self.pol > 0 else -amp, width, flags,
+            self.out.append((index, ncc, amp if self.polarity > 0 else -amp, width, flags,
                              np.full(index.size, len(self.templates) - 1, dtype=np.int32)))
 
 
@@ -421,7 +432,7 @@ def _auto_polarity(seg: np.ndarray, width: float) -> int:
     ``test_auto_polarity_holds_at_low_snr``).
     """
     d = max(1, int(width // 4)) if math.isfinite(width) else 1
-    y = _decimate(seg, d) if seg.size >= d else seg
+    y = decimate(seg, d) if seg.size >= d else seg
     if y.size == 0:
         return 1
     y = y[:: max(1, y.size >> 16)]
@@ -525,14 +536,14 @@ def detect_onsets(x, fs: float, *, t0: float = 0.0, width: float | None = None,
     samples need >= ~15 dB to be detected at ``k_sigma = 5``.
     """
     arr = as_signal(x)
-    opt = _options(fs, t0=t0, width=width, mesh_freq=mesh_freq, min_spacing=min_spacing,
-                   template=template, relearn=relearn, polarity=polarity, reference=reference,
-                   level=level, k_sigma=k_sigma, min_corr=min_corr, block=block,
-                   decimation=decimation, max_template_pulses=max_template_pulses,
-                   min_template_pulses=min_template_pulses, n_align=n_align,
-                   flag_runs=flag_runs, gap_guard=gap_guard, channel=channel, gap_runs=gap_runs,
-                   engine=engine)
-    eng = _Engine(opt)
+    opt = check_options(fs, t0=t0, width=width, mesh_freq=mesh_freq, min_spacing=min_spacing,
+                        template=template, relearn=relearn, polarity=polarity, reference=reference,
+                        level=level, k_sigma=k_sigma, min_corr=min_corr, block=block,
+                        decimation=decimation, max_template_pulses=max_template_pulses,
+                        min_template_pulses=min_template_pulses, n_align=n_align,
+                        flag_runs=flag_runs, gap_guard=gap_guard, channel=channel, gap_runs=gap_runs,
+                        engine=engine)
+    eng = BlockEngine(opt)
     eng.feed(arr)
     return eng.finish()
 
@@ -567,14 +578,7 @@ def detect_onsets_recording(rec: Recording, channel: str, *, quality=None, **kwa
             raise TypeError(f"detect_onsets_recording takes {bad} from the recording, not as an argument")
     x = rec.channel(channel)
     if quality is not None:
-        if not isinstance(quality, ChannelQuality):
-            raise TypeError(f"quality must be a ChannelQuality, got {type(quality).__name__}")
-        if quality.n_samples != rec.n_samples or quality.fs != rec.fs:
-            raise ValueError(f"quality report ({quality.n_samples} samples at {quality.fs} Hz) does "
-                             f"not describe this recording ({rec.n_samples} samples at {rec.fs} Hz)")
-        kwargs.setdefault("flag_runs", quality.clipped_runs)
-        kwargs.setdefault("gap_guard", quality.settle)
-        if len(quality.dropout_runs):
-            kwargs.setdefault("gap_runs", quality.dropout_runs)
+        for key, value in quality_options(quality, rec.n_samples, rec.fs).items():
+            kwargs.setdefault(key, value)
     return detect_onsets(x, rec.fs, t0=rec.t0, channel=channel, **kwargs)
 

@@ -106,7 +106,7 @@ def refine_pulses(yd: np.ndarray, peaks: np.ndarray, anchor: int, k: int, u: int
                   flag_edge: int, flag_low: int):
     """The refinement of every pulse at ``peaks`` in one compiled pass.
 
-    Parameters as :class:`meshphase.onsets.matched._Matcher` holds them (``t_all`` shape
+    Parameters as :class:`meshphase.onsets.matched.Matcher` holds them (``t_all`` shape
     ``(L + 2k, ncol)``, ``tensile`` the template's tensile sample indices, ``n_base`` the
     samples at each window end that make the baseline); ``lo`` and ``d`` place the block,
     ``ref`` is the template's onset feature [decimated samples], ``width_unit`` ``d / fs``

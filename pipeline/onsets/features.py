@@ -11,7 +11,7 @@ from scipy import ndimage
 from meshphase.signal.savgol import savgol_coeffs_cached, savgol_filter
 from meshphase.signal.spectral import resample
 
-__all__: list[str] = []
+__all__ = ["template_features"]
 
 
 def _crossing_left(y: np.ndarray, start: int, level: float) -> float:
@@ -46,7 +46,7 @@ def _savgol_interior(h: np.ndarray, window: int) -> np.ndarray:
     return hs
 
 
-def _template_features(h: np.ndarray, reference: str, level: float):
+def template_features(h: np.ndarray, reference: str, level: float):
     """(peak, ref, fwhm) of a normalised template [template samples]; NaN when not found.
 
     Templates >= 8 samples wide (all decimated ones) are measured by least-squares fits,

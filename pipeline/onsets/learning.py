@@ -16,12 +16,13 @@ from scipy import fft as sfft
 
 from meshphase.signal.spectral import tukey
 from meshphase.validate import as_choice, as_float, as_positive, as_positive_int, as_signal
-from meshphase.onsets.coarse import _coarse_dec, _decimate, _decimation, _fill_nan
-from meshphase.onsets.features import _template_features
-from meshphase.onsets.matched import _gather, _Matcher, _sublags, _window_baseline
-from meshphase.onsets.results import Template
+from meshphase.onsets.coarse import coarse_decimated, decimate, decimation_for, fill_nan
+from meshphase.onsets.features import template_features
+from meshphase.onsets.matched import gather_windows, Matcher, sublags, window_baseline
+from meshphase.onsets.template import Template
 
-__all__ = ["learn_template", "estimate_pulse_width"]
+__all__ = ["learn_template", "estimate_pulse_width", "half_length", "learn_decimated", "refine_width",
+           "width_autocorr"]
 
 _HALF_LENGTH = 3.0           # template half-length [FWHM]
 _TAPER = 0.2                 # Tukey taper fraction of the template
@@ -29,7 +30,7 @@ _AUTOCORR_TO_FWHM = 1.6      # FWHM ~ 1.6 x lag where the autocorrelation halves
 _WIDTH_SAMPLES = 1 << 20     # samples entering the width estimate
 
 
-def _half_length(w_d: float) -> int:
+def half_length(w_d: float) -> int:
     """Template half-length [samples] for pulses ``w_d`` samples wide (FWHM): 3 FWHM, >= 4."""
     return max(4, int(math.ceil(_HALF_LENGTH * w_d)))
 
@@ -62,16 +63,16 @@ def _frac_advance(w: np.ndarray, frac: np.ndarray) -> np.ndarray:
     return out + line + slope[:, None] * frac[:, None]
 
 
-def _learn_dec(yd: np.ndarray, peaks: np.ndarray, *, fs: float, d: int, w_d: float,
-               reference: str, level: float, polarity: int, max_pulses: int, n_align: int,
-               min_corr: float, max_half: int | None = None) -> Template | None:
+def learn_decimated(yd: np.ndarray, peaks: np.ndarray, *, fs: float, d: int, w_d: float,
+                    reference: str, level: float, polarity: int, max_pulses: int, n_align: int,
+                    min_corr: float, max_half: int | None = None) -> Template | None:
     """Learn a template from decimated data ``yd`` around coarse maxima ``peaks``.
 
     The template spans +-3 FWHM, but never more than half the usual distance between
     pulses (``max_half`` [decimated samples]): a template reaching into the neighbouring
     pulses (planets a few mesh periods apart) learns their tails and times every pulse
     worse (five planets, sun gauge: 1.6x the Cramer-Rao bound before the cap, 1.2x after)."""
-    h_half = _half_length(w_d)
+    h_half = half_length(w_d)
     if max_half is not None:
         h_half = max(4, min(h_half, int(max_half)))
     k = int(math.ceil(0.5 * w_d)) + 2
@@ -83,8 +84,8 @@ def _learn_dec(yd: np.ndarray, peaks: np.ndarray, *, fs: float, d: int, w_d: flo
         return None
     if peaks.size > max_pulses:
         peaks = peaks[np.round(np.linspace(0, peaks.size - 1, max_pulses)).astype(np.int64)]
-    w, _ = _gather(yd, peaks - h_half - k, L + 2 * k)
-    w = w - _window_baseline(w)[:, None]
+    w, _ = gather_windows(yd, peaks - h_half - k, L + 2 * k)
+    w = w - window_baseline(w)[:, None]
     c0 = w[:, k:k + L]
     centre = slice(max(0, h_half - int(w_d)), h_half + int(w_d) + 1)
     a0 = c0[:, centre].max(axis=1)
@@ -93,11 +94,11 @@ def _learn_dec(yd: np.ndarray, peaks: np.ndarray, *, fs: float, d: int, w_d: flo
     h = _normalise((a0[:, None] * c0).sum(axis=0) / float(a0 @ a0))
     if h is None:
         return None
-    u = _sublags(w_d)
+    u = sublags(w_d)
     n_used = peaks.size
     for _ in range(n_align):
         tpl = Template(h, fs, d, float(h_half), float(h_half), float("nan"))
-        mt = _Matcher(tpl, k, u)
+        mt = Matcher(tpl, k, u)
         lag, cmax, ncc, edge, _, _ = mt.match(w)
         use = (~edge) & (ncc >= min_corr) & (cmax > 0)
         if not use.any():
@@ -111,19 +112,19 @@ def _learn_dec(yd: np.ndarray, peaks: np.ndarray, *, fs: float, d: int, w_d: flo
         idx = np.clip(idx, 0, w.shape[1] - 1)
         rows = np.take_along_axis(w[use], idx, axis=1)
         al = _frac_advance(rows, fr)[:, 2:2 + L]
-        al = al - _window_baseline(al)[:, None]
+        al = al - window_baseline(al)[:, None]
         h_new = _normalise((amp[:, None] * al).sum(axis=0) / float(amp @ amp))
         if h_new is None:
             return None
         h = h_new
         n_used = int(use.sum())
-    peak, ref, fwhm = _template_features(h, reference, level)
+    peak, ref, fwhm = template_features(h, reference, level)
     if not (np.isfinite(peak) and np.isfinite(ref) and np.isfinite(fwhm)):
         return None
     return Template(h, fs, d, peak, ref, fwhm * d / fs, reference, level, n_used, polarity)
 
 
-def _width_autocorr(x: np.ndarray) -> float:
+def width_autocorr(x: np.ndarray) -> float:
     """Tensile FWHM estimate [samples] from the autocorrelation half-lag.
 
     The autocorrelation of the (median-removed) signal is evaluated at geometrically spaced
@@ -156,17 +157,17 @@ def _width_autocorr(x: np.ndarray) -> float:
     return float(max(2.0, _AUTOCORR_TO_FWHM * math.exp(l0 + fr * (l1 - l0))))
 
 
-def _refine_width(seg: np.ndarray, fs: float, w0: float, k_sigma: float, pol: int,
-                  decimation: int | None = None) -> tuple[float, Template | None]:
+def refine_width(seg: np.ndarray, fs: float, w0: float, k_sigma: float, pol: int,
+                 decimation: int | None = None) -> tuple[float, Template | None]:
     """Up to three rounds of coarse detection + template learning to pin the FWHM [samples]."""
     w = w0
     tpl = None
     for _ in range(3):
-        d = decimation or _decimation(w)
-        yd = _decimate(seg, d)
-        peaks, *_ = _coarse_dec(yd, w / d, 2.0 * w / d, k_sigma)
-        t = _learn_dec(yd, peaks, fs=fs, d=d, w_d=w / d, reference="peak", level=0.5,
-                       polarity=pol, max_pulses=128, n_align=1, min_corr=0.3)
+        d = decimation or decimation_for(w)
+        yd = decimate(seg, d)
+        peaks, *_ = coarse_decimated(yd, w / d, 2.0 * w / d, k_sigma)
+        t = learn_decimated(yd, peaks, fs=fs, d=d, w_d=w / d, reference="peak", level=0.5,
+                            polarity=pol, max_pulses=128, n_align=1, min_corr=0.3)
         if t is None:
             break
         tpl = t
@@ -203,8 +204,8 @@ def estimate_pulse_width(x, fs: float, *, polarity: str = "positive") -> float:
     if x.size == 0:
         return 2.0 / fs
     seg = x[:_WIDTH_SAMPLES] * pol
-    seg = _fill_nan(seg)
-    w, _ = _refine_width(seg, fs, _width_autocorr(seg), 5.0, pol)
+    seg = fill_nan(seg)
+    w, _ = refine_width(seg, fs, width_autocorr(seg), 5.0, pol)
     return w / fs
 
 
@@ -259,16 +260,16 @@ def learn_template(x, fs: float, coarse_idx, *, width: float | None = None,
     if not 0.0 <= level < 1.0:
         raise ValueError(f"level must be in [0, 1), got {level!r}")
     pol = 1 if as_choice(polarity, "polarity", ("positive", "negative")) == "positive" else -1
-    seg = _fill_nan(arr.astype(np.float64, copy=False))
+    seg = fill_nan(arr.astype(np.float64, copy=False))
     if pol < 0:
         seg = -seg
-    w = as_positive(width, "width") * fs if width is not None else _refine_width(
-        seg, fs, _width_autocorr(seg), 5.0, pol, decimation)[0]
-    d = _decimation(w) if decimation is None else as_positive_int(decimation, "decimation")
-    yd = _decimate(seg, d)
-    tpl = _learn_dec(yd, np.sort(idx) // d, fs=fs, d=d, w_d=w / d, reference=reference,
-                     level=level, polarity=pol, max_pulses=as_positive_int(max_pulses, "max_pulses"),
-                     n_align=as_positive_int(n_align, "n_align"), min_corr=as_float(min_corr, "min_corr"))
+    w = as_positive(width, "width") * fs if width is not None else refine_width(
+        seg, fs, width_autocorr(seg), 5.0, pol, decimation)[0]
+    d = decimation_for(w) if decimation is None else as_positive_int(decimation, "decimation")
+    yd = decimate(seg, d)
+    tpl = learn_decimated(yd, np.sort(idx) // d, fs=fs, d=d, w_d=w / d, reference=reference,
+                          level=level, polarity=pol, max_pulses=as_positive_int(max_pulses, "max_pulses"),
+                          n_align=as_positive_int(n_align, "n_align"), min_corr=as_float(min_corr, "min_corr"))
     if tpl is None:
         raise ValueError(f"no usable pulse among the {idx.size} coarse indices (windows outside the "
                          "data, or no positive correlation)")

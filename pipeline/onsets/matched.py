@@ -14,14 +14,14 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from scipy import fft as sfft
 
-from meshphase.onsets.results import Template
+from meshphase.onsets.template import Template
 
-__all__: list[str] = []
+__all__ = ["Matcher", "gather_windows", "sublags", "window_baseline"]
 
 _SUBLAG_TARGET = 4.0        # sub-lag grid: U = ceil(4 / FWHM) steps per sample (>= 4 per FWHM)
 
 
-def _sublags(w_d: float) -> int:
+def sublags(w_d: float) -> int:
     """Sub-lags per sample U for a template ``w_d`` samples wide (FWHM), 1 to 16."""
     return int(min(16, max(1, math.ceil(_SUBLAG_TARGET / max(w_d, 1.0)))))
 
@@ -63,14 +63,14 @@ def _col_sum(w: np.ndarray, cols) -> np.ndarray:
     return acc
 
 
-def _window_baseline(w: np.ndarray) -> np.ndarray:
+def window_baseline(w: np.ndarray) -> np.ndarray:
     """Mean of the outer 10 % of each row at both ends."""
     n = w.shape[1]
     e = max(1, n // 10)
     return _col_sum(w, list(range(e)) + list(range(n - e, n))) / (2 * e)
 
 
-def _gather(y: np.ndarray, start: np.ndarray, length: int) -> tuple[np.ndarray, np.ndarray]:
+def gather_windows(y: np.ndarray, start: np.ndarray, length: int) -> tuple[np.ndarray, np.ndarray]:
     """Rows y[start_i + 0..length-1] and whether the row ran past the data (those rows
     repeat the edge sample)."""
     out_of = (start < 0) | (start + length > y.size)
@@ -85,7 +85,7 @@ def _gather(y: np.ndarray, start: np.ndarray, length: int) -> tuple[np.ndarray, 
     return rows, out_of
 
 
-class _Matcher:
+class Matcher:
     """Correlation machinery for one template: a Toeplitz matrix of (sub-)lagged copies.
 
     The window of a pulse (``L + 2K`` samples, template length ``L``) is correlated with

@@ -10,16 +10,21 @@ import numpy as np
 
 from meshphase.validate import as_choice, as_float, as_nonnegative, as_positive, as_positive_int
 from meshphase.onsets.fastpath import check_engine
-from meshphase.onsets.results import Template
-from meshphase.onsets.runs import _check_runs
+from meshphase.onsets.template import Template
+from meshphase.onsets.runs import check_runs
 
-__all__: list[str] = []
+__all__ = ["DetectOptions", "check_options", "DEFAULT_BLOCK"]
 
-_DEFAULT_BLOCK = 1 << 20     # analysis block [samples] when ``block`` is None
+#: analysis block of the matched filter [samples] when ``block`` is None
+DEFAULT_BLOCK = 1 << 20
 
 
 @dataclass
-class _Options:
+class DetectOptions:
+    """The keywords of :func:`~meshphase.onsets.detect_onsets` checked, lengths in samples
+    (``width``, ``mesh_width``, ``min_spacing``, ``block``, ``gap_guard``) and runs as
+    merged absolute ``[start, stop)`` sample rows (:func:`check_options` builds it)."""
+
     fs: float
     t0: float
     width: float | None            # samples
@@ -44,11 +49,13 @@ class _Options:
     engine: str = "auto"           # numba kernels for dense blocks (see .fastpath)
 
 
-def _options(fs, *, t0=0.0, width=None, mesh_freq=None, min_spacing=None, template=None,
-             relearn="auto", polarity=None, reference="rise", level=0.5, k_sigma=5.0,
-             min_corr=0.5, block=None, decimation=None, max_template_pulses=256,
-             min_template_pulses=8, n_align=2, flag_runs=None, gap_guard=0.0,
-             channel=None, gap_runs=None, engine="auto") -> _Options:
+def check_options(fs, *, t0=0.0, width=None, mesh_freq=None, min_spacing=None, template=None,
+                  relearn="auto", polarity=None, reference="rise", level=0.5, k_sigma=5.0,
+                  min_corr=0.5, block=None, decimation=None, max_template_pulses=256,
+                  min_template_pulses=8, n_align=2, flag_runs=None, gap_guard=0.0,
+                  channel=None, gap_runs=None, engine="auto") -> DetectOptions:
+    """The keywords of :func:`~meshphase.onsets.detect_onsets` (which documents them)
+    checked and converted to samples; TypeError or ValueError naming the bad one."""
     fs = as_positive(fs, "fs")
     t0 = as_float(t0, "t0")
     w = None if width is None else as_positive(width, "width") * fs
@@ -76,7 +83,7 @@ def _options(fs, *, t0=0.0, width=None, mesh_freq=None, min_spacing=None, templa
     min_corr = as_float(min_corr, "min_corr")
     if not -1.0 <= min_corr <= 1.0:
         raise ValueError(f"min_corr must be in [-1, 1], got {min_corr!r}")
-    blk = _DEFAULT_BLOCK if block is None else max(16, int(round(as_positive(block, "block") * fs)))
+    blk = DEFAULT_BLOCK if block is None else max(16, int(round(as_positive(block, "block") * fs)))
     dec = None if decimation is None else as_positive_int(decimation, "decimation")
     if template is not None:
         if dec is not None and dec != template.decimation:
@@ -85,12 +92,12 @@ def _options(fs, *, t0=0.0, width=None, mesh_freq=None, min_spacing=None, templa
     mtp = as_positive_int(max_template_pulses, "max_template_pulses")
     mnp = as_positive_int(min_template_pulses, "min_template_pulses")
     n_align = as_positive_int(n_align, "n_align")
-    fr = _check_runs(flag_runs, "flag_runs")
-    gr = _check_runs(gap_runs, "gap_runs")
+    fr = check_runs(flag_runs, "flag_runs")
+    gr = check_runs(gap_runs, "gap_runs")
     guard = int(math.ceil(as_nonnegative(gap_guard, "gap_guard") * fs))
     if channel is not None and not isinstance(channel, str):
         raise TypeError(f"channel must be a string, got {channel!r}")
     engine = check_engine(engine)
-    return _Options(fs, t0, w, mw, sp, template, relearn, polarity, reference, level, k_sigma,
-                    min_corr, blk, dec, mtp, mnp, n_align, fr, guard, channel, gr, engine)
+    return DetectOptions(fs, t0, w, mw, sp, template, relearn, polarity, reference, level, k_sigma,
+                         min_corr, blk, dec, mtp, mnp, n_align, fr, guard, channel, gr, engine)
 

@@ -4,7 +4,7 @@ A template is learnt once per operating point and reused while the pulses still 
 Two checks, both on what a block measures anyway:
 
 - **Speed**, before refining: the block's pulse period (coarse maxima, see
-  :func:`_period`) against the period of the block the template was learnt in. A pulse
+  :func:`pulse_period`) against the period of the block the template was learnt in. A pulse
   train at a speed changed by the fraction ``f`` is the template stretched by ``f``, which
   would move the onset feature by about ``f`` times its distance from the pulse centre
   (the larger of ``|ref - peak|`` and half the FWHM). The template is kept while that shift
@@ -37,16 +37,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from meshphase.signal.median import median_of_finite
-from meshphase.onsets.results import Template
+from meshphase.onsets.template import Template
 
-__all__: list[str] = []
+__all__ = ["TemplateFit", "good_median", "pulse_period", "timing_bound", "SHIFT_TOL", "NCC_ABS",
+           "NCC_REL"]
 
 SHIFT_TOL = 0.1      # allowed onset shift from a speed change [timing bounds]
 NCC_ABS = 0.01       # allowed drop of the median NCC [-], at least ...
 NCC_REL = 0.5        # ... or this fraction of the learnt misfit 1 - NCC
 
 
-def _period(peaks: np.ndarray) -> float | None:
+def pulse_period(peaks: np.ndarray) -> float | None:
     """Mean pulse period of a block [decimated samples] from its coarse maxima: the
     least-squares slope of their positions against their period count, each interval
     counted as its nearest multiple of the median interval (a missed pulse counts twice);
@@ -63,14 +64,14 @@ def _period(peaks: np.ndarray) -> float | None:
     return float(c @ (peaks - peaks.mean())) / den if den > 0 else None
 
 
-def _good_median(ncc: np.ndarray, flags: np.ndarray) -> float:
+def good_median(ncc: np.ndarray, flags: np.ndarray) -> float:
     """Median NCC of the unflagged pulses (of all when fewer than 3 are unflagged)."""
     good = ncc[flags == 0]
     a = good if good.size >= 3 else ncc
     return float(median_of_finite(a)) if a.size and np.isfinite(a).all() else float(np.median(a))
 
 
-def _timing_bound(tpl: Template, ncc: float) -> float:
+def timing_bound(tpl: Template, ncc: float) -> float:
     """Per-pulse timing bound [full-rate samples] of pulses correlating ``ncc`` with ``tpl``
     (see the module notes); inf for ``ncc <= 0``, 0 for ``ncc >= 1``."""
     h = tpl.samples
@@ -86,7 +87,7 @@ def _timing_bound(tpl: Template, ncc: float) -> float:
 
 
 @dataclass(frozen=True)
-class _Fit:
+class TemplateFit:
     """How a learnt template fitted its block: median NCC, pulse period [decimated
     samples] and the largest relative speed change it tolerates [-]."""
 
@@ -96,10 +97,10 @@ class _Fit:
 
     @classmethod
     def measure(cls, tpl: Template, ncc: np.ndarray, flags: np.ndarray, period: float | None):
-        c = _good_median(ncc, flags)
+        c = good_median(ncc, flags)
         lever = max(abs(tpl.ref - tpl.peak), 0.5 * tpl.fwhm * tpl.fs / tpl.decimation)
         lever *= tpl.decimation                                   # [full-rate samples]
-        tol = SHIFT_TOL * _timing_bound(tpl, c) / lever if lever > 0 else 0.0
+        tol = SHIFT_TOL * timing_bound(tpl, c) / lever if lever > 0 else 0.0
         return cls(c, period, tol)
 
     def speed_holds(self, period: float | None) -> bool:
@@ -111,4 +112,4 @@ class _Fit:
 
     def holds(self, ncc: np.ndarray, flags: np.ndarray) -> bool:
         """Do the refined pulses still fit (median NCC within the allowed drop)?"""
-        return _good_median(ncc, flags) >= self.ncc - max(NCC_ABS, NCC_REL * (1.0 - self.ncc))
+        return good_median(ncc, flags) >= self.ncc - max(NCC_ABS, NCC_REL * (1.0 - self.ncc))

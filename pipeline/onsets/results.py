@@ -1,4 +1,5 @@
-"""What onset detection returns: the pulse template, coarse maxima, onsets and their flags."""
+"""What onset detection returns: coarse maxima, onsets with their flags and their timing
+model (the one result type of every detector, :mod:`meshphase.onsets.detector`)."""
 
 from __future__ import annotations
 
@@ -6,7 +7,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Template", "CoarsePeaks", "Onsets", "FLAG_GAP", "FLAG_CLIPPED", "FLAG_LOW_CORR",
+from meshphase.signal.noise_spectrum import NoiseSpectrum
+from meshphase.onsets.timing import OnsetTiming, TemplateTiming
+
+__all__ = ["CoarsePeaks", "Onsets", "FLAG_GAP", "FLAG_CLIPPED", "FLAG_LOW_CORR",
            "FLAG_EDGE", "FLAG_TEMPLATE", "FLAG_NAMES", "empty_onsets"]
 
 #: The pulse window overlaps (or lies within ``gap_guard`` of) a gap: non-finite samples or
@@ -24,64 +28,6 @@ FLAG_EDGE = 8
 FLAG_TEMPLATE = 16
 FLAG_NAMES = {FLAG_GAP: "gap", FLAG_CLIPPED: "clipped", FLAG_LOW_CORR: "low_corr",
               FLAG_EDGE: "edge", FLAG_TEMPLATE: "template"}
-
-
-@dataclass(frozen=True, eq=False)
-class Template:
-    """A pulse template learnt from a recording (or given).
-
-    Attributes
-    ----------
-    samples : ndarray of float64, shape (L,)
-        Pulse shape at the decimated rate ``fs / decimation``, baseline 0, tensile peak 1,
-        polarity-corrected (tension positive), Tukey-tapered at its ends.
-    fs : float
-        Sample rate of the recording [Hz].
-    decimation : int
-        Block-mean decimation factor D of the template samples [-].
-    peak : float
-        Position of the tensile maximum [template samples].
-    ref : float
-        Position of the onset feature [template samples].
-    fwhm : float
-        Full width at half maximum of the tensile lobe [s].
-    reference : str
-        "rise" or "peak" (see :mod:`meshphase.onsets`).
-    level : float
-        Level of the "rise" feature, fraction of the peak height [-].
-    n_pulses : int
-        Pulses averaged [-].
-    polarity : int
-        +1 when tension reads positive in the data, -1 otherwise.
-    """
-
-    samples: np.ndarray
-    fs: float
-    decimation: int
-    peak: float
-    ref: float
-    fwhm: float
-    reference: str = "rise"
-    level: float = 0.5
-    n_pulses: int = 0
-    polarity: int = 1
-
-    @property
-    def rate(self) -> float:
-        """Sample rate of the template samples, fs / decimation [Hz]."""
-        return self.fs / self.decimation
-
-    @property
-    def ref_after_peak(self) -> float:
-        """Time from the tensile peak to the onset feature [s] (negative for "rise")."""
-        return (self.ref - self.peak) / self.rate
-
-    def to_dict(self) -> dict:
-        """JSON-friendly dict."""
-        return {"samples": self.samples.tolist(), "fs": self.fs, "decimation": self.decimation,
-                "peak": self.peak, "ref": self.ref, "fwhm": self.fwhm,
-                "reference": self.reference, "level": self.level, "n_pulses": self.n_pulses,
-                "polarity": self.polarity}
 
 
 @dataclass(frozen=True, eq=False)
@@ -114,7 +60,9 @@ class CoarsePeaks:
 
 @dataclass(frozen=True, eq=False)
 class Onsets:
-    """Engagement onsets of one channel, with per-onset quality.
+    """Engagement onsets of one channel, with per-onset quality and timing: what every onset
+    detector returns, and all the passes and the phasing read of it (:attr:`centres`,
+    :meth:`sigma`, ``amplitude``, ``width``, ``flags``).
 
     Attributes
     ----------
@@ -123,7 +71,8 @@ class Onsets:
     index : ndarray of float64, shape (n,)
         Fractional sample index of each onset, relative to the first sample [samples].
     corr : ndarray of float64, shape (n,)
-        Normalised correlation of the pulse with the template [-], in [-1, 1].
+        Normalised correlation of the pulse with the detector's pulse model [-], in [-1, 1]
+        (NaN for a detector without one).
     amplitude : ndarray of float64, shape (n,)
         Fitted tensile peak above baseline, signed, in data units (e.g. strain [m/m]).
     width : ndarray of float64, shape (n,)
@@ -131,10 +80,11 @@ class Onsets:
     flags : ndarray of uint8, shape (n,)
         Bit mask of ``FLAG_*`` values; 0 for a clean onset.
     template_id : ndarray of int32, shape (n,)
-        Index into ``templates`` of the template that timed each onset.
+        Index into ``templates`` of the template that timed each onset (matched filter;
+        -1 for a detector without templates).
     templates : tuple of Template
         Templates in use, one per analysis block that had pulses (repeated objects when a
-        block re-used an earlier one).
+        block re-used an earlier one); empty for a detector without templates.
     fs : float
         Sample rate [Hz].
     t0 : float
@@ -142,6 +92,12 @@ class Onsets:
     channel : str or None
     reference : str
     level : float
+    polarity : int
+        Sign of the pulses' main lobe in the data: +1 tensile, -1 compressive, 0 unknown
+        (no pulse found).
+    timing : OnsetTiming
+        The per-onset timing model (:mod:`meshphase.onsets.timing`); default the matched
+        filter's, from ``templates``, ``template_id`` and ``amplitude``.
     """
 
     times: np.ndarray
@@ -157,12 +113,21 @@ class Onsets:
     channel: str | None = None
     reference: str = "rise"
     level: float = 0.5
+    polarity: int = 0
+    timing: OnsetTiming | None = None
 
     def __post_init__(self):
         n = self.times.size
         for name in ("index", "corr", "amplitude", "width", "flags", "template_id"):
             if getattr(self, name).shape != (n,):
                 raise ValueError(f"Onsets.{name} must have shape ({n},), got {getattr(self, name).shape}")
+        if self.timing is None:
+            object.__setattr__(self, "timing", TemplateTiming(tuple(self.templates), self.template_id,
+                                                              self.amplitude))
+        elif not isinstance(self.timing, OnsetTiming):
+            raise TypeError(f"Onsets.timing must be an OnsetTiming, got {type(self.timing).__name__}")
+        if len(self.timing) != n:
+            raise ValueError(f"Onsets.timing describes {len(self.timing)} onsets, not {n}")
 
     def __len__(self) -> int:
         return int(self.times.size)
@@ -181,7 +146,29 @@ class Onsets:
         m = np.asarray(mask)
         return Onsets(self.times[m], self.index[m], self.corr[m], self.amplitude[m],
                       self.width[m], self.flags[m], self.template_id[m], self.templates,
-                      self.fs, self.t0, self.channel, self.reference, self.level)
+                      self.fs, self.t0, self.channel, self.reference, self.level,
+                      self.polarity, self.timing.select(m))
+
+    @property
+    def centres(self) -> np.ndarray:
+        """Onset times moved to their timing centres [s] (``timing.centre_shifts``): for the
+        matched filter a fixed angle of the gauged gear whatever the local speed, near the
+        middle of the tooth's contact, i.e. the engagement instant, on every gauge alike
+        (:func:`meshphase.onsets.timing.centre_shifts`). Shifts that would break the
+        increasing order are not applied: the onset times themselves are returned then, as
+        when no onset moves."""
+        shift = self.timing.centre_shifts()
+        if not np.any(shift):                 # no onset moves (no templates, say)
+            return self.times
+        out = self.times + shift
+        # keep the order strictly increasing (templates may differ between blocks)
+        return out if np.all(np.diff(out) > 0) else self.times
+
+    def sigma(self, noise_rms: float, noise: NoiseSpectrum | None = None) -> np.ndarray:
+        """Per-onset timing uncertainty [s], shape (n,), in the channel's noise: per-sample
+        RMS ``noise_rms`` [data units] and, where the timing model uses it, the noise
+        spectrum ``noise`` (see ``timing.sigma``); NaN where unknown."""
+        return self.timing.sigma(noise_rms, noise)
 
     def flag_counts(self) -> dict:
         """Number of onsets carrying each flag, by flag name."""
@@ -198,11 +185,13 @@ class Onsets:
                 "level": self.level}
 
 
-def empty_onsets(fs, t0, channel, reference, level, templates=()) -> Onsets:
+def empty_onsets(fs, t0, channel, reference, level, templates=(), timing: OnsetTiming | None = None) -> Onsets:
     """:class:`Onsets` with no onset (every array empty) of a channel sampled at ``fs`` [Hz]
-    from ``t0`` [s], with the detector's timing ``reference`` and ``level`` and its
-    ``templates``: the one return type of a detector that found nothing."""
+    from ``t0`` [s], with the detector's timing ``reference`` and ``level``, its
+    ``templates`` and its (empty) ``timing`` model (default the matched filter's): the one
+    return type of a detector that found nothing."""
     f = np.empty(0, dtype=np.float64)
     return Onsets(f, f.copy(), f.copy(), f.copy(), f.copy(), np.empty(0, dtype=np.uint8),
-                  np.empty(0, dtype=np.int32), tuple(templates), fs, t0, channel, reference, level)
+                  np.empty(0, dtype=np.int32), tuple(templates), fs, t0, channel, reference, level,
+                  0, timing)
 

@@ -11,16 +11,18 @@ import numpy as np
 from meshphase.errors import DataQualityWarning
 from meshphase.recording import Recording
 from meshphase.validate import as_signal
-from meshphase.onsets.engine import _Engine
-from meshphase.onsets.options import _options
+from meshphase.onsets.engine import BlockEngine
+from meshphase.onsets.options import check_options
 from meshphase.onsets.results import Onsets, empty_onsets
-from meshphase.onsets.runs import _time_runs
+from meshphase.onsets.runs import time_runs
 
 __all__ = ["OnsetStream", "detect_onsets_stream"]
 
 
 class OnsetStream:
-    """:func:`detect_onsets` on samples fed in consecutive chunks, in bounded memory.
+    """:func:`detect_onsets` on samples fed in consecutive chunks, in bounded memory: the
+    matched-filter detector (:class:`meshphase.onsets.detector.OnsetDetector`, registered as
+    ``"matched"``).
 
     Parameters
     ----------
@@ -39,13 +41,23 @@ class OnsetStream:
     """
 
     def __init__(self, fs: float, **kwargs):
-        self._eng = _Engine(_options(fs, **kwargs))
+        self._eng = BlockEngine(check_options(fs, **kwargs))
         self._done = False
 
     @property
     def n_samples(self) -> int:
         """Samples fed so far [-]."""
-        return self._eng.n
+        return self._eng.n_fed
+
+    @property
+    def block_samples(self) -> int:
+        """The analysis block [samples] as estimated from the options before any sample:
+        the ``block`` option, or 16 pulse widths from ``mesh_freq`` when that is longer
+        (about two blocks are held at a time)."""
+        opt = self._eng.opt
+        if opt.mesh_width is None:
+            return int(opt.block)
+        return max(int(opt.block), int(16 * opt.mesh_width))
 
     def feed(self, x) -> None:
         """Feed the next chunk of samples (1-D, float32 or float64; NaN marks gaps)."""
@@ -110,10 +122,10 @@ def detect_onsets_stream(blocks: Iterable[Recording], channel: str, *, flag_time
         col = blk.channel(channel)
         if eng is None:
             fs, t0 = blk.fs, blk.t0
-            fr = _time_runs(flag_times, "flag_times", fs, t0)
-            gr = _time_runs(gap_times, "gap_times", fs, t0)
-            eng = _Engine(_options(fs, t0=t0, channel=channel, flag_runs=fr, gap_runs=gr,
-                                   **kwargs))
+            fr = time_runs(flag_times, "flag_times", fs, t0)
+            gr = time_runs(gap_times, "gap_times", fs, t0)
+            eng = BlockEngine(check_options(fs, t0=t0, channel=channel, flag_runs=fr, gap_runs=gr,
+                                            **kwargs))
         elif blk.fs != fs:
             raise ValueError(f"block at t0={blk.t0!r} s has fs={blk.fs!r} Hz, the stream started at {fs!r} Hz")
         pos = (blk.t0 - t0) * fs
@@ -121,15 +133,15 @@ def detect_onsets_stream(blocks: Iterable[Recording], channel: str, *, flag_time
         if abs(pos - i0) > 1e-3:
             raise ValueError(f"block at t0={blk.t0!r} s is off the sample grid of the stream "
                              f"(t0={t0!r} s, fs={fs!r} Hz)")
-        if i0 > eng.n:
-            missing += i0 - eng.n
-            eng.feed(np.full(i0 - eng.n, np.nan))
-        skip = eng.n - i0
+        if i0 > eng.n_fed:
+            missing += i0 - eng.n_fed
+            eng.feed(np.full(i0 - eng.n_fed, np.nan))
+        skip = eng.n_fed - i0
         if skip < col.size:
             eng.feed(col[skip:])
     if eng is None:
-        o = _options(1.0, channel=channel, **{k: v for k, v in kwargs.items()
-                                               if k in ("reference", "level")})
+        o = check_options(1.0, channel=channel, **{k: v for k, v in kwargs.items()
+                                                   if k in ("reference", "level")})
         return empty_onsets(float("nan"), 0.0, channel, o.reference, o.level)
     if missing:
         warnings.warn(f"channel {channel!r}: {missing} sample(s) missing between stream blocks; "

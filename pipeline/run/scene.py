@@ -37,6 +37,7 @@ from meshphase.models.assembly import (CLEARANCE_ATOL, assemblable_planet_counts
 from meshphase.models.gearset import Gearset, Speeds, rpm_to_rad_s
 from meshphase.recording import Recording
 from meshphase.io.units import parse_unit
+from meshphase.runtime.registry import DEFAULT_ONSET_DETECTOR, ONSET_DETECTORS
 
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "scene_schema_errors", "plan",
            "check_recording", "STAGES", "RESULTS", "LIMITS"]
@@ -144,6 +145,9 @@ class Scene:
     profile_shift : bool
         ``[gearset] profile_shift``: the gears are profile shifted, so Z_r = Z_s + 2 Z_p need
         not hold (coaxiality is then not checked).
+    onset_detector : str
+        ``[onsets] detector``: the registered onset detector of the gauges
+        (:mod:`meshphase.onsets.detector`), default ``"matched"``.
     text : str
         The scene file's text (for the line numbers of errors found later, e.g. by
         :func:`plan`); empty for a scene built in code.
@@ -167,6 +171,7 @@ class Scene:
     mounts: dict = field(default_factory=dict)
     labels: dict = field(default_factory=dict)
     profile_shift: bool = False
+    onset_detector: str = DEFAULT_ONSET_DETECTOR
     text: str = field(default="", repr=False, compare=False)
 
     @property
@@ -389,6 +394,7 @@ def parse_scene(text: str, path: Path | str | None = None, *, recording_given: b
     channels, mounts = _parse_channels(raw, gearset, err)
     tacho = _parse_tacho(raw)
     labels = _parse_labels(raw, gearset, err)
+    detector = _parse_onsets(raw, err)
     inp = _parse_input(raw, base, err)
     tol = _parse_tolerances(raw, gearset, err)
     bearing = _parse_bearing(raw, err, label, text)
@@ -400,7 +406,7 @@ def parse_scene(text: str, path: Path | str | None = None, *, recording_given: b
         processing=dict(raw.get("processing", {})), tolerances=tol, bearing=bearing,
         output=(base / raw["output"]) if "output" in raw else None, raw=raw,
         speeds_resolution=resolution or None, fixed=raw.get("speeds", {}).get("fixed"), tacho=tacho, mounts=mounts,
-        labels=labels, profile_shift=profile_shift, text=text)
+        labels=labels, profile_shift=profile_shift, onset_detector=detector, text=text)
     _check_consistency(scene, text, label, recording_given=recording_given)
     stages = plan(scene, check=False)
     if "tolerance" in stages:
@@ -690,6 +696,15 @@ def _parse_labels(raw: dict, gearset: Gearset | None, err) -> dict:
                       f"pass order, below the number of planets ({gearset.n_planets})")
         out[gear] = int(k)
     return out
+
+
+def _parse_onsets(raw: dict, err) -> str:
+    """``[onsets] detector`` -> a registered onset detector's name (default "matched")."""
+    name = raw.get("onsets", {}).get("detector", DEFAULT_ONSET_DETECTOR)
+    try:
+        return ONSET_DETECTORS.check(name)
+    except ValueError as exc:
+        raise err(["onsets", "detector"], str(exc)) from None
 
 
 def _parse_input(raw: dict, base: Path, err) -> dict:

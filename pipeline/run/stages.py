@@ -39,10 +39,10 @@ from meshphase.runtime.log import logger
 from meshphase.kinematics.member_speeds import mean_mesh_rate, member_speeds, tacho_rate
 from meshphase.models.gearset import Speeds
 from meshphase.models.mesh_phasing import assembly_check, classify_phasing, ideal_phasing
-from meshphase.onsets import detect_onsets_recording
+from meshphase.onsets import ONSET_RESOLUTION, detect_recording  # noqa: F401 (ONSET_RESOLUTION was here)
 from meshphase.onsets.results import Onsets, empty_onsets
 from meshphase.run.outputs import new_output_dir, summary_dict, write_outputs  # noqa: F401 (public here)
-from meshphase.kinematics.passes import ONSET_RESOLUTION, gap_intervals_of, gauge_passes  # noqa: F401 (was here)
+from meshphase.kinematics.passes import gap_intervals_of, gauge_passes
 from meshphase.kinematics.pass_rates import pass_rate_warnings, two_level_train, wiring_findings
 from meshphase.kinematics.phasing import (PassTable, assign_planets_by_pattern, measure_phasing, pass_order,
                                           relabel_gauge)
@@ -378,7 +378,7 @@ def _channel_plans(ctx: RunContext, rec) -> list:
             ofm = _mesh_freq(ctx, og) if og in ("sun", "ring") else None
             kw = {"mesh_freq": ofm} if ofm else {}
         plans.append(ChannelPlan(c.name, mesh_freq=fm, pulse_period=period, group=str(gear),
-                                 onsets=onsets, onset_kwargs=kw))
+                                 onsets=onsets, onset_kwargs=kw, detector=ctx.scene.onset_detector))
     return plans
 
 
@@ -398,15 +398,16 @@ def stage_onsets(ctx: RunContext) -> OnsetsStage:
             if c.kind in GAUGE_KINDS:
                 gear = c.gear or c.kind
                 fm = _mesh_freq(ctx, gear) if gear in ("sun", "ring") else None
-                found[c.name] = detect_onsets_recording(rec, c.name, quality=cond.quality.get(c.name),
-                                                        **({"mesh_freq": fm} if fm else {}))
+                found[c.name] = detect_recording(rec, c.name, detector=ctx.scene.onset_detector,
+                                                 quality=cond.quality.get(c.name),
+                                                 **({"mesh_freq": fm} if fm else {}))
     out = {c.name: found[c.name] for c in rec.channels if c.kind in GAUGE_KINDS and c.name in found}
     scan = cond.scan if cond.scan is not None else ctx.load.scan
     n = sum(len(o) for o in out.values())
     jit = [float(np.median(o.corr)) for o in out.values() if len(o) and np.isfinite(o.corr).any()]
     # a gauge whose pulses were found upside down (the compressive fillet, or a bridge wired
     # the other way round) is said to be: the amplitudes in its tables are negative
-    neg = [nm for nm, o in out.items() if o.templates and o.templates[0].polarity < 0]
+    neg = [nm for nm, o in out.items() if len(o) and o.polarity < 0]
     note = f"{n} onsets" + (f"; median template correlation {np.median(jit):.4f}" if jit else "")
     if neg:
         note += f"; negative (compressive) pulses on {', '.join(neg)}"

@@ -79,6 +79,7 @@ from meshphase.signal.condition import (_apply_finite, _block_means, _block_medi
                                         design_filter, design_notch, detect_hum, finite_apply_gaps, level_steps)
 from meshphase.kinematics.encoder import pulse_levels, rising_crossing_parts
 from meshphase.errors import DataQualityWarning
+from meshphase.onsets import DEFAULT_BLOCK, DEFAULT_DETECTOR, make_detector
 from meshphase.signal.quality import ChannelQuality, ChannelScan, _RunTracker, merge_runs, quality_from_scan
 from meshphase.recording import ChannelSpec, Recording
 from meshphase.signal.savgol import savgol_filter
@@ -1405,7 +1406,9 @@ class ChannelPlan:
     onsets : bool
         Detect onsets on it (a gauge).
     onset_kwargs : dict
-        Passed to :class:`meshphase.onsets.OnsetStream` (``mesh_freq``).
+        Passed to the onset detector's factory (``mesh_freq``).
+    detector : str
+        The registered onset detector (:func:`meshphase.onsets.make_detector`).
     """
 
     name: str
@@ -1414,6 +1417,7 @@ class ChannelPlan:
     group: str = ""
     onsets: bool = False
     onset_kwargs: dict = field(default_factory=dict)
+    detector: str = DEFAULT_DETECTOR
 
 
 @dataclass
@@ -1660,9 +1664,7 @@ def _channel_chain(p: ChannelPlan, q: ChannelQuality, notch_sos, settle: dict, n
 def _onset_streams(plans, quality: dict, fs: float, t0: float) -> tuple[dict, int]:
     """The onset detector of every planned gauge (flagging its clipped runs, guarding its
     gaps by ``settle``, its dropouts as gaps), and the largest analysis block [samples]."""
-    from meshphase.onsets import OnsetStream
-
-    onsets, est_onset = {}, 1 << 20
+    onsets, est_onset = {}, DEFAULT_BLOCK
     for p in plans:
         if not p.onsets:
             continue
@@ -1672,11 +1674,8 @@ def _onset_streams(plans, quality: dict, fs: float, t0: float) -> tuple[dict, in
         kw.setdefault("gap_guard", q.settle)
         if len(q.dropout_runs):
             kw.setdefault("gap_runs", q.dropout_runs)
-        onsets[p.name] = OnsetStream(fs, t0=t0, channel=p.name, **kw)
-        mf = kw.get("mesh_freq")
-        if mf:
-            w_s = 0.8 * fs / mf
-            est_onset = max(est_onset, int(16 * w_s))
+        onsets[p.name] = make_detector(p.detector, fs, t0=t0, channel=p.name, **kw)
+        est_onset = max(est_onset, onsets[p.name].block_samples)
     return onsets, est_onset
 
 

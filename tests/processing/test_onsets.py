@@ -149,12 +149,12 @@ def test_auto_polarity_holds_at_low_snr(snr_db):
     # tails do not decide it (the raw 0.1 % / 99.9 % quantiles chose wrong in 6 of 40 such
     # blocks at 0 dB); a wrong sign times the side lobes, 2-3x the timing error, unflagged
     from meshphase.onsets.engine import _auto_polarity
-    from meshphase.onsets.learning import _width_autocorr
+    from meshphase.onsets.learning import width_autocorr
 
     rng = np.random.default_rng(17)
     for _ in range(10):
         x = _lobed_train(rng, snr_db)
-        w = _width_autocorr(x)
+        w = width_autocorr(x)
         assert _auto_polarity(x, w) == 1
         assert _auto_polarity(-x, w) == -1
 

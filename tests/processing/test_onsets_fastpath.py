@@ -11,7 +11,7 @@ from meshphase.errors import ProcessingWarning
 from meshphase.onsets import (FLAG_CLIPPED, FLAG_EDGE, FLAG_GAP, FLAG_TEMPLATE, OnsetStream,
                               detect_onsets)
 from meshphase.onsets import fastpath
-from meshphase.onsets.coarse import _coarse_dec
+from meshphase.onsets.coarse import coarse_decimated
 from meshphase.signal.condition import assess_quality
 
 FS = 5120.0
@@ -163,8 +163,8 @@ def test_coarse_run_maxima_bit_equal():
         if trial % 5 == 0:
             y = np.round(y)                         # ties between maxima
         w_d, sp = rng.uniform(1.0, 12.0), rng.uniform(1.0, 30.0)
-        fast = _coarse_dec(y, w_d, sp, 3.0, True)
-        slow = _coarse_dec(y, w_d, sp, 3.0, False)
+        fast = coarse_decimated(y, w_d, sp, 3.0, True)
+        slow = coarse_decimated(y, w_d, sp, 3.0, False)
         np.testing.assert_array_equal(fast[0], slow[0])
         np.testing.assert_array_equal(fast[1], slow[1])
         assert fast[2:] == slow[2:]

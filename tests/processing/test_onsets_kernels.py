@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from scipy import signal
 
 from meshphase.onsets import detect_onsets
-from meshphase.onsets.coarse import _decimate
+from meshphase.onsets.coarse import decimate
 from meshphase.onsets.features import _features_fit, _savgol_interior
 
 FS = 5120.0
@@ -18,8 +18,8 @@ FS = 5120.0
 @pytest.mark.parametrize("d", [1, 2, 7, 40])
 def test_decimate_sign_equals_negated_copy(d):
     x = np.random.default_rng(d).standard_normal(1000)
-    assert np.array_equal(_decimate(x, d, -1), _decimate(-x, d))
-    assert np.array_equal(_decimate(x, d, 1), _decimate(x, d))
+    assert np.array_equal(decimate(x, d, -1), decimate(-x, d))
+    assert np.array_equal(decimate(x, d, 1), decimate(x, d))
 
 
 def test_savgol_interior_equals_filter_inside():

@@ -9,8 +9,8 @@ import pytest
 
 from meshphase.bench.processing import match_onsets
 from meshphase.onsets import detect_onsets, detect_onsets_stream
-from meshphase.onsets.coarse import _decimate
-from meshphase.onsets.relearn import _Fit, _good_median, _period, _timing_bound
+from meshphase.onsets.coarse import decimate
+from meshphase.onsets.relearn import TemplateFit, good_median, pulse_period, timing_bound
 from meshphase.recording import ChannelSpec, Recording
 
 FS = 5120.0
@@ -26,9 +26,9 @@ def test_decimate_equals_the_block_mean(d):
     col = x[:, 1]                                    # a strided column, as rec.channel gives
     m = (col.size // d) * d
     ref = col[:m].reshape(-1, d).mean(axis=1)
-    np.testing.assert_allclose(_decimate(col, d), ref, rtol=0, atol=1e-14)
-    assert _decimate(np.zeros(0), d).size == 0
-    assert _decimate(col[: d - 1], d).size == 0
+    np.testing.assert_allclose(decimate(col, d), ref, rtol=0, atol=1e-14)
+    assert decimate(np.zeros(0), d).size == 0
+    assert decimate(col[: d - 1], d).size == 0
 
 
 def test_auto_learns_once_on_a_steady_run_and_keeps_the_accuracy(make_train):
@@ -59,14 +59,14 @@ def test_a_reused_template_reuses_its_matcher(make_train, monkeypatch):
 
     x, _, _ = make_train(n_pulses=400, snr_db=20.0, rng=31)
     built = []
-    real = engine._Matcher
+    real = engine.Matcher
 
     class Counting(real):
         def __init__(self, *a):
             built.append(a[1:])
             super().__init__(*a)
 
-    monkeypatch.setattr(engine, "_Matcher", Counting)
+    monkeypatch.setattr(engine, "Matcher", Counting)
     auto = detect_onsets(x, FS, block=2.4, engine="numpy")
     assert len(auto.templates) == 1 and len(built) == 1
     fresh = []
@@ -75,7 +75,7 @@ def test_a_reused_template_reuses_its_matcher(make_train, monkeypatch):
         fresh.append(k)
         return real(tpl, k, u)
 
-    monkeypatch.setattr(engine._Engine, "_matcher_for", per_block)
+    monkeypatch.setattr(engine.BlockEngine, "_matcher_for", per_block)
     again = detect_onsets(x, FS, block=2.4, engine="numpy")
     assert len(fresh) >= 7
     np.testing.assert_array_equal(again.index, auto.index)
@@ -107,30 +107,30 @@ def test_auto_streamed_equals_whole(make_train):
 
 def test_period_of_a_train_with_missed_pulses():
     peaks = np.arange(0, 100 * 50, 50, dtype=np.int64)
-    assert _period(peaks) == pytest.approx(50.0)
+    assert pulse_period(peaks) == pytest.approx(50.0)
     holed = np.delete(peaks, [10, 11, 40])          # missed pulses count as whole periods
-    assert _period(holed) == pytest.approx(50.0)
-    assert _period(np.empty(0, dtype=np.int64)) is None
-    assert _period(peaks[:5]) is None
-    assert _period(np.zeros(10, dtype=np.int64)) is None          # no interval
+    assert pulse_period(holed) == pytest.approx(50.0)
+    assert pulse_period(np.empty(0, dtype=np.int64)) is None
+    assert pulse_period(peaks[:5]) is None
+    assert pulse_period(np.zeros(10, dtype=np.int64)) is None          # no interval
 
 
 def test_fit_checks_and_timing_bound(make_train):
     x, truth, _ = make_train(n_pulses=200, snr_db=20.0, rng=4)
     on = detect_onsets(x, FS)
     tpl = on.templates[0]
-    c = _good_median(on.corr, on.flags)
+    c = good_median(on.corr, on.flags)
     # the bound from the correlations matches the true Cramer-Rao bound within ~25 %
-    assert _timing_bound(tpl, c) == pytest.approx(_crb(truth), rel=0.25)
-    assert math.isinf(_timing_bound(tpl, 0.0)) and math.isinf(_timing_bound(tpl, -0.5))
-    assert _timing_bound(tpl, 1.0) == 0.0
-    fit = _Fit.measure(tpl, on.corr, on.flags, 40.0)
+    assert timing_bound(tpl, c) == pytest.approx(_crb(truth), rel=0.25)
+    assert math.isinf(timing_bound(tpl, 0.0)) and math.isinf(timing_bound(tpl, -0.5))
+    assert timing_bound(tpl, 1.0) == 0.0
+    fit = TemplateFit.measure(tpl, on.corr, on.flags, 40.0)
     assert 0 < fit.speed_tol < 0.01
     assert fit.speed_holds(40.0) and fit.speed_holds(40.0 * (1 + 0.5 * fit.speed_tol))
     assert not fit.speed_holds(40.0 * (1 + 2 * fit.speed_tol))
     assert not fit.speed_holds(None)                 # unknown now, known before: re-learn
-    assert _Fit(0.9, None, 0.0).speed_holds(None)
+    assert TemplateFit(0.9, None, 0.0).speed_holds(None)
     assert fit.holds(on.corr, on.flags)
     assert not fit.holds(on.corr - 0.1, on.flags)
     # fewer than 3 unflagged pulses: the median of all of them
-    assert _good_median(np.array([0.5, 0.7, 0.9]), np.array([1, 0, 1], np.uint8)) == 0.7
+    assert good_median(np.array([0.5, 0.7, 0.9]), np.array([1, 0, 1], np.uint8)) == 0.7

@@ -14,9 +14,9 @@ from meshphase.signal.crb import crb_delay_std
 from meshphase.signal.condition import ChannelQuality
 from meshphase.errors import ProcessingWarning
 from meshphase.onsets import FLAG_CLIPPED, FLAG_GAP, Onsets, Template
-from meshphase.kinematics.passes import (ONSET_RESOLUTION, conditioned_gap_runs, gap_intervals_of,
-                                         centre_shifts, gauge_passes, onset_sigma, pass_times, timing_centre,
-                                         usable_onsets)
+from meshphase.kinematics.passes import (conditioned_gap_runs, gap_intervals_of, gauge_passes, onset_sigma,
+                                         pass_times, usable_onsets)
+from meshphase.onsets.timing import ONSET_RESOLUTION, centre_shifts, timing_centre
 from meshphase.kinematics.phasing import GaugePasses
 from meshphase.recording import ChannelSpec
 
