@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from meshphase.kinematics.angles import revolution_numbers
+from meshphase.kinematics.trains import revolution_numbers
 from meshphase.models.gearset import Gearset, Speeds
 from meshphase.kinematics.phasing import pass_order
 from meshphase.validate import as_positive
@@ -58,7 +58,7 @@ def mean_mesh_rate(model) -> float:
 
 def tacho_rate(tacho_times) -> float:
     """Carrier revolutions per second [1/s] between the first and last once-per-turn tacho
-    edge (missed edges counted by :func:`meshphase.kinematics.angles.revolution_numbers`); NaN with
+    edge (missed edges counted by :func:`meshphase.kinematics.trains.revolution_numbers`); NaN with
     fewer than two edges."""
     if tacho_times is None:
         return float("nan")
@@ -82,7 +82,7 @@ def member_speeds(gearset: Gearset, mesh_rate: float, *, fixed: str | None,
     mesh_rate : float
         Measured mean mesh frequency [cycles/s] (:func:`mean_mesh_rate`).
     fixed : {"ring", "sun", None}
-        The held member (:func:`meshphase.kinematics.angles.held_member`).
+        The held member (:func:`meshphase.kinematics.shafts.held_member`).
     speeds : Speeds, optional
         Nominal speeds [rad/s]: the senses, and a differential's carrier ratio when no tacho
         rate is given.

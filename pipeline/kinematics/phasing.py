@@ -55,10 +55,12 @@ from scipy import linalg, special
 from scipy.interpolate import PchipInterpolator
 
 from meshphase.kinematics.angle_windows import fit_angle_windows
-from meshphase.kinematics.angles import (AngleModel, Kinematics, PassTrain, gauge_train, held_member, kinematics,
-                                         label_shift_costs, mesh_cycles_per_carrier_turn, relabel_train,
-                                         revolution_numbers, tacho_train, unseen_ripples)
-from meshphase.kinematics.angles import encoder_train, shaft_cycles
+from meshphase.kinematics.angle_selection import unseen_ripples
+from meshphase.kinematics.angles import AngleModel
+from meshphase.kinematics.label_shift import label_shift_costs
+from meshphase.kinematics.shafts import Kinematics, held_member, kinematics, shaft_cycles
+from meshphase.kinematics.trains import (PassTrain, encoder_train, gauge_train, mesh_cycles_per_carrier_turn,
+                                         relabel_train, revolution_numbers, tacho_train)
 from meshphase.kinematics.encoder import MAX_GAP_PULSES, clean_edges, split_at_gaps
 from meshphase.errors import DataQualityWarning, ProcessingWarning
 from meshphase.validate import as_finite_array, as_positive_int
@@ -707,7 +709,7 @@ def phasing_from_model(model: AngleModel, train: PassTrain, z_gear: int, n_plane
     model : AngleModel
         From :func:`meshphase.kinematics.angle_windows.fit_angle_windows` (``train`` among its trains).
     train : PassTrain
-        The gauge's passes (:func:`meshphase.kinematics.angles.gauge_train`).
+        The gauge's passes (:func:`meshphase.kinematics.trains.gauge_train`).
     z_gear : int
         Tooth count of the gauged gear [-].
     n_planets : int
@@ -794,7 +796,7 @@ def phasing_from_model(model: AngleModel, train: PassTrain, z_gear: int, n_plane
     # it passes what the reliability rule lets an estimated error reach (UNRELIABLE_RATIO x
     # the timing floor), and then the whole D joins the uncertainty (the far end is not
     # ruled out); below it, or below what a small common ripple could do
-    # (:data:`meshphase.kinematics.angles.INSEPARABLE_RIPPLE`), the chosen explanation stands and a
+    # (:data:`meshphase.kinematics.angle_choice.INSEPARABLE_RIPPLE`), the chosen explanation stands and a
     # note names the other
     tol = (UNRELIABLE_RATIO * INSEPARABLE_SHARE * float(np.sqrt(np.mean(floor ** 2)))
            if rows.size else 0.0)
@@ -1305,7 +1307,7 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
         Every sun, ring and face-width gauge with its usable pulses.
     gearset : Gearset
     fixed : {"ring", "sun", None}
-        Held member (:func:`meshphase.kinematics.angles.held_member`); ``fixed_reason`` says why.
+        Held member (:func:`meshphase.kinematics.shafts.held_member`); ``fixed_reason`` says why.
     tacho_times : array_like, optional
         Carrier tacho edges [s]: an angle train when a member is held, and planet 1 of the
         held member's gauge when ``key_angle`` and that gauge's ``mounts`` entry are known.
@@ -1321,9 +1323,9 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
         Sense of the carrier's rotation (default from the direction and the held member).
     check_held : bool
         Decide the held member again from the data (mesh cycles per carrier turn measured
-        between tacho edges, :func:`meshphase.kinematics.angles.mesh_cycles_per_carrier_turn`) together
+        between tacho edges, :func:`meshphase.kinematics.trains.mesh_cycles_per_carrier_turn`) together
         with ``speeds`` and their typed ``speeds_resolution``
-        (:func:`meshphase.kinematics.angles.held_member`); ``fixed`` is then only the starting guess.
+        (:func:`meshphase.kinematics.shafts.held_member`); ``fixed`` is then only the starting guess.
     label_shifts : dict of str to int, optional
         Per gear ("sun", "ring"): planet 1 of its main gauge is this many places along the
         pass order from its first pulse [-] (the scene's ``[labels]``); what the data say
@@ -1395,7 +1397,7 @@ def measure_phasing(passes, gearset, *, fixed=None, fixed_reason: str = "",
 
 
 def _encoder_trains(encoders, kin: Kinematics, notes: list) -> list:
-    """Angle trains of the encoders (:func:`meshphase.kinematics.angles.encoder_train`), their edges
+    """Angle trains of the encoders (:func:`meshphase.kinematics.trains.encoder_train`), their edges
     cleaned (:func:`meshphase.kinematics.encoder.clean_edges`, counts in ``notes``); an encoder that
     cannot observe the mesh angle (a differential, a held shaft) is named in ``notes``."""
     out = []
@@ -1430,7 +1432,7 @@ def _encoder_trains(encoders, kin: Kinematics, notes: list) -> list:
 def _held_from_data(passes, gearset, tach: np.ndarray, speeds, resolution, given: tuple) -> tuple:
     """(held member, reason) from the data: mesh cycles per carrier turn, counted over one
     tacho interval on the busiest gauge's pass pattern (which pulse is planet 1 does not
-    matter for a count), with the nominal ``speeds`` (:func:`meshphase.kinematics.angles.held_member`);
+    matter for a count), with the nominal ``speeds`` (:func:`meshphase.kinematics.shafts.held_member`);
     ``given`` when the count cannot be made."""
     psi = gearset.angles
     p0 = max(passes, key=lambda p: p.times.size)
@@ -1648,7 +1650,7 @@ def _sun_by_loads(p: GaugePasses, pl, pos, raw: tuple, ring: GaugeLabels, gearse
 
 def _gauge_trains(all_labels: dict, gearset) -> tuple[list, dict]:
     """The angle train of every gauge with two or more labelled passes
-    (:func:`meshphase.kinematics.angles.gauge_train`), as a list and by channel."""
+    (:func:`meshphase.kinematics.trains.gauge_train`), as a list and by channel."""
     trains, train_of = [], {}
     for name, (lab, frac, p) in all_labels.items():
         ok = lab.planet >= 0
@@ -1707,7 +1709,7 @@ def nearest_index(sorted_times: np.ndarray, t) -> np.ndarray:
 
 
 def coincident_shift(train, reference, n_planets: int) -> tuple[int | None, int, int]:
-    """The cyclic relabelling of ``train`` (:func:`meshphase.kinematics.angles.relabel_train`) that
+    """The cyclic relabelling of ``train`` (:func:`meshphase.kinematics.trains.relabel_train`) that
     gives its passes the planets of the ``reference`` train's passes at the same instants.
 
     Two gauges on one tooth (across its face width) meet each planet at the same time, so a
@@ -1758,7 +1760,7 @@ def _align_labels(trains, train_of, all_labels, labels, kin, n, notes):
     """Relabel relatively labelled gauge trains cyclically so that their planet numbers name
     the same planets as the reference trains'. A gauge on the same tooth as a reference
     gauge takes the shift its coincident passes name (:func:`coincident_shift`). Otherwise
-    the shifts are fitted (:func:`meshphase.kinematics.angles.label_shift_costs`), and one is taken
+    the shifts are fitted (:func:`meshphase.kinematics.label_shift.label_shift_costs`), and one is taken
     only when its misfit stands clearly apart (the next best is worse by more than 25 times
     the fit's variance per observation); else the planets' offsets look alike, nothing is
     changed and a note says so."""
@@ -1891,7 +1893,7 @@ def _choice_reasons(competitors, floor: float, est: float) -> list:
 
 def _reliability(model: AngleModel, train: PassTrain, tab: PassTable, unseen=()) -> dict:
     """Whether a gear's phasing can be trusted, from the model's own residual diagnostics and
-    what its trains can see (``unseen``: :func:`meshphase.kinematics.angles.unseen_ripples`)."""
+    what its trains can see (``unseen``: :func:`meshphase.kinematics.angle_selection.unseen_ripples`)."""
     reasons = []
     for shaft, period in unseen:
         # a relative ripple a moves A by a P / (2 pi) mesh cycles at most, and the phasing

@@ -121,7 +121,9 @@ def measured(direction, err, gauge, profile="constant", tooth=0.3):
     "ring_sun_encoder" the ring's passes from one angle model of both gauges' trains (the
     ring held), as stage_phasing does."""
     if gauge == "ring_sun_encoder":
-        from meshphase.kinematics.angles import fit_angle_model, gauge_train, kinematics
+        from meshphase.kinematics.angles import fit_angle_model
+        from meshphase.kinematics.shafts import kinematics
+        from meshphase.kinematics.trains import gauge_train
         from meshphase.kinematics.phasing import assign_planets_by_pattern, phasing_from_model, planet_fractions
 
         g = gearset(direction)
