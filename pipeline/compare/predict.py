@@ -10,7 +10,7 @@ planet-1 pass (angle time tau_1) and the planet-n pass (tau_n) the tooth turns
     lag_n = psi_es,n(tau_n) - psi_es,1(tau_1)        (mod 2 pi, in the gear's sense)
 
 and the measured phasing is gamma_n = frac(o Z lag_n / 2 pi) with o = +-1 the gauge's
-sense of rotation (:func:`meshphase.kinematics.phasing.pass_order`). The model therefore has to be
+sense of rotation (:func:`meshphase.kinematics.pass_table.pass_order`). The model therefore has to be
 evaluated at the two engagement instants, not at one common time as in seed 000's
 gamma(t): :func:`predict_pass_phasing` does that, on the pulse-train encoder angle of each
 pass (so speed drift does not accumulate into the offset angles).
@@ -37,7 +37,7 @@ from meshphase.errors import ProcessingWarning
 from meshphase.models.gearset import Gearset, Speeds
 from meshphase.models.mesh_phasing import ShaftHoleErrors, ideal_phasing, mesh_angle_deviations
 from meshphase.models.phasing_jacobian import MeshGradientPlan, n_offset_parameters
-from meshphase.kinematics.phasing import PassTable, nearest_index, pass_order
+from meshphase.kinematics.pass_table import PassTable, nearest_index, pass_order
 from meshphase.validate import as_choice, as_positive, as_positive_int
 
 __all__ = [

@@ -14,7 +14,7 @@ the sun, relative to the carrier, has turned to the planet's direction, i.e. at
     A = Z_s (k + f_n) + c + d_n + h_n          (sun gauge, relative revolution k)        (1)
 
 with ``f_n`` the planet's fraction of a revolution in the gauge's pass order
-(:func:`meshphase.kinematics.phasing.planet_fractions`), ``c`` a constant of the gauge (which tooth, which
+(:func:`meshphase.kinematics.pass_table.planet_fractions`), ``c`` a constant of the gauge (which tooth, which
 pulse feature is timed), ``d_n`` planet n's phasing deviation from the ideal (the quantity of
 interest) and ``h_n`` its time-varying part (a planet's own shaft hole offset turns with the
 planet and moves its passes: terms periodic in the planet's spin, Z_p mesh cycles per turn).

@@ -10,7 +10,7 @@ One more fact fixes the carrier: a held ring (w_c = -(w_r - w_c)), a held sun
 (w_c = -(w_s - w_c)), else the carrier tacho's count of turns per second or, without a tacho,
 the nominal ratio of carrier to sun-relative speed. The sense of the sun relative to the
 carrier is the nominal speeds', else the gearset's direction
-(:func:`meshphase.kinematics.phasing.pass_order`, as :func:`meshphase.compare.predict.relative_speeds`).
+(:func:`meshphase.kinematics.pass_table.pass_order`, as :func:`meshphase.compare.predict.relative_speeds`).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import numpy as np
 
 from meshphase.kinematics.trains import revolution_numbers
 from meshphase.models.gearset import Gearset, Speeds
-from meshphase.kinematics.phasing import pass_order
+from meshphase.kinematics.pass_table import pass_order
 from meshphase.validate import as_positive
 
 __all__ = ["member_speeds", "mean_mesh_rate", "tacho_rate"]

@@ -52,7 +52,7 @@ class PassTrain:
     z : int
         Tooth count of the gauged gear (0 for a tacho) [-].
     order : {+1, -1}
-        Sense in which the gauge meets the planets (:func:`meshphase.kinematics.phasing.pass_order`):
+        Sense in which the gauge meets the planets (:func:`meshphase.kinematics.pass_table.pass_order`):
         a planet's carrier-frame angle shift d psi moves its passes by
         ``order * z * d psi / 2 pi`` mesh cycles.
     """
@@ -123,18 +123,18 @@ def gauge_train(name: str, gear: str, times, planet, position, fractions, z_gear
     planet : array_like of int, shape (m,)
         0-based planet per pass (>= 0: pass unassigned pulses separately, not here).
     position : array_like of int, shape (m,)
-        Pass-order position of each pass (:func:`meshphase.kinematics.phasing.assign_planets_by_pattern`
+        Pass-order position of each pass (:func:`meshphase.kinematics.planet_labels.assign_planets_by_pattern`
         ``info["position"]``): consecutive planets differ by 1, a revolution by N.
     fractions : array_like, shape (N,)
         Fraction of a revolution from planet 1 to planet n in pass order [-]
-        (:func:`meshphase.kinematics.phasing.planet_fractions`).
+        (:func:`meshphase.kinematics.pass_table.planet_fractions`).
     z_gear : int
         Tooth count of the gauged gear [-].
     sigma : float or array_like, optional
         Timing uncertainty per pass [s] (the onset timing bound). None: unknown (the
         train's scatter sets it).
     order : {+1, -1}
-        The gauge's pass order (:func:`meshphase.kinematics.phasing.pass_order`), which sets the sign
+        The gauge's pass order (:func:`meshphase.kinematics.pass_table.pass_order`), which sets the sign
         with which a planet's own angle shift moves its passes.
     """
     if order not in (1, -1):

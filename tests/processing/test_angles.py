@@ -24,8 +24,8 @@ from meshphase.kinematics.trains import (PassTrain, gauge_train, relabel_train, 
                                          tacho_train)
 from meshphase.models.gearset import Gearset, Speeds, rpm_to_rad_s
 from meshphase.models.tolerance import table2_case
-from meshphase.kinematics.phasing import (assign_planets_by_pattern, pass_order, phasing_from_model,
-                                          planet_fractions)
+from meshphase.kinematics.pass_table import pass_order, phasing_from_model, planet_fractions
+from meshphase.kinematics.planet_labels import assign_planets_by_pattern
 from meshphase.synthetic.kinematics import SpeedProfile, engagement_events, event_times_for_angles
 
 TWO_PI = 2 * math.pi
@@ -295,7 +295,7 @@ def _same_tooth_passes(drop_first: int, *, angle_b=None):
     tooth 0 and two on tooth 5 (across its face width), the second of those missing its
     first ``drop_first`` passes, so the first pulse it sees is another planet's; with
     ``angle_b`` [rad] the second's passes are those of a gauge at that angle instead."""
-    from meshphase.kinematics.phasing import GaugePasses
+    from meshphase.kinematics.planet_labels import GaugePasses
     from meshphase.synthetic.kinematics import engagement_events
 
     g, sp = rig(zp=31)
@@ -361,7 +361,7 @@ def test_gauges_on_one_tooth_whose_passes_do_not_coincide_fall_back_to_the_offse
 
 
 def test_coincident_shift_names_the_relabelling_and_refuses_unclear_cases():
-    from meshphase.kinematics.phasing import COINCIDENT_MIN, coincident_shift
+    from meshphase.kinematics.label_checks import COINCIDENT_MIN, coincident_shift
 
     trains, frac, _, _ = offset_trains()
     ring = trains[1]
@@ -700,7 +700,7 @@ def test_planet_rate_ripple_and_equal_planet_terms_are_named_and_counted():
     # is inside it: RMS(error / sigma) <= 1.5, the issue's calibration target for a flagged
     # value) and the reliability names both explanations and the measurement that separates
     # them
-    from meshphase.kinematics.phasing import _reliability
+    from meshphase.kinematics.reliability import phasing_reliability
 
     trains, ev, kin = _planet_rate_ripple_trains(False)
     model = fit_angle_model(trains, kin, 4)
@@ -712,7 +712,7 @@ def test_planet_rate_ripple_and_equal_planet_terms_are_named_and_counted():
         floor = float(np.sqrt(np.mean(tab.timing_floor ** 2)))
         assert float(np.sqrt(np.mean(err ** 2))) > 20 * floor      # the error at stake
         assert float(np.sqrt(np.mean((err / tab.uncertainty) ** 2))) <= 1.5
-        rel = _reliability(model, tr, tab)
+        rel = phasing_reliability(model, tr, tab)
         assert not rel["reliable"]
         why = [r for r in rel["reasons"] if "equally well" in r]
         assert len(why) == 1 and "shaft encoder" in why[0] and "0.092" in why[0]
@@ -775,7 +775,7 @@ def test_a_carrier_harmonic_at_the_planet_spin_period_is_right_or_flagged():
     # ranks it after them), and the phasing (0.028 / 0.019 cycles off, 16x / 11x the floor) is
     # within the target (max(2e-3, 1.3 x floor)) or flagged with the cause named and a sigma
     # that covers its error (RMS(error / sigma) <= 1.5; 1.03 / 0.85 measured)
-    from meshphase.kinematics.phasing import _reliability
+    from meshphase.kinematics.reliability import phasing_reliability
     from meshphase.synthetic.kinematics import ShaftRipple
 
     g, sp = rig()
@@ -792,6 +792,6 @@ def test_a_carrier_harmonic_at_the_planet_spin_period_is_right_or_flagged():
         rms = float(np.sqrt(np.mean(err ** 2)))
         if rms <= max(2e-3, 1.3 * floor):
             continue
-        rel = _reliability(model, tr, tab)
+        rel = phasing_reliability(model, tr, tab)
         assert not rel["reliable"] and any("planet spin rate" in r for r in rel["reasons"])
         assert float(np.sqrt(np.mean((err / tab.uncertainty) ** 2))) <= 1.5

@@ -7,7 +7,7 @@ changes are exact too). Two kinds of pass tables are built from the events:
 
 * exact tables: gamma and the encoder angle taken from the truth itself, so the model
   (:func:`predict_pass_phasing`) is checked alone;
-* measured tables: the event times through :func:`meshphase.kinematics.phasing.measured_phasing`, as the
+* measured tables: the event times through :func:`meshphase.kinematics.pass_table.measured_phasing`, as the
   pipeline does, so the check includes the pulse-train encoder; the model then has to match
   the measured phasing to the encoder's own accuracy.
 
@@ -29,7 +29,7 @@ from meshphase.compare.predict import (PARAMETER_NAMES, Identification, band_cov
 from meshphase.errors import ProcessingWarning
 from meshphase.models.gearset import Gearset, Speeds
 from meshphase.models.mesh_phasing import ShaftHoleErrors, ideal_phasing, time_varying_phasing
-from meshphase.kinematics.phasing import PassTable, measured_phasing, pass_order
+from meshphase.kinematics.pass_table import PassTable, measured_phasing, pass_order
 from meshphase.synthetic.kinematics import SpeedProfile, engagement_events
 
 TWO_PI = 2 * math.pi
@@ -124,7 +124,8 @@ def measured(direction, err, gauge, profile="constant", tooth=0.3):
         from meshphase.kinematics.angles import fit_angle_model
         from meshphase.kinematics.shafts import kinematics
         from meshphase.kinematics.trains import gauge_train
-        from meshphase.kinematics.phasing import assign_planets_by_pattern, phasing_from_model, planet_fractions
+        from meshphase.kinematics.pass_table import phasing_from_model, planet_fractions
+        from meshphase.kinematics.planet_labels import assign_planets_by_pattern
 
         g = gearset(direction)
         trains = {}

@@ -13,7 +13,7 @@ import pytest
 from meshphase.compare.predict import (PARAMETER_NAMES, identify_errors, pass_phasing_jacobian,
                                        predict_pass_phasing)
 from meshphase.models.mesh_phasing import ShaftHoleErrors
-from meshphase.kinematics.phasing import PassTable
+from meshphase.kinematics.pass_table import PassTable
 
 from test_compare import ERRORS, exact_table, gearset, measured
 
