@@ -10,7 +10,7 @@ One more fact fixes the carrier: a held ring (w_c = -(w_r - w_c)), a held sun
 (w_c = -(w_s - w_c)), else the carrier tacho's count of turns per second or, without a tacho,
 the nominal ratio of carrier to sun-relative speed. The sense of the sun relative to the
 carrier is the nominal speeds', else the gearset's direction
-(:func:`meshphase.kinematics.pass_table.pass_order`, as :func:`meshphase.compare.predict.relative_speeds`).
+(:func:`meshphase.kinematics.pass_table.pass_order`, as :func:`meshphase.compare.pass_model.relative_speeds`).
 """
 
 from __future__ import annotations

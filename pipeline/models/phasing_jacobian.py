@@ -1,6 +1,6 @@
 """Closed-form derivatives of the mesh-line deviations with respect to the shaft hole errors.
 
-The identification (:func:`meshphase.compare.predict.identify_errors`) fits the Cartesian offset
+The identification (:func:`meshphase.compare.identify.identify_errors`) fits the Cartesian offset
 components p = (sun_x, sun_y, ring_x, ring_y, planet1_x, planet1_y, ...) [m], with
 (x, y) = e (cos kappa, sin kappa) in the conventions of :class:`ShaftHoleErrors` (planet
 kappa from the inward radial). In the frame of planet n (u_n radial, t_n tangential) the
@@ -80,7 +80,7 @@ def mesh_angle_gradient(t: ArrayLike, planet: ArrayLike, gearset: Gearset, speed
         entry of :func:`meshphase.models.mesh_phasing.mesh_angle_deviations`.
     grad : numpy.ndarray, shape (n, 4 + 2 N)
         d delta / d p [rad/m], p the Cartesian offsets in the order of
-        :func:`meshphase.compare.predict.PARAMETER_NAMES`: (sun_x, sun_y, ring_x, ring_y,
+        :func:`meshphase.compare.identify.PARAMETER_NAMES`: (sun_x, sun_y, ring_x, ring_y,
         planet1_x, planet1_y, ...). Columns other than the meshing gear's and the planet's
         own are 0.
 

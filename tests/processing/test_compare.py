@@ -24,8 +24,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from meshphase.compare.predict import (PARAMETER_NAMES, Identification, band_coverage, identify_errors,
-                                       predict_pass_phasing, relative_speeds, residual_stats, wrap)
+from meshphase.compare.identify import Identification, PARAMETER_NAMES, identify_errors
+from meshphase.compare.pass_model import predict_pass_phasing, relative_speeds, wrap
+from meshphase.compare.predict import band_coverage, residual_stats
 from meshphase.errors import ProcessingWarning
 from meshphase.models.gearset import Gearset, Speeds
 from meshphase.models.mesh_phasing import ShaftHoleErrors, ideal_phasing, time_varying_phasing

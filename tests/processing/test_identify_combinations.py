@@ -12,8 +12,8 @@ import math
 import numpy as np
 import pytest
 
-from meshphase.compare.predict import (PARAMETER_NAMES, Identification, describe_combination,
-                                       identification_verdict, identify_errors)
+from meshphase.compare.identify import (Identification, PARAMETER_NAMES, describe_combination,
+                                        identification_verdict, identify_errors)
 from meshphase.models.gearset import Gearset
 from meshphase.kinematics.pass_table import PassTable
 
