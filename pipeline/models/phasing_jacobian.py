@@ -40,7 +40,7 @@ from numpy.typing import ArrayLike
 from meshphase.validate import as_choice
 from meshphase.models._geometry import broadcast_errors, check_error_size, cos_sin, rotation_angle_unchecked
 from meshphase.models.gearset import Gearset, Speeds
-from meshphase.models.mesh_phasing import ShaftHoleErrors, _prepare
+from meshphase.models.mesh_phasing import ShaftHoleErrors, prepare_inputs
 
 __all__ = ["MESHES", "MeshGradientPlan", "mesh_angle_gradient", "n_offset_parameters"]
 
@@ -125,7 +125,7 @@ class MeshGradientPlan:
     def __init__(self, t: ArrayLike, planet: ArrayLike, gearset: Gearset, speeds: Speeds, *,
                  mesh: str = "sun"):
         mesh = as_choice(mesh, "mesh", MESHES)
-        g, sp, t, _, _ = _prepare(t, gearset, speeds, None)
+        g, sp, t, _, _ = prepare_inputs(t, gearset, speeds, None)
         n_p = g.n_planets
         pl = np.asarray(planet)
         if pl.size and not np.issubdtype(pl.dtype, np.integer):
