@@ -81,7 +81,8 @@ import numpy as np
 import pytest
 
 import meshphase.io
-from meshphase.compare.predict import PARAMETER_NAMES, _vector_from_errors, truth_comparison, wrap
+from meshphase.compare.identify import vector_from_errors
+from meshphase.compare.predict import PARAMETER_NAMES, truth_comparison, wrap
 from meshphase.errors import ProcessingWarning
 from meshphase.models.mesh_phasing import ShaftHoleErrors
 from meshphase.run.scene import SceneError, load_scene, parse_scene
@@ -224,7 +225,7 @@ def mapped_true_errors(ctx: RunContext, truth, gearset) -> ShaftHoleErrors:
 
 def _ident_ratio(ident, errors: ShaftHoleErrors) -> float:
     n = (ident.free.size - 4) // 2
-    proj = np.linalg.norm(ident.projector @ _vector_from_errors(errors, n)[ident.free])
+    proj = np.linalg.norm(ident.projector @ vector_from_errors(errors, n)[ident.free])
     return ident.subspace_error(errors) / proj
 
 
@@ -352,7 +353,7 @@ def test_identified_errors_recover_the_truth(name):
     if kind[0] == "zero":
         # no errors in the truth: the projected estimate stays at the encoder's resolution
         n = (ident.free.size - 4) // 2
-        est = np.linalg.norm(ident.projector @ _vector_from_errors(ident.errors, n)[ident.free])
+        est = np.linalg.norm(ident.projector @ vector_from_errors(ident.errors, n)[ident.free])
         assert est <= kind[1], est
         return
     true = mapped_true_errors(ctx, truth, g)
@@ -360,7 +361,7 @@ def test_identified_errors_recover_the_truth(name):
         assert _ident_ratio(ident, true) <= kind[1]
     else:
         # noise-limited: each identifiable parameter within k of its own standard deviation
-        vt = dict(zip(PARAMETER_NAMES(g.n_planets), _vector_from_errors(true, g.n_planets)))
+        vt = dict(zip(PARAMETER_NAMES(g.n_planets), vector_from_errors(true, g.n_planets)))
         z = [(est - vt[k]) / std for k, (est, std, ok) in ident.parameters.items() if ok]
         assert len(z) >= 4, ident.parameters
         assert np.all(np.isfinite(z)) and np.max(np.abs(z)) <= kind[1], z

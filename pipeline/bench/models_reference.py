@@ -31,7 +31,7 @@ from scipy import special
 from meshphase.jsonable import to_jsonable
 from meshphase.runtime.log import logger
 from meshphase.models import _kernels
-from meshphase.models.tolerance_model import (ALL_STATISTICS, _P3_HI, _P3_LO, _Grid, _map_samples,
+from meshphase.models.tolerance_model import (ALL_STATISTICS, P3_HI, P3_LO, RotationGrid, map_samples,
                                               _map_values, default_n_times)
 from meshphase.validate import as_positive_int
 from meshphase.bench.models_reference_tail import directional_bounds, interpolation_check
@@ -75,7 +75,7 @@ class _Tails:
         return a + frac * (b - a)
 
 
-def _tail_k(n, p_lo=_P3_LO, p_hi=_P3_HI):
+def _tail_k(n, p_lo=P3_LO, p_hi=P3_HI):
     return max(int(math.ceil((n - 1) * p_lo)) + 3, n - int(math.floor((n - 1) * p_hi)) + 3)
 
 
@@ -83,15 +83,15 @@ def _summaries(count, s1, s2, shift, tails):
     mean = shift + s1 / count
     var = (s2 - s1 * s1 / count) / max(count - 1, 1)
     return {"mean": mean, "std": np.sqrt(np.maximum(var, 0.0)),
-            "bound3_lo": tails.quantile(count, _P3_LO),
-            "bound3_hi": tails.quantile(count, _P3_HI)}
+            "bound3_lo": tails.quantile(count, P3_LO),
+            "bound3_hi": tails.quantile(count, P3_HI)}
 
 
 def _run(case, n, seed, groups, batch):
     """Stream n pseudo-random samples in ``groups`` groups; moments and tails per group."""
     g, sp, tol, win = case
     n_p = g.n_planets
-    grid = _Grid(g, sp, win, _n_times(sp, win))
+    grid = RotationGrid(g, sp, win, _n_times(sp, win))
     d = tol.n_random(n_p)
     gen = np.random.default_rng(seed)
     sizes = [n // groups + (1 if i < n % groups else 0) for i in range(groups)]
@@ -104,7 +104,7 @@ def _run(case, n, seed, groups, batch):
         acc = [0, 0.0, 0.0]
         for a in range(0, m, batch):
             b = min(m, a + batch) - a
-            es, ks, er, kr, ep, kp = _map_samples(gen.random((b, d)), tol, n_p)
+            es, ks, er, kr, ep, kp = map_samples(gen.random((b, d)), tol, n_p)
             x = np.stack(grid.run(es, ks, er, kr, ep, kp, "numba")).transpose(1, 0, 2)
             x = x.reshape(b, -1)                      # columns: statistic-major, then planet
             if shift is None:
@@ -217,21 +217,21 @@ class _CaseModel:
     (as :func:`plain_reference`)."""
 
     def __init__(self, case):
-        from meshphase.models.tolerance_cv import _check_cv_bands, _surrogate
+        from meshphase.models.tolerance_cv import check_cv_bands, cv_surrogate
         from meshphase.models.tolerance_linear import exceedance, linearised_deviation
         g, sp, tol, win = case
         self.n_p = g.n_planets
         self.n_t = _n_times(sp, win)
-        _check_cv_bands(tol, self.n_p)                 # zero-mean normal radii, fixed angles
+        check_cv_bands(tol, self.n_p)                 # zero-mean normal radii, fixed angles
         self.lin = linearised_deviation(g, sp, tol, win, self.n_t)
         if self.lin.n_random == 0 or not self.lin.homogeneous():
             raise ValueError("directional reference: needs random radial errors and a "
                              "deviation that vanishes at the mean errors")
         self.tol = tol
-        self.grid = _Grid(g, sp, win, self.n_t)
+        self.grid = RotationGrid(g, sp, win, self.n_t)
         self.engine = _kernels.resolve_engine("auto")
         self._exceedance = exceedance
-        self.mean, self.std, q, _ = _surrogate(self.lin, np.zeros(0))   # q: (8, 2, N)
+        self.mean, self.std, q, _ = cv_surrogate(self.lin, np.zeros(0))   # q: (8, 2, N)
         scale = np.max(self.std, initial=0.0)
         self.targets, self.q_lin, self.info, self._dirs = [], [], [], {}
         for i in range(len(ALL_STATISTICS)):

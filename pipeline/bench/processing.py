@@ -722,18 +722,18 @@ IDENTIFY_COLUMNS = ("minutes", "jac", "n_passes", "evaluations", "jacobians", "w
 
 
 def identify_rows(minutes=(10.0,), *, jacs=("2-point", "analytic")) -> list:
-    """Evaluations and wall time of :func:`meshphase.compare.predict.identify_errors` per Jacobian.
+    """Evaluations and wall time of :func:`meshphase.compare.identify.identify_errors` per Jacobian.
 
     The passes are the exact engagements (:func:`meshphase.synthetic.kinematics.engagement_events`)
     of the benchmark rig (:data:`meshphase.bench.rss.BENCH_GEARSET`, Z_p 31, sun 18.19 and
     carrier 1.06 r/min) with seed 000 Table 2 case 1 offsets (0.2 mm, sun and ring gauges),
-    through :func:`meshphase.kinematics.phasing.measured_phasing`, every offset free: what the identify
+    through :func:`meshphase.kinematics.pass_table.measured_phasing`, every offset free: what the identify
     stage of a run of that length fits. Rows: :data:`IDENTIFY_COLUMNS`.
     """
-    from meshphase.compare.predict import identify_errors
+    from meshphase.compare.identify import identify_errors
     from meshphase.models.gearset import Gearset, Speeds
     from meshphase.models.mesh_phasing import ShaftHoleErrors
-    from meshphase.kinematics.phasing import measured_phasing
+    from meshphase.kinematics.pass_table import measured_phasing
     from meshphase.synthetic.kinematics import engagement_events
 
     g = Gearset.equally_spaced(25, 87, 31, 4, 112.5e-3)

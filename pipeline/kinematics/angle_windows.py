@@ -35,7 +35,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from meshphase.kinematics.angles import AngleModel, Kinematics, PassTrain, TrainFit, fit_angle_model, slice_train
+from meshphase.kinematics.angles import AngleModel, TrainFit, fit_angle_model
+from meshphase.kinematics.shafts import Kinematics
+from meshphase.kinematics.trains import PassTrain, slice_train
 from meshphase.runtime.threads import thread_pool
 
 __all__ = ["fit_angle_windows", "WindowedAngleModel", "WINDOW_OBS"]

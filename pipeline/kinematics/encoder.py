@@ -6,9 +6,9 @@ revolution of that shaft. Its rising edges sit at equal shaft angles, so edge k 
     A = (P_shaft / pulses_per_rev) k + c            [mesh cycles]
 
 with ``P_shaft`` the mesh cycles per revolution of the shaft
-(:func:`meshphase.kinematics.angles.shaft_cycles`, from the gear kinematics) and ``c`` an unknown
+(:func:`meshphase.kinematics.shafts.shaft_cycles`, from the gear kinematics) and ``c`` an unknown
 constant (which pulse is the index). That is the form of a carrier tacho's train
-(:func:`meshphase.kinematics.angles.tacho_train`), sampled many times per revolution: a sun-shaft
+(:func:`meshphase.kinematics.trains.tacho_train`), sampled many times per revolution: a sun-shaft
 encoder of 60 pulses on the seed rig (Z_s 25, Z_r 87, ring held) observes the mesh angle
 every 25 x 87 / (112 x 60) = 0.32 mesh cycles and so sees a speed ripple at the planets'
 spin rate that the gauges and a once-per-turn tacho cannot tell from the planets' own terms.
@@ -25,9 +25,9 @@ Array functions, no Recording:
   count k of every kept edge stays right (as MATLAB's ``tachorpm`` with its pulses per
   revolution), both reported in counts; :func:`split_at_gaps` cuts the train where too many
   pulses are missing in a row to count across (a dropout);
-* :func:`meshphase.kinematics.angles.encoder_train` then makes the cleaned edges a
-  :class:`~meshphase.kinematics.angles.PassTrain` of kind ``"tacho"`` (an angle train with a constant
-  of its own and no planet terms), ``P_shaft`` from :func:`meshphase.kinematics.angles.shaft_cycles`.
+* :func:`meshphase.kinematics.trains.encoder_train` then makes the cleaned edges a
+  :class:`~meshphase.kinematics.trains.PassTrain` of kind ``"tacho"`` (an angle train with a constant
+  of its own and no planet terms), ``P_shaft`` from :func:`meshphase.kinematics.shafts.shaft_cycles`.
 
 Nothing here depends on the angle model: the streamed scan (:mod:`meshphase.run.stream`) times
 encoder edges with these functions.

@@ -10,7 +10,7 @@ One more fact fixes the carrier: a held ring (w_c = -(w_r - w_c)), a held sun
 (w_c = -(w_s - w_c)), else the carrier tacho's count of turns per second or, without a tacho,
 the nominal ratio of carrier to sun-relative speed. The sense of the sun relative to the
 carrier is the nominal speeds', else the gearset's direction
-(:func:`meshphase.kinematics.phasing.pass_order`, as :func:`meshphase.compare.predict.relative_speeds`).
+(:func:`meshphase.kinematics.pass_table.pass_order`, as :func:`meshphase.compare.pass_model.relative_speeds`).
 """
 
 from __future__ import annotations
@@ -19,9 +19,9 @@ import math
 
 import numpy as np
 
-from meshphase.kinematics.angles import revolution_numbers
+from meshphase.kinematics.trains import revolution_numbers
 from meshphase.models.gearset import Gearset, Speeds
-from meshphase.kinematics.phasing import pass_order
+from meshphase.kinematics.pass_table import pass_order
 from meshphase.validate import as_positive
 
 __all__ = ["member_speeds", "mean_mesh_rate", "tacho_rate"]
@@ -58,7 +58,7 @@ def mean_mesh_rate(model) -> float:
 
 def tacho_rate(tacho_times) -> float:
     """Carrier revolutions per second [1/s] between the first and last once-per-turn tacho
-    edge (missed edges counted by :func:`meshphase.kinematics.angles.revolution_numbers`); NaN with
+    edge (missed edges counted by :func:`meshphase.kinematics.trains.revolution_numbers`); NaN with
     fewer than two edges."""
     if tacho_times is None:
         return float("nan")
@@ -82,7 +82,7 @@ def member_speeds(gearset: Gearset, mesh_rate: float, *, fixed: str | None,
     mesh_rate : float
         Measured mean mesh frequency [cycles/s] (:func:`mean_mesh_rate`).
     fixed : {"ring", "sun", None}
-        The held member (:func:`meshphase.kinematics.angles.held_member`).
+        The held member (:func:`meshphase.kinematics.shafts.held_member`).
     speeds : Speeds, optional
         Nominal speeds [rad/s]: the senses, and a differential's carrier ratio when no tacho
         rate is given.

@@ -20,6 +20,11 @@ Geometry first: :func:`operating_mesh` derives operating pitch radii, pressure a
 from tooth counts and centre distance; :func:`seed_case` builds the seed's Case 1, 2-A and 2-B
 from its Tables 1 and 2 with it. Where the spec page and the seed disagree the geometry wins,
 and the docstrings say so (Case 2's SP-RP pressure angle, Table 6's radii).
+
+Why one file of over 1,000 lines: it is one closed-form model, the seed's bearing moments,
+from one frame and sign convention; the geometry, the single- and double-pinion moments and
+the seed's cases share that convention and check each other against the seed's tables, and
+split apart each half would have to restate it.
 """
 
 from __future__ import annotations

@@ -416,7 +416,10 @@ def harmonic_excitation(gearset: Gearset, harmonics: ArrayLike, *,
 
 # ----------------------------------------------------------------------------- section 2: errors
 
-def _prepare(t, gearset, speeds, errors):
+def prepare_inputs(t, gearset, speeds, errors):
+    """Checked inputs of the phasing models: (gearset, speeds, times [s], the errors' batch
+    shape, the errors broadcast to every planet); ValueError or TypeError as the public
+    models raise on a bad gearset, speeds, times or error size, or a phase past MAX_PHASE."""
     g = check_gearset(gearset)
     sp = check_speeds(speeds)
     t = _times(t)
@@ -482,7 +485,7 @@ def centre_positions(t: ArrayLike, gearset: Gearset, speeds: Speeds,
     a_r = w_rc t + kappa_r, th = w_pc t + kappa_pn (module docstring). Then
     |O_pan| = sqrt(R_c^2 + e_p^2 - 2 R_c e_p cos th), the seed's |O_si O_pan|.
     """
-    g, sp, t, shape, b = _prepare(t, gearset, speeds, errors)
+    g, sp, t, shape, b = prepare_inputs(t, gearset, speeds, errors)
     sl = (Ellipsis, None)
     a_s = rotation_angle_unchecked(sp.w_sc, t, b.ks[sl])
     a_r = rotation_angle_unchecked(sp.w_rc, t, b.kr[sl])
@@ -536,7 +539,7 @@ def mesh_angles(t: ArrayLike, gearset: Gearset, speeds: Speeds,
     worst 1.4e-15). Memory: the full (*S, n_t, N) broadcast with ~10 temporaries; for many
     realisations use :func:`meshphase.models.tolerance.phasing_statistics`, which batches.
     """
-    g, sp, t, shape, b = _prepare(t, gearset, speeds, errors)
+    g, sp, t, shape, b = prepare_inputs(t, gearset, speeds, errors)
     d_s, d_r = _deltas(t, g, sp, shape, b)
     psi = g.angles
     return psi + d_s, psi + d_r
@@ -570,7 +573,7 @@ def mesh_angle_deviations(t: ArrayLike, gearset: Gearset, speeds: Speeds,
     frame of planet n (see :func:`mesh_angles`); in seed 000's notation
     delta_s = dpsi_epn + varsigma_spn.
     """
-    g, sp, t, shape, b = _prepare(t, gearset, speeds, errors)
+    g, sp, t, shape, b = prepare_inputs(t, gearset, speeds, errors)
     return _deltas(t, g, sp, shape, b)
 
 
@@ -607,7 +610,7 @@ def time_varying_phasing(t: ArrayLike, gearset: Gearset, speeds: Speeds,
     (psi_n - psi_1) + (delta_n - delta_1) is used, which reproduces the ideal value exactly
     when every delta is zero.
     """
-    g, sp, t, shape, b = _prepare(t, gearset, speeds, errors)
+    g, sp, t, shape, b = prepare_inputs(t, gearset, speeds, errors)
     d_s, d_r = _deltas(t, g, sp, shape, b)
     sign = direction_sign(g.direction)
     psi = g.angles
@@ -655,7 +658,7 @@ def phasing_deviation(t: ArrayLike, gearset: Gearset, speeds: Speeds,
     gamma_rn(t) - gamma_rn,ideal = -s Z_r (delta_r,n - delta_r,1) / 2 pi (mod 1) with the
     deltas of :func:`mesh_angles` (seed 000; Ave_jn and Dev_jn are taken on this quantity).
     """
-    g, sp, t, shape, b = _prepare(t, gearset, speeds, errors)
+    g, sp, t, shape, b = prepare_inputs(t, gearset, speeds, errors)
     d_s, d_r = _deltas(t, g, sp, shape, b)
     sign = direction_sign(g.direction)
     if d_s.shape[-1]:

@@ -1,6 +1,6 @@
 """Closed-form derivatives of the mesh-line deviations with respect to the shaft hole errors.
 
-The identification (:func:`meshphase.compare.predict.identify_errors`) fits the Cartesian offset
+The identification (:func:`meshphase.compare.identify.identify_errors`) fits the Cartesian offset
 components p = (sun_x, sun_y, ring_x, ring_y, planet1_x, planet1_y, ...) [m], with
 (x, y) = e (cos kappa, sin kappa) in the conventions of :class:`ShaftHoleErrors` (planet
 kappa from the inward radial). In the frame of planet n (u_n radial, t_n tangential) the
@@ -40,7 +40,7 @@ from numpy.typing import ArrayLike
 from meshphase.validate import as_choice
 from meshphase.models._geometry import broadcast_errors, check_error_size, cos_sin, rotation_angle_unchecked
 from meshphase.models.gearset import Gearset, Speeds
-from meshphase.models.mesh_phasing import ShaftHoleErrors, _prepare
+from meshphase.models.mesh_phasing import ShaftHoleErrors, prepare_inputs
 
 __all__ = ["MESHES", "MeshGradientPlan", "mesh_angle_gradient", "n_offset_parameters"]
 
@@ -80,7 +80,7 @@ def mesh_angle_gradient(t: ArrayLike, planet: ArrayLike, gearset: Gearset, speed
         entry of :func:`meshphase.models.mesh_phasing.mesh_angle_deviations`.
     grad : numpy.ndarray, shape (n, 4 + 2 N)
         d delta / d p [rad/m], p the Cartesian offsets in the order of
-        :func:`meshphase.compare.predict.PARAMETER_NAMES`: (sun_x, sun_y, ring_x, ring_y,
+        :func:`meshphase.compare.identify.PARAMETER_NAMES`: (sun_x, sun_y, ring_x, ring_y,
         planet1_x, planet1_y, ...). Columns other than the meshing gear's and the planet's
         own are 0.
 
@@ -125,7 +125,7 @@ class MeshGradientPlan:
     def __init__(self, t: ArrayLike, planet: ArrayLike, gearset: Gearset, speeds: Speeds, *,
                  mesh: str = "sun"):
         mesh = as_choice(mesh, "mesh", MESHES)
-        g, sp, t, _, _ = _prepare(t, gearset, speeds, None)
+        g, sp, t, _, _ = prepare_inputs(t, gearset, speeds, None)
         n_p = g.n_planets
         pl = np.asarray(planet)
         if pl.size and not np.issubdtype(pl.dtype, np.integer):

@@ -64,10 +64,10 @@ from meshphase.models.gearset import Gearset, Speeds
 from meshphase.models._geometry import ShaftHoleErrors, broadcast_errors, check_error_size, check_gearset, \
     check_speeds
 from meshphase.models.tolerance_model import (  # noqa: F401  (re-exported: the public and test-used names)
-                                              _FIELDS, _P3_HI, _P3_LO, ABSOLUTE_STATISTICS, ALL_STATISTICS, DEFAULT_QUANTILES, METHODS,
+                                              _FIELDS, P3_HI, P3_LO, ABSOLUTE_STATISTICS, ALL_STATISTICS, DEFAULT_QUANTILES, METHODS,
                                               SAMPLERS, STATISTICS, WINDOW_KINDS, MonteCarloResult, ObservationWindow, PhasingStats,
-                                              StatSummary, ToleranceBand, Tolerances, _as_band, _as_window, _Grid, _map_samples,
-                                              _map_values, _mc_inputs, _nan_summary, _offset_speeds, _resolve_n_times, default_n_times,
+                                              StatSummary, ToleranceBand, Tolerances, _as_band, _as_window, RotationGrid, map_samples,
+                                              _map_values, _mc_inputs, _nan_summary, _offset_speeds, resolve_n_times, default_n_times,
                                               observation_window, time_grid)
 
 __all__ = [
@@ -134,12 +134,12 @@ def phasing_statistics(gearset: Gearset, speeds: Speeds, errors: ShaftHoleErrors
     g = check_gearset(gearset)
     sp = check_speeds(speeds)
     win = _as_window(window, sp)
-    n_t = _resolve_n_times(sp, win, n_times, points_per_rev)
+    n_t = resolve_n_times(sp, win, n_times, points_per_rev)
     eng = _kernels.resolve_engine(engine)
     bs = as_positive_int(batch_size, "batch_size")
     shape, b = broadcast_errors(errors, g.n_planets)
     check_error_size(b, g.carrier_radius)
-    grid = _Grid(g, sp, win, n_t)
+    grid = RotationGrid(g, sp, win, n_t)
     flat = int(np.prod(shape, dtype=np.int64))
     n_p = g.n_planets
     es, ks = b.es.reshape(flat), b.ks.reshape(flat)
@@ -165,7 +165,7 @@ def _replicate_bounds(n, r):
 def _summary_exact(x, levels, bins, bounds):
     """x (n, N) -> StatSummary with replicate standard errors."""
     n, n_p = x.shape
-    lv = np.concatenate([levels, [_P3_LO, _P3_HI]])
+    lv = np.concatenate([levels, [P3_LO, P3_HI]])
 
     def point(xx):
         m = xx.mean(axis=0)
@@ -254,7 +254,7 @@ class _Stream:
         return mean, std, q, bad
 
     def summaries(self, levels, bins):
-        lv = np.concatenate([levels, [_P3_LO, _P3_HI]])
+        lv = np.concatenate([levels, [P3_LO, P3_HI]])
         tot = self.count.sum()
         mean, std, q, bad = self._point(tot, self.s1.sum(0), self.s2.sum(0), self.hist.sum(0), lv)
         r = self.count.size
@@ -386,7 +386,7 @@ def monte_carlo(gearset: Gearset, speeds: Speeds, tolerances: Tolerances, window
     bounds = _replicate_bounds(n, reps)
     n_stat = len(ALL_STATISTICS)
     keep = n * n_stat * n_p * 8 <= max_memory if keep_samples is None else bool(keep_samples)
-    grid = _Grid(g, sp, win, n_t)
+    grid = RotationGrid(g, sp, win, n_t)
     if sampler == "sobol":
         bs = 1 << (bs.bit_length() - 1)
         sizes = np.diff(bounds)
@@ -444,7 +444,7 @@ def _run_batches(grid, tolerances, carrier_radius, draw, bounds, bs, eng, store,
         for a in range(a0, a1, bs):
             z = min(a1, a + bs)
             m = z - a
-            es, ks, er, kr, ep, kp = _map_samples(draw(r, m, a == a0), tolerances, n_p)
+            es, ks, er, kr, ep, kp = map_samples(draw(r, m, a == a0), tolerances, n_p)
             for name, e in (("e_sun", es), ("e_ring", er)):
                 if np.any(e + ep.max(axis=1) >= carrier_radius):
                     raise ValueError(f"monte_carlo: a sampled {name} + e_planet reached the "

@@ -41,12 +41,14 @@ from meshphase.runtime.log import logger
 from meshphase.validate import as_positive_int
 from meshphase.models.tolerance_linear import chi_mean, linearised_deviation, solve_level
 from meshphase.models.tolerance_model import (ALL_STATISTICS, DEFAULT_QUANTILES, MonteCarloResult, StatSummary,
-                                              _Grid, _map_values, _mc_inputs, _nan_summary)
+                                              RotationGrid, _map_values, _mc_inputs, _nan_summary)
 
 __all__ = ["monte_carlo_cv"]
 
 
-def _check_cv_bands(tolerances, n_p):
+def check_cv_bands(tolerances, n_p):
+    """Raise ValueError where the control variate cannot be used on ``tolerances`` with
+    ``n_p`` planets (a random angle, or an offset band whose mean is not 0 [m])."""
     for name, _, band in tolerances.columns(n_p):
         if band.is_random and name.startswith("kappa"):
             raise ValueError(f"method='cv': {name} is random; the control variate needs "
@@ -67,7 +69,7 @@ def _sobol_normals(gen, d, reps, m):
     return out
 
 
-def _surrogate(lin, levels):
+def cv_surrogate(lin, levels):
     """Exact mean, std and quantiles (levels + the two 3-sigma levels) of the linear
     statistics, shapes (8, N), (8, N), (8, L + 2, N)."""
     n_p = lin.d0.shape[1]
@@ -261,7 +263,7 @@ def monte_carlo_cv(gearset, speeds, tolerances, window, n_samples: int = 2048, *
 
     Notes
     -----
-    The stages are separate functions: the exact linear answer (``_surrogate``), the paired
+    The stages are separate functions: the exact linear answer (``cv_surrogate``), the paired
     moment correction (here) and the directional tail correction (``_tail_corrections``).
     """
     t_start = time.perf_counter()
@@ -271,7 +273,7 @@ def monte_carlo_cv(gearset, speeds, tolerances, window, n_samples: int = 2048, *
         bins, levels_in, 0.0, engine, progress, points_per_rev)
     n_dir = as_positive_int(tail_directions, "tail_directions")
     n_p = g.n_planets
-    _check_cv_bands(tolerances, n_p)
+    check_cv_bands(tolerances, n_p)
     common = dict(sampler="sobol", window=win, n_times=n_t, engine=eng,
                   tolerances=tolerances, method="cv")
     if n == 0:
@@ -289,8 +291,8 @@ def monte_carlo_cv(gearset, speeds, tolerances, window, n_samples: int = 2048, *
                       f"running {reps} x {m} points", ModelWarning, stacklevel=3)
     lin = linearised_deviation(g, sp, tolerances, win, n_t)
     d = lin.n_random
-    grid = _Grid(g, sp, win, n_t)
-    surr_mean, surr_std, surr_q, lv = _surrogate(lin, levels)
+    grid = RotationGrid(g, sp, win, n_t)
+    surr_mean, surr_std, surr_q, lv = cv_surrogate(lin, levels)
     gen = np.random.default_rng(rng)
     g_mom, g_tail = gen.spawn(2)
     z = _sobol_normals(g_mom, d, reps, m)                    # (R, m, d)

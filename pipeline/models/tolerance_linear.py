@@ -40,7 +40,7 @@ import numpy as np
 from scipy import special
 
 from meshphase.validate import as_finite_array
-from meshphase.models.tolerance_model import _case_inputs, _Grid, _resolve_n_times
+from meshphase.models.tolerance_model import case_inputs, RotationGrid, resolve_n_times
 
 __all__ = ["LinearisedDeviation", "linearised_deviation", "SERIES", "chi_sf", "chi_pdf",
            "chi_mean", "exceedance", "solve_level"]
@@ -189,15 +189,15 @@ def linearised_deviation(gearset, speeds, tolerances, window, n_times: int | Non
     TypeError, ValueError
         On bad arguments, a uniform random band, or bands reaching the carrier radius.
     """
-    g, sp, win = _case_inputs(gearset, speeds, tolerances, window)
-    n_t = _resolve_n_times(sp, win, n_times, points_per_rev)
+    g, sp, win = case_inputs(gearset, speeds, tolerances, window)
+    n_t = resolve_n_times(sp, win, n_times, points_per_rev)
     n_p = g.n_planets
     cols = tolerances.columns(n_p)
     for name, _, band in cols:
         if band.is_random and band.distribution != "normal":
             raise ValueError(f"linearised_deviation: {name} has a {band.distribution!r} band; "
                              "the first-order distribution needs normal bands")
-    grid = _Grid(g, sp, win, n_t)
+    grid = RotationGrid(g, sp, win, n_t)
     cs, ss, cr, sr, cp, spn = grid.arrays
     val = {}
     for name, n, band in cols:

@@ -42,8 +42,9 @@ METHODS = ("plain", "cv")
 #: Quantile levels reported by default; the first and last are the two-sided 3-sigma levels
 #: Phi(-3) and Phi(3) of a normal distribution.
 DEFAULT_QUANTILES = (float(special.ndtr(-3.0)), 0.025, 0.5, 0.975, float(special.ndtr(3.0)))
-_P3_LO = float(special.ndtr(-3.0))
-_P3_HI = float(special.ndtr(3.0))
+#: the two 3-sigma levels of the normal distribution [-]
+P3_LO = float(special.ndtr(-3.0))
+P3_HI = float(special.ndtr(3.0))
 
 
 # ----------------------------------------------------------------------------- window
@@ -230,7 +231,7 @@ class PhasingStats:
     dev_r_abs: np.ndarray = None
 
 
-class _Grid:
+class RotationGrid:
     """Precomputed cos/sin of the offset rotations on a time grid and of the planet angles."""
 
     def __init__(self, gearset, speeds, window, n_times):
@@ -275,7 +276,9 @@ class _Grid:
         return outs
 
 
-def _resolve_n_times(speeds, window, n_times, points_per_rev):
+def resolve_n_times(speeds, window, n_times, points_per_rev):
+    """Time points of a tolerance run: ``n_times`` checked (>= 2), or the default for
+    ``points_per_rev`` points per relative revolution over ``window`` when None [-]."""
     if n_times is None:
         return default_n_times(speeds, window, points_per_rev=points_per_rev)
     n = as_positive_int(n_times, "n_times")
@@ -415,7 +418,7 @@ class Tolerances:
                                  f"carrier_radius = {carrier_radius!r} m")
 
 
-def _map_samples(u, tol, n_planets):
+def map_samples(u, tol, n_planets):
     """Unit-cube points u (B, d) -> flat error arrays (es, ks, er, kr, ep, kp)."""
     rand = [band for _, _, band in tol.columns(n_planets) if band.is_random]
     values = np.empty(u.shape[:1] + (len(rand),))
@@ -617,7 +620,7 @@ def _nan_summary(n_p, levels, bins):
                        nan.copy(), nan.copy(), q.copy(), two.copy())
 
 
-def _case_inputs(gearset, speeds, tolerances, window):
+def case_inputs(gearset, speeds, tolerances, window):
     """Checked (gearset, speeds, window) of a tolerance run; the bands checked against R_c."""
     g = check_gearset(gearset)
     sp = check_speeds(speeds)
@@ -630,12 +633,12 @@ def _case_inputs(gearset, speeds, tolerances, window):
 def _mc_inputs(gearset, speeds, tolerances, window, n_samples, sampler, n_times, batch_size,
                replicates, bins, quantile_levels, max_memory, engine, progress, points_per_rev):
     """Validate the arguments of :func:`monte_carlo` (ValueError / TypeError naming them)."""
-    g, sp, win = _case_inputs(gearset, speeds, tolerances, window)
+    g, sp, win = case_inputs(gearset, speeds, tolerances, window)
     n = as_int(n_samples, "n_samples")
     if n < 0:
         raise ValueError(f"n_samples must be >= 0, got {n}")
     sampler = as_choice(sampler, "sampler", SAMPLERS)
-    n_t = _resolve_n_times(sp, win, n_times, points_per_rev)
+    n_t = resolve_n_times(sp, win, n_times, points_per_rev)
     bs = as_positive_int(batch_size, "batch_size")
     reps = as_positive_int(replicates, "replicates")
     bins = as_positive_int(bins, "bins")

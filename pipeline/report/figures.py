@@ -80,7 +80,7 @@ def phasing_over_time(tables: dict, *, predicted: dict | None = None, bands: dic
     tables : dict gauge -> DataFrame or dict of arrays
         Measured passes with columns time_s [s], planet, gamma [mesh cycles] and
         uncertainty [mesh cycles] (NaN: no error bar), e.g.
-        :meth:`meshphase.kinematics.phasing.PassTable.columns`.
+        :meth:`meshphase.kinematics.pass_table.PassTable.columns`.
     predicted : dict gauge -> dict planet -> (t [s], gamma [-])
         Model curves (e.g. shaft-hole-error model with identified errors).
     bands : dict gauge -> dict planet -> (lo, hi)

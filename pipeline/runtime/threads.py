@@ -13,7 +13,7 @@ processing`` compares the two.
 
 The angle model of a long record is fitted in windows (:mod:`meshphase.kinematics.angle_windows`), and
 the windows go side by side on these threads too, as do the planet-label alignment's
-relabellings after the first (:func:`meshphase.kinematics.angles.label_shift_costs`). Each fit's
+relabellings after the first (:func:`meshphase.kinematics.label_shift.label_shift_costs`). Each fit's
 Gauss-Newton steps are solved by Householder QR (LAPACK geqrf, which releases the GIL;
 gelsy, used before, held it, as do the SVD and the small array steps that remain), so two
 threads gain less than two cores.

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from meshphase.run.outputs import summary_dict
-from meshphase.kinematics.phasing import pass_order, planet_fractions
+from meshphase.kinematics.pass_table import pass_order, planet_fractions
 from meshphase.run.scene import parse_scene
 from meshphase.run.stages import run_scene
 from . import rig as R

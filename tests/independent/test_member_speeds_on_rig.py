@@ -147,7 +147,7 @@ def test_suggested_second_ring_gauge_on_the_rig(tmp_path):
     # Measured but not asserted: the estimates of the newly determined (weakest) direction
     # lie 0.2-0.3 mm from the rig's truth, several standard errors: the rig's recordings
     # carry a systematic misfit there that the statistical prediction does not include.
-    from meshphase.compare.predict import identify_errors
+    from meshphase.compare.identify import identify_errors
 
     err = {"e_planet": (0.2e-3, 0.1e-3, 0.3e-3, 0.15e-3), "kappa_planet": (0.3, 1.5, 2.9, 4.4)}
     base = R.make_rig_config(minutes=2.0).ring_gauge_angle

@@ -197,10 +197,10 @@ def test_tolerance_band():
 
 
 def test_negative_radial_samples_flip_the_angle():
-    from meshphase.models.tolerance import _map_samples
+    from meshphase.models.tolerance import map_samples
     tol = Tolerances(e_sun=ToleranceBand(0.0, 3e-4), kappa_sun=0.5)
     u = np.array([[0.1], [0.9]])
-    es, ks, *_ = _map_samples(u, tol, 4)
+    es, ks, *_ = map_samples(u, tol, 4)
     assert np.all(es >= 0) and es[0] == pytest.approx(es[1])
     assert ks[0] == pytest.approx(0.5 + math.pi) and ks[1] == pytest.approx(0.5)
 
@@ -456,13 +456,13 @@ def test_seed_case3_absolute_dev_s():
 def test_replicate_standard_errors_one_reduction_equal_the_loop_over_replicates(bounds):
     # equal replicates take one reduction over an (R, n/R, N) view; unequal ones the loop:
     # both the std over replicates of each replicate's own mean, std and quantiles
-    from meshphase.models.tolerance import _P3_HI, _P3_LO, _summary_exact
+    from meshphase.models.tolerance import P3_HI, P3_LO, _summary_exact
 
     x = np.random.default_rng(7).normal(0.3, 0.01, size=(4096, 3))
     levels = np.array([0.025, 0.5, 0.975])
     b = np.asarray(bounds)
     got = _summary_exact(x, levels, 16, b)
-    lv = np.concatenate([levels, [_P3_LO, _P3_HI]])
+    lv = np.concatenate([levels, [P3_LO, P3_HI]])
     parts = [x[b[i]:b[i + 1]] for i in range(len(b) - 1)]
     r = len(parts)
     se_m = np.std([p.mean(axis=0) for p in parts], axis=0, ddof=1) / math.sqrt(r)

@@ -15,7 +15,7 @@ from meshphase.models.tolerance import (
                                         ALL_STATISTICS,
                                         ToleranceBand,
                                         Tolerances,
-                                        _Grid,
+                                        RotationGrid,
                                         _map_values,
                                         monte_carlo,
                                         observation_window,
@@ -42,7 +42,7 @@ def case3():
 
 def _series(g, sp, win, n_t, tol, values):
     """Full-model deviation series (4, N, n_t) at parameter values (d,) (kernel numpy path)."""
-    grid = _Grid(g, sp, win, n_t)
+    grid = RotationGrid(g, sp, win, n_t)
     es, ks, er, kr, ep, kp = _map_values(np.atleast_2d(values), tol, g.n_planets)
     cks, sks = np.cos(ks), np.sin(ks)
     ckr, skr = np.cos(kr), np.sin(kr)
@@ -79,9 +79,9 @@ def test_linearisation_matches_finite_differences():
 def test_linear_distribution_matches_sampling_of_the_linear_model(case3):
     g, sp, tol, win = case3
     lin = linearised_deviation(g, sp, tol, win)
-    from meshphase.models.tolerance_cv import _surrogate
+    from meshphase.models.tolerance_cv import cv_surrogate
     levels = np.array([0.1, 0.5, 0.9])
-    mean, std, q, lv = _surrogate(lin, levels)
+    mean, std, q, lv = cv_surrogate(lin, levels)
     z = np.random.default_rng(3).standard_normal((200000, lin.n_random))
     y = lin.statistics(z)                                    # (8, S, N)
     for i in range(8):
@@ -157,7 +157,7 @@ def test_zero_tolerances_give_zero_spread(case3):
 @example(c=2.0, es=0.0, er=0.0, ep=5e-324, ks=0.0, kp=0.0)   # a subnormal spread: no overflow
 @example(c=2.0, es=1.4879975500833057e-163, er=0.0, ep=0.0, ks=0.0, kp=0.0)  # rho^2 underflows
 def test_scaling_tolerances_scales_the_linear_spread(c, es, er, ep, ks, kp):
-    from meshphase.models.tolerance_cv import _surrogate
+    from meshphase.models.tolerance_cv import cv_surrogate
     g, sp, _ = table2_case(3)
     win = observation_window(sp)
 
@@ -169,8 +169,8 @@ def test_scaling_tolerances_scales_the_linear_spread(c, es, er, ep, ks, kp):
     lin1 = linearised_deviation(g, sp, tol(1.0), win, 48)
     lin2 = linearised_deviation(g, sp, tol(c), win, 48)
     levels = np.array([0.5])
-    m1, s1, q1, _ = _surrogate(lin1, levels)
-    m2, s2, q2, _ = _surrogate(lin2, levels)
+    m1, s1, q1, _ = cv_surrogate(lin1, levels)
+    m2, s2, q2, _ = cv_surrogate(lin2, levels)
     scale = max(np.max(s1), 1e-300)
     # Ave rows (even) are exact Gaussians: they scale to rounding. Dev rows (odd) are a
     # direction-set quadrature in the SVD basis of J sigma; c J can come back in a rotated

@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from meshphase.kinematics.angle_windows import WindowedAngleModel, fit_angle_windows
-from meshphase.kinematics.angles import fit_angle_model, kinematics
+from meshphase.kinematics.angles import fit_angle_model
+from meshphase.kinematics.shafts import kinematics
 from meshphase.jsonable import to_jsonable
 from meshphase.models.tolerance import table2_case
 from meshphase.synthetic.kinematics import ShaftRipple, SpeedProfile

@@ -12,14 +12,20 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from meshphase.kinematics.angles import (AngleModel, Kinematics, PassTrain, fit_angle_model, gauge_train,
-                                         held_member, kinematics, label_shift_costs, relabel_train,
-                                         revolution_numbers, slice_train, tacho_train, typed_resolution,
-                                         unseen_ripples)
+import meshphase.kinematics.angle_design as angle_design
+import meshphase.kinematics.angle_selection as angle_selection
+import meshphase.kinematics.angles as angles
+from meshphase.kinematics.angle_choice import BIC_CLOSE
+from meshphase.kinematics.angle_selection import unseen_ripples
+from meshphase.kinematics.angles import AngleModel, fit_angle_model
+from meshphase.kinematics.label_shift import label_shift_costs
+from meshphase.kinematics.shafts import Kinematics, held_member, kinematics, typed_resolution
+from meshphase.kinematics.trains import (PassTrain, gauge_train, relabel_train, revolution_numbers, slice_train,
+                                         tacho_train)
 from meshphase.models.gearset import Gearset, Speeds, rpm_to_rad_s
 from meshphase.models.tolerance import table2_case
-from meshphase.kinematics.phasing import (assign_planets_by_pattern, pass_order, phasing_from_model,
-                                          planet_fractions)
+from meshphase.kinematics.pass_table import pass_order, phasing_from_model, planet_fractions
+from meshphase.kinematics.planet_labels import assign_planets_by_pattern
 from meshphase.synthetic.kinematics import SpeedProfile, engagement_events, event_times_for_angles
 
 TWO_PI = 2 * math.pi
@@ -289,7 +295,7 @@ def _same_tooth_passes(drop_first: int, *, angle_b=None):
     tooth 0 and two on tooth 5 (across its face width), the second of those missing its
     first ``drop_first`` passes, so the first pulse it sees is another planet's; with
     ``angle_b`` [rad] the second's passes are those of a gauge at that angle instead."""
-    from meshphase.kinematics.phasing import GaugePasses
+    from meshphase.kinematics.planet_labels import GaugePasses
     from meshphase.synthetic.kinematics import engagement_events
 
     g, sp = rig(zp=31)
@@ -355,7 +361,7 @@ def test_gauges_on_one_tooth_whose_passes_do_not_coincide_fall_back_to_the_offse
 
 
 def test_coincident_shift_names_the_relabelling_and_refuses_unclear_cases():
-    from meshphase.kinematics.phasing import COINCIDENT_MIN, coincident_shift
+    from meshphase.kinematics.label_checks import COINCIDENT_MIN, coincident_shift
 
     trains, frac, _, _ = offset_trains()
     ring = trains[1]
@@ -408,7 +414,6 @@ def test_label_shift_costs_on_a_central_window_decide_alike():
 
 
 def test_slice_train_keeps_labels_and_positions():
-    from meshphase.kinematics.angles import slice_train
 
     g, sp = rig(zp=31)
     trains, _ = trains_from_truth(g, sp, SpeedProfile(), 30.0, sigma=2e-5)
@@ -572,25 +577,24 @@ def _screening_record(profile: str) -> list:
 
 @pytest.mark.parametrize("profile", ["drift", "ramp_ripple", "steady_noisy"])
 def test_candidate_screening_leaves_the_selection_unchanged(monkeypatch, profile):
-    # the screen (angles._spline_bounds for finer splines, angles._linear_bound for every
+    # the screen (angle_selection._spline_bounds for finer splines, angle_selection._linear_bound for every
     # candidate) skips only candidates that could not have been chosen: the same model, bit
     # for bit, with and without it, on a record whose slow speed wander needs a fine spline,
     # a ramp under carrier ripple, and a steady noisy one where no finer spline pays; and it
     # must skip something (fewer solves), ripple and planet candidates as well as splines
     import functools
 
-    import meshphase.kinematics.angles as angles
 
     trains = _screening_record(profile)
     kin = kinematics(25, 87, 29, fixed="ring")
     solves = []
-    orig_solve = angles._solve
+    orig_solve = angle_selection.solve
 
-    orig_extend = angles._extend
+    orig_extend = angle_selection.extend_theta
     same_knots = {}       # candidate spec -> whether it keeps the fit's spline (not a finer one)
 
     def counted(*a, **k):
-        # a candidate's solve (4 iterations, no recheck) comes right after its _extend
+        # a candidate's solve (4 iterations, no recheck) comes right after its extend_theta
         cand = k.get("max_iter") == 4 and k.get("recheck") is False
         solves.append(same_knots.get(id(a[1])) if cand else None)
         return orig_solve(*a, **k)
@@ -599,13 +603,13 @@ def test_candidate_screening_leaves_the_selection_unchanged(monkeypatch, profile
         same_knots[id(spec)] = spec.knots == fit.spec.knots
         return orig_extend(fit, spec, d)
 
-    monkeypatch.setattr(angles, "_solve", counted)
-    monkeypatch.setattr(angles, "_extend", extend)
+    monkeypatch.setattr(angle_selection, "solve", counted)
+    monkeypatch.setattr(angle_selection, "extend_theta", extend)
     screened = fit_angle_model(trains, kin, 4)
     n_screened = len(solves)
     screened_solves = list(solves)
-    monkeypatch.setattr(angles, "_select_terms",
-                        functools.partial(angles._select_terms, screen=False))
+    monkeypatch.setattr(angles, "select_terms",
+                        functools.partial(angle_selection.select_terms, screen=False))
     solves.clear()
     plain = fit_angle_model(trains, kin, 4)
     assert screened.terms == plain.terms
@@ -621,28 +625,27 @@ def test_candidate_screening_leaves_the_selection_unchanged(monkeypatch, profile
 
 @pytest.mark.parametrize("profile", ["drift", "ramp_ripple", "steady_noisy"])
 def test_linear_bound_is_optimistic_for_every_candidate(monkeypatch, profile):
-    # the screen is safe only if a candidate's bound (angles._linear_bound) never exceeds the
+    # the screen is safe only if a candidate's bound (angle_selection._linear_bound) never exceeds the
     # BIC its solve reaches: checked for every candidate of an unscreened selection (each one
     # solved), on the three records of the screening test
     import functools
     from types import SimpleNamespace
 
-    import meshphase.kinematics.angles as angles
 
     trains = _screening_record(profile)
-    orig_solve = angles._solve
+    orig_solve = angle_selection.solve
     pairs = []
 
     def solve(d, spec, theta0, scale, **k):
         fit = orig_solve(d, spec, theta0, scale, **k)
         if k.get("max_iter") == 4 and k.get("recheck") is False:      # a candidate's solve
-            bound, _ = angles._linear_bound(d, SimpleNamespace(floor=fit.floor), spec, theta0)
+            bound, _ = angle_selection._linear_bound(d, SimpleNamespace(floor=fit.floor), spec, theta0)
             pairs.append((bound, fit.bic()))
         return fit
 
-    monkeypatch.setattr(angles, "_solve", solve)
-    monkeypatch.setattr(angles, "_select_terms",
-                        functools.partial(angles._select_terms, screen=False))
+    monkeypatch.setattr(angle_selection, "solve", solve)
+    monkeypatch.setattr(angles, "select_terms",
+                        functools.partial(angle_selection.select_terms, screen=False))
     fit_angle_model(trains, kinematics(25, 87, 29, fixed="ring"), 4)
     bounded = [(b, bic) for b, bic in pairs if math.isfinite(b)]
     assert len(bounded) >= 0.5 * len(pairs) > 0
@@ -654,20 +657,19 @@ def test_linear_bound_of_a_candidate_without_rows_is_minus_infinity():
     # nothing to judge on (every observation left out): always solved, never screened away
     import copy
 
-    import meshphase.kinematics.angles as angles
 
     g, sp = rig()
     trains, _ = trains_from_truth(g, sp, SpeedProfile(), 30.0)
     kin = kinematics(25, 87, 29, fixed="ring")
-    d = angles._Design(trains, kin, 4)
-    spec = angles._Spec(knots=1, harm={r: 0 for r in kin.periods},
+    d = angle_design.Design(trains, kin, 4)
+    spec = angle_design.ModelSpec(knots=1, harm={r: 0 for r in kin.periods},
                         mod={r: False for r in kin.periods})
-    fit = angles._solve(d, spec, None, np.ones(len(trains)))
+    fit = angle_design.solve(d, spec, None, np.ones(len(trains)))
     cand = spec.copy()
     cand.sig = 1
     d2 = copy.copy(d)
     d2.active = np.zeros_like(d.active)
-    bound, keep = angles._linear_bound(d2, fit, cand, angles._extend(fit, cand, d2))
+    bound, keep = angle_selection._linear_bound(d2, fit, cand, angle_design.extend_theta(fit, cand, d2))
     assert bound == -math.inf
 
 
@@ -698,7 +700,7 @@ def test_planet_rate_ripple_and_equal_planet_terms_are_named_and_counted():
     # is inside it: RMS(error / sigma) <= 1.5, the issue's calibration target for a flagged
     # value) and the reliability names both explanations and the measurement that separates
     # them
-    from meshphase.kinematics.phasing import _reliability
+    from meshphase.kinematics.reliability import phasing_reliability
 
     trains, ev, kin = _planet_rate_ripple_trains(False)
     model = fit_angle_model(trains, kin, 4)
@@ -710,7 +712,7 @@ def test_planet_rate_ripple_and_equal_planet_terms_are_named_and_counted():
         floor = float(np.sqrt(np.mean(tab.timing_floor ** 2)))
         assert float(np.sqrt(np.mean(err ** 2))) > 20 * floor      # the error at stake
         assert float(np.sqrt(np.mean((err / tab.uncertainty) ** 2))) <= 1.5
-        rel = _reliability(model, tr, tab)
+        rel = phasing_reliability(model, tr, tab)
         assert not rel["reliable"]
         why = [r for r in rel["reasons"] if "equally well" in r]
         assert len(why) == 1 and "shaft encoder" in why[0] and "0.092" in why[0]
@@ -721,7 +723,6 @@ def test_a_shaft_encoder_separates_the_planet_rate_ripple():
     # per turn, which meets the planet spin at ever other angles): the ripple's column is no
     # longer in the planet terms' span, the inseparable pair clears by itself, and the ripple
     # is a competitor the data prefer outright (BIC far below the chosen model's)
-    from meshphase.kinematics.angles import BIC_CLOSE
 
     trains, ev, kin = _planet_rate_ripple_trains(True, 60.0)
     model = fit_angle_model(trains, kin, 4)
@@ -774,7 +775,7 @@ def test_a_carrier_harmonic_at_the_planet_spin_period_is_right_or_flagged():
     # ranks it after them), and the phasing (0.028 / 0.019 cycles off, 16x / 11x the floor) is
     # within the target (max(2e-3, 1.3 x floor)) or flagged with the cause named and a sigma
     # that covers its error (RMS(error / sigma) <= 1.5; 1.03 / 0.85 measured)
-    from meshphase.kinematics.phasing import _reliability
+    from meshphase.kinematics.reliability import phasing_reliability
     from meshphase.synthetic.kinematics import ShaftRipple
 
     g, sp = rig()
@@ -791,6 +792,6 @@ def test_a_carrier_harmonic_at_the_planet_spin_period_is_right_or_flagged():
         rms = float(np.sqrt(np.mean(err ** 2)))
         if rms <= max(2e-3, 1.3 * floor):
             continue
-        rel = _reliability(model, tr, tab)
+        rel = phasing_reliability(model, tr, tab)
         assert not rel["reliable"] and any("planet spin rate" in r for r in rel["reasons"])
         assert float(np.sqrt(np.mean((err / tab.uncertainty) ** 2))) <= 1.5

@@ -1,4 +1,4 @@
-"""meshphase.kinematics.angles' Gauss-Newton iteration: the QR step and the stop at a converged point.
+"""meshphase.kinematics.angle_design's Gauss-Newton iteration: the QR step and the stop at a converged point.
 
 Truth: exact engagement instants from meshphase.synthetic.kinematics (test_angles.py's
 ``trains_from_truth``); the step solver is checked against scipy's gelsy (rank-revealing
@@ -12,8 +12,9 @@ import pytest
 from hypothesis import given, settings, strategies as st
 from scipy import linalg
 
-import meshphase.kinematics.angles as angles
-from meshphase.kinematics.angles import kinematics
+import meshphase.kinematics.angle_design as angle_design
+from meshphase.kinematics.angles import fit_angle_model
+from meshphase.kinematics.shafts import kinematics
 from meshphase.models.tolerance import table2_case
 from meshphase.synthetic.kinematics import ShaftRipple, SpeedProfile
 
@@ -37,7 +38,7 @@ def test_gn_step_solves_well_conditioned_least_squares_like_gelsy(n, p, seed):
     v, _ = np.linalg.qr(rng.standard_normal((p, p)))
     a = _unit_columns((u * rng.uniform(0.5, 2.0, p)) @ v.T)
     b = rng.standard_normal(n)
-    x = angles._gn_step(a, b)
+    x = angle_design._gn_step(a, b)
     ref = linalg.lstsq(a, b, lapack_driver="gelsy")[0]
     assert x.shape == (p,)
     scale = max(1.0, float(np.max(np.abs(ref))))
@@ -51,7 +52,7 @@ def test_gn_step_falls_back_to_rank_revealing_on_a_dependent_column():
     a = _unit_columns(rng.standard_normal((200, 4)))
     a = np.column_stack([a, a[:, 1]])
     b = rng.standard_normal(200)
-    x = angles._gn_step(a, b)
+    x = angle_design._gn_step(a, b)
     ref = linalg.lstsq(a, b, lapack_driver="gelsy")[0]
     assert np.all(np.isfinite(x))
     np.testing.assert_allclose(a @ x, a @ ref, rtol=0, atol=1e-12)
@@ -59,16 +60,16 @@ def test_gn_step_falls_back_to_rank_revealing_on_a_dependent_column():
 
 
 def test_gn_step_empty_and_square_and_wide():
-    assert angles._gn_step(np.zeros((5, 0)), np.ones(5)).shape == (0,)
+    assert angle_design._gn_step(np.zeros((5, 0)), np.ones(5)).shape == (0,)
     a = np.eye(3)
-    np.testing.assert_allclose(angles._gn_step(a, np.array([1.0, 2.0, 3.0])), [1, 2, 3])
-    wide = angles._gn_step(np.array([[1.0, 1.0]]), np.array([2.0]))   # minimum norm
+    np.testing.assert_allclose(angle_design._gn_step(a, np.array([1.0, 2.0, 3.0])), [1, 2, 3])
+    wide = angle_design._gn_step(np.array([[1.0, 1.0]]), np.array([2.0]))   # minimum norm
     np.testing.assert_allclose(wide, [1.0, 1.0])
 
 
 def test_gn_step_bad_input():
     with pytest.raises(ValueError):
-        angles._gn_step(np.ones(3), np.ones(3))
+        angle_design._gn_step(np.ones(3), np.ones(3))
 
 
 @pytest.fixture(scope="module")
@@ -77,10 +78,10 @@ def converged():
     prof = SpeedProfile(shaft=(ShaftRipple("carrier", 0.01, 1, 0.3),))
     trains, _ = trains_from_truth(g, sp, prof, 60.0, errors=table2_case(1)[2], jitter=2e-5,
                                   sigma=2e-5)
-    model = angles.fit_angle_model(trains, KIN, 4)
+    model = fit_angle_model(trains, KIN, 4)
     d, spec = model._design, model._fit.spec
     # the final model weighs each train by its variance factor; here every factor is 1
-    fit = angles._solve(d, spec, model._fit.theta, np.ones(len(d.trains)))
+    fit = angle_design.solve(d, spec, model._fit.theta, np.ones(len(d.trains)))
     assert fit.converged
     return d, fit
 
@@ -93,7 +94,7 @@ def test_a_converged_start_is_not_halved_over_rounding(converged, monkeypatch):
     d, fit = converged
     start = fit.theta.copy()
     calls = []
-    orig = angles._Design.evaluate
+    orig = angle_design.Design.evaluate
 
     def nudged(self, theta, lay, spec, rows=None, **k):
         f, J, rate = orig(self, theta, lay, spec, rows, **k)
@@ -103,8 +104,8 @@ def test_a_converged_start_is_not_halved_over_rounding(converged, monkeypatch):
             f = f - 1e-10 * np.sign(y - f)
         return f, J, rate
 
-    monkeypatch.setattr(angles._Design, "evaluate", nudged)
-    again = angles._solve(d, fit.spec, start, np.ones(len(d.trains)), recheck=False)
+    monkeypatch.setattr(angle_design.Design, "evaluate", nudged)
+    again = angle_design.solve(d, fit.spec, start, np.ones(len(d.trains)), recheck=False)
     assert again.converged
     np.testing.assert_array_equal(again.theta, start)
     # the start, the identifiability check, one trial, and the final residuals at most
@@ -115,7 +116,7 @@ def test_converged_fit_unchanged_by_a_second_solve(converged):
     """Solving again from a fitted model's parameters moves no prediction by more than the
     convergence tolerance (1e-3 of the 20-us timing bound in mesh cycles, about 3e-7)."""
     d, fit = converged
-    again = angles._solve(d, fit.spec, fit.theta, np.ones(len(d.trains)))
+    again = angle_design.solve(d, fit.spec, fit.theta, np.ones(len(d.trains)))
     assert again.converged and again.iterations <= 3
     rows = np.flatnonzero(d.active)
     f0 = d.evaluate(fit.theta, fit.lay, fit.spec, rows, jac=False)[0]

@@ -7,7 +7,7 @@ changes are exact too). Two kinds of pass tables are built from the events:
 
 * exact tables: gamma and the encoder angle taken from the truth itself, so the model
   (:func:`predict_pass_phasing`) is checked alone;
-* measured tables: the event times through :func:`meshphase.kinematics.phasing.measured_phasing`, as the
+* measured tables: the event times through :func:`meshphase.kinematics.pass_table.measured_phasing`, as the
   pipeline does, so the check includes the pulse-train encoder; the model then has to match
   the measured phasing to the encoder's own accuracy.
 
@@ -24,12 +24,13 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from meshphase.compare.predict import (PARAMETER_NAMES, Identification, band_coverage, identify_errors,
-                                       predict_pass_phasing, relative_speeds, residual_stats, wrap)
+from meshphase.compare.identify import Identification, PARAMETER_NAMES, identify_errors
+from meshphase.compare.pass_model import predict_pass_phasing, relative_speeds, wrap
+from meshphase.compare.predict import band_coverage, residual_stats
 from meshphase.errors import ProcessingWarning
 from meshphase.models.gearset import Gearset, Speeds
 from meshphase.models.mesh_phasing import ShaftHoleErrors, ideal_phasing, time_varying_phasing
-from meshphase.kinematics.phasing import PassTable, measured_phasing, pass_order
+from meshphase.kinematics.pass_table import PassTable, measured_phasing, pass_order
 from meshphase.synthetic.kinematics import SpeedProfile, engagement_events
 
 TWO_PI = 2 * math.pi
@@ -121,8 +122,11 @@ def measured(direction, err, gauge, profile="constant", tooth=0.3):
     "ring_sun_encoder" the ring's passes from one angle model of both gauges' trains (the
     ring held), as stage_phasing does."""
     if gauge == "ring_sun_encoder":
-        from meshphase.kinematics.angles import fit_angle_model, gauge_train, kinematics
-        from meshphase.kinematics.phasing import assign_planets_by_pattern, phasing_from_model, planet_fractions
+        from meshphase.kinematics.angles import fit_angle_model
+        from meshphase.kinematics.shafts import kinematics
+        from meshphase.kinematics.trains import gauge_train
+        from meshphase.kinematics.pass_table import phasing_from_model, planet_fractions
+        from meshphase.kinematics.planet_labels import assign_planets_by_pattern
 
         g = gearset(direction)
         trains = {}

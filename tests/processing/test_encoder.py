@@ -6,7 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from meshphase.kinematics.angles import encoder_train, kinematics, shaft_cycles
+from meshphase.kinematics.shafts import kinematics, shaft_cycles
+from meshphase.kinematics.trains import encoder_train
 from meshphase.errors import DataQualityWarning
 from meshphase.kinematics.encoder import (EncoderEdges, clean_edges, edge_timing_sigma, edge_times,
                                           pulse_levels, rising_crossings, shaft_of)

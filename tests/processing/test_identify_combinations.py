@@ -12,10 +12,10 @@ import math
 import numpy as np
 import pytest
 
-from meshphase.compare.predict import (PARAMETER_NAMES, Identification, describe_combination,
-                                       identification_verdict, identify_errors)
+from meshphase.compare.identify import (Identification, PARAMETER_NAMES, describe_combination,
+                                        identification_verdict, identify_errors)
 from meshphase.models.gearset import Gearset
-from meshphase.kinematics.phasing import PassTable
+from meshphase.kinematics.pass_table import PassTable
 
 from test_compare import ERRORS, exact_table, gearset
 

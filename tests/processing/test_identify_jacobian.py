@@ -10,10 +10,10 @@ import math
 import numpy as np
 import pytest
 
-from meshphase.compare.predict import (PARAMETER_NAMES, identify_errors, pass_phasing_jacobian,
-                                       predict_pass_phasing)
+from meshphase.compare.identify import PARAMETER_NAMES, identify_errors
+from meshphase.compare.pass_model import pass_phasing_jacobian, predict_pass_phasing
 from meshphase.models.mesh_phasing import ShaftHoleErrors
-from meshphase.kinematics.phasing import PassTable
+from meshphase.kinematics.pass_table import PassTable
 
 from test_compare import ERRORS, exact_table, gearset, measured
 

@@ -15,7 +15,7 @@ from hypothesis import given, settings, strategies as st
 from meshphase.models.gearset import Gearset, Speeds, rpm_to_rad_s
 from meshphase.kinematics.pass_rates import (RATE_TOLERANCE, expected_pass_rates, measured_pass_rate,
                                              pass_rate_warnings)
-from meshphase.kinematics.phasing import GaugePasses
+from meshphase.kinematics.planet_labels import GaugePasses
 
 RIG = Gearset.equally_spaced(25, 87, 29, 4, 0.1125)
 

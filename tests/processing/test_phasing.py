@@ -13,9 +13,10 @@ import pytest
 from hypothesis import given, strategies as st
 
 from meshphase.errors import ProcessingWarning
-from meshphase.kinematics.phasing import (PassTable, TachoRelabel, assign_planets_by_pattern,
-                                          assign_planets_by_tacho, measured_phasing, pass_order,
-                                          planet_fractions, relabel_by_tacho, revolution_numbers)
+from meshphase.kinematics.pass_table import PassTable, measured_phasing, pass_order, planet_fractions
+from meshphase.kinematics.planet_labels import (TachoRelabel, assign_planets_by_pattern,
+                                                assign_planets_by_tacho, relabel_by_tacho)
+from meshphase.kinematics.trains import revolution_numbers
 
 TWO_PI = 2 * math.pi
 
@@ -311,15 +312,15 @@ def test_walk_equals_the_loop_over_gaps(n, equal, m, seed, chunk):
     # positions, flags and the summed mismatch to the bit, on trains with missing pulses
     # (double gaps), extra ones (half gaps), slow drift and unequal spacing, the gaps worked
     # out in chunks of every size (the walk carries its place and sum across them)
-    from meshphase.kinematics import phasing
-    from meshphase.kinematics.phasing import _walk
+    from meshphase.kinematics import planet_labels
+    from meshphase.kinematics.planet_labels import _walk
 
-    before = phasing._WALK_CHUNK
-    phasing._WALK_CHUNK = chunk
+    before = planet_labels._WALK_CHUNK
+    planet_labels._WALK_CHUNK = chunk
     try:
         _check_walk(n, equal, m, seed, _walk)
     finally:
-        phasing._WALK_CHUNK = before
+        planet_labels._WALK_CHUNK = before
 
 
 def _check_walk(n, equal, m, seed, _walk):
@@ -335,7 +336,7 @@ def _check_walk(n, equal, m, seed, _walk):
 
 
 def test_walk_empty_and_bad_gaps():
-    from meshphase.kinematics.phasing import _walk
+    from meshphase.kinematics.planet_labels import _walk
 
     pos, ok, total = _walk(np.empty(0), np.array([0.0, 0.5]), 1, 0.1)
     assert pos.tolist() == [1] and ok.tolist() == [True] and total == 0.0
@@ -347,7 +348,7 @@ def test_model_choice_reasons_follow_the_verdicts_rule():
     # an inseparable pair that counts is always named (with no timing floor to compare to);
     # a weighed competitor only where the estimated error with the model choice passes 3x
     # the floor; nothing from an empty list
-    from meshphase.kinematics.phasing import _choice_reasons
+    from meshphase.kinematics.reliability import choice_reasons
 
     insep = {"words": "a common speed ripple at the planet spin rate",
              "versus": "equal shaft-hole errors on every planet", "inseparable": True,
@@ -357,11 +358,11 @@ def test_model_choice_reasons_follow_the_verdicts_rule():
                "versus": "the chosen model",
                "inseparable": False, "counted": True, "rms": 0.004, "delta_bic": 1.0,
                "weight": 0.3, "ripple_bound": float("nan")}
-    assert _choice_reasons([], 0.002, 0.01) == []
+    assert choice_reasons([], 0.002, 0.01) == []
     for floor in (0.002, float("nan")):
-        why = _choice_reasons([insep], floor, 0.05)
+        why = choice_reasons([insep], floor, 0.05)
         assert len(why) == 1 and "shaft encoder" in why[0] and "0.092" in why[0]
-    assert _choice_reasons([dict(insep, counted=False)], 0.002, 0.05) == []
-    assert _choice_reasons([weighed], 0.002, 0.0059) == []          # 2.95x the floor
-    why = _choice_reasons([weighed], 0.002, 0.0061)
+    assert choice_reasons([dict(insep, counted=False)], 0.002, 0.05) == []
+    assert choice_reasons([weighed], 0.002, 0.0059) == []          # 2.95x the floor
+    why = choice_reasons([weighed], 0.002, 0.0061)
     assert len(why) == 1 and "posterior weight 0.30" in why[0]

@@ -4,9 +4,9 @@ A torque ripple once per carrier turn scales every planet's pulses by one functi
 carrier angle; a ring gauge on the held ring meets each planet at one carrier angle, so its
 per-planet amplitudes are the loads times that function there, and matching them against the
 sun gauge's named the sun's planet 1 one planet off with "ambiguous False". Here the sun
-gauge measures the variation (:func:`meshphase.kinematics.phasing.carrier_load_variation`), the ring's
+gauge measures the variation (:func:`meshphase.kinematics.label_checks.carrier_load_variation`), the ring's
 loads are divided by it and must match the sun's under one labelling clearly
-(:func:`meshphase.kinematics.phasing.load_shift_chi2`), else the labels are relative with a caution.
+(:func:`meshphase.kinematics.label_checks.load_shift_chi2`), else the labels are relative with a caution.
 
 The recordings are the independent rig's engagement instants (tests/independent/rig.py, no
 code shared with the package) with pulse amplitudes of 1 % noise: the labelling logic
@@ -22,8 +22,9 @@ import numpy as np
 import pytest
 
 from meshphase.models.gearset import Gearset
-from meshphase.kinematics.phasing import (GaugePasses, carrier_load_variation, load_shift_chi2,
-                                          measure_phasing)
+from meshphase.kinematics.label_checks import carrier_load_variation, load_shift_chi2
+from meshphase.kinematics.phasing import measure_phasing
+from meshphase.kinematics.planet_labels import GaugePasses
 from independent import rig as R
 
 TWO_PI = 2.0 * math.pi
@@ -197,9 +198,9 @@ def test_without_a_load_variation_the_labels_are_as_before():
 def test_load_pattern_and_planet_offsets_that_disagree_are_reported(monkeypatch):
     # the planets' own offsets (label_shift_costs) name the sun's planet 1 one place on from
     # where the loads name it: the labels follow the offsets, are relative, and say why
-    import meshphase.kinematics.phasing as P
+    import meshphase.kinematics.label_checks as checks
 
-    monkeypatch.setattr(P, "label_shift_costs",
+    monkeypatch.setattr(checks, "label_shift_costs",
                         lambda refs, tr, frac, kin, n: np.array([1e4, 10.0, 1e4, 1e4]))
     ph, truth = _measure(load_sharing=(1.15, 0.9, 1.0, 0.95))
     sun = ph.labels["sun"]
@@ -244,5 +245,5 @@ def test_chi2_quantile_is_scipy_stats(q, dof):
     # (inverse regularised gamma); 1e-12 relative, the two paths' rounding
     from scipy import stats
 
-    from meshphase.kinematics.phasing import _chi2_quantile
+    from meshphase.kinematics.label_checks import _chi2_quantile
     assert _chi2_quantile(q, dof) == pytest.approx(float(stats.chi2.ppf(q, dof)), rel=1e-12)

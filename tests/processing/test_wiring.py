@@ -10,7 +10,7 @@ import pytest
 
 from meshphase.models.gearset import Gearset, Speeds, rpm_to_rad_s
 from meshphase.kinematics.pass_rates import TWO_LEVEL_SPREAD, two_level_train, wiring_findings
-from meshphase.kinematics.phasing import GaugePasses
+from meshphase.kinematics.planet_labels import GaugePasses
 
 RIG = Gearset.equally_spaced(25, 87, 29, 4, 0.1125)
 SUN, RING, CARRIER = 0.94198, 0.27068, 18.19 * 25 / 112 / 60
