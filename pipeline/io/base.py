@@ -3,21 +3,24 @@ readers and writers (option and header checks, JSON text, warnings about NaN run
 Format modules share code through this module and :mod:`meshphase.io.atomic` (atomic
 writes; :func:`atomic_path` and :func:`clean_stale_partials` are re-exported here).
 
-A format module (``hdf5``, ``mcap``, ``csv``, ``tdms``) provides
+A format module (``hdf5``, ``mcap``, ``csv``, ``tdms``) declares itself once, as ``FORMAT``
+(a :class:`~meshphase.io.registry.FormatSpec`: name, suffixes, capabilities, options), and
+provides
 
-``NAME`` (str), ``SUFFIXES`` (tuple of lower-case suffixes), ``CAN_WRITE`` (bool),
 ``sniff(head: bytes) -> bool``
     True when the first bytes of a file are this format (content, not suffix).
-``read_info(path, *, verify=True) -> RecordingInfo``
+``read_info(path, *, verify=True, **options) -> RecordingInfo``
     Header only: no samples are read.
-``read(path, channels=None, i0=0, i1=None, *, verify=True) -> Recording``
+``read(path, channels=None, i0=0, i1=None, *, verify=True, **options) -> Recording``
     Samples ``i0 <= i < i1`` of the named channels (all when None); indices already checked
     by the registry. ``verify`` switches the checksum checks of formats that store checksums
     (MCAP CRCs, HDF5 fletcher32); structural checks (truncation, field counts) always run.
-``write(recording, path, **options) -> None`` (when ``CAN_WRITE``)
-    Writes to ``path``, an empty file the registry created for it (see :func:`atomic_path`).
-``iter_blocks(path, n_block, n_overlap, channels, *, verify=True) -> Iterator[Recording]``
+``iter_blocks(path, n_block, n_overlap, channels, *, verify=True, **options) -> Iterator[Recording]``
     (optional) A faster streaming path than repeated ``read`` calls.
+``write(recording, path, **options) -> None`` (when ``writable``)
+    Writes to ``path``, an empty file the registry created for it (see :func:`atomic_path`).
+``write_blocks(header, blocks, path, *, dtype, **options) -> None`` (when ``streaming_write``)
+    The same from a header and consecutive (k, channels) sample blocks, in flat memory.
 
 Errors: :class:`RecordingFileError` (a ValueError) for a file that is not what it claims to
 be; its subclass :class:`CorruptFileError` for a file whose bytes are damaged (checksum
