@@ -59,7 +59,8 @@ def convert(src, dst, *, format: str | None = None, overwrite: bool = False,
     src, dst : str or Path
         Source recording (format recognised by content) and output file.
     format : str, optional
-        Output format (``hdf5``, ``mcap``, ``csv``); default from ``dst``'s suffix.
+        A writable format of :data:`meshphase.io.FORMATS` (``hdf5``, ``mcap``, ``csv``,
+        ``tdms`` ...); default from ``dst``'s suffix.
     overwrite : bool
         Replace an existing ``dst`` (atomically); otherwise FileExistsError.
     block_samples : int
