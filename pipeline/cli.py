@@ -61,7 +61,7 @@ from meshphase.errors import DataQualityWarning
 from meshphase.run.exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_PIPE, OutputDir, output_write_errors,
                                  recording_read_errors, run_status, status_line)
 from meshphase.runtime.heap import limit_heap_growth
-from meshphase.io import convert, detect_format, iter_blocks, read_info
+from meshphase.io import FormatChoices, convert, detect_format, iter_blocks, read_info
 from meshphase.io.base import ANY_FS_ENV
 from meshphase.runtime.log import MessageFormatter, logger, message_line
 from meshphase.signal.quality import channel_quality
@@ -546,10 +546,10 @@ def _add_info(sub) -> None:
 
 def _add_convert(sub) -> None:
     """The ``meshphase convert`` subcommand."""
-    s = sub.add_parser("convert", help="convert a recording between formats (hdf5, mcap, csv; tdms read)")
-    s.add_argument("input", help="recording to read (.h5, .mcap, .csv, .tdms)")
-    s.add_argument("output", help="file to write (.h5, .mcap, .csv)")
-    s.add_argument("--format", choices=["hdf5", "mcap", "csv"], help="output format (default: from the suffix)")
+    s = sub.add_parser("convert", help="convert a recording between formats (hdf5, mcap, csv, tdms, ...)")
+    s.add_argument("input", help="recording to read (.h5, .mcap, .csv, .tdms, ...)")
+    s.add_argument("output", help="file to write (.h5, .mcap, .csv, .tdms, ...)")
+    s.add_argument("--format", choices=FormatChoices(writable=True), help="output format (default: from the suffix)")
     s.add_argument("--compression", help="hdf5: gzip|lzf; mcap: lz4|zstd; csv: none (default none)")
     s.add_argument("--overwrite", action="store_true", help="replace an existing output file")
     s.set_defaults(func=cmd_convert)
@@ -563,7 +563,7 @@ def _add_synth(sub) -> None:
     s.add_argument("--list", action="store_true", help="list the scenarios and exit")
     s.add_argument("--minutes", type=float, help="duration [min] (default: the scenario's)")
     s.add_argument("--seed", type=int, help="random seed (recorded in the truth sidecar)")
-    s.add_argument("--format", choices=["hdf5", "mcap", "csv", "tdms"],
+    s.add_argument("--format", choices=FormatChoices(writable=True),
                    help="output format (default: from the suffix)")
     s.add_argument("--overwrite", action="store_true",
                    help="replace an existing output file and its truth sidecar")

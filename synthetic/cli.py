@@ -1,40 +1,26 @@
 """Implementation of ``meshphase synth SCENARIO OUT [--minutes M] [--seed N] [--format F]``.
 
-:func:`cli_synth` generates a named scenario and writes the recording in any of the four
-formats plus the ground-truth sidecar (``OUT.truth.json``). TDMS is written block by block
-(flat memory, :mod:`meshphase.synthetic.tdms_export`); HDF5, MCAP and CSV through
-``meshphase.io.write_blocks``, block by block as well.
+:func:`cli_synth` generates a named scenario and writes the recording in any writable
+format of :mod:`meshphase.io` (the format from ``format`` or the suffix:
+:func:`meshphase.io.format_for_write`) plus the ground-truth sidecar (``OUT.truth.json``),
+block by block (flat memory): TDMS as :func:`meshphase.io.tdms_write.write_tdms` lays it
+out (one float64 segment per generated block, the file named after OUT), the other formats
+through :func:`meshphase.io.write_blocks`.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from meshphase.io import format_for_write, write_blocks
+from meshphase.io.tdms_write import write_tdms
 from meshphase.runtime.log import logger
 from meshphase.validate import as_positive
 
 from meshphase.synthetic.generate import generate_blocks
 from meshphase.synthetic.truth import truth_path_for
 
-__all__ = ["cli_synth", "FORMATS", "format_for_path"]
-
-#: Output formats of ``meshphase synth``.
-FORMATS = ("hdf5", "mcap", "csv", "tdms")
-_SUFFIXES = {".h5": "hdf5", ".hdf5": "hdf5", ".hdf": "hdf5", ".mcap": "mcap", ".csv": "csv",
-             ".tdms": "tdms"}
-
-
-def format_for_path(path, format: str | None = None) -> str:
-    """Output format from ``format`` or the file suffix (ValueError listing the choices)."""
-    if format is not None:
-        if format not in FORMATS:
-            raise ValueError(f"format must be one of {', '.join(FORMATS)}, got {format!r}")
-        return format
-    suffix = Path(path).suffix.lower()
-    if suffix in _SUFFIXES:
-        return _SUFFIXES[suffix]
-    raise ValueError(f"{path}: cannot tell the format from suffix {suffix!r}; use one of "
-                     f"{', '.join(sorted(_SUFFIXES))} or pass format= one of {', '.join(FORMATS)}")
+__all__ = ["cli_synth"]
 
 
 def cli_synth(scenario: str, out, minutes: float | None = None, seed: int | None = None,
@@ -48,12 +34,14 @@ def cli_synth(scenario: str, out, minutes: float | None = None, seed: int | None
         Scenario name (:func:`meshphase.synthetic.scenarios.list_scenarios`).
     out : str or Path
         Output recording file; the format comes from ``format`` or the suffix
-        (.h5/.hdf5, .mcap, .csv, .tdms).
+        (.h5/.hdf5, .mcap, .csv, .tdms, or a registered format's).
     minutes : float, optional
         Duration [min] (default: the scenario's).
     seed : int, optional
         Random seed (recorded in the sidecar); None draws fresh entropy.
-    format : {"hdf5", "mcap", "csv", "tdms"}, optional
+    format : str, optional
+        A writable format of :data:`meshphase.io.FORMATS` (``"hdf5"``, ``"mcap"``,
+        ``"csv"``, ``"tdms"`` ...).
     overwrite : bool
         Replace existing output files (default False: FileExistsError before any work).
     progress : bool
@@ -65,7 +53,7 @@ def cli_synth(scenario: str, out, minutes: float | None = None, seed: int | None
         The recording file and its truth sidecar (``<out>.truth.json``).
     """
     out = Path(out)
-    fmt = format_for_path(out, format)
+    fmt = format_for_write(out, format)
     truth_path = truth_path_for(out)
     if not overwrite:
         for p in (out, truth_path):
@@ -76,14 +64,9 @@ def cli_synth(scenario: str, out, minutes: float | None = None, seed: int | None
     duration = None if minutes is None else 60.0 * as_positive(minutes, "minutes")
     # default blocks of 2**20 samples: also the TDMS segment length
     stream = generate_blocks(scenario, duration=duration, seed=seed, progress=bool(progress))
-    if fmt == "tdms":
-        from meshphase.synthetic.tdms_export import write_tdms
-
+    if fmt == "tdms":   # one segment per generated block, the file property name = OUT's stem
         write_tdms(iter(stream), out, n_samples=stream.n_samples, overwrite=overwrite)
     else:
-        from meshphase.io import write_blocks
-
-        # block by block too: flat memory whatever the duration
         write_blocks(stream, (blk.data for blk in stream), out, format=fmt,
                      dtype=stream.dtype, overwrite=overwrite)
     stream.truth.write(truth_path, overwrite=overwrite)

@@ -120,7 +120,7 @@ _FORK_READY = "meshphase.campaign.fork_ready"
 def worker_modules(formats=None, synthetic: bool = False) -> tuple[str, ...]:
     """What a worker's tasks import: the processing stack, the task functions, the scene's
     schema check, the reader of each format with the libraries it imports on first use
-    (h5py, mcap, npTDMS, pandas: ``READ_LIBRARIES`` of each format module) and the report's
+    (h5py, mcap, npTDMS, pandas: ``read_libraries`` of each format's spec) and the report's
     figures (:func:`draw_figures`), then :mod:`meshphase.campaign.fork_ready` (first uses paid,
     matplotlib imported, the heap frozen before the workers fork); imported once in the fork
     server the local workers start from (:func:`meshphase.campaign.cluster.worker_server`), and by
@@ -144,11 +144,11 @@ def worker_modules(formats=None, synthetic: bool = False) -> tuple[str, ...]:
     ValueError
         An unknown format.
     """
-    from meshphase.io import FORMATS, get_format
+    from meshphase.io import FORMATS, get_spec
 
     formats = FORMATS if formats is None else tuple(dict.fromkeys(formats))
-    libs = tuple(lib for name in formats for lib in get_format(name).READ_LIBRARIES)
-    return (_STACK + _EVERY_TASK + tuple(f"meshphase.io.{name}" for name in formats)
+    libs = tuple(lib for name in formats for lib in get_spec(name).read_libraries)
+    return (_STACK + _EVERY_TASK + tuple(get_spec(name).module for name in formats)
             + tuple(dict.fromkeys(libs)) + (("meshphase.synthetic",) if synthetic else ())
             + (_FORK_READY,))
 
@@ -167,9 +167,9 @@ def campaign_modules(scene, files) -> tuple[str, ...]:
     -------
     tuple of str
     """
-    from meshphase.io import _format_of_suffix
+    from meshphase.io import format_of_suffix
 
-    formats = [_format_of_suffix(f) for f in files]
+    formats = [format_of_suffix(f) for f in files]
     synthetic = "synthetic" in (getattr(scene, "input", None) or {})
     return worker_modules(None if None in formats else formats, synthetic)
 

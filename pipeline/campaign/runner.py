@@ -129,9 +129,9 @@ def phasing_reliability(ctx) -> dict:
 
 # ---------------------------------------------------------------------------- inputs
 def _recording_suffixes() -> tuple[str, ...]:
-    from meshphase.io import FORMATS, get_format
+    from meshphase.io import FORMATS, get_spec
 
-    return tuple(s for f in FORMATS for s in get_format(f).SUFFIXES)
+    return tuple(s for f in FORMATS for s in get_spec(f).suffixes)
 
 
 def collect_recordings(inputs: Iterable, *, recursive: bool = False) -> tuple[list[Path], list[dict]]:

@@ -1,10 +1,14 @@
-"""Readers and writers: one module per format behind a small registry.
+"""Readers and writers: one module per format, declared to the format registry.
 
 ``read(path, channels=None, start=None, stop=None)`` and ``write(recording, path,
 format=None)``. The format is recognised by content (magic bytes), the suffix only breaks
 ties for text formats; an unknown format raises ValueError listing the supported ones.
 
-Formats: ``hdf5`` (native archive), ``mcap``, ``csv``, ``tdms`` (NI, read only).
+Formats (:data:`FORMATS`, from :mod:`meshphase.io.registry`): ``hdf5`` (native archive),
+``mcap``, ``tdms`` (NI), ``csv``, and any registered with :func:`register_format` or the
+``meshphase.formats`` entry points. Each format module declares its
+:class:`~meshphase.io.registry.FormatSpec` once; detection, the suffix table, the command
+line's ``--format`` choices and the per-format options derive from the specs.
 
 Integrity: every read checks what the format lets it check (``data_schemas/*.md`` say what,
 per format): MCAP chunk, data-section and summary CRC32s, HDF5 fletcher32 checksums of the
@@ -14,12 +18,15 @@ ValueError) naming the file, the position and the problem. ``verify=False`` (a f
 option of :func:`read`, :func:`read_info` and :func:`iter_blocks`) skips the checksum
 checks (MCAP, HDF5); structural checks always run.
 
-Writes are atomic and safe: see :func:`~meshphase.io.base.atomic_path`.
+Writes are atomic and safe: see :func:`~meshphase.io.atomic.atomic_path`.
+
+Imports: the package root helpers (recording, validate, errors), :mod:`meshphase.runtime`
+and :mod:`meshphase.signal` (quality); never a format library at import time (a format
+module is imported when the registry first needs it).
 """
 
 from __future__ import annotations
 
-import importlib
 from pathlib import Path
 from typing import Iterator
 
@@ -27,31 +34,34 @@ import numpy as np
 
 from meshphase.recording import Recording
 from meshphase.validate import as_nonnegative, as_positive, as_regular_file
-from meshphase.io.base import (CorruptFileError, RecordingFileError, RecordingInfo, RecordingTooLargeError,
-                               atomic_path, clean_stale_partials)
+from meshphase.io.atomic import atomic_path, clean_stale_partials
+from meshphase.io.base import CorruptFileError, RecordingFileError, RecordingInfo, RecordingTooLargeError
+from meshphase.io.registry import (FormatChoices, FormatSpec, format_names, format_of_suffix, get_format, get_spec,
+                                   register_format, sniff_order, unregister_format, writable_formats)
 
 __all__ = ["read", "write", "write_blocks", "convert", "read_info", "iter_blocks", "detect_format", "FORMATS",
            "RecordingFileError", "CorruptFileError", "RecordingTooLargeError", "RecordingInfo",
-           "get_format", "atomic_path",
+           "get_format", "get_spec", "FormatSpec", "FormatChoices", "register_format", "unregister_format",
+           "format_names", "format_of_suffix", "writable_formats", "format_for_write", "atomic_path",
            "clean_stale_partials"]
 
-#: Supported formats, in sniffing order (binary formats with magic bytes first, CSV last).
-FORMATS = ("hdf5", "mcap", "tdms", "csv")
 _SNIFF_BYTES = 4096
 
 
-def get_format(name: str):
-    """The module implementing format ``name``."""
-    if name not in FORMATS:
-        raise ValueError(f"unknown format {name!r}; supported formats: {', '.join(FORMATS)}")
-    return importlib.import_module(f"{__name__}.{name}")
+def __getattr__(name: str):
+    # FORMATS follows the registry: a format registered later is in it too
+    if name == "FORMATS":
+        return format_names()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def detect_format(path) -> str:
     """Name of the format of the file at ``path``, from its first bytes.
 
-    The file position of an open file object is never touched: the path is opened anew,
-    after :func:`~meshphase.validate.as_regular_file` checked it (its exceptions:
+    The formats are asked in the registry's order (:func:`~meshphase.io.registry.sniff_order`:
+    formats with magic bytes first, delimited text last). The file position of an open
+    file object is never touched: the path is opened anew, after
+    :func:`~meshphase.validate.as_regular_file` checked it (its exceptions:
     FileNotFoundError, IsADirectoryError, NotRegularFileError for a FIFO, device or socket,
     OSError for a symbolic-link loop ...). Raises :class:`RecordingFileError` when the file
     is empty or no format recognises the content (the message lists the supported ones).
@@ -67,34 +77,33 @@ def detect_format(path) -> str:
         raise type(exc)(exc.errno, exc.strerror, str(path)) from exc
     if not head:
         raise RecordingFileError(path, "file is empty (0 bytes)")
-    for name in FORMATS:
-        if get_format(name).sniff(head):
-            return name
+    for spec in sniff_order():
+        if spec.load().sniff(head):
+            return spec.name
     raise RecordingFileError(path, f"unknown format (first bytes {head[:8]!r}); supported "
-                                   f"formats: {', '.join(FORMATS)}")
+                                   f"formats: {', '.join(format_names())}")
 
 
-def _format_for_write(path: Path, format: str | None) -> str:
+def format_for_write(path, format: str | None = None) -> str:
+    """The writable format to write ``path`` in: ``format``, else the one of its suffix.
+
+    Raises ValueError for an unknown or read-only format, and for a suffix no writable
+    format claims (the message lists the writable formats).
+    """
+    path = Path(path)
     if format is not None:
-        mod = get_format(format)
-        if not getattr(mod, "CAN_WRITE", False):
+        if not get_spec(format).writable:
             raise ValueError(f"format {format!r} is read-only here; writable formats: "
-                             f"{', '.join(f for f in FORMATS if get_format(f).CAN_WRITE)}")
+                             f"{', '.join(writable_formats())}")
         return format
-    name = _format_of_suffix(path)
+    name = format_of_suffix(path)
     if name is not None:
-        if not getattr(get_format(name), "CAN_WRITE", False):
+        if not get_spec(name).writable:
             raise ValueError(f"{path}: format {name!r} is read-only here; writable formats: "
-                             f"{', '.join(f for f in FORMATS if get_format(f).CAN_WRITE)}")
+                             f"{', '.join(writable_formats())}")
         return name
     raise ValueError(f"{path}: cannot tell the format from suffix {path.suffix.lower()!r}; pass format= "
-                     f"one of {', '.join(f for f in FORMATS if get_format(f).CAN_WRITE)}")
-
-
-def _format_of_suffix(path) -> str | None:
-    """The format whose ``SUFFIXES`` hold ``path``'s suffix (any case); None when none does."""
-    suffix = Path(path).suffix.lower()
-    return next((name for name in FORMATS if suffix in get_format(name).SUFFIXES), None)
+                     f"one of {', '.join(writable_formats())}")
 
 
 def read_info(path, format: str | None = None, **options) -> RecordingInfo:
@@ -225,7 +234,7 @@ def write(recording: Recording, path, format: str | None = None, *, overwrite: b
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
     path = Path(path)
-    name = _format_for_write(path, format)
+    name = format_for_write(path, format)
     mod = get_format(name)
     with atomic_path(path, overwrite=overwrite, size_hint=_size_hint(recording, name, options)) as tmp:
         mod.write(recording, tmp, **options)
@@ -264,7 +273,10 @@ def write_blocks(header, blocks, path, format: str | None = None, *, dtype="floa
     Path
     """
     path = Path(path)
-    name = _format_for_write(path, format)
+    name = format_for_write(path, format)
+    if not get_spec(name).streaming_write:
+        raise ValueError(f"{path}: format {name!r} is not written block by block; write() the whole "
+                         f"recording, or use one of {', '.join(n for n in format_names() if get_spec(n).streaming_write)}")
     mod = get_format(name)
     for attr in ("fs", "t0", "n_samples", "channels", "meta", "history"):
         if not hasattr(header, attr):
@@ -293,4 +305,5 @@ def _hint(n: int, nc: int, itemsize: int, name: str, options: dict) -> int | Non
     return int(n * nc * itemsize)
 
 
-from meshphase.io.convert import convert  # noqa: E402 (uses the functions above)
+# convert streams through the functions above (read_info, iter_blocks, write_blocks)
+from meshphase.io.convert import convert  # noqa: E402

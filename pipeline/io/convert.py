@@ -18,6 +18,7 @@ import numpy as np
 
 from meshphase.recording import Recording
 from meshphase.validate import as_positive_int
+from meshphase.io import detect_format, format_for_write, iter_blocks, read_info, write_blocks
 from meshphase.io.base import recording_read_errors
 
 __all__ = ["convert", "Converted", "CONVERT_BLOCK_SAMPLES"]
@@ -58,7 +59,8 @@ def convert(src, dst, *, format: str | None = None, overwrite: bool = False,
     src, dst : str or Path
         Source recording (format recognised by content) and output file.
     format : str, optional
-        Output format (``hdf5``, ``mcap``, ``csv``); default from ``dst``'s suffix.
+        A writable format of :data:`meshphase.io.FORMATS` (``hdf5``, ``mcap``, ``csv``,
+        ``tdms`` ...); default from ``dst``'s suffix.
     overwrite : bool
         Replace an existing ``dst`` (atomically); otherwise FileExistsError.
     block_samples : int
@@ -75,8 +77,6 @@ def convert(src, dst, *, format: str | None = None, overwrite: bool = False,
         The written path, both formats, samples and channels. The samples keep their stored
         dtype (float32 stays float32); the history gains a ``convert`` step naming the source.
     """
-    from meshphase.io import _format_for_write, detect_format, iter_blocks, read_info, write_blocks
-
     block_samples = as_positive_int(block_samples, "block_samples")
     src, dst = Path(src), Path(dst)
     with recording_read_errors(src):
@@ -90,7 +90,7 @@ def convert(src, dst, *, format: str | None = None, overwrite: bool = False,
     with recording_read_errors(src):
         first = next(blocks, None)
     dtype = first.data.dtype if first is not None else np.dtype(np.float64)
-    out_format = _format_for_write(dst, format)
+    out_format = format_for_write(dst, format)
 
     def data():
         bar_cm = (progress(info.n_samples, f"{fmt} -> {out_format}") if progress is not None

@@ -69,16 +69,17 @@ from meshphase.recording import ChannelSpec, Recording
 from meshphase.validate import as_int, as_positive_int
 from meshphase.io.base import (CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime, check_verify,
                                dumps_json, nice_fs, spec_from_dict, warn_nonfinite)
+from meshphase.io.registry import FormatSpec
 
-__all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "FORMAT_VERSION", "TIME_TOLERANCE", "sniff", "read_info",
+__all__ = ["NAME", "FORMAT", "FORMAT_VERSION", "TIME_TOLERANCE", "sniff", "read_info",
            "read", "write", "write_blocks", "iter_blocks", "MAX_CHANNELS", "MAX_HEADER_LINE"]
 
 NAME = "csv"
-SUFFIXES = (".csv",)
-CAN_WRITE = True
-#: the libraries the reader imports on its first use (a campaign's workers have them
-#: imported ahead: :func:`meshphase.campaign.job.worker_modules`)
-READ_LIBRARIES = ("pandas",)
+#: The format's declaration in the registry (:mod:`meshphase.io.registry`).
+FORMAT = FormatSpec(
+    name=NAME, module=__name__, suffixes=(".csv",), writable=True, streaming_write=True, catch_all=True,
+    write_options={"chunk_rows": int}, read_libraries=("pandas",),
+    description="delimited text with a time column (ours with a JSON preamble)")
 #: Version of the preamble written by :func:`write`.
 FORMAT_VERSION = 1
 #: Largest allowed distance of a time value from the uniform grid t0 + i / fs, in sample

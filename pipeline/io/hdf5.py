@@ -77,16 +77,21 @@ from meshphase.validate import as_choice, as_int, as_positive, as_positive_int
 from meshphase.io.base import (CLOCK_NAMES, CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime,
                                check_allocation, check_verify, clock_timing, dumps_json, kind_from_name,
                                regroup_blocks, spec_from_dict, warn_nonfinite)
+from meshphase.io.registry import FormatSpec
 
-__all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "FORMAT_VERSION", "DEFAULT_CHUNK_SAMPLES", "sniff",
+__all__ = ["NAME", "FORMAT", "FORMAT_VERSION", "DEFAULT_CHUNK_SAMPLES", "sniff",
            "read_info", "read", "write", "write_blocks", "iter_blocks"]
 
 NAME = "hdf5"
-SUFFIXES = (".h5", ".hdf5", ".hdf", ".he5")
-CAN_WRITE = True
-#: the libraries the reader imports on its first use (a campaign's workers have them
-#: imported ahead: :func:`meshphase.campaign.job.worker_modules`)
-READ_LIBRARIES = ("h5py",)
+#: The format's declaration in the registry (:mod:`meshphase.io.registry`).
+FORMAT = FormatSpec(
+    name=NAME, module=__name__, suffixes=(".h5", ".hdf5", ".hdf", ".he5"),
+    writable=True, streaming_write=True, random_access=True, checksums=True, rate_option=True,
+    read_options={"fs": float},
+    write_options={"compression": str, "compression_opts": int, "shuffle": bool, "chunk_samples": int,
+                   "fletcher32": bool},
+    read_libraries=("h5py",),
+    description="native archive: chunked, fletcher32 checksums, windows read in place")
 #: Layout version written by :func:`write`; readers refuse newer versions.
 FORMAT_VERSION = 1
 #: Samples per chunk (131072 float64 samples = 1 MiB, the HDF5 default chunk-cache size).

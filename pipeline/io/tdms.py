@@ -1,4 +1,5 @@
-"""NI TDMS (npTDMS): what NI DAQ rigs record. Read only (``CAN_WRITE = False``).
+"""NI TDMS (npTDMS): what NI DAQ rigs record. Written by :mod:`meshphase.io.tdms_write`
+(:func:`write`, :func:`write_blocks`, :func:`write_tdms`, :func:`write_ni_log`).
 
 Mapping (full description in ``data_schemas/tdms_mapping.md``):
 
@@ -88,16 +89,20 @@ from meshphase.validate import as_int, as_positive, as_positive_int
 from meshphase.io import tdms_index, tdms_rows, tdms_scaling
 from meshphase.io.base import (CLOCK_NAMES, CorruptFileError, RecordingFileError, RecordingInfo, check_allocation,
                                check_verify, clock_timing, kind_from_name, spec_from_dict, warn_nonfinite)
+from meshphase.io.registry import FormatSpec
+from meshphase.io.tdms_write import write, write_blocks, write_ni_log, write_tdms
 
-__all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "sniff", "read_info", "read", "iter_blocks", "kind_from_name",
+__all__ = ["NAME", "FORMAT", "sniff", "read_info", "read", "iter_blocks", "write", "write_blocks", "write_tdms",
+           "write_ni_log", "kind_from_name",
            "reading_path"]
 
 NAME = "tdms"
-SUFFIXES = (".tdms",)
-CAN_WRITE = False
-#: the libraries the reader imports on its first use (a campaign's workers have them
-#: imported ahead: :func:`meshphase.campaign.job.worker_modules`)
-READ_LIBRARIES = ("nptdms",)
+#: The format's declaration in the registry (:mod:`meshphase.io.registry`).
+FORMAT = FormatSpec(
+    name=NAME, module=__name__, suffixes=(".tdms",), writable=True, streaming_write=True, rate_option=True,
+    read_options={"fs": float, "raw": bool}, write_options={"name": str, "group": str},
+    read_libraries=("nptdms",),
+    description="NI TDMS as NI DAQ rigs record it (NI scaling applied)")
 
 #: Read through the segment index and computed offsets (tests switch it off to compare with
 #: npTDMS's public ``read_data``, the path every file can take).

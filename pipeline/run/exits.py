@@ -61,7 +61,7 @@ from pathlib import Path
 from meshphase import __version__
 from meshphase.io import atomic_path
 from meshphase.io.base import recording_read_errors  # noqa: F401 (public here too)
-from meshphase.io.base import _WRITE_FULL, _host_tag, _pid_alive, _SignalGuard
+from meshphase.io.atomic import WRITE_FULL as _WRITE_FULL, SignalGuard as _SignalGuard, host_tag as _host_tag, pid_alive as _pid_alive
 from meshphase.runtime.log import logger
 from meshphase.recording import GAUGE_KINDS
 

@@ -779,9 +779,10 @@ def _check_input_fs(inp: dict, err) -> None:
     if "mcap" in inp:
         raise err(["input", "fs_Hz"], "an MCAP file's rate goes in [input.mcap] fs_Hz")
     fmt = _input_format(inp["recording"])
-    if fmt not in (None, "tdms", "hdf5"):
+    if fmt is not None and not io.get_spec(fmt).rate_option:
+        takers = " or ".join(f.upper() for f in io.FORMATS if io.get_spec(f).rate_option)
         raise err(["input", "fs_Hz"], f"{inp['recording'].name} is a {fmt} file, which gives its own "
-                  "sample rate; fs_Hz is for a TDMS or HDF5 file that states none")
+                  f"sample rate; fs_Hz is for a {takers} file that states none")
 
 
 def _parse_input_mcap(inp: dict, err) -> dict:

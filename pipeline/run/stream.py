@@ -319,7 +319,8 @@ class FileSource(BlockSource):
 
         self.path = Path(path)
         self.fmt = format or io.detect_format(self.path)
-        self.mod = io.get_format(self.fmt)
+        self.spec = io.get_spec(self.fmt)
+        self.mod = self.spec.load()
         self.options = dict(options or {})
         info = self.mod.read_info(self.path, **self.options)
         self.info = info
@@ -358,7 +359,7 @@ class FileSource(BlockSource):
                 self._note_dtype(blk.data)
                 yield a, _apply_gains(blk.data, self.gains, copy=False)
             return
-        if self.fmt == "hdf5" or not hasattr(self.mod, "iter_blocks"):
+        if self.spec.random_access or not hasattr(self.mod, "iter_blocks"):
             reads = (self.mod.read(self.path, self.names, a, min(i1, a + n_block), **opts)
                      for a in range(i0, i1, n_block))
             for blk in self._quiet(reads):
@@ -379,9 +380,6 @@ class FileSource(BlockSource):
             self._note_dtype(data)
             yield max(a, i0) - i0, _apply_gains(data, self.gains, copy=True)
 
-    #: formats whose stored checksums a first pass checks and later passes may skip
-    CHECKSUM_FORMATS = ("hdf5", "mcap")
-
     def _signature(self) -> tuple:
         st = os.stat(self.path)
         return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
@@ -390,13 +388,14 @@ class FileSource(BlockSource):
         """Format options of the next pass over the file, whether it skips the checksums,
         and the file's signature now.
 
-        A file with checksums (HDF5 fletcher32, MCAP CRC32: :data:`CHECKSUM_FORMATS`) has
+        A file with checksums (HDF5 fletcher32, MCAP CRC32: a format whose spec declares
+        ``checksums``) has
         them checked in the first whole pass (they cost about as much as the rest of the
         read). A later pass of the same source over the file, unchanged since (device,
         inode, size and modification time as before and after the checked pass), reads it
         again unchecked (``verify=False``); ``verify`` given in the options is obeyed in
         every pass."""
-        if self.fmt not in self.CHECKSUM_FORMATS or "verify" in self.options:
+        if not self.spec.checksums or "verify" in self.options:
             return self.options, False, None
         sig = self._signature()
         if self._verified is not None and sig == self._verified:

@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 
 import meshphase.io as pio
-from meshphase.io import base
-from meshphase.io.base import TEMP_SUFFIX, atomic_path, clean_stale_partials
+from meshphase.io import atomic
+from meshphase.io.atomic import TEMP_SUFFIX, atomic_path, clean_stale_partials
 from meshphase.recording import ChannelSpec, Recording
 
 pytestmark = pytest.mark.timeout(120)
@@ -39,7 +39,7 @@ def _partials(d):
 
 
 def _temp_name(pid, tag="deadbeef"):
-    return f".mp-{base._host_tag()}-{pid}-{tag}{TEMP_SUFFIX}"
+    return f".mp-{atomic.host_tag()}-{pid}-{tag}{TEMP_SUFFIX}"
 
 
 def _dead_pid():
@@ -65,7 +65,7 @@ def test_temp_file_is_created_exclusively(tmp_path, monkeypatch):
     taken = tmp_path / _temp_name(os.getpid(), "00000000")
     taken.write_bytes(b"someone else's")
     tags = iter(["00000000", "00000000", "11111111"])
-    monkeypatch.setattr(base.secrets, "token_hex", lambda n: next(tags))
+    monkeypatch.setattr(atomic.secrets, "token_hex", lambda n: next(tags))
     with atomic_path(tmp_path / "out.bin") as tmp:
         assert tmp.name == _temp_name(os.getpid(), "11111111")
         tmp.write_bytes(b"mine")
@@ -75,7 +75,7 @@ def test_temp_file_is_created_exclusively(tmp_path, monkeypatch):
 
 def test_no_free_temp_name_raises(tmp_path, monkeypatch):
     (tmp_path / _temp_name(os.getpid(), "00000000")).write_bytes(b"")
-    monkeypatch.setattr(base.secrets, "token_hex", lambda n: "00000000")
+    monkeypatch.setattr(atomic.secrets, "token_hex", lambda n: "00000000")
     with pytest.raises(FileExistsError, match="no free temporary file name"):
         with atomic_path(tmp_path / "out.bin"):
             pass
@@ -85,7 +85,7 @@ def test_no_free_temp_name_raises(tmp_path, monkeypatch):
 def test_file_and_directory_are_fsynced(tmp_path, monkeypatch):
     synced = []
     real = os.fsync
-    monkeypatch.setattr(base.os, "fsync", lambda fd: synced.append(os.readlink(f"/proc/self/fd/{fd}"))
+    monkeypatch.setattr(atomic.os, "fsync", lambda fd: synced.append(os.readlink(f"/proc/self/fd/{fd}"))
                         or real(fd))
     p = pio.write(_rec(), tmp_path / "s.h5")
     assert synced[0].endswith(TEMP_SUFFIX) and synced[-1] == str(tmp_path)
@@ -179,18 +179,18 @@ def test_stale_partials_are_cleaned_and_others_kept(tmp_path):
     live = tmp_path / _temp_name(os.getppid(), "bbbbbbbb")          # a running process
     old_live = tmp_path / _temp_name(os.getppid(), "cccccccc")
     other_host = tmp_path / ".mp-zzzz-1-dddddddd.partial"            # not our pattern: kept
-    foreign_host = tmp_path / f".mp-{'0000' if base._host_tag() != '0000' else '1111'}-1-eeeeeeee.partial"
+    foreign_host = tmp_path / f".mp-{'0000' if atomic.host_tag() != '0000' else '1111'}-1-eeeeeeee.partial"
     legacy_old = tmp_path / ".run.h5.k2j4_x9q.partial"
     legacy_new = tmp_path / ".run.h5.abcdefgh.partial"
     unrelated = tmp_path / ".notes.partial"
     for p in (dead, live, old_live, other_host, foreign_host, legacy_old, legacy_new, unrelated):
         p.write_bytes(b"x" * 10)
     for p in (old_live, legacy_old, unrelated):
-        os.utime(p, (now - 2 * base.STALE_AGE, now - 2 * base.STALE_AGE))
+        os.utime(p, (now - 2 * atomic.STALE_AGE, now - 2 * atomic.STALE_AGE))
     removed = clean_stale_partials(tmp_path)
     assert sorted(p.name for p in removed) == sorted([dead.name, old_live.name, legacy_old.name])
     assert all(p.exists() for p in (live, other_host, foreign_host, legacy_new, unrelated))
-    os.utime(foreign_host, (now - 2 * base.STALE_AGE,) * 2)  # another host's, by age only
+    os.utime(foreign_host, (now - 2 * atomic.STALE_AGE,) * 2)  # another host's, by age only
     assert clean_stale_partials(tmp_path) == [foreign_host]
     assert clean_stale_partials(tmp_path / "missing") == []
 
@@ -207,7 +207,7 @@ def test_clean_stale_partials_empty_and_bad_input(tmp_path):
 
 _KILLED_WRITER = textwrap.dedent("""
     import sys, time
-    from meshphase.io.base import atomic_path
+    from meshphase.io.atomic import atomic_path
     with atomic_path(sys.argv[1]) as tmp:
         tmp.write_bytes(b"x" * 1_000_000)
         print(tmp, flush=True)
@@ -274,7 +274,7 @@ def test_enospc_from_fsync_leaves_nothing(tmp_path, monkeypatch):
     def fsync(fd):
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(base.os, "fsync", fsync)
+    monkeypatch.setattr(atomic.os, "fsync", fsync)
     with pytest.raises(OSError) as err:
         pio.write(_rec(), tmp_path / "f.mcap")
     assert err.value.errno == errno.ENOSPC and list(tmp_path.iterdir()) == []
@@ -287,7 +287,7 @@ def test_not_enough_space_is_refused_before_writing(tmp_path, monkeypatch):
         def __init__(self, st):
             self.f_bavail, self.f_frsize = 10, st.f_frsize
 
-    monkeypatch.setattr(base.os, "statvfs", lambda p: Tiny(real(p)))
+    monkeypatch.setattr(atomic.os, "statvfs", lambda p: Tiny(real(p)))
     rec = _rec(100_000, 4)
     with pytest.raises(OSError, match=r"not enough free space: the file needs about 3200000 bytes") as err:
         pio.write(rec, tmp_path / "big.h5")
@@ -301,11 +301,11 @@ _FULL_DISK = textwrap.dedent("""
     import errno, os, sys
     import numpy as np
     import meshphase.io as pio
-    from meshphase.io import base
+    from meshphase.io import atomic
     from meshphase.recording import ChannelSpec, Recording
     fmt, target, preflight = sys.argv[1], sys.argv[2], sys.argv[3] == "1"
     if not preflight:  # make the format's own writer hit ENOSPC
-        base._check_space = lambda path, size_hint: None
+        atomic._check_space = lambda path, size_hint: None
     rec = Recording(np.random.default_rng(0).standard_normal((40_000, 4)), 5120.0,
                     [ChannelSpec(name=f"s{j}", kind="sun", units="m/m") for j in range(4)])
     try:

@@ -34,14 +34,19 @@ def test_sniff_data_files_not_index_files():
     assert not tdms.sniff(b"\x89HDF\r\n\x1a\n")
 
 
-def test_registry_detects_tdms_by_content_and_refuses_to_write(rig_tdms, tmp_path):
-    path, _ = rig_tdms
+def test_registry_detects_tdms_by_content_and_writes_it_back(rig_tdms, tmp_path):
+    path, data = rig_tdms
     renamed = tmp_path / "rig.dat"
     renamed.write_bytes(path.read_bytes())
     assert pio.detect_format(renamed) == "tdms"
     rec = pio.read(renamed)
-    with pytest.raises(ValueError, match="read-only"):
-        pio.write(rec, tmp_path / "out.tdms", format="tdms")
+    out = pio.write(rec, tmp_path / "out.tdms", format="tdms")
+    back = pio.read(out)
+    assert back.names == rec.names and back.fs == rec.fs and back.t0 == rec.t0
+    assert [c.kind for c in back.channels] == [c.kind for c in rec.channels]
+    np.testing.assert_array_equal(back.data, rec.data)
+    with pytest.raises(FileExistsError):
+        pio.write(rec, out, format="tdms")
 
 
 # ---------------------------------------------------------------------------- mapping

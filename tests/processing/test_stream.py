@@ -589,8 +589,12 @@ def test_write_blocks_bad_header_and_dtype(tmp_path):
         io.write_blocks(object(), [rec.data], tmp_path / "x.h5")
     with pytest.raises(TypeError, match="dtype"):
         io.write_blocks(rec, [rec.data], tmp_path / "x.h5", dtype="int16")
-    with pytest.raises(ValueError, match="read-only"):
-        io.write_blocks(rec, [rec.data], tmp_path / "x.tdms")
+    ro = io.register_format(io.FormatSpec(name="tdmsro", module="meshphase.io.tdms", suffixes=(".tdmsro",)))
+    try:
+        with pytest.raises(ValueError, match="read-only"):
+            io.write_blocks(rec, [rec.data], tmp_path / "x.tdmsro")
+    finally:
+        io.unregister_format(ro.name)
 
 
 # ---------------------------------------------------------------- peak memory of process

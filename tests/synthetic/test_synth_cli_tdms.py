@@ -10,7 +10,7 @@ from meshphase.errors import DataQualityWarning
 from meshphase.io import read
 from meshphase.recording import Recording
 from meshphase.synthetic import GroundTruth, cli_synth, generate, generate_blocks
-from meshphase.synthetic.cli import format_for_path
+from meshphase.io import format_for_write
 from meshphase.synthetic.tdms_export import write_tdms
 
 
@@ -50,7 +50,7 @@ def test_cli_synth_refuses_to_overwrite_and_bad_format(tmp_path):
         cli_synth("seed_rig", tmp_path / "b.h5", minutes=-1.0, progress=False)
     with pytest.raises(ValueError, match="unknown scenario"):
         cli_synth("nope", tmp_path / "c.h5", minutes=0.05, progress=False)
-    assert format_for_path("x.HDF5") == "hdf5" and format_for_path("x.bin", "mcap") == "mcap"
+    assert format_for_write("x.HDF5") == "hdf5" and format_for_write("x.bin", "mcap") == "mcap"
 
 
 def test_cli_synth_progress_bar(tmp_path, capsys):

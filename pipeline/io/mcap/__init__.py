@@ -55,9 +55,9 @@ recording header, per-file cache), ``chunks`` (the chunk reader), ``reader`` (:f
 """
 
 from meshphase.io.mcap.crc import crc32_combine
-from meshphase.io.mcap.layout import (CAN_WRITE, COMPRESSIONS, DEFAULT_BLOCK, DEFAULT_CHUNK_SIZE, FORMAT_VERSION, HEADER_SIZE,
-                                      LAYOUT, MAGIC, MESSAGE_ENCODING, NAME, PROFILE, READ_LIBRARIES, RECORDING_METADATA,
-                                      SCHEMA_ENCODING, SCHEMA_NAME, SUFFIXES, log_time_ns, sniff)
+from meshphase.io.mcap.layout import (COMPRESSIONS, DEFAULT_BLOCK, DEFAULT_CHUNK_SIZE, FORMAT, FORMAT_VERSION, HEADER_SIZE,
+                                      LAYOUT, MAGIC, MESSAGE_ENCODING, NAME, PROFILE, RECORDING_METADATA,
+                                      SCHEMA_ENCODING, SCHEMA_NAME, log_time_ns, sniff)
 from meshphase.io.mcap.foreign import describe, read_foreign
 from meshphase.io.mcap.foxglove import FOXGLOVE_METADATA, FOXGLOVE_SCHEMA_NAME, LAYOUTS, write_foxglove
 from meshphase.io.mcap.header import ForeignMcapError
@@ -66,7 +66,7 @@ from meshphase.io.mcap.reader import iter_blocks, read, read_info
 from meshphase.io.mcap.timing import fit_grid
 from meshphase.io.mcap.writer import write, write_blocks
 
-__all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "READ_LIBRARIES", "MAGIC", "SCHEMA_NAME", "MESSAGE_ENCODING",
+__all__ = ["NAME", "FORMAT", "MAGIC", "SCHEMA_NAME", "MESSAGE_ENCODING",
            "RECORDING_METADATA", "COMPRESSIONS", "DEFAULT_BLOCK", "sniff", "read_info", "read",
            "write", "write_blocks", "iter_blocks", "log_time_ns", "crc32_combine", "SCHEMA_ENCODING",
            "PROFILE", "FORMAT_VERSION", "DEFAULT_CHUNK_SIZE", "HEADER_SIZE", "LAYOUT",

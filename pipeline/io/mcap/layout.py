@@ -10,15 +10,20 @@ from pathlib import Path
 
 from meshphase.jsonable import json_default
 from meshphase.validate import as_int, as_positive
+from meshphase.io.registry import FormatSpec
 
-__all__ = ["NAME", "SUFFIXES", "CAN_WRITE", "READ_LIBRARIES", "MAGIC", "SCHEMA_NAME", "MESSAGE_ENCODING",
+__all__ = ["NAME", "FORMAT", "MAGIC", "SCHEMA_NAME", "MESSAGE_ENCODING",
            "RECORDING_METADATA", "COMPRESSIONS", "DEFAULT_BLOCK", "sniff", "log_time_ns"]
 
 NAME = "mcap"
-SUFFIXES = (".mcap",)
-CAN_WRITE = True
-#: the libraries the reader imports on its first use (mcap: at import already)
-READ_LIBRARIES: tuple = ()
+#: The format's declaration in the registry (:mod:`meshphase.io.registry`); the reader and
+#: writer are the package's (``meshphase.io.mcap``). No read libraries: ``mcap`` is imported
+#: with the package already.
+FORMAT = FormatSpec(
+    name=NAME, module="meshphase.io.mcap", suffixes=(".mcap",), writable=True, streaming_write=True,
+    checksums=True, read_options={"topics": (list, tuple, dict), "fs": float, "max_jitter": float, "stamp": str},
+    write_options={"layout": str, "block": int, "compression": str, "chunk_size": int, "topic": str},
+    description="MCAP: ours (CRC32 per chunk), or another tool's mapped by topics=")
 
 #: The 8 magic bytes that open and close every MCAP file.
 MAGIC = b"\x89MCAP0\r\n"
