@@ -80,7 +80,7 @@ def test_typescript_reader_sees_same_samples_times_and_metadata(node, tmp_path, 
     p = pio.write(rec, tmp_path / "r.mcap", block=block, compression=compression, chunk_size=50_000)
     out = _node_read(node, p)
 
-    origin = mlayout._origin_ns(t0)
+    origin = mlayout.origin_ns(t0)
     assert origin == (12_500_000_000 if t0 == 12.5 else 0)
     starts = list(range(0, rec.n_samples, block))
     want_times = [str(m.log_time_ns(a, rec.fs, origin)) for a in starts]
@@ -129,7 +129,7 @@ def test_time_window_end_is_inclusive_in_typescript_half_open_in_python(node, tm
     assert ts == [2000, 4000, 6000]  # @mcap/core: [startTime, endTime], end included
 
     with open(p, "rb") as fh:
-        py = sorted(mlayout._HEADER.unpack_from(x.data)[0] for _, _, x in make_reader(fh).iter_messages(
+        py = sorted(mlayout.HEADER.unpack_from(x.data)[0] for _, _, x in make_reader(fh).iter_messages(
             topics=["sun_1"], starting_at=t_start, ending_before=t_end))
     assert py == [2000, 4000]  # mcap (Python): [start, end), end excluded
 
@@ -151,7 +151,7 @@ def test_typescript_reader_decodes_foxglove_layout(node, tmp_path, compression):
     assert (jt["schemaName"], jt["schemaEncoding"]) == (m.FOXGLOVE_SCHEMA_NAME, "jsonschema")
     (schema,) = [s["data"] for s in out["schemas"] if s["name"] == m.FOXGLOVE_SCHEMA_NAME]
     assert set(schema["properties"]["channels"]["properties"]) == set(rec.names)
-    origin = mlayout._origin_ns(rec.t0)
+    origin = mlayout.origin_ns(rec.t0)
     want_ns = [m.log_time_ns(k, rec.fs, origin) for k in range(rec.n_samples)]
     assert [int(t) for t in jt["logTimes"]] == want_ns
     msgs = jt["messages"]

@@ -175,8 +175,8 @@ def test_mcap_verify_is_checked_once_per_file(tmp_path, monkeypatch):
     p = tmp_path / "once.mcap"
     pio.write(rec, p, block=1000)
     calls = []
-    real = mheader._check_data_crc
-    monkeypatch.setattr(mheader, "_check_data_crc", lambda *a: calls.append(1) or real(*a))
+    real = mheader.check_data_crc
+    monkeypatch.setattr(mheader, "check_data_crc", lambda *a: calls.append(1) or real(*a))
     for _ in range(3):
         assert pio.read(p) == rec
     assert len(calls) == 1

@@ -88,11 +88,11 @@ def _corrupt_chunk(path, offset):
 def _custom_file(path, rec, *, block=100, drop=None, duplicate=None, recording_md=None,
                  channel_md=None, payload_edit=None):
     """Write an MCAP file the way meshphase does, with one thing changed (tests only)."""
-    origin = mlayout._origin_ns(rec.t0)
+    origin = mlayout.origin_ns(rec.t0)
     rmd = mwriter._recording_metadata(rec, block, "none", origin)
     if recording_md:
         rmd = recording_md(rmd)
-    code = mlayout._DTYPE_CODES[rec.data.dtype.name]
+    code = mlayout.DTYPE_CODES[rec.data.dtype.name]
     with open(path, "wb") as fh:
         w = Writer(fh, compression=CompressionType.NONE)
         w.start(profile="meshphase", library="test")
@@ -110,7 +110,7 @@ def _custom_file(path, rec, *, block=100, drop=None, duplicate=None, recording_m
                 if drop == (j, k):
                     continue
                 b = min(rec.n_samples, a + block)
-                payload = mlayout._HEADER.pack(a, b - a, 1, code, 1) + col[a:b].tobytes()
+                payload = mlayout.HEADER.pack(a, b - a, 1, code, 1) + col[a:b].tobytes()
                 if payload_edit:
                     payload = payload_edit(j, k, payload)
                 t = m.log_time_ns(a, rec.fs, origin)
@@ -330,7 +330,7 @@ def test_log_times_follow_the_documented_rule(tmp_path, t0, origin):
     rec = _recording(3000, t0=t0, fs=1000.0 / 3.0)
     p = _write(rec, tmp_path / "r.mcap", block=250)
     with open(p, "rb") as fh:
-        msgs = [(msg.log_time, mlayout._HEADER.unpack_from(msg.data)[0])
+        msgs = [(msg.log_time, mlayout.HEADER.unpack_from(msg.data)[0])
                 for _, ch, msg in make_reader(fh).iter_messages(topics=["sun_1"])]
     assert len(msgs) == 12
     for lt, first in msgs:
@@ -373,9 +373,9 @@ def test_python_reader_window_is_half_open(tmp_path):
     t2 = m.log_time_ns(2000, rec.fs, 0)
     with open(p, "rb") as fh:
         r = make_reader(fh)
-        excl = [mlayout._HEADER.unpack_from(x.data)[0]
+        excl = [mlayout.HEADER.unpack_from(x.data)[0]
                 for _, _, x in r.iter_messages(topics=["sun_1"], starting_at=0, ending_before=t2)]
-        incl = [mlayout._HEADER.unpack_from(x.data)[0]
+        incl = [mlayout.HEADER.unpack_from(x.data)[0]
                 for _, _, x in r.iter_messages(topics=["sun_1"], starting_at=0, ending_at=t2)]
     assert excl == [0, 1000] and incl == [0, 1000, 2000]
 
@@ -392,7 +392,7 @@ def test_mcap_library_decodes_the_same_samples(tmp_path):
         assert (schema.name, schema.encoding) == (m.SCHEMA_NAME, m.SCHEMA_ENCODING)
         assert json.loads(schema.data) == m.LAYOUT
         for _, ch, msg in r.iter_messages():
-            first, n, nch, code, ver = mlayout._HEADER.unpack_from(msg.data)
+            first, n, nch, code, ver = mlayout.HEADER.unpack_from(msg.data)
             assert (nch, code, ver) == (1, 1, 1) and ch.message_encoding == m.MESSAGE_ENCODING
             out[first:first + n, int(ch.metadata["index"])] = np.frombuffer(msg.data, "<f4", n, 16)
         md = {x.name: x.metadata for x in r.iter_metadata()}
@@ -406,13 +406,13 @@ def test_schema_files_are_valid_and_describe_what_we_write(tmp_path):
 
     for name in ("mcap_message.schema.json", "mcap_channel_metadata.schema.json"):
         Draft202012Validator.check_schema(mlayout._json_schema(name))
-    assert mlayout._schema_problem("layout", m.LAYOUT) is None
+    assert mlayout.schema_problem("layout", m.LAYOUT) is None
     rec = _recording(10)
-    assert mlayout._schema_problem("recording", mwriter._recording_metadata(rec, 5120, "none", 0)) is None
+    assert mlayout.schema_problem("recording", mwriter._recording_metadata(rec, 5120, "none", 0)) is None
     for i, s in enumerate(rec.channels):
-        assert mlayout._schema_problem("channel", mwriter._channel_metadata(s, i, rec.fs, "float64")) is None
+        assert mlayout.schema_problem("channel", mwriter._channel_metadata(s, i, rec.fs, "float64")) is None
     bad = dict(m.LAYOUT, version=2)
-    assert mlayout._schema_problem("layout", bad) == "version: 1 was expected"
+    assert mlayout.schema_problem("layout", bad) == "version: 1 was expected"
 
 
 # ---------------------------------------------------------------------------------- bad input

@@ -7,9 +7,9 @@ import os
 from pathlib import Path
 
 from meshphase.io.base import CorruptFileError, RecordingFileError
-from meshphase.io.mcap.crc import _crc32
-from meshphase.io.mcap.header import _LIB_ERRORS, _Layout
-from meshphase.io.mcap.layout import (_CHUNK_HEAD, _HEADER, _MAX_RECORD, _MSG_HEAD, _OP_CHUNK, _OP_MESSAGE, _REC, _U64,
+from meshphase.io.mcap.crc import crc32
+from meshphase.io.mcap.header import LIB_ERRORS, Layout
+from meshphase.io.mcap.layout import (CHUNK_HEAD, HEADER, MAX_RECORD, MSG_HEAD, OP_CHUNK, OP_MESSAGE, REC, U64,
                                       FORMAT_VERSION, HEADER_SIZE)
 
 __all__: list[str] = []
@@ -17,7 +17,7 @@ __all__: list[str] = []
 _CRC_ASYNC_MIN = 1 << 16  # chunks at least this large [B] get their CRC in the worker thread
 
 
-class _ChunkReader:
+class ChunkReader:
     """Reads the uncompressed records of one chunk given its ChunkIndex (summary section).
 
     The file bytes go into two buffers used in turn: the returned view is valid until the
@@ -28,7 +28,7 @@ class _ChunkReader:
     takes precedence over an error raised while parsing the damaged chunk.
     """
 
-    def __init__(self, fh, path: Path, lay: _Layout | None = None, *, verify: bool = True):
+    def __init__(self, fh, path: Path, lay: Layout | None = None, *, verify: bool = True):
         self.fh = fh
         self.file_size = os.fstat(fh.fileno()).st_size
         self.path = path
@@ -53,7 +53,7 @@ class _ChunkReader:
                 try:
                     self.finish()
                 except CorruptFileError as crc_error:
-                    if isinstance(exc, (RecordingFileError,) + _LIB_ERRORS):
+                    if isinstance(exc, (RecordingFileError,) + LIB_ERRORS):
                         raise crc_error from exc
         finally:
             if self.pool is not None:
@@ -97,7 +97,7 @@ class _ChunkReader:
         """Check (or start checking) the CRC of ``data``, which lives in buffer ``turn``
         (-1: in its own object)."""
         if len(data) < _CRC_ASYNC_MIN:
-            got = _crc32(data)
+            got = crc32(data)
             if got != want:
                 raise self._crc_error(ci, got, want, len(data))
             return
@@ -106,7 +106,7 @@ class _ChunkReader:
 
             self.pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="meshphase-crc")
         self.finish()  # one CRC in flight at a time
-        self.pending = (self.pool.submit(_crc32, data), ci, want, len(data))
+        self.pending = (self.pool.submit(crc32, data), ci, want, len(data))
         self._pending_turn = turn
 
     def records(self, ci) -> memoryview:
@@ -124,25 +124,25 @@ class _ChunkReader:
         got = self.fh.readinto(mv)
         if got != size:
             raise self._bad(ci, f"only {got} of {size} bytes present (file truncated)")
-        if size < 9 + _CHUNK_HEAD.size + 8:
+        if size < 9 + CHUNK_HEAD.size + 8:
             raise self._bad(ci, f"{size} bytes is too short for a chunk record")
-        op, length = _REC.unpack_from(mv, 0)
-        if op != _OP_CHUNK or 9 + length != size:
+        op, length = REC.unpack_from(mv, 0)
+        if op != OP_CHUNK or 9 + length != size:
             raise self._bad(ci, f"the chunk index points at a record with opcode {op:#04x} and "
                                 f"length {length}, not a {size}-byte chunk")
-        _, _, usize, crc, clen = _CHUNK_HEAD.unpack_from(mv, 9)
-        pos = 9 + _CHUNK_HEAD.size
+        _, _, usize, crc, clen = CHUNK_HEAD.unpack_from(mv, 9)
+        pos = 9 + CHUNK_HEAD.size
         comp = bytes(mv[pos:pos + clen]).decode("utf-8", "replace")
         pos += clen
         if pos + 8 > size:
             raise self._bad(ci, "chunk header runs past the record")
-        (rlen,) = _U64.unpack_from(mv, pos)
+        (rlen,) = U64.unpack_from(mv, pos)
         pos += 8
         if pos + rlen != size:
             raise self._bad(ci, f"records length {rlen} does not fit the {size}-byte record")
         data = mv[pos:pos + rlen]
-        if usize > _MAX_RECORD:
-            raise self._bad(ci, f"claims {usize} bytes uncompressed, more than {_MAX_RECORD}")
+        if usize > MAX_RECORD:
+            raise self._bad(ci, f"claims {usize} bytes uncompressed, more than {MAX_RECORD}")
         try:
             if comp == "":
                 pass
@@ -160,7 +160,7 @@ class _ChunkReader:
                 raise self._bad(ci, f"unsupported compression {comp!r} (supported: none, lz4, zstd)")
         except RecordingFileError:
             raise
-        except _LIB_ERRORS as exc:
+        except LIB_ERRORS as exc:
             raise self._bad(ci, f"{comp} data do not decompress ({type(exc).__name__}: {exc}): the chunk "
                                 f"is damaged") from exc
         if len(data) != usize:
@@ -171,7 +171,7 @@ class _ChunkReader:
         return data
 
 
-def _payloads(recs: memoryview, ids, path: Path):
+def chunk_payloads(recs: memoryview, ids, path: Path):
     """(channel id, payload offset, payload length, log_time) of the messages of the wanted
     channel ids in the uncompressed records of one chunk, in file order."""
     q = 0
@@ -179,25 +179,25 @@ def _payloads(recs: memoryview, ids, path: Path):
     while q < end:
         if q + 9 > end:
             raise RecordingFileError(path, "record header runs past the end of its chunk")
-        op, length = _REC.unpack_from(recs, q)
+        op, length = REC.unpack_from(recs, q)
         nxt = q + 9 + length
         if nxt > end:
             raise RecordingFileError(path, f"record of {length} bytes runs past the end of its chunk")
-        if op == _OP_MESSAGE:
-            if length < _MSG_HEAD.size:
+        if op == OP_MESSAGE:
+            if length < MSG_HEAD.size:
                 raise RecordingFileError(path, f"message record of {length} bytes is too short")
-            cid, _, log_time, _ = _MSG_HEAD.unpack_from(recs, q + 9)
+            cid, _, log_time, _ = MSG_HEAD.unpack_from(recs, q + 9)
             if cid in ids:
-                yield cid, q + 9 + _MSG_HEAD.size, length - _MSG_HEAD.size, log_time
+                yield cid, q + 9 + MSG_HEAD.size, length - MSG_HEAD.size, log_time
         q = nxt
 
 
-def _decode(buf, off: int, size: int, lay: _Layout, path: Path, name: str) -> tuple[int, int]:
+def decode_message(buf, off: int, size: int, lay: Layout, path: Path, name: str) -> tuple[int, int]:
     """Check one payload header; return (first_sample, n_samples)."""
     if size < HEADER_SIZE:
         raise RecordingFileError(path, f"channel {name!r}: message payload of {size} bytes is "
                                        f"shorter than the {HEADER_SIZE}-byte header")
-    first, n, nch, code, version = _HEADER.unpack_from(buf, off)
+    first, n, nch, code, version = HEADER.unpack_from(buf, off)
     if version != FORMAT_VERSION or nch != 1 or code != lay.code:
         raise RecordingFileError(path, f"channel {name!r}: message header (version {version}, "
                                        f"n_channels {nch}, dtype code {code}) does not match the "

@@ -10,16 +10,16 @@ from pathlib import Path
 
 from meshphase.validate import as_int
 from meshphase.io.base import CorruptFileError
-from meshphase.io.mcap.layout import _CHUNK_HEAD, _OP_CHUNK, _REC, _U64, MAGIC
+from meshphase.io.mcap.layout import CHUNK_HEAD, OP_CHUNK, REC, U64, MAGIC
 
 __all__ = ["crc32_combine"]
 
 _CRC_POLY = 0xEDB88320  # CRC-32 (ISO-HDLC, zlib), reflected
 
 try:  # ISA-L's CRC-32 (same polynomial as zlib, SIMD): ~3x zlib's speed where installed
-    from isal.isal_zlib import crc32 as _crc32
+    from isal.isal_zlib import crc32
 except ImportError:  # the default: zlib (releases the GIL for large buffers, as does isal)
-    _crc32 = zlib.crc32
+    crc32 = zlib.crc32
 
 
 def _crc_mulmod(a: int, b: int) -> int:
@@ -90,7 +90,7 @@ _OP_DATA_END = 0x0F
 _IO_BLOCK = 1 << 22  # bytes CRC'd per read while walking the data section
 
 
-def _check_summary_crc(fh, path: Path) -> tuple[int, int]:
+def check_summary_crc(fh, path: Path) -> tuple[int, int]:
     """Check the footer record and the summary CRC (when not 0) before anything parses the
     summary. Returns (footer offset, summary_start)."""
     fh.seek(0, 2)
@@ -108,8 +108,8 @@ def _check_summary_crc(fh, path: Path) -> tuple[int, int]:
                                                             f"byte {offset_start}, footer at byte {pos})")
     if crc:
         fh.seek(start)
-        got = _crc32(fh.read(pos - start))
-        got = _crc32(_FOOTER.pack(op, length, summary_start, offset_start, 0)[:-4], got)
+        got = crc32(fh.read(pos - start))
+        got = crc32(_FOOTER.pack(op, length, summary_start, offset_start, 0)[:-4], got)
         if got != crc:
             raise CorruptFileError(path, f"bytes [{start}, {pos + 25}) (summary section and footer)",
                                    f"summary CRC32 is {got:#010x}, the footer records {crc:#010x}: the "
@@ -118,7 +118,7 @@ def _check_summary_crc(fh, path: Path) -> tuple[int, int]:
     return pos, start
 
 
-def _check_data_crc(fh, path: Path, data_end_limit: int) -> bool:
+def check_data_crc(fh, path: Path, data_end_limit: int) -> bool:
     """Walk the records of the data section and check the DataEnd record's CRC (when not 0).
 
     The CRC covers bytes [0, start of DataEnd). Uncompressed chunks with a stored CRC are
@@ -127,16 +127,16 @@ def _check_data_crc(fh, path: Path, data_end_limit: int) -> bool:
     is read. Other records (and compressed chunks) are read and CRC'd. Returns True when a
     CRC was checked, False when the file stores none.
     """
-    crc = _crc32(MAGIC)
+    crc = crc32(MAGIC)
     pos = 8
     fh.seek(pos)
-    head_size = 9 + _CHUNK_HEAD.size
+    head_size = 9 + CHUNK_HEAD.size
     while True:
         if pos + 9 > data_end_limit:
             raise CorruptFileError(path, f"byte {pos}", f"the data section ends without a DataEnd record "
                                                         f"(records run into the summary at byte {data_end_limit})")
         head = fh.read(9)
-        op, length = _REC.unpack(head)
+        op, length = REC.unpack(head)
         end = pos + 9 + length
         if end > data_end_limit:
             raise CorruptFileError(path, f"byte {pos}", f"record (opcode {op:#04x}) of {length} bytes runs past "
@@ -151,31 +151,31 @@ def _check_data_crc(fh, path: Path, data_end_limit: int) -> bool:
                                        f"{stored:#010x}: a record outside the chunks' records (header, "
                                        f"metadata, chunk headers, message indexes) is damaged")
             return bool(stored)
-        crc = _crc32(head, crc)
+        crc = crc32(head, crc)
         done = 9
-        if op == _OP_CHUNK and length >= _CHUNK_HEAD.size + 4 + 8:
-            fixed = fh.read(_CHUNK_HEAD.size)
-            _, _, usize, ccrc, clen = _CHUNK_HEAD.unpack(fixed)
+        if op == OP_CHUNK and length >= CHUNK_HEAD.size + 4 + 8:
+            fixed = fh.read(CHUNK_HEAD.size)
+            _, _, usize, ccrc, clen = CHUNK_HEAD.unpack(fixed)
             if head_size + clen + 8 <= 9 + length:
                 rest = fh.read(clen + 8)
-                (rlen,) = _U64.unpack_from(rest, clen)
+                (rlen,) = U64.unpack_from(rest, clen)
                 if ccrc and clen == 0 and head_size + clen + 8 + rlen == 9 + length and usize == rlen:
-                    crc = _crc32(rest, _crc32(fixed, crc))
+                    crc = crc32(rest, crc32(fixed, crc))
                     crc = crc32_combine(crc, ccrc, rlen)
                     pos = end
                     fh.seek(pos)
                     continue
-                crc = _crc32(rest, _crc32(fixed, crc))
+                crc = crc32(rest, crc32(fixed, crc))
                 done = head_size + clen + 8
             else:
-                crc = _crc32(fixed, crc)
+                crc = crc32(fixed, crc)
                 done = head_size
         left = 9 + length - done
         while left > 0:
             piece = fh.read(min(left, _IO_BLOCK))
             if not piece:
                 raise CorruptFileError(path, f"byte {pos}", "record runs past the end of the file")
-            crc = _crc32(piece, crc)
+            crc = crc32(piece, crc)
             left -= len(piece)
         pos = end
 

@@ -29,7 +29,7 @@ from mcap.reader import make_reader
 from meshphase.recording import ChannelSpec, Recording
 from meshphase.io.base import RecordingFileError, RecordingInfo, check_verify
 from meshphase.io.mcap.foxglove import FOXGLOVE_METADATA
-from meshphase.io.mcap.header import _check_ends, _lib_errors
+from meshphase.io.mcap.header import check_ends, lib_errors
 from meshphase.io.mcap.mapping import TopicField, TopicSummary, format_field_path, mapping_key, parse_topics
 from meshphase.io.mcap.timing import fit_grid
 
@@ -176,8 +176,8 @@ def describe(path, *, verify: bool = True) -> list[TopicSummary]:
     """
     path = Path(path)
     verify = check_verify(verify)
-    with open(path, "rb") as fh, _lib_errors(path, "listing topics"):
-        _check_ends(fh, path)
+    with open(path, "rb") as fh, lib_errors(path, "listing topics"):
+        check_ends(fh, path)
         reader = make_reader(fh, validate_crcs=verify, decoder_factories=decoder_factories())
         summary = reader.get_summary()
         channels = dict(summary.channels) if summary is not None else {}
@@ -368,7 +368,7 @@ def _assemble(path: Path, entries: list[TopicField], got: dict, fs, max_jitter) 
 
 def _embedded(reader, path: Path):
     """(mapping, header map) of a file meshphase wrote in the ``foxglove`` layout, else None."""
-    with _lib_errors(path, "reading metadata records"):
+    with lib_errors(path, "reading metadata records"):
         recs = [m for m in reader.iter_metadata() if m.name == FOXGLOVE_METADATA]
     if not recs:
         return None
@@ -401,8 +401,8 @@ def _decode_file(path: Path, entries, fs, max_jitter, verify: bool) -> Recording
     """The whole mapped recording of a foreign file (``entries`` None: the embedded mapping
     of a ``foxglove`` layout file, else the no-mapping error)."""
     header = None
-    with open(path, "rb") as fh, _lib_errors(path, "decoding messages"):
-        _check_ends(fh, path)
+    with open(path, "rb") as fh, lib_errors(path, "decoding messages"):
+        check_ends(fh, path)
         reader = make_reader(fh, validate_crcs=verify, decoder_factories=decoder_factories())
         if entries is None:
             emb = _embedded(reader, path)

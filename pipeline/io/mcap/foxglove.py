@@ -24,7 +24,7 @@ from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, IndexType, Writer
 
 from meshphase.validate import as_choice
 from meshphase.io.base import regroup_blocks
-from meshphase.io.mcap.layout import _DTYPE_CODES, _MAX_LOG_TIME, COMPRESSIONS, _dumps, _log_time, _origin_ns
+from meshphase.io.mcap.layout import DTYPE_CODES, MAX_LOG_TIME, COMPRESSIONS, dumps_metadata, log_time, origin_ns
 
 __all__ = ["write_foxglove", "FOXGLOVE_METADATA", "FOXGLOVE_SCHEMA_NAME", "DEFAULT_TOPIC", "LAYOUTS"]
 
@@ -71,7 +71,7 @@ def _header_metadata(rec, topic: str, dtype_name: str, origin: int) -> dict:
           "t0": repr(float(rec.t0)), "n_samples": str(int(rec.n_samples)), "dtype": dtype_name,
           "log_time_origin_ns": str(origin),
           "channels": json.dumps([s.to_dict() for s in rec.channels]),
-          "meta": _dumps(rec.meta, "meta"), "history": _dumps(rec.history, "history")}
+          "meta": dumps_metadata(rec.meta, "meta"), "history": dumps_metadata(rec.history, "history")}
     if rec.start_datetime is not None:
         md["start_datetime"] = rec.start_datetime
     return md
@@ -110,12 +110,12 @@ def write_foxglove(header, blocks, path, *, dtype="float64", compression: str = 
     if not isinstance(topic, str) or not topic:
         raise ValueError(f"topic must be a non-empty string, got {topic!r}")
     dtype_name = np.dtype(dtype).name
-    if dtype_name not in _DTYPE_CODES:
+    if dtype_name not in DTYPE_CODES:
         raise TypeError(f"recording data must be float32 or float64, got {np.dtype(dtype)}")
     specs = list(header.channels)
     nch, n = len(specs), int(header.n_samples)
-    origin = _origin_ns(header.t0)
-    if n and _log_time(n - 1, header.fs, origin) > _MAX_LOG_TIME:
+    origin = origin_ns(header.t0)
+    if n and log_time(n - 1, header.fs, origin) > MAX_LOG_TIME:
         raise ValueError(f"recording too long for MCAP uint64 nanosecond log times: {n} samples")
     md = _header_metadata(header, topic, dtype_name, origin)
     comp = {"none": CompressionType.NONE, "lz4": CompressionType.LZ4, "zstd": CompressionType.ZSTD}[compression]
@@ -146,7 +146,7 @@ def _put_rows(w: Writer, cid: int, names: list, group: np.ndarray, s0: int, fs: 
     cols = group.astype(np.float64).T.tolist()
     for j, vals in enumerate(cols):
         k = s0 + j
-        t = _log_time(k, fs, origin)
+        t = log_time(k, fs, origin)
         stamp = (t // 1_000_000_000, t % 1_000_000_000, k)
         if whole[j]:
             text = every % (stamp + tuple(vals))

@@ -1,5 +1,5 @@
 """Opening an MCAP recording: the file's ends, its summary (chunk index, schema, channels)
-and the recording header, checked and parsed into a :class:`_Layout`, cached per file
+and the recording header, checked and parsed into a :class:`Layout`, cached per file
 identity together with the outcome of the summary and data-section CRC checks."""
 
 from __future__ import annotations
@@ -22,9 +22,9 @@ from mcap.reader import make_reader
 
 from meshphase.recording import ChannelSpec
 from meshphase.io.base import CorruptFileError, RecordingFileError, RecordingInfo, check_verify
-from meshphase.io.mcap.crc import _check_data_crc, _check_summary_crc
-from meshphase.io.mcap.layout import (_DTYPE_CODES, FORMAT_VERSION, MAGIC, MESSAGE_ENCODING, NAME, RECORDING_METADATA,
-                                      SCHEMA_ENCODING, SCHEMA_NAME, _log_time, _schema_problem)
+from meshphase.io.mcap.crc import check_data_crc, check_summary_crc
+from meshphase.io.mcap.layout import (DTYPE_CODES, FORMAT_VERSION, MAGIC, MESSAGE_ENCODING, NAME, RECORDING_METADATA,
+                                      SCHEMA_ENCODING, SCHEMA_NAME, log_time, schema_problem)
 
 __all__: list[str] = ["ForeignMcapError"]
 
@@ -35,19 +35,19 @@ class ForeignMcapError(RecordingFileError):
 
 # Exceptions the mcap package (and its codecs) raise on malformed input; wrapped into
 # RecordingFileError so a caller never sees a raw struct/EOF error.
-_LIB_ERRORS: tuple[type[BaseException], ...] = (McapError, struct.error, EOFError, ValueError, KeyError,
+LIB_ERRORS: tuple[type[BaseException], ...] = (McapError, struct.error, EOFError, ValueError, KeyError,
                                                IndexError, RuntimeError, UnicodeDecodeError,
                                                OverflowError)
 try:  # zstandard's error does not derive from a standard class
     import zstandard as _zstd
 
-    _LIB_ERRORS = _LIB_ERRORS + (_zstd.ZstdError,)
+    LIB_ERRORS = LIB_ERRORS + (_zstd.ZstdError,)
 except ImportError:  # pragma: no cover - zstandard is a dependency
     pass
 
 
 @dataclass
-class _Layout:
+class Layout:
     info: RecordingInfo
     dtype: np.dtype
     block: int
@@ -58,23 +58,23 @@ class _Layout:
     code: int  # payload dtype code
 
     def log_time(self, i: int) -> int:
-        return _log_time(i, self.info.fs, self.origin_ns)
+        return log_time(i, self.info.fs, self.origin_ns)
 
 
 @contextlib.contextmanager
-def _lib_errors(path: Path, what: str):
+def lib_errors(path: Path, what: str):
     """Turn errors of the mcap package into RecordingFileError naming the file."""
     try:
         yield
     except RecordingFileError:
         raise
-    except _LIB_ERRORS as exc:
+    except LIB_ERRORS as exc:
         detail = str(exc) or type(exc).__name__
         raise RecordingFileError(path, f"malformed MCAP while {what}: {type(exc).__name__}: "
                                        f"{detail}") from exc
 
 
-def _check_ends(fh, path: Path) -> None:
+def check_ends(fh, path: Path) -> None:
     fh.seek(0, 2)
     size = fh.tell()
     fh.seek(0)
@@ -102,15 +102,15 @@ def _check_ends(fh, path: Path) -> None:
 
 def _summary(fh, path: Path, verify: bool):
     """(reader, summary) from ``mcap.reader.make_reader`` (summary None when absent)."""
-    with _lib_errors(path, "reading the summary section"):
+    with lib_errors(path, "reading the summary section"):
         reader = make_reader(fh, validate_crcs=verify)
         return reader, reader.get_summary()
 
 
-def _read_layout(fh, path: Path, verify: bool = True, opened=None) -> tuple[object, _Layout]:
+def _read_layout(fh, path: Path, verify: bool = True, opened=None) -> tuple[object, Layout]:
     """Open an MCAP stream, check it is one of ours and parse the header records.
     ``opened``: (reader, summary) already made by :func:`_summary`."""
-    _check_ends(fh, path)
+    check_ends(fh, path)
     reader, summary = opened if opened is not None else _summary(fh, path, verify)
     if summary is None:
         raise RecordingFileError(path, "MCAP file has no summary section (no index); meshphase "
@@ -133,9 +133,9 @@ def _read_layout(fh, path: Path, verify: bool = True, opened=None) -> tuple[obje
     info = RecordingInfo(path=str(path), format=NAME, fs=hd.fs, n_samples=hd.n_samples,
                          channels=specs, t0=hd.t0, start_datetime=hd.md.get("start_datetime"),
                          meta=hd.meta, history=hd.history, extra=extra)
-    return reader, _Layout(info=info, dtype=np.dtype(hd.dtype_name).newbyteorder("<"), block=hd.block,
+    return reader, Layout(info=info, dtype=np.dtype(hd.dtype_name).newbyteorder("<"), block=hd.block,
                            origin_ns=hd.origin, channel_ids=ids, schema_id=schema.id, summary=summary,
-                           code=_DTYPE_CODES[hd.dtype_name])
+                           code=DTYPE_CODES[hd.dtype_name])
 
 
 def _our_schema(summary, path: Path):
@@ -158,7 +158,7 @@ def _our_schema(summary, path: Path):
         layout = json.loads(bytes(schema.data).decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise RecordingFileError(path, f"schema {SCHEMA_NAME!r}: data is not JSON ({exc})") from exc
-    problem = _schema_problem("layout", layout)
+    problem = schema_problem("layout", layout)
     if problem:
         raise RecordingFileError(path, f"schema {SCHEMA_NAME!r}: unsupported payload layout "
                                        f"({problem}); this reader knows version {FORMAT_VERSION}")
@@ -182,7 +182,7 @@ class _Header(NamedTuple):
 
 def _recording_header(reader, path: Path) -> _Header:
     """The one ``meshphase.recording`` Metadata record, checked against its schema."""
-    with _lib_errors(path, "reading metadata records"):
+    with lib_errors(path, "reading metadata records"):
         records = [m for m in reader.iter_metadata() if m.name == RECORDING_METADATA]
     if not records:
         raise RecordingFileError(path, f"no {RECORDING_METADATA!r} Metadata record: the recording "
@@ -191,7 +191,7 @@ def _recording_header(reader, path: Path) -> _Header:
         raise RecordingFileError(path, f"{len(records)} {RECORDING_METADATA!r} Metadata records; "
                                        f"expected one")
     md = dict(records[0].metadata)
-    problem = _schema_problem("recording", md)
+    problem = schema_problem("recording", md)
     if problem:
         raise RecordingFileError(path, f"Metadata record {RECORDING_METADATA!r}: {problem}")
     try:
@@ -234,7 +234,7 @@ def _channel_specs(summary, schema_id: int, hd: _Header, path: Path) -> tuple[li
             raise RecordingFileError(path, f"channel {ch.topic!r}: message encoding "
                                            f"{ch.message_encoding!r}, expected {MESSAGE_ENCODING!r}")
         cm = dict(ch.metadata)
-        problem = _schema_problem("channel", cm)
+        problem = schema_problem("channel", cm)
         if problem:
             raise RecordingFileError(path, f"channel {ch.topic!r} metadata: {problem}")
         idx = int(cm["index"])
@@ -278,9 +278,9 @@ _LOCK = threading.Lock()
 
 
 @contextlib.contextmanager
-def _open(path, verify: bool = True):
+def open_layout(path, verify: bool = True):
     """Open ``path`` (once per file identity: the CRC checks and the parsed header are
-    cached); yields (path, open file, :class:`_Layout`)."""
+    cached); yields (path, open file, :class:`Layout`)."""
     path = Path(path)
     verify = check_verify(verify)
     if not path.is_file():
@@ -293,14 +293,14 @@ def _open(path, verify: bool = True):
             checked = key in _VERIFIED
         opened = None
         if verify and not checked:  # before anything parses the data section's records
-            _check_ends(fh, path)
-            _, data_end = _check_summary_crc(fh, path)
+            check_ends(fh, path)
+            _, data_end = check_summary_crc(fh, path)
             opened = _summary(fh, path, verify)  # the summary passed its CRC
             summary = opened[1]
             if summary is not None and any(sc.name == SCHEMA_NAME for sc in summary.schemas.values()):
                 # one of ours (else _read_layout says what it is, without walking a foreign
                 # file); the summary starts right after the DataEnd record: the walk stops there
-                _check_data_crc(fh, path, data_end)
+                check_data_crc(fh, path, data_end)
         if lay is None:
             _, lay = _read_layout(fh, path, verify, opened)
         with _LOCK:

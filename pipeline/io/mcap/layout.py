@@ -45,12 +45,12 @@ DEFAULT_BLOCK = 5120
 #: Target uncompressed chunk size by default [B].
 DEFAULT_CHUNK_SIZE = 1 << 20
 
-_HEADER = struct.Struct("<QIHBB")  # first_sample, n_samples, n_channels, dtype code, version
-HEADER_SIZE = _HEADER.size  # 16
-_DTYPE_CODES = {"float32": 1, "float64": 2}
-_CODE_DTYPES = {v: k for k, v in _DTYPE_CODES.items()}
-_MAX_LOG_TIME = 2 ** 64 - 1
-_MAX_RECORD = 4 * 2 ** 30  # the mcap package's record size limit [B]
+HEADER = struct.Struct("<QIHBB")  # first_sample, n_samples, n_channels, dtype code, version
+HEADER_SIZE = HEADER.size  # 16
+DTYPE_CODES = {"float32": 1, "float64": 2}
+_CODE_DTYPES = {v: k for k, v in DTYPE_CODES.items()}
+MAX_LOG_TIME = 2 ** 64 - 1
+MAX_RECORD = 4 * 2 ** 30  # the mcap package's record size limit [B]
 
 #: JSON layout description stored as the data of the Schema record (see mcap_message.schema.json).
 LAYOUT = {
@@ -65,18 +65,18 @@ LAYOUT = {
         {"name": "dtype", "type": "uint8", "offset": 14},
         {"name": "version", "type": "uint8", "offset": 15},
     ],
-    "dtypes": {str(v): k for k, v in _DTYPE_CODES.items()},
+    "dtypes": {str(v): k for k, v in DTYPE_CODES.items()},
     "samples": "channel-major",
     "log_time": "log_time_origin_ns + floor(first_sample * 1e9 / fs)",
 }
 
 # MCAP records: opcode uint8, length uint64, then the record's fields
-_REC = struct.Struct("<BQ")  # opcode, record length
-_CHUNK_HEAD = struct.Struct("<QQQII")  # start, end, uncompressed size, crc, compression length
-_U64 = struct.Struct("<Q")
-_MSG_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log_time, publish_time
-_OP_MESSAGE = 0x05
-_OP_CHUNK = 0x06
+REC = struct.Struct("<BQ")  # opcode, record length
+CHUNK_HEAD = struct.Struct("<QQQII")  # start, end, uncompressed size, crc, compression length
+U64 = struct.Struct("<Q")
+MSG_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log_time, publish_time
+OP_MESSAGE = 0x05
+OP_CHUNK = 0x06
 
 
 def _json_schema(filename: str) -> dict:
@@ -106,7 +106,7 @@ def _validator(kind: str):
     return Draft202012Validator(schema)
 
 
-def _schema_problem(kind: str, instance) -> str | None:
+def schema_problem(kind: str, instance) -> str | None:
     """First validation problem of ``instance`` against schema ``kind``, or None."""
     from jsonschema.exceptions import best_match
 
@@ -143,15 +143,15 @@ def log_time_ns(first_sample: int, fs: float, origin_ns: int = 0) -> int:
         raise ValueError(f"first_sample must be >= 0, got {first_sample}")
     if origin_ns < 0:
         raise ValueError(f"origin_ns must be >= 0, got {origin_ns}")
-    return _log_time(first_sample, as_positive(fs, "fs"), origin_ns)
+    return log_time(first_sample, as_positive(fs, "fs"), origin_ns)
 
 
-def _log_time(first_sample: int, fs: float, origin_ns: int) -> int:
+def log_time(first_sample: int, fs: float, origin_ns: int) -> int:
     p, q = fs.as_integer_ratio()
     return origin_ns + (first_sample * 1_000_000_000 * q) // p
 
 
-def _origin_ns(t0: float) -> int:
+def origin_ns(t0: float) -> int:
     x = t0 * 1e9
     if 0.0 <= x < 2.0 ** 63:
         return int(round(x))
@@ -163,7 +163,7 @@ def sniff(head: bytes) -> bool:
     return bytes(head[:8]) == MAGIC
 
 
-def _dumps(value, what: str) -> str:
+def dumps_metadata(value, what: str) -> str:
     """``value`` (a recording's meta or history) as JSON text; TypeError naming ``what``."""
     try:
         return json.dumps(value, default=json_default)

@@ -13,10 +13,10 @@ import numpy as np
 from meshphase.recording import Recording
 from meshphase.validate import as_positive_int
 from meshphase.io.base import RecordingFileError, RecordingInfo, check_allocation
-from meshphase.io.mcap.chunks import _ChunkReader, _decode, _payloads
+from meshphase.io.mcap.chunks import ChunkReader, decode_message, chunk_payloads
 from meshphase.io.mcap.foreign import foreign_info, read_foreign
-from meshphase.io.mcap.header import ForeignMcapError, _Layout, _lib_errors, _open
-from meshphase.io.mcap.layout import _MAX_LOG_TIME, _MSG_HEAD, _OP_MESSAGE, _REC, FORMAT_VERSION, HEADER_SIZE
+from meshphase.io.mcap.header import ForeignMcapError, Layout, lib_errors, open_layout
+from meshphase.io.mcap.layout import MAX_LOG_TIME, MSG_HEAD, OP_MESSAGE, REC, FORMAT_VERSION, HEADER_SIZE
 
 __all__ = ["read_info", "read", "iter_blocks"]
 
@@ -28,7 +28,7 @@ _RECORD_VIEW = np.dtype({
     "itemsize": 47})
 
 
-def _uniform_chunk(recs: memoryview, lay: _Layout, col: dict, i0: int, i1: int):
+def _uniform_chunk(recs: memoryview, lay: Layout, col: dict, i0: int, i1: int):
     """Fast path of :func:`read` for the chunks :func:`write` produces.
 
     When the chunk holds only full-size messages of one wanted channel, with contiguous
@@ -37,12 +37,12 @@ def _uniform_chunk(recs: memoryview, lay: _Layout, col: dict, i0: int, i1: int):
     chunk message by message (which also reports what is wrong, if anything is).
     """
     size = len(recs)
-    if size < 9 + _MSG_HEAD.size + HEADER_SIZE:
+    if size < 9 + MSG_HEAD.size + HEADER_SIZE:
         return None
-    op, length = _REC.unpack_from(recs, 0)
+    op, length = REC.unpack_from(recs, 0)
     rec_size = 9 + length
     n = lay.block
-    if op != _OP_MESSAGE or length != _MSG_HEAD.size + HEADER_SIZE + n * lay.dtype.itemsize \
+    if op != OP_MESSAGE or length != MSG_HEAD.size + HEADER_SIZE + n * lay.dtype.itemsize \
             or size % rec_size:
         return None
     k = size // rec_size
@@ -50,13 +50,13 @@ def _uniform_chunk(recs: memoryview, lay: _Layout, col: dict, i0: int, i1: int):
     cid = int(heads["channel"][0])
     first = int(heads["first"][0])
     if (cid not in col or first < i0 or first + k * n > i1
-            or not (np.all(heads["op"] == _OP_MESSAGE) and np.all(heads["length"] == length)
+            or not (np.all(heads["op"] == OP_MESSAGE) and np.all(heads["length"] == length)
                     and np.all(heads["channel"] == cid) and np.all(heads["n"] == n)
                     and np.all(heads["nch"] == 1) and np.all(heads["code"] == lay.code)
                     and np.all(heads["version"] == FORMAT_VERSION)
                     and np.array_equal(heads["first"], first + n * np.arange(k, dtype=np.uint64)))):
         return None
-    samples = np.ndarray((k, n), dtype=lay.dtype, buffer=recs, offset=9 + _MSG_HEAD.size + HEADER_SIZE,
+    samples = np.ndarray((k, n), dtype=lay.dtype, buffer=recs, offset=9 + MSG_HEAD.size + HEADER_SIZE,
                          strides=(rec_size, lay.dtype.itemsize))
     return col[cid], first, samples
 
@@ -89,7 +89,7 @@ def _names(info: RecordingInfo, channels) -> list:
     return info.check_channels(channels)
 
 
-def _recording(lay: _Layout, data: np.ndarray, names: list, i0: int) -> Recording:
+def _recording(lay: Layout, data: np.ndarray, names: list, i0: int) -> Recording:
     info = lay.info
     specs = {c.name: c for c in info.channels}
     return Recording(data, info.fs, [specs[n] for n in names], t0=info.t0 + i0 / info.fs,
@@ -103,7 +103,7 @@ def _mapped(path, verify, topics, fs, max_jitter, stamp) -> Recording | None:
     if topics is not None:
         return read_foreign(path, topics=topics, fs=fs, max_jitter=max_jitter, stamp=stamp, verify=verify)
     try:
-        with _open(path, verify):
+        with open_layout(path, verify):
             pass
     except ForeignMcapError:
         return read_foreign(path, fs=fs, max_jitter=max_jitter, stamp=stamp, verify=verify)
@@ -121,12 +121,12 @@ def _part(rec: Recording, names: list, i0: int, i1: int) -> Recording:
                      meta=copy.deepcopy(rec.meta), history=copy.deepcopy(rec.history))
 
 
-def _window_ns(lay: _Layout, i0: int, i1: int) -> tuple[int, int]:
+def _window_ns(lay: Layout, i0: int, i1: int) -> tuple[int, int]:
     """Inclusive log-time range [ns] of every message that can hold a sample of [i0, i1)."""
     return lay.log_time(max(0, i0 - lay.block + 1)), lay.log_time(i1 - 1)
 
 
-def _select_chunks(lay: _Layout, ids, start_ns: int, end_ns: int) -> list:
+def _select_chunks(lay: Layout, ids, start_ns: int, end_ns: int) -> list:
     """Chunk indexes that may hold messages of channel ids ``ids`` with log_time in
     [start_ns, end_ns] (inclusive), in log-time order."""
     out = []
@@ -162,7 +162,7 @@ def read_info(path, *, verify: bool = True, topics=None, fs: float | None = None
     rec = _mapped(path, verify, topics, fs, max_jitter, stamp)
     if rec is not None:
         return foreign_info(path, rec)
-    with _open(path, verify) as (_, _, lay):
+    with open_layout(path, verify) as (_, _, lay):
         return copy.deepcopy(lay.info)
 
 
@@ -217,7 +217,7 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *,
         if not 0 <= int(i0) <= i1 <= rec.n_samples:
             raise ValueError(f"{path}: sample range [{i0}, {i1}) is outside [0, {rec.n_samples}]")
         return _part(rec, names, int(i0), i1)
-    with _open(path, verify) as (path, fh, lay):
+    with open_layout(path, verify) as (path, fh, lay):
         info = lay.info
         names = _names(info, channels)
         n_total = info.n_samples
@@ -233,8 +233,8 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *,
             start_ns, end_ns = _window_ns(lay, i0, i1)
             itemsize = lay.dtype.itemsize
             dtype = lay.dtype
-            with _lib_errors(path, "reading chunks"), \
-                    _ChunkReader(fh, path, lay, verify=verify) as chunks:
+            with lib_errors(path, "reading chunks"), \
+                    ChunkReader(fh, path, lay, verify=verify) as chunks:
                 for ci in _select_chunks(lay, col, start_ns, end_ns):
                     recs = chunks.records(ci)
                     fast = _uniform_chunk(recs, lay, col, i0, i1)
@@ -244,9 +244,9 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *,
                         out[first - i0:first - i0 + m_ * n_, c].reshape(m_, n_)[...] = samples
                         spans[c].append((first, first + m_ * n_))
                         continue
-                    for cid, off, size, _ in _payloads(recs, col, path):
+                    for cid, off, size, _ in chunk_payloads(recs, col, path):
                         c = col[cid]
-                        first, n = _decode(recs, off, size, lay, path, names[c])
+                        first, n = decode_message(recs, off, size, lay, path, names[c])
                         a = first if first > i0 else i0
                         b = first + n if first + n < i1 else i1
                         if a >= b:
@@ -302,7 +302,7 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *,
         for b0 in range(0, rec.n_samples, n_block):
             yield _part(rec, names, b0, min(rec.n_samples, b0 + n_block + n_overlap))
         return
-    with _open(path, verify) as (path, fh, lay):
+    with open_layout(path, verify) as (path, fh, lay):
         names = _names(lay.info, channels)
         n_total = lay.info.n_samples
         if n_total == 0:
@@ -315,13 +315,13 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *,
                 yield _recording(lay, np.empty((b1 - b0, 0), native), names, b0)
             return
         col = {lay.channel_ids[n]: c for c, n in enumerate(names)}
-        with _lib_errors(path, "streaming chunks"), \
-                _ChunkReader(fh, path, lay, verify=verify) as chunks:  # samples are copied out at once
-            for ci in _select_chunks(lay, col, 0, _MAX_LOG_TIME):
+        with lib_errors(path, "streaming chunks"), \
+                ChunkReader(fh, path, lay, verify=verify) as chunks:  # samples are copied out at once
+            for ci in _select_chunks(lay, col, 0, MAX_LOG_TIME):
                 recs = chunks.records(ci)
-                for cid, off, size, _ in _payloads(recs, col, path):
+                for cid, off, size, _ in chunk_payloads(recs, col, path):
                     c = col[cid]
-                    first, n = _decode(recs, off, size, lay, path, names[c])
+                    first, n = decode_message(recs, off, size, lay, path, names[c])
                     done = blocks.done[c]
                     if first != done:
                         what = "missing" if first > done else "stored twice or out of order"

@@ -13,9 +13,9 @@ from meshphase.io.base import regroup_blocks
 from meshphase.recording import ChannelSpec, Recording
 from meshphase.validate import as_choice, as_positive_int
 from meshphase.io.mcap.foxglove import DEFAULT_TOPIC, LAYOUTS, write_foxglove
-from meshphase.io.mcap.layout import (_DTYPE_CODES, _HEADER, _MAX_LOG_TIME, COMPRESSIONS, DEFAULT_BLOCK, DEFAULT_CHUNK_SIZE,
+from meshphase.io.mcap.layout import (DTYPE_CODES, HEADER, MAX_LOG_TIME, COMPRESSIONS, DEFAULT_BLOCK, DEFAULT_CHUNK_SIZE,
                                       FORMAT_VERSION, HEADER_SIZE, LAYOUT, MESSAGE_ENCODING, PROFILE, RECORDING_METADATA,
-                                      SCHEMA_ENCODING, SCHEMA_NAME, _dumps, _log_time, _origin_ns, _schema_problem)
+                                      SCHEMA_ENCODING, SCHEMA_NAME, dumps_metadata, log_time, origin_ns, schema_problem)
 
 __all__ = ["write", "write_blocks"]
 
@@ -49,7 +49,7 @@ def _recording_metadata(rec, block: int, compression: str, origin: int,
           "n_samples": str(int(rec.n_samples)), "n_channels": str(len(names)),
           "channels": json.dumps(names), "dtype": dtype_name, "block": str(block),
           "log_time_origin_ns": str(origin), "compression": compression,
-          "meta": _dumps(rec.meta, "meta"), "history": _dumps(rec.history, "history")}
+          "meta": dumps_metadata(rec.meta, "meta"), "history": dumps_metadata(rec.history, "history")}
     if rec.start_datetime is not None:
         md["start_datetime"] = rec.start_datetime
     return md
@@ -137,16 +137,16 @@ def write_blocks(header, blocks, path, *, dtype="float64", layout: str = "meshph
     if nch > 65000:
         raise ValueError(f"MCAP holds at most 65000 channels here, the recording has {nch}")
     dtype_name = np.dtype(dtype).name
-    if dtype_name not in _DTYPE_CODES:  # Recording guarantees float32/float64
+    if dtype_name not in DTYPE_CODES:  # Recording guarantees float32/float64
         raise TypeError(f"recording data must be float32 or float64, got {np.dtype(dtype)}")
     le = np.dtype(dtype_name).newbyteorder("<")
     n = int(rec.n_samples)
-    origin = _origin_ns(rec.t0)
-    if n and _log_time(n - 1, rec.fs, origin) > _MAX_LOG_TIME:
+    origin = origin_ns(rec.t0)
+    if n and log_time(n - 1, rec.fs, origin) > MAX_LOG_TIME:
         raise ValueError(f"recording too long for MCAP uint64 nanosecond log times: "
                          f"{n} samples at fs={rec.fs!r} Hz from origin {origin} ns")
     rec_md, ch_md = _checked_metadata(rec, block, compression, origin, dtype_name)
-    code = _DTYPE_CODES[dtype_name]
+    code = DTYPE_CODES[dtype_name]
     per_chunk = max(1, chunk_size // (HEADER_SIZE + block * le.itemsize))
     with open(path, "wb") as fh:
         w, cids = _start_writer(fh, compression, rec, rec_md, ch_md)
@@ -160,7 +160,7 @@ def _checked_metadata(rec, block: int, compression: str, origin: int, dtype_name
     rec_md = _recording_metadata(rec, block, compression, origin, dtype_name)
     ch_md = [_channel_metadata(s, i, rec.fs, dtype_name) for i, s in enumerate(rec.channels)]
     for kind, md in [("recording", rec_md)] + [("channel", m) for m in ch_md]:
-        problem = _schema_problem(kind, md)
+        problem = schema_problem(kind, md)
         if problem:  # a bug of ours, or a value the schema does not allow
             raise ValueError(f"{kind} metadata {md.get('name', '')!r} does not validate: {problem}")
     return rec_md, ch_md
@@ -190,12 +190,12 @@ def _put_group(w: Writer, cids: list, group: np.ndarray, s0: int, *, block: int,
     one chunk per channel."""
     s1 = s0 + group.shape[1]
     g0, g1 = s0 // block, -(-s1 // block)
-    times = [_log_time(k * block, fs, origin) for k in range(g0, g1)]
+    times = [log_time(k * block, fs, origin) for k in range(g0, g1)]
     for j, cid in enumerate(cids):
         row = group[j]
         for k in range(g0, g1):
             a = k * block
             b = min(s1, a + block)
-            payload = _HEADER.pack(a, b - a, 1, code, FORMAT_VERSION) + row[a - s0:b - s0].tobytes()
+            payload = HEADER.pack(a, b - a, 1, code, FORMAT_VERSION) + row[a - s0:b - s0].tobytes()
             w.add_message(cid, times[k - g0], payload, times[k - g0], sequence=k & 0xFFFFFFFF)
         w.flush()  # close the chunk: one channel per chunk
