@@ -32,7 +32,7 @@ from meshphase.jsonable import to_jsonable
 from meshphase.runtime.log import logger
 from meshphase.models import _kernels
 from meshphase.models.tolerance_model import (ALL_STATISTICS, P3_HI, P3_LO, RotationGrid, map_samples,
-                                              _map_values, default_n_times)
+                                              map_values, default_n_times)
 from meshphase.validate import as_positive_int
 from meshphase.bench.models_reference_tail import directional_bounds, interpolation_check
 
@@ -253,7 +253,7 @@ class _CaseModel:
     def model(self, z):
         """Full-model statistics (S, 8 N) at standard normal points z (S, d)."""
         vals = self.lin.mean + self.lin.sigma * z
-        es, ks, er, kr, ep, kp = _map_values(vals, self.tol, self.n_p)
+        es, ks, er, kr, ep, kp = map_values(vals, self.tol, self.n_p)
         out = np.stack(self.grid.run(es, ks, er, kr, ep, kp, self.engine))
         return out.transpose(1, 0, 2).reshape(z.shape[0], -1)
 

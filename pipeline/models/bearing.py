@@ -82,7 +82,7 @@ def _angle(value, name, lo, hi, *, lo_open=True, hi_open=True) -> float:
     return out
 
 
-def _real_array(value, name) -> np.ndarray:
+def real_array(value, name) -> np.ndarray:
     """Float array with only finite entries (TypeError: non-numeric; ValueError: NaN/inf)."""
     if isinstance(value, (str, bytes)):
         raise TypeError(f"{name} must be numeric array_like, got {value!r}")
@@ -98,7 +98,7 @@ def _real_array(value, name) -> np.ndarray:
 
 def _torque_array(value, name="input_torque") -> np.ndarray:
     """Input torque array [N·m]: finite and >= 0 (the formulas assume the drive flanks)."""
-    arr = _real_array(value, name)
+    arr = real_array(value, name)
     if arr.size and np.any(arr < 0):
         raise ValueError(
             f"{name} must be >= 0 [N·m] (the force directions assume the drive flanks; reverse "
@@ -116,7 +116,7 @@ def _deg(value, name) -> float:
     return math.radians(as_float(value, name))
 
 
-def _scalar(x):
+def as_scalar(x):
     """A Python float (bool) for a 0-d result, the array itself otherwise."""
     arr = np.asarray(x)
     return arr.item() if arr.ndim == 0 else x
@@ -433,7 +433,7 @@ accept_old_names(DoublePinion, {"beta": "included_angle_sp", "gamma": "included_
 # the common linear layout: mesh sides on pinions, per unit input torque
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
-class _Layout:
+class UnitLayout:
     """Per-unit-input-torque description of the mesh forces of one planet.
 
     A *side* is one mesh seen from one pinion (single pinion: sun, ring; double pinion:
@@ -493,7 +493,7 @@ def _side(pos_xy, f_dir, magnitude, fz):
     return (pos_xy, (fx, fy, fz), (-f_dir[1], f_dir[0]))
 
 
-def _layout(geom) -> _Layout:
+def unit_layout(geom) -> UnitLayout:
     """The per-unit-torque layout of a SinglePinion or DoublePinion."""
     if isinstance(geom, SinglePinion):
         ft_s = 1.0 / (geom.n_planets * geom.r_sun)                 # -FyS per N·m
@@ -504,7 +504,7 @@ def _layout(geom) -> _Layout:
         s_ring = _side((geom.r_pr, 0.0), (-math.sin(p2), -math.cos(p2)), ft_r / math.cos(p2),
                        -ft_r * math.tan(geom.helix_2))
         sides = (s_sun, s_ring)
-        return _Layout(sides=("sun", "ring"), meshes=SinglePinion.mesh_names,
+        return UnitLayout(sides=("sun", "ring"), meshes=SinglePinion.mesh_names,
                        pinion=np.array([0, 0]), mesh=np.array([0, 1]),
                        pos=np.array([s[0] for s in sides], dtype=float),
                        force=np.array([s[1] for s in sides], dtype=float),
@@ -527,7 +527,7 @@ def _layout(geom) -> _Layout:
             _side((geom.r_rp_ring, 0.0), (-math.sin(p3), math.cos(p3)), ft3 / math.cos(p3),
                   -ft3 * math.tan(geom.helix_3)),
         )
-        return _Layout(sides=("sp_sun", "sp_rp", "rp_sp", "rp_ring"),
+        return UnitLayout(sides=("sp_sun", "sp_rp", "rp_sp", "rp_ring"),
                        meshes=DoublePinion.mesh_names,
                        pinion=np.array([0, 0, 1, 1]), mesh=np.array([0, 1, 1, 2]),
                        pos=np.array([s[0] for s in sides], dtype=float),
@@ -536,7 +536,7 @@ def _layout(geom) -> _Layout:
     raise TypeError(f"geom must be a SinglePinion or DoublePinion, got {type(geom).__name__}")
 
 
-def _evaluate(lay: _Layout, torque: np.ndarray, z: np.ndarray):
+def _evaluate(lay: UnitLayout, torque: np.ndarray, z: np.ndarray):
     """Forces, per-side moment contributions, pinion moments and LOA moments.
 
     torque (...) [N·m]; z (..., J) [m], broadcast together. Returns
@@ -621,22 +621,22 @@ class _CommonMoments:
 
     def _scalar_fields(self, names):
         for n in names:
-            object.__setattr__(self, n, _scalar(getattr(self, n)))
+            object.__setattr__(self, n, as_scalar(getattr(self, n)))
 
     @property
     def z_sun(self):
         """Load-centroid offset at the sun mesh [m]."""
-        return _scalar(np.asarray(self.z)[..., 0])
+        return as_scalar(np.asarray(self.z)[..., 0])
 
     @property
     def z_ring(self):
         """Load-centroid offset at the ring mesh [m]."""
-        return _scalar(np.asarray(self.z)[..., -1])
+        return as_scalar(np.asarray(self.z)[..., -1])
 
     def loa_of(self, name: str):
         """One line-of-action moment by its name in :attr:`loa_names` [N·m]."""
         i = self.loa_names.index(as_choice(name, "name", self.loa_names))
-        return _scalar(self.loa[..., i])
+        return as_scalar(self.loa[..., i])
 
 
 @dataclass(frozen=True)
@@ -692,7 +692,7 @@ class BearingMoments(_CommonMoments):
     @property
     def total(self) -> np.ndarray:
         """Magnitude of the bending moment hypot(Mx, My) [N·m]."""
-        return _scalar(np.hypot(self.mx, self.my))
+        return as_scalar(np.hypot(self.mx, self.my))
 
     @property
     def loa(self) -> np.ndarray:
@@ -762,7 +762,7 @@ class DoublePinionMoments(_CommonMoments):
                              "m_rp_sp", "m_rp_ring", "mz_sp", "mz_rp"))
         if isinstance(self.contributions, dict):
             object.__setattr__(self, "contributions", {
-                k: tuple(_scalar(v) for v in pair) for k, pair in self.contributions.items()})
+                k: tuple(as_scalar(v) for v in pair) for k, pair in self.contributions.items()})
 
     @property
     def m_loa_sun(self):
@@ -783,12 +783,12 @@ class DoublePinionMoments(_CommonMoments):
     @property
     def total_sp(self) -> np.ndarray:
         """Bending moment magnitude on SP hypot(Mx_SP, My_SP) [N·m]."""
-        return _scalar(np.hypot(self.mx_sp, self.my_sp))
+        return as_scalar(np.hypot(self.mx_sp, self.my_sp))
 
     @property
     def total_rp(self) -> np.ndarray:
         """Bending moment magnitude on RP [N·m]."""
-        return _scalar(np.hypot(self.mx_rp, self.my_rp))
+        return as_scalar(np.hypot(self.mx_rp, self.my_rp))
 
     @property
     def loa(self) -> np.ndarray:
@@ -827,7 +827,7 @@ def single_pinion_forces(geom: SinglePinion, input_torque) -> MeshForces:
     """
     _check_geom(geom, SinglePinion)
     t = _torque_array(input_torque)
-    forces, _, _, _ = _evaluate(_layout(geom), t, np.zeros(t.shape + (2,)))
+    forces, _, _, _ = _evaluate(unit_layout(geom), t, np.zeros(t.shape + (2,)))
     return MeshForces(("sun", "ring"), forces[..., 0], forces[..., 1], forces[..., 2])
 
 
@@ -867,11 +867,11 @@ def single_pinion_moments(geom: SinglePinion, input_torque, z_s=0.0, z_r=0.0) ->
     """
     _check_geom(geom, SinglePinion)
     t = _torque_array(input_torque)
-    zs = _real_array(z_s, "z_s")
-    zr = _real_array(z_r, "z_r")
+    zs = real_array(z_s, "z_s")
+    zr = real_array(z_r, "z_r")
     zs, zr = np.broadcast_arrays(zs, zr)
     z = np.stack([zs, zr], axis=-1)
-    lay = _layout(geom)
+    lay = unit_layout(geom)
     forces, _, m, loa = _evaluate(lay, t, z)
     _, _, m0, loa0 = _evaluate(lay, t, np.zeros_like(z))
     shape = m.shape[:-2]
@@ -934,12 +934,12 @@ def double_pinion_moments(geom: DoublePinion, input_torque, z_sun=0.0, z_mid=0.0
     """
     _check_geom(geom, DoublePinion)
     t = _torque_array(input_torque)
-    a = _real_array(z_sun, "z_sun")
-    b = _real_array(z_mid, "z_mid")
-    c = _real_array(z_ring, "z_ring")
+    a = real_array(z_sun, "z_sun")
+    b = real_array(z_mid, "z_mid")
+    c = real_array(z_ring, "z_ring")
     a, b, c = np.broadcast_arrays(a, b, c)
     z = np.stack([a, b, c], axis=-1)
-    lay = _layout(geom)
+    lay = unit_layout(geom)
     forces, contrib, m, loa = _evaluate(lay, t, z)
     names = ("FzSUN", "FzRP", "FzSP", "FzRING")
     contributions = {n: (contrib[..., s, 0], contrib[..., s, 1]) for s, n in enumerate(names)}
@@ -955,9 +955,9 @@ def double_pinion_moments(geom: DoublePinion, input_torque, z_sun=0.0, z_mid=0.0
 # --------------------------------------------------------------------------------------------
 # inverse use
 # --------------------------------------------------------------------------------------------
-def _offset_system(geom):
+def offset_system(geom):
     """m = m0 + A z with A per unit torque: returns (m0 per unit torque (2P,), A (2P, J))."""
-    lay = _layout(geom)
+    lay = unit_layout(geom)
     j = len(lay.meshes)
     _, _, m0, _ = _evaluate(lay, np.ones(()), np.zeros(j))
     a = np.zeros((2 * lay.n_pinions, j))
@@ -1027,13 +1027,13 @@ def offsets_from_moments(geom: SinglePinion, input_torque, mx, my):
     t = _torque_array(input_torque)
     if t.size and np.any(t == 0):
         raise ValueError("input_torque must be > 0 to recover offsets (no load, no centroid)")
-    mx = _real_array(mx, "mx")
-    my = _real_array(my, "my")
-    m0, a = _offset_system(geom)
+    mx = real_array(mx, "mx")
+    my = real_array(my, "my")
+    m0, a = offset_system(geom)
     t, mx, my = np.broadcast_arrays(t, mx, my)
     rhs = np.stack([mx, my], axis=-1) / np.where(t == 0, 1.0, t)[..., None] - m0
     z = np.linalg.solve(a, rhs[..., None])[..., 0] if rhs.size else np.zeros(rhs.shape)
-    return _scalar(z[..., 0]), _scalar(z[..., 1])
+    return as_scalar(z[..., 0]), as_scalar(z[..., 1])
 
 
 def loa_from_moments(geom: SinglePinion, mx, my):
@@ -1053,10 +1053,10 @@ def loa_from_moments(geom: SinglePinion, mx, my):
         seed Table 10 gets its M_LOA columns from GSAM's Mx, My this way.
     """
     _check_geom(geom, SinglePinion)
-    mx = _real_array(mx, "mx")
-    my = _real_array(my, "my")
-    u = _layout(geom).u
-    return _scalar(mx * u[0, 0] + my * u[0, 1]), _scalar(mx * u[1, 0] + my * u[1, 1])
+    mx = real_array(mx, "mx")
+    my = real_array(my, "my")
+    u = unit_layout(geom).u
+    return as_scalar(mx * u[0, 0] + my * u[0, 1]), as_scalar(mx * u[1, 0] + my * u[1, 1])
 
 
 def double_pinion_offsets_from_moments(geom: DoublePinion, input_torque, mx_sp, my_sp, mx_rp,
@@ -1087,21 +1087,21 @@ def double_pinion_offsets_from_moments(geom: DoublePinion, input_torque, mx_sp, 
     t = _torque_array(input_torque)
     if t.size and np.any(t == 0):
         raise ValueError("input_torque must be > 0 to recover offsets (no load, no centroid)")
-    arrs = [_real_array(v, n) for v, n in ((mx_sp, "mx_sp"), (my_sp, "my_sp"),
+    arrs = [real_array(v, n) for v, n in ((mx_sp, "mx_sp"), (my_sp, "my_sp"),
                                            (mx_rp, "mx_rp"), (my_rp, "my_rp"))]
-    m0, a = _offset_system(geom)
+    m0, a = offset_system(geom)
     t, *arrs = np.broadcast_arrays(t, *arrs)
     rhs = np.stack(arrs, axis=-1) / np.where(t == 0, 1.0, t)[..., None] - m0
     pinv = np.linalg.pinv(a)
     z = rhs @ pinv.T
-    return _scalar(z[..., 0]), _scalar(z[..., 1]), _scalar(z[..., 2])
+    return as_scalar(z[..., 0]), as_scalar(z[..., 1]), as_scalar(z[..., 2])
 
 
 # --------------------------------------------------------------------------------------------
 # parametric study (seed Fig. 6 and Table 6)
 # --------------------------------------------------------------------------------------------
 def _pressure_array(phi, name="phi") -> np.ndarray:
-    arr = _real_array(phi, name)
+    arr = real_array(phi, name)
     if arr.size and np.any((arr <= 0) | (arr >= _HALF_PI)):
         raise ValueError(f"{name} must lie in (0, pi/2) rad, got range "
                          f"[{float(arr.min())!r}, {float(arr.max())!r}]")
@@ -1109,12 +1109,12 @@ def _pressure_array(phi, name="phi") -> np.ndarray:
 
 
 def _radius_pair(r_mesh, r_inter):
-    rm = _real_array(r_mesh, "r_mesh")
+    rm = real_array(r_mesh, "r_mesh")
     if rm.size and np.any(rm <= 0):
         raise ValueError(f"r_mesh must be > 0 [m], got min {float(rm.min())!r}")
     if r_inter is None:
         return rm, rm
-    ri = _real_array(r_inter, "r_inter")
+    ri = real_array(r_inter, "r_inter")
     if ri.size and np.any(ri <= 0):
         raise ValueError(f"r_inter must be > 0 [m], got min {float(ri.min())!r}")
     return rm, ri
@@ -1150,11 +1150,11 @@ def sp_sun_moment(axial_force, r_mesh, phi, included_angle_sp, r_inter=None):
     F_A R_SP (sin(beta - phi) + sin(phi)) when the radii are equal; beta = pi is the single
     pinion, F_A (R_SP-SUN + R_SP-RP) sin(phi).
     """
-    fa = _real_array(axial_force, "axial_force")
+    fa = real_array(axial_force, "axial_force")
     rm, ri = _radius_pair(r_mesh, r_inter)
     p = _pressure_array(phi)
-    b = _real_array(included_angle_sp, "included_angle_sp")
-    return _scalar(fa * (ri * np.sin(b - p) + rm * np.sin(p)))
+    b = real_array(included_angle_sp, "included_angle_sp")
+    return as_scalar(fa * (ri * np.sin(b - p) + rm * np.sin(p)))
 
 
 @renamed_kwargs({"gamma": "included_angle_rp"})
@@ -1184,11 +1184,11 @@ def rp_ring_moment(axial_force, r_mesh, phi, included_angle_rp, r_inter=None):
     M_RP-RING = F_A [R_RP-SP sin(gamma + phi) + R_RP-RING sin(phi)] (seed: F_A R_RP
     (sin(gamma + phi) + sin(phi))); gamma = 0 is the single pinion.
     """
-    fa = _real_array(axial_force, "axial_force")
+    fa = real_array(axial_force, "axial_force")
     rm, ri = _radius_pair(r_mesh, r_inter)
     p = _pressure_array(phi)
-    g = _real_array(included_angle_rp, "included_angle_rp")
-    return _scalar(fa * (ri * np.sin(g + p) + rm * np.sin(p)))
+    g = real_array(included_angle_rp, "included_angle_rp")
+    return as_scalar(fa * (ri * np.sin(g + p) + rm * np.sin(p)))
 
 
 def worst_case_angles(phi):
@@ -1207,7 +1207,7 @@ def worst_case_angles(phi):
         d M / d beta = F_A R cos(beta - phi) = 0 and d M / d gamma = F_A R cos(gamma + phi) = 0.
     """
     p = _pressure_array(phi)
-    return _scalar(_HALF_PI + p), _scalar(_HALF_PI - p)
+    return as_scalar(_HALF_PI + p), as_scalar(_HALF_PI - p)
 
 
 def worst_case_moment(axial_force, r_mesh, phi, r_inter=None):
@@ -1239,10 +1239,10 @@ def worst_case_moment(axial_force, r_mesh, phi, r_inter=None):
     and R_inter = 22.510 mm, i.e. the Case 1 pinion's sun and ring radii (the same values the
     seed's Case 2-A copied from Case 1).
     """
-    fa = _real_array(axial_force, "axial_force")
+    fa = real_array(axial_force, "axial_force")
     rm, ri = _radius_pair(r_mesh, r_inter)
     p = _pressure_array(phi)
-    return _scalar(fa * (ri + rm * np.sin(p)))
+    return as_scalar(fa * (ri + rm * np.sin(p)))
 
 
 def single_equivalent_moment(axial_force, r_mesh, phi, r_inter=None):
@@ -1265,10 +1265,10 @@ def single_equivalent_moment(axial_force, r_mesh, phi, r_inter=None):
         F_A (R_mesh + R_inter) sin(phi) [N·m] (beta = pi or gamma = 0), the seed's
         2 F_A R sin(phi) for equal radii.
     """
-    fa = _real_array(axial_force, "axial_force")
+    fa = real_array(axial_force, "axial_force")
     rm, ri = _radius_pair(r_mesh, r_inter)
     p = _pressure_array(phi)
-    return _scalar(fa * (rm + ri) * np.sin(p))
+    return as_scalar(fa * (rm + ri) * np.sin(p))
 
 
 def same_as_single_angle(phi, mesh: str = "sp_sun"):
@@ -1291,7 +1291,7 @@ def same_as_single_angle(phi, mesh: str = "sp_sun"):
     """
     p = _pressure_array(phi)
     mesh = as_choice(mesh, "mesh", ("sp_sun", "rp_ring"))
-    return _scalar(2.0 * p if mesh == "sp_sun" else math.pi - 2.0 * p)
+    return as_scalar(2.0 * p if mesh == "sp_sun" else math.pi - 2.0 * p)
 
 
 def worst_to_single_ratio(phi, r_mesh=1.0, r_inter=None):
@@ -1315,7 +1315,7 @@ def worst_to_single_ratio(phi, r_mesh=1.0, r_inter=None):
     """
     rm, ri = _radius_pair(r_mesh, r_inter)
     p = _pressure_array(phi)
-    return _scalar((ri + rm * np.sin(p)) / ((rm + ri) * np.sin(p)))
+    return as_scalar((ri + rm * np.sin(p)) / ((rm + ri) * np.sin(p)))
 
 
 # --------------------------------------------------------------------------------------------

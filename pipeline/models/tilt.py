@@ -33,10 +33,10 @@ from meshphase.validate import as_choice, as_nonnegative, as_positive, as_positi
 from meshphase.models.bearing import (
                                       DoublePinion,
                                       SinglePinion,
-                                      _layout,
-                                      _offset_system,
-                                      _real_array,
-                                      _scalar,
+                                      unit_layout,
+                                      offset_system,
+                                      real_array,
+                                      as_scalar,
                                       double_pinion_moments,
                                       seed_case,
                                       single_pinion_moments,
@@ -102,7 +102,7 @@ class LoadDistribution:
 
     def __post_init__(self):   # Python floats (bool) for scalar inputs
         for n in self.__dataclass_fields__:
-            object.__setattr__(self, n, _scalar(getattr(self, n)))
+            object.__setattr__(self, n, as_scalar(getattr(self, n)))
 
 
 def _distribution(force, theta, b, cg):
@@ -128,7 +128,7 @@ def _distribution(force, theta, b, cg):
 
 
 def _positive_array(value, name):
-    arr = _real_array(value, name)
+    arr = real_array(value, name)
     if arr.size and np.any(arr <= 0):
         raise ValueError(f"{name} must be > 0, got min {float(arr.min())!r}")
     return arr
@@ -170,7 +170,7 @@ def load_distribution(force_n, tilt, face_width, c_g=C_G_DEFAULT) -> LoadDistrib
     theta b = F_beta_y.
     """
     f = _positive_array(force_n, "force_n")
-    t = _real_array(tilt, "tilt")
+    t = real_array(tilt, "tilt")
     b = _positive_array(face_width, "face_width")
     cg = _positive_array(c_g, "c_g")
     return _distribution(f, t, b, cg)
@@ -191,13 +191,13 @@ def load_intensity(z, force_n, tilt, face_width, c_g=C_G_DEFAULT):
     ndarray
         w(z) = c_g max(0, delta - theta z) [N/m].
     """
-    zz = _real_array(z, "z")
+    zz = real_array(z, "z")
     d = load_distribution(force_n, tilt, face_width, c_g)
-    t = _real_array(tilt, "tilt")
+    t = real_array(tilt, "tilt")
     b = _positive_array(face_width, "face_width")
     cg = _positive_array(c_g, "c_g")
     w = cg * np.maximum(0.0, d.delta - t * zz)
-    return _scalar(np.where(np.abs(zz) <= 0.5 * b, w, 0.0))
+    return as_scalar(np.where(np.abs(zz) <= 0.5 * b, w, 0.0))
 
 
 def _h(z, force, b, cg):
@@ -246,7 +246,7 @@ def tilt_from_centroid(centroid, force_n, face_width, c_g=C_G_DEFAULT):
         -sign(Z) 2 F / (9 c_g (b/2 - |Z|)^2). Useful to turn a measured centroid (spec
         section 7) into a misalignment.
     """
-    z = _real_array(centroid, "centroid")
+    z = real_array(centroid, "centroid")
     f = _positive_array(force_n, "force_n")
     b = _positive_array(face_width, "face_width")
     cg = _positive_array(c_g, "c_g")
@@ -254,7 +254,7 @@ def tilt_from_centroid(centroid, force_n, face_width, c_g=C_G_DEFAULT):
     if zb.size and np.any(np.abs(zb) >= 0.5 * bb):
         raise ValueError("centroid must lie strictly inside (-face_width/2, face_width/2); "
                          f"got max |Z| / (b/2) = {float(np.max(np.abs(zb) / (0.5 * bb)))!r}")
-    return _scalar(_h(z, f, b, cg))
+    return as_scalar(_h(z, f, b, cg))
 
 
 # --------------------------------------------------------------------------------------------
@@ -273,8 +273,8 @@ class _System:
 
 
 def _system(geom, b, cg, basis) -> _System:
-    lay = _layout(geom)
-    m0, am = _offset_system(geom)
+    lay = unit_layout(geom)
+    m0, am = offset_system(geom)
     e = lay.mesh_matrix()
     ft = np.zeros(len(lay.meshes))
     ft[lay.mesh] = lay.transverse
@@ -504,7 +504,7 @@ class TiltSolution:
         # physical scalars as Python floats; the solver's bookkeeping (iterations, converged,
         # method) stays ndarray so that .all() / .item() work for any batch shape
         for n in ("input_torque", "k_tilt", "residual"):
-            object.__setattr__(self, n, _scalar(getattr(self, n)))
+            object.__setattr__(self, n, as_scalar(getattr(self, n)))
 
     def intensity(self, z) -> np.ndarray:
         """Load per unit face width w(z) of every mesh at axial positions ``z`` [N/m].
@@ -524,7 +524,7 @@ class TiltSolution:
         ValueError
             For an edge-loaded mesh of the k_t = 0 limit (infinite tilt: a point load).
         """
-        zz = _real_array(z, "z")
+        zz = real_array(z, "z")
         if zz.ndim != 1:
             raise ValueError(f"z must be 1-D, got shape {zz.shape}")
         return load_intensity(zz, self.force[..., None], self.tilt[..., None],
@@ -533,12 +533,12 @@ class TiltSolution:
     @property
     def z_s(self) -> np.ndarray:
         """Offset at the sun (sun-SP) mesh [m]."""
-        return _scalar(self.z[..., 0])
+        return as_scalar(self.z[..., 0])
 
     @property
     def z_r(self) -> np.ndarray:
         """Offset at the ring (RP-ring) mesh [m]."""
-        return _scalar(self.z[..., -1])
+        return as_scalar(self.z[..., -1])
 
 
 def _k_array(value, name="k_tilt") -> np.ndarray:
@@ -726,7 +726,7 @@ def _tilt_inputs(geom, input_torque, k_tilt, c_g, face_width, load_basis, rtol, 
     """Validate the arguments of :func:`solve_tilt`; SI values and the per-mesh face widths."""
     if not isinstance(geom, (SinglePinion, DoublePinion)):
         raise TypeError(f"geom must be a SinglePinion or DoublePinion, got {type(geom).__name__}")
-    t = _real_array(input_torque, "input_torque")
+    t = real_array(input_torque, "input_torque")
     if t.size and np.any(t <= 0):
         raise ValueError(f"input_torque must be > 0 [N·m], got min {float(t.min())!r}")
     k = _k_tilt_si(k_tilt, k_tilt_Nm_per_rad, k_tilt_Nmm_per_rad)
@@ -740,7 +740,7 @@ def _tilt_inputs(geom, input_torque, k_tilt, c_g, face_width, load_basis, rtol, 
         if geom.face_width is None:
             raise ValueError("face_width is required (none given and geom.face_width is None)")
         face_width = geom.face_width
-    b = _real_array(face_width, "face_width")
+    b = real_array(face_width, "face_width")
     if b.ndim > 1 or (b.ndim == 1 and b.size not in (1, nmesh)):
         raise ValueError(f"face_width must be a scalar or have {nmesh} entries (one per mesh), "
                          f"got shape {b.shape}")

@@ -64,10 +64,10 @@ from meshphase.models.gearset import Gearset, Speeds
 from meshphase.models._geometry import ShaftHoleErrors, broadcast_errors, check_error_size, check_gearset, \
     check_speeds
 from meshphase.models.tolerance_model import (  # noqa: F401  (re-exported: the public and test-used names)
-                                              _FIELDS, P3_HI, P3_LO, ABSOLUTE_STATISTICS, ALL_STATISTICS, DEFAULT_QUANTILES, METHODS,
+                                              ERROR_FIELDS, P3_HI, P3_LO, ABSOLUTE_STATISTICS, ALL_STATISTICS, DEFAULT_QUANTILES, METHODS,
                                               SAMPLERS, STATISTICS, WINDOW_KINDS, MonteCarloResult, ObservationWindow, PhasingStats,
-                                              StatSummary, ToleranceBand, Tolerances, _as_band, _as_window, RotationGrid, map_samples,
-                                              _map_values, _mc_inputs, _nan_summary, _offset_speeds, resolve_n_times, default_n_times,
+                                              StatSummary, ToleranceBand, Tolerances, as_band, as_window, RotationGrid, map_samples,
+                                              map_values, mc_inputs, nan_summary, offset_speeds, resolve_n_times, default_n_times,
                                               observation_window, time_grid)
 
 __all__ = [
@@ -133,7 +133,7 @@ def phasing_statistics(gearset: Gearset, speeds: Speeds, errors: ShaftHoleErrors
     """
     g = check_gearset(gearset)
     sp = check_speeds(speeds)
-    win = _as_window(window, sp)
+    win = as_window(window, sp)
     n_t = resolve_n_times(sp, win, n_times, points_per_rev)
     eng = _kernels.resolve_engine(engine)
     bs = as_positive_int(batch_size, "batch_size")
@@ -363,7 +363,7 @@ def monte_carlo(gearset: Gearset, speeds: Speeds, tolerances: Tolerances, window
     mapped through the inverse CDF of each band (the same mapping for both samplers).
     Every statistic comes relative to planet 1 and absolute (``*_abs``), from the same samples.
 
-    Code layout: argument checks (``_mc_inputs``), the unit-cube sampler per replicate
+    Code layout: argument checks (``mc_inputs``), the unit-cube sampler per replicate
     (``_unit_draws``), the batched evaluation (``_run_batches``) and the summaries here; the
     Sobol balance warning stays here so that it points at the caller.
     """
@@ -376,7 +376,7 @@ def monte_carlo(gearset: Gearset, speeds: Speeds, tolerances: Tolerances, window
                               bins=bins, engine=engine, points_per_rev=points_per_rev,
                               progress=progress)
     t_start = time.perf_counter()
-    g, sp, win, n, sampler, n_t, bs, reps, bins, levels, max_memory, eng = _mc_inputs(
+    g, sp, win, n, sampler, n_t, bs, reps, bins, levels, max_memory, eng = mc_inputs(
         gearset, speeds, tolerances, window, n_samples, sampler, n_times, batch_size,
         replicates, bins, quantile_levels, max_memory, engine, progress, points_per_rev)
     gen = np.random.default_rng(rng)
@@ -399,7 +399,7 @@ def monte_carlo(gearset: Gearset, speeds: Speeds, tolerances: Tolerances, window
     stream = _run_batches(grid, tolerances, g.carrier_radius, draw, bounds, bs, eng, store,
                           progress)
     if n == 0:
-        summaries = [_nan_summary(n_p, levels, bins) for _ in ALL_STATISTICS]
+        summaries = [nan_summary(n_p, levels, bins) for _ in ALL_STATISTICS]
         samples = {s: np.zeros((0, n_p)) for s in ALL_STATISTICS} if keep else None
     elif keep:
         summaries = [_summary_exact(store[i], levels, bins, bounds) for i in range(n_stat)]

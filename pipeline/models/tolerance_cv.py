@@ -41,7 +41,7 @@ from meshphase.runtime.log import logger
 from meshphase.validate import as_positive_int
 from meshphase.models.tolerance_linear import chi_mean, linearised_deviation, solve_level
 from meshphase.models.tolerance_model import (ALL_STATISTICS, DEFAULT_QUANTILES, MonteCarloResult, StatSummary,
-                                              RotationGrid, _map_values, _mc_inputs, _nan_summary)
+                                              RotationGrid, map_values, mc_inputs, nan_summary)
 
 __all__ = ["monte_carlo_cv"]
 
@@ -103,7 +103,7 @@ def _full(grid, lin, tol, z, eng, batch=8192):
     out = np.empty((8, z.shape[0], n_p))
     for a in range(0, z.shape[0], batch):
         vals = lin.mean + lin.sigma * z[a:a + batch]
-        es, ks, er, kr, ep, kp = _map_values(vals, tol, n_p)
+        es, ks, er, kr, ep, kp = map_values(vals, tol, n_p)
         out[:, a:a + batch] = np.stack(grid.run(es, ks, er, kr, ep, kp, eng))
     return out
 
@@ -268,7 +268,7 @@ def monte_carlo_cv(gearset, speeds, tolerances, window, n_samples: int = 2048, *
     """
     t_start = time.perf_counter()
     levels_in = DEFAULT_QUANTILES if quantile_levels is None else quantile_levels
-    g, sp, win, n, _, n_t, _, reps, bins, levels, _, eng = _mc_inputs(
+    g, sp, win, n, _, n_t, _, reps, bins, levels, _, eng = mc_inputs(
         gearset, speeds, tolerances, window, n_samples, "sobol", n_times, 1, replicates,
         bins, levels_in, 0.0, engine, progress, points_per_rev)
     n_dir = as_positive_int(tail_directions, "tail_directions")
@@ -277,7 +277,7 @@ def monte_carlo_cv(gearset, speeds, tolerances, window, n_samples: int = 2048, *
     common = dict(sampler="sobol", window=win, n_times=n_t, engine=eng,
                   tolerances=tolerances, method="cv")
     if n == 0:
-        s = [_nan_summary(n_p, levels, bins) for _ in ALL_STATISTICS]
+        s = [nan_summary(n_p, levels, bins) for _ in ALL_STATISTICS]
         return MonteCarloResult(*s[:4], n_samples=0, replicates=reps,
                                 wall_time=time.perf_counter() - t_start,
                                 samples={k: np.zeros((0, n_p)) for k in ALL_STATISTICS},

@@ -80,7 +80,8 @@ class ObservationWindow:
         return f"{self.name} window [{self.t0:g}, {self.t0 + self.duration:g}] s"
 
 
-def _offset_speeds(speeds):
+def offset_speeds(speeds):
+    """The rotation speeds [rad/s] of sun, planet and ring relative to the carrier, by gear name."""
     return {"sun": speeds.w_sc, "planet": speeds.w_pc, "ring": speeds.w_rc}
 
 
@@ -118,7 +119,7 @@ def observation_window(speeds: Speeds, kind: str = "slowest-offset", *, t0: floa
     kind = as_choice(kind, "kind", WINDOW_KINDS)
     t0 = as_float(t0, "t0")
     max_rev = as_positive_int(max_revolutions, "max_revolutions")
-    ws = [abs(w) for w in _offset_speeds(sp).values() if w != 0.0]
+    ws = [abs(w) for w in offset_speeds(sp).values() if w != 0.0]
     if not ws:
         raise ValueError("speeds: no offset turns relative to the carrier "
                          f"(w_sc = w_pc = w_rc = 0), got {sp!r}; give the window explicitly")
@@ -141,7 +142,8 @@ def observation_window(speeds: Speeds, kind: str = "slowest-offset", *, t0: floa
     return ObservationWindow(t0, m * TWO_PI / w_min, kind)
 
 
-def _as_window(window, speeds):
+def as_window(window, speeds):
+    """An :class:`ObservationWindow` from a window or its dict (ValueError/TypeError naming it)."""
     if isinstance(window, ObservationWindow):
         return window
     if isinstance(window, str):
@@ -174,10 +176,10 @@ def default_n_times(speeds: Speeds, window, *, points_per_rev: int = 64,
         ``max(min_points, ceil(points_per_rev T max|w| / 2 pi))``.
     """
     sp = check_speeds(speeds)
-    win = _as_window(window, sp)
+    win = as_window(window, sp)
     ppr = as_positive_int(points_per_rev, "points_per_rev")
     mp = as_positive_int(min_points, "min_points")
-    w_max = max(abs(w) for w in _offset_speeds(sp).values())
+    w_max = max(abs(w) for w in offset_speeds(sp).values())
     revs = win.duration * w_max / TWO_PI
     return max(mp, int(math.ceil(ppr * revs - 1e-9)))
 
@@ -354,10 +356,12 @@ class ToleranceBand:
         return {"mean": self.mean, "band": self.band, "distribution": self.distribution}
 
 
-_FIELDS = ("e_sun", "kappa_sun", "e_ring", "kappa_ring", "e_planet", "kappa_planet")
+#: the shaft-hole error fields of a tolerance set, in sampling order
+ERROR_FIELDS = ("e_sun", "kappa_sun", "e_ring", "kappa_ring", "e_planet", "kappa_planet")
 
 
-def _as_band(value, name):
+def as_band(value, name):
+    """A :class:`ToleranceBand` from a band, a number [m] or a (low, high) pair [m]."""
     if isinstance(value, ToleranceBand):
         return value
     if isinstance(value, str):
@@ -391,15 +395,15 @@ class Tolerances:
     kappa_planet: ToleranceBand = field(default_factory=ToleranceBand)
 
     def __post_init__(self):
-        for name in _FIELDS:
-            object.__setattr__(self, name, _as_band(getattr(self, name), name))
+        for name in ERROR_FIELDS:
+            object.__setattr__(self, name, as_band(getattr(self, name), name))
 
     def to_dict(self) -> dict:
-        return {name: getattr(self, name).to_dict() for name in _FIELDS}
+        return {name: getattr(self, name).to_dict() for name in ERROR_FIELDS}
 
     def columns(self, n_planets: int) -> list[tuple[str, int | None, ToleranceBand]]:
         """The parameters in sampling order: (field, planet index or None, band)."""
-        cols = [(name, None, getattr(self, name)) for name in _FIELDS[:4]]
+        cols = [(name, None, getattr(self, name)) for name in ERROR_FIELDS[:4]]
         for n in range(n_planets):
             cols.append(("e_planet", n, self.e_planet))
             cols.append(("kappa_planet", n, self.kappa_planet))
@@ -424,10 +428,10 @@ def map_samples(u, tol, n_planets):
     values = np.empty(u.shape[:1] + (len(rand),))
     for j, band in enumerate(rand):
         values[:, j] = band.ppf(u[:, j])
-    return _map_values(values, tol, n_planets)
+    return map_values(values, tol, n_planets)
 
 
-def _map_values(values, tol, n_planets):
+def map_values(values, tol, n_planets):
     """Values (B, d) of the random parameters (sampling order, signed radial errors [m],
     angles [rad]) -> flat error arrays (es, ks, er, kr, ep, kp), fixed parameters at their
     means, negative radial errors as |e| with the angle turned by pi."""
@@ -611,7 +615,8 @@ class MonteCarloResult:
         return out
 
 
-def _nan_summary(n_p, levels, bins):
+def nan_summary(n_p, levels, bins):
+    """The Monte Carlo summary arrays of ``n_p`` planets filled with NaN (no finite sample)."""
     nan = np.full(n_p, np.nan)
     q = np.full((levels.size, n_p), np.nan)
     two = np.full((2, n_p), np.nan)
@@ -627,10 +632,10 @@ def case_inputs(gearset, speeds, tolerances, window):
     if not isinstance(tolerances, Tolerances):
         raise TypeError(f"tolerances must be a Tolerances, got {type(tolerances).__name__}")
     tolerances.check(g.carrier_radius)
-    return g, sp, _as_window(window, sp)
+    return g, sp, as_window(window, sp)
 
 
-def _mc_inputs(gearset, speeds, tolerances, window, n_samples, sampler, n_times, batch_size,
+def mc_inputs(gearset, speeds, tolerances, window, n_samples, sampler, n_times, batch_size,
                replicates, bins, quantile_levels, max_memory, engine, progress, points_per_rev):
     """Validate the arguments of :func:`monte_carlo` (ValueError / TypeError naming them)."""
     g, sp, win = case_inputs(gearset, speeds, tolerances, window)

@@ -16,7 +16,7 @@ from meshphase.models.tolerance import (
                                         ToleranceBand,
                                         Tolerances,
                                         RotationGrid,
-                                        _map_values,
+                                        map_values,
                                         monte_carlo,
                                         observation_window,
                                         table2_case,
@@ -43,7 +43,7 @@ def case3():
 def _series(g, sp, win, n_t, tol, values):
     """Full-model deviation series (4, N, n_t) at parameter values (d,) (kernel numpy path)."""
     grid = RotationGrid(g, sp, win, n_t)
-    es, ks, er, kr, ep, kp = _map_values(np.atleast_2d(values), tol, g.n_planets)
+    es, ks, er, kr, ep, kp = map_values(np.atleast_2d(values), tol, g.n_planets)
     cks, sks = np.cos(ks), np.sin(ks)
     ckr, skr = np.cos(kr), np.sin(kr)
     d_s, d_r = _kernels.deltas_numpy(*grid.arrays, grid.cpsi, grid.spsi, grid.R, es, cks, sks,
