@@ -89,8 +89,11 @@ class Stage:
                                 f"{type(getattr(self, key)).__name__}")
 
 
-#: every stage, in declaration order (dependencies before the stages that need them)
+#: every stage, in declaration order (a stage after the stages it needs; the results in the
+#: order the scene's documentation lists them)
 STAGE_REGISTRY: tuple[Stage, ...] = (
+    Stage("ideal", result_type=IdealStage, result="ideal_phasing", report="ideal",
+          uses_gearset=True, outputs=("summary.json: ideal",)),
     Stage("load", result_type=LoadStage, report="recording", opens_recording=True,
           outputs=("summary.json: recording",)),
     Stage("condition", needs=("load",), result_type=ConditionStage, report="recording"),
@@ -104,17 +107,15 @@ STAGE_REGISTRY: tuple[Stage, ...] = (
           outputs=("load_sharing.csv", "summary.json: load_sharing")),
     Stage("centroids", needs=("onsets",), result_type=CentroidsStage, result="centroids",
           report="centroids", outputs=("summary.json: centroids_m",)),
-    Stage("ideal", result_type=IdealStage, result="ideal_phasing", report="ideal",
-          uses_gearset=True, outputs=("summary.json: ideal",)),
-    Stage("tolerance", result_type=ToleranceStage, result="tolerance", scope="scene",
-          uses_gearset=True, outputs=("arrays.h5: monte_carlo", "summary.json: tolerance")),
+    Stage("compare", needs=("phasing", "ideal"), reads=("identify", "tolerance"),
+          result_type=CompareStage, result="compare", uses_gearset=True,
+          outputs=("summary.json: compare",)),
     Stage("identify", needs=("phasing",), result_type=IdentifyStage, result="identify",
           report="identify", uses_gearset=True,
           outputs=("identified_errors.csv", "identified_combinations.csv",
                    "summary.json: identify")),
-    Stage("compare", needs=("phasing", "ideal"), reads=("identify", "tolerance"),
-          result_type=CompareStage, result="compare", uses_gearset=True,
-          outputs=("summary.json: compare",)),
+    Stage("tolerance", result_type=ToleranceStage, result="tolerance", scope="scene",
+          uses_gearset=True, outputs=("arrays.h5: monte_carlo", "summary.json: tolerance")),
     Stage("bearing_moments", reads=("centroids",), result_type=BearingStage,
           result="bearing_moments", report="bearing_moments", scope="scene",
           outputs=("bearing_moments.csv", "summary.json: bearing_moments")),
@@ -125,14 +126,16 @@ STAGE_REGISTRY: tuple[Stage, ...] = (
 
 def check_registry(registry: Iterable[Stage]) -> tuple[Stage, ...]:
     """``registry`` as a tuple, checked: unique names and result names, each stage's
-    ``needs`` and ``reads`` declared before it (so declaration order is a run order).
+    ``needs`` declared before it (so declaration order is a run order), its ``reads``
+    declared.
 
     Raises
     ------
     TypeError
         An entry is not a :class:`Stage`.
     ValueError
-        A name twice, or a stage needing or reading one declared after it (or not at all).
+        A name twice, a stage needing one declared after it (or not at all), or reading one
+        not declared.
     """
     stages = tuple(registry)
     seen: set = set()
@@ -142,15 +145,18 @@ def check_registry(registry: Iterable[Stage]) -> tuple[Stage, ...]:
             raise TypeError(f"a stage registry holds Stage declarations, got {type(s).__name__}")
         if s.name in seen:
             raise ValueError(f"stage {s.name!r} is declared twice")
-        late = [d for d in s.needs + s.reads if d not in seen]
+        late = [d for d in s.needs if d not in seen]
         if late:
-            raise ValueError(f"stage {s.name!r} needs or reads {', '.join(late)}, not declared "
-                             "before it")
+            raise ValueError(f"stage {s.name!r} needs {', '.join(late)}, not declared before it")
         if s.result is not None:
             if s.result in results:
                 raise ValueError(f"result {s.result!r} is declared by two stages")
             results.add(s.result)
         seen.add(s.name)
+    unknown = [(s.name, d) for s in stages for d in s.reads if d not in seen]
+    if unknown:
+        raise ValueError("stages read stages not declared: "
+                         + ", ".join(f"{a} reads {b}" for a, b in unknown))
     return stages
 
 

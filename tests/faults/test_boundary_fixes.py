@@ -17,7 +17,6 @@ import pytest
 import meshphase.io as pio
 from meshphase.cli import main
 from meshphase.errors import FormatWarning
-from meshphase.io import CorruptFileError
 from meshphase.run.exits import _load_error, recording_read_errors
 from meshphase.run.state import FailureKind, StageFailure
 from meshphase.io.base import atomic_path
@@ -129,7 +128,8 @@ def test_load_error_text():
         return StageFailure.raised("load", exc)
 
     assert _load_error(failed(PermissionError(13, "Permission denied", "/x/a.h5"))) == "/x/a.h5: Permission denied"
-    assert _load_error(failed(CorruptFileError("/a.csv: line 2: bad"))) == "/a.csv: line 2: bad"
+    assert _load_error(StageFailure("load", FailureKind.RAISED, "/a.csv: line 2: bad", "CorruptFileError")) \
+        == "/a.csv: line 2: bad"
     assert _load_error(failed(RuntimeError("odd"))) == "RuntimeError: odd"
     assert _load_error(StageFailure("load", FailureKind.RAISED)) == ""
 
