@@ -10,8 +10,8 @@ import pytest
 
 from meshphase.data_schemas import load_schema
 from meshphase.report.validation import SECTION_KEYS
-from meshphase.run import declare
-from meshphase.run.declare import (RESULT_OF_STAGE, RESULT_TYPES, STAGE_REGISTRY, Stage, check_registry,
+from meshphase.run.context import RESULT_TYPES, result_types
+from meshphase.run.declare import (RESULT_OF_STAGE, STAGE_REGISTRY, Stage, check_registry,
                                    client_results, report_sections, result_names, result_of_stage,
                                    result_stages, stage_graph)
 from meshphase.run.exits import RESULT_OF_STAGE as EXIT_TABLE
@@ -44,7 +44,7 @@ def test_adding_a_result_is_one_descriptor():
     assert stage_graph(reg)["wear"] == ("tilt",)
     assert result_stages(reg)["wear"] == ("wear",) and result_names(reg)[-1] == "wear"
     assert result_of_stage(reg)["wear"] == "wear"
-    assert declare.result_types(reg)["wear"] is WearStage
+    assert result_types(reg)["wear"] is WearStage and result_types(reg)["tilt"] is TiltStage
     assert report_sections(reg)["wear"] == ("wear",)
     assert client_results(["phasing", "wear"], gearset_known=False, registry=reg) == ["wear"]
     assert "wear" not in RESULTS                    # the real registry is untouched
@@ -75,7 +75,11 @@ def test_registry_bad_input():
     with pytest.raises(ValueError, match="scope"):
         Stage("x", scope="cluster")
     with pytest.raises(TypeError, match="StageResult"):
-        Stage("x", result_type=dict)
+        Stage("x", result_type=3)
+    with pytest.raises(TypeError, match="StageResult"):
+        result_types((Stage("x", result_type=dict),))
+    with pytest.raises(TypeError, match="StageResult"):
+        result_types((Stage("x", result_type="NoSuchStage"),))
     with pytest.raises(TypeError, match="tuple"):
         Stage("x", needs=["load"])
     with pytest.raises(ValueError, match="identifier"):

@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 from meshphase.kinematics.phasing import GaugeLabels, PassTable, PhasingResult
-from meshphase.run.context import phasing_verdict
-from meshphase.run.declare import RESULT_TYPES
+from meshphase.run.context import RESULT_TYPES, phasing_verdict
 from meshphase.run.results import (CompareStage, GaugeComparison, IdentifyStage, LoadSharingStage,
                                    PhasingStage, StageResult, ToleranceStage)
 from meshphase.run.state import RunMessage

@@ -11,13 +11,37 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Generic, TypeVar
 
 from meshphase.models.gearset import Gearset
-from meshphase.run.declare import RESULT_TYPES, STAGE_REGISTRY
+from meshphase.run import results
+from meshphase.run.declare import STAGE_REGISTRY, check_registry
 from meshphase.run.results import PhasingStage, StageResult
 from meshphase.run.state import RunMessage, StageFailure
 
-__all__ = ["RunContext", "phasing_verdict"]
+__all__ = ["RunContext", "phasing_verdict", "result_types", "RESULT_TYPES"]
 
 _R = TypeVar("_R", bound=StageResult)
+
+
+def result_types(registry=STAGE_REGISTRY) -> dict[str, type]:
+    """stage -> the type of the result it records (a declared name resolved in
+    :mod:`meshphase.run.results`).
+
+    Raises
+    ------
+    TypeError
+        A declared type that is not a :class:`StageResult` subclass (or names none).
+    """
+    out = {}
+    for s in check_registry(registry):
+        cls = getattr(results, s.result_type, None) if isinstance(s.result_type, str) else s.result_type
+        if not (isinstance(cls, type) and issubclass(cls, StageResult)):
+            raise TypeError(f"stage {s.name!r}: result type {s.result_type!r} is not a StageResult "
+                            "subclass of meshphase.run.results")
+        out[s.name] = cls
+    return out
+
+
+#: stage name -> the type of its result
+RESULT_TYPES: dict[str, type] = result_types()
 
 
 class _StageAttr(Generic[_R]):
@@ -121,9 +145,9 @@ compare, bearing_moments, tilt : StageResult or None
                          else str(m).replace(old, new) for m in self.messages]
 
 
-for _stage in STAGE_REGISTRY:       # one typed slot per declared stage
-    setattr(RunContext, _stage.name, _StageAttr(_stage.name, _stage.result_type))
-del _stage
+for _name, _cls in RESULT_TYPES.items():       # one typed slot per declared stage
+    setattr(RunContext, _name, _StageAttr(_name, _cls))
+del _name, _cls
 
 
 def phasing_verdict(phasing: PhasingStage | None, messages) -> dict:

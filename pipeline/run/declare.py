@@ -3,7 +3,7 @@
 :data:`STAGE_REGISTRY` holds one :class:`Stage` per stage, in declaration order (the order
 a run lists them). Everything that names stages is derived from it: the scene's stage graph
 and result names (:data:`meshphase.run.scene.STAGES`, :data:`meshphase.run.scene.RESULTS`),
-the result type each stage records (:data:`RESULT_TYPES`), the exit table from a stage to
+the result type each stage records (:data:`meshphase.run.context.RESULT_TYPES`), the exit table from a stage to
 the result a scene requests it by (:data:`RESULT_OF_STAGE`), the campaign's split of a
 scene's results into client and per-recording ones
 (:func:`meshphase.campaign.runner.split_results`), the report's sections
@@ -21,14 +21,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Iterable
 
-from meshphase.run.results import (BearingStage, CentroidsStage, CompareStage, ConditionStage,
-                                   IdealStage, IdentifyStage, LoadSharingStage, LoadStage,
-                                   OnsetsStage, PhasingStage, StageResult, TiltStage,
-                                   ToleranceStage)
 
 __all__ = ["Stage", "STAGE_REGISTRY", "SCOPES", "stage_graph", "result_stages", "result_names",
-           "result_of_stage", "result_types", "report_sections", "client_results",
-           "gearset_stages", "recording_stages", "check_registry", "RESULT_TYPES",
+           "result_of_stage", "report_sections", "client_results",
+           "gearset_stages", "recording_stages", "check_registry",
            "RESULT_OF_STAGE", "STAGE_NAMES"]
 
 #: where a stage runs in a campaign: once per recording, or once per scene (on the client)
@@ -45,8 +41,11 @@ class Stage:
         The stage name (``ctx.<name>`` holds its result).
     needs : tuple of str
         Stages that must have run before it (a DAG; a failed one skips this stage).
-    result_type : type
-        The :class:`meshphase.run.results.StageResult` subclass it records.
+    result_type : str or type
+        The :class:`meshphase.run.results.StageResult` subclass it records: its name in
+        :mod:`meshphase.run.results`, or the class (resolved by
+        :func:`meshphase.run.context.result_types`; named, so this module loads no result
+        code).
     result : str or None
         The name a scene requests it by in ``results`` (None: only pulled in by others).
     reads : tuple of str
@@ -66,7 +65,7 @@ class Stage:
 
     name: str
     needs: tuple = ()
-    result_type: type = StageResult
+    result_type: str | type = "StageResult"
     result: str | None = None
     reads: tuple = ()
     outputs: tuple = ()
@@ -80,9 +79,10 @@ class Stage:
             raise ValueError(f"a stage name is an identifier, got {self.name!r}")
         if self.scope not in SCOPES:
             raise ValueError(f"stage {self.name!r}: scope must be one of {SCOPES}, got {self.scope!r}")
-        if not (isinstance(self.result_type, type) and issubclass(self.result_type, StageResult)):
-            raise TypeError(f"stage {self.name!r}: result_type must be a StageResult subclass, "
-                            f"got {self.result_type!r}")
+        rt = self.result_type
+        if not (isinstance(rt, type) or (isinstance(rt, str) and rt.isidentifier())):
+            raise TypeError(f"stage {self.name!r}: result_type must be a StageResult subclass or "
+                            f"its name, got {rt!r}")
         for key in ("needs", "reads", "outputs"):
             if not isinstance(getattr(self, key), tuple):
                 raise TypeError(f"stage {self.name!r}: {key} must be a tuple, got "
@@ -92,34 +92,34 @@ class Stage:
 #: every stage, in declaration order (a stage after the stages it needs; the results in the
 #: order the scene's documentation lists them)
 STAGE_REGISTRY: tuple[Stage, ...] = (
-    Stage("ideal", result_type=IdealStage, result="ideal_phasing", report="ideal",
+    Stage("ideal", result_type="IdealStage", result="ideal_phasing", report="ideal",
           uses_gearset=True, outputs=("summary.json: ideal",)),
-    Stage("load", result_type=LoadStage, report="recording", opens_recording=True,
+    Stage("load", result_type="LoadStage", report="recording", opens_recording=True,
           outputs=("summary.json: recording",)),
-    Stage("condition", needs=("load",), result_type=ConditionStage, report="recording"),
-    Stage("onsets", needs=("condition",), result_type=OnsetsStage, report="onsets",
+    Stage("condition", needs=("load",), result_type="ConditionStage", report="recording"),
+    Stage("onsets", needs=("condition",), result_type="OnsetsStage", report="onsets",
           uses_gearset=True, outputs=("arrays.h5: onsets", "summary.json: onsets")),
-    Stage("phasing", needs=("onsets",), result_type=PhasingStage, result="phasing",
+    Stage("phasing", needs=("onsets",), result_type="PhasingStage", result="phasing",
           report="phasing", uses_gearset=True,
           outputs=("passes_<gear>.csv", "summary.json: phasing")),
-    Stage("load_sharing", needs=("onsets",), reads=("phasing",), result_type=LoadSharingStage,
+    Stage("load_sharing", needs=("onsets",), reads=("phasing",), result_type="LoadSharingStage",
           result="load_sharing", report="load_sharing", uses_gearset=True,
           outputs=("load_sharing.csv", "summary.json: load_sharing")),
-    Stage("centroids", needs=("onsets",), result_type=CentroidsStage, result="centroids",
+    Stage("centroids", needs=("onsets",), result_type="CentroidsStage", result="centroids",
           report="centroids", outputs=("summary.json: centroids_m",)),
     Stage("compare", needs=("phasing", "ideal"), reads=("identify", "tolerance"),
-          result_type=CompareStage, result="compare", uses_gearset=True,
+          result_type="CompareStage", result="compare", uses_gearset=True,
           outputs=("summary.json: compare",)),
-    Stage("identify", needs=("phasing",), result_type=IdentifyStage, result="identify",
+    Stage("identify", needs=("phasing",), result_type="IdentifyStage", result="identify",
           report="identify", uses_gearset=True,
           outputs=("identified_errors.csv", "identified_combinations.csv",
                    "summary.json: identify")),
-    Stage("tolerance", result_type=ToleranceStage, result="tolerance", scope="scene",
+    Stage("tolerance", result_type="ToleranceStage", result="tolerance", scope="scene",
           uses_gearset=True, outputs=("arrays.h5: monte_carlo", "summary.json: tolerance")),
-    Stage("bearing_moments", reads=("centroids",), result_type=BearingStage,
+    Stage("bearing_moments", reads=("centroids",), result_type="BearingStage",
           result="bearing_moments", report="bearing_moments", scope="scene",
           outputs=("bearing_moments.csv", "summary.json: bearing_moments")),
-    Stage("tilt", result_type=TiltStage, result="tilt", report="tilt", scope="scene",
+    Stage("tilt", result_type="TiltStage", result="tilt", report="tilt", scope="scene",
           outputs=("tilt.csv", "summary.json: tilt")),
 )
 
@@ -181,11 +181,6 @@ def result_of_stage(registry: Iterable[Stage] = STAGE_REGISTRY) -> dict[str, str
     return {s.name: s.result for s in check_registry(registry) if s.result is not None}
 
 
-def result_types(registry: Iterable[Stage] = STAGE_REGISTRY) -> dict[str, type]:
-    """stage -> the type of the result it records."""
-    return {s.name: s.result_type for s in check_registry(registry)}
-
-
 def report_sections(registry: Iterable[Stage] = STAGE_REGISTRY) -> dict[str, tuple[str, ...]]:
     """report section -> the stages whose results fill it (stages without a section left
     out)."""
@@ -231,7 +226,5 @@ def client_results(results, *, gearset_known: bool, registry: Iterable[Stage] = 
 
 
 STAGE_NAMES: tuple[str, ...] = tuple(s.name for s in STAGE_REGISTRY)
-#: stage name -> the type of its result
-RESULT_TYPES: dict[str, type] = result_types()
 #: stage -> the result name a scene requests it by
 RESULT_OF_STAGE: dict[str, str] = result_of_stage()

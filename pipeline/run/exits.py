@@ -48,7 +48,6 @@ import numpy as np
 
 from meshphase.io.base import recording_read_errors  # noqa: F401 (public here too)
 from meshphase.recording import GAUGE_KINDS
-from meshphase.run.context import phasing_verdict
 from meshphase.run.declare import RESULT_OF_STAGE
 from meshphase.run.state import FailureKind, RunMessage
 
@@ -233,6 +232,9 @@ def run_status(ctx) -> dict:
     missing = [{"result": RESULT_OF_STAGE[s], "stage": s, "cause": _cause(failed, s)}
                for s in failed if s in RESULT_OF_STAGE]
     empty = _empty_results(ctx, failed)
+    # a run's results: not loaded for the command line's start-up (meshphase --help)
+    from meshphase.run.context import phasing_verdict
+
     rel = phasing_verdict(ctx.phasing, ctx.messages)
     unreliable = {g: list(v["reasons"]) for g, v in rel.items() if not v["reliable"]}
     error = None

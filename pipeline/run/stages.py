@@ -20,7 +20,7 @@ import math
 import time
 import warnings
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -37,11 +37,8 @@ from meshphase.run.exits import recording_read_errors, run_status
 from meshphase.kinematics.loads import facewidth_centroid, facewidth_readings, load_sharing_from_amplitudes
 from meshphase.runtime.log import logger
 from meshphase.kinematics.member_speeds import mean_mesh_rate, member_speeds, tacho_rate
-from meshphase.models import bearing
 from meshphase.models.gearset import Speeds
 from meshphase.models.mesh_phasing import assembly_check, classify_phasing, ideal_phasing
-from meshphase.models.tilt import solve_tilt
-from meshphase.models.tolerance import ToleranceBand, Tolerances, monte_carlo, observation_window
 from meshphase.onsets import detect_onsets_recording
 from meshphase.onsets.results import Onsets, empty_onsets
 from meshphase.run.outputs import new_output_dir, summary_dict, write_outputs  # noqa: F401 (public here)
@@ -65,6 +62,10 @@ from meshphase.runtime.threads import blas_single_thread
 from meshphase.compare.truth import phasing_vs_truth, tacho_geometry, true_errors
 from meshphase.io.units import gauge_unit_gains
 from meshphase.validate import as_regular_file
+
+if TYPE_CHECKING:  # the model modules of bearing, tilt and tolerance load in their stages:
+    # `meshphase process` runs none of them (nor does a scene that does not ask for them)
+    from meshphase.models.tolerance import Tolerances
 
 __all__ = ["RunContext", "run_scene", "STAGE_FUNCTIONS", "write_outputs", "process_recording",
            "new_output_dir"]
@@ -638,7 +639,10 @@ def stage_ideal(ctx: RunContext) -> IdealStage:
                       error_estimate="exact (closed form)")
 
 
-def _tolerances(ctx: RunContext) -> Tolerances:
+def _tolerances(ctx: RunContext, tolerance) -> "Tolerances":
+    """The scene's tolerance bands as :class:`meshphase.models.tolerance.Tolerances`
+    (``tolerance``: that module, loaded by the stage)."""
+    ToleranceBand = tolerance.ToleranceBand
     t = ctx.scene.tolerances
     kw = {}
     for gear in ("sun", "ring", "planet"):
@@ -646,17 +650,21 @@ def _tolerances(ctx: RunContext) -> Tolerances:
         k = t[f"kappa_{gear}"]
         kw[f"kappa_{gear}"] = (ToleranceBand.full_circle() if k == "uniform" else
                                ToleranceBand(mean=k, band=0.0))
-    return Tolerances(**kw)
+    return tolerance.Tolerances(**kw)
 
 
 @runs("tolerance")
 def stage_tolerance(ctx: RunContext) -> ToleranceStage:
     """Monte Carlo phasing statistics under the scene's tolerances."""
+    # scipy.stats and numba behind it: loaded only by a scene that asks for the Monte Carlo
+    from meshphase.models import tolerance
+
     g = ctx.gearset
     t = ctx.scene.tolerances
     sp = ctx.scene.speeds
-    window = observation_window(sp) if t.get("window") is None else (0.0, float(t["window"]))
-    res = monte_carlo(g, sp, _tolerances(ctx), window, t["samples"], sampler=t["sampler"],
+    window = (tolerance.observation_window(sp) if t.get("window") is None
+              else (0.0, float(t["window"])))
+    res = tolerance.monte_carlo(g, sp, _tolerances(ctx, tolerance), window, t["samples"], sampler=t["sampler"],
                       rng=t.get("seed", 0))
     se = float(np.max(res.dev_s.se_bound3)) if res.dev_s.se_bound3.size else float("nan")
     return ToleranceStage(monte_carlo=res, error_estimate=(
@@ -746,6 +754,9 @@ def stage_compare(ctx: RunContext) -> CompareStage:
 
 def _bearing_case(ctx: RunContext) -> tuple:
     """(seed 001 case, input torque [N·m]) of the scene's [bearing] table."""
+    # the bearing and tilt models load only for a scene that asks for them
+    from meshphase.models import bearing
+
     b = ctx.scene.bearing
     case = bearing.seed_case(b["case"])
     return case, (b["input_torque"] if b.get("input_torque") is not None else case.input_torque)
@@ -755,6 +766,8 @@ def _bearing_case(ctx: RunContext) -> tuple:
 def stage_bearing_moments(ctx: RunContext) -> BearingStage:
     """Bearing moments of the scene's seed 001 case: concentrated, with the scene's centroid
     offsets and (single pinion) with the measured centroids."""
+    from meshphase.models import bearing
+
     b = ctx.scene.bearing
     case, torque = _bearing_case(ctx)
     est = "closed form (seed 001 tables reproduced to print precision)"
@@ -776,6 +789,8 @@ def stage_bearing_moments(ctx: RunContext) -> BearingStage:
 @runs("tilt")
 def stage_tilt(ctx: RunContext) -> TiltStage:
     """The coupled tilt / load-distribution solve at each of the scene's tilt stiffnesses."""
+    from meshphase.models.tilt import solve_tilt  # scipy.optimize
+
     b = ctx.scene.bearing
     case, torque = _bearing_case(ctx)
     sols = [(k, solve_tilt(case.geometry, torque, k_tilt_Nm_per_rad=k, c_g=b["c_g"])) for k in b["k_tilt"]]
