@@ -58,8 +58,9 @@ from meshphase import __version__
 from meshphase.run.channels import mapping_report
 from meshphase.run.demo import demo_scene_path
 from meshphase.errors import DataQualityWarning
-from meshphase.run.exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_PIPE, OutputDir, output_write_errors,
-                                 recording_read_errors, run_status, status_line)
+from meshphase.run.exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_PIPE, recording_read_errors,
+                                 run_status, status_line)
+from meshphase.run.outdir import OutputDir, output_write_errors
 from meshphase.runtime.heap import limit_heap_growth
 from meshphase.io import FormatChoices, convert, detect_format, iter_blocks, read_info
 from meshphase.io.base import ANY_FS_ENV
@@ -415,7 +416,7 @@ def _run_and_write(args, scene, base, *, report: bool = True):
 
     ``scene`` is a Scene or a function of the reserved folder returning one (the demo writes
     its scene file there first). The folder is removed again when the run fails or is
-    interrupted (:class:`meshphase.run.exits.OutputDir`)."""
+    interrupted (:class:`meshphase.run.outdir.OutputDir`)."""
     from meshphase.run.stages import run_scene, write_outputs  # heavy (scipy): see the module docstring
     with OutputDir(base, overwrite=args.overwrite, staged=True) as out:
         if callable(scene):

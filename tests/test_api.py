@@ -18,7 +18,7 @@ from meshphase.errors import NotRegularFileError
 from meshphase.io import RecordingFileError, RecordingTooLargeError, write
 from meshphase.api.result import Result
 from meshphase.recording import ChannelSpec, Recording
-from meshphase.run.results import RunContext
+from meshphase.run.context import RunContext
 from meshphase.run.scene import Scene
 
 

@@ -18,7 +18,8 @@ from meshphase.models.mesh_phasing import ShaftHoleErrors
 from meshphase.run.frames import (COLUMNS, centroid_rows, circular_mean, comparison_rows,
                                   frame, identification_rows, load_sharing_rows, passes_rows,
                                   phasing_rows)
-from meshphase.run.results import CentroidsStage, IdentifyStage, RunContext
+from meshphase.run.context import RunContext
+from meshphase.run.results import CentroidsStage, IdentifyStage
 from meshphase.run.scene import Scene, SceneError
 
 TABLE = {"z_sun": 25, "z_ring": 87, "z_planet": 29, "n_planets": 4, "carrier_radius_mm": 112.5,

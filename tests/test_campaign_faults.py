@@ -30,7 +30,8 @@ from meshphase.campaign import runner as cp
 from meshphase.campaign import cluster as cluster_mod
 from meshphase.campaign.job import campaign_task
 from meshphase.cli import build_parser
-from meshphase.run.exits import EXIT_OK, EXIT_PARTIAL, MANIFEST_NAME, PARTIAL_SUFFIX
+from meshphase.run.exits import EXIT_OK, EXIT_PARTIAL
+from meshphase.run.outdir import MANIFEST_NAME, PARTIAL_SUFFIX
 
 SCENE = ('name = "campaign fault scene"\nresults = ["phasing"]\n\n' + SEED_RIG_GEARSET
          + '\n[input]\nsynthetic = "seed_rig"\nminutes = 0.1\n')

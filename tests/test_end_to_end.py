@@ -263,7 +263,7 @@ def test_every_requested_stage_runs(name):
     ctx = synthetic_run(name)
     fw = any(c.kind == "facewidth" for c in ctx.load.recording.channels)
     expected_failed = {} if fw else {"centroids": CENTROIDS_SKIPPED}
-    assert ctx.failed == expected_failed
+    assert {k: str(v) for k, v in ctx.failed.items()} == expected_failed
     for stage in ("load", "condition", "onsets", "phasing", "load_sharing", "identify", "compare"):
         assert stage in ctx.ran
     assert ("centroids" in ctx.ran) == fw
@@ -433,7 +433,7 @@ def test_partial_contact_ring_centroid_matches_truth():
 def test_no_centroid_work_without_facewidth_gauges(name):
     ctx = synthetic_run(name)
     assert ctx.centroids is None
-    assert ctx.failed.get("centroids") == CENTROIDS_SKIPPED
+    assert str(ctx.failed.get("centroids")) == CENTROIDS_SKIPPED and ctx.failed["centroids"].benign
 
 
 @pytest.mark.parametrize("name", FACEWIDTH)

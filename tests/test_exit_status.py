@@ -29,13 +29,16 @@ import meshphase.api.process
 import meshphase.io
 import meshphase.io.base
 import meshphase.run.exits
+import meshphase.run.outdir
 import meshphase.run.stages
 from meshphase import cli
 from meshphase.campaign.runner import phasing_reliability
 from meshphase.cli import describe_error, main
 from meshphase.errors import ProcessingWarning
+from meshphase.run.state import FailureKind, RunMessage, StageFailure
 from meshphase.run.exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_OK, EXIT_PARTIAL, EXIT_PIPE,
-                                 OutputDir, run_status, status_line)
+                                 run_status, status_line)
+from meshphase.run.outdir import OutputDir
 from meshphase.recording import ChannelSpec, Recording
 from meshphase.run.stages import STAGE_FUNCTIONS, RunContext
 from meshphase.validate import as_regular_file
@@ -471,13 +474,23 @@ def test_usage_error_is_2():
 
 
 # --------------------------------------------------------------------------- helpers
+def _failure(stage: str, text: str) -> StageFailure:
+    """The typed failure a run records for what its text says (test shorthand)."""
+    if text.startswith("skipped: needs "):
+        return StageFailure.blocked(stage, text[len("skipped: needs "):].split(", "))
+    if text.startswith("skipped: "):
+        return StageFailure.not_applicable(stage, text[len("skipped: "):])
+    exc, reason = text.split(": ", 1)
+    return StageFailure(stage, FailureKind.RAISED, reason, exc)
+
+
 def _ctx(failed=None, ran=None, messages=None, tables=None):
     from meshphase.run.results import PhasingStage
     from meshphase.run.scene import parse_scene
 
     scene = parse_scene('results = ["tilt"]\n[bearing]\ncase = "1"\nk_tilt_Nm_per_rad = 1e6\n')
     ctx = RunContext(scene)
-    ctx.failed, ctx.ran = dict(failed or {}), list(ran or [])
+    ctx.failed, ctx.ran = {k: _failure(k, v) for k, v in (failed or {}).items()}, list(ran or [])
     ctx.messages = list(messages or [])
     if tables is not None:
         ctx.record("phasing", PhasingStage(tables=tables))
@@ -517,13 +530,16 @@ def test_run_status_and_status_line_bad_input():
 
 def test_phasing_reliability_prefers_the_stage_key_and_falls_back_to_messages():
     assert phasing_reliability(_ctx()) == {}                         # nothing ran: nothing flagged
-    msg = "phasing: ProcessingWarning: ring gauge: encoder misfit; phasing not reliable"
-    ctx = _ctx(messages=[msg, "onsets: DataQualityWarning: sun gauge: aliased, not reliable"],
+    msg = RunMessage("phasing", "ProcessingWarning", "ring gauge: encoder misfit; phasing not reliable",
+                     gauge="ring", unreliable=True)
+    said = RunMessage("onsets", "DataQualityWarning", "sun gauge: aliased, not reliable", gauge="sun")
+    ctx = _ctx(messages=[msg, said],
                tables={"sun": [], "ring": []})
     assert phasing_reliability(ctx) == {
         "sun": {"reliable": True, "reasons": []},                    # DataQualityWarning: not ours
         "ring": {"reliable": False, "reasons": ["ring gauge: encoder misfit; phasing not reliable"]}}
-    anon = _ctx(messages=["compare: ProcessingWarning: residuals not reliable"],
+    anon = _ctx(messages=[RunMessage("compare", "ProcessingWarning", "residuals not reliable",
+                                     unreliable=True)],
                 tables={"sun": []})
     assert phasing_reliability(anon)["sun"]["reliable"] is False
     given = {"sun": {"reliable": False, "reasons": ["from the stage"]}}
@@ -652,20 +668,20 @@ def test_overflowing_samples_give_no_raw_numpy_warning():
 
 
 def test_output_write_errors_empty_and_bad_input(tmp_path):
-    with meshphase.run.exits.output_write_errors(tmp_path / "o"):     # nothing raised: nothing to do
+    with meshphase.run.outdir.output_write_errors(tmp_path / "o"):     # nothing raised: nothing to do
         pass
     with pytest.raises(OSError) as exc:                             # names no file: the output
-        with meshphase.run.exits.output_write_errors(tmp_path / "o"):
+        with meshphase.run.outdir.output_write_errors(tmp_path / "o"):
             raise OSError(errno.EDQUOT, os.strerror(errno.EDQUOT))
     assert exc.value.errno == errno.EDQUOT and exc.value.filename == str(tmp_path / "o")
     named = OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), "/elsewhere/f.csv")
     with pytest.raises(OSError) as exc:                             # already named: kept as is
-        with meshphase.run.exits.output_write_errors(tmp_path / "o"):
+        with meshphase.run.outdir.output_write_errors(tmp_path / "o"):
             raise named
     assert exc.value is named
     with pytest.raises(PermissionError):                            # not a full disk: untouched
-        with meshphase.run.exits.output_write_errors(tmp_path / "o"):
+        with meshphase.run.outdir.output_write_errors(tmp_path / "o"):
             raise PermissionError(errno.EACCES, "Permission denied")
     with pytest.raises(ValueError, match="not an OSError"):
-        with meshphase.run.exits.output_write_errors(tmp_path / "o"):
+        with meshphase.run.outdir.output_write_errors(tmp_path / "o"):
             raise ValueError("not an OSError")

@@ -1,4 +1,4 @@
-"""The output-folder guard (meshphase.run.exits.OutputDir): written whole or not at all.
+"""The output-folder guard (meshphase.run.outdir.OutputDir): written whole or not at all.
 
 ``--overwrite`` builds the new folder beside the old one and swaps it in (rename aside, rename
 in, remove the old one; a journal makes a crash between the renames recoverable), never writes
@@ -21,8 +21,8 @@ from pathlib import Path
 
 import pytest
 
-import meshphase.run.exits as ex
-from meshphase.run.exits import (MANIFEST_NAME, PARTIAL_SUFFIX, OutputDir, foreign_entries,
+import meshphase.run.outdir as ex
+from meshphase.run.outdir import (MANIFEST_NAME, PARTIAL_SUFFIX, OutputDir, foreign_entries,
                                  published_path, recover_output_dirs)
 
 
@@ -251,7 +251,7 @@ def test_recovery_leaves_live_writers_and_other_names_alone(tmp_path):
 
 _KILLED_WRITER = textwrap.dedent("""
     import os, signal, sys
-    from meshphase.run.exits import OutputDir
+    from meshphase.run.outdir import OutputDir
     base, keep = sys.argv[1], sys.argv[2] == "keep"
     with OutputDir(base, overwrite=True, staged=True) as out:
         (out.path / "summary.json").write_text("half")

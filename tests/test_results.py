@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from meshphase.kinematics.phasing import GaugeLabels, PassTable, PhasingResult
-from meshphase.run.results import (RESULT_TYPES, CompareStage, GaugeComparison, IdentifyStage,
-                                   LoadSharingStage, PhasingStage,
-                                   StageResult, ToleranceStage, phasing_verdict)
+from meshphase.run.context import RESULT_TYPES, phasing_verdict
+from meshphase.run.results import (CompareStage, GaugeComparison, IdentifyStage, LoadSharingStage,
+                                   PhasingStage, StageResult, ToleranceStage)
+from meshphase.run.state import RunMessage
 from meshphase.run.scene import STAGES, parse_scene
 from meshphase.run.stages import STAGE_FUNCTIONS, RunContext
 
@@ -109,13 +110,18 @@ def test_run_context_bad_input():
 
 def test_phasing_verdict_given_or_from_messages():
     assert phasing_verdict(None, []) == {}
-    assert phasing_verdict(_phasing(reliability={}), ["phasing: ProcessingWarning: not reliable"]) == {}
+    flag = RunMessage("phasing", "ProcessingWarning", "not reliable", unreliable=True)
+    assert phasing_verdict(_phasing(reliability={}), [flag]) == {}
     ph = _phasing(reliability=None)
-    msgs = ["phasing: ProcessingWarning: ring gauge: encoder misfit; phasing not reliable"]
+    msgs = [RunMessage("phasing", "ProcessingWarning", "ring gauge: encoder misfit; phasing not reliable",
+                       gauge="ring", unreliable=True)]
     assert phasing_verdict(ph, msgs) == {"ring": {"reliable": False, "reasons": [
         "ring gauge: encoder misfit; phasing not reliable"]}}
-    assert phasing_verdict(None, ["x: ProcessingWarning: not reliable"]) == {
+    assert phasing_verdict(None, [RunMessage("x", "ProcessingWarning", "not reliable", unreliable=True)]) == {
         "phasing": {"reliable": False, "reasons": ["not reliable"]}}
+    # the text is never read: an unflagged message that says "not reliable" flags nothing
+    assert phasing_verdict(None, ["x: ProcessingWarning: not reliable",
+                                  RunMessage("x", "ProcessingWarning", "not reliable")]) == {}
     with pytest.raises(TypeError, match="PhasingStage"):
         phasing_verdict({"tables": {}}, [])
     with pytest.raises(TypeError, match="messages"):

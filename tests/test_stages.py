@@ -19,6 +19,7 @@ import pytest
 import meshphase.io
 import meshphase.models.tolerance
 import meshphase.run.stages
+from meshphase.run.state import FailureKind, StageFailure
 from meshphase.run.scene import STAGES, Scene, load_scene, parse_scene, plan
 from meshphase.kinematics.phasing import relabel_gauge
 from meshphase.run.results import IdentifyStage, PhasingStage
@@ -144,7 +145,8 @@ def test_scene_without_face_width_gauges_does_no_centroid_work(tmp_path, monkeyp
                         'minutes = 0.25\n', tmp_path / "c.toml")
     ctx = run_scene(scene)
     assert "centroids" not in ctx.ran and ctx.centroids is None
-    assert ctx.failed["centroids"].startswith("skipped")
+    assert ctx.failed["centroids"].kind is FailureKind.NOT_APPLICABLE and ctx.failed["centroids"].benign
+    assert str(ctx.failed["centroids"]) == "skipped: the recording has no face-width gauges"
     assert ctx.ran == ["load", "condition", "onsets"]
 
 
@@ -208,9 +210,11 @@ def test_failed_load_skips_dependents_and_the_rest_runs(tmp_path):
     p.write_text(text, encoding="utf-8")
     ctx = run_scene(load_scene(p))
     assert "ideal" in ctx.ran
-    assert "load" in ctx.failed and "garbage.h5" in ctx.failed["load"]
+    assert "load" in ctx.failed and "garbage.h5" in str(ctx.failed["load"])
+    assert ctx.failed["load"].kind is FailureKind.RAISED and ctx.failed["load"].exception
     for s in ("condition", "onsets", "phasing"):
-        assert ctx.failed[s].startswith("skipped: needs")
+        assert ctx.failed[s].kind is FailureKind.BLOCKED
+        assert str(ctx.failed[s]).startswith("skipped: needs")
     files = write_outputs(ctx, new_output_dir(tmp_path / "out"), report=False)
     stages = pd.read_csv(files["stages"])
     assert set(stages["stage"]) == {"ideal", "load", "condition", "onsets", "phasing"}
@@ -251,7 +255,9 @@ def test_a_key_error_in_a_stage_is_a_bug_not_a_failed_stage(monkeypatch):
 
     monkeypatch.setitem(STAGE_FUNCTIONS, "tilt", bad)
     ctx = run_scene(load_scene(EXAMPLES / "bearing_moments.toml"))
-    assert ctx.failed == {"tilt": "ValueError: k_tilt out of range"} and ctx.ran == ["bearing_moments"]
+    assert ctx.failed == {"tilt": StageFailure("tilt", FailureKind.RAISED, "k_tilt out of range",
+                                               "ValueError")} and ctx.ran == ["bearing_moments"]
+    assert str(ctx.failed["tilt"]) == "ValueError: k_tilt out of range"
 
 
 def test_a_stage_out_of_order_says_what_it_needs():

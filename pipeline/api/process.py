@@ -145,8 +145,7 @@ def _run_in_memory(scene, rec: Recording, progress):
         scene.input = {"recording": path}
         ctx = run_scene(scene, progress=progress)
     name = "<Recording in memory>"
-    ctx.failed = {k: str(v).replace(str(path), name) for k, v in ctx.failed.items()}
-    ctx.messages = [str(m).replace(str(path), name) for m in ctx.messages]
+    ctx.replace_text(str(path), name)
     if ctx.load is not None:
         ctx.record("load", dataclasses.replace(ctx.load, source=name, stream=None))
     return ctx

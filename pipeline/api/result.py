@@ -17,7 +17,10 @@ import os
 from meshphase.run import frames as rf
 from meshphase.html_repr import html_table
 from meshphase.run.exits import run_status
-from meshphase.run.results import RunContext, phasing_verdict
+from meshphase.run.context import RunContext, phasing_verdict
+from meshphase.run.outdir import OutputDir
+from meshphase.run.outputs import write_outputs
+from meshphase.run.state import failure_texts
 
 __all__ = ["Result", "PLOT_KINDS", "run_html"]
 
@@ -117,7 +120,7 @@ class Result:
         if ph is not None:
             out["held_member"] = ph.fixed or "none"
         out["n_messages"] = len(ctx.messages)
-        out["stages_failed"] = ", ".join(f"{k} ({v})" for k, v in ctx.failed.items())
+        out["stages_failed"] = ", ".join(f"{k} ({v})" for k, v in failure_texts(ctx.failed).items())
         verdict = phasing_verdict(ph, ctx.messages)
         rel = (ph.reliability or {}) if ph is not None else {}
         for gauge, t in (ph.tables.items() if ph is not None else ()):
@@ -180,7 +183,7 @@ class Result:
         """Write summary.json, the CSV tables, arrays.h5 and (``report``) report.html into
         ``folder``, as ``meshphase process`` does (:func:`meshphase.run.outputs.write_outputs`).
 
-        The folder is put in place whole (:class:`meshphase.run.exits.OutputDir`); an existing
+        The folder is put in place whole (:class:`meshphase.run.outdir.OutputDir`); an existing
         one is kept and ``folder-2``, ... is used unless ``overwrite``.
 
         Returns
@@ -190,9 +193,6 @@ class Result:
         """
         if not isinstance(folder, (str, os.PathLike)):
             raise TypeError(f"folder must be a path, got {type(folder).__name__}")
-        from meshphase.run.exits import OutputDir
-        from meshphase.run.outputs import write_outputs
-
         with OutputDir(folder, overwrite=overwrite, staged=True) as out:
             written = write_outputs(self.context, out.path, report=report)
             return {k: out.published(v) for k, v in written.items()}

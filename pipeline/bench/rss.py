@@ -236,7 +236,7 @@ def process_job(path: str, gearset: str, out_dir: str) -> dict:
     timings = ctx.condition.timings if ctx.condition is not None else {}
     memory = ctx.condition.memory if ctx.condition is not None else {}
     return {"status": run_status(ctx)["status"], "timings": dict(ctx.timings), "hwm_mb": hwm,
-            "failed": dict(ctx.failed), "n_onsets": int(sum(len(o) for o in ons.values())),
+            "failed": {k: str(v) for k, v in ctx.failed.items()}, "n_onsets": int(sum(len(o) for o in ons.values())),
             "onsets_s": float(timings.get("onsets_s", float("nan"))),
             "memory_estimate_mb": (memory.get("total", 0) / 2**20) or None,
             "threads": run_threads(), "cpu_s": cpu}

@@ -17,7 +17,7 @@ import shutil
 from pathlib import Path
 from typing import Callable, Sequence
 
-from meshphase.run.exits import read_json_object
+from meshphase.run.outdir import read_json_object
 from meshphase.jsonable import to_jsonable
 from meshphase.runtime.log import logger
 

@@ -11,7 +11,7 @@ fails (unreadable file, a stage raising, the worker process dying more often tha
 retries, a task running past its timeout) is reported as failed and the others finish. The
 client then writes ``campaign.json``, ``campaign.csv`` and ``campaign_report.html``
 (:mod:`meshphase.report.campaign_report`) across all recordings, each atomically; the whole
-folder is built beside ``OUT`` and swapped in when finished (:class:`meshphase.run.exits.OutputDir`).
+folder is built beside ``OUT`` and swapped in when finished (:class:`meshphase.run.outdir.OutputDir`).
 
 Faults: a task's timeout (:func:`default_task_timeout`, ``--task-timeout``) counts from the
 moment it starts on a worker (the worker tells the client through a Dask event); past it the
@@ -78,7 +78,9 @@ from meshphase.campaign.cluster import check_cluster_options, local_cluster, tri
 from meshphase.runtime.heap import limit_heap_growth
 from meshphase.jsonable import to_jsonable
 from meshphase.runtime.log import logger
-from meshphase.run.results import phasing_verdict
+from meshphase.run.context import phasing_verdict
+from meshphase.run.declare import client_results
+from meshphase.run.state import failure_texts
 from meshphase.validate import as_regular_file
 
 __all__ = ["run_recording", "run_campaign", "cli_campaign", "collect_recordings",
@@ -197,7 +199,7 @@ def collect_recordings(inputs: Iterable, *, recursive: bool = False) -> tuple[li
 def _folder_files(folder: Path, recursive: bool, skipped: list):
     """The entries of ``folder`` in name order (with ``recursive``, those of its subfolders
     in their place, depth first); the subfolders not entered go to ``skipped``."""
-    from meshphase.run.exits import MANIFEST_NAME
+    from meshphase.run.outdir import MANIFEST_NAME
 
     for q in sorted(folder.iterdir()):
         if not (recursive and q.is_dir()):
@@ -322,14 +324,8 @@ def split_results(scene) -> tuple[list[str], list[str], bool]:
     results = list(scene.results)
     mc_wanted = "tolerance" in results or ("compare" in results and scene.tolerances is not None)
     mc_on_client = mc_wanted and scene.gearset is not None
-    client, worker = [], []
-    for r in results:
-        if r == "tolerance":
-            (client if mc_on_client else worker).append(r)
-        elif r == "tilt" or (r == "bearing_moments" and "centroids" not in results):
-            client.append(r)
-        else:
-            worker.append(r)
+    client = client_results(results, gearset_known=scene.gearset is not None)
+    worker = [r for r in results if r not in client]
     if mc_on_client and "tolerance" not in client:
         client.append("tolerance")
     return client, worker, mc_on_client
@@ -510,7 +506,7 @@ def run_recording(scene_path: str, recording_path: str, out_dir: str, *, bands: 
         out.update(_compact(summ))
         out["timings_s"] = summ["timings_s"]
         out["stages_ran"] = list(ctx.ran)
-        out["stages_failed"] = dict(ctx.failed)
+        out["stages_failed"] = failure_texts(ctx.failed)
         msgs = list(ctx.messages)
         for w in caught:
             m = f"{w.category.__name__}: {w.message}"
@@ -656,7 +652,7 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
                  recursive: bool = False) -> dict:
     """Process many recordings with one scene as one Dask job.
 
-    The output folder is written whole or not at all (:class:`meshphase.run.exits.OutputDir`: a
+    The output folder is written whole or not at all (:class:`meshphase.run.outdir.OutputDir`: a
     staging folder swapped in at the end). Each recording's results go to
     ``recordings/<name>/`` (:func:`recording_names`) with a completion marker written last
     (:data:`DONE_NAME`); ``resume`` reuses the results whose marker matches the recording
@@ -689,7 +685,7 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
         LocalCluster worker processes (one thread each); default one per core.
     overwrite : bool
         Replace ``out_dir`` if it exists (atomically; refused when it holds files meshphase
-        did not write or symbolic links: :class:`meshphase.run.exits.OutputDir`).
+        did not write or symbolic links: :class:`meshphase.run.outdir.OutputDir`).
     progress : bool
         A tqdm progress bar (recordings done) on stderr.
     recording_reports : bool
@@ -739,7 +735,7 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
         Arguments of the wrong type.
     """
     t_all = time.perf_counter()
-    from meshphase.run.exits import PARTIAL_SUFFIX, OutputDir, remove_partial
+    from meshphase.run.outdir import PARTIAL_SUFFIX, OutputDir, remove_partial
 
     workers, task_timeout, task = _check_options(scheduler, workers, dashboard, task_timeout, task)
     scene_path = Path(scene_path).resolve()
@@ -759,7 +755,7 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
                     sources=[base, partial] if resume else [], dashboard=dashboard)
     # the folder is reserved now; the campaign fills a staging folder beside it, swapped in
     # when it finishes; if it raises or is interrupted (Ctrl-C) nothing is left but the
-    # recordings it had finished, in <out>.partial (meshphase.run.exits.OutputDir)
+    # recordings it had finished, in <out>.partial (meshphase.run.outdir.OutputDir)
     with OutputDir(base, overwrite=overwrite or resume, staged=True) as guard:
         opts.guard = guard
         result = _campaign_body(scene, scene_path, inputs, files, skipped, names, guard.path.resolve(), opts)

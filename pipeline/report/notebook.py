@@ -14,7 +14,7 @@ import numpy as np
 import matplotlib.pyplot as plt
 
 from meshphase.compare.pass_model import wrap
-from meshphase.run.results import RunContext
+from meshphase.run.context import RunContext
 
 __all__ = ["plot_channels", "plot_result_onsets", "plot_phasing", "plot_load_sharing",
            "plot_residuals", "onset_marks"]

@@ -22,7 +22,7 @@ from meshphase.models.tilt import TABLE11_THEORY, table10_cases, table11_cases
 from meshphase.report import figures
 from meshphase.report.html import Report, figure_to_png
 
-__all__ = ["build_report"]
+__all__ = ["build_report", "SECTION_KEYS"]
 
 
 def _f(x, unit="", scale=1.0, fmt="{:.4g}"):
@@ -66,28 +66,68 @@ def build_report(ctx, out_dir) -> Path:
     fig_dir.mkdir(exist_ok=True)
     figs = _Figures(fig_dir)
     _summary_section(rep, ctx)
+    for _, write in _SECTIONS:
+        write(rep, ctx, figs)
+    _runtime_section(rep, ctx, figs)
+    return rep.write(out_dir / "report.html")
+
+
+def _recording_part(rep: Report, ctx, figs: _Figures) -> None:
     if ctx.load is not None:
         _recording_section(rep, ctx, figs)
         if ctx.scene.channels:
             _channel_map_section(rep, ctx)
+
+
+def _onsets_part(rep: Report, ctx, figs: _Figures) -> None:
     if ctx.onsets is not None:
         _onsets_section(rep, ctx, figs)
+
+
+def _ideal_part(rep: Report, ctx, figs: _Figures) -> None:
     if ctx.ideal is not None:
         _ideal_section(rep, ctx.ideal)
+
+
+def _phasing_part(rep: Report, ctx, figs: _Figures) -> None:
     if ctx.phasing is not None and ctx.phasing.tables:
         _phasing_section(rep, ctx, figs)
+
+
+def _identify_part(rep: Report, ctx, figs: _Figures) -> None:
     if ctx.identify is not None:
         _identify_section(rep, ctx)
+
+
+def _load_sharing_part(rep: Report, ctx, figs: _Figures) -> None:
     if ctx.load_sharing is not None and ctx.load_sharing.sharing is not None:
         _load_sharing_section(rep, ctx, figs)
+
+
+def _centroids_part(rep: Report, ctx, figs: _Figures) -> None:
     if ctx.centroids is not None and ctx.centroids.by_gear:
         _centroids_section(rep, ctx.centroids)
+
+
+def _bearing_part(rep: Report, ctx, figs: _Figures) -> None:
     if ctx.bearing_moments is not None:
         _bearing_section(rep, ctx.bearing_moments)
+
+
+def _tilt_part(rep: Report, ctx, figs: _Figures) -> None:
     if ctx.tilt is not None:
         _tilt_section(rep, ctx.tilt, figs)
-    _runtime_section(rep, ctx, figs)
-    return rep.write(out_dir / "report.html")
+
+
+#: the sections between the summary and "error against run time", in report order: section
+#: key (a stage declaration's ``report``, :data:`meshphase.run.declare.STAGE_REGISTRY`) ->
+#: its writer, which writes it when the run computed something for it
+_SECTIONS = (("recording", _recording_part), ("onsets", _onsets_part), ("ideal", _ideal_part),
+             ("phasing", _phasing_part), ("identify", _identify_part),
+             ("load_sharing", _load_sharing_part), ("centroids", _centroids_part),
+             ("bearing_moments", _bearing_part), ("tilt", _tilt_part))
+#: the report's section keys, in report order
+SECTION_KEYS: tuple[str, ...] = tuple(k for k, _ in _SECTIONS)
 
 
 def _summary_section(rep: Report, ctx) -> None:
@@ -100,7 +140,7 @@ def _summary_section(rep: Report, ctx) -> None:
     s.text(f"Results requested: {', '.join(ctx.scene.results)}. Stages run: {', '.join(ctx.ran)}.")
     if ctx.failed:
         for k, v in ctx.failed.items():
-            s.warning(f"stage {k}: {v}")
+            s.warning(f"stage {k}: {v}")          # a StageFailure says itself
     if ctx.messages:
         s.heading("Warnings raised")
         s.table([{"message": m} for m in ctx.messages[:40]])
@@ -490,7 +530,7 @@ def _runtime_section(rep: Report, ctx, figs: _Figures) -> None:
     listed = names + [n for n in ctx.failed if n not in ctx.timings]
     s.table([{"stage": n, "wall time [s]": ctx.timings.get(n, float("nan")),
               "error estimate": ctx.error_estimates.get(n, ""),
-              "status": "ran" if n in ctx.ran else ctx.failed.get(n, "")} for n in listed])
+              "status": "ran" if n in ctx.ran else str(ctx.failed.get(n, ""))} for n in listed])
     if names:
         s.text(f"Total wall time of the stages: {sum(ctx.timings.values()):.3g} s.")
     if ctx.tolerance is not None:

@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from meshphase.compare.predict import wrap
-from meshphase.run.results import RunContext
+from meshphase.run.context import RunContext
 
 __all__ = ["COLUMNS", "passes_rows", "phasing_rows", "load_sharing_rows", "comparison_rows",
            "identification_rows", "centroid_rows", "frame", "circular_mean"]

@@ -1,7 +1,7 @@
 """What a run writes: the machine-readable summary (summary.json), the CSV tables, the
 arrays (arrays.h5) and the HTML report, from the run context's typed stage results
 (:mod:`meshphase.run.results`). The output folder a run writes into is
-:func:`meshphase.run.exits.new_output_dir`'s (re-exported here and from :mod:`meshphase.run.stages`).
+:func:`meshphase.run.outdir.new_output_dir`'s (re-exported here and from :mod:`meshphase.run.stages`).
 
 ``summary.json`` keys: scene, status, missing_results, phasing_reliability,
 results_requested, stages_ran, stages_failed, timings_s, error_estimates, messages,
@@ -26,10 +26,13 @@ from pathlib import Path
 
 import numpy as np
 
-from meshphase.run.exits import new_output_dir, run_status
 from meshphase.compare.predict import identification_verdict
 from meshphase.jsonable import to_jsonable
-from meshphase.run.results import PhasingStage, RunContext, phasing_verdict
+from meshphase.run.context import RunContext, phasing_verdict
+from meshphase.run.exits import run_status
+from meshphase.run.outdir import new_output_dir
+from meshphase.run.results import PhasingStage
+from meshphase.run.state import failure_texts
 from meshphase.run.table_csv import write_csv
 
 __all__ = ["new_output_dir", "summary_dict", "write_outputs"]
@@ -42,7 +45,7 @@ def summary_dict(ctx: RunContext) -> dict:
                "missing_results": st["missing_results"],
                "phasing_reliability": phasing_verdict(ctx.phasing, ctx.messages),
                "results_requested": ctx.scene.results,
-               "stages_ran": ctx.ran, "stages_failed": ctx.failed,
+               "stages_ran": ctx.ran, "stages_failed": failure_texts(ctx.failed),
                "timings_s": ctx.timings, "error_estimates": ctx.error_estimates,
                "messages": ctx.messages, "channels_unused": ctx.channels_unused}
     g = ctx.gearset
@@ -154,7 +157,7 @@ def write_outputs(ctx: RunContext, out_dir: Path, *, report: bool = True, summar
     files["stages"] = _csv(
         [{"stage": s, "wall_time_s": ctx.timings.get(s, float("nan")),
           "error_estimate": ctx.error_estimates.get(s, ""),
-          "status": "ran" if s in ctx.ran else ctx.failed.get(s, "")}
+          "status": "ran" if s in ctx.ran else str(ctx.failed.get(s, ""))}
          for s in list(ctx.timings) + [k for k in ctx.failed if k not in ctx.timings]],
         out_dir / "stages.csv", columns=["stage", "wall_time_s", "error_estimate", "status"])
     files["arrays"] = _write_arrays(ctx, out_dir / "arrays.h5")

@@ -1,8 +1,7 @@
-"""Typed results of the stages a scene runs: one frozen dataclass per stage, and the run
-context that holds them.
+"""Typed results of the stages a scene runs: one frozen dataclass per stage.
 
-:func:`meshphase.run.stages.run_scene` keeps them in its :class:`RunContext`, one attribute per
-stage (``ctx.load``, ``ctx.phasing``, ``ctx.compare``, ...; None for a stage
+:func:`meshphase.run.stages.run_scene` keeps them in its
+:class:`meshphase.run.context.RunContext`, one attribute per stage (``ctx.load``, ``ctx.phasing``, ``ctx.compare``, ...; None for a stage
 that did not run); :func:`meshphase.run.stages.summary_dict`, :func:`meshphase.run.stages.write_outputs`,
 the HTML report and the run status read them there. Units are SI; phasing in mesh cycles [-].
 
@@ -14,18 +13,14 @@ in :meth:`StageResult.supersedes`); the arrays and dicts they hold are not copie
 from __future__ import annotations
 
 import dataclasses
-import re
 from dataclasses import dataclass, field
-from typing import Any, Callable, Generic, TypeVar
+from typing import Any
 
 import numpy as np
 
-from meshphase.models.gearset import Gearset
-
 __all__ = ["StageResult", "LoadStage", "ConditionStage", "OnsetsStage", "PhasingStage",
            "LoadSharingStage", "CentroidsStage", "IdealStage", "ToleranceStage",
-           "IdentifyStage", "GaugeComparison", "CompareStage", "BearingStage", "TiltStage",
-           "RESULT_TYPES", "RunContext", "phasing_verdict"]
+           "IdentifyStage", "GaugeComparison", "CompareStage", "BearingStage", "TiltStage"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -413,158 +408,3 @@ class TiltStage(StageResult):
     case: Any
     torque: float
     solutions: list
-
-
-#: stage name -> the type of its result
-RESULT_TYPES: dict[str, type[StageResult]] = {
-    "load": LoadStage, "condition": ConditionStage, "onsets": OnsetsStage,
-    "phasing": PhasingStage, "load_sharing": LoadSharingStage, "centroids": CentroidsStage,
-    "ideal": IdealStage, "tolerance": ToleranceStage, "identify": IdentifyStage,
-    "compare": CompareStage, "bearing_moments": BearingStage, "tilt": TiltStage,
-}
-
-
-# ----------------------------------------------------------------------------- the run
-_R = TypeVar("_R", bound=StageResult)
-
-
-class _StageAttr(Generic[_R]):
-    """A run context's typed result of one stage (read only; None until the stage ran)."""
-
-    def __init__(self, cls: type[_R]):
-        self.cls = cls
-
-    def __set_name__(self, owner, name: str) -> None:
-        self.name = name
-
-    def __get__(self, ctx, owner=None) -> _R | None:
-        return self if ctx is None else ctx.result(self.name)
-
-    def __set__(self, ctx, value) -> None:
-        raise AttributeError(f"ctx.{self.name} is the stage's recorded result: record a new "
-                             f"one with ctx.record({self.name!r}, result)")
-
-
-@dataclass
-class RunContext:
-    """Everything a run produces.
-
-    Attributes
-    ----------
-    scene : meshphase.run.scene.Scene
-    ran : list of str
-        Stages that ran, in order.
-    timings : dict
-        Wall time per stage [s].
-    error_estimates : dict
-        Per stage, a short text with its error estimate (what "error against run time" lists).
-    messages : list of str
-        Warnings raised during the run (category: message).
-    failed : dict
-        Stage -> error message for stages that raised (the run goes on with what it has).
-    channels_unused : list of str
-        Channels of the recording that no planned stage reads (set by the load stage).
-    load, condition, onsets, phasing, load_sharing, centroids, ideal, tolerance, identify, \
-compare, bearing_moments, tilt : StageResult or None
-        The typed result of each stage (:mod:`meshphase.run.results`: :class:`LoadStage`,
-        :class:`PhasingStage`, ...), None while the stage has not run.
-    gearset : Gearset or None
-        The scene's, else the recording's (read only).
-    """
-
-    scene: Any                      # meshphase.run.scene.Scene (which imports the stages)
-    ran: list = field(default_factory=list)
-    timings: dict = field(default_factory=dict)
-    error_estimates: dict = field(default_factory=dict)
-    messages: list = field(default_factory=list)
-    failed: dict = field(default_factory=dict)
-    progress: Callable | None = None
-    channels_unused: list = field(default_factory=list)
-    _store: dict = field(default_factory=dict, init=False, repr=False)
-
-    load = _StageAttr(LoadStage)
-    condition = _StageAttr(ConditionStage)
-    onsets = _StageAttr(OnsetsStage)
-    phasing = _StageAttr(PhasingStage)
-    load_sharing = _StageAttr(LoadSharingStage)
-    centroids = _StageAttr(CentroidsStage)
-    ideal = _StageAttr(IdealStage)
-    tolerance = _StageAttr(ToleranceStage)
-    identify = _StageAttr(IdentifyStage)
-    compare = _StageAttr(CompareStage)
-    bearing_moments = _StageAttr(BearingStage)
-    tilt = _StageAttr(TiltStage)
-
-    @property
-    def gearset(self) -> Gearset | None:
-        """The scene's gearset, else the one in the recording's metadata (synthetic files
-        carry one); None without either."""
-        g = self.scene.gearset
-        if g is None and self.load is not None:
-            meta = self.load.recording.meta.get("gearset")
-            if meta:
-                g = Gearset.from_dict(meta)
-        return g
-
-    def result(self, name: str) -> StageResult | None:
-        """The typed result of stage ``name``; None while it has not run."""
-        if name not in RESULT_TYPES:
-            raise KeyError(f"no stage {name!r}; stages: {', '.join(RESULT_TYPES)}")
-        return self._store.get(name)
-
-    def record(self, name: str, result: StageResult) -> StageResult:
-        """Keep ``result`` as stage ``name``'s (with the results it supersedes) and its error
-        estimate; returns it."""
-        cls = RESULT_TYPES[name]
-        if not isinstance(result, cls):
-            raise TypeError(f"stage {name!r} gives a {cls.__name__}, got {type(result).__name__}")
-        self._store[name] = result
-        self._store.update(result.supersedes())
-        self.error_estimates[name] = result.error_estimate
-        return result
-
-
-_NOT_RELIABLE = re.compile(r"ProcessingWarning: (?:(?P<gauge>[A-Za-z0-9_]+) gauge\b)?.*not reliable")
-
-
-def phasing_verdict(phasing: PhasingStage | None, messages) -> dict:
-    """Whether each gauge's measured phasing is reliable, and why not.
-
-    Parameters
-    ----------
-    phasing : PhasingStage or None
-        Its ``reliability`` decides when given; otherwise ``messages`` do.
-    messages : sequence of str
-        The run's "stage: Category: message" lines: a ProcessingWarning that says "not
-        reliable" flags the gauge it names ("sun gauge: ..."), or every gauge with a phasing
-        table when it names none (``"phasing"`` if there is none).
-
-    Returns
-    -------
-    dict
-        gauge -> ``{"reliable": bool, "reasons": list of str}``; empty when no phasing ran
-        and nothing was flagged.
-    """
-    if phasing is not None and not isinstance(phasing, PhasingStage):
-        raise TypeError(f"phasing must be a PhasingStage or None, got {type(phasing).__name__}")
-    if not isinstance(messages, (list, tuple)):
-        raise TypeError(f"messages must be a list of str, got {type(messages).__name__}")
-    given = None if phasing is None else phasing.reliability
-    if isinstance(given, dict):
-        return {str(g): {"reliable": bool(v.get("reliable", True)),
-                         "reasons": [str(r) for r in v.get("reasons") or []]}
-                for g, v in given.items()}
-    tables = {} if phasing is None else (phasing.tables or {})
-    out = {str(g): {"reliable": True, "reasons": []} for g in tables}
-    for m in messages:
-        hit = _NOT_RELIABLE.search(str(m))
-        if hit is None:
-            continue
-        reason = str(m).split("ProcessingWarning: ", 1)[1]
-        gauges = [hit.group("gauge")] if hit.group("gauge") else (list(out) or ["phasing"])
-        for g in gauges:
-            entry = out.setdefault(g, {"reliable": True, "reasons": []})
-            entry["reliable"] = False
-            if reason not in entry["reasons"]:
-                entry["reasons"].append(reason)
-    return out

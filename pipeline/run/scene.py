@@ -8,7 +8,8 @@ anything runs"; the gearset itself with :mod:`meshphase.models.assembly`, and th
 the recording's header with :func:`check_recording`). :func:`plan` turns the requested results into the ordered list of
 stages that must run, and nothing else: a bearing-moment scene opens no recording, a scene
 without tolerances runs no Monte Carlo, a scene without face-width gauges does no centroid
-work. The stages themselves live in :mod:`meshphase.run.stages`.
+work. The stages are declared in :mod:`meshphase.run.declare` (:data:`STAGES` and
+:data:`RESULTS` come from there) and run by :mod:`meshphase.run.stages`.
 """
 
 from __future__ import annotations
@@ -38,40 +39,18 @@ from meshphase.models.gearset import Gearset, Speeds, rpm_to_rad_s
 from meshphase.recording import Recording
 from meshphase.io.units import parse_unit
 from meshphase.runtime.registry import DEFAULT_ONSET_DETECTOR, ONSET_DETECTORS
+from meshphase.run.declare import gearset_stages, recording_stages, result_stages, stage_graph
 
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "scene_schema_errors", "plan",
            "check_recording", "STAGES", "RESULTS", "LIMITS"]
 
-#: stage -> the stages it needs (a DAG; the flow runs one way)
-STAGES: dict[str, tuple[str, ...]] = {
-    "load": (),
-    "condition": ("load",),
-    "onsets": ("condition",),
-    "phasing": ("onsets",),
-    "load_sharing": ("onsets",),
-    "centroids": ("onsets",),
-    "ideal": (),
-    "tolerance": (),
-    "identify": ("phasing",),
-    "compare": ("phasing", "ideal"),
-    "bearing_moments": (),
-    "tilt": (),
-}
+#: stage -> the stages it needs (a DAG; the flow runs one way), from the stage registry
+STAGES: dict[str, tuple[str, ...]] = stage_graph()
 
-#: result name -> stages that produce it
-RESULTS: dict[str, tuple[str, ...]] = {
-    "ideal_phasing": ("ideal",),
-    "phasing": ("phasing",),
-    "load_sharing": ("load_sharing",),
-    "centroids": ("centroids",),
-    "compare": ("compare",),
-    "identify": ("identify",),
-    "tolerance": ("tolerance",),
-    "bearing_moments": ("bearing_moments",),
-    "tilt": ("tilt",),
-}
+#: result name -> stages that produce it, from the stage registry
+RESULTS: dict[str, tuple[str, ...]] = result_stages()
 
-_NEEDS_RECORDING = {"load"}
+_NEEDS_RECORDING = recording_stages()
 
 
 def _file_state(path) -> str:
@@ -1213,8 +1192,7 @@ def _check_consistency(scene: Scene, text: str, label, *, check_files: bool = Tr
     ``recording_given``: the caller supplies the recording, ``[input]`` may be absent.
     """
     stages = plan(scene, check=False)
-    needs_gearset = set(stages) & {"onsets", "phasing", "load_sharing", "ideal", "tolerance",
-                                   "identify", "compare"}
+    needs_gearset = set(stages) & gearset_stages()
     if needs_gearset and scene.gearset is None and not scene.input.get("synthetic"):
         raise SceneError(label, "gearset", f"results {scene.results} need a [gearset] table",
                          _line_of(text, ["results"]))

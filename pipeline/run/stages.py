@@ -33,7 +33,7 @@ from meshphase.run.channels import (GAUGE_KINDS, apply_channel_overrides, bridge
 from meshphase.compare.predict import band_coverage, identify_errors, predict_pass_phasing, residual_stats
 from meshphase.kinematics.encoder import edge_timing_sigma
 from meshphase.errors import DataQualityWarning, MeshphaseWarning, ProcessingWarning, SceneWarning
-from meshphase.run.exits import OutputDir, output_write_errors, recording_read_errors, run_status
+from meshphase.run.exits import recording_read_errors, run_status
 from meshphase.kinematics.loads import facewidth_centroid, facewidth_readings, load_sharing_from_amplitudes
 from meshphase.runtime.log import logger
 from meshphase.kinematics.member_speeds import mean_mesh_rate, member_speeds, tacho_rate
@@ -47,11 +47,15 @@ from meshphase.kinematics.pass_rates import pass_rate_warnings, two_level_train,
 from meshphase.kinematics.phasing import (PassTable, assign_planets_by_pattern, measure_phasing, pass_order,
                                           relabel_gauge)
 from meshphase.recording import Recording
+from meshphase.run.context import RunContext
+from meshphase.run.declare import STAGE_REGISTRY
+from meshphase.run.outdir import OutputDir, output_write_errors
 from meshphase.run.results import (BearingStage, CentroidsStage, CompareStage, ConditionStage,
                                    GaugeComparison, IdealStage, IdentifyStage, LoadSharingStage, LoadStage,
-                                   OnsetsStage, PhasingStage, RunContext, StageResult, TiltStage,
+                                   OnsetsStage, PhasingStage, StageResult, TiltStage,
                                    ToleranceStage)
 from meshphase.run.scene import STAGES, Scene, SceneError, load_scene, plan, read_options
+from meshphase.run.state import RunMessage, StageFailure, flagged_warning
 from meshphase.run.stream import (BLOCK_SAMPLES, ChannelPlan, FileSource, GeneratorSource, MemorySource,
                                   condition_stream, scan_source)
 from meshphase.runtime.threads import blas_single_thread
@@ -67,13 +71,24 @@ __all__ = ["RunContext", "run_scene", "STAGE_FUNCTIONS", "write_outputs", "proce
            "new_output_dir"]
 
 
-def _records(name: str):
-    """The stage function records what it returns in the run context
-    (:meth:`RunContext.record`)."""
+#: stage name -> its function, as :func:`runs` binds them (in definition order)
+_BOUND: dict[str, Callable] = {}
+
+
+def runs(name: str):
+    """Bind the decorated function to the declared stage ``name``
+    (:data:`meshphase.run.declare.STAGE_REGISTRY`); the function records what it returns in
+    the run context (:meth:`RunContext.record`)."""
+    if name not in STAGES:
+        raise ValueError(f"no declared stage {name!r} (meshphase.run.declare.STAGE_REGISTRY)")
+    if name in _BOUND:
+        raise ValueError(f"stage {name!r} is bound to a function twice")
+
     def deco(fn):
         @functools.wraps(fn)
         def stage(ctx: RunContext):
             return ctx.record(name, fn(ctx))
+        _BOUND[name] = stage
         return stage
     return deco
 
@@ -153,7 +168,7 @@ PULSE_KINDS = ("tacho", "encoder")
 SYNTHETIC_WHOLE_BYTES = 256 * 2**20
 
 
-@_records("load")
+@runs("load")
 def stage_load(ctx: RunContext) -> LoadStage:
     """Open the recording and scan its raw samples (passes 1 and 2 of :mod:`meshphase.run.stream`):
     the quality of every channel, the tacho's edges, the hum windows. A file is never held
@@ -324,7 +339,7 @@ def _overflowing_gauges(ctx: RunContext) -> dict:
     return out
 
 
-@_records("condition")
+@runs("condition")
 def stage_condition(ctx: RunContext) -> ConditionStage:
     """Condition every non-tacho channel and time the gauges' pulses, in one streamed pass
     (pass 3 of :mod:`meshphase.run.stream`): the conditioned samples are not kept, only the
@@ -382,7 +397,7 @@ def _channel_plans(ctx: RunContext, rec) -> list:
     return plans
 
 
-@_records("onsets")
+@runs("onsets")
 def stage_onsets(ctx: RunContext) -> OnsetsStage:
     """The gauges' onsets: found in the condition stage's pass (its warnings are issued
     here), or detected now from a condition result that kept the samples."""
@@ -428,7 +443,7 @@ def _warn_aliased(ctx: RunContext, fs: float) -> None:
                           DataQualityWarning, stacklevel=3)
 
 
-@_records("phasing")
+@runs("phasing")
 def stage_phasing(ctx: RunContext) -> PhasingStage:
     """Measured phasing of every gauged gear (:func:`meshphase.kinematics.phasing.measure_phasing`) from
     the gauges' usable passes (:func:`meshphase.kinematics.passes.gauge_passes`)."""
@@ -543,8 +558,9 @@ def _warn_phasing(res) -> None:
                           ProcessingWarning, stacklevel=3)
     for gear, rel in res.reliability.items():
         if not rel["reliable"]:
-            warnings.warn(f"{gear} gauge: phasing not reliable: " + "; ".join(rel["reasons"]),
-                          ProcessingWarning, stacklevel=3)
+            warnings.warn(flagged_warning(ProcessingWarning, f"{gear} gauge: phasing not reliable: "
+                                          + "; ".join(rel["reasons"]), gauge=gear, unreliable=True),
+                          stacklevel=3)
 
 
 def _phasing_estimate(res) -> str:
@@ -561,7 +577,7 @@ def _phasing_estimate(res) -> str:
     return "; ".join(est)
 
 
-@_records("load_sharing")
+@runs("load_sharing")
 def stage_load_sharing(ctx: RunContext) -> LoadSharingStage:
     """Planet load sharing from the ring gauge's pulse amplitudes, labelled by the phasing
     (else by the pass pattern of its clean onsets)."""
@@ -584,7 +600,7 @@ def stage_load_sharing(ctx: RunContext) -> LoadSharingStage:
         "no standard error (fewer than two passes per planet)"))
 
 
-@_records("centroids")
+@runs("centroids")
 def stage_centroids(ctx: RunContext) -> CentroidsStage:
     """Face-width load centroid of each gear with two or more positioned face-width gauges
     (:func:`meshphase.kinematics.loads.facewidth_readings`, :func:`meshphase.kinematics.loads.facewidth_centroid`)."""
@@ -612,7 +628,7 @@ def stage_centroids(ctx: RunContext) -> CentroidsStage:
         f"{k}: Z = {v.centroid * 1e3:.3f} ± {v.std_error * 1e3:.3f} mm" for k, v in out.items() if v))
 
 
-@_records("ideal")
+@runs("ideal")
 def stage_ideal(ctx: RunContext) -> IdealStage:
     """The gearset's ideal phasing and its class (Parker & Lin 2004)."""
     g = ctx.gearset
@@ -624,9 +640,10 @@ def stage_ideal(ctx: RunContext) -> IdealStage:
                       error_estimate="exact (closed form)")
 
 
-def _tolerances(ctx: RunContext) -> Tolerances:
-    from meshphase.models.tolerance import ToleranceBand, Tolerances
-
+def _tolerances(ctx: RunContext, tolerance) -> "Tolerances":
+    """The scene's tolerance bands as :class:`meshphase.models.tolerance.Tolerances`
+    (``tolerance``: that module, loaded by the stage)."""
+    ToleranceBand = tolerance.ToleranceBand
     t = ctx.scene.tolerances
     kw = {}
     for gear in ("sun", "ring", "planet"):
@@ -634,19 +651,21 @@ def _tolerances(ctx: RunContext) -> Tolerances:
         k = t[f"kappa_{gear}"]
         kw[f"kappa_{gear}"] = (ToleranceBand.full_circle() if k == "uniform" else
                                ToleranceBand(mean=k, band=0.0))
-    return Tolerances(**kw)
+    return tolerance.Tolerances(**kw)
 
 
-@_records("tolerance")
+@runs("tolerance")
 def stage_tolerance(ctx: RunContext) -> ToleranceStage:
     """Monte Carlo phasing statistics under the scene's tolerances."""
-    from meshphase.models.tolerance import monte_carlo, observation_window
+    # scipy.stats and numba behind it: loaded only by a scene that asks for the Monte Carlo
+    from meshphase.models import tolerance
 
     g = ctx.gearset
     t = ctx.scene.tolerances
     sp = ctx.scene.speeds
-    window = observation_window(sp) if t.get("window") is None else (0.0, float(t["window"]))
-    res = monte_carlo(g, sp, _tolerances(ctx), window, t["samples"], sampler=t["sampler"],
+    window = (tolerance.observation_window(sp) if t.get("window") is None
+              else (0.0, float(t["window"])))
+    res = tolerance.monte_carlo(g, sp, _tolerances(ctx, tolerance), window, t["samples"], sampler=t["sampler"],
                       rng=t.get("seed", 0))
     se = float(np.max(res.dev_s.se_bound3)) if res.dev_s.se_bound3.size else float("nan")
     return ToleranceStage(monte_carlo=res, error_estimate=(
@@ -654,7 +673,7 @@ def stage_tolerance(ctx: RunContext) -> ToleranceStage:
         f"{se:.1e} cycles"))
 
 
-@_records("identify")
+@runs("identify")
 def stage_identify(ctx: RunContext) -> IdentifyStage:
     """Shaft hole errors from the measured phasing (:func:`meshphase.compare.predict.identify_errors`).
 
@@ -697,7 +716,7 @@ def _identified(ident, **kw) -> IdentifyStage:
         f"{ident.n_passes} passes"), **kw)
 
 
-@_records("compare")
+@runs("compare")
 def stage_compare(ctx: RunContext) -> CompareStage:
     """Each gauge's measured phasing against the ideal, the identified model, the Monte
     Carlo band and (synthetic input) the truth."""
@@ -736,6 +755,7 @@ def stage_compare(ctx: RunContext) -> CompareStage:
 
 def _bearing_case(ctx: RunContext) -> tuple:
     """(seed 001 case, input torque [N·m]) of the scene's [bearing] table."""
+    # the bearing and tilt models load only for a scene that asks for them
     from meshphase.models import bearing
 
     b = ctx.scene.bearing
@@ -743,7 +763,7 @@ def _bearing_case(ctx: RunContext) -> tuple:
     return case, (b["input_torque"] if b.get("input_torque") is not None else case.input_torque)
 
 
-@_records("bearing_moments")
+@runs("bearing_moments")
 def stage_bearing_moments(ctx: RunContext) -> BearingStage:
     """Bearing moments of the scene's seed 001 case: concentrated, with the scene's centroid
     offsets and (single pinion) with the measured centroids."""
@@ -767,10 +787,10 @@ def stage_bearing_moments(ctx: RunContext) -> BearingStage:
                         with_offsets=with_offsets, measured=measured, error_estimate=est)
 
 
-@_records("tilt")
+@runs("tilt")
 def stage_tilt(ctx: RunContext) -> TiltStage:
     """The coupled tilt / load-distribution solve at each of the scene's tilt stiffnesses."""
-    from meshphase.models.tilt import solve_tilt
+    from meshphase.models.tilt import solve_tilt  # scipy.optimize
 
     b = ctx.scene.bearing
     case, torque = _bearing_case(ctx)
@@ -781,13 +801,14 @@ def stage_tilt(ctx: RunContext) -> TiltStage:
                      error_estimate=f"max residual {res:.1e} m, <= {its} iterations")
 
 
-#: stage name -> the function that runs it (and records its result in the run context)
+_UNBOUND = [s.name for s in STAGE_REGISTRY if s.name not in _BOUND]
+if _UNBOUND:
+    raise ImportError(f"declared stages without a function (@runs): {', '.join(_UNBOUND)}")
+
+#: stage name -> the function that runs it (and records its result in the run context), in
+#: the registry's order
 STAGE_FUNCTIONS: dict[str, Callable[[RunContext], StageResult]] = {
-    "load": stage_load, "condition": stage_condition, "onsets": stage_onsets,
-    "phasing": stage_phasing, "load_sharing": stage_load_sharing, "centroids": stage_centroids,
-    "ideal": stage_ideal, "tolerance": stage_tolerance, "identify": stage_identify,
-    "compare": stage_compare, "bearing_moments": stage_bearing_moments, "tilt": stage_tilt,
-}
+    s.name: _BOUND[s.name] for s in STAGE_REGISTRY}
 
 #: what a stage raises for bad input or data (SceneError and RecordingFileError are
 #: ValueErrors): recorded in ``ctx.failed``; anything else (a KeyError, an AttributeError)
@@ -800,11 +821,13 @@ def run_scene(scene: Scene, *, progress: Callable[[str, int, int], None] | None 
 
     A stage that raises one of :data:`STAGE_ERRORS` (bad input or data: ValueError, among
     them SceneError and RecordingFileError, TypeError, OSError) is recorded in
-    ``ctx.failed`` and the stages that depend on it are skipped (with the reason); the others
+    ``ctx.failed`` (a :class:`meshphase.run.state.StageFailure`) and the stages that depend on
+    it are skipped (with the stages that blocked them); the others
     still run, so a run always returns what it could compute. Any other exception (a KeyError
     or AttributeError is a bug, not a failed stage) propagates. Our warnings
     (:class:`~meshphase.errors.MeshphaseWarning` and subclasses) are collected into
-    ``ctx.messages`` as "stage: Category: message" and not issued again (the CLI prints
+    ``ctx.messages`` (:class:`meshphase.run.state.RunMessage`, "stage: Category: message")
+    and not issued again (the CLI prints
     them, the report lists them); other warnings are collected and re-issued.
     """
     if not isinstance(scene, Scene):
@@ -823,12 +846,12 @@ def _run_stages(ctx: RunContext, stages: list, progress) -> None:
     for i, name in enumerate(stages):
         blocked = [d for d in STAGES[name] if d in ctx.failed or (d not in ctx.ran)]
         if blocked:
-            ctx.failed[name] = f"skipped: needs {', '.join(blocked)}"
+            ctx.fail(StageFailure.blocked(name, blocked))
             continue
         if name == "centroids" and ctx.load is not None and not any(
                 c.kind == "facewidth" for c in ctx.load.recording.channels):
             # only what the scene needs: no face-width gauges, no centroid work
-            ctx.failed[name] = "skipped: the recording has no face-width gauges"
+            ctx.fail(StageFailure.not_applicable(name, "the recording has no face-width gauges"))
             continue
         if progress:
             progress(name, i, len(stages))
@@ -839,7 +862,7 @@ def _run_stages(ctx: RunContext, stages: list, progress) -> None:
                 STAGE_FUNCTIONS[name](ctx)
                 ctx.ran.append(name)
             except STAGE_ERRORS as exc:
-                ctx.failed[name] = f"{type(exc).__name__}: {exc}"
+                ctx.fail(StageFailure.raised(name, exc))
                 # the caller reports ctx.failed (the CLI: one line per cause); the traceback
                 # is for developers (meshphase --debug)
                 logger.info("stage %s failed: %s", name, exc)
@@ -849,9 +872,10 @@ def _run_stages(ctx: RunContext, stages: list, progress) -> None:
 
 
 def _collect_warnings(ctx: RunContext, stage: str, caught) -> None:
-    """Our warnings into ``ctx.messages`` once each; others issued again."""
+    """Our warnings into ``ctx.messages`` once each (typed:
+    :class:`meshphase.run.state.RunMessage`); others issued again."""
     for w in caught:
-        msg = f"{stage}: {w.category.__name__}: {w.message}"
+        msg = RunMessage.of_warning(stage, w.message, w.category)
         if msg not in ctx.messages:
             ctx.messages.append(msg)
         if not issubclass(w.category, MeshphaseWarning):

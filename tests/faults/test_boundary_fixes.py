@@ -18,6 +18,7 @@ import meshphase.io as pio
 from meshphase.cli import main
 from meshphase.errors import FormatWarning
 from meshphase.run.exits import _load_error, recording_read_errors
+from meshphase.run.state import FailureKind, StageFailure
 from meshphase.io.base import atomic_path
 from meshphase.recording import ChannelSpec, Recording
 
@@ -123,10 +124,14 @@ def test_detect_format_names_a_file_whose_read_fails():
 
 
 def test_load_error_text():
-    assert _load_error("PermissionError: [Errno 13] Permission denied: '/x/a.h5'") == "/x/a.h5: Permission denied"
-    assert _load_error("CorruptFileError: /a.csv: line 2: bad") == "/a.csv: line 2: bad"
-    assert _load_error("RuntimeError: odd") == "RuntimeError: odd"
-    assert _load_error("") == ""
+    def failed(exc):
+        return StageFailure.raised("load", exc)
+
+    assert _load_error(failed(PermissionError(13, "Permission denied", "/x/a.h5"))) == "/x/a.h5: Permission denied"
+    assert _load_error(StageFailure("load", FailureKind.RAISED, "/a.csv: line 2: bad", "CorruptFileError")) \
+        == "/a.csv: line 2: bad"
+    assert _load_error(failed(RuntimeError("odd"))) == "RuntimeError: odd"
+    assert _load_error(StageFailure("load", FailureKind.RAISED)) == ""
 
 
 # --------------------------------------------------------------------------- npTDMS log records

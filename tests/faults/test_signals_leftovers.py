@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from meshphase.run.exits import OutputDir, free_output_name
+from meshphase.run.outdir import OutputDir, free_output_name
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -72,7 +72,7 @@ def test_output_under_a_file_is_refused_naming_the_output(tmp_path):
 def test_sigterm_inside_output_dir_exits_143_and_leaves_nothing(tmp_path):
     r = _py(f"""
         import os, signal, time
-        from meshphase.run.exits import OutputDir
+        from meshphase.run.outdir import OutputDir
         with OutputDir({str(tmp_path / 'pout')!r}, staged=True) as out:
             (out.path / "half.csv").write_text("1,2")
             os.kill(os.getpid(), signal.SIGTERM)
@@ -86,7 +86,7 @@ def test_sigterm_inside_output_dir_exits_143_and_leaves_nothing(tmp_path):
 def test_sigkill_leaves_a_staging_folder_the_next_run_removes(tmp_path):
     r = _py(f"""
         import os, signal
-        from meshphase.run.exits import OutputDir
+        from meshphase.run.outdir import OutputDir
         with OutputDir({str(tmp_path / 'pout')!r}, staged=True) as out:
             (out.path / "half.csv").write_text("1,2")
             os.kill(os.getpid(), signal.SIGKILL)

@@ -102,4 +102,4 @@ def test_input_mcap_mistakes_name_their_key(files):
     ctx = run_scene(parse_scene(base + '[input]\nrecording = "rig.mcap"\n[input.mcap]\n'
                                 '[[input.mcap.channels]]\nname = "sun"\ntopic = "/nope"\nfield = "v"\n'
                                 'kind = "sun"\n', d / "c.toml"))
-    assert "/nope" in ctx.failed["load"] and "topics present" in ctx.failed["load"]
+    assert "/nope" in str(ctx.failed["load"]) and "topics present" in str(ctx.failed["load"])
