@@ -175,7 +175,9 @@ def sample_index(time: float, t0: float, fs: float, n_samples: int) -> int:
 
 def history_entry(step: str, **params: Any) -> dict:
     """One processing-history entry: ``step``, the UTC time [s resolution] and ``params``
-    as JSON-friendly values (non-finite floats kept)."""
+    as JSON-friendly values (non-finite floats kept); TypeError when ``step`` is no string."""
+    if not isinstance(step, str):
+        raise TypeError(f"a history step must be a string, got {type(step).__name__}")
     entry = {"step": step, "time": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
     entry.update({k: to_jsonable(v, nonfinite="keep") for k, v in params.items()})
     return entry
