@@ -17,7 +17,7 @@ import meshphase  # noqa: E402
 from meshphase.io import write  # noqa: E402
 from meshphase.api.result import Result  # noqa: E402
 from meshphase.recording import ChannelSpec, Recording  # noqa: E402
-from meshphase.report import plot_recording  # noqa: E402
+from meshphase.report.notebook import plot_recording  # noqa: E402
 from meshphase.run.results import RunContext  # noqa: E402
 from meshphase.run.scene import Scene  # noqa: E402
 
