@@ -1,26 +1,40 @@
-"""The Recording container: the one type every stage passes on.
+"""The Recording container, its header and the block-source interface every stage reads.
 
-A Recording holds a samples x channels array at a uniform sample rate, the start time of
-its first sample, one :class:`ChannelSpec` per channel, free gearset/rig metadata and the
-processing history. Array functions further down the package take plain arrays and sample
-rates; the thin methods here convert seconds to samples once.
+A :class:`Recording` holds a samples x channels array at a uniform sample rate, the start
+time of its first sample, one :class:`ChannelSpec` per channel, free gearset/rig metadata
+and the processing history. Array functions further down the package take plain arrays and
+sample rates; the thin methods here convert seconds to samples once.
+
+A :class:`RecordingHeader` is everything of a recording but its samples: what a file's
+header says (:func:`meshphase.io.read_info`) and what the streamed stages know of a
+recording they read block by block. A :class:`BlockSource` is a recording that can be read
+again and again in consecutive blocks: its ``header`` and ``blocks(n_block)``.
+:class:`MemorySource` is the source of a Recording in memory
+(:meth:`Recording.source`); the file, generated and bridge-converting sources are in
+:mod:`meshphase.io.sources`.
 """
 
 from __future__ import annotations
 
+import abc
 import copy
 import datetime as _dt
 import math
 import unicodedata
-from dataclasses import asdict, dataclass
+import warnings
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any, Iterator, Sequence
 
 import numpy as np
 
+from meshphase.errors import DataQualityWarning
+from meshphase.html_repr import html_table
 from meshphase.jsonable import to_jsonable
 from meshphase.validate import as_float, as_nonnegative, as_positive
 
-__all__ = ["ChannelSpec", "Recording", "CHANNEL_KINDS", "GAUGE_KINDS", "ENCODER_SHAFTS", "sample_index", "control_character"]
+__all__ = ["ChannelSpec", "Recording", "RecordingHeader", "BlockSource", "MemorySource", "apply_gains",
+           "history_entry", "warn_nonfinite_runs", "CHANNEL_KINDS", "GAUGE_KINDS", "ENCODER_SHAFTS", "sample_index",
+           "control_character"]
 
 #: Channel kinds a recording may carry.
 CHANNEL_KINDS = ("sun", "ring", "facewidth", "tacho", "encoder", "other")
@@ -157,6 +171,182 @@ def sample_index(time: float, t0: float, fs: float, n_samples: int) -> int:
     x = (time - t0) * fs
     i = math.ceil(x - 1e-6)
     return int(min(max(i, 0), n_samples))
+
+
+def history_entry(step: str, **params: Any) -> dict:
+    """One processing-history entry: ``step``, the UTC time [s resolution] and ``params``
+    as JSON-friendly values (non-finite floats kept); TypeError when ``step`` is no string."""
+    if not isinstance(step, str):
+        raise TypeError(f"a history step must be a string, got {type(step).__name__}")
+    entry = {"step": step, "time": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
+    entry.update({k: to_jsonable(v, nonfinite="keep") for k, v in params.items()})
+    return entry
+
+
+@dataclass(repr=False)
+class RecordingHeader:
+    """Everything of a recording but its samples.
+
+    What a file's header says (:func:`meshphase.io.read_info`: ``path``, ``format`` and
+    ``extra`` set) and what the stages after ``load`` know of a recording they stream (a
+    :class:`BlockSource`'s ``header``). Asking it for samples raises a TypeError that says so.
+
+    Parameters
+    ----------
+    fs : float
+        Sample rate [Hz], > 0.
+    n_samples : int
+        Samples per channel [-].
+    channels : list of ChannelSpec
+        One per column.
+    t0 : float
+        Time of the first sample [s].
+    start_datetime : str, optional
+        Wall-clock time of the first sample (ISO 8601).
+    meta : dict
+        Gearset / rig metadata.
+    history : list of dict
+        Processing steps applied so far, oldest first.
+    dtype : numpy dtype
+        Sample type as stored (float64 until a reader says otherwise).
+    path : str, optional
+        The recording file, for a file's header.
+    format : str, optional
+        The file's format name (``"hdf5"``, ``"mcap"``, ``"csv"``, ``"tdms"``).
+    extra : dict
+        Format-specific details (layout, compression, segment count...).
+    """
+
+    fs: float
+    n_samples: int
+    channels: list = field(default_factory=list)
+    t0: float = 0.0
+    start_datetime: str | None = None
+    meta: dict = field(default_factory=dict)
+    history: list = field(default_factory=list)
+    dtype: Any = np.dtype(np.float64)
+    path: str | None = None
+    format: str | None = None
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.fs = as_positive(self.fs, "fs")
+        self.n_samples = int(self.n_samples)
+        self.channels = list(self.channels)
+        self.t0 = float(self.t0)
+        self.meta = dict(self.meta) if self.meta else {}
+        self.history = list(self.history) if self.history else []
+        self.dtype = np.dtype(self.dtype)
+        self.extra = dict(self.extra) if self.extra else {}
+
+    @classmethod
+    def of(cls, rec) -> "RecordingHeader":
+        """The header of a Recording (or of anything with the same attributes)."""
+        return cls(rec.fs, rec.n_samples, rec.channels, rec.t0, rec.start_datetime, rec.meta,
+                   rec.history, getattr(rec, "dtype", None) or rec.data.dtype)
+
+    @property
+    def n_channels(self) -> int:
+        """Channels [-]."""
+        return len(self.channels)
+
+    @property
+    def duration(self) -> float:
+        """Duration n_samples / fs [s]."""
+        return self.n_samples / self.fs
+
+    @property
+    def dt(self) -> float:
+        """Sample interval 1 / fs [s]."""
+        return 1.0 / self.fs
+
+    @property
+    def t_end(self) -> float:
+        """Time just after the last sample, t0 + n_samples / fs [s] (exclusive end)."""
+        return self.t0 + self.duration
+
+    @property
+    def names(self) -> list[str]:
+        """Channel names, in column order."""
+        return [c.name for c in self.channels]
+
+    def __len__(self) -> int:
+        return self.n_samples
+
+    def __repr__(self) -> str:
+        where = f"{self.format} file {self.path}" if self.path is not None else "samples not held"
+        return (f"RecordingHeader({self.n_samples} samples x {self.n_channels} channels at "
+                f"{self.fs:g} Hz, t0={self.t0:g} s, {where})")
+
+    def index(self, name: str) -> int:
+        """Column index of channel ``name``; KeyError naming the channels when unknown."""
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise KeyError(f"no channel {name!r}; channels: {self.names}") from None
+
+    def spec(self, name: str) -> ChannelSpec:
+        """The ChannelSpec of channel ``name``."""
+        return self.channels[self.index(name)]
+
+    def by_kind(self, kind: str) -> list[ChannelSpec]:
+        """Channel specs of one kind, in column order."""
+        return [c for c in self.channels if c.kind == kind]
+
+    def header(self) -> dict:
+        """Everything except the samples, as a JSON-friendly dict (as
+        :meth:`Recording.header`)."""
+        return {"fs": self.fs, "t0": self.t0, "n_samples": self.n_samples,
+                "start_datetime": self.start_datetime,
+                "channels": [c.to_dict() for c in self.channels], "meta": self.meta,
+                "history": self.history}
+
+    def with_history(self, step: str, **params) -> "RecordingHeader":
+        """A copy with one processing step appended to the history (:func:`history_entry`)."""
+        return replace(self, history=self.history + [history_entry(step, **params)])
+
+    def window(self, start: float | None, stop: float | None) -> tuple[int, int]:
+        """Sample range [i0, i1) of the time window [start, stop) [s]; ValueError naming the
+        recording when the window is empty, reversed or outside it."""
+        where = self.path if self.path is not None else "the recording"
+        t_start = self.t0 if start is None else float(start)
+        t_stop = self.t_end if stop is None else float(stop)
+        if t_stop <= t_start:
+            raise ValueError(f"{where}: empty or reversed window [{t_start!r}, {t_stop!r}) s")
+        if t_start >= self.t_end or t_stop <= self.t0:
+            raise ValueError(f"{where}: window [{t_start!r}, {t_stop!r}) s lies outside the "
+                             f"recording [{self.t0!r}, {self.t_end!r}) s")
+        i0 = sample_index(t_start, self.t0, self.fs, self.n_samples)
+        i1 = sample_index(t_stop, self.t0, self.fs, self.n_samples)
+        return i0, max(i0, i1)
+
+    def check_channels(self, channels) -> list[str]:
+        """Normalise a channel selection (None, a name, or names) and check it exists."""
+        where = self.path if self.path is not None else "the recording"
+        if channels is None:
+            return self.names
+        if isinstance(channels, str):
+            channels = [channels]
+        channels = list(channels)
+        if not channels:
+            raise ValueError(f"{where}: channel selection is empty")
+        known = set(self.names)
+        missing = [c for c in channels if c not in known]
+        if missing:
+            raise ValueError(f"{where}: no channel(s) {missing}; the file has {self.names}")
+        if len(set(channels)) != len(channels):
+            raise ValueError(f"{where}: channel selection repeats a channel: {channels}")
+        return channels
+
+    def channel(self, name: str):
+        """Not held: TypeError (the samples of a streamed recording are read block by block)."""
+        raise TypeError(f"channel {name!r}: the recording is streamed in blocks, its samples are "
+                        "not held (use the stage results: onsets, quality, the excerpt)")
+
+    @property
+    def data(self):
+        """Not held: TypeError (the samples of a streamed recording are read block by block)."""
+        raise TypeError("the recording is streamed in blocks, its samples are not held")
 
 
 class Recording:
@@ -400,11 +590,30 @@ class Recording:
             "meta": self.meta, "history": self.history,
         }
 
+    @property
+    def info(self) -> RecordingHeader:
+        """Everything but the samples, as a :class:`RecordingHeader` (dtype included)."""
+        return RecordingHeader.of(self)
+
+    def source(self, channels: Sequence[ChannelSpec] | None = None, gains: list | None = None, *,
+               label: str = "recording") -> "MemorySource":
+        """The recording as a :class:`BlockSource` (:class:`MemorySource`): its samples read
+        block by block as views, what the streamed stages read.
+
+        Parameters
+        ----------
+        channels : sequence of ChannelSpec, optional
+            Specs replacing the recording's (channel overrides).
+        gains : list of (int, float), optional
+            (column, factor) applied to the samples, in order, on copies of the blocks.
+        label : str
+            What the source is called in messages.
+        """
+        return MemorySource(self, channels, gains, label=label)
+
     def with_history(self, step: str, **params: Any) -> "Recording":
         """A shallow copy with one processing step appended to the history."""
-        entry = {"step": step, "time": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
-        entry.update({k: to_jsonable(v, nonfinite="keep") for k, v in params.items()})
-        return self._derive(history=self.history + [entry])
+        return self._derive(history=self.history + [history_entry(step, **params)])
 
     def replace_data(self, data, step: str | None = None, **params) -> "Recording":
         """A recording with new samples of the same shape (same specs), optionally logging a step."""
@@ -426,44 +635,8 @@ class Recording:
         return Recording(**kw)
 
     # ------------------------------------------------------------------ notebooks
-    def plot(self, channels=None, start: float | None = None, stop: float | None = None,
-             onsets=None, *, ax=None, max_points: int = 20000):
-        """Plot channels against time, one panel each, with onsets marked (matplotlib,
-        imported now; :func:`meshphase.report.notebook.plot_channels`).
-
-        Parameters
-        ----------
-        channels : str or sequence of str, optional
-            Channels to draw (default all).
-        start, stop : float, optional
-            Time window [s] (half-open; default the whole recording).
-        onsets : array_like, dict, Result or RunContext, optional
-            Onset times [s] to mark: one array for every channel, a dict channel -> times
-            (or Onsets, or (times, 1-based planets)), or a :class:`meshphase.Result` (its
-            onsets, coloured by planet).
-        ax : matplotlib Axes, optional
-            Draw a single channel into it.
-        max_points : int
-            Samples drawn per channel at most (decimated by striding).
-
-        Returns
-        -------
-        matplotlib.figure.Figure
-        """
-        if self.n_samples == 0 or self.n_channels == 0:
-            raise ValueError("the recording is empty: nothing to plot")
-        part = self.select(channels).slice_time(start, stop)
-        if part.n_samples == 0:
-            raise ValueError(f"no samples in the window [{start}, {stop}) s")
-        from meshphase.report.notebook import plot_channels  # matplotlib: only when plotting
-
-        return plot_channels(part.times(), part.data, part.channels, onsets, ax=ax,
-                             max_points=max_points)
-
     def _repr_html_(self) -> str:
         """The channels, sample rate, duration and start as an HTML table (notebooks)."""
-        from meshphase.html_repr import html_table
-
         cap = (f"Recording: {self.n_channels} channel(s) at {self.fs:g} Hz, {self.duration:.6g} s "
                f"({self.n_samples} samples), t0 = {self.t0:g} s"
                + (f", started {self.start_datetime}" if self.start_datetime else ""))
@@ -488,3 +661,127 @@ class Recording:
 
         return [dict(channel=c.name, **channel_quality(self.data[:, i], kind=c.kind))
                 for i, c in enumerate(self.channels)]
+
+
+# ============================================================================ block sources
+class BlockSource(abc.ABC):
+    """A recording that can be read again and again in consecutive blocks.
+
+    Implementations: :class:`MemorySource` (a Recording in memory), and in
+    :mod:`meshphase.io.sources` ``FileSource`` (a recording file), ``GeneratedSource`` (a
+    generated recording, again for every pass) and ``BridgeSource`` (another source's bridge
+    channels converted to strain).
+
+    Attributes
+    ----------
+    header : RecordingHeader
+        Channels (after any override), fs, t0, length, dtype.
+    """
+
+    header: RecordingHeader
+
+    @abc.abstractmethod
+    def blocks(self, n_block: int) -> Iterator[tuple[int, np.ndarray]]:
+        """(first sample, samples x channels array) of consecutive blocks of about
+        ``n_block`` samples, in the stored dtype, channel gains applied; the arrays are the
+        caller's."""
+
+    @property
+    def label(self) -> str:
+        """What the source is called in messages."""
+        return "recording"
+
+
+def apply_gains(data: np.ndarray, gains: list, copy: bool) -> np.ndarray:
+    """``data`` with column ``j`` multiplied by ``g`` for each (j, g) of ``gains``, in order,
+    in the stored dtype; on a copy (Fortran order) when ``copy``, else in place.
+
+    Parameters
+    ----------
+    data : ndarray, shape (n, c)
+    gains : list of (int, float)
+        (column, factor) pairs; empty: ``data`` itself is returned.
+    copy : bool
+    """
+    if not gains:
+        return data
+    if copy:
+        data = data.copy(order="F")
+    for j, g in gains:
+        data[:, j] *= g
+    return data
+
+
+def warn_nonfinite_runs(label: str, names: Sequence[str], results: dict, first: int = 0) -> None:
+    """One DataQualityWarning per channel with NaN/inf runs, as :func:`meshphase.io.read`
+    issues it for a whole file.
+
+    Parameters
+    ----------
+    label : str
+        The recording (a file's path), first in each message.
+    names : sequence of str
+        Channel names, in the order warned.
+    results : dict
+        Channel name -> anything with ``nonfinite_runs`` (k x 2 [start, stop) sample array, or
+        None); channels missing here are skipped.
+    first : int
+        Sample index of the results' sample 0 in the recording [-] (a window's start).
+    """
+    for name in names:
+        runs = results[name].nonfinite_runs if name in results else None
+        if runs is None or not len(runs):
+            continue
+        lengths = runs[:, 1] - runs[:, 0]
+        warnings.warn(DataQualityWarning(
+            f"{label}: channel {name!r} has {len(runs)} run(s) of NaN/inf samples "
+            f"({int(lengths.sum())} samples, longest {int(lengths.max())}, first at sample "
+            f"{int(runs[0, 0]) + first}); kept in the data"), stacklevel=3)
+
+
+class MemorySource(BlockSource):
+    """A Recording held in memory, read as views (gains applied on copies of the blocks).
+
+    Parameters
+    ----------
+    rec : Recording
+    channels : sequence of ChannelSpec, optional
+        Specs replacing the recording's (channel overrides); default its own.
+    gains : list of (int, float), optional
+        (column, factor) applied to the samples, in order.
+    label : str
+        What the source is called in messages.
+    nonfinite_warnings : bool
+        :meth:`warn_nonfinite` warns of the NaN/inf runs as a file source does (default
+        False: it does nothing).
+    """
+
+    def __init__(self, rec: Recording, channels=None, gains: list | None = None, *,
+                 label: str = "recording", nonfinite_warnings: bool = False):
+        if not isinstance(rec, Recording):
+            raise TypeError(f"rec must be a Recording, got {type(rec).__name__}")
+        self.rec = rec
+        self.gains = list(gains or [])
+        h = RecordingHeader.of(rec)
+        if channels is not None:
+            h.channels = list(channels)
+        self.header = h
+        self._label = str(label)
+        self.nonfinite_warnings = bool(nonfinite_warnings)
+
+    def warn_nonfinite(self, results: dict) -> None:
+        """With ``nonfinite_warnings``: one DataQualityWarning per channel with NaN/inf runs
+        (:func:`warn_nonfinite_runs`; ``results``: the scan results by channel)."""
+        if self.nonfinite_warnings:
+            warn_nonfinite_runs(self.label, self.rec.names, results)
+
+    @property
+    def label(self) -> str:
+        """What the source is called in messages."""
+        return self._label
+
+    def blocks(self, n_block: int):
+        """Consecutive blocks of ``n_block`` samples (views; copies where gains apply)."""
+        n = self.rec.n_samples
+        for i0 in range(0, n, n_block):
+            yield i0, apply_gains(self.rec.data[i0:i0 + n_block], self.gains, copy=True)

@@ -9,6 +9,8 @@
 - :mod:`.scenarios`   the registry of named scenarios (:data:`SCENARIOS`)
 - :mod:`.generate`    :func:`generate` (whole) and :func:`generate_blocks` (streamed)
 - :mod:`.truth`       :class:`GroundTruth` and its JSON sidecar
+- :mod:`.source`      :data:`GENERATOR`, the generator the processing package finds through
+                      the ``meshphase.sources`` entry point
 - :mod:`.tdms_export` NI TDMS writer for synthetic recordings
 - :mod:`.cli`         :func:`cli_synth` behind ``meshphase synth``
 """

@@ -74,6 +74,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from meshphase.models.tilt import load_intensity, tilt_from_centroid
 from meshphase.validate import as_finite_array, as_float, as_nonnegative, as_positive
 
 __all__ = ["pulse_shape", "pulse_support", "pulse_peak_offset", "face_load_factor",
@@ -208,8 +209,6 @@ def face_load_factor(z, centroid, face_width: float) -> np.ndarray:
     (``load_intensity``), with a unit force; the shape does not depend on the force or the
     mesh stiffness.
     """
-    from meshphase.models.tilt import load_intensity, tilt_from_centroid
-
     b = as_positive(face_width, "face_width")
     zz = as_finite_array(z, "z")
     zc = as_finite_array(centroid, "centroid")

@@ -57,6 +57,10 @@ from pathlib import Path
 
 import numpy as np
 
+from meshphase.io.base import atomic_path
+from meshphase.models.mesh_phasing import ShaftHoleErrors
+from meshphase.synthetic.config import SynthConfig, errors_from_dict
+
 __all__ = ["GroundTruth", "EventTable", "PassTruth", "truth_path_for", "ENGAGEMENT_DEFINITION",
            "TRUTH_FORMAT"]
 
@@ -303,8 +307,6 @@ class GroundTruth:
 
     def write(self, path, *, overwrite: bool = False) -> Path:
         """Write the sidecar JSON to ``path`` (atomically); FileExistsError unless overwrite."""
-        from meshphase.io.base import atomic_path
-
         path = Path(path)
         text = json.dumps(self.to_dict(), allow_nan=False, separators=(",", ":"))
         with atomic_path(path, overwrite=overwrite) as tmp:
@@ -325,10 +327,25 @@ class GroundTruth:
         """The recording's :class:`~meshphase.synthetic.kinematics.SpeedClock` (speed profile bound to the
         nominal speeds, both from ``config``): ``tau(t)`` and ``t(tau)`` with t from the first
         sample [s]."""
-        from meshphase.synthetic.config import SynthConfig
-
         cfg = SynthConfig.from_dict(self.config)
         return cfg.speed.clock(cfg.speeds)
+
+    def shaft_hole_errors(self) -> ShaftHoleErrors | None:
+        """The shaft hole errors put in (``errors`` as :class:`ShaftHoleErrors`), None
+        without (:class:`meshphase.compare.truth.RecordingTruth`)."""
+        return errors_from_dict(self.errors) if isinstance(self.errors, dict) else self.errors
+
+    def tacho_geometry(self) -> tuple:
+        """(key angle [rad] or None, {gauge channel: ground angle [rad]}) of the generator
+        (:class:`meshphase.compare.truth.RecordingTruth`).
+
+        Its key reaches the probe at carrier angle ``cfg.tacho_angle()``, so the edge fires
+        at theta_c = -key_angle; a held member's gauge sits still, its direction at t = 0 is
+        its ground angle. The key angle is None without a tacho in the configuration.
+        """
+        cfg = SynthConfig.from_dict(self.config)
+        key = -cfg.tacho_angle() if cfg.tacho is not None else None
+        return key, {g.name: cfg.tooth_angle(g) for g in cfg.gauges}
 
     def event_angle_times(self, channel: str, offset) -> np.ndarray:
         """Times [s] (recording axis) at which the gauged gear has turned ``offset`` mesh

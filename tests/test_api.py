@@ -9,11 +9,13 @@ import subprocess
 import sys
 
 import numpy as np
+import pandas as pd
 import pytest
 
 import meshphase
 from meshphase.run.demo import demo_scene_path
 import meshphase.io
+import meshphase.io.sources
 from meshphase.errors import NotRegularFileError
 from meshphase.io import RecordingFileError, RecordingTooLargeError, write
 from meshphase.api.result import Result
@@ -155,7 +157,7 @@ def test_process_runs_the_cli_stages(res):
                   "tolerance", "compare"):
         assert stage in ctx.ran
     assert ctx.load.source == "<Recording in memory>"
-    assert ctx.load.stream is None       # the temporary file is gone; nothing points at it
+    assert ctx.load.stream is None       # the result keeps no source of the caller's samples
 
 
 def test_process_runs_the_monte_carlo_only_when_asked(rig_file, scene_path):
@@ -167,11 +169,30 @@ def test_process_runs_the_monte_carlo_only_when_asked(rig_file, scene_path):
         meshphase.process(rig_file, scene_path, tolerance="yes")
 
 
-def test_process_file_equals_memory(res, rig_file, scene_path):
+def test_process_file_equals_memory(res, synthetic, rig_file, scene_path, monkeypatch):
+    """A Recording in memory is streamed from its own samples (no file written) and gives
+    bit for bit the tables of the same recording processed from a file."""
     from_file = meshphase.process(rig_file, scene_path)
     assert from_file.context.load.source == str(rig_file.resolve())
-    for gear, t in res.context.phasing.tables.items():
-        np.testing.assert_array_equal(from_file.context.phasing.tables[gear].gamma, t.gamma)
+
+    def no_file(*args, **kwargs):
+        raise AssertionError("processing a Recording in memory wrote or read a file")
+
+    monkeypatch.setattr(meshphase.io, "write", no_file)
+    monkeypatch.setattr(meshphase.io.sources.FileSource, "__init__", no_file)
+    in_memory = meshphase.process(synthetic, scene_path)
+    for gear, t in from_file.context.phasing.tables.items():
+        m = in_memory.context.phasing.tables[gear]
+        for col in ("time", "ref_time", "gamma", "uncertainty", "planet"):
+            np.testing.assert_array_equal(getattr(m, col), getattr(t, col))
+        np.testing.assert_array_equal(res.context.phasing.tables[gear].gamma, t.gamma)
+    for name in ("phasing", "passes", "load_sharing", "comparison"):
+        pd.testing.assert_frame_equal(getattr(in_memory, name), getattr(from_file, name),
+                                      check_exact=True)
+    assert in_memory.context.ran == from_file.context.ran
+    said = [m.replace(str(rig_file.resolve()), "<Recording in memory>")
+            for m in from_file.context.messages]
+    assert in_memory.context.messages == said
 
 
 def test_process_default_gearset_from_metadata_and_window(rig_file, synthetic):

@@ -17,6 +17,7 @@ import meshphase  # noqa: E402
 from meshphase.io import write  # noqa: E402
 from meshphase.api.result import Result  # noqa: E402
 from meshphase.recording import ChannelSpec, Recording  # noqa: E402
+from meshphase.report.notebook import plot_recording  # noqa: E402
 from meshphase.run.context import RunContext  # noqa: E402
 from meshphase.run.scene import Scene  # noqa: E402
 
@@ -127,9 +128,9 @@ def test_result_plot_of_an_empty_run():
             r.plot(kind)
 
 
-# ----------------------------------------------------------------------------- Recording.plot
-def test_recording_plot_with_result_onsets(rec, res):
-    fig = rec.plot(channels=["sun", "ring"], start=0.0, stop=10.0, onsets=res)
+# ----------------------------------------------------------------------------- plot_recording
+def test_plot_recording_with_result_onsets(rec, res):
+    fig = plot_recording(rec, channels=["sun", "ring"], start=0.0, stop=10.0, onsets=res)
     assert len(fig.axes) == 2
     for ax, ch in zip(fig.axes, ("sun", "ring")):
         assert len(ax.lines) == 1
@@ -140,39 +141,42 @@ def test_recording_plot_with_result_onsets(rec, res):
         assert sum(len(c.get_segments()) for c in _vlines(ax)) == n_in > 0
 
 
-def test_recording_plot_with_times_and_decimation(rec):
+def test_plot_recording_with_times_and_decimation(rec):
     times = np.array([1.0, 2.0, 3.0, 50.0])
-    fig = rec.plot("sun", start=0.0, stop=5.0, onsets=times, max_points=1000)
+    fig = plot_recording(rec, "sun", start=0.0, stop=5.0, onsets=times, max_points=1000)
     ax, = fig.axes
     assert len(ax.lines[0].get_xdata()) <= 1000
     marks = _vlines(ax)
     assert len(marks) == 1 and len(marks[0].get_segments()) == 3    # 50 s is outside
-    fig2 = rec.plot(start=0.0, stop=1.0)
+    fig2 = plot_recording(rec, start=0.0, stop=1.0)
     assert len(fig2.axes) == rec.n_channels and not any(_vlines(a) for a in fig2.axes)
 
 
-def test_recording_plot_dict_onsets_and_axes(rec):
+def test_plot_recording_dict_onsets_and_axes(rec):
     fig, ax = plt.subplots()
-    out = rec.plot("ring", 0.0, 2.0, {"ring": ([0.5, 1.5], [1, 2])}, ax=ax)
+    out = plot_recording(rec, "ring", 0.0, 2.0, {"ring": ([0.5, 1.5], [1, 2])}, ax=ax)
     assert out is fig
     assert len(_vlines(ax)) == 2                                 # planets 1 and 2
 
 
-def test_recording_plot_empty_and_bad_input(rec):
+def test_plot_recording_empty_and_bad_input(rec):
     empty = Recording(np.empty((0, 1)), 100.0, ["x"])
     with pytest.raises(ValueError, match="empty"):
-        empty.plot()
+        plot_recording(empty)
     with pytest.raises(ValueError, match="no channel named"):
-        rec.plot(channels="nope")
+        plot_recording(rec, channels="nope")
     with pytest.raises(ValueError, match="outside the recording"):
-        rec.plot(start=1000.0, stop=1001.0)
+        plot_recording(rec, start=1000.0, stop=1001.0)
     with pytest.raises(TypeError, match="onsets must be"):
-        rec.plot("sun", 0.0, 1.0, onsets="soon")
+        plot_recording(rec, "sun", 0.0, 1.0, onsets="soon")
     fig, ax = plt.subplots()
     with pytest.raises(ValueError, match="ax= draws one panel"):
-        rec.plot(start=0.0, stop=1.0, ax=ax)
+        plot_recording(rec, start=0.0, stop=1.0, ax=ax)
     with pytest.raises(ValueError, match="max_points"):
-        rec.plot("sun", 0.0, 1.0, max_points=1)
+        plot_recording(rec, "sun", 0.0, 1.0, max_points=1)
+    with pytest.raises(TypeError, match="Recording"):
+        plot_recording(rec.data)
+    assert not hasattr(rec, "plot")        # plotting lives in the report, not on the Recording
 
 
 def test_plot_channels_empty_and_bad_input():

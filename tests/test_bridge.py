@@ -19,7 +19,7 @@ from meshphase.io.bridge import (BRIDGE_TYPES, BridgeConfig, bridge_history, bri
                                  convert_block, initial_volts, null_ratio, ratio_from_strain,
                                  strain_from_ratio, strain_from_volts, strain_spec,
                                  volts_from_strain, window_means)
-from meshphase.run.bridge_source import BridgeSource
+from meshphase.io.sources import BridgeSource
 from meshphase.recording import ChannelSpec, Recording
 from meshphase.errors import SceneWarning
 from meshphase.run.scene import SceneError, load_scene, parse_scene

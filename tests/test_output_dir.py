@@ -49,7 +49,7 @@ def _dead_pid() -> int:
 
 
 def _work(parent: Path, pid: int, token: str, kind: str) -> Path:
-    return parent / f".mp-{ex._host_tag()}-{pid}-{token}.{kind}"
+    return parent / f".mp-{ex.host_tag()}-{pid}-{token}.{kind}"
 
 
 # ---------------------------------------------------------------------------- the swap

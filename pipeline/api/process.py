@@ -11,17 +11,15 @@
 :func:`process` runs exactly the stages ``meshphase process`` runs (the scene is built by
 :mod:`meshphase.api.scene`, the run is :func:`meshphase.run.stages.run_scene`), so the numbers
 are the CLI's. A recording file is streamed block by block as the CLI does; a
-:class:`~meshphase.recording.Recording` in memory is first written to a temporary HDF5 file
-(deleted again before :func:`process` returns), since the load stage reads files and
-synthetic scenarios only: one extra copy of the samples on disk, the same streamed run.
+:class:`~meshphase.recording.Recording` in memory is streamed the same way from its own
+samples (:class:`meshphase.recording.MemorySource`, no copy), with the same numbers as the
+same recording written to a file and processed from there.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import os
-import tempfile
-from pathlib import Path
 from typing import Callable
 
 from meshphase import io
@@ -138,14 +136,10 @@ def process(recording, gearset=None, *, scene=None, results=None, start: float |
 
 
 def _run_in_memory(scene, rec: Recording, progress):
-    """Run ``scene`` on ``rec`` through a temporary HDF5 file (see the module docstring);
-    the load result then names the recording, not the deleted file."""
-    with tempfile.TemporaryDirectory(prefix="meshphase-") as tmp:
-        path = io.write(rec, Path(tmp) / "recording.h5")
-        scene.input = {"recording": path}
-        ctx = run_scene(scene, progress=progress)
-    name = "<Recording in memory>"
-    ctx.replace_text(str(path), name)
+    """Run ``scene`` on ``rec`` streamed from memory; the load result keeps no source (the
+    samples stay the caller's)."""
+    scene.input = {"memory": rec}
+    ctx = run_scene(scene, progress=progress)
     if ctx.load is not None:
-        ctx.record("load", dataclasses.replace(ctx.load, source=name, stream=None))
+        ctx.record("load", dataclasses.replace(ctx.load, stream=None))
     return ctx

@@ -36,7 +36,7 @@ import math
 import os
 import re
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -46,8 +46,9 @@ from meshphase.errors import DataQualityWarning, FormatWarning
 from meshphase.jsonable import json_default
 from meshphase.runtime.log import logger
 from meshphase.signal.quality import nonfinite_runs
-from meshphase.recording import ChannelSpec, sample_index
+from meshphase.recording import ChannelSpec, RecordingHeader, sample_index
 from meshphase.io.atomic import STALE_AGE, TEMP_PREFIX, TEMP_SUFFIX, atomic_path, clean_stale_partials
+from meshphase.validate import as_float, as_nonnegative
 
 __all__ = ["RecordingFileError", "CorruptFileError", "RecordingTooLargeError", "RecordingInfo", "atomic_path",
            "clean_stale_partials", "TEMP_PREFIX", "TEMP_SUFFIX", "STALE_AGE", "check_verify",
@@ -118,25 +119,11 @@ class RecordingTooLargeError(RecordingFileError, MemoryError):
                                "(iter_blocks, the streamed commands)")
 
 
-@dataclass
-class RecordingInfo:
-    """Header of a recording file: everything but the samples.
-
-    Attributes
-    ----------
-    path : str
-    format : str
-    fs : float
-        Sample rate [Hz].
-    n_samples : int
-    channels : list of ChannelSpec
-    t0 : float
-        Time of the first sample [s].
-    start_datetime : str or None
-    meta : dict
-    history : list
-    extra : dict
-        Format-specific details (layout, compression, segment count...).
+@dataclass(repr=False)
+class RecordingInfo(RecordingHeader):
+    """Header of a recording file: a :class:`~meshphase.recording.RecordingHeader` whose
+    sample rate is checked as a file's (built with keywords: ``path``, ``format``, ``fs``,
+    ``n_samples``, ``channels``, ...).
 
     Raises
     ------
@@ -145,60 +132,9 @@ class RecordingInfo:
         :func:`check_fs_range`).
     """
 
-    path: str
-    format: str
-    fs: float
-    n_samples: int
-    channels: list[ChannelSpec]
-    t0: float = 0.0
-    start_datetime: str | None = None
-    meta: dict = field(default_factory=dict)
-    history: list = field(default_factory=list)
-    extra: dict = field(default_factory=dict)
-
     def __post_init__(self):
         check_fs_range(self.fs, self.path)
-
-    @property
-    def duration(self) -> float:
-        """Duration [s]."""
-        return self.n_samples / self.fs
-
-    @property
-    def names(self) -> list[str]:
-        return [c.name for c in self.channels]
-
-    def window(self, start: float | None, stop: float | None) -> tuple[int, int]:
-        """Sample range [i0, i1) of the time window [start, stop) [s]; RecordingFileError-free
-        ValueError naming the file when the window lies outside the recording."""
-        t_end = self.t0 + self.duration
-        t_start = self.t0 if start is None else float(start)
-        t_stop = t_end if stop is None else float(stop)
-        if t_stop <= t_start:
-            raise ValueError(f"{self.path}: empty or reversed window [{t_start!r}, {t_stop!r}) s")
-        if t_start >= t_end or t_stop <= self.t0:
-            raise ValueError(f"{self.path}: window [{t_start!r}, {t_stop!r}) s lies outside the "
-                             f"recording [{self.t0!r}, {t_end!r}) s")
-        i0 = sample_index(t_start, self.t0, self.fs, self.n_samples)
-        i1 = sample_index(t_stop, self.t0, self.fs, self.n_samples)
-        return i0, max(i0, i1)
-
-    def check_channels(self, channels) -> list[str]:
-        """Normalise a channel selection (None, a name, or names) and check it exists."""
-        if channels is None:
-            return self.names
-        if isinstance(channels, str):
-            channels = [channels]
-        channels = list(channels)
-        if not channels:
-            raise ValueError(f"{self.path}: channel selection is empty")
-        known = set(self.names)
-        missing = [c for c in channels if c not in known]
-        if missing:
-            raise ValueError(f"{self.path}: no channel(s) {missing}; the file has {self.names}")
-        if len(set(channels)) != len(channels):
-            raise ValueError(f"{self.path}: channel selection repeats a channel: {channels}")
-        return channels
+        super().__post_init__()
 
 
 # ---------------------------------------------------------------------------- shared helpers

@@ -45,6 +45,7 @@ from typing import Iterator
 
 import numpy as np
 
+from meshphase.recording import Recording
 from meshphase.validate import as_float
 
 __all__ = ["BRIDGE_TYPES", "BridgeConfig", "strain_from_ratio", "ratio_from_strain",
@@ -288,7 +289,7 @@ def window_means(blocks: Iterator, t0: float, fs: float, n: int, windows: dict) 
     Parameters
     ----------
     blocks : iterator of (int, ndarray)
-        (first sample, samples x channels) as :meth:`meshphase.run.stream.BlockSource.blocks`
+        (first sample, samples x channels) as :meth:`meshphase.recording.BlockSource.blocks`
         gives them; read only up to the last window's end.
     t0, fs, n : float, float, int
         Time of sample 0 [s], sample rate [Hz], number of samples.
@@ -364,8 +365,6 @@ def bridge_recording(rec, configs: dict):
         The converted samples, with a ``bridge_strain`` history step naming each channel's
         bridge, its V_init [V] and initial ratio [V/V].
     """
-    from meshphase.recording import Recording
-
     if not isinstance(rec, Recording):
         raise TypeError(f"rec must be a Recording, got {type(rec).__name__}")
     if not configs:
@@ -375,7 +374,7 @@ def bridge_recording(rec, configs: dict):
     v_init = initial_volts(iter([(0, data)]), rec.t0, rec.fs, rec.n_samples, cols)
     out = convert_block(data, {j: (c, v_init[j]) for j, c in cols.items()})
     specs = [strain_spec(s) if j in cols else s for j, s in enumerate(rec.channels)]
-    return rec._derive(data=out, channels=specs).with_history(
+    return Recording(out, rec.fs, specs, rec.t0, rec.start_datetime, rec.meta, rec.history).with_history(
         "bridge_strain", channels=bridge_history(rec.names, cols, v_init))
 
 

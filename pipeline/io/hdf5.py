@@ -44,7 +44,7 @@ missing chunk is a CorruptFileError naming the channel and its time range; so is
 length of 1e12 samples with nothing stored, before anything is allocated.
 ``read(..., verify=False)`` reads chunks stored with fletcher32 as the only filter without
 checking the checksum (to salvage the undamaged samples of a damaged file, or to read again
-what a checked pass of the same run has read: :class:`meshphase.run.stream.FileSource`), with
+what a checked pass of the same run has read: :class:`meshphase.io.sources.FileSource`), with
 ``os.preadv`` at the chunks' byte offsets; chunks with
 compression are always checked (h5py exposes no switch to skip it). Files are written with
 no chunk cache (``rdcc_nbytes=0``), so a failed write (ENOSPC) leaves no dirty chunk for

@@ -2,6 +2,8 @@
 
 - :mod:`.html`     static self-contained HTML (embedded PNG figures, tables)
 - :mod:`.figures`  the report's figures
+- :mod:`.notebook` plots for notebooks (:func:`meshphase.report.notebook.plot_recording`;
+                   imported on its own: it loads matplotlib.pyplot)
 """
 
 from meshphase.report.html import Report, Section

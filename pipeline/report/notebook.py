@@ -1,4 +1,4 @@
-"""Plots for notebooks: :meth:`meshphase.Recording.plot` and :meth:`meshphase.Result.plot`.
+"""Plots for notebooks: :func:`plot_recording` and :meth:`meshphase.Result.plot`.
 
 Unlike :mod:`meshphase.report.figures` (the report's, drawn on the Agg backend), these leave
 matplotlib's backend alone, so a notebook shows them inline; each returns its Figure and
@@ -14,9 +14,10 @@ import numpy as np
 import matplotlib.pyplot as plt
 
 from meshphase.compare.pass_model import wrap
+from meshphase.recording import Recording
 from meshphase.run.context import RunContext
 
-__all__ = ["plot_channels", "plot_result_onsets", "plot_phasing", "plot_load_sharing",
+__all__ = ["plot_recording", "plot_channels", "plot_result_onsets", "plot_phasing", "plot_load_sharing",
            "plot_residuals", "onset_marks"]
 
 _GAUGES = ("sun", "ring")
@@ -103,7 +104,7 @@ def onset_marks(source, channel: str):
 
 def plot_channels(t, data, channels, onsets=None, *, ax=None, max_points: int = 20000):
     """Channels against time, one panel each, with onsets marked
-    (:meth:`meshphase.Recording.plot` cuts the window and channels).
+    (:func:`plot_recording` cuts the window and channels of a Recording).
 
     Parameters
     ----------
@@ -136,6 +137,48 @@ def plot_channels(t, data, channels, onsets=None, *, ax=None, max_points: int = 
     axes[-1].set_xlabel("time [s]")
     fig.tight_layout()
     return fig
+
+
+def plot_recording(rec, channels=None, start: float | None = None, stop: float | None = None,
+                   onsets=None, *, ax=None, max_points: int = 20000):
+    """Plot a recording's channels against time, one panel each, with onsets marked.
+
+    Parameters
+    ----------
+    rec : meshphase.Recording
+    channels : str or sequence of str, optional
+        Channels to draw (default all).
+    start, stop : float, optional
+        Time window [s] (half-open; default the whole recording).
+    onsets : array_like, dict, Result or RunContext, optional
+        Onset times [s] to mark: one array for every channel, a dict channel -> times
+        (or Onsets, or (times, 1-based planets)), or a :class:`meshphase.Result` (its
+        onsets, coloured by planet).
+    ax : matplotlib Axes, optional
+        Draw a single channel into it.
+    max_points : int
+        Samples drawn per channel at most (decimated by striding).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Raises
+    ------
+    TypeError
+        ``rec`` is no Recording.
+    ValueError
+        An empty recording, unknown channels, a window holding no sample.
+    """
+    if not isinstance(rec, Recording):
+        raise TypeError(f"rec must be a meshphase.Recording, got {type(rec).__name__}")
+    if rec.n_samples == 0 or rec.n_channels == 0:
+        raise ValueError("the recording is empty: nothing to plot")
+    part = rec.select(channels).slice_time(start, stop)
+    if part.n_samples == 0:
+        raise ValueError(f"no samples in the window [{start}, {stop}) s")
+    return plot_channels(part.times(), part.data, part.channels, onsets, ax=ax,
+                         max_points=max_points)
 
 
 def _gauges(ctx: RunContext, gauge, have) -> list[str]:

@@ -30,6 +30,7 @@ from meshphase.data_schemas import schema_errors
 
 from meshphase import io
 from meshphase.io.bridge import BridgeConfig
+from meshphase.io.sources import scenario_config, scenario_names
 from meshphase.run.channels import (GAUGE_KINDS, ChannelMapError, apply_channel_overrides, check_gauges,
                                     is_glob, map_channels)
 from meshphase.errors import DeprecatedNameWarning, SceneWarning
@@ -94,7 +95,7 @@ class Scene:
         ``mount_angle`` [rad], ``bridge`` (a :class:`meshphase.io.bridge.BridgeConfig`).
     input : dict
         ``recording`` (Path) or ``synthetic`` (scenario name) with ``minutes``, ``seed``,
-        ``start``/``stop`` [s]; ``mcap``: the format options mapping an MCAP file of
+        ``start``/``stop`` [s], or ``memory`` (a Recording given in code: :func:`meshphase.process`); ``mcap``: the format options mapping an MCAP file of
         another tool (``topics``, ``fs``, ``max_jitter``, ``stamp``).
     processing : dict
     tolerances : dict or None
@@ -155,7 +156,8 @@ class Scene:
 
     @property
     def has_recording_input(self) -> bool:
-        return bool(self.input.get("recording") or self.input.get("synthetic"))
+        return bool(self.input.get("recording") or self.input.get("synthetic")
+                    or self.input.get("memory") is not None)
 
 
 _HEADER = re.compile(r"^\s*(\[\[?)\s*([A-Za-z0-9_.\-]+)\s*\]\]?\s*(#.*)?$")
@@ -716,11 +718,10 @@ def _parse_input(raw: dict, base: Path, err) -> dict:
     if "fs_Hz" in inp:
         _check_input_fs(inp, err)
     if "synthetic" in inp:
-        from meshphase.synthetic.scenarios import SCENARIOS  # synthetic: imported only when named
-
-        if inp["synthetic"] not in SCENARIOS:
+        known = scenario_names("synthetic")
+        if inp["synthetic"] not in known:
             raise err(["input", "synthetic"], f"unknown scenario {inp['synthetic']!r}; known: "
-                      f"{', '.join(sorted(SCENARIOS))}")
+                      f"{', '.join(known) or 'none (no synthetic generator installed)'}")
         _check_synthetic_size(inp, err)
     return inp
 
@@ -1003,9 +1004,8 @@ def _synthetic_config(inp: dict):
     """The synthetic scenario's configuration (no samples generated), or None."""
     if inp.get("config") is not None:
         return inp["config"]
-    from meshphase.synthetic.scenarios import SCENARIOS, get_scenario  # synthetic: heavy, only when named
-
-    return get_scenario(inp["synthetic"]) if inp.get("synthetic") in SCENARIOS else None
+    name = inp.get("synthetic")
+    return scenario_config(name, "synthetic") if isinstance(name, str) else None
 
 
 def _check_synthetic_size(inp: dict, err) -> None:

@@ -26,7 +26,7 @@ import numpy as np
 
 from meshphase.kinematics.angles import held_member
 from meshphase.io.bridge import bridge_recording
-from meshphase.run.bridge_source import BridgeSource
+from meshphase.io.sources import BridgeSource, generator
 from meshphase.run.channels import (GAUGE_KINDS, apply_channel_overrides, bridge_configs, channels_present,
                                     check_gauges, entry_values, map_channels, mapped_specs, overridden,
                                     unmapped_message)
@@ -46,7 +46,7 @@ from meshphase.kinematics.passes import gap_intervals_of, gauge_passes
 from meshphase.kinematics.pass_rates import pass_rate_warnings, two_level_train, wiring_findings
 from meshphase.kinematics.phasing import (PassTable, assign_planets_by_pattern, measure_phasing, pass_order,
                                           relabel_gauge)
-from meshphase.recording import Recording
+from meshphase.recording import Recording, RecordingHeader
 from meshphase.run.context import RunContext
 from meshphase.run.declare import STAGE_REGISTRY
 from meshphase.run.outdir import OutputDir, output_write_errors
@@ -177,6 +177,8 @@ def stage_load(ctx: RunContext) -> LoadStage:
     block by block, for every pass (the generator is deterministic)."""
     if ctx.scene.input.get("recording"):
         src, rec, source, truth = _open_file(ctx.scene)
+    elif ctx.scene.input.get("memory") is not None:
+        src, rec, source, truth = _open_memory(ctx.scene)
     else:
         src, rec, source, truth = _open_synthetic(ctx.scene)
     # said at once: a recording whose samples then fail to read still names them
@@ -216,12 +218,32 @@ def _open_file(scene: Scene) -> tuple:
     return src, src.header, source, None
 
 
+#: What a Recording given in memory is called in the run's messages and load result.
+MEMORY_NAME = "<Recording in memory>"
+
+
+def _open_memory(scene: Scene) -> tuple:
+    """(source, header, name, None) of the Recording the scene's ``input["memory"]`` holds
+    (:func:`meshphase.process`), read as a file is: the same channel mapping, unit gains,
+    bridge conversion and NaN/inf warnings, named :data:`MEMORY_NAME`."""
+    rec = scene.input["memory"]
+    if not isinstance(rec, Recording):
+        raise TypeError(f"input memory must be a Recording, got {type(rec).__name__}")
+
+    def make(specs, gains):
+        return MemorySource(rec, specs, gains, label=MEMORY_NAME, nonfinite_warnings=True)
+
+    src = _mapped_source(RecordingHeader.of(rec), scene.channels, MEMORY_NAME, make, make) \
+        or make(None, None)
+    return src, src.header, MEMORY_NAME, None
+
+
 def _mapped_source(header, entries: list, source: str, make: Callable, make_whole: Callable):
     """The source with the scene's ``[[channels]]`` applied (:mod:`meshphase.run.channels`) and
     the gauges' units converted to m/m as read (:func:`meshphase.io.units.gauge_unit_gains`, a
     ``units_to_si`` history step): ``make(specs, gains)`` opens it; unmapped channels said as
     a SceneWarning; bridge channels converted to strain as read
-    (:class:`meshphase.io.bridge.BridgeSource`, the null windows read from
+    (:class:`meshphase.io.sources.BridgeSource`, the null windows read from
     ``make_whole(specs, gains)``, the whole recording). None when there is nothing to apply
     (no entries, every gauge in m/m)."""
     cmap = bridges = None
@@ -262,14 +284,16 @@ def _say_unmapped(cmap, specs, source: str) -> None:
 def _open_synthetic(scene: Scene) -> tuple:
     """(source, header, name, truth) of the scene's synthetic recording: generated whole up
     to :data:`SYNTHETIC_WHOLE_BYTES`, else again block by block for every pass."""
-    from meshphase.synthetic import generate_blocks  # the generator: optional for the core
-
     inp, entries = scene.input, scene.channels
     minutes = inp.get("minutes")
+    gen = generator("synthetic")
+    if gen is None:
+        raise ValueError(f"synthetic scenario {inp['synthetic']!r}: no generator 'synthetic' is "
+                         "installed (the meshphase.sources entry point of meshphase.synthetic)")
     # a config built in code (benchmarks, tests) wins over the registered scenario's
-    stream = generate_blocks(inp.get("config") or inp["synthetic"],
-                             duration=None if minutes is None else 60.0 * minutes,
-                             seed=inp.get("seed", 0))
+    stream = gen.stream(inp.get("config") or inp["synthetic"],
+                        duration=None if minutes is None else 60.0 * minutes,
+                        seed=inp.get("seed", 0))
     source = f"synthetic:{inp['synthetic']}"
     size = stream.n_samples * len(stream.channels) * stream.dtype.itemsize
     if size <= SYNTHETIC_WHOLE_BYTES:

@@ -4,7 +4,7 @@ The stages ``load``, ``condition`` and ``onsets`` (:mod:`meshphase.run.stages`) 
 module, for recording files and for recordings already in memory alike. A recording is read
 three times, block by block, channel-major, in the dtype it is stored in (an HDF5 or MCAP
 file's checksums are checked in the first pass; the later ones read the same, unchanged
-file unchecked, see :meth:`FileSource._pass_options`), each pass reading the next block on a
+file unchecked, see :class:`meshphase.io.sources.FileSource`), each pass reading the next block on a
 thread of its own while it works on this one (:func:`meshphase.runtime.threads.read_ahead`):
 
 1. **Statistics** (pass 1, :class:`meshphase.signal.quality.ChannelScan`): per channel the extremes,
@@ -53,21 +53,20 @@ the pass reads anything and refuse (ValueError naming fs, the largest item and
 every buffer that grows with fs is capped at the recording's own length, so a high fs costs
 at most the recording's size.
 
-Sources: :class:`FileSource` (a file of any :mod:`meshphase.io` format, read block by block
-through its format module), :class:`MemorySource` (a Recording in memory) and
-:class:`GeneratorSource` (a synthetic recording generated again for every pass).
+Sources (:class:`meshphase.recording.BlockSource`): :class:`meshphase.io.sources.FileSource`
+(a file of any :mod:`meshphase.io` format, read block by block through its format module),
+:class:`meshphase.recording.MemorySource` (a Recording in memory) and
+:class:`meshphase.io.sources.GeneratedSource` (a generated recording, generated again for
+every pass); they are importable from here too.
 """
 
 from __future__ import annotations
 
-import contextlib
 import math
-import os
 import time
 import warnings
 from dataclasses import dataclass, field, replace
-from pathlib import Path
-from typing import Callable, Iterator, Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 from scipy import ndimage
@@ -81,9 +80,11 @@ from meshphase.kinematics.encoder import pulse_levels, rising_crossing_parts
 from meshphase.errors import DataQualityWarning
 from meshphase.onsets import DEFAULT_BLOCK, DEFAULT_DETECTOR, make_detector
 from meshphase.signal.quality import ChannelQuality, ChannelScan, _RunTracker, merge_runs, quality_from_scan
-from meshphase.recording import ChannelSpec, Recording
+from meshphase.recording import BlockSource, MemorySource, Recording
 from meshphase.signal.savgol import savgol_filter
-from meshphase.runtime.threads import read_ahead, thread_pool
+from meshphase.runtime.threads import thread_pool
+from meshphase.io.sources import FileSource, GeneratorSource, StreamedRecording
+from meshphase.io.sources import blocks_ahead as _blocks_ahead
 from meshphase.validate import as_choice, as_positive
 
 __all__ = ["StreamedRecording", "BlockSource", "FileSource", "MemorySource", "GeneratorSource",
@@ -116,408 +117,6 @@ _SNR_SAMPLES = 1 << 20  # condition._SUBSAMPLE
 #: the memory estimates' item for the blocks read (all channels; the passes read ahead)
 _READ_BLOCKS = ("read blocks (all channels: this one, one queued, one being read; float64 copies of "
                 "two: the onsets' and the chains')")
-
-
-# ============================================================================ the header
-class StreamedRecording:
-    """Everything of a :class:`~meshphase.recording.Recording` but its samples.
-
-    What the stages after ``load`` read of a recording that is streamed: sample rate, time
-    origin, channel specs, metadata, history and length. Asking for samples raises a
-    TypeError that says so.
-
-    Parameters
-    ----------
-    fs : float
-        Sample rate [Hz].
-    n_samples : int
-        Samples per channel [-].
-    channels : sequence of ChannelSpec
-    t0 : float
-        Time of the first sample [s].
-    start_datetime : str, optional
-    meta : dict, optional
-    history : list, optional
-    dtype : numpy dtype
-        Sample type as stored.
-    """
-
-    def __init__(self, fs: float, n_samples: int, channels: Sequence[ChannelSpec], t0: float = 0.0,
-                 start_datetime: str | None = None, meta: dict | None = None,
-                 history: list | None = None, dtype=np.float64):
-        self.fs = as_positive(fs, "fs")
-        self._n = int(n_samples)
-        self.channels = tuple(channels)
-        self.t0 = float(t0)
-        self.start_datetime = start_datetime
-        self.meta = dict(meta) if meta else {}
-        self.history = list(history) if history else []
-        self.dtype = np.dtype(dtype)
-
-    @classmethod
-    def of(cls, rec) -> "StreamedRecording":
-        """The header of a Recording (or of anything with the same attributes)."""
-        return cls(rec.fs, rec.n_samples, rec.channels, rec.t0, rec.start_datetime, rec.meta,
-                   rec.history, getattr(rec, "dtype", None) or rec.data.dtype)
-
-    @property
-    def n_samples(self) -> int:
-        """Samples per channel [-]."""
-        return self._n
-
-    @property
-    def n_channels(self) -> int:
-        """Channels [-]."""
-        return len(self.channels)
-
-    @property
-    def duration(self) -> float:
-        """Duration n_samples / fs [s]."""
-        return self._n / self.fs
-
-    @property
-    def dt(self) -> float:
-        """Sample interval [s]."""
-        return 1.0 / self.fs
-
-    @property
-    def t_end(self) -> float:
-        """Time just after the last sample [s]."""
-        return self.t0 + self.duration
-
-    @property
-    def names(self) -> list[str]:
-        """Channel names, in column order."""
-        return [c.name for c in self.channels]
-
-    def __len__(self) -> int:
-        return self._n
-
-    def __repr__(self) -> str:
-        return (f"StreamedRecording({self._n} samples x {self.n_channels} channels at {self.fs:g} Hz, "
-                f"t0={self.t0:g} s, samples not held)")
-
-    def index(self, name: str) -> int:
-        """Column index of channel ``name``."""
-        try:
-            return self.names.index(name)
-        except ValueError:
-            raise KeyError(f"no channel {name!r}; channels: {self.names}") from None
-
-    def spec(self, name: str) -> ChannelSpec:
-        """The ChannelSpec of channel ``name``."""
-        return self.channels[self.index(name)]
-
-    def by_kind(self, kind: str) -> list[ChannelSpec]:
-        """Channel specs of one kind, in column order."""
-        return [c for c in self.channels if c.kind == kind]
-
-    def header(self) -> dict:
-        """Everything except the samples, as a JSON-friendly dict."""
-        return {"fs": self.fs, "t0": self.t0, "n_samples": self._n,
-                "start_datetime": self.start_datetime,
-                "channels": [c.to_dict() for c in self.channels], "meta": self.meta,
-                "history": self.history}
-
-    def with_history(self, step: str, **params) -> "StreamedRecording":
-        """A copy with one processing step appended to the history."""
-        rec = Recording(np.empty((0, self.n_channels)), self.fs, self.channels, self.t0,
-                        history=self.history).with_history(step, **params)
-        return StreamedRecording(self.fs, self._n, self.channels, self.t0, self.start_datetime,
-                                 self.meta, rec.history, self.dtype)
-
-    def channel(self, name: str):
-        raise TypeError(f"channel {name!r}: the recording is streamed in blocks, its samples are "
-                        "not held (use the stage results: onsets, quality, the excerpt)")
-
-    @property
-    def data(self):
-        raise TypeError("the recording is streamed in blocks, its samples are not held")
-
-
-# ============================================================================ sources
-class BlockSource:
-    """A recording that can be read again and again in consecutive blocks.
-
-    Attributes
-    ----------
-    header : StreamedRecording
-        Channels (after any override), fs, t0, length, dtype.
-    """
-
-    header: StreamedRecording
-
-    def blocks(self, n_block: int) -> Iterator[tuple[int, np.ndarray]]:
-        """(first sample, samples x channels array) of consecutive blocks of ``n_block``
-        samples, in the stored dtype, channel gains applied; the arrays are the caller's."""
-        raise NotImplementedError
-
-    @property
-    def label(self) -> str:
-        return "recording"
-
-
-def _apply_gains(data: np.ndarray, gains: list, copy: bool) -> np.ndarray:
-    if not gains:
-        return data
-    if copy:
-        data = data.copy(order="F")
-    for j, g in gains:                   # in order, in the stored dtype (as the stage did)
-        data[:, j] *= g
-    return data
-
-
-class MemorySource(BlockSource):
-    """A Recording held in memory, read as views (gains applied on copies of the blocks).
-
-    Parameters
-    ----------
-    rec : Recording
-    channels : sequence of ChannelSpec, optional
-        Specs replacing the recording's (channel overrides); default its own.
-    gains : list of (int, float), optional
-        (column, factor) applied to the samples, in order.
-    """
-
-    def __init__(self, rec: Recording, channels=None, gains: list | None = None):
-        if not isinstance(rec, Recording):
-            raise TypeError(f"rec must be a Recording, got {type(rec).__name__}")
-        self.rec = rec
-        self.gains = list(gains or [])
-        h = StreamedRecording.of(rec)
-        if channels is not None:
-            h.channels = tuple(channels)
-        self.header = h
-
-    def blocks(self, n_block: int):
-        n = self.rec.n_samples
-        for i0 in range(0, n, n_block):
-            yield i0, _apply_gains(self.rec.data[i0:i0 + n_block], self.gains, copy=True)
-
-
-class FileSource(BlockSource):
-    """A recording file (any format of :mod:`meshphase.io`), or a time window of it.
-
-    Parameters
-    ----------
-    path : str or Path
-    start, stop : float, optional
-        Time window [s] on the recording's axis (as :func:`meshphase.io.read`).
-    channels : sequence of ChannelSpec, optional
-        Specs replacing the file's (channel overrides).
-    gains : list of (int, float), optional
-        (column, factor) applied to the samples, in order.
-    format : str, optional
-    options : dict, optional
-        Format options of every read (e.g. an MCAP mapping: ``topics``, ``fs``).
-    """
-
-    def __init__(self, path, *, start: float | None = None, stop: float | None = None,
-                 channels=None, gains: list | None = None, format: str | None = None,
-                 options: dict | None = None):
-        from meshphase import io
-
-        self.path = Path(path)
-        self.fmt = format or io.detect_format(self.path)
-        self.spec = io.get_spec(self.fmt)
-        self.mod = self.spec.load()
-        self.options = dict(options or {})
-        info = self.mod.read_info(self.path, **self.options)
-        self.info = info
-        self.names = info.names
-        if start is None and stop is None:
-            self.i0, self.i1 = 0, info.n_samples
-        else:
-            self.i0, self.i1 = info.window(start, stop)
-        dtype = np.dtype(np.float64)            # until the first block says otherwise
-        self.gains = list(gains or [])
-        self.header = StreamedRecording(info.fs, self.i1 - self.i0,
-                                        tuple(channels) if channels is not None else tuple(info.channels),
-                                        info.t0 + self.i0 / info.fs, info.start_datetime, info.meta,
-                                        info.history, dtype)
-        self._dtype_known = False
-        self._seen: set = set()
-        self._verified: tuple | None = None     # the file's signature after a checked pass
-
-    @property
-    def label(self) -> str:
-        return str(self.path)
-
-    def blocks(self, n_block: int):
-        from meshphase.run.exits import recording_read_errors
-
-        with recording_read_errors(self.path):
-            opts, unchecked, sig = self._pass_options()
-            yield from self._read(n_block, opts)
-            self._pass_done(unchecked, sig)
-
-    def _read(self, n_block: int, opts: dict):
-        i0, i1 = self.i0, self.i1
-        if i0 == 0 and i1 == self.info.n_samples and hasattr(self.mod, "iter_blocks"):
-            for blk in self._quiet(self.mod.iter_blocks(self.path, n_block, 0, self.names, **opts)):
-                a = int(round((blk.t0 - self.info.t0) * self.info.fs))
-                self._note_dtype(blk.data)
-                yield a, _apply_gains(blk.data, self.gains, copy=False)
-            return
-        if self.spec.random_access or not hasattr(self.mod, "iter_blocks"):
-            reads = (self.mod.read(self.path, self.names, a, min(i1, a + n_block), **opts)
-                     for a in range(i0, i1, n_block))
-            for blk in self._quiet(reads):
-                self._note_dtype(blk.data)
-                a = int(round((blk.t0 - self.info.t0) * self.info.fs))
-                yield a - i0, _apply_gains(blk.data, self.gains, copy=False)
-            return
-        # other formats stream from the start: skip to the window, stop after it
-        pos = 0
-        for blk in self._quiet(self.mod.iter_blocks(self.path, n_block, 0, self.names, **opts)):
-            a, b = pos, pos + blk.n_samples
-            pos = b
-            if b <= i0:
-                continue
-            if a >= i1:
-                break
-            data = blk.data[max(a, i0) - a:min(b, i1) - a]
-            self._note_dtype(data)
-            yield max(a, i0) - i0, _apply_gains(data, self.gains, copy=True)
-
-    def _signature(self) -> tuple:
-        st = os.stat(self.path)
-        return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
-
-    def _pass_options(self) -> tuple[dict, bool, tuple | None]:
-        """Format options of the next pass over the file, whether it skips the checksums,
-        and the file's signature now.
-
-        A file with checksums (HDF5 fletcher32, MCAP CRC32: a format whose spec declares
-        ``checksums``) has
-        them checked in the first whole pass (they cost about as much as the rest of the
-        read). A later pass of the same source over the file, unchanged since (device,
-        inode, size and modification time as before and after the checked pass), reads it
-        again unchecked (``verify=False``); ``verify`` given in the options is obeyed in
-        every pass."""
-        if not self.spec.checksums or "verify" in self.options:
-            return self.options, False, None
-        sig = self._signature()
-        if self._verified is not None and sig == self._verified:
-            return dict(self.options, verify=False), True, sig
-        self._verified = None
-        return self.options, False, sig
-
-    def _pass_done(self, unchecked: bool, sig: tuple | None) -> None:
-        """After a whole pass: an unchecked one must have read the file as checked
-        (CorruptFileError if it changed meanwhile); a checked one over an unchanged file
-        lets the next passes skip the checksums."""
-        if sig is None:
-            return
-        end = self._signature()
-        if unchecked and end != self._verified:
-            from meshphase.io.base import CorruptFileError
-
-            raise CorruptFileError(self.path, "the whole file", "it changed while it was being read "
-                                   "again (size or modification time): read it anew")
-        if not unchecked and end == sig:
-            self._verified = sig
-
-    def _quiet(self, it):
-        """The blocks of ``it``; the readers' per-block NaN/inf warnings are dropped
-        (:meth:`warn_nonfinite` issues one per channel for the whole window instead), any
-        other warning is issued once."""
-        it = iter(it)
-        try:
-            while True:
-                with warnings.catch_warnings(record=True) as wl:
-                    warnings.simplefilter("always")
-                    try:
-                        blk = next(it)
-                    except StopIteration:
-                        return
-                for w in wl:
-                    text = str(w.message)
-                    if issubclass(w.category, DataQualityWarning) and "NaN/inf samples" in text:
-                        continue
-                    if text not in self._seen:
-                        self._seen.add(text)
-                        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-                yield blk
-        finally:
-            close = getattr(it, "close", None)
-            if close is not None:
-                close()
-
-    def warn_nonfinite(self, results: dict) -> None:
-        """One DataQualityWarning per channel with NaN/inf runs, as :func:`meshphase.io.read`
-        of the whole window issues it (``results``: the ScanResults by channel)."""
-        for name in self.names:
-            runs = results[name].nonfinite_runs if name in results else None
-            if runs is None or not len(runs):
-                continue
-            lengths = runs[:, 1] - runs[:, 0]
-            warnings.warn(DataQualityWarning(
-                f"{self.path}: channel {name!r} has {len(runs)} run(s) of NaN/inf samples "
-                f"({int(lengths.sum())} samples, longest {int(lengths.max())}, first at sample "
-                f"{int(runs[0, 0]) + self.i0}); kept in the data"), stacklevel=2)
-
-    def _note_dtype(self, data: np.ndarray) -> None:
-        if not self._dtype_known:
-            self.header.dtype = data.dtype
-            self._dtype_known = True
-
-
-class GeneratorSource(BlockSource):
-    """A synthetic recording generated block by block, again for every pass (the generator
-    is deterministic: :func:`meshphase.synthetic.generate_blocks` gives the same samples each time).
-
-    Parameters
-    ----------
-    stream : meshphase.synthetic.generate.SyntheticStream
-        (:func:`meshphase.synthetic.generate_blocks`); its own block length is used.
-    channels : sequence of ChannelSpec, optional
-        Specs replacing the stream's (channel overrides).
-    gains : list of (int, float), optional
-        (column, factor) applied to the samples, in order.
-    """
-
-    def __init__(self, stream, channels=None, gains: list | None = None):
-        self.stream = stream
-        self.gains = list(gains or [])
-        self.header = StreamedRecording(stream.fs, stream.n_samples,
-                                        tuple(channels) if channels is not None else tuple(stream.channels),
-                                        stream.t0, stream.start_datetime, stream.meta,
-                                        stream.history, stream.dtype)
-
-    @property
-    def label(self) -> str:
-        return "synthetic recording"
-
-    def blocks(self, n_block: int):
-        pos = 0
-        for blk in self.stream:
-            yield pos, _apply_gains(blk.data, self.gains, copy=False)
-            pos += blk.n_samples
-
-
-def _rechunk(source: BlockSource, n_block: int) -> Iterator[tuple[int, np.ndarray]]:
-    """The source's blocks, checked to be consecutive and to cover the recording."""
-    pos = 0
-    n = source.header.n_samples
-    nc = source.header.n_channels
-    for a, data in source.blocks(n_block):
-        if a != pos:
-            raise ValueError(f"{source.label}: block at sample {a}, expected {pos}")
-        if data.ndim != 2 or data.shape[1] != nc:
-            raise ValueError(f"{source.label}: block of shape {data.shape}, expected (k, {nc})")
-        pos += data.shape[0]
-        if data.shape[0]:
-            yield a, data
-    if pos != n:
-        raise ValueError(f"{source.label}: the blocks hold {pos} samples, the header says {n}")
-
-
-def _blocks_ahead(source: BlockSource, n_block: int):
-    """:func:`_rechunk`'s blocks, the next one read on a thread of its own while the caller
-    works on this one (:func:`meshphase.runtime.threads.read_ahead`), as a context manager: leaving
-    it, whatever way, stops the reader and closes its file."""
-    return contextlib.closing(read_ahead(lambda: _rechunk(source, n_block)))
 
 
 def _column(data: np.ndarray, j: int) -> np.ndarray:
