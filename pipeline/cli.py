@@ -55,7 +55,7 @@ import warnings
 from pathlib import Path
 
 from meshphase import __version__
-from meshphase.run.channels import mapping_report
+from meshphase.io.channels import mapping_report
 from meshphase.run.demo import demo_scene_path
 from meshphase.errors import DataQualityWarning
 from meshphase.run.exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_PIPE, recording_read_errors,
@@ -153,7 +153,7 @@ def cmd_info(args) -> int:
 
 def _channel_map(scene_path, channels, source: str) -> dict:
     """``info --scene``: the scene's channel mapping of the recording
-    (:func:`meshphase.run.channels.mapping_report`)."""
+    (:func:`meshphase.io.channels.mapping_report`)."""
     scene = load_scene(as_regular_file(scene_path, "the scene"))
     return dict(mapping_report(channels, scene.channels, source), scene=str(scene_path))
 

@@ -15,7 +15,7 @@ from meshphase.run.demo import demo_scene_path
 from meshphase.kinematics.loads import CentroidResult
 from meshphase.models.gearset import Gearset
 from meshphase.models.mesh_phasing import ShaftHoleErrors
-from meshphase.run.frames import (COLUMNS, centroid_rows, circular_mean, comparison_rows,
+from meshphase.report.frames import (COLUMNS, centroid_rows, circular_mean, comparison_rows,
                                   frame, identification_rows, load_sharing_rows, passes_rows,
                                   phasing_rows)
 from meshphase.run.context import RunContext

@@ -12,7 +12,7 @@ import pytest
 from seed_rig_toml import SEED_RIG_GEARSET as G
 
 import meshphase.io
-from meshphase.run.channels import (ChannelMapError, apply_channel_overrides, check_gauges,
+from meshphase.io.channels import (ChannelMapError, apply_channel_overrides, check_gauges,
                                     entry_values, is_glob, map_channels, mapped_specs,
                                     mapping_report, mapping_rows, unmapped_message)
 from meshphase.cli import main
@@ -319,7 +319,7 @@ def test_regex_tooth_beyond_the_gear_is_refused(tmp_path):
 def test_a_message_lists_the_first_missing_names_and_counts_the_rest():
     # a scene can name any number of channels the file lacks: the message stays one short
     # line (the first MESSAGE_NAMES names, their hints, then how many more)
-    from meshphase.run.channels import MESSAGE_NAMES
+    from meshphase.io.channels import MESSAGE_NAMES
 
     many = [{"name": f"gauge_{i:05d}", "kind": "sun"} for i in range(25)]
     with pytest.raises(ChannelMapError) as e:

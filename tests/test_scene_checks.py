@@ -346,7 +346,7 @@ def test_window_outside_the_recording(rig_file, tmp_path):
 
 
 def test_mapped_channel_missing_from_the_recording(rig_file, tmp_path):
-    # the load stage's message (meshphase.run.channels.map_channels), with key and line
+    # the load stage's message (meshphase.io.channels.map_channels), with key and line
     body = ('results = ["phasing"]\n' + G + '[[channels]]\nname = "sun"\nkind = "sun"\n'
             '[[channels]]\nname = "ring_gauge"\nkind = "ring"\n')
     p, text = _with_file(rig_file, body, tmp_path)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from meshphase.run.channels import mapped_specs, map_channels
+from meshphase.io.channels import mapped_specs, map_channels
 from meshphase.recording import ChannelSpec
 from meshphase.run.scene import SceneError, parse_scene
 

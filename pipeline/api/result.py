@@ -2,7 +2,7 @@
 (units in the column names), a short summary, plots, HTML for notebooks, and the usual output
 files.
 
-The tables come from :mod:`meshphase.run.frames`, the plots from
+The tables come from :mod:`meshphase.report.frames`, the plots from
 :mod:`meshphase.report.notebook` (matplotlib, imported only when plotting), the files from
 :func:`meshphase.run.outputs.write_outputs`. :attr:`Result.context` is the
 :class:`~meshphase.run.results.RunContext` itself (``.phasing``, ``.compare``, ...).
@@ -14,7 +14,7 @@ import html
 import math
 import os
 
-from meshphase.run import frames as rf
+from meshphase.report import frames as rf
 from meshphase.html_repr import html_table
 from meshphase.run.exits import run_status
 from meshphase.run.context import RunContext, phasing_verdict
@@ -63,37 +63,37 @@ class Result:
     @property
     def passes(self):
         """Per pass: gauge, planet, time_s, phasing_cycles, sigma_cycles, ideal and model
-        phasing and the residuals [mesh cycles] (:func:`meshphase.run.frames.passes_rows`)."""
+        phasing and the residuals [mesh cycles] (:func:`meshphase.report.frames.passes_rows`)."""
         return rf.frame(rf.passes_rows(self.context), "passes")
 
     @property
     def phasing(self):
         """Per gauge and planet: measured mean and sd, ideal, model, residuals, band [mesh
-        cycles] (:func:`meshphase.run.frames.phasing_rows`)."""
+        cycles] (:func:`meshphase.report.frames.phasing_rows`)."""
         return rf.frame(rf.phasing_rows(self.context), "phasing")
 
     @property
     def load_sharing(self):
         """Per planet: load-sharing factor and its standard error [-]
-        (:func:`meshphase.run.frames.load_sharing_rows`)."""
+        (:func:`meshphase.report.frames.load_sharing_rows`)."""
         return rf.frame(rf.load_sharing_rows(self.context), "load_sharing")
 
     @property
     def comparison(self):
         """Per gauge and reference (ideal, model, truth): residual statistics [mesh cycles]
-        (:func:`meshphase.run.frames.comparison_rows`)."""
+        (:func:`meshphase.report.frames.comparison_rows`)."""
         return rf.frame(rf.comparison_rows(self.context), "comparison")
 
     @property
     def identification(self):
         """Per gear: identified shaft hole error [um] and angle [deg] with uncertainties
-        (:func:`meshphase.run.frames.identification_rows`)."""
+        (:func:`meshphase.report.frames.identification_rows`)."""
         return rf.frame(rf.identification_rows(self.context), "identification")
 
     @property
     def centroids(self):
         """Per gear with face-width gauges: load centroid [mm] and its standard error
-        (:func:`meshphase.run.frames.centroid_rows`); no rows without face-width gauges."""
+        (:func:`meshphase.report.frames.centroid_rows`); no rows without face-width gauges."""
         return rf.frame(rf.centroid_rows(self.context), "centroids")
 
     # ------------------------------------------------------------------ summary

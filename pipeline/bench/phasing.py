@@ -109,7 +109,7 @@ def run_case(case: PhasingCase, *, seed: int = 0, results=("phasing", "compare")
              channels=()) -> dict:
     """Generate the case, run the scene stages on it, compare with the truth.
 
-    ``channels``: the scene's ``[[channels]]`` entries (dicts, :mod:`meshphase.run.channels`),
+    ``channels``: the scene's ``[[channels]]`` entries (dicts, :mod:`meshphase.io.channels`),
     none by default (the generator's own channel kinds).
 
     Returns

@@ -15,7 +15,7 @@ import matplotlib.pyplot as plt
 
 from meshphase.compare.pass_model import wrap
 from meshphase.recording import Recording
-from meshphase.run.context import RunContext
+from meshphase.report.frames import RunResults, load_sharing_rows, passes_rows, phasing_rows
 
 __all__ = ["plot_recording", "plot_channels", "plot_result_onsets", "plot_phasing", "plot_load_sharing",
            "plot_residuals", "onset_marks"]
@@ -81,7 +81,7 @@ def onset_marks(source, channel: str):
     (times, planets), a :class:`~meshphase.Result` or a RunContext (its planet labels where
     the phasing named them, else its onsets)."""
     ctx = getattr(source, "context", source)
-    if isinstance(ctx, RunContext):
+    if isinstance(ctx, RunResults):
         ph = ctx.phasing
         for lab in (ph.labels.values() if ph is not None else ()):
             if lab.channel == channel:
@@ -181,7 +181,7 @@ def plot_recording(rec, channels=None, start: float | None = None, stop: float |
                          max_points=max_points)
 
 
-def _gauges(ctx: RunContext, gauge, have) -> list[str]:
+def _gauges(ctx: RunResults, gauge, have) -> list[str]:
     """The gauges to draw: ``gauge`` or every one in ``have``; ValueError when none."""
     want = [g for g in _GAUGES if g in have and (gauge is None or g == gauge)]
     if not want:
@@ -190,7 +190,7 @@ def _gauges(ctx: RunContext, gauge, have) -> list[str]:
     return want
 
 
-def plot_result_onsets(ctx: RunContext, gauge=None, *, ax=None, revolutions: float = 2.0,
+def plot_result_onsets(ctx: RunResults, gauge=None, *, ax=None, revolutions: float = 2.0,
                        max_points: int = 20000):
     """The conditioned signal of each gauge (the first minute the run keeps) over about
     ``revolutions`` relative revolutions from its first onset, onsets coloured by planet."""
@@ -226,12 +226,10 @@ def _unwrap(y, ref):
     return ref + wrap(np.asarray(y, dtype=float) - ref)
 
 
-def plot_phasing(ctx: RunContext, gauge=None, *, ax=None):
+def plot_phasing(ctx: RunResults, gauge=None, *, ax=None):
     """Measured phasing per pass against time, one colour per planet: error bars of one
     sigma, the ideal (dotted), the identified model (line) and the Monte Carlo band (shaded)
     [mesh cycles]; one panel per gauge."""
-    from meshphase.run.frames import passes_rows, phasing_rows
-
     tabs = {g: t for g, t in (ctx.phasing.tables.items() if ctx.phasing is not None else ())
             if len(t)}
     want = _gauges(ctx, gauge, tabs)
@@ -261,11 +259,9 @@ def plot_phasing(ctx: RunContext, gauge=None, *, ax=None):
     return fig
 
 
-def plot_residuals(ctx: RunContext, gauge=None, *, ax=None):
+def plot_residuals(ctx: RunResults, gauge=None, *, ax=None):
     """Measured - model phasing per pass (measured - ideal where no model was identified)
     [mesh cycles] against time, one colour per planet, one panel per gauge."""
-    from meshphase.run.frames import passes_rows
-
     rows = passes_rows(ctx)
     want = _gauges(ctx, gauge, {r["gauge"] for r in rows})
     fig, axes = _axes(len(want), ax)
@@ -285,10 +281,8 @@ def plot_residuals(ctx: RunContext, gauge=None, *, ax=None):
     return fig
 
 
-def plot_load_sharing(ctx: RunContext, *, ax=None):
+def plot_load_sharing(ctx: RunResults, *, ax=None):
     """Load-sharing factor per planet [-] with its standard error; 1 is equal sharing."""
-    from meshphase.run.frames import load_sharing_rows
-
     rows = load_sharing_rows(ctx)
     if not rows:
         raise ValueError("nothing to plot: this run has no load sharing (it needs a ring gauge; "

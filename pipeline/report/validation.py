@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from meshphase.run.channels import mapping_report
+from meshphase.io.channels import mapping_report
 from meshphase.compare.predict import RECORD_FACTORS, identification_verdict, wrap
 from meshphase.models.bearing import BearingMoments
 from meshphase.models.tilt import TABLE11_THEORY, table10_cases, table11_cases

@@ -31,7 +31,7 @@ from meshphase.data_schemas import schema_errors
 from meshphase import io
 from meshphase.io.bridge import BridgeConfig
 from meshphase.io.sources import scenario_config, scenario_names
-from meshphase.run.channels import (GAUGE_KINDS, ChannelMapError, apply_channel_overrides, check_gauges,
+from meshphase.io.channels import (GAUGE_KINDS, ChannelMapError, apply_channel_overrides, check_gauges,
                                     is_glob, map_channels)
 from meshphase.errors import DeprecatedNameWarning, SceneWarning
 from meshphase.models.assembly import (CLEARANCE_ATOL, assemblable_planet_counts, coaxiality_error,
@@ -90,7 +90,7 @@ class Scene:
     speeds : Speeds or None
         Nominal speeds [rad/s] (a hint, never used for measured phasing).
     channels : list of dict
-        The ``[[channels]]`` entries (:mod:`meshphase.run.channels`): ``name`` (exact or glob) or
+        The ``[[channels]]`` entries (:mod:`meshphase.io.channels`): ``name`` (exact or glob) or
         ``regex``, ``kind``, ``gear``, ``tooth``, ``face_position`` [m], ``gain``,
         ``mount_angle`` [rad], ``bridge`` (a :class:`meshphase.io.bridge.BridgeConfig`).
     input : dict
@@ -1090,8 +1090,8 @@ def check_recording(scene: Scene, info=None) -> None:
     files carry one); ``processing.notch_hz`` below the Nyquist frequency; the
     ``start_s``/``stop_s`` window inside the recording; every ``[[channels]]`` name and the
     ``[tacho] channel`` present, and a gauge channel when measured results are wanted (the
-    same rules and messages as the load stage: :func:`meshphase.run.channels.map_channels`,
-    :func:`meshphase.run.channels.check_gauges`), each bridge channel's ``null_window_s`` inside
+    same rules and messages as the load stage: :func:`meshphase.io.channels.map_channels`,
+    :func:`meshphase.io.channels.check_gauges`), each bridge channel's ``null_window_s`` inside
     the recording.
 
     Parameters

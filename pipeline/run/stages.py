@@ -27,7 +27,7 @@ import numpy as np
 from meshphase.kinematics.angles import held_member
 from meshphase.io.bridge import bridge_recording
 from meshphase.io.sources import BridgeSource, generator
-from meshphase.run.channels import (GAUGE_KINDS, apply_channel_overrides, bridge_configs, channels_present,
+from meshphase.io.channels import (GAUGE_KINDS, apply_channel_overrides, bridge_configs, channels_present,
                                     check_gauges, entry_values, map_channels, mapped_specs, overridden,
                                     unmapped_message)
 from meshphase.compare.predict import band_coverage, identify_errors, predict_pass_phasing, residual_stats
@@ -239,7 +239,7 @@ def _open_memory(scene: Scene) -> tuple:
 
 
 def _mapped_source(header, entries: list, source: str, make: Callable, make_whole: Callable):
-    """The source with the scene's ``[[channels]]`` applied (:mod:`meshphase.run.channels`) and
+    """The source with the scene's ``[[channels]]`` applied (:mod:`meshphase.io.channels`) and
     the gauges' units converted to m/m as read (:func:`meshphase.io.units.gauge_unit_gains`, a
     ``units_to_si`` history step): ``make(specs, gains)`` opens it; unmapped channels said as
     a SceneWarning; bridge channels converted to strain as read

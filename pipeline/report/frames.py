@@ -1,7 +1,7 @@
 """Tables of a run's typed stage results, one row per pass, planet, gear ...: what
 :class:`meshphase.Result`'s DataFrames hold.
 
-Each ``*_rows(ctx)`` function reads the typed results of a :class:`~meshphase.run.results.RunContext`
+Each ``*_rows(ctx)`` function reads the typed results of a :class:`~meshphase.run.context.RunContext`
 (``ctx.phasing``, ``ctx.compare``, ...) and returns a list of dicts whose keys are the
 columns of :data:`COLUMNS` (units in the names: ``_s`` seconds, ``_cycles`` mesh cycles,
 ``_um`` micrometres, ``_mm`` millimetres, ``_deg`` degrees, ``_ustrain`` microstrain; no
@@ -13,13 +13,13 @@ to the unit the column names.
 from __future__ import annotations
 
 import math
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
 from meshphase.compare.predict import wrap
-from meshphase.run.context import RunContext
 
-__all__ = ["COLUMNS", "passes_rows", "phasing_rows", "load_sharing_rows", "comparison_rows",
+__all__ = ["RunResults", "COLUMNS", "passes_rows", "phasing_rows", "load_sharing_rows", "comparison_rows",
            "identification_rows", "centroid_rows", "frame", "circular_mean"]
 
 #: table name -> its columns, in order
@@ -44,8 +44,24 @@ COLUMNS: dict[str, tuple[str, ...]] = {
 _NAN = float("nan")
 
 
+@runtime_checkable
+class RunResults(Protocol):
+    """What the tables and figures read of a run: the typed stage results of a
+    :class:`~meshphase.run.context.RunContext` (None where a stage did not run). The report
+    sits above the numbers and below the run that writes it, so it names the run's results by
+    their shape, not by the run's class."""
+
+    scene: Any
+    onsets: Any
+    phasing: Any
+    load_sharing: Any
+    compare: Any
+    identify: Any
+    centroids: Any
+
+
 def _check(ctx) -> None:
-    if not isinstance(ctx, RunContext):
+    if not isinstance(ctx, RunResults):
         raise TypeError(f"ctx must be a RunContext (meshphase.run.stages.run_scene), got "
                         f"{type(ctx).__name__}")
 
@@ -59,7 +75,7 @@ def circular_mean(x) -> float:
     return float((np.angle(np.exp(2j * np.pi * x).mean()) / (2 * np.pi)) % 1.0)
 
 
-def _comparison_arrays(ctx: RunContext, gauge: str, n: int) -> tuple:
+def _comparison_arrays(ctx: RunResults, gauge: str, n: int) -> tuple:
     """(ideal, model) phasing at each pass of ``gauge`` [-]; NaN where not compared."""
     cmp = ctx.compare.by_gear.get(gauge) if ctx.compare is not None else None
     ideal = np.full(n, np.nan) if cmp is None else np.asarray(cmp.ideal, dtype=float)
@@ -68,7 +84,7 @@ def _comparison_arrays(ctx: RunContext, gauge: str, n: int) -> tuple:
     return ideal, model
 
 
-def passes_rows(ctx: RunContext) -> list[dict]:
+def passes_rows(ctx: RunResults) -> list[dict]:
     """One row per measured pass of every gauge: its phasing and one-sigma uncertainty
     [mesh cycles], the ideal and identified-model phasing at it and the residuals (wrapped to
     [-0.5, 0.5))."""
@@ -100,7 +116,7 @@ def _per_planet(stats: dict | None, planet: int, key: str) -> float:
     return _NAN if v is None else float(v)
 
 
-def phasing_rows(ctx: RunContext) -> list[dict]:
+def phasing_rows(ctx: RunResults) -> list[dict]:
     """One row per gauge and measured planet (2..N): the passes' circular mean, standard
     deviation and range [mesh cycles] (:meth:`meshphase.kinematics.phasing.PassTable.summary`, as in
     summary.json), their median one-sigma uncertainty, the ideal phasing, the identified
@@ -134,7 +150,7 @@ def phasing_rows(ctx: RunContext) -> list[dict]:
     return rows
 
 
-def load_sharing_rows(ctx: RunContext) -> list[dict]:
+def load_sharing_rows(ctx: RunResults) -> list[dict]:
     """One row per planet: load-sharing factor LS_n [-] (1 = equal), its standard error [-],
     the passes it comes from and the mean pulse amplitude [microstrain]."""
     _check(ctx)
@@ -146,7 +162,7 @@ def load_sharing_rows(ctx: RunContext) -> list[dict]:
             for r in ctx.load_sharing.sharing.to_rows()]
 
 
-def comparison_rows(ctx: RunContext) -> list[dict]:
+def comparison_rows(ctx: RunResults) -> list[dict]:
     """One row per gauge and reference ("ideal", "model": the identified errors, "truth":
     a synthetic recording's): residual statistics of measured - reference [mesh cycles] and
     the share of passes inside the Monte Carlo band (NaN without one)."""
@@ -174,7 +190,7 @@ def _deg(v) -> float:
     return _NAN if v is None else math.degrees(float(v))
 
 
-def identification_rows(ctx: RunContext) -> list[dict]:
+def identification_rows(ctx: RunResults) -> list[dict]:
     """One row per gear (sun, ring, planet1..N): the identified shaft hole error e [um] with
     its one-sigma and 95 % interval [um], its angle kappa [deg] with its one-sigma [deg],
     whether the data can tell it and why not (NaN values where they cannot)."""
@@ -191,7 +207,7 @@ def identification_rows(ctx: RunContext) -> list[dict]:
     return rows
 
 
-def centroid_rows(ctx: RunContext) -> list[dict]:
+def centroid_rows(ctx: RunResults) -> list[dict]:
     """One row per gear with face-width gauges: load centroid Z [mm] from the face centre and
     its standard error [mm], the loaded share of the face [-], the load shape and the fit's
     RMS misfit [strain]; NaN for a gear with too few positioned gauges."""
