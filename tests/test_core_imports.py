@@ -1,4 +1,4 @@
-"""The core never imports matplotlib (DESIGN.md: only meshphase.report may), and stays light."""
+"""The core never imports matplotlib (only meshphase.report may: docs/architecture.md), and stays light."""
 
 import subprocess
 import sys

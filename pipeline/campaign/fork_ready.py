@@ -35,15 +35,10 @@ so this module does its work when it is imported:
    collector's permanent generation. A worker's collections then never walk them, and so
    never write to, and copy, the pages they share with the server.
 
-Measured (``meshphase bench campaign``, its first-figure rows; a forked child draws one
-figure of the combined report twice; medians of 6 children per figure): while the server
-also imported scipy.signal (until 2026-11-29), the child's first figure took 0.13-0.18 s
-longer than its second without the frozen heap, a full collection walking every inherited
-object, and 0.02-0.05 s with it (six runs on 2026-11-28). Without scipy.signal the bench
-measures 0.02-0.03 s either way: whether a full collection falls into a worker's first
-figure depends on what the server imported; with the heap frozen, it never walks that. The
-small figure drawn here halves what is left (the bench's cases without and with this
-module, 2026-11-29: 0.022-0.029 s and 0.009-0.016 s per figure).
+Why the freeze matters is measured by ``meshphase bench campaign`` (its first-figure rows: a
+forked child draws one figure of the combined report twice, with and without this module):
+whether a full collection falls into a worker's first figure depends on what the server
+imported; with the heap frozen, it never walks those objects.
 
 A failure of the first uses (a full temporary disk, say) leaves them to the workers: the
 import itself never fails.

@@ -5,7 +5,8 @@ Why this exists
 meshphase's own generator (``synthetic/``) is written by the same people as the pipeline and
 may share its blind spots (an outside tester with a third-party generator found the measured
 phasing 20-50x off under an ordinary 1 % drive ripple). This module is a second, independent
-implementation of the physics in ``spec/models.md`` sections 1-3 and seed 000. It imports
+implementation of the physics the models restate (ideal phasing, the shaft-hole error
+model, the engagement condition; docs/method.md) and of the seed 000 gearset. It imports
 nothing from ``pipeline`` or ``synthetic`` -- only numpy, scipy, nptdms and the standard
 library -- and deliberately solves things another way:
 

@@ -1,6 +1,6 @@
 """Tests of the independent reference rig (tests/independent/rig.py).
 
-Reference values: Parker & Lin (2004) ideal phasing as restated in spec/models.md section 1;
+Reference values: Parker & Lin (2004) ideal phasing as restated in meshphase.models.mesh_phasing;
 closed forms derived in the test docstrings. Recordings are kept to seconds so the module runs
 in a few seconds.
 """

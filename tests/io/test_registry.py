@@ -262,7 +262,7 @@ def _best_rate(fn, n_samples, repeats=3):
 @pytest.mark.bench
 @pytest.mark.parametrize("minutes", [10.0])
 def test_read_throughput_vs_raw_npy(tmp_path, minutes):
-    """Measured, not asserted: GS/s of each reader vs np.load of the same samples (DESIGN.md
+    """Measured, not asserted: GS/s of each reader vs np.load of the same samples (the readers'
     targets: HDF5 >= 0.5, TDMS >= 0.3 of raw; CSV at least pandas' C engine on the same file)."""
     import pandas as pd
     from nptdms import ChannelObject, TdmsWriter
