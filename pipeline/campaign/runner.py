@@ -1,5 +1,10 @@
 """Campaigns: one scene, many recordings, one Dask job (``meshphase campaign``).
 
+One module of about 1,000 lines: collecting the inputs, the per-recording task, the scene-level
+results and the campaign tables are one flow over the same options; the job's life is in
+:mod:`meshphase.campaign.job`, markers in :mod:`~meshphase.campaign.resume`, the cluster in
+:mod:`~meshphase.campaign.cluster`.
+
 The scene supplies the gearset, channel map, tolerances and the results wanted; each
 recording file replaces the scene's ``[input]``. Every recording is one Dask task that gets
 *file paths* (scene, recording, output folder), never open handles or arrays, loads the

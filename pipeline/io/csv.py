@@ -1,5 +1,9 @@
 """CSV: a time column plus one column per channel (pandas C engine).
 
+One module of about 1,000 lines on purpose: the header parser, the time-grid checks, the block
+reader and the writer follow one layout and share its rules; split, they would pass private
+names between the halves.
+
 File layout (full description in ``data_schemas/csv_header.md``)::
 
     # meshphase {"format": "meshphase-csv", "format_version": 1, "fs": 5120.0, "t0": 0.0, ...}

@@ -1,5 +1,9 @@
 """HDF5: the native archive of meshphase recordings (h5py).
 
+One module of about 1,000 lines on purpose: the reader, the block reader and the writer of one
+layout share its checks, constants and chunk arithmetic; split, they would pass private names
+between the halves.
+
 Layout (version 1; full description in ``data_schemas/hdf5_layout.md``, schema in
 ``data_schemas/hdf5_layout.schema.json``)::
 

@@ -1,5 +1,9 @@
 """Scenes: a TOML file -> a typed, SI-unit config -> the stages its results need.
 
+One module of about 1,300 lines on purpose: it walks one schema table by table, each table's
+parser beside its checks, and every error names the key and the line of the file; the stage
+graph it plans from is declared in :mod:`meshphase.run.declare`.
+
 A scene names the gearset, the gauges, the inputs (a recording file or a synthetic
 scenario), the tolerances and the results wanted (``data_schemas/scene.schema.json``,
 documented in ``data_schemas/scene.md``). It is validated up front; errors name the key and
