@@ -101,10 +101,12 @@ ms per million samples; the candidate runs add work in proportion to their numbe
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from meshphase.errors import DataQualityWarning
 from meshphase.signal.median import median_of_finite, sigma_of_differences
 from meshphase.validate import as_choice
 
@@ -112,7 +114,8 @@ __all__ = ["find_runs", "nonfinite_runs", "clipped_runs", "channel_quality", "eq
            "quantisation_step", "chance_min_run", "FlatRuns", "flat_runs", "dropout_runs",
            "plateau_runs", "outside_runs", "FALSE_ALARM", "DROPOUT_MIN_RUN", "CLIP_MIN_RUN",
            "FlatScan", "FlatStats", "classify_flat_runs", "ChannelScan", "ScanResult",
-           "FLAT_WINDOW", "ChannelQuality", "HumReport", "quality_from_scan", "merge_runs"]
+           "FLAT_WINDOW", "ChannelQuality", "HumReport", "quality_from_scan", "merge_runs",
+           "RunTracker", "warn_quality"]
 
 #: Expected number of chance runs over a channel below which a run is significant [-].
 FALSE_ALARM = 1e-3
@@ -948,6 +951,25 @@ def quality_from_scan(res: ScanResult, name: str = "", fs: float | None = None,
                           res.clipped(), min=res.min, max=res.max, rms=res.rms, **extra)
 
 
+def warn_quality(rep: ChannelQuality, snr_warn_db: float) -> None:
+    """One :class:`~meshphase.errors.DataQualityWarning` listing what ``rep`` found: gap,
+    dropout and clipped runs, and an SNR below ``snr_warn_db`` [dB]; none when clean."""
+    problems = []
+    if len(rep.gap_runs):
+        problems.append(f"{len(rep.gap_runs)} gap run(s) of non-finite samples "
+                        f"({rep.n_gap_samples} samples)")
+    if len(rep.dropout_runs):
+        problems.append(f"{len(rep.dropout_runs)} dropout run(s) of zeros or a held value "
+                        f"({rep.n_dropout_samples} samples, treated as gaps)")
+    if len(rep.clipped_runs):
+        problems.append(f"{len(rep.clipped_runs)} clipped run(s) ({rep.n_clipped_samples} samples)")
+    if np.isfinite(rep.snr_db) and rep.snr_db < snr_warn_db:
+        problems.append(f"low SNR {rep.snr_db:.1f} dB (< {snr_warn_db:g} dB)")
+    if problems:
+        warnings.warn(f"channel {rep.name!r}: " + "; ".join(problems), DataQualityWarning,
+                      stacklevel=3)
+
+
 def channel_quality(x, *, kind: str | None = None) -> dict:
     """Summary of one channel: counts and runs of non-finite, dropout and clipped samples, range.
 
@@ -1002,8 +1024,10 @@ FLAT_WINDOW = _EXTEND_SPAN + 128 + 16
 _EMPTY_RUNS = np.empty((0, 2), dtype=np.int64)
 
 
-class _RunTracker:
-    """Runs of True of a boolean mask fed in consecutive pieces, merged across pieces."""
+class RunTracker:
+    """Runs of True of a boolean mask fed in consecutive pieces, merged across pieces
+    (:func:`find_runs` of the whole mask): :meth:`add` the next piece, :meth:`runs` the
+    ``[start, stop)`` rows so far."""
 
     def __init__(self):
         self.done: list[np.ndarray] = []
@@ -1011,6 +1035,7 @@ class _RunTracker:
         self.n = 0
 
     def add(self, mask: np.ndarray) -> None:
+        """The next piece of the boolean mask."""
         m = mask.size
         if m == 0:
             return
@@ -1035,6 +1060,7 @@ class _RunTracker:
         self.n += m
 
     def runs(self) -> np.ndarray:
+        """The runs of every piece fed, shape (k, 2)."""
         out = list(self.done)
         if self.open is not None:
             out.append(np.array([[self.open, self.n]], dtype=np.int64))
@@ -1553,15 +1579,15 @@ class ChannelScan:
         self.fa = _check_false_alarm(false_alarm)
         self.min_run = _check_int(min_run, "min_run", 2)
         self.clip_min_run = _check_int(clip_min_run, "clip_min_run", 2)
-        self.nonfinite = _RunTracker()
-        self.nan = _RunTracker()
+        self.nonfinite = RunTracker()
+        self.nan = RunTracker()
         self.fscan = FlatScan(self.n)
         self.pulse: list | None = [] if flat is None else None   # the pulse-train test
         self.pulse_step = max(1, self.n // 4096)
         self.norm = 0.0          # Euclidean norm of the finite samples fed in pass 1
         self.pos1 = self.pos2 = 0
         self.stats: FlatStats | None = None
-        self.rails = _RunTracker()
+        self.rails = RunTracker()
         self.cand: _Candidates | None = None
 
     def feed1(self, x: np.ndarray) -> None:
