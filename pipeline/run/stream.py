@@ -83,7 +83,7 @@ from meshphase.signal.drift import DriftFilter
 from meshphase.signal.quality import ChannelQuality, ChannelScan, RunTracker, quality_from_scan, warn_quality
 from meshphase.signal.snr import SNR_SAMPLES, SnrTap, finite_pairs
 from meshphase.signal.zero_phase import ZeroPhase
-from meshphase.validate import as_choice, as_positive
+from meshphase.validate import as_positive
 
 __all__ = ["StreamedRecording", "BlockSource", "FileSource", "MemorySource", "GeneratorSource",
            "RawScan",

@@ -26,7 +26,7 @@ Dropouts and clipped plateaus
 -----------------------------
 A DAQ that drops samples may write exact zeros or hold its last sample instead of NaN; an
 ADC or amplifier stage may saturate below the nominal full scale, or on one polarity only.
-:func:`meshphase.signal.quality.flat_runs` finds both on the raw data, with a run-length threshold
+:func:`meshphase.signal.flat_runs.flat_runs` finds both on the raw data, with a run-length threshold
 from the channel's own statistics (a quantised quiet channel repeats values by chance) and
 tells them apart by where the flat run sits: a clip bounds a pulse extreme and is entered
 steeply, a dropout sits at 0 or at a value the signal passes through (see that module's
@@ -654,7 +654,7 @@ def assess_quality(x, fs: float, *, t0: float = 0.0, name: str = "", clip_min_ru
         SNR below which to warn [dB].
     detect_flat : bool
         Look for dropout runs and clipped plateaus at any level
-        (:func:`meshphase.signal.quality.flat_runs`); False: non-finite gaps and rail clipping only.
+        (:func:`meshphase.signal.flat_runs.flat_runs`); False: non-finite gaps and rail clipping only.
         Meant for analogue (strain) channels, not pulse trains.
     dropout_min_run : int
         Floor of the dropout run-length threshold [samples], >= 2 (the threshold itself

@@ -23,7 +23,7 @@ import numpy as np
 
 from meshphase.errors import DataQualityWarning
 from meshphase.signal import iir
-from meshphase.signal.quality import find_runs, merge_runs
+from meshphase.signal.runs import find_runs, merge_runs
 
 __all__ = ["ZeroPhase", "apply_finite", "finite_apply_gaps", "filter_overlap", "push_pair",
            "DECAY", "FILL_MAX", "CHUNK"]
