@@ -72,6 +72,7 @@ from typing import Callable, Iterator, Sequence
 import numpy as np
 from meshphase.errors import DataQualityWarning
 from meshphase.kinematics.encoder import pulse_levels, rising_crossing_parts
+from meshphase.onsets import OnsetStream
 from meshphase.recording import ChannelSpec, Recording
 from meshphase.runtime.threads import read_ahead, thread_pool
 from meshphase.signal import iir
@@ -1004,8 +1005,6 @@ def _channel_chain(p: ChannelPlan, q: ChannelQuality, notch_sos, settle: dict, n
 def _onset_streams(plans, quality: dict, fs: float, t0: float) -> tuple[dict, int]:
     """The onset detector of every planned gauge (flagging its clipped runs, guarding its
     gaps by ``settle``, its dropouts as gaps), and the largest analysis block [samples]."""
-    from meshphase.onsets import OnsetStream
-
     onsets, est_onset = {}, 1 << 20
     for p in plans:
         if not p.onsets:

@@ -274,6 +274,7 @@ def notch_settle(freqs, q: float = NOTCH_Q) -> float:
 def drift_highpass(fs: float, window: float, order: int = 2) -> np.ndarray:
     """Second-order sections of the ``method="highpass"`` drift removal: a Butterworth
     high-pass of corner ``min(1 / window, fs / 4)`` [Hz] (``window`` [s], ``fs`` [Hz])."""
+    window = as_positive(window, "window")
     return design_filter(fs, kind="highpass", low=min(1.0 / window, 0.25 * fs), order=order)
 
 
