@@ -968,7 +968,7 @@ def _through_gaps(bad: np.ndarray, st: ZeroPhase, notes: list) -> np.ndarray:
 def _channel_chain(p: ChannelPlan, q: ChannelQuality, notch_sos, settle: dict, notes: list, *,
                    n: int, fs: float, block: int, dtype, drift, drift_window, lowpass,
                    highpass, order, engine: str = "scipy") -> tuple:
-    """One channel's conditioning chain (:class:`_Chain`), the overlap it needs [samples]
+    """One channel's conditioning chain (:class:`meshphase.signal.blocks.ConditioningChain`), the overlap it needs [samples]
     and its drift block [samples]; its filters' settling goes into its group's ``settle``."""
     bad = q.all_gap_runs()                                 # masked input: gaps + dropouts
     notch = None
@@ -1025,7 +1025,7 @@ def _onset_streams(plans, quality: dict, fs: float, t0: float) -> tuple[dict, in
 
 def _chain_pairs(plans) -> list:
     """The plans in pairs for the worker threads: two chains on one thread filter side by
-    side where their windows fall due together (:func:`_push_pair`). Channels of one group
+    side where their windows fall due together (:func:`meshphase.signal.zero_phase.push_pair`). Channels of one group
     (one gear, one pulse period: their drift-removed windows coincide) are paired first;
     the groups' odd ones out are paired with each other (their notches still coincide),
     the last alone."""
@@ -1139,7 +1139,7 @@ STEP_PULSE_SHARE = 0.25
 
 def _warn_steps(name: str, drift, q, fs: float, t0: float, units: str) -> None:
     """A DataQualityWarning naming the level steps of a channel's baseline
-    (:meth:`_Drift.steps`), with the stretch whose passes they may have moved."""
+    (:meth:`meshphase.signal.drift.DriftFilter.steps`), with the stretch whose passes they may have moved."""
     if not isinstance(drift, DriftFilter) or not math.isfinite(q.noise_rms):
         return
     has_peak = math.isfinite(q.signal_peak) and q.signal_peak > 0

@@ -2,7 +2,10 @@
 
 Array functions at the bottom (numpy in, numpy out, sample rate ``fs`` in [Hz]) and thin
 :class:`~meshphase.recording.Recording` wrappers that convert, apply per channel and append
-one entry to the recording's history.
+one entry to the recording's history. The filters are the block filters of
+:mod:`meshphase.signal.zero_phase` and :mod:`meshphase.signal.drift`, pushed the whole array
+(:func:`meshphase.signal.blocks.run_whole`): the streamed stages run the same ones block by
+block.
 
 Steps
 -----
