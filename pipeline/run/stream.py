@@ -27,7 +27,7 @@ zero-phase IIR filters (:func:`scipy.signal.sosfiltfilt`, or its arithmetic comp
 for a long recording, two channels of a gear side by side: :mod:`meshphase.signal.iir`, the same
 numbers) are run on windows that overlap
 each kept stretch by ``L`` samples on both sides, ``L`` chosen so that the slowest pole
-of the filter decays by 1e-15 over it (:func:`filter_overlap`): a transient started at an
+of the filter decays by 1e-15 over it (:func:`meshphase.signal.zero_phase.filter_overlap`): a transient started at an
 artificial window edge has decayed below ~1e-13 of the signal at the samples kept; at the
 recording's own ends and at gaps the window holds the true edge and the filter pads it as
 the whole-array filter does. The drift baseline is computed from the same block medians
@@ -69,27 +69,27 @@ from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
 import numpy as np
-from scipy import ndimage
-
-from meshphase.signal import iir
-from meshphase.signal.condition import (_apply_finite, _block_means, _block_medians, _check_freq, _drift_window,
-                                        _noise_from_diffs, _resolve_band, _settle_time, _short_segments_message,
-                                        _short_signal_message, _snr_combine, _snr_peak, _warn_quality, default_band,
-                                        design_filter, design_notch, detect_hum, finite_apply_gaps, level_steps)
-from meshphase.kinematics.encoder import pulse_levels, rising_crossing_parts
 from meshphase.errors import DataQualityWarning
-from meshphase.onsets import DEFAULT_BLOCK, DEFAULT_DETECTOR, make_detector
-from meshphase.signal.quality import ChannelQuality, ChannelScan, _RunTracker, merge_runs, quality_from_scan
-from meshphase.recording import BlockSource, MemorySource, Recording
-from meshphase.signal.savgol import savgol_filter
-from meshphase.runtime.threads import thread_pool
 from meshphase.io.sources import FileSource, GeneratorSource, StreamedRecording
-from meshphase.io.sources import blocks_ahead as _blocks_ahead
-from meshphase.validate import as_choice, as_positive
+from meshphase.io.sources import blocks_ahead
+from meshphase.kinematics.encoder import pulse_levels, rising_crossing_parts
+from meshphase.onsets import DEFAULT_BLOCK, DEFAULT_DETECTOR, make_detector
+from meshphase.recording import BlockSource, MemorySource, Recording
+from meshphase.runtime.threads import thread_pool
+from meshphase.signal import drift as drift_filters
+from meshphase.signal import iir
+from meshphase.signal.blocks import ConditioningChain, Identity, push_chains
+from meshphase.signal.condition import (NOTCH_Q, band_limit, design_notch, detect_hum, drift_highpass,
+                                        notch_settle, settle_time)
+from meshphase.signal.drift import DriftFilter
+from meshphase.signal.quality import (ChannelQuality, ChannelScan, RunTracker, quality_from_scan,
+                                      warn_quality)
+from meshphase.signal.snr import SNR_SAMPLES, SnrTap, finite_pairs
+from meshphase.signal.zero_phase import ZeroPhase
 
 __all__ = ["StreamedRecording", "BlockSource", "FileSource", "MemorySource", "GeneratorSource",
            "RawScan",
-           "ChannelPlan", "StreamResult", "scan_source", "condition_stream", "filter_overlap",
+           "ChannelPlan", "StreamResult", "scan_source", "condition_stream",
            "stream_memory", "scan_memory", "MEMORY_BUDGET", "PROCESS_RSS_BUDGET", "BLOCK_SAMPLES",
            "HUM_SECONDS", "EXCERPT_SECONDS"]
 
@@ -110,10 +110,6 @@ MEMORY_BUDGET = 2 * 1024 ** 3
 #: recording) with headroom;
 #: tests/processing/test_stream.py holds a 30-minute run to it (slow).
 PROCESS_RSS_BUDGET = 1024 ** 3
-#: Decay of the slowest filter pole over the overlap of two filter windows [-].
-_DECAY = 1e-15
-_FILL_MAX = 8          # gap bridging of the conditioning filters (filter_signal's default)
-_SNR_SAMPLES = 1 << 20  # condition._SUBSAMPLE
 #: the memory estimates' item for the blocks read (all channels; the passes read ahead)
 _READ_BLOCKS = ("read blocks (all channels: this one, one queued, one being read; float64 copies of "
                 "two: the onsets' and the chains')")
@@ -125,43 +121,6 @@ def _column(data: np.ndarray, j: int) -> np.ndarray:
 
 
 # ============================================================================ memory
-def filter_overlap(sos: np.ndarray, *, decay: float = _DECAY) -> int:
-    """Samples over which the slowest pole of ``sos`` decays by ``decay`` [-].
-
-    A zero-phase filter (:func:`scipy.signal.sosfiltfilt`) run on a window that starts or
-    ends inside the data starts with the wrong state there; the error it leaves decays like
-    the slowest pole, ``r**m`` after ``m`` samples (``r`` its radius). Kept samples at least
-    this far from an artificial window edge carry an error below ``decay`` times the state
-    error (itself of the order of the signal).
-
-    Parameters
-    ----------
-    sos : ndarray, shape (k, 6)
-        Second-order sections.
-    decay : float
-        In (0, 1).
-
-    Returns
-    -------
-    int
-    """
-    sos = np.asarray(sos, dtype=np.float64)
-    if sos.ndim != 2 or sos.shape[1] != 6:
-        raise ValueError(f"sos must have shape (k, 6), got {sos.shape}")
-    if not 0.0 < decay < 1.0:
-        raise ValueError(f"decay must be in (0, 1), got {decay!r}")
-    r = 0.0
-    for sec in sos:
-        if sec[3] == 0:
-            continue
-        r = max(r, float(np.max(np.abs(np.roots(sec[3:])))) if np.any(sec[4:]) else 0.0)
-    if r <= 0.0:
-        return 1
-    if r >= 1.0:
-        raise ValueError(f"filter is not stable (pole radius {r!r})")
-    return int(math.ceil(math.log(decay) / math.log(r)))
-
-
 def stream_memory(fs: float, n_samples: int, n_channels: int, n_conditioned: int, *,
                   overlap: int = 0, drift_block: int = 0, onset_block: int = 1 << 20,
                   itemsize: int = 8, block: int = BLOCK_SAMPLES) -> dict:
@@ -200,7 +159,7 @@ def stream_memory(fs: float, n_samples: int, n_channels: int, n_conditioned: int
         "filter windows (per channel)": 8 * 6 * cap(blk + 2 * overlap),
         "drift look-ahead": 8 * cap(12 * drift_block + blk),
         "onset detector": 8 * cap(3 * onset_block) + 8 * cap(blk),
-        "SNR subsamples": 8 * 2 * cap(_SNR_SAMPLES),
+        "SNR subsamples": 8 * 2 * cap(SNR_SAMPLES),
         "hum window": 8 * cap(HUM_SECONDS * fs),
         "excerpt": 8 * cap(min(EXCERPT_SECONDS * fs, _EXCERPT_MAX)),
     }
@@ -347,7 +306,7 @@ def scan_source(source: BlockSource, *, conditioned: Sequence[str] = (), tacho: 
                   memory_budget, h.fs, "quality scan")
     scans = {c.name: ChannelScan(n, flat=c.kind not in ("tacho", "encoder")) for c in specs}
     nblk = 0
-    with _blocks_ahead(source, block) as blocks:
+    with blocks_ahead(source, block) as blocks:
         for a, data in blocks:
             for j, c in enumerate(specs):
                 scans[c.name].feed1(_column(data, j))
@@ -366,7 +325,7 @@ def scan_source(source: BlockSource, *, conditioned: Sequence[str] = (), tacho: 
             edges = _TachoEdges(dt.type(st.lo), dt.type(st.hi), h.fs, h.t0)
     enc_edges = _encoder_edges(scans, encoders, h)
     idx = {c.name: j for j, c in enumerate(specs)}
-    with _blocks_ahead(source, block) as blocks:
+    with blocks_ahead(source, block) as blocks:
         for a, data in blocks:
             for j, c in enumerate(specs):
                 x = _column(data, j)
@@ -404,587 +363,6 @@ def _encoder_edges(scans: dict, encoders: Sequence[str], h) -> dict:
             continue
         out[nm] = _TachoEdges(lo, hi, h.fs, h.t0)
     return out
-
-
-# ============================================================================ filter chains
-class _Pending:
-    """Samples waiting to go on: arrays, with stretches of all-NaN samples held as lengths."""
-
-    def __init__(self):
-        self.parts: list = []        # arrays, or ints (a run of NaN of that length)
-        self.start = 0               # global index of the first held sample
-        self.n = 0
-
-    def add(self, x: np.ndarray) -> None:
-        if x.size == 0:
-            return
-        if x.size > 64 and math.isnan(x[0]) and math.isnan(x[-1]) and np.isnan(x).all():
-            self.parts.append(int(x.size))
-        else:
-            self.parts.append(x)
-        self.n += x.size
-
-    def take(self, k: int) -> np.ndarray:
-        """The first ``k`` held samples (removed)."""
-        out = np.empty(k)
-        got = 0
-        while got < k:
-            p = self.parts[0]
-            m = p if isinstance(p, int) else p.size
-            use = min(m, k - got)
-            if isinstance(p, int):
-                out[got:got + use] = np.nan
-                rest = m - use
-                if rest:
-                    self.parts[0] = rest
-                else:
-                    self.parts.pop(0)
-            else:
-                out[got:got + use] = p[:use]
-                if use < m:
-                    self.parts[0] = p[use:]
-                else:
-                    self.parts.pop(0)
-            got += use
-        self.start += k
-        self.n -= k
-        return out
-
-
-class _ZeroPhase:
-    """A gap-aware zero-phase filter (condition._apply_finite + sosfiltfilt) on a stream."""
-
-    def __init__(self, sos: np.ndarray, n_total: int, *, what: str, chunk: int = BLOCK_SAMPLES,
-                 fill_max: int = _FILL_MAX, engine: str = "scipy"):
-        self._apply = _apply_finite
-        self.sos = sos
-        self.engine = engine
-        self.padlen = iir.padlen_for(sos)
-        self.min_len = self.padlen + 1
-        self.fill_max = fill_max
-        self.what = what
-        # the transient decays over L; bridging and padding of a gap at a window edge add
-        # fill_max + padlen samples more before it starts
-        self.L = filter_overlap(sos) + fill_max + self.padlen + 2
-        self.chunk = max(int(chunk), 1)
-        self.n = int(n_total)
-        self.buf: list[np.ndarray] = []
-        self.buf_start = 0
-        self.buf_n = 0
-        self.out_pos = 0
-
-    def _func(self, s: np.ndarray) -> np.ndarray:
-        return iir.sosfiltfilt(self.sos, s, padlen=self.padlen, engine=self.engine)
-
-    def push(self, x: np.ndarray) -> np.ndarray:
-        if not self._add(x):
-            return np.empty(0)
-        return self._run(self._at_end)
-
-    @property
-    def _at_end(self) -> bool:
-        """Whether the samples held reach the recording's end (the due window is the last)."""
-        return self.buf_start + self.buf_n >= self.n
-
-    def _add(self, x: np.ndarray) -> bool:
-        """``x`` appended; whether a window is due (the look-ahead is there, or the end)."""
-        if x.size:
-            self.buf.append(x)
-            self.buf_n += x.size
-        end = self.buf_start + self.buf_n
-        return not (end < self.n and end - self.out_pos < self.L + self.chunk)
-
-    def flush(self) -> np.ndarray:
-        if self.out_pos >= self.buf_start + self.buf_n:
-            return np.empty(0)
-        return self._run(True)
-
-    def _window(self) -> np.ndarray:
-        return self.buf[0] if len(self.buf) == 1 else np.concatenate(self.buf)
-
-    def _filtered(self, w: np.ndarray) -> np.ndarray:
-        return self._apply(w, self._func, min_len=self.min_len, fill_max=self.fill_max,
-                           what=self.what, warn=False)
-
-    def _whole(self) -> bool:
-        """Whether the due window may go to the numba kernel whole (then joined straight
-        into the kernel's buffer): on that engine and long enough."""
-        return self.engine == "numba" and self.buf_n >= self.min_len
-
-    def _result(self) -> np.ndarray:
-        """The due window filtered (what _apply_finite gives on it)."""
-        if self._whole():
-            ext = iir.extended(self.buf, self.padlen)
-            return self._or_gaps(iir.filter_extended(self.sos, ext, self.padlen))
-        return self._filtered(self._window())
-
-    def _or_gaps(self, y: np.ndarray) -> np.ndarray:
-        """``y``, the due window filtered whole, where it held no gap (:func:`_no_gap`); else
-        the window again through the gap handling."""
-        return y if _no_gap(y) else self._filtered(self._window())
-
-    def _run(self, final: bool) -> np.ndarray:
-        return self._emit(self._result(), final)
-
-    def _emit(self, y: np.ndarray, final: bool) -> np.ndarray:
-        """The final samples of the due window's result ``y``; the overlap kept (a copy:
-        the window's pieces go)."""
-        w0 = self.buf_start
-        end = w0 + self.buf_n
-        stop = end if final else end - self.L
-        # a view: y is this window's own result, which nothing else holds or changes; a
-        # copy cost a fresh allocation per window
-        out = y[self.out_pos - w0:stop - w0]
-        self.out_pos = stop
-        keep = max(0, stop - self.L)
-        tail, pos = [], w0
-        for p in self.buf:
-            if pos + p.size > keep:
-                tail.append(p[max(keep - pos, 0):])
-            pos += p.size
-        self.buf = [np.concatenate(tail) if len(tail) != 1 else tail[0].copy()]
-        self.buf_start = keep
-        self.buf_n = end - keep
-        return out
-
-
-def _no_gap(y: np.ndarray) -> bool:
-    """Whether a window filtered whole held no gap: a NaN or inf sample anywhere makes the
-    forward sweep's last state, and with it every sample of the backward sweep, NaN, so
-    its first and last samples tell (finite samples so large the filter overflows fail it
-    too, and take the gap handling's path, which gives them the same result)."""
-    return y.size > 0 and math.isfinite(float(y[0])) and math.isfinite(float(y[-1]))
-
-
-def _push_pair(a: _ZeroPhase, xa: np.ndarray, b: _ZeroPhase, xb: np.ndarray):
-    """``(a.push(xa), b.push(xb))``, the two windows filtered in one sweep
-    (:func:`meshphase.signal.iir.filter_extended_pair`) when both are due together, of one length,
-    free of gaps and on the numba engine, with filters of one section count: the same
-    numbers either way (the chains of two channels read in the same blocks are due
-    together unless their gaps or drift blocks differ)."""
-    ra, rb = a._add(xa), b._add(xb)
-    if not (ra and rb):
-        return (a._run(a._at_end) if ra else np.empty(0),
-                b._run(b._at_end) if rb else np.empty(0))
-    # (equal section counts make equal padlens)
-    if a.buf_n == b.buf_n and a.sos.shape == b.sos.shape and a._whole() and b._whole():
-        ya, yb = iir.filter_extended_pair(a.sos, iir.extended(a.buf, a.padlen), b.sos,
-                                          iir.extended(b.buf, b.padlen), a.padlen)
-        ya, yb = a._or_gaps(ya), b._or_gaps(yb)
-    else:
-        ya, yb = a._result(), b._result()
-    return a._emit(ya, a._at_end), b._emit(yb, b._at_end)
-
-
-#: mean samples per interval of the knots below which :func:`_minus_interp` calls
-#: ``np.interp`` instead of its loop over the intervals [-]
-_INTERP_RUN = 512
-
-
-def _minus_interp(x: np.ndarray, a: int, xp: np.ndarray, fp: np.ndarray) -> np.ndarray:
-    """``x - np.interp(np.arange(a, a + x.size), xp, fp)``, bit for bit [same units as x].
-
-    A drift baseline's knots sit a pulse period (thousands of samples) apart, and
-    ``np.interp`` searches the knots for every sample: here each interval's samples are
-    computed at once, with numpy's own steps (``slope * (t - xp[k]) + fp[k]``, the slope
-    ``(fp[k+1] - fp[k]) / (xp[k+1] - xp[k])``; ``fp[0]`` before the first knot, ``fp[-1]``
-    from the last) on an interval-long scratch array that stays in cache. Knots closer than
-    ``_INTERP_RUN`` samples on average, values not all finite (numpy's NaN rules) or knots
-    not strictly increasing go through ``np.interp``. ``a + x.size`` below 2**53.
-    """
-    n = x.size
-    xp = np.asarray(xp, dtype=np.float64)
-    fp = np.asarray(fp, dtype=np.float64)
-    if n == 0:
-        return np.empty(0)
-    if (xp.size < 2 or not xp[-1] - xp[0] >= _INTERP_RUN * (xp.size - 1)
-            or not np.all(np.isfinite(fp)) or not np.all(xp[1:] > xp[:-1])):
-        return x - np.interp(np.arange(a, a + n, dtype=np.float64), xp, fp)
-    # sample i (t = a + i) lies in interval k when xp[k] <= t < xp[k + 1]
-    cut = np.clip(np.ceil(xp - a), 0, n).astype(np.int64)
-    y = np.empty(n)
-    c0, c1 = int(cut[0]), int(cut[-1])
-    if c0:
-        np.subtract(x[:c0], fp[0], out=y[:c0])
-    if c1 < n:
-        np.subtract(x[c1:], fp[-1], out=y[c1:])
-    seg = np.flatnonzero(cut[1:] > cut[:-1])
-    if seg.size:
-        longest = int(np.max(cut[seg + 1] - cut[seg]))
-        ramp = np.arange(longest, dtype=np.float64)
-        tmp = np.empty(longest)
-        slopes = (fp[1:] - fp[:-1]) / (xp[1:] - xp[:-1])
-        for k in seg.tolist():
-            i0, i1 = int(cut[k]), int(cut[k + 1])
-            m = i1 - i0
-            d = tmp[:m]
-            np.add(ramp[:m], float(a + i0), out=d)                # t, exact integers
-            d -= xp[k]
-            d *= slopes[k]
-            d += fp[k]
-            np.subtract(x[i0:i1], d, out=y[i0:i1])
-    return y
-
-
-class _Drift:
-    """Streaming :func:`meshphase.signal.condition.remove_drift` with method "median" or "savgol"
-    (the baseline of block medians / means, smoothed over 17 blocks, interpolated)."""
-
-    def __init__(self, n_total: int, fs: float, *, method: str, window: float,
-                 pulse_period: float | None):
-        self.n = int(n_total)
-        b_p = None if pulse_period is None else max(
-            1, int(round(as_positive(pulse_period, "pulse_period") * fs)))
-        if b_p is not None and self.n >= 2 * b_p:
-            # as drift_baseline: means of whole periods only, a partial last block left out
-            self.b = b_p
-            self.means = True
-            self.nb = self.n // self.b
-        else:
-            self.b = max(1, int(round(window * fs / 16.0)))
-            self.means = False
-            self.nb = -(-self.n // self.b) if self.n else 0
-        self.method = method
-        if method == "median":
-            self.h = (min(17, self.nb) | 1) // 2
-            self.global_mean = False
-        else:
-            self.h = 8
-            self.global_mean = self.nb < 17
-        self.acc: list[np.ndarray] = []
-        self.acc_n = 0
-        # every block's (values, centres): the global mean's input, and the level steps'
-        self.trace: list[tuple[np.ndarray, np.ndarray]] = []
-        self.j_next = 0                         # next block whose value is computed
-        # filled block values and centres of blocks [f0, f0 + len(fv))
-        self.f0 = 0
-        self.fv = np.empty(0)
-        self.fc = np.empty(0)
-        self.wait_c = np.empty(0)               # centres of NaN blocks awaiting a right value
-        self.last = None                        # (centre, value) of the last finite block
-        # base values and centres of blocks [b0, b0 + len(bv))
-        self.b0 = 0
-        self.bv = np.empty(0)
-        self.bc = np.empty(0)
-        self.pend = _Pending()
-        self.nan_all = False
-        self.n_in = 0
-        self.filled_final = False
-
-    # -------------------------------------------------------------- block values
-    def _values(self, final: bool) -> None:
-        k = min(self.acc_n // self.b, self.nb - self.j_next)
-        if final and self.acc_n > k * self.b and self.j_next + k < self.nb:
-            k += 1                              # the partial last block (medians only)
-        if k == 0:
-            if final and self.j_next >= self.nb and not self.filled_final:
-                # the last whole block came before the end (a partial block left out)
-                self.filled_final = True
-                self._fill(np.empty(0), np.empty(0), True)
-            return
-        x = self.acc[0] if len(self.acc) == 1 else np.concatenate(self.acc)
-        m = min(x.size, k * self.b)
-        seg = x[:m]
-        if not self.means:
-            # a median would take an inf as a value: inf to NaN first (a finite sum: none);
-            # _block_means leaves every non-finite sample out itself
-            with np.errstate(over="ignore", invalid="ignore"):
-                total = float(np.sum(seg))
-            if not math.isfinite(total):
-                seg = np.where(np.isfinite(seg), seg, np.nan)
-        vals, cents = (_block_means if self.means else _block_medians)(seg, self.b)
-        cents = cents + self.j_next * self.b
-        self.trace.append((vals, cents))
-        rest = x[m:]
-        self.acc = [rest] if rest.size else []
-        self.acc_n = rest.size
-        self.j_next += vals.size
-        last = final and self.j_next >= self.nb
-        self.filled_final = self.filled_final or last
-        self._fill(vals, cents, last)
-
-    def _fill(self, vals: np.ndarray, cents: np.ndarray, final: bool) -> None:
-        ok = np.isfinite(vals)
-        if self.global_mean:
-            if final:
-                self._global()
-            return
-        wait_c = np.concatenate([self.wait_c, cents])
-        if ok.any():
-            last_ok = np.flatnonzero(ok)[-1]
-            n_wait_old = self.wait_c.size
-            xs = wait_c[:n_wait_old + last_ok + 1]
-            fin_c = cents[ok]
-            fin_v = vals[ok]
-            if self.last is not None:
-                fin_c = np.concatenate([[self.last[0]], fin_c])
-                fin_v = np.concatenate([[self.last[1]], fin_v])
-            filled = np.interp(xs, fin_c, fin_v)
-            self._append_filled(filled, xs)
-            self.last = (float(fin_c[-1]), float(fin_v[-1]))
-            self.wait_c = wait_c[n_wait_old + last_ok + 1:]
-        else:
-            self.wait_c = wait_c
-        if final and self.wait_c.size:
-            if self.last is None:
-                self.nan_all = True
-                return
-            self._append_filled(np.full(self.wait_c.size, self.last[1]), self.wait_c)
-            self.wait_c = np.empty(0)
-
-    def _traced(self) -> tuple[np.ndarray, np.ndarray]:
-        """(values, centres) of every block seen, in order (empty before the first)."""
-        if not self.trace:
-            return np.empty(0), np.empty(0)
-        return np.concatenate([v for v, _ in self.trace]), np.concatenate([c for _, c in self.trace])
-
-    def _global(self) -> None:
-        vals, cents = self._traced()
-        ok = np.isfinite(vals)
-        if not ok.any():
-            self.nan_all = True
-            return
-        if not ok.all():
-            vals = np.interp(cents, cents[ok], vals[ok])
-        self.fv, self.fc, self.f0 = np.full(vals.size, np.mean(vals)), cents, 0
-        self.bv, self.bc, self.b0 = self.fv.copy(), cents, 0
-
-    def _append_filled(self, v: np.ndarray, c: np.ndarray) -> None:
-        self.fv = np.concatenate([self.fv, v])
-        self.fc = np.concatenate([self.fc, c])
-        self._bases()
-
-    def _bases(self) -> None:
-        """Base values of every block whose neighbourhood of filled values is known."""
-        if self.global_mean:
-            return
-        h, nb = self.h, self.nb
-        f_end = self.f0 + self.fv.size
-        j_start = self.b0 + self.bv.size
-        j_stop = nb if f_end >= nb else f_end - h       # base j needs filled up to j + h
-        if self.method == "savgol" and f_end < nb and j_stop > 0 and j_start < 8:
-            j_stop = j_stop if f_end >= 17 else 0       # the first 8: a fit to blocks 0..16
-        if self.method == "savgol" and f_end < nb:
-            j_stop = min(j_stop, nb - 8)                # the last 8: a fit to the last 17
-        if j_stop <= j_start:
-            return
-        lo = max(0, j_start - h)
-        hi = min(nb, j_stop + h)
-        if self.method == "savgol" and hi == nb:
-            lo = max(0, min(lo, nb - 17))               # the end fit reads the last 17
-        win = self.fv[lo - self.f0:hi - self.f0]
-        if self.method == "median":
-            base = ndimage.median_filter(win, size=2 * h + 1, mode="nearest")
-        else:
-            base = savgol_filter(win, 17, 2)
-        new = base[j_start - lo:j_stop - lo]
-        self.bv = np.concatenate([self.bv, new])
-        self.bc = np.concatenate([self.bc, self.fc[j_start - self.f0:j_stop - self.f0]])
-        # filled values older than the next base's neighbourhood are no longer needed
-        keep = j_stop - h - 1
-        if self.method == "savgol":
-            keep = min(keep, nb - 17)
-        drop = max(0, keep - self.f0)
-        if drop:
-            self.fv, self.fc, self.f0 = self.fv[drop:], self.fc[drop:], self.f0 + drop
-
-    def steps(self, fs: float, t0: float, min_size: float) -> np.ndarray:
-        """:func:`meshphase.signal.condition.level_steps` of the blocks seen: (time [s], size) rows."""
-        if not self.trace:
-            return np.empty((0, 2))
-        return level_steps(*self._traced(), fs, t0=t0, min_size=min_size)
-
-    # -------------------------------------------------------------- samples
-    def push(self, x: np.ndarray) -> np.ndarray:
-        return self._step(x, False)
-
-    def flush(self) -> np.ndarray:
-        return self._step(np.empty(0), True)
-
-    def _step(self, x: np.ndarray, final: bool) -> np.ndarray:
-        if x.size:
-            self.pend.add(x)
-            self.acc.append(x)
-            self.acc_n += x.size
-            self.n_in += x.size
-        final = final or self.n_in >= self.n
-        self._values(final)
-        if self.nan_all:
-            return self.pend.take(self.pend.n) * np.nan if self.pend.n else np.empty(0)
-        return self._emit(final)
-
-    def _emit(self, final: bool) -> np.ndarray:
-        nb_known = self.b0 + self.bv.size
-        if nb_known == 0:
-            return np.empty(0)
-        if nb_known >= self.nb:
-            stop = self.n
-        else:
-            stop = int(math.ceil(self.bc[-1]))          # samples before the last known centre
-        stop = min(stop, self.pend.start + self.pend.n)
-        a = self.pend.start
-        if stop <= a:
-            return np.empty(0)
-        x = self.pend.take(stop - a)
-        # the bracketing centres of [a, stop): from the last centre <= a
-        j = max(0, int(np.searchsorted(self.bc, a, side="right")) - 1)
-        y = _minus_interp(x, a, self.bc[j:], self.bv[j:])
-        # base values no longer needed: all but the one bracketing the next sample
-        k = max(0, int(np.searchsorted(self.bc, stop, side="right")) - 1)
-        if k:
-            self.bv, self.bc, self.b0 = self.bv[k:], self.bc[k:], self.b0 + k
-        return y
-
-
-class _Chain:
-    """A channel's conditioning: dropouts to NaN -> notch -> drift -> (SNR tap) -> band
-    limit, each stage streaming; :func:`_push_chains` pushes one or two chains and returns
-    the newly final conditioned samples."""
-
-    def __init__(self, n: int, *, dropouts: np.ndarray | None, notch: _ZeroPhase | None,
-                 drift, snr: "_SnrTap", band: _ZeroPhase | None, dtype=np.float64):
-        self.n = n
-        self.dropouts = dropouts if dropouts is not None and len(dropouts) else None
-        self.notch, self.drift, self.snr, self.band = notch, drift, snr, band
-        self.pos = 0
-        # a float32 recording holds each conditioning step's result as float32 (as the
-        # whole-array path does, writing every step back into the recording's array)
-        self.round = np.dtype(dtype) == np.float32
-
-    def _rounded(self, x: np.ndarray) -> np.ndarray:
-        return x.astype(np.float32).astype(np.float64) if self.round and x.size else x
-
-    def _mask(self, x: np.ndarray) -> np.ndarray:
-        if self.dropouts is None:
-            return x
-        a, b = self.pos, self.pos + x.size
-        r = self.dropouts
-        i = np.searchsorted(r[:, 1], a, side="right")
-        j = np.searchsorted(r[:, 0], b, side="left")
-        if j > i:
-            x = x.copy()
-            for s0, s1 in r[i:j]:
-                x[max(s0, a) - a:min(s1, b) - a] = np.nan
-        return x
-
-
-def _live(st) -> bool:
-    return not (st is None or isinstance(st, _Identity))
-
-
-def _stage(sts, xs: list, finals: list) -> list:
-    """One stage of one or two chains (``sts``: that stage of each, None where a chain has
-    none) pushed their samples ``xs``, flushed where the chain is final; the outputs (the
-    input where a chain has no such stage). Two filters go through :func:`_push_pair`."""
-    out = list(xs)
-    live = [i for i, st in enumerate(sts) if _live(st)]
-    if (len(live) == 2 and all(isinstance(sts[i], _ZeroPhase) and xs[i].size for i in live)):
-        out[0], out[1] = _push_pair(sts[0], xs[0], sts[1], xs[1])
-    else:
-        for i in live:
-            out[i] = sts[i].push(xs[i]) if xs[i].size else np.empty(0)
-    for i in live:
-        if finals[i]:
-            tail = sts[i].flush()
-            out[i] = np.concatenate([out[i], tail]) if tail.size else out[i]
-    return out
-
-
-def _push_chains(chains, xs) -> list:
-    """Each of ``chains`` (one, or two filtered side by side: :func:`_push_pair`) pushed
-    its next samples ``xs``; the newly final conditioned samples of each."""
-    xs = [c._mask(x) for c, x in zip(chains, xs)]
-    for c, x in zip(chains, xs):
-        c.pos += x.size
-    finals = [c.pos >= c.n for c in chains]
-    for attr in ("notch", "drift"):
-        sts = [getattr(c, attr) for c in chains]
-        ys = _stage(sts, xs, finals)
-        xs = [c._rounded(y) if _live(st) else y for c, st, y in zip(chains, sts, ys)]
-    for c, x in zip(chains, xs):
-        if x.size:
-            c.snr.add(x)
-    sts = [c.band for c in chains]
-    ys = _stage(sts, xs, finals)
-    return [c._rounded(y) if _live(st) else y for c, st, y in zip(chains, sts, ys)]
-
-
-class _Identity:
-    def push(self, x):
-        return x
-
-    def flush(self):
-        return np.empty(0)
-
-
-class _SnrTap:
-    """:func:`meshphase.signal.condition.estimate_snr` of the drift-free signal, streamed: the noise
-    from the first differences at the same stride over the finite ones, the pulse peak from
-    the first 2**20 samples."""
-
-    def __init__(self, n: int, n_finite_diffs: int, q: float = 0.999):
-        self.n = n
-        self.step = max(1, -(-n_finite_diffs // _SNR_SAMPLES))
-        self.expect = n_finite_diffs
-        self.rank = 0
-        self.parts: list[np.ndarray] = []
-        self.last = None
-        self.pos = 0
-        self.n_pre = min(n, _SNR_SAMPLES)
-        self.pre = np.empty(self.n_pre)
-        self.peak = None
-        self.peak_done = self.n_pre == 0
-        self.q = q
-
-    def add(self, x: np.ndarray) -> None:
-        if x.size == 0:
-            return
-        first = (-self.rank) % self.step
-        lo, hi = float(np.min(x)), float(np.max(x))     # NaN when x holds a NaN
-        if self.last is not None:
-            v = float(self.last[0])
-            lo, hi = (min(lo, v), max(hi, v)) if math.isfinite(v) else (math.nan, math.nan)
-        if math.isfinite(hi - lo):
-            # every difference finite (none exceeds hi - lo): only the kept ones computed
-            self.parts.append(self._strided(x, first))
-            self.rank += x.size - (self.last is None)
-        else:
-            xx = x if self.last is None else np.concatenate([self.last, x])
-            with np.errstate(invalid="ignore", over="ignore"):   # inf - inf: dropped below
-                d = np.diff(xx)
-            d = d[np.isfinite(d)]
-            self.parts.append(d[first::self.step].copy())
-            self.rank += d.size
-        if self.pos < self.n_pre:
-            k = min(self.n_pre - self.pos, x.size)
-            self.pre[self.pos:self.pos + k] = x[:k]
-            if self.pos + k >= self.n_pre:
-                xs = self.pre[np.isfinite(self.pre)]
-                self.peak = _snr_peak(xs, self.q) if xs.size >= 2 else None
-                self.pre = None
-                self.peak_done = True
-        self.last = x[-1:].copy()
-        self.pos += x.size
-
-    def _strided(self, x: np.ndarray, first: int) -> np.ndarray:
-        """``np.diff([last] + x)[first::step]`` (``last`` when there is one), computed for
-        the kept differences only."""
-        s = self.step
-        if self.last is None:
-            a, b = x[first + 1::s], x[first::s]
-            return a - b[:a.size]
-        if first == 0:                                   # the one across the block edge
-            head = x[:1] - self.last
-            a, b = x[s::s], x[s - 1::s]
-            return np.concatenate([head, a - b[:a.size]])
-        a, b = x[first::s], x[first - 1::s]
-        return a - b[:a.size]
-
-    def result(self) -> tuple[float, float, float]:
-        if self.rank != self.expect:
-            raise RuntimeError(f"SNR tap saw {self.rank} finite differences, expected {self.expect}")
-        d = np.concatenate(self.parts) if self.parts else np.empty(0)
-        return _snr_combine(_noise_from_diffs(d), self.peak)
 
 
 # ============================================================================ pass 3
@@ -1050,38 +428,6 @@ class StreamResult:
     timings: dict = field(default_factory=dict)
     memory: dict = field(default_factory=dict)
     n_blocks: int = 0
-
-
-def _band(fs: float, mesh_freq, lowpass, highpass, order):
-    """(kind, low, high, sos) of condition_recording's band limit, or None."""
-    low = None if highpass is None else _check_freq(highpass, "highpass", fs)
-    if isinstance(lowpass, str):
-        as_choice(lowpass, "lowpass", ("auto",))
-        high = default_band(fs, mesh_freq)[1] if mesh_freq is not None else None
-    elif lowpass is None:
-        high = None
-    else:
-        high = _check_freq(lowpass, "lowpass", fs)
-    if low is None and high is None:
-        return None
-    kind = "bandpass" if (low is not None and high is not None) else (
-        "highpass" if low is not None else "lowpass")
-    kind, low, high = _resolve_band(fs, kind, low, high, None)
-    kind, low, high = _resolve_band(fs, kind, low, high, None)   # filter_signal resolves again
-    return kind, low, high, design_filter(fs, kind=kind, low=low, high=high, order=order)
-
-
-def _pairs_finite(bad: np.ndarray, n: int) -> int:
-    """Number of i in [0, n - 1) with samples i and i + 1 both outside the ``bad`` runs."""
-    if n < 2:
-        return 0
-    if len(bad) == 0:
-        return n - 1
-    r = bad.copy()
-    r[:, 0] = np.maximum(r[:, 0] - 1, 0)          # pair i is lost when i or i + 1 is bad
-    r[:, 1] = np.minimum(r[:, 1], n - 1)
-    r = merge_runs(r[r[:, 1] > r[:, 0]])
-    return int((n - 1) - (r[:, 1] - r[:, 0]).sum())
 
 
 def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[ChannelPlan], *,
@@ -1160,7 +506,7 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
         for msg in notes:
             warnings.warn(msg, DataQualityWarning, stacklevel=2)
         for p in plans:
-            _warn_quality(quality[p.name], 6.0)
+            warn_quality(quality[p.name], 6.0)
             _warn_steps(p.name, chains[p.name].drift, quality[p.name], fs, h.t0, h.spec(p.name).units)
     names = [p.name for p in plans]
     rec = _stream_history(h, quality, names, hum=hum, drift=drift, n_blocks=run.n_blocks)
@@ -1206,56 +552,54 @@ def _hum_notches(plans, scan: RawScan, quality: dict, settle: dict, fs: float,
     for p, rep in zip(plans, reps):
         quality[p.name] = replace(quality[p.name], hum=rep)
         if rep.present:
-            settle[p.group] = max(settle[p.group], 2.0 * 30.0 / (math.pi * float(np.min(rep.freqs))))
-            notch_sos[p.name] = design_notch(rep.freqs, fs, 30.0)
+            settle[p.group] = max(settle[p.group], notch_settle(rep.freqs, NOTCH_Q))
+            notch_sos[p.name] = design_notch(rep.freqs, fs, NOTCH_Q)
     return notch_sos
 
 
-def _through_gaps(bad: np.ndarray, n: int, st: _ZeroPhase, notes: list) -> np.ndarray:
+def _through_gaps(bad: np.ndarray, st: ZeroPhase, notes: list) -> np.ndarray:
     """The runs that are NaN after the zero-phase stage ``st`` (``bad`` before it), noting
     the stretches too short for it as the whole-array filter warns about them."""
-    out, n_short, whole = finite_apply_gaps(bad, n, min_len=st.min_len, fill_max=_FILL_MAX)
-    if whole:
-        notes.append(_short_signal_message(st.what, n, st.min_len))
-    elif n_short:
-        notes.append(_short_segments_message(st.what, n_short, st.min_len))
+    out, note = st.through_gaps(bad)
+    if note is not None:
+        notes.append(note)
     return out
 
 
 def _channel_chain(p: ChannelPlan, q: ChannelQuality, notch_sos, settle: dict, notes: list, *,
                    n: int, fs: float, block: int, dtype, drift, drift_window, lowpass,
                    highpass, order, engine: str = "scipy") -> tuple:
-    """One channel's conditioning chain (:class:`_Chain`), the overlap it needs [samples]
+    """One channel's conditioning chain (:class:`meshphase.signal.blocks.ConditioningChain`), the overlap it needs [samples]
     and its drift block [samples]; its filters' settling goes into its group's ``settle``."""
     bad = q.all_gap_runs()                                 # masked input: gaps + dropouts
     notch = None
     chain_l = drift_b = 0
     if notch_sos is not None:
-        notch = _ZeroPhase(notch_sos, n, what="notch_hum", chunk=block, engine=engine)
-        bad = _through_gaps(bad, n, notch, notes)
+        notch = ZeroPhase(notch_sos, n, what="notch_hum", chunk=block, engine=engine)
+        bad = _through_gaps(bad, notch, notes)
     dr = None
     if drift is not None:
-        w = _drift_window(drift_window, p.mesh_freq)
+        w = drift_filters.drift_window(drift_window, p.mesh_freq)   # (the parameter hides the name)
         if drift == "highpass":
-            sos = design_filter(fs, kind="highpass", low=min(1.0 / w, 0.25 * fs), order=2)
-            dr = _ZeroPhase(sos, n, what="filter_signal(highpass)", chunk=block, engine=engine)
-            bad = _through_gaps(bad, n, dr, notes)
+            dr = ZeroPhase(drift_highpass(fs, w, 2), n, what="filter_signal(highpass)", chunk=block,
+                           engine=engine)
+            bad = _through_gaps(bad, dr, notes)
             settle[p.group] = max(settle[p.group], 2.0 * w)
             chain_l = dr.L
         else:
-            dr = _Drift(n, fs, method=drift, window=w, pulse_period=p.pulse_period)
+            dr = DriftFilter(n, fs, method=drift, window=w, pulse_period=p.pulse_period)
             drift_b = dr.b
-    snr = _SnrTap(n, _pairs_finite(bad, n))
+    snr = SnrTap(n, finite_pairs(bad, n))
     band = None
-    bd = _band(fs, p.mesh_freq, lowpass, highpass, order)
+    bd = band_limit(fs, p.mesh_freq, lowpass, highpass, order)
     if bd is not None:
         kind, low, high, sos = bd
-        band = _ZeroPhase(sos, n, what=f"filter_signal({kind})", chunk=block, engine=engine)
-        _through_gaps(bad, n, band, notes)
-        settle[p.group] = max(settle[p.group], _settle_time(low, high))
+        band = ZeroPhase(sos, n, what=f"filter_signal({kind})", chunk=block, engine=engine)
+        _through_gaps(bad, band, notes)
+        settle[p.group] = max(settle[p.group], settle_time(low, high))
     chain_l += sum(st.L for st in (notch, band) if st is not None)
-    chain = _Chain(n, dropouts=q.dropout_runs, notch=notch,
-                   drift=dr if dr is not None else _Identity(), snr=snr, band=band, dtype=dtype)
+    chain = ConditioningChain(n, dropouts=q.dropout_runs, notch=notch,
+                   drift=dr if dr is not None else Identity(), snr=snr, band=band, dtype=dtype)
     return chain, chain_l, drift_b
 
 
@@ -1279,7 +623,7 @@ def _onset_streams(plans, quality: dict, fs: float, t0: float) -> tuple[dict, in
 
 def _chain_pairs(plans) -> list:
     """The plans in pairs for the worker threads: two chains on one thread filter side by
-    side where their windows fall due together (:func:`_push_pair`). Channels of one group
+    side where their windows fall due together (:func:`meshphase.signal.zero_phase.push_pair`). Channels of one group
     (one gear, one pulse period: their drift-removed windows coincide) are paired first;
     the groups' odd ones out are paired with each other (their notches still coincide),
     the last alone."""
@@ -1329,12 +673,12 @@ class _Pass3:
         # with the onsets' own; the chains report through notes and raise none.)
         def chains(data):
             # a fresh float64 copy: the stages hold on to what they are given
-            return lambda group: _push_chains(
+            return lambda group: push_chains(
                 [self.chains[p.name] for p in group],
                 [np.array(data[:, idx[p.name]], dtype=np.float64) for p in group])
 
         groups = _chain_pairs(self.plans)
-        with thread_pool(max_items=len(groups)) as tmap, _blocks_ahead(source, block) as blocks:
+        with thread_pool(max_items=len(groups)) as tmap, blocks_ahead(source, block) as blocks:
             prev = None
             for a, data in blocks:
                 self.n_blocks += 1
@@ -1393,8 +737,8 @@ STEP_PULSE_SHARE = 0.25
 
 def _warn_steps(name: str, drift, q, fs: float, t0: float, units: str) -> None:
     """A DataQualityWarning naming the level steps of a channel's baseline
-    (:meth:`_Drift.steps`), with the stretch whose passes they may have moved."""
-    if not isinstance(drift, _Drift) or not math.isfinite(q.noise_rms):
+    (:meth:`meshphase.signal.drift.DriftFilter.steps`), with the stretch whose passes they may have moved."""
+    if not isinstance(drift, DriftFilter) or not math.isfinite(q.noise_rms):
         return
     has_peak = math.isfinite(q.signal_peak) and q.signal_peak > 0
     min_size = STEP_NOISE_RMS * q.noise_rms
@@ -1432,7 +776,7 @@ def _stream_history(h: StreamedRecording, quality: dict, names: list, *, hum: bo
 
 class _RunTrack:
     def __init__(self):
-        self.t = _RunTracker()
+        self.t = RunTracker()
 
     def add(self, y):
         self.t.add(~np.isfinite(y))

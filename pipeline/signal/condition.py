@@ -2,7 +2,10 @@
 
 Array functions at the bottom (numpy in, numpy out, sample rate ``fs`` in [Hz]) and thin
 :class:`~meshphase.recording.Recording` wrappers that convert, apply per channel and append
-one entry to the recording's history.
+one entry to the recording's history. The filters are the block filters of
+:mod:`meshphase.signal.zero_phase` and :mod:`meshphase.signal.drift`, pushed the whole array
+(:func:`meshphase.signal.blocks.run_whole`): the streamed stages run the same ones block by
+block.
 
 Steps
 -----
@@ -26,7 +29,7 @@ Dropouts and clipped plateaus
 -----------------------------
 A DAQ that drops samples may write exact zeros or hold its last sample instead of NaN; an
 ADC or amplifier stage may saturate below the nominal full scale, or on one polarity only.
-:func:`meshphase.signal.quality.flat_runs` finds both on the raw data, with a run-length threshold
+:func:`meshphase.signal.flat_runs.flat_runs` finds both on the raw data, with a run-length threshold
 from the channel's own statistics (a quantised quiet channel repeats values by chance) and
 tells them apart by where the flat run sits: a clip bounds a pulse extreme and is entered
 steeply, a dropout sits at 0 or at a value the signal passes through (see that module's
@@ -63,21 +66,23 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass, field, replace
-from typing import Callable, Sequence
+from typing import Sequence
 
 import numpy as np
-from scipy import ndimage
 
-from meshphase.signal import iir
-from meshphase.signal.median import MAD_TO_SIGMA, median_and_mad, median_of_finite, sigma_of_differences
-from meshphase.errors import DataQualityWarning, ProcessingWarning
-from meshphase.runtime.log import logger
-from meshphase.signal.quality import (DROPOUT_MIN_RUN, FALSE_ALARM, ChannelQuality, ChannelScan, HumReport,
-                                      find_runs, merge_runs, quality_from_scan)
+from meshphase.errors import ProcessingWarning
 from meshphase.recording import Recording
-from meshphase.signal.savgol import savgol_filter
+from meshphase.runtime.log import logger
+from meshphase.signal import drift as drift_filters
+from meshphase.signal.blocks import run_whole
+from meshphase.signal.drift import (DEFAULT_DRIFT_WINDOW_S, STEP_SPREADS, DriftFilter, drift_baseline,
+                                    drift_window, level_steps)
+from meshphase.signal.quality import (DROPOUT_MIN_RUN, FALSE_ALARM, ChannelQuality, ChannelScan, HumReport,
+                                      find_runs, merge_runs, quality_from_scan, warn_quality)
+from meshphase.signal.snr import estimate_noise, estimate_snr
 from meshphase.signal.sos_design import butter_sos, notch_sos
 from meshphase.signal.spectral import welch
+from meshphase.signal.zero_phase import ZeroPhase
 from meshphase.validate import as_signal, as_choice, as_float, as_nonnegative, as_positive, as_positive_int
 
 __all__ = [
@@ -87,23 +92,20 @@ __all__ = [
     "detect_hum", "notch_hum", "assess_quality", "estimate_noise", "estimate_snr",
     "filter_recording", "remove_drift_recording", "notch_hum_recording",
     "assess_quality_recording", "condition_recording", "merge_runs", "gap_intervals",
-    "DEFAULT_HIGHPASS_HZ", "DEFAULT_DRIFT_WINDOW_S",
+    "check_freq", "resolve_band", "band_limit", "settle_time", "notch_settle", "drift_highpass",
+    "DEFAULT_HIGHPASS_HZ", "DEFAULT_DRIFT_WINDOW_S", "NOTCH_Q",
 ]
 
 #: High-pass corner used when the mesh frequency is unknown [Hz].
 DEFAULT_HIGHPASS_HZ = 0.05
-#: Drift-removal window used when the mesh frequency is unknown [s].
-DEFAULT_DRIFT_WINDOW_S = 10.0
 #: High-pass corner as a fraction of the mesh frequency [-].
 HIGHPASS_FRACTION = 1.0 / 20.0
 #: Low-pass corner as a multiple of the mesh frequency [-].
 LOWPASS_MULTIPLE = 4.0
 #: Highest corner frequency allowed, as a fraction of fs [-].
 MAX_CORNER_FRACTION = 0.45
-#: Drift-removal window in mesh periods [-].
-DRIFT_WINDOW_MESH_PERIODS = 20.0
-
-_SUBSAMPLE = 1 << 20                 # at most this many samples enter a median / quantile
+#: Quality factor of the hum notches of the conditioning chain [-].
+NOTCH_Q = 30.0
 
 
 # ====================================================================== small helpers
@@ -112,118 +114,12 @@ def _as_signal(x, name: str = "x") -> np.ndarray:
     return as_signal(x, name, float64=True)
 
 
-def _subsample(x: np.ndarray, n_max: int = _SUBSAMPLE) -> np.ndarray:
-    """Every k-th sample so that at most ``n_max`` remain (deterministic)."""
-    step = max(1, -(-x.size // n_max))
-    return x[::step]
-
-
-def _check_freq(value, name: str, fs: float) -> float:
+def check_freq(value, name: str, fs: float) -> float:
+    """``value`` [Hz] checked positive and below Nyquist ``fs / 2`` (``name`` in messages)."""
     f = as_positive(value, name)
     if f >= 0.5 * fs:
         raise ValueError(f"{name} must be below Nyquist fs/2 = {0.5 * fs!r} Hz, got {f!r}")
     return f
-
-
-def _apply_finite(x: np.ndarray, func: Callable[[np.ndarray], np.ndarray], *, min_len: int,
-                  fill_max: int, what: str, warn: bool = True) -> np.ndarray:
-    """Apply ``func`` to the finite parts of ``x`` without smearing NaN.
-
-    Interior non-finite runs of at most ``fill_max`` samples are bridged by linear
-    interpolation; longer runs split ``x`` into segments processed independently; segments
-    shorter than ``min_len`` become NaN (DataQualityWarning). Every sample non-finite on
-    input is NaN on output.
-    """
-    n = x.size
-    if n == 0:
-        return np.empty(0, dtype=np.float64)
-    if math.isfinite(float(np.sum(x))):
-        if n < min_len:
-            if warn:
-                warnings.warn(_short_signal_message(what, n, min_len), DataQualityWarning,
-                              stacklevel=3)
-            return np.full(n, np.nan)
-        return func(x)
-    bad = ~np.isfinite(x)
-    runs = find_runs(bad)
-    lengths = runs[:, 1] - runs[:, 0]
-    interior = (runs[:, 0] > 0) & (runs[:, 1] < n)
-    short = interior & (lengths <= fill_max)
-    xf = x.copy()
-    if short.any():
-        marks = np.zeros(n + 1, dtype=np.int64)
-        np.add.at(marks, runs[short, 0], 1)
-        np.add.at(marks, runs[short, 1], -1)
-        fill_idx = np.flatnonzero(np.cumsum(marks[:n]) > 0)
-        good = np.flatnonzero(~bad)
-        xf[fill_idx] = np.interp(fill_idx, good, x[good])
-    split = runs[~short]
-    # segments = complement of the long runs
-    edges = np.concatenate([[0], split.ravel(), [n]]).reshape(-1, 2)
-    out = np.full(n, np.nan)
-    n_short = 0
-    for a, b in edges:
-        if b <= a:
-            continue
-        if b - a < min_len:
-            n_short += 1
-            continue
-        out[a:b] = func(xf[a:b])
-    if n_short and warn:
-        warnings.warn(_short_segments_message(what, n_short, min_len), DataQualityWarning,
-                      stacklevel=3)
-    out[bad] = np.nan
-    return out
-
-
-def _short_signal_message(what: str, n: int, min_len: int) -> str:
-    return (f"{what}: signal of {n} sample(s) is shorter than the {min_len} the filter needs; "
-            "returned as NaN")
-
-
-def _short_segments_message(what: str, n_short: int, min_len: int) -> str:
-    return (f"{what}: {n_short} finite segment(s) between gaps are shorter than the {min_len} "
-            "samples the filter needs; they are set to NaN")
-
-
-def finite_apply_gaps(bad_runs, n: int, *, min_len: int, fill_max: int) -> tuple[np.ndarray, int, bool]:
-    """The non-finite runs of the output of a gap-aware filter, from those of its input.
-
-    What :func:`filter_signal` and :func:`notch_hum` (``_apply_finite``) do to the gaps,
-    without the samples: interior runs of at most ``fill_max`` samples are bridged (and
-    non-finite again on output), longer runs split the signal, and finite segments shorter
-    than ``min_len`` become NaN.
-
-    Parameters
-    ----------
-    bad_runs : ndarray of int, shape (k, 2)
-        Sorted, disjoint ``[start, stop)`` runs of non-finite input samples.
-    n : int
-        Samples [-].
-    min_len, fill_max : int
-        As the filter uses them [samples].
-
-    Returns
-    -------
-    (runs, n_short, whole_short) : (ndarray, int, bool)
-        Non-finite output runs (merged); the number of finite segments set to NaN; True when
-        the input was finite throughout and shorter than ``min_len`` (the "signal shorter"
-        case, one NaN run over everything).
-    """
-    r = np.asarray(bad_runs, dtype=np.int64).reshape(-1, 2)
-    if n == 0:
-        return np.empty((0, 2), dtype=np.int64), 0, False
-    if len(r) == 0:
-        if n < min_len:
-            return np.array([[0, n]], dtype=np.int64), 0, True
-        return np.empty((0, 2), dtype=np.int64), 0, False
-    lengths = r[:, 1] - r[:, 0]
-    interior = (r[:, 0] > 0) & (r[:, 1] < n)
-    split = r[~(interior & (lengths <= fill_max))]
-    edges = np.concatenate([[0], split.ravel(), [n]]).reshape(-1, 2)
-    seg = edges[edges[:, 1] > edges[:, 0]]
-    short = seg[(seg[:, 1] - seg[:, 0]) < min_len]
-    return merge_runs(np.concatenate([r, short])), int(len(short)), False
 
 
 # ====================================================================== filtering
@@ -283,11 +179,11 @@ def design_filter(fs: float, *, kind: str = "bandpass", low: float | None = None
     if kind in ("bandpass", "highpass"):
         if low is None:
             raise ValueError(f"kind={kind!r} needs the high-pass corner low [Hz], got None")
-        low = _check_freq(low, "low", fs)
+        low = check_freq(low, "low", fs)
     if kind in ("bandpass", "lowpass"):
         if high is None:
             raise ValueError(f"kind={kind!r} needs the low-pass corner high [Hz], got None")
-        high = _check_freq(high, "high", fs)
+        high = check_freq(high, "high", fs)
     if kind == "bandpass":
         if not low < high:
             raise ValueError(f"low ({low!r} Hz) must be below high ({high!r} Hz)")
@@ -297,7 +193,10 @@ def design_filter(fs: float, *, kind: str = "bandpass", low: float | None = None
     return butter_sos(order, high, "lowpass", fs)
 
 
-def _resolve_band(fs, kind, low, high, mesh_freq):
+def resolve_band(fs, kind, low, high, mesh_freq):
+    """(kind, low, high) [Hz] that :func:`filter_signal` designs for a request: missing
+    corners from :func:`default_band`; a bandpass without a usable low-pass corner becomes
+    a high-pass (logged)."""
     d_low, d_high = default_band(fs, mesh_freq)
     if kind == "bandpass":
         low = d_low if low is None else low
@@ -317,10 +216,76 @@ def _resolve_band(fs, kind, low, high, mesh_freq):
     return kind, None, high
 
 
-def _settle_time(low: float | None, high: float | None) -> float:
+def settle_time(low: float | None, high: float | None) -> float:
     """Heuristic settling time [s] of a zero-phase filter: 2 / (lowest corner)."""
     corners = [f for f in (low, high) if f is not None]
     return 2.0 / min(corners) if corners else 0.0
+
+
+def _band_request(fs: float, mesh_freq, lowpass, highpass) -> tuple[str, float | None, float | None] | None:
+    """(kind, low, high) of :func:`condition_recording`'s band limit as it asks
+    :func:`filter_recording` for it, or None (no band limit)."""
+    low = None if highpass is None else check_freq(highpass, "highpass", fs)
+    if isinstance(lowpass, str):
+        as_choice(lowpass, "lowpass", ("auto",))
+        high = default_band(fs, mesh_freq)[1] if mesh_freq is not None else None
+    elif lowpass is None:
+        high = None
+    else:
+        high = check_freq(lowpass, "lowpass", fs)
+    if low is None and high is None:
+        return None
+    kind = "bandpass" if (low is not None and high is not None) else (
+        "highpass" if low is not None else "lowpass")
+    return kind, low, high
+
+
+def band_limit(fs: float, mesh_freq: float | None, lowpass, highpass: float | None,
+               order: int = 4) -> tuple | None:
+    """The band limit of :func:`condition_recording`, as its filter runs it.
+
+    Parameters
+    ----------
+    fs : float
+        Sample rate [Hz].
+    mesh_freq : float or None
+        Mesh frequency [Hz] (the ``"auto"`` low-pass corner).
+    lowpass, highpass, order
+        As :func:`condition_recording`.
+
+    Returns
+    -------
+    (kind, low, high, sos) or None
+        Filter kind, corners [Hz] and second-order sections; None when there is no band
+        limit.
+    """
+    req = _band_request(fs, mesh_freq, lowpass, highpass)
+    if req is None:
+        return None
+    kind, low, high = resolve_band(fs, *req, None)          # filter_recording resolves,
+    kind, low, high = resolve_band(fs, kind, low, high, None)   # filter_signal again
+    return kind, low, high, design_filter(fs, kind=kind, low=low, high=high, order=order)
+
+
+def notch_settle(freqs, q: float = NOTCH_Q) -> float:
+    """Ringing time [s] of hum notches of quality ``q`` at ``freqs`` [Hz]: a notch rings for
+    ~q / (pi f) seconds, twice that for the lowest line; 0 without lines."""
+    f = np.asarray(freqs, dtype=np.float64)
+    return 2.0 * q / (math.pi * float(np.min(f))) if f.size else 0.0
+
+
+def drift_highpass(fs: float, window: float, order: int = 2) -> np.ndarray:
+    """Second-order sections of the ``method="highpass"`` drift removal: a Butterworth
+    high-pass of corner ``min(1 / window, fs / 4)`` [Hz] (``window`` [s], ``fs`` [Hz])."""
+    window = as_positive(window, "window")
+    return design_filter(fs, kind="highpass", low=min(1.0 / window, 0.25 * fs), order=order)
+
+
+def _zero_phase(x: np.ndarray, sos: np.ndarray, *, what: str, fill_max: int) -> np.ndarray:
+    """The :class:`~meshphase.signal.zero_phase.ZeroPhase` block filter pushed the whole of
+    ``x``, warning about the stretches too short for it."""
+    return run_whole(ZeroPhase(sos, x.size, what=what, fill_max=fill_max, engine="auto",
+                               warn=True), x)
 
 
 def filter_signal(x, fs: float, *, kind: str = "bandpass", low: float | None = None,
@@ -362,257 +327,12 @@ def filter_signal(x, fs: float, *, kind: str = "bandpass", low: float | None = N
     fs = as_positive(fs, "fs")
     fill_max = int(as_nonnegative(fill_max, "fill_max"))
     kind = as_choice(kind, "kind", ("bandpass", "highpass", "lowpass"))
-    kind, low, high = _resolve_band(fs, kind, low, high, mesh_freq)
+    kind, low, high = resolve_band(fs, kind, low, high, mesh_freq)
     sos = design_filter(fs, kind=kind, low=low, high=high, order=order)
-    padlen = iir.padlen_for(sos)
-    return _apply_finite(x, lambda s: iir.sosfiltfilt(sos, s, padlen=padlen),
-                         min_len=padlen + 1, fill_max=fill_max, what=f"filter_signal({kind})")
+    return _zero_phase(x, sos, what=f"filter_signal({kind})", fill_max=fill_max)
 
 
 # ====================================================================== drift
-def _block_medians(x: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
-    """Medians of consecutive blocks of ``b`` samples (at most 33 evenly strided samples of
-    each enter its median; NaN ignored) and the block centre indices.
-
-    Only the strided samples are gathered (a partial last block is padded with NaN to the
-    length of the others): the work space is ~34 values per block whatever ``b`` is, so a
-    block longer than the data (a window of seconds at an absurd fs) costs nothing."""
-    n = x.size
-    nb = -(-n // b)
-    nf = n // b
-    step = max(1, b // 33)
-    rows = np.full((nb, -(-b // step)), np.nan)
-    if nf:
-        rows[:nf] = x[:nf * b].reshape(nf, b)[:, ::step]
-    if nb > nf:
-        part = x[nf * b::step]
-        rows[nf, :part.size] = part
-    med = np.median(rows, axis=1)
-    bad = np.isnan(med)
-    if bad.any():
-        fin = np.isfinite(rows[bad]).any(axis=1)
-        sub = np.full(int(bad.sum()), np.nan)
-        if fin.any():
-            sub[fin] = np.nanmedian(rows[bad][fin], axis=1)
-        med[bad] = sub
-    starts = np.arange(nb) * b
-    stops = np.minimum(starts + b, n)
-    n_used = -(-(stops - starts) // step)             # strided samples inside each block
-    return med, starts + 0.5 * step * (n_used - 1)
-
-
-def _block_means(x: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
-    """Means of consecutive blocks of ``b`` samples (NaN ignored; NaN for an all-NaN block)
-    and the block centre indices (no padding: the work space is the data's own size)."""
-    n = x.size
-    nb = -(-n // b)
-    nf = n // b
-    cnt = np.zeros(nb, dtype=np.int64)
-    tot = np.zeros(nb)
-    if nf:
-        rows = x[:nf * b].reshape(nf, b)
-        with np.errstate(over="ignore", invalid="ignore"):
-            sums = rows.sum(axis=1)                  # all finite: every sample is (NaN/inf
-        if np.isfinite(sums).all():                  # or an overflow: the masked path below)
-            cnt[:nf] = b
-            tot[:nf] = sums
-        else:
-            fin = np.isfinite(rows)
-            cnt[:nf] = fin.sum(axis=1)
-            tot[:nf] = np.where(fin, rows, 0.0).sum(axis=1)
-    if nb > nf:
-        part = x[nf * b:]
-        fin = np.isfinite(part)
-        cnt[nf] = int(fin.sum())
-        tot[nf] = float(np.where(fin, part, 0.0).sum())
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mean = np.where(cnt > 0, tot / np.maximum(cnt, 1), np.nan)
-    starts = np.arange(nb) * b
-    stops = np.minimum(starts + b, n)
-    return mean, 0.5 * (starts + stops - 1)
-
-
-def drift_baseline(x, fs: float, *, method: str = "median", window: float | None = None,
-                   mesh_freq: float | None = None, pulse_period: float | None = None) -> np.ndarray:
-    """Slow baseline of a pulse train (what :func:`remove_drift` subtracts).
-
-    Parameters
-    ----------
-    x : array_like, shape (n,)
-        Samples [any unit]; NaN/inf ignored.
-    fs : float
-        Sample rate [Hz].
-    method : {"median", "savgol"}
-        "median": moving median (``window`` long) of block medians, one block being 1/16
-        of the window; robust to the pulses (tensile lobes above, compressive lobes below
-        the baseline) as long as they cover less than about half of each block.
-        "savgol": Savitzky-Golay (quadratic) smoothing of the same block medians; smoother,
-        less robust to outliers.
-    window : float, optional
-        Baseline window [s]; default 20 mesh periods, or ``DEFAULT_DRIFT_WINDOW_S`` without
-        ``mesh_freq``.
-    mesh_freq : float, optional
-        Mesh frequency [Hz].
-    pulse_period : float, optional
-        Period of the pulse train [s]: one relative revolution of the gauged gear, in which
-        every planet passes once. Given, the blocks are whole periods and each enters with
-        its MEAN: every block then holds the same pulses (each planet's, whatever their
-        loads), which add a constant instead of a wobble. Needed when the pulses cover more
-        than about half of the time (five planets on a sun gauge: tensile lobe and side
-        lobes span 3.6 of every 5 mesh periods), where block medians follow the pulses and
-        the baseline they leave shifts each pulse's timing (1.1e-3 mesh cycles RMS
-        noise-free, against 4e-4 without drift removal); blocks of one planet spacing would
-        still wobble with the planets' unequal loads (face-width amplitudes moved by 6 %).
-
-    Returns
-    -------
-    baseline : ndarray of float64, shape (n,)
-        Linearly interpolated between block centres (constant beyond the first and last);
-        NaN everywhere when no sample is finite.
-    """
-    x = _as_signal(x)
-    fs = as_positive(fs, "fs")
-    method = as_choice(method, "method", ("median", "savgol"))
-    window = _drift_window(window, mesh_freq)
-    n = x.size
-    if n == 0:
-        return np.empty(0)
-    b_p = None if pulse_period is None else max(1, int(round(as_positive(pulse_period, "pulse_period") * fs)))
-    if b_p is not None and n >= 2 * b_p:
-        # whole periods only: a partial block at the end holds some planets' pulses and not
-        # the others', which is exactly the wobble whole periods avoid
-        b = b_p
-        means, centres = _block_means(np.where(np.isfinite(x), x, np.nan), b)
-        if n % b:
-            means, centres = means[:-1], centres[:-1]
-    else:
-        b = max(1, int(round(window * fs / 16.0)))
-        means, centres = _block_medians(np.where(np.isfinite(x), x, np.nan), b)
-    ok = np.isfinite(means)
-    if not ok.any():
-        return np.full(n, np.nan)
-    if not ok.all():
-        means = np.interp(centres, centres[ok], means[ok])
-    k = 17  # blocks per window (odd)
-    if method == "median":
-        base = ndimage.median_filter(means, size=min(k, means.size) | 1, mode="nearest")
-    else:
-        if means.size >= k:
-            base = savgol_filter(means, k, 2)
-        else:
-            base = np.full(means.size, np.mean(means))
-    if base.size == 1:
-        return np.full(n, base[0])
-    return np.interp(np.arange(n, dtype=np.float64), centres, base)
-
-
-#: a block-to-block change of the drift baseline this many robust spreads beyond the local
-#: trend of its neighbours is a level step [-]
-STEP_SPREADS = 10.0
-
-
-def level_steps(values, centres, fs: float, *, t0: float = 0.0, min_size: float = 0.0) -> np.ndarray:
-    """Level steps of a channel's baseline: jumps between consecutive drift-baseline blocks
-    (:func:`drift_baseline`'s block means or medians) that its slow drift does not make.
-
-    A bridge re-zeroed, an amplifier range switched or a cable knocked moves the baseline
-    within a few samples; the drift baseline then ramps across the block holding the jump
-    (its values are interpolated between block centres), and the pulses of that stretch sit
-    on a slope: they are timed off or lost (independent rig, a step of twice the pulse height
-    mid-record: the passes within one relative revolution of it). Thermal drift changes the
-    block values smoothly: a step is a change ``d_k`` between blocks that the trend of the
-    changes 3 to 5 blocks either side (their median) does not explain, beyond
-    :data:`STEP_SPREADS` robust spreads of those residuals and beyond ``min_size``, and that
-    stays (the median level of the 5 blocks after it less that of the 5 before, drift
-    aside, keeps half of it: a block that caught a pulse goes up and down, a spike); a step
-    inside a block splits over two consecutive changes, taken as one.
-
-    Parameters
-    ----------
-    values : array_like, shape (m,)
-        Block values [data units]; NaN where a block had no sample.
-    centres : array_like, shape (m,)
-        Their centres [samples].
-    fs : float
-        Sample rate [Hz].
-    t0 : float
-        Time of sample 0 [s].
-    min_size : float
-        Smallest step reported [data units] (e.g. a few times the per-sample noise RMS).
-
-    Returns
-    -------
-    ndarray, shape (k, 2)
-        Per step its time [s] (between the two blocks, or the centre of the block it fell
-        in) and its size [data units] (the change less its neighbours' trend), in time order;
-        empty with fewer than 7 finite blocks (blocks without a sample are interpolated).
-    """
-    v = np.asarray(values, dtype=np.float64).ravel()
-    c = np.asarray(centres, dtype=np.float64).ravel()
-    if v.shape != c.shape:
-        raise ValueError(f"values and centres must have one shape, got {v.shape} and {c.shape}")
-    fs = as_positive(fs, "fs")
-    ok = np.isfinite(v)
-    if np.count_nonzero(ok) < 7 or not np.all(np.isfinite(c)):
-        return np.empty((0, 2))
-    if not ok.all():                                    # blocks without a sample: interpolated
-        v = np.interp(c, c[ok], v[ok])
-    e = _step_residuals(v)
-    spread = MAD_TO_SIGMA * float(median_and_mad(e)[1])          # e is finite (v filled)
-    thr = max(STEP_SPREADS * spread, float(min_size), 0.0)
-    out = []
-    v = v.copy()
-    spike = np.zeros(e.size, dtype=bool)
-    for _ in range(v.size):
-        # the largest first, taken out of the values before the next is looked for: the
-        # trend of a change next to a large step would otherwise carry a little of it
-        j = int(np.argmax(np.where(spike, 0.0, np.abs(e))))
-        if not abs(e[j]) > thr or spike[j]:
-            break
-        pair = [k for k in (j - 1, j + 1)
-                if 0 <= k < e.size and abs(e[k]) > thr and np.sign(e[k]) == np.sign(e[j]) and not spike[k]]
-        k = max(pair, key=lambda i: abs(e[i])) if pair else j
-        a, b = min(j, k), max(j, k)                       # a pair: inside block b
-        size = e[a] + (e[b] if b != a else 0.0)
-        # a step stays: the level after it is the level before it plus the step, drift
-        # aside (a block that caught a pulse goes up and down again: a spike, not a step)
-        dv = np.diff(v)
-        lo, hi = max(0, a - 5), min(dv.size, b + 6)
-        local = np.concatenate([dv[lo:a], dv[b + 1:hi]])          # the drift's trend there
-        u = v - (float(np.median(local)) if local.size else 0.0) * np.arange(v.size)
-        kept = float(np.median(u[b + 1:b + 6])) - float(np.median(u[max(0, a - 4):a + 1]))
-        if not (np.sign(kept) == np.sign(size) and abs(kept) > 0.5 * abs(size)):
-            spike[a:b + 1] = True
-            continue
-        t = c[b] if b != a else 0.5 * (c[a] + c[a + 1])
-        v[a + 1:] -= e[a]
-        if b != a:
-            v[b + 1:] -= e[b]
-        if abs(size) > min_size:
-            out.append((t0 + t / fs, size))
-        e = _step_residuals(v)
-    out.sort()
-    return np.array(out, dtype=np.float64).reshape(-1, 2)
-
-
-def _step_residuals(v: np.ndarray) -> np.ndarray:
-    """Each change between consecutive block values less the trend of the changes 3 to 5
-    blocks either side (their median: a step among them, or the two parts of one that fell
-    inside a block, does not move it; a quadratic drift's changes are linear, and the median
-    of a symmetric set is the middle)."""
-    d = np.diff(v)
-    p = np.pad(d, 5, mode="reflect", reflect_type="odd")
-    return d - np.median(np.stack([p[5 + o:5 + o + d.size] for o in (-5, -4, -3, 3, 4, 5)]), axis=0)
-
-
-def _drift_window(window, mesh_freq) -> float:
-    if window is not None:
-        return as_positive(window, "window")
-    if mesh_freq is not None:
-        return DRIFT_WINDOW_MESH_PERIODS / as_positive(mesh_freq, "mesh_freq")
-    return DEFAULT_DRIFT_WINDOW_S
-
-
 def remove_drift(x, fs: float, *, method: str = "median", window: float | None = None,
                  mesh_freq: float | None = None, order: int = 2, fill_max: int = 8,
                  pulse_period: float | None = None) -> np.ndarray:
@@ -652,12 +372,13 @@ def remove_drift(x, fs: float, *, method: str = "median", window: float | None =
     x = _as_signal(x)
     fs = as_positive(fs, "fs")
     method = as_choice(method, "method", ("median", "savgol", "highpass"))
-    w = _drift_window(window, mesh_freq)
+    w = drift_window(window, mesh_freq)
     if method == "highpass":
-        return filter_signal(x, fs, kind="highpass", low=min(1.0 / w, 0.25 * fs), order=order,
-                             fill_max=fill_max)
-    base = drift_baseline(x, fs, method=method, window=w, pulse_period=pulse_period)
-    return x - base
+        return _zero_phase(x, drift_highpass(fs, w, order), what="filter_signal(highpass)",
+                           fill_max=int(as_nonnegative(fill_max, "fill_max")))
+    if x.size == 0:
+        return np.empty(0)
+    return run_whole(DriftFilter(x.size, fs, method=method, window=w, pulse_period=pulse_period), x)
 
 
 # ====================================================================== mains hum
@@ -843,14 +564,11 @@ def notch_hum(x, fs: float, *, freqs: Sequence[float] | None = None, mains: str 
                           stacklevel=2)
         fl = rep.freqs
     else:
-        fl = np.asarray([_check_freq(f, "freqs", fs) for f in freqs], dtype=np.float64)
+        fl = np.asarray([check_freq(f, "freqs", fs) for f in freqs], dtype=np.float64)
     if fl.size == 0 or x.size == 0:
         return x.copy()
-    sos = design_notch(fl, fs, q)
-    padlen = iir.padlen_for(sos)
     fill_max = int(as_nonnegative(fill_max, "fill_max"))
-    return _apply_finite(x, lambda s: iir.sosfiltfilt(sos, s, padlen=padlen),
-                         min_len=padlen + 1, fill_max=fill_max, what="notch_hum")
+    return _zero_phase(x, design_notch(fl, fs, q), what="notch_hum", fill_max=fill_max)
 
 
 def design_notch(freqs, fs: float, q: float = 30.0) -> np.ndarray:
@@ -861,99 +579,6 @@ def design_notch(freqs, fs: float, q: float = 30.0) -> np.ndarray:
 
 
 # ====================================================================== quality
-def estimate_noise(x) -> float:
-    """Robust white-noise standard deviation of ``x`` [units of x].
-
-    ``1.4826 * MAD(diff(x)) / sqrt(2)``: the first difference removes the slow pulse and
-    drift content, the MAD ignores the sparse large differences at pulse edges. It
-    overestimates the noise when pulses are only a few samples wide (their edges then fill a
-    large share of the differences). NaN when fewer than 2 finite neighbours exist.
-    """
-    x = _as_signal(x)
-    with np.errstate(invalid="ignore"):                # inf - inf: dropped below
-        d = np.diff(x)
-    return _noise_from_diffs(_subsample(d[np.isfinite(d)]))
-
-
-def _noise_from_diffs(d: np.ndarray) -> float:
-    """:func:`estimate_noise` from its (subsampled, finite) first differences."""
-    if d.size == 0:
-        return float("nan")
-    return float(sigma_of_differences(d))
-
-
-def estimate_snr(x, *, quantile: float = 0.999) -> tuple[float, float, float]:
-    """Peak-power SNR estimate of a pulse train.
-
-    SNR = 10 log10(A^2 / sigma^2) [dB], the definition of the onset accuracy tests (peak
-    pulse power over noise variance): ``sigma`` from :func:`estimate_noise`, ``A`` the
-    median pulse peak above the median level. The peaks are the maxima of the runs above
-    half the ``quantile`` level of ``x - median(x)``, taken on a copy smoothed over a
-    quarter of the median run length (so that the noise on top of a peak does not bias
-    it upwards); the median over runs is insensitive to the planets' different loads.
-    Uses the first 2**20 samples; needs drift-free data (condition first).
-
-    Returns
-    -------
-    (snr_db, signal_peak, noise_rms) : tuple of float
-        [dB], [units of x], [units of x]; NaN when not computable.
-    """
-    x = _as_signal(x)
-    q = as_float(quantile, "quantile")
-    if not 0.5 < q < 1.0:
-        raise ValueError(f"quantile must be in (0.5, 1), got {q!r}")
-    return _snr_from(estimate_noise(x), x[:_SUBSAMPLE], q)
-
-
-def _snr_from(sigma: float, xs: np.ndarray, q: float) -> tuple[float, float, float]:
-    """:func:`estimate_snr` from the noise estimate and the first ``_SUBSAMPLE`` samples."""
-    xs = xs[np.isfinite(xs)]
-    a = _snr_peak(xs, q) if xs.size >= 2 else None
-    return _snr_combine(sigma, a)
-
-
-def _snr_peak(xs: np.ndarray, q: float) -> float:
-    """The pulse peak amplitude ``A`` of :func:`estimate_snr` from the finite samples ``xs``
-    of the first ``_SUBSAMPLE`` samples (at least 2)."""
-    z = xs - median_of_finite(xs)
-    top = float(np.quantile(z, q))
-    a = top
-    runs = find_runs(z > 0.5 * top) if top > 0 else np.empty((0, 2), dtype=np.int64)
-    if len(runs):
-        # noise chops a pulse's run at its edges: merge runs closer than half a typical
-        # pulse run, then drop the slivers
-        typ = float(np.quantile(runs[:, 1] - runs[:, 0], 0.9))
-        new = np.ones(len(runs), dtype=bool)
-        new[1:] = (runs[1:, 0] - runs[:-1, 1]) > 0.5 * typ
-        runs = np.stack([runs[new, 0], np.maximum.reduceat(runs[:, 1], np.flatnonzero(new))], 1)
-        runs = runs[(runs[:, 1] - runs[:, 0]) >= max(1.0, 0.25 * typ)]
-    if len(runs):
-        m = max(1, int(np.median(runs[:, 1] - runs[:, 0])) // 4)
-        zs = ndimage.uniform_filter1d(z, m, mode="nearest") if m > 1 else z
-        a = float(np.median(_run_max(zs, runs)))
-    return a
-
-
-def _snr_combine(sigma: float, a: float | None) -> tuple[float, float, float]:
-    """(snr_db, signal_peak, noise_rms) of :func:`estimate_snr` from the noise ``sigma``
-    and the peak ``a`` (None: fewer than 2 finite samples in the first ``_SUBSAMPLE``)."""
-    if a is None or not np.isfinite(sigma):
-        return float("nan"), float("nan"), sigma
-    if sigma == 0.0:
-        return (float("inf") if a > 0 else float("nan")), a, sigma
-    if a <= 0:
-        return float("nan"), a, sigma
-    return float(20.0 * np.log10(a / sigma)), a, sigma
-
-
-def _run_max(z: np.ndarray, runs: np.ndarray) -> np.ndarray:
-    """Maximum of ``z`` over each ``[start, stop)`` run (runs sorted, disjoint)."""
-    edges = runs.ravel()
-    if edges[-1] == z.size:
-        edges = edges[:-1]
-    return np.maximum.reduceat(z, edges)[::2]
-
-
 def gap_intervals(quality_or_mask, fs: float | None = None, t0: float | None = None) -> np.ndarray:
     """Gap intervals of a channel in seconds: non-finite gaps and dropout runs together.
 
@@ -1033,7 +658,7 @@ def assess_quality(x, fs: float, *, t0: float = 0.0, name: str = "", clip_min_ru
         SNR below which to warn [dB].
     detect_flat : bool
         Look for dropout runs and clipped plateaus at any level
-        (:func:`meshphase.signal.quality.flat_runs`); False: non-finite gaps and rail clipping only.
+        (:func:`meshphase.signal.flat_runs.flat_runs`); False: non-finite gaps and rail clipping only.
         Meant for analogue (strain) channels, not pulse trains.
     dropout_min_run : int
         Floor of the dropout run-length threshold [samples], >= 2 (the threshold itself
@@ -1076,25 +701,8 @@ def assess_quality(x, fs: float, *, t0: float = 0.0, name: str = "", clip_min_ru
         snr_db, peak, noise = estimate_snr(x)
         rep = replace(rep, snr_db=snr_db, signal_peak=peak, noise_rms=noise)
     if warn:
-        _warn_quality(rep, snr_warn_db)
+        warn_quality(rep, snr_warn_db)
     return rep
-
-
-def _warn_quality(rep: ChannelQuality, snr_warn_db: float) -> None:
-    problems = []
-    if len(rep.gap_runs):
-        problems.append(f"{len(rep.gap_runs)} gap run(s) of non-finite samples "
-                        f"({rep.n_gap_samples} samples)")
-    if len(rep.dropout_runs):
-        problems.append(f"{len(rep.dropout_runs)} dropout run(s) of zeros or a held value "
-                        f"({rep.n_dropout_samples} samples, treated as gaps)")
-    if len(rep.clipped_runs):
-        problems.append(f"{len(rep.clipped_runs)} clipped run(s) ({rep.n_clipped_samples} samples)")
-    if np.isfinite(rep.snr_db) and rep.snr_db < snr_warn_db:
-        problems.append(f"low SNR {rep.snr_db:.1f} dB (< {snr_warn_db:g} dB)")
-    if problems:
-        warnings.warn(f"channel {rep.name!r}: " + "; ".join(problems), DataQualityWarning,
-                      stacklevel=3)
 
 
 # ====================================================================== Recording level
@@ -1130,7 +738,7 @@ def filter_recording(rec: Recording, *, channels: Sequence[str] | str | None = N
     """
     _check_rec(rec)
     kind = as_choice(kind, "kind", ("bandpass", "highpass", "lowpass"))
-    kind, low, high = _resolve_band(rec.fs, kind, low, high, mesh_freq)
+    kind, low, high = resolve_band(rec.fs, kind, low, high, mesh_freq)
     out, names = _map_channels(rec, channels, lambda c: filter_signal(
         c, rec.fs, kind=kind, low=low, high=high, order=order))
     return out.with_history("condition.filter", kind=kind, low_hz=low, high_hz=high,
@@ -1147,7 +755,7 @@ def remove_drift_recording(rec: Recording, *, channels: Sequence[str] | str | No
     """
     _check_rec(rec)
     method = as_choice(method, "method", ("median", "savgol", "highpass"))
-    w = _drift_window(window, mesh_freq)
+    w = drift_window(window, mesh_freq)
     out, names = _map_channels(rec, channels, lambda c: remove_drift(c, rec.fs, method=method,
                                                                      window=w,
                                                                      pulse_period=pulse_period))
@@ -1168,7 +776,7 @@ def _notch_rec(rec: Recording, channels, freqs, mains, q, exclude):
             fl = rep.freqs
         else:
             rep = None
-            fl = np.asarray([_check_freq(f, "freqs", rec.fs) for f in freqs], dtype=np.float64)
+            fl = np.asarray([check_freq(f, "freqs", rec.fs) for f in freqs], dtype=np.float64)
         if fl.size:
             if data is rec.data:
                 data = rec.data.copy()
@@ -1289,41 +897,33 @@ def condition_recording(rec: Recording, *, channels: Sequence[str] | str | None 
         out = rec.replace_data(data).with_history("condition.mask_dropouts", samples=masked)
     settle = 0.0
     if hum:
-        out, reports = _notch_rec(out, names, None, "auto", 30.0, ())
+        out, reports = _notch_rec(out, names, None, "auto", NOTCH_Q, ())
         for nm, r in reports.items():
             quality[nm] = replace(quality[nm], hum=r)
             if r is not None and r.present:
-                # a notch of quality q rings for ~q / (pi f) seconds
-                settle = max(settle, 2.0 * 30.0 / (math.pi * float(np.min(r.freqs))))
+                settle = max(settle, notch_settle(r.freqs, NOTCH_Q))
     if drift is not None:
         out = remove_drift_recording(out, channels=names, method=drift, window=drift_window,
                                      pulse_period=pulse_period,
                                      mesh_freq=mesh_freq)
         if drift == "highpass":
-            settle = max(settle, 2.0 * _drift_window(drift_window, mesh_freq))
+            # (the parameter drift_window hides the function of that name here)
+            settle = max(settle, 2.0 * drift_filters.drift_window(drift_window, mesh_freq))
     # SNR on the drift-free, not yet band-limited data: its noise is still the white
     # per-sample noise the peak-power SNR is defined with (a low-pass would hide it)
     for nm in names:
         snr_db, peak, noise = estimate_snr(out.channel(nm))
         quality[nm] = replace(quality[nm], snr_db=snr_db, signal_peak=peak, noise_rms=noise)
-    low = None if highpass is None else _check_freq(highpass, "highpass", rec.fs)
-    if isinstance(lowpass, str):
-        as_choice(lowpass, "lowpass", ("auto",))
-        high = default_band(rec.fs, mesh_freq)[1] if mesh_freq is not None else None
-    elif lowpass is None:
-        high = None
-    else:
-        high = _check_freq(lowpass, "lowpass", rec.fs)
-    if low is not None or high is not None:
-        kind = "bandpass" if (low is not None and high is not None) else (
-            "highpass" if low is not None else "lowpass")
+    req = _band_request(rec.fs, mesh_freq, lowpass, highpass)
+    if req is not None:
+        kind, low, high = req
         out = filter_recording(out, channels=names, kind=kind, low=low, high=high, order=order)
-        settle = max(settle, _settle_time(low, high))
+        settle = max(settle, settle_time(low, high))
     for nm in names:
         q = quality[nm] = replace(quality[nm], settle=settle,
                                   conditioned_gap_runs=find_runs(~np.isfinite(out.channel(nm))))
         if warn:
-            _warn_quality(q, 6.0)
+            warn_quality(q, 6.0)
     out = out.with_history("condition.quality", settle_s=settle,
                            quality={nm: quality[nm].history_entry() for nm in names})
     return Conditioned(out, quality)

@@ -30,15 +30,14 @@ from scipy import signal
 from meshphase import io
 
 from meshphase.signal import iir
-from meshphase.signal.condition import (condition_recording, drift_baseline, finite_apply_gaps,
-                                        quality_from_scan)
+from meshphase.signal.condition import condition_recording, drift_baseline, quality_from_scan
 from meshphase.errors import DataQualityWarning, ProcessingWarning
 from meshphase.onsets import OnsetStream, detect_onsets, detect_onsets_recording
 from meshphase.signal.quality import ChannelScan, FlatScan, channel_quality, classify_flat_runs
 from meshphase.recording import ChannelSpec, Recording
 from meshphase.run.stream import (ChannelPlan, FileSource, MemorySource, StreamedRecording,
-                                  _ZeroPhase, condition_stream, filter_overlap, scan_source,
-                                  stream_memory)
+                                  condition_stream, scan_source, stream_memory)
+from meshphase.signal.zero_phase import ZeroPhase, apply_finite, filter_overlap, finite_apply_gaps
 from meshphase.synthetic import generate
 from meshphase.synthetic.scenarios import seed_rig_gearset, seed_rig_speeds
 
@@ -155,7 +154,7 @@ def test_a_failure_in_a_chain_or_an_onset_detector_ends_the_pass_with_its_error(
     from meshphase.runtime.threads import threads_limited
 
     calls = {"n": 0}
-    target = stream._push_chains if where == "chain" else OnsetStream.feed
+    target = stream.push_chains if where == "chain" else OnsetStream.feed
     # the chains are pushed every block (two side by side per call); the onsets get the
     # chains' output in larger pieces (the filters' look-ahead): four over this record
     at = 5 if where == "chain" else 2
@@ -167,7 +166,7 @@ def test_a_failure_in_a_chain_or_an_onset_detector_ends_the_pass_with_its_error(
         return target(self, x)
 
     if where == "chain":
-        monkeypatch.setattr(stream, "_push_chains", failing)
+        monkeypatch.setattr(stream, "push_chains", failing)
     else:
         monkeypatch.setattr(OnsetStream, "feed", failing)
     with threads_limited(n_threads), pytest.raises(RuntimeError, match=f"{where} failed"):
@@ -391,11 +390,9 @@ def test_filter_overlap_makes_blocks_equal_the_whole_filter(kind):
     x[1000:1004] = np.nan                       # bridged
     x[3 * L:3 * L + 500] = np.nan               # splits the signal
     padlen = 3 * (2 * len(sos) + 1)
-    from meshphase.signal.condition import _apply_finite
-
-    ref = _apply_finite(x, lambda s: signal.sosfiltfilt(sos, s, padlen=padlen),
+    ref = apply_finite(x, lambda s: signal.sosfiltfilt(sos, s, padlen=padlen),
                         min_len=padlen + 1, fill_max=8, what="t")
-    zp = _ZeroPhase(sos, n, what="t", chunk=L // 3 + 1)
+    zp = ZeroPhase(sos, n, what="t", chunk=L // 3 + 1)
     parts = [zp.push(x[a:a + 997]) for a in range(0, n, 997)] + [zp.flush()]
     y = np.concatenate(parts)
     fin = np.isfinite(ref)
@@ -410,7 +407,7 @@ def test_filter_overlap_makes_blocks_equal_the_whole_filter(kind):
         # the numba engine: windows without a gap joined straight into the kernel's buffer,
         # the others through the same gap handling: scipy's numbers (bit for bit on x86-64;
         # tests/processing/test_iir.py states the tolerance)
-        zn = _ZeroPhase(sos, n, what="t", chunk=L // 3 + 1, engine="numba")
+        zn = ZeroPhase(sos, n, what="t", chunk=L // 3 + 1, engine="numba")
         yn = np.concatenate([zn.push(x[a:a + 997]) for a in range(0, n, 997)] + [zn.flush()])
         assert np.array_equal(np.isfinite(yn), fin)
         assert np.max(np.abs(yn[fin] - y[fin])) <= 1e-12 * np.max(np.abs(x[np.isfinite(x)]))

@@ -9,8 +9,8 @@ import numpy as np
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from meshphase.signal.condition import _block_means
-from meshphase.run.stream import _Pending, _SnrTap, _minus_interp
+from meshphase.signal.drift import PendingSamples, block_means, minus_interp
+from meshphase.signal.snr import SnrTap
 
 
 def _finite_diffs(x: np.ndarray) -> np.ndarray:
@@ -21,7 +21,7 @@ def _finite_diffs(x: np.ndarray) -> np.ndarray:
 
 def _tap_parts(x: np.ndarray, cuts, n_keep: int) -> tuple[np.ndarray, int]:
     d_all = _finite_diffs(x)
-    tap = _SnrTap(x.size, d_all.size)
+    tap = SnrTap(x.size, d_all.size)
     tap.step = max(1, -(-d_all.size // n_keep))        # a stride > 1 on short data too
     # (the pulse peak of the first samples may overflow in its median with +-1.7e308 in
     # them, and its quantile then meets inf - inf: warnings of that estimate, not of the
@@ -75,12 +75,12 @@ def test_snr_tap_on_empty_and_single_sample_blocks():
 @given(n=st.integers(1, 300), b=st.integers(1, 40), seed=st.integers(0, 2**32 - 1),
        bad=st.lists(st.tuples(st.integers(0, 299), st.sampled_from([np.nan, 1e300, -1e300])),
                     max_size=3))
-def test_block_means_finite_path_equals_the_masked_one(n, b, seed, bad):
+def testblock_means_finite_path_equals_the_masked_one(n, b, seed, bad):
     x = np.random.default_rng(seed).normal(size=n) * 1e3
     for i, v in bad:
         x[i % n] = v
     x = np.where(np.isfinite(x), x, np.nan)            # as the callers hand it over
-    mean, cent = _block_means(x, b)
+    mean, cent = block_means(x, b)
     nb = -(-n // b)
     for j in range(nb):
         blk = x[j * b:(j + 1) * b]
@@ -94,7 +94,7 @@ def test_block_means_finite_path_equals_the_masked_one(n, b, seed, bad):
 
 
 def test_pending_holds_all_nan_stretches_as_lengths_only():
-    p = _Pending()
+    p = PendingSamples()
     p.add(np.full(100, np.nan))
     x = np.full(100, np.nan)
     x[50] = 1.0                                        # NaN at both ends, not all NaN
@@ -110,7 +110,7 @@ def test_pending_holds_all_nan_stretches_as_lengths_only():
        spacing=st.integers(1, 3000), shift=st.floats(-4000.0, 4000.0), half=st.booleans(),
        seed=st.integers(0, 2**32 - 1))
 @example(n=5000, a=0, n_knots=4, spacing=1000, shift=0.0, half=False, seed=0)   # knots on samples
-def test_minus_interp_equals_numpy_interp_bit_for_bit(n, a, n_knots, spacing, shift, half,
+def testminus_interp_equals_numpy_interp_bit_for_bit(n, a, n_knots, spacing, shift, half,
                                                       seed):
     # the drift's baseline subtracted interval by interval: numpy's own arithmetic, so the
     # same bits as x - np.interp on the sample indices, for knots on samples, on halves and
@@ -124,25 +124,25 @@ def test_minus_interp_equals_numpy_interp_bit_for_bit(n, a, n_knots, spacing, sh
         xp = np.unique(xp)
     fp = rng.normal(size=xp.size) * 10.0 ** rng.integers(-6, 4)
     want = x - np.interp(np.arange(a, a + n, dtype=np.float64), xp, fp)
-    got = _minus_interp(x, a, xp, fp)
+    got = minus_interp(x, a, xp, fp)
     np.testing.assert_array_equal(got, want)
 
 
-def test_minus_interp_empty_non_finite_and_dense_knots():
-    assert _minus_interp(np.empty(0), 5, np.array([0.0, 1e4]), np.array([1.0, 2.0])).size == 0
+def testminus_interp_empty_non_finite_and_dense_knots():
+    assert minus_interp(np.empty(0), 5, np.array([0.0, 1e4]), np.array([1.0, 2.0])).size == 0
     x = np.arange(3000.0)
     xp = np.array([100.0, 1200.0, 2500.0])
     for fp in (np.array([1.0, np.nan, 3.0]), np.array([1.0, np.inf, 3.0])):   # numpy's rules
         with np.errstate(invalid="ignore"):
             want = x - np.interp(np.arange(7, 3007.0), xp, fp)
-        np.testing.assert_array_equal(_minus_interp(x, 7, xp, fp), want)
+        np.testing.assert_array_equal(minus_interp(x, 7, xp, fp), want)
     dense = np.arange(0.0, 3000.0, 10.0)                 # knots 10 samples apart: np.interp
     fp = np.sin(dense)
-    np.testing.assert_array_equal(_minus_interp(x, 0, dense, fp),
+    np.testing.assert_array_equal(minus_interp(x, 0, dense, fp),
                                   x - np.interp(np.arange(3000.0), dense, fp))
     twice = np.array([100.0, 1200.0, 1200.0, 2500.0])    # a repeated knot: numpy's rule
     fp = np.array([1.0, 2.0, 5.0, 3.0])
-    np.testing.assert_array_equal(_minus_interp(x, 0, twice, fp),
+    np.testing.assert_array_equal(minus_interp(x, 0, twice, fp),
                                   x - np.interp(np.arange(3000.0), twice, fp))
-    one = _minus_interp(x, 0, np.array([50.0]), np.array([2.0]))  # a single knot: constant
+    one = minus_interp(x, 0, np.array([50.0]), np.array([2.0]))  # a single knot: constant
     np.testing.assert_array_equal(one, x - 2.0)
