@@ -227,8 +227,8 @@ def level_steps(values, centres, fs: float, *, t0: float = 0.0, min_size: float 
         # aside (a block that caught a pulse goes up and down again: a spike, not a step)
         dv = np.diff(v)
         lo, hi = max(0, a - 5), min(dv.size, b + 6)
-        local = np.concatenate([dv[lo:a], dv[b + 1:hi]])          # the drift's trend there
-        u = v - (float(np.median(local)) if local.size else 0.0) * np.arange(v.size)
+        idx = np.r_[lo:a, b + 1:hi]                                 # the drift's changes there
+        u = v - _trend_levels(idx, dv[idx], v.size)
         kept = float(np.median(u[b + 1:b + 6])) - float(np.median(u[max(0, a - 4):a + 1]))
         if not (np.sign(kept) == np.sign(size) and abs(kept) > 0.5 * abs(size)):
             spike[a:b + 1] = True
@@ -242,6 +242,22 @@ def level_steps(values, centres, fs: float, *, t0: float = 0.0, min_size: float 
         e = _step_residuals(v)
     out.sort()
     return np.array(out, dtype=np.float64).reshape(-1, 2)
+
+
+def _trend_levels(idx: np.ndarray, d: np.ndarray, n: int) -> np.ndarray:
+    """The levels [data units] of ``n`` blocks that the drift alone gives, from its changes
+    ``d`` between blocks ``idx`` and ``idx + 1``: a line through the changes (a quadratic
+    drift's changes are linear) by Theil-Sen (the median of the pairwise slopes, so one step
+    or spike among them does not tilt it), summed; level 0 at block 0. Fewer than two
+    changes: their median as a constant change, or none."""
+    if idx.size < 2:
+        rate = float(np.median(d)) if d.size else 0.0
+        return rate * np.arange(n, dtype=np.float64)
+    i, j = np.triu_indices(idx.size, 1)
+    slope = float(np.median((d[j] - d[i]) / (idx[j] - idx[i])))
+    icpt = float(np.median(d - slope * idx))
+    steps = icpt + slope * np.arange(n - 1, dtype=np.float64)
+    return np.concatenate(([0.0], np.cumsum(steps)))
 
 
 def _step_residuals(v: np.ndarray) -> np.ndarray:

@@ -10,7 +10,7 @@ import warnings
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import example, given, settings, strategies as st
 
 from scipy.signal import find_peaks
 
@@ -823,6 +823,9 @@ def test_level_steps_empty_few_and_bad_input():
 
 
 @settings(max_examples=60, deadline=None)
+# a spike near the start on a strongly curved drift: a linear trend of the neighbouring changes
+# left the curvature in the levels and took the spike for two steps
+@example(a=0.0, b=0.0, q=9.546009822727292e-10, k=5, size=0.05078125, sign=1.0, frac=0.0, seed=1)
 @given(a=st.floats(-1.0, 1.0), b=st.floats(-1e-4, 1e-4), q=st.floats(-1e-9, 1e-9),
        k=st.integers(5, 34), size=st.floats(0.05, 1.0), sign=st.sampled_from([-1.0, 1.0]),
        frac=st.floats(0.0, 1.0), seed=st.integers(0, 10_000))
