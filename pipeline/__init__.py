@@ -8,12 +8,12 @@ never imports matplotlib.
 
 from __future__ import annotations
 
-from meshphase.errors import (ConvergenceWarning, DataQualityWarning, FormatWarning, MeshphaseWarning,
-                              ModelWarning, ProcessingWarning)
-from meshphase.runtime.log import logger
-from meshphase.recording import ChannelSpec, Recording, CHANNEL_KINDS
+from .errors import (ConvergenceWarning, DataQualityWarning, FormatWarning, MeshphaseWarning,
+                     ModelWarning, ProcessingWarning)
+from .runtime.log import logger
+from .recording import ChannelSpec, Recording, CHANNEL_KINDS
 
-__version__ = "0.1.0"
+from .version import __version__
 
 #: names imported on first use: name -> module that holds it
 _LAZY = {"read": "meshphase.io", "process": "meshphase.api.process", "Result": "meshphase.api.result",

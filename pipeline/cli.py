@@ -54,20 +54,20 @@ import time
 import warnings
 from pathlib import Path
 
-from meshphase import __version__
-from meshphase.io.channels import mapping_report
-from meshphase.run.demo import demo_scene_path
-from meshphase.errors import DataQualityWarning
-from meshphase.run.exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_PIPE, recording_read_errors,
-                                 run_status, status_line)
-from meshphase.run.outdir import OutputDir, output_write_errors
-from meshphase.runtime.heap import limit_heap_growth
-from meshphase.io import FormatChoices, convert, detect_format, iter_blocks, read_info
-from meshphase.io.base import ANY_FS_ENV
-from meshphase.runtime.log import MessageFormatter, logger, message_line
-from meshphase.signal.quality import channel_quality
-from meshphase.run.scene import SceneError, load_scene
-from meshphase.validate import as_regular_file
+from .version import __version__
+from .io.channels import mapping_report
+from .run.demo import demo_scene_path
+from .errors import DataQualityWarning
+from .run.exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_PIPE, recording_read_errors,
+                        run_status, status_line)
+from .run.outdir import OutputDir, output_write_errors
+from .runtime.heap import limit_heap_growth
+from .io import FormatChoices, convert, detect_format, iter_blocks, read_info
+from .io.base import ANY_FS_ENV
+from .runtime.log import MessageFormatter, logger, message_line
+from .signal.quality import channel_quality
+from .run.scene import SceneError, load_scene
+from .validate import as_regular_file
 
 __all__ = ["main", "build_parser", "describe_error"]
 
@@ -212,8 +212,8 @@ def cmd_bench(args) -> int:
     # bench drives the CLI's own commands (bench.rss runs `convert` through main), so it is
     # imported here, not at the top: cli -> bench only when benchmarking, no import loop
     if args.warmup:
-        from meshphase.models._kernels import warmup
-        from meshphase.onsets.fastpath import warmup as warmup_onsets
+        from .models._kernels import warmup
+        from .onsets.fastpath import warmup as warmup_onsets
 
         w = warmup()
         print(f"numba kernel ready in {w['seconds']:.2f} s, cache {w['cache_dir']}"
@@ -222,12 +222,12 @@ def cmd_bench(args) -> int:
         wo = warmup_onsets()              # the onset stage's kernels, into the same cache
         if wo["engine"] == "numba":
             print(f"onset kernels ready in {wo['seconds']:.2f} s")
-        from meshphase.io.tdms_rows import warmup as warmup_rows
+        from .io.tdms_rows import warmup as warmup_rows
 
         wr = warmup_rows()                # the interleaved TDMS rows' kernel
         if wr["engine"] == "numba":
             print(f"TDMS rows kernel ready in {wr['seconds']:.2f} s")
-        from meshphase.signal.iir import warmup as warmup_iir
+        from .signal.iir import warmup as warmup_iir
 
         wf = warmup_iir()                 # the conditioning filters' kernel
         if wf["engine"] == "numba":
@@ -238,7 +238,7 @@ def cmd_bench(args) -> int:
         if args.what != "processing":
             raise ValueError(f"--accuracy belongs to 'meshphase bench processing', got "
                              f"'meshphase bench {args.what}'")
-        from meshphase.bench.conditions import QUICK_CONDITIONS, run_conditions
+        from .bench.conditions import QUICK_CONDITIONS, run_conditions
 
         res = run_conditions(out, QUICK_CONDITIONS if args.quick else None)
         print(res["markdown"], end="")
@@ -248,13 +248,13 @@ def cmd_bench(args) -> int:
     if args.what == "campaign":
         return _bench_campaign(out, args.quick, args.repeats)
     if args.what == "reference":
-        from meshphase.bench.models_reference import build_reference, reference_line
+        from .bench.models_reference import build_reference, reference_line
 
         ref = build_reference(out, evaluations=args.evaluations, plain=args.plain,
                               progress=not args.quiet)
         print(reference_line(ref))
         return 0
-    from meshphase.bench import rss_summary, run_bench
+    from .bench import rss_summary, run_bench
 
     res = run_bench(args.what, out, minutes=args.minutes, quick=args.quick,
                     rss_minutes=args.rss_minutes)
@@ -269,11 +269,11 @@ def _bench_campaign(out: Path, quick: bool, repeats: int | None = None) -> int:
     """``meshphase bench campaign``: :func:`meshphase.bench.campaign.measure_speedup` into
     ``out/campaign_bench.json``, one line per timed run and the speed-ups on stdout
     (``repeats`` timed runs per worker count; None: 3, or 1 with ``quick``)."""
-    from meshphase.bench.campaign import measure_speedup
+    from .bench.campaign import measure_speedup
 
     n, minutes, default_repeats = (2, 0.5, 1) if quick else (8, 2.0, 3)
     repeats = default_repeats if repeats is None else repeats
-    from meshphase.bench.first_figure import first_figure_rows
+    from .bench.first_figure import first_figure_rows
 
     res = measure_speedup(n, minutes, (1, 2), repeats=repeats)
     res["first_figure"] = first_figure_rows(1 if quick else 6)
@@ -354,7 +354,7 @@ _MAX_MESSAGES = 10
 
 def _print_run(ctx, files, command: str) -> None:
     """The results of a run on stdout; its warnings on stderr (:func:`message_line`)."""
-    from meshphase.run.stages import summary_dict  # heavy (scipy): see the module docstring
+    from .run.stages import summary_dict  # heavy (scipy): see the module docstring
     s = summary_dict(ctx)
     print(f"scene     {ctx.scene.name}")
     print(f"stages    {', '.join(ctx.ran)}" + (f"  (failed: {', '.join(ctx.failed)})" if ctx.failed else ""))
@@ -417,7 +417,7 @@ def _run_and_write(args, scene, base, *, report: bool = True):
     ``scene`` is a Scene or a function of the reserved folder returning one (the demo writes
     its scene file there first). The folder is removed again when the run fails or is
     interrupted (:class:`meshphase.run.outdir.OutputDir`)."""
-    from meshphase.run.stages import run_scene, write_outputs  # heavy (scipy): see the module docstring
+    from .run.stages import run_scene, write_outputs  # heavy (scipy): see the module docstring
     with OutputDir(base, overwrite=args.overwrite, staged=True) as out:
         if callable(scene):
             scene = scene(out.path)
@@ -448,7 +448,7 @@ def cmd_process(args) -> int:
     # both files checked before the stages' imports: a mistyped path fails before they load
     as_regular_file(args.file, "the recording")
     as_regular_file(args.gearset, "the gearset scene (--gearset)")
-    from meshphase.run.stages import process_recording  # heavy (scipy): see the module docstring
+    from .run.stages import process_recording  # heavy (scipy): see the module docstring
     # process_recording returns the paths as published (the output folder's final name)
     ctx, files = process_recording(args.file, args.gearset, out_dir=args.out, overwrite=args.overwrite,
                                    progress=_stage_progress(not args.quiet), tolerance=args.tolerance)
@@ -466,7 +466,7 @@ def cmd_demo(args) -> int:
 
 
 def cmd_campaign(args) -> int:
-    from meshphase.campaign.runner import cli_campaign
+    from .campaign.runner import cli_campaign
 
     as_regular_file(args.scene, "the scene")
     res = cli_campaign(args.scene, args.inputs, scheduler=args.scheduler, workers=args.workers,

@@ -27,10 +27,11 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
-from meshphase.errors import DataQualityWarning
-from meshphase.html_repr import html_table
-from meshphase.jsonable import to_jsonable
-from meshphase.validate import as_float, as_nonnegative, as_positive
+from .errors import DataQualityWarning
+from .html_repr import html_table
+from .jsonable import to_jsonable
+from .signal.quality import channel_quality
+from .validate import as_float, as_nonnegative, as_positive
 
 __all__ = ["ChannelSpec", "Recording", "RecordingHeader", "BlockSource", "MemorySource", "apply_gains",
            "history_entry", "warn_nonfinite_runs", "CHANNEL_KINDS", "GAUGE_KINDS", "ENCODER_SHAFTS", "sample_index",
@@ -657,8 +658,6 @@ class Recording:
         Uses :func:`meshphase.signal.quality.channel_quality` on each channel (with its kind: a tacho's
         flat levels are not analysed as dropouts or clipped plateaus).
         """
-        from meshphase.signal.quality import channel_quality
-
         return [dict(channel=c.name, **channel_quality(self.data[:, i], kind=c.kind))
                 for i, c in enumerate(self.channels)]
 

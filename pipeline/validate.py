@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from meshphase.errors import NotRegularFileError
+from .errors import NotRegularFileError
 
 __all__ = [
     "as_float",

@@ -92,7 +92,7 @@ from meshphase.models.gearset import Gearset, Speeds, rpm_to_rad_s
 from meshphase.models.tolerance import table2_case
 
 from meshphase.synthetic.config import Artefacts, EncoderConfig, GaugeConfig, LoadModulation, SynthConfig, TachoConfig, TiltSource
-from meshphase.synthetic.kinematics import ShaftRipple, SpeedProfile
+from meshphase.synthetic.kinematics import SpeedProfile
 
 __all__ = ["Scenario", "SCENARIOS", "get_scenario", "list_scenarios", "describe_scenarios",
            "register", "table1_gearset", "seed_rig_gearset", "seed_rig_speeds", "rig_gearset",

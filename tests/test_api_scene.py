@@ -16,8 +16,8 @@ from meshphase.kinematics.loads import CentroidResult
 from meshphase.models.gearset import Gearset
 from meshphase.models.mesh_phasing import ShaftHoleErrors
 from meshphase.report.frames import (COLUMNS, centroid_rows, circular_mean, comparison_rows,
-                                  frame, identification_rows, load_sharing_rows, passes_rows,
-                                  phasing_rows)
+                                     frame, identification_rows, load_sharing_rows, passes_rows,
+                                     phasing_rows)
 from meshphase.run.context import RunContext
 from meshphase.run.results import CentroidsStage, IdentifyStage
 from meshphase.run.scene import Scene, SceneError

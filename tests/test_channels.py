@@ -13,8 +13,8 @@ from seed_rig_toml import SEED_RIG_GEARSET as G
 
 import meshphase.io
 from meshphase.io.channels import (ChannelMapError, apply_channel_overrides, check_gauges,
-                                    entry_values, is_glob, map_channels, mapped_specs,
-                                    mapping_report, mapping_rows, unmapped_message)
+                                   entry_values, is_glob, map_channels, mapped_specs,
+                                   mapping_report, mapping_rows, unmapped_message)
 from meshphase.cli import main
 from meshphase.recording import ChannelSpec, Recording
 from meshphase.run.scene import SceneError, load_scene, parse_scene

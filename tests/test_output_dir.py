@@ -23,7 +23,7 @@ import pytest
 
 import meshphase.run.outdir as ex
 from meshphase.run.outdir import (MANIFEST_NAME, PARTIAL_SUFFIX, OutputDir, foreign_entries,
-                                 published_path, recover_output_dirs)
+                                  published_path, recover_output_dirs)
 
 
 def _tree(folder: Path) -> dict[str, bytes]:

@@ -22,13 +22,13 @@ import dataclasses
 import os
 from typing import Callable
 
-from meshphase import io
-from meshphase.api.scene import build_scene
-from meshphase.run.exits import run_status
-from meshphase.recording import Recording
-from meshphase.api.result import Result
-from meshphase.run.stages import run_scene
-from meshphase.validate import as_regular_file
+from .. import io
+from .scene import build_scene
+from ..run.exits import run_status
+from ..recording import Recording
+from .result import Result
+from ..run.stages import run_scene
+from ..validate import as_regular_file
 
 __all__ = ["read", "process", "Result", "ProcessingFailed"]
 

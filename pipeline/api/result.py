@@ -14,13 +14,13 @@ import html
 import math
 import os
 
-from meshphase.report import frames as rf
-from meshphase.html_repr import html_table
-from meshphase.run.exits import run_status
-from meshphase.run.context import RunContext, phasing_verdict
-from meshphase.run.outdir import OutputDir
-from meshphase.run.outputs import write_outputs
-from meshphase.run.state import failure_texts
+from ..report import frames as rf
+from ..html_repr import html_table
+from ..run.exits import run_status
+from ..run.context import RunContext, phasing_verdict
+from ..run.outdir import OutputDir
+from ..run.outputs import write_outputs
+from ..run.state import failure_texts
 
 __all__ = ["Result", "PLOT_KINDS", "run_html"]
 
@@ -170,7 +170,7 @@ class Result:
             raise ValueError(f"kind must be one of {', '.join(PLOT_KINDS)}, got {kind!r}")
         if gauge is not None and gauge not in ("sun", "ring"):
             raise ValueError(f"gauge must be 'sun', 'ring' or None, got {gauge!r}")
-        from meshphase.report import notebook  # matplotlib: only when plotting
+        from ..report import notebook  # matplotlib: only when plotting
 
         fn = {"phasing": notebook.plot_phasing, "onsets": notebook.plot_result_onsets,
               "load_sharing": notebook.plot_load_sharing,

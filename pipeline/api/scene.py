@@ -17,9 +17,9 @@ import math
 import os
 from collections.abc import Mapping
 
-from meshphase.models.gearset import Gearset
-from meshphase.run.scene import RESULTS, Scene, load_scene, parse_scene
-from meshphase.run.stages import PROCESS_RESULTS
+from ..models.gearset import Gearset
+from ..run.scene import RESULTS, Scene, load_scene, parse_scene
+from ..run.stages import PROCESS_RESULTS
 
 __all__ = ["build_scene", "toml_text", "gearset_table"]
 

@@ -20,7 +20,7 @@ import json
 import time
 from pathlib import Path
 
-from meshphase.runtime.log import logger
+from ..runtime.log import logger
 
 __all__ = ["run_bench", "rss_summary"]
 
@@ -55,7 +55,7 @@ def run_bench(what: str, out_dir, *, minutes: float = 60.0, quick: bool = False,
     if what not in KINDS + ("all",):
         raise ValueError(f"what must be one of {KINDS + ('all',)}, got {what!r}")
     if rss_minutes is not None:
-        from meshphase.validate import as_positive
+        from ..validate import as_positive
 
         if isinstance(rss_minutes, (str, bytes)) or not hasattr(rss_minutes, "__iter__"):
             raise TypeError(f"rss_minutes must be a sequence of minutes, got {rss_minutes!r}")
@@ -68,16 +68,16 @@ def run_bench(what: str, out_dir, *, minutes: float = 60.0, quick: bool = False,
         t = time.perf_counter()
         logger.info("bench %s -> %s", kind, out)
         if kind == "io":
-            from meshphase.bench.io import CONVERT_MINUTES, run_io_bench
+            from .io import CONVERT_MINUTES, run_io_bench
             rss = rss_minutes if rss_minutes is not None else (
                 (0.5, 1.0) if quick else CONVERT_MINUTES)
             results[kind] = run_io_bench(out, minutes=(min(minutes, 0.5) if quick else minutes),
                                          convert_minutes=rss, process_minutes=rss)
         elif kind == "models":
-            from meshphase.bench.models import run_models_bench
+            from .models import run_models_bench
             results[kind] = run_models_bench(out, quick=quick)
         else:
-            from meshphase.bench.processing import PROCESS_MINUTES, run_processing_bench
+            from .processing import PROCESS_MINUTES, run_processing_bench
             rss = rss_minutes if rss_minutes is not None else (
                 (0.5, 1.0) if quick else PROCESS_MINUTES)
             results[kind] = run_processing_bench(out, quick=quick, process_minutes=rss)
@@ -114,7 +114,7 @@ def combined_report(out: Path, kinds, wall: dict) -> Path:
     """One table-and-figure set of every benchmark in ``out``: ``bench_report.md`` (the
     benchmarks' Markdown tables, in order) and ``bench_report.html`` (the same tables plus
     every figure, self-contained)."""
-    from meshphase.report.html import Report
+    from ..report.html import Report
 
     titles = {"io": "Read throughput and memory (ratios to a raw .npy read)",
               "models": "Monte Carlo: error against run time",

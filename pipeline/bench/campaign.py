@@ -13,11 +13,11 @@ import statistics
 import tempfile
 from pathlib import Path
 
-from meshphase.campaign.runner import client_scene, collect_recordings, run_campaign
-from meshphase.campaign.job import campaign_modules
-from meshphase.campaign.cluster import cores, worker_server
-from meshphase.runtime.log import logger
-from meshphase.validate import as_positive, as_positive_int
+from ..campaign.runner import client_scene, collect_recordings, run_campaign
+from ..campaign.job import campaign_modules
+from ..campaign.cluster import cores, worker_server
+from ..runtime.log import logger
+from ..validate import as_positive, as_positive_int
 
 __all__ = ["measure_speedup"]
 
@@ -54,7 +54,7 @@ def _prepare(work: Path, n_recordings: int, minutes: float, scenario: str, seed:
         if not p.exists():
             cli_synth(scenario, p, minutes=minutes, seed=seed + k, progress=False)
     if scene_path is None:
-        from meshphase.run.demo import DEMO_SCENE
+        from ..run.demo import DEMO_SCENE
 
         scene_path = work / "speedup_scene.toml"
         scene_path.write_text(DEMO_SCENE, encoding="utf-8")
@@ -62,9 +62,9 @@ def _prepare(work: Path, n_recordings: int, minutes: float, scenario: str, seed:
     # the first timed run does not pay for what the later ones get for free
     import distributed  # noqa: F401
 
-    from meshphase.report import campaign_report  # noqa: F401
-    from meshphase.run.scene import load_scene
-    from meshphase.run.stages import run_scene
+    from ..report import campaign_report  # noqa: F401
+    from ..run.scene import load_scene
+    from ..run.stages import run_scene
 
     scene = load_scene(scene_path)
     warm = client_scene(scene)
@@ -181,7 +181,7 @@ def measure_speedup(n_recordings: int = 8, minutes: float = 2.0, workers=(1, 2),
     try:
         rec_dir, scene_path, server_s = _prepare(work, n_recordings, minutes, scenario, seed, scene_path)
         load0 = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
-        from meshphase.runtime.threads import threads_limited
+        from ..runtime.threads import threads_limited
 
         with threads_limited(as_positive_int(threads, "threads")):
             runs = [_timed_run(scene_path, rec_dir, work / f"campaign-{w}w", w, rep, progress)

@@ -26,9 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
-from meshphase.runtime.log import logger
-from meshphase.validate import as_int, as_positive
-from meshphase.bench.phasing import PhasingCase, markdown_table, pooled_calibration, run_case
+from ..runtime.log import logger
+from ..validate import as_int, as_positive
+from .phasing import PhasingCase, markdown_table, pooled_calibration, run_case
 
 __all__ = ["Condition", "CONDITIONS", "QUICK_CONDITIONS", "CONDITION_COLUMNS", "FLAGGED_Z_MAX",
            "condition_rows", "conditions_markdown", "run_conditions"]
@@ -172,7 +172,7 @@ def run_conditions(out_dir, conditions=None) -> dict:
         ``rows``, ``pooled`` (:func:`meshphase.bench.phasing.pooled_calibration` over the
         rows, ``n_ok`` counting the rows that meet the goal), ``markdown`` and ``files``.
     """
-    from meshphase.run.table_csv import write_csv
+    from ..run.table_csv import write_csv
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -18,7 +18,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from meshphase.validate import as_positive_int
+from ..validate import as_positive_int
 
 __all__ = ["FIRST_FIGURE_COLUMNS", "first_figure_rows"]
 
@@ -81,7 +81,7 @@ def first_figure_rows(repeats: int = 6) -> list:
     repeats = as_positive_int(repeats, "repeats")
     if not hasattr(os, "fork"):
         return []
-    from meshphase.bench.rss import child_env
+    from .rss import child_env
 
     rows = []
     for case in ("without fork_ready", "with fork_ready"):

@@ -55,11 +55,11 @@ from typing import Callable
 
 import numpy as np
 
-from meshphase.jsonable import json_default
-from meshphase.runtime.log import logger
-from meshphase.recording import ChannelSpec, Recording
-from meshphase.validate import as_positive, as_positive_int
-from meshphase.bench.mcap_paths import markdown as mcap_paths_markdown, mcap_path_rows
+from ..jsonable import json_default
+from ..runtime.log import logger
+from ..recording import ChannelSpec, Recording
+from ..validate import as_positive, as_positive_int
+from .mcap_paths import markdown as mcap_paths_markdown, mcap_path_rows
 
 __all__ = ["run_io_bench", "strain_recording", "convert_rss_rows", "IO_FORMATS", "TARGETS",
            "COLUMNS", "CONVERT_COLUMNS", "CONVERT_MINUTES"]
@@ -162,7 +162,7 @@ def _tdms_reading(fmt: str, variant: str):
     (numba once :func:`_warm_tdms_rows` loaded it) or on numpy (``_TDMS_NUMPY_ROWS``)."""
     if fmt != "tdms":
         return contextlib.nullcontext()
-    from meshphase.io.tdms import reading_path
+    from ..io.tdms import reading_path
 
     return reading_path(computed_offsets=not variant.endswith(_TDMS_PUBLIC),
                         cache_plans=not variant.endswith(_TDMS_COLD),
@@ -173,14 +173,14 @@ def _warm_tdms_rows() -> dict:
     """Load numba and the interleaved rows' kernel before the TDMS rows are timed
     (:func:`meshphase.io.tdms_rows.warmup`): ``{"engine", "seconds"}``, the once-per-process
     start-up that the read times leave out."""
-    from meshphase.io.tdms_rows import warmup
+    from ..io.tdms_rows import warmup
 
     return warmup()
 
 
 def _variants(fmt: str) -> list[tuple[str, str, Callable[[Recording, Path], None]]]:
     """(variant name, file suffix, writer) of one format."""
-    from meshphase import io as pio
+    from .. import io as pio
 
     if fmt == "hdf5":
         return [("default", ".h5", lambda r, p: pio.write(r, p, format="hdf5"))]
@@ -265,7 +265,7 @@ def _pandas_c(path: Path, repeats: int) -> float:
 
 def _stream_peak(path: Path, block_s: float) -> tuple[float, int]:
     """Peak traced memory [B] of streaming ``path`` in blocks of ``block_s`` [s]."""
-    from meshphase import io as pio
+    from .. import io as pio
 
     tracemalloc.start()
     try:
@@ -458,7 +458,7 @@ class _ReadBench:
         return row
 
     def _reads(self, row: dict, fmt: str, writer, path: Path) -> None:
-        from meshphase import io as pio
+        from .. import io as pio
 
         rec, repeats = self.rec, self.repeats
         total, n = rec.data.size, rec.n_samples
@@ -504,7 +504,7 @@ def _rss_tables(work: Path, convert_minutes, process_minutes, skipped: list) -> 
     skipped += conv_skipped
     process = []
     if process_minutes:
-        from meshphase.bench.processing import process_rss_rows
+        from .processing import process_rss_rows
 
         process, proc_skipped, _ = process_rss_rows(work / "process", process_minutes)
         skipped += [{"format": f"process {s['minutes']:g} min", "reason": s["reason"]}
@@ -580,7 +580,7 @@ def convert_rss_rows(work, minutes, *, seed: int = 1) -> tuple[list, list]:
     (rows, skipped) : (list of dict, list of dict)
         Rows with the keys :data:`CONVERT_COLUMNS`; skipped lengths with their reason.
     """
-    from meshphase.bench.rss import N_CHANNELS, free_bytes, run_child
+    from .rss import N_CHANNELS, free_bytes, run_child
 
     work = Path(work)
     rows, skipped = [], []

@@ -18,7 +18,7 @@ import numpy as np
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from meshphase.recording import Recording
+from ..recording import Recording
 
 __all__ = ["mcap_path_rows", "SECONDS", "COLUMNS", "markdown"]
 
@@ -83,8 +83,8 @@ def mcap_path_rows(rec: Recording, work: Path, timer) -> list[dict]:
         size [MB], write time [s], best read time [s], MSamples/s, throughput relative to
         the fast path, and whether the samples read back exactly.
     """
-    from meshphase import io as pio
-    from meshphase.io.mcap import foreign
+    from .. import io as pio
+    from ..io.mcap import foreign
 
     if rec.n_samples < 2:
         raise ValueError(f"the MCAP paths need a recording of at least 2 samples, got {rec.n_samples}")

@@ -39,12 +39,12 @@ from pathlib import Path
 
 import numpy as np
 
-from meshphase.runtime.log import logger
-from meshphase.models import _kernels
-from meshphase.models.tolerance import (ALL_STATISTICS, STATISTICS, monte_carlo, observation_window,
-                                        table2_case, WINDOW_KINDS)
-from meshphase.bench.models_reference import CASE3_NAME, directional_reference, plain_reference
-from meshphase.validate import as_choice, as_positive_int
+from ..runtime.log import logger
+from ..models import _kernels
+from ..models.tolerance import (ALL_STATISTICS, STATISTICS, monte_carlo, observation_window,
+                                table2_case, WINDOW_KINDS)
+from .models_reference import CASE3_NAME, directional_reference, plain_reference
+from ..validate import as_choice, as_positive_int
 
 __all__ = ["run_models_bench", "METRICS", "TABLE_COLUMNS", "ESTIMATOR_COLUMNS"]
 
@@ -483,7 +483,7 @@ def _write(result: dict, out: Path, figure: bool) -> None:
     mpath.write_text(_markdown(result))
     result["files"] = {"json": str(jpath), "markdown": str(mpath)}
     if figure:
-        from meshphase.report.bench_figures_models import save_models_bench_figure
+        from ..report.bench_figures_models import save_models_bench_figure
         fpath = out / "models_bench.png"
         save_models_bench_figure(result, fpath)
         result["files"]["figure"] = str(fpath)

@@ -28,13 +28,13 @@ import numpy as np
 
 from scipy import special
 
-from meshphase.jsonable import to_jsonable
-from meshphase.runtime.log import logger
-from meshphase.models import _kernels
-from meshphase.models.tolerance_model import (ALL_STATISTICS, P3_HI, P3_LO, RotationGrid, map_samples,
-                                              map_values, default_n_times)
-from meshphase.validate import as_positive_int
-from meshphase.bench.models_reference_tail import directional_bounds, interpolation_check
+from ..jsonable import to_jsonable
+from ..runtime.log import logger
+from ..models import _kernels
+from ..models.tolerance_model import (ALL_STATISTICS, P3_HI, P3_LO, RotationGrid, map_samples,
+                                      map_values, default_n_times)
+from ..validate import as_positive_int
+from .models_reference_tail import directional_bounds, interpolation_check
 
 __all__ = ["plain_reference", "directional_reference", "REFERENCE_SUMMARIES"]
 
@@ -217,8 +217,8 @@ class _CaseModel:
     (as :func:`plain_reference`)."""
 
     def __init__(self, case):
-        from meshphase.models.tolerance_cv import check_cv_bands, cv_surrogate
-        from meshphase.models.tolerance_linear import exceedance, linearised_deviation
+        from ..models.tolerance_cv import check_cv_bands, cv_surrogate
+        from ..models.tolerance_linear import exceedance, linearised_deviation
         g, sp, tol, win = case
         self.n_p = g.n_planets
         self.n_t = _n_times(sp, win)
@@ -442,7 +442,7 @@ def build_reference(out_dir, *, evaluations: int = 10 ** 7, plain: bool = False,
     dict
         The reference (:func:`directional_reference` / :func:`plain_reference`).
     """
-    from meshphase.models.tolerance import observation_window, table2_case
+    from ..models.tolerance import observation_window, table2_case
 
     g, sp, tol = table2_case(3)
     case = (g, sp, tol, observation_window(sp, "slowest-offset"))

@@ -51,7 +51,7 @@ import numpy as np
 from scipy import special
 from scipy.interpolate import CubicSpline
 
-from meshphase.validate import as_positive, as_positive_int
+from ..validate import as_positive, as_positive_int
 
 __all__ = ["directional_bounds", "radial_nodes", "interpolation_check", "chi_moments"]
 

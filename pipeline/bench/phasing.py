@@ -26,7 +26,7 @@ import warnings
 
 import numpy as np
 
-from meshphase.runtime.log import logger
+from ..runtime.log import logger
 
 __all__ = ["PhasingCase", "matrix_cases", "run_case", "phasing_rows", "markdown_table",
            "pooled_calibration", "error_vs_runtime_figure", "PHASING_COLUMNS", "TARGET_ABS",
@@ -118,9 +118,9 @@ def run_case(case: PhasingCase, *, seed: int = 0, results=("phasing", "compare")
         ``case``, ``ctx`` (the RunContext), ``process_s`` (wall time of the stages [s]),
         ``gauges``: {gear: row dict with the :data:`PHASING_COLUMNS` values}.
     """
-    from meshphase.compare.predict import truth_comparison
-    from meshphase.run.scene import Scene
-    from meshphase.run.stages import run_scene
+    from ..compare.predict import truth_comparison
+    from ..run.scene import Scene
+    from ..run.stages import run_scene
 
     cfg = case_config(case)
     scene = Scene(path=None, name=case.name, results=list(results),
@@ -188,7 +188,7 @@ def pooled_calibration(rows) -> dict:
 def error_vs_runtime_figure(rows, path) -> None:
     """Scatter of error / target against processing time, one point per case and gauge
     (matplotlib through meshphase.report.figures, the one plotting module)."""
-    from meshphase.report.figures import error_vs_runtime
+    from ..report.figures import error_vs_runtime
 
     curves = {}
     for r in rows:

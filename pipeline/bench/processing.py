@@ -55,10 +55,10 @@ from pathlib import Path
 
 import numpy as np
 
-from meshphase.signal.crb import crb_delay_std
-from meshphase.runtime.log import logger
-from meshphase.validate import as_float, as_nonnegative, as_positive
-from meshphase.bench.rss import child_env
+from ..signal.crb import crb_delay_std
+from ..runtime.log import logger
+from ..validate import as_float, as_nonnegative, as_positive
+from .rss import child_env
 
 __all__ = ["PulseShape", "pulse_train", "pulse_scenario", "match_onsets", "run_processing_bench",
            "process_rss_rows", "identify_rows", "ACCURACY_COLUMNS", "THROUGHPUT_COLUMNS",
@@ -354,7 +354,7 @@ def _scenarios(quick: bool):
 
 
 def _accuracy_rows(name, x, truth, fs, shape, snr_db, settings):
-    from meshphase.onsets import coarse_peaks, detect_onsets, learn_template
+    from ..onsets import coarse_peaks, detect_onsets, learn_template
 
     rows = []
     n = x.size
@@ -410,9 +410,9 @@ def _median_of_3(fn):
 
 
 def _throughput_rows(fs, scen, n, rng):
-    from meshphase.signal.condition import filter_signal, notch_hum, remove_drift
-    from meshphase.onsets import detect_onsets
-    from meshphase.onsets.fastpath import warmup as warmup_onsets
+    from ..signal.condition import filter_signal, notch_hum, remove_drift
+    from ..onsets import detect_onsets
+    from ..onsets.fastpath import warmup as warmup_onsets
 
     rows = []
     load = getattr(os, "getloadavg", lambda: (float("nan"),))   # 1-minute load average [-]
@@ -455,7 +455,7 @@ def _median_rows(x):
     detector's noise level) on the samples of 2 min at most: ``np.median`` against
     :func:`meshphase.signal.median.median_of_finite`, medians of three, CPU seconds of one core;
     ``max_diff`` 0 when both give the same value."""
-    from meshphase.signal.median import median_of_finite
+    from ..signal.median import median_of_finite
 
     rows, vals = [], {}
     for stage, fn in (("np.median", np.median), ("median_of_finite", median_of_finite)):
@@ -473,9 +473,9 @@ def _filter_rows(x, fs):
     a hum notch pair (50 and 100 Hz, Q 30), each two sections. Medians of three, CPU
     seconds of one core; ``max_diff`` is the largest difference of the numba result from
     scipy's over the largest |x| (0: equal bit for bit)."""
-    from meshphase.signal import iir
-    from meshphase.signal.condition import design_notch
-    from meshphase.bench.rss import reference_sos
+    from ..signal import iir
+    from ..signal.condition import design_notch
+    from .rss import reference_sos
 
     filters = {"lowpass 28.6 Hz": reference_sos(fs),
                "notch 50 + 100 Hz": design_notch((50.0, 100.0), fs, 30.0)}
@@ -514,7 +514,7 @@ def _hum_rows(x, fs):
     three, CPU seconds of one core."""
     from scipy import signal
 
-    from meshphase.signal.condition import _detrend_linear, _hum_nperseg, detect_hum
+    from ..signal.condition import _detrend_linear, _hum_nperseg, detect_hum
 
     t = np.arange(x.size) / fs
     y = x + 0.1 * np.sin(2 * np.pi * 50.0 * t)
@@ -590,7 +590,7 @@ def _markdown(res: dict) -> str:
         lines += _md_table(res["process"], PROCESS_COLUMNS)
         for sk in res.get("process_skipped", []):
             lines.append(f"\nSkipped {sk['minutes']:g} min: {sk['reason']}")
-    from meshphase.bench.startup import EXIT_COLUMNS, STARTUP_COLUMNS
+    from .startup import EXIT_COLUMNS, STARTUP_COLUMNS
 
     for key, title, note, cols in (
             ("startup", "Start-up: fresh interpreters, median wall time [s]",
@@ -614,7 +614,7 @@ def _markdown(res: dict) -> str:
         if res.get(key):
             lines += ["", f"## {title}", "", note, ""] + _md_table(res[key], cols)
     if res.get("phasing"):
-        from meshphase.bench.phasing import TARGET_ABS, TARGET_FLOOR_RATIO, markdown_table, pooled_calibration
+        from .phasing import TARGET_ABS, TARGET_FLOOR_RATIO, markdown_table, pooled_calibration
 
         cal = pooled_calibration(res["phasing"])
         lines += ["", "## Measured phasing against truth on the rig's conditions", "",
@@ -628,7 +628,7 @@ def _markdown(res: dict) -> str:
                   f"{cal['coverage95']:.3f} over {cal['n']} passes; {cal['n_ok']} of "
                   f"{cal['n_rows']} rows meet the target.", "", markdown_table(res["phasing"])]
     if res.get("conditions"):
-        from meshphase.bench.conditions import conditions_markdown
+        from .conditions import conditions_markdown
 
         lines += ["", "## Conditions where measured phasing was once confident and wrong", "",
                   "Per condition, seed and gauge (meshphase.bench.conditions; `meshphase bench "
@@ -651,7 +651,7 @@ def process_rss_rows(work, minutes, *, seed: int = 1) -> tuple[list, list, float
         the reference pass timed just before and just after its run (``sosfiltfilt_msps``:
         the two rates [MS/s]).
     """
-    from meshphase.bench.rss import BENCH_GEARSET, N_CHANNELS, free_bytes, run_child
+    from .rss import BENCH_GEARSET, N_CHANNELS, free_bytes, run_child
 
     work = Path(work)
     work.mkdir(parents=True, exist_ok=True)
@@ -730,10 +730,10 @@ def identify_rows(minutes=(10.0,), *, jacs=("2-point", "analytic")) -> list:
     through :func:`meshphase.kinematics.pass_table.measured_phasing`, every offset free: what the identify
     stage of a run of that length fits. Rows: :data:`IDENTIFY_COLUMNS`.
     """
-    from meshphase.compare.identify import identify_errors
-    from meshphase.models.gearset import Gearset, Speeds
-    from meshphase.models.mesh_phasing import ShaftHoleErrors
-    from meshphase.kinematics.pass_table import measured_phasing
+    from ..compare.identify import identify_errors
+    from ..models.gearset import Gearset, Speeds
+    from ..models.mesh_phasing import ShaftHoleErrors
+    from ..kinematics.pass_table import measured_phasing
     from meshphase.synthetic.kinematics import engagement_events
 
     g = Gearset.equally_spaced(25, 87, 31, 4, 112.5e-3)
@@ -844,14 +844,14 @@ def _run(out_dir, quick: bool, rng, process_minutes=()) -> dict:
             proc, proc_skipped, rate = process_rss_rows(work, process_minutes)
         finally:
             shutil.rmtree(work, ignore_errors=True)
-    from meshphase.bench.phasing import matrix_cases, phasing_rows
+    from .phasing import matrix_cases, phasing_rows
 
     phs = phasing_rows(matrix_cases(quick))
-    from meshphase.bench.conditions import CONDITIONS, QUICK_CONDITIONS, condition_rows
+    from .conditions import CONDITIONS, QUICK_CONDITIONS, condition_rows
 
     conds = condition_rows(QUICK_CONDITIONS if quick else CONDITIONS)
     ident = identify_rows((2.0,) if quick else (10.0, 60.0))
-    from meshphase.bench.startup import exit_rows, startup_rows
+    from .startup import exit_rows, startup_rows
 
     # a quick run times each start-up case once (each case costs its fresh interpreters)
     start = startup_rows(1 if quick else 7)
@@ -868,7 +868,7 @@ def _run(out_dir, quick: bool, rng, process_minutes=()) -> dict:
     (out / "processing_bench.json").write_text(json.dumps(res, indent=2, default=float))
     (out / "processing_bench.md").write_text(_markdown(res))
     if phs:
-        from meshphase.bench.phasing import error_vs_runtime_figure
+        from .phasing import error_vs_runtime_figure
 
         error_vs_runtime_figure(phs, out / "phasing_error_vs_runtime.png")
     return res

@@ -67,7 +67,7 @@ def bench_config(duration: float, dtype: str = "float64"):
     from meshphase.synthetic.config import Artefacts, GaugeConfig, SynthConfig, TachoConfig
     from meshphase.synthetic.scenarios import FACE_WIDTH, seed_rig_gearset, seed_rig_speeds
 
-    from meshphase.models.tolerance import table2_case
+    from ..models.tolerance import table2_case
 
     g = seed_rig_gearset()
     b = FACE_WIDTH
@@ -106,7 +106,7 @@ def _vmhwm() -> float | None:
 
 
 def _child(spec: str) -> None:
-    from meshphase.runtime.heap import limit_heap_growth
+    from ..runtime.heap import limit_heap_growth
 
     limit_heap_growth()                   # as ``meshphase`` does at start (pipeline/runtime/heap.py)
     job = json.loads(spec)
@@ -181,7 +181,7 @@ def write_job(path: str, minutes: float, dtype: str = "float64", seed: int = 1) 
     (format from the suffix), generated and written block by block."""
     from meshphase.synthetic import generate_blocks
 
-    from meshphase import io
+    from .. import io
 
     stream = generate_blocks(bench_config(60.0 * minutes, dtype), seed=seed)
     t = time.perf_counter()
@@ -203,7 +203,7 @@ def write_job(path: str, minutes: float, dtype: str = "float64", seed: int = 1) 
 def convert_job(src: str, dst: str) -> dict:
     """``meshphase -q convert SRC DST --overwrite``: the command's one call,
     :func:`meshphase.io.convert` (the CLI adds only argument parsing and a progress bar)."""
-    from meshphase.io import convert
+    from ..io import convert
 
     convert(src, dst, overwrite=True)
     return {"rc": 0, "bytes": os.path.getsize(dst)}
@@ -215,9 +215,9 @@ def process_job(path: str, gearset: str, out_dir: str) -> dict:
     status come back."""
     import warnings
 
-    from meshphase.run import stages
-    from meshphase.run.exits import run_status
-    from meshphase.run.stages import process_recording
+    from ..run import stages
+    from ..run.exits import run_status
+    from ..run.stages import process_recording
 
     hwm = {}
     for name, fn in list(stages.STAGE_FUNCTIONS.items()):   # this child process only
@@ -225,7 +225,7 @@ def process_job(path: str, gearset: str, out_dir: str) -> dict:
             fn(ctx)
             hwm[name] = _vmhwm()
         stages.STAGE_FUNCTIONS[name] = wrapped
-    from meshphase.runtime.threads import run_threads
+    from ..runtime.threads import run_threads
 
     c0 = time.process_time()                 # every thread of this process
     with warnings.catch_warnings():
@@ -250,7 +250,7 @@ def hdf5_pass_job(path: str, block: int = 1 << 18) -> dict:
     the library path kept beside it); best of two each."""
     import h5py
 
-    from meshphase.io import hdf5
+    from ..io import hdf5
 
     def one(verify: bool) -> float:
         t = time.perf_counter()

@@ -20,7 +20,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from meshphase.validate import as_positive_int
+from ..validate import as_positive_int
 
 __all__ = ["STARTUP_COLUMNS", "EXIT_COLUMNS", "startup_rows", "exit_rows"]
 
@@ -77,9 +77,9 @@ def _timed_runs(make_cases, repeats: int, what: str):
     repeats = as_positive_int(repeats, "repeats")
     import numpy as np
 
-    from meshphase.io import write
-    from meshphase.recording import Recording
-    from meshphase.bench.rss import child_env
+    from ..io import write
+    from ..recording import Recording
+    from .rss import child_env
 
     with tempfile.TemporaryDirectory(prefix=f"meshphase-{what}-") as tmp:
         h5 = Path(tmp) / f"{what}.h5"

@@ -37,8 +37,8 @@ import threading
 import time
 from typing import Callable, Iterator, Sequence
 
-from meshphase.runtime.log import logger
-from meshphase.validate import as_positive_int
+from ..runtime.log import logger
+from ..validate import as_positive_int
 
 __all__ = ["local_cluster", "open_client", "ClusterStart", "check_cluster_options", "cores", "own_child",
            "end_worker", "worker_server", "trim_env_is_distributed"]

@@ -65,11 +65,11 @@ def pay_first_use() -> None:
 
     import numpy as np
 
-    from meshphase.run.demo import DEMO_SCENE
-    from meshphase.io import read_info, write
-    from meshphase.recording import Recording
-    from meshphase.report.campaign_report import figure_png, load_sharing_across_recordings
-    from meshphase.run.scene import scene_schema_errors
+    from ..run.demo import DEMO_SCENE
+    from ..io import read_info, write
+    from ..recording import Recording
+    from ..report.campaign_report import figure_png, load_sharing_across_recordings
+    from ..run.scene import scene_schema_errors
 
     # matplotlib on Agg and one of the report's figures, small: matplotlib loads its font and
     # fills its text caches on the first text it lays out, which a worker's first figure
@@ -99,8 +99,8 @@ def load_kernels() -> dict:
     ValueError, ImportError
         numba is installed but does not import.
     """
-    from meshphase.signal import iir
-    from meshphase.onsets import fastpath
+    from ..signal import iir
+    from ..onsets import fastpath
 
     t = time.perf_counter()
     filters, onsets = iir.warmup(check=False)["engine"], fastpath.warmup()["engine"]
@@ -128,7 +128,7 @@ except Exception:  # noqa: BLE001 - a broken numba install, a read-only cache th
 try:
     # after every import: the limit reaches the BLAS libraries loaded by then (scipy's comes
     # with the kernels' modules)
-    from meshphase.runtime.threads import hold_blas_single_thread
+    from ..runtime.threads import hold_blas_single_thread
 
     hold_blas_single_thread()
 except Exception:  # noqa: BLE001 - threadpoolctl failing: each run still holds BLAS itself

@@ -29,9 +29,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
-from meshphase.campaign.resume import relocate, write_marker
-from meshphase.campaign.cluster import ClusterStart, end_worker
-from meshphase.runtime.log import logger
+from .resume import relocate, write_marker
+from .cluster import ClusterStart, end_worker
+from ..runtime.log import logger
 
 __all__ = ["Job", "run_job", "start_cluster", "campaign_task", "failed_record", "default_task_timeout",
            "task_limits", "warm_up", "worker_modules", "campaign_modules", "draw_figures", "figure_order",
@@ -69,7 +69,7 @@ def default_task_timeout(size_bytes) -> float:
     float
         Timeout [s].
     """
-    from meshphase.validate import as_nonnegative
+    from ..validate import as_nonnegative
 
     return TIMEOUT_BASE_S + as_nonnegative(size_bytes, "size_bytes") / TIMEOUT_RATE_BPS
 
@@ -144,7 +144,7 @@ def worker_modules(formats=None, synthetic: bool = False) -> tuple[str, ...]:
     ValueError
         An unknown format.
     """
-    from meshphase.io import FORMATS, get_spec
+    from ..io import FORMATS, get_spec
 
     formats = FORMATS if formats is None else tuple(dict.fromkeys(formats))
     libs = tuple(lib for name in formats for lib in get_spec(name).read_libraries)
@@ -167,7 +167,7 @@ def campaign_modules(scene, files) -> tuple[str, ...]:
     -------
     tuple of str
     """
-    from meshphase.io import format_of_suffix
+    from ..io import format_of_suffix
 
     formats = [format_of_suffix(f) for f in files]
     synthetic = "synthetic" in (getattr(scene, "input", None) or {})
@@ -192,7 +192,7 @@ def warm_up(modules=None) -> int:
 
 
 def _draw(call) -> bytes:
-    from meshphase.report.campaign_report import figure_png
+    from ..report.campaign_report import figure_png
 
     make, args, kwargs = call
     return figure_png(make, *args, **kwargs)
@@ -404,7 +404,7 @@ def campaign_task(task: Callable[..., dict], scene_path: str, recording_path: st
     if threads is None:
         rec = task(scene_path, recording_path, out_dir, **kw)
     else:
-        from meshphase.runtime.threads import threads_limited
+        from ..runtime.threads import threads_limited
 
         with threads_limited(threads):
             rec = task(scene_path, recording_path, out_dir, **kw)
@@ -476,7 +476,7 @@ def _task_threads(cluster_info: dict) -> int | None:
     machine's cores; None on a remote cluster (each worker's own default)."""
     if not cluster_info.get("local"):
         return None
-    from meshphase.runtime.threads import run_threads
+    from ..runtime.threads import run_threads
 
     return max(1, run_threads() // max(1, int(cluster_info.get("n_workers") or 1)))
 

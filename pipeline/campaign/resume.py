@@ -17,9 +17,10 @@ import shutil
 from pathlib import Path
 from typing import Callable, Sequence
 
-from meshphase.run.outdir import read_json_object
-from meshphase.jsonable import to_jsonable
-from meshphase.runtime.log import logger
+from ..run.outdir import read_json_object
+from ..jsonable import to_jsonable
+from ..runtime.log import logger
+from ..version import __version__
 
 __all__ = ["RECORDINGS_DIR_NAME", "DONE_NAME", "sha256_file", "recording_key", "recording_keys",
            "completed_recordings", "resume_sources", "reuse_completed", "relocate",
@@ -82,7 +83,6 @@ def recording_key(recording, scene_sha256: str, options: dict | None = None) -> 
     OSError
         The file cannot be stat'ed.
     """
-    from meshphase import __version__
 
     if not isinstance(recording, (str, os.PathLike)):
         raise TypeError(f"recording must be a path, got {type(recording).__name__} {recording!r}")
@@ -139,7 +139,7 @@ def write_marker(out_dir, done_key: dict, record: dict) -> None:
     OSError
         The folder or the file cannot be written.
     """
-    from meshphase.io import atomic_path
+    from ..io import atomic_path
 
     if not isinstance(done_key, dict) or not isinstance(record, dict):
         raise TypeError(f"done_key and record must be dicts, got {type(done_key).__name__} and "

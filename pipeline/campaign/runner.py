@@ -74,19 +74,19 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import Callable, Iterable
 
-from meshphase.campaign.job import (TIMEOUT_BASE_S, TIMEOUT_RATE_BPS, Job, campaign_modules, default_task_timeout,
-                                    draw_figures, run_job, start_cluster, task_limits)
-from meshphase.campaign.resume import (DONE_NAME, RECORDINGS_DIR_NAME, completed_recordings,
-                                       recording_key, recording_keys, resume_sources, reuse_completed,
-                                       sha256_file)
-from meshphase.campaign.cluster import check_cluster_options, local_cluster, trim_env_is_distributed
-from meshphase.runtime.heap import limit_heap_growth
-from meshphase.jsonable import to_jsonable
-from meshphase.runtime.log import logger
-from meshphase.run.context import phasing_verdict
-from meshphase.run.declare import client_results
-from meshphase.run.state import failure_texts
-from meshphase.validate import as_regular_file
+from .job import (TIMEOUT_BASE_S, TIMEOUT_RATE_BPS, Job, campaign_modules, default_task_timeout,
+                  draw_figures, run_job, start_cluster, task_limits)
+from .resume import (DONE_NAME, RECORDINGS_DIR_NAME, completed_recordings,
+                     recording_key, recording_keys, resume_sources, reuse_completed,
+                     sha256_file)
+from .cluster import check_cluster_options, local_cluster, trim_env_is_distributed
+from ..runtime.heap import limit_heap_growth
+from ..jsonable import to_jsonable
+from ..runtime.log import logger
+from ..run.context import phasing_verdict
+from ..run.declare import client_results
+from ..run.state import failure_texts
+from ..validate import as_regular_file
 
 __all__ = ["run_recording", "run_campaign", "cli_campaign", "collect_recordings",
            "recording_names", "split_results", "client_scene", "campaign_rows",
@@ -136,7 +136,7 @@ def phasing_reliability(ctx) -> dict:
 
 # ---------------------------------------------------------------------------- inputs
 def _recording_suffixes() -> tuple[str, ...]:
-    from meshphase.io import FORMATS, get_spec
+    from ..io import FORMATS, get_spec
 
     return tuple(s for f in FORMATS for s in get_spec(f).suffixes)
 
@@ -204,7 +204,7 @@ def collect_recordings(inputs: Iterable, *, recursive: bool = False) -> tuple[li
 def _folder_files(folder: Path, recursive: bool, skipped: list):
     """The entries of ``folder`` in name order (with ``recursive``, those of its subfolders
     in their place, depth first); the subfolders not entered go to ``skipped``."""
-    from meshphase.run.outdir import MANIFEST_NAME
+    from ..run.outdir import MANIFEST_NAME
 
     for q in sorted(folder.iterdir()):
         if not (recursive and q.is_dir()):
@@ -221,7 +221,7 @@ def _folder_files(folder: Path, recursive: bool, skipped: list):
 
 def _not_a_recording(q: Path, suffixes: tuple) -> str | None:
     """Why the folder entry ``q`` is not taken as a recording, or None when it is."""
-    from meshphase.io import detect_format
+    from ..io import detect_format
 
     name = q.name.lower()
     if not q.is_file():
@@ -390,7 +390,7 @@ def _apply_bands(ctx, bands: dict) -> None:
     """Band coverage of each gauge's passes, given the client's Monte Carlo band."""
     import numpy as np
 
-    from meshphase.compare.predict import band_coverage
+    from ..compare.predict import band_coverage
 
     comp, phasing, ideal = ctx.compare, ctx.phasing, ctx.ideal
     if comp is None or phasing is None or ideal is None:
@@ -486,10 +486,10 @@ def run_recording(scene_path: str, recording_path: str, out_dir: str, *, bands: 
                  "worker": f"{socket.gethostname()}:{os.getpid()}", "timings_s": {},
                  "stages_ran": [], "stages_failed": {}, "messages": [], "files": {}}
     try:
-        from meshphase.run.exits import run_status
-        from meshphase.io import detect_format
-        from meshphase.run.scene import load_scene
-        from meshphase.run.stages import run_scene, summary_dict, write_outputs
+        from ..run.exits import run_status
+        from ..io import detect_format
+        from ..run.scene import load_scene
+        from ..run.stages import run_scene, summary_dict, write_outputs
 
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -544,7 +544,7 @@ def run_recording(scene_path: str, recording_path: str, out_dir: str, *, bands: 
 
 def _write_atomic(path: Path, write: Callable[[Path], None]) -> None:
     """``write(tmp)`` to a temporary file beside ``path``, fsync, rename (meshphase.io)."""
-    from meshphase.io import atomic_path
+    from ..io import atomic_path
 
     with atomic_path(path, overwrite=True) as tmp:
         write(tmp)
@@ -636,7 +636,7 @@ def campaign_exit_code(campaign: dict) -> int:
     -------
     int
     """
-    from meshphase.run.exits import EXIT_ERROR, EXIT_OK, EXIT_PARTIAL
+    from ..run.exits import EXIT_ERROR, EXIT_OK, EXIT_PARTIAL
 
     if not isinstance(campaign, dict) or not isinstance(campaign.get("recordings"), list):
         raise TypeError(f"campaign must be run_campaign's dict with a 'recordings' list, got "
@@ -740,7 +740,7 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
         Arguments of the wrong type.
     """
     t_all = time.perf_counter()
-    from meshphase.run.outdir import PARTIAL_SUFFIX, OutputDir, remove_partial
+    from ..run.outdir import PARTIAL_SUFFIX, OutputDir, remove_partial
 
     workers, task_timeout, task = _check_options(scheduler, workers, dashboard, task_timeout, task)
     scene_path = Path(scene_path).resolve()
@@ -793,7 +793,7 @@ class _Options:
 
 def _check_options(scheduler, workers, dashboard, task_timeout, task):
     """(workers, task_timeout, task) checked, before anything is read or started."""
-    from meshphase.validate import as_nonnegative
+    from ..validate import as_nonnegative
 
     workers = check_cluster_options(scheduler, workers, dashboard)
     if task_timeout is not None:
@@ -813,7 +813,7 @@ def _start_worker_server_early(scene_path: Path, inputs, recursive: bool):
     here is left to the checks that follow, which report it. Returns what
     :func:`collect_recordings` found (for :func:`_scene_and_recordings`), None when it
     failed."""
-    from meshphase.campaign.cluster import worker_server
+    from .cluster import worker_server
 
     try:
         found = collect_recordings(inputs, recursive=recursive)
@@ -845,7 +845,7 @@ def _scene_and_recordings(scene_path: Path, inputs, recursive: bool = False, fou
     found in ``inputs`` (a path or a list: read more than once; ``found``: what
     :func:`collect_recordings` gave already), and the per-recording scene validated once, up
     front."""
-    from meshphase.run.scene import load_scene, plan
+    from ..run.scene import load_scene, plan
 
     # FileNotFoundError / SceneError (a ValueError) up front; each recording replaces [input]
     scene = load_scene(scene_path, recording_given=True)
@@ -925,8 +925,8 @@ def _campaign_body(scene, scene_path, inputs, files, skipped, names, out, opts: 
 def _import_report_modules() -> None:
     """Import what :func:`_write_campaign_files` needs, ahead of time: the report's module,
     without matplotlib (the workers draw the figures) and the CSV writer, without pandas."""
-    from meshphase.run import table_csv  # noqa: F401
-    from meshphase.report import campaign_report  # noqa: F401
+    from ..run import table_csv  # noqa: F401
+    from ..report import campaign_report  # noqa: F401
 
 
 def _result_dict(scene, scene_path, inputs, skipped, final, cluster_info, timing, scene_level,
@@ -957,8 +957,8 @@ def _scene_level(scene, out: Path, opts: _Options):
     client into ``out/scene/``; all None when there are none."""
     if not opts.client_results:
         return None, None, None
-    from meshphase.run.exits import run_status
-    from meshphase.run.stages import run_scene, summary_dict, write_outputs
+    from ..run.exits import run_status
+    from ..run.stages import run_scene, summary_dict, write_outputs
 
     sctx = run_scene(client_scene(scene))
     scene_status = {k: v for k, v in run_status(sctx).items() if k != "exit_code"}
@@ -983,8 +983,8 @@ def _write_campaign_files(result: dict, out: Path, final_of, t_all: float,
     sets ``result["files"]`` and the ``report`` and ``total`` times. ``draw`` draws the
     report's figures (:func:`meshphase.campaign.job.draw_figures`; None: here); ``closed()``
     (if given) closes the cluster after the report, before the total is taken."""
-    from meshphase.report.campaign_report import build_campaign_report
-    from meshphase.run.table_csv import write_csv
+    from ..report.campaign_report import build_campaign_report
+    from ..run.table_csv import write_csv
 
     timing, counts = result["timing_s"], result["counts"]
     t = time.perf_counter()

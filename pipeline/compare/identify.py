@@ -19,14 +19,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import OptimizeResult, approx_fprime, least_squares
 
-from meshphase.compare.pass_model import (gamma_and_jacobian, gradient_plan, pass_setup, predict_pass_phasing,
-                                          table_speeds, wrap)
-from meshphase.errors import ProcessingWarning
-from meshphase.kinematics.pass_table import PassTable, pass_order
-from meshphase.models.gearset import Gearset
-from meshphase.models.mesh_phasing import ShaftHoleErrors
-from meshphase.models.phasing_jacobian import MeshGradientPlan
-from meshphase.validate import as_choice, as_positive, as_positive_int
+from .pass_model import (gamma_and_jacobian, gradient_plan, pass_setup, predict_pass_phasing,
+                         table_speeds, wrap)
+from ..errors import ProcessingWarning
+from ..kinematics.pass_table import PassTable, pass_order
+from ..models.gearset import Gearset
+from ..models.mesh_phasing import ShaftHoleErrors
+from ..models.phasing_jacobian import MeshGradientPlan
+from ..validate import as_choice, as_positive, as_positive_int
 
 __all__ = ["Identification", "identify_errors", "PARAMETER_NAMES", "describe_combination",
            "identification_verdict", "vector_from_errors", "RECORD_FACTORS", "JACOBIANS"]

@@ -30,12 +30,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from meshphase.errors import ProcessingWarning
-from meshphase.kinematics.pass_table import PassTable, pass_order
-from meshphase.models.gearset import Gearset, Speeds
-from meshphase.models.mesh_phasing import ShaftHoleErrors, mesh_angle_deviations
-from meshphase.models.phasing_jacobian import MeshGradientPlan, n_offset_parameters
-from meshphase.validate import as_positive
+from ..errors import ProcessingWarning
+from ..kinematics.pass_table import PassTable, pass_order
+from ..models.gearset import Gearset, Speeds
+from ..models.mesh_phasing import ShaftHoleErrors, mesh_angle_deviations
+from ..models.phasing_jacobian import MeshGradientPlan, n_offset_parameters
+from ..validate import as_positive
 
 __all__ = ["wrap", "relative_speeds", "table_speeds", "predict_pass_phasing", "pass_phasing_jacobian",
            "PassSetup", "pass_setup", "gamma_of", "gradient_plan", "gamma_and_jacobian"]

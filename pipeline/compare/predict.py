@@ -13,11 +13,11 @@ import math
 
 import numpy as np
 
-from meshphase.compare.identify import (PARAMETER_NAMES, RECORD_FACTORS, Identification, describe_combination,
-                                        identification_verdict, identify_errors)
-from meshphase.compare.pass_model import pass_phasing_jacobian, predict_pass_phasing, relative_speeds, wrap
-from meshphase.kinematics.pass_table import PassTable, nearest_index
-from meshphase.models.gearset import Speeds
+from .identify import (PARAMETER_NAMES, RECORD_FACTORS, Identification, describe_combination,
+                       identification_verdict, identify_errors)
+from .pass_model import pass_phasing_jacobian, predict_pass_phasing, relative_speeds, wrap
+from ..kinematics.pass_table import PassTable, nearest_index
+from ..models.gearset import Speeds
 
 __all__ = ["truth_comparison", "residual_stats", "band_coverage", "relative_speeds", "predict_pass_phasing",
            "pass_phasing_jacobian", "wrap", "Identification", "identify_errors", "PARAMETER_NAMES",

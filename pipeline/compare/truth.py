@@ -12,9 +12,9 @@ from __future__ import annotations
 
 from typing import Protocol, runtime_checkable
 
-from meshphase.compare.predict import truth_comparison
-from meshphase.kinematics.phasing import GaugeLabels, PassTable
-from meshphase.models.mesh_phasing import ShaftHoleErrors
+from .predict import truth_comparison
+from ..kinematics.phasing import GaugeLabels, PassTable
+from ..models.mesh_phasing import ShaftHoleErrors
 
 __all__ = ["RecordingTruth", "true_errors", "tacho_geometry", "phasing_vs_truth"]
 

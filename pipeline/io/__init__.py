@@ -32,12 +32,12 @@ from typing import Iterator
 
 import numpy as np
 
-from meshphase.recording import Recording
-from meshphase.validate import as_nonnegative, as_positive, as_regular_file
-from meshphase.io.atomic import atomic_path, clean_stale_partials
-from meshphase.io.base import CorruptFileError, RecordingFileError, RecordingInfo, RecordingTooLargeError
-from meshphase.io.registry import (FormatChoices, FormatSpec, format_names, format_of_suffix, get_format, get_spec,
-                                   register_format, sniff_order, unregister_format, writable_formats)
+from ..recording import Recording
+from ..validate import as_nonnegative, as_positive, as_regular_file
+from .atomic import atomic_path, clean_stale_partials
+from .base import CorruptFileError, RecordingFileError, RecordingInfo, RecordingTooLargeError
+from .registry import (FormatChoices, FormatSpec, format_names, format_of_suffix, get_format, get_spec,
+                       register_format, sniff_order, unregister_format, writable_formats)
 
 __all__ = ["read", "write", "write_blocks", "convert", "read_info", "iter_blocks", "detect_format", "FORMATS",
            "RecordingFileError", "CorruptFileError", "RecordingTooLargeError", "RecordingInfo",
@@ -306,4 +306,4 @@ def _hint(n: int, nc: int, itemsize: int, name: str, options: dict) -> int | Non
 
 
 # convert streams through the functions above (read_info, iter_blocks, write_blocks)
-from meshphase.io.convert import convert  # noqa: E402
+from .convert import convert  # noqa: E402

@@ -24,8 +24,8 @@ import threading
 import time
 from pathlib import Path
 
-from meshphase.runtime.log import logger
-from meshphase.validate import as_float, as_nonnegative
+from ..runtime.log import logger
+from ..validate import as_float, as_nonnegative
 
 __all__ = ["atomic_path", "clean_stale_partials", "TEMP_PREFIX", "TEMP_SUFFIX", "STALE_AGE", "WRITE_FULL",
            "host_tag", "pid_alive", "SignalGuard"]

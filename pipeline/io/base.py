@@ -37,18 +37,15 @@ import os
 import re
 import warnings
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Iterator
 
 import numpy as np
 
-from meshphase.errors import DataQualityWarning, FormatWarning
-from meshphase.jsonable import json_default
-from meshphase.runtime.log import logger
-from meshphase.signal.quality import nonfinite_runs
-from meshphase.recording import ChannelSpec, RecordingHeader, sample_index
-from meshphase.io.atomic import STALE_AGE, TEMP_PREFIX, TEMP_SUFFIX, atomic_path, clean_stale_partials
-from meshphase.validate import as_float, as_nonnegative
+from ..errors import DataQualityWarning, FormatWarning
+from ..jsonable import json_default
+from ..signal.quality import nonfinite_runs
+from ..recording import ChannelSpec, RecordingHeader
+from .atomic import STALE_AGE, TEMP_PREFIX, TEMP_SUFFIX, atomic_path, clean_stale_partials
 
 __all__ = ["RecordingFileError", "CorruptFileError", "RecordingTooLargeError", "RecordingInfo", "atomic_path",
            "clean_stale_partials", "TEMP_PREFIX", "TEMP_SUFFIX", "STALE_AGE", "check_verify",

@@ -45,8 +45,8 @@ from typing import Iterator
 
 import numpy as np
 
-from meshphase.recording import Recording
-from meshphase.validate import as_float
+from ..recording import Recording
+from ..validate import as_float
 
 __all__ = ["BRIDGE_TYPES", "BridgeConfig", "strain_from_ratio", "ratio_from_strain",
            "strain_from_volts", "volts_from_strain", "null_ratio", "bridge_recording",

@@ -16,10 +16,10 @@ from typing import Callable, ContextManager
 
 import numpy as np
 
-from meshphase.recording import Recording
-from meshphase.validate import as_positive_int
-from meshphase.io import detect_format, format_for_write, iter_blocks, read_info, write_blocks
-from meshphase.io.base import recording_read_errors
+from ..recording import Recording
+from ..validate import as_positive_int
+from . import detect_format, format_for_write, iter_blocks, read_info, write_blocks
+from .base import recording_read_errors
 
 __all__ = ["convert", "Converted", "CONVERT_BLOCK_SAMPLES"]
 

@@ -68,12 +68,12 @@ from typing import Iterator
 
 import numpy as np
 
-from meshphase.errors import FormatWarning
-from meshphase.recording import ChannelSpec, Recording
-from meshphase.validate import as_int, as_positive_int
-from meshphase.io.base import (CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime, check_verify,
-                               dumps_json, nice_fs, spec_from_dict, warn_nonfinite)
-from meshphase.io.registry import FormatSpec
+from ..errors import FormatWarning
+from ..recording import ChannelSpec, Recording
+from ..validate import as_int, as_positive_int
+from .base import (CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime, check_verify,
+                   dumps_json, nice_fs, spec_from_dict, warn_nonfinite)
+from .registry import FormatSpec
 
 __all__ = ["NAME", "FORMAT", "FORMAT_VERSION", "TIME_TOLERANCE", "sniff", "read_info",
            "read", "write", "write_blocks", "iter_blocks", "MAX_CHANNELS", "MAX_HEADER_LINE"]

@@ -73,15 +73,16 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from meshphase.errors import FormatWarning
-from meshphase.jsonable import to_jsonable
-from meshphase.runtime.log import logger
-from meshphase.recording import Recording
-from meshphase.validate import as_choice, as_int, as_positive, as_positive_int
-from meshphase.io.base import (CLOCK_NAMES, CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime,
-                               check_allocation, check_verify, clock_timing, dumps_json, kind_from_name,
-                               regroup_blocks, spec_from_dict, warn_nonfinite)
-from meshphase.io.registry import FormatSpec
+from ..errors import FormatWarning
+from ..jsonable import to_jsonable
+from ..runtime.log import logger
+from ..recording import Recording
+from ..validate import as_choice, as_int, as_positive, as_positive_int
+from .base import (CLOCK_NAMES, CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime,
+                   check_allocation, check_verify, clock_timing, dumps_json, kind_from_name,
+                   regroup_blocks, spec_from_dict, warn_nonfinite)
+from .registry import FormatSpec
+from ..version import __version__
 
 __all__ = ["NAME", "FORMAT", "FORMAT_VERSION", "DEFAULT_CHUNK_SAMPLES", "sniff",
            "read_info", "read", "write", "write_blocks", "iter_blocks"]
@@ -341,7 +342,7 @@ def _foreign_header(f, path, fs_opt) -> tuple[dict, tuple, tuple]:
     agree. Returns (attrs, specs, (dataset path, column or None, samples axis) per channel)."""
     import h5py
 
-    from meshphase.recording import ChannelSpec
+    from ..recording import ChannelSpec
 
     found = []                                         # (dataset or column, name)
 
@@ -1024,6 +1025,4 @@ def _close_after_failure(f, path) -> None:
 
 
 def _version_string() -> str:
-    from meshphase import __version__
-
     return str(__version__)

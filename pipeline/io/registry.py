@@ -33,7 +33,7 @@ from pathlib import Path
 from types import MappingProxyType, ModuleType
 from typing import Iterator, Mapping
 
-from meshphase.errors import FormatWarning
+from ..errors import FormatWarning
 
 __all__ = ["FormatSpec", "register_format", "unregister_format", "format_names", "get_spec", "get_format",
            "format_of_suffix", "writable_formats", "sniff_order", "FormatChoices", "ENTRY_POINT_GROUP", "BUILTIN_FORMATS"]

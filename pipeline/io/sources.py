@@ -30,12 +30,12 @@ from typing import Any, Iterator, Protocol, runtime_checkable
 
 import numpy as np
 
-from meshphase.errors import DataQualityWarning
-from meshphase.io import detect_format, get_spec
-from meshphase.io.base import CorruptFileError, recording_read_errors
-from meshphase.io.bridge import BridgeConfig, bridge_history, convert_block, initial_volts, strain_spec
-from meshphase.recording import BlockSource, RecordingHeader, apply_gains, warn_nonfinite_runs
-from meshphase.runtime.threads import read_ahead
+from ..errors import DataQualityWarning
+from . import detect_format, get_spec
+from .base import CorruptFileError, recording_read_errors
+from .bridge import BridgeConfig, bridge_history, convert_block, initial_volts, strain_spec
+from ..recording import BlockSource, RecordingHeader, apply_gains, warn_nonfinite_runs
+from ..runtime.threads import read_ahead
 
 __all__ = ["FileSource", "GeneratedSource", "BridgeSource", "checked_blocks", "blocks_ahead",
            "RecordingGenerator", "GENERATOR_GROUP", "register_generator", "generator",

@@ -74,7 +74,6 @@ import mmap
 import os
 import sys
 from collections import OrderedDict
-import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -82,15 +81,15 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from meshphase.errors import FormatWarning
-from meshphase.jsonable import to_jsonable
-from meshphase.recording import CHANNEL_KINDS, ChannelSpec, Recording
-from meshphase.validate import as_int, as_positive, as_positive_int
-from meshphase.io import tdms_index, tdms_rows, tdms_scaling
-from meshphase.io.base import (CLOCK_NAMES, CorruptFileError, RecordingFileError, RecordingInfo, check_allocation,
-                               check_verify, clock_timing, kind_from_name, spec_from_dict, warn_nonfinite)
-from meshphase.io.registry import FormatSpec
-from meshphase.io.tdms_write import write, write_blocks, write_ni_log, write_tdms
+from ..errors import FormatWarning
+from ..jsonable import to_jsonable
+from ..recording import CHANNEL_KINDS, ChannelSpec, Recording
+from ..validate import as_int, as_positive, as_positive_int
+from . import tdms_index, tdms_rows, tdms_scaling
+from .base import (CLOCK_NAMES, CorruptFileError, RecordingFileError, RecordingInfo, check_allocation,
+                   check_verify, clock_timing, kind_from_name, spec_from_dict, warn_nonfinite)
+from .registry import FormatSpec
+from .tdms_write import write, write_blocks, write_ni_log, write_tdms
 
 __all__ = ["NAME", "FORMAT", "sniff", "read_info", "read", "iter_blocks", "write", "write_blocks", "write_tdms",
            "write_ni_log", "kind_from_name",

@@ -30,8 +30,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from meshphase.io.base import CorruptFileError, RecordingFileError
-from meshphase.io.tdms_rows import read_rows, row_columns, shared_rows  # the interleaved rows reader (names kept here)
+from .base import CorruptFileError, RecordingFileError
+from .tdms_rows import read_rows, row_columns, shared_rows  # the interleaved rows reader (names kept here)
 
 __all__ = ["Index", "Run", "FileMap", "scan", "read_runs", "shared_rows", "row_columns", "read_rows", "open_map",
            "count_index_segments"]

@@ -32,7 +32,7 @@ import time
 
 import numpy as np
 
-from meshphase.runtime.numba_cache import import_kernels
+from ..runtime.numba_cache import import_kernels
 
 __all__ = ["ENGINES", "HAVE_NUMBA", "shared_rows", "row_columns", "read_rows", "rows_engine", "warmup"]
 

@@ -37,8 +37,8 @@ from typing import Iterable, Iterator
 
 import numpy as np
 
-from meshphase.recording import Recording
-from meshphase.io.atomic import atomic_path
+from ..recording import Recording
+from .atomic import atomic_path
 
 __all__ = ["write", "write_blocks", "write_tdms", "write_ni_log", "LABVIEW_ZERO", "DEFAULT_GROUP"]
 

@@ -31,8 +31,8 @@ import functools
 import warnings
 from typing import Sequence
 
-from meshphase.errors import FormatWarning
-from meshphase.recording import GAUGE_KINDS, ChannelSpec
+from ..errors import FormatWarning
+from ..recording import GAUGE_KINDS, ChannelSpec
 
 __all__ = ["STRAIN_UNITS", "RATIO_UNITS", "VOLT_UNITS", "UnitError", "parse_unit",
            "gauge_unit_gains"]

@@ -21,9 +21,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from meshphase.kinematics.angle_design import Design, ModelFit, ModelSpec, extend_theta, rank_keep, solve
-from meshphase.kinematics.angle_selection import ripple_rates
-from meshphase.kinematics.shafts import Kinematics
+from .angle_design import Design, ModelFit, ModelSpec, extend_theta, rank_keep, solve
+from .angle_selection import ripple_rates
+from .shafts import Kinematics
 
 __all__ = ["Competitor", "model_competitors", "BIC_CLOSE", "INSEPARABLE_RIPPLE"]
 

@@ -25,9 +25,9 @@ import numpy as np
 from scipy import linalg
 from scipy.interpolate import BSpline
 
-from meshphase.kinematics.shafts import Kinematics
-from meshphase.kinematics.trains import PassTrain
-from meshphase.signal.median import median_of_finite
+from .shafts import Kinematics
+from .trains import PassTrain
+from ..signal.median import median_of_finite
 
 __all__ = ["ModelSpec", "Design", "ModelFit", "spline_basis", "rank_keep", "fix_rate",
            "plausible_rate", "column_norms", "solve", "extend_theta", "RANK_TOL", "CHI2_FLOOR",

@@ -19,11 +19,11 @@ import math
 import numpy as np
 from scipy import linalg
 
-from meshphase.kinematics.angle_design import (RANK_TOL, Design, ModelFit, ModelSpec, column_norms,
-                                               extend_theta, fix_rate, plausible_rate, rank_keep,
-                                               solve, spline_basis)
-from meshphase.kinematics.shafts import Kinematics
-from meshphase.kinematics.trains import PassTrain
+from .angle_design import (RANK_TOL, Design, ModelFit, ModelSpec, column_norms,
+                           extend_theta, fix_rate, plausible_rate, rank_keep,
+                           solve, spline_basis)
+from .shafts import Kinematics
+from .trains import PassTrain
 
 __all__ = ["knot_ladder", "unseen_ripples", "ripple_rates", "drop_gross_outliers", "select_terms",
            "variance_factors", "KNOT_LADDER", "BIC_GAIN", "UNSEEN_TOL", "SCREEN_SLACK"]

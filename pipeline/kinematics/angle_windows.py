@@ -35,10 +35,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from meshphase.kinematics.angles import AngleModel, TrainFit, fit_angle_model
-from meshphase.kinematics.shafts import Kinematics
-from meshphase.kinematics.trains import PassTrain, slice_train
-from meshphase.runtime.threads import thread_pool
+from .angles import AngleModel, TrainFit, fit_angle_model
+from .shafts import Kinematics
+from .trains import PassTrain, slice_train
+from ..runtime.threads import thread_pool
 
 __all__ = ["fit_angle_windows", "WindowedAngleModel", "WINDOW_OBS"]
 

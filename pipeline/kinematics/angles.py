@@ -62,13 +62,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from meshphase.errors import ProcessingWarning
-from meshphase.kinematics.angle_choice import INSEPARABLE_RIPPLE, model_competitors
-from meshphase.kinematics.angle_design import Design, ModelFit, ModelSpec
-from meshphase.kinematics.angle_selection import (drop_gross_outliers, knot_ladder, ripple_rates, select_terms,
-                                                  variance_factors)
-from meshphase.kinematics.shafts import Kinematics, held_member, typed_resolution  # noqa: F401 (run/ imports them here)
-from meshphase.kinematics.trains import PassTrain
+from ..errors import ProcessingWarning
+from .angle_choice import INSEPARABLE_RIPPLE, model_competitors
+from .angle_design import Design, ModelFit, ModelSpec
+from .angle_selection import (drop_gross_outliers, knot_ladder, ripple_rates, select_terms,
+                              variance_factors)
+from .shafts import Kinematics, held_member, typed_resolution  # noqa: F401 (run/ imports them here)
+from .trains import PassTrain
 
 __all__ = ["AngleModel", "TrainFit", "fit_angle_model", "held_member", "typed_resolution"]
 

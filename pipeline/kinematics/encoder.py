@@ -40,8 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from meshphase.recording import ENCODER_SHAFTS
-from meshphase.validate import as_finite_array, as_positive, as_positive_int, as_signal
+from ..recording import ENCODER_SHAFTS
+from ..validate import as_finite_array, as_positive, as_positive_int, as_signal
 
 __all__ = ["ENCODER_SHAFTS", "EncoderEdges", "shaft_of", "pulse_levels", "rising_crossing_parts", "rising_crossings",
            "edge_times", "clean_edges", "split_at_gaps", "edge_timing_sigma"]

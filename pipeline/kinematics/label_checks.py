@@ -20,11 +20,11 @@ import numpy as np
 from scipy import linalg, special
 from scipy.interpolate import PchipInterpolator
 
-from meshphase.kinematics.label_shift import label_shift_costs
-from meshphase.kinematics.pass_table import nearest_index, pass_order, planet_fractions
-from meshphase.kinematics.planet_labels import GaugeLabels, GaugePasses, shift_labels
-from meshphase.kinematics.trains import relabel_train
-from meshphase.validate import as_finite_array, as_positive_int
+from .label_shift import label_shift_costs
+from .pass_table import nearest_index, pass_order, planet_fractions
+from .planet_labels import GaugeLabels, GaugePasses, shift_labels
+from .trains import relabel_train
+from ..validate import as_finite_array, as_positive_int
 
 __all__ = ["LoadVariation", "carrier_load_variation", "load_shift_chi2", "ring_loads", "sun_by_loads",
            "coincident_shift", "align_labels", "LOAD_VARIATION_ORDERS", "LOAD_SHIFT_MARGIN",

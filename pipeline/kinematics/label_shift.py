@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from meshphase.kinematics.angle_design import Design, ModelSpec, extend_theta, solve
-from meshphase.kinematics.shafts import Kinematics
-from meshphase.kinematics.trains import PassTrain, relabel_train, slice_train
-from meshphase.runtime.threads import thread_pool
-from meshphase.validate import as_positive_int
+from .angle_design import Design, ModelSpec, extend_theta, solve
+from .shafts import Kinematics
+from .trains import PassTrain, relabel_train, slice_train
+from ..runtime.threads import thread_pool
+from ..validate import as_positive_int
 
 __all__ = ["label_shift_costs", "SHIFT_OBS"]
 

@@ -13,9 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from meshphase.errors import ProcessingWarning
-from meshphase.models.load_sharing import load_sharing
-from meshphase.validate import as_finite_array, as_float, as_positive, as_positive_int
+from ..errors import ProcessingWarning
+from ..models.load_sharing import load_sharing
+from ..validate import as_finite_array, as_float, as_positive, as_positive_int
 
 #: relative slack on |s| b / 2 <= 1 (full contact) for rounding of fitted slopes [-]
 _FULL_CONTACT_TOL = 1e-12

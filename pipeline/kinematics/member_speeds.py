@@ -19,10 +19,10 @@ import math
 
 import numpy as np
 
-from meshphase.kinematics.trains import revolution_numbers
-from meshphase.models.gearset import Gearset, Speeds
-from meshphase.kinematics.pass_table import pass_order
-from meshphase.validate import as_positive
+from .trains import revolution_numbers
+from ..models.gearset import Gearset, Speeds
+from .pass_table import pass_order
+from ..validate import as_positive
 
 __all__ = ["member_speeds", "mean_mesh_rate", "tacho_rate"]
 

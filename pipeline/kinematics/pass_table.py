@@ -42,13 +42,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from meshphase.errors import ProcessingWarning
-from meshphase.kinematics.angle_windows import fit_angle_windows
-from meshphase.kinematics.angles import AngleModel
-from meshphase.kinematics.reliability import INSEPARABLE_SHARE, UNRELIABLE_RATIO
-from meshphase.kinematics.shafts import Kinematics
-from meshphase.kinematics.trains import PassTrain, gauge_train, revolution_numbers, tacho_train
-from meshphase.validate import as_finite_array, as_positive_int
+from ..errors import ProcessingWarning
+from .angle_windows import fit_angle_windows
+from .angles import AngleModel
+from .reliability import INSEPARABLE_SHARE, UNRELIABLE_RATIO
+from .shafts import Kinematics
+from .trains import PassTrain, gauge_train, revolution_numbers, tacho_train
+from ..validate import as_finite_array, as_positive_int
 
 __all__ = ["PassTable", "pass_order", "planet_fractions", "GaugeEncoder", "phasing_from_model",
            "measured_phasing", "nearest_index"]

@@ -21,12 +21,12 @@ import warnings
 
 import numpy as np
 
-from meshphase.errors import DataQualityWarning, ProcessingWarning
-from meshphase.signal.noise_spectrum import TRANSIENT_RATIO, NoiseSpectrum, pulse_residual_psd
-from meshphase.onsets import FLAG_GAP, FLAG_TEMPLATE, Onsets
-from meshphase.kinematics.phasing import GaugePasses
-from meshphase.recording import GAUGE_KINDS
-from meshphase.validate import as_positive
+from ..errors import DataQualityWarning, ProcessingWarning
+from ..signal.noise_spectrum import TRANSIENT_RATIO, NoiseSpectrum, pulse_residual_psd
+from ..onsets import FLAG_GAP, FLAG_TEMPLATE, Onsets
+from .phasing import GaugePasses
+from ..recording import GAUGE_KINDS
+from ..validate import as_positive
 
 __all__ = ["pass_times", "usable_onsets",
            "conditioned_gap_runs", "gap_intervals_of", "onset_sigma", "channel_noise_spectrum",

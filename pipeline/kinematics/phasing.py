@@ -24,20 +24,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from meshphase.errors import DataQualityWarning, ProcessingWarning
-from meshphase.kinematics.angle_selection import unseen_ripples
-from meshphase.kinematics.angle_windows import fit_angle_windows
-from meshphase.kinematics.angles import AngleModel
-from meshphase.kinematics.encoder import MAX_GAP_PULSES, clean_edges, split_at_gaps
-from meshphase.kinematics.label_checks import align_labels, ring_loads, sun_by_loads
-from meshphase.kinematics.pass_table import PassTable, measured_phasing, pass_order, phasing_from_model, planet_fractions
-from meshphase.kinematics.planet_labels import (GaugeLabels, GaugePasses, assign_planets_by_pattern,
-                                                relabel_by_tacho, shift_labels)
-from meshphase.kinematics.reliability import phasing_reliability
-from meshphase.kinematics.shafts import Kinematics, held_member, kinematics, shaft_cycles
-from meshphase.kinematics.trains import (encoder_train, gauge_train, mesh_cycles_per_carrier_turn, relabel_train,
-                                         tacho_train)
-from meshphase.validate import as_positive_int
+from ..errors import DataQualityWarning, ProcessingWarning
+from .angle_selection import unseen_ripples
+from .angle_windows import fit_angle_windows
+from .angles import AngleModel
+from .encoder import MAX_GAP_PULSES, clean_edges, split_at_gaps
+from .label_checks import align_labels, ring_loads, sun_by_loads
+from .pass_table import PassTable, measured_phasing, pass_order, phasing_from_model, planet_fractions
+from .planet_labels import (GaugeLabels, GaugePasses, assign_planets_by_pattern,
+                            relabel_by_tacho, shift_labels)
+from .reliability import phasing_reliability
+from .shafts import Kinematics, held_member, kinematics, shaft_cycles
+from .trains import (encoder_train, gauge_train, mesh_cycles_per_carrier_turn, relabel_train,
+                     tacho_train)
+from ..validate import as_positive_int
 
 __all__ = ["PassTable", "pass_order", "assign_planets_by_pattern", "measured_phasing", "GaugePasses",
            "GaugeLabels", "PhasingResult", "measure_phasing", "relabel_gauge"]

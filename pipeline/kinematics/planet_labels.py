@@ -19,9 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
-from meshphase.kinematics.pass_table import planet_fractions
-from meshphase.kinematics.trains import revolution_numbers
-from meshphase.validate import as_finite_array
+from .pass_table import planet_fractions
+from .trains import revolution_numbers
+from ..validate import as_finite_array
 
 __all__ = ["GaugePasses", "GaugeLabels", "assign_planets_by_pattern", "assign_planets_by_tacho",
            "TachoRelabel", "relabel_by_tacho", "shift_labels"]

@@ -13,8 +13,8 @@ import math
 
 import numpy as np
 
-from meshphase.kinematics.angles import AngleModel
-from meshphase.kinematics.trains import PassTrain
+from .angles import AngleModel
+from .trains import PassTrain
 
 __all__ = ["phasing_reliability", "choice_reasons", "UNRELIABLE_RATIO", "UNRELIABLE_LAG1",
            "INSEPARABLE_SHARE"]

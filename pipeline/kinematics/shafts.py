@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from meshphase.kinematics.encoder import shaft_of
+from .encoder import shaft_of
 
 __all__ = ["Kinematics", "kinematics", "shaft_cycles", "typed_resolution", "held_member"]
 

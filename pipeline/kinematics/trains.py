@@ -17,8 +17,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from meshphase.kinematics.encoder import EncoderEdges
-from meshphase.validate import as_finite_array, as_positive
+from .encoder import EncoderEdges
+from ..validate import as_finite_array, as_positive
 
 __all__ = ["PassTrain", "slice_train", "gauge_train", "revolution_numbers", "tacho_train",
            "relabel_train", "mesh_cycles_per_carrier_turn", "encoder_train"]

@@ -11,6 +11,6 @@
                         mesh_phasing and tolerance
 """
 
-from meshphase.models.gearset import Gearset, Speeds, rad_s_to_rpm, rpm_to_rad_s
+from .gearset import Gearset, Speeds, rad_s_to_rpm, rpm_to_rad_s
 
 __all__ = ["Gearset", "Speeds", "rpm_to_rad_s", "rad_s_to_rpm"]

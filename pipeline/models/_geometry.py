@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from meshphase.validate import as_choice, as_finite_array, as_float
-from meshphase.models.gearset import DIRECTIONS, Gearset, Speeds
+from ..validate import as_choice, as_finite_array, as_float
+from .gearset import DIRECTIONS, Gearset, Speeds
 
 __all__ = [
     "TWO_PI",

@@ -44,9 +44,9 @@ import time
 
 import numpy as np
 
-from meshphase.runtime.log import logger
-from meshphase.models._kernel_math import atan_cephes  # noqa: F401  (the scalar reference, re-exported)
-from meshphase.runtime.numba_cache import import_kernels, numba_cache_dir  # noqa: F401  (numba_cache_dir re-exported)
+from ..runtime.log import logger
+from ._kernel_math import atan_cephes  # noqa: F401  (the scalar reference, re-exported)
+from ..runtime.numba_cache import import_kernels, numba_cache_dir  # noqa: F401  (numba_cache_dir re-exported)
 
 __all__ = ["HAVE_NUMBA", "deltas_numpy", "stats_numpy", "stats_numba", "resolve_engine",
            "atan_cephes", "numba_cache_dir", "warmup"]

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numba as _numba
 import numpy as np
 
-from meshphase.models._kernel_math import atan_cephes, mean_range
+from ._kernel_math import atan_cephes, mean_range
 
 _atan = _numba.njit(inline="always", cache=True)(atan_cephes)
 _mean_range = _numba.njit(inline="always", cache=True)(mean_range)

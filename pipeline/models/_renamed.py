@@ -9,7 +9,7 @@ from __future__ import annotations
 import functools
 import warnings
 
-from meshphase.errors import DeprecatedNameWarning
+from ..errors import DeprecatedNameWarning
 
 
 def translate(kwargs: dict, renames: dict, owner: str, stacklevel: int = 3) -> dict:

@@ -32,7 +32,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
-from meshphase.validate import as_finite_array, as_int, as_positive_int
+from ..validate import as_finite_array, as_int, as_positive_int
 
 __all__ = ["coaxiality_error", "tip_clearance", "max_equal_planets", "assemblable_planet_counts",
            "CLEARANCE_ATOL"]

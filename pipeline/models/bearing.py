@@ -34,8 +34,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from meshphase.validate import as_choice, as_float, as_positive, as_positive_int
-from meshphase.models._renamed import accept_old_names, renamed_kwargs
+from ..validate import as_choice, as_float, as_positive, as_positive_int
+from ._renamed import accept_old_names, renamed_kwargs
 
 __all__ = [
     "SinglePinion",

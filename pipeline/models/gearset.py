@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from meshphase.validate import as_choice, as_float, as_positive, as_positive_int
+from ..validate import as_choice, as_float, as_positive, as_positive_int
 
 __all__ = ["Gearset", "Speeds", "rpm_to_rad_s", "rad_s_to_rpm", "DIRECTIONS"]
 

@@ -14,8 +14,8 @@ import warnings
 
 import numpy as np
 
-from meshphase.errors import DataQualityWarning
-from meshphase.validate import as_choice, as_int
+from ..errors import DataQualityWarning
+from ..validate import as_choice, as_int
 
 __all__ = ["load_sharing"]
 

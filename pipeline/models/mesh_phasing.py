@@ -52,13 +52,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from meshphase.errors import ModelWarning
-from meshphase.validate import as_finite_array, as_float, as_int, as_positive_int
-from meshphase.models._geometry import (MAX_PHASE, TWO_PI, ShaftHoleErrors, broadcast_errors, check_error_size,
-                                        check_gearset, check_speeds, cos_sin, direction_sign, reduce_angle,
-                                        rotation_angle, rotation_angle_unchecked, rotation_cos_sin)
-from meshphase.models._kernels import deltas_numpy
-from meshphase.models.gearset import Gearset, Speeds
+from ..errors import ModelWarning
+from ..validate import as_finite_array, as_float, as_int, as_positive_int
+from ._geometry import (MAX_PHASE, TWO_PI, ShaftHoleErrors, broadcast_errors, check_error_size,
+                        check_gearset, check_speeds, cos_sin, direction_sign, reduce_angle,
+                        rotation_angle, rotation_angle_unchecked, rotation_cos_sin)
+from ._kernels import deltas_numpy
+from .gearset import Gearset, Speeds
 
 __all__ = [
     "ShaftHoleErrors",

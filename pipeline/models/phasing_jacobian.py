@@ -37,10 +37,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from meshphase.validate import as_choice
-from meshphase.models._geometry import broadcast_errors, check_error_size, cos_sin, rotation_angle_unchecked
-from meshphase.models.gearset import Gearset, Speeds
-from meshphase.models.mesh_phasing import ShaftHoleErrors, prepare_inputs
+from ..validate import as_choice
+from ._geometry import broadcast_errors, check_error_size, cos_sin, rotation_angle_unchecked
+from .gearset import Gearset, Speeds
+from .mesh_phasing import ShaftHoleErrors, prepare_inputs
 
 __all__ = ["MESHES", "MeshGradientPlan", "mesh_angle_gradient", "n_offset_parameters"]
 

@@ -27,20 +27,20 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import brentq
 
-from meshphase.errors import ConvergenceWarning, ModelWarning
-from meshphase.runtime.log import logger
-from meshphase.validate import as_choice, as_nonnegative, as_positive, as_positive_int
-from meshphase.models.bearing import (
-                                      DoublePinion,
-                                      SinglePinion,
-                                      unit_layout,
-                                      offset_system,
-                                      real_array,
-                                      as_scalar,
-                                      double_pinion_moments,
-                                      seed_case,
-                                      single_pinion_moments,
-                                      )
+from ..errors import ConvergenceWarning, ModelWarning
+from ..runtime.log import logger
+from ..validate import as_choice, as_nonnegative, as_positive, as_positive_int
+from .bearing import (
+                      DoublePinion,
+                      SinglePinion,
+                      unit_layout,
+                      offset_system,
+                      real_array,
+                      as_scalar,
+                      double_pinion_moments,
+                      seed_case,
+                      single_pinion_moments,
+                      )
 
 __all__ = [
     "C_G_DEFAULT",

@@ -56,19 +56,19 @@ import warnings
 
 import numpy as np
 
-from meshphase.errors import ModelWarning
-from meshphase.runtime.log import logger
-from meshphase.validate import as_choice, as_int, as_positive_int
-from meshphase.models import _kernels
-from meshphase.models.gearset import Gearset, Speeds
-from meshphase.models._geometry import ShaftHoleErrors, broadcast_errors, check_error_size, check_gearset, \
+from ..errors import ModelWarning
+from ..runtime.log import logger
+from ..validate import as_choice, as_int, as_positive_int
+from . import _kernels
+from .gearset import Gearset, Speeds
+from ._geometry import ShaftHoleErrors, broadcast_errors, check_error_size, check_gearset, \
     check_speeds
-from meshphase.models.tolerance_model import (  # noqa: F401  (re-exported: the public and test-used names)
-                                              ERROR_FIELDS, P3_HI, P3_LO, ABSOLUTE_STATISTICS, ALL_STATISTICS, DEFAULT_QUANTILES, METHODS,
-                                              SAMPLERS, STATISTICS, WINDOW_KINDS, MonteCarloResult, ObservationWindow, PhasingStats,
-                                              StatSummary, ToleranceBand, Tolerances, as_band, as_window, RotationGrid, map_samples,
-                                              map_values, mc_inputs, nan_summary, offset_speeds, resolve_n_times, default_n_times,
-                                              observation_window, time_grid)
+from .tolerance_model import (  # noqa: F401  (re-exported: the public and test-used names)
+                              ERROR_FIELDS, P3_HI, P3_LO, ABSOLUTE_STATISTICS, ALL_STATISTICS, DEFAULT_QUANTILES, METHODS,
+                              SAMPLERS, STATISTICS, WINDOW_KINDS, MonteCarloResult, ObservationWindow, PhasingStats,
+                              StatSummary, ToleranceBand, Tolerances, as_band, as_window, RotationGrid, map_samples,
+                              map_values, mc_inputs, nan_summary, offset_speeds, resolve_n_times, default_n_times,
+                              observation_window, time_grid)
 
 __all__ = [
     "ObservationWindow",
@@ -369,7 +369,7 @@ def monte_carlo(gearset: Gearset, speeds: Speeds, tolerances: Tolerances, window
     """
     method = as_choice(method, "method", METHODS)
     if method == "cv":
-        from meshphase.models.tolerance_cv import monte_carlo_cv
+        from .tolerance_cv import monte_carlo_cv
         return monte_carlo_cv(gearset, speeds, tolerances, window, n_samples,
                               tail_directions=tail_directions, n_times=n_times, rng=rng,
                               replicates=replicates, quantile_levels=quantile_levels,

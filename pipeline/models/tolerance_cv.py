@@ -36,12 +36,12 @@ import warnings
 import numpy as np
 from scipy import special
 
-from meshphase.errors import ModelWarning
-from meshphase.runtime.log import logger
-from meshphase.validate import as_positive_int
-from meshphase.models.tolerance_linear import chi_mean, linearised_deviation, solve_level
-from meshphase.models.tolerance_model import (ALL_STATISTICS, DEFAULT_QUANTILES, MonteCarloResult, StatSummary,
-                                              RotationGrid, map_values, mc_inputs, nan_summary)
+from ..errors import ModelWarning
+from ..runtime.log import logger
+from ..validate import as_positive_int
+from .tolerance_linear import chi_mean, linearised_deviation, solve_level
+from .tolerance_model import (ALL_STATISTICS, DEFAULT_QUANTILES, MonteCarloResult, StatSummary,
+                              RotationGrid, map_values, mc_inputs, nan_summary)
 
 __all__ = ["monte_carlo_cv"]
 

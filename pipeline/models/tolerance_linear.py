@@ -39,8 +39,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special
 
-from meshphase.validate import as_finite_array
-from meshphase.models.tolerance_model import case_inputs, RotationGrid, resolve_n_times
+from ..validate import as_finite_array
+from .tolerance_model import case_inputs, RotationGrid, resolve_n_times
 
 __all__ = ["LinearisedDeviation", "linearised_deviation", "SERIES", "chi_sf", "chi_pdf",
            "chi_mean", "exceedance", "solve_level"]

@@ -16,12 +16,12 @@ from fractions import Fraction
 import numpy as np
 from scipy import special
 
-from meshphase.validate import (as_choice, as_finite_array, as_float, as_int, as_nonnegative,
-                                as_positive, as_positive_int)
-from meshphase.models import _kernels
-from meshphase.models.gearset import Speeds
-from meshphase.models._geometry import (MAX_PHASE, TWO_PI, check_gearset, check_speeds, cos_sin,
-                                        direction_sign, rotation_angle_unchecked)
+from ..validate import (as_choice, as_finite_array, as_float, as_int, as_nonnegative,
+                        as_positive, as_positive_int)
+from . import _kernels
+from .gearset import Speeds
+from ._geometry import (MAX_PHASE, TWO_PI, check_gearset, check_speeds, cos_sin,
+                        direction_sign, rotation_angle_unchecked)
 
 __all__ = [
     "ObservationWindow", "observation_window", "default_n_times", "time_grid", "PhasingStats",

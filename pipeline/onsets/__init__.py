@@ -84,17 +84,17 @@ The package imports the root helpers, :mod:`meshphase.runtime` and :mod:`meshpha
 only.
 """
 
-from meshphase.onsets.coarse import coarse_peaks
-from meshphase.onsets.detector import (DEFAULT_DETECTOR, OnsetDetector, check_detector, detect_recording,
-                                       detector_names, make_detector, register_detector, unregister_detector)
-from meshphase.onsets.engine import detect_onsets, detect_onsets_recording
-from meshphase.onsets.learning import estimate_pulse_width, learn_template
-from meshphase.onsets.options import DEFAULT_BLOCK
-from meshphase.onsets.results import (FLAG_CLIPPED, FLAG_EDGE, FLAG_GAP, FLAG_LOW_CORR, FLAG_NAMES, FLAG_TEMPLATE,
-                                      CoarsePeaks, Onsets, empty_onsets)
-from meshphase.onsets.streaming import OnsetStream, detect_onsets_stream
-from meshphase.onsets.template import Template
-from meshphase.onsets.timing import ONSET_RESOLUTION, OnsetTiming, TemplateTiming
+from .coarse import coarse_peaks
+from .detector import (DEFAULT_DETECTOR, OnsetDetector, check_detector, detect_recording,
+                       detector_names, make_detector, register_detector, unregister_detector)
+from .engine import detect_onsets, detect_onsets_recording
+from .learning import estimate_pulse_width, learn_template
+from .options import DEFAULT_BLOCK
+from .results import (FLAG_CLIPPED, FLAG_EDGE, FLAG_GAP, FLAG_LOW_CORR, FLAG_NAMES, FLAG_TEMPLATE,
+                      CoarsePeaks, Onsets, empty_onsets)
+from .streaming import OnsetStream, detect_onsets_stream
+from .template import Template
+from .timing import ONSET_RESOLUTION, OnsetTiming, TemplateTiming
 
 __all__ = [
     "Onsets", "Template", "CoarsePeaks", "detect_onsets", "detect_onsets_recording",

@@ -13,10 +13,10 @@ import math
 import numpy as np
 from scipy import ndimage
 
-from meshphase.signal.median import MAD_TO_SIGMA, median_and_mad, median_of_finite
-from meshphase.validate import as_choice, as_positive, as_positive_int, as_signal
-from meshphase.onsets.fastpath import run_maxima
-from meshphase.onsets.results import CoarsePeaks
+from ..signal.median import MAD_TO_SIGMA, median_and_mad, median_of_finite
+from ..validate import as_choice, as_positive, as_positive_int, as_signal
+from .fastpath import run_maxima
+from .results import CoarsePeaks
 
 __all__ = ["coarse_peaks", "coarse_decimated", "decimate", "decimation_for", "fill_nan"]
 

@@ -23,10 +23,10 @@ from __future__ import annotations
 
 from typing import Callable, Protocol, runtime_checkable
 
-from meshphase.recording import Recording
-from meshphase.runtime.registry import DEFAULT_ONSET_DETECTOR, ONSET_DETECTORS
-from meshphase.onsets.results import Onsets
-from meshphase.onsets.runs import quality_options
+from ..recording import Recording
+from ..runtime.registry import DEFAULT_ONSET_DETECTOR, ONSET_DETECTORS
+from .results import Onsets
+from .runs import quality_options
 
 __all__ = ["OnsetDetector", "DEFAULT_DETECTOR", "RUN_OPTIONS", "register_detector",
            "unregister_detector", "detector_names", "check_detector", "make_detector",

@@ -12,22 +12,22 @@ import warnings
 
 import numpy as np
 
-from meshphase.signal.condition import merge_runs
-from meshphase.errors import ProcessingWarning
-from meshphase.runtime.log import logger
-from meshphase.signal.quality import find_runs
-from meshphase.recording import Recording
-from meshphase.validate import as_signal
-from meshphase.onsets.coarse import coarse_decimated, decimate, decimation_for, fill_nan
-from meshphase.onsets.learning import half_length, learn_decimated, refine_width, width_autocorr
-from meshphase.onsets.fastpath import dense, refine_pulses
-from meshphase.onsets.matched import gather_windows, Matcher, sublags, window_baseline
-from meshphase.onsets.options import check_options, DetectOptions
-from meshphase.onsets.relearn import TemplateFit, good_median, pulse_period
-from meshphase.onsets.results import (FLAG_CLIPPED, FLAG_EDGE, FLAG_GAP, FLAG_LOW_CORR, FLAG_TEMPLATE, Onsets,
-                                      empty_onsets)
-from meshphase.onsets.template import Template
-from meshphase.onsets.runs import inside_runs, quality_options, runs_overlap
+from ..signal.condition import merge_runs
+from ..errors import ProcessingWarning
+from ..runtime.log import logger
+from ..signal.quality import find_runs
+from ..recording import Recording
+from ..validate import as_signal
+from .coarse import coarse_decimated, decimate, decimation_for, fill_nan
+from .learning import half_length, learn_decimated, refine_width, width_autocorr
+from .fastpath import dense, refine_pulses
+from .matched import gather_windows, Matcher, sublags, window_baseline
+from .options import check_options, DetectOptions
+from .relearn import TemplateFit, good_median, pulse_period
+from .results import (FLAG_CLIPPED, FLAG_EDGE, FLAG_GAP, FLAG_LOW_CORR, FLAG_TEMPLATE, Onsets,
+                      empty_onsets)
+from .template import Template
+from .runs import inside_runs, quality_options, runs_overlap
 
 __all__ = ["BlockEngine", "detect_onsets", "detect_onsets_recording"]
 

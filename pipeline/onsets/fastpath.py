@@ -34,7 +34,7 @@ import time
 
 import numpy as np
 
-from meshphase.runtime.numba_cache import import_kernels
+from ..runtime.numba_cache import import_kernels
 
 __all__ = ["ENGINES", "HAVE_NUMBA", "DENSE_PULSES", "check_engine", "dense", "run_maxima",
            "refine_pulses", "warmup"]

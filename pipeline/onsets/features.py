@@ -8,8 +8,8 @@ import math
 import numpy as np
 from scipy import ndimage
 
-from meshphase.signal.savgol import savgol_coeffs_cached, savgol_filter
-from meshphase.signal.spectral import resample
+from ..signal.savgol import savgol_coeffs_cached, savgol_filter
+from ..signal.spectral import resample
 
 __all__ = ["template_features"]
 

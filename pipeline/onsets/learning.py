@@ -14,12 +14,12 @@ import math
 import numpy as np
 from scipy import fft as sfft
 
-from meshphase.signal.spectral import tukey
-from meshphase.validate import as_choice, as_float, as_positive, as_positive_int, as_signal
-from meshphase.onsets.coarse import coarse_decimated, decimate, decimation_for, fill_nan
-from meshphase.onsets.features import template_features
-from meshphase.onsets.matched import gather_windows, Matcher, sublags, window_baseline
-from meshphase.onsets.template import Template
+from ..signal.spectral import tukey
+from ..validate import as_choice, as_float, as_positive, as_positive_int, as_signal
+from .coarse import coarse_decimated, decimate, decimation_for, fill_nan
+from .features import template_features
+from .matched import gather_windows, Matcher, sublags, window_baseline
+from .template import Template
 
 __all__ = ["learn_template", "estimate_pulse_width", "half_length", "learn_decimated", "refine_width",
            "width_autocorr"]

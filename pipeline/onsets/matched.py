@@ -14,7 +14,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from scipy import fft as sfft
 
-from meshphase.onsets.template import Template
+from .template import Template
 
 __all__ = ["Matcher", "gather_windows", "sublags", "window_baseline"]
 

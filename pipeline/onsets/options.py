@@ -8,10 +8,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from meshphase.validate import as_choice, as_float, as_nonnegative, as_positive, as_positive_int
-from meshphase.onsets.fastpath import check_engine
-from meshphase.onsets.template import Template
-from meshphase.onsets.runs import check_runs
+from ..validate import as_choice, as_float, as_nonnegative, as_positive, as_positive_int
+from .fastpath import check_engine
+from .template import Template
+from .runs import check_runs
 
 __all__ = ["DetectOptions", "check_options", "DEFAULT_BLOCK"]
 

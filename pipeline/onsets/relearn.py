@@ -36,8 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from meshphase.signal.median import median_of_finite
-from meshphase.onsets.template import Template
+from ..signal.median import median_of_finite
+from .template import Template
 
 __all__ = ["TemplateFit", "good_median", "pulse_period", "timing_bound", "SHIFT_TOL", "NCC_ABS",
            "NCC_REL"]

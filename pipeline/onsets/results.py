@@ -7,8 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from meshphase.signal.noise_spectrum import NoiseSpectrum
-from meshphase.onsets.timing import OnsetTiming, TemplateTiming
+from ..signal.noise_spectrum import NoiseSpectrum
+from .timing import OnsetTiming, TemplateTiming
 
 __all__ = ["CoarsePeaks", "Onsets", "FLAG_GAP", "FLAG_CLIPPED", "FLAG_LOW_CORR",
            "FLAG_EDGE", "FLAG_TEMPLATE", "FLAG_NAMES", "empty_onsets"]

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from meshphase.signal.condition import ChannelQuality, merge_runs
+from ..signal.condition import ChannelQuality, merge_runs
 
 __all__ = ["runs_overlap", "inside_runs", "check_runs", "time_runs", "quality_options"]
 

@@ -8,13 +8,13 @@ from typing import Iterable
 
 import numpy as np
 
-from meshphase.errors import DataQualityWarning
-from meshphase.recording import Recording
-from meshphase.validate import as_signal
-from meshphase.onsets.engine import BlockEngine
-from meshphase.onsets.options import check_options
-from meshphase.onsets.results import Onsets, empty_onsets
-from meshphase.onsets.runs import time_runs
+from ..errors import DataQualityWarning
+from ..recording import Recording
+from ..validate import as_signal
+from .engine import BlockEngine
+from .options import check_options
+from .results import Onsets, empty_onsets
+from .runs import time_runs
 
 __all__ = ["OnsetStream", "detect_onsets_stream"]
 

@@ -17,9 +17,9 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from meshphase.signal.crb import crb_delay_std, crb_delay_std_psd
-from meshphase.signal.noise_spectrum import NoiseSpectrum
-from meshphase.onsets.template import Template
+from ..signal.crb import crb_delay_std, crb_delay_std_psd
+from ..signal.noise_spectrum import NoiseSpectrum
+from .template import Template
 
 __all__ = ["OnsetTiming", "TemplateTiming", "ONSET_RESOLUTION", "timing_centre", "centre_shifts",
            "unit_bound"]

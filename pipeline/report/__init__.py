@@ -6,6 +6,6 @@
                    imported on its own: it loads matplotlib.pyplot)
 """
 
-from meshphase.report.html import Report, Section
+from .html import Report, Section
 
 __all__ = ["Report", "Section"]

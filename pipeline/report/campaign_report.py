@@ -24,8 +24,8 @@ from typing import Callable
 
 import numpy as np
 
-from meshphase.io import atomic_path
-from meshphase.report.html import Report, escape, figure_to_png
+from ..io import atomic_path
+from .html import Report, escape, figure_to_png
 
 __all__ = ["build_campaign_report", "figure_png", "phasing_across_recordings", "load_sharing_across_recordings",
            "residual_rms_across_recordings", "wall_times_across_recordings", "pyplot"]

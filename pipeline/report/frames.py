@@ -17,7 +17,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from meshphase.compare.predict import wrap
+from ..compare.predict import wrap
 
 __all__ = ["RunResults", "COLUMNS", "passes_rows", "phasing_rows", "load_sharing_rows", "comparison_rows",
            "identification_rows", "centroid_rows", "frame", "circular_mean"]

@@ -13,9 +13,9 @@ import numpy as np
 
 import matplotlib.pyplot as plt
 
-from meshphase.compare.pass_model import wrap
-from meshphase.recording import Recording
-from meshphase.report.frames import RunResults, load_sharing_rows, passes_rows, phasing_rows
+from ..compare.pass_model import wrap
+from ..recording import Recording
+from .frames import RunResults, load_sharing_rows, passes_rows, phasing_rows
 
 __all__ = ["plot_recording", "plot_channels", "plot_result_onsets", "plot_phasing", "plot_load_sharing",
            "plot_residuals", "onset_marks"]

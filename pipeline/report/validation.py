@@ -15,12 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
-from meshphase.io.channels import mapping_report
-from meshphase.compare.predict import RECORD_FACTORS, identification_verdict, wrap
-from meshphase.models.bearing import BearingMoments
-from meshphase.models.tilt import TABLE11_THEORY, table10_cases, table11_cases
-from meshphase.report import figures
-from meshphase.report.html import Report, figure_to_png
+from ..io.channels import mapping_report
+from ..compare.predict import RECORD_FACTORS, identification_verdict, wrap
+from ..models.bearing import BearingMoments
+from ..models.tilt import TABLE11_THEORY, table10_cases, table11_cases
+from . import figures
+from .html import Report, figure_to_png
 
 __all__ = ["build_report", "SECTION_KEYS"]
 

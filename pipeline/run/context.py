@@ -10,11 +10,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Callable, Generic, TypeVar
 
-from meshphase.models.gearset import Gearset
-from meshphase.run import results
-from meshphase.run.declare import STAGE_REGISTRY, check_registry
-from meshphase.run.results import PhasingStage, StageResult
-from meshphase.run.state import RunMessage, StageFailure
+from ..models.gearset import Gearset
+from . import results
+from .declare import STAGE_REGISTRY, check_registry
+from .results import PhasingStage, StageResult
+from .state import RunMessage, StageFailure
 
 __all__ = ["RunContext", "phasing_verdict", "result_types", "RESULT_TYPES"]
 

@@ -46,10 +46,10 @@ import re
 
 import numpy as np
 
-from meshphase.io.base import recording_read_errors  # noqa: F401 (public here too)
-from meshphase.recording import GAUGE_KINDS
-from meshphase.run.declare import RESULT_OF_STAGE
-from meshphase.run.state import FailureKind, RunMessage
+from ..io.base import recording_read_errors  # noqa: F401 (public here too)
+from ..recording import GAUGE_KINDS
+from .declare import RESULT_OF_STAGE
+from .state import FailureKind, RunMessage
 
 __all__ = ["EXIT_OK", "EXIT_ERROR", "EXIT_USAGE", "EXIT_PARTIAL", "EXIT_INTERRUPTED",
            "EXIT_PIPE", "RESULT_OF_STAGE", "run_status", "status_line", "recording_read_errors"]
@@ -233,7 +233,7 @@ def run_status(ctx) -> dict:
                for s in failed if s in RESULT_OF_STAGE]
     empty = _empty_results(ctx, failed)
     # a run's results: not loaded for the command line's start-up (meshphase --help)
-    from meshphase.run.context import phasing_verdict
+    from .context import phasing_verdict
 
     rel = phasing_verdict(ctx.phasing, ctx.messages)
     unreliable = {g: list(v["reasons"]) for g, v in rel.items() if not v["reliable"]}

@@ -24,10 +24,10 @@ from pathlib import Path
 
 # one definition of "this host" and "that writer is gone" for the temp files and the
 # output folders (a process under another user counts as alive: not ours to recover)
-from meshphase import __version__
-from meshphase.io import atomic_path
-from meshphase.io.atomic import WRITE_FULL, SignalGuard, host_tag, pid_alive
-from meshphase.runtime.log import logger
+from ..version import __version__
+from ..io import atomic_path
+from ..io.atomic import WRITE_FULL, SignalGuard, host_tag, pid_alive
+from ..runtime.log import logger
 
 __all__ = ["OutputDir", "output_write_errors", "new_output_dir", "free_output_name",
            "foreign_entries", "recover_output_dirs", "published_path", "remove_partial",

@@ -26,14 +26,14 @@ from pathlib import Path
 
 import numpy as np
 
-from meshphase.compare.predict import identification_verdict
-from meshphase.jsonable import to_jsonable
-from meshphase.run.context import RunContext, phasing_verdict
-from meshphase.run.exits import run_status
-from meshphase.run.outdir import new_output_dir
-from meshphase.run.results import PhasingStage
-from meshphase.run.state import failure_texts
-from meshphase.run.table_csv import write_csv
+from ..compare.predict import identification_verdict
+from ..jsonable import to_jsonable
+from .context import RunContext, phasing_verdict
+from .exits import run_status
+from .outdir import new_output_dir
+from .results import PhasingStage
+from .state import failure_texts
+from .table_csv import write_csv
 
 __all__ = ["new_output_dir", "summary_dict", "write_outputs"]
 
@@ -162,7 +162,7 @@ def write_outputs(ctx: RunContext, out_dir: Path, *, report: bool = True, summar
         out_dir / "stages.csv", columns=["stage", "wall_time_s", "error_estimate", "status"])
     files["arrays"] = _write_arrays(ctx, out_dir / "arrays.h5")
     if report:
-        from meshphase.report.validation import build_report  # matplotlib: only for the report
+        from ..report.validation import build_report  # matplotlib: only for the report
 
         files["report"] = build_report(ctx, out_dir)
     return files

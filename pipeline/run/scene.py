@@ -26,25 +26,24 @@ import tomllib
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from meshphase.data_schemas import schema_errors
 
-from meshphase import io
-from meshphase.io.bridge import BridgeConfig
-from meshphase.io.sources import scenario_config, scenario_names
-from meshphase.io.channels import (GAUGE_KINDS, ChannelMapError, apply_channel_overrides, check_gauges,
-                                    is_glob, map_channels)
-from meshphase.errors import DeprecatedNameWarning, SceneWarning
-from meshphase.models.assembly import (CLEARANCE_ATOL, assemblable_planet_counts, coaxiality_error,
-                                       max_equal_planets, tip_clearance)
-from meshphase.models.gearset import Gearset, Speeds, rpm_to_rad_s
-from meshphase.recording import Recording
-from meshphase.io.units import parse_unit
-from meshphase.runtime.registry import DEFAULT_ONSET_DETECTOR, ONSET_DETECTORS
-from meshphase.run.declare import gearset_stages, recording_stages, result_stages, stage_graph
+from .. import io
+from ..io.bridge import BridgeConfig
+from ..io.sources import scenario_config, scenario_names
+from ..io.channels import (GAUGE_KINDS, ChannelMapError, apply_channel_overrides, check_gauges,
+                           is_glob, map_channels)
+from ..errors import DeprecatedNameWarning, SceneWarning
+from ..models.assembly import (CLEARANCE_ATOL, assemblable_planet_counts, coaxiality_error,
+                               max_equal_planets, tip_clearance)
+from ..models.gearset import Gearset, Speeds, rpm_to_rad_s
+from ..recording import Recording
+from ..io.units import parse_unit
+from ..runtime.registry import DEFAULT_ONSET_DETECTOR, ONSET_DETECTORS
+from .declare import gearset_stages, recording_stages, result_stages, stage_graph
 
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "scene_schema_errors", "plan",
            "check_recording", "STAGES", "RESULTS", "LIMITS"]
@@ -511,7 +510,7 @@ def _parse_speeds(raw: dict, gearset: Gearset | None, err) -> tuple[Speeds | Non
     speeds = None
     if "speeds" not in raw or gearset is None:
         return speeds, None
-    from meshphase.kinematics.angles import typed_resolution   # angles imports scipy.optimize: only when needed
+    from ..kinematics.angles import typed_resolution   # angles imports scipy.optimize: only when needed
 
     s = raw["speeds"]
     conv = {}
@@ -776,7 +775,7 @@ def _parse_input_mcap(inp: dict, err) -> dict:
     ``gear``, ``tooth``, ``face_position_mm``, ``description``), ``fs`` [Hz], ``max_jitter``
     [s], ``stamp``. The mapping is checked here (:func:`meshphase.io.mcap.parse_topics`);
     the file against it when it is read."""
-    from meshphase.io.mcap import parse_topics  # the MCAP mapping: only scenes that give one
+    from ..io.mcap import parse_topics  # the MCAP mapping: only scenes that give one
 
     if "recording" not in inp:
         raise err(["input", "mcap"], "[input.mcap] maps the topics of an MCAP recording file: "
@@ -892,8 +891,8 @@ def _check_gearset(gearset: Gearset, g: dict, profile_shift: bool, err) -> Gears
     ``[gearset]`` table as written); returns the gearset with typed planet angles snapped to
     the assemblable ones."""
     # heavy: angles imports scipy.optimize, mesh_phasing numba; only a gearset needs them
-    from meshphase.kinematics.angles import typed_resolution
-    from meshphase.models.mesh_phasing import assembly_check
+    from ..kinematics.angles import typed_resolution
+    from ..models.mesh_phasing import assembly_check
 
     zs, zr, zp = gearset.z_sun, gearset.z_ring, gearset.z_planet
     n = gearset.n_planets
@@ -1037,7 +1036,7 @@ def _check_monte_carlo(scene: Scene, err) -> None:
     above ``LIMITS["mc_evals_max"]``, a SceneWarning with the run-time estimate above
     ``LIMITS["samples_warn"]`` realisations."""
     # heavy: tolerance imports scipy.stats and numba; only a Monte Carlo scene needs it
-    from meshphase.models.tolerance import default_n_times, observation_window
+    from ..models.tolerance import default_n_times, observation_window
 
     t, sp, g = scene.tolerances, scene.speeds, scene.gearset
     if t is None or sp is None or g is None:

@@ -24,48 +24,48 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from meshphase.kinematics.angles import held_member
-from meshphase.io.bridge import bridge_recording
-from meshphase.io.sources import BridgeSource, generator
-from meshphase.io.channels import (GAUGE_KINDS, apply_channel_overrides, bridge_configs, channels_present,
-                                    check_gauges, entry_values, map_channels, mapped_specs, overridden,
-                                    unmapped_message)
-from meshphase.compare.predict import band_coverage, identify_errors, predict_pass_phasing, residual_stats
-from meshphase.kinematics.encoder import edge_timing_sigma
-from meshphase.errors import DataQualityWarning, MeshphaseWarning, ProcessingWarning, SceneWarning
-from meshphase.run.exits import recording_read_errors, run_status
-from meshphase.kinematics.loads import facewidth_centroid, facewidth_readings, load_sharing_from_amplitudes
-from meshphase.runtime.log import logger
-from meshphase.kinematics.member_speeds import mean_mesh_rate, member_speeds, tacho_rate
-from meshphase.models.gearset import Speeds
-from meshphase.models.mesh_phasing import assembly_check, classify_phasing, ideal_phasing
-from meshphase.onsets import ONSET_RESOLUTION, detect_recording  # noqa: F401 (ONSET_RESOLUTION was here)
-from meshphase.onsets.results import Onsets, empty_onsets
-from meshphase.run.outputs import new_output_dir, summary_dict, write_outputs  # noqa: F401 (public here)
-from meshphase.kinematics.passes import gap_intervals_of, gauge_passes
-from meshphase.kinematics.pass_rates import pass_rate_warnings, two_level_train, wiring_findings
-from meshphase.kinematics.phasing import (PassTable, assign_planets_by_pattern, measure_phasing, pass_order,
-                                          relabel_gauge)
-from meshphase.recording import Recording, RecordingHeader
-from meshphase.run.context import RunContext
-from meshphase.run.declare import STAGE_REGISTRY
-from meshphase.run.outdir import OutputDir, output_write_errors
-from meshphase.run.results import (BearingStage, CentroidsStage, CompareStage, ConditionStage,
-                                   GaugeComparison, IdealStage, IdentifyStage, LoadSharingStage, LoadStage,
-                                   OnsetsStage, PhasingStage, StageResult, TiltStage,
-                                   ToleranceStage)
-from meshphase.run.scene import STAGES, Scene, SceneError, load_scene, plan, read_options
-from meshphase.run.state import RunMessage, StageFailure, flagged_warning
-from meshphase.run.stream import (BLOCK_SAMPLES, ChannelPlan, FileSource, GeneratorSource, MemorySource,
-                                  condition_stream, scan_source)
-from meshphase.runtime.threads import blas_single_thread
-from meshphase.compare.truth import phasing_vs_truth, tacho_geometry, true_errors
-from meshphase.io.units import gauge_unit_gains
-from meshphase.validate import as_regular_file
+from ..kinematics.angles import held_member
+from ..io.bridge import bridge_recording
+from ..io.sources import BridgeSource, generator
+from ..io.channels import (GAUGE_KINDS, apply_channel_overrides, bridge_configs, channels_present,
+                           check_gauges, entry_values, map_channels, mapped_specs, overridden,
+                           unmapped_message)
+from ..compare.predict import band_coverage, identify_errors, predict_pass_phasing, residual_stats
+from ..kinematics.encoder import edge_timing_sigma
+from ..errors import DataQualityWarning, MeshphaseWarning, ProcessingWarning, SceneWarning
+from .exits import recording_read_errors, run_status
+from ..kinematics.loads import facewidth_centroid, facewidth_readings, load_sharing_from_amplitudes
+from ..runtime.log import logger
+from ..kinematics.member_speeds import mean_mesh_rate, member_speeds, tacho_rate
+from ..models.gearset import Speeds
+from ..models.mesh_phasing import assembly_check, classify_phasing, ideal_phasing
+from ..onsets import ONSET_RESOLUTION, detect_recording  # noqa: F401 (ONSET_RESOLUTION was here)
+from ..onsets.results import Onsets, empty_onsets
+from .outputs import new_output_dir, summary_dict, write_outputs  # noqa: F401 (public here)
+from ..kinematics.passes import gap_intervals_of, gauge_passes
+from ..kinematics.pass_rates import pass_rate_warnings, two_level_train, wiring_findings
+from ..kinematics.phasing import (PassTable, assign_planets_by_pattern, measure_phasing, pass_order,
+                                  relabel_gauge)
+from ..recording import Recording, RecordingHeader
+from .context import RunContext
+from .declare import STAGE_REGISTRY
+from .outdir import OutputDir, output_write_errors
+from .results import (BearingStage, CentroidsStage, CompareStage, ConditionStage,
+                      GaugeComparison, IdealStage, IdentifyStage, LoadSharingStage, LoadStage,
+                      OnsetsStage, PhasingStage, StageResult, TiltStage,
+                      ToleranceStage)
+from .scene import STAGES, Scene, SceneError, load_scene, plan, read_options
+from .state import RunMessage, StageFailure, flagged_warning
+from .stream import (BLOCK_SAMPLES, ChannelPlan, FileSource, GeneratorSource, MemorySource,
+                     condition_stream, scan_source)
+from ..runtime.threads import blas_single_thread
+from ..compare.truth import phasing_vs_truth, tacho_geometry, true_errors
+from ..io.units import gauge_unit_gains
+from ..validate import as_regular_file
 
 if TYPE_CHECKING:  # the model modules of bearing, tilt and tolerance load in their stages:
     # `meshphase process` runs none of them (nor does a scene that does not ask for them)
-    from meshphase.models.tolerance import Tolerances
+    from ..models.tolerance import Tolerances
 
 __all__ = ["RunContext", "run_scene", "STAGE_FUNCTIONS", "write_outputs", "process_recording",
            "new_output_dir"]
@@ -682,7 +682,7 @@ def _tolerances(ctx: RunContext, tolerance) -> "Tolerances":
 def stage_tolerance(ctx: RunContext) -> ToleranceStage:
     """Monte Carlo phasing statistics under the scene's tolerances."""
     # scipy.stats and numba behind it: loaded only by a scene that asks for the Monte Carlo
-    from meshphase.models import tolerance
+    from ..models import tolerance
 
     g = ctx.gearset
     t = ctx.scene.tolerances
@@ -780,7 +780,7 @@ def stage_compare(ctx: RunContext) -> CompareStage:
 def _bearing_case(ctx: RunContext) -> tuple:
     """(seed 001 case, input torque [N·m]) of the scene's [bearing] table."""
     # the bearing and tilt models load only for a scene that asks for them
-    from meshphase.models import bearing
+    from ..models import bearing
 
     b = ctx.scene.bearing
     case = bearing.seed_case(b["case"])
@@ -791,7 +791,7 @@ def _bearing_case(ctx: RunContext) -> tuple:
 def stage_bearing_moments(ctx: RunContext) -> BearingStage:
     """Bearing moments of the scene's seed 001 case: concentrated, with the scene's centroid
     offsets and (single pinion) with the measured centroids."""
-    from meshphase.models import bearing
+    from ..models import bearing
 
     b = ctx.scene.bearing
     case, torque = _bearing_case(ctx)
@@ -814,7 +814,7 @@ def stage_bearing_moments(ctx: RunContext) -> BearingStage:
 @runs("tilt")
 def stage_tilt(ctx: RunContext) -> TiltStage:
     """The coupled tilt / load-distribution solve at each of the scene's tilt stiffnesses."""
-    from meshphase.models.tilt import solve_tilt  # scipy.optimize
+    from ..models.tilt import solve_tilt  # scipy.optimize
 
     b = ctx.scene.bearing
     case, torque = _bearing_case(ctx)

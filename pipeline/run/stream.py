@@ -35,7 +35,7 @@ the whole-array filter does. The drift baseline is computed from the same block 
 at least two) as the whole array; its output for a sample waits until every block value that
 sample depends on is known (about 9 blocks ahead, further across a gap; stretches of all-NaN
 samples are held as their length only). So the conditioned signal equals the whole-array
-:func:`meshphase.signal.condition.condition_recording` to ~1e-12 of its amplitude and the onset
+:func:`meshphase.conditioning.condition_recording` to ~1e-12 of its amplitude and the onset
 times equal those of :func:`meshphase.onsets.detect_onsets_recording` to far below a
 microsample (tests/processing/test_stream.py states and checks the tolerances).
 
@@ -69,23 +69,23 @@ from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
 import numpy as np
-from meshphase.errors import DataQualityWarning
-from meshphase.io.sources import FileSource, GeneratorSource, StreamedRecording
-from meshphase.io.sources import blocks_ahead
-from meshphase.kinematics.encoder import pulse_levels, rising_crossing_parts
-from meshphase.onsets import DEFAULT_BLOCK, DEFAULT_DETECTOR, make_detector
-from meshphase.recording import BlockSource, MemorySource, Recording
-from meshphase.runtime.threads import thread_pool
-from meshphase.signal import drift as drift_filters
-from meshphase.signal import iir
-from meshphase.signal.blocks import ConditioningChain, Identity, push_chains
-from meshphase.signal.condition import (NOTCH_Q, band_limit, design_notch, detect_hum, drift_highpass,
-                                        notch_settle, settle_time)
-from meshphase.signal.drift import DriftFilter
-from meshphase.signal.quality import (ChannelQuality, ChannelScan, RunTracker, quality_from_scan,
-                                      warn_quality)
-from meshphase.signal.snr import SNR_SAMPLES, SnrTap, finite_pairs
-from meshphase.signal.zero_phase import ZeroPhase
+from ..errors import DataQualityWarning
+from ..io.sources import FileSource, GeneratorSource, StreamedRecording
+from ..io.sources import blocks_ahead
+from ..kinematics.encoder import pulse_levels, rising_crossing_parts
+from ..onsets import DEFAULT_BLOCK, DEFAULT_DETECTOR, make_detector
+from ..recording import BlockSource, MemorySource, Recording
+from ..runtime.threads import thread_pool
+from ..signal import drift as drift_filters
+from ..signal import iir
+from ..signal.blocks import ConditioningChain, Identity, push_chains
+from ..signal.condition import (NOTCH_Q, band_limit, design_notch, detect_hum, drift_highpass,
+                                notch_settle, settle_time)
+from ..signal.drift import DriftFilter
+from ..signal.quality import (ChannelQuality, ChannelScan, RunTracker, quality_from_scan,
+                              warn_quality)
+from ..signal.snr import SNR_SAMPLES, SnrTap, finite_pairs
+from ..signal.zero_phase import ZeroPhase
 
 __all__ = ["StreamedRecording", "BlockSource", "FileSource", "MemorySource", "GeneratorSource",
            "RawScan",
@@ -440,7 +440,7 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
                      filter_engine: str = "auto") -> StreamResult:
     """Pass 3: condition the planned channels and detect onsets on the gauges, streamed.
 
-    The chain per channel is that of :func:`meshphase.signal.condition.condition_recording`
+    The chain per channel is that of :func:`meshphase.conditioning.condition_recording`
     (dropouts to NaN, hum notches for the lines found in the first ``HUM_SECONDS``, drift
     removal, band limit) with its defaults; channels of one ``group`` share the gap guard
     ``settle`` as channels conditioned in one call do there.
@@ -453,7 +453,7 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
         Its passes 1 and 2 (:func:`scan_source`).
     plans : sequence of ChannelPlan
     hum, drift, drift_window, lowpass, highpass, order, warn
-        As :func:`meshphase.signal.condition.condition_recording`.
+        As :func:`meshphase.conditioning.condition_recording`.
     block : int
         Samples per channel read at a time.
     memory_budget : float

@@ -18,7 +18,7 @@ from typing import Protocol
 
 import numpy as np
 
-from meshphase.signal.zero_phase import ZeroPhase, push_pair
+from .zero_phase import ZeroPhase, push_pair
 
 __all__ = ["BlockFilter", "Identity", "ConditioningChain", "run_whole", "push_chains"]
 

@@ -46,7 +46,7 @@ import math
 
 import numpy as np
 
-from meshphase.validate import as_nonnegative, as_positive
+from ..validate import as_nonnegative, as_positive
 
 __all__ = ["crb_delay_std", "crb_delay_std_psd", "welch_dof"]
 

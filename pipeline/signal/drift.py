@@ -18,10 +18,10 @@ import math
 import numpy as np
 from scipy import ndimage
 
-from meshphase.signal.blocks import run_whole
-from meshphase.signal.median import MAD_TO_SIGMA, median_and_mad
-from meshphase.signal.savgol import savgol_filter
-from meshphase.validate import as_choice, as_positive, as_signal
+from .blocks import run_whole
+from .median import MAD_TO_SIGMA, median_and_mad
+from .savgol import savgol_filter
+from ..validate import as_choice, as_positive, as_signal
 
 __all__ = ["DriftFilter", "PendingSamples", "drift_baseline", "drift_window", "block_medians",
            "block_means", "level_steps", "minus_interp", "STEP_SPREADS",

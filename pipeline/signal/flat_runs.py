@@ -98,8 +98,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from meshphase.signal.median import median_of_finite, sigma_of_differences
-from meshphase.signal.runs import EqualRuns, as_count, as_samples, equal_runs
+from .median import median_of_finite, sigma_of_differences
+from .runs import EqualRuns, as_count, as_samples, equal_runs
 
 __all__ = ["quantisation_step", "chance_min_run", "FlatRuns", "flat_runs", "dropout_runs",
            "plateau_runs", "FlatScan", "FlatStats", "FlatCandidates", "classify_flat_runs",

@@ -37,9 +37,9 @@ import time
 
 import numpy as np
 
-from meshphase.runtime.log import logger
-from meshphase.runtime.numba_cache import import_kernels
-from meshphase.signal.sos_design import butter_sos, sosfilt_zi
+from ..runtime.log import logger
+from ..runtime.numba_cache import import_kernels
+from .sos_design import butter_sos, sosfilt_zi
 
 __all__ = ["ENGINES", "HAVE_NUMBA", "NUMBA_SAMPLES", "pick_engine", "padlen_for",
            "sosfiltfilt", "sosfiltfilt_pair", "extended", "filter_extended",

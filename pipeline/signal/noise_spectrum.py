@@ -51,9 +51,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from meshphase.signal.crb import welch_dof
-from meshphase.signal.spectral import welch
-from meshphase.validate import as_float, as_positive
+from .crb import welch_dof
+from .spectral import welch
+from ..validate import as_float, as_positive
 
 __all__ = ["NoiseSpectrum", "pulse_residual_psd"]
 

@@ -18,14 +18,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from meshphase.errors import DataQualityWarning
-from meshphase.signal.flat_runs import (CLIP_MIN_RUN, DROPOUT_MIN_RUN, FALSE_ALARM, FLAT_WINDOW, FlatCandidates,
-                                        FlatRuns, FlatScan, FlatStats, chance_min_run, check_false_alarm,
-                                        classify_flat_runs, dropout_runs, flat_runs, plateau_runs,
-                                        quantisation_step)
-from meshphase.signal.runs import (RunTracker, as_count, as_samples, equal_runs, find_runs, merge_runs,
-                                   nonfinite_runs, outside_runs)
-from meshphase.validate import as_choice
+from ..errors import DataQualityWarning
+from .flat_runs import (CLIP_MIN_RUN, DROPOUT_MIN_RUN, FALSE_ALARM, FLAT_WINDOW, FlatCandidates,
+                        FlatRuns, FlatScan, FlatStats, chance_min_run, check_false_alarm,
+                        classify_flat_runs, dropout_runs, flat_runs, plateau_runs,
+                        quantisation_step)
+from .runs import (RunTracker, as_count, as_samples, equal_runs, find_runs, merge_runs,
+                   nonfinite_runs, outside_runs)
+from ..validate import as_choice
 
 __all__ = ["find_runs", "nonfinite_runs", "clipped_runs", "channel_quality", "equal_runs",
            "quantisation_step", "chance_min_run", "FlatRuns", "flat_runs", "dropout_runs",
@@ -120,7 +120,7 @@ class ChannelQuality:
 
     The one quality report of the package. :func:`quality_from_scan` makes it from a
     :class:`ChannelScan` (whole arrays and streamed blocks alike);
-    :func:`meshphase.signal.condition.assess_quality`, :func:`meshphase.signal.condition.condition_recording`
+    :func:`meshphase.signal.condition.assess_quality`, :func:`meshphase.conditioning.condition_recording`
     and :func:`meshphase.run.stream.condition_stream` return it, the conditioning steps adding
     their findings (SNR, hum, ``settle``, ``conditioned_gap_runs``) to a copy
     (:func:`dataclasses.replace`). Two plain forms: :meth:`to_dict` (a conditioned channel's
@@ -161,7 +161,7 @@ class ChannelQuality:
         Noise standard deviation estimate [units].
     settle : float
         Guard time around gaps within which filter transients may distort the data [s]
-        (set by :func:`meshphase.signal.condition.condition_recording`; the onset stage flags pulses
+        (set by :func:`meshphase.conditioning.condition_recording`; the onset stage flags pulses
         that close).
     hum : HumReport or None
         Mains hum found (None when not examined).
@@ -179,7 +179,7 @@ class ChannelQuality:
     conditioned_gap_runs : ndarray of int64, shape (k, 2), or None
         Runs of non-finite samples of the conditioned channel: its gaps and dropouts plus
         the stretches between gaps too short for the filters (set by
-        :func:`meshphase.signal.condition.condition_recording` and the streaming stage; None when not
+        :func:`meshphase.conditioning.condition_recording` and the streaming stage; None when not
         conditioned). What the phasing stage checks a pulse's window against.
     min, max : float
         Smallest and largest finite raw sample [units]; NaN when none is finite.

@@ -14,9 +14,9 @@ import math
 import numpy as np
 from scipy import ndimage
 
-from meshphase.signal.median import median_of_finite, sigma_of_differences
-from meshphase.signal.runs import find_runs, merge_runs
-from meshphase.validate import as_float, as_signal
+from .median import median_of_finite, sigma_of_differences
+from .runs import find_runs, merge_runs
+from ..validate import as_float, as_signal
 
 __all__ = ["SnrTap", "estimate_noise", "estimate_snr", "finite_pairs", "subsample", "SNR_SAMPLES"]
 

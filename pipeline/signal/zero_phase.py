@@ -21,9 +21,9 @@ from typing import Callable
 
 import numpy as np
 
-from meshphase.errors import DataQualityWarning
-from meshphase.signal import iir
-from meshphase.signal.runs import find_runs, merge_runs
+from ..errors import DataQualityWarning
+from . import iir
+from .runs import find_runs, merge_runs
 
 __all__ = ["ZeroPhase", "apply_finite", "finite_apply_gaps", "filter_overlap", "push_pair",
            "DECAY", "FILL_MAX", "CHUNK"]

@@ -14,12 +14,9 @@ from hypothesis import example, given, settings, strategies as st
 
 from scipy.signal import find_peaks
 
-from meshphase.signal.condition import (ChannelQuality, Conditioned, HumReport, assess_quality,
-                                        assess_quality_recording, condition_recording, default_band,
-                                        design_filter, detect_hum, drift_baseline, estimate_noise, level_steps,
-                                        estimate_snr, filter_recording, filter_signal, gap_intervals,
-                                        merge_runs, notch_hum, notch_hum_recording, remove_drift,
-                                        remove_drift_recording)
+from meshphase.conditioning import (Conditioned, assess_quality_recording, condition_recording, filter_recording,
+                                    notch_hum_recording, remove_drift_recording)
+from meshphase.signal.condition import (ChannelQuality, HumReport, assess_quality, default_band, design_filter, detect_hum, drift_baseline, estimate_noise, level_steps, estimate_snr, filter_signal, gap_intervals, merge_runs, notch_hum, remove_drift)
 from meshphase.errors import DataQualityWarning, ProcessingWarning
 from meshphase.onsets import FLAG_CLIPPED, FLAG_GAP, detect_onsets_recording
 from meshphase.signal.quality import clipped_runs, find_runs

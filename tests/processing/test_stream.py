@@ -30,7 +30,8 @@ from scipy import signal
 from meshphase import io
 
 from meshphase.signal import iir
-from meshphase.signal.condition import condition_recording, drift_baseline, quality_from_scan
+from meshphase.conditioning import condition_recording
+from meshphase.signal.condition import drift_baseline, quality_from_scan
 from meshphase.errors import DataQualityWarning, ProcessingWarning
 from meshphase.onsets import OnsetStream, detect_onsets, detect_onsets_recording
 from meshphase.signal.quality import ChannelScan, FlatScan, channel_quality, classify_flat_runs

@@ -54,17 +54,17 @@ recording header, per-file cache), ``chunks`` (the chunk reader), ``reader`` (:f
 :func:`read_info`, :func:`iter_blocks`) and ``writer`` (:func:`write`, :func:`write_blocks`).
 """
 
-from meshphase.io.mcap.crc import crc32_combine
-from meshphase.io.mcap.layout import (COMPRESSIONS, DEFAULT_BLOCK, DEFAULT_CHUNK_SIZE, FORMAT, FORMAT_VERSION, HEADER_SIZE,
-                                      LAYOUT, MAGIC, MESSAGE_ENCODING, NAME, PROFILE, RECORDING_METADATA,
-                                      SCHEMA_ENCODING, SCHEMA_NAME, log_time_ns, sniff)
-from meshphase.io.mcap.foreign import describe, read_foreign
-from meshphase.io.mcap.foxglove import FOXGLOVE_METADATA, FOXGLOVE_SCHEMA_NAME, LAYOUTS, write_foxglove
-from meshphase.io.mcap.header import ForeignMcapError
-from meshphase.io.mcap.mapping import TopicField, parse_field_path, parse_topics
-from meshphase.io.mcap.reader import iter_blocks, read, read_info
-from meshphase.io.mcap.timing import fit_grid
-from meshphase.io.mcap.writer import write, write_blocks
+from .crc import crc32_combine
+from .layout import (COMPRESSIONS, DEFAULT_BLOCK, DEFAULT_CHUNK_SIZE, FORMAT, FORMAT_VERSION, HEADER_SIZE,
+                     LAYOUT, MAGIC, MESSAGE_ENCODING, NAME, PROFILE, RECORDING_METADATA,
+                     SCHEMA_ENCODING, SCHEMA_NAME, log_time_ns, sniff)
+from .foreign import describe, read_foreign
+from .foxglove import FOXGLOVE_METADATA, FOXGLOVE_SCHEMA_NAME, LAYOUTS, write_foxglove
+from .header import ForeignMcapError
+from .mapping import TopicField, parse_field_path, parse_topics
+from .reader import iter_blocks, read, read_info
+from .timing import fit_grid
+from .writer import write, write_blocks
 
 __all__ = ["NAME", "FORMAT", "MAGIC", "SCHEMA_NAME", "MESSAGE_ENCODING",
            "RECORDING_METADATA", "COMPRESSIONS", "DEFAULT_BLOCK", "sniff", "read_info", "read",

@@ -6,11 +6,11 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from meshphase.io.base import CorruptFileError, RecordingFileError
-from meshphase.io.mcap.crc import crc32
-from meshphase.io.mcap.header import LIB_ERRORS, Layout
-from meshphase.io.mcap.layout import (CHUNK_HEAD, HEADER, MAX_RECORD, MSG_HEAD, OP_CHUNK, OP_MESSAGE, REC, U64,
-                                      FORMAT_VERSION, HEADER_SIZE)
+from ..base import CorruptFileError, RecordingFileError
+from .crc import crc32
+from .header import LIB_ERRORS, Layout
+from .layout import (CHUNK_HEAD, HEADER, MAX_RECORD, MSG_HEAD, OP_CHUNK, OP_MESSAGE, REC, U64,
+                     FORMAT_VERSION, HEADER_SIZE)
 
 __all__: list[str] = []
 

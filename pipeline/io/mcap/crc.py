@@ -8,9 +8,9 @@ import zlib
 from functools import lru_cache
 from pathlib import Path
 
-from meshphase.validate import as_int
-from meshphase.io.base import CorruptFileError
-from meshphase.io.mcap.layout import CHUNK_HEAD, OP_CHUNK, REC, U64, MAGIC
+from ...validate import as_int
+from ..base import CorruptFileError
+from .layout import CHUNK_HEAD, OP_CHUNK, REC, U64, MAGIC
 
 __all__ = ["crc32_combine"]
 

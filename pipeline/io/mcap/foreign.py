@@ -26,12 +26,12 @@ from mcap.decoder import DecoderFactory
 from mcap.exceptions import DecoderNotFoundError
 from mcap.reader import make_reader
 
-from meshphase.recording import ChannelSpec, Recording
-from meshphase.io.base import RecordingFileError, RecordingInfo, check_verify
-from meshphase.io.mcap.foxglove import FOXGLOVE_METADATA
-from meshphase.io.mcap.header import check_ends, lib_errors
-from meshphase.io.mcap.mapping import TopicField, TopicSummary, format_field_path, mapping_key, parse_topics
-from meshphase.io.mcap.timing import fit_grid
+from ...recording import ChannelSpec, Recording
+from ..base import RecordingFileError, RecordingInfo, check_verify
+from .foxglove import FOXGLOVE_METADATA
+from .header import check_ends, lib_errors
+from .mapping import TopicField, TopicSummary, format_field_path, mapping_key, parse_topics
+from .timing import fit_grid
 
 __all__ = ["read_foreign", "describe", "JsonDecoderFactory", "decoder_factories", "FOREIGN_OPTIONS"]
 

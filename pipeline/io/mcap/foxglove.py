@@ -22,9 +22,9 @@ import numpy as np
 from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, IndexType, Writer
 
-from meshphase.validate import as_choice
-from meshphase.io.base import regroup_blocks
-from meshphase.io.mcap.layout import DTYPE_CODES, MAX_LOG_TIME, COMPRESSIONS, dumps_metadata, log_time, origin_ns
+from ...validate import as_choice
+from ..base import regroup_blocks
+from .layout import DTYPE_CODES, MAX_LOG_TIME, COMPRESSIONS, dumps_metadata, log_time, origin_ns
 
 __all__ = ["write_foxglove", "FOXGLOVE_METADATA", "FOXGLOVE_SCHEMA_NAME", "DEFAULT_TOPIC", "LAYOUTS"]
 

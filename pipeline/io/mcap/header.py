@@ -20,11 +20,11 @@ import numpy as np
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
-from meshphase.recording import ChannelSpec
-from meshphase.io.base import CorruptFileError, RecordingFileError, RecordingInfo, check_verify
-from meshphase.io.mcap.crc import check_data_crc, check_summary_crc
-from meshphase.io.mcap.layout import (DTYPE_CODES, FORMAT_VERSION, MAGIC, MESSAGE_ENCODING, NAME, RECORDING_METADATA,
-                                      SCHEMA_ENCODING, SCHEMA_NAME, log_time, schema_problem)
+from ...recording import ChannelSpec
+from ..base import CorruptFileError, RecordingFileError, RecordingInfo, check_verify
+from .crc import check_data_crc, check_summary_crc
+from .layout import (DTYPE_CODES, FORMAT_VERSION, MAGIC, MESSAGE_ENCODING, NAME, RECORDING_METADATA,
+                     SCHEMA_ENCODING, SCHEMA_NAME, log_time, schema_problem)
 
 __all__: list[str] = ["ForeignMcapError"]
 

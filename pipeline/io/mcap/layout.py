@@ -8,9 +8,9 @@ import struct
 from functools import lru_cache
 from pathlib import Path
 
-from meshphase.jsonable import json_default
-from meshphase.validate import as_int, as_positive
-from meshphase.io.registry import FormatSpec
+from ...jsonable import json_default
+from ...validate import as_int, as_positive
+from ..registry import FormatSpec
 
 __all__ = ["NAME", "FORMAT", "MAGIC", "SCHEMA_NAME", "MESSAGE_ENCODING",
            "RECORDING_METADATA", "COMPRESSIONS", "DEFAULT_BLOCK", "sniff", "log_time_ns"]
@@ -80,7 +80,7 @@ OP_CHUNK = 0x06
 
 
 def _json_schema(filename: str) -> dict:
-    from meshphase import data_schemas
+    from ... import data_schemas
 
     if hasattr(data_schemas, "load_schema"):
         return data_schemas.load_schema(filename)

@@ -19,7 +19,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Any
 
-from meshphase.recording import CHANNEL_KINDS, ChannelSpec
+from ...recording import CHANNEL_KINDS, ChannelSpec
 
 __all__ = ["TopicField", "parse_topics", "parse_field_path", "format_field_path", "STAMP_SOURCES"]
 

@@ -10,13 +10,13 @@ from typing import Iterator
 
 import numpy as np
 
-from meshphase.recording import Recording
-from meshphase.validate import as_positive_int
-from meshphase.io.base import RecordingFileError, RecordingInfo, check_allocation
-from meshphase.io.mcap.chunks import ChunkReader, decode_message, chunk_payloads
-from meshphase.io.mcap.foreign import foreign_info, read_foreign
-from meshphase.io.mcap.header import ForeignMcapError, Layout, lib_errors, open_layout
-from meshphase.io.mcap.layout import MAX_LOG_TIME, MSG_HEAD, OP_MESSAGE, REC, FORMAT_VERSION, HEADER_SIZE
+from ...recording import Recording
+from ...validate import as_positive_int
+from ..base import RecordingFileError, RecordingInfo, check_allocation
+from .chunks import ChunkReader, decode_message, chunk_payloads
+from .foreign import foreign_info, read_foreign
+from .header import ForeignMcapError, Layout, lib_errors, open_layout
+from .layout import MAX_LOG_TIME, MSG_HEAD, OP_MESSAGE, REC, FORMAT_VERSION, HEADER_SIZE
 
 __all__ = ["read_info", "read", "iter_blocks"]
 

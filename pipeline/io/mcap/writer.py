@@ -9,13 +9,13 @@ import numpy as np
 
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, IndexType, Writer
 
-from meshphase.io.base import regroup_blocks
-from meshphase.recording import ChannelSpec, Recording
-from meshphase.validate import as_choice, as_positive_int
-from meshphase.io.mcap.foxglove import DEFAULT_TOPIC, LAYOUTS, write_foxglove
-from meshphase.io.mcap.layout import (DTYPE_CODES, HEADER, MAX_LOG_TIME, COMPRESSIONS, DEFAULT_BLOCK, DEFAULT_CHUNK_SIZE,
-                                      FORMAT_VERSION, HEADER_SIZE, LAYOUT, MESSAGE_ENCODING, PROFILE, RECORDING_METADATA,
-                                      SCHEMA_ENCODING, SCHEMA_NAME, dumps_metadata, log_time, origin_ns, schema_problem)
+from ..base import regroup_blocks
+from ...recording import ChannelSpec, Recording
+from ...validate import as_choice, as_positive_int
+from .foxglove import DEFAULT_TOPIC, LAYOUTS, write_foxglove
+from .layout import (DTYPE_CODES, HEADER, MAX_LOG_TIME, COMPRESSIONS, DEFAULT_BLOCK, DEFAULT_CHUNK_SIZE,
+                     FORMAT_VERSION, HEADER_SIZE, LAYOUT, MESSAGE_ENCODING, PROFILE, RECORDING_METADATA,
+                     SCHEMA_ENCODING, SCHEMA_NAME, dumps_metadata, log_time, origin_ns, schema_problem)
 
 __all__ = ["write", "write_blocks"]
 
