@@ -30,7 +30,7 @@ import re
 from dataclasses import dataclass
 from typing import Sequence
 
-from ..recording import GAUGE_KINDS, ChannelSpec
+from ..recording import GAUGE_KINDS, ChannelSpec, Recording
 
 __all__ = ["ChannelMapError", "ChannelMatch", "ChannelMap", "GAUGE_KINDS", "map_channels",
            "mapped_specs", "apply_channel_overrides", "check_gauges", "channels_present",
@@ -277,8 +277,6 @@ def apply_channel_overrides(rec, entries: Sequence[dict], source: str | None = N
     ChannelMapError
         As :func:`map_channels`.
     """
-    from ..recording import Recording
-
     if not isinstance(rec, Recording):
         raise TypeError(f"rec must be a Recording, got {type(rec).__name__}")
     if not entries:

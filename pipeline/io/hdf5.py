@@ -76,7 +76,7 @@ import numpy as np
 from ..errors import FormatWarning
 from ..jsonable import to_jsonable
 from ..runtime.log import logger
-from ..recording import Recording
+from ..recording import ChannelSpec, Recording
 from ..validate import as_choice, as_int, as_positive, as_positive_int
 from .base import (CLOCK_NAMES, CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime,
                    check_allocation, check_verify, clock_timing, dumps_json, kind_from_name,
@@ -341,8 +341,6 @@ def _foreign_header(f, path, fs_opt) -> tuple[dict, tuple, tuple]:
     or their groups (:data:`_RATE_ATTRS`, :data:`_INTERVAL_ATTRS`); all stating one must
     agree. Returns (attrs, specs, (dataset path, column or None, samples axis) per channel)."""
     import h5py
-
-    from ..recording import ChannelSpec
 
     found = []                                         # (dataset or column, name)
 

@@ -40,6 +40,8 @@ from ..errors import DeprecatedNameWarning, SceneWarning
 from ..models.assembly import (CLEARANCE_ATOL, assemblable_planet_counts, coaxiality_error,
                                max_equal_planets, tip_clearance)
 from ..models.gearset import Gearset, Speeds, rpm_to_rad_s
+from ..models.mesh_phasing import assembly_check
+from ..kinematics.shafts import typed_resolution
 from ..recording import Recording
 from ..io.units import parse_unit
 from ..runtime.registry import DEFAULT_ONSET_DETECTOR, ONSET_DETECTORS
@@ -510,7 +512,6 @@ def _parse_speeds(raw: dict, gearset: Gearset | None, err) -> tuple[Speeds | Non
     speeds = None
     if "speeds" not in raw or gearset is None:
         return speeds, None
-    from ..kinematics.angles import typed_resolution   # angles imports scipy.optimize: only when needed
 
     s = raw["speeds"]
     conv = {}
@@ -890,10 +891,6 @@ def _check_gearset(gearset: Gearset, g: dict, profile_shift: bool, err) -> Gears
     """Coaxiality, assembly and planet tip clearance of the scene's gearset (``g``: the
     ``[gearset]`` table as written); returns the gearset with typed planet angles snapped to
     the assemblable ones."""
-    # heavy: angles imports scipy.optimize, mesh_phasing numba; only a gearset needs them
-    from ..kinematics.angles import typed_resolution
-    from ..models.mesh_phasing import assembly_check
-
     zs, zr, zp = gearset.z_sun, gearset.z_ring, gearset.z_planet
     n = gearset.n_planets
     where = "n_planets" if "n_planets" in g else "planet_angles_deg"
