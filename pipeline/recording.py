@@ -184,8 +184,33 @@ def history_entry(step: str, **params: Any) -> dict:
     return entry
 
 
+class _TimeAxis:
+    """The time axis and channel names a recording and its header both derive from ``fs``
+    [Hz], ``n_samples``, ``t0`` [s] and ``channels``."""
+
+    @property
+    def duration(self) -> float:
+        """Duration n_samples / fs [s]."""
+        return self.n_samples / self.fs
+
+    @property
+    def dt(self) -> float:
+        """Sample interval 1 / fs [s]."""
+        return 1.0 / self.fs
+
+    @property
+    def t_end(self) -> float:
+        """Time just after the last sample, t0 + n_samples / fs [s] (exclusive end)."""
+        return self.t0 + self.duration
+
+    @property
+    def names(self) -> list[str]:
+        """Channel names, in column order."""
+        return [c.name for c in self.channels]
+
+
 @dataclass(repr=False)
-class RecordingHeader:
+class RecordingHeader(_TimeAxis):
     """Everything of a recording but its samples.
 
     What a file's header says (:func:`meshphase.io.read_info`: ``path``, ``format`` and
@@ -250,26 +275,6 @@ class RecordingHeader:
     def n_channels(self) -> int:
         """Channels [-]."""
         return len(self.channels)
-
-    @property
-    def duration(self) -> float:
-        """Duration n_samples / fs [s]."""
-        return self.n_samples / self.fs
-
-    @property
-    def dt(self) -> float:
-        """Sample interval 1 / fs [s]."""
-        return 1.0 / self.fs
-
-    @property
-    def t_end(self) -> float:
-        """Time just after the last sample, t0 + n_samples / fs [s] (exclusive end)."""
-        return self.t0 + self.duration
-
-    @property
-    def names(self) -> list[str]:
-        """Channel names, in column order."""
-        return [c.name for c in self.channels]
 
     def __len__(self) -> int:
         return self.n_samples
@@ -350,7 +355,7 @@ class RecordingHeader:
         raise TypeError("the recording is streamed in blocks, its samples are not held")
 
 
-class Recording:
+class Recording(_TimeAxis):
     """Samples x channels at a uniform sample rate, with channel specs, metadata, history.
 
     Parameters
@@ -438,26 +443,6 @@ class Recording:
     def n_channels(self) -> int:
         """Number of channels [-]."""
         return int(self.data.shape[1])
-
-    @property
-    def duration(self) -> float:
-        """Duration n_samples / fs [s]."""
-        return self.n_samples / self.fs
-
-    @property
-    def dt(self) -> float:
-        """Sample interval 1 / fs [s]."""
-        return 1.0 / self.fs
-
-    @property
-    def t_end(self) -> float:
-        """Time just after the last sample, t0 + n_samples / fs [s] (exclusive end)."""
-        return self.t0 + self.duration
-
-    @property
-    def names(self) -> list[str]:
-        """Channel names, in column order."""
-        return [c.name for c in self.channels]
 
     def times(self) -> np.ndarray:
         """Sample times t0 + i / fs [s], float64."""

@@ -387,6 +387,23 @@ def spec_from_dict(d: dict, path, where: str, *, checked: bool = False) -> Chann
         raise RecordingFileError(path, f"bad channel spec: {exc}") from exc
 
 
+def checked_write_blocks(blocks, nch: int, n: int) -> Iterator[np.ndarray]:
+    """Each of ``blocks`` as an array, checked as a streaming writer takes them: (samples,
+    ``nch``) each, and ``n`` samples together. ValueError naming the shape, or the count
+    (raised after the last block when they hold fewer)."""
+    got = 0
+    for blk in blocks:
+        blk = np.asarray(blk)
+        if blk.ndim != 2 or blk.shape[1] != nch:
+            raise ValueError(f"blocks must be (samples, {nch}) arrays, got shape {blk.shape}")
+        if got + blk.shape[0] > n:
+            raise ValueError(f"blocks hold more than the header's n_samples = {n}")
+        got += blk.shape[0]
+        yield blk
+    if got != n:
+        raise ValueError(f"blocks hold {got} samples, the header says n_samples = {n}")
+
+
 def regroup_blocks(blocks, nch: int, n: int, group_len: int, dtype: np.dtype) -> Iterator[tuple[np.ndarray, int]]:
     """The samples of ``blocks`` (each (k, nch), any k) regrouped by a streaming writer:
     (samples, first sample) of consecutive groups of ``group_len`` samples (the last may be

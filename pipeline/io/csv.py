@@ -72,7 +72,7 @@ from ..errors import FormatWarning
 from ..recording import ChannelSpec, Recording
 from ..validate import as_int, as_positive_int
 from .base import (CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime, check_verify,
-                   dumps_json, nice_fs, spec_from_dict, warn_nonfinite)
+                   checked_write_blocks, dumps_json, nice_fs, spec_from_dict, warn_nonfinite)
 from .registry import FormatSpec
 
 __all__ = ["NAME", "FORMAT", "FORMAT_VERSION", "TIME_TOLERANCE", "sniff", "read_info",
@@ -1006,17 +1006,10 @@ def write_blocks(header, blocks, path, *, dtype="float64", chunk_rows: int = 655
     with open(path, "w", encoding="utf-8", newline="") as fh:
         fh.write(_TAG + text + "\n")
         fh.write(out.getvalue())
-        for blk in blocks:
-            blk = np.asarray(blk)
-            if blk.ndim != 2 or blk.shape[1] != nc:
-                raise ValueError(f"blocks must be (samples, {nc}) arrays, got shape {blk.shape}")
-            if pos + blk.shape[0] > n:
-                raise ValueError(f"blocks hold more than the header's n_samples = {n}")
+        for blk in checked_write_blocks(blocks, nc, n):
             blk = blk.astype(dtype, copy=False)
             for i0 in range(0, blk.shape[0], chunk_rows):
                 i1 = min(blk.shape[0], i0 + chunk_rows)
                 times = header.t0 + np.arange(pos + i0, pos + i1, dtype=np.float64) / fs
                 fh.write(_format_block(times, blk[i0:i1]))
             pos += blk.shape[0]
-    if pos != n:
-        raise ValueError(f"blocks hold {pos} samples, the header says n_samples = {n}")

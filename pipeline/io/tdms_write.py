@@ -39,6 +39,7 @@ import numpy as np
 
 from ..recording import Recording
 from .atomic import atomic_path
+from .base import checked_write_blocks
 
 __all__ = ["write", "write_blocks", "write_tdms", "write_ni_log", "LABVIEW_ZERO", "DEFAULT_GROUP"]
 
@@ -228,18 +229,9 @@ def write_blocks(header, blocks, path, *, dtype="float64", name: str | None = No
     n, nch = int(header.n_samples), len(header.channels)
 
     def arrays():
-        got = 0
-        for blk in blocks:
-            blk = np.asarray(blk)
-            if blk.ndim != 2 or blk.shape[1] != nch:
-                raise ValueError(f"blocks must be (samples, {nch}) arrays, got shape {blk.shape}")
-            if got + blk.shape[0] > n:
-                raise ValueError(f"the blocks hold more than the header's {n} samples")
-            got += blk.shape[0]
+        for blk in checked_write_blocks(blocks, nch, n):
             if blk.shape[0]:
                 yield blk
-        if got != n:
-            raise ValueError(f"the blocks hold {got} samples, the header says {n}")
         if n == 0:
             yield np.empty((0, nch), dtype=dtype)
 

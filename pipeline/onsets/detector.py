@@ -23,6 +23,8 @@ from __future__ import annotations
 
 from typing import Callable, Protocol, runtime_checkable
 
+import numpy as np
+
 from ..recording import Recording
 from ..runtime.registry import DEFAULT_ONSET_DETECTOR, ONSET_DETECTORS
 from .results import Onsets
@@ -30,7 +32,7 @@ from .runs import quality_options
 
 __all__ = ["OnsetDetector", "DEFAULT_DETECTOR", "RUN_OPTIONS", "register_detector",
            "unregister_detector", "detector_names", "check_detector", "make_detector",
-           "detect_recording"]
+           "detect_recording", "recording_channel"]
 
 #: the detector a scene uses unless its ``[onsets] detector`` names another: the matched
 #: filter, :class:`meshphase.onsets.OnsetStream`
@@ -121,6 +123,28 @@ def make_detector(name: str, fs: float, **options) -> OnsetDetector:
     return det
 
 
+def recording_channel(rec: Recording, channel: str, quality, options: dict, caller: str) -> np.ndarray:
+    """The samples of ``channel`` of ``rec``, with the options its quality report gives added to
+    ``options`` (in place, where not given): the checks every detection on a whole recording
+    channel makes first.
+
+    Raises TypeError for a ``rec`` that is no Recording, a ``channel`` that is no name, or
+    ``options`` that give ``fs``, ``t0`` or ``channel`` (the recording's own); KeyError for an
+    unknown channel (:meth:`Recording.channel`).
+    """
+    if not isinstance(rec, Recording):
+        raise TypeError(f"rec must be a Recording, got {type(rec).__name__}")
+    if not isinstance(channel, str):
+        raise TypeError(f"channel must be a channel name (str), got {channel!r}")
+    for bad in ("fs", "t0", "channel"):
+        if bad in options:
+            raise TypeError(f"{caller} takes {bad} from the recording, not as an argument")
+    if quality is not None:
+        for key, value in quality_options(quality, rec.n_samples, rec.fs).items():
+            options.setdefault(key, value)
+    return rec.channel(channel)
+
+
 def detect_recording(rec: Recording, channel: str, *, detector: str = DEFAULT_DETECTOR, quality=None,
                      **options) -> Onsets:
     """The onsets of one channel of a conditioned recording by the detector called
@@ -147,17 +171,7 @@ def detect_recording(rec: Recording, channel: str, *, detector: str = DEFAULT_DE
         For the matched filter identical to
         :func:`~meshphase.onsets.detect_onsets_recording`.
     """
-    if not isinstance(rec, Recording):
-        raise TypeError(f"rec must be a Recording, got {type(rec).__name__}")
-    if not isinstance(channel, str):
-        raise TypeError(f"channel must be a channel name (str), got {channel!r}")
-    for bad in ("fs", "t0", "channel"):
-        if bad in options:
-            raise TypeError(f"detect_recording takes {bad} from the recording, not as an argument")
-    x = rec.channel(channel)
-    if quality is not None:
-        for key, value in quality_options(quality, rec.n_samples, rec.fs).items():
-            options.setdefault(key, value)
+    x = recording_channel(rec, channel, quality, options, "detect_recording")
     det = make_detector(detector, rec.fs, t0=rec.t0, channel=channel, **options)
     det.feed(x)
     return det.finish()

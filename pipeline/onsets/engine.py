@@ -26,8 +26,9 @@ from .options import check_options, DetectOptions
 from .relearn import TemplateFit, good_median, pulse_period
 from .results import (FLAG_CLIPPED, FLAG_EDGE, FLAG_GAP, FLAG_LOW_CORR, FLAG_TEMPLATE, Onsets,
                       empty_onsets)
+from .detector import recording_channel
 from .template import Template
-from .runs import inside_runs, quality_options, runs_overlap
+from .runs import inside_runs, runs_overlap
 
 __all__ = ["BlockEngine", "detect_onsets", "detect_onsets_recording"]
 
@@ -569,16 +570,6 @@ def detect_onsets_recording(rec: Recording, channel: str, *, quality=None, **kwa
     -------
     Onsets
     """
-    if not isinstance(rec, Recording):
-        raise TypeError(f"rec must be a Recording, got {type(rec).__name__}")
-    if not isinstance(channel, str):
-        raise TypeError(f"channel must be a channel name (str), got {channel!r}")
-    for bad in ("fs", "t0", "channel"):
-        if bad in kwargs:
-            raise TypeError(f"detect_onsets_recording takes {bad} from the recording, not as an argument")
-    x = rec.channel(channel)
-    if quality is not None:
-        for key, value in quality_options(quality, rec.n_samples, rec.fs).items():
-            kwargs.setdefault(key, value)
+    x = recording_channel(rec, channel, quality, kwargs, "detect_onsets_recording")
     return detect_onsets(x, rec.fs, t0=rec.t0, channel=channel, **kwargs)
 
