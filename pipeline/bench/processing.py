@@ -510,21 +510,21 @@ def _filter_rows(x, fs):
 def _hum_rows(x, fs):
     """The hum search (what ``process`` runs on each channel's first 120 s) and its Welch
     PSD two ways: segments detrended by the library (``scipy.signal.detrend``, linear) and
-    by :func:`meshphase.signal.condition._detrend_linear`, which ``detect_hum`` uses. Medians of
+    by :func:`meshphase.signal.condition.detrend_linear`, which ``detect_hum`` uses. Medians of
     three, CPU seconds of one core."""
     from scipy import signal
 
-    from ..signal.condition import _detrend_linear, _hum_nperseg, detect_hum
+    from ..signal.condition import detrend_linear, hum_nperseg, detect_hum
 
     t = np.arange(x.size) / fs
     y = x + 0.1 * np.sin(2 * np.pi * 50.0 * t)
-    nper = _hum_nperseg(y.size, fs)
+    nper = hum_nperseg(y.size, fs)
     rows = []
     for stage, fn in (("condition.detect_hum", lambda: detect_hum(y, fs)),
                       ("welch detrend=linear (scipy)",
                        lambda: signal.welch(y, fs, nperseg=nper, detrend="linear")),
-                      ("welch detrend=_detrend_linear",
-                       lambda: signal.welch(y, fs, nperseg=nper, detrend=_detrend_linear))):
+                      ("welch detrend=detrend_linear",
+                       lambda: signal.welch(y, fs, nperseg=nper, detrend=detrend_linear))):
         cpu, wall = [], []
         for _ in range(3):
             t0, tw = time.process_time(), time.perf_counter()

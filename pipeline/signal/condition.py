@@ -89,7 +89,7 @@ __all__ = [
     "level_steps", "STEP_SPREADS",
     "detect_hum", "notch_hum", "assess_quality", "estimate_noise", "estimate_snr",
     "merge_runs", "gap_intervals",
-    "check_freq", "resolve_band", "band_limit", "settle_time", "notch_settle", "drift_highpass",
+    "check_freq", "resolve_band", "hum_nperseg", "detrend_linear", "band_limit", "settle_time", "notch_settle", "drift_highpass",
     "DEFAULT_HIGHPASS_HZ", "DEFAULT_DRIFT_WINDOW_S", "NOTCH_Q",
 ]
 
@@ -379,12 +379,12 @@ def remove_drift(x, fs: float, *, method: str = "median", window: float | None =
 
 
 # ====================================================================== mains hum
-def _hum_nperseg(n: int, fs: float) -> int:
+def hum_nperseg(n: int, fs: float) -> int:
     """Welch segment length of the hum search: about 4 s (a power of two), at most ``n``."""
     return int(min(n, 2 ** math.ceil(math.log2(4.0 * fs))))
 
 
-def _detrend_linear(seg: np.ndarray) -> np.ndarray:
+def detrend_linear(seg: np.ndarray) -> np.ndarray:
     """Each row of ``seg`` (segments along the last axis) less its least-squares line.
 
     The line is the projection on the orthonormal pair ``1 / sqrt(n)`` and the centred,
@@ -484,8 +484,8 @@ def detect_hum(x, fs: float, *, mains: str | float = "auto", n_harmonics: int = 
     peak_abs = float(np.max(np.abs(xs)))
     if peak_abs > 0.0:
         xs = xs / peak_abs
-    nper = _hum_nperseg(xs.size, fs)
-    f, p = welch(xs, fs, nper, detrend=_detrend_linear)
+    nper = hum_nperseg(xs.size, fs)
+    f, p = welch(xs, fs, nper, detrend=detrend_linear)
     df = f[1] - f[0]
 
     def excess(fc: float) -> float:

@@ -192,9 +192,9 @@ def test_tukey_bad_input():
 @pytest.mark.parametrize("nperseg, noverlap", [(16, None), (64, 0), (255, 100), (256, None), (1, 0)])
 @pytest.mark.parametrize("detrend", ["constant", False, "linear-callable"])
 def test_welch_equals_scipy(nperseg, noverlap, detrend):
-    from meshphase.signal.condition import _detrend_linear
+    from meshphase.signal.condition import detrend_linear
 
-    det = _detrend_linear if detrend == "linear-callable" else detrend
+    det = detrend_linear if detrend == "linear-callable" else detrend
     rng = np.random.default_rng(1)
     n = 5000
     x = rng.normal(size=n) + 3 * np.sin(0.3 * np.arange(n)) + 1e-3 * np.arange(n)
