@@ -30,7 +30,7 @@ def test_quick_bench_writes_tables(tmp_path):
     assert all(r["crb_samples"] > 0 for r in data["accuracy"])
     assert {r["stage"] for r in data["throughput"]} >= {
         "onsets.detect_onsets", "onsets.detect_onsets relearn=block", "condition.detect_hum",
-        "welch detrend=linear (scipy)", "welch detrend=_detrend_linear",
+        "welch detrend=linear (scipy)", "welch detrend=detrend_linear",
         "iir.sosfiltfilt engine=scipy"}
     for r in data["throughput"]:
         if r["stage"].startswith("iir.sosfiltfilt") and "scipy" not in r["stage"]:

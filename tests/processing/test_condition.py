@@ -210,44 +210,44 @@ def test_hum_search_detrend_is_scipys_linear_detrend(n, rows, seed, offset, slop
     hundred ulps of the segments' magnitude (offset and ramp up to ~3e3)."""
     from scipy.signal import detrend
 
-    from meshphase.signal.condition import _detrend_linear
+    from meshphase.signal.condition import detrend_linear
 
     rng = np.random.default_rng(seed)
     seg = rng.normal(size=(rows, n)) + offset + slope * np.arange(n)
     ref = detrend(seg, type="linear", axis=-1)
-    got = _detrend_linear(seg)
+    got = detrend_linear(seg)
     assert got.shape == seg.shape
     scale = max(1.0, float(np.max(np.abs(seg))))
     assert np.max(np.abs(got - ref)) <= 1e-12 * scale
     # a straight line is removed whole
     line = offset + slope * np.arange(n, dtype=float)
-    assert np.max(np.abs(_detrend_linear(line))) <= 1e-12 * max(1.0, float(np.max(np.abs(line))))
+    assert np.max(np.abs(detrend_linear(line))) <= 1e-12 * max(1.0, float(np.max(np.abs(line))))
 
 
 def test_hum_search_psd_equals_welch_with_scipys_detrend():
-    """detect_hum's Welch PSD (segments detrended by _detrend_linear) is the one scipy's own
+    """detect_hum's Welch PSD (segments detrended by detrend_linear) is the one scipy's own
     linear detrend gives, to rounding, on a hum-and-drift signal as the hum search sees it
     (120 s at 5120 Hz, 32768-sample segments)."""
     from scipy.signal import welch
 
-    from meshphase.signal.condition import _detrend_linear
+    from meshphase.signal.condition import detrend_linear
 
     rng = np.random.default_rng(3)
     n = int(120 * FS)
     t = np.arange(n) / FS
     x = rng.normal(size=n) + 0.2 * np.sin(2 * np.pi * 50 * t) + 0.05 * t + 3.0
     f1, p1 = welch(x, FS, nperseg=32768, detrend="linear")
-    f2, p2 = welch(x, FS, nperseg=32768, detrend=_detrend_linear)
+    f2, p2 = welch(x, FS, nperseg=32768, detrend=detrend_linear)
     np.testing.assert_array_equal(f1, f2)
     np.testing.assert_allclose(p2, p1, rtol=1e-9, atol=1e-12 * float(np.max(p1)))
 
 
 def test_hum_search_detrend_edges():
-    from meshphase.signal.condition import _detrend_linear
+    from meshphase.signal.condition import detrend_linear
 
-    assert _detrend_linear(np.empty((3, 0))).shape == (3, 0)
-    np.testing.assert_array_equal(_detrend_linear(np.array([[2.0], [5.0]])), np.zeros((2, 1)))
-    np.testing.assert_allclose(_detrend_linear(np.array([1.0, 4.0])), [0.0, 0.0], atol=1e-15)
+    assert detrend_linear(np.empty((3, 0))).shape == (3, 0)
+    np.testing.assert_array_equal(detrend_linear(np.array([[2.0], [5.0]])), np.zeros((2, 1)))
+    np.testing.assert_allclose(detrend_linear(np.array([1.0, 4.0])), [0.0, 0.0], atol=1e-15)
 
 
 def test_hum_short_data_and_bad_input():
