@@ -1,0 +1,65 @@
+"""meshphase.runtime.lazy: module proxies that import their module on first attribute read."""
+
+import subprocess
+import sys
+
+import pytest
+
+from meshphase.runtime.lazy import LazyModule, lazy_module
+
+
+def _run(code):
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    return res.stdout.strip()
+
+
+def test_creating_a_proxy_imports_nothing():
+    # a fresh interpreter: neither the proxies of meshphase.runtime.lazy nor a new one load scipy
+    out = _run("import sys, meshphase.runtime.lazy as lz; p = lz.lazy_module('scipy.special'); "
+               "repr(p); print(sorted(m for m in sys.modules if m == 'scipy' or m.startswith('scipy.')), "
+               "p.loaded, lz.linalg.loaded)")
+    assert out == "[] False False"
+
+
+def test_attribute_read_imports_the_module():
+    out = _run("import sys, meshphase.runtime.lazy as lz; f = lz.special.ndtr; "
+               "import scipy.special; print('scipy.special' in sys.modules, f is scipy.special.ndtr, "
+               "lz.special.loaded, 'ndtr' in vars(lz.special), lz.special.load() is scipy.special)")
+    assert out == "True True True True True"
+
+
+def test_dunder_probes_do_not_import():
+    out = _run("import sys, inspect, meshphase.runtime.lazy as lz; inspect.unwrap(lz.optimize); "
+               "print(hasattr(lz.optimize, '__path__'), 'scipy.optimize' in sys.modules)")
+    assert out == "False False"
+
+
+def test_a_missing_module_fails_on_first_use_naming_it():
+    proxy = lazy_module("meshphase_no_such_module.sub")          # creation does not look it up
+    assert not proxy.loaded
+    with pytest.raises(ImportError, match="meshphase_no_such_module.sub") as exc:
+        proxy.anything
+    assert exc.value.name == "meshphase_no_such_module.sub"
+    assert not proxy.loaded
+
+
+def test_a_missing_attribute_is_an_attribute_error():
+    proxy = lazy_module("json")
+    with pytest.raises(AttributeError):
+        proxy.no_such_function
+    assert proxy.loaded and proxy.dumps([1]) == "[1]"
+
+
+def test_repr_says_whether_it_is_loaded():
+    proxy = lazy_module("json")
+    assert repr(proxy) == "<lazy module 'json' (not loaded)>"
+    assert "dumps" in dir(proxy)
+    assert repr(proxy) == "<lazy module 'json' (loaded)>"
+    assert isinstance(proxy, LazyModule)
+
+
+@pytest.mark.parametrize("bad", ["", ".relative", None, 3])
+def test_empty_or_bad_names_are_refused(bad):
+    with pytest.raises(ValueError, match="absolute module name"):
+        lazy_module(bad)
