@@ -5,7 +5,7 @@ import sys
 
 import pytest
 
-from meshphase.runtime.lazy import LazyModule, lazy_module
+from meshphase.runtime.lazy import LazyModule, lazy_module, load_all
 
 
 def _run(code):
@@ -63,3 +63,23 @@ def test_repr_says_whether_it_is_loaded():
 def test_empty_or_bad_names_are_refused(bad):
     with pytest.raises(ValueError, match="absolute module name"):
         lazy_module(bad)
+
+
+def test_load_all_loads_the_processing_modules_and_not_signal_or_stats():
+    out = _run("import sys, meshphase.runtime.lazy as lz; lz.load_all(); "
+               "print(all(p.loaded for p in lz.PROCESSING_SCIPY), "
+               "[m for m in ('scipy.linalg', 'scipy.optimize', 'scipy.signal', 'scipy.stats') if m in sys.modules])")
+    assert out == "True ['scipy.linalg', 'scipy.optimize']"
+
+
+def test_load_all_of_nothing_loads_nothing():
+    out = _run("import sys, meshphase.runtime.lazy as lz; lz.load_all(()); "
+               "print([m for m in sys.modules if m.startswith('scipy')])")
+    assert out == "[]"
+
+
+def test_load_all_refuses_what_is_not_a_proxy():
+    proxy = lazy_module("json")
+    with pytest.raises(TypeError, match="LazyModule"):
+        load_all([proxy, "scipy.linalg"])
+    assert not proxy.loaded                       # checked before anything is loaded

@@ -6,6 +6,10 @@ attributes is read, so that importing a module of the package that uses scipy lo
 (``meshphase --help``, ``info`` and ``process`` start without it). The proxies below are the
 scipy submodules the package uses; a module takes its proxy by name
 (``from ..runtime.lazy import linalg``) and calls through it (``linalg.qr(...)``).
+
+A run loads the scipy modules of its stages (:data:`PROCESSING_SCIPY`, :func:`load_all`)
+before it holds the loaded BLAS libraries to one thread: scipy.linalg brings a BLAS of its
+own, which a limit set before it loads would not reach.
 """
 
 from __future__ import annotations
@@ -13,7 +17,7 @@ from __future__ import annotations
 import importlib
 import types
 
-__all__ = ["LazyModule", "lazy_module", "fft", "interpolate", "linalg", "ndimage", "optimize",
+__all__ = ["LazyModule", "lazy_module", "load_all", "PROCESSING_SCIPY", "fft", "interpolate", "linalg", "ndimage", "optimize",
            "signal", "special", "stats"]
 
 
@@ -127,3 +131,31 @@ signal = lazy_module("scipy.signal")
 special = lazy_module("scipy.special")
 #: scipy.stats (the tolerance Monte Carlo's quasi-random sampler, qmc)
 stats = lazy_module("scipy.stats")
+
+#: The scipy submodules the processing stages use: loaded (:func:`load_all`) before a run
+#: holds BLAS to one thread and before a campaign's fork server forks (scipy.signal and
+#: scipy.stats are not among them: ``meshphase process`` needs neither)
+PROCESSING_SCIPY = (fft, interpolate, linalg, ndimage, optimize, special)
+
+
+def load_all(proxies=PROCESSING_SCIPY) -> None:
+    """Import the modules of the given proxies now (each once).
+
+    Parameters
+    ----------
+    proxies : iterable of LazyModule
+        The proxies to load; empty: nothing to do.
+
+    Raises
+    ------
+    TypeError
+        An item that is not a :class:`LazyModule`.
+    ImportError
+        A module that does not import; the message names it.
+    """
+    proxies = tuple(proxies)
+    for p in proxies:
+        if not isinstance(p, LazyModule):
+            raise TypeError(f"load_all takes LazyModule proxies, got {type(p).__name__}")
+    for p in proxies:
+        p.load()
