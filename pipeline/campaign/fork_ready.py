@@ -111,7 +111,7 @@ def load_kernels() -> dict:
     if filters == "scipy":
         # no numba (it is optional): the filters are scipy's, loaded here once rather than
         # by every worker's first recording
-        scipy_signal.load()
+        load_all([scipy_signal])
     return {"filters": filters, "onsets": onsets, "seconds": time.perf_counter() - t}
 
 

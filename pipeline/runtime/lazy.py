@@ -17,7 +17,7 @@ from __future__ import annotations
 import importlib
 import types
 
-__all__ = ["LazyModule", "lazy_module", "load_all", "PROCESSING_SCIPY", "fft", "interpolate", "linalg", "ndimage", "optimize",
+__all__ = ["LazyModule", "lazy_module", "is_loaded", "load_all", "PROCESSING_SCIPY", "fft", "interpolate", "linalg", "ndimage", "optimize",
            "signal", "special", "stats"]
 
 
@@ -26,7 +26,9 @@ class LazyModule(types.ModuleType):
 
     Creating one imports nothing and does not look the module up (no ``find_spec``): a module
     that is not installed fails on first use, not at creation. Each attribute read is cached
-    on the proxy, so later reads of it are plain attribute look-ups. Dunder names
+    on the proxy, so later reads of it are plain attribute look-ups. The proxy adds no public
+    attribute of its own (every name is the module's): :func:`is_loaded` and :func:`load_all`
+    ask and load it from outside. Dunder names
     (``__wrapped__``, ``__path__`` ...) read before the module is loaded raise AttributeError
     rather than import it: tools that probe module globals (doctest, ``inspect.unwrap``) do
     not load the library.
@@ -50,24 +52,9 @@ class LazyModule(types.ModuleType):
         super().__init__(name)
         self.__dict__["_lazy_module"] = None
 
-    @property
-    def loaded(self) -> bool:
-        """bool : True once the module has been imported through this proxy."""
-        return self.__dict__["_lazy_module"] is not None
-
-    def load(self) -> types.ModuleType:
-        """Import the module (once) and return it.
-
-        Returns
-        -------
-        module
-            The real module.
-
-        Raises
-        ------
-        ImportError
-            When the module does not import; the message names it.
-        """
+    def _lazy_load(self) -> types.ModuleType:
+        """Import the module (once) and return it; ImportError naming it when it does not
+        import."""
         module = self.__dict__["_lazy_module"]
         if module is None:
             name = self.__dict__["__name__"]
@@ -80,17 +67,17 @@ class LazyModule(types.ModuleType):
         return module
 
     def __getattr__(self, attr: str):
-        if attr.startswith("__") and attr.endswith("__") and not self.loaded:
+        if attr.startswith("__") and attr.endswith("__") and not is_loaded(self):
             raise AttributeError(attr)
-        value = getattr(self.load(), attr)
+        value = getattr(self._lazy_load(), attr)
         self.__dict__[attr] = value
         return value
 
     def __dir__(self):
-        return dir(self.load())
+        return dir(self._lazy_load())
 
     def __repr__(self) -> str:
-        state = "loaded" if self.loaded else "not loaded"
+        state = "loaded" if is_loaded(self) else "not loaded"
         return f"<lazy module {self.__dict__['__name__']!r} ({state})>"
 
 
@@ -113,6 +100,27 @@ def lazy_module(name: str) -> LazyModule:
         ``name`` empty, relative or not a string.
     """
     return LazyModule(name)
+
+
+def is_loaded(proxy: LazyModule) -> bool:
+    """Whether the proxy's module has been imported through it.
+
+    Parameters
+    ----------
+    proxy : LazyModule
+
+    Returns
+    -------
+    bool
+
+    Raises
+    ------
+    TypeError
+        ``proxy`` is not a :class:`LazyModule`.
+    """
+    if not isinstance(proxy, LazyModule):
+        raise TypeError(f"is_loaded takes a LazyModule proxy, got {type(proxy).__name__}")
+    return proxy.__dict__["_lazy_module"] is not None
 
 
 #: scipy.fft (the spectra and the matched filters' correlations)
@@ -158,4 +166,4 @@ def load_all(proxies=PROCESSING_SCIPY) -> None:
         if not isinstance(p, LazyModule):
             raise TypeError(f"load_all takes LazyModule proxies, got {type(p).__name__}")
     for p in proxies:
-        p.load()
+        p._lazy_load()
