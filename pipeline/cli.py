@@ -1,12 +1,13 @@
 """The ``meshphase`` command.
 
-The stages (and with them scipy.linalg, scipy.interpolate and scipy.optimize, but not
-scipy.signal, whose import pulls scipy.stats in: the filter designs are meshphase.signal.sos_design's,
-and the filters need scipy.signal only where numba is not installed), dask, matplotlib and
-the synthetic generator are imported only by the subcommands that use them, so ``meshphase
---help``, ``info`` and ``convert`` start without them; tqdm (with importlib.metadata), the
-run's result types and the campaign machinery load with the first progress bar, run or
-campaign (tests hold the modules each loads; ``meshphase bench`` times the start-up).
+The processing stack (the stages, the onset detectors and the filters, ~0.3 s of imports),
+dask, matplotlib and the synthetic generator are imported only by the subcommands that use
+them, so ``meshphase --help``, ``info`` and ``convert`` start without them; scipy loads on
+first use (:mod:`meshphase.runtime.lazy`; scipy.signal, whose import pulls scipy.stats in,
+only where numba is not installed: the filter designs are meshphase.signal.sos_design's);
+tqdm (with importlib.metadata), the run's result types and the campaign machinery load with
+the first progress bar, run or campaign (tests hold the modules each loads; ``meshphase
+bench`` times the start-up).
 
 Exit status (every subcommand; README.md "Exit status"; constants in :mod:`meshphase.run.exits`):
 
@@ -64,6 +65,8 @@ from .run.outdir import OutputDir, output_write_errors
 from .runtime.heap import limit_heap_growth
 from .io import FormatChoices, convert, detect_format, iter_blocks, read_info
 from .io.base import ANY_FS_ENV
+from .io.tdms_rows import warmup as warmup_rows
+from .models._kernels import warmup as warmup_models
 from .runtime.log import MessageFormatter, logger, message_line
 from .signal.quality import channel_quality
 from .run.scene import SceneError, load_scene
@@ -212,23 +215,21 @@ def cmd_bench(args) -> int:
     # bench drives the CLI's own commands (bench.rss runs `convert` through main), so it is
     # imported here, not at the top: cli -> bench only when benchmarking, no import loop
     if args.warmup:
-        from .models._kernels import warmup
+        # the onset detectors and the filters: the processing stack (~0.05-0.1 s of imports),
+        # not loaded for every command's start-up
         from .onsets.fastpath import warmup as warmup_onsets
+        from .signal.iir import warmup as warmup_iir
 
-        w = warmup()
+        w = warmup_models()
         print(f"numba kernel ready in {w['seconds']:.2f} s, cache {w['cache_dir']}"
               if w["engine"] == "numba" else "numba is not importable: the numpy path needs no "
               "compilation")
         wo = warmup_onsets()              # the onset stage's kernels, into the same cache
         if wo["engine"] == "numba":
             print(f"onset kernels ready in {wo['seconds']:.2f} s")
-        from .io.tdms_rows import warmup as warmup_rows
-
         wr = warmup_rows()                # the interleaved TDMS rows' kernel
         if wr["engine"] == "numba":
             print(f"TDMS rows kernel ready in {wr['seconds']:.2f} s")
-        from .signal.iir import warmup as warmup_iir
-
         wf = warmup_iir()                 # the conditioning filters' kernel
         if wf["engine"] == "numba":
             print(f"filter kernel ready in {wf['seconds']:.2f} s")
@@ -354,7 +355,7 @@ _MAX_MESSAGES = 10
 
 def _print_run(ctx, files, command: str) -> None:
     """The results of a run on stdout; its warnings on stderr (:func:`message_line`)."""
-    from .run.stages import summary_dict  # heavy (scipy): see the module docstring
+    from .run.stages import summary_dict  # the processing stack: see the module docstring
     s = summary_dict(ctx)
     print(f"scene     {ctx.scene.name}")
     print(f"stages    {', '.join(ctx.ran)}" + (f"  (failed: {', '.join(ctx.failed)})" if ctx.failed else ""))
@@ -417,7 +418,7 @@ def _run_and_write(args, scene, base, *, report: bool = True):
     ``scene`` is a Scene or a function of the reserved folder returning one (the demo writes
     its scene file there first). The folder is removed again when the run fails or is
     interrupted (:class:`meshphase.run.outdir.OutputDir`)."""
-    from .run.stages import run_scene, write_outputs  # heavy (scipy): see the module docstring
+    from .run.stages import run_scene, write_outputs  # the processing stack: see the module docstring
     with OutputDir(base, overwrite=args.overwrite, staged=True) as out:
         if callable(scene):
             scene = scene(out.path)
@@ -448,7 +449,7 @@ def cmd_process(args) -> int:
     # both files checked before the stages' imports: a mistyped path fails before they load
     as_regular_file(args.file, "the recording")
     as_regular_file(args.gearset, "the gearset scene (--gearset)")
-    from .run.stages import process_recording  # heavy (scipy): see the module docstring
+    from .run.stages import process_recording  # the processing stack: see the module docstring
     # process_recording returns the paths as published (the output folder's final name)
     ctx, files = process_recording(args.file, args.gearset, out_dir=args.out, overwrite=args.overwrite,
                                    progress=_stage_progress(not args.quiet), tolerance=args.tolerance)
@@ -466,7 +467,7 @@ def cmd_demo(args) -> int:
 
 
 def cmd_campaign(args) -> int:
-    from .campaign.runner import cli_campaign
+    from .campaign.runner import cli_campaign  # the campaign machinery: with the first campaign
 
     as_regular_file(args.scene, "the scene")
     res = cli_campaign(args.scene, args.inputs, scheduler=args.scheduler, workers=args.workers,

@@ -8,6 +8,9 @@ so this module does its work when it is imported:
 1. It pays the costs that every worker's first recording would otherwise pay for itself,
    once:
 
+   - the stages' scipy modules (:data:`meshphase.runtime.lazy.PROCESSING_SCIPY`), which the
+     package imports on first use, and with them scipy's BLAS, before its thread limit (not
+     counted in :data:`FIRST_USE_S`: they came with the processing stack's imports);
    - matplotlib's pyplot on Agg (:func:`meshphase.report.campaign_report.pyplot`), which
      the report's module no longer imports itself, and one small figure drawn to PNG as the
      report's are: matplotlib loads its font and fills its text caches on the first text it
@@ -26,7 +29,7 @@ so this module does its work when it is imported:
      (:func:`meshphase.signal.iir.pick_engine`, :func:`meshphase.onsets.fastpath.dense`); without
      it they took scipy's filters and numpy's onsets, the slower engines (the iir and onset
      rows of ``meshphase bench processing``), so that no worker loaded numba for itself.
-     Where numba is not installed (it is optional), the server imports scipy.signal
+     Where numba is not installed (it is optional), the server loads scipy.signal
      instead, the filters' engine then.
 
 2. It freezes the heap (:func:`gc.freeze`), as the docs of ``gc.freeze`` advise before a
@@ -50,7 +53,23 @@ modules' objects stay alive for the worker's life anyway. Nothing else imports i
 from __future__ import annotations
 
 import gc
+import tempfile
 import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from ..io import read_info, write
+from ..onsets import fastpath
+from ..recording import Recording
+from ..report.campaign_report import figure_png, load_sharing_across_recordings
+from ..run.demo import DEMO_SCENE
+from ..run.scene import scene_schema_errors
+from ..runtime.lazy import load_all
+from ..runtime.lazy import signal as scipy_signal
+from ..runtime.threads import hold_blas_single_thread
+from ..signal import iir
 
 __all__ = ["FROZEN_OBJECTS", "FIRST_USE_S", "KERNELS", "pay_first_use", "load_kernels"]
 
@@ -59,18 +78,6 @@ def pay_first_use() -> None:
     """Import matplotlib on Agg and draw a small figure, validate the demo scene and read the
     header of a small recording, in this process (what a worker's first recording and first
     figure do first)."""
-    import tempfile
-    import tomllib
-    from pathlib import Path
-
-    import numpy as np
-
-    from ..run.demo import DEMO_SCENE
-    from ..io import read_info, write
-    from ..recording import Recording
-    from ..report.campaign_report import figure_png, load_sharing_across_recordings
-    from ..run.scene import scene_schema_errors
-
     # matplotlib on Agg and one of the report's figures, small: matplotlib loads its font and
     # fills its text caches on the first text it lays out, which a worker's first figure
     # otherwise paid (the bench's first-figure rows)
@@ -99,18 +106,21 @@ def load_kernels() -> dict:
     ValueError, ImportError
         numba is installed but does not import.
     """
-    from ..signal import iir
-    from ..onsets import fastpath
-
     t = time.perf_counter()
     filters, onsets = iir.warmup(check=False)["engine"], fastpath.warmup()["engine"]
     if filters == "scipy":
         # no numba (it is optional): the filters are scipy's, loaded here once rather than
         # by every worker's first recording
-        import scipy.signal  # noqa: F401
+        load_all([scipy_signal])
     return {"filters": filters, "onsets": onsets, "seconds": time.perf_counter() - t}
 
 
+try:
+    # with the processing stack the server imported before this module: the stages' scipy
+    # modules are imported on first use (meshphase.runtime.lazy), here before any worker forks
+    load_all()
+except ImportError:  # reported by the first recording that needs them
+    pass
 _t = time.perf_counter()
 try:
     pay_first_use()
@@ -127,9 +137,7 @@ except Exception:  # noqa: BLE001 - a broken numba install, a read-only cache th
     KERNELS = None
 try:
     # after every import: the limit reaches the BLAS libraries loaded by then (scipy's comes
-    # with the kernels' modules)
-    from ..runtime.threads import hold_blas_single_thread
-
+    # with the stages' scipy modules, loaded above)
     hold_blas_single_thread()
 except Exception:  # noqa: BLE001 - threadpoolctl failing: each run still holds BLAS itself
     pass

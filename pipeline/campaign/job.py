@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import importlib
 import itertools
 import os
 import pickle
@@ -31,7 +32,10 @@ from typing import Callable, Sequence
 
 from .resume import relocate, write_marker
 from .cluster import ClusterStart, end_worker
+from ..io import FORMATS, format_of_suffix, get_spec
 from ..runtime.log import logger
+from ..runtime.threads import run_threads, threads_limited
+from ..validate import as_nonnegative
 
 __all__ = ["Job", "run_job", "start_cluster", "campaign_task", "failed_record", "default_task_timeout",
            "task_limits", "warm_up", "worker_modules", "campaign_modules", "draw_figures", "figure_order",
@@ -69,8 +73,6 @@ def default_task_timeout(size_bytes) -> float:
     float
         Timeout [s].
     """
-    from ..validate import as_nonnegative
-
     return TIMEOUT_BASE_S + as_nonnegative(size_bytes, "size_bytes") / TIMEOUT_RATE_BPS
 
 
@@ -144,8 +146,6 @@ def worker_modules(formats=None, synthetic: bool = False) -> tuple[str, ...]:
     ValueError
         An unknown format.
     """
-    from ..io import FORMATS, get_spec
-
     formats = FORMATS if formats is None else tuple(dict.fromkeys(formats))
     libs = tuple(lib for name in formats for lib in get_spec(name).read_libraries)
     return (_STACK + _EVERY_TASK + tuple(get_spec(name).module for name in formats)
@@ -167,8 +167,6 @@ def campaign_modules(scene, files) -> tuple[str, ...]:
     -------
     tuple of str
     """
-    from ..io import format_of_suffix
-
     formats = [format_of_suffix(f) for f in files]
     synthetic = "synthetic" in (getattr(scene, "input", None) or {})
     return worker_modules(None if None in formats else formats, synthetic)
@@ -184,14 +182,14 @@ def warm_up(modules=None) -> int:
     int
         The worker's pid.
     """
-    import importlib
-
     for name in (worker_modules() if modules is None else modules):
         importlib.import_module(name)
     return os.getpid()
 
 
 def _draw(call) -> bytes:
+    # the report's module: imported by the client after the workers' fork server started
+    # (meshphase.campaign.runner's module notes), by the workers from the server
     from ..report.campaign_report import figure_png
 
     make, args, kwargs = call
@@ -404,8 +402,6 @@ def campaign_task(task: Callable[..., dict], scene_path: str, recording_path: st
     if threads is None:
         rec = task(scene_path, recording_path, out_dir, **kw)
     else:
-        from ..runtime.threads import threads_limited
-
         with threads_limited(threads):
             rec = task(scene_path, recording_path, out_dir, **kw)
     if done_key is not None and isinstance(rec, dict) and rec.get("status") in ("ok", "unreliable", "partial"):
@@ -476,8 +472,6 @@ def _task_threads(cluster_info: dict) -> int | None:
     machine's cores; None on a remote cluster (each worker's own default)."""
     if not cluster_info.get("local"):
         return None
-    from ..runtime.threads import run_threads
-
     return max(1, run_threads() // max(1, int(cluster_info.get("n_workers") or 1)))
 
 

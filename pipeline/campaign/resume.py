@@ -17,6 +17,7 @@ import shutil
 from pathlib import Path
 from typing import Callable, Sequence
 
+from ..io import atomic_path
 from ..run.outdir import read_json_object
 from ..jsonable import to_jsonable
 from ..runtime.log import logger
@@ -139,8 +140,6 @@ def write_marker(out_dir, done_key: dict, record: dict) -> None:
     OSError
         The folder or the file cannot be written.
     """
-    from ..io import atomic_path
-
     if not isinstance(done_key, dict) or not isinstance(record, dict):
         raise TypeError(f"done_key and record must be dicts, got {type(done_key).__name__} and "
                         f"{type(record).__name__}")

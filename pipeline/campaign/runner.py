@@ -74,19 +74,27 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import Callable, Iterable
 
+import numpy as np
+
 from .job import (TIMEOUT_BASE_S, TIMEOUT_RATE_BPS, Job, campaign_modules, default_task_timeout,
                   draw_figures, run_job, start_cluster, task_limits)
 from .resume import (DONE_NAME, RECORDINGS_DIR_NAME, completed_recordings,
                      recording_key, recording_keys, resume_sources, reuse_completed,
                      sha256_file)
+from . import cluster
 from .cluster import check_cluster_options, local_cluster, trim_env_is_distributed
+from ..io import FORMATS, atomic_path, detect_format, get_spec
 from ..runtime.heap import limit_heap_growth
 from ..jsonable import to_jsonable
 from ..runtime.log import logger
 from ..run.context import phasing_verdict
 from ..run.declare import client_results
+from ..run.exits import EXIT_ERROR, EXIT_OK, EXIT_PARTIAL, run_status
+from ..run.outdir import MANIFEST_NAME, PARTIAL_SUFFIX, OutputDir, remove_partial
+from ..run.scene import load_scene, plan
 from ..run.state import failure_texts
-from ..validate import as_regular_file
+from ..run.table_csv import write_csv
+from ..validate import as_nonnegative, as_regular_file
 
 __all__ = ["run_recording", "run_campaign", "cli_campaign", "collect_recordings",
            "recording_names", "split_results", "client_scene", "campaign_rows",
@@ -136,8 +144,6 @@ def phasing_reliability(ctx) -> dict:
 
 # ---------------------------------------------------------------------------- inputs
 def _recording_suffixes() -> tuple[str, ...]:
-    from ..io import FORMATS, get_spec
-
     return tuple(s for f in FORMATS for s in get_spec(f).suffixes)
 
 
@@ -204,8 +210,6 @@ def collect_recordings(inputs: Iterable, *, recursive: bool = False) -> tuple[li
 def _folder_files(folder: Path, recursive: bool, skipped: list):
     """The entries of ``folder`` in name order (with ``recursive``, those of its subfolders
     in their place, depth first); the subfolders not entered go to ``skipped``."""
-    from ..run.outdir import MANIFEST_NAME
-
     for q in sorted(folder.iterdir()):
         if not (recursive and q.is_dir()):
             yield q
@@ -221,8 +225,6 @@ def _folder_files(folder: Path, recursive: bool, skipped: list):
 
 def _not_a_recording(q: Path, suffixes: tuple) -> str | None:
     """Why the folder entry ``q`` is not taken as a recording, or None when it is."""
-    from ..io import detect_format
-
     name = q.name.lower()
     if not q.is_file():
         return "not a file"
@@ -388,8 +390,8 @@ def _bands(mc) -> dict:
 
 def _apply_bands(ctx, bands: dict) -> None:
     """Band coverage of each gauge's passes, given the client's Monte Carlo band."""
-    import numpy as np
-
+    # the processing stack, here and below: not imported by the client before the workers'
+    # fork server starts (module notes; ~0.3 s of imports)
     from ..compare.predict import band_coverage
 
     comp, phasing, ideal = ctx.compare, ctx.phasing, ctx.ideal
@@ -486,10 +488,7 @@ def run_recording(scene_path: str, recording_path: str, out_dir: str, *, bands: 
                  "worker": f"{socket.gethostname()}:{os.getpid()}", "timings_s": {},
                  "stages_ran": [], "stages_failed": {}, "messages": [], "files": {}}
     try:
-        from ..run.exits import run_status
-        from ..io import detect_format
-        from ..run.scene import load_scene
-        from ..run.stages import run_scene, summary_dict, write_outputs
+        from ..run.stages import run_scene, summary_dict, write_outputs  # the processing stack
 
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -544,8 +543,6 @@ def run_recording(scene_path: str, recording_path: str, out_dir: str, *, bands: 
 
 def _write_atomic(path: Path, write: Callable[[Path], None]) -> None:
     """``write(tmp)`` to a temporary file beside ``path``, fsync, rename (meshphase.io)."""
-    from ..io import atomic_path
-
     with atomic_path(path, overwrite=True) as tmp:
         write(tmp)
 
@@ -636,8 +633,6 @@ def campaign_exit_code(campaign: dict) -> int:
     -------
     int
     """
-    from ..run.exits import EXIT_ERROR, EXIT_OK, EXIT_PARTIAL
-
     if not isinstance(campaign, dict) or not isinstance(campaign.get("recordings"), list):
         raise TypeError(f"campaign must be run_campaign's dict with a 'recordings' list, got "
                         f"{type(campaign).__name__}")
@@ -740,8 +735,6 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
         Arguments of the wrong type.
     """
     t_all = time.perf_counter()
-    from ..run.outdir import PARTIAL_SUFFIX, OutputDir, remove_partial
-
     workers, task_timeout, task = _check_options(scheduler, workers, dashboard, task_timeout, task)
     scene_path = Path(scene_path).resolve()
     if not isinstance(inputs, (str, bytes, os.PathLike)):
@@ -793,8 +786,6 @@ class _Options:
 
 def _check_options(scheduler, workers, dashboard, task_timeout, task):
     """(workers, task_timeout, task) checked, before anything is read or started."""
-    from ..validate import as_nonnegative
-
     workers = check_cluster_options(scheduler, workers, dashboard)
     if task_timeout is not None:
         task_timeout = as_nonnegative(task_timeout, "task_timeout")
@@ -813,8 +804,6 @@ def _start_worker_server_early(scene_path: Path, inputs, recursive: bool):
     here is left to the checks that follow, which report it. Returns what
     :func:`collect_recordings` found (for :func:`_scene_and_recordings`), None when it
     failed."""
-    from .cluster import worker_server
-
     try:
         found = collect_recordings(inputs, recursive=recursive)
     except Exception:  # noqa: BLE001 - collected again, and reported, after the scene's checks
@@ -832,7 +821,7 @@ def _start_worker_server_early(scene_path: Path, inputs, recursive: bool):
 
     def serve():
         try:
-            worker_server(modules)
+            cluster.worker_server(modules)
         except Exception as exc:  # noqa: BLE001 - the cluster's own start tries again and reports
             logger.debug("campaign: early fork server start failed (%s)", exc)
 
@@ -845,8 +834,6 @@ def _scene_and_recordings(scene_path: Path, inputs, recursive: bool = False, fou
     found in ``inputs`` (a path or a list: read more than once; ``found``: what
     :func:`collect_recordings` gave already), and the per-recording scene validated once, up
     front."""
-    from ..run.scene import load_scene, plan
-
     # FileNotFoundError / SceneError (a ValueError) up front; each recording replaces [input]
     scene = load_scene(scene_path, recording_given=True)
     files, skipped = found if found is not None else collect_recordings(inputs, recursive=recursive)
@@ -924,9 +911,8 @@ def _campaign_body(scene, scene_path, inputs, files, skipped, names, out, opts: 
 
 def _import_report_modules() -> None:
     """Import what :func:`_write_campaign_files` needs, ahead of time: the report's module,
-    without matplotlib (the workers draw the figures) and the CSV writer, without pandas."""
-    from ..run import table_csv  # noqa: F401
-    from ..report import campaign_report  # noqa: F401
+    without matplotlib (the workers draw the figures)."""
+    from ..report import campaign_report  # noqa: F401  (the processing stack: module notes)
 
 
 def _result_dict(scene, scene_path, inputs, skipped, final, cluster_info, timing, scene_level,
@@ -957,8 +943,7 @@ def _scene_level(scene, out: Path, opts: _Options):
     client into ``out/scene/``; all None when there are none."""
     if not opts.client_results:
         return None, None, None
-    from ..run.exits import run_status
-    from ..run.stages import run_scene, summary_dict, write_outputs
+    from ..run.stages import run_scene, summary_dict, write_outputs  # the processing stack
 
     sctx = run_scene(client_scene(scene))
     scene_status = {k: v for k, v in run_status(sctx).items() if k != "exit_code"}
@@ -983,8 +968,7 @@ def _write_campaign_files(result: dict, out: Path, final_of, t_all: float,
     sets ``result["files"]`` and the ``report`` and ``total`` times. ``draw`` draws the
     report's figures (:func:`meshphase.campaign.job.draw_figures`; None: here); ``closed()``
     (if given) closes the cluster after the report, before the total is taken."""
-    from ..report.campaign_report import build_campaign_report
-    from ..run.table_csv import write_csv
+    from ..report.campaign_report import build_campaign_report  # the processing stack
 
     timing, counts = result["timing_s"], result["counts"]
     t = time.perf_counter()

@@ -17,8 +17,8 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import OptimizeResult, approx_fprime, least_squares
 
+from ..runtime.lazy import optimize
 from .pass_model import (gamma_and_jacobian, gradient_plan, pass_setup, predict_pass_phasing,
                          table_speeds, wrap)
 from ..errors import ProcessingWarning
@@ -302,17 +302,17 @@ def identify_errors(tables, gearset: Gearset, *, gears=("sun", "ring", "planet")
         suggestions=sugg)
 
 
-def _box_fit(fit: "_PhasingFit", x0: np.ndarray, jac: str, max_nfev: int, bound: float) -> OptimizeResult:
+def _box_fit(fit: "_PhasingFit", x0: np.ndarray, jac: str, max_nfev: int, bound: float) -> "optimize.OptimizeResult":
     """Least squares of :meth:`_PhasingFit.resid` over every free parameter from ``x0``, each
     held to +-``bound`` [scaled parameter units] (trust region reflective; the closed-form
     Jacobian, or forward differences of step 1e-6)."""
-    return least_squares(fit.resid, x0, jac=fit.jac if jac == "analytic" else jac,
+    return optimize.least_squares(fit.resid, x0, jac=fit.jac if jac == "analytic" else jac,
                          method="trf", x_scale=1.0, diff_step=1e-6, max_nfev=max_nfev,
                          bounds=(-bound, bound))
 
 
 def _subspace_fit(fit: "_PhasingFit", basis: np.ndarray, jac: str, max_nfev: int,
-                  bound: float = np.inf) -> OptimizeResult:
+                  bound: float = np.inf) -> "optimize.OptimizeResult":
     """Least squares of :meth:`_PhasingFit.resid` over x = ``basis`` c (orthonormal columns:
     the determined directions), started at c = 0, so the directions outside the span stay
     exactly 0. Returns ``x`` (scaled parameters), ``fun``, ``jac`` (the full Jacobian at x,
@@ -324,7 +324,7 @@ def _subspace_fit(fit: "_PhasingFit", basis: np.ndarray, jac: str, max_nfev: int
     layout, e.g. on passes that hold no phasing, can then never be reached)."""
     if basis.shape[1] == 0:        # nothing determined: the parameters stay at 0
         x = np.zeros(basis.shape[0])
-        return OptimizeResult(x=x, fun=fit.resid(x), jac=_jacobian_at(fit, x, jac), njev=1,
+        return optimize.OptimizeResult(x=x, fun=fit.resid(x), jac=_jacobian_at(fit, x, jac), njev=1,
                               success=True, message="no determined direction to fit")
 
     def resid(c):
@@ -334,11 +334,11 @@ def _subspace_fit(fit: "_PhasingFit", basis: np.ndarray, jac: str, max_nfev: int
         return fit.jac(basis @ c) @ basis
 
     cb = bound / math.sqrt(basis.shape[1])
-    sol = least_squares(resid, np.zeros(basis.shape[1]), jac=jac_c if fit.analytic else jac,
+    sol = optimize.least_squares(resid, np.zeros(basis.shape[1]), jac=jac_c if fit.analytic else jac,
                         method="trf", x_scale=1.0, diff_step=1e-6, max_nfev=max_nfev,
                         bounds=(-cb, cb))
     x = basis @ sol.x
-    return OptimizeResult(x=x, fun=fit.resid(x), jac=_jacobian_at(fit, x, jac),
+    return optimize.OptimizeResult(x=x, fun=fit.resid(x), jac=_jacobian_at(fit, x, jac),
                           njev=(sol.njev or 0) + 1, success=sol.success, message=sol.message)
 
 
@@ -347,7 +347,7 @@ def _jacobian_at(fit: "_PhasingFit", x: np.ndarray, jac: str) -> np.ndarray:
     forward differences of step 1e-6 (scipy.optimize.approx_fprime)."""
     if fit.analytic:
         return fit.jac(x)
-    return np.atleast_2d(approx_fprime(x, fit.resid, 1e-6)).reshape(fit.meas.size, x.size)
+    return np.atleast_2d(optimize.approx_fprime(x, fit.resid, 1e-6)).reshape(fit.meas.size, x.size)
 
 
 def _kept(s: np.ndarray, rcond: float) -> np.ndarray:

@@ -22,9 +22,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import linalg
-from scipy.interpolate import BSpline
 
+from ..runtime.lazy import interpolate, linalg
 from .shafts import Kinematics
 from .trains import PassTrain
 from ..signal.median import median_of_finite
@@ -91,7 +90,7 @@ def spline_basis(x: np.ndarray, K: int, nu: int = 0) -> np.ndarray:
     h = 2.0 / K
     kk = -1.0 + h * np.arange(-3, K + 4)
     nb = K + 3
-    spl = BSpline(kk, np.eye(nb), 3, extrapolate=True)
+    spl = interpolate.BSpline(kk, np.eye(nb), 3, extrapolate=True)
     return spl(x, nu) if x.size else np.zeros((0, nb))
 
 

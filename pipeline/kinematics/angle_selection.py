@@ -17,8 +17,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import linalg
 
+from ..runtime.lazy import linalg
 from .angle_design import (RANK_TOL, Design, ModelFit, ModelSpec, column_norms,
                            extend_theta, fix_rate, plausible_rate, rank_keep,
                            solve, spline_basis)

@@ -17,9 +17,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import linalg, special
-from scipy.interpolate import PchipInterpolator
 
+from ..runtime.lazy import interpolate, linalg, special
 from .label_shift import label_shift_costs
 from .pass_table import nearest_index, pass_order, planet_fractions
 from .planet_labels import GaugeLabels, GaugePasses, shift_labels
@@ -250,7 +249,7 @@ def _ring_clock(lab: GaugeLabels, gearset):
     t = lab.times[ok]
     if np.any(np.diff(turns) <= 0):
         return None
-    return PchipInterpolator(t, turns, extrapolate=False)
+    return interpolate.PchipInterpolator(t, turns, extrapolate=False)
 
 
 def _chi2_quantile(q: float, dof: int) -> float:

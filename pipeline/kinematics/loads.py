@@ -11,8 +11,8 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
 
+from ..runtime.lazy import optimize
 from ..errors import ProcessingWarning
 from ..models.load_sharing import load_sharing
 from ..validate import as_finite_array, as_float, as_positive, as_positive_int
@@ -250,7 +250,7 @@ def facewidth_centroid(readings, positions, face_width: float, gains=None) -> Ce
             return zc, frac, "linear" if frac == 1.0 else "partial", float(np.sqrt(np.mean(resid ** 2)))
         # partial contact: fit A max(0, 1 - s z)
         fun = lambda p: p[0] * np.maximum(0.0, 1.0 - p[1] * z) - y
-        sol = least_squares(fun, [a, s])
+        sol = optimize.least_squares(fun, [a, s])
         zc, frac = centroid_of_shape(sol.x[1], b)
         return (zc, frac, "linear" if frac == 1.0 else "partial",
                 float(np.sqrt(np.mean(sol.fun ** 2))))

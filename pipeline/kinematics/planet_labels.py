@@ -17,8 +17,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
 
+from ..runtime.lazy import interpolate
 from .pass_table import planet_fractions
 from .trains import revolution_numbers
 from ..validate import as_finite_array
@@ -313,7 +313,7 @@ def assign_planets_by_tacho(times, tacho_times, planet_angles, gauge_angle: floa
     if tach.size < 2:
         raise ValueError(f"assign_planets_by_tacho needs >= 2 tacho pulses, got {tach.size}")
     k = revolution_numbers(tach)
-    theta = PchipInterpolator(tach, -float(key_angle) + TWO_PI * k * order, extrapolate=False)(t)
+    theta = interpolate.PchipInterpolator(tach, -float(key_angle) + TWO_PI * k * order, extrapolate=False)(t)
     ok = np.isfinite(theta)
     # ground angle of planet n: theta_c + psi_n; match against the gauge angle
     d = (gauge_angle - theta[ok, None] - psi[None, :] + math.pi) % TWO_PI - math.pi

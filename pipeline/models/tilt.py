@@ -25,8 +25,8 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import brentq
 
+from ..runtime.lazy import optimize
 from ..errors import ConvergenceWarning, ModelWarning
 from ..runtime.log import logger
 from ..validate import as_choice, as_nonnegative, as_positive, as_positive_int
@@ -391,7 +391,7 @@ def _coordinate(sysm, kinv, z, atol, rtol, max_sweeps=500):
                 elif fhi <= 0:
                     zi[jj] = hi
                 else:
-                    zi[jj] = brentq(f, lo, hi, xtol=1e-16, rtol=4 * np.finfo(float).eps)
+                    zi[jj] = optimize.brentq(f, lo, hi, xtol=1e-16, rtol=4 * np.finfo(float).eps)
             iters[i] = sweep + 1
             if np.max(np.abs(zi - old)) <= 0.1 * (atol + rtol * np.max(np.abs(zi))):
                 break

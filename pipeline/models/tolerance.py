@@ -57,6 +57,7 @@ import warnings
 import numpy as np
 
 from ..errors import ModelWarning
+from ..runtime.lazy import stats
 from ..runtime.log import logger
 from ..validate import as_choice, as_int, as_positive_int
 from . import _kernels
@@ -420,8 +421,7 @@ def _unit_draws(sampler, gen, d, reps):
     """draw(r, m, first) -> (m, d) unit-cube points of replicate r (its first batch: first)."""
     if sampler == "random":
         return lambda r, m, first: gen.random((m, d))
-    from scipy.stats import qmc   # lazy: the core import does not load scipy.stats
-    engines = [qmc.Sobol(max(d, 1), scramble=True, rng=child) for child in gen.spawn(reps)]
+    engines = [stats.qmc.Sobol(max(d, 1), scramble=True, rng=child) for child in gen.spawn(reps)]
 
     def draw(r, m, first):
         if first and (m & (m - 1)):

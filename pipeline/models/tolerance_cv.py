@@ -34,8 +34,8 @@ import time
 import warnings
 
 import numpy as np
-from scipy import special
 
+from ..runtime.lazy import special, stats
 from ..errors import ModelWarning
 from ..runtime.log import logger
 from ..validate import as_positive_int
@@ -60,11 +60,10 @@ def check_cv_bands(tolerances, n_p):
 
 def _sobol_normals(gen, d, reps, m):
     """reps independent scrambled Sobol sets of m standard normal points, (reps, m, d)."""
-    from scipy.stats import qmc   # lazy: the core import does not load scipy.stats
     out = np.empty((reps, m, d))
     for r, child in enumerate(gen.spawn(reps)):
         m2 = 1 << max(0, int(m - 1).bit_length())          # balanced draw, then the first m
-        u = qmc.Sobol(max(d, 1), scramble=True, rng=child).random(m2)[:m, :d]
+        u = stats.qmc.Sobol(max(d, 1), scramble=True, rng=child).random(m2)[:m, :d]
         out[r] = special.ndtri(np.clip(u, 2.0 ** -53, 1.0 - 2.0 ** -53))
     return out
 

@@ -37,8 +37,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import special
 
+from ..runtime.lazy import special, stats
 from ..validate import as_finite_array
 from .tolerance_model import case_inputs, RotationGrid, resolve_n_times
 
@@ -145,8 +145,7 @@ class LinearisedDeviation:
             phi = 2.0 * math.pi * (np.arange(_CIRCLE_NODES) + 0.5) / _CIRCLE_NODES
             dirs = np.stack([np.cos(phi), np.sin(phi)], axis=1)
         else:
-            from scipy.stats import qmc   # lazy: the core import does not load scipy.stats
-            u = qmc.Sobol(k, scramble=True, rng=np.random.default_rng(12345)).random(
+            u = stats.qmc.Sobol(k, scramble=True, rng=np.random.default_rng(12345)).random(
                 _SPHERE_POINTS)
             dirs = special.ndtri(np.clip(u, 2.0 ** -53, 1.0 - 2.0 ** -53))
             dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)

@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 from fractions import Fraction
 
 import numpy as np
-from scipy import special
 
+from ..runtime.lazy import special
 from ..validate import (as_choice, as_finite_array, as_float, as_int, as_nonnegative,
                         as_positive, as_positive_int)
 from . import _kernels

@@ -11,8 +11,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import ndimage
 
+from ..runtime.lazy import ndimage
 from ..signal.median import MAD_TO_SIGMA, median_and_mad, median_of_finite
 from ..validate import as_choice, as_positive, as_positive_int, as_signal
 from .fastpath import run_maxima

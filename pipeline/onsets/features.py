@@ -6,8 +6,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import ndimage
 
+from ..runtime.lazy import ndimage
 from ..signal.savgol import savgol_coeffs_cached, savgol_filter
 from ..signal.spectral import resample
 

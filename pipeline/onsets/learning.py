@@ -12,8 +12,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import fft as sfft
 
+from ..runtime.lazy import fft as sfft
 from ..signal.spectral import tukey
 from ..validate import as_choice, as_float, as_positive, as_positive_int, as_signal
 from .coarse import coarse_decimated, decimate, decimation_for, fill_nan

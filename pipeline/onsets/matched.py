@@ -12,8 +12,8 @@ import math
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
-from scipy import fft as sfft
 
+from ..runtime.lazy import fft as sfft
 from .template import Template
 
 __all__ = ["Matcher", "gather_windows", "sublags", "window_baseline"]

@@ -232,7 +232,8 @@ def run_status(ctx) -> dict:
     missing = [{"result": RESULT_OF_STAGE[s], "stage": s, "cause": _cause(failed, s)}
                for s in failed if s in RESULT_OF_STAGE]
     empty = _empty_results(ctx, failed)
-    # a run's results: not loaded for the command line's start-up (meshphase --help)
+    # the run's result types (meshphase.run.results, through .context): not loaded for the
+    # command line's start-up (meshphase --help; tests/test_core_imports.py)
     from .context import phasing_verdict
 
     rel = phasing_verdict(ctx.phasing, ctx.messages)

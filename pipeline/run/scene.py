@@ -776,7 +776,8 @@ def _parse_input_mcap(inp: dict, err) -> dict:
     ``gear``, ``tooth``, ``face_position_mm``, ``description``), ``fs`` [Hz], ``max_jitter``
     [s], ``stamp``. The mapping is checked here (:func:`meshphase.io.mcap.parse_topics`);
     the file against it when it is read."""
-    from ..io.mcap import parse_topics  # the MCAP mapping: only scenes that give one
+    # the mcap library (lz4, zstandard) behind it: loaded only by a scene that maps an MCAP file
+    from ..io.mcap import parse_topics
 
     if "recording" not in inp:
         raise err(["input", "mcap"], "[input.mcap] maps the topics of an MCAP recording file: "
@@ -1032,7 +1033,8 @@ def _check_monte_carlo(scene: Scene, err) -> None:
     """Size of the Monte Carlo (realisations x time points x planets) before it runs: refused
     above ``LIMITS["mc_evals_max"]``, a SceneWarning with the run-time estimate above
     ``LIMITS["samples_warn"]`` realisations."""
-    # heavy: tolerance imports scipy.stats and numba; only a Monte Carlo scene needs it
+    # scipy.special (the tolerance model's quantiles, computed at its import): only a Monte
+    # Carlo scene loads it
     from ..models.tolerance import default_n_times, observation_window
 
     t, sp, g = scene.tolerances, scene.speeds, scene.gearset

@@ -58,6 +58,7 @@ from .scene import STAGES, Scene, SceneError, load_scene, plan, read_options
 from .state import RunMessage, StageFailure, flagged_warning
 from .stream import (BLOCK_SAMPLES, ChannelPlan, FileSource, GeneratorSource, MemorySource,
                      condition_stream, scan_source)
+from ..runtime.lazy import load_all
 from ..runtime.threads import blas_single_thread
 from ..compare.truth import phasing_vs_truth, tacho_geometry, true_errors
 from ..io.units import gauge_unit_gains
@@ -681,7 +682,7 @@ def _tolerances(ctx: RunContext, tolerance) -> "Tolerances":
 @runs("tolerance")
 def stage_tolerance(ctx: RunContext) -> ToleranceStage:
     """Monte Carlo phasing statistics under the scene's tolerances."""
-    # scipy.stats and numba behind it: loaded only by a scene that asks for the Monte Carlo
+    # scipy.special and numba's kernels behind it: loaded only by a scene that asks for the Monte Carlo
     from ..models import tolerance
 
     g = ctx.gearset
@@ -814,7 +815,8 @@ def stage_bearing_moments(ctx: RunContext) -> BearingStage:
 @runs("tilt")
 def stage_tilt(ctx: RunContext) -> TiltStage:
     """The coupled tilt / load-distribution solve at each of the scene's tilt stiffnesses."""
-    from ..models.tilt import solve_tilt  # scipy.optimize
+    # the bearing and tilt models load only for a scene that asks for them
+    from ..models.tilt import solve_tilt
 
     b = ctx.scene.bearing
     case, torque = _bearing_case(ctx)
@@ -858,6 +860,8 @@ def run_scene(scene: Scene, *, progress: Callable[[str, int, int], None] | None 
         raise TypeError(f"scene must be a Scene (meshphase.run.scene.load_scene), got {type(scene).__name__}")
     ctx = RunContext(scene)
     stages = plan(scene)
+    # the stages' scipy modules (their BLAS among them) load before BLAS is held to one thread
+    load_all()
     with blas_single_thread():          # meshphase.runtime.threads: tall, narrow least squares
         _run_stages(ctx, stages, progress)
     if progress:

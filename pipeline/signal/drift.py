@@ -16,8 +16,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import ndimage
 
+from ..runtime.lazy import ndimage
 from .blocks import run_whole
 from .median import MAD_TO_SIGMA, median_and_mad
 from .savgol import savgol_filter

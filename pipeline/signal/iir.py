@@ -37,6 +37,7 @@ import time
 
 import numpy as np
 
+from ..runtime.lazy import signal as scipy_signal
 from ..runtime.log import logger
 from ..runtime.numba_cache import import_kernels
 from .sos_design import butter_sos, sosfilt_zi
@@ -176,9 +177,7 @@ def sosfiltfilt(sos, x, *, padlen: int, engine: str = "auto") -> np.ndarray:
         raise ValueError(f"x must be 1-D, got shape {x.shape}")
     padlen = _check_padlen(padlen, x.size)
     if pick_engine(engine, x.size) == "scipy":
-        from scipy import signal
-
-        return signal.sosfiltfilt(sos, x, padlen=padlen)
+        return scipy_signal.sosfiltfilt(sos, x, padlen=padlen)
     return filter_extended(sos, extended([x], padlen), padlen)
 
 
@@ -288,9 +287,7 @@ def warmup(check: bool = True) -> dict:
     seconds = time.perf_counter() - t
     if not check:
         return {"engine": "numba", "seconds": seconds}
-    from scipy import signal
-
-    ref = signal.sosfiltfilt(sos, x, padlen=9)
+    ref = scipy_signal.sosfiltfilt(sos, x, padlen=9)
     if not (np.allclose(y, ref, rtol=0.0, atol=1e-12) and np.array_equal(ya, y)
             and np.array_equal(yb, -y)):
         raise RuntimeError("the numba filter kernel disagrees with scipy.signal.sosfiltfilt")

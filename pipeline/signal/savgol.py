@@ -14,8 +14,8 @@ from __future__ import annotations
 import functools
 
 import numpy as np
-from scipy import linalg, ndimage
 
+from ..runtime.lazy import linalg, ndimage
 __all__ = ["savgol_coeffs", "savgol_coeffs_cached", "savgol_filter"]
 
 

@@ -12,8 +12,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import ndimage
 
+from ..runtime.lazy import ndimage
 from .median import median_of_finite, sigma_of_differences
 from .runs import find_runs, merge_runs
 from ..validate import as_float, as_signal

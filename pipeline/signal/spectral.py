@@ -17,8 +17,8 @@ import math
 from typing import Callable
 
 import numpy as np
-from scipy import fft as sfft
 
+from ..runtime.lazy import fft as sfft
 __all__ = ["tukey", "welch", "resample"]
 
 
