@@ -332,3 +332,32 @@ def test_relative_paths_and_the_current_folder(tmp_path, monkeypatch):
             with OutputDir(path, overwrite=True):
                 pass
     assert (base / "summary.json").read_text() == "new" and sorted(os.listdir(tmp_path)) == ["out"]
+
+
+def test_a_signal_right_after_the_staging_mkdir_leaves_no_folder(tmp_path, monkeypatch):
+    # SIGTERM raises SystemExit wherever the main thread is; the window between the staging
+    # folder's mkdir and the code that removes it on failure was open (a loaded machine's
+    # signal landed there and left .mp-*.new behind)
+    real = os.mkdir
+
+    def mkdir_then_signal(p, *a, **k):
+        real(p, *a, **k)
+        raise SystemExit(143)
+
+    monkeypatch.setattr(ex.os, "mkdir", mkdir_then_signal)
+    with pytest.raises(SystemExit):
+        with ex.OutputDir(tmp_path / "out", staged=True):
+            pass
+    monkeypatch.undo()
+    assert sorted(os.listdir(tmp_path)) == []
+
+
+def test_a_colliding_staging_name_of_another_run_is_never_removed(tmp_path):
+    other = tmp_path / ".mp-0000-1-00000000.new"
+    other.mkdir()
+    (other / ex.MANIFEST_NAME).write_text('{"pid": 1}')
+    assert not ex._own_stage(other)
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    assert ex._own_stage(mine)
+    assert not ex._own_stage(tmp_path / "missing")

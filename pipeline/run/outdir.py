@@ -456,6 +456,18 @@ def new_output_dir(base: Path, *, overwrite: bool = False) -> Path:
     return out
 
 
+def _own_stage(p: Path) -> bool:
+    """Whether the staging folder ``p`` is this process's: empty (made, no manifest yet) or its
+    manifest names this process."""
+    try:
+        if not os.listdir(p):
+            return True
+        with open(p / MANIFEST_NAME, encoding="utf-8") as fh:
+            return json.load(fh).get("pid") == os.getpid()
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
 class OutputDir:
     """A run's output folder, written whole or not at all.
 
@@ -539,9 +551,14 @@ class OutputDir:
         # staging folder) and the guard would end the process at the default action and
         # leave that folder behind
         self._signals = SignalGuard().__enter__()
+        self._making = None
         try:
             return self._open()
         except BaseException:
+            # a signal raises SystemExit wherever the main thread is: between the staging
+            # folder's mkdir and the code that would remove it on failure, too
+            if self._making is not None and self._state != "open" and _own_stage(self._making):
+                shutil.rmtree(self._making, ignore_errors=True)
             self._signals.__exit__(None, None, None)
             self._signals = None
             raise
@@ -610,11 +627,14 @@ class OutputDir:
         for _ in range(100):
             self._token = secrets.token_hex(4)
             p = parent / _work_name("new", self._token)
+            self._making = p                 # named before it exists: __enter__ removes it on any exit
             try:
                 os.mkdir(p)
             except FileExistsError:
+                self._making = None          # another run's folder (a 32-bit token collision)
                 continue
             except OSError as exc:      # the output folder's name, not the working name, in the message
+                self._making = None
                 raise OSError(exc.errno, exc.strerror, str(self.final)) from None
             break
         else:  # pragma: no cover - 100 collisions of 32 random bits

@@ -879,10 +879,12 @@ def _scene_with(path: tuple, value, results=None, *, drop: bool = False):
 
 #: tables BASE_SCENE leaves out (they need another kind of recording, or pin what the data
 #: decide), with a valid content for the keys under them: ``[input.mcap]`` maps the topics of
-#: an MCAP file of another tool, ``[labels]`` pins a gauge's planet labels
+#: an MCAP file of another tool, ``[labels]`` pins a gauge's planet labels, ``[onsets]`` names
+#: the onset detector
 _OPTIONAL_TABLES = {("input", "mcap"): {"channels": [{"name": "sun", "topic": "/rig/strain",
                                                       "field": "gauges.sun"}]},
-                    ("labels",): {"sun_shift": 0}}
+                    ("labels",): {"sun_shift": 0},
+                    ("onsets",): {"detector": "matched"}}
 
 #: keys the scene schema allows only instead of another (``oneOf``)
 _EXCLUSIVE = {("gearset", "planet_angles_deg"): "n_planets"}
