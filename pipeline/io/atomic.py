@@ -28,7 +28,7 @@ from ..runtime.log import logger
 from ..validate import as_float, as_nonnegative
 
 __all__ = ["atomic_path", "clean_stale_partials", "TEMP_PREFIX", "TEMP_SUFFIX", "STALE_AGE", "WRITE_FULL",
-           "host_tag", "pid_alive", "SignalGuard"]
+           "host_tag", "pid_alive", "SignalGuard", "fsync_path"]
 
 #: Temporary files are named ``.mp-<host>-<pid>-<8 hex>.partial`` (at most 33 characters,
 #: so any legal output name works): ``host`` is 4 hex digits of a hash of the host name and
@@ -44,7 +44,8 @@ _LEGACY_RE = re.compile(r"^\..+\.[a-z0-9_]{8}\.partial$")
 # link() is refused by filesystems without hard links (FAT, some FUSE/SMB mounts)
 _NO_LINK = {errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.EMLINK, errno.ENOSYS, errno.EACCES}
 # fsync of a directory is refused by some filesystems; the data are already synced then
-_NO_DIR_FSYNC = {errno.EINVAL, errno.EBADF, errno.EACCES, errno.EPERM, errno.EISDIR, errno.ENOTSUP}
+_NO_FSYNC = {errno.EINVAL, errno.EBADF, errno.EACCES, errno.EPERM, errno.EISDIR, errno.ENOTSUP,
+             errno.EROFS}
 #: Signals that would end the process without unwinding; while a temporary file is open in
 #: the main thread they raise SystemExit(128 + signum) instead, so the file is removed.
 _GUARDED_SIGNALS = tuple(getattr(signal, n) for n in ("SIGTERM", "SIGHUP") if hasattr(signal, n))
@@ -142,17 +143,21 @@ def _create_temp(directory: Path) -> tuple[Path, int]:
     raise FileExistsError(errno.EEXIST, f"{directory}: no free temporary file name after 100 tries")
 
 
-def _fsync_dir(directory: Path) -> None:
+def fsync_path(path, *, directory: bool = False) -> None:
+    """fsync a file (opened read-only: enough on Linux) or a folder; refusals of the file
+    system (some refuse fsync on folders, read-only descriptors or read-only mounts) are not
+    errors."""
+    flags = os.O_RDONLY | getattr(os, "O_CLOEXEC", 0) | (getattr(os, "O_DIRECTORY", 0) if directory else 0)
     try:
-        fd = os.open(directory, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+        fd = os.open(path, flags)
     except OSError as exc:
-        if exc.errno in _NO_DIR_FSYNC:
+        if exc.errno in _NO_FSYNC:
             return
         raise
     try:
         os.fsync(fd)
     except OSError as exc:
-        if exc.errno not in _NO_DIR_FSYNC:
+        if exc.errno not in _NO_FSYNC:
             raise
     finally:
         os.close(fd)
@@ -355,7 +360,7 @@ def atomic_path(path, *, overwrite: bool = False, size_hint: int | None = None):
             fd = -1
             _publish(tmp, path, overwrite)
             tmp = None
-            _fsync_dir(directory)
+            fsync_path(directory, directory=True)
         finally:
             if fd >= 0:
                 os.close(fd)

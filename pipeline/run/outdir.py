@@ -26,7 +26,7 @@ from pathlib import Path
 # output folders (a process under another user counts as alive: not ours to recover)
 from ..version import __version__
 from ..io import atomic_path
-from ..io.atomic import WRITE_FULL, SignalGuard, host_tag, pid_alive
+from ..io.atomic import WRITE_FULL, SignalGuard, fsync_path, host_tag, pid_alive
 from ..runtime.log import logger
 
 __all__ = ["OutputDir", "output_write_errors", "new_output_dir", "free_output_name",
@@ -77,8 +77,6 @@ _TEMP_FILE_RE = re.compile(r"^\.mp-[0-9a-f]{4}-[0-9]{1,10}-[0-9a-f]{8}\.partial$
 _LEGACY_NAME_RE = re.compile(r"^(summary\.json|passes_\w+\.csv|load_sharing\.csv|identified_errors\.csv|"
                              r"tilt\.csv|stages\.csv|arrays\.h5|report\.html|demo_scene\.toml|"
                              r"campaign\.json|campaign\.csv|campaign_report\.html)$")
-_NO_FSYNC = {errno.EINVAL, errno.EBADF, errno.EACCES, errno.EPERM, errno.EISDIR, errno.ENOTSUP,
-             errno.EROFS}
 # staging folder -> published folder, for callers that only kept paths (published_path)
 _PUBLISHED: "OrderedDict[str, str]" = OrderedDict()
 
@@ -89,25 +87,6 @@ def _work_name(kind: str, token: str) -> str:
     return f".mp-{host_tag()}-{os.getpid()}-{token}.{kind}"
 
 
-def _fsync_path(path, *, directory: bool = False) -> None:
-    """fsync a file (opened read-only: enough on Linux) or a folder; refusals of the file
-    system (some refuse fsync on folders or read-only descriptors) are not errors."""
-    flags = os.O_RDONLY | getattr(os, "O_CLOEXEC", 0) | (getattr(os, "O_DIRECTORY", 0) if directory else 0)
-    try:
-        fd = os.open(path, flags)
-    except OSError as exc:
-        if exc.errno in _NO_FSYNC:
-            return
-        raise
-    try:
-        os.fsync(fd)
-    except OSError as exc:
-        if exc.errno not in _NO_FSYNC:
-            raise
-    finally:
-        os.close(fd)
-
-
 def _fsync_tree(root: Path) -> None:
     """Every file and folder under ``root`` on disk before ``root`` is renamed into place (the
     writers - pandas, h5py, matplotlib - close their files without fsync)."""
@@ -115,8 +94,8 @@ def _fsync_tree(root: Path) -> None:
         for name in files:
             p = os.path.join(dirpath, name)
             if stat.S_ISREG(os.lstat(p).st_mode):
-                _fsync_path(p)
-        _fsync_path(dirpath, directory=True)
+                fsync_path(p)
+        fsync_path(dirpath, directory=True)
 
 
 def _write_json_atomic(path: Path, obj) -> None:
@@ -253,7 +232,7 @@ def _swap_in(stage: Path, dest: Path, token: str, *, reserved: bool = False, sna
                 raise FileExistsError(errno.EEXIST, "another writer put files into the folder reserved "
                                                     "for this run; nothing replaced", str(dest)) from None
             raise
-        _fsync_path(parent, directory=True)
+        fsync_path(parent, directory=True)
         return
     if not os.path.isdir(dest):
         raise NotADirectoryError(errno.ENOTDIR, "exists and is not a folder; nothing replaced", str(dest))
@@ -270,12 +249,12 @@ def _swap_in(stage: Path, dest: Path, token: str, *, reserved: bool = False, sna
         except BaseException:
             os.rename(aside, dest)
             raise
-        _fsync_path(parent, directory=True)
+        fsync_path(parent, directory=True)
     finally:
         with contextlib.suppress(OSError):
             os.unlink(journal)
     shutil.rmtree(aside, ignore_errors=True)  # a leftover is removed by the next recovery
-    _fsync_path(parent, directory=True)
+    fsync_path(parent, directory=True)
 
 
 def _rename_to_free(stage: Path, base: Path) -> Path:
@@ -290,7 +269,7 @@ def _rename_to_free(stage: Path, base: Path) -> Path:
             if exc.errno not in (errno.ENOTEMPTY, errno.EEXIST):
                 raise
             continue
-        _fsync_path(dest.parent, directory=True)
+        fsync_path(dest.parent, directory=True)
         return dest
     raise FileExistsError(errno.EEXIST, "no free output folder name after 100 tries",  # pragma: no cover
                           str(base))
