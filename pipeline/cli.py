@@ -61,7 +61,6 @@ from .run.demo import demo_scene_path
 from .errors import DataQualityWarning
 from .run.exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_PIPE, recording_read_errors,
                         run_status, status_line)
-from .run.outdir import OutputDir, output_write_errors
 from .runtime.heap import limit_heap_growth
 from .io import FormatChoices, convert, detect_format, iter_blocks, read_info
 from .io.base import ANY_FS_ENV
@@ -418,18 +417,9 @@ def _run_and_write(args, scene, base, *, report: bool = True):
     ``scene`` is a Scene or a function of the reserved folder returning one (the demo writes
     its scene file there first). The folder is removed again when the run fails or is
     interrupted (:class:`meshphase.run.outdir.OutputDir`)."""
-    from .run.stages import run_scene, write_outputs  # the processing stack: see the module docstring
-    with OutputDir(base, overwrite=args.overwrite, staged=True) as out:
-        if callable(scene):
-            scene = scene(out.path)
-        ctx = run_scene(scene, progress=_stage_progress(not args.quiet))
-        if run_status(ctx)["status"] == "failed":
-            out.discard()
-            return ctx, {}
-        with output_write_errors(base):
-            files = write_outputs(ctx, out.path, report=report)
-    # written into the staging folder; these are the paths now that it is published
-    return ctx, {k: out.published(v) for k, v in files.items()}
+    from .run.stages import run_to_folder  # the processing stack: see the module docstring
+    return run_to_folder(scene, base, overwrite=args.overwrite, report=report,
+                         progress=_stage_progress(not args.quiet))
 
 
 def cmd_run(args) -> int:

@@ -68,7 +68,7 @@ if TYPE_CHECKING:  # the model modules of bearing, tilt and tolerance load in th
     # `meshphase process` runs none of them (nor does a scene that does not ask for them)
     from ..models.tolerance import Tolerances
 
-__all__ = ["RunContext", "run_scene", "STAGE_FUNCTIONS", "write_outputs", "process_recording",
+__all__ = ["RunContext", "run_scene", "STAGE_FUNCTIONS", "write_outputs", "process_recording", "run_to_folder",
            "new_output_dir"]
 
 
@@ -964,14 +964,47 @@ def process_recording(path, gearset_scene_path, *, out_dir=None, overwrite=False
     if not tolerance:
         scene.tolerances = None
     base = Path(out_dir) if out_dir else Path(path).with_name(Path(path).stem + "-meshphase")
-    # staged: the folder is built beside its final name and swapped in whole, so a killed
-    # run never leaves a half-written result folder under the name a reader expects
+    return run_to_folder(scene, base, overwrite=overwrite, report=False, progress=progress)
+
+
+def run_to_folder(scene, base, *, overwrite: bool = False, report: bool = True,
+                  progress: Callable[[str, int, int], None] | None = None) -> tuple:
+    """Run ``scene`` into the output folder ``base``: reserved first, written unless nothing is
+    usable, published whole.
+
+    The folder is staged beside its final name and swapped in when complete, so a killed run
+    never leaves a half-written folder under the name a reader expects; a failed or
+    interrupted run leaves none (:class:`meshphase.run.outdir.OutputDir`).
+
+    Parameters
+    ----------
+    scene : Scene or callable
+        The scene, or a function of the staging folder returning one (the demo writes its
+        scene file there first).
+    base : str or Path
+        The output folder (an existing one gets ``-2``, ``-3``, ... unless ``overwrite``).
+    overwrite : bool
+        Replace an existing folder (atomically, when the run finishes).
+    report : bool
+        Also write report.html.
+    progress : callable, optional
+        ``progress(stage, i, n)``.
+
+    Returns
+    -------
+    (RunContext, dict)
+        The run and the files written (name -> path, after publishing); no files when the
+        run failed.
+    """
+    base = Path(base)
     with OutputDir(base, overwrite=overwrite, staged=True) as out:
+        if callable(scene):
+            scene = scene(out.path)
         ctx = run_scene(scene, progress=progress)
         if run_status(ctx)["status"] == "failed":
             out.discard()
             return ctx, {}
         with output_write_errors(base):
-            written = write_outputs(ctx, out.path, report=False)
+            written = write_outputs(ctx, out.path, report=report)
     # after publishing: the folder's name is settled then (another run may have taken it)
     return ctx, {k: out.published(v) for k, v in written.items()}
