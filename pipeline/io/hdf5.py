@@ -23,10 +23,12 @@ Channel names are stored in the ``name`` attribute; the dataset name is the chan
 ``%`` and ``/`` percent-encoded (and a name ``.`` written ``%2E``) so any Unicode name works.
 
 A file written by another tool (no ``meshphase_format`` root attribute) is read as it is
-laid out: its 1-D numeric datasets (and the columns of a 2-D one of a few channels) of the
-longest length are the channels, the rate from
-``fs=``, a clock dataset or a rate / interval attribute (:func:`_foreign_header`;
-``data_schemas/hdf5_layout.md``, "HDF5 files written by other tools").
+laid out: its numeric datasets of the longest length are the channels, a 1-D dataset one
+channel, a 2-D one of any channel count one channel per column (or row: the samples axis is
+the longer one unless an attribute says otherwise), an N-D one one channel per index over
+its other axes (``name[i,j]``); the rate from ``fs=``, a clock dataset or a rate / interval
+attribute (:func:`_foreign_header`; ``data_schemas/hdf5_layout.md``, "HDF5 files written by
+other tools").
 
 Reading allocates the output once, as a channel-major (Fortran-ordered) samples x channels
 array, and fills each column with ``Dataset.read_direct``: one channel or one time window is
@@ -153,8 +155,15 @@ def dataset_name(channel: str) -> str:
 
 
 # ---------------------------------------------------------------------------- sniff
+#: user-block text of a MATLAB 7.3 MAT-file (HDF5 inside, read by :mod:`meshphase.io.matlab`)
+_MATLAB_TEXT = b"MATLAB 7.3 MAT-file"
+
+
 def sniff(head: bytes) -> bool:
-    """True when ``head`` carries the HDF5 signature at offset 0, 512, 1024 or 2048."""
+    """True when ``head`` carries the HDF5 signature at offset 0, 512, 1024 or 2048, and its
+    user block is not a MATLAB 7.3 MAT-file's header (that file is the ``matlab`` format's)."""
+    if head.startswith(_MATLAB_TEXT):
+        return False
     return any(head[o:o + 8] == _MAGIC for o in _USERBLOCK_OFFSETS)
 
 
@@ -288,32 +297,71 @@ def _stated_rate(objs, path, where: str) -> float | None:
 
 #: attributes (any case) of a 2-D dataset naming its channels
 _NAMES_ATTRS = ("channels", "channel_names", "names", "columns", "labels")
-#: a 2-D dataset with at most this many rows or columns holds that many channels
-MAX_COLUMNS = 64
+#: attributes (any case) of a 2-D or N-D dataset giving its samples axis (0-based, in the
+#: dataset's own axis order as h5py and numpy show it)
+_AXIS_ATTRS = ("time_axis", "sample_axis", "samples_axis")
+#: a dataset of channels read at a time is read in pieces of at most this many bytes
+_PIECE_BYTES = 64 * 2 ** 20
 
 
 class _Column:
-    """One channel of a 2-D dataset (samples along ``axis``), read like a 1-D dataset: through
-    h5py's selection, never the raw-chunk path (``chunks`` None)."""
+    """One channel of a 2-D or N-D dataset (samples along ``axis``; ``col`` the index over
+    the other axes: an int for a 2-D dataset, a tuple for N-D), read like a 1-D dataset:
+    through h5py's selection, never the raw-chunk path (``chunks`` None)."""
 
     chunks = None
     fletcher32 = False
 
-    def __init__(self, ds, col: int, axis: int):
-        self.ds, self.col, self.axis = ds, int(col), int(axis)
-        self.name = f"{ds.name}[{col}]"
+    def __init__(self, ds, col, axis: int):
+        self.ds, self.axis = ds, int(axis)
+        self.col = tuple(int(c) for c in col) if isinstance(col, (tuple, list)) else int(col)
+        idx = self.col if isinstance(self.col, tuple) else (self.col,)
+        other = tuple(d for k, d in enumerate(ds.shape) if k != self.axis)
+        #: the column's index into the other axes flattened in C order
+        self.flat = int(np.ravel_multi_index(idx, other))
+        self.name = f"{ds.name}[{','.join(map(str, idx))}]"
         self.dtype, self.attrs, self.parent = ds.dtype, ds.attrs, ds.parent
-        self.shape = (ds.shape[axis],)
+        self.shape = (ds.shape[self.axis],)
         self.compression = ds.compression
 
     def _sel(self, source):
-        return (source, self.col) if self.axis == 0 else (self.col, source)
+        idx = list(self.col) if isinstance(self.col, tuple) else [self.col]
+        idx.insert(self.axis, source)
+        return tuple(idx)
 
     def read_direct(self, dest, source=np.s_[:]):
         self.ds.read_direct(dest, self._sel(source))
 
     def __getitem__(self, key):
         return self.ds[self._sel(np.s_[:] if key == () else key)]
+
+
+def _samples_axis(ds, path) -> int | None:
+    """The samples axis of a 2-D or N-D dataset: an axis attribute (:data:`_AXIS_ATTRS`),
+    else (2-D) the axis other than the one a names attribute's count matches, else the
+    longest axis; None when two axes tie for longest (ambiguous)."""
+    low = {str(a).lower(): a for a in ds.attrs.keys()}
+    for a in _AXIS_ATTRS:
+        if a in low:
+            v = _plain(ds.attrs[low[a]])
+            if isinstance(v, list) and len(v) == 1:
+                v = v[0]
+            if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v < ds.ndim:
+                raise RecordingFileError(path, f"attribute {low[a]} = {v!r} of dataset {ds.name} (shape "
+                                               f"{ds.shape}) is not an axis 0 to {ds.ndim - 1}")
+            return v
+    if ds.ndim == 2:
+        for a in _NAMES_ATTRS:
+            if a in low:
+                v = _plain(ds.attrs[low[a]])
+                k = len(v.split(",")) if isinstance(v, str) else len(v) if isinstance(v, list) else -1
+                match = [ax for ax in (0, 1) if ds.shape[ax] == k]
+                if len(match) == 1:
+                    return 1 - match[0]
+    longest = max(ds.shape)
+    if list(ds.shape).count(longest) > 1:
+        return None
+    return int(np.argmax(ds.shape))
 
 
 def _column_names(ds, k: int, base: str) -> list[str]:
@@ -331,37 +379,57 @@ def _column_names(ds, k: int, base: str) -> list[str]:
 
 
 def _foreign_header(f, path, fs_opt) -> tuple[dict, tuple, tuple]:
-    """Header of an HDF5 file another tool wrote: its 1-D numeric datasets, and the columns
-    of 2-D ones with at most :data:`MAX_COLUMNS` of them (samples along the longer axis; named
-    by a names attribute, else ``<dataset>_<i>``), of the longest common length are the
-    channels (others skipped with a FormatWarning), named by their link names (full paths
+    """Header of an HDF5 file another tool wrote: its numeric datasets of the longest length
+    are the channels (shorter ones skipped with a FormatWarning): a 1-D dataset is one
+    channel; a 2-D one, of any size, one channel per index of its other axis (the samples
+    axis by :func:`_samples_axis`: an axis attribute, else the axis other than the one a
+    names attribute counts, else the longer; named by a names attribute, else
+    ``<dataset>_<i>``); an N-D one one channel per index over the axes other than the samples
+    axis (``<dataset>[i,j]``, C order); a dataset whose two longest axes tie at the longest
+    length found is refused as ambiguous. Channels are named by their link names (full paths
     where those repeat), kind from the name as for TDMS, units from a ``units`` / ``unit``
-    attribute (a list: one per column). The rate: ``fs_opt``, else a clock dataset or column
-    (:data:`CLOCK_NAMES`; not a channel), else a rate or interval attribute on the datasets
-    or their groups (:data:`_RATE_ATTRS`, :data:`_INTERVAL_ATTRS`); all stating one must
-    agree. Returns (attrs, specs, (dataset path, column or None, samples axis) per channel)."""
+    attribute (a list: one per column of a 2-D dataset). The rate: ``fs_opt``, else a clock
+    dataset or column (:data:`CLOCK_NAMES`; not a channel), else a rate or interval attribute
+    on the datasets or their groups (:data:`_RATE_ATTRS`, :data:`_INTERVAL_ATTRS`); all
+    stating one must agree. Returns (attrs, specs, (dataset path, column or None, samples
+    axis) per channel)."""
     import h5py
 
     found = []                                         # (dataset or column, name)
+    ambiguous = []                                     # (dataset, length of its tied axes)
 
     def visit(name, obj):
-        if not isinstance(obj, h5py.Dataset) or obj.dtype.kind not in "biuf" or 0 in obj.shape:
+        if not isinstance(obj, h5py.Dataset) or obj.dtype.kind not in "biuf" or 0 in obj.shape or not obj.ndim:
             return
         base = obj.name.rsplit("/", 1)[-1]
         if obj.ndim == 1:
             found.append((obj, base))
-        elif obj.ndim == 2 and min(obj.shape) <= MAX_COLUMNS and obj.shape[0] != obj.shape[1]:
-            axis = int(np.argmax(obj.shape))
-            k = obj.shape[1 - axis]
-            found.extend((_Column(obj, i, axis), nm) for i, nm in enumerate(_column_names(obj, k, base)))
+            return
+        axis = _samples_axis(obj, path)
+        if axis is None:
+            ambiguous.append((obj, max(obj.shape)))
+            return
+        other = tuple(d for k, d in enumerate(obj.shape) if k != axis)
+        if obj.ndim == 2:
+            found.extend((_Column(obj, i, axis), nm) for i, nm in enumerate(_column_names(obj, other[0], base)))
+        else:
+            found.extend((_Column(obj, idx, axis), f"{base}[{','.join(map(str, idx))}]")
+                         for idx in np.ndindex(*other))
 
     f.visititems(visit)
+    longest = max([ds.shape[0] for ds, _ in found] + [0])
+    tied = [(ds, m) for ds, m in ambiguous if m >= longest]
+    if tied:
+        ds, m = tied[0]
+        raise RecordingFileError(path, f"dataset {ds.name} of shape {ds.shape}: two axes of {m} values, so "
+                                       "which is the samples axis is ambiguous; give it an attribute "
+                                       f"{_AXIS_ATTRS[0]} (the samples axis, 0-based){' or a names attribute' if ds.ndim == 2 else ''}")
     if not found:
         raise RecordingFileError(path, "an HDF5 file but not a meshphase recording (root attribute "
                                        "meshphase_format='recording' missing), and it holds no 1-D numeric "
-                                       "dataset (nor a 2-D one of a few channels) to read as channels")
+                                       "dataset (nor a 2-D or N-D one) to read as channels")
     n = max(ds.shape[0] for ds, _ in found)
-    skipped = sorted({ds.name for ds, _ in found if ds.shape[0] != n})
+    skipped = sorted({ds.name for ds, _ in found if ds.shape[0] != n} | {ds.name for ds, _ in ambiguous})
     if skipped:
         warnings.warn(FormatWarning(f"{path}: skipped dataset(s) {skipped}: shorter than the channels "
                                     f"({n} samples)"), stacklevel=4)
@@ -402,33 +470,49 @@ def _foreign_header(f, path, fs_opt) -> tuple[dict, tuple, tuple]:
         ds.name.lstrip("/") if isinstance(ds, h5py.Dataset) else f"{ds.ds.name.lstrip('/')}/{b}"
         for ds, b in zip(chans, base)]
     specs = []
+    unit_attrs: dict = {}                              # dataset name -> its units attribute (read once)
     for name, ds in zip(names, chans):
-        units = next((_plain(ds.attrs[k]) for k in ds.attrs.keys() if str(k).lower() in ("units", "unit",
-                                                                                          "unit_string")), "")
+        key = ds.ds.name if isinstance(ds, _Column) else ds.name
+        if key not in unit_attrs:
+            unit_attrs[key] = next((_plain(ds.attrs[k]) for k in ds.attrs.keys()
+                                    if str(k).lower() in ("units", "unit", "unit_string")), "")
+        units = unit_attrs[key]
         if isinstance(units, list) and isinstance(ds, _Column):
-            units = units[ds.col] if ds.col < len(units) else ""
+            units = units[ds.col] if isinstance(ds.col, int) and ds.col < len(units) else ""
         try:
             specs.append(ChannelSpec(name=name, kind=kind_from_name(name.rsplit("/", 1)[-1],
                                                                     ds.parent.name.strip("/")),
                                      units=units if isinstance(units, str) else ""))
         except (ValueError, TypeError) as exc:
             raise RecordingFileError(path, f"dataset {ds.name!r}: {exc}") from exc
+    checked = set()
     for nm, ds in zip(names, chans):
-        _check_written(path, ds.ds if isinstance(ds, _Column) else ds, nm, fs,
-                       ds.axis if isinstance(ds, _Column) else 0)
+        whole = ds.ds if isinstance(ds, _Column) else ds
+        if whole.name not in checked:
+            checked.add(whole.name)
+            _check_written(path, whole, nm, fs, ds.axis if isinstance(ds, _Column) else 0)
     dtypes = {ds.dtype for ds in chans}
     dtype = "float32" if dtypes == {np.dtype(np.float32)} else "float64"
     root = {str(k): _plain(v) for k, v in f.attrs.items()}
     attrs = {"fs": fs, "t0": t0, "n_samples": n, "dtype": dtype, "start_datetime": start,
              "format_version": None, "created_by": root.get("created_by"), "file_id": None,
-             "meta": {"hdf5": {"root": _jsonable_attrs(root),
-                               "datasets": {nm: _jsonable_attrs({str(k): _plain(v) for k, v in ds.attrs.items()})
-                                            for nm, ds in zip(names, chans)}}},
+             "meta": {"hdf5": {"root": _jsonable_attrs(root), "datasets": _datasets_meta(names, chans)}},
              "history": [{"step": "read_hdf5", "file": Path(path).name, "layout": "other tool",
                           "datasets": {nm: ds.name for nm, ds in zip(names, chans)},
                           "fs_from": "given" if fs_opt is not None else "clock" if clock is not None else "attribute"}]}
     return attrs, tuple(specs), tuple((ds.name, None, 0) if isinstance(ds, h5py.Dataset)
                                       else (ds.ds.name, ds.col, ds.axis) for ds in chans)
+
+
+def _datasets_meta(names, chans) -> dict:
+    """The attributes of the datasets read: by channel name for a 1-D dataset, once by the
+    dataset's path (without the leading ``/``) for a 2-D or N-D one."""
+    out = {}
+    for nm, ds in zip(names, chans):
+        key = ds.ds.name.lstrip("/") if isinstance(ds, _Column) else nm
+        if key not in out:
+            out[key] = _jsonable_attrs({str(k): _plain(v) for k, v in ds.attrs.items()})
+    return out
 
 
 def _stored_chunk_offsets(ds) -> np.ndarray:
@@ -720,7 +804,16 @@ def _read_open(f, path, attrs, specs, dsets, names, i0, i1, verify: bool = True,
     buf = np.empty((len(sel), n), dtype=dtype)  # channel-major; data = buf.T (Fortran order)
     if n:
         source = np.s_[i0:i1]
+        columns: dict = {}                              # 2-D / N-D dataset -> [(j, column)]
         for j, (spec, ds) in enumerate(sel):
+            if isinstance(ds, _Column):
+                columns.setdefault(ds.ds.name, []).append((j, ds))
+        for group in columns.values():
+            if len(group) > 1:
+                _read_columns(f, path, group, buf, i0, i1, [sel[j][0].name for j, _ in group])
+        for j, (spec, ds) in enumerate(sel):
+            if isinstance(ds, _Column) and len(columns[ds.ds.name]) > 1:
+                continue
             try:
                 if not verify and _unverified_ok(ds):
                     _read_raw_chunks(ds, buf[j], i0, i1, chunks)
@@ -733,6 +826,26 @@ def _read_open(f, path, attrs, specs, dsets, names, i0, i1, verify: bool = True,
     fs = float(attrs["fs"])
     return Recording(data, fs, [s for s, _ in sel], t0=float(attrs["t0"]) + i0 / fs,
                      start_datetime=attrs["start_datetime"], meta=attrs["meta"], history=attrs["history"])
+
+
+def _read_columns(f, path, group: list, buf: np.ndarray, i0: int, i1: int, names: list) -> None:
+    """Samples [i0, i1) of several channels of one 2-D or N-D dataset (``group``: (row of
+    ``buf``, column)) into ``buf``: the dataset's slab of the window read once, in pieces of
+    at most :data:`_PIECE_BYTES`, each column copied out of it."""
+    ds, axis = group[0][1].ds, group[0][1].axis
+    row = math.prod(d for k, d in enumerate(ds.shape) if k != axis) * ds.dtype.itemsize
+    step = max(1, _PIECE_BYTES // max(row, 1))
+    flats = np.array([c.flat for _, c in group])
+    rows = np.array([j for j, _ in group])
+    for a in range(i0, i1, step):
+        b = min(i1, a + step)
+        sel = tuple(slice(a, b) if k == axis else slice(None) for k in range(ds.ndim))
+        try:
+            piece = ds[sel]
+        except (OSError, RuntimeError) as exc:
+            raise _locate_bad_chunk(f, path, group[0][1], names[0], a, b, exc) from exc
+        piece = np.moveaxis(piece, axis, 0).reshape(b - a, -1)
+        buf[rows, a - i0:b - i0] = piece[:, flats].T
 
 
 def _check_range(path, n_samples, i0, i1):

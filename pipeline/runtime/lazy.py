@@ -17,7 +17,7 @@ from __future__ import annotations
 import importlib
 import types
 
-__all__ = ["LazyModule", "lazy_module", "is_loaded", "load_all", "PROCESSING_SCIPY", "fft", "interpolate", "linalg", "ndimage", "optimize",
+__all__ = ["LazyModule", "lazy_module", "is_loaded", "load_all", "PROCESSING_SCIPY", "fft", "interpolate", "io", "linalg", "ndimage", "optimize",
            "signal", "special", "stats"]
 
 
@@ -127,6 +127,8 @@ def is_loaded(proxy: LazyModule) -> bool:
 fft = lazy_module("scipy.fft")
 #: scipy.interpolate (BSpline, PchipInterpolator)
 interpolate = lazy_module("scipy.interpolate")
+#: scipy.io (loadmat: MATLAB MAT-files v5/v7, meshphase.io.matlab)
+io = lazy_module("scipy.io")
 #: scipy.linalg (least-squares and QR of the smoother and the angle designs)
 linalg = lazy_module("scipy.linalg")
 #: scipy.ndimage (running filters and labelled runs)

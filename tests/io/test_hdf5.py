@@ -532,11 +532,21 @@ def test_hdf5_matrix_datasets_of_other_tools_read(tmp_path, layout):
     np.testing.assert_array_equal(np.concatenate([b.data[:2560] for b in blocks]), want)
 
 
-def test_hdf5_square_or_wide_matrices_are_not_channels(tmp_path):
-    # a 2-D dataset with more than MAX_COLUMNS on both axes (an image, a spectrogram) or
-    # square is not read as channels
+def test_hdf5_wide_matrices_are_channels_and_square_ones_ambiguous(tmp_path):
+    # a 2-D dataset of any size is channels (the longer axis the samples); a smaller square
+    # one beside it is skipped as shorter; a square one of the longest length is refused as
+    # ambiguous, naming its shape and the attribute that resolves it
     with h5py.File(tmp_path / "img.h5", "w") as f:
-        f["image"] = np.zeros((200, 300))
+        f["image"] = np.arange(200 * 300, dtype=float).reshape(200, 300)
         f["square"] = np.zeros((3, 3))
-    with pytest.raises(RecordingFileError, match="no 1-D numeric dataset"):
-        pio.read(tmp_path / "img.h5")
+    with pytest.warns(FormatWarning, match="skipped dataset.*square"):
+        rec = pio.read(tmp_path / "img.h5", fs=10.0)
+    assert rec.n_channels == 200 and rec.n_samples == 300 and rec.names[:2] == ["image_0", "image_1"]
+    np.testing.assert_array_equal(rec.data[:, 7], np.arange(300.0) + 7 * 300)
+    with h5py.File(tmp_path / "sq.h5", "w") as f:
+        f["square"] = np.zeros((300, 300))
+    with pytest.raises(RecordingFileError, match=r"dataset /square of shape \(300, 300\).*ambiguous.*time_axis"):
+        pio.read(tmp_path / "sq.h5", fs=10.0)
+    with h5py.File(tmp_path / "sq.h5", "r+") as f:
+        f["square"].attrs["time_axis"] = 1
+    assert pio.read(tmp_path / "sq.h5", fs=10.0).n_channels == 300
