@@ -40,26 +40,40 @@ def _has_unit(col: str) -> bool:
 
 
 def _documented_units() -> dict:
-    """Column -> the unit outputs.md's tables give it (rows with one unit for named columns)."""
-    out, in_table = {}, False
+    """Column -> the unit outputs.md's tables give it (rows with one unit for named columns),
+    from the CSV tables (column | unit | meaning) and the Python tables (table | column | ...)."""
+    out, first = {}, None
     for line in SCHEMA_DOC.read_text(encoding="utf-8").splitlines():
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        if cells == ["column", "unit", "meaning"]:
-            in_table = True
-        in_table = in_table and line.startswith("|")
-        if not in_table or len(cells) != 3 or "`" not in cells[0] or "," in cells[1]:
+        if cells[-3:] == ["column", "unit", "meaning"]:
+            first = len(cells) - 3
+        if not line.startswith("|"):
+            first = None
+        if first is None or len(cells) != first + 3 or "," in cells[first + 1]:
             continue
-        for col in re.findall(r"`([^`]+)`", cells[0]):
+        for col in re.findall(r"`([^`]+)`", cells[first]):
             if "<" not in col and "." not in col:
-                out[col] = cells[1]
+                out[col] = cells[first + 1]
     return out
 
 
 def test_documented_units_are_the_unit_table():
     doc = _documented_units()
     assert len(doc) > 60 and {"gamma_cycles", "e_m", "mean_amplitude_strain", "wall_time_s"} <= set(doc)
+    assert {"coverage", "median_uncertainty_cycles", "residual_ideal_cycles"} <= set(doc)
     wrong = {c: (u, column_unit(c)) for c, u in doc.items() if DOC_UNITS[u] != column_unit(c)}
     assert not wrong
+
+
+def test_every_python_table_column_is_documented():
+    from meshphase.report.frames import COLUMNS, RENAMED
+
+    doc = SCHEMA_DOC.read_text(encoding="utf-8")
+    for table, cols in COLUMNS.items():
+        missing = [c for c in cols if f"`{c}`" not in doc]
+        assert not missing, (table, missing)
+        missing = [old for old in RENAMED[table] if f"`{old}`" not in doc]
+        assert not missing, (table, missing)
 
 
 def test_column_unit_bad_input():
