@@ -19,6 +19,7 @@ from __future__ import annotations
 import abc
 import copy
 import datetime as _dt
+import json
 import math
 import unicodedata
 import warnings
@@ -566,6 +567,55 @@ class Recording(_TimeAxis):
         df.attrs["fs"] = self.fs
         df.attrs["units"] = {c.name: c.units for c in self.channels}
         return df
+
+    def to_xarray(self):
+        """The samples as an ``xarray.DataArray`` (time x channel), labelled.
+
+        Needs xarray, an optional dependency: ``pip install "meshphase[xarray]"``.
+
+        Returns
+        -------
+        xarray.DataArray
+            Named ``"samples"``, dims ``("time", "channel")``, the samples as stored (a view
+            of :attr:`data` where xarray allows; physical value = sample * ``gain``).
+            Coordinates: ``time`` [s] (``t0 + i / fs``, attrs ``units="s"``), ``channel``
+            (the names) and, along ``channel``: ``kind``, ``units``, ``gear`` (text, ""
+            when unset), ``gain`` [units per stored unit], ``tooth`` [-] and
+            ``face_position`` [m] (floats, NaN when unset). Attrs: ``fs`` [Hz], ``t0`` [s],
+            ``start_datetime`` (ISO 8601 text, "" when unknown) and ``meta`` (the metadata
+            as JSON text, ``json.loads`` reads it back): attrs a netCDF or Zarr file can
+            hold.
+
+        Raises
+        ------
+        ImportError
+            xarray is not installed; the message names the extra that installs it.
+        """
+        try:
+            import xarray as xr  # optional, heavy: only when asked for
+        except ImportError as exc:
+            raise ImportError("Recording.to_xarray needs xarray, an optional dependency of "
+                              "meshphase: pip install \"meshphase[xarray]\"") from exc
+        specs = self.channels
+
+        def opt_float(values):
+            return np.array([np.nan if v is None else float(v) for v in values], dtype=float)
+
+        coords = {
+            "time": ("time", self.times(), {"units": "s"}),
+            "channel": ("channel", list(self.names)),
+            "kind": ("channel", [c.kind for c in specs]),
+            "units": ("channel", [c.units for c in specs]),
+            "gear": ("channel", [c.gear or "" for c in specs]),
+            "gain": ("channel", np.array([c.gain for c in specs], dtype=float)),
+            "tooth": ("channel", opt_float(c.tooth for c in specs), {"units": "1"}),
+            "face_position": ("channel", opt_float(c.face_position for c in specs),
+                              {"units": "m"}),
+        }
+        attrs = {"fs": self.fs, "t0": self.t0, "start_datetime": self.start_datetime or "",
+                 "meta": json.dumps(to_jsonable(self.meta))}
+        return xr.DataArray(self.data, dims=("time", "channel"), coords=coords, attrs=attrs,
+                            name="samples")
 
     def header(self) -> dict:
         """Everything except the samples, as a JSON-friendly dict."""

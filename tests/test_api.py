@@ -7,6 +7,7 @@ import math
 import os
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pandas as pd
@@ -257,19 +258,19 @@ def test_process_with_nothing_usable_raises_with_the_cause(synthetic):
 # ----------------------------------------------------------------------------- tables
 def test_passes_equal_the_phasing_tables(res):
     ctx, df = res.context, res.passes
-    assert list(df.columns[:6]) == ["gauge", "planet", "revolution", "time_s", "phasing_cycles",
-                                    "sigma_cycles"]
+    assert list(df.columns[:6]) == ["gauge", "time_s", "planet", "revolution", "gamma_cycles",
+                                    "uncertainty_cycles"]
     for gear, t in ctx.phasing.tables.items():
         d = df[df["gauge"] == gear]
         assert len(d) == len(t) > 0
         np.testing.assert_array_equal(d["time_s"], t.time)
         np.testing.assert_array_equal(d["planet"], t.planet)
-        np.testing.assert_array_equal(d["phasing_cycles"], t.gamma)
-        np.testing.assert_array_equal(d["sigma_cycles"], t.uncertainty)
+        np.testing.assert_array_equal(d["gamma_cycles"], t.gamma)
+        np.testing.assert_array_equal(d["uncertainty_cycles"], t.uncertainty)
         np.testing.assert_array_equal(d["mesh_period_s"], t.mesh_period)
         cmp = ctx.compare.by_gear[gear]
-        np.testing.assert_array_equal(d["ideal_cycles"], cmp.ideal)
-        np.testing.assert_array_equal(d["model_cycles"], cmp.model)
+        np.testing.assert_array_equal(d["gamma_ideal_cycles"], cmp.ideal)
+        np.testing.assert_array_equal(d["gamma_model_cycles"], cmp.model)
         r = d["residual_model_cycles"].to_numpy()
         assert np.all(np.abs(r) < 0.5)
         np.testing.assert_allclose(np.sqrt(np.mean(r ** 2)), cmp.vs_model["rms"], rtol=1e-12)
@@ -277,7 +278,7 @@ def test_passes_equal_the_phasing_tables(res):
 
 def test_phasing_equals_table_summary_and_comparison(res):
     ctx, df = res.context, res.phasing
-    assert {"mean_cycles", "sd_cycles", "ideal_cycles", "model_cycles",
+    assert {"gamma_mean_cycles", "gamma_std_cycles", "gamma_ideal_cycles", "gamma_model_cycles",
             "residual_model_rms_cycles", "band_dev_lo_cycles"} <= set(df.columns)
     for gear, t in ctx.phasing.tables.items():
         cmp = ctx.compare.by_gear[gear]
@@ -285,13 +286,13 @@ def test_phasing_equals_table_summary_and_comparison(res):
         for planet, s in t.summary().items():
             row = df[(df["gauge"] == gear) & (df["planet"] == planet)].iloc[0]
             assert row["n_passes"] == s["n"]
-            assert row["mean_cycles"] == s["mean"] and row["sd_cycles"] == s["std"]
-            assert row["ideal_cycles"] == ctx.ideal.gamma(gear)[planet - 1]
+            assert row["gamma_mean_cycles"] == s["mean"] and row["gamma_std_cycles"] == s["std"]
+            assert row["gamma_ideal_cycles"] == ctx.ideal.gamma(gear)[planet - 1]
             assert row["residual_model_rms_cycles"] == cmp.vs_model["per_planet"][planet]["rms"]
             assert row["residual_ideal_mean_cycles"] == cmp.vs_ideal["per_planet"][planet]["mean"]
             assert row["band_dev_lo_cycles"] == lo[planet - 1]
             assert row["band_dev_hi_cycles"] == hi[planet - 1]
-            assert abs(row["model_cycles"] - row["mean_cycles"]) < 0.01
+            assert abs(row["gamma_model_cycles"] - row["gamma_mean_cycles"]) < 0.01
 
 
 def test_load_sharing_and_comparison_equal_the_stage_results(res):
@@ -299,35 +300,119 @@ def test_load_sharing_and_comparison_equal_the_stage_results(res):
     ls = ctx.load_sharing.sharing
     df = res.load_sharing
     assert list(df.columns) == ["planet", "load_sharing", "std_error", "n_passes",
-                                "mean_amplitude_ustrain"]
+                                "mean_amplitude_strain"]
     np.testing.assert_array_equal(df["load_sharing"], ls.factors)
     np.testing.assert_array_equal(df["std_error"], ls.std_error)
     np.testing.assert_array_equal(df["n_passes"], ls.n_passes)
-    np.testing.assert_allclose(df["mean_amplitude_ustrain"], ls.mean_amplitude * 1e6, rtol=1e-15)
+    np.testing.assert_array_equal(df["mean_amplitude_strain"], ls.mean_amplitude)
     cmp = res.comparison
-    assert "rms_cycles" in cmp.columns and "inside_band_fraction" in cmp.columns
+    assert "rms_cycles" in cmp.columns and "coverage" in cmp.columns
     for gear, c in ctx.compare.by_gear.items():
         for ref, stats in (("ideal", c.vs_ideal), ("model", c.vs_model)):
             row = cmp[(cmp["gauge"] == gear) & (cmp["reference"] == ref)].iloc[0]
             assert row["rms_cycles"] == stats["rms"] and row["n_passes"] == stats["n"]
-            assert row["inside_band_fraction"] == c.coverage["inside_fraction"]
+            assert row["std_cycles"] == stats["std"]
+            assert row["coverage"] == c.coverage["inside_fraction"]
 
 
-def test_identification_equals_the_table_in_um_and_deg(res):
+def test_identification_equals_the_table_in_m_and_rad(res):
     table = res.context.identify.identification.table
     df = res.identification
-    assert list(df.columns) == ["gear", "e_um", "e_std_um", "e_ci95_lo_um", "e_ci95_hi_um",
-                                "kappa_deg", "kappa_std_deg", "identifiable", "note"]
+    assert list(df.columns[:9]) == ["gear", "e_m", "e_std_m", "e_ci95_lo_m", "e_ci95_hi_m",
+                                    "kappa_rad", "kappa_std_rad", "identifiable", "note"]
     assert list(df["gear"]) == [r["gear"] for r in table]
-    np.testing.assert_array_equal(df["e_um"], [r["e"] * 1e6 for r in table])
-    np.testing.assert_array_equal(df["kappa_deg"], [math.degrees(r["kappa"]) for r in table])
+    np.testing.assert_array_equal(df["e_m"], [r["e"] for r in table])
+    np.testing.assert_array_equal(df["kappa_rad"], [r["kappa"] for r in table])
     np.testing.assert_array_equal(df["identifiable"], [r["identifiable"] for r in table])
 
 
 def test_centroids_empty_without_facewidth_gauges(res):
     df = res.centroids
-    assert df.empty and list(df.columns) == ["gear", "centroid_mm", "std_error_mm",
-                                             "contact_fraction", "shape", "residual_rms"]
+    assert df.empty and list(df.columns) == ["gear", "centroid_m", "std_error_m",
+                                             "contact_fraction", "shape", "residual_rms_strain"]
+    assert df.attrs["units"]["centroid_m"] == "m"
+
+
+def test_tables_are_the_csv_files_columns_and_values(res, tmp_path):
+    """The DataFrames a notebook sees and the CSV files a run writes: one name, one unit."""
+    files = res.write(tmp_path / "out", report=False)
+    for gear in res.context.phasing.tables:
+        csv = pd.read_csv(files[f"passes_{gear}"])
+        df = res.passes
+        d = df[df["gauge"] == gear].reset_index(drop=True)
+        assert list(d.columns[:len(csv.columns)]) == list(csv.columns)
+        pd.testing.assert_frame_equal(pd.DataFrame(d[list(csv.columns)]), csv, check_exact=True)
+    for table, name in (("load_sharing", "load_sharing"), ("identification", "identified_errors")):
+        df = getattr(res, table)
+        csv = pd.read_csv(files[name], keep_default_na=False, na_values=[""])
+        assert list(df.columns) == list(csv.columns), table
+        assert df.attrs["file"] == f"{name}.csv"
+        for c in df.columns:
+            if pd.api.types.is_float_dtype(df[c]):
+                np.testing.assert_array_equal(df[c].to_numpy(), csv[c].to_numpy(), err_msg=c)
+            else:
+                assert df[c].astype(str).tolist() == csv[c].astype(str).tolist(), c
+
+
+def test_every_column_of_every_table_has_a_unit(res):
+    for name in ("passes", "phasing", "load_sharing", "comparison", "identification", "centroids"):
+        df = getattr(res, name)
+        units = df.attrs["units"]
+        assert list(units) == list(df.columns), name
+        assert df.attrs["table"] == name and df.attrs["description"], name
+        for c, u in units.items():      # a number has a unit ("1": a count or ratio), a label none
+            numeric = pd.api.types.is_numeric_dtype(df[c]) and not pd.api.types.is_bool_dtype(df[c])
+            assert df.empty or (u != "") == numeric, (name, c, u)
+    assert res.passes.attrs["units"]["gamma_cycles"] == "cycles"
+    assert res.passes.attrs["units"]["time_s"] == "s"
+    assert res.load_sharing.attrs["units"]["mean_amplitude_strain"] == "strain"
+    assert res.identification.attrs["units"]["e_m"] == "m"
+    assert res.identification.attrs["units"]["kappa_rad"] == "rad"
+    assert res.load_sharing.attrs["units"]["load_sharing"] == "1"
+
+
+def test_old_column_names_answer_with_a_future_warning_in_the_old_unit(res):
+    df = res.identification
+    with pytest.warns(FutureWarning, match="'e_um' is now 'e_m' \\[m\\]"):
+        e_um = df["e_um"]
+    np.testing.assert_allclose(e_um, df["e_m"] * 1e6, rtol=1e-15)
+    assert e_um.name == "e_um"
+    with pytest.warns(FutureWarning, match="'kappa_deg' is now 'kappa_rad'"):
+        np.testing.assert_allclose(df.kappa_deg, np.degrees(df["kappa_rad"]), rtol=1e-15)
+    p = res.passes
+    with pytest.warns(FutureWarning, match="'phasing_cycles' is now 'gamma_cycles'"):
+        np.testing.assert_array_equal(p["phasing_cycles"], p["gamma_cycles"])
+    with pytest.warns(FutureWarning, match="'sigma_cycles' is now 'uncertainty_cycles'"):
+        sub = p[["gauge", "sigma_cycles"]]
+    assert list(sub.columns) == ["gauge", "sigma_cycles"]
+    np.testing.assert_array_equal(sub["sigma_cycles"], p["uncertainty_cycles"])
+    with pytest.warns(FutureWarning, match="mean_amplitude_ustrain"):
+        np.testing.assert_allclose(res.load_sharing["mean_amplitude_ustrain"],
+                                   res.load_sharing["mean_amplitude_strain"] * 1e6, rtol=1e-15)
+    with pytest.warns(FutureWarning, match="'mean_cycles' is now 'gamma_mean_cycles'"):
+        res.phasing["mean_cycles"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res.comparison["mean_cycles"]         # a current column of this table: no warning
+        p["gamma_cycles"]
+    with pytest.raises(KeyError):
+        p["no_such_column"]
+
+
+def test_old_column_names_survive_common_operations(res):
+    import pickle
+
+    p = res.passes
+    derived = {"mask": p[p["planet"] == 2], "head": p.head(3), "sort": p.sort_values("time_s"),
+               "copy": p.copy(), "query": p.query("planet == 2"), "assign": p.assign(x=1.0),
+               "reset_index": p.reset_index(), "dropna": p.dropna(subset=["gamma_cycles"]),
+               "concat": pd.concat([p, p]), "merge": p.merge(p[["time_s"]], on="time_s"),
+               "pickle": pickle.loads(pickle.dumps(p)), "loc": p.loc[p["planet"] == 1]}
+    for op, d in derived.items():
+        assert isinstance(d, type(p)), op
+        assert d.attrs["units"]["gamma_cycles"] == "cycles", op
+        with pytest.warns(FutureWarning, match="phasing_cycles"):
+            np.testing.assert_array_equal(d["phasing_cycles"], d["gamma_cycles"], err_msg=op)
 
 
 def test_summary(res):
@@ -335,14 +420,28 @@ def test_summary(res):
     ctx = res.context
     assert s["status"] == "ok" and s["error"] is None
     assert s["duration_s"] == pytest.approx(60.0) and s["fs_hz"] == 5120.0
-    assert s["sun_passes"] == len(ctx.phasing.tables["sun"])
-    assert s["sun_reliable"] is True
-    assert s["sun_sigma_cycles"] == ctx.phasing.reliability["sun"]["error_estimate"]
-    assert s["ring_rms_vs_model_cycles"] == ctx.compare.by_gear["ring"].vs_model["rms"]
+    assert s["passes_sun"] == len(ctx.phasing.tables["sun"])
+    assert s["reliable_sun"] is True
+    assert s["error_estimate_sun_cycles"] == ctx.phasing.reliability["sun"]["error_estimate"]
+    assert s["rms_vs_model_ring_cycles"] == ctx.compare.by_gear["ring"].vs_model["rms"]
     assert s["load_sharing_max_dev"] == pytest.approx(
         np.max(np.abs(ctx.load_sharing.sharing.factors - 1)))
     assert s["identify_rms_after_cycles"] == ctx.identify.identification.rms_after
     json.dumps(s)                                  # plain values only
+    assert not any(k.startswith(("sun_", "ring_")) for k in s)
+
+
+def test_summary_old_keys_answer_with_a_future_warning(res):
+    s = res.summary()
+    with pytest.warns(FutureWarning, match="'sun_passes' is now 'passes_sun'"):
+        assert s["sun_passes"] == s["passes_sun"]
+    with pytest.warns(FutureWarning, match="'ring_sigma_cycles' is now 'error_estimate_ring_cycles'"):
+        assert s.get("ring_sigma_cycles") == s["error_estimate_ring_cycles"]
+    assert "sun_passes" not in s and s.get("nope", 3) == 3
+    with pytest.raises(KeyError):
+        s["nope"]
+    with pytest.raises(KeyError):
+        Result(_empty_ctx()).summary()["sun_passes"]      # no gauge: no key, old or new
 
 
 def test_repr(res):
@@ -391,7 +490,7 @@ def test_result_of_an_empty_run_has_empty_tables():
         df = getattr(r, name)
         assert df.empty and len(df.columns) > 2, name
     s = r.summary()
-    assert s["status"] == r.status and "sun_passes" not in s and "load_sharing_max_dev" not in s
+    assert s["status"] == r.status and "passes_sun" not in s and "load_sharing_max_dev" not in s
     assert f"meshphase result: {r.status}" in r._repr_html_()
 
 

@@ -15,7 +15,7 @@ from meshphase.run.demo import demo_scene_path
 from meshphase.kinematics.loads import CentroidResult
 from meshphase.models.gearset import Gearset
 from meshphase.models.mesh_phasing import ShaftHoleErrors
-from meshphase.report.frames import (COLUMNS, centroid_rows, circular_mean, comparison_rows,
+from meshphase.report.frames import (COLUMNS, RENAMED, table_units, centroid_rows, circular_mean, comparison_rows,
                                      frame, identification_rows, load_sharing_rows, passes_rows,
                                      phasing_rows)
 from meshphase.run.context import RunContext
@@ -125,7 +125,7 @@ def _ctx() -> RunContext:
     return RunContext(Scene(path=None, name="t", results=[]))
 
 
-def test_identification_rows_in_um_and_deg():
+def test_identification_rows_in_m_and_rad():
     ctx = _ctx()
     table = [{"gear": "sun", "e": 2.0e-4, "e_std": 1.0e-5, "e_ci95": [1.8e-4, 2.2e-4],
               "kappa": math.pi / 2, "kappa_std": math.pi / 180, "identifiable": True, "note": ""},
@@ -136,23 +136,27 @@ def test_identification_rows_in_um_and_deg():
                            0.0, False)
     ctx.record("identify", IdentifyStage(identification=ident))
     rows = identification_rows(ctx)
-    assert rows[0] == {"gear": "sun", "e_um": pytest.approx(200.0), "e_std_um": pytest.approx(10.0),
-                       "e_ci95_lo_um": pytest.approx(180.0), "e_ci95_hi_um": pytest.approx(220.0),
-                       "kappa_deg": pytest.approx(90.0), "kappa_std_deg": pytest.approx(1.0),
-                       "identifiable": True, "note": ""}
-    assert math.isnan(rows[1]["e_ci95_lo_um"]) and rows[1]["note"] == "not identifiable"
+    assert {k: v for k, v in rows[0].items() if not isinstance(v, float) or not math.isnan(v)} == {
+        "gear": "sun", "e_m": 2.0e-4, "e_std_m": 1.0e-5, "e_ci95_lo_m": 1.8e-4, "e_ci95_hi_m": 2.2e-4,
+        "kappa_rad": math.pi / 2, "kappa_std_rad": math.pi / 180, "identifiable": True, "note": "",
+        "identified_by": ""}                         # no suggestion: its numbers NaN
+    assert math.isnan(rows[1]["e_ci95_lo_m"]) and rows[1]["note"] == "not identifiable"
     assert list(frame(rows, "identification").columns) == list(COLUMNS["identification"])
 
 
-def test_centroid_rows_in_mm():
+def test_centroid_rows_in_m():
     ctx = _ctx()
     ctx.record("centroids", CentroidsStage(by_gear={
         "sun": CentroidResult(centroid=2.5e-3, std_error=1e-4, contact_fraction=1.0,
                               shape="linear", residual_rms=1e-6), "ring": None}))
     sun, ring = centroid_rows(ctx)
-    assert sun["centroid_mm"] == pytest.approx(2.5) and sun["std_error_mm"] == pytest.approx(0.1)
+    assert sun["centroid_m"] == 2.5e-3 and sun["std_error_m"] == 1e-4
+    assert sun["residual_rms_strain"] == 1e-6
     assert sun["shape"] == "linear" and ring["shape"] == "none"
-    assert math.isnan(ring["centroid_mm"])
+    assert math.isnan(ring["centroid_m"])
+    df = frame([sun, ring], "centroids")
+    with pytest.warns(FutureWarning, match="'centroid_mm' is now 'centroid_m'"):
+        assert df["centroid_mm"].iloc[0] == pytest.approx(2.5)
 
 
 def test_rows_of_a_run_without_stages_and_bad_input():
@@ -171,3 +175,39 @@ def test_circular_mean():
     assert circular_mean([0.2, 0.3]) == pytest.approx(0.25)
     assert math.isnan(circular_mean([]))
     assert math.isnan(circular_mean([float("nan")]))
+
+
+def test_frame_attrs_carry_table_units_and_file():
+    for name, cols in COLUMNS.items():
+        df = frame([], name)                               # empty: columns and attrs still there
+        assert df.empty and list(df.columns) == list(cols)
+        assert list(df.attrs["units"]) == list(cols) and df.attrs["table"] == name
+        assert df.attrs["description"]
+    assert frame([], "passes").attrs["file"] == "passes_<gear>.csv"
+    assert frame([], "phasing").attrs["file"] is None
+    assert table_units([]) == {}
+    assert table_units(["time_s", "gauge", "coef_sun_x"]) == {"time_s": "s", "gauge": "",
+                                                             "coef_sun_x": "1"}
+
+
+def test_frame_and_table_units_bad_input():
+    with pytest.raises(TypeError, match="rows must be a list of dicts"):
+        frame([1, 2], "passes")
+    with pytest.raises(TypeError, match="rows must be a list of dicts"):
+        frame({"gauge": "sun"}, "passes")
+    with pytest.raises(ValueError, match="unknown table"):
+        frame([], 3)
+    with pytest.raises(TypeError, match="not a string|sequence of column names"):
+        table_units("time_s")
+    with pytest.raises(ValueError, match="has no unit"):
+        table_units(["time_s", "amplitude"])
+
+
+def test_renamed_columns_point_at_current_columns_with_their_unit():
+    """Every name of the previous release maps onto a column of its table; the factor turns
+    the current SI value back into the old unit (um, deg, mm, microstrain)."""
+    for table, renamed in RENAMED.items():
+        for old, (new, factor) in renamed.items():
+            assert new in COLUMNS[table] and old not in COLUMNS[table], (table, old)
+            assert factor > 0
+    assert RENAMED["identification"]["kappa_deg"][1] == pytest.approx(180 / math.pi)

@@ -1,7 +1,9 @@
-"""The CSV tables and summary.json of a run are tidy (issue 12, item 7): a unit in every
-header of a dimensional column, one number per field (interval bounds in two columns), NaN
-as an empty field, bearing moments and tilt results as CSV; summary.json's numbers are
-numbers (data_schemas/outputs.md lists every column)."""
+"""The CSV tables and summary.json of a run are tidy: a unit in every header of a
+dimensional column (one unit table, meshphase.report.frames.column_unit, which the
+documentation's unit column agrees with), one number per field (interval bounds in two
+columns), NaN as an empty field, bearing moments and tilt results as CSV; summary.json's
+numbers are numbers and its rows shared with a CSV carry the CSV's names
+(data_schemas/outputs.md lists every column)."""
 
 from __future__ import annotations
 
@@ -15,25 +17,74 @@ import pytest
 from seed_rig_toml import SEED_RIG_GEARSET
 
 import meshphase.io
-from meshphase.run.outputs import PASS_COLUMNS
+from meshphase.report.frames import column_unit
+from meshphase.run.outputs import PASS_COLUMNS, SUMMARY_RENAMED
 from meshphase.run.scene import load_scene
 from meshphase.run.stages import process_recording, run_scene, write_outputs
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 SCHEMA_DOC = Path(__file__).resolve().parents[1] / "data_schemas" / "outputs.md"
 
-#: unit suffixes a dimensional column ends with
-UNITS = ("_s", "_m", "_rad", "_cycles", "_strain", "_N", "_Nm", "_Nm_per_rad", "_N_per_m")
-#: columns that are labels, counts, flags, text or dimensionless ratios (no unit)
-UNITLESS = re.compile(r"^(gauge|planet|revolution|gear|identifiable|note|stage|status|error_estimate|"
-                      r"load_sharing|std_error|n_passes|moments|converged|iterations|method|"
-                      r"contact_fraction_\w+|face_load_factor_\w+|"
-                      r"identified_by|record_factor|combination|description|"
-                      r"relative_singular_value|coef_\w+)$")
+#: the unit column of data_schemas/outputs.md -> column_unit's unit
+DOC_UNITS = {"label": "", "text": "", "flag": "", "count": "1", "ratio": "1", "fraction": "1",
+             "mesh cycles": "cycles", "m/m": "strain", "s": "s", "m": "m", "rad": "rad", "N": "N",
+             "N·m": "N*m", "N·m/rad": "N*m/rad", "N/m": "N/m"}
 
 
 def _has_unit(col: str) -> bool:
-    return col.endswith(UNITS) or bool(UNITLESS.match(col))
+    try:
+        column_unit(col)
+    except ValueError:
+        return False
+    return True
+
+
+def _documented_units() -> dict:
+    """Column -> the unit outputs.md's tables give it (rows with one unit for named columns),
+    from the CSV tables (column | unit | meaning) and the Python tables (table | column | ...)."""
+    out, first = {}, None
+    for line in SCHEMA_DOC.read_text(encoding="utf-8").splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if cells[-3:] == ["column", "unit", "meaning"]:
+            first = len(cells) - 3
+        if not line.startswith("|"):
+            first = None
+        if first is None or len(cells) != first + 3 or "," in cells[first + 1]:
+            continue
+        for col in re.findall(r"`([^`]+)`", cells[first]):
+            if "<" not in col and "." not in col:
+                out[col] = cells[first + 1]
+    return out
+
+
+def test_documented_units_are_the_unit_table():
+    doc = _documented_units()
+    assert len(doc) > 60 and {"gamma_cycles", "e_m", "mean_amplitude_strain", "wall_time_s"} <= set(doc)
+    assert {"coverage", "median_uncertainty_cycles", "residual_ideal_cycles"} <= set(doc)
+    wrong = {c: (u, column_unit(c)) for c, u in doc.items() if DOC_UNITS[u] != column_unit(c)}
+    assert not wrong
+
+
+def test_every_python_table_column_is_documented():
+    from meshphase.report.frames import COLUMNS, RENAMED
+
+    doc = SCHEMA_DOC.read_text(encoding="utf-8")
+    for table, cols in COLUMNS.items():
+        missing = [c for c in cols if f"`{c}`" not in doc]
+        assert not missing, (table, missing)
+        missing = [old for old in RENAMED[table] if f"`{old}`" not in doc]
+        assert not missing, (table, missing)
+
+
+def test_column_unit_bad_input():
+    with pytest.raises(ValueError, match="has no unit"):
+        column_unit("amplitude")
+    with pytest.raises(ValueError, match="has no unit"):
+        column_unit("")
+    with pytest.raises(ValueError, match="has no unit"):
+        column_unit("_m")                               # a suffix alone names nothing
+    with pytest.raises(TypeError, match="must be a string"):
+        column_unit(3)
 
 
 @pytest.fixture(scope="module")
@@ -146,3 +197,36 @@ def test_summary_numbers_are_numbers(runs):
         if "identify" in summary:
             for row in summary["identify"]["table"]:
                 assert isinstance(row["e_ci95"], list) and len(row["e_ci95"]) == 2
+
+
+def _same(json_value, csv_value) -> bool:
+    """A summary.json number and a CSV field: equal, or null and empty (NaN)."""
+    if json_value is None:
+        return isinstance(csv_value, float) and math.isnan(csv_value)
+    return json_value == csv_value
+
+
+def test_summary_rows_carry_the_csv_names(runs):
+    """summary.json's rows shared with a CSV: the CSV's names and values, and for one release
+    the previous names beside them (SUMMARY_RENAMED)."""
+    out = runs["process"]
+    summary = json.loads((out / "summary.json").read_text())
+    ls = pd.read_csv(out / "load_sharing.csv")
+    for row, (_, csv) in zip(summary["load_sharing"], ls.iterrows(), strict=True):
+        assert _same(row["mean_amplitude_strain"], csv["mean_amplitude_strain"])
+        assert row["mean_amplitude"] == row["mean_amplitude_strain"]      # deprecated
+        assert set(csv.index) <= set(row)
+    ident = pd.read_csv(out / "identified_errors.csv")
+    for row, (_, csv) in zip(summary["identify"]["table"], ident.iterrows(), strict=True):
+        for c in ("e_m", "e_std_m", "e_ci95_lo_m", "e_ci95_hi_m", "kappa_rad", "kappa_std_rad"):
+            assert _same(row[c], csv[c]), c
+        assert row["e_ci95"] == [row["e_ci95_lo_m"], row["e_ci95_hi_m"]]   # deprecated
+    comb = pd.read_csv(out / "identified_combinations.csv")
+    for row, (_, csv) in zip(summary["identify"]["combinations"], comb.iterrows(), strict=True):
+        for c in ("estimate_m", "std_m", "ci95_lo_m", "ci95_hi_m"):
+            assert _same(row[c], csv[c]), c
+    for gear, ph in summary["phasing"].items():
+        for p, v in ph["per_planet"].items():
+            assert {"n_passes", "gamma_mean_cycles", "gamma_std_cycles", "gamma_range_cycles"} <= set(v)
+            for old, new in SUMMARY_RENAMED["phasing.per_planet"].items():
+                assert v[old] == v[new], (gear, p, old)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import datetime as dt
+import json
+import sys
 
 import numpy as np
 import pytest
@@ -256,6 +258,46 @@ def test_to_dataframe():
     np.testing.assert_array_equal(df.to_numpy(), r.data)
     assert df.attrs["fs"] == 4.0 and df.attrs["units"]["tacho"] == "V"
     assert r.to_dataframe(time_index=False).index.tolist() == [0, 1, 2, 3, 4]
+
+
+def test_to_xarray_labels_time_channels_and_header():
+    xr = pytest.importorskip("xarray")
+    specs = [ChannelSpec("sun_1", "sun", tooth=3, gain=2.0),
+             ChannelSpec("fw_a", "facewidth", gear="ring", face_position=-0.004),
+             ChannelSpec("tacho", "tacho", "V")]
+    data = np.arange(15, dtype=np.float32).reshape(5, 3)
+    r = Recording(data, 4.0, specs, t0=1.0, start_datetime="2024-05-01T10:00:00+00:00",
+                  meta={"rig": "B2", "z": [1, 2], "bad": float("nan")})
+    da = r.to_xarray()
+    assert isinstance(da, xr.DataArray) and da.dims == ("time", "channel") and da.name == "samples"
+    assert da.dtype == np.float32
+    np.testing.assert_array_equal(da.to_numpy(), data)
+    np.testing.assert_array_equal(da["time"].to_numpy(), r.times())
+    assert da["time"].attrs["units"] == "s" and da["face_position"].attrs["units"] == "m"
+    assert list(da["channel"].to_numpy()) == ["sun_1", "fw_a", "tacho"]
+    assert list(da["kind"].to_numpy()) == ["sun", "facewidth", "tacho"]
+    assert list(da["units"].to_numpy()) == ["m/m", "m/m", "V"]
+    assert list(da["gear"].to_numpy()) == ["sun", "ring", ""]
+    np.testing.assert_array_equal(da["gain"].to_numpy(), [2.0, 1.0, 1.0])
+    np.testing.assert_array_equal(da["tooth"].to_numpy(), [3.0, np.nan, np.nan])
+    np.testing.assert_array_equal(da["face_position"].to_numpy(), [np.nan, -0.004, np.nan])
+    assert da.attrs["fs"] == 4.0 and da.attrs["t0"] == 1.0
+    assert da.attrs["start_datetime"] == "2024-05-01T10:00:00+00:00"
+    assert json.loads(da.attrs["meta"]) == {"rig": "B2", "z": [1, 2], "bad": None}
+    assert float(da.sel(channel="fw_a", time=1.5)) == 7.0       # sample 2 at t0 + 2 / fs
+
+
+def test_to_xarray_of_an_empty_recording():
+    pytest.importorskip("xarray")
+    da = _rec(n=0).to_xarray()
+    assert da.shape == (0, 3) and da["time"].size == 0
+    assert da.attrs["start_datetime"] == "" and json.loads(da.attrs["meta"]) == {}
+
+
+def test_to_xarray_without_xarray_names_the_extra(monkeypatch):
+    monkeypatch.setitem(sys.modules, "xarray", None)            # import xarray raises ImportError
+    with pytest.raises(ImportError, match=r"pip install \"meshphase\[xarray\]\""):
+        _rec(n=3).to_xarray()
 
 
 def test_header_history_and_replace_data():

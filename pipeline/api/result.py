@@ -1,6 +1,6 @@
 """The result of :func:`meshphase.process`: a run's typed stage results as pandas DataFrames
-(units in the column names), a short summary, plots, HTML for notebooks, and the usual output
-files.
+(the names and SI units of the CSV files a run writes; ``df.attrs["units"]`` maps each
+column to its unit), a short summary, plots, HTML for notebooks, and the usual output files.
 
 The tables come from :mod:`meshphase.report.frames`, the plots from
 :mod:`meshphase.report.notebook` (matplotlib, imported only when plotting), the files from
@@ -13,6 +13,7 @@ from __future__ import annotations
 import html
 import math
 import os
+import warnings
 
 from ..report import frames as rf
 from ..html_repr import html_table
@@ -22,7 +23,7 @@ from ..run.outdir import OutputDir
 from ..run.outputs import write_outputs
 from ..run.state import failure_texts
 
-__all__ = ["Result", "PLOT_KINDS", "run_html"]
+__all__ = ["Result", "Summary", "PLOT_KINDS", "run_html"]
 
 #: what :meth:`Result.plot` draws
 PLOT_KINDS = ("phasing", "onsets", "load_sharing", "residuals")
@@ -60,59 +61,70 @@ class Result:
         return list(self.context.messages)
 
     # ------------------------------------------------------------------ tables
+    # Each table is a meshphase.report.frames.ResultFrame: attrs["units"] (column -> unit),
+    # attrs["description"], attrs["file"] (the CSV with the same columns, or None).
     @property
     def passes(self):
-        """Per pass: gauge, planet, time_s, phasing_cycles, sigma_cycles, ideal and model
-        phasing and the residuals [mesh cycles] (:func:`meshphase.report.frames.passes_rows`)."""
+        """Per pass: the columns of passes_<gear>.csv (gauge, time_s, planet, revolution,
+        gamma_cycles, uncertainty_cycles, ..., gamma_ideal_cycles, gamma_model_cycles), then
+        the residuals against the ideal and the model [mesh cycles]
+        (:func:`meshphase.report.frames.passes_rows`)."""
         return rf.frame(rf.passes_rows(self.context), "passes")
 
     @property
     def phasing(self):
-        """Per gauge and planet: measured mean and sd, ideal, model, residuals, band [mesh
-        cycles] (:func:`meshphase.report.frames.phasing_rows`)."""
+        """Per gauge and planet: gamma_mean_cycles, gamma_std_cycles, ideal, model, residuals,
+        band [mesh cycles] (:func:`meshphase.report.frames.phasing_rows`)."""
         return rf.frame(rf.phasing_rows(self.context), "phasing")
 
     @property
     def load_sharing(self):
-        """Per planet: load-sharing factor and its standard error [-]
+        """Per planet: the columns of load_sharing.csv: load-sharing factor and its standard
+        error [-], passes used, mean peak strain [m/m]
         (:func:`meshphase.report.frames.load_sharing_rows`)."""
         return rf.frame(rf.load_sharing_rows(self.context), "load_sharing")
 
     @property
     def comparison(self):
         """Per gauge and reference (ideal, model, truth): residual statistics [mesh cycles]
+        and the share of passes inside the Monte Carlo band
         (:func:`meshphase.report.frames.comparison_rows`)."""
         return rf.frame(rf.comparison_rows(self.context), "comparison")
 
     @property
     def identification(self):
-        """Per gear: identified shaft hole error [um] and angle [deg] with uncertainties
+        """Per gear: the columns of identified_errors.csv: identified shaft hole error [m] and
+        angle [rad] with uncertainties, and what would identify it
         (:func:`meshphase.report.frames.identification_rows`)."""
         return rf.frame(rf.identification_rows(self.context), "identification")
 
     @property
     def centroids(self):
-        """Per gear with face-width gauges: load centroid [mm] and its standard error
+        """Per gear with face-width gauges: load centroid [m] and its standard error [m]
         (:func:`meshphase.report.frames.centroid_rows`); no rows without face-width gauges."""
         return rf.frame(rf.centroid_rows(self.context), "centroids")
 
     # ------------------------------------------------------------------ summary
-    def summary(self) -> dict:
+    def summary(self) -> "Summary":
         """Status and key numbers, one level deep (``pandas.Series(res.summary())`` shows it).
+
+        Per-gauge keys are named as campaign.csv names them (``<quantity>_<gauge>[_<unit>]``).
 
         Returns
         -------
-        dict
-            ``status``, ``error``, ``source``, ``duration_s``, ``fs_hz``, ``held_member``,
-            ``n_messages``, ``stages_failed``; per gauge ``<gauge>_passes``,
-            ``<gauge>_reliable``, ``<gauge>_sigma_cycles`` (per-pass error estimate),
-            ``<gauge>_planet1_by``, ``<gauge>_rms_vs_ideal_cycles``,
-            ``<gauge>_rms_vs_model_cycles``; ``load_sharing_max_dev`` (max |LS_n - 1|);
-            ``identify_rms_before_cycles``, ``identify_rms_after_cycles``.
+        Summary
+            A dict: ``status``, ``error``, ``source``, ``duration_s``, ``fs_hz``,
+            ``held_member``, ``n_messages``, ``stages_failed``; per gauge ``passes_<gauge>``,
+            ``reliable_<gauge>``, ``error_estimate_<gauge>_cycles`` (per-pass error estimate),
+            ``planet1_by_<gauge>``, ``rms_vs_ideal_<gauge>_cycles``,
+            ``rms_vs_model_<gauge>_cycles``; ``load_sharing_max_dev`` (max |LS_n - 1|);
+            ``identify_rms_before_cycles``, ``identify_rms_after_cycles``. A key of the
+            previous release (``<gauge>_passes``, ``<gauge>_sigma_cycles``, ...,
+            :data:`Summary.RENAMED`) is answered with a FutureWarning.
         """
         ctx = self.context
         st = run_status(ctx)
-        out = {"status": st["status"], "error": st["error"]}
+        out = Summary(status=st["status"], error=st["error"])
         if ctx.load is not None:
             rec = ctx.load.recording
             out.update(source=str(ctx.load.source), duration_s=rec.duration, fs_hz=rec.fs)
@@ -124,14 +136,16 @@ class Result:
         verdict = phasing_verdict(ph, ctx.messages)
         rel = (ph.reliability or {}) if ph is not None else {}
         for gauge, t in (ph.tables.items() if ph is not None else ()):
-            out[f"{gauge}_passes"] = len(t)
-            out[f"{gauge}_reliable"] = verdict.get(gauge, {}).get("reliable", True)
-            out[f"{gauge}_sigma_cycles"] = float(rel.get(gauge, {}).get("error_estimate", math.nan))
+            out[f"passes_{gauge}"] = len(t)
+            out[f"reliable_{gauge}"] = verdict.get(gauge, {}).get("reliable", True)
+            out[f"error_estimate_{gauge}_cycles"] = float(rel.get(gauge, {}).get("error_estimate",
+                                                                                 math.nan))
             lab = ph.labels.get(gauge)
-            out[f"{gauge}_planet1_by"] = lab.decided_by if lab is not None else ""
+            out[f"planet1_by_{gauge}"] = lab.decided_by if lab is not None else ""
             c = ctx.compare.by_gear.get(gauge) if ctx.compare is not None else None
-            out[f"{gauge}_rms_vs_ideal_cycles"] = c.vs_ideal["rms"] if c else math.nan
-            out[f"{gauge}_rms_vs_model_cycles"] = c.vs_model["rms"] if c and c.vs_model else math.nan
+            out[f"rms_vs_ideal_{gauge}_cycles"] = c.vs_ideal["rms"] if c else math.nan
+            out[f"rms_vs_model_{gauge}_cycles"] = (c.vs_model["rms"] if c and c.vs_model
+                                                   else math.nan)
         ls = rf.load_sharing_rows(ctx)
         if ls:
             dev = [abs(r["load_sharing"] - 1.0) for r in ls if math.isfinite(r["load_sharing"])]
@@ -209,6 +223,49 @@ class Result:
         return run_html(self.context, run_status(self.context))
 
 
+class Summary(dict):
+    """:meth:`Result.summary`: a plain dict of its current keys that answers a key of the
+    previous release (``<gauge>_passes`` ... , :data:`RENAMED`) for one release, by item
+    access and ``get``, with a FutureWarning naming the current key; ``in``, iteration,
+    ``keys()`` and ``json.dumps`` see the current keys only."""
+
+    #: key of the previous release, ``{gauge}`` for the gauge -> the current key
+    RENAMED = {"{gauge}_passes": "passes_{gauge}", "{gauge}_reliable": "reliable_{gauge}",
+               "{gauge}_sigma_cycles": "error_estimate_{gauge}_cycles",
+               "{gauge}_planet1_by": "planet1_by_{gauge}",
+               "{gauge}_rms_vs_ideal_cycles": "rms_vs_ideal_{gauge}_cycles",
+               "{gauge}_rms_vs_model_cycles": "rms_vs_model_{gauge}_cycles"}
+
+    def _current(self, key):
+        if not isinstance(key, str):
+            return None
+        for gauge in ("sun", "ring"):
+            for old, new in self.RENAMED.items():
+                if key == old.format(gauge=gauge):
+                    return new.format(gauge=gauge)
+        return None
+
+    def __missing__(self, key):
+        new = self._current(key)
+        if new is None or new not in self:
+            raise KeyError(key)
+        warnings.warn(f"summary key {key!r} is now {new!r} (as campaign.csv names it); the old "
+                      f"key goes in meshphase 0.2", FutureWarning, stacklevel=3)
+        return self[new]
+
+    def get(self, key, default=None):
+        """``self[key]`` (a key of the previous release too, with a FutureWarning), else
+        ``default``."""
+        if key in self:
+            return dict.__getitem__(self, key)
+        new = self._current(key)
+        if new is None or new not in self:
+            return default
+        warnings.warn(f"summary key {key!r} is now {new!r} (as campaign.csv names it); the old "
+                      f"key goes in meshphase 0.2", FutureWarning, stacklevel=2)
+        return dict.__getitem__(self, new)
+
+
 def run_html(ctx, status: dict) -> str:
     """A run's status, input and per-planet phasing (and load sharing), as HTML.
 
@@ -235,8 +292,9 @@ def run_html(ctx, status: dict) -> str:
                      f"{html.escape('; '.join(reasons))}</p>")
     rows = rf.phasing_rows(ctx)
     if rows:
-        parts.append(html_table(rows, ["gauge", "planet", "n_passes", "mean_cycles", "sd_cycles",
-                                       "ideal_cycles", "model_cycles", "residual_model_rms_cycles"],
+        parts.append(html_table(rows, ["gauge", "planet", "n_passes", "gamma_mean_cycles",
+                                       "gamma_std_cycles", "gamma_ideal_cycles",
+                                       "gamma_model_cycles", "residual_model_rms_cycles"],
                                 caption="Measured phasing per planet [mesh cycles]"))
     ls = rf.load_sharing_rows(ctx)
     if ls:

@@ -238,20 +238,22 @@ def plot_phasing(ctx: RunResults, gauge=None, *, ax=None):
     for a, g in zip(axes, want):
         for s in (r for r in per_planet if r["gauge"] == g):
             p, col = s["planet"], _colour(s["planet"] - 1)
-            ref = s["ideal_cycles"] if np.isfinite(s["ideal_cycles"]) else s["mean_cycles"]
+            ref = (s["gamma_ideal_cycles"] if np.isfinite(s["gamma_ideal_cycles"])
+                   else s["gamma_mean_cycles"])
             d = [r for r in rows if r["gauge"] == g and r["planet"] == p]
             t = np.array([r["time_s"] for r in d])
-            a.errorbar(t, _unwrap([r["phasing_cycles"] for r in d], ref),
-                       yerr=np.nan_to_num([r["sigma_cycles"] for r in d]), fmt="o", ms=3,
+            a.errorbar(t, _unwrap([r["gamma_cycles"] for r in d], ref),
+                       yerr=np.nan_to_num([r["uncertainty_cycles"] for r in d]), fmt="o", ms=3,
                        lw=0.6, color=col, label=f"planet {p}")
-            if np.isfinite(s["ideal_cycles"]):
-                a.axhline(s["ideal_cycles"], color=col, lw=0.8, ls=":")
-            model = np.array([r["model_cycles"] for r in d])
+            if np.isfinite(s["gamma_ideal_cycles"]):
+                a.axhline(s["gamma_ideal_cycles"], color=col, lw=0.8, ls=":")
+            model = np.array([r["gamma_model_cycles"] for r in d])
             if np.isfinite(model).any():
                 a.plot(t, _unwrap(model, ref), color=col, lw=1.2)
-            if np.isfinite(s["band_dev_lo_cycles"]) and np.isfinite(s["ideal_cycles"]):
-                a.axhspan(s["ideal_cycles"] + s["band_dev_lo_cycles"],
-                          s["ideal_cycles"] + s["band_dev_hi_cycles"], color=col, alpha=0.12)
+            if np.isfinite(s["band_dev_lo_cycles"]) and np.isfinite(s["gamma_ideal_cycles"]):
+                a.axhspan(s["gamma_ideal_cycles"] + s["band_dev_lo_cycles"],
+                          s["gamma_ideal_cycles"] + s["band_dev_hi_cycles"], color=col,
+                          alpha=0.12)
         a.set_ylabel(f"{g} phasing [mesh cycles]")
         a.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.005, 1.0), borderaxespad=0.0)
     axes[-1].set_xlabel("time [s]")

@@ -10,13 +10,20 @@ phasing_labels, held_member, member_speeds_rpm, angle_model, load_sharing, centr
 tolerance, identify, compare, bearing_moments, tilt, and verdict (the report's opening
 paragraph, :func:`meshphase.compare.predict.identification_verdict`).
 
+The rows of a table the summary shares with a CSV carry the CSV's column names
+(:data:`SUMMARY_RENAMED`): ``load_sharing`` rows, ``identify.table`` and
+``identify.combinations`` rows, ``phasing.<gear>.per_planet`` entries (named as campaign.csv
+names them); for one release they also keep the names of the previous one beside them.
+
 CSV tables (columns in ``data_schemas/outputs.md``): passes_<gear>.csv, load_sharing.csv,
 identified_errors.csv, identified_combinations.csv, bearing_moments.csv, tilt.csv and
 stages.csv, each of what ran. SI values, the unit in the header (``time_s``,
 ``gamma_cycles``, ``e_m``, ``my_Nm``, ...; no suffix: a label, count, flag, text or a
-dimensionless ratio), one number per field (an interval is two columns, ``..._ci95_lo_m``
-and ``..._ci95_hi_m``), NaN (not computed) as an empty field, infinities as ``inf`` /
-``-inf``.
+dimensionless ratio; :func:`meshphase.report.frames.column_unit` reads it), one number per
+field (an interval is two columns, ``..._ci95_lo_m`` and ``..._ci95_hi_m``), NaN (not
+computed) as an empty field, infinities as ``inf`` / ``-inf``. load_sharing.csv and
+identified_errors.csv are the rows of :class:`meshphase.Result`'s ``load_sharing`` and
+``identification`` tables (:mod:`meshphase.report.frames`).
 """
 
 from __future__ import annotations
@@ -28,6 +35,7 @@ import numpy as np
 
 from ..compare.predict import identification_verdict
 from ..jsonable import to_jsonable
+from ..report.frames import identification_rows, load_sharing_rows
 from .context import RunContext, phasing_verdict
 from .exits import run_status
 from .outdir import new_output_dir
@@ -35,7 +43,36 @@ from .results import PhasingStage
 from .state import failure_texts
 from .table_csv import write_csv
 
-__all__ = ["new_output_dir", "summary_dict", "write_outputs"]
+__all__ = ["new_output_dir", "summary_dict", "write_outputs", "PASS_COLUMNS", "SUMMARY_RENAMED"]
+
+#: summary.json rows that a CSV shares -> {name of the previous release: the CSV's name}; the
+#: previous names are written beside the CSV's for one release (until meshphase 0.2). An
+#: interval ``[lo, hi]`` of the previous release becomes two keys, ``..._lo_...`` and
+#: ``..._hi_...``.
+SUMMARY_RENAMED: dict[str, dict[str, str | tuple[str, str]]] = {
+    "load_sharing": {"mean_amplitude": "mean_amplitude_strain"},
+    "identify.table": {"e": "e_m", "e_std": "e_std_m", "e_ci95": ("e_ci95_lo_m", "e_ci95_hi_m"),
+                       "kappa": "kappa_rad", "kappa_std": "kappa_std_rad"},
+    "identify.combinations": {"estimate": "estimate_m", "std": "std_m",
+                              "ci95": ("ci95_lo_m", "ci95_hi_m")},
+    "phasing.per_planet": {"n": "n_passes", "mean": "gamma_mean_cycles",
+                           "std": "gamma_std_cycles", "range": "gamma_range_cycles"},
+}
+
+
+def _aligned(row: dict, section: str) -> dict:
+    """``row`` with the CSV's names of :data:`SUMMARY_RENAMED` ``[section]`` first, then its
+    own keys (the previous release's names among them)."""
+    new = {}
+    for old, name in SUMMARY_RENAMED[section].items():
+        if old not in row:
+            continue
+        if isinstance(name, tuple):
+            lo, hi = (list(row[old] or [None, None]) + [None, None])[:2]
+            new[name[0]], new[name[1]] = lo, hi
+        else:
+            new[name] = row[old]
+    return {**new, **{k: v for k, v in row.items() if k not in new}}
 
 
 def summary_dict(ctx: RunContext) -> dict:
@@ -63,17 +100,20 @@ def summary_dict(ctx: RunContext) -> dict:
     if ctx.phasing is not None:
         s.update(_phasing_summary(ctx.phasing))
     if ctx.load_sharing is not None and ctx.load_sharing.sharing is not None:
-        s["load_sharing"] = ctx.load_sharing.sharing.to_rows()
+        s["load_sharing"] = [_aligned(r, "load_sharing") for r in ctx.load_sharing.sharing.to_rows()]
     if ctx.centroids is not None and ctx.centroids.by_gear:
         s["centroids_m"] = {k: (None if v is None else vars(v)) for k, v in ctx.centroids.by_gear.items()}
     if ctx.tolerance is not None:
         s["tolerance"] = ctx.tolerance.monte_carlo.to_dict()
     if ctx.identify is not None:
         i = ctx.identify.identification
-        s["identify"] = {"table": i.table, "rms_before": i.rms_before, "rms_after": i.rms_after,
+        s["identify"] = {"table": [_aligned(r, "identify.table") for r in i.table],
+                         "rms_before": i.rms_before, "rms_after": i.rms_after,
                          "n_passes": i.n_passes, "identifiable": i.identifiable, "notes": i.notes,
                          "singular_values": i.singular_values, "rank": i.rank, "rank_note": i.rank_note,
-                         "combinations": i.combinations, "suggestions": i.suggestions}
+                         "combinations": [_aligned(c, "identify.combinations")
+                                          for c in i.combinations],
+                         "suggestions": i.suggestions}
     if ctx.identify is not None or (ctx.phasing is not None and ctx.phasing.member_speeds):
         s["verdict"] = identification_verdict(
             ctx.identify.identification if ctx.identify is not None else None,
@@ -89,7 +129,10 @@ def _phasing_summary(ph: PhasingStage) -> dict:
     """``phasing`` (per gear: passes, per-planet statistics, notes, labels, reliability),
     ``phasing_labels``, ``held_member`` and ``angle_model`` of the summary."""
     assignment, reliability = ph.assignment, ph.reliability or {}
-    s = {"phasing": {k: {"n_passes": len(t), "per_planet": t.summary(), "notes": t.notes,
+    s = {"phasing": {k: {"n_passes": len(t),
+                         "per_planet": {p: _aligned(v, "phasing.per_planet")
+                                        for p, v in t.summary().items()},
+                         "notes": t.notes,
                          "assignment": assignment.get(k), "reliability": reliability.get(k)}
                      for k, t in ph.tables.items()}}
     cautions = {gear: lab.caution for gear, lab in (ph.labels or {}).items()
@@ -192,26 +235,10 @@ def _write_tables(ctx: RunContext, out_dir: Path) -> dict:
                     cols["gamma_model_cycles"] = np.asarray(cmp[gear].model)
             files[f"passes_{gear}"] = _csv(cols, out_dir / f"passes_{gear}.csv")
     if ctx.load_sharing is not None and ctx.load_sharing.sharing is not None:
-        rows = [{"planet": r["planet"], "load_sharing": r["load_sharing"], "std_error": r["std_error"],
-                 "n_passes": r["n_passes"], "mean_amplitude_strain": r["mean_amplitude"]}
-                for r in ctx.load_sharing.sharing.to_rows()]
-        files["load_sharing"] = _csv(rows, out_dir / "load_sharing.csv")
+        files["load_sharing"] = _csv(load_sharing_rows(ctx), out_dir / "load_sharing.csv")
     if ctx.identify is not None:
-        rows = [{"gear": r["gear"], "e_m": r["e"], "e_std_m": r["e_std"],
-                 "e_ci95_lo_m": r["e_ci95"][0], "e_ci95_hi_m": r["e_ci95"][1],
-                 "kappa_rad": r["kappa"], "kappa_std_rad": r["kappa_std"],
-                 "identifiable": r["identifiable"], "note": r["note"]}
-                for r in ctx.identify.identification.table]
         i = ctx.identify.identification
-        sugg = {sg["gear"]: sg for sg in i.suggestions}
-        for r in rows:
-            sg = sugg.get(r["gear"])
-            r["identified_by"] = "" if sg is None else (sg["option"] or "none of the options tried")
-            r["predicted_std_m"] = float("nan") if sg is None else sg["predicted_std"]
-            r["record_factor"] = float("nan") if sg is None else sg["record_factor"]
-            r["record_predicted_std_m"] = (float("nan") if sg is None
-                                           else sg["record_predicted_std"])
-        files["identified_errors"] = _csv(rows, out_dir / "identified_errors.csv")
+        files["identified_errors"] = _csv(identification_rows(ctx), out_dir / "identified_errors.csv")
         rows = [{"combination": k + 1, "description": c["description"], "estimate_m": c["estimate"],
                  "std_m": c["std"], "ci95_lo_m": c["ci95"][0], "ci95_hi_m": c["ci95"][1],
                  "relative_singular_value": c["relative_singular_value"],
