@@ -33,6 +33,7 @@ import json
 import math
 import os
 import platform
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -44,6 +45,7 @@ from ..models import _kernels
 from ..models.tolerance import (ALL_STATISTICS, STATISTICS, monte_carlo, observation_window,
                                 table2_case, WINDOW_KINDS)
 from .models_reference import CASE3_NAME, directional_reference, plain_reference
+from .phasing_stage import PHASING_MINUTES, phasing_markdown, phasing_stage_rows
 from ..validate import as_choice, as_positive_int
 
 __all__ = ["run_models_bench", "METRICS", "TABLE_COLUMNS", "ESTIMATOR_COLUMNS"]
@@ -122,7 +124,7 @@ def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 1
                      figure: bool = True, estimator_reference: int = 10 ** 7,
                      reference_method: str = "directional",
                      reference_progress: bool | None = None,
-                     estimator_repeats: int = 5) -> dict:
+                     estimator_repeats: int = 5, phasing_minutes=None) -> dict:
     """Monte Carlo error against wall time for both samplers; writes table, JSON and figure.
 
     Parameters
@@ -166,6 +168,11 @@ def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 1
         Show a progress bar (stderr) while the reference is computed (not when read from the
         cache); default: when stderr is a terminal. ``meshphase bench reference --out
         OUT_DIR`` builds it as a separate step.
+    phasing_minutes : sequence of float, optional
+        Lengths [min] of the 8-channel recordings on which ``meshphase process``'s wall time,
+        its phasing stage's time and share, and the fixed cost per run are measured
+        (:mod:`.phasing_stage`, ``models_phasing_stage.md``); default
+        :data:`.phasing_stage.PHASING_MINUTES`, none when ``quick``.
 
     Returns
     -------
@@ -224,6 +231,14 @@ def run_models_bench(out_dir, *, sample_counts=(256, 1000, 3000, 10000, 30000, 1
     result = {"rows": rows, "reference": reference, "crossover": crossover, "case3": case3,
               "estimators": estimators, "meta": meta, "files": {}}
     _write(result, out, figure)
+    # the models' consumer in a run: the phasing stage's time and share, the fixed cost
+    ph_min = (() if quick else PHASING_MINUTES) if phasing_minutes is None else tuple(phasing_minutes)
+    if ph_min:
+        result["phasing_stage"] = phasing_stage_rows(out / "phasing-work", ph_min)
+        shutil.rmtree(out / "phasing-work", ignore_errors=True)
+        md = out / "models_phasing_stage.md"
+        md.write_text(phasing_markdown(result["phasing_stage"]), encoding="utf-8")
+        result["files"]["phasing_stage"] = str(md)
     return result
 
 

@@ -28,9 +28,9 @@ from .shafts import Kinematics
 from .trains import PassTrain
 from ..signal.median import median_of_finite
 
-__all__ = ["ModelSpec", "Design", "ModelFit", "spline_basis", "rank_keep", "fix_rate",
-           "plausible_rate", "column_norms", "solve", "extend_theta", "RANK_TOL", "CHI2_FLOOR",
-           "RATE_SPREAD", "STEP_QR_TOL"]
+__all__ = ["ModelSpec", "Design", "ModelFit", "FitBasis", "fit_basis", "spline_basis",
+           "rank_keep", "fix_rate", "plausible_rate", "column_norms", "appended_diagonal",
+           "solve", "extend_theta", "RANK_TOL", "CHI2_FLOOR", "RATE_SPREAD", "STEP_QR_TOL"]
 
 TWO_PI = 2.0 * math.pi
 #: columns whose share outside the span of earlier columns is below this are dropped [-]
@@ -403,12 +403,20 @@ class Design:
         return A, rate, G
 
 
-def rank_keep(d: "Design", theta, lay, spec, rows) -> np.ndarray:
+def rank_keep(d: "Design", theta, lay, spec, rows, basis: "FitBasis | None" = None) -> np.ndarray:
     """Identifiable columns: the Jacobian at the nominal angles, weighted by the timing bounds
-    alone (a train's variance factor must not decide what is identifiable)."""
+    alone (a train's variance factor must not decide what is identifiable).
+
+    ``basis``: the :class:`FitBasis` of a fit that ``theta`` extends (:func:`extend_theta`:
+    the fit's spline and terms, the new terms at zero) on the same ``rows``; the columns this
+    spec shares with that fit, in rank order before its first new column, then come from the
+    basis's factorisation instead of a fresh one (:func:`_independent_columns`)."""
     _, J, rate = d.evaluate(theta, lay, spec, rows, nominal=True)
     w = 1.0 / (d.sig[rows] * fix_rate(rate))
-    return _independent_columns(J * w[:, None], lay["priority"])
+    prefix = None
+    if basis is not None and basis.knots == spec.knots and np.array_equal(basis.rows, rows):
+        prefix = (lay["names"], basis)
+    return _independent_columns(J * w[:, None], lay["priority"], prefix=prefix)
 
 
 def fix_rate(rate: np.ndarray) -> np.ndarray:
@@ -452,35 +460,208 @@ def column_norms(A: np.ndarray) -> np.ndarray:
     return np.where(amax > 0, amax * np.sqrt(np.add.reduce(T, axis=0)), 0.0)
 
 
-def _independent_columns(Jw: np.ndarray, priority: np.ndarray, tol: float = RANK_TOL) -> np.ndarray:
+def appended_diagonal(Q: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """|R_jj| of columns ``T`` appended to a matrix whose columns ``Q`` span orthonormally:
+    the last ``T.shape[1]`` diagonal entries of the Householder R of [A | T], A any matrix
+    with Q's span (each column's distance to the span of A and of the columns of T before it).
+
+    ``T`` is projected out of Q's span twice (classical Gram-Schmidt, reorthogonalised: one
+    pass leaves a component of order eps * cond of the unprojected part, the second brings
+    it to rounding) and its own QR taken; the cost is that of T's columns alone, not of
+    refactorising A's. In exact arithmetic this equals the full QR's diagonal; in floating
+    point the two differ by O(eps * cond([A | T])) relative to the columns' norms.
+
+    Parameters
+    ----------
+    Q : ndarray, shape (n, m)
+        Orthonormal columns (m may be 0).
+    T : ndarray, shape (n, k)
+
+    Returns
+    -------
+    ndarray, shape (min(n - m, k),) when n > m, else (0,)
+
+    Raises
+    ------
+    ValueError
+        ``Q`` and ``T`` not 2-D with the same number of rows.
+    """
+    Q = np.asarray(Q, dtype=np.float64)
+    T = np.asarray(T, dtype=np.float64)
+    if Q.ndim != 2 or T.ndim != 2 or Q.shape[0] != T.shape[0]:
+        raise ValueError(f"Q and T must be 2-D with one row count, got {Q.shape} and {T.shape}")
+    n, m = Q.shape
+    k = T.shape[1]
+    if k == 0 or n <= m:
+        return np.zeros(0)
+    P = np.array(T, order="F")
+    if m:
+        for _ in range(2):
+            P -= Q @ (Q.T @ P)
+    qr = linalg.qr(P, mode="raw", overwrite_a=True, check_finite=False)[0][0]
+    return np.abs(np.diag(qr))[:min(n - m, k)]
+
+
+def _independent_columns(Jw: np.ndarray, priority: np.ndarray, tol: float = RANK_TOL,
+                         prefix=None) -> np.ndarray:
     """Columns kept, in priority order (then left to right): a column whose part outside the
     span of the columns kept before it is below ``tol`` of its norm is dropped.
 
     Householder QR without pivoting on the unit-norm columns in priority order gives, in
     |R_jj|, each column's distance to the span of the ones before it. The first column
     below ``tol`` is dropped and the QR repeated (a dependent column would otherwise steer
-    the later reflections), until none is."""
+    the later reflections), until none is.
+
+    ``prefix``: (column names, :class:`FitBasis`). The leading columns in priority order
+    that are the basis's own (same names, in its order, none below ``tol`` there) keep
+    the basis's |R_jj| and span; only the columns after them are factorised
+    (:func:`appended_diagonal`), again after each drop. A candidate that extends a fit by
+    a term shares every column before its first new one: the same columns kept, in exact
+    arithmetic, for a fraction of the work."""
     p = Jw.shape[1]
     order = np.lexsort((np.arange(p), priority))
     norms = column_norms(Jw)
     cand = [j for j in order if norms[j] > 0]
-    while cand:
-        A = Jw[:, cand] / norms[cand]
-        # geqrf's packed result: R is its upper triangle (mode "r" would copy it out whole)
-        qr = linalg.qr(A, mode="raw", overwrite_a=True, check_finite=False)[0][0]
-        d = np.abs(np.diag(qr))
-        small = np.flatnonzero(d < tol)
-        if small.size == 0:
-            break
-        # clear-cut dependence (far below tol) is dropped at once; a borderline column one
-        # at a time, since a dependent column steers the later reflections
-        clear = small[d[small] < 1e-3 * tol]
-        drop = clear if clear.size else small[:1]
-        for i in sorted(drop.tolist(), reverse=True):
-            del cand[int(i)]
+    m = 0
+    if prefix is not None:
+        names, basis = prefix
+        lim = min(len(cand), basis.valid)
+        while m < lim and names[cand[m]] == basis.names[m]:
+            m += 1
+        if Jw.shape[0] <= len(cand):
+            m = 0                           # wide: the plain path's min(n, p) diagonal
+    if m:
+        head, tail = cand[:m], cand[m:]
+        Qm = basis.q_nominal[:, :m]
+        while tail:
+            dt = appended_diagonal(Qm, Jw[:, tail] / norms[tail])
+            small = np.flatnonzero(dt < tol)
+            if small.size == 0:
+                break
+            clear = small[dt[small] < 1e-3 * tol]
+            drop = clear if clear.size else small[:1]
+            for i in sorted(drop.tolist(), reverse=True):
+                del tail[int(i)]
+        cand = head + tail
+    else:
+        while cand:
+            A = Jw[:, cand] / norms[cand]
+            # geqrf's packed result: R is its upper triangle (mode "r" would copy it out whole)
+            qr = linalg.qr(A, mode="raw", overwrite_a=True, check_finite=False)[0][0]
+            d = np.abs(np.diag(qr))
+            small = np.flatnonzero(d < tol)
+            if small.size == 0:
+                break
+            # clear-cut dependence (far below tol) is dropped at once; a borderline column one
+            # at a time, since a dependent column steers the later reflections
+            clear = small[d[small] < 1e-3 * tol]
+            drop = clear if clear.size else small[:1]
+            for i in sorted(drop.tolist(), reverse=True):
+                del cand[int(i)]
     keep = np.zeros(p, bool)
     keep[cand] = True
     return keep
+
+
+@dataclass
+class FitBasis:
+    """Factorisations of one fitted model's design, made once and shared by every candidate
+    that extends it by a term (:func:`fit_basis`; the selection's screen,
+    :func:`meshphase.kinematics.angle_selection.select_terms`).
+
+    Attributes
+    ----------
+    knots : int
+        The fit's spline intervals (a candidate with another spline shares no column).
+    rows : ndarray of int
+        The active observations the factorisations are of.
+    names : list of str
+        The fit's columns of nonzero norm in rank order (priority, then layout), nominal.
+    q_nominal : ndarray, shape (n, len(names))
+        Orthonormal basis of those weighted unit-norm nominal columns (:func:`rank_keep`'s
+        design), leading columns first: its first m columns span the first m columns.
+    valid : int
+        Leading columns whose |R_jj| is at least ``RANK_TOL`` (a prefix that long is the
+        same in every candidate's rank check).
+    kept : frozenset of str
+        Names of the fit's identifiable columns.
+    q : ndarray, shape (n, rank)
+        Orthonormal basis of the fit's weighted unit-norm identifiable columns at its
+        parameters (the Gauss-Newton design).
+    r, chi : ndarray, float
+        Weighted residual at the fit (timing bounds alone) and its squared norm [-].
+    r_out, chi_out : ndarray, float
+        Its part outside the span of ``q`` and that part's squared norm [-].
+    fac : ndarray
+        Row factor every spline's columns share at the fit, (1 + h') / (1 - R') times the
+        weight (the row sums of the fitted spline's columns).
+    """
+
+    knots: int
+    rows: np.ndarray
+    names: list
+    q_nominal: np.ndarray
+    valid: int
+    kept: frozenset
+    q: np.ndarray
+    r: np.ndarray
+    chi: float
+    r_out: np.ndarray
+    chi_out: float
+    fac: np.ndarray
+
+
+def fit_basis(d: Design, fit: "ModelFit", *, nominal: bool = True) -> "FitBasis | None":
+    """The :class:`FitBasis` of ``fit`` on the design's active rows: one evaluation and one
+    QR each of its nominal and its Gauss-Newton design (``nominal=False``: the Gauss-Newton
+    design's alone, ``valid`` 0). None when there is no active row or the weighted misfit
+    is not finite (nothing to share).
+
+    Raises
+    ------
+    TypeError
+        ``d`` not a :class:`Design` or ``fit`` not a :class:`ModelFit`.
+    """
+    if not isinstance(d, Design) or not isinstance(fit, ModelFit):
+        raise TypeError(f"fit_basis takes a Design and a ModelFit, got {type(d).__name__} "
+                        f"and {type(fit).__name__}")
+    rows = np.flatnonzero(d.active)
+    n = rows.size
+    if n == 0:
+        return None
+    f, J, rate = d.evaluate(fit.theta, fit.lay, fit.spec, rows)
+    w = 1.0 / (d.sig[rows] * fix_rate(rate))
+    with np.errstate(over="ignore", invalid="ignore"):
+        r = (d.y[rows] - f) * w
+        chi = float(r @ r)
+    if not math.isfinite(chi):
+        return None
+    sb = fit.lay["blocks"]["spline"]
+    fac = J[:, sb].sum(axis=1) * w
+    Ac = (J * w[:, None])[:, fit.keep]
+    cn = column_norms(Ac)
+    cn[~(cn > 0)] = 1.0
+    Q = linalg.qr(Ac / cn, mode="economic", check_finite=False)[0]
+    r_out = r - Q @ (Q.T @ r)
+    # the nominal design in rank order: the leading columns of every candidate's rank check
+    cand = []
+    if nominal:
+        _, Jn, rn = d.evaluate(fit.theta, fit.lay, fit.spec, rows, nominal=True)
+        Jn *= (1.0 / (d.sig[rows] * fix_rate(rn)))[:, None]
+        p = Jn.shape[1]
+        order = np.lexsort((np.arange(p), fit.lay["priority"]))
+        norms = column_norms(Jn)
+        cand = [j for j in order if norms[j] > 0]
+    if cand and n > len(cand):
+        Qn, Rn = linalg.qr(Jn[:, cand] / norms[cand], mode="economic", check_finite=False)
+        small = np.flatnonzero(np.abs(np.diag(Rn)) < RANK_TOL)
+        valid = int(small[0]) if small.size else len(cand)
+    else:
+        Qn, valid = np.zeros((n, 0)), 0
+    names = fit.lay["names"]
+    return FitBasis(int(fit.spec.knots), rows, [names[j] for j in cand], Qn, valid,
+                    frozenset(nm for nm, k in zip(names, fit.keep) if k), Q, r, chi, r_out,
+                    float(r_out @ r_out), fac)
 
 
 @dataclass

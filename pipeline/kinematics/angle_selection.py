@@ -19,8 +19,8 @@ import math
 import numpy as np
 
 from ..runtime.lazy import linalg
-from .angle_design import (RANK_TOL, Design, ModelFit, ModelSpec, column_norms,
-                           extend_theta, fix_rate, plausible_rate, rank_keep,
+from .angle_design import (RANK_TOL, Design, FitBasis, ModelFit, ModelSpec, column_norms,
+                           extend_theta, fit_basis, fix_rate, plausible_rate, rank_keep,
                            solve, spline_basis)
 from .shafts import Kinematics
 from .trains import PassTrain
@@ -157,7 +157,7 @@ def drop_gross_outliers(d: Design, use: list, spec: ModelSpec, outlier_k: float)
 
 def select_terms(d: Design, spec: ModelSpec, fit: ModelFit, ladder: list, rates: list,
                   kin: Kinematics, max_harmonics: int, max_planet_harmonics: int, *,
-                  screen: bool = True, rejected: list | None = None):
+                  screen: bool = True, rejected: list | None = None, reuse: bool = True):
     """Forward selection of the model terms on BIC, weights from the timing bounds alone:
     (spec, fit, selection steps).
 
@@ -171,7 +171,13 @@ def select_terms(d: Design, spec: ModelSpec, fit: ModelFit, ladder: list, rates:
     leaves the chosen model unchanged (a test runs the selection both ways).
 
     ``rejected``: a list that receives the spec of the best candidate of the last step (the
-    one that did not gain ``BIC_GAIN``), when one was solved."""
+    one that did not gain ``BIC_GAIN``), when one was solved.
+
+    ``reuse``: the screen's bounds take the fit's factorisations, made once per step
+    (:func:`meshphase.kinematics.angle_design.fit_basis`): each candidate adds its own
+    columns to them (:func:`meshphase.kinematics.angle_design.appended_diagonal`) instead
+    of refactorising the whole design. The same bounds and identifiable columns in exact
+    arithmetic; ``reuse=False`` factorises each candidate afresh (a test runs both)."""
     ones = np.ones(len(d.trains))
     selection = [(0, spec.describe(), fit.bic())]
     step = 0
@@ -205,7 +211,9 @@ def select_terms(d: Design, spec: ModelSpec, fit: ModelFit, ladder: list, rates:
             s2.sig += 1
             cands.append(s2)
         finer = [c.knots for c in cands if c.knots != spec.knots]
-        spline_bound = _spline_bounds(d, fit, finer) if screen and finer else {}
+        # the fit's factorisations, shared by every candidate's bound of this step
+        basis = fit_basis(d, fit) if screen and reuse else None
+        spline_bound = _spline_bounds(d, fit, finer, basis) if screen and finer else {}
         n_act = np.count_nonzero(d.active)
         # each candidate's optimistic BIC (-inf: always solved), its start and, where the
         # bound judged it, its identifiable columns there (the solve's own first check)
@@ -217,7 +225,7 @@ def select_terms(d: Design, spec: ModelSpec, fit: ModelFit, ladder: list, rates:
                 bound[i] = spline_bound.get(c.knots, -math.inf)
                 continue
             start[i] = extend_theta(fit, c, d)
-            bound[i], keep0[i] = (_linear_bound(d, fit, c, start[i]) if screen
+            bound[i], keep0[i] = (_linear_bound(d, fit, c, start[i], basis) if screen
                                   else (-math.inf, None))
         # from the most promising: each BIC solved lowers the bar the others' optimistic
         # BICs must pass
@@ -258,7 +266,7 @@ def select_terms(d: Design, spec: ModelSpec, fit: ModelFit, ladder: list, rates:
 SCREEN_SLACK = 1.5
 
 
-def _spline_bounds(d: Design, fit: ModelFit, knots) -> dict:
+def _spline_bounds(d: Design, fit: ModelFit, knots, basis: FitBasis | None = None) -> dict:
     """Optimistic BIC of each finer spline in ``knots`` [-], from one evaluation at ``fit``.
 
     The spline with K' intervals can lower the misfit by no more than the union of the
@@ -266,29 +274,19 @@ def _spline_bounds(d: Design, fit: ModelFit, knots) -> dict:
     weighted residual's part outside the span of both. Its rank is at least the union's
     less the spline columns it drops. The bound takes ``SCREEN_SLACK`` times that gain and
     that rank: n ln(max(chi2 / n, floor)) + rank ln n. A spline whose bound is not finite
-    gets -inf (it is always solved)."""
-    rows = np.flatnonzero(d.active)
-    n = rows.size
+    gets -inf (it is always solved). ``basis``: ``fit``'s :class:`FitBasis` when already
+    made (its evaluation and QR are the ones needed here)."""
     out = {int(k): -math.inf for k in knots}
-    if n == 0 or not knots:
+    if not knots:
         return out
-    f, J, rate = d.evaluate(fit.theta, fit.lay, fit.spec, rows)
-    w = 1.0 / (d.sig[rows] * fix_rate(rate))
-    with np.errstate(over="ignore", invalid="ignore"):
-        r = (d.y[rows] - f) * w
-        chi = float(r @ r)
-    if not math.isfinite(chi):
+    if basis is None or not np.array_equal(basis.rows, np.flatnonzero(d.active)):
+        basis = fit_basis(d, fit, nominal=False)
+    if basis is None:
         return out
+    rows = basis.rows
+    n = rows.size
+    chi, r_out, chi_out, fac, Q = basis.chi, basis.r_out, basis.chi_out, basis.fac, basis.q
     sb = fit.lay["blocks"]["spline"]
-    # the spline columns are B(x) (1 + h') / (1 - R'): B-splines sum to 1, so the row sums
-    # of the fitted spline's columns are the factor every spline's columns share
-    fac = J[:, sb].sum(axis=1) * w
-    Ac = (J * w[:, None])[:, fit.keep]
-    cn = column_norms(Ac)
-    cn[~(cn > 0)] = 1.0
-    Q = linalg.qr(Ac / cn, mode="economic", check_finite=False)[0]
-    r_out = r - Q @ (Q.T @ r)
-    chi_out = float(r_out @ r_out)
     kept_spline = int(np.count_nonzero(fit.keep[sb]))
     for k in out:
         N = spline_basis(d.x[rows], k) * fac[:, None]
@@ -296,9 +294,10 @@ def _spline_bounds(d: Design, fit: ModelFit, knots) -> dict:
         N = N[:, nn > 0] / nn[nn > 0]
         for _ in range(2):                         # projected twice: orthogonal to rounding
             N -= Q @ (Q.T @ N)
-        Q2, R2, _ = linalg.qr(N, mode="economic", pivoting=True, check_finite=False)
+        # Q2^T r_out by applying the reflectors (LAPACK ormqr), without forming Q2
+        rq, R2, _ = linalg.qr_multiply(N, r_out, mode="right", pivoting=True, overwrite_a=True)
         k2 = int(np.count_nonzero(np.abs(np.diag(R2)) > RANK_TOL))
-        g = Q2[:, :k2].T @ r_out
+        g = rq[:k2]
         chi_u = max(chi_out - float(g @ g), 0.0)
         chi_opt = max(chi - SCREEN_SLACK * (chi - chi_u), 0.0)
         rank = fit.rank + k2 - kept_spline
@@ -306,7 +305,8 @@ def _spline_bounds(d: Design, fit: ModelFit, knots) -> dict:
     return out
 
 
-def _linear_bound(d: Design, fit: ModelFit, spec: ModelSpec, theta0: np.ndarray):
+def _linear_bound(d: Design, fit: ModelFit, spec: ModelSpec, theta0: np.ndarray,
+                  basis: FitBasis | None = None):
     """Optimistic BIC of the candidate ``spec`` that extends ``fit`` by terms starting at zero
     (``theta0``, from :func:`extend_theta`) [-], and the identifiable columns there: (bound, keep).
 
@@ -320,11 +320,19 @@ def _linear_bound(d: Design, fit: ModelFit, spec: ModelSpec, theta0: np.ndarray)
     again; None where it drops a parameter that is not zero there):
     n ln(max(chi_opt / n, floor)) + rank ln n, as :meth:`ModelFit.bic`. A candidate whose check
     drops a parameter that is not zero at theta0 (its solve starts elsewhere), whose misfit
-    is not finite, or with no more rows than columns gets -inf: it is always solved."""
+    is not finite, or with no more rows than columns gets -inf: it is always solved.
+
+    ``basis``: ``fit``'s :class:`FitBasis` (``theta0`` must extend ``fit``). The rank check
+    then factorises only the columns after the candidate's shared leading ones, and where
+    the candidate keeps every column the fit kept, chi_lin is the residual's part outside
+    the basis (``r_out``) less what the candidate's new columns, projected out of the
+    basis, take of it: one QR of [N | r] of the new columns, not of the whole design."""
     rows = np.flatnonzero(d.active)
     n = rows.size
     lay = d.layout(spec)
-    keep = rank_keep(d, theta0, lay, spec, rows)
+    if basis is not None and not (basis.knots == spec.knots and np.array_equal(basis.rows, rows)):
+        basis = None
+    keep = rank_keep(d, theta0, lay, spec, rows, basis=basis)
     p = int(np.count_nonzero(keep))
     if np.any(theta0[~keep] != 0.0):
         return -math.inf, None            # the solve zeroes them and starts from there
@@ -337,14 +345,33 @@ def _linear_bound(d: Design, fit: ModelFit, spec: ModelSpec, theta0: np.ndarray)
         chi = float(r @ r)
     if not (math.isfinite(chi) and plausible_rate(rate)):
         return -math.inf, keep
-    Ab = np.empty((n, p + 1), order="F")
-    Ab[:, :p] = J[:, keep] * w[:, None]
-    cn = column_norms(Ab[:, :p])
-    cn[~(cn > 0)] = 1.0
-    Ab[:, :p] /= cn
-    Ab[:, p] = r
-    qr = linalg.qr(Ab, mode="raw", overwrite_a=True, check_finite=False)[0][0]
-    chi_lin = float(qr[p, p]) ** 2
+    names = lay["names"]
+    kept = np.flatnonzero(keep)
+    new = [j for j in kept if names[j] not in basis.kept] if basis is not None else None
+    if basis is not None and len(kept) - len(new) == len(basis.kept) and n > p:
+        # the fit's identifiable columns all kept: the union's span is the basis's and the
+        # new columns'; [N | r] projected out of the basis, its QR gives the rest
+        k = len(new)
+        Ab = np.empty((n, k + 1), order="F")
+        Ab[:, :k] = J[:, new] * w[:, None]
+        cn = column_norms(Ab[:, :k])
+        cn[~(cn > 0)] = 1.0
+        Ab[:, :k] /= cn
+        Ab[:, k] = r
+        Q = basis.q
+        for _ in range(2):                  # projected twice: orthogonal to rounding
+            Ab -= Q @ (Q.T @ Ab)
+        qr = linalg.qr(Ab, mode="raw", overwrite_a=True, check_finite=False)[0][0]
+        chi_lin = float(qr[k, k]) ** 2
+    else:
+        Ab = np.empty((n, p + 1), order="F")
+        Ab[:, :p] = J[:, keep] * w[:, None]
+        cn = column_norms(Ab[:, :p])
+        cn[~(cn > 0)] = 1.0
+        Ab[:, :p] /= cn
+        Ab[:, p] = r
+        qr = linalg.qr(Ab, mode="raw", overwrite_a=True, check_finite=False)[0][0]
+        chi_lin = float(qr[p, p]) ** 2
     if not math.isfinite(chi_lin):
         return -math.inf, keep
     chi_opt = max(chi - SCREEN_SLACK * max(chi - chi_lin, 0.0), 0.0)
