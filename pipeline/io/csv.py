@@ -434,7 +434,7 @@ def _header_at(lines: _Lines, k: int, sep: str, fs_given: bool) -> bool:
         got = len(line.split(sep))
         raise CorruptFileError(lines.path, f"line {nxt_k + 1} (byte {at})",
                                f"{got} field(s), the header (line {k + 1}) has {n}: malformed row")
-    if row is None and timed:
+    if row is None:
         j = k + 1
         while lines.text(j) is not None and not lines.text(j).strip():
             j += 1
