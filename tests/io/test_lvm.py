@@ -115,11 +115,12 @@ def test_several_segments_concatenate(tmp_path):
     assert len(rec.meta["lvm"]["segments"]) == 3
 
 
-def test_comma_decimal_separator(tmp_path):
+@pytest.mark.parametrize("x_columns", ["No", "One"])
+def test_comma_decimal_separator(tmp_path, x_columns):
     """LVM 2.0's Decimal_Separator ``,`` (a decimal-comma locale): numbers and clock times
-    with a comma, fields tab-separated."""
-    seg, data = _segment(2000, decimal=",")
-    rec = pio.read(_write(tmp_path / "de.lvm", _file_header(decimal=",") + seg))
+    with a comma, fields tab-separated (the layout of docs/daq/lvm.md)."""
+    seg, data = _segment(2000, decimal=",", x_columns=x_columns)
+    rec = pio.read(_write(tmp_path / "de.lvm", _file_header(decimal=",", x_columns=x_columns) + seg))
     assert rec.fs == FS and rec.start_datetime == "2026-11-28T10:00:00"
     assert np.max(np.abs(rec.data - data)) <= 5e-7
 
