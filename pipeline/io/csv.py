@@ -470,6 +470,10 @@ def _find_header(path, lines: _Lines, opts: _Options) -> tuple[int, str]:
         nxt = lines.text(k + 1)
         if _data_row(nxt, sep, n) or (_units_line(nxt, sep, n) and _data_row(lines.text(k + 2), sep, n)):
             return k, sep
+    last = lines.items[-1] if lines.items else None
+    if last is not None and not last[4]:
+        raise CorruptFileError(path, f"line {len(lines.items)} (byte {last[0]})",
+                               "truncated: the file ends inside the preamble or header line (no newline)")
     if not looked:
         raise RecordingFileError(path, "no header line (only comments or blank lines)")
     shown = "; ".join(f"line {k + 1}: {lines.text(k)[:60]!r}" for k in looked[:_SHOWN_LINES])
@@ -513,15 +517,15 @@ def _read_head(path, opts: _Options = _Options()) -> _Head:
         first = lines.text(0)
         preamble = None
         if first is not None and first.startswith(_TAG):
+            if not lines.get(0)[4]:
+                raise CorruptFileError(path, "line 1 (byte 0)",
+                                       "truncated: the file ends inside the preamble or header line (no newline)")
             try:
                 preamble = json.loads(first[len(_TAG):])
             except json.JSONDecodeError as exc:
                 raise RecordingFileError(path, f"line 1: meshphase preamble is not valid JSON ({exc})") from exc
             if not isinstance(preamble, dict):
                 raise RecordingFileError(path, "line 1: meshphase preamble must be a JSON object")
-            if not lines.get(0)[4]:
-                raise CorruptFileError(path, "line 1 (byte 0)",
-                                       "truncated: the file ends inside the preamble or header line (no newline)")
             k = 1
             while lines.text(k) is not None and (lines.text(k).startswith("#") or not lines.text(k).strip()):
                 k += 1
