@@ -5,7 +5,7 @@ format=None)``. The format is recognised by content (magic bytes), the suffix on
 ties for text formats; an unknown format raises ValueError listing the supported ones.
 
 Formats (:data:`FORMATS`, from :mod:`meshphase.io.registry`): ``hdf5`` (native archive),
-``mcap``, ``tdms`` (NI), ``csv``, and any registered with :func:`register_format` or the
+``mcap``, ``tdms`` (NI), ``lvm`` (NI LabVIEW text, read-only), ``csv``, and any registered with :func:`register_format` or the
 ``meshphase.formats`` entry points. Each format module declares its
 :class:`~meshphase.io.registry.FormatSpec` once; detection, the suffix table, the command
 line's ``--format`` choices and the per-format options derive from the specs.

@@ -46,6 +46,8 @@ from ..jsonable import json_default
 from ..signal.quality import nonfinite_runs
 from ..recording import ChannelSpec, RecordingHeader
 from .atomic import STALE_AGE, TEMP_PREFIX, TEMP_SUFFIX, atomic_path, clean_stale_partials
+# the one list of clock names (TDMS without waveform timing, HDF5 from other tools, CSV, LVM)
+from .timenames import CLOCK_NAMES
 
 __all__ = ["RecordingFileError", "CorruptFileError", "RecordingTooLargeError", "RecordingInfo", "atomic_path",
            "clean_stale_partials", "TEMP_PREFIX", "TEMP_SUFFIX", "STALE_AGE", "check_verify",
@@ -275,10 +277,6 @@ def nice_fs(fs_est: float, n: int, span: float, quantum: float = 0.0) -> float:
     return float(f"{fs_est:.12g}")
 
 
-#: names (lower case) of a channel or dataset that holds each sample's time, in a file
-#: without a stated sample rate (TDMS without waveform timing: DIAdem, LabVIEW's "Write to
-#: Measurement File" without waveforms, scripts; HDF5 written by other tools)
-CLOCK_NAMES = ("time", "t", "time_s", "zeit", "timestamp", "time stamp", "datetime", "relative time")
 
 _KIND_PATTERNS = (
     ("sun", re.compile(r"^sun", re.I)),

@@ -74,6 +74,7 @@ from ..validate import as_int, as_positive_int
 from .base import (CorruptFileError, RecordingFileError, RecordingInfo, check_start_datetime, check_verify,
                    checked_write_blocks, dumps_json, nice_fs, spec_from_dict, warn_nonfinite)
 from .registry import FormatSpec
+from .timenames import CLOCK_NAMES, time_header
 
 __all__ = ["NAME", "FORMAT", "FORMAT_VERSION", "TIME_TOLERANCE", "sniff", "read_info",
            "read", "write", "write_blocks", "iter_blocks", "MAX_CHANNELS", "MAX_HEADER_LINE"]
@@ -82,6 +83,7 @@ NAME = "csv"
 #: The format's declaration in the registry (:mod:`meshphase.io.registry`).
 FORMAT = FormatSpec(
     name=NAME, module=__name__, suffixes=(".csv",), writable=True, streaming_write=True, catch_all=True,
+    read_options={"header_row": int, "skip_rows": int, "fs": float, "decimal": str, "delimiter": str},
     write_options={"chunk_rows": int}, read_libraries=("pandas",),
     description="delimited text with a time column (ours with a JSON preamble)")
 #: Version of the preamble written by :func:`write`.
@@ -105,13 +107,17 @@ _TAG = "# meshphase "
 _SEPARATORS = ("\t", ";", ",")
 #: data rows whose time field's printed digits give the time column's resolution
 _QUANTUM_ROWS = 64
-_TIME_NAMES = ("time", "t", "time_s")
-#: headers of a time column that holds ISO 8601 timestamps, besides :data:`_TIME_NAMES`
-_STAMP_NAMES = ("timestamp", "datetime", "date/time", "date time", "date_time")
 #: units a timestamp column may carry
 _STAMP_UNITS = ("", "utc", "local")
 _CLOCK_RE = re.compile(r"\d{1,2}:\d{2}:\d{2}(?:[.,](\d+))?")
-_TIME_UNITS = {"s": 1.0, "": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6}
+#: Field separators the ``delimiter`` option may name.
+DELIMITERS = (",", ";", "\t", "|")
+#: lines of a plain CSV searched for its header (the metadata block above it included)
+_LOOK_LINES = 500
+#: longest field of a units line under the header [characters]
+_UNIT_CHARS = 24
+#: lines a "no header found" message quotes
+_SHOWN_LINES = 5
 _FIELD_RE = re.compile(r"^(?P<name>.*?)\s*\[(?P<units>[^\[\]]*)\]\s*$", re.S)
 _PREAMBLE_KEYS = {"format", "format_version", "fs", "t0", "n_samples", "dtype", "start_datetime",
                   "channels", "meta", "history"}
@@ -159,6 +165,9 @@ class _Head:
     decimal: str = "."               # decimal mark of the numbers
     time_quantum: float = 0.0        # resolution the times are printed to [s] (0: full)
     epoch: str | None = None         # first row's ISO 8601 timestamp (a timestamp column)
+    timed: bool = True               # the first column is the time (else fs was given)
+    meta: dict = field(default_factory=dict)   # the metadata block above the header
+    fs: float | None = None          # the fs option [Hz]
 
 
 def _separator(header: str) -> str:
@@ -191,10 +200,17 @@ def _units_row(fh, sep: str, n_header: int) -> list[str] | None:
             return False
 
     if (not raw.endswith(b"\n") or len(fields) != n_header or not line.strip()
-            or any(numeric(f) for f in fields if f) or _stamp(fields[0]) is not None):
+            or any(numeric(f) for f in fields if f) or _stamp(fields[0]) is not None
+            or not all(_unit_like(f) for f in fields)):
         fh.seek(at)
         return None
     return fields
+
+
+def _unit_like(text: str) -> bool:
+    """A field of a units line: a short token without blanks or brackets (``m/m``, ``µm/m``,
+    ``V``, ``s``, ``°C``), or empty."""
+    return len(text) <= _UNIT_CHARS and not any(c.isspace() or c in "[]()" for c in text)
 
 
 def _time_token(line: str, sep: str) -> str:
@@ -274,54 +290,260 @@ def _header_field(name: str, units: str) -> str:
     return f"{name} [{units}]"
 
 
-def _read_head(path) -> _Head:
+@dataclass(frozen=True)
+class _Options:
+    """The layout options of a plain CSV (see :func:`read_info`), checked."""
+    header_row: int | None = None    # 1-based line of the column names
+    fs: float | None = None          # sample rate [Hz] of a file without a time column
+    decimal: str | None = None
+    delimiter: str | None = None
+
+
+def _options(header_row=None, skip_rows=None, fs=None, decimal=None, delimiter=None) -> _Options:
+    """The read options checked: ``header_row`` (1-based) and ``skip_rows`` (lines before
+    the header) name the same line, ``fs`` [Hz] is finite and positive, ``decimal`` is
+    ``.`` or ``,``, ``delimiter`` one of :data:`DELIMITERS` (``"tab"`` for a tab)."""
+    if header_row is not None:
+        header_row = as_positive_int(header_row, "header_row")
+    if skip_rows is not None:
+        skip_rows = as_int(skip_rows, "skip_rows")
+        if skip_rows < 0:
+            raise ValueError(f"skip_rows must be >= 0 (lines before the header), got {skip_rows}")
+        if header_row is not None and header_row != skip_rows + 1:
+            raise ValueError(f"header_row = {header_row} and skip_rows = {skip_rows} name different header "
+                             f"lines ({header_row} and {skip_rows + 1}); give one of them")
+        header_row = skip_rows + 1
+    if fs is not None:
+        if isinstance(fs, bool) or not isinstance(fs, (int, float, np.integer, np.floating)) \
+                or not (math.isfinite(float(fs)) and float(fs) > 0):
+            raise ValueError(f"fs must be a finite positive sample rate [Hz], got {fs!r}")
+        fs = float(fs)
+    if decimal is not None and decimal not in (".", ","):
+        raise ValueError(f"decimal must be '.' or ',', got {decimal!r}")
+    if delimiter is not None:
+        if isinstance(delimiter, str) and delimiter.lower() == "tab":
+            delimiter = "\t"
+        if delimiter not in DELIMITERS:
+            raise ValueError(f"delimiter must be one of {', '.join(repr(d) for d in DELIMITERS)} or 'tab', "
+                             f"got {delimiter!r}")
+        if delimiter == decimal:
+            raise ValueError(f"delimiter and decimal are both {delimiter!r}: the numbers could not be told apart")
+    return _Options(header_row=header_row, fs=fs, decimal=decimal, delimiter=delimiter)
+
+
+def _decode(raw: bytes) -> tuple[str, str]:
+    try:
+        return raw.decode("utf-8"), "utf-8"
+    except UnicodeDecodeError:
+        return raw.decode("latin-1"), "latin-1"
+
+
+class _Lines:
+    """The first lines of a file, read as they are asked for: (start offset, end offset,
+    text without the line end, encoding, ends with a newline) each."""
+
+    def __init__(self, path, fh):
+        self.path, self.fh, self.items, self.eof = path, fh, [], False
+
+    def get(self, k: int):
+        while len(self.items) <= k and not self.eof:
+            at = self.fh.tell()
+            raw = self.fh.readline(MAX_HEADER_LINE + 1)
+            if not raw:
+                self.eof = True
+                break
+            if len(raw) > MAX_HEADER_LINE:
+                raise RecordingFileError(self.path, f"line {len(self.items) + 1} (byte {at}) is longer than "
+                                                    f"{MAX_HEADER_LINE} bytes: not a preamble or header line of "
+                                                    "a recording")
+            body = raw[len(codecs.BOM_UTF8):] if not self.items and raw.startswith(codecs.BOM_UTF8) else raw
+            text, enc = _decode(body)
+            self.items.append((at, self.fh.tell(), text.rstrip("\r\n"), enc, raw.endswith(b"\n")))
+        return self.items[k] if k < len(self.items) else None
+
+    def text(self, k: int) -> str | None:
+        item = self.get(k)
+        return None if item is None else item[2]
+
+
+def _numeric(token: str) -> bool:
+    """A number as a plain CSV prints one (decimal point or comma, NaN, inf), or empty."""
+    t = token.strip().strip('"').strip()
+    if not t:
+        return True
+    try:
+        float(t.replace(",", ".", 1) if t.count(",") == 1 and "." not in t else t)
+        return True
+    except ValueError:
+        return False
+
+
+def _fields(line: str, sep: str) -> list[str]:
+    return next(_csv.reader([line], delimiter=sep)) if line else [""]
+
+
+def _time_like(field: str) -> bool:
+    """A header field that names the time column (any units: checked later)."""
+    return time_header(field) is not None or _split_field(field)[0].lower() in CLOCK_NAMES
+
+
+def _data_row(line: str | None, sep: str, n: int, stamp_first: bool = True) -> bool | None:
+    """True when ``line`` is a row of ``n`` numbers (the first may be a timestamp); False
+    for a row of numbers with another field count; None when it is no row of numbers."""
+    if line is None or not line.strip():
+        return None
+    fields = line.split(sep)
+    first_ok = _numeric(fields[0]) or (stamp_first and _stamp(fields[0].strip().strip('"')) is not None)
+    if not first_ok or not all(_numeric(f) for f in fields[1:]) or not any(f.strip() for f in fields):
+        return None
+    return len(fields) == n
+
+
+def _units_line(line: str | None, sep: str, n: int) -> bool:
+    if line is None or not line.strip():
+        return False
+    fields = [f.strip().strip('"').strip("[]").strip() for f in line.split(sep)]
+    return (len(fields) == n and not any(_numeric(f) for f in fields if f)
+            and _stamp(fields[0]) is None and all(_unit_like(f) for f in fields))
+
+
+def _header_at(lines: _Lines, k: int, sep: str, fs_given: bool) -> bool:
+    """True when line ``k`` (0-based) is a plain CSV's header: its first field names the
+    time (or, with ``fs`` given, no field is a number), and the next line, or the one after
+    a units line, is a row of as many numbers, or only blank lines follow. Raises
+    CorruptFileError when a time header is followed by a row of numbers of another count."""
+    text = lines.text(k)
+    if text is None or not text.strip() or text.startswith("#"):
+        return False
+    fields = _fields(text, sep)
+    timed = _time_like(fields[0])
+    if not timed and not (fs_given and not any(_numeric(f) for f in fields)):
+        return False
+    n = len(fields)
+    nxt = lines.text(k + 1)
+    row = _data_row(nxt, sep, n)
+    if row is None and _units_line(nxt, sep, n):
+        nxt_k = k + 2
+        row = _data_row(lines.text(nxt_k), sep, n)
+    else:
+        nxt_k = k + 1
+    if row:
+        return True
+    if row is False and timed:
+        at, _, line, _, _ = lines.get(nxt_k)
+        got = len(line.split(sep))
+        raise CorruptFileError(lines.path, f"line {nxt_k + 1} (byte {at})",
+                               f"{got} field(s), the header (line {k + 1}) has {n}: malformed row")
+    if row is None:
+        j = k + 1
+        while lines.text(j) is not None and not lines.text(j).strip():
+            j += 1
+        return lines.text(j) is None       # a header with no rows
+    return False
+
+
+def _find_header(path, lines: _Lines, opts: _Options) -> tuple[int, str]:
+    """(0-based line of the header, field separator) of a plain CSV."""
+    def sep_of(k):
+        return opts.delimiter or _separator(lines.text(k))
+
+    if opts.header_row is not None:
+        k = opts.header_row - 1
+        if lines.get(k) is None:
+            raise RecordingFileError(path, f"header_row = {opts.header_row} is past the end of the file "
+                                           f"({len(lines.items)} lines)")
+        return k, sep_of(k)
+    looked = []
+    for k in range(_LOOK_LINES):
+        text = lines.text(k)
+        if text is None:
+            break
+        if text.strip() and not text.startswith("#"):
+            looked.append(k)
+            if _header_at(lines, k, sep_of(k), opts.fs is not None):
+                return k, sep_of(k)
+    # no header by the rules: the first line over a row of as many numbers is taken, and its
+    # first column is then refused with the reason
+    for k in looked:
+        sep = sep_of(k)
+        n = len(_fields(lines.text(k), sep))
+        nxt = lines.text(k + 1)
+        if _data_row(nxt, sep, n) or (_units_line(nxt, sep, n) and _data_row(lines.text(k + 2), sep, n)):
+            return k, sep
+    last = lines.items[-1] if lines.items else None
+    if last is not None and not last[4]:
+        raise CorruptFileError(path, f"line {len(lines.items)} (byte {last[0]})",
+                               "truncated: the file ends inside the preamble or header line (no newline)")
+    if not looked:
+        raise RecordingFileError(path, "no header line (only comments or blank lines)")
+    shown = "; ".join(f"line {k + 1}: {lines.text(k)[:60]!r}" for k in looked[:_SHOWN_LINES])
+    raise RecordingFileError(path, f"no header found in the first {len(lines.items)} line(s) ({shown}"
+                                   f"{'; ...' if len(looked) > _SHOWN_LINES else ''}): a header names the "
+                                   f"time column first (Time, Zeit, Temps, t ... [s]) and is followed by "
+                                   f"rows of as many numbers; give header_row= (its line number), or fs= "
+                                   f"[Hz] when the file has no time column")
+
+
+def _metadata(lines: list[str], sep: str) -> dict:
+    """The lines above a plain CSV's header as ``{"metadata": {key: value}, "lines": [...]}``:
+    ``key<sep>value`` -> value, ``key<sep>v1<sep>v2...`` -> [v1, v2, ...], ``key: value``
+    -> value; any other line (and a repeated key) kept as it is in ``lines``."""
+    md, raw = {}, []
+    for line in lines:
+        fields = [f.strip() for f in _fields(line, sep)]
+        while fields and not fields[-1]:
+            fields.pop()
+        key = fields[0] if fields else ""
+        if len(fields) == 1 and re.match(r"^[^:=]*[A-Za-z][^:=]*[:=]", key):
+            key, value = (s.strip() for s in re.split(r"[:=]", key, maxsplit=1))
+            fields = [key, value] if value else [key]
+        key = key.rstrip(":").strip()
+        if len(fields) >= 2 and key and key not in md:
+            md[key] = fields[1] if len(fields) == 2 else fields[1:]
+        else:
+            raw.append(line)
+    return {"metadata": md, "lines": raw}
+
+
+def _read_head(path, opts: _Options = _Options()) -> _Head:
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such file")
     size = path.stat().st_size
     if size == 0:
         raise RecordingFileError(path, "file is empty (0 bytes)")
-    preamble = None
-    n_head = 0
     with open(path, "rb") as fh:
-        while True:
-            at = fh.tell()
-            raw = fh.readline(MAX_HEADER_LINE + 1)
-            if len(raw) > MAX_HEADER_LINE:
-                raise RecordingFileError(path, f"line {n_head + 1} (byte {at}) is longer than {MAX_HEADER_LINE} "
-                                               "bytes: not a preamble or header line of a recording")
-            if not raw:
-                if preamble is not None:
-                    raise CorruptFileError(path, f"byte {size} (end of file)", "truncated: the file ends after "
-                                                                               "the preamble, before the header line")
-                raise RecordingFileError(path, "no header line (only comments or blank lines)")
-            if not raw.endswith(b"\n"):
-                raise CorruptFileError(path, f"line {n_head + 1} (byte {at})",
+        lines = _Lines(path, fh)
+        first = lines.text(0)
+        preamble = None
+        if first is not None and first.startswith(_TAG):
+            if not lines.get(0)[4]:
+                raise CorruptFileError(path, "line 1 (byte 0)",
                                        "truncated: the file ends inside the preamble or header line (no newline)")
-            n_head += 1
-            if n_head == 1 and raw.startswith(codecs.BOM_UTF8):
-                raw = raw[len(codecs.BOM_UTF8):]
             try:
-                line = raw.decode("utf-8")
-                encoding = "utf-8"
-            except UnicodeDecodeError:
-                line = raw.decode("latin-1")
-                encoding = "latin-1"
-            line = line.rstrip("\r\n")
-            if line.startswith(_TAG) and preamble is None and n_head == 1:
-                try:
-                    preamble = json.loads(line[len(_TAG):])
-                except json.JSONDecodeError as exc:
-                    raise RecordingFileError(path, f"line 1: meshphase preamble is not valid JSON ({exc})") from exc
-                if not isinstance(preamble, dict):
-                    raise RecordingFileError(path, "line 1: meshphase preamble must be a JSON object")
-                continue
-            if line.startswith("#") or not line.strip():
-                continue
-            header = line
-            break
-        data_offset = fh.tell()
-        sep = "," if preamble is not None else _separator(header)
+                preamble = json.loads(first[len(_TAG):])
+            except json.JSONDecodeError as exc:
+                raise RecordingFileError(path, f"line 1: meshphase preamble is not valid JSON ({exc})") from exc
+            if not isinstance(preamble, dict):
+                raise RecordingFileError(path, "line 1: meshphase preamble must be a JSON object")
+            k = 1
+            while lines.text(k) is not None and (lines.text(k).startswith("#") or not lines.text(k).strip()):
+                k += 1
+            if lines.get(k) is None:
+                raise CorruptFileError(path, f"byte {size} (end of file)", "truncated: the file ends after "
+                                                                           "the preamble, before the header line")
+            sep = ","
+        else:
+            k, sep = _find_header(path, lines, opts)
+        at, end, header, encoding, newline = lines.get(k)
+        if not newline:
+            raise CorruptFileError(path, f"line {k + 1} (byte {at})",
+                                   "truncated: the file ends inside the preamble or header line (no newline)")
+        above = [] if preamble is not None else [
+            lines.text(j) for j in range(k) if lines.text(j).strip() and not lines.text(j).startswith("#")]
+        n_head = k + 1
+        data_offset = end
+        fh.seek(data_offset)
         fields = next(_csv.reader([header], delimiter=sep))
         if len(fields) - 1 > MAX_CHANNELS:
             raise RecordingFileError(path, f"line {n_head}: header of {len(fields) - 1} channel columns, more than "
@@ -333,37 +555,52 @@ def _read_head(path) -> _Head:
                 n_head += 1
                 data_offset = fh.tell()
             decimal, quantum, epoch = _dialect(fh, sep)
+            if opts.decimal is not None:
+                decimal = opts.decimal
         fh.seek(max(0, size - 1))
         ends_with_newline = fh.read(1) == b"\n"
     if encoding != "utf-8":
         warnings.warn(FormatWarning(f"{path}: header is not UTF-8; decoded as latin-1"), stacklevel=3)
-    if len(fields) < 2 and not (preamble is not None and preamble.get("channels") == []):
+    if decimal == sep:
+        raise RecordingFileError(path, f"decimal mark and field separator are both {sep!r}")
+    timed = preamble is not None or opts.fs is None or _time_like(fields[0])
+    c0 = 1 if timed else 0
+    if len(fields) < 1 + c0 and not (preamble is not None and preamble.get("channels") == []):
         raise RecordingFileError(path, f"line {n_head}: header {header[:80]!r} has no channel columns "
                                        f"(expected 'time [s],<name> [<units>],...')")
     if units_row is not None:          # 'time,sun,ring' then 's,m/m,m/m'
         fields = [f if _split_field(f)[1] is not None or not u else _header_field(f.strip(), u)
                   for f, u in zip(fields, units_row)]
-    tname, tunits = _split_field(fields[0])
-    if epoch is not None:
-        if tname.lower() not in _TIME_NAMES + _STAMP_NAMES or (tunits or "").lower() not in _STAMP_UNITS:
-            raise RecordingFileError(path, f"line {n_head}: first column holds timestamps ({epoch}); it must be "
-                                           f"headed 'time', 'timestamp' or 'datetime' (units none, UTC or "
-                                           f"local), got {fields[0]!r}")
-        tunits = ""
-    elif tname.lower() not in _TIME_NAMES or (tunits or "") not in _TIME_UNITS:
-        raise RecordingFileError(path, f"line {n_head}: first column must be the time, headed 'time [s]' "
-                                       f"(units s, ms or us) or holding ISO 8601 timestamps, got "
-                                       f"{fields[0]!r}")
+    scale = 1.0
+    if timed:
+        th = time_header(fields[0])
+        tname, tunits = _split_field(fields[0])
+        if epoch is not None:
+            if tname.lower() not in CLOCK_NAMES or (tunits or "").lower() not in _STAMP_UNITS:
+                raise RecordingFileError(path, f"line {n_head}: first column holds timestamps ({epoch}); it must be "
+                                               f"headed 'time', 'timestamp' or 'datetime' (units none, UTC or "
+                                               f"local), got {fields[0]!r}")
+        elif th is None:
+            raise RecordingFileError(path, f"line {n_head}: first column must be the time, headed 'time [s]' "
+                                           f"(or Zeit, Temps, Tiempo, Tempo, t; units s, ms or us) or holding ISO "
+                                           f"8601 timestamps, got {fields[0]!r}; a file without a time column "
+                                           f"reads with fs= (its sample rate [Hz]), a header further down with "
+                                           f"header_row=")
+        else:
+            scale = th[2]
     names, units = [], []
-    for f in fields[1:]:
+    for f in fields[c0:]:
         nm, un = _split_field(f)
         names.append(nm)
         units.append(un)
+    meta = {}
+    if above:
+        meta = {"csv": {"header_row": k + 1, **_metadata(above, sep)}}
     return _Head(n_head=n_head, preamble=preamble, fields=fields, names=names, units=units,
-                 time_scale=_TIME_UNITS[tunits or ""], encoding=encoding,
+                 time_scale=scale, encoding=encoding,
                  ends_with_newline=ends_with_newline, size=size, data_offset=data_offset,
-                 sep=sep, decimal=decimal, time_quantum=quantum * _TIME_UNITS[tunits or ""],
-                 epoch=epoch)
+                 sep=sep, decimal=decimal, time_quantum=quantum * scale,
+                 epoch=epoch, timed=timed, meta=meta, fs=opts.fs)
 
 
 def _duplicates(names) -> list[str]:
@@ -433,7 +670,7 @@ def _plain_info(path, head: _Head) -> RecordingInfo:
     dup = _duplicates(head.names)
     if dup:
         raise RecordingFileError(path, f"line {head.n_head}: duplicate channel name(s) {dup} in the header")
-    empty = [i + 2 for i, n in enumerate(head.names) if not n]
+    empty = [i + 1 + int(head.timed) for i, n in enumerate(head.names) if not n]
     if empty:
         raise RecordingFileError(path, f"line {head.n_head}: header column(s) {empty} have no name")
     no_units = [n for n, u in zip(head.names, head.units) if u is None]
@@ -449,6 +686,18 @@ def _plain_info(path, head: _Head) -> RecordingInfo:
             raise RecordingFileError(path, f"line {head.n_head}: bad channel column {n!r}: {exc}") from exc
     head.specs = specs
     n, first, last = _scan(path, head)
+    extra = {"format_version": None, "dtype": "float64", "preamble": False, "header_lines": head.n_head,
+             "encoding": head.encoding, "time_column": head.timed}
+    if not head.timed:                 # the rate given: the rows are the grid from t0 = 0
+        return RecordingInfo(path=str(path), format=NAME, fs=head.fs, n_samples=n, channels=specs, t0=0.0,
+                             meta=head.meta, extra=extra)
+    if n < 2 and head.fs is not None:
+        t0 = _parse_time(path, first, head.n_head + 1, head) * head.time_scale if n else 0.0
+        start = None
+        if head.epoch is not None:
+            t0, start = 0.0, head.epoch
+        return RecordingInfo(path=str(path), format=NAME, fs=head.fs, n_samples=n, channels=specs, t0=float(t0),
+                             start_datetime=start, meta=head.meta, extra=extra)
     if n < 2:
         raise RecordingFileError(path, f"missing or non-positive sample rate: cannot infer it from {n} data row(s) "
                                        f"(need at least 2)")
@@ -459,6 +708,12 @@ def _plain_info(path, head: _Head) -> RecordingInfo:
         raise RecordingFileError(path, f"missing or non-positive sample rate: time runs from {t_first!r} s to "
                                        f"{t_last!r} s over {n} rows (non-monotonic time)")
     fs = nice_fs((n - 1) / span, n, span, head.time_quantum)
+    if head.fs is not None:
+        # the time column and the given rate must tell the same grid
+        if abs((n - 1) / head.fs - span) > TIME_TOLERANCE / head.fs + head.time_quantum:
+            raise RecordingFileError(path, f"fs = {head.fs!r} Hz given, but the time column spans {span!r} s over "
+                                           f"{n} rows: {fs!r} Hz")
+        fs = head.fs
     start = None
     if head.epoch is not None:
         t_first, start = 0.0, head.epoch
@@ -468,8 +723,7 @@ def _plain_info(path, head: _Head) -> RecordingInfo:
             f"sample interval 1/fs = {1.0 / fs:.4g} s: a dropped or repeated sample cannot be seen "
             f"in it; the rows are taken as the uniform grid t0 + i/fs"), stacklevel=3)
     return RecordingInfo(path=str(path), format=NAME, fs=fs, n_samples=n, channels=specs, t0=float(t_first),
-                         start_datetime=start, extra={"format_version": None, "dtype": "float64", "preamble": False,
-                                "header_lines": head.n_head, "encoding": head.encoding})
+                         start_datetime=start, meta=head.meta, extra=extra)
 
 
 def _rounding(head: _Head, fs: float) -> float:
@@ -638,18 +892,53 @@ class _RowScan:
             raise self.bad_line(self.line + i, self.pos + int(starts[i]), problem)
 
 
-def read_info(path, *, verify: bool = True) -> RecordingInfo:
+def read_info(path, *, verify: bool = True, header_row: int | None = None, skip_rows: int | None = None,
+              fs: float | None = None, decimal: str | None = None, delimiter: str | None = None) -> RecordingInfo:
     """Header of a CSV recording.
 
     Our own files: preamble and header line only (and the final newline). Plain CSVs: also
     the structure scan (see the module notes), which counts the rows, and the first and last
     time value to infer fs (no samples are parsed). ``verify`` is accepted for the
     registry's uniform options: CSV stores no checksum, the structure is always checked.
+
+    Parameters
+    ----------
+    path : str or Path
+    verify : bool
+    header_row : int, optional
+        1-based line number of the column-name line (as an editor and the error messages
+        count); found by content when None (see the module notes).
+    skip_rows : int, optional
+        Lines before the header (``header_row = skip_rows + 1``; both given must agree).
+    fs : float, optional
+        Sample rate [Hz] of a file without a time column (its first column is then a
+        channel and t0 = 0). With a time column it must agree with the times.
+    decimal : {".", ","}, optional
+        Decimal mark of the numbers (detected when None).
+    delimiter : {",", ";", "\\t", "|"}, optional
+        Field separator (``"tab"`` names a tab; detected from the header line when None).
+
+    The layout options are not used with our own files (the preamble states the layout);
+    ``fs`` must then equal the preamble's.
+
+    Raises
+    ------
+    RecordingFileError
+        No header found (the message quotes the first lines looked at), ``header_row`` past
+        the end of the file, no time column and no ``fs``, bad time column.
+    CorruptFileError
+        A row with another field count than the header, a truncated file.
+    ValueError, TypeError
+        Bad option values.
     """
     check_verify(verify)
-    head = _read_head(path)
+    opts = _options(header_row, skip_rows, fs, decimal, delimiter)
+    head = _read_head(path, opts)
     if head.preamble is not None:
-        return _check_preamble(path, head)
+        info = _check_preamble(path, head)
+        if opts.fs is not None and abs(opts.fs - info.fs) > 1e-9 * info.fs:
+            raise RecordingFileError(path, f"fs = {opts.fs!r} Hz given, the preamble says {info.fs!r} Hz")
+        return info
     return _plain_info(path, head)
 
 
@@ -663,11 +952,14 @@ def _parse(path, head: _Head, cols: list[int], dtype, skip: int, nrows: int | No
     import pandas as pd
 
     ncols = len(head.fields)
+    c0 = int(head.timed)
     opts = {}
-    if len(cols) != ncols - 1:
-        opts["usecols"] = [0] + [c + 1 for c in cols]
+    if len(cols) != ncols - c0:
+        opts["usecols"] = [0] * c0 + [c + c0 for c in cols]
     if head.epoch is not None:
         opts["dtype"] = {0: str, **{c + 1: dtype for c in cols}}
+    elif not head.timed:
+        opts["dtype"] = dtype
     else:
         opts["dtype"] = np.float64 if dtype == np.float64 else {0: np.float64, **{c + 1: dtype for c in cols}}
     if nrows is not None:
@@ -713,12 +1005,14 @@ def _locate_bad(path, skip: int, nrows: int, head: _Head) -> str:
     return ""
 
 
-def _frame_arrays(df, dtype, head: _Head) -> tuple[np.ndarray, np.ndarray]:
-    if head.epoch is not None:
+def _frame_arrays(df, dtype, head: _Head) -> tuple[np.ndarray | None, np.ndarray]:
+    if not head.timed:
+        t = None
+    elif head.epoch is not None:
         t = _stamp_seconds(df[0].to_numpy(dtype=object), head.epoch)
     else:
         t = np.asarray(df[0].to_numpy(dtype=np.float64))
-    data = df.iloc[:, 1:].to_numpy(dtype=dtype)
+    data = df.iloc[:, int(head.timed):].to_numpy(dtype=dtype)
     if not data.flags.writeable:
         # pandas (copy-on-write) hands out a read-only view of its block; the DataFrame is dropped
         # right after, so the block becomes ours alone.
@@ -727,8 +1021,9 @@ def _frame_arrays(df, dtype, head: _Head) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _check_time(path, head: _Head, info: RecordingInfo, t: np.ndarray, row0: int) -> None:
-    """Raise RecordingFileError naming the line when ``t`` (rows row0...) leaves the grid."""
-    if t.size == 0:
+    """Raise RecordingFileError naming the line when ``t`` (rows row0...) leaves the grid
+    (``t`` None: no time column, nothing to check)."""
+    if t is None or t.size == 0:
         return
     if head.time_scale != 1.0:
         t = t * head.time_scale
@@ -770,8 +1065,8 @@ def _check_time(path, head: _Head, info: RecordingInfo, t: np.ndarray, row0: int
                                        f"t0 + i/fs (fs = {info.fs!r} Hz, tolerance {tol * info.fs:.3g} sample)")
 
 
-def _setup(path, channels):
-    head = _read_head(path)
+def _setup(path, channels, opts: _Options):
+    head = _read_head(path, opts)
     if head.preamble is not None:
         info = _check_preamble(path, head)
         rows, _, _ = _scan(path, head)
@@ -781,6 +1076,8 @@ def _setup(path, channels):
         if rows > info.n_samples:
             raise RecordingFileError(path, f"more data rows than the preamble's n_samples = {info.n_samples} "
                                            f"({rows} rows)")
+        if opts.fs is not None and abs(opts.fs - info.fs) > 1e-9 * info.fs:
+            raise RecordingFileError(path, f"fs = {opts.fs!r} Hz given, the preamble says {info.fs!r} Hz")
     else:
         info = _plain_info(path, head)
     names = info.check_channels(channels) if info.names else []
@@ -799,12 +1096,16 @@ def _recording(info: RecordingInfo, data, names, i0: int) -> Recording:
                      start_datetime=info.start_datetime, meta=info.meta, history=info.history)
 
 
-def read(path, channels=None, i0: int = 0, i1: int | None = None, *, verify: bool = True) -> Recording:
+def read(path, channels=None, i0: int = 0, i1: int | None = None, *, verify: bool = True,
+         header_row: int | None = None, skip_rows: int | None = None, fs: float | None = None,
+         decimal: str | None = None, delimiter: str | None = None) -> Recording:
     """Rows ``i0 <= i < i1`` of the named channels (all when None) of a CSV recording.
 
     The structure of the whole file is checked once (final newline, field count of every
     line, row count of our own files; see the module notes), and the time column against
-    the uniform grid t0 + i / fs for every row read. ``verify`` as in :func:`read_info`.
+    the uniform grid t0 + i / fs for every row read. ``verify`` and the layout options
+    (``header_row``, ``skip_rows``, ``fs``, ``decimal``, ``delimiter``) as in
+    :func:`read_info`.
 
     Raises
     ------
@@ -819,7 +1120,8 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *, verify: boo
         float32 when the preamble says so, else float64; Fortran-ordered (channel-major).
     """
     check_verify(verify)
-    head, info, names, cols, perm, dtype = _setup(path, channels)
+    opts = _options(header_row, skip_rows, fs, decimal, delimiter)
+    head, info, names, cols, perm, dtype = _setup(path, channels, opts)
     n = info.n_samples
     i0 = as_int(i0, "i0")
     i1 = n if i1 is None else as_int(i1, "i1")
@@ -850,11 +1152,13 @@ def read(path, channels=None, i0: int = 0, i1: int | None = None, *, verify: boo
     return _recording(info, data, names, i0)
 
 
-def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *,
-                verify: bool = True) -> Iterator[Recording]:
+def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *, verify: bool = True,
+                header_row: int | None = None, skip_rows: int | None = None, fs: float | None = None,
+                decimal: str | None = None, delimiter: str | None = None) -> Iterator[Recording]:
     """Blocks of ``n_block`` rows plus ``n_overlap`` following rows, parsed in one pass.
 
-    The structure is checked first, as in :func:`read`.
+    The structure is checked first, as in :func:`read`; the layout options as in
+    :func:`read_info`.
 
     Block k covers rows [k n_block, (k + 1) n_block + n_overlap), clipped to the recording;
     each row is parsed once (pandas ``chunksize``), so the cost is one read of the file.
@@ -866,7 +1170,8 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *,
     if n_overlap < 0:
         raise ValueError(f"n_overlap must be >= 0, got {n_overlap}")
     check_verify(verify)
-    head, info, names, cols, perm, dtype = _setup(path, channels)
+    opts = _options(header_row, skip_rows, fs, decimal, delimiter)
+    head, info, names, cols, perm, dtype = _setup(path, channels, opts)
     n = info.n_samples
     if n == 0:
         return
@@ -894,10 +1199,10 @@ def iter_blocks(path, n_block: int, n_overlap: int, channels=None, *,
                     raise RecordingFileError(path, f"non-numeric value in the data rows: {exc}") from exc
                 t, data = _frame_arrays(df, dtype, head)
                 del df
-                if parsed + len(t) > n:
+                if parsed + len(data) > n:
                     raise RecordingFileError(path, f"more data rows than the preamble's n_samples = {n}")
                 _check_time(path, head, info, t, parsed)
-                parsed += len(t)
+                parsed += len(data)
                 pending.append(data)
                 pending_rows += len(data)
             if pending_rows < min(n - start, n_block + n_overlap):

@@ -10,7 +10,7 @@ else (:data:`meshphase.io.FORMATS`, format detection, the suffix table of
 :func:`meshphase.io.write`, the ``--format`` choices of the command line, the scene's
 per-format options, the checksum pass of streamed reads) is derived from the specs.
 
-The built-in formats are listed here by module (``hdf5``, ``mcap``, ``tdms``, ``csv``,
+The built-in formats are listed here by module (``hdf5``, ``mcap``, ``tdms``, ``lvm``, ``csv``,
 ``matlab``) and
 imported when first needed, so ``import meshphase.io`` loads no format library. Other
 formats come from
@@ -41,12 +41,13 @@ __all__ = ["FormatSpec", "register_format", "unregister_format", "format_names",
 
 #: Entry-point group of third-party format plugins (each object a :class:`FormatSpec`).
 ENTRY_POINT_GROUP = "meshphase.formats"
-#: The built-in formats: name -> module declaring ``FORMAT`` (detection asks CSV, the catch-all,
-#: after all the others; the HDF5 reader declines a MATLAB 7.3 file, an HDF5 file with
-#: MATLAB's header text in its user block, which goes to ``matlab``).
+#: The built-in formats: name -> module declaring ``FORMAT`` (detection asks the formats with
+#: magic bytes or a first line of their own first, CSV, the catch-all, last; the HDF5 reader
+#: declines a MATLAB 7.3 file, an HDF5 file with MATLAB's header text in its user block,
+#: which goes to ``matlab``).
 BUILTIN_FORMATS = MappingProxyType({"hdf5": "meshphase.io.hdf5", "mcap": "meshphase.io.mcap",
-                                    "tdms": "meshphase.io.tdms", "csv": "meshphase.io.csv",
-                                    "matlab": "meshphase.io.matlab"})
+                                    "tdms": "meshphase.io.tdms", "lvm": "meshphase.io.lvm",
+                                    "csv": "meshphase.io.csv", "matlab": "meshphase.io.matlab"})
 
 
 def _as_option_types(value, what: str) -> Mapping:

@@ -17,7 +17,8 @@ Mapping (full description in ``data_schemas/tdms_mapping.md``):
   ``meshphase_pulses_per_rev``.
 * fs = 1 / ``wf_increment`` (the same on every channel). A file without waveform timing
   (DIAdem, "Write to Measurement File" without waveforms, scripts) may hold a clock
-  channel instead: one named as :data:`CLOCK_NAMES` (``Time``, ``t``, ``Zeit``, ...) or
+  channel instead: one named as :data:`~meshphase.io.timenames.CLOCK_NAMES` (``Time``, ``t``,
+  ``Zeit``, ``Temps``, ...) or
   holding timestamps; fs then comes from its first and last time, every time is checked
   against the grid (0.1 sample plus the clock's resolution: a dropped sample is named),
   t0 is its first value (timestamps: t0 = 0 and start_datetime the first), and it is not a
@@ -86,9 +87,10 @@ from ..jsonable import to_jsonable
 from ..recording import CHANNEL_KINDS, ChannelSpec, Recording
 from ..validate import as_int, as_positive, as_positive_int
 from . import tdms_index, tdms_rows, tdms_scaling
-from .base import (CLOCK_NAMES, CorruptFileError, RecordingFileError, RecordingInfo, check_allocation,
+from .base import (CorruptFileError, RecordingFileError, RecordingInfo, check_allocation,
                    check_verify, clock_timing, kind_from_name, spec_from_dict, warn_nonfinite)
 from .registry import FormatSpec
+from .timenames import CLOCK_NAMES, is_clock_name
 from .tdms_write import write, write_blocks, write_ni_log, write_tdms
 
 __all__ = ["NAME", "FORMAT", "sniff", "read_info", "read", "iter_blocks", "write", "write_blocks", "write_tdms",
@@ -384,7 +386,7 @@ def _clock_channel(path: Path, names: list, usable: list) -> str | None:
     if any(_prop_float(ch.properties, "wf_increment", path, n) for n, (_, ch) in zip(names, usable)):
         return None
     found = [n for n, (_, ch) in zip(names, usable)
-             if _stamp_dtype(ch) or ch.name.strip().lower() in CLOCK_NAMES]
+             if _stamp_dtype(ch) or is_clock_name(ch.name)]
     return found[0] if found and len(usable) > 1 else None
 
 

@@ -100,7 +100,7 @@ def plugin(tmp_path, monkeypatch):
 
 # ---------------------------------------------------------------------------- a new format is one module
 def test_plugin_reads_through_read_detect_and_iter_blocks(plugin, tmp_path, recording):
-    assert "mpraw" in pio.FORMATS and pio.FORMATS[:4] == ("hdf5", "mcap", "tdms", "csv")
+    assert "mpraw" in pio.FORMATS and pio.FORMATS[:5] == ("hdf5", "mcap", "tdms", "lvm", "csv")
     path = pio.write(recording, tmp_path / "r.mpraw")                 # suffix -> the plugin
     assert pio.detect_format(path) == "mpraw" and pio.format_of_suffix(path) == "mpraw"
     assert meshphase.read(path) == recording
@@ -232,7 +232,7 @@ def _kwonly(fn, drop=()) -> set:
             if p.kind is p.KEYWORD_ONLY and p.name not in drop}
 
 
-@pytest.mark.parametrize("name", ["hdf5", "mcap", "tdms", "csv"])
+@pytest.mark.parametrize("name", ["hdf5", "mcap", "tdms", "lvm", "csv"])
 def test_declared_entry_points_and_options_match_the_module(name):
     spec = pio.get_spec(name)
     mod = spec.load()

@@ -44,7 +44,7 @@ def test_tdms_by_content(rig_tdms, tmp_path):
 def test_unknown_format_lists_the_supported_ones(tmp_path, blob):
     path = tmp_path / "mystery.h5"
     path.write_bytes(blob)
-    with pytest.raises(ValueError, match=r"mystery\.h5: unknown format .*supported formats: hdf5, mcap, tdms, csv"):
+    with pytest.raises(ValueError, match=r"mystery\.h5: unknown format .*supported formats: hdf5, mcap, tdms, lvm, csv"):
         pio.read(path)
 
 
