@@ -397,37 +397,36 @@ def _quality(path, fmt: str, opts: dict, info, enabled: bool) -> dict:
 
 def _foreign_mcap_topics(path, fmt: str, opts: dict, exc: BaseException):
     """The topics of an MCAP file of another tool read without a mapping
-    (:func:`meshphase.io.mcap.describe_topics`), or None when ``exc`` is another error."""
+    (:func:`meshphase.io.mcap.describe_topics`), or None when ``exc`` is another error (a
+    damaged file, a mapping given)."""
     if fmt != "mcap" or "topics" in opts or isinstance(exc, CorruptFileError) \
             or not isinstance(exc, RecordingFileError):
         return None
-    from .io import mcap as mcap_io  # the mcap library: only for an MCAP file
+    from .io.mcap import describe_topics  # the mcap library: only for an MCAP file
 
-    describe = getattr(mcap_io, "describe_topics", None)
-    if describe is None:
-        return None
     try:
-        return describe(path)
+        return describe_topics(path)
     except Exception:  # noqa: BLE001 - the read's own error says it better
         return None
 
 
 def _print_topics(path, topics: list) -> None:
+    """The plain listing of ``info`` on an MCAP file of another tool."""
     print(f"file      {path}")
-    print("format    mcap (written by another tool: no meshphase layout)")
+    print("format    mcap, written by another tool (no meshphase layout): map its topic fields "
+          "onto channels")
     print(f"topics    {len(topics)}")
     for t in topics:
-        rate = t.get("rate_hz")
-        fields = t.get("fields")
+        rate = t["rate_Hz"]
+        fields = t["numeric_fields"]
         shown = ("no decoder for this encoding" if fields is None else
-                 ", ".join(f"{f['path']} ({f['type']})" if isinstance(f, dict) else str(f)
+                 ", ".join(f["path"] + ("" if f["length"] is None else f" [{f['length']}]")
                            for f in fields) or "no numeric fields")
-        print(f"  {t.get('topic')}: schema {t.get('schema') or '(none)'} "
-              f"({t.get('schema_encoding') or 'none'}), messages {t.get('message_encoding')}, "
-              f"{t.get('messages', '?')} message(s)"
-              + (f" at {rate:.6g} Hz" if isinstance(rate, (int, float)) and math.isfinite(rate) else "")
-              + f"; numeric fields: {shown}")
-    print("map the channels with --topics NAME=TOPIC:FIELD or a scene's [[input.mcap.channels]] "
+        print(f"  {t['topic']}: schema {t['schema'] or '(none)'} ({t['schema_encoding'] or 'none'}), "
+              f"messages {t['message_encoding']}, {t['message_count']} message(s)"
+              + (f" at {rate:.6g} Hz" if rate is not None else ""))
+        print(f"    numeric fields: {shown}")
+    print("map      --topics NAME=TOPIC:FIELD[,...] or a scene's [[input.mcap.channels]] with --scene "
           "(data_schemas/mcap.md)")
 
 
