@@ -848,18 +848,15 @@ def cmd_demo(args) -> int:
 
 
 def cmd_campaign(args) -> int:
-    import functools
-
-    from .campaign.runner import run_campaign, run_recording  # the campaign machinery: with the first campaign
+    from .campaign.runner import cli_campaign  # the campaign machinery: with the first campaign
 
     as_regular_file(args.scene, "the scene")
-    flags = _flag_options(args)
     out = Path(args.out) if args.out else Path.cwd() / (Path(args.scene).stem + "-campaign")
-    res = run_campaign(args.scene, list(args.inputs), out, scheduler=args.scheduler, workers=args.workers,
-                       overwrite=args.overwrite, progress=_bars(args),
+    res = cli_campaign(args.scene, args.inputs, scheduler=args.scheduler, workers=args.workers,
+                       out=out, overwrite=args.overwrite, progress=_bars(args),
                        recording_reports=args.recording_reports, task_timeout=args.task_timeout,
                        resume=args.resume, dashboard=args.dashboard, recursive=args.recursive,
-                       task=functools.partial(run_recording, read_options=flags) if flags else None)
+                       read_options=_flag_options(args) or None)
     c = res["counts"]
     print(f"campaign  {res['scene']}: {c['ok']} ok, {c['unreliable']} unreliable, {c['partial']} partial, "
           f"{c['failed']} failed in {res['timing_s'].get('total', float('nan')):.1f} s "

@@ -996,7 +996,7 @@ def cli_campaign(scene_path, inputs: list[str], *, scheduler: str | None = None,
                  workers: int | None = None, out=None, overwrite: bool = False,
                  progress: bool = True, recording_reports: bool = False,
                  task_timeout: float | None = None, resume: bool = False, dashboard=None,
-                 recursive: bool = False) -> dict:
+                 recursive: bool = False, read_options: dict | None = None) -> dict:
     """``meshphase campaign SCENE DIR...``: :func:`run_campaign` with the CLI's arguments.
 
     Parameters
@@ -1022,6 +1022,9 @@ def cli_campaign(scene_path, inputs: list[str], *, scheduler: str | None = None,
         ``--dashboard [ADDRESS]``.
     recursive : bool
         ``--recursive``: look into the folders' subfolders too.
+    read_options : dict, optional
+        ``--topics``, ``--fs``, ``--header-row`` ...: format options of every recording's
+        reads, over the scene's ``[input.*]`` tables (:func:`run_recording`).
 
     Returns
     -------
@@ -1031,4 +1034,6 @@ def cli_campaign(scene_path, inputs: list[str], *, scheduler: str | None = None,
     return run_campaign(scene_path, list(inputs), out, scheduler=scheduler, workers=workers,
                         overwrite=overwrite, progress=progress, recording_reports=recording_reports,
                         task_timeout=task_timeout, resume=resume, dashboard=dashboard,
-                        recursive=recursive)
+                        recursive=recursive,
+                        task=functools.partial(run_recording, read_options=read_options)
+                        if read_options else None)
