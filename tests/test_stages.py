@@ -367,7 +367,7 @@ def test_process_recording_writes_in_the_current_directory_without_monte_carlo(s
     assert "report" not in files
     first = files["summary"].read_text()
     _, files2 = process_recording(path, gs)
-    assert files2["summary"].parent == path.with_name("run-meshphase-2")
+    assert files2["summary"].parent == tmp_path / "run-meshphase-2"
     assert files["summary"].read_text() == first          # the first results are untouched
     assert path.read_bytes() == before                      # and so is the input
 
