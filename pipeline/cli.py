@@ -1,3 +1,4 @@
+# PYTHON_ARGCOMPLETE_OK
 """The ``meshphase`` command.
 
 The processing stack (the stages, the onset detectors and the filters, ~0.3 s of imports),
@@ -44,16 +45,20 @@ runs a corpus of faulty inputs and outputs through this boundary.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import errno
 import gc
 import json
 import logging
 import math
+import operator
 import os
 import sys
 import time
 import warnings
 from pathlib import Path
+
+import numpy as np
 
 from .version import __version__
 from .io.channels import mapping_report
@@ -62,23 +67,246 @@ from .errors import DataQualityWarning
 from .run.exits import (EXIT_ERROR, EXIT_INTERRUPTED, EXIT_PIPE, recording_read_errors,
                         run_status, status_line)
 from .runtime.heap import limit_heap_growth
-from .io import FormatChoices, convert, detect_format, iter_blocks, read_info
-from .io.base import ANY_FS_ENV
+from .io import FormatChoices, convert, detect_format, format_of_suffix, get_spec, iter_blocks, read_info
+from .io.base import ANY_FS_ENV, CorruptFileError, RecordingFileError
 from .io.tdms_rows import warmup as warmup_rows
 from .models._kernels import warmup as warmup_models
 from .runtime.log import MessageFormatter, logger, message_line
-from .signal.quality import channel_quality
-from .run.scene import SceneError, load_scene
+from .signal.runs import RunTracker
+from .run.scene import SceneError, load_scene, read_options, with_recording
 from .validate import as_regular_file
 
 __all__ = ["main", "build_parser", "describe_error"]
 
 
+def _bars(args) -> bool:
+    """Progress bars for this command: not ``-q``, and stderr a terminal (a log file or a
+    pipe gets no bar lines)."""
+    if args.quiet:
+        return False
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):   # stderr replaced or closed
+        return False
+
+
 def _progress(total: int | None, desc: str, enabled: bool):
-    from tqdm import tqdm  # with the first bar: tqdm loads importlib.metadata (~20 ms)
+    # tqdm.auto: the widget in a notebook, the text bar in a terminal; with the first bar
+    # tqdm loads importlib.metadata (~20 ms)
+    from tqdm.auto import tqdm
 
     return tqdm(total=total, desc=desc, unit="S", unit_scale=True, disable=not enabled,
                 leave=False, file=sys.stderr)
+
+
+# ---------------------------------------------------------------------------- input options
+#: Read options of the command line's input options: option -> (flag, scene table).
+_OPTION_SOURCES = {"topics": ("--topics", "[input.mcap]"), "fs": ("--fs", "[input] fs_Hz"),
+                   "header_row": ("--header-row", "[input.csv]"),
+                   "skip_rows": ("--skip-rows", "[input.csv]"),
+                   "decimal": ("--decimal", "[input.csv]"),
+                   "delimiter": ("--delimiter", "[input.csv]")}
+
+
+def _nonnegative_int(text: str) -> int:
+    """argparse type: a row count or number, >= 0."""
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {n}")
+    return n
+
+
+def _positive_hz(text: str) -> float:
+    """argparse type: a finite sample rate > 0 [Hz]."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a sample rate in Hz: {text!r}") from None
+    if not (v > 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"must be a finite rate > 0 Hz, got {text!r}")
+    return v
+
+
+def _one_char(text: str) -> str:
+    """argparse type: one character (``\\t`` for a tab)."""
+    text = {"\\t": "\t", "tab": "\t", "TAB": "\t"}.get(text, text)
+    if len(text) != 1:
+        raise argparse.ArgumentTypeError(f"expected one character, got {text!r}")
+    return text
+
+
+def parse_topics_arg(values) -> dict | list:
+    """The ``--topics`` values as the ``topics=`` option of :func:`meshphase.io.read`.
+
+    Each value is either JSON (a dict ``{"sun_T3": "/rig/strain:gauges.sun_T3"}`` or a list
+    of tables with ``name``, ``topic``, ``field`` ..., as in Python) or comma-separated
+    ``NAME=TOPIC:FIELD`` pairs; several values are joined.
+
+    Parameters
+    ----------
+    values : list of str
+
+    Returns
+    -------
+    dict or list
+        A dict when every value gives pairs or a dict, else a list of tables.
+
+    Raises
+    ------
+    ValueError
+        An empty list, a malformed value (named), a channel given twice.
+    """
+    if isinstance(values, str):
+        values = [values]
+    if not values:
+        raise ValueError("--topics: give NAME=TOPIC:FIELD pairs, e.g. --topics "
+                         "sun_T3=/rig/strain:gauges.sun_T3")
+    pairs: dict = {}
+    tables: list = []
+    for text in values:
+        s = str(text).strip()
+        if s.startswith(("{", "[")):
+            try:
+                val = json.loads(s)
+            except json.JSONDecodeError as exc:
+                raise ValueError(f"--topics {text!r}: not valid JSON ({exc})") from None
+            if isinstance(val, dict):
+                items = val.items()
+            else:
+                tables.extend(val)
+                continue
+        else:
+            items = []
+            for part in filter(None, (p.strip() for p in s.split(","))):
+                name, sep, target = part.partition("=")
+                if not sep or not name.strip() or not target.strip():
+                    raise ValueError(f"--topics {text!r}: {part!r} is no NAME=TOPIC:FIELD pair, "
+                                     "e.g. sun_T3=/rig/strain:gauges.sun_T3")
+                items.append((name.strip(), target.strip()))
+            if not items:
+                raise ValueError(f"--topics {text!r}: no NAME=TOPIC:FIELD pair in it")
+        for name, target in items:
+            if name in pairs:
+                raise ValueError(f"--topics: channel {name!r} is mapped twice")
+            pairs[name] = target
+    if tables:
+        return tables + [{"name": n, **({"topic": t.rpartition(":")[0], "field": t.rpartition(":")[2]}
+                                        if isinstance(t, str) else t)} for n, t in pairs.items()]
+    return pairs
+
+
+def _flag_options(args) -> dict:
+    """The read options given as flags (``--topics``, ``--fs``, ``--header-row`` ...)."""
+    out: dict = {}
+    if getattr(args, "topics", None):
+        from .io.mcap import parse_topics  # the mcap library: only for a mapping
+
+        out["topics"] = parse_topics_arg(args.topics)
+        try:
+            parse_topics(out["topics"])
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"--topics: {exc}") from None
+    for opt in ("fs", "header_row", "skip_rows", "decimal", "delimiter"):
+        v = getattr(args, opt, None)
+        if v is not None:
+            out[opt] = v
+    return out
+
+
+def _input_scene(args, path=None):
+    """The ``--scene`` of a command (None without one), loaded for reading a recording given
+    beside it."""
+    scene_path = getattr(args, "scene", None)
+    if not scene_path:
+        return None
+    return load_scene(as_regular_file(scene_path, "the scene (--scene)"), recording_given=True)
+
+
+def check_read_options(path, fmt: str, options: dict) -> None:
+    """Refuse read options the format of ``path`` does not take, naming the flag or scene
+    table that gave each and the options the format takes.
+
+    Parameters
+    ----------
+    path : str or Path
+    fmt : str
+        The file's format (:func:`meshphase.io.detect_format`).
+    options : dict
+        Read options.
+
+    Raises
+    ------
+    ValueError
+        An option ``fmt``'s :class:`~meshphase.io.FormatSpec` does not declare.
+    """
+    takes = get_spec(fmt).read_options
+    for key in options:
+        if key != "verify" and key not in takes:
+            flag, table = _OPTION_SOURCES.get(key, (key, "the scene"))
+            raise ValueError(f"{path}: a {fmt} file takes no read option {key!r} (given by {flag} "
+                             f"or the scene's {table}); the {fmt} reader's options: "
+                             f"{', '.join(sorted(takes)) or 'none'}")
+
+
+def input_options(args, path, scene=None) -> tuple[str, dict]:
+    """(format, read options) of recording ``path`` for a command: the scene's ``[input.*]``
+    tables and ``fs_Hz`` (``scene``, or ``--scene``), the flags over them; checked against
+    the file's format (:func:`check_read_options`).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        With the input options (:func:`add_input_options`).
+    path : Path
+    scene : Scene, optional
+        The scene whose tables hold (default: ``--scene``'s).
+
+    Returns
+    -------
+    (str, dict)
+    """
+    if scene is None:
+        scene = _input_scene(args)
+    flags = _flag_options(args)
+    if scene is not None:
+        opts = read_options(dataclasses.replace(scene, input=with_recording(scene, path, flags)))
+    else:
+        opts = flags
+    with recording_read_errors(path):
+        fmt = detect_format(path)
+    check_read_options(path, fmt, opts)
+    return fmt, opts
+
+
+def add_input_options(parser: argparse.ArgumentParser, *, scene: bool = True) -> None:
+    """The input options every reading command shares: ``--topics``, ``--scene`` (unless
+    the command's scene is positional), ``--header-row``, ``--skip-rows``, ``--fs``,
+    ``--decimal``, ``--delimiter``; forwarded as the format's read options
+    (:func:`input_options`)."""
+    g = parser.add_argument_group(
+        "input options", "how to read the recording (over the scene's [input.*] tables; a "
+        "format that does not take an option refuses it)")
+    g.add_argument("--topics", action="append", metavar="NAME=TOPIC:FIELD",
+                   help="an MCAP file of another tool: which topic fields are the channels, "
+                        "comma-separated NAME=TOPIC:FIELD pairs or JSON as Python's topics= "
+                        "(repeatable)")
+    if scene:
+        g.add_argument("--scene", metavar="SCENE",
+                       help="a scene whose [input.mcap] / [input.csv] tables, [input] fs_Hz and "
+                            "[[channels]] mapping read the recording")
+    g.add_argument("--header-row", type=_nonnegative_int, metavar="N",
+                   help="text: row of the channel names (from 0, after --skip-rows)")
+    g.add_argument("--skip-rows", type=_nonnegative_int, metavar="N",
+                   help="text: rows of preamble skipped at the top")
+    g.add_argument("--fs", type=_positive_hz, metavar="HZ",
+                   help="sample rate [Hz] of a file that states none (TDMS without wf_increment, "
+                        "text without a time column ...)")
+    g.add_argument("--decimal", type=_one_char, metavar="CHAR", help="text: decimal mark (. or ,)")
+    g.add_argument("--delimiter", type=_one_char, metavar="CHAR",
+                   help="text: field delimiter (default detected; \\t for a tab)")
 
 
 # ---------------------------------------------------------------------------- info
@@ -90,40 +318,148 @@ def _fmt_seconds(s: float) -> str:
     return f"{s:.6g} s"
 
 
+class _QualityScan:
+    """The quality summary of ``meshphase info --quality`` in one pass over the blocks: per
+    channel the non-finite samples and their runs, the finite range, and the runs of at least
+    3 samples at the channel's extreme values (those of :func:`meshphase.signal.quality.clipped_runs`
+    of the whole channel: the runs at the running extremes, restarted when a block passes
+    them). Whole-block numpy reductions; per channel only the run bookkeeping."""
+
+    def __init__(self, names):
+        self.names = list(names)
+        k = len(self.names)
+        self.nonfinite = [RunTracker() for _ in range(k)]
+        self.n_nonfinite = np.zeros(k, dtype=np.int64)
+        self.lo = np.full(k, np.inf)
+        self.hi = np.full(k, -np.inf)
+        self.at_hi = [RunTracker() for _ in range(k)]
+        self.at_lo = [RunTracker() for _ in range(k)]
+        self.pos = 0
+
+    def feed(self, data: np.ndarray) -> None:
+        """The next block, shape (n, channels)."""
+        n = data.shape[0]
+        if n == 0:
+            return
+        fin = np.isfinite(data)
+        bad_cols = set(np.flatnonzero(~fin.all(axis=0)).tolist())
+        with np.errstate(invalid="ignore"):
+            bhi = np.where(fin, data, -np.inf).max(axis=0) if bad_cols else data.max(axis=0)
+            blo = np.where(fin, data, np.inf).min(axis=0) if bad_cols else data.min(axis=0)
+        for j in range(len(self.names)):
+            col = data[:, j]
+            bad = ~fin[:, j]
+            if j in bad_cols:
+                self.n_nonfinite[j] += int(bad.sum())
+            self.nonfinite[j].add(bad)    # closes a run left open by the block before
+            for ext, new, trackers, better in ((self.hi, bhi[j], self.at_hi, operator.gt),
+                                               (self.lo, blo[j], self.at_lo, operator.lt)):
+                if better(new, ext[j]):
+                    ext[j] = new
+                    t = RunTracker()
+                    t.n = self.pos            # runs before this block lie below the new extreme
+                    trackers[j] = t
+                trackers[j].add(col == ext[j])
+        self.pos += n
+
+    def result(self) -> dict:
+        """Channel name -> ``n_nonfinite``, ``nonfinite_runs``, ``clipped_runs``, ``min``, ``max``."""
+        out = {}
+        for j, name in enumerate(self.names):
+            finite = self.hi[j] >= self.lo[j]
+            clipped = 0
+            if finite and self.hi[j] > self.lo[j]:
+                for t in (self.at_hi[j], self.at_lo[j]):
+                    r = t.runs()
+                    clipped += int(((r[:, 1] - r[:, 0]) >= 3).sum())
+            out[name] = {"n_nonfinite": int(self.n_nonfinite[j]),
+                         "nonfinite_runs": len(self.nonfinite[j].runs()), "clipped_runs": clipped,
+                         "min": float(self.lo[j]) if finite else float("inf"),
+                         "max": float(self.hi[j]) if finite else float("-inf")}
+        return out
+
+
+#: Samples per channel per block of ``info --quality`` (2**20: 64 MB of 8 float64 channels).
+QUALITY_BLOCK = 2 ** 20
+
+
+def _quality(path, fmt: str, opts: dict, info, enabled: bool) -> dict:
+    """``info --quality``: :class:`_QualityScan` over the file's blocks."""
+    scan = _QualityScan([c.name for c in info.channels])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataQualityWarning)  # counted here instead
+        with _progress(info.n_samples, "quality", enabled) as bar, recording_read_errors(path):
+            for block in iter_blocks(path, QUALITY_BLOCK / info.fs, format=fmt, **opts):
+                scan.feed(block.data)
+                bar.update(block.n_samples)
+    return scan.result()
+
+
+def _foreign_mcap_topics(path, fmt: str, opts: dict, exc: BaseException):
+    """The topics of an MCAP file of another tool read without a mapping
+    (:func:`meshphase.io.mcap.describe_topics`), or None when ``exc`` is another error (a
+    damaged file, a mapping given)."""
+    if fmt != "mcap" or "topics" in opts or isinstance(exc, CorruptFileError) \
+            or not isinstance(exc, RecordingFileError):
+        return None
+    from .io.mcap import describe_topics  # the mcap library: only for an MCAP file
+
+    try:
+        return describe_topics(path)
+    except Exception:  # noqa: BLE001 - the read's own error says it better
+        return None
+
+
+def _print_topics(path, topics: list) -> None:
+    """The plain listing of ``info`` on an MCAP file of another tool."""
+    print(f"file      {path}")
+    print("format    mcap, written by another tool (no meshphase layout): map its topic fields "
+          "onto channels")
+    print(f"topics    {len(topics)}")
+    for t in topics:
+        rate = t["rate_Hz"]
+        fields = t["numeric_fields"]
+        shown = ("no decoder for this encoding" if fields is None else
+                 ", ".join(f["path"] + ("" if f["length"] is None else f" [{f['length']}]")
+                           for f in fields) or "no numeric fields")
+        print(f"  {t['topic']}: schema {t['schema'] or '(none)'} ({t['schema_encoding'] or 'none'}), "
+              f"messages {t['message_encoding']}, {t['message_count']} message(s)"
+              + (f" at {rate:.6g} Hz" if rate is not None else ""))
+        print(f"    numeric fields: {shown}")
+    print("map      --topics NAME=TOPIC:FIELD[,...] or a scene's [[input.mcap.channels]] with --scene "
+          "(data_schemas/mcap.md)")
+
+
 def cmd_info(args) -> int:
     path = as_regular_file(args.file, "the recording")  # a FIFO would block detect_format
-    with recording_read_errors(path):
-        fmt = detect_format(path)
-        info = read_info(path, format=fmt)
+    scene = _input_scene(args)          # before the file: a bad scene fails at once
+    fmt, opts = input_options(args, path, scene)
+    try:
+        with recording_read_errors(path):
+            info = read_info(path, format=fmt, **opts)
+    except Exception as exc:
+        topics = _foreign_mcap_topics(path, fmt, opts, exc)
+        if topics is None:
+            raise
+        if args.json:
+            print(json.dumps({"file": str(path), "format": fmt, "foreign": True, "topics": topics},
+                             indent=2, default=str))
+        else:
+            _print_topics(path, topics)
+        return 0
     out = {
         "file": str(path), "format": fmt, "fs_hz": info.fs, "n_samples": info.n_samples,
         "duration_s": info.duration, "t0_s": info.t0, "start_datetime": info.start_datetime,
         "channels": [c.to_dict() for c in info.channels], "meta": info.meta,
         "history": info.history,
     }
-    if getattr(args, "scene", None):   # before the scan: a bad scene fails at once
-        out["channel_map"] = _channel_map(args.scene, info.channels, str(path))
-    if not args.no_quality:
-        # quality summary streamed in blocks: memory stays flat on long files
-        totals = {c.name: {"n_nonfinite": 0, "nonfinite_runs": 0, "clipped_runs": 0,
-                           "min": float("inf"), "max": float("-inf")} for c in info.channels}
-        block_s = max(1.0, 2**22 / info.fs)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", DataQualityWarning)  # counted below instead
-            with _progress(info.n_samples, "quality", not args.quiet) as bar, \
-                    recording_read_errors(path):
-                for block in iter_blocks(path, block_s, format=fmt):
-                    for i, c in enumerate(block.channels):
-                        q = channel_quality(block.data[:, i])
-                        t = totals[c.name]
-                        t["n_nonfinite"] += q["n_nonfinite"]
-                        t["nonfinite_runs"] += len(q["nonfinite_runs"])
-                        t["clipped_runs"] += q["n_clipped_runs"]
-                        if q["n_samples"] > q["n_nonfinite"]:
-                            t["min"] = min(t["min"], q["min"])
-                            t["max"] = max(t["max"], q["max"])
-                    bar.update(block.n_samples)
-        out["quality"] = totals
+    if opts:
+        out["read_options"] = opts
+    if scene is not None:
+        out["channel_map"] = dict(mapping_report(info.channels, scene.channels, str(path)),
+                                  scene=str(args.scene))
+    if args.quality:
+        out["quality"] = _quality(path, fmt, opts, info, _bars(args))
     if args.json:
         print(json.dumps(out, indent=2, default=str))
         return 0
@@ -150,14 +486,9 @@ def cmd_info(args) -> int:
         print(f"history   {len(info.history)} step(s): " + ", ".join(str(h.get('step', h)) for h in info.history))
     if "channel_map" in out:
         _print_channel_map(out["channel_map"])
+    if "quality" not in out:
+        print("quality   not scanned (--quality scans every sample)")
     return 0
-
-
-def _channel_map(scene_path, channels, source: str) -> dict:
-    """``info --scene``: the scene's channel mapping of the recording
-    (:func:`meshphase.io.channels.mapping_report`)."""
-    scene = load_scene(as_regular_file(scene_path, "the scene"))
-    return dict(mapping_report(channels, scene.channels, source), scene=str(scene_path))
 
 
 def _print_channel_map(m: dict) -> None:
@@ -172,14 +503,38 @@ def _print_channel_map(m: dict) -> None:
 
 
 # ---------------------------------------------------------------------------- convert
+class _LayoutChoices:
+    """The MCAP writer's layouts (:data:`meshphase.io.mcap.LAYOUTS`) as argparse ``choices``,
+    read when used (building the parser loads no mcap library)."""
+
+    def _names(self) -> tuple:
+        from .io.mcap import LAYOUTS
+
+        return tuple(LAYOUTS)
+
+    def __contains__(self, item) -> bool:
+        return item in self._names()
+
+    def __iter__(self):
+        return iter(self._names())
+
+
 def cmd_convert(args) -> int:
     src, dst = as_regular_file(args.input, "the input recording"), Path(args.output)
-    if args.compression and (args.format or dst.suffix.lower().lstrip(".")) == "csv":
+    out_fmt = args.format or format_of_suffix(dst)
+    if args.compression and out_fmt == "csv":
         raise ValueError(f"--compression {args.compression}: CSV is written uncompressed "
                          "(compression is for hdf5 and mcap)")
     options = {"compression": args.compression} if args.compression else {}
+    if args.layout:
+        if out_fmt is not None and "layout" not in get_spec(out_fmt).write_options:
+            raise ValueError(f"--layout {args.layout}: a {out_fmt} file has no layouts (--layout is "
+                             "for mcap output)")
+        options["layout"] = args.layout
+    _, read_opts = input_options(args, src)
     done = convert(src, dst, format=args.format, overwrite=args.overwrite,
-                   progress=lambda total, desc: _progress(total, desc, not args.quiet), **options)
+                   progress=lambda total, desc: _progress(total, desc, _bars(args)),
+                   read_options=read_opts, **options)
     logger.info("wrote %s", done.path)
     if not args.quiet:
         print(f"{src} ({done.source_format}) -> {done.path} ({done.n_samples} samples x "
@@ -204,7 +559,7 @@ def cmd_synth(args) -> int:
         return 0
 
     path, truth = cli_synth(args.scenario, args.output, minutes=args.minutes, seed=args.seed,
-                            format=args.format, overwrite=args.overwrite, progress=not args.quiet)
+                            format=args.format, overwrite=args.overwrite, progress=_bars(args))
     print(f"wrote {path}\ntruth {truth}")
     return 0
 
@@ -251,7 +606,7 @@ def cmd_bench(args) -> int:
         from .bench.models_reference import build_reference, reference_line
 
         ref = build_reference(out, evaluations=args.evaluations, plain=args.plain,
-                              progress=not args.quiet)
+                              progress=_bars(args))
         print(reference_line(ref))
         return 0
     from .bench import rss_summary, run_bench
@@ -337,7 +692,7 @@ def _stage_progress(enabled: bool):
 
     def cb(name, i, n):
         if bar["b"] is None:
-            from tqdm import tqdm
+            from tqdm.auto import tqdm
 
             bar["b"] = tqdm(total=n, desc="stages", leave=False, file=sys.stderr)
         bar["b"].set_postfix_str(name)
@@ -419,7 +774,7 @@ def _run_and_write(args, scene, base, *, report: bool = True):
     interrupted (:class:`meshphase.run.outdir.OutputDir`)."""
     from .run.stages import run_to_folder  # the processing stack: see the module docstring
     return run_to_folder(scene, base, overwrite=args.overwrite, report=report,
-                         progress=_stage_progress(not args.quiet))
+                         progress=_stage_progress(_bars(args)))
 
 
 def cmd_run(args) -> int:
@@ -429,20 +784,56 @@ def cmd_run(args) -> int:
         raise SceneError(args.scene, "results", "no results requested, nothing to run; add e.g. "
                          'results = ["ideal_phasing", "phasing"] (`meshphase process FILE --gearset '
                          f"{args.scene}` takes a gearset file without results)")
-    base = Path(args.out) if args.out else (scene.output or Path(args.scene).with_suffix("").with_name(
-        Path(args.scene).stem + "-out"))
+    flags = _flag_options(args)
+    if flags:
+        rec = scene.input.get("recording")
+        if not rec:
+            raise ValueError(f"{', '.join(_OPTION_SOURCES[k][0] for k in flags)}: the scene "
+                             f"{args.scene} reads no recording file ([input] recording)")
+        scene.input = with_recording(scene, rec, flags) | {
+            k: v for k, v in scene.input.items() if k in ("start", "stop")}
+        if Path(rec).is_file():
+            input_options(args, rec, scene)       # a format that takes no such option: said now
+    base = Path(args.out) if args.out else (scene.output or Path.cwd() / (Path(args.scene).stem
+                                                                          + "-meshphase"))
     ctx, files = _run_and_write(args, scene, base, report=not args.no_report)
     return _finish_run(args, ctx, files)
 
 
+def _gearset_line(g) -> str:
+    return f"Z {g.z_sun}/{g.z_ring}/{g.z_planet}, {g.n_planets} planets"
+
+
 def cmd_process(args) -> int:
-    # both files checked before the stages' imports: a mistyped path fails before they load
-    as_regular_file(args.file, "the recording")
-    as_regular_file(args.gearset, "the gearset scene (--gearset)")
+    # the files checked before the stages' imports: a mistyped path fails before they load
+    path = as_regular_file(args.file, "the recording")
+    gearset = (load_scene(as_regular_file(args.gearset, "the gearset scene (--gearset)"),
+                          recording_given=True) if args.gearset else None)
+    scene_in = _input_scene(args)
+    fmt, opts = input_options(args, path, scene_in or gearset)
     from .run.stages import process_recording  # the processing stack: see the module docstring
+
+    if gearset is None and scene_in is not None and scene_in.gearset is not None:
+        gearset = scene_in
+    if gearset is None:
+        from .api.scene import build_scene  # beside the processing stack
+
+        with recording_read_errors(path):
+            meta = read_info(path, format=fmt, **opts).meta.get("gearset")
+        if not meta:
+            raise ValueError(f"{path}: no gearset: give --gearset GEARSET.toml (a scene with a "
+                             "[gearset] table) or --scene SCENE with one; this file's metadata "
+                             "carries none")
+        gearset = build_scene(scene=scene_in, meta_gearset=lambda: meta, label=str(path))
+        print(message_line(args.command, "info", f"gearset: from the file's metadata "
+                           f"({_gearset_line(gearset.gearset)}); --gearset GEARSET.toml gives "
+                           "another"), file=sys.stderr)
+    elif scene_in is not None and gearset is not scene_in:
+        gearset.channels = scene_in.channels       # --scene's mapping over the gearset file's
     # process_recording returns the paths as published (the output folder's final name)
-    ctx, files = process_recording(args.file, args.gearset, out_dir=args.out, overwrite=args.overwrite,
-                                   progress=_stage_progress(not args.quiet), tolerance=args.tolerance)
+    ctx, files = process_recording(path, gearset, out_dir=args.out, overwrite=args.overwrite,
+                                   progress=_stage_progress(_bars(args)), tolerance=args.tolerance,
+                                   options=opts)
     return _finish_run(args, ctx, files)
 
 
@@ -460,10 +851,12 @@ def cmd_campaign(args) -> int:
     from .campaign.runner import cli_campaign  # the campaign machinery: with the first campaign
 
     as_regular_file(args.scene, "the scene")
+    out = Path(args.out) if args.out else Path.cwd() / (Path(args.scene).stem + "-campaign")
     res = cli_campaign(args.scene, args.inputs, scheduler=args.scheduler, workers=args.workers,
-                       out=args.out, overwrite=args.overwrite, progress=not args.quiet,
+                       out=out, overwrite=args.overwrite, progress=_bars(args),
                        recording_reports=args.recording_reports, task_timeout=args.task_timeout,
-                       resume=args.resume, dashboard=args.dashboard, recursive=args.recursive)
+                       resume=args.resume, dashboard=args.dashboard, recursive=args.recursive,
+                       read_options=_flag_options(args) or None)
     c = res["counts"]
     print(f"campaign  {res['scene']}: {c['ok']} ok, {c['unreliable']} unreliable, {c['partial']} partial, "
           f"{c['failed']} failed in {res['timing_s'].get('total', float('nan')):.1f} s "
@@ -499,21 +892,67 @@ def _seconds(text: str) -> float:
     return v
 
 
+#: The global flags, accepted before and after the subcommand: flag -> (dest, argparse kwargs).
+_GLOBAL_FLAGS = {
+    ("-v", "--verbose"): ("verbose", dict(action="count", help="more log output (-vv debug)")),
+    ("-q", "--quiet"): ("quiet", dict(action="store_true",
+                                      help="no progress bars (convert: no summary line either)")),
+    ("--debug",): ("debug", dict(action="store_true", help="developers: re-raise errors with their "
+                                 "traceback (also MESHPHASE_DEBUG=1)")),
+    ("--any-fs",): ("any_fs", dict(action="store_true", help="accept a recording's sample rate "
+                                   "outside 1e-3 to 1e8 Hz (refused by default as a damaged header; "
+                                   "also MESHPHASE_ANY_FS=1)")),
+}
+#: Prefix of the dests the global flags get after the subcommand (merged by :func:`_merge_globals`).
+_AFTER = "after_"
+
+
+def _global_flags(parser: argparse.ArgumentParser, *, after: bool) -> None:
+    """The global flags on ``parser``: the main parser's (defaults 0 / False), or a
+    subcommand's (``after``: their own dests, absent unless given)."""
+    g = parser.add_argument_group("global options") if after else parser
+    for flags, (dest, kw) in _GLOBAL_FLAGS.items():
+        kw = dict(kw)
+        if after:
+            g.add_argument(*flags, dest=_AFTER + dest, default=argparse.SUPPRESS, **kw)
+        else:
+            g.add_argument(*flags, dest=dest, default=0 if kw["action"] == "count" else False, **kw)
+
+
+def _merge_globals(args: argparse.Namespace) -> argparse.Namespace:
+    """The global flags given after the subcommand added to those before it (``-v`` counts
+    add up)."""
+    for _, (dest, _kw) in _GLOBAL_FLAGS.items():
+        after = getattr(args, _AFTER + dest, None)
+        if after is None:
+            continue
+        delattr(args, _AFTER + dest)
+        setattr(args, dest, getattr(args, dest) + after if dest == "verbose" else True)
+    return args
+
+
+class _Sub:
+    """``add_parser`` of the subcommands with the global flags on each (accepted after the
+    subcommand as before it)."""
+
+    def __init__(self, sub):
+        self.sub = sub
+
+    def add_parser(self, name: str, **kw) -> argparse.ArgumentParser:
+        s = self.sub.add_parser(name, **kw)
+        _global_flags(s, after=True)
+        return s
+
+
 def build_parser() -> argparse.ArgumentParser:
-    """The ``meshphase`` argument parser: global options, one subparser per command."""
+    """The ``meshphase`` argument parser: global options (before or after the command), one
+    subparser per command."""
     p = argparse.ArgumentParser(
         prog="meshphase",
         description="Planetary gear rig strain recordings -> measured mesh phasing vs models.")
     p.add_argument("--version", action="version", version=f"meshphase {__version__}")
-    p.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv debug)")
-    p.add_argument("-q", "--quiet", action="store_true",
-                   help="no progress bars (convert: no summary line either)")
-    p.add_argument("--debug", action="store_true",
-                   help="developers: re-raise errors with their traceback (also MESHPHASE_DEBUG=1)")
-    p.add_argument("--any-fs", action="store_true",
-                   help="accept a recording's sample rate outside 1e-3 to 1e8 Hz (refused by default as "
-                        "a damaged header; also MESHPHASE_ANY_FS=1)")
-    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _global_flags(p, after=False)
+    sub = _Sub(p.add_subparsers(dest="command", required=True, metavar="COMMAND"))
     _add_info(sub)
     _add_convert(sub)
     _add_synth(sub)
@@ -522,17 +961,23 @@ def build_parser() -> argparse.ArgumentParser:
     _add_process(sub)
     _add_campaign(sub)
     _add_bench(sub)
+    _add_completion(sub)
     return p
 
 
 def _add_info(sub) -> None:
     """The ``meshphase info`` subcommand."""
-    s = sub.add_parser("info", help="channels, kinds, fs, duration, start and a quality summary of a recording")
-    s.add_argument("file", help="recording file (hdf5, mcap, csv, tdms; format recognised by content)")
+    s = sub.add_parser("info", help="header, channels, kinds, fs, duration and start of a recording "
+                                    "(the topics of another tool's MCAP); --quality scans the samples")
+    s.add_argument("file", help="recording file (hdf5, mcap, csv, tdms ...; format recognised by content)")
     s.add_argument("--json", action="store_true", help="machine-readable output")
-    s.add_argument("--no-quality", action="store_true", help="header only (do not scan the samples)")
-    s.add_argument("--scene", metavar="SCENE",
-                   help="also list what the scene's [[channels]] map each channel to, and what they leave unmapped")
+    q = s.add_mutually_exclusive_group()
+    q.add_argument("--quality", action="store_true",
+                   help="also scan every sample: NaN/inf counts and runs, clipped runs, range "
+                        "(one pass in large blocks)")
+    q.add_argument("--no-quality", dest="quality", action="store_false",
+                   help="header only, the default (kept for scripts that pass it)")
+    add_input_options(s)
     s.set_defaults(func=cmd_info)
 
 
@@ -543,14 +988,26 @@ def _add_convert(sub) -> None:
     s.add_argument("output", help="file to write (.h5, .mcap, .csv, .tdms, ...)")
     s.add_argument("--format", choices=FormatChoices(writable=True), help="output format (default: from the suffix)")
     s.add_argument("--compression", help="hdf5: gzip|lzf; mcap: lz4|zstd; csv: none (default none)")
+    s.add_argument("--layout", choices=_LayoutChoices(),
+                   help="mcap output: meshphase (sample blocks, the default) or foxglove "
+                        "(JSON messages Foxglove plots)")
     s.add_argument("--overwrite", action="store_true", help="replace an existing output file")
+    add_input_options(s)
     s.set_defaults(func=cmd_convert)
+
+
+def _scenario_completer(**_kw):
+    """Completions of a synthetic scenario name (argcomplete)."""
+    from .io.sources import scenario_names
+
+    return scenario_names("synthetic")
 
 
 def _add_synth(sub) -> None:
     """The ``meshphase synth`` subcommand."""
     s = sub.add_parser("synth", help="write a synthetic recording of a named scenario plus its truth sidecar")
-    s.add_argument("scenario", nargs="?", help="scenario name (see `meshphase synth --list`)")
+    s.add_argument("scenario", nargs="?", help="scenario name (see `meshphase synth --list`)"
+                   ).completer = _scenario_completer
     s.add_argument("output", nargs="?", help="output file: .h5, .mcap, .csv or .tdms")
     s.add_argument("--list", action="store_true", help="list the scenarios and exit")
     s.add_argument("--minutes", type=float, help="duration [min] (default: the scenario's)")
@@ -575,12 +1032,13 @@ def _add_run(sub) -> None:
     """The ``meshphase run`` subcommand."""
     s = sub.add_parser("run", help="run a scene (TOML) and write results, figures and the HTML report")
     s.add_argument("scene", help="scene file (TOML; data_schemas/scene.md)")
-    s.add_argument("--out", help="output folder (default: the scene's `output`, relative to the scene "
-                                 "file, else STEM-out beside it, e.g. rig.toml -> rig-out; never "
-                                 "overwritten: -2, -3, ...)")
+    s.add_argument("--out", help="output folder (default: the scene's `output`, else STEM-meshphase, "
+                                 "both in the current directory, e.g. rig.toml -> ./rig-meshphase; "
+                                 "never overwritten: -2, -3, ...)")
     s.add_argument("--overwrite", action="store_true",
                    help="replace the output folder (atomically, when the run finishes)")
     s.add_argument("--no-report", action="store_true", help="results only, no HTML/figures")
+    add_input_options(s, scene=False)
     s.set_defaults(func=cmd_run)
 
 
@@ -589,29 +1047,34 @@ def _add_process(sub) -> None:
     s = sub.add_parser(
         "process", help="process one recording: phasing, load sharing, comparison with the ideal "
         "and identified model (CSV + summary.json, no report; no Monte Carlo unless --tolerance)")
-    s.add_argument("file", help="the recording (.h5, .mcap, .csv, .tdms)")
-    s.add_argument("--gearset", required=True,
-                   help="scene TOML with [gearset], [speeds], [[channels]], ... (its [input] is "
-                        "replaced by FILE; of its results only centroids are computed: `meshphase "
-                        "run` a scene for the others)")
-    s.add_argument("--out", help="output folder (default: STEM-meshphase beside FILE, e.g. rig.h5 -> "
-                                 "rig-meshphase; an existing folder is never overwritten: -2, -3, ...)")
+    s.add_argument("file", help="the recording (.h5, .mcap, .csv, .tdms ...)")
+    s.add_argument("--gearset",
+                   help="scene TOML with [gearset], [speeds], [[channels]], ... (its [input] "
+                        "recording is replaced by FILE, its [input.*] tables read FILE; of its "
+                        "results only centroids are computed: `meshphase run` a scene for the "
+                        "others); default: --scene's [gearset], else the gearset in FILE's metadata")
+    s.add_argument("--out", help="output folder (default: STEM-meshphase in the current directory, "
+                                 "e.g. rig.h5 -> ./rig-meshphase; an existing folder is never "
+                                 "overwritten: -2, -3, ...)")
     s.add_argument("--overwrite", action="store_true",
                    help="replace the output folder (atomically, when the run finishes)")
     s.add_argument("--tolerance", action="store_true",
                    help="also run the tolerance Monte Carlo of the gearset file's [tolerances] "
                         "(band coverage in the comparison)")
+    add_input_options(s)
     s.set_defaults(func=cmd_process)
 
 
 def _add_campaign(sub) -> None:
     """The ``meshphase campaign`` subcommand."""
     s = sub.add_parser("campaign", help="process many recordings with one scene as a Dask job")
-    s.add_argument("scene", help="scene TOML (gearset, tolerances, results); each recording replaces [input]")
+    s.add_argument("scene", help="scene TOML (gearset, tolerances, results, [input.*] tables); each "
+                                 "recording replaces [input] recording")
     s.add_argument("inputs", nargs="+", metavar="DIR_OR_FILE", help="recording files or folders of them")
     s.add_argument("--scheduler", help="address of an existing Dask scheduler (default: a LocalCluster)")
     s.add_argument("--workers", type=int, help="LocalCluster worker processes (default: one per core)")
-    s.add_argument("--out", help="output folder (default SCENE-campaign; never overwritten: -2, -3, ...)")
+    s.add_argument("--out", help="output folder (default ./SCENE-campaign in the current directory; "
+                                 "never overwritten: -2, -3, ...)")
     s.add_argument("--overwrite", action="store_true",
                    help="replace the output folder (atomically, when the campaign finishes)")
     s.add_argument("--resume", action="store_true",
@@ -627,6 +1090,7 @@ def _add_campaign(sub) -> None:
     s.add_argument("--recursive", action="store_true",
                    help="look for recordings in the folders' subfolders too (not hidden ones, "
                         "symbolic links or meshphase output folders)")
+    add_input_options(s, scene=False)
     s.set_defaults(func=cmd_campaign)
 
 
@@ -664,6 +1128,36 @@ def _add_bench(sub) -> None:
                         "and process is measured (default io: 10,60,180, a few minutes for the "
                         "3 h one; processing: 2,10,60,180; --quick: 0.5,1; none: skip)")
     s.set_defaults(func=cmd_bench)
+
+
+def _add_completion(sub) -> None:
+    """The ``meshphase completion`` subcommand."""
+    s = sub.add_parser("completion", help="print the shell code that completes meshphase's commands, "
+                                          "options, formats and scenarios (bash, zsh, fish)")
+    s.add_argument("shell", choices=COMPLETION_SHELLS, help="the shell: eval \"$(meshphase completion "
+                                                            "bash)\" in ~/.bashrc (zsh: ~/.zshrc)")
+    s.set_defaults(func=cmd_completion)
+
+
+#: Shells ``meshphase completion`` writes the activation code of (argcomplete's).
+COMPLETION_SHELLS = ("bash", "zsh", "fish")
+
+
+def cmd_completion(args) -> int:
+    import argcomplete  # only here and when completing
+
+    print(argcomplete.shellcode(["meshphase"], shell=args.shell))
+    return 0
+
+
+def _complete(parser: argparse.ArgumentParser) -> None:
+    """Shell completion (argcomplete): when the shell asks (``_ARGCOMPLETE`` set), print the
+    completions of the command line in ``COMP_LINE`` and exit; otherwise return at once."""
+    if "_ARGCOMPLETE" not in os.environ:
+        return
+    import argcomplete
+
+    argcomplete.autocomplete(parser)
 
 
 def _one_line(text) -> str:
@@ -742,7 +1236,8 @@ def main(argv=None) -> int:
     The one error boundary of the command: every error becomes one line on stderr and an
     exit code; ``--debug`` / ``MESHPHASE_DEBUG=1`` re-raises instead."""
     parser = build_parser()
-    args = parser.parse_args(argv)        # usage errors: argparse prints them, exits 2
+    _complete(parser)                     # the shell asking for completions: answered, exits
+    args = _merge_globals(parser.parse_args(argv))  # usage errors: argparse prints them, exits 2
     limit_heap_growth()                   # streamed runs: peak memory flat in length
     debug = bool(args.debug) or os.environ.get("MESHPHASE_DEBUG", "").strip() not in ("", "0")
     level = logging.DEBUG if debug else logging.WARNING - 10 * min(args.verbose, 2)
@@ -790,7 +1285,7 @@ def main(argv=None) -> int:
 
 
 def console_main(argv=None) -> int:
-    """The ``meshphase`` console script (and ``python -m meshphase.cli``): :func:`main`, then
+    """The ``meshphase`` console script (and ``python -m meshphase``): :func:`main`, then
     one garbage collection and the heap frozen (:func:`gc.freeze`), so that the interpreter's
     exit skips its own collections.
 

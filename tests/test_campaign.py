@@ -114,10 +114,11 @@ def test_run_recording_good_and_corrupt_in_process(data, tmp_path):
 
 
 # ---------------------------------------------------------------------------- Dask runs
-def test_campaign_default_local_cluster(data, tmp_path, capsys):
+def test_campaign_default_local_cluster(data, tmp_path, capsys, monkeypatch):
     """The default path: the campaign starts a 2-process LocalCluster, every good recording
     has results, the truncated one is failed with its message, the combined outputs name all."""
     out = tmp_path / "camp"
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)   # the bar is drawn on a terminal only
     res = cp.cli_campaign(str(data["scene"]), [str(data["recordings"])], workers=2, out=str(out),
                           progress=True)
     assert "recordings" in capsys.readouterr().err  # the tqdm bar went to stderr

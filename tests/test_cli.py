@@ -61,13 +61,14 @@ def _assert_png_not_blank(png: bytes) -> None:
 
 
 # --------------------------------------------------------------------------- bad input
-def test_run_bad_scene_exits_1_naming_file_key_and_line(tmp_path, capsys):
+def test_run_bad_scene_exits_1_naming_file_key_and_line(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
     p = tmp_path / "bad.toml"
     p.write_text('results = ["bearing_moments"]\n[bearing]\ncase = "1"\ntorque = 5\n', encoding="utf-8")
     assert main(["-q", "run", str(p)]) == 1
     err = capsys.readouterr().err
     assert str(p) in err and "line 4" in err and "bearing.torque" in err
-    assert not (tmp_path / "bad-out").exists()     # nothing written for a scene that failed
+    assert not (tmp_path / "bad-meshphase").exists()     # nothing written for a scene that failed
 
 
 def test_run_missing_scene_exits_1(tmp_path, capsys):
@@ -103,24 +104,27 @@ def test_exit_code_of_the_real_command(tmp_path):
 
 
 # --------------------------------------------------------------------------- run
-def test_run_never_overwrites_unless_asked(tmp_path, capsys):
-    scene = tmp_path / "bearing.toml"
+def test_run_never_overwrites_unless_asked(tmp_path, capsys, monkeypatch):
+    scene = tmp_path / "scenes" / "bearing.toml"
+    scene.parent.mkdir()
     scene.write_text((EXAMPLES / "bearing_moments.toml").read_text(encoding="utf-8"), encoding="utf-8")
+    monkeypatch.chdir(tmp_path)
     assert main(["-q", "run", str(scene)]) == 0
-    first = tmp_path / "bearing-out"
+    first = tmp_path / "bearing-meshphase"       # in the current directory, not beside the scene
+    assert [p.name for p in scene.parent.iterdir()] == ["bearing.toml"]
     summary = (first / "summary.json").read_text()
     out = capsys.readouterr().out
     assert "bearing_moments" in out and "report" in out
     # the second and third runs skip the report (figures are the slow part; not needed here)
     assert main(["-q", "run", str(scene), "--no-report"]) == 0
-    second = tmp_path / "bearing-out-2"
+    second = tmp_path / "bearing-meshphase-2"
     assert second.is_dir()
     assert (first / "summary.json").read_text() == summary
     html = (first / "report.html").read_text(encoding="utf-8")
     names = {p.name for p in first.iterdir()}
     assert {"summary.json", "tilt.csv", "stages.csv", "arrays.h5", "report.html", "figures"} <= names
     assert main(["-q", "run", str(scene), "--overwrite", "--no-report"]) == 0
-    assert not (tmp_path / "bearing-out-3").exists()
+    assert not (tmp_path / "bearing-meshphase-3").exists()
     assert {"summary.json", "tilt.csv", "stages.csv", "arrays.h5"} <= {p.name for p in second.iterdir()}
     # --overwrite replaced the folder: no report.html / figures of the earlier run beside the new summary
     names = {p.name for p in first.iterdir()}
@@ -152,7 +156,7 @@ def rig_cli_run(tmp_path_factory):
     text = text.replace("minutes = 1.0", "minutes = 0.5").replace("samples = 4096", "samples = 256")
     scene = d / "rig.toml"
     scene.write_text(text, encoding="utf-8")
-    rc = main(["-q", "run", str(scene)])
+    rc = main(["-q", "run", str(scene), "--out", str(d / "rig-out")])
     return rc, d / "rig-out"
 
 
@@ -207,7 +211,7 @@ def test_rig_report_figures_are_not_empty(rig_cli_run):
 
 
 # --------------------------------------------------------------------------- process
-def test_process_writes_next_to_the_input(tmp_path, capsys):
+def test_process_writes_in_the_current_directory(tmp_path, capsys, monkeypatch):
     from meshphase.synthetic import generate
 
     # 40 s: a shorter noise-free record cannot fit the planets' own offsets apart from the
@@ -216,15 +220,18 @@ def test_process_writes_next_to_the_input(tmp_path, capsys):
     path = Path(meshphase.io.write(rec, tmp_path / "rig.h5"))
     gs = tmp_path / "gearset.toml"
     gs.write_text(GEARSET_TOML, encoding="utf-8")
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
     before = sorted(p.name for p in tmp_path.iterdir())
     assert main(["-q", "process", str(path), "--gearset", str(gs)]) == 0
     out = capsys.readouterr().out
     assert "sun phasing" in out and "load sharing planet 1" in out and "RMS residual" in out
-    after = sorted(p.name for p in tmp_path.iterdir())
-    assert after == sorted(before + ["rig-meshphase"])           # nothing else touched
-    assert (tmp_path / "rig-meshphase" / "summary.json").is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == before    # nothing beside the recording
+    assert [p.name for p in work.iterdir()] == ["rig-meshphase"]
+    assert (work / "rig-meshphase" / "summary.json").is_file()
     assert main(["-q", "process", str(path), "--gearset", str(gs)]) == 0
-    assert (tmp_path / "rig-meshphase-2" / "summary.json").is_file()
+    assert (work / "rig-meshphase-2" / "summary.json").is_file()
 
 
 # --------------------------------------------------------------------------- info / convert / synth
@@ -251,6 +258,9 @@ def test_info_text_and_json(tmp_path, capsys):
     assert info["format"] == "hdf5" and info["n_samples"] == 3000 and info["fs_hz"] == 5120.0
     assert info["t0_s"] == 1.25
     assert [c["name"] for c in info["channels"]] == ["sun", "ring", "tacho"]
+    assert "quality" not in info            # the header only, by default: no sample scan
+    assert main(["-q", "info", str(p), "--json", "--quality"]) == 0
+    info = json.loads(capsys.readouterr().out)
     assert info["quality"]["sun"]["n_nonfinite"] == 0
 
 

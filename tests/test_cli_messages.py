@@ -161,7 +161,7 @@ def test_output_folder_help_names_the_folder_really_used(tmp_path):
     helps = {name: sp.format_help() for name, sp in _subparsers().items()}
     assert "FILE-meshphase" not in helps["process"] and "STEM-meshphase" in helps["process"]
     assert "--tolerance" in helps["process"]
-    assert "STEM-out" in helps["run"]
+    assert "STEM-meshphase" in helps["run"] and "current directory" in helps["run"]
 
 
 def test_synth_list_names_every_scenario_without_python_calls(capsys):

@@ -115,7 +115,8 @@ def test_channel_typo_in_scene_lists_the_channels_present(rig, tmp_path, capsys)
     assert not (tmp_path / "o").exists()
 
 
-def test_run_scene_with_channel_typo_exits_1(rig, tmp_path, capsys):
+def test_run_scene_with_channel_typo_exits_1(rig, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
     scene = tmp_path / "typo.toml"
     scene.write_text('results = ["ideal_phasing", "phasing"]\n' + SEED_RIG_GEARSET
                      + f'[input]\nrecording = "{rig["path"]}"\n'
@@ -124,7 +125,7 @@ def test_run_scene_with_channel_typo_exits_1(rig, tmp_path, capsys):
     assert main(["-q", "run", str(scene), "--no-report"]) == EXIT_ERROR
     err = capsys.readouterr().err
     assert "'ring_gauge'" in err and "sun (sun), ring (ring), tacho (tacho)" in err
-    assert not (tmp_path / "typo-out").exists()
+    assert not (tmp_path / "typo-meshphase").exists()
 
 
 def test_recording_without_gauge_channels_exits_1_naming_kinds(rig, tmp_path, capsys):

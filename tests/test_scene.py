@@ -84,7 +84,8 @@ def test_example_units_are_si():
     assert bm.bearing["case"] == "1"
 
 
-def test_channels_input_and_output_convert_and_resolve(tmp_path):
+def test_channels_input_and_output_convert_and_resolve(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path / "..")   # output: relative to the current directory, not the scene's
     text = ('results = ["phasing"]\noutput = "results/here"\n' + GEARSET
             + '[input]\nrecording = "rec/run.h5"\nstart_s = 1.5\nstop_s = 9\n'
             + '[[channels]]\nname = "fw1"\nkind = "facewidth"\nface_position_mm = -12.5\n')
@@ -94,7 +95,7 @@ def test_channels_input_and_output_convert_and_resolve(tmp_path):
     assert scene.input["recording"] == (tmp_path / "rec" / "run.h5").resolve()
     assert (scene.input["start"], scene.input["stop"]) == (1.5, 9)
     assert scene.channels == [{"name": "fw1", "kind": "facewidth", "face_position": pytest.approx(-0.0125)}]
-    assert scene.output == tmp_path.resolve() / "results" / "here"
+    assert scene.output == Path.cwd() / "results" / "here" != tmp_path.resolve() / "results" / "here"
 
 
 # --------------------------------------------------------------------------- validation errors

@@ -350,8 +350,10 @@ def seed_rig_file(tmp_path_factory):
     return Path(path), gs
 
 
-def test_process_recording_writes_next_to_input_without_monte_carlo(seed_rig_file, monkeypatch):
+def test_process_recording_writes_in_the_current_directory_without_monte_carlo(seed_rig_file, monkeypatch,
+                                                                              tmp_path):
     path, gs = seed_rig_file
+    monkeypatch.chdir(tmp_path)           # the outputs go where the user works, not beside the data
     # no [tolerances] in the gearset file: the run must not touch the Monte Carlo
     monkeypatch.setattr(meshphase.models.tolerance, "monte_carlo", _fail("monte_carlo"))
     before = path.read_bytes()
@@ -359,12 +361,13 @@ def test_process_recording_writes_next_to_input_without_monte_carlo(seed_rig_fil
     assert "tolerance" not in ctx.ran and ctx.tolerance is None
     assert {"load", "phasing", "load_sharing", "identify", "compare"} <= set(ctx.ran)
     assert ctx.failed == {}
-    out = path.with_name("run-meshphase")
+    out = tmp_path / "run-meshphase"
+    assert not path.with_name("run-meshphase").exists()
     assert files["summary"].parent == out
     assert "report" not in files
     first = files["summary"].read_text()
     _, files2 = process_recording(path, gs)
-    assert files2["summary"].parent == path.with_name("run-meshphase-2")
+    assert files2["summary"].parent == tmp_path / "run-meshphase-2"
     assert files["summary"].read_text() == first          # the first results are untouched
     assert path.read_bytes() == before                      # and so is the input
 

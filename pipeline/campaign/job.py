@@ -686,7 +686,8 @@ class _Collection:
         fut_of = self.submit()
         index_of = self.watch.index_of
         with tqdm(total=len(self.records) + len(self.job.todo), initial=len(self.records), desc="recordings",
-                  unit="rec", disable=not self.job.progress, file=sys.stderr, leave=False) as self.bar:
+                  unit="rec", disable=not (self.job.progress and sys.stderr.isatty()), file=sys.stderr,
+                  leave=False) as self.bar:
             next_check = 0.0
             while self.pending:
                 try:

@@ -91,7 +91,7 @@ from ..run.context import phasing_verdict
 from ..run.declare import client_results
 from ..run.exits import EXIT_ERROR, EXIT_OK, EXIT_PARTIAL, run_status
 from ..run.outdir import MANIFEST_NAME, PARTIAL_SUFFIX, OutputDir, remove_partial
-from ..run.scene import load_scene, plan
+from ..run.scene import load_scene, plan, with_recording
 from ..run.state import failure_texts
 from ..run.table_csv import write_csv
 from ..validate import as_nonnegative, as_regular_file
@@ -338,13 +338,13 @@ def split_results(scene) -> tuple[list[str], list[str], bool]:
     return client, worker, mc_on_client
 
 
-def _worker_scene(scene, recording: Path, mc_on_client: bool):
-    """A copy of ``scene`` reading ``recording``, with the per-recording results only."""
+def _worker_scene(scene, recording: Path, mc_on_client: bool, read_options: dict | None = None):
+    """A copy of ``scene`` reading ``recording`` (with ``read_options`` over its tables), with
+    the per-recording results only."""
     _, worker, _ = split_results(scene)
     s = copy.copy(scene)
-    # the reading options ([input.mcap], [input] fs_Hz) hold for every recording of the logger
-    s.input = {"recording": Path(recording), **{k: scene.input[k] for k in ("mcap", "fs_Hz")
-                                                if k in (scene.input or {})}}
+    # the reading options ([input.mcap], [input.csv], [input] fs_Hz) hold for every recording
+    s.input = with_recording(scene, Path(recording), read_options)
     s.results = worker
     if mc_on_client:
         s.tolerances = None  # the band comes from the client's Monte Carlo
@@ -446,7 +446,7 @@ def _compact(summary: dict) -> dict:
 
 
 def run_recording(scene_path: str, recording_path: str, out_dir: str, *, bands: dict | None = None,
-                  recording_report: bool = False) -> dict:
+                  recording_report: bool = False, read_options: dict | None = None) -> dict:
     """Process one recording of a campaign (the Dask task; also callable directly).
 
     Loads the scene, replaces its ``[input]`` by the recording, keeps the per-recording
@@ -465,6 +465,9 @@ def run_recording(scene_path: str, recording_path: str, out_dir: str, *, bands: 
         coverage of the passes is computed with it.
     recording_report : bool
         Also build this recording's HTML report (slower; see the module notes).
+    read_options : dict, optional
+        Format options of the recording's reads over the scene's ``[input.*]`` tables
+        (``meshphase campaign --topics/--fs/...``: :func:`meshphase.run.scene.with_recording`).
 
     Returns
     -------
@@ -498,7 +501,7 @@ def run_recording(scene_path: str, recording_path: str, out_dir: str, *, bands: 
                 out["error"] = f"{type(exc).__name__}: {exc}"
             scene = load_scene(scene_path, recording_given=True)  # the recording replaces [input]
             _, _, mc_on_client = split_results(scene)
-            scene = _worker_scene(scene, rec_path, mc_on_client and bands is not None)
+            scene = _worker_scene(scene, rec_path, mc_on_client and bands is not None, read_options)
             ctx = run_scene(scene)
             if bands:
                 _apply_bands(ctx, bands)
@@ -993,7 +996,7 @@ def cli_campaign(scene_path, inputs: list[str], *, scheduler: str | None = None,
                  workers: int | None = None, out=None, overwrite: bool = False,
                  progress: bool = True, recording_reports: bool = False,
                  task_timeout: float | None = None, resume: bool = False, dashboard=None,
-                 recursive: bool = False) -> dict:
+                 recursive: bool = False, read_options: dict | None = None) -> dict:
     """``meshphase campaign SCENE DIR...``: :func:`run_campaign` with the CLI's arguments.
 
     Parameters
@@ -1019,6 +1022,9 @@ def cli_campaign(scene_path, inputs: list[str], *, scheduler: str | None = None,
         ``--dashboard [ADDRESS]``.
     recursive : bool
         ``--recursive``: look into the folders' subfolders too.
+    read_options : dict, optional
+        ``--topics``, ``--fs``, ``--header-row`` ...: format options of every recording's
+        reads, over the scene's ``[input.*]`` tables (:func:`run_recording`).
 
     Returns
     -------
@@ -1028,4 +1034,6 @@ def cli_campaign(scene_path, inputs: list[str], *, scheduler: str | None = None,
     return run_campaign(scene_path, list(inputs), out, scheduler=scheduler, workers=workers,
                         overwrite=overwrite, progress=progress, recording_reports=recording_reports,
                         task_timeout=task_timeout, resume=resume, dashboard=dashboard,
-                        recursive=recursive)
+                        recursive=recursive,
+                        task=functools.partial(run_recording, read_options=read_options)
+                        if read_options else None)

@@ -51,7 +51,7 @@ class Converted:
 def convert(src, dst, *, format: str | None = None, overwrite: bool = False,
             block_samples: int = CONVERT_BLOCK_SAMPLES,
             progress: Callable[[int, str], ContextManager] | None = None,
-            **options) -> Converted:
+            read_options: dict | None = None, **options) -> Converted:
     """Convert recording file ``src`` to ``dst``, streamed block by block.
 
     Parameters
@@ -68,6 +68,8 @@ def convert(src, dst, *, format: str | None = None, overwrite: bool = False,
     progress : callable, optional
         ``progress(total_samples, description)`` returning a context manager with an
         ``update(n_samples)`` method (a tqdm bar fits); None: no progress.
+    read_options : dict, optional
+        Read options of the source's format (``topics=``, ``fs=`` ...: :func:`meshphase.io.read`).
     **options
         Write options of the output format (e.g. ``compression="gzip"`` for HDF5).
 
@@ -81,12 +83,12 @@ def convert(src, dst, *, format: str | None = None, overwrite: bool = False,
     src, dst = Path(src), Path(dst)
     with recording_read_errors(src):
         fmt = detect_format(src)
-        info = read_info(src, format=fmt)
+        info = read_info(src, format=fmt, **(read_options or {}))
     history = Recording(np.empty((0, len(info.channels))), info.fs, info.channels,
                         history=info.history).with_history(
         "convert", source=str(src), source_format=fmt).history
     header = dataclasses.replace(info, history=history)
-    blocks = iter_blocks(src, block_samples / info.fs, format=fmt)
+    blocks = iter_blocks(src, block_samples / info.fs, format=fmt, **(read_options or {}))
     with recording_read_errors(src):
         first = next(blocks, None)
     dtype = first.data.dtype if first is not None else np.dtype(np.float64)

@@ -48,7 +48,8 @@ from ..runtime.registry import DEFAULT_ONSET_DETECTOR, ONSET_DETECTORS
 from .declare import gearset_stages, recording_stages, result_stages, stage_graph
 
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "scene_schema_errors", "plan",
-           "check_recording", "STAGES", "RESULTS", "LIMITS"]
+           "check_recording", "read_options", "with_recording", "output_folder", "READ_KEYS",
+           "CSV_KEYS", "STAGES", "RESULTS", "LIMITS"]
 
 #: stage -> the stages it needs (a DAG; the flow runs one way), from the stage registry
 STAGES: dict[str, tuple[str, ...]] = stage_graph()
@@ -101,7 +102,10 @@ class Scene:
     input : dict
         ``recording`` (Path) or ``synthetic`` (scenario name) with ``minutes``, ``seed``,
         ``start``/``stop`` [s], or ``memory`` (a Recording given in code: :func:`meshphase.process`); ``mcap``: the format options mapping an MCAP file of
-        another tool (``topics``, ``fs``, ``max_jitter``, ``stamp``).
+        another tool (``topics``, ``fs``, ``max_jitter``, ``stamp``); ``csv``: the reader
+        options of a delimited-text file (``header_row``, ``skip_rows``, ``decimal``,
+        ``delimiter``); ``fs_Hz`` [Hz]; ``options``: format options given beside the scene
+        (the command line's), over the others (:func:`read_options`).
     processing : dict
     tolerances : dict or None
         Bands in SI ([m], [rad] or "uniform"), ``samples``, ``sampler``, ``window`` [s], ``seed``.
@@ -111,6 +115,7 @@ class Scene:
         included-angle sweeps ``double_pinion_included_angle_sp``/``_rp`` [rad] (old keys
         ``double_pinion_beta_deg``/``_gamma_deg`` still read, with a DeprecatedNameWarning).
     output : Path or None
+        The ``output`` key, absolute: relative to the current directory (:func:`output_folder`).
     raw : dict
         The parsed TOML as written.
     speeds_resolution : dict or None
@@ -381,7 +386,7 @@ def parse_scene(text: str, path: Path | str | None = None, *, recording_given: b
     tacho = _parse_tacho(raw)
     labels = _parse_labels(raw, gearset, err)
     detector = _parse_onsets(raw, err)
-    inp = _parse_input(raw, base, err)
+    inp = _parse_input(raw, base, err, recording_given=recording_given)
     tol = _parse_tolerances(raw, gearset, err)
     bearing = _parse_bearing(raw, err, label, text)
     _check_block(raw, err)
@@ -390,7 +395,7 @@ def parse_scene(text: str, path: Path | str | None = None, *, recording_given: b
         name=raw.get("name", Path(path).stem if path is not None else "scene"),
         results=list(raw.get("results", [])), gearset=gearset, speeds=speeds, channels=channels, input=inp,
         processing=dict(raw.get("processing", {})), tolerances=tol, bearing=bearing,
-        output=(base / raw["output"]) if "output" in raw else None, raw=raw,
+        output=output_folder(raw["output"]) if "output" in raw else None, raw=raw,
         speeds_resolution=resolution or None, fixed=raw.get("speeds", {}).get("fixed"), tacho=tacho, mounts=mounts,
         labels=labels, profile_shift=profile_shift, onset_detector=detector, text=text)
     _check_consistency(scene, text, label, recording_given=recording_given)
@@ -692,9 +697,43 @@ def _parse_onsets(raw: dict, err) -> str:
         raise err(["onsets", "detector"], str(exc)) from None
 
 
-def _parse_input(raw: dict, base: Path, err) -> dict:
+def output_folder(output) -> Path:
+    """The folder a scene's ``output`` key names: relative to the current directory (the
+    directory the command runs in), never to the scene file's folder, so a scene kept in a
+    repository or an installed package writes its outputs where the user works.
+
+    Parameters
+    ----------
+    output : str or Path
+        The key's value (absolute, or relative to the current directory).
+
+    Returns
+    -------
+    Path
+        Absolute (normalised, symbolic links not resolved).
+    """
+    if not isinstance(output, (str, os.PathLike)) or not str(output).strip():
+        raise ValueError(f"output must be a folder path, got {output!r}")
+    return Path(os.path.normpath(os.path.abspath(output)))
+
+
+#: The ``[input]`` keys that say how to read the recording file rather than which one (they
+#: hold for any recording read with the scene: ``meshphase process``, ``campaign``):
+#: the format tables ``mcap`` and ``csv``, the rate ``fs_Hz``, and ``options`` (format options
+#: given beside the scene, e.g. on the command line, over the tables').
+READ_KEYS = ("mcap", "csv", "fs_Hz", "options")
+
+#: ``[input.csv]`` keys -> their types: the read options of delimited-text files with the same
+#: names (a row number counts from 0; ``header_row`` the row of the channel names,
+#: ``skip_rows`` the rows skipped before it).
+CSV_KEYS = {"header_row": int, "skip_rows": int, "decimal": str, "delimiter": str}
+
+
+def _parse_input(raw: dict, base: Path, err, *, recording_given: bool = False) -> dict:
     """``[input]`` -> ``recording`` (absolute Path) or ``synthetic`` (a known scenario that
-    fits in memory), ``minutes``, ``seed``, ``start``/``stop`` [s]."""
+    fits in memory), ``minutes``, ``seed``, ``start``/``stop`` [s]; the reading tables
+    ``mcap`` and ``csv`` and ``fs_Hz`` (:data:`READ_KEYS`), which need a ``recording`` unless
+    the caller supplies one (``recording_given``)."""
     inp = dict(raw.get("input", {}))
     if "recording" in inp and "synthetic" in inp:
         raise err(["input", "synthetic"], "give either recording or synthetic, not both")
@@ -718,9 +757,11 @@ def _parse_input(raw: dict, base: Path, err) -> dict:
     if "stop_s" in inp:
         inp["stop"] = inp.pop("stop_s")
     if "mcap" in inp:
-        inp["mcap"] = _parse_input_mcap(inp, err)
+        inp["mcap"] = _parse_input_mcap(inp, err, recording_given)
+    if "csv" in inp:
+        inp["csv"] = _parse_input_csv(inp, err, recording_given)
     if "fs_Hz" in inp:
-        _check_input_fs(inp, err)
+        _check_input_fs(inp, err, recording_given)
     if "synthetic" in inp:
         known = scenario_names("synthetic")
         if inp["synthetic"] not in known:
@@ -732,13 +773,48 @@ def _parse_input(raw: dict, base: Path, err) -> dict:
 
 def read_options(scene) -> dict:
     """The format options of every read of the scene's recording file
-    (:func:`meshphase.io.read`): ``[input.mcap]``'s mapping, or ``[input] fs_Hz`` as ``fs``."""
+    (:func:`meshphase.io.read`): ``[input.mcap]``'s mapping, ``[input.csv]``'s reader
+    options, ``[input] fs_Hz`` as ``fs`` (unless ``[input.mcap] fs_Hz`` gives it), then
+    ``input["options"]`` (given beside the scene, e.g. the command line's input options)
+    over them."""
     inp = scene.input
-    if "mcap" in inp:
-        return dict(inp["mcap"])
+    out: dict = {}
     if "fs_Hz" in inp:
-        return {"fs": float(inp["fs_Hz"])}
-    return {}
+        out["fs"] = float(inp["fs_Hz"])
+    for table in ("mcap", "csv"):
+        out.update(inp.get(table) or {})
+    out.update(inp.get("options") or {})
+    return out
+
+
+def with_recording(scene, path, options: dict | None = None) -> dict:
+    """The ``[input]`` of ``scene`` reading recording file ``path`` instead of its own: its
+    reading keys (:data:`READ_KEYS`: ``[input.mcap]``, ``[input.csv]``, ``fs_Hz``) kept, its
+    file and window dropped; ``options`` (format options, e.g. the command line's) over the
+    tables'.
+
+    Parameters
+    ----------
+    scene : Scene
+    path : str or Path
+        The recording file.
+    options : dict, optional
+        Format options of :func:`meshphase.io.read` (``topics``, ``fs``, ``header_row`` ...).
+
+    Returns
+    -------
+    dict
+        For ``scene.input``.
+    """
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a Scene, got {type(scene).__name__}")
+    if options is not None and not isinstance(options, dict):
+        raise TypeError(f"options must be a dict of format options, got {type(options).__name__}")
+    inp = {k: scene.input[k] for k in READ_KEYS if k in scene.input}
+    if options:
+        inp["options"] = dict(inp.get("options") or {}, **options)
+    inp["recording"] = Path(path)
+    return inp
 
 
 def _input_format(path: Path) -> str | None:
@@ -752,24 +828,50 @@ def _input_format(path: Path) -> str | None:
         return None
 
 
-def _check_input_fs(inp: dict, err) -> None:
-    """``[input] fs_Hz``: the sample rate of a TDMS file without waveform timing (NI's
-    wf_increment) or clock channel, or of an HDF5 file another tool wrote without a rate; only
-    there (a CSV's time column gives it; ``[input.mcap] fs_Hz`` for MCAP written by other
-    tools)."""
-    if "recording" not in inp:
+def _check_input_fs(inp: dict, err, recording_given: bool = False) -> None:
+    """``[input] fs_Hz``: the sample rate of a file that states none (a format whose
+    :class:`~meshphase.io.registry.FormatSpec` has ``rate_option``: a TDMS file without
+    waveform timing or clock channel, an HDF5 file of another tool, text files without a time
+    column ...); only there (``[input.mcap] fs_Hz`` for MCAP written by other tools)."""
+    if "recording" not in inp and not recording_given:
         raise err(["input", "fs_Hz"], "fs_Hz is the sample rate of a recording file: give [input] "
                   "recording = \"FILE.tdms\" too")
     if "mcap" in inp:
         raise err(["input", "fs_Hz"], "an MCAP file's rate goes in [input.mcap] fs_Hz")
-    fmt = _input_format(inp["recording"])
+    fmt = _input_format(inp["recording"]) if "recording" in inp else None
     if fmt is not None and not io.get_spec(fmt).rate_option:
         takers = " or ".join(f.upper() for f in io.FORMATS if io.get_spec(f).rate_option)
         raise err(["input", "fs_Hz"], f"{inp['recording'].name} is a {fmt} file, which gives its own "
                   f"sample rate; fs_Hz is for a {takers} file that states none")
 
 
-def _parse_input_mcap(inp: dict, err) -> dict:
+def _parse_input_csv(inp: dict, err, recording_given: bool = False) -> dict:
+    """``[input.csv]`` (a delimited-text file: where its header is, its decimal mark and
+    delimiter) -> the format options ``header_row``, ``skip_rows``, ``decimal``,
+    ``delimiter`` (:data:`CSV_KEYS`); each checked against the recording's format when the
+    file is there (a format that does not take an option is named)."""
+    if "recording" not in inp and not recording_given:
+        raise err(["input", "csv"], "[input.csv] says how to read a delimited-text recording file: "
+                  "give [input] recording = \"FILE.csv\" too")
+    if "mcap" in inp:
+        raise err(["input", "csv"], "[input.csv] and [input.mcap] describe different formats: "
+                  "give the one of the recording file")
+    out = dict(inp["csv"])      # the schema checked the types, one character for the marks
+    if "decimal" in out and out.get("delimiter") == out["decimal"]:
+        raise err(["input", "csv", "delimiter"], f"delimiter and decimal are both {out['decimal']!r}: "
+                  "the numbers could not be told apart")
+    fmt = _input_format(inp["recording"]) if "recording" in inp else None
+    if fmt is not None:
+        takes = io.get_spec(fmt).read_options
+        for key in out:
+            if key not in takes:
+                raise err(["input", "csv", key], f"{inp['recording'].name} is a {fmt} file, which "
+                          f"takes no {key} option (its read options: "
+                          f"{', '.join(sorted(takes)) or 'none'})")
+    return out
+
+
+def _parse_input_mcap(inp: dict, err, recording_given: bool = False) -> dict:
     """``[input.mcap]`` (an MCAP file written by another tool) -> the format options of
     :func:`meshphase.io.read`: ``topics`` (the ``[[input.mcap.channels]]`` tables, each
     ``name``, ``topic``, ``field`` and optionally ``kind``, ``units``, ``scale``, ``stamp``,
@@ -779,10 +881,10 @@ def _parse_input_mcap(inp: dict, err) -> dict:
     # the mcap library (lz4, zstandard) behind it: loaded only by a scene that maps an MCAP file
     from ..io.mcap import parse_topics
 
-    if "recording" not in inp:
+    if "recording" not in inp and not recording_given:
         raise err(["input", "mcap"], "[input.mcap] maps the topics of an MCAP recording file: "
                   "give [input] recording = \"FILE.mcap\" too")
-    fmt = _input_format(inp["recording"])
+    fmt = _input_format(inp["recording"]) if "recording" in inp else None
     if fmt not in (None, "mcap"):
         raise err(["input", "mcap"], f"{inp['recording'].name} is a {fmt} file; [input.mcap] maps "
                   "the topics of an MCAP file")

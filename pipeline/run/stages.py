@@ -54,7 +54,7 @@ from .results import (BearingStage, CentroidsStage, CompareStage, ConditionStage
                       GaugeComparison, IdealStage, IdentifyStage, LoadSharingStage, LoadStage,
                       OnsetsStage, PhasingStage, StageResult, TiltStage,
                       ToleranceStage)
-from .scene import STAGES, Scene, SceneError, load_scene, plan, read_options
+from .scene import STAGES, Scene, SceneError, load_scene, plan, read_options, with_recording
 from .state import RunMessage, StageFailure, flagged_warning
 from .stream import (BLOCK_SAMPLES, ChannelPlan, FileSource, GeneratorSource, MemorySource,
                      condition_stream, scan_source)
@@ -916,7 +916,7 @@ PROCESS_RESULTS = ("phasing", "load_sharing", "compare")
 
 def process_recording(path, gearset_scene_path, *, out_dir=None, overwrite=False,
                       progress: Callable[[str, int, int], None] | None = None,
-                      tolerance: bool = False) -> tuple:
+                      tolerance: bool = False, options: dict | None = None) -> tuple:
     """``meshphase process FILE --gearset GEARSET.toml``: the recording-processing results
     (phasing, load sharing, comparison with the ideal and identified model; face-width
     centroids too when the gearset file's ``results`` name them).
@@ -934,17 +934,21 @@ def process_recording(path, gearset_scene_path, *, out_dir=None, overwrite=False
     ----------
     path : str or Path
         The recording.
-    gearset_scene_path : str or Path
-        A scene file with ``[gearset]``, ``[speeds]``, ``[[channels]]`` ...
+    gearset_scene_path : str, Path or Scene
+        A scene file with ``[gearset]``, ``[speeds]``, ``[[channels]]`` ... (its reading keys
+        ``[input.mcap]``, ``[input.csv]``, ``fs_Hz`` read the recording), or such a Scene.
     out_dir : str or Path, optional
-        Output folder (default: ``STEM-meshphase`` beside the recording; an existing folder
-        gets ``-2``, ``-3``, ... unless ``overwrite``).
+        Output folder (default: ``STEM-meshphase`` in the current directory; an existing
+        folder gets ``-2``, ``-3``, ... unless ``overwrite``).
     overwrite : bool
         Replace the output folder (atomically, when the run finishes).
     progress : callable, optional
         ``progress(stage, i, n)``.
     tolerance : bool
         Also run the tolerance Monte Carlo (needs ``[tolerances]`` in the gearset file).
+    options : dict, optional
+        Format options of the recording's reads (``topics``, ``fs``, ``header_row`` ...),
+        over the scene's tables (:func:`meshphase.run.scene.with_recording`).
 
     Returns
     -------
@@ -952,18 +956,19 @@ def process_recording(path, gearset_scene_path, *, out_dir=None, overwrite=False
         The run and the files written (name -> path).
     """
     path = as_regular_file(path, "the recording")  # stat only: a FIFO never blocks here
-    scene = load_scene(gearset_scene_path, recording_given=True)  # FILE replaces [input]
+    scene = (gearset_scene_path if isinstance(gearset_scene_path, Scene)
+             else load_scene(gearset_scene_path, recording_given=True))  # FILE replaces [input]
     if tolerance and scene.tolerances is None:
         raise SceneError(gearset_scene_path, "tolerances", "--tolerance (tolerance=True) needs a "
                          "[tolerances] table in the gearset file")
-    scene.input = {"recording": Path(path).resolve()}
+    scene.input = with_recording(scene, Path(path).resolve(), options)
     # only what process's outputs need: without tolerance=True the scene's [tolerances]
     # are set aside, so compare pulls in no Monte Carlo (plan adds it when tolerances exist)
     scene.results = (list(PROCESS_RESULTS) + (["centroids"] if "centroids" in scene.results else [])
                      + (["tolerance"] if tolerance else []))
     if not tolerance:
         scene.tolerances = None
-    base = Path(out_dir) if out_dir else Path(path).with_name(Path(path).stem + "-meshphase")
+    base = Path(out_dir) if out_dir else Path.cwd() / (Path(path).stem + "-meshphase")
     return run_to_folder(scene, base, overwrite=overwrite, report=False, progress=progress)
 
 

@@ -89,7 +89,7 @@ EXIT_ERROR = 1  # meshphase.run.exits.EXIT_ERROR; the corpus is plain data, the 
 
 # --------------------------------------------------------------------------- commands
 #: argv templates; ``{name}`` is replaced by the case's value of that name
-INFO = ("info", "{input}")
+INFO = ("info", "--quality", "{input}")   # every sample read: a damaged one must show
 PROCESS = ("process", "{input}", "--gearset", "{gearset}", "--out", "{out}/proc")
 CONVERT = ("convert", "{input}", "{out}/conv.h5")
 RUN = ("run", "{scene}", "--out", "{out}/run", "--no-report")
