@@ -200,6 +200,19 @@ def test_process_cluster_bad_input(tmp_path):
     assert not list(tmp_path.glob("*.log"))            # refused before anything started
 
 
+def test_process_cluster_that_does_not_start_leaves_no_process(tmp_path):
+    """A scheduler given no time to write its file: a RuntimeError naming its log, and the
+    process it started is ended again."""
+    import psutil
+
+    before = {p.pid for p in psutil.Process().children(recursive=True)}
+    with pytest.raises(RuntimeError, match="scheduler.log"):
+        ProcessCluster(1, work_dir=tmp_path, start_timeout=0.01)
+    left = [p for p in psutil.Process().children(recursive=True) if p.pid not in before]
+    assert not [p for p in left if p.is_running() and p.status() != psutil.STATUS_ZOMBIE]
+    assert (tmp_path / "scheduler.log").is_file()
+
+
 def test_process_cluster_kill_worker_bad_index(cluster):
     with pytest.raises(IndexError, match="no worker 5"):
         cluster.kill_worker(5)

@@ -321,6 +321,9 @@ def measure_overhead(n_recordings: int = 200, minutes: float = 2.0, workers: int
     dict
         ``n_recordings``, ``minutes``, ``workers``, ``plain_wall_s``, ``campaign_wall_s``,
         ``per_recording_plain_s``, ``per_recording_campaign_s``, ``overhead`` [-],
+        ``machinery_overhead`` and ``processing_overhead`` (the campaign's whole wall time,
+        and the part while its tasks ran, over the sum of its tasks' own wall times divided
+        by ``workers``, less 1: the machinery alone, whatever ``process`` does besides) [-],
         ``campaign_timing_s`` (the campaign's ``timing_s``), ``task_sum_s`` (the campaign
         tasks' own wall times), ``plain_task_sum_s``, ``cluster_start_s`` (the processes'
         start, not in the campaign's time), ``n_failed``, ``loadavg_before`` and
@@ -385,6 +388,8 @@ def measure_overhead(n_recordings: int = 200, minutes: float = 2.0, workers: int
                 "per_recording_plain_s": plain_wall / n_recordings,
                 "per_recording_campaign_s": camp_wall / n_recordings,
                 "overhead": camp_wall / plain_wall - 1.0,
+                "machinery_overhead": _over_tasks(camp_wall, res["recordings"], workers),
+                "processing_overhead": _over_tasks(res["timing_s"]["processing"], res["recordings"], workers),
                 "campaign_timing_s": res["timing_s"],
                 "task_sum_s": _finite_sum(r.get("wall_time_s") for r in res["recordings"]),
                 "plain_task_sum_s": _finite_sum(plain_times),
@@ -394,6 +399,13 @@ def measure_overhead(n_recordings: int = 200, minutes: float = 2.0, workers: int
     finally:
         if tmp is not None:
             tmp.cleanup()
+
+
+def _over_tasks(wall: float, records: list, workers: int) -> float:
+    """``wall`` over the tasks' own wall times spread over ``workers``, less 1 [-]: what the
+    campaign spends beyond its tasks (NaN without task times)."""
+    tasks = _finite_sum(r.get("wall_time_s") for r in records)
+    return wall * workers / tasks - 1.0 if tasks > 0 else float("nan")
 
 
 def overhead_lines(res: dict) -> list[str]:
@@ -419,4 +431,7 @@ def overhead_lines(res: dict) -> list[str]:
             f"  plain process {res['plain_wall_s']:7.1f} s ({res['per_recording_plain_s']:.3f} s per recording), "
             f"campaign {res['campaign_wall_s']:7.1f} s ({res['per_recording_campaign_s']:.3f} s per recording)",
             f"  overhead per recording: {100 * res['overhead']:+.1f} % of its plain processing "
-            f"(goal < 5 %); {res['n_failed']} failed"]
+            f"(goal < 5 %); {res['n_failed']} failed",
+            f"  the campaign over its own tasks' time per worker: {100 * res['machinery_overhead']:+.1f} % "
+            f"in all (connection, warm-up, combined report), {100 * res['processing_overhead']:+.1f} % "
+            "while the tasks ran"]

@@ -170,7 +170,7 @@ class ProcessCluster:
             try:
                 client.wait_for_workers(n, timeout=timeout)
             except TimeoutError:
-                raise RuntimeError(f"{len(client.scheduler_info(n_workers=-1)['workers'])} of {n} dask "
+                raise RuntimeError(f"{len(client.scheduler_info()['workers'])} of {n} dask "
                                    f"workers connected after {timeout:.3g} s; see "
                                    f"{self.work_dir / 'worker-0.log'}") from None
 

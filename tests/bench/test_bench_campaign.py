@@ -89,10 +89,12 @@ def test_overhead_lines_and_bad_input():
 
     res = {"n_recordings": 200, "minutes": 2.0, "workers": 2, "loadavg_before": [1.5, 1, 1],
            "plain_wall_s": 200.0, "campaign_wall_s": 206.0, "per_recording_plain_s": 1.0,
-           "per_recording_campaign_s": 1.03, "overhead": 0.03, "n_failed": 0}
+           "per_recording_campaign_s": 1.03, "overhead": 0.03, "n_failed": 0,
+           "machinery_overhead": 0.04, "processing_overhead": 0.01}
     lines = overhead_lines(res)
     assert "200 x 2 min, 2 workers, load before 1.5" in lines[0]
     assert "+3.0 % of its plain processing" in lines[2]
+    assert "+4.0 % in all" in lines[3] and "+1.0 % while the tasks ran" in lines[3]
     with pytest.raises(KeyError):
         overhead_lines({})
     with pytest.raises(ValueError, match="n_recordings"):
@@ -110,6 +112,8 @@ def test_measure_overhead_smoke(tmp_path):
     res = measure_overhead(3, 0.25, 2, distinct=1, work_dir=tmp_path)
     assert res["n_failed"] == 0 and res["plain_wall_s"] > 0
     assert res["overhead"] == pytest.approx(res["campaign_wall_s"] / res["plain_wall_s"] - 1)
+    # the whole campaign takes longer than the part while its tasks ran
+    assert res["machinery_overhead"] > res["processing_overhead"]
     assert len(list((tmp_path / "recordings").glob("rec_*.h5"))) == 3
     assert len(list((tmp_path / "campaign" / "recordings").iterdir())) == 3
 
