@@ -218,3 +218,15 @@ def test_process_cluster_kill_worker_bad_index(cluster):
         cluster.kill_worker(5)
     assert cluster.worker_of(os.getpid()) is None      # this process is no worker
     assert all(p is not None for p in cluster.worker_pids())
+
+
+def test_dashboard_named_only_where_the_scheduler_serves_one(tmp_path):
+    """A scheduler started with ``--no-dashboard`` still names its HTTP server "dashboard":
+    no link is reported for it."""
+    from distributed import Client
+
+    from meshphase.campaign.cluster import scheduler_dashboard
+
+    with ProcessCluster(1, work_dir=tmp_path, dashboard=False) as cl, Client(cl.address) as client:
+        assert "dashboard" in client.scheduler_info()["services"]
+        assert scheduler_dashboard(client) is None

@@ -389,7 +389,12 @@ def _connect(scheduler, workers, dashboard, info: dict, worker_modules=None):
 def scheduler_dashboard(client) -> str | None:
     """The address of the dashboard of the scheduler ``client`` is connected to, with the
     host of the address the client reached the scheduler at (the one that works from here);
-    None when the scheduler names no dashboard service.
+    None when the scheduler has none.
+
+    A scheduler names its HTTP server (health, metrics) a "dashboard" service whether or
+    not it serves the dashboard (``dask scheduler --no-dashboard`` too); the dashboard's page
+    is asked for once (1 s): a 404 means there is none. A page that cannot be reached from
+    here (a firewall; an SSH tunnel would reach it) is still named.
 
     Parameters
     ----------
@@ -407,9 +412,21 @@ def scheduler_dashboard(client) -> str | None:
     if "dashboard" not in services:
         return None
     try:
-        return str(client.dashboard_link)
+        link = str(client.dashboard_link)
     except Exception:  # noqa: BLE001 - as above
         return None
+    import urllib.error
+    import urllib.request
+
+    try:
+        with urllib.request.urlopen(link, timeout=1.0):
+            pass
+    except urllib.error.HTTPError as exc:
+        if exc.code == 404:
+            return None
+    except (OSError, ValueError):       # unreachable from here: named all the same
+        pass
+    return link
 
 
 class ClusterStart:
