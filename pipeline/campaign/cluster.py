@@ -393,8 +393,9 @@ def scheduler_dashboard(client) -> str | None:
 
     A scheduler names its HTTP server (health, metrics) a "dashboard" service whether or
     not it serves the dashboard (``dask scheduler --no-dashboard`` too); the dashboard's page
-    is asked for once (1 s): a 404 means there is none. A page that cannot be reached from
-    here (a firewall; an SSH tunnel would reach it) is still named.
+    is asked for once (at most 5 s, also for a scheduler slowed by a loaded machine): a 404
+    means there is none. A page that cannot be reached from here (a firewall; an SSH tunnel
+    would reach it) is still named.
 
     Parameters
     ----------
@@ -419,7 +420,7 @@ def scheduler_dashboard(client) -> str | None:
     import urllib.request
 
     try:
-        with urllib.request.urlopen(link, timeout=1.0):
+        with urllib.request.urlopen(link, timeout=5.0):
             pass
     except urllib.error.HTTPError as exc:
         if exc.code == 404:
