@@ -632,6 +632,9 @@ def _bench_campaign(out: Path, quick: bool, repeats: int | None = None) -> int:
 
     res = measure_speedup(n, minutes, (1, 2), repeats=repeats)
     res["first_figure"] = first_figure_rows(1 if quick else 6)
+    from .bench.campaign import measure_overhead, overhead_lines  # dask scheduler/worker processes
+
+    res["overhead"] = measure_overhead(*((6, 0.5) if quick else (200, 2.0)), 2)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "campaign_bench.json"
     path.write_text(json.dumps(res, indent=2, default=str))
@@ -654,6 +657,7 @@ def _bench_campaign(out: Path, quick: bool, repeats: int | None = None) -> int:
         for case in ("without fork_ready", "with fork_ready"):
             rows = [r for r in res["first_figure"] if r["case"] == case]
             print(f"  {case:>18}: " + ", ".join(f"{r['figure']} {r['first_excess_s']:.3f}" for r in rows))
+    print("\n".join(overhead_lines(res["overhead"])))
     print(f"{path.name:<24} {path}")
     return 0
 
@@ -1101,7 +1105,9 @@ def _add_bench(sub) -> None:
                    choices=["io", "models", "processing", "all", "campaign", "reference"],
                    help="which benchmarks (default all: io, models, processing); campaign: the "
                         "same 8 x 2 min campaign on 1 and 2 local workers (--quick: 2 x 0.5 min), "
-                        "its speed-up and phase timings; reference: build (or read) the "
+                        "its speed-up and phase timings, and 200 x 2 min (--quick: 6 x 0.5) on a "
+                        "scheduler and 2 workers as processes against plain `process` (the "
+                        "overhead per recording); reference: build (or read) the "
                         "models bench's 1e7-evaluation reference in --out as its own step")
     s.add_argument("--out", default="bench-results", help="output folder (default ./bench-results)")
     s.add_argument("--minutes", type=float, default=60.0, help="io: recording length [min] (default 60)")

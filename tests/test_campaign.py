@@ -116,7 +116,11 @@ def test_run_recording_good_and_corrupt_in_process(data, tmp_path):
 # ---------------------------------------------------------------------------- Dask runs
 def test_campaign_default_local_cluster(data, tmp_path, capsys, monkeypatch):
     """The default path: the campaign starts a 2-process LocalCluster, every good recording
-    has results, the truncated one is failed with its message, the combined outputs name all."""
+    has results, the truncated one is failed with its message, the combined outputs name all.
+    The progress bar is drawn when stderr is a terminal (here: said to be one)."""
+    from meshphase.campaign import job as job_mod
+
+    monkeypatch.setattr(job_mod, "_stderr_is_terminal", lambda: True)
     out = tmp_path / "camp"
     monkeypatch.setattr(sys.stderr, "isatty", lambda: True)   # the bar is drawn on a terminal only
     res = cp.cli_campaign(str(data["scene"]), [str(data["recordings"])], workers=2, out=str(out),

@@ -41,7 +41,7 @@ from ..runtime.log import logger
 from ..validate import as_positive_int
 
 __all__ = ["local_cluster", "open_client", "ClusterStart", "check_cluster_options", "cores", "own_child",
-           "end_worker", "worker_server", "trim_env_is_distributed"]
+           "end_worker", "worker_server", "trim_env_is_distributed", "scheduler_dashboard"]
 
 _server_lock = threading.Lock()
 _server_modules: tuple | None = None  # what the fork server this module started imported
@@ -364,9 +364,16 @@ def _connect(scheduler, workers, dashboard, info: dict, worker_modules=None):
 
     if scheduler is not None:
         try:
-            return Client(scheduler), None
+            client = Client(scheduler)
         except OSError as exc:
             raise ValueError(f"scheduler {scheduler!r}: cannot connect: {exc}") from None
+        # a cluster job's output is a log file, not a terminal (no progress bar): the
+        # scheduler's dashboard shows the tasks as they run
+        link = scheduler_dashboard(client)
+        if link is not None:
+            info["dashboard"] = link
+            logger.warning("campaign: the scheduler's Dask dashboard: %s", link)
+        return client, None
     cluster = local_cluster(workers or cores(), dashboard=dashboard, worker_modules=worker_modules)
     try:
         client = Client(cluster)
@@ -377,6 +384,50 @@ def _connect(scheduler, workers, dashboard, info: dict, worker_modules=None):
         info["dashboard"] = cluster.dashboard_link
         logger.warning("campaign: Dask dashboard at %s", cluster.dashboard_link)
     return client, cluster
+
+
+def scheduler_dashboard(client) -> str | None:
+    """The address of the dashboard of the scheduler ``client`` is connected to, with the
+    host of the address the client reached the scheduler at (the one that works from here);
+    None when the scheduler has none.
+
+    A scheduler names its HTTP server (health, metrics) a "dashboard" service whether or
+    not it serves the dashboard (``dask scheduler --no-dashboard`` too); the dashboard's page
+    is asked for once (at most 5 s, also for a scheduler slowed by a loaded machine): a 404
+    means there is none. A page that cannot be reached from here (a firewall; an SSH tunnel
+    would reach it) is still named.
+
+    Parameters
+    ----------
+    client : distributed.Client
+
+    Returns
+    -------
+    str or None
+        ``http://HOST:PORT/status``.
+    """
+    try:
+        services = client.scheduler_info().get("services") or {}
+    except Exception:  # noqa: BLE001 - a link is a courtesy; the campaign goes on without it
+        return None
+    if "dashboard" not in services:
+        return None
+    try:
+        link = str(client.dashboard_link)
+    except Exception:  # noqa: BLE001 - as above
+        return None
+    import urllib.error
+    import urllib.request
+
+    try:
+        with urllib.request.urlopen(link, timeout=5.0):
+            pass
+    except urllib.error.HTTPError as exc:
+        if exc.code == 404:
+            return None
+    except (OSError, ValueError):       # unreachable from here: named all the same
+        pass
+    return link
 
 
 class ClusterStart:

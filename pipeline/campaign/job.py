@@ -440,7 +440,7 @@ class Job:
     recording_report : bool
         Each task also writes its HTML report.
     progress : bool
-        A tqdm bar on stderr.
+        A tqdm bar on stderr, when stderr is a terminal.
     final_of : callable
         A staging path -> the path it will have in the finished campaign.
     on_usable : callable
@@ -686,7 +686,7 @@ class _Collection:
         fut_of = self.submit()
         index_of = self.watch.index_of
         with tqdm(total=len(self.records) + len(self.job.todo), initial=len(self.records), desc="recordings",
-                  unit="rec", disable=not (self.job.progress and sys.stderr.isatty()), file=sys.stderr,
+                  unit="rec", disable=not (self.job.progress and _stderr_is_terminal()), file=sys.stderr,
                   leave=False) as self.bar:
             next_check = 0.0
             while self.pending:
@@ -704,6 +704,15 @@ class _Collection:
                     continue
                 next_check = now + 0.5
                 self.check_timeouts(now, fut_of)
+
+
+def _stderr_is_terminal() -> bool:
+    """True when stderr is a terminal: the progress bar is drawn only there (a cluster job's
+    log file would get a line per redraw)."""
+    try:
+        return bool(sys.stderr.isatty())
+    except (AttributeError, ValueError):  # replaced by an object without it, or closed
+        return False
 
 
 def _timed_out(client, fut, path, name, rec_dir, limit, start) -> dict:

@@ -690,7 +690,8 @@ def run_campaign(scene_path, inputs, out_dir=None, *, scheduler: str | None = No
         Replace ``out_dir`` if it exists (atomically; refused when it holds files meshphase
         did not write or symbolic links: :class:`meshphase.run.outdir.OutputDir`).
     progress : bool
-        A tqdm progress bar (recordings done) on stderr.
+        A tqdm progress bar (recordings done) on stderr, drawn only when stderr is a terminal
+        (a cluster job's log file gets the scheduler's dashboard link instead).
     recording_reports : bool
         Also write each recording's HTML report (default False: see the module notes).
     task : callable, optional

@@ -64,6 +64,58 @@ def test_cli_bench_campaign_quick(tmp_path, capsys):
     assert [r["workers"] for r in res["runs"]] == [1, 2, 1, 2]
     assert len(res["paired_speedup"]["2"]["pairs"]) == 2
     assert all(r["n_failed"] == 0 for r in res["runs"])
+    assert "campaign overhead on a cluster of processes (6 x 0.5 min, 2 workers" in text
+    assert "overhead per recording:" in text
+    ov = res["overhead"]
+    assert ov["n_recordings"] == 6 and ov["n_failed"] == 0 and ov["campaign_wall_s"] > 0
+
+
+def test_process_scene_asks_for_what_process_computes(tmp_path):
+    """The overhead bench's scene: the demo scene's gearset and channels, the results of
+    ``meshphase process`` (:data:`meshphase.run.stages.PROCESS_RESULTS`), no Monte Carlo."""
+    from meshphase.bench.campaign import process_scene_text
+    from meshphase.run.scene import load_scene
+    from meshphase.run.stages import PROCESS_RESULTS
+
+    p = tmp_path / "s.toml"
+    p.write_text(process_scene_text())
+    scene = load_scene(p)
+    assert list(scene.results) == list(PROCESS_RESULTS) and scene.tolerances is None
+    assert scene.gearset is not None
+
+
+def test_overhead_lines_and_bad_input():
+    from meshphase.bench.campaign import measure_overhead, overhead_lines
+
+    res = {"n_recordings": 200, "minutes": 2.0, "workers": 2, "loadavg_before": [1.5, 1, 1],
+           "plain_wall_s": 200.0, "campaign_wall_s": 206.0, "per_recording_plain_s": 1.0,
+           "per_recording_campaign_s": 1.03, "overhead": 0.03, "n_failed": 0,
+           "machinery_overhead": 0.04, "processing_overhead": 0.01}
+    lines = overhead_lines(res)
+    assert "200 x 2 min, 2 workers, load before 1.5" in lines[0]
+    assert "+3.0 % of its plain processing" in lines[2]
+    assert "+4.0 % in all" in lines[3] and "+1.0 % while the tasks ran" in lines[3]
+    with pytest.raises(KeyError):
+        overhead_lines({})
+    with pytest.raises(ValueError, match="n_recordings"):
+        measure_overhead(0)
+    with pytest.raises(ValueError, match="workers"):
+        measure_overhead(2, 0.1, 0)
+    with pytest.raises(ValueError, match="scenario"):
+        measure_overhead(2, 0.1, 2, scenario="no_such_scenario")
+
+
+@pytest.mark.bench
+def test_measure_overhead_smoke(tmp_path):
+    from meshphase.bench.campaign import measure_overhead
+
+    res = measure_overhead(3, 0.25, 2, distinct=1, work_dir=tmp_path)
+    assert res["n_failed"] == 0 and res["plain_wall_s"] > 0
+    assert res["overhead"] == pytest.approx(res["campaign_wall_s"] / res["plain_wall_s"] - 1)
+    # the whole campaign takes longer than the part while its tasks ran
+    assert res["machinery_overhead"] > res["processing_overhead"]
+    assert len(list((tmp_path / "recordings").glob("rec_*.h5"))) == 3
+    assert len(list((tmp_path / "campaign" / "recordings").iterdir())) == 3
 
 
 def test_paired_speedups_pair_each_repeats_runs():
