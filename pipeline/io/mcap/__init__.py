@@ -45,11 +45,13 @@ MCAP written by other tools (ROS 2 CDR, protobuf, JSON): :func:`read`, :func:`re
 channels and decode the messages with the mcap project's decoders (:mod:`.foreign`, the
 generic path; :mod:`.timing` fits the stamps to one sample grid); without a mapping the
 error lists the file's topics, schemas and numeric fields (:func:`describe`).
+:func:`describe_topics` (:mod:`.topics`) lists any MCAP file's topics as dicts: encodings,
+message count, rate, time span and the numeric fields a mapping can name.
 ``write(..., layout="foxglove")`` (:mod:`.foxglove`) writes one self-describing JSON message
 per sample time, which Foxglove plots, and which reads back without a mapping.
 
 Modules: ``layout`` (names, record framing, payload header, log times, schemas), ``crc``
-(summary and data-section CRCs, ``crc32_combine``), ``header`` (opening a file: summary,
+(summary and data-section CRCs, ``crc32_combine``), ``topics`` (:func:`describe_topics`), ``header`` (opening a file: summary,
 recording header, per-file cache), ``chunks`` (the chunk reader), ``reader`` (:func:`read`,
 :func:`read_info`, :func:`iter_blocks`) and ``writer`` (:func:`write`, :func:`write_blocks`).
 """
@@ -63,6 +65,7 @@ from .foxglove import FOXGLOVE_METADATA, FOXGLOVE_SCHEMA_NAME, LAYOUTS, write_fo
 from .header import ForeignMcapError
 from .mapping import TopicField, parse_field_path, parse_topics
 from .reader import iter_blocks, read, read_info
+from .topics import TOPIC_KEYS, describe_topics
 from .timing import fit_grid
 from .writer import write, write_blocks
 
@@ -72,4 +75,4 @@ __all__ = ["NAME", "FORMAT", "MAGIC", "SCHEMA_NAME", "MESSAGE_ENCODING",
            "PROFILE", "FORMAT_VERSION", "DEFAULT_CHUNK_SIZE", "HEADER_SIZE", "LAYOUT",
            "describe", "read_foreign", "write_foxglove", "LAYOUTS", "FOXGLOVE_METADATA",
            "FOXGLOVE_SCHEMA_NAME", "ForeignMcapError", "TopicField", "parse_topics",
-           "parse_field_path", "fit_grid"]
+           "parse_field_path", "fit_grid", "describe_topics", "TOPIC_KEYS"]

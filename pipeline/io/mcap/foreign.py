@@ -33,7 +33,7 @@ from .header import check_ends, lib_errors
 from .mapping import TopicField, TopicSummary, format_field_path, mapping_key, parse_topics
 from .timing import fit_grid
 
-__all__ = ["read_foreign", "describe", "JsonDecoderFactory", "decoder_factories", "FOREIGN_OPTIONS"]
+__all__ = ["read_foreign", "describe", "numeric_fields", "JsonDecoderFactory", "decoder_factories", "FOREIGN_OPTIONS"]
 
 #: Format options of the foreign path (besides ``verify``).
 FOREIGN_OPTIONS = ("topics", "fs", "max_jitter", "stamp")
@@ -132,8 +132,10 @@ def _stamp_ns(stamp, msg, decoded, where: str) -> int:
 
 # -- what a file holds -------------------------------------------------------------------
 
-def _numeric_fields(obj, prefix: tuple, out: list, depth: int = 0) -> None:
-    """(path text, "number" / "array[n]") of the numeric fields of a decoded message."""
+def numeric_fields(obj, prefix: tuple, out: list, depth: int = 0) -> None:
+    """Append to ``out`` the numeric fields of a decoded message (dict, protobuf message,
+    ROS 2 object) below ``prefix``, as (field path text, ``"number"`` or ``"array[n]"``);
+    at most 40 fields, 8 levels deep, arrays of arrays by their first element."""
     if len(out) >= _MAX_LISTED_FIELDS or depth > 8:
         return
     v = _as_values(obj) if prefix else None
@@ -155,7 +157,7 @@ def _numeric_fields(obj, prefix: tuple, out: list, depth: int = 0) -> None:
     else:
         return
     for k, val in items:
-        _numeric_fields(val, prefix + (k,), out, depth + 1)
+        numeric_fields(val, prefix + (k,), out, depth + 1)
 
 
 def describe(path, *, verify: bool = True) -> list[TopicSummary]:
@@ -192,7 +194,7 @@ def describe(path, *, verify: bool = True) -> list[TopicSummary]:
                               messages=counts.get(cid, 0 if stats is not None else None))
             try:
                 for _, _, _, decoded in reader.iter_decoded_messages(topics=[ch.topic]):
-                    _numeric_fields(decoded, (), ts.fields)
+                    numeric_fields(decoded, (), ts.fields)
                     break
             except DecoderNotFoundError:
                 ts.fields = None  # no decoder for this encoding
@@ -258,7 +260,7 @@ def _collect(reader, path: Path, entries: list[TopicField]) -> dict:
                         values.append(math.nan)
                         continue
                     found: list = []
-                    _numeric_fields(decoded, (), found)
+                    numeric_fields(decoded, (), found)
                     raise RecordingFileError(path, f"{_where(e)}: message {len(stamps)} has no field "
                                                    f"{str(exc)!r}; numeric fields of that message: "
                                                    f"{', '.join(p for p, _ in found) or 'none'}") from None
