@@ -28,17 +28,17 @@ from mcap.reader import make_reader
 
 from ...recording import ChannelSpec, Recording
 from ..base import RecordingFileError, RecordingInfo, check_verify
+from .fields import FieldError, as_values, get_field, numeric_fields, stamp_ns
 from .foxglove import FOXGLOVE_METADATA
 from .header import check_ends, lib_errors
-from .mapping import TopicField, TopicSummary, format_field_path, mapping_key, parse_topics
+from .mapping import TopicField, TopicSummary, mapping_key, parse_topics
 from .timing import fit_grid
 
-__all__ = ["read_foreign", "describe", "numeric_fields", "JsonDecoderFactory", "decoder_factories", "FOREIGN_OPTIONS"]
+__all__ = ["read_foreign", "describe", "JsonDecoderFactory", "decoder_factories", "FOREIGN_OPTIONS"]
 
 #: Format options of the foreign path (besides ``verify``).
 FOREIGN_OPTIONS = ("topics", "fs", "max_jitter", "stamp")
 _EPOCH_NS = 10 ** 18  # stamps from 2001-09-09 on are taken as Unix time (start_datetime)
-_MAX_LISTED_FIELDS = 40
 
 
 class JsonDecoderFactory(DecoderFactory):
@@ -57,107 +57,6 @@ def decoder_factories() -> list:
     from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
 
     return [JsonDecoderFactory(), ProtobufDecoderFactory(), Ros2DecoderFactory()]
-
-
-# -- field access ------------------------------------------------------------------------
-
-class _FieldError(LookupError):
-    pass
-
-
-def _get(obj, path: tuple):
-    """The value at ``path`` in a decoded message (dict, protobuf message, ROS 2 object)."""
-    for i, p in enumerate(path):
-        try:
-            if isinstance(p, int):
-                obj = obj[p]
-            elif isinstance(obj, dict):
-                obj = obj[p]
-            else:
-                obj = getattr(obj, p)
-        except (KeyError, IndexError, AttributeError, TypeError):
-            where = format_field_path(path[:i + 1])
-            raise _FieldError(where) from None
-    return obj
-
-
-def _is_number(x) -> bool:
-    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
-
-
-def _as_values(x):
-    """A float (one sample) or a 1-D float64 array (samples), or None when not numeric.
-    JSON null reads as NaN."""
-    if _is_number(x):
-        return float(x)
-    if x is None:
-        return math.nan
-    if isinstance(x, (str, bytes, dict)):
-        return None
-    if isinstance(x, np.ndarray) or hasattr(x, "__len__"):
-        try:
-            arr = np.asarray(x)
-        except (TypeError, ValueError):
-            return None
-        if arr.ndim == 1 and arr.dtype.kind in "iuf":
-            return arr.astype(np.float64)
-        if arr.ndim == 1 and arr.dtype.kind == "O":  # JSON nulls among the numbers
-            items = arr.tolist()
-            if all(_is_number(v) or v is None for v in items):
-                return np.array([math.nan if v is None else v for v in items], dtype=np.float64)
-    return None
-
-
-def _stamp_ns(stamp, msg, decoded, where: str) -> int:
-    if stamp == "log_time":
-        return int(msg.log_time)
-    if stamp == "publish_time":
-        return int(msg.publish_time)
-    try:
-        v = _get(decoded, stamp)
-    except _FieldError as exc:
-        raise ValueError(f"{where}: stamp field {format_field_path(stamp)!r} not found "
-                         f"(at {exc})") from None
-    for sec, nsec in (("sec", "nsec"), ("sec", "nanosec"), ("seconds", "nanos")):
-        try:
-            s, ns = (v[sec], v[nsec]) if isinstance(v, dict) else (getattr(v, sec), getattr(v, nsec))
-        except (KeyError, AttributeError, TypeError):
-            continue
-        return int(s) * 1_000_000_000 + int(ns)
-    if _is_number(v) and math.isfinite(float(v)):
-        return int(v) if isinstance(v, (int, np.integer)) else int(round(float(v) * 1e9))
-    raise ValueError(f"{where}: stamp field {format_field_path(stamp)!r} is {v!r}; a stamp is "
-                     f"{{sec, nsec}}, {{sec, nanosec}}, {{seconds, nanos}}, an integer [ns] or a float [s]")
-
-
-# -- what a file holds -------------------------------------------------------------------
-
-def numeric_fields(obj, prefix: tuple, out: list, depth: int = 0) -> None:
-    """Append to ``out`` the numeric fields of a decoded message (dict, protobuf message,
-    ROS 2 object) below ``prefix``, as (field path text, ``"number"`` or ``"array[n]"``);
-    at most 40 fields, 8 levels deep, arrays of arrays by their first element."""
-    if len(out) >= _MAX_LISTED_FIELDS or depth > 8:
-        return
-    v = _as_values(obj) if prefix else None
-    if isinstance(v, float):
-        out.append((format_field_path(prefix), "number"))
-        return
-    if isinstance(v, np.ndarray):
-        if v.size:
-            out.append((format_field_path(prefix), f"array[{v.size}]"))
-        return
-    if isinstance(obj, dict):
-        items = list(obj.items())
-    elif hasattr(obj, "DESCRIPTOR") and hasattr(obj.DESCRIPTOR, "fields"):  # protobuf
-        items = [(f.name, getattr(obj, f.name)) for f in obj.DESCRIPTOR.fields]
-    elif hasattr(obj, "__slots__"):  # mcap_ros2's message classes
-        items = [(k, getattr(obj, k)) for k in obj.__slots__ if not k.startswith("_")]
-    elif isinstance(obj, (list, tuple)) and obj:
-        items = [(0, obj[0])]
-    else:
-        return
-    for k, val in items:
-        numeric_fields(val, prefix + (k,), out, depth + 1)
 
 
 def describe(path, *, verify: bool = True) -> list[TopicSummary]:
@@ -253,8 +152,8 @@ def _collect(reader, path: Path, entries: list[TopicField]) -> dict:
             for e in by_topic.get(channel.topic, ()):
                 stamps, values = got[e.name]
                 try:
-                    raw = _get(decoded, e.path)
-                except _FieldError as exc:
+                    raw = get_field(decoded, e.path)
+                except FieldError as exc:
                     if e.missing_is_nan:
                         stamps.append(msg.log_time)  # the foxglove layout stamps by log time
                         values.append(math.nan)
@@ -264,7 +163,7 @@ def _collect(reader, path: Path, entries: list[TopicField]) -> dict:
                     raise RecordingFileError(path, f"{_where(e)}: message {len(stamps)} has no field "
                                                    f"{str(exc)!r}; numeric fields of that message: "
                                                    f"{', '.join(p for p, _ in found) or 'none'}") from None
-                v = _as_values(raw)
+                v = as_values(raw)
                 if v is None:
                     raise RecordingFileError(path, f"{_where(e)}: message {len(stamps)} holds "
                                                    f"{type(raw).__name__} {str(raw)[:60]!r}, not a number "
@@ -273,7 +172,7 @@ def _collect(reader, path: Path, entries: list[TopicField]) -> dict:
                 if shape.setdefault(e.name, kind) != kind:
                     raise RecordingFileError(path, f"{_where(e)}: message {len(stamps)} holds a {kind}, "
                                                    f"earlier messages a {shape[e.name]}")
-                stamps.append(_stamp_ns(e.stamp, msg, decoded, _where(e)) if not isinstance(e.stamp, str)
+                stamps.append(stamp_ns(e.stamp, msg, decoded, _where(e)) if not isinstance(e.stamp, str)
                               else msg.log_time if e.stamp == "log_time" else msg.publish_time)
                 values.append(v)
     except DecoderNotFoundError as exc:

@@ -11,10 +11,7 @@ first message with the foreign path's decoders (JSON, protobuf, ROS 2 CDR).
 
 from __future__ import annotations
 
-import struct
 from pathlib import Path
-
-import numpy as np
 
 from mcap.exceptions import DecoderNotFoundError
 from mcap.reader import make_reader
@@ -22,7 +19,9 @@ from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
 
 from ..base import RecordingFileError, check_verify
-from .foreign import decoder_factories, numeric_fields
+from .chunks import read_message_index
+from .fields import numeric_fields
+from .foreign import decoder_factories
 from .header import check_ends, lib_errors
 
 __all__ = ["describe_topics", "TOPIC_KEYS"]
@@ -31,26 +30,6 @@ __all__ = ["describe_topics", "TOPIC_KEYS"]
 TOPIC_KEYS = ("topic", "schema", "schema_encoding", "message_encoding", "message_count", "rate_Hz",
               "start_ns", "end_ns", "numeric_fields")
 
-_OP_MESSAGE_INDEX = 0x07
-_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, record length, channel id, entries byte length
-
-
-def _index_times(fh, path: Path, offset: int, cid: int) -> np.ndarray | None:
-    """Log times [ns] of one MessageIndex record at ``offset`` (None when it is not one of
-    channel ``cid``)."""
-    fh.seek(offset)
-    head = fh.read(_INDEX_HEAD.size)
-    if len(head) < _INDEX_HEAD.size:
-        raise RecordingFileError(path, f"message index at byte {offset} runs past the end of the file")
-    op, length, ch, nbytes = _INDEX_HEAD.unpack(head)
-    if op != _OP_MESSAGE_INDEX or ch != cid or nbytes % 16 or 2 + 4 + nbytes != length:
-        return None
-    raw = fh.read(nbytes)
-    if len(raw) != nbytes:
-        raise RecordingFileError(path, f"message index at byte {offset} runs past the end of the file")
-    return np.frombuffer(raw, dtype="<u8").reshape(-1, 2)[:, 0]
-
-
 def _spans_from_index(fh, path: Path, summary, counts: dict) -> dict | None:
     """{channel id: (start_ns, end_ns)} from the chunks' message indexes, or None when the
     file has messages without index (then the caller scans)."""
@@ -58,9 +37,10 @@ def _spans_from_index(fh, path: Path, summary, counts: dict) -> dict | None:
     seen = dict.fromkeys(counts, 0)
     for ci in summary.chunk_indexes:
         for cid, off in (ci.message_index_offsets or {}).items():
-            t = _index_times(fh, path, off, cid)
-            if t is None:
+            entries = read_message_index(fh, path, off, cid)
+            if entries is None:
                 return None
+            t = entries[:, 0]
             if t.size:
                 lo, hi = int(t.min()), int(t.max())
                 a, b = spans.get(cid, (lo, hi))
