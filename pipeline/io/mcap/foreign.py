@@ -28,6 +28,7 @@ from mcap.reader import make_reader
 
 from ...recording import ChannelSpec, Recording
 from ..base import RecordingFileError, RecordingInfo, check_verify
+from .bulk import Series, collect_bulk
 from .fields import FieldError, as_values, get_field, numeric_fields, stamp_ns
 from .foxglove import FOXGLOVE_METADATA
 from .header import check_ends, lib_errors
@@ -128,10 +129,12 @@ def no_mapping_error(path: Path, verify: bool) -> RecordingFileError:
 
 # -- decoding and assembling -------------------------------------------------------------
 
-def _collect(reader, path: Path, entries: list[TopicField]) -> dict:
-    """Per entry name: (stamps [ns] list, values list of float or 1-D arrays), in message
-    order. Checks every mapped topic exists and has messages, fields exist and are numeric,
-    and each field keeps its shape (number or array) from message to message."""
+def _collect(reader, path: Path, entries: list[TopicField], fh=None, verify: bool = True) -> dict:
+    """Per entry name: (stamps [ns] list, values list of float or 1-D arrays) in message
+    order, or a :class:`~.bulk.Series` for the entries the per-chunk path decodes
+    (:func:`~.bulk.collect_bulk`, given the open file ``fh``). Checks every mapped topic
+    exists and has messages, fields exist and are numeric, and each field keeps its shape
+    (number or array) from message to message."""
     summary = reader.get_summary()
     present = sorted({c.topic for c in summary.channels.values()}) if summary is not None else None
     wanted = sorted({e.topic for e in entries})
@@ -140,6 +143,12 @@ def _collect(reader, path: Path, entries: list[TopicField]) -> dict:
         if missing:
             raise RecordingFileError(path, f"topic(s) {missing} not in the file; topics present: "
                                            f"{present or 'none'}")
+    done: dict = {}
+    if fh is not None:
+        done, entries = collect_bulk(fh, path, summary, entries, decoder_factories(), verify=verify)
+        if not entries:
+            return done
+        wanted = sorted({e.topic for e in entries})
     by_topic: dict = {}
     for e in entries:
         by_topic.setdefault(e.topic, []).append(e)
@@ -181,6 +190,7 @@ def _collect(reader, path: Path, entries: list[TopicField]) -> dict:
     for e in entries:
         if not got[e.name][0]:
             raise RecordingFileError(path, f"channel {e.name!r}: topic {e.topic!r} has no messages")
+    got.update(done)
     return got
 
 
@@ -188,9 +198,24 @@ def _where(e: TopicField) -> str:
     return f"channel {e.name!r} (topic {e.topic!r}, field {e.field!r})"
 
 
-def _series(stamps: list, values: list):
+def _series(collected):
     """(stamps ns int64, counts, samples float64) of one channel, in stamp order (stable:
-    messages with equal stamps keep their order in the file)."""
+    messages with equal stamps keep their order in the file); ``collected`` is what
+    :func:`_collect` holds for the channel."""
+    if isinstance(collected, Series):
+        t, counts, samples = collected.stamps, collected.counts, collected.samples
+        if counts is None:
+            counts = np.ones(t.size, dtype=np.int64)
+        if np.any(t[1:] < t[:-1]):
+            order = np.argsort(t, kind="stable")
+            if not np.all(counts == counts[0]):
+                starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
+                samples = np.concatenate([samples[starts[i]:starts[i] + counts[i]] for i in order])
+            else:
+                samples = samples.reshape(t.size, -1)[order].reshape(-1)
+            t, counts = t[order], counts[order]
+        return t, counts, samples
+    stamps, values = collected
     t = np.asarray(stamps, dtype=np.int64)
     if isinstance(values[0], float):
         counts = np.ones(t.size, dtype=np.int64)
@@ -220,7 +245,7 @@ def _assemble(path: Path, entries: list[TopicField], got: dict, fs, max_jitter) 
     channel is checked against it. The channels then start at the latest first sample
     and end at the earliest last one (whole samples; a start offset off the grid by more
     than ``max_jitter`` is an error)."""
-    series = {e.name: _series(*got[e.name]) for e in entries}
+    series = {e.name: _series(got[e.name]) for e in entries}
     what = {e.name: _where(e) for e in entries}
     given = fs is not None
     try:
@@ -316,7 +341,7 @@ def _decode_file(path: Path, entries, fs, max_jitter, verify: bool) -> Recording
             fs = header["fs"]
             if header["n_samples"] == 0:
                 return _written_back(path, np.empty((0, len(entries))), entries, header)
-        got = _collect(reader, path, entries)
+        got = _collect(reader, path, entries, fh, verify)
     data, fs, origin, notes = _assemble(path, entries, got, fs, max_jitter)
     if header is not None:
         return _written_back(path, data, entries, header)
