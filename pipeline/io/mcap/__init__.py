@@ -48,7 +48,9 @@ error lists the file's topics, schemas and numeric fields (:func:`describe`).
 :func:`describe_topics` (:mod:`.topics`) lists any MCAP file's topics as dicts: encodings,
 message count, rate, time span and the numeric fields a mapping can name.
 ``write(..., layout="foxglove")`` (:mod:`.foxglove`) writes one self-describing JSON message
-per sample time, which Foxglove plots, and which reads back without a mapping.
+per sample time, stamped in absolute time (the start time + t0 + k / fs, ns since the Unix
+epoch), one field per channel named for Foxglove's message paths (:func:`field_names`),
+which Foxglove plots, and which reads back without a mapping.
 
 Modules: ``layout`` (names, record framing, payload header, log times, schemas), ``crc``
 (summary and data-section CRCs, ``crc32_combine``), ``topics`` (:func:`describe_topics`), ``header`` (opening a file: summary,
@@ -61,7 +63,8 @@ from .layout import (COMPRESSIONS, DEFAULT_BLOCK, DEFAULT_CHUNK_SIZE, FORMAT, FO
                      LAYOUT, MAGIC, MESSAGE_ENCODING, NAME, PROFILE, RECORDING_METADATA,
                      SCHEMA_ENCODING, SCHEMA_NAME, log_time_ns, sniff)
 from .foreign import describe, read_foreign
-from .foxglove import FOXGLOVE_METADATA, FOXGLOVE_SCHEMA_NAME, LAYOUTS, write_foxglove
+from .foxglove import (FOXGLOVE_METADATA, FOXGLOVE_SCHEMA_NAME, LAYOUTS, TIME_BASES, field_names,
+                       time_origin, write_foxglove)
 from .header import ForeignMcapError
 from .mapping import TopicField, parse_field_path, parse_topics
 from .reader import iter_blocks, read, read_info
@@ -75,4 +78,5 @@ __all__ = ["NAME", "FORMAT", "MAGIC", "SCHEMA_NAME", "MESSAGE_ENCODING",
            "PROFILE", "FORMAT_VERSION", "DEFAULT_CHUNK_SIZE", "HEADER_SIZE", "LAYOUT",
            "describe", "read_foreign", "write_foxglove", "LAYOUTS", "FOXGLOVE_METADATA",
            "FOXGLOVE_SCHEMA_NAME", "ForeignMcapError", "TopicField", "parse_topics",
-           "parse_field_path", "fit_grid", "describe_topics", "TOPIC_KEYS"]
+           "parse_field_path", "fit_grid", "describe_topics", "TOPIC_KEYS", "field_names", "time_origin",
+           "TIME_BASES"]

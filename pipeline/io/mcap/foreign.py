@@ -301,8 +301,12 @@ def _embedded(reader, path: Path):
     md = dict(recs[0].metadata)
     try:
         specs = [ChannelSpec.from_dict(d) for d in json.loads(md["channels"])]
-        entries = [TopicField(spec=s, topic=md["topic"], path=("channels", s.name), missing_is_nan=True)
-                   for s in specs]
+        # format 1 keyed the fields by channel name, format 2 by field_names() ("fields")
+        fields = list(json.loads(md["fields"])) if "fields" in md else [s.name for s in specs]
+        if len(fields) != len(specs):
+            raise ValueError(f"{len(fields)} fields for {len(specs)} channels")
+        entries = [TopicField(spec=s, topic=md["topic"], path=("channels", f), missing_is_nan=True)
+                   for s, f in zip(specs, fields)]
         header = {"fs": float(md["fs"]), "t0": float(md["t0"]), "n_samples": int(md["n_samples"]),
                   "dtype": md["dtype"], "meta": json.loads(md["meta"]), "history": json.loads(md["history"]),
                   "start_datetime": md.get("start_datetime")}
