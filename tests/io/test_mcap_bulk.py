@@ -289,3 +289,26 @@ def test_bulk_without_summary_or_mapping_is_a_no_op(tmp_path):
     assert bulk.collect_bulk(None, p, None, parse_topics({"v": "/j:v"}), []) == ({}, parse_topics({"v": "/j:v"}))
     with open(p, "rb") as fh:
         assert bulk.collect_bulk(fh, p, make_reader(fh).get_summary(), [], []) == ({}, [])
+
+
+def test_bench_generic_decode_rows(tmp_path):
+    from meshphase.bench.io import GENERIC_COLUMNS, _generic_markdown, generic_decode_rows, strain_recording
+
+    rec = strain_recording(600, 2, 200.0, rng=4)
+    calls = []
+
+    def timer(fn):
+        calls.append(fn)
+        return 0.5, fn()
+
+    rows = generic_decode_rows(rec, tmp_path, timer)
+    assert [r["encoding"] for r in rows] == ["json", "cdr"] and len(calls) == 4
+    for r in rows:
+        assert tuple(r) == GENERIC_COLUMNS
+        assert r["messages"] == 600 and r["exact"] is True and r["samples_per_s"] == 1200.0
+    assert not list(tmp_path.iterdir())  # files removed
+    md = _generic_markdown(rows)
+    assert md[0] == "## MCAP generic decode, scalar per message" and sum(ln.startswith("| json") for ln in md) == 1
+    assert _generic_markdown([]) == []
+    with pytest.raises(ValueError, match="at least 2 samples"):
+        generic_decode_rows(Recording(np.zeros((1, 1)), 10.0, ["a"]), tmp_path, timer)

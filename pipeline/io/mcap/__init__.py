@@ -62,7 +62,7 @@ from .crc import crc32_combine
 from .layout import (COMPRESSIONS, DEFAULT_BLOCK, DEFAULT_CHUNK_SIZE, FORMAT, FORMAT_VERSION, HEADER_SIZE,
                      LAYOUT, MAGIC, MESSAGE_ENCODING, NAME, PROFILE, RECORDING_METADATA,
                      SCHEMA_ENCODING, SCHEMA_NAME, log_time_ns, sniff)
-from .foreign import describe, read_foreign
+from .foreign import clear_cache, describe, read_foreign
 from .foxglove import (FOXGLOVE_METADATA, FOXGLOVE_SCHEMA_NAME, LAYOUTS, TIME_BASES, field_names,
                        time_origin, write_foxglove)
 from .header import ForeignMcapError
@@ -79,4 +79,4 @@ __all__ = ["NAME", "FORMAT", "MAGIC", "SCHEMA_NAME", "MESSAGE_ENCODING",
            "describe", "read_foreign", "write_foxglove", "LAYOUTS", "FOXGLOVE_METADATA",
            "FOXGLOVE_SCHEMA_NAME", "ForeignMcapError", "TopicField", "parse_topics",
            "parse_field_path", "fit_grid", "describe_topics", "TOPIC_KEYS", "field_names", "time_origin",
-           "TIME_BASES"]
+           "TIME_BASES", "clear_cache"]

@@ -35,7 +35,7 @@ from .header import check_ends, lib_errors
 from .mapping import TopicField, TopicSummary, mapping_key, parse_topics
 from .timing import fit_grid
 
-__all__ = ["read_foreign", "describe", "JsonDecoderFactory", "decoder_factories", "FOREIGN_OPTIONS"]
+__all__ = ["read_foreign", "describe", "JsonDecoderFactory", "decoder_factories", "FOREIGN_OPTIONS", "clear_cache"]
 
 #: Format options of the foreign path (besides ``verify``).
 FOREIGN_OPTIONS = ("topics", "fs", "max_jitter", "stamp")
@@ -365,6 +365,13 @@ def _decode_file(path: Path, entries, fs, max_jitter, verify: bool) -> Recording
 _CACHE: OrderedDict = OrderedDict()
 _CACHE_MAX = 1
 _LOCK = threading.Lock()
+
+
+def clear_cache() -> None:
+    """Forget the decoded file :func:`read_foreign` keeps (the next read decodes anew, as a
+    benchmark wants)."""
+    with _LOCK:
+        _CACHE.clear()
 
 
 def _options(topics, fs, max_jitter, stamp):
