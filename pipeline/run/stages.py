@@ -956,7 +956,10 @@ def process_recording(path, gearset_scene_path, *, out_dir=None, overwrite=False
     if tolerance and scene.tolerances is None:
         raise SceneError(gearset_scene_path, "tolerances", "--tolerance (tolerance=True) needs a "
                          "[tolerances] table in the gearset file")
+    mapping = scene.input.get("mcap") if isinstance(scene.input, dict) else None
     scene.input = {"recording": Path(path).resolve()}
+    if mapping is not None and Path(path).suffix.lower() == ".mcap":
+        scene.input["mcap"] = mapping  # [input.mcap] maps the topics of another tool's MCAP FILE
     # only what process's outputs need: without tolerance=True the scene's [tolerances]
     # are set aside, so compare pulls in no Monte Carlo (plan adds it when tolerances exist)
     scene.results = (list(PROCESS_RESULTS) + (["centroids"] if "centroids" in scene.results else [])

@@ -103,3 +103,17 @@ def test_input_mcap_mistakes_name_their_key(files):
                                 '[[input.mcap.channels]]\nname = "sun"\ntopic = "/nope"\nfield = "v"\n'
                                 'kind = "sun"\n', d / "c.toml"))
     assert "/nope" in str(ctx.failed["load"]) and "topics present" in str(ctx.failed["load"])
+
+
+def test_process_keeps_the_gearset_files_mcap_mapping(files, tmp_path):
+    # meshphase process FILE --gearset G.toml replaces [input] by FILE, and keeps G.toml's
+    # [input.mcap] for an MCAP FILE (another tool's file needs its mapping)
+    from meshphase.run.stages import process_recording
+
+    d, rec = files
+    g = tmp_path / "g.toml"
+    g.write_text('name = "x"\nresults = ["phasing"]\n' + GEARSET + '[speeds]\nsun_rpm = 18.19\nfixed = "ring"\n'
+                 f'[input]\nrecording = "{(d / "rig.mcap").as_posix()}"\n' + _mapping_toml(rec), encoding="utf-8")
+    foreign._CACHE.clear()
+    ctx, written = process_recording(d / "rig.mcap", g, out_dir=tmp_path / "out")
+    assert ctx.load.recording.names == rec.names and "phasing" not in ctx.failed, ctx.failed
