@@ -42,8 +42,9 @@ offset) or byte range, and the CRCs.
 
 MCAP written by other tools (ROS 2 CDR, protobuf, JSON): :func:`read`, :func:`read_info` and
 :func:`iter_blocks` take a mapping (``topics=``, see :mod:`.mapping`) of topic fields onto
-channels and decode the messages with the mcap project's decoders (:mod:`.foreign`, the
-generic path; :mod:`.timing` fits the stamps to one sample grid); without a mapping the
+channels and decode the messages (:mod:`.foreign`: JSON and CDR a chunk at a time with numpy,
+:mod:`.bulk`, :mod:`.jsonbatch`, :mod:`.cdr`; the rest with the mcap project's decoders;
+:mod:`.timing` fits the stamps to one sample grid); without a mapping the
 error lists the file's topics, schemas and numeric fields (:func:`describe`).
 :func:`describe_topics` (:mod:`.topics`) lists any MCAP file's topics as dicts: encodings,
 message count, rate, time span and the numeric fields a mapping can name.
@@ -53,9 +54,12 @@ epoch), one field per channel named for Foxglove's message paths (:func:`field_n
 which Foxglove plots, and which reads back without a mapping.
 
 Modules: ``layout`` (names, record framing, payload header, log times, schemas), ``crc``
-(summary and data-section CRCs, ``crc32_combine``), ``topics`` (:func:`describe_topics`), ``header`` (opening a file: summary,
-recording header, per-file cache), ``chunks`` (the chunk reader), ``reader`` (:func:`read`,
-:func:`read_info`, :func:`iter_blocks`) and ``writer`` (:func:`write`, :func:`write_blocks`).
+(summary and data-section CRCs, ``crc32_combine``), ``topics`` (:func:`describe_topics`),
+``header`` (opening a file: summary, recording header, per-file cache), ``chunks`` (the chunk
+reader, message indexes), ``reader`` (:func:`read`,
+:func:`read_info`, :func:`iter_blocks`), ``writer`` (:func:`write`, :func:`write_blocks`);
+for other tools' files ``mapping``, ``fields``, ``foreign``, ``bulk``, ``jsonbatch``, ``cdr``,
+``timing``, and ``foxglove`` (the export).
 """
 
 from .crc import crc32_combine

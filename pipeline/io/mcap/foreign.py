@@ -3,10 +3,12 @@ messages are decoded by the mcap project's decoders (JSON here, protobuf by
 ``mcap-protobuf-support``, ROS 2 CDR by ``mcap-ros2-support``) and the mapped fields
 (:mod:`.mapping`) become channels of one uniform-rate recording (:mod:`.timing`).
 
-This is the generic path: every message goes through ``McapReader.iter_decoded_messages``
-and Python objects, ~10-100x slower per sample than meshphase's own block layout (``meshphase
-bench io`` measures both). A decoded file is kept (one at a time, by file identity and
-mapping) so that the registry's ``read_info`` + ``read`` decode it once.
+JSON and ROS 2 CDR topics are decoded a chunk at a time by :mod:`.bulk` where it can; the
+rest (protobuf, the fields and files it leaves) message by message through
+``McapReader.iter_decoded_messages`` and Python objects, which is also the path that reports
+every error (``meshphase bench io`` measures both against meshphase's own block layout). A
+decoded file is kept (one at a time, by file identity and mapping) so that the registry's
+``read_info`` + ``read`` decode it once.
 """
 
 from __future__ import annotations
