@@ -1,5 +1,4 @@
-"""The per-chunk decoders of other tools' MCAP files (``meshphase.io.mcap.bulk``, ``cdr``,
-``jsonbatch``) against the per-message path they replace, which stays the reference: the same
+"""The per-chunk decoders of other tools' MCAP files (``meshphase.io.mcap.bulk``, ``batch``) against the per-message path they replace, which stays the reference: the same
 stamps and the same samples, bit for bit.
 
 The files are written by the mcap project's own writers (``mcap.writer.Writer`` for JSON,
@@ -19,8 +18,7 @@ from mcap.writer import Writer
 
 import meshphase.io as pio
 from meshphase.io.mcap import bulk, foreign
-from meshphase.io.mcap.cdr import CdrBatch, Unsupported, parse_msgdefs
-from meshphase.io.mcap.jsonbatch import JsonBatch, parse_numbers
+from meshphase.io.mcap.batch import CdrBatch, JsonBatch, Unsupported, parse_msgdefs, parse_numbers, token_matrix
 from meshphase.io.mcap.mapping import parse_topics
 from meshphase.recording import Recording
 
@@ -233,9 +231,7 @@ def _texts(texts):
     raw = b" ".join(t.encode() for t in texts)
     lens = np.array([len(t) for t in texts])
     starts = np.concatenate(([0], np.cumsum(lens + 1)[:-1]))
-    from meshphase.io.mcap.jsonbatch import _matrix
-
-    return _matrix(np.frombuffer(raw, np.uint8), starts, lens), lens
+    return token_matrix(np.frombuffer(raw, np.uint8), starts, lens), lens
 
 
 def test_parse_numbers_is_json_loads_bit_for_bit():

@@ -6,15 +6,15 @@ as for meshphase's own layout), its messages of that topic are found through the
 MessageIndex record, their record headers (channel, log and publish time, payload position)
 are read for all of them at once with numpy, and the payloads are decoded together:
 
-* JSON (:class:`~.jsonbatch.JsonBatch`): when the messages of the chunk share one shape, the
+* JSON (:class:`~.batch.JsonBatch`): when the messages of the chunk share one shape, the
   wanted number of every message is converted at once; otherwise the chunk's payloads are
   parsed by one :func:`json.loads` call over them joined as a JSON array, and the fields
   taken message by message.
-* ROS 2 CDR (:class:`~.cdr.CdrBatch`): the field's byte position in every message, then one
+* ROS 2 CDR (:class:`~.batch.CdrBatch`): the field's byte position in every message, then one
   gather.
 
-The values are those of the per-message path (:func:`.fields.get_field`,
-:func:`.fields.as_values`, :func:`.fields.stamp_ns` on the objects the mcap project's
+The values are those of the per-message path (:func:`.mapping.get_field`,
+:func:`.mapping.as_values`, :func:`.mapping.stamp_ns` on the objects the mcap project's
 decoders give), bit for bit: the first and last message of every chunk are decoded by the
 reference decoder and compared. Whatever this path does not handle (protobuf, other
 encodings, a topic on several channels, messages outside chunks or without a message index,
@@ -30,15 +30,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...runtime.log import logger
-from .cdr import CdrBatch, Unsupported, parse_msgdefs
+from .batch import CdrBatch, JsonBatch, Unsupported, parse_msgdefs
 from .chunks import ChunkReader, read_message_index
-from .fields import FieldError, as_values, get_field, stamp_ns
-from .jsonbatch import JsonBatch
-from .mapping import TopicField
+from .mapping import FieldError, TopicField, as_values, get_field, stamp_ns
 
 __all__ = ["Series", "collect_bulk", "STAMP_PAIRS"]
 
-#: Field names of a time stamp struct, in the order :func:`.fields.stamp_ns` tries them.
+#: Field names of a time stamp struct, in the order :func:`.mapping.stamp_ns` tries them.
 STAMP_PAIRS = (("sec", "nsec"), ("sec", "nanosec"), ("seconds", "nanos"))
 _RECORD_HEAD = 9 + 22  # opcode, length; channel id, sequence, log_time, publish_time
 _U8 = np.arange(8, dtype=np.int64)
