@@ -34,6 +34,13 @@ measured alongside, so that one table shows both streamed commands flat in the l
 MCAP paths (:mod:`meshphase.bench.mcap_paths`): on the first 10 s of the recording, the own
 block layout read by the fast path against the generic decoder path (the ``foxglove`` layout,
 a foreign JSON file with one message per sample time, a ROS 2 file with arrays per message).
+
+MCAP generic decode, scalar per message (:func:`generic_decode_rows`): one channel of the
+first 10 s written by the official writers as one message per sample (JSON ``{"value": x}``
+with ``mcap.writer``; ROS 2 ``std_msgs/msg/Float64`` with ``mcap_ros2.writer``) and read
+through a mapping (``meshphase.io.read(path, topics=...)``, decoded chunk by chunk), against
+the official reader's per-message decoding of the same file (``iter_decoded_messages``), in
+samples/s.
 """
 
 from __future__ import annotations
@@ -62,7 +69,7 @@ from ..validate import as_positive, as_positive_int
 from .mcap_paths import markdown as mcap_paths_markdown, mcap_path_rows
 
 __all__ = ["run_io_bench", "strain_recording", "convert_rss_rows", "IO_FORMATS", "TARGETS",
-           "COLUMNS", "CONVERT_COLUMNS", "CONVERT_MINUTES"]
+           "COLUMNS", "CONVERT_COLUMNS", "CONVERT_MINUTES", "generic_decode_rows", "GENERIC_COLUMNS"]
 
 #: Formats the benchmark knows, in report order.
 IO_FORMATS = ("hdf5", "mcap", "csv", "tdms")
@@ -219,6 +226,115 @@ def _best(fn, repeats: int) -> tuple[float, object]:
     return best, out
 
 
+#: Keys of the rows of :func:`generic_decode_rows`.
+GENERIC_COLUMNS = ("encoding", "messages", "read_s", "samples_per_s", "per_message_samples_per_s",
+                   "x_per_message", "exact")
+_GENERIC_SECONDS = 10.0
+
+
+def _scalar_file(encoding: str, values: np.ndarray, fs: float, path: Path) -> dict:
+    """One message per sample, the value its one number, written by the official writer of
+    ``encoding`` ("json" or "cdr"); the mapping that reads it."""
+    from mcap.writer import Writer
+
+    t0 = 1_790_000_000 * 10**9
+    stamps = [t0 + (k * 10**9 * q) // p for k, (p, q) in enumerate([fs.as_integer_ratio()] * values.size)]
+    with open(path, "wb") as fh:
+        if encoding == "json":
+            w = Writer(fh)
+            w.start(profile="", library="meshphase bench")
+            cid = w.register_channel("/rig/sun_T3", "json",
+                                     w.register_schema("bench.Scalar", "jsonschema", b'{"type": "object"}'))
+            for t, v in zip(stamps, values.tolist()):
+                w.add_message(cid, t, json.dumps({"value": v}).encode(), t)
+            w.finish()
+            return {"sun_T3": "/rig/sun_T3:value"}
+        from mcap_ros2.writer import Writer as Ros2Writer  # the ROS 2 message parser: only here
+
+        w = Ros2Writer(fh)
+        schema = w.register_msgdef("std_msgs/msg/Float64", "float64 data\n")
+        for t, v in zip(stamps, values.tolist()):
+            w.write_message("/rig/sun_T3", schema, {"data": v}, log_time=t, publish_time=t)
+        w.finish()
+        return {"sun_T3": "/rig/sun_T3:data"}
+
+
+def _per_message(path: Path, field: str) -> np.ndarray:
+    """The official reader's per-message decoding: one Python object per message."""
+    from mcap.reader import make_reader
+
+    from ..io.mcap.foreign import decoder_factories
+
+    with open(path, "rb") as fh:
+        reader = make_reader(fh, decoder_factories=decoder_factories())
+        return np.array([getattr(m, field) if not isinstance(m, dict) else m[field]
+                         for _, _, _, m in reader.iter_decoded_messages(log_time_order=False)])
+
+
+def generic_decode_rows(rec: Recording, work: Path, timer) -> list[dict]:
+    """MCAP generic decode, scalar per message: samples/s of ``meshphase.io.read`` with a
+    mapping on files of one number per message, JSON and ROS 2 CDR.
+
+    Parameters
+    ----------
+    rec : Recording
+        Its first channel's first 10 s (at least 2 samples) are written.
+    work : Path
+        Folder for the files (removed after each row).
+    timer : callable
+        ``timer(fn) -> (best wall time [s], last result)``.
+
+    Returns
+    -------
+    list of dict
+        One row per encoding with the keys :data:`GENERIC_COLUMNS`: ``samples_per_s`` of the
+        read, ``per_message_samples_per_s`` of ``iter_decoded_messages`` on the same file,
+        their ratio, and whether the read gave the written samples bit for bit.
+    """
+    from ..io import read as io_read
+    from ..io.mcap import clear_cache
+
+    n = min(rec.n_samples, int(round(_GENERIC_SECONDS * rec.fs)))
+    if n < 2 or rec.n_channels < 1:
+        raise ValueError(f"generic decode rows need at least 2 samples of one channel, got {n} x "
+                         f"{rec.n_channels}")
+    values = np.ascontiguousarray(rec.data[:n, 0], dtype=np.float64)
+    rows = []
+    for encoding in ("json", "cdr"):
+        path = work / f"generic_{encoding}.mcap"
+        topics = _scalar_file(encoding, values, float(rec.fs), path)
+        field = "value" if encoding == "json" else "data"
+
+        def read():
+            clear_cache()  # decode anew every time (a read keeps the last decoded file)
+            return io_read(path, topics=topics)
+
+        t_read, got = timer(read)
+        t_msg, ref = timer(lambda: _per_message(path, field))
+        clear_cache()
+        exact = bool(got.n_samples == n and np.array_equal(got.data[:, 0].view(np.uint64), values.view(np.uint64))
+                     and np.array_equal(ref, values))
+        rows.append({"encoding": encoding, "messages": n, "read_s": t_read, "samples_per_s": n / t_read,
+                     "per_message_samples_per_s": n / t_msg, "x_per_message": t_msg / t_read, "exact": exact})
+        path.unlink()
+    return rows
+
+
+def _generic_markdown(rows: list[dict]) -> list[str]:
+    if not rows:
+        return []
+    lines = ["## MCAP generic decode, scalar per message", "",
+             "One number per message (JSON `{\"value\": x}`, ROS 2 `std_msgs/msg/Float64`), written by the "
+             "official writers, read through a mapping; against `iter_decoded_messages` of the same file.", "",
+             "| encoding | messages | read s | samples/s | per-message samples/s | x per-message | exact |",
+             "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['encoding']} | {r['messages']} | {r['read_s']:.3f} | {r['samples_per_s']:,.0f} "
+                     f"| {r['per_message_samples_per_s']:,.0f} | {r['x_per_message']:.1f} | {r['exact']} |")
+    lines.append("")
+    return lines
+
+
 def _raw_reads(data: np.ndarray, path: Path, repeats: int) -> dict:
     np.save(path, data)
     buf = np.empty_like(data)
@@ -348,10 +464,10 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
     Returns
     -------
     dict
-        ``{"config", "raw", "rows", "convert", "process", "mcap_paths", "skipped", "warnings",
-        "notes", "files"}`` (``mcap_paths``: own MCAP layout by the fast path against the
-        generic decoder path, :func:`meshphase.bench.mcap_paths.mcap_path_rows`, when MCAP is
-        benchmarked; ``convert``: rows with the keys :data:`CONVERT_COLUMNS`; ``process``: rows
+        ``{"config", "raw", "rows", "convert", "process", "mcap_paths", "generic_decode",
+        "skipped", "warnings", "notes", "files"}`` (``mcap_paths``: own MCAP layout by the fast
+        path against the generic decoder path, :func:`meshphase.bench.mcap_paths.mcap_path_rows`,
+        and ``generic_decode``: :func:`generic_decode_rows`, when MCAP is benchmarked; ``convert``: rows with the keys :data:`CONVERT_COLUMNS`; ``process``: rows
         with the keys :data:`meshphase.bench.processing.PROCESS_COLUMNS`); ``rows`` is a
         list of dicts with the keys :data:`COLUMNS`, throughputs in MSamples/s, sizes in MB,
         times in s (None where a column does not apply).
@@ -390,6 +506,8 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
         convert, process = _rss_tables(work, convert_minutes, process_minutes, skipped)
         mcap_paths = (mcap_path_rows(rec, work, lambda fn: _best(fn, repeats))  # own vs generic
                       if any(f == "mcap" for f, *_ in plan) else [])
+        generic = (generic_decode_rows(rec, work, lambda fn: _best(fn, repeats))
+                   if any(f == "mcap" for f, *_ in plan) else [])
     finally:
         if bar:
             bar.close()
@@ -399,7 +517,7 @@ def run_io_bench(out_dir, *, minutes: float = 60.0, n_channels: int = 8, fs: flo
                      bench)
     config["tdms_rows_engine"] = rows_warm
     result = {"config": config, "raw": raw, "rows": rows, "convert": convert, "process": process,
-              "mcap_paths": mcap_paths, "skipped": skipped, "warnings": caught,
+              "mcap_paths": mcap_paths, "generic_decode": generic, "skipped": skipped, "warnings": caught,
               "notes": _notes(repeats, rows_warm)}
     files = {"json": str(out / "io_bench.json"), "md": str(out / "io_bench.md")}
     result["files"] = files
@@ -670,6 +788,7 @@ def _markdown(res: dict) -> str:
                          f"| {_fmt(r.get('streamed_peak_mb'))} | {r['rss_over_data']:.3f} |")
         lines.append("")
     lines += mcap_paths_markdown(res.get("mcap_paths") or [], c["n_channels"], c["fs"])
+    lines += _generic_markdown(res.get("generic_decode") or [])
     if res["skipped"]:
         lines.append("Skipped: " + "; ".join(f"{s['format']} ({s['reason']})" for s in res["skipped"]))
         lines.append("")

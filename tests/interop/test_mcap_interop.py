@@ -141,7 +141,13 @@ def test_time_window_end_is_inclusive_in_typescript_half_open_in_python(node, tm
 
 @pytest.mark.parametrize("compression", ["none", "zstd"])
 def test_typescript_reader_decodes_foxglove_layout(node, tmp_path, compression):
-    rec = _recording(np.float64, 12.5).slice_samples(0, 1500)
+    """The ``foxglove`` layout (data_schemas/mcap.md) through @mcap/core: absolute log times
+    (start_datetime + t0 + k / fs in ns since the Unix epoch) and one field per channel named
+    for Foxglove's message paths (https://docs.foxglove.dev/docs/visualization/message-path-syntax:
+    field names of letters, digits and ``_``)."""
+    base = _recording(np.float64, 12.5).slice_samples(0, 1500)
+    specs = [ChannelSpec("sun/T3", kind="sun"), ChannelSpec("ring 1.a", kind="ring"), ChannelSpec("sun_T3")]
+    rec = Recording(base.data, base.fs, specs, t0=base.t0, start_datetime="2026-03-04T05:06:07.5+01:00")
     p = pio.write(rec, tmp_path / "fox.mcap", layout="foxglove", compression=compression)
     out = _node_read(node, p)
     assert out["topics"] == {}  # no meshphase-block channel
@@ -150,17 +156,38 @@ def test_typescript_reader_decodes_foxglove_layout(node, tmp_path, compression):
     assert topic == "/meshphase/samples"
     assert (jt["schemaName"], jt["schemaEncoding"]) == (m.FOXGLOVE_SCHEMA_NAME, "jsonschema")
     (schema,) = [s["data"] for s in out["schemas"] if s["name"] == m.FOXGLOVE_SCHEMA_NAME]
-    assert set(schema["properties"]["channels"]["properties"]) == set(rec.names)
-    origin = mlayout.origin_ns(rec.t0)
+    fields = ["sun_T3", "ring_1_a", "sun_T3_2"]
+    props = schema["properties"]["channels"]["properties"]
+    assert list(props) == fields and [props[f]["title"] for f in fields] == rec.names
+    (md,) = [x["metadata"] for x in out["metadata"] if x["name"] == m.FOXGLOVE_METADATA]
+    assert md["time_base"] == "start_datetime" and json.loads(md["fields"]) == dict(zip(fields, rec.names))
+    origin = 1_772_597_167_500_000_000 + 12_500_000_000  # 2026-03-04T04:06:07.5Z + t0
+    assert int(md["log_time_origin_ns"]) == origin
     want_ns = [m.log_time_ns(k, rec.fs, origin) for k in range(rec.n_samples)]
     assert [int(t) for t in jt["logTimes"]] == want_ns
     msgs = jt["messages"]
     assert [x["sample"] for x in msgs] == list(range(rec.n_samples))
     assert [x["timestamp"]["sec"] * 10**9 + x["timestamp"]["nsec"] for x in msgs] == want_ns
-    for j, name in enumerate(rec.names):
-        got = np.array([x["channels"].get(name, np.nan) for x in msgs])  # NaN/inf left out
+    for j, field in enumerate(fields):
+        got = np.array([x["channels"].get(field, np.nan) for x in msgs])  # NaN/inf left out
         want = np.where(np.isfinite(rec.data[:, j]), rec.data[:, j], np.nan)
         np.testing.assert_array_equal(got, want)  # finite values bit-exact through JSON
+    # the official Python reader sees the same messages at the same times
+    with open(p, "rb") as fh:
+        py = [(msg.log_time, json.loads(msg.data)) for _, _, msg in make_reader(fh).iter_messages()]
+    assert [t for t, _ in py] == want_ns and [d for _, d in py] == msgs
     # and meshphase reads the same file back without a mapping
     back = pio.read(p)
     assert back.fs == rec.fs and back.t0 == rec.t0 and back.names == rec.names
+    assert back.start_datetime == rec.start_datetime
+    np.testing.assert_array_equal(back.data[np.isfinite(rec.data)], rec.data[np.isfinite(rec.data)])
+
+
+def test_skip_reason_names_what_is_missing(monkeypatch, tmp_path):
+    # runs everywhere: without node (or without npm ci) the tests above are skipped with this
+    # reason, which pytest's -ra (pyproject addopts) prints in the summary
+    monkeypatch.setattr(shutil, "which", lambda name: None)
+    assert "node is not on PATH" in _skip_reason()
+    monkeypatch.setattr(shutil, "which", lambda name: "/usr/bin/node")
+    monkeypatch.setitem(globals(), "HERE", tmp_path)  # no node_modules here
+    assert "npm ci" in _skip_reason()

@@ -401,16 +401,20 @@ def test_foxglove_layout_decodes_with_mcap_python_and_validates(tmp_path):
         _foxglove_parser_accepts(schema)
         got = list(reader.iter_decoded_messages())
     assert len(got) == rec.n_samples
+    fields = m.field_names(rec.names)
+    assert fields == ["sun_1", "ring_1", "tacho"]  # "ring.1" is no Foxglove message-path name
+    assert [schema["properties"]["channels"]["properties"][f]["title"] for f in fields] == rec.names
+    start_ns = 1_735_689_600 * 10**9  # 2025-01-01T00:00:00Z
     for k, (_, _, msg, obj) in enumerate(got):
         validator.validate(obj)
-        want_ns = m.log_time_ns(k, rec.fs, 1_250_000_000)
+        want_ns = m.log_time_ns(k, rec.fs, start_ns + 1_250_000_000)  # start_datetime + t0 + k / fs
         assert msg.log_time == want_ns == obj["timestamp"]["sec"] * 10**9 + obj["timestamp"]["nsec"]
         assert obj["sample"] == k
-        for j, name in enumerate(rec.names):
+        for j, field in enumerate(fields):
             if np.isfinite(rec.data[k, j]):
-                assert obj["channels"][name] == rec.data[k, j]
+                assert obj["channels"][field] == rec.data[k, j]
             else:
-                assert name not in obj["channels"]
+                assert field not in obj["channels"]
 
 
 def test_foxglove_layout_streaming_and_bad_options(tmp_path):

@@ -103,3 +103,44 @@ def test_input_mcap_mistakes_name_their_key(files):
                                 '[[input.mcap.channels]]\nname = "sun"\ntopic = "/nope"\nfield = "v"\n'
                                 'kind = "sun"\n', d / "c.toml"))
     assert "/nope" in str(ctx.failed["load"]) and "topics present" in str(ctx.failed["load"])
+
+
+def test_process_keeps_the_gearset_files_mcap_mapping(files, tmp_path):
+    # meshphase process FILE --gearset G.toml replaces [input] by FILE, and keeps G.toml's
+    # [input.mcap] for an MCAP FILE (another tool's file needs its mapping)
+    from meshphase.run.stages import process_recording
+
+    d, rec = files
+    g = tmp_path / "g.toml"
+    g.write_text('name = "x"\nresults = ["phasing"]\n' + GEARSET + '[speeds]\nsun_rpm = 18.19\nfixed = "ring"\n'
+                 f'[input]\nrecording = "{(d / "rig.mcap").as_posix()}"\n' + _mapping_toml(rec), encoding="utf-8")
+    foreign._CACHE.clear()
+    ctx, written = process_recording(d / "rig.mcap", g, out_dir=tmp_path / "out")
+    assert ctx.load.recording.names == rec.names and "phasing" not in ctx.failed, ctx.failed
+
+
+def test_the_scene_of_the_mcap_docs_page_parses(tmp_path):
+    # docs/daq/mcap.md: its [input.mcap] scene is a valid scene
+    import re
+    from pathlib import Path
+
+    from meshphase.io.mcap import describe_topics
+
+    page = (Path(__file__).resolve().parents[2] / "docs" / "daq" / "mcap.md").read_text(encoding="utf-8")
+    # its writer snippet (the official ROS 2 writer), on 0.1 s instead of 30 s
+    (code,) = [b for b in re.findall(r"```python\n(.*?)```", page, re.S) if "mcap_ros2.writer" in b]
+    monkey = code.replace("range(30 * FS)", "range(FS // 10)").replace('"run42.mcap"', repr(str(tmp_path / "run42.mcap")))
+    assert monkey != code
+    exec(compile(monkey, "docs/daq/mcap.md", "exec"), {})
+    (t,) = describe_topics(tmp_path / "run42.mcap")
+    assert (t["topic"], t["schema"], t["message_count"]) == ("/rig/strain", "rig_msgs/msg/Strain", 512)
+    assert t["rate_Hz"] == pytest.approx(5120.0) and t["start_ns"] == 1_772_614_800_000_000_000
+    assert [f["path"] for f in t["numeric_fields"]] == ["header.stamp.sec", "header.stamp.nanosec", "sun_t3",
+                                                         "ring_r1", "tacho"]
+    (toml,) = [b for b in re.findall(r"```toml\n(.*?)```", page, re.S) if "[input.mcap]" in b]
+    scene = parse_scene(toml, tmp_path / "run42.toml")
+    assert [t["name"] for t in scene.input["mcap"]["topics"]] == ["sun_T3", "ring_R1", "tacho"]
+    assert scene.input["mcap"]["stamp"] == "header.stamp"
+    rec = pio.read(tmp_path / "run42.mcap", **scene.input["mcap"])
+    assert rec.names == ["sun_T3", "ring_R1", "tacho"] and rec.fs == pytest.approx(5120.0)
+    assert rec.start_datetime == "2026-03-04T09:00:00+00:00"

@@ -42,30 +42,36 @@ offset) or byte range, and the CRCs.
 
 MCAP written by other tools (ROS 2 CDR, protobuf, JSON): :func:`read`, :func:`read_info` and
 :func:`iter_blocks` take a mapping (``topics=``, see :mod:`.mapping`) of topic fields onto
-channels and decode the messages with the mcap project's decoders (:mod:`.foreign`, the
-generic path; :mod:`.timing` fits the stamps to one sample grid); without a mapping the
+channels and decode the messages (:mod:`.foreign`: JSON and CDR a chunk at a time with numpy,
+:mod:`.bulk`, :mod:`.batch`; the rest with the mcap project's decoders;
+:mod:`.timing` fits the stamps to one sample grid); without a mapping the
 error lists the file's topics, schemas and numeric fields (:func:`describe`).
-:func:`describe_topics` (:mod:`.topics`) lists any MCAP file's topics as dicts: encodings,
+:func:`describe_topics` (:mod:`.foreign`) lists any MCAP file's topics as dicts: encodings,
 message count, rate, time span and the numeric fields a mapping can name.
 ``write(..., layout="foxglove")`` (:mod:`.foxglove`) writes one self-describing JSON message
-per sample time, which Foxglove plots, and which reads back without a mapping.
+per sample time, stamped in absolute time (the start time + t0 + k / fs, ns since the Unix
+epoch), one field per channel named for Foxglove's message paths (:func:`field_names`),
+which Foxglove plots, and which reads back without a mapping.
 
 Modules: ``layout`` (names, record framing, payload header, log times, schemas), ``crc``
-(summary and data-section CRCs, ``crc32_combine``), ``topics`` (:func:`describe_topics`), ``header`` (opening a file: summary,
-recording header, per-file cache), ``chunks`` (the chunk reader), ``reader`` (:func:`read`,
-:func:`read_info`, :func:`iter_blocks`) and ``writer`` (:func:`write`, :func:`write_blocks`).
+(summary and data-section CRCs, ``crc32_combine``), ``header`` (opening a file: summary, recording header, per-file cache), ``chunks`` (the chunk
+reader, message indexes), ``reader`` (:func:`read`,
+:func:`read_info`, :func:`iter_blocks`), ``writer`` (:func:`write`, :func:`write_blocks`);
+for other tools' files ``mapping`` (mapping, field access), ``foreign`` (decoding,
+:func:`describe_topics`), ``bulk`` and ``batch`` (per-chunk decoding), ``timing``, and
+``foxglove`` (the export).
 """
 
 from .crc import crc32_combine
 from .layout import (COMPRESSIONS, DEFAULT_BLOCK, DEFAULT_CHUNK_SIZE, FORMAT, FORMAT_VERSION, HEADER_SIZE,
                      LAYOUT, MAGIC, MESSAGE_ENCODING, NAME, PROFILE, RECORDING_METADATA,
                      SCHEMA_ENCODING, SCHEMA_NAME, log_time_ns, sniff)
-from .foreign import describe, read_foreign
-from .foxglove import FOXGLOVE_METADATA, FOXGLOVE_SCHEMA_NAME, LAYOUTS, write_foxglove
+from .foreign import TOPIC_KEYS, clear_cache, describe, describe_topics, read_foreign
+from .foxglove import (FOXGLOVE_METADATA, FOXGLOVE_SCHEMA_NAME, LAYOUTS, TIME_BASES, field_names,
+                       time_origin, write_foxglove)
 from .header import ForeignMcapError
 from .mapping import TopicField, parse_field_path, parse_topics
 from .reader import iter_blocks, read, read_info
-from .topics import TOPIC_KEYS, describe_topics
 from .timing import fit_grid
 from .writer import write, write_blocks
 
@@ -75,4 +81,5 @@ __all__ = ["NAME", "FORMAT", "MAGIC", "SCHEMA_NAME", "MESSAGE_ENCODING",
            "PROFILE", "FORMAT_VERSION", "DEFAULT_CHUNK_SIZE", "HEADER_SIZE", "LAYOUT",
            "describe", "read_foreign", "write_foxglove", "LAYOUTS", "FOXGLOVE_METADATA",
            "FOXGLOVE_SCHEMA_NAME", "ForeignMcapError", "TopicField", "parse_topics",
-           "parse_field_path", "fit_grid", "describe_topics", "TOPIC_KEYS"]
+           "parse_field_path", "fit_grid", "describe_topics", "TOPIC_KEYS", "field_names", "time_origin",
+           "TIME_BASES", "clear_cache"]

@@ -4,7 +4,10 @@ checked in a worker thread, and the messages and payload headers in it."""
 from __future__ import annotations
 
 import os
+import struct
 from pathlib import Path
+
+import numpy as np
 
 from ..base import CorruptFileError, RecordingFileError
 from .crc import crc32
@@ -12,7 +15,10 @@ from .header import LIB_ERRORS, Layout
 from .layout import (CHUNK_HEAD, HEADER, MAX_RECORD, MSG_HEAD, OP_CHUNK, OP_MESSAGE, REC, U64,
                      FORMAT_VERSION, HEADER_SIZE)
 
-__all__: list[str] = []
+__all__: list[str] = ["read_message_index"]
+
+_OP_MESSAGE_INDEX = 0x07
+_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, record length, channel id, entries byte length
 
 _CRC_ASYNC_MIN = 1 << 16  # chunks at least this large [B] get their CRC in the worker thread
 
@@ -211,3 +217,27 @@ def decode_message(buf, off: int, size: int, lay: Layout, path: Path, name: str)
                                        f"beyond n_samples = {lay.info.n_samples}")
     return first, n
 
+
+
+def read_message_index(fh, path: Path, offset: int, cid: int) -> np.ndarray | None:
+    """The entries of the MessageIndex record at byte ``offset`` of the file (a chunk index's
+    ``message_index_offsets[cid]``): an (n, 2) uint64 array of (log_time [ns], offset of the
+    message record in the chunk's uncompressed records [B]), in the file's order; None when
+    the bytes there are not a MessageIndex record of channel ``cid``.
+
+    Raises
+    ------
+    RecordingFileError
+        The record runs past the end of the file.
+    """
+    fh.seek(offset)
+    head = fh.read(_INDEX_HEAD.size)
+    if len(head) < _INDEX_HEAD.size:
+        raise RecordingFileError(path, f"message index at byte {offset} runs past the end of the file")
+    op, length, ch, nbytes = _INDEX_HEAD.unpack(head)
+    if op != _OP_MESSAGE_INDEX or ch != cid or nbytes % 16 or 2 + 4 + nbytes != length:
+        return None
+    raw = fh.read(nbytes)
+    if len(raw) != nbytes:
+        raise RecordingFileError(path, f"message index at byte {offset} runs past the end of the file")
+    return np.frombuffer(raw, dtype="<u8").reshape(-1, 2)

@@ -1,12 +1,15 @@
 """Reading MCAP files written by other tools (ROS 2, Foxglove bridges, DAQ loggers): their
 messages are decoded by the mcap project's decoders (JSON here, protobuf by
 ``mcap-protobuf-support``, ROS 2 CDR by ``mcap-ros2-support``) and the mapped fields
-(:mod:`.mapping`) become channels of one uniform-rate recording (:mod:`.timing`).
+(:mod:`.mapping`) become channels of one uniform-rate recording (:mod:`.timing`). What any
+MCAP file holds, topic by topic, for writing a mapping: :func:`describe_topics`.
 
-This is the generic path: every message goes through ``McapReader.iter_decoded_messages``
-and Python objects, ~10-100x slower per sample than meshphase's own block layout (``meshphase
-bench io`` measures both). A decoded file is kept (one at a time, by file identity and
-mapping) so that the registry's ``read_info`` + ``read`` decode it once.
+JSON and ROS 2 CDR topics are decoded a chunk at a time by :mod:`.bulk` where it can; the
+rest (protobuf, the fields and files it leaves) message by message through
+``McapReader.iter_decoded_messages`` and Python objects, which is also the path that reports
+every error (``meshphase bench io`` measures both against meshphase's own block layout). A
+decoded file is kept (one at a time, by file identity and mapping) so that the registry's
+``read_info`` + ``read`` decode it once.
 """
 
 from __future__ import annotations
@@ -25,20 +28,28 @@ import numpy as np
 from mcap.decoder import DecoderFactory
 from mcap.exceptions import DecoderNotFoundError
 from mcap.reader import make_reader
+from mcap.records import Channel, Message, Schema
+from mcap.stream_reader import StreamReader
 
 from ...recording import ChannelSpec, Recording
 from ..base import RecordingFileError, RecordingInfo, check_verify
+from .bulk import Series, collect_bulk
 from .foxglove import FOXGLOVE_METADATA
 from .header import check_ends, lib_errors
-from .mapping import TopicField, TopicSummary, format_field_path, mapping_key, parse_topics
+from .chunks import read_message_index
+from .mapping import (FieldError, TopicField, TopicSummary, as_values, get_field, mapping_key, numeric_fields,
+                      parse_topics, stamp_ns)
 from .timing import fit_grid
 
-__all__ = ["read_foreign", "describe", "numeric_fields", "JsonDecoderFactory", "decoder_factories", "FOREIGN_OPTIONS"]
+__all__ = ["read_foreign", "describe", "describe_topics", "TOPIC_KEYS", "JsonDecoderFactory", "decoder_factories",
+           "FOREIGN_OPTIONS", "clear_cache"]
 
 #: Format options of the foreign path (besides ``verify``).
 FOREIGN_OPTIONS = ("topics", "fs", "max_jitter", "stamp")
+#: Keys of each dict :func:`describe_topics` returns, in order.
+TOPIC_KEYS = ("topic", "schema", "schema_encoding", "message_encoding", "message_count", "rate_Hz",
+              "start_ns", "end_ns", "numeric_fields")
 _EPOCH_NS = 10 ** 18  # stamps from 2001-09-09 on are taken as Unix time (start_datetime)
-_MAX_LISTED_FIELDS = 40
 
 
 class JsonDecoderFactory(DecoderFactory):
@@ -57,107 +68,6 @@ def decoder_factories() -> list:
     from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
 
     return [JsonDecoderFactory(), ProtobufDecoderFactory(), Ros2DecoderFactory()]
-
-
-# -- field access ------------------------------------------------------------------------
-
-class _FieldError(LookupError):
-    pass
-
-
-def _get(obj, path: tuple):
-    """The value at ``path`` in a decoded message (dict, protobuf message, ROS 2 object)."""
-    for i, p in enumerate(path):
-        try:
-            if isinstance(p, int):
-                obj = obj[p]
-            elif isinstance(obj, dict):
-                obj = obj[p]
-            else:
-                obj = getattr(obj, p)
-        except (KeyError, IndexError, AttributeError, TypeError):
-            where = format_field_path(path[:i + 1])
-            raise _FieldError(where) from None
-    return obj
-
-
-def _is_number(x) -> bool:
-    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
-
-
-def _as_values(x):
-    """A float (one sample) or a 1-D float64 array (samples), or None when not numeric.
-    JSON null reads as NaN."""
-    if _is_number(x):
-        return float(x)
-    if x is None:
-        return math.nan
-    if isinstance(x, (str, bytes, dict)):
-        return None
-    if isinstance(x, np.ndarray) or hasattr(x, "__len__"):
-        try:
-            arr = np.asarray(x)
-        except (TypeError, ValueError):
-            return None
-        if arr.ndim == 1 and arr.dtype.kind in "iuf":
-            return arr.astype(np.float64)
-        if arr.ndim == 1 and arr.dtype.kind == "O":  # JSON nulls among the numbers
-            items = arr.tolist()
-            if all(_is_number(v) or v is None for v in items):
-                return np.array([math.nan if v is None else v for v in items], dtype=np.float64)
-    return None
-
-
-def _stamp_ns(stamp, msg, decoded, where: str) -> int:
-    if stamp == "log_time":
-        return int(msg.log_time)
-    if stamp == "publish_time":
-        return int(msg.publish_time)
-    try:
-        v = _get(decoded, stamp)
-    except _FieldError as exc:
-        raise ValueError(f"{where}: stamp field {format_field_path(stamp)!r} not found "
-                         f"(at {exc})") from None
-    for sec, nsec in (("sec", "nsec"), ("sec", "nanosec"), ("seconds", "nanos")):
-        try:
-            s, ns = (v[sec], v[nsec]) if isinstance(v, dict) else (getattr(v, sec), getattr(v, nsec))
-        except (KeyError, AttributeError, TypeError):
-            continue
-        return int(s) * 1_000_000_000 + int(ns)
-    if _is_number(v) and math.isfinite(float(v)):
-        return int(v) if isinstance(v, (int, np.integer)) else int(round(float(v) * 1e9))
-    raise ValueError(f"{where}: stamp field {format_field_path(stamp)!r} is {v!r}; a stamp is "
-                     f"{{sec, nsec}}, {{sec, nanosec}}, {{seconds, nanos}}, an integer [ns] or a float [s]")
-
-
-# -- what a file holds -------------------------------------------------------------------
-
-def numeric_fields(obj, prefix: tuple, out: list, depth: int = 0) -> None:
-    """Append to ``out`` the numeric fields of a decoded message (dict, protobuf message,
-    ROS 2 object) below ``prefix``, as (field path text, ``"number"`` or ``"array[n]"``);
-    at most 40 fields, 8 levels deep, arrays of arrays by their first element."""
-    if len(out) >= _MAX_LISTED_FIELDS or depth > 8:
-        return
-    v = _as_values(obj) if prefix else None
-    if isinstance(v, float):
-        out.append((format_field_path(prefix), "number"))
-        return
-    if isinstance(v, np.ndarray):
-        if v.size:
-            out.append((format_field_path(prefix), f"array[{v.size}]"))
-        return
-    if isinstance(obj, dict):
-        items = list(obj.items())
-    elif hasattr(obj, "DESCRIPTOR") and hasattr(obj.DESCRIPTOR, "fields"):  # protobuf
-        items = [(f.name, getattr(obj, f.name)) for f in obj.DESCRIPTOR.fields]
-    elif hasattr(obj, "__slots__"):  # mcap_ros2's message classes
-        items = [(k, getattr(obj, k)) for k in obj.__slots__ if not k.startswith("_")]
-    elif isinstance(obj, (list, tuple)) and obj:
-        items = [(0, obj[0])]
-    else:
-        return
-    for k, val in items:
-        numeric_fields(val, prefix + (k,), out, depth + 1)
 
 
 def describe(path, *, verify: bool = True) -> list[TopicSummary]:
@@ -202,6 +112,133 @@ def describe(path, *, verify: bool = True) -> list[TopicSummary]:
     return out
 
 
+def _spans_from_index(fh, path: Path, summary, counts: dict) -> dict | None:
+    """{channel id: (start_ns, end_ns)} from the chunks' message indexes, or None when the
+    file has messages without index (then the caller scans)."""
+    spans: dict = {}
+    seen = dict.fromkeys(counts, 0)
+    for ci in summary.chunk_indexes:
+        for cid, off in (ci.message_index_offsets or {}).items():
+            entries = read_message_index(fh, path, off, cid)
+            if entries is None:
+                return None
+            t = entries[:, 0]
+            if t.size:
+                lo, hi = int(t.min()), int(t.max())
+                a, b = spans.get(cid, (lo, hi))
+                spans[cid] = (min(a, lo), max(b, hi))
+                seen[cid] = seen.get(cid, 0) + int(t.size)
+    if any(seen.get(cid, 0) != n for cid, n in counts.items()):
+        return None  # messages outside chunks, or chunks without indexes
+    return spans
+
+
+def _scan(path: Path, verify: bool) -> tuple[dict, dict, dict, dict]:
+    """(schemas, channels, counts, spans) from reading every record once."""
+    schemas, channels, counts, spans = {}, {}, {}, {}
+    with open(path, "rb") as fh, lib_errors(path, "scanning the records"):
+        for rec in StreamReader(fh, validate_crcs=verify).records:
+            if isinstance(rec, Message):
+                c = rec.channel_id
+                counts[c] = counts.get(c, 0) + 1
+                a, b = spans.get(c, (rec.log_time, rec.log_time))
+                spans[c] = (min(a, rec.log_time), max(b, rec.log_time))
+            elif isinstance(rec, Channel):
+                channels[rec.id] = rec
+            elif isinstance(rec, Schema):
+                schemas[rec.id] = rec
+    return schemas, channels, counts, spans
+
+
+def _fields(reader, factories: list, channel, schema, n: int):
+    """The numeric fields of the first message of ``channel`` (None: no decoder)."""
+    if not any(f.decoder_for(channel.message_encoding, schema) is not None for f in factories):
+        return None
+    found: list = []
+    if n:
+        try:
+            for _, _, _, decoded in reader.iter_decoded_messages(topics=[channel.topic], log_time_order=False):
+                numeric_fields(decoded, (), found)
+                break
+        except DecoderNotFoundError:
+            return None
+    return [{"path": p, "length": None if kind == "number" else int(kind[len("array["):-1])}
+            for p, kind in found]
+
+
+def describe_topics(path, *, verify: bool = True) -> list[dict]:
+    """What an MCAP file holds, one dict per topic (MCAP channel), in channel-id order.
+
+    Parameters
+    ----------
+    path : str or Path
+        Any MCAP file: another tool's (ROS 2 CDR, protobuf, JSON), meshphase's block layout
+        or its ``foxglove`` layout; with or without a summary section.
+    verify : bool
+        Check the CRCs of what is read (default True).
+
+    Returns
+    -------
+    list of dict
+        Keys (:data:`TOPIC_KEYS`):
+
+        * ``topic`` (str), ``schema`` (schema name, ``""`` without a schema),
+          ``schema_encoding`` (``""`` without a schema), ``message_encoding``;
+        * ``message_count`` (int);
+        * ``rate_Hz`` (float or None): ``(message_count - 1) / (end_ns - start_ns) * 1e9``
+          [messages/s], None with fewer than 2 messages or all at one time;
+        * ``start_ns``, ``end_ns`` (int or None): first and last log time [ns since the
+          Unix epoch, or whatever origin the writer used], None without messages;
+        * ``numeric_fields``: from decoding the topic's first message, a list of
+          ``{"path": str, "length": int or None}``; ``path`` is what a scene's
+          ``[[input.mcap.channels]] field`` takes, ``length`` is None for a number (one
+          sample per message) and the element count for an array of numbers (consecutive
+          samples per message; ``path[i]`` picks element i). ``[]`` when the first message
+          has no numeric field or the topic has no message; None when no decoder knows the
+          message encoding (meshphase's own ``meshphase-block`` layout, which needs no
+          mapping, among them).
+
+    Raises
+    ------
+    RecordingFileError
+        Not an MCAP file, an empty or truncated one (:class:`CorruptFileError`), a malformed
+        record, or a file without channels; each names the file.
+    FileNotFoundError
+        No such file.
+    """
+    path = Path(path)
+    verify = check_verify(verify)
+    with open(path, "rb") as fh:
+        check_ends(fh, path)
+        with lib_errors(path, "listing topics"):
+            factories = decoder_factories()
+            reader = make_reader(fh, validate_crcs=verify, decoder_factories=factories)
+            summary = reader.get_summary()
+            spans = None
+            if summary is not None and summary.statistics is not None:
+                schemas, channels = dict(summary.schemas), dict(summary.channels)
+                counts = {cid: int(summary.statistics.channel_message_counts.get(cid, 0)) for cid in channels}
+                spans = _spans_from_index(fh, path, summary, counts)
+            if spans is None:
+                schemas, channels, counts, spans = _scan(path, verify)
+            if not channels:
+                raise RecordingFileError(path, "the MCAP file has no channels (no topics): nothing to "
+                                               "list or read")
+            out = []
+            for cid in sorted(channels):
+                ch = channels[cid]
+                sc = schemas.get(ch.schema_id)
+                n = counts.get(cid, 0)
+                start, end = spans.get(cid, (None, None))
+                rate = (n - 1) / (end - start) * 1e9 if n >= 2 and end > start else None
+                out.append({"topic": ch.topic, "schema": sc.name if sc else "",
+                            "schema_encoding": sc.encoding if sc else "",
+                            "message_encoding": ch.message_encoding, "message_count": n,
+                            "rate_Hz": rate, "start_ns": start, "end_ns": end,
+                            "numeric_fields": _fields(reader, factories, ch, sc, n)})
+    return out
+
+
 def listing(topics: list[TopicSummary]) -> str:
     """The text of :func:`describe`'s result, one line per topic."""
     if not topics:
@@ -229,10 +266,12 @@ def no_mapping_error(path: Path, verify: bool) -> RecordingFileError:
 
 # -- decoding and assembling -------------------------------------------------------------
 
-def _collect(reader, path: Path, entries: list[TopicField]) -> dict:
-    """Per entry name: (stamps [ns] list, values list of float or 1-D arrays), in message
-    order. Checks every mapped topic exists and has messages, fields exist and are numeric,
-    and each field keeps its shape (number or array) from message to message."""
+def _collect(reader, path: Path, entries: list[TopicField], fh=None, verify: bool = True) -> dict:
+    """Per entry name: (stamps [ns] list, values list of float or 1-D arrays) in message
+    order, or a :class:`~.bulk.Series` for the entries the per-chunk path decodes
+    (:func:`~.bulk.collect_bulk`, given the open file ``fh``). Checks every mapped topic
+    exists and has messages, fields exist and are numeric, and each field keeps its shape
+    (number or array) from message to message."""
     summary = reader.get_summary()
     present = sorted({c.topic for c in summary.channels.values()}) if summary is not None else None
     wanted = sorted({e.topic for e in entries})
@@ -241,6 +280,12 @@ def _collect(reader, path: Path, entries: list[TopicField]) -> dict:
         if missing:
             raise RecordingFileError(path, f"topic(s) {missing} not in the file; topics present: "
                                            f"{present or 'none'}")
+    done: dict = {}
+    if fh is not None:
+        done, entries = collect_bulk(fh, path, summary, entries, decoder_factories(), verify=verify)
+        if not entries:
+            return done
+        wanted = sorted({e.topic for e in entries})
     by_topic: dict = {}
     for e in entries:
         by_topic.setdefault(e.topic, []).append(e)
@@ -253,8 +298,8 @@ def _collect(reader, path: Path, entries: list[TopicField]) -> dict:
             for e in by_topic.get(channel.topic, ()):
                 stamps, values = got[e.name]
                 try:
-                    raw = _get(decoded, e.path)
-                except _FieldError as exc:
+                    raw = get_field(decoded, e.path)
+                except FieldError as exc:
                     if e.missing_is_nan:
                         stamps.append(msg.log_time)  # the foxglove layout stamps by log time
                         values.append(math.nan)
@@ -264,7 +309,7 @@ def _collect(reader, path: Path, entries: list[TopicField]) -> dict:
                     raise RecordingFileError(path, f"{_where(e)}: message {len(stamps)} has no field "
                                                    f"{str(exc)!r}; numeric fields of that message: "
                                                    f"{', '.join(p for p, _ in found) or 'none'}") from None
-                v = _as_values(raw)
+                v = as_values(raw)
                 if v is None:
                     raise RecordingFileError(path, f"{_where(e)}: message {len(stamps)} holds "
                                                    f"{type(raw).__name__} {str(raw)[:60]!r}, not a number "
@@ -273,7 +318,7 @@ def _collect(reader, path: Path, entries: list[TopicField]) -> dict:
                 if shape.setdefault(e.name, kind) != kind:
                     raise RecordingFileError(path, f"{_where(e)}: message {len(stamps)} holds a {kind}, "
                                                    f"earlier messages a {shape[e.name]}")
-                stamps.append(_stamp_ns(e.stamp, msg, decoded, _where(e)) if not isinstance(e.stamp, str)
+                stamps.append(stamp_ns(e.stamp, msg, decoded, _where(e)) if not isinstance(e.stamp, str)
                               else msg.log_time if e.stamp == "log_time" else msg.publish_time)
                 values.append(v)
     except DecoderNotFoundError as exc:
@@ -282,6 +327,7 @@ def _collect(reader, path: Path, entries: list[TopicField]) -> dict:
     for e in entries:
         if not got[e.name][0]:
             raise RecordingFileError(path, f"channel {e.name!r}: topic {e.topic!r} has no messages")
+    got.update(done)
     return got
 
 
@@ -289,9 +335,24 @@ def _where(e: TopicField) -> str:
     return f"channel {e.name!r} (topic {e.topic!r}, field {e.field!r})"
 
 
-def _series(stamps: list, values: list):
+def _series(collected):
     """(stamps ns int64, counts, samples float64) of one channel, in stamp order (stable:
-    messages with equal stamps keep their order in the file)."""
+    messages with equal stamps keep their order in the file); ``collected`` is what
+    :func:`_collect` holds for the channel."""
+    if isinstance(collected, Series):
+        t, counts, samples = collected.stamps, collected.counts, collected.samples
+        if counts is None:
+            counts = np.ones(t.size, dtype=np.int64)
+        if np.any(t[1:] < t[:-1]):
+            order = np.argsort(t, kind="stable")
+            if not np.all(counts == counts[0]):
+                starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
+                samples = np.concatenate([samples[starts[i]:starts[i] + counts[i]] for i in order])
+            else:
+                samples = samples.reshape(t.size, -1)[order].reshape(-1)
+            t, counts = t[order], counts[order]
+        return t, counts, samples
+    stamps, values = collected
     t = np.asarray(stamps, dtype=np.int64)
     if isinstance(values[0], float):
         counts = np.ones(t.size, dtype=np.int64)
@@ -321,7 +382,7 @@ def _assemble(path: Path, entries: list[TopicField], got: dict, fs, max_jitter) 
     channel is checked against it. The channels then start at the latest first sample
     and end at the earliest last one (whole samples; a start offset off the grid by more
     than ``max_jitter`` is an error)."""
-    series = {e.name: _series(*got[e.name]) for e in entries}
+    series = {e.name: _series(got[e.name]) for e in entries}
     what = {e.name: _where(e) for e in entries}
     given = fs is not None
     try:
@@ -377,8 +438,12 @@ def _embedded(reader, path: Path):
     md = dict(recs[0].metadata)
     try:
         specs = [ChannelSpec.from_dict(d) for d in json.loads(md["channels"])]
-        entries = [TopicField(spec=s, topic=md["topic"], path=("channels", s.name), missing_is_nan=True)
-                   for s in specs]
+        # format 1 keyed the fields by channel name, format 2 by field_names() ("fields")
+        fields = list(json.loads(md["fields"])) if "fields" in md else [s.name for s in specs]
+        if len(fields) != len(specs):
+            raise ValueError(f"{len(fields)} fields for {len(specs)} channels")
+        entries = [TopicField(spec=s, topic=md["topic"], path=("channels", f), missing_is_nan=True)
+                   for s, f in zip(specs, fields)]
         header = {"fs": float(md["fs"]), "t0": float(md["t0"]), "n_samples": int(md["n_samples"]),
                   "dtype": md["dtype"], "meta": json.loads(md["meta"]), "history": json.loads(md["history"]),
                   "start_datetime": md.get("start_datetime")}
@@ -417,7 +482,7 @@ def _decode_file(path: Path, entries, fs, max_jitter, verify: bool) -> Recording
             fs = header["fs"]
             if header["n_samples"] == 0:
                 return _written_back(path, np.empty((0, len(entries))), entries, header)
-        got = _collect(reader, path, entries)
+        got = _collect(reader, path, entries, fh, verify)
     data, fs, origin, notes = _assemble(path, entries, got, fs, max_jitter)
     if header is not None:
         return _written_back(path, data, entries, header)
@@ -437,6 +502,13 @@ def _decode_file(path: Path, entries, fs, max_jitter, verify: bool) -> Recording
 _CACHE: OrderedDict = OrderedDict()
 _CACHE_MAX = 1
 _LOCK = threading.Lock()
+
+
+def clear_cache() -> None:
+    """Forget the decoded file :func:`read_foreign` keeps (the next read decodes anew, as a
+    benchmark wants)."""
+    with _LOCK:
+        _CACHE.clear()
 
 
 def _options(topics, fs, max_jitter, stamp):
