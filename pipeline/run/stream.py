@@ -460,7 +460,8 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
         Largest estimated memory [B] (:func:`stream_memory`); ValueError above it.
     on_samples : callable(channel, first sample, samples), optional
         Called with every piece of conditioned samples as it is final (e.g. to write the
-        conditioned recording out, block by block); the array is the callee's to keep.
+        conditioned recording out, block by block); the array is the callee's to keep, not
+        to change (float32 for a float32 recording, whose conditioned values are float32).
     progress : callable(name, done, total), optional
     filter_engine : {"auto", "numba", "scipy"}
         Engine of the zero-phase filters (:func:`meshphase.signal.iir.pick_engine`; ``"auto"``
@@ -672,10 +673,14 @@ class _Pass3:
         # to block), and the onsets take the blocks in order. (Warnings a chain raised meanwhile would be kept
         # with the onsets' own; the chains report through notes and raise none.)
         def chains(data):
-            # a fresh float64 copy: the stages hold on to what they are given
+            # a fresh contiguous copy (the stages hold on to what they are given): float32
+            # samples of a float32 recording stay float32 (its chains round every step to
+            # float32 and widen exactly where they compute), anything else float64
+            dt = np.float32 if data.dtype == np.float32 else np.float64
             return lambda group: push_chains(
                 [self.chains[p.name] for p in group],
-                [np.array(data[:, idx[p.name]], dtype=np.float64) for p in group])
+                [np.array(data[:, idx[p.name]], dtype=dt if self.chains[p.name].round
+                          else np.float64) for p in group])
 
         groups = _chain_pairs(self.plans)
         with thread_pool(max_items=len(groups)) as tmap, blocks_ahead(source, block) as blocks:
@@ -779,7 +784,13 @@ class _RunTrack:
         self.t = RunTracker()
 
     def add(self, y):
-        self.t.add(~np.isfinite(y))
+        # a finite sum: no NaN or inf among the samples (one read of them, no mask made)
+        with np.errstate(over="ignore", invalid="ignore"):
+            clean = math.isfinite(float(np.sum(y)))
+        if clean:
+            self.t.skip(y.size)
+        else:
+            self.t.add(~np.isfinite(y))
 
     def runs(self):
         return self.t.runs()
