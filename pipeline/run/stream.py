@@ -222,6 +222,9 @@ class RawScan:
         (:func:`meshphase.kinematics.encoder.pulse_levels`); an encoder with one level only is absent.
     n_blocks : int
         Blocks read per pass.
+    n_reads : int
+        Reads of the source: 1, or 2 when the one read could not settle everything
+        exactly (:func:`scan_source`).
     reports : dict of str -> meshphase.signal.quality.ChannelQuality
         The raw-data quality report of every channel.
     """
@@ -234,6 +237,7 @@ class RawScan:
     n_blocks: int = 0
     reports: dict = field(default_factory=dict)
     encoder_times: dict = field(default_factory=dict)
+    n_reads: int = 1
 
 
 class _TachoEdges:
@@ -305,40 +309,40 @@ def scan_source(source: BlockSource, *, conditioned: Sequence[str] = (), tacho: 
                               block=block, hum_seconds=hum_seconds),
                   memory_budget, h.fs, "quality scan")
     scans = {c.name: ChannelScan(n, flat=c.kind not in ("tacho", "encoder")) for c in specs}
+    idx = {c.name: j for j, c in enumerate(specs)}
+    n_hum = min(n, int(hum_seconds * h.fs))
+    hum = {nm: np.empty(n_hum) for nm in conditioned}
+    pulses = {nm: _BandEdges(h.fs, h.t0) for nm in ([tacho] if tacho else []) + list(encoders)}
     nblk = 0
     with blocks_ahead(source, block) as blocks:
         for a, data in blocks:
             for j, c in enumerate(specs):
-                scans[c.name].feed1(_column(data, j))
-            nblk += 1
-            if progress:
-                progress("scan 1/2", a + data.shape[0], n)
-    for s in scans.values():
-        s.end1()
-    n_hum = min(n, int(hum_seconds * h.fs))
-    hum = {nm: np.empty(n_hum) for nm in conditioned}
-    edges = None
-    if tacho is not None:
-        st = scans[tacho].stats
-        if st.n_fin and st.hi > st.lo:
-            dt = h.dtype if h.dtype in (np.float32, np.float64) else np.dtype(np.float64)
-            edges = _TachoEdges(dt.type(st.lo), dt.type(st.hi), h.fs, h.t0)
-    enc_edges = _encoder_edges(scans, encoders, h)
-    idx = {c.name: j for j, c in enumerate(specs)}
-    with blocks_ahead(source, block) as blocks:
-        for a, data in blocks:
-            for j, c in enumerate(specs):
                 x = _column(data, j)
-                scans[c.name].feed2(x)
+                scans[c.name].feed(x)
                 if c.name in hum and a < n_hum:
                     hum[c.name][a:min(n_hum, a + x.size)] = x[:n_hum - a]
-            if edges is not None:
-                col = data[:, idx[tacho]]
-                edges.add(col if col.dtype in (np.float32, np.float64) else col.astype(np.float64))
-            for nm, ed in enc_edges.items():
-                ed.add(data[:, idx[nm]].astype(np.float64, copy=False))
+            for nm, ed in pulses.items():
+                ed.add(_pulse_column(data, idx[nm], nm == tacho))
+            nblk += 1
             if progress:
-                progress("scan 2/2", a + data.shape[0], n)
+                progress("scan", a + data.shape[0], n)
+    again = [c.name for c in specs if not scans[c.name].end()]
+    timers = _edge_timers(scans, tacho, encoders, h)
+    times = {nm: pulses[nm].times(ed.half) for nm, ed in timers.items()}
+    redo = [nm for nm, t in times.items() if t is None]
+    n_reads = 1
+    if again or redo:
+        # what the one read could not settle exactly (module notes): read again
+        n_reads = 2
+        with blocks_ahead(source, block) as blocks:
+            for a, data in blocks:
+                for nm in again:
+                    scans[nm].feed2(_column(data, idx[nm]))
+                for nm in redo:
+                    timers[nm].add(_pulse_column(data, idx[nm], nm == tacho))
+                if progress:
+                    progress("scan again", a + data.shape[0], n)
+        times.update({nm: timers[nm].times() for nm in redo})
     results = {nm: s.result() for nm, s in scans.items()}
     for nm, x in hum.items():                      # dropouts are gaps for the hum search too
         fr = results[nm].flat
@@ -348,8 +352,116 @@ def scan_source(source: BlockSource, *, conditioned: Sequence[str] = (), tacho: 
                     x[s0:min(s1, n_hum)] = np.nan
     reports = {c.name: quality_from_scan(results[c.name], c.name, h.fs, h.t0) for c in specs}
     quality = [dict(channel=c.name, **reports[c.name].summary_dict()) for c in specs]
-    return RawScan(h, results, quality, hum, None if edges is None else edges.times(), nblk,
-                   reports, {nm: ed.times() for nm, ed in enc_edges.items()})
+    return RawScan(h, results, quality, hum, times.get(tacho) if tacho else None, nblk,
+                   reports, {nm: times[nm] for nm in encoders if nm in times}, n_reads)
+
+
+def _pulse_column(data: np.ndarray, j: int, is_tacho: bool) -> np.ndarray:
+    """Column ``j`` of a block as a pulse train's edges are timed from it: a tacho's in its
+    floating dtype (float32 samples give float32 crossing fractions), an encoder's as
+    float64."""
+    col = data[:, j]
+    if is_tacho:
+        return col if col.dtype in (np.float32, np.float64) else col.astype(np.float64)
+    return col.astype(np.float64, copy=False)
+
+
+def _edge_timers(scans: dict, tacho: str | None, encoders: Sequence[str], h) -> dict:
+    """The edge timer (:class:`_TachoEdges`, its level settled by the scan) of the tacho,
+    when it has two levels, and of every encoder with two levels."""
+    out = {}
+    if tacho is not None:
+        st = scans[tacho].stats
+        if st.n_fin and st.hi > st.lo:
+            dt = h.dtype if h.dtype in (np.float32, np.float64) else np.dtype(np.float64)
+            out[tacho] = _TachoEdges(dt.type(st.lo), dt.type(st.hi), h.fs, h.t0)
+    out.update(_encoder_edges(scans, encoders, h))
+    return out
+
+
+#: Crossing candidates a pulse channel's one-read edge timing holds at most [-]
+#: (:class:`_BandEdges`; beyond them the channel's edges are timed in a second read).
+BAND_PAIRS = 1 << 20
+
+
+class _BandEdges:
+    """The rising crossings of a pulse train through a level that is known only once the
+    whole channel has been read (half-way between its extremes, or its two levels), from
+    one read.
+
+    Every sample pair that rises into the middle half of the range seen so far (the block
+    itself included) is kept: the sample after it, and the two values (at most
+    :data:`BAND_PAIRS` of them). At the end, the crossings of the final level are those
+    among them by :func:`meshphase.kinematics.encoder.rising_crossing_parts`' rule and
+    arithmetic, exactly, if the level lay in the middle half of the range in every block
+    that could hold one of its crossings (a block whose samples all lie above it, or all at
+    or below, cannot); :meth:`times` returns None otherwise (a tacho whose levels changed
+    after its first pulses: then timed in a second read).
+    """
+
+    def __init__(self, fs: float, t0: float):
+        self.fs, self.t0 = fs, t0
+        self.lo, self.hi = math.inf, -math.inf
+        self.last = None
+        self.pos = 0
+        self.idx: list[np.ndarray] = []
+        self.x0: list[np.ndarray] = []
+        self.x1: list[np.ndarray] = []
+        self.kept = 0
+        # per block: (band low, band high, largest non-NaN sample, smallest non-NaN sample
+        # of the block with the one before it, whether those hold a NaN)
+        self.blocks: list[tuple] = []
+
+    def add(self, x: np.ndarray) -> None:
+        """The next samples (in the dtype the crossings are computed in)."""
+        if x.size == 0:
+            return
+        xx = x if self.last is None else np.concatenate([self.last, x])
+        nan = np.isnan(xx)
+        has_nan = bool(nan.any())
+        vals = xx[~nan] if has_nan else xx
+        new = x[~np.isnan(x)] if has_nan else x
+        fin = new[np.isfinite(new)]
+        if fin.size:
+            self.lo = min(self.lo, float(np.min(fin)))
+            self.hi = max(self.hi, float(np.max(fin)))
+        if self.hi > self.lo:
+            q = 0.25 * (self.hi - self.lo)
+            # float64 scalars: compared with float32 samples exactly, not rounded to them
+            a, b = np.float64(self.lo + q), np.float64(self.hi - q)
+        else:
+            a, b = np.float64(math.inf), np.float64(-math.inf)
+        self.blocks.append((a, b, float(np.max(new)) if new.size else -math.inf,
+                            float(np.min(vals)) if vals.size else math.inf, has_nan))
+        if self.kept <= BAND_PAIRS and xx.size > 1 and a <= b:
+            sel = np.flatnonzero((xx[1:] > a) & ~(xx[:-1] > b))
+            if sel.size:
+                off = self.pos - (0 if self.last is None else 1)
+                self.idx.append(sel + (off + 1))
+                self.x0.append(xx[sel])
+                self.x1.append(xx[sel + 1])
+                self.kept += sel.size
+        self.last = x[-1:].copy()
+        self.pos += x.size
+
+    def times(self, level) -> np.ndarray | None:
+        """The crossing times [s] of ``level`` (in the samples' dtype), or None when the
+        pairs kept may miss one (class notes)."""
+        lv = float(level)
+        if self.kept > BAND_PAIRS:
+            return None
+        for a, b, mx, mn, has_nan in self.blocks:
+            if not (a <= lv <= b or mx <= lv or (not has_nan and mn > lv)):
+                return None
+        if not self.idx:
+            return np.empty(0)
+        i, x0, x1 = (np.concatenate(p) for p in (self.idx, self.x0, self.x1))
+        up = (x1 > level) & ~(x0 > level)
+        i, x0, x1 = i[up], x0[up], x1[up]
+        with np.errstate(invalid="ignore", divide="ignore"):   # inf edges: frac unused
+            frac = np.where(x1 > x0, (level - x0) / np.where(x1 > x0, x1 - x0, 1.0), 0.0)
+        frac = np.clip(frac, 0.0, 1.0)
+        return self.t0 + (i - 1 + frac) / self.fs
 
 
 def _encoder_edges(scans: dict, encoders: Sequence[str], h) -> dict:
