@@ -2,27 +2,34 @@
 
 The stages ``load``, ``condition`` and ``onsets`` (:mod:`meshphase.run.stages`) run through this
 module, for recording files and for recordings already in memory alike. A recording is read
-three times, block by block, channel-major, in the dtype it is stored in (an HDF5 or MCAP
-file's checksums are checked in the first pass; the later ones read the same, unchanged
-file unchecked, see :class:`meshphase.io.sources.FileSource`), each pass reading the next block on a
-thread of its own while it works on this one (:func:`meshphase.runtime.threads.read_ahead`):
+twice, block by block, channel-major, in the dtype it is stored in (an HDF5 or MCAP file's
+checksums are checked in the first read; the second reads the same, unchanged file
+unchecked, see :class:`meshphase.io.sources.FileSource`), each read taking the next block on
+a thread of its own while it works on this one (:func:`meshphase.runtime.threads.read_ahead`):
 
-1. **Statistics** (pass 1, :class:`meshphase.signal.quality.ChannelScan`): per channel the extremes,
-   the strided subsamples and run-length counts that the dropout / plateau thresholds come
-   from, the runs of non-finite samples.
-2. **Runs** (pass 2): the runs at the rails, the candidate flat runs with the samples around
-   them (classified at the end of the pass), the tacho's rising edges, and the first
-   ``HUM_SECONDS`` of each conditioned channel, in which the mains hum is looked for (what
-   :func:`meshphase.signal.condition.detect_hum` examines of a whole channel).
-3. **Conditioning and onsets** (pass 3, :func:`condition_stream`): dropouts to NaN, hum
-   notches, drift removal, band limit, SNR estimate, and the onset detector
+1. **Scan** (:func:`scan_source`, one read, :class:`meshphase.signal.quality.ChannelScan`):
+   per channel the extremes, the strided subsamples and run-length counts that the dropout
+   / plateau thresholds come from, the runs of non-finite samples; the runs at the rails
+   (tracked at the running extremes), the candidate flat runs with the samples around them
+   (collected from the shortest length any threshold can be, classified at the end), the
+   tacho's and encoders' rising edges (from the crossings kept in the middle half of the
+   range seen, :class:`_BandEdges`), and the first ``HUM_SECONDS`` of each conditioned
+   channel, in which the mains hum is looked for (what
+   :func:`meshphase.signal.condition.detect_hum` examines of a whole channel). Each of these
+   settles exactly at the end of the read or says that it did not (a rail tolerance, more
+   than :data:`meshphase.signal.quality.SCAN_CANDIDATES` flat runs at the threshold, a
+   tacho whose levels moved after its first pulses): only then are those channels read a
+   second time (``RawScan.n_reads``).
+2. **Conditioning and onsets** (:func:`condition_stream`, the last read): dropouts to NaN,
+   hum notches, drift removal, band limit, SNR estimate, and the onset detector
    (:class:`meshphase.onsets.OnsetStream`), each channel through a chain of streaming
    filters; only the onsets, the quality reports and a short excerpt of the conditioned
-   signal are kept.
+   signal are kept. The dropouts, the clipped runs and the hum lines are needed before
+   the first sample is filtered, and come from the whole channel: hence the scan first.
 
 Equality with the whole-array functions
 ---------------------------------------
-Passes 1 and 2 give exactly the whole-array quality report (same code, see ChannelScan). The
+The scan gives exactly the whole-array quality report (same code, see ChannelScan). The
 zero-phase IIR filters (:func:`scipy.signal.sosfiltfilt`, or its arithmetic compiled by numba
 for a long recording, two channels of a gear side by side: :mod:`meshphase.signal.iir`, the same
 numbers) are run on windows that overlap
@@ -47,7 +54,7 @@ detector's two analysis blocks (2 x 2**20 samples), the SNR estimate's subsample
 values), the hum window (``HUM_SECONDS`` x fs) and the excerpt, plus up to three read blocks
 of every channel (the one worked on, one read ahead, one being read); and in proportion to
 what is found (gap, dropout and clip runs, ~20 KB per candidate flat run, the onsets).
-:func:`scan_memory` (passes 1 and 2) and :func:`stream_memory` (pass 3) estimate it before
+:func:`scan_memory` (the scan) and :func:`stream_memory` (the last read) estimate it before
 the pass reads anything and refuse (ValueError naming fs, the largest item and
 ``memory_budget``) when it exceeds the budget;
 every buffer that grows with fs is capped at the recording's own length, so a high fs costs
@@ -173,7 +180,8 @@ def stream_memory(fs: float, n_samples: int, n_channels: int, n_conditioned: int
 def scan_memory(fs: float, n_samples: int, n_channels: int, n_conditioned: int, *,
                 itemsize: int = 8, block: int = BLOCK_SAMPLES,
                 hum_seconds: float = HUM_SECONDS) -> dict:
-    """Estimated peak memory of passes 1 and 2 (:func:`scan_source`) [B], by item.
+    """Estimated peak memory of the scan (:func:`scan_source`) [B], by item (the flat-run
+    candidates it may hold, ``SCAN_CANDIDATES`` per channel, are findings: not counted).
 
     Parameters as :func:`stream_memory`; ``hum_seconds`` [s]. Returns a dict with ``"total"``;
     the buffers that grow with fs are capped at the recording's length.
@@ -197,10 +205,10 @@ def _check_budget(est: dict, budget: float, fs: float, what: str) -> None:
                          "the mesh frequency, or raise the budget")
 
 
-# ============================================================================ passes 1 and 2
+# ============================================================================ the scan
 @dataclass
 class RawScan:
-    """What passes 1 and 2 found on the raw samples.
+    """What the scan (:func:`scan_source`) found on the raw samples.
 
     Attributes
     ----------
@@ -221,7 +229,7 @@ class RawScan:
         Rising edges of each encoder channel [s], crossing half-way between its two levels
         (:func:`meshphase.kinematics.encoder.pulse_levels`); an encoder with one level only is absent.
     n_blocks : int
-        Blocks read per pass.
+        Blocks per read.
     n_reads : int
         Reads of the source: 1, or 2 when the one read could not settle everything
         exactly (:func:`scan_source`).
@@ -271,7 +279,9 @@ def scan_source(source: BlockSource, *, conditioned: Sequence[str] = (), tacho: 
                 block: int = BLOCK_SAMPLES, hum_seconds: float = HUM_SECONDS,
                 memory_budget: float = MEMORY_BUDGET,
                 progress: Callable[[str, int, int], None] | None = None) -> RawScan:
-    """Passes 1 and 2: the quality of every channel, the tacho edges and the hum windows.
+    """The scan: the quality of every channel, the tacho and encoder edges and the hum
+    windows, in one read of ``source`` (two when the one read could not settle a channel
+    exactly: see the module notes).
 
     Parameters
     ----------
@@ -477,10 +487,10 @@ def _encoder_edges(scans: dict, encoders: Sequence[str], h) -> dict:
     return out
 
 
-# ============================================================================ pass 3
+# ============================================================================ conditioning and onsets
 @dataclass
 class ChannelPlan:
-    """How one channel is conditioned and timed in pass 3.
+    """How one channel is conditioned and timed in the last read (:func:`condition_stream`).
 
     Attributes
     ----------
@@ -510,7 +520,7 @@ class ChannelPlan:
 
 @dataclass
 class StreamResult:
-    """What pass 3 keeps.
+    """What the last read (:func:`condition_stream`) keeps.
 
     Attributes
     ----------
@@ -550,7 +560,7 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
                      on_samples: Callable[[str, int, np.ndarray], None] | None = None,
                      progress: Callable[[str, int, int], None] | None = None,
                      filter_engine: str = "auto") -> StreamResult:
-    """Pass 3: condition the planned channels and detect onsets on the gauges, streamed.
+    """The last read: condition the planned channels and detect onsets on the gauges, streamed.
 
     The chain per channel is that of :func:`meshphase.conditioning.condition_recording`
     (dropouts to NaN, hum notches for the lines found in the first ``HUM_SECONDS``, drift
@@ -562,7 +572,7 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
     source : BlockSource
         The recording (read once more).
     scan : RawScan
-        Its passes 1 and 2 (:func:`scan_source`).
+        Its scan (:func:`scan_source`).
     plans : sequence of ChannelPlan
     hum, drift, drift_window, lowpass, highpass, order, warn
         As :func:`meshphase.conditioning.condition_recording`.
@@ -759,7 +769,7 @@ def _in_plan_order(plans, groups, outs) -> list:
 
 
 class _Pass3:
-    """The read of pass 3: every block through the chains, the conditioned samples to the
+    """The last read (:func:`condition_stream`): every block through the chains, the conditioned samples to the
     onset detectors, the excerpt and the conditioned gap runs; timings and the onset
     detectors' warnings kept."""
 
