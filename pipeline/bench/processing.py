@@ -36,7 +36,7 @@ Peak memory and wall time of ``meshphase process`` (``process_minutes``; ``meshp
 processing`` measures 2 min, 10 min, 1 h and 3 h): the 8-channel benchmark recording
 (:func:`meshphase.bench.rss.bench_config`, float64 HDF5 written block by block) processed with
 the seed rig's gearset in a child process (peak RSS: its VmHWM), with each stage's
-time, and the whole run and the streamed stages (load, condition, onsets: the three passes
+time, and the whole run and the streamed stages (load, condition, onsets: the two reads
 over the samples) as multiples of one :func:`scipy.signal.sosfiltfilt` pass over the same
 samples (the conditioning's 4th-order low-pass, timed just before and just after each run:
 the mean of the two times).
@@ -72,7 +72,7 @@ ACCURACY_COLUMNS = ("scenario", "setting", "snr_db", "fwhm_samples", "n_true", "
 THROUGHPUT_COLUMNS = ("stage", "scenario", "n_samples", "n_pulses", "runtime_s", "msamples_per_s",
                       "wall_s")
 #: Columns of the ``meshphase process`` peak-memory table.
-PROCESS_COLUMNS = ("minutes", "n_channels", "n_samples", "data_mb", "status", "n_onsets",
+PROCESS_COLUMNS = ("minutes", "dtype", "n_channels", "n_samples", "data_mb", "status", "n_onsets",
                    "wall_s", "peak_rss_mb", "streamed_peak_mb", "rss_over_data",
                    "memory_estimate_mb", "load_s",
                    "condition_s", "onsets_s", "phasing_s", "identify_s", "identify_share",
@@ -572,13 +572,14 @@ def _markdown(res: dict) -> str:
                   "over the largest |x| (0: bit for bit): " + ", ".join(diffs) + "."]
     if res.get("process"):
         lines += ["", "## meshphase process: peak memory and time against recording length", "",
-                  "8 channels (sun, ring, 5 face-width gauges, tacho) at 5120 Hz, float64 HDF5; "
+                  "8 channels (sun, ring, 5 face-width gauges, tacho) at 5120 Hz, HDF5 of the "
+                  "row's dtype; wall_over_sosfiltfilt: the run's wall time over that pass; "
                   "child process, BLAS on one thread; times in s. sosfiltfilt_s: one zero-phase "
                   "pass of the conditioning low-pass over the same samples, at the mean time of "
                   "the pass timed just before and just after the run (sosfiltfilt_msps: those "
                   "two rates; median of all "
                   f"{res['meta'].get('sosfiltfilt_msps', float('nan')):.1f} MS/s here); streamed = "
-                  "load + condition + onsets (the three passes over the samples); "
+                  "load + condition + onsets (the reads of the samples: the scan, then conditioning and onsets); "
                   "streamed_peak_mb: the peak RSS (VmHWM) when they are done, peak_rss_mb: of "
                   "the whole run (phasing and the later stages work on the passes, whose "
                   "number grows with the length). read_*_s: one pass over the file's "
@@ -639,9 +640,11 @@ def _markdown(res: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def process_rss_rows(work, minutes, *, seed: int = 1) -> tuple[list, list, float]:
+def process_rss_rows(work, minutes, *, seed: int = 1,
+                     dtype: str = "float64") -> tuple[list, list, float]:
     """Peak memory, wall and stage times of ``meshphase process`` on the 8-channel benchmark
-    recording of each length in ``minutes`` (written to ``work``, removed again).
+    recording of each length in ``minutes`` (written to ``work`` with samples of ``dtype``,
+    "float64" or "float32", removed again).
 
     Returns
     -------
@@ -660,17 +663,19 @@ def process_rss_rows(work, minutes, *, seed: int = 1) -> tuple[list, list, float
     gearset = work / "gearset.toml"
     gearset.write_text(BENCH_GEARSET, encoding="utf-8")
     rows, skipped = [], []
+    if dtype not in ("float64", "float32"):
+        raise ValueError(f"dtype must be 'float64' or 'float32', got {dtype!r}")
     for m in minutes:
         m = as_positive(m, "process_minutes")
         n = int(round(m * 60.0 * 5120.0))
-        data = n * N_CHANNELS * 8
+        data = n * N_CHANNELS * np.dtype(dtype).itemsize
         if free_bytes(work) < int(1.1 * data) + (256 << 20):
             skipped.append({"minutes": m, "reason": f"needs {1.1 * data / 1e9:.1f} GB free on {work}"})
             logger.warning("processing bench: process %g min skipped: not enough disk space", m)
             continue
         path = work / f"process_{m:g}.h5"
         logger.info("processing bench: writing the %g min x %d channel recording", m, N_CHANNELS)
-        run_child("write_job", path=str(path), minutes=m, seed=seed)
+        run_child("write_job", path=str(path), minutes=m, seed=seed, dtype=dtype)
         # one pass over the file three ways: checked (process's first pass), unchecked at
         # the chunks' byte offsets (its later passes), unchecked through h5py's
         # read_direct_chunk (the library path beside that)
@@ -685,7 +690,7 @@ def process_rss_rows(work, minutes, *, seed: int = 1) -> tuple[list, list, float
         t = r["timings"]
         streamed = sum(t.get(k, 0.0) for k in ("load", "condition", "onsets"))
         ref = n * N_CHANNELS * 0.5 * (1.0 / before + 1.0 / after)
-        rows.append({"minutes": m, "n_channels": N_CHANNELS, "n_samples": n, "data_mb": data / 2**20,
+        rows.append({"minutes": m, "dtype": dtype, "n_channels": N_CHANNELS, "n_samples": n, "data_mb": data / 2**20,
                      "status": r["status"], "n_onsets": r["n_onsets"], "wall_s": r["wall_s"],
                      "peak_rss_mb": r["peak_rss_mb"],
                      "streamed_peak_mb": (r.get("hwm_mb") or {}).get("onsets"),

@@ -62,7 +62,7 @@ class LoadStage(StageResult):
     stream : meshphase.run.stream.BlockSource or None
         Where the samples come from for each pass.
     scan : meshphase.run.stream.RawScan or None
-        What passes 1 and 2 found (tacho edges, hum windows, quality).
+        What the scan found (tacho edges, hum windows, quality: one read, :func:`meshphase.run.stream.scan_source`).
     channels_unused : tuple of str
         Channels no planned stage reads.
     pulse_trains : dict of str to (str, float, float)

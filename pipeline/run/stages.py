@@ -171,9 +171,9 @@ SYNTHETIC_WHOLE_BYTES = 256 * 2**20
 
 @runs("load")
 def stage_load(ctx: RunContext) -> LoadStage:
-    """Open the recording and scan its raw samples (passes 1 and 2 of :mod:`meshphase.run.stream`):
-    the quality of every channel, the tacho's edges, the hum windows. A file is never held
-    in memory: the later stages stream it again. A synthetic recording up to
+    """Open the recording and scan its raw samples in one read (the scan of
+    :mod:`meshphase.run.stream`): the quality of every channel, the tacho's edges, the hum
+    windows. A file is never held in memory: the condition stage streams it again. A synthetic recording up to
     :data:`SYNTHETIC_WHOLE_BYTES` is generated whole, once; a longer one is generated again,
     block by block, for every pass (the generator is deterministic)."""
     if ctx.scene.input.get("recording"):
@@ -195,7 +195,12 @@ def stage_load(ctx: RunContext) -> LoadStage:
                      channels_unused=tuple(ctx.channels_unused),
                      pulse_trains=_pulse_trains(h.channels, scan.hum_window),
                      error_estimate=(f"{h.n_samples * h.n_channels / 1e6:.2f} MSamples read "
-                                     f"(twice, {scan.n_blocks} block(s) each)"))
+                                     f"({_times(scan.n_reads)}, {scan.n_blocks} block(s) "
+                                     f"{'each' if scan.n_reads > 1 else 'in all'})"))
+
+
+def _times(k: int) -> str:
+    return {1: "once", 2: "twice"}.get(k, f"{k} times")
 
 
 def _open_file(scene: Scene) -> tuple:
@@ -324,7 +329,7 @@ def _open_synthetic(scene: Scene) -> tuple:
 
 
 def _scan(src):
-    """Passes 1 and 2 over ``src``: every channel but the pulse trains (tacho, encoders) may
+    """The scan of ``src`` (one read): every channel but the pulse trains (tacho, encoders) may
     be conditioned, the first tacho and every encoder are timed."""
     h = src.header
     tacho = [c.name for c in h.channels if c.kind == "tacho"]
@@ -367,7 +372,7 @@ def _overflowing_gauges(ctx: RunContext) -> dict:
 @runs("condition")
 def stage_condition(ctx: RunContext) -> ConditionStage:
     """Condition every non-tacho channel and time the gauges' pulses, in one streamed pass
-    (pass 3 of :mod:`meshphase.run.stream`): the conditioned samples are not kept, only the
+    (the last read of :mod:`meshphase.run.stream`): the conditioned samples are not kept, only the
     quality reports, the onsets (handed to the onsets stage) and a short excerpt. A gauge
     with samples beyond :data:`MAX_GAUGE_ABS` gives no onsets (a DataQualityWarning says
     so)."""
@@ -396,7 +401,7 @@ def stage_condition(ctx: RunContext) -> ConditionStage:
 
 
 def _channel_plans(ctx: RunContext, rec) -> list:
-    """What pass 3 does to each non-tacho channel: each gear's gauges with their own mesh
+    """What the last read does to each non-tacho channel: each gear's gauges with their own mesh
     frequency (drift window, low-pass corner) and pulse period (one relative revolution of
     the gauged gear, Z mesh periods, in which every planet passes once); onsets for the
     gauges."""

@@ -2,27 +2,34 @@
 
 The stages ``load``, ``condition`` and ``onsets`` (:mod:`meshphase.run.stages`) run through this
 module, for recording files and for recordings already in memory alike. A recording is read
-three times, block by block, channel-major, in the dtype it is stored in (an HDF5 or MCAP
-file's checksums are checked in the first pass; the later ones read the same, unchanged
-file unchecked, see :class:`meshphase.io.sources.FileSource`), each pass reading the next block on a
-thread of its own while it works on this one (:func:`meshphase.runtime.threads.read_ahead`):
+twice, block by block, channel-major, in the dtype it is stored in (an HDF5 or MCAP file's
+checksums are checked in the first read; the second reads the same, unchanged file
+unchecked, see :class:`meshphase.io.sources.FileSource`), each read taking the next block on
+a thread of its own while it works on this one (:func:`meshphase.runtime.threads.read_ahead`):
 
-1. **Statistics** (pass 1, :class:`meshphase.signal.quality.ChannelScan`): per channel the extremes,
-   the strided subsamples and run-length counts that the dropout / plateau thresholds come
-   from, the runs of non-finite samples.
-2. **Runs** (pass 2): the runs at the rails, the candidate flat runs with the samples around
-   them (classified at the end of the pass), the tacho's rising edges, and the first
-   ``HUM_SECONDS`` of each conditioned channel, in which the mains hum is looked for (what
-   :func:`meshphase.signal.condition.detect_hum` examines of a whole channel).
-3. **Conditioning and onsets** (pass 3, :func:`condition_stream`): dropouts to NaN, hum
-   notches, drift removal, band limit, SNR estimate, and the onset detector
+1. **Scan** (:func:`scan_source`, one read, :class:`meshphase.signal.quality.ChannelScan`):
+   per channel the extremes, the strided subsamples and run-length counts that the dropout
+   / plateau thresholds come from, the runs of non-finite samples; the runs at the rails
+   (tracked at the running extremes), the candidate flat runs with the samples around them
+   (collected from the shortest length any threshold can be, classified at the end), the
+   tacho's and encoders' rising edges (from the crossings kept in the middle half of the
+   range seen, :class:`_BandEdges`), and the first ``HUM_SECONDS`` of each conditioned
+   channel, in which the mains hum is looked for (what
+   :func:`meshphase.signal.condition.detect_hum` examines of a whole channel). Each of these
+   settles exactly at the end of the read or says that it did not (a rail tolerance, more
+   than :data:`meshphase.signal.quality.SCAN_CANDIDATES` flat runs at the threshold, a
+   tacho whose levels moved after its first pulses): only then are those channels read a
+   second time (``RawScan.n_reads``).
+2. **Conditioning and onsets** (:func:`condition_stream`, the last read): dropouts to NaN,
+   hum notches, drift removal, band limit, SNR estimate, and the onset detector
    (:class:`meshphase.onsets.OnsetStream`), each channel through a chain of streaming
    filters; only the onsets, the quality reports and a short excerpt of the conditioned
-   signal are kept.
+   signal are kept. The dropouts, the clipped runs and the hum lines are needed before
+   the first sample is filtered, and come from the whole channel: hence the scan first.
 
 Equality with the whole-array functions
 ---------------------------------------
-Passes 1 and 2 give exactly the whole-array quality report (same code, see ChannelScan). The
+The scan gives exactly the whole-array quality report (same code, see ChannelScan). The
 zero-phase IIR filters (:func:`scipy.signal.sosfiltfilt`, or its arithmetic compiled by numba
 for a long recording, two channels of a gear side by side: :mod:`meshphase.signal.iir`, the same
 numbers) are run on windows that overlap
@@ -47,7 +54,7 @@ detector's two analysis blocks (2 x 2**20 samples), the SNR estimate's subsample
 values), the hum window (``HUM_SECONDS`` x fs) and the excerpt, plus up to three read blocks
 of every channel (the one worked on, one read ahead, one being read); and in proportion to
 what is found (gap, dropout and clip runs, ~20 KB per candidate flat run, the onsets).
-:func:`scan_memory` (passes 1 and 2) and :func:`stream_memory` (pass 3) estimate it before
+:func:`scan_memory` (the scan) and :func:`stream_memory` (the last read) estimate it before
 the pass reads anything and refuse (ValueError naming fs, the largest item and
 ``memory_budget``) when it exceeds the budget;
 every buffer that grows with fs is capped at the recording's own length, so a high fs costs
@@ -173,7 +180,8 @@ def stream_memory(fs: float, n_samples: int, n_channels: int, n_conditioned: int
 def scan_memory(fs: float, n_samples: int, n_channels: int, n_conditioned: int, *,
                 itemsize: int = 8, block: int = BLOCK_SAMPLES,
                 hum_seconds: float = HUM_SECONDS) -> dict:
-    """Estimated peak memory of passes 1 and 2 (:func:`scan_source`) [B], by item.
+    """Estimated peak memory of the scan (:func:`scan_source`) [B], by item (the flat-run
+    candidates it may hold, ``SCAN_CANDIDATES`` per channel, are findings: not counted).
 
     Parameters as :func:`stream_memory`; ``hum_seconds`` [s]. Returns a dict with ``"total"``;
     the buffers that grow with fs are capped at the recording's length.
@@ -197,10 +205,10 @@ def _check_budget(est: dict, budget: float, fs: float, what: str) -> None:
                          "the mesh frequency, or raise the budget")
 
 
-# ============================================================================ passes 1 and 2
+# ============================================================================ the scan
 @dataclass
 class RawScan:
-    """What passes 1 and 2 found on the raw samples.
+    """What the scan (:func:`scan_source`) found on the raw samples.
 
     Attributes
     ----------
@@ -221,7 +229,10 @@ class RawScan:
         Rising edges of each encoder channel [s], crossing half-way between its two levels
         (:func:`meshphase.kinematics.encoder.pulse_levels`); an encoder with one level only is absent.
     n_blocks : int
-        Blocks read per pass.
+        Blocks per read.
+    n_reads : int
+        Reads of the source: 1, or 2 when the one read could not settle everything
+        exactly (:func:`scan_source`).
     reports : dict of str -> meshphase.signal.quality.ChannelQuality
         The raw-data quality report of every channel.
     """
@@ -234,6 +245,7 @@ class RawScan:
     n_blocks: int = 0
     reports: dict = field(default_factory=dict)
     encoder_times: dict = field(default_factory=dict)
+    n_reads: int = 1
 
 
 class _TachoEdges:
@@ -267,7 +279,9 @@ def scan_source(source: BlockSource, *, conditioned: Sequence[str] = (), tacho: 
                 block: int = BLOCK_SAMPLES, hum_seconds: float = HUM_SECONDS,
                 memory_budget: float = MEMORY_BUDGET,
                 progress: Callable[[str, int, int], None] | None = None) -> RawScan:
-    """Passes 1 and 2: the quality of every channel, the tacho edges and the hum windows.
+    """The scan: the quality of every channel, the tacho and encoder edges and the hum
+    windows, in one read of ``source`` (two when the one read could not settle a channel
+    exactly: see the module notes).
 
     Parameters
     ----------
@@ -305,40 +319,40 @@ def scan_source(source: BlockSource, *, conditioned: Sequence[str] = (), tacho: 
                               block=block, hum_seconds=hum_seconds),
                   memory_budget, h.fs, "quality scan")
     scans = {c.name: ChannelScan(n, flat=c.kind not in ("tacho", "encoder")) for c in specs}
+    idx = {c.name: j for j, c in enumerate(specs)}
+    n_hum = min(n, int(hum_seconds * h.fs))
+    hum = {nm: np.empty(n_hum) for nm in conditioned}
+    pulses = {nm: _BandEdges(h.fs, h.t0) for nm in ([tacho] if tacho else []) + list(encoders)}
     nblk = 0
     with blocks_ahead(source, block) as blocks:
         for a, data in blocks:
             for j, c in enumerate(specs):
-                scans[c.name].feed1(_column(data, j))
-            nblk += 1
-            if progress:
-                progress("scan 1/2", a + data.shape[0], n)
-    for s in scans.values():
-        s.end1()
-    n_hum = min(n, int(hum_seconds * h.fs))
-    hum = {nm: np.empty(n_hum) for nm in conditioned}
-    edges = None
-    if tacho is not None:
-        st = scans[tacho].stats
-        if st.n_fin and st.hi > st.lo:
-            dt = h.dtype if h.dtype in (np.float32, np.float64) else np.dtype(np.float64)
-            edges = _TachoEdges(dt.type(st.lo), dt.type(st.hi), h.fs, h.t0)
-    enc_edges = _encoder_edges(scans, encoders, h)
-    idx = {c.name: j for j, c in enumerate(specs)}
-    with blocks_ahead(source, block) as blocks:
-        for a, data in blocks:
-            for j, c in enumerate(specs):
                 x = _column(data, j)
-                scans[c.name].feed2(x)
+                scans[c.name].feed(x)
                 if c.name in hum and a < n_hum:
                     hum[c.name][a:min(n_hum, a + x.size)] = x[:n_hum - a]
-            if edges is not None:
-                col = data[:, idx[tacho]]
-                edges.add(col if col.dtype in (np.float32, np.float64) else col.astype(np.float64))
-            for nm, ed in enc_edges.items():
-                ed.add(data[:, idx[nm]].astype(np.float64, copy=False))
+            for nm, ed in pulses.items():
+                ed.add(_pulse_column(data, idx[nm], nm == tacho))
+            nblk += 1
             if progress:
-                progress("scan 2/2", a + data.shape[0], n)
+                progress("scan", a + data.shape[0], n)
+    again = [c.name for c in specs if not scans[c.name].end()]
+    timers = _edge_timers(scans, tacho, encoders, h)
+    times = {nm: pulses[nm].times(ed.half) for nm, ed in timers.items()}
+    redo = [nm for nm, t in times.items() if t is None]
+    n_reads = 1
+    if again or redo:
+        # what the one read could not settle exactly (module notes): read again
+        n_reads = 2
+        with blocks_ahead(source, block) as blocks:
+            for a, data in blocks:
+                for nm in again:
+                    scans[nm].feed2(_column(data, idx[nm]))
+                for nm in redo:
+                    timers[nm].add(_pulse_column(data, idx[nm], nm == tacho))
+                if progress:
+                    progress("scan again", a + data.shape[0], n)
+        times.update({nm: timers[nm].times() for nm in redo})
     results = {nm: s.result() for nm, s in scans.items()}
     for nm, x in hum.items():                      # dropouts are gaps for the hum search too
         fr = results[nm].flat
@@ -348,8 +362,116 @@ def scan_source(source: BlockSource, *, conditioned: Sequence[str] = (), tacho: 
                     x[s0:min(s1, n_hum)] = np.nan
     reports = {c.name: quality_from_scan(results[c.name], c.name, h.fs, h.t0) for c in specs}
     quality = [dict(channel=c.name, **reports[c.name].summary_dict()) for c in specs]
-    return RawScan(h, results, quality, hum, None if edges is None else edges.times(), nblk,
-                   reports, {nm: ed.times() for nm, ed in enc_edges.items()})
+    return RawScan(h, results, quality, hum, times.get(tacho) if tacho else None, nblk,
+                   reports, {nm: times[nm] for nm in encoders if nm in times}, n_reads)
+
+
+def _pulse_column(data: np.ndarray, j: int, is_tacho: bool) -> np.ndarray:
+    """Column ``j`` of a block as a pulse train's edges are timed from it: a tacho's in its
+    floating dtype (float32 samples give float32 crossing fractions), an encoder's as
+    float64."""
+    col = data[:, j]
+    if is_tacho:
+        return col if col.dtype in (np.float32, np.float64) else col.astype(np.float64)
+    return col.astype(np.float64, copy=False)
+
+
+def _edge_timers(scans: dict, tacho: str | None, encoders: Sequence[str], h) -> dict:
+    """The edge timer (:class:`_TachoEdges`, its level settled by the scan) of the tacho,
+    when it has two levels, and of every encoder with two levels."""
+    out = {}
+    if tacho is not None:
+        st = scans[tacho].stats
+        if st.n_fin and st.hi > st.lo:
+            dt = h.dtype if h.dtype in (np.float32, np.float64) else np.dtype(np.float64)
+            out[tacho] = _TachoEdges(dt.type(st.lo), dt.type(st.hi), h.fs, h.t0)
+    out.update(_encoder_edges(scans, encoders, h))
+    return out
+
+
+#: Crossing candidates a pulse channel's one-read edge timing holds at most [-]
+#: (:class:`_BandEdges`; beyond them the channel's edges are timed in a second read).
+BAND_PAIRS = 1 << 20
+
+
+class _BandEdges:
+    """The rising crossings of a pulse train through a level that is known only once the
+    whole channel has been read (half-way between its extremes, or its two levels), from
+    one read.
+
+    Every sample pair that rises into the middle half of the range seen so far (the block
+    itself included) is kept: the sample after it, and the two values (at most
+    :data:`BAND_PAIRS` of them). At the end, the crossings of the final level are those
+    among them by :func:`meshphase.kinematics.encoder.rising_crossing_parts`' rule and
+    arithmetic, exactly, if the level lay in the middle half of the range in every block
+    that could hold one of its crossings (a block whose samples all lie above it, or all at
+    or below, cannot); :meth:`times` returns None otherwise (a tacho whose levels changed
+    after its first pulses: then timed in a second read).
+    """
+
+    def __init__(self, fs: float, t0: float):
+        self.fs, self.t0 = fs, t0
+        self.lo, self.hi = math.inf, -math.inf
+        self.last = None
+        self.pos = 0
+        self.idx: list[np.ndarray] = []
+        self.x0: list[np.ndarray] = []
+        self.x1: list[np.ndarray] = []
+        self.kept = 0
+        # per block: (band low, band high, largest non-NaN sample, smallest non-NaN sample
+        # of the block with the one before it, whether those hold a NaN)
+        self.blocks: list[tuple] = []
+
+    def add(self, x: np.ndarray) -> None:
+        """The next samples (in the dtype the crossings are computed in)."""
+        if x.size == 0:
+            return
+        xx = x if self.last is None else np.concatenate([self.last, x])
+        nan = np.isnan(xx)
+        has_nan = bool(nan.any())
+        vals = xx[~nan] if has_nan else xx
+        new = x[~np.isnan(x)] if has_nan else x
+        fin = new[np.isfinite(new)]
+        if fin.size:
+            self.lo = min(self.lo, float(np.min(fin)))
+            self.hi = max(self.hi, float(np.max(fin)))
+        if self.hi > self.lo:
+            q = 0.25 * (self.hi - self.lo)
+            # float64 scalars: compared with float32 samples exactly, not rounded to them
+            a, b = np.float64(self.lo + q), np.float64(self.hi - q)
+        else:
+            a, b = np.float64(math.inf), np.float64(-math.inf)
+        self.blocks.append((a, b, float(np.max(new)) if new.size else -math.inf,
+                            float(np.min(vals)) if vals.size else math.inf, has_nan))
+        if self.kept <= BAND_PAIRS and xx.size > 1 and a <= b:
+            sel = np.flatnonzero((xx[1:] > a) & ~(xx[:-1] > b))
+            if sel.size:
+                off = self.pos - (0 if self.last is None else 1)
+                self.idx.append(sel + (off + 1))
+                self.x0.append(xx[sel])
+                self.x1.append(xx[sel + 1])
+                self.kept += sel.size
+        self.last = x[-1:].copy()
+        self.pos += x.size
+
+    def times(self, level) -> np.ndarray | None:
+        """The crossing times [s] of ``level`` (in the samples' dtype), or None when the
+        pairs kept may miss one (class notes)."""
+        lv = float(level)
+        if self.kept > BAND_PAIRS:
+            return None
+        for a, b, mx, mn, has_nan in self.blocks:
+            if not (a <= lv <= b or mx <= lv or (not has_nan and mn > lv)):
+                return None
+        if not self.idx:
+            return np.empty(0)
+        i, x0, x1 = (np.concatenate(p) for p in (self.idx, self.x0, self.x1))
+        up = (x1 > level) & ~(x0 > level)
+        i, x0, x1 = i[up], x0[up], x1[up]
+        with np.errstate(invalid="ignore", divide="ignore"):   # inf edges: frac unused
+            frac = np.where(x1 > x0, (level - x0) / np.where(x1 > x0, x1 - x0, 1.0), 0.0)
+        frac = np.clip(frac, 0.0, 1.0)
+        return self.t0 + (i - 1 + frac) / self.fs
 
 
 def _encoder_edges(scans: dict, encoders: Sequence[str], h) -> dict:
@@ -365,10 +487,10 @@ def _encoder_edges(scans: dict, encoders: Sequence[str], h) -> dict:
     return out
 
 
-# ============================================================================ pass 3
+# ============================================================================ conditioning and onsets
 @dataclass
 class ChannelPlan:
-    """How one channel is conditioned and timed in pass 3.
+    """How one channel is conditioned and timed in the last read (:func:`condition_stream`).
 
     Attributes
     ----------
@@ -398,7 +520,7 @@ class ChannelPlan:
 
 @dataclass
 class StreamResult:
-    """What pass 3 keeps.
+    """What the last read (:func:`condition_stream`) keeps.
 
     Attributes
     ----------
@@ -438,7 +560,7 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
                      on_samples: Callable[[str, int, np.ndarray], None] | None = None,
                      progress: Callable[[str, int, int], None] | None = None,
                      filter_engine: str = "auto") -> StreamResult:
-    """Pass 3: condition the planned channels and detect onsets on the gauges, streamed.
+    """The last read: condition the planned channels and detect onsets on the gauges, streamed.
 
     The chain per channel is that of :func:`meshphase.conditioning.condition_recording`
     (dropouts to NaN, hum notches for the lines found in the first ``HUM_SECONDS``, drift
@@ -450,7 +572,7 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
     source : BlockSource
         The recording (read once more).
     scan : RawScan
-        Its passes 1 and 2 (:func:`scan_source`).
+        Its scan (:func:`scan_source`).
     plans : sequence of ChannelPlan
     hum, drift, drift_window, lowpass, highpass, order, warn
         As :func:`meshphase.conditioning.condition_recording`.
@@ -460,7 +582,8 @@ def condition_stream(source: BlockSource, scan: RawScan, plans: Sequence[Channel
         Largest estimated memory [B] (:func:`stream_memory`); ValueError above it.
     on_samples : callable(channel, first sample, samples), optional
         Called with every piece of conditioned samples as it is final (e.g. to write the
-        conditioned recording out, block by block); the array is the callee's to keep.
+        conditioned recording out, block by block); the array is the callee's to keep, not
+        to change (float32 for a float32 recording, whose conditioned values are float32).
     progress : callable(name, done, total), optional
     filter_engine : {"auto", "numba", "scipy"}
         Engine of the zero-phase filters (:func:`meshphase.signal.iir.pick_engine`; ``"auto"``
@@ -646,7 +769,7 @@ def _in_plan_order(plans, groups, outs) -> list:
 
 
 class _Pass3:
-    """The read of pass 3: every block through the chains, the conditioned samples to the
+    """The last read (:func:`condition_stream`): every block through the chains, the conditioned samples to the
     onset detectors, the excerpt and the conditioned gap runs; timings and the onset
     detectors' warnings kept."""
 
@@ -672,10 +795,14 @@ class _Pass3:
         # to block), and the onsets take the blocks in order. (Warnings a chain raised meanwhile would be kept
         # with the onsets' own; the chains report through notes and raise none.)
         def chains(data):
-            # a fresh float64 copy: the stages hold on to what they are given
+            # a fresh contiguous copy (the stages hold on to what they are given): float32
+            # samples of a float32 recording stay float32 (its chains round every step to
+            # float32 and widen exactly where they compute), anything else float64
+            dt = np.float32 if data.dtype == np.float32 else np.float64
             return lambda group: push_chains(
                 [self.chains[p.name] for p in group],
-                [np.array(data[:, idx[p.name]], dtype=np.float64) for p in group])
+                [np.array(data[:, idx[p.name]], dtype=dt if self.chains[p.name].round
+                          else np.float64) for p in group])
 
         groups = _chain_pairs(self.plans)
         with thread_pool(max_items=len(groups)) as tmap, blocks_ahead(source, block) as blocks:
@@ -779,7 +906,13 @@ class _RunTrack:
         self.t = RunTracker()
 
     def add(self, y):
-        self.t.add(~np.isfinite(y))
+        # a finite sum: no NaN or inf among the samples (one read of them, no mask made)
+        with np.errstate(over="ignore", invalid="ignore"):
+            clean = math.isfinite(float(np.sum(y)))
+        if clean:
+            self.t.skip(y.size)
+        else:
+            self.t.add(~np.isfinite(y))
 
     def runs(self):
         return self.t.runs()

@@ -74,7 +74,9 @@ class ConditioningChain:
     dtype : numpy dtype
         Sample type of the recording: a float32 recording holds each step's result as
         float32 (as the whole-array path does, writing every step back into the
-        recording's array).
+        recording's array), and the samples between the steps stay float32 arrays (half
+        the bytes to hold and move; each filter reads them into its float64 window, the
+        same numbers as the float64 copies of float32 values it held before).
     """
 
     def __init__(self, n: int, *, dropouts: np.ndarray | None, notch: ZeroPhase | None,
@@ -86,7 +88,9 @@ class ConditioningChain:
         self.round = np.dtype(dtype) == np.float32
 
     def _rounded(self, x: np.ndarray) -> np.ndarray:
-        return x.astype(np.float32).astype(np.float64) if self.round and x.size else x
+        """A step's float64 result rounded to float32 on a float32 recording (kept as
+        float32: the values the float64 copy of the rounded samples holds)."""
+        return x.astype(np.float32) if self.round and x.size else x
 
     def _mask(self, x: np.ndarray) -> np.ndarray:
         if self.dropouts is None:
@@ -139,7 +143,8 @@ def push_chains(chains, xs) -> list:
         xs = [c._rounded(y) if _live(st) else y for c, st, y in zip(chains, sts, ys)]
     for c, x in zip(chains, xs):
         if x.size:
-            c.snr.add(x)
+            # the tap's differences are float64 arithmetic (float32 samples widened, exactly)
+            c.snr.add(x if x.dtype == np.float64 else x.astype(np.float64))
     sts = [c.band for c in chains]
     ys = _stage(sts, xs, finals)
     return [c._rounded(y) if _live(st) else y for c, st, y in zip(chains, sts, ys)]

@@ -289,7 +289,17 @@ class PendingSamples:
         self.n += x.size
 
     def take(self, k: int) -> np.ndarray:
-        """The first ``k`` held samples (removed)."""
+        """The first ``k`` held samples (removed): a view of the first piece held when they
+        lie in it (the pieces are the caller's, never written to), else a float64 copy."""
+        p = self.parts[0] if self.parts else None
+        if isinstance(p, np.ndarray) and p.size >= k:
+            if p.size > k:
+                self.parts[0] = p[k:]
+            else:
+                self.parts.pop(0)
+            self.start += k
+            self.n -= k
+            return p[:k]
         out = np.empty(k)
         got = 0
         while got < k:
@@ -339,9 +349,9 @@ def minus_interp(x: np.ndarray, a: int, xp: np.ndarray, fp: np.ndarray) -> np.nd
     y = np.empty(n)
     c0, c1 = int(cut[0]), int(cut[-1])
     if c0:
-        np.subtract(x[:c0], fp[0], out=y[:c0])
+        np.subtract(x[:c0], fp[0], out=y[:c0], dtype=np.float64)
     if c1 < n:
-        np.subtract(x[c1:], fp[-1], out=y[c1:])
+        np.subtract(x[c1:], fp[-1], out=y[c1:], dtype=np.float64)
     seg = np.flatnonzero(cut[1:] > cut[:-1])
     if seg.size:
         longest = int(np.max(cut[seg + 1] - cut[seg]))
@@ -356,7 +366,7 @@ def minus_interp(x: np.ndarray, a: int, xp: np.ndarray, fp: np.ndarray) -> np.nd
             d -= xp[k]
             d *= slopes[k]
             d += fp[k]
-            np.subtract(x[i0:i1], d, out=y[i0:i1])
+            np.subtract(x[i0:i1], d, out=y[i0:i1], dtype=np.float64)
     return y
 
 
@@ -450,7 +460,12 @@ class DriftFilter:
                 total = float(np.sum(seg))
             if not math.isfinite(total):
                 seg = np.where(np.isfinite(seg), seg, np.nan)
-        vals, cents = (block_means if self.means else block_medians)(seg, self.b)
+        if self.means:
+            # float64 sums, as of the float64 samples (float32 ones widened exactly); the
+            # medians gather their strided samples into float64 rows themselves
+            vals, cents = block_means(seg.astype(np.float64, copy=False), self.b)
+        else:
+            vals, cents = block_medians(seg, self.b)
         cents = cents + self.j_next * self.b
         self.trace.append((vals, cents))
         rest = x[m:]

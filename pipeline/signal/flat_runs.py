@@ -712,11 +712,18 @@ class FlatScan:
 
 class FlatCandidates:
     """Maximal runs of equal finite samples at least ``min_len`` long, with the samples
-    within ``FLAT_WINDOW`` of their ends, from a channel fed in consecutive pieces."""
+    within ``FLAT_WINDOW`` of their ends, from a channel fed in consecutive pieces.
 
-    def __init__(self, n: int, min_len: int, window: int = FLAT_WINDOW):
+    With ``cap``, at most ``cap`` runs are held: when one more is found, ``min_len`` is
+    raised to the shortest length that at most ``cap // 2`` of the runs held reach, and the
+    shorter ones are dropped (a scan that does not know its threshold yet collects from the
+    floor up; :meth:`keep_at_least` then tells whether it still holds every run of the
+    threshold found at the end)."""
+
+    def __init__(self, n: int, min_len: int, window: int = FLAT_WINDOW, cap: int | None = None):
         self.n = n
         self.min_len = int(min_len)
+        self.cap = None if cap is None else max(2, int(cap))
         self.w = int(window)
         self.runs = EqualRuns()
         self.tail = np.empty(0)                  # the last <= w samples before the piece
@@ -782,6 +789,27 @@ class FlatCandidates:
         need = hi - b - right.size
         if need > 0:
             self.pending.append([row, need])
+        if self.cap is not None and len(self.found) > self.cap:
+            self._raise_min_len()
+
+    def _raise_min_len(self) -> None:
+        """``min_len`` raised so that at most ``cap // 2`` of the runs held reach it; the
+        shorter runs dropped."""
+        lengths = np.sort(np.array([r[1] - r[0] for r in self.found]))[::-1]
+        # the (cap // 2 + 1)-th longest run is the longest one that must go
+        self.min_len = max(self.min_len, int(lengths[self.cap // 2]) + 1)
+        self.found = [r for r in self.found if r[1] - r[0] >= self.min_len]
+        kept = {id(r) for r in self.found}
+        self.pending = [p for p in self.pending if id(p[0]) in kept]
+
+    def keep_at_least(self, min_len: int) -> bool:
+        """Keep only the runs at least ``min_len`` long (after :meth:`finish`); whether those
+        are all of them (False: runs of ``min_len`` or longer were dropped under ``cap``,
+        or ``min_len`` is below the length collected from)."""
+        complete = int(min_len) >= self.min_len
+        self.found = [r for r in self.found if r[1] - r[0] >= min_len]
+        self.min_len = max(self.min_len, int(min_len))
+        return complete
 
     def finish(self) -> None:
         starts, stops, values = self.runs.finish()

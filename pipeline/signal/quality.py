@@ -32,7 +32,12 @@ __all__ = ["find_runs", "nonfinite_runs", "clipped_runs", "channel_quality", "eq
            "plateau_runs", "outside_runs", "FALSE_ALARM", "DROPOUT_MIN_RUN", "CLIP_MIN_RUN",
            "FlatScan", "FlatStats", "classify_flat_runs", "ChannelScan", "ScanResult",
            "FLAT_WINDOW", "ChannelQuality", "HumReport", "quality_from_scan", "merge_runs",
-           "RunTracker", "warn_quality", "rail_mask"]
+           "RunTracker", "warn_quality", "rail_mask", "SCAN_CANDIDATES"]
+
+
+#: Candidate flat runs the one-pass scan holds per channel at most [-]
+#: (:class:`ChannelScan`): ~2 * FLAT_WINDOW float64 samples each, ~10 MB at most.
+SCAN_CANDIDATES = 1024
 
 
 def rail_mask(x: np.ndarray, hi: float, lo: float, rtol: float) -> np.ndarray:
@@ -454,15 +459,25 @@ def _norm2(x: np.ndarray) -> float:
 
 
 class ChannelScan:
-    """The quality of one channel from its raw samples fed in consecutive pieces, twice.
+    """The quality of one channel from its raw samples fed in consecutive pieces: once
+    (:meth:`feed`, :meth:`end`), or twice (:meth:`feed1`, :meth:`end1`, :meth:`feed2`).
 
-    Pass 1 (:meth:`feed1`, then :meth:`end1`) accumulates the channel-wide statistics
-    (extremes, strided subsamples, run-length counts: :class:`FlatScan`), pass 2
-    (:meth:`feed2`) the runs at the rails and the candidate flat runs with the samples
-    around them; :meth:`result` classifies them. The result equals that of the whole array
-    (:func:`channel_quality`, :func:`meshphase.signal.condition.assess_quality`) whatever the
-    pieces, in memory bounded by the subsamples plus ~2 * ``FLAT_WINDOW`` samples per
-    candidate flat run (the faults found) and the run lists themselves.
+    Twice: pass 1 accumulates the channel-wide statistics (extremes, strided subsamples,
+    run-length counts: :class:`FlatScan`), pass 2 the runs at the rails and the candidate
+    flat runs with the samples around them; :meth:`result` classifies them. The result
+    equals that of the whole array (:func:`channel_quality`,
+    :func:`meshphase.signal.condition.assess_quality`) whatever the pieces, in memory bounded
+    by the subsamples plus ~2 * ``FLAT_WINDOW`` samples per candidate flat run (the faults
+    found) and the run lists themselves.
+
+    Once: :meth:`feed` does pass 1's work and, without the channel-wide statistics, pass
+    2's: the runs at the running extremes (a new extreme drops the runs at the old one;
+    infinities are always at the rails) and the candidate flat runs from the shortest
+    length any threshold can be (``min(min_run, clip_min_run)``), at most
+    :data:`SCAN_CANDIDATES` of them held (the shortest dropped first,
+    :class:`FlatCandidates`). :meth:`end` then has what pass 2 would have found, exactly,
+    unless ``rail_rtol`` is not 0 or more candidate runs reached the final threshold than
+    were held: it returns False, and the second pass (:meth:`feed2`) is needed.
 
     Parameters
     ----------
@@ -499,6 +514,11 @@ class ChannelScan:
         self.stats: FlatStats | None = None
         self.rails = RunTracker()
         self.cand: FlatCandidates | None = None
+        # the one-pass scan (feed): runs at the running extremes, candidates from the floor
+        self.once = False
+        self.run_hi = self.run_lo = None        # RunTrackers of x == running max / min
+        self.run_inf = RunTracker()             # +-inf: at the rails whatever the extremes
+        self.cand1: FlatCandidates | None = None
 
     def feed1(self, x: np.ndarray) -> None:
         """Pass 1: the next piece of float64 samples."""
@@ -515,6 +535,74 @@ class ChannelScan:
         if x.size:
             self.norm = math.hypot(self.norm, _norm2(x[fin] if bad.any() else x))
         self.pos1 += x.size
+
+    def feed(self, x: np.ndarray) -> None:
+        """The one-pass scan: the next piece of float64 samples (pass 1's work and pass 2's
+        at the running extremes; see the class notes)."""
+        if not self.once:
+            if self.pos1:
+                raise RuntimeError("ChannelScan.feed after feed1(): one scan or the other")
+            self.once = True
+            self.run_hi, self.run_lo = RunTracker(), RunTracker()
+            if self.flat is not False and self.n:
+                self.cand1 = FlatCandidates(self.n, min(self.min_run, self.clip_min_run),
+                                            cap=SCAN_CANDIDATES)
+        hi0, lo0 = self.fscan.hi, self.fscan.lo
+        self.feed1(x)
+        if x.size == 0:
+            return
+        with np.errstate(over="ignore", invalid="ignore"):
+            clean = math.isfinite(float(np.sum(x)))
+        if clean:
+            self.run_inf.skip(x.size)
+        else:
+            self.run_inf.add(np.isinf(x))
+        for tr, old, new, attr in ((self.run_hi, hi0, self.fscan.hi, "run_hi"),
+                                   (self.run_lo, lo0, self.fscan.lo, "run_lo")):
+            if not math.isfinite(new):                  # no finite sample yet
+                tr.skip(x.size)
+            elif new != old:                            # a new extreme: runs at the old go
+                fresh = RunTracker()
+                fresh.skip(tr.n)
+                fresh.add(x == new)
+                setattr(self, attr, fresh)
+            else:
+                tr.add(x == new)
+        if self.cand1 is not None:
+            self.cand1.add(x)
+
+    def end(self) -> bool:
+        """End of the one-pass scan: True when it found what pass 2 would have (then
+        :meth:`result`), False when the second pass (:meth:`feed2` of every piece again) is
+        needed."""
+        if not self.once:
+            self.feed(np.empty(0))
+        self.end1()
+        st = self.stats
+        complete = self.rail_rtol == 0.0
+        # (a range beyond float64 makes rail_mask's tolerance NaN: no sample at a rail)
+        if complete and st.n_fin and st.hi != st.lo and math.isfinite(st.hi - st.lo):
+            runs = merge_runs(np.concatenate([self.run_hi.runs(), self.run_lo.runs(),
+                                              self.run_inf.runs()]))
+            self.rails = RunTracker()
+            self.rails.done = [runs]
+            self.rails.n = self.n
+        if self.cand is not None:
+            if self.cand1 is None:
+                complete = False
+            else:
+                self.cand1.finish()
+                complete = self.cand1.keep_at_least(st.min_candidate) and complete
+                if complete:
+                    self.cand = self.cand1
+        self.cand1 = self.run_hi = self.run_lo = None
+        if complete:
+            self.pos2 = self.n
+        else:
+            self.rails = RunTracker()
+            if self.cand is not None:
+                self.cand = FlatCandidates(self.n, st.min_candidate)
+        return complete
 
     def end1(self) -> None:
         """End of pass 1: the thresholds for pass 2."""
@@ -536,6 +624,9 @@ class ChannelScan:
         """Pass 2: the same pieces again."""
         if self.stats is None:
             raise RuntimeError("ChannelScan.feed2 before end1()")
+        if self.pos2 >= self.n and x.size:
+            raise RuntimeError("ChannelScan.feed2 after the scan found everything (end() "
+                               "returned True)")
         st = self.stats
         if st.n_fin and st.hi != st.lo:
             self.rails.add(rail_mask(x, st.hi, st.lo, self.rail_rtol))

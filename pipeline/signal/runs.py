@@ -197,6 +197,15 @@ class RunTracker:
             self.done.append(r)
         self.n += m
 
+    def skip(self, m: int) -> None:
+        """The next piece: ``m`` samples all False (what :meth:`add` of such a mask does)."""
+        if m <= 0:
+            return
+        if self.open is not None:
+            self.done.append(np.array([[self.open, self.n]], dtype=np.int64))
+            self.open = None
+        self.n += int(m)
+
     def runs(self) -> np.ndarray:
         """The runs of every piece fed, shape (k, 2)."""
         out = list(self.done)

@@ -283,7 +283,11 @@ class ZeroPhase:
         return self._run(True)
 
     def _window(self) -> np.ndarray:
-        return self.buf[0] if len(self.buf) == 1 else np.concatenate(self.buf)
+        """The held samples as one float64 window (pieces pushed as float32 widened in the
+        same copy that joins them; a single float64 piece as it is)."""
+        if len(self.buf) == 1:
+            return self.buf[0].astype(np.float64, copy=False)
+        return np.concatenate(self.buf, dtype=np.float64)
 
     def _filtered(self, w: np.ndarray) -> np.ndarray:
         return apply_finite(w, self._func, min_len=self.min_len, fill_max=self.fill_max,

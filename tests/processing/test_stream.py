@@ -796,3 +796,232 @@ def test_a_read_failing_mid_pass_is_raised_and_its_reader_stopped(faulty, n_thre
             condition_stream(Failing(faulty), good, plans, block=BLOCK)
     assert Failing.closed == 2
     assert not [t for t in threading.enumerate() if t.name == "meshphase-read"]
+
+
+# ----------------------------------------------------------------------------- one read
+def _scan_twice(x, cuts, **kw):
+    s = ChannelScan(x.size, **kw)
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        s.feed1(x[a:b])
+    s.end1()
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        s.feed2(x[a:b])
+    return quality_from_scan(s.result()).to_dict()
+
+
+def _scan_once(x, cuts, **kw):
+    s = ChannelScan(x.size, **kw)
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        s.feed(x[a:b])
+    settled = s.end()
+    if not settled:
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            s.feed2(x[a:b])
+    return quality_from_scan(s.result()).to_dict(), settled
+
+
+def _signals():
+    rng = np.random.default_rng(11)
+    x = rng.normal(size=60000)
+    x[1000:1050] = 0.0                                   # zeros
+    x[5000:5020] = x[4999]                               # a held value
+    x[9000:9010] = x.max() + 1.0                         # a new maximum after others
+    x[100:130] = np.nan
+    x[150] = np.inf
+    x[-5:] = x.min() - 1.0                               # the minimum at the very end
+    q = np.rint(rng.normal(size=80000) * 1.5)            # quantised: chance runs of equal values
+    q[7000:7100] = 0.0
+    q[20000:20040] = q.max()
+    sine = np.rint(np.sin(np.arange(50000) * 0.01) * 20)  # thousands of runs at every level
+    square = np.where((np.arange(30000) // 500) % 2, 1.0, 0.0)
+    return {"faults": x, "quantised": q, "sine": sine, "square": square,
+            "constant": np.full(5000, 3.0), "empty": np.zeros(0)}
+
+
+@pytest.mark.parametrize("name", ["faults", "quantised", "sine", "square", "constant", "empty"])
+@pytest.mark.parametrize("flat", [True, None])
+def test_one_read_scan_equals_the_two_pass_scan(name, flat):
+    x = _signals()[name]
+    for cuts in ([0, x.size], [0, 1, 2, 999, 1001, 9005, x.size // 2, x.size],
+                 list(range(0, x.size, 7)) + [x.size]):
+        cuts = sorted({min(c, x.size) for c in cuts})
+        once, settled = _scan_once(x, cuts, flat=flat)
+        assert settled                      # none of these needs the second pass
+        assert once == _scan_twice(x, cuts, flat=flat)
+
+
+def test_one_read_scan_says_when_it_needs_the_second_pass():
+    # 1500 dropouts of zeros, away from the signal's level: more runs at the threshold than
+    # the scan holds (SCAN_CANDIDATES), so the shortest were dropped; the second pass then
+    # gives what the two-pass scan gives. A rail tolerance needs it too.
+    from meshphase.signal.quality import SCAN_CANDIDATES
+
+    x = np.random.default_rng(3).normal(size=900000) + 5.0
+    for k in range(1500):
+        x[k * 600:k * 600 + 20 + k % 5] = 0.0
+    cuts = list(range(0, x.size, 1 << 16)) + [x.size]
+    once, settled = _scan_once(x, cuts)
+    assert not settled and once == _scan_twice(x, cuts)
+    assert once["dropout_runs"] and len(once["dropout_runs"]) == 1500 > SCAN_CANDIDATES
+    y = _signals()["faults"]
+    once, settled = _scan_once(y, [0, y.size], rail_rtol=0.01)
+    assert not settled and once == _scan_twice(y, [0, y.size], rail_rtol=0.01)
+
+
+def test_one_read_scan_misused():
+    s = ChannelScan(10)
+    s.feed1(np.zeros(4))
+    with pytest.raises(RuntimeError, match="feed1"):
+        s.feed(np.zeros(6))
+    s = ChannelScan(10)
+    s.feed(np.zeros(3))
+    with pytest.raises(ValueError, match="fed 3 samples"):
+        s.end()
+    s = ChannelScan(4)
+    s.feed(np.arange(4.0))
+    assert s.end()
+    with pytest.raises(RuntimeError, match="found everything"):
+        s.feed2(np.arange(4.0))
+    s = ChannelScan(0)
+    assert s.end() and s.result().n == 0
+
+
+class _CountingSource(MemorySource):
+    """A memory source that counts how often each sample was handed out."""
+
+    def __init__(self, rec):
+        super().__init__(rec)
+        self.reads = np.zeros(rec.n_samples, dtype=np.int64)
+
+    def blocks(self, n_block):
+        for a, data in super().blocks(n_block):
+            self.reads[a:a + data.shape[0]] += 1
+            yield a, data
+
+
+def test_the_scan_reads_every_sample_once_and_conditioning_once_more(faulty):
+    # the scan settles everything in its one read (quality, rails, flat runs, tacho edges,
+    # hum windows); conditioning and onsets need the dropouts, clips and hum lines of the
+    # whole channel before their first sample, so they read once more: two in all
+    src = _CountingSource(faulty)
+    scan = scan_source(src, conditioned=["sun", "ring"], tacho="tacho", block=BLOCK)
+    assert scan.n_reads == 1 and np.all(src.reads == 1)
+    plans = [ChannelPlan(ch, mesh_freq=fm, pulse_period=per, group=ch, onsets=True,
+                         onset_kwargs={"mesh_freq": fm}) for ch, (fm, per) in _mesh().items()]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataQualityWarning)
+        condition_stream(src, scan, plans, block=BLOCK)
+    assert np.all(src.reads == 2)
+
+
+def test_a_tacho_whose_levels_move_is_timed_in_a_second_read():
+    # the tacho's first pulses go from 0 to 1, later ones from -1 to 1.2: the final half
+    # level (0.1) lies outside the middle half of the first pulses' range, around which
+    # the one read kept their crossings: its edges are timed again, exactly as the
+    # whole-array rule times them
+    fs, n = 1000.0, 40000
+    t = np.arange(n)
+    up = (t // 700) % 2 == 1
+    tacho = np.where(up, 1.0, 0.0)
+    tacho[n // 2:] = np.where(up[n // 2:], 1.2, -1.0)
+    gauge = np.random.default_rng(1).normal(size=n)
+    rec = Recording(np.stack([gauge, tacho], axis=1), fs,
+                    [ChannelSpec("sun", kind="sun"), ChannelSpec("tacho", kind="tacho")])
+    src = _CountingSource(rec)
+    scan = scan_source(src, conditioned=["sun"], tacho="tacho", block=3000)
+    assert scan.n_reads == 2 and np.all(src.reads == 2)
+    half = 0.5 * (-1.0 + 1.2)
+    b = tacho > half
+    rise = np.flatnonzero(b[1:] & ~b[:-1]) + 1
+    frac = (half - tacho[rise - 1]) / (tacho[rise] - tacho[rise - 1])
+    np.testing.assert_array_equal(scan.tacho_times, (rise - 1 + frac) / fs)
+    assert scan.tacho_times.size == np.count_nonzero(np.diff(up.astype(int)) == 1)
+    # levels reached in the first pulses: one read, the same edges as the whole array
+    half = 1.5
+    steady = np.where(up, 3.0, 0.0)
+    rec2 = rec.replace_data(np.stack([gauge, steady], axis=1))
+    src2 = _CountingSource(rec2)
+    scan2 = scan_source(src2, conditioned=["sun"], tacho="tacho", block=3000)
+    assert scan2.n_reads == 1 and np.all(src2.reads == 1)
+    b = steady > half
+    rise = np.flatnonzero(b[1:] & ~b[:-1]) + 1
+    np.testing.assert_array_equal(scan2.tacho_times, (rise - 1 + 0.5) / fs)
+
+
+def test_float32_chains_hand_on_float32_and_equal_float64_copies():
+    # a float32 recording's chain rounds every step to float32: it hands float32 samples
+    # on (half the bytes), the values the float64 copies of those roundings held
+    rec, _ = generate("noisy", seed=4, duration=20.0)
+    rec32 = Recording(rec.data.astype(np.float32), rec.fs, rec.channels, rec.t0, meta=rec.meta)
+    src = MemorySource(rec32)
+    scan = scan_source(src, conditioned=["sun"], block=BLOCK)
+    fm, per = _mesh()["sun"]
+    pieces = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataQualityWarning)
+        res = condition_stream(src, scan, [ChannelPlan("sun", mesh_freq=fm, pulse_period=per)],
+                               block=BLOCK, on_samples=lambda nm, a, y: pieces.append(y))
+        whole = condition_recording(rec32, channels=["sun"], mesh_freq=fm, pulse_period=per)
+    assert pieces and all(p.dtype == np.float32 for p in pieces)
+    y = np.concatenate(pieces)
+    ref = whole.recording.channel("sun")
+    assert ref.dtype == np.float32 and y.size == ref.size
+    ok = np.isfinite(ref)
+    # the streamed windows equal the whole filter to ~1e-13, rounded to float32: at most
+    # one float32 step apart where a value straddles a rounding boundary
+    assert np.array_equal(np.isfinite(y), ok)
+    assert np.max(np.abs(y[ok] - ref[ok])) <= 4 * np.spacing(np.float32(np.max(np.abs(ref[ok]))))
+    assert res.excerpt.data.dtype == np.float64
+
+
+class _TiledSource(MemorySource):
+    """A recording ``reps`` times as long as ``rec``: its samples repeated, block by block
+    (never held whole)."""
+
+    def __init__(self, rec, reps):
+        super().__init__(rec)
+        self.base = rec
+        self.header = StreamedRecording(rec.fs, rec.n_samples * reps, list(rec.channels), rec.t0,
+                                        None, rec.meta, (), rec.data.dtype)
+
+    def blocks(self, n_block):
+        m, n = self.base.n_samples, self.header.n_samples
+        for a in range(0, n, n_block):
+            b = min(a + n_block, n)
+            idx = np.arange(a, b) % m
+            yield a, self.base.data[idx]
+
+
+def _streamed_peak(rec, reps):
+    import tracemalloc
+
+    src = _TiledSource(rec, reps)
+    fm, per = _mesh()["sun"]
+    tracemalloc.start()
+    try:
+        scan = scan_source(src, conditioned=["sun"], tacho="tacho", block=1 << 16)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DataQualityWarning)
+            res = condition_stream(src, scan, [ChannelPlan("sun", mesh_freq=fm, pulse_period=per,
+                                                           onsets=True,
+                                                           onset_kwargs={"mesh_freq": fm})],
+                                   block=1 << 16)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    return peak, len(res.onsets["sun"])
+
+
+def test_streamed_memory_does_not_grow_with_the_length():
+    # 5 and 10 min of a gauge and a tacho (a 30 s recording repeated, read block by block):
+    # past 2**20 samples (3.4 min) every fixed buffer (onset analysis blocks, SNR
+    # subsamples, filter windows, drift look-ahead) is full, so doubling the length adds
+    # only what is found: the onsets (~50 B each) and the drift blocks' values. 4 MB is a
+    # third of the 12 MB that 5 more minutes of one float64 channel take: a structure
+    # holding anything per sample fails it
+    rec, _ = generate("rig_realistic", seed=5, duration=30.0)
+    rec = rec.select(["sun", "tacho"])
+    p5, n5 = _streamed_peak(rec, 10)
+    p10, n10 = _streamed_peak(rec, 20)
+    assert n10 > 1.9 * n5 > 0
+    assert p10 - p5 < 4 * 2**20, (p5 / 2**20, p10 / 2**20)
