@@ -125,8 +125,9 @@ _PREAMBLE_KEYS = {"format", "format_version", "fs", "t0", "n_samples", "dtype", 
 
 # ---------------------------------------------------------------------------- sniff
 def sniff(head: bytes) -> bool:
-    """True when ``head`` is text whose first non-comment, non-blank line holds a comma, a
-    semicolon or a tab."""
+    """True when ``head`` is text (no control characters but tab and line ends) in which a
+    non-comment line holds a comma, a semicolon or a tab: the header may sit below a
+    metadata block whose first lines hold none (a title line, a free-text comment)."""
     if not head or b"\x00" in head:
         return False
     if head.startswith(codecs.BOM_UTF8):
@@ -141,9 +142,8 @@ def sniff(head: bytes) -> bool:
         return False
     for line in text.splitlines():
         s = line.strip()
-        if not s or s.startswith("#"):
-            continue
-        return any(c in s for c in _SEPARATORS)
+        if s and not s.startswith("#") and any(c in s for c in _SEPARATORS):
+            return True
     return False
 
 

@@ -223,3 +223,17 @@ def test_one_list_of_time_names_for_csv_and_tdms():
     assert time_header("Zeit  1 - Standard-Messrate") is not None
     for bad in ("", "sun [s]", "time [h]", "Timer", "T3 sun", None, 3):
         assert time_header(bad) is None
+
+
+def test_a_title_line_without_separators_above_the_header(tmp_path):
+    """A text export whose first lines are a title and a free-text comment (no separator on
+    the first line) is still recognised as CSV by content, and reads with the header found
+    or named: detection looks for a separator on any line of the file's head."""
+    t, data = _signal()
+    head = "Rig A export\nfree text, with a comma\nTime [s],sun [m/m],ring [m/m]\n"
+    path = _write(tmp_path / "title.txt", head + _rows(t, data, ",", "."))
+    assert pio.detect_format(path) == "csv"
+    a, b = pio.read(path), pio.read(path, header_row=3)
+    assert a == b and a.names == ["sun", "ring"] and a.fs == FS
+    assert a.meta["csv"]["header_row"] == 3
+    assert not mcsv.sniff(b"Rig A export\nno separators here\n")   # plain prose is no CSV
