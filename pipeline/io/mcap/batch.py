@@ -313,9 +313,6 @@ _LUT_START[list(b"0123456789-")] = True
 _LUT_DELIM = np.zeros(256, dtype=bool)
 _LUT_DELIM[list(b":[, \t\r\n")] = True
 
-_P10 = 10.0 ** np.arange(23)
-_EXTENDED = np.finfo(np.longdouble).nmant >= 63
-_P10L = np.array([10 ** k for k in range(28)], dtype=np.longdouble) if _EXTENDED else None
 _PROBE = 1_000_000
 
 
@@ -334,6 +331,10 @@ def token_matrix(buf: np.ndarray, start: np.ndarray, length: np.ndarray) -> np.n
     return out
 
 
+def _is_digit(c: np.ndarray) -> np.ndarray:
+    return np.subtract(c, 48, dtype=np.uint8) < 10
+
+
 def parse_numbers(mat: np.ndarray, length: np.ndarray):
     """JSON number texts to float64, exactly as ``json.loads`` then ``float``.
 
@@ -350,7 +351,8 @@ def parse_numbers(mat: np.ndarray, length: np.ndarray):
     is_int : ndarray of bool
         The text is a JSON integer (no fraction, no exponent).
     mantissa : ndarray of uint64
-        The digits as an integer (the magnitude of an integer text).
+        The magnitude of an integer text (0 for other texts; saturated at the uint64 maximum
+        for an integer of more than 18 digits).
 
     Raises
     ------
@@ -361,85 +363,38 @@ def parse_numbers(mat: np.ndarray, length: np.ndarray):
     n, w = mat.shape
     if w == 0 or np.any(length <= 0):
         raise Unsupported("an empty number")
-    col = np.arange(w)
-    inside = col < length[:, None]
-    digit = (np.subtract(mat, 48, dtype=np.uint8) < 10) & inside
-    dot, ech = mat == ord("."), (mat == ord("e")) | (mat == ord("E"))
-    sign = (mat == ord("-")) | (mat == ord("+"))
-    if np.count_nonzero(digit | dot | ech | sign | ~inside) != digit.size:
-        raise Unsupported("a token is not a JSON number")
-    n_dot, n_e, n_sign = (np.count_nonzero(x, axis=1) for x in (dot, ech, sign))
-    has_dot, has_e = n_dot == 1, n_e == 1
-    epos = np.where(has_e, ech.argmax(axis=1), length)
-    dpos = np.where(has_dot, dot.argmax(axis=1), epos)
+    mat = np.ascontiguousarray(mat)
+    texts = mat.view(f"S{w}").reshape(n)
+    # numpy's bytes-to-float cast parses as Python's float() does (correctly rounded) and
+    # refuses what float() refuses ("1e", "--1", "1-2", "1e5e5", any letter but e/E ...).
+    # JSON refuses more than float() (RFC 8259, section 6): a leading "+", a leading zero
+    # before a digit, a dot without digits on both sides; those are checked here.
+    try:
+        values = texts.astype(np.float64)
+    except ValueError:
+        raise Unsupported("a token is not a JSON number") from None
+    rows = np.arange(n)
     neg = mat[:, 0] == ord("-")
     i0 = neg.astype(np.int64)
-    exp_sign = has_e & (epos + 1 < length) & sign[np.arange(n), np.minimum(epos + 1, w - 1)]
-    first = mat[np.arange(n), np.minimum(i0, w - 1)]
-    second = mat[np.arange(n), np.minimum(i0 + 1, w - 1)]
-    ok = ((n_dot <= 1) & (n_e <= 1) & (n_sign == i0 + exp_sign) & (mat[:, 0] != ord("+"))
-          & (dpos > i0)                                      # an integer part
-          & ((first != ord("0")) | (dpos == i0 + 1) | (second == ord("."))
-             | (second == ord("e")) | (second == ord("E")) | (i0 + 1 >= length))  # no leading zero
-          & (~has_dot | (dpos + 1 < epos))                   # digits after the dot
-          & (~has_e | (epos + 1 + exp_sign < length)))       # digits in the exponent
+    first = mat[rows, np.minimum(i0, w - 1)]
+    second = mat[rows, np.minimum(i0 + 1, w - 1)]
+    dot = mat == ord(".")
+    has_dot = dot.any(axis=1)
+    dpos = dot.argmax(axis=1)
+    before = mat[rows, np.maximum(dpos - 1, 0)]
+    after = mat[rows, np.minimum(dpos + 1, w - 1)]
+    ok = (_is_digit(first)                                                # no "+", ".5", "-.5", "e5"
+          & ~((first == ord("0")) & (i0 + 1 < length) & _is_digit(second))   # no "01", "-00"
+          & (~has_dot | (_is_digit(before) & (dpos > i0) & (dpos + 1 < length) & _is_digit(after))))
     if not ok.all():
         raise Unsupported("a token is not a JSON number")
-    mant = digit & (col < epos[:, None])
-    # significant digits: from the first non-zero one
-    nz = np.logical_or.accumulate(mant & (mat != ord("0")), axis=1)
-    sig = np.count_nonzero(mant & nz, axis=1)
-    frac = np.count_nonzero(mant & (col > dpos[:, None]), axis=1)
-    d = np.ascontiguousarray(np.subtract(mat, 48, dtype=np.uint8).T)
-    mt = np.ascontiguousarray(mant.T)
+    is_int = ~has_dot & ~((mat == ord("e")) | (mat == ord("E"))).any(axis=1)
+    values[is_int & (values == 0)] = 0.0               # json.loads("-0") is the integer 0
     m = np.zeros(n, dtype=np.uint64)
-    ten = np.uint64(10)
-    for c in range(int(epos.max())):  # rows with more than 19 digits go through Python's float
-        m = np.where(mt[c], m * ten + d[c], m)
-    ex = np.zeros(n, dtype=np.int64)
-    if has_e.any():
-        n_exp = np.where(has_e, length - epos - 1 - exp_sign, 0)  # exponent digits, at the end
-        if n_exp.max() > 6:
-            raise Unsupported("an exponent of more than 6 digits")
-        rows = np.arange(n)
-        for k in range(int(n_exp.max())):
-            at = k < n_exp
-            ex += np.where(at, (mat[rows, np.maximum(length - 1 - k, 0)].astype(np.int64) - 48) * 10 ** k, 0)
-    eneg = exp_sign & (mat[np.arange(n), np.minimum(epos + 1, w - 1)] == ord("-"))
-    is_int = ~(has_dot | has_e)
-    e10 = np.where(eneg, -ex, ex) - frac
-    values = np.empty(n, dtype=np.float64)
-    exact = sig <= 19
-    zero = m == 0
-    fast = exact & (zero | ((m <= np.uint64(2 ** 53)) & (np.abs(e10) <= 22)))
-    mf = m.astype(np.float64)
-    k = np.clip(np.abs(e10), 0, 22)
-    values[:] = np.where(e10 >= 0, mf * _P10[k], mf / _P10[k])
-    values[zero] = 0.0
-    rest = ~fast
-    if rest.any() and _EXTENDED:
-        sel = rest & exact & (np.abs(e10) <= 27)
-        if sel.any():
-            ml = m[sel].astype(np.longdouble)
-            es = e10[sel]
-            pl = _P10L[np.abs(es)]
-            ld = np.where(es >= 0, ml * pl, ml / pl)
-            r = ld.astype(np.float64)
-            up = (r.astype(np.longdouble) + np.nextafter(r, np.inf).astype(np.longdouble)) / 2
-            down = (r.astype(np.longdouble) + np.nextafter(r, -np.inf).astype(np.longdouble)) / 2
-            ok = (ld != up) & (ld != down)
-            idx = np.flatnonzero(sel)
-            values[idx[ok]] = r[ok]
-            rest[idx[ok]] = False
-    for i in np.flatnonzero(rest):
-        text = mat[i, :length[i]].tobytes()
-        if is_int[i]:
-            if length[i] > 300:
-                raise Unsupported("an integer too long for a float")
-            values[i] = abs(float(int(text)))
-        else:
-            values[i] = abs(float(text))
-    values = np.where(neg & ~(is_int & (values == 0)), -values, values)
+    small = is_int & (length - i0 <= 18)
+    if small.any():
+        m[small] = np.abs(texts[small].astype(np.int64)).astype(np.uint64)
+    m[is_int & ~small] = np.iinfo(np.uint64).max       # more than 18 digits: saturated
     return values, is_int, m
 
 
@@ -474,13 +429,20 @@ class JsonBatch:
         if start[0] == 0:
             raise Unsupported("payload at the start of the buffer")
         end = start + length
-        # runs of number characters, broken where a payload starts
-        pos = np.flatnonzero(_number_chars(buf))
+        # runs of number characters, broken where a payload starts: a run begins where a
+        # number character follows another byte (or a payload starts with one) and ends
+        # where one is followed by another byte (or by a payload's first byte)
+        num = _number_chars(buf)
         first_of = np.zeros(buf.size + 1, dtype=bool)
         first_of[start] = True
-        brk = (np.diff(pos) != 1) | first_of[pos[1:]]
-        rs = pos[np.concatenate(([True], brk))]
-        re_ = pos[np.concatenate((brk, [True]))] + 1
+        begins = num.copy()
+        begins[1:] &= ~num[:-1]
+        begins[start] |= num[start]
+        ends = num.copy()
+        ends[:-1] &= ~num[1:]
+        ends[start - 1] |= num[start - 1] & num[start]
+        rs = np.flatnonzero(begins)
+        re_ = np.flatnonzero(ends) + 1
         # a token: a run starting with - or a digit after a delimiter or at a payload's start
         tok = _LUT_START[buf[rs]] & (_LUT_DELIM[buf[rs - 1]] | first_of[rs])
         ts, te = rs[tok], re_[tok]
