@@ -2,13 +2,17 @@
 
 ``read_mcap.mjs`` uses ``@mcap/core`` (McapIndexedReader, from the npm registry) and decodes
 the payload itself from the layout documented in ``data_schemas/mcap.md`` (JSON messages of
-the ``foxglove`` layout with ``JSON.parse``); nothing is shared with the Python code. Set up once with ``(cd tests/interop && npm ci --no-audit --no-fund)``.
+the ``foxglove`` layout with ``JSON.parse``); nothing is shared with the Python code. The
+first run installs the reader's locked packages (``npm ci`` in this folder) when Node.js and
+npm are on PATH; without them the tests are skipped with the reason printed (``-ra``), unless
+``MESHPHASE_REQUIRE_INTEROP=1`` (set by ``.ci/run``) turns the skip into a failure.
 """
 
 from __future__ import annotations
 
 import base64
 import json
+import os
 import shutil
 import subprocess
 from pathlib import Path
@@ -29,12 +33,26 @@ HERE = Path(__file__).resolve().parent
 SCRIPT = HERE / "read_mcap.mjs"
 
 
+def _install() -> str | None:
+    """``npm ci`` of the locked reader packages; the reason it could not, or None."""
+    npm = shutil.which("npm")
+    if npm is None:
+        return "npm is not on PATH, so the TypeScript reader (@mcap/core) cannot be installed"
+    try:
+        res = subprocess.run([npm, "ci", "--no-audit", "--no-fund", "--loglevel=error"], cwd=HERE,
+                             capture_output=True, text=True, timeout=600)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        return f"`npm ci` in tests/interop failed: {exc}"
+    if res.returncode != 0:
+        return f"`npm ci` in tests/interop failed: {res.stderr.strip()[-300:]}"
+    return None
+
+
 def _skip_reason() -> str | None:
     if shutil.which("node") is None:
         return "node is not on PATH (the interop test needs Node.js >= 18)"
     if not (HERE / "node_modules" / "@mcap" / "core").is_dir():
-        return ("tests/interop/node_modules is missing: run "
-                "`(cd tests/interop && npm ci --no-audit --no-fund)` first")
+        return _install()
     return None
 
 
@@ -42,6 +60,8 @@ def _skip_reason() -> str | None:
 def node():
     reason = _skip_reason()
     if reason:
+        if os.environ.get("MESHPHASE_REQUIRE_INTEROP") == "1":
+            pytest.fail(f"MESHPHASE_REQUIRE_INTEROP=1 but {reason}")
         pytest.skip(reason)
     return shutil.which("node")
 
@@ -188,6 +208,6 @@ def test_skip_reason_names_what_is_missing(monkeypatch, tmp_path):
     # reason, which pytest's -ra (pyproject addopts) prints in the summary
     monkeypatch.setattr(shutil, "which", lambda name: None)
     assert "node is not on PATH" in _skip_reason()
-    monkeypatch.setattr(shutil, "which", lambda name: "/usr/bin/node")
-    monkeypatch.setitem(globals(), "HERE", tmp_path)  # no node_modules here
-    assert "npm ci" in _skip_reason()
+    monkeypatch.setattr(shutil, "which", lambda name: "/usr/bin/node" if name == "node" else None)
+    monkeypatch.setitem(globals(), "HERE", tmp_path)  # no node_modules here, and no npm to install them
+    assert "npm is not on PATH" in _skip_reason()
