@@ -108,15 +108,23 @@ _OPTION_SOURCES = {"topics": ("--topics", "[input.mcap]"), "fs": ("--fs", "[inpu
                    "delimiter": ("--delimiter", "[input.csv]")}
 
 
-def _nonnegative_int(text: str) -> int:
-    """argparse type: a row count or number, >= 0."""
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
-    if n < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {n}")
-    return n
+def _whole_number(minimum: int):
+    """argparse type: a whole number >= ``minimum`` (a row count, a number of runs)."""
+    def parse(text: str) -> int:
+        try:
+            n = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number >= {minimum}, got {text!r}") from None
+        if n < minimum:
+            raise argparse.ArgumentTypeError(f"must be >= {minimum}, got {n}")
+        return n
+    parse.__name__ = f"whole number >= {minimum}"   # argparse names the type in its messages
+    return parse
+
+
+_nonnegative_int = _whole_number(0)
+_positive_int = _whole_number(1)
+_repeats = _whole_number(1)
 
 
 def _positive_hz(text: str) -> float:
@@ -297,10 +305,10 @@ def add_input_options(parser: argparse.ArgumentParser, *, scene: bool = True) ->
         g.add_argument("--scene", metavar="SCENE",
                        help="a scene whose [input.mcap] / [input.csv] tables, [input] fs_Hz and "
                             "[[channels]] mapping read the recording")
-    g.add_argument("--header-row", type=_nonnegative_int, metavar="N",
-                   help="text: row of the channel names (from 0, after --skip-rows)")
+    g.add_argument("--header-row", type=_positive_int, metavar="N",
+                   help="text: line number of the channel names (from 1, as editors count)")
     g.add_argument("--skip-rows", type=_nonnegative_int, metavar="N",
-                   help="text: rows of preamble skipped at the top")
+                   help="text: lines of preamble above the channel names")
     g.add_argument("--fs", type=_positive_hz, metavar="HZ",
                    help="sample rate [Hz] of a file that states none (TDMS without wf_increment, "
                         "text without a time column ...)")
@@ -660,17 +668,6 @@ def _bench_campaign(out: Path, quick: bool, repeats: int | None = None) -> int:
     print("\n".join(overhead_lines(res["overhead"])))
     print(f"{path.name:<24} {path}")
     return 0
-
-
-def _repeats(text: str) -> int:
-    """``--repeats N``: a whole number >= 1."""
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number of runs, got {text!r}") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"repeats must be at least 1, got {n}")
-    return n
 
 
 def _minutes_list(text: str) -> tuple:

@@ -163,9 +163,9 @@ TEXT_PLUGIN = textwrap.dedent('''
     def _rows(path, header_row, skip_rows, decimal, delimiter):
         with open(path, encoding="utf-8") as fh:
             lines = fh.read().splitlines()[1 + (skip_rows or 0):]
-        names = lines[header_row or 0].split(delimiter or ",")
+        names = lines[(header_row or 1) - 1].split(delimiter or ",")   # a line number, from 1
         rows = [[float(v.replace(decimal or ".", ".")) for v in ln.split(delimiter or ",")]
-                for ln in lines[(header_row or 0) + 1:]]
+                for ln in lines[(header_row or 1):]]
         return names, np.array(rows)
 
     def read_info(path, *, verify=True, header_row=None, skip_rows=None, fs=None, decimal=None,
@@ -203,10 +203,13 @@ def semitext(tmp_path, monkeypatch):
 
 
 def test_text_options_reach_the_reader_from_flags_and_from_the_scene(semitext, tmp_path, capsys):
-    flags = ["--skip-rows", "2", "--header-row", "0", "--decimal", ",", "--delimiter", ";", "--fs", "100"]
+    flags = ["--skip-rows", "2", "--header-row", "1", "--decimal", ",", "--delimiter", ";", "--fs", "100"]
+    with pytest.raises(SystemExit):                      # a line number counts from 1
+        main(["-q", "info", str(semitext), "--header-row", "0"])
+    capsys.readouterr()
     assert main(["-q", "info", str(semitext), "--json", *flags]) == 0
     js = json.loads(capsys.readouterr().out)
-    assert js["meta"]["options"] == [0, 2, 100.0, ",", ";"]
+    assert js["meta"]["options"] == [1, 2, 100.0, ",", ";"]
     assert [c["name"] for c in js["channels"]] == ["sun", "ring"] and js["fs_hz"] == 100.0
     scene = tmp_path / "s.toml"
     scene.write_text(GEARSET + '[input]\nfs_Hz = 50.0\n[input.csv]\nskip_rows = 2\ndecimal = ","\n'

@@ -724,8 +724,8 @@ def output_folder(output) -> Path:
 READ_KEYS = ("mcap", "csv", "fs_Hz", "options")
 
 #: ``[input.csv]`` keys -> their types: the read options of delimited-text files with the same
-#: names (a row number counts from 0; ``header_row`` the row of the channel names,
-#: ``skip_rows`` the rows skipped before it).
+#: names (``header_row`` the line number of the channel names, from 1; ``skip_rows`` the
+#: lines of preamble above them).
 CSV_KEYS = {"header_row": int, "skip_rows": int, "decimal": str, "delimiter": str}
 
 
