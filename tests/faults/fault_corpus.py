@@ -879,10 +879,11 @@ def _scene_with(path: tuple, value, results=None, *, drop: bool = False):
 
 #: tables BASE_SCENE leaves out (they need another kind of recording, or pin what the data
 #: decide), with a valid content for the keys under them: ``[input.mcap]`` maps the topics of
-#: an MCAP file of another tool, ``[labels]`` pins a gauge's planet labels, ``[onsets]`` names
-#: the onset detector
+#: an MCAP file of another tool, ``[input.csv]`` says how to read a DAQ's text export,
+#: ``[labels]`` pins a gauge's planet labels, ``[onsets]`` names the onset detector
 _OPTIONAL_TABLES = {("input", "mcap"): {"channels": [{"name": "sun", "topic": "/rig/strain",
                                                       "field": "gauges.sun"}]},
+                    ("input", "csv"): {"header_row": 1},
                     ("labels",): {"sun_shift": 0},
                     ("onsets",): {"detector": "matched"}}
 
