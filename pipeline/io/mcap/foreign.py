@@ -71,7 +71,9 @@ def decoder_factories() -> list:
 
 
 def describe(path, *, verify: bool = True) -> list[TopicSummary]:
-    """What an MCAP file holds, topic by topic, for writing a mapping.
+    """What an MCAP file holds, topic by topic, for writing a mapping (the listing of a
+    missing mapping's error): :func:`describe_topics` as :class:`TopicSummary` records, an
+    empty list for a file without channels.
 
     Parameters
     ----------
@@ -84,31 +86,18 @@ def describe(path, *, verify: bool = True) -> list[TopicSummary]:
     list of TopicSummary
         Per topic: schema name and encoding, message encoding, message count, and the numeric
         fields of its first message (decoded with :func:`decoder_factories`; JSON, protobuf
-        and ROS 2) as (field path, ``"number"`` or ``"array[n]"``).
+        and ROS 2) as (field path, ``"number"`` or ``"array[n]"``), None without a decoder.
     """
-    path = Path(path)
-    verify = check_verify(verify)
-    with open(path, "rb") as fh, lib_errors(path, "listing topics"):
-        check_ends(fh, path)
-        reader = make_reader(fh, validate_crcs=verify, decoder_factories=decoder_factories())
-        summary = reader.get_summary()
-        channels = dict(summary.channels) if summary is not None else {}
-        schemas = dict(summary.schemas) if summary is not None else {}
-        stats = summary.statistics if summary is not None else None
-        counts = dict(stats.channel_message_counts) if stats is not None else {}
-        out = []
-        for cid, ch in sorted(channels.items()):
-            sc = schemas.get(ch.schema_id)
-            ts = TopicSummary(topic=ch.topic, schema=sc.name if sc else "", message_encoding=ch.message_encoding,
-                              schema_encoding=sc.encoding if sc else "",
-                              messages=counts.get(cid, 0 if stats is not None else None))
-            try:
-                for _, _, _, decoded in reader.iter_decoded_messages(topics=[ch.topic]):
-                    numeric_fields(decoded, (), ts.fields)
-                    break
-            except DecoderNotFoundError:
-                ts.fields = None  # no decoder for this encoding
-            out.append(ts)
+    out = []
+    for row in _topic_rows(Path(path), check_verify(verify)):
+        fields = row["numeric_fields"]
+        if fields is not None:
+            fields = [(f["path"], "number" if f["length"] is None else f"array[{f['length']}]")
+                      for f in fields]
+        out.append(TopicSummary(topic=row["topic"], schema=row["schema"],
+                                schema_encoding=row["schema_encoding"],
+                                message_encoding=row["message_encoding"],
+                                messages=row["message_count"], fields=fields))
     return out
 
 
@@ -207,7 +196,15 @@ def describe_topics(path, *, verify: bool = True) -> list[dict]:
         No such file.
     """
     path = Path(path)
-    verify = check_verify(verify)
+    rows = _topic_rows(path, check_verify(verify))
+    if not rows:
+        raise RecordingFileError(path, "the MCAP file has no channels (no topics): nothing to "
+                                       "list or read")
+    return rows
+
+
+def _topic_rows(path: Path, verify: bool) -> list[dict]:
+    """:func:`describe_topics`'s rows, an empty list for a file without channels."""
     with open(path, "rb") as fh:
         check_ends(fh, path)
         with lib_errors(path, "listing topics"):
@@ -221,9 +218,6 @@ def describe_topics(path, *, verify: bool = True) -> list[dict]:
                 spans = _spans_from_index(fh, path, summary, counts)
             if spans is None:
                 schemas, channels, counts, spans = _scan(path, verify)
-            if not channels:
-                raise RecordingFileError(path, "the MCAP file has no channels (no topics): nothing to "
-                                               "list or read")
             out = []
             for cid in sorted(channels):
                 ch = channels[cid]
