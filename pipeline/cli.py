@@ -71,7 +71,7 @@ from .io import FormatChoices, convert, detect_format, format_of_suffix, get_spe
 from .io.base import ANY_FS_ENV, CorruptFileError, RecordingFileError
 from .io.tdms_rows import warmup as warmup_rows
 from .models._kernels import warmup as warmup_models
-from .runtime.log import MessageFormatter, logger, message_line
+from .runtime.log import MessageFormatter, logger, message_line, stderr_is_terminal
 from .signal.runs import RunTracker
 from .run.scene import SceneError, load_scene, read_options, with_recording
 from .validate import as_regular_file
@@ -82,12 +82,7 @@ __all__ = ["main", "build_parser", "describe_error"]
 def _bars(args) -> bool:
     """Progress bars for this command: not ``-q``, and stderr a terminal (a log file or a
     pipe gets no bar lines)."""
-    if args.quiet:
-        return False
-    try:
-        return sys.stderr.isatty()
-    except (AttributeError, ValueError):   # stderr replaced or closed
-        return False
+    return not args.quiet and stderr_is_terminal()
 
 
 def _progress(total: int | None, desc: str, enabled: bool):

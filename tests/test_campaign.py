@@ -120,7 +120,7 @@ def test_campaign_default_local_cluster(data, tmp_path, capsys, monkeypatch):
     The progress bar is drawn when stderr is a terminal (here: said to be one)."""
     from meshphase.campaign import job as job_mod
 
-    monkeypatch.setattr(job_mod, "_stderr_is_terminal", lambda: True)
+    monkeypatch.setattr(job_mod, "stderr_is_terminal", lambda: True)
     out = tmp_path / "camp"
     monkeypatch.setattr(sys.stderr, "isatty", lambda: True)   # the bar is drawn on a terminal only
     res = cp.cli_campaign(str(data["scene"]), [str(data["recordings"])], workers=2, out=str(out),

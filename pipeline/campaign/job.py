@@ -33,7 +33,7 @@ from typing import Callable, Sequence
 from .resume import relocate, write_marker
 from .cluster import ClusterStart, end_worker
 from ..io import FORMATS, format_of_suffix, get_spec
-from ..runtime.log import logger
+from ..runtime.log import logger, stderr_is_terminal
 from ..runtime.threads import run_threads, threads_limited
 from ..validate import as_nonnegative
 
@@ -686,7 +686,7 @@ class _Collection:
         fut_of = self.submit()
         index_of = self.watch.index_of
         with tqdm(total=len(self.records) + len(self.job.todo), initial=len(self.records), desc="recordings",
-                  unit="rec", disable=not (self.job.progress and _stderr_is_terminal()), file=sys.stderr,
+                  unit="rec", disable=not (self.job.progress and stderr_is_terminal()), file=sys.stderr,
                   leave=False) as self.bar:
             next_check = 0.0
             while self.pending:
@@ -704,15 +704,6 @@ class _Collection:
                     continue
                 next_check = now + 0.5
                 self.check_timeouts(now, fut_of)
-
-
-def _stderr_is_terminal() -> bool:
-    """True when stderr is a terminal: the progress bar is drawn only there (a cluster job's
-    log file would get a line per redraw)."""
-    try:
-        return bool(sys.stderr.isatty())
-    except (AttributeError, ValueError):  # replaced by an object without it, or closed
-        return False
 
 
 def _timed_out(client, fut, path, name, rec_dir, limit, start) -> dict:

@@ -1,5 +1,6 @@
-"""The one package logger (``logging.getLogger("meshphase")``) and the one style of the
-messages the ``meshphase`` command prints on stderr.
+"""The one package logger (``logging.getLogger("meshphase")``), the one style of the
+messages the ``meshphase`` command prints on stderr, and whether stderr is a terminal (where
+progress bars are drawn).
 
 Every message line, whatever prints it (the command's errors and run status, a stage's
 warning collected in a run, a Python warning, a log record), reads::
@@ -14,11 +15,21 @@ warning collected in a run, a Python warning, a log record), reads::
 from __future__ import annotations
 
 import logging
+import sys
 
 logger = logging.getLogger("meshphase")
 logger.addHandler(logging.NullHandler())
 
-__all__ = ["logger", "message_line", "MessageFormatter"]
+__all__ = ["logger", "message_line", "MessageFormatter", "stderr_is_terminal"]
+
+
+def stderr_is_terminal() -> bool:
+    """True when stderr is a terminal: progress bars are drawn only there (a log file, a pipe
+    or a cluster job's output would get a line per redraw)."""
+    try:
+        return bool(sys.stderr.isatty())
+    except (AttributeError, ValueError):   # replaced by an object without it, or closed
+        return False
 
 
 def message_line(command: str, level: str, text) -> str:
